@@ -1,0 +1,362 @@
+/* terrainnet command-line tool: every library feature as a subcommand.
+   Build: make   (bin/terrainnet). Run `bin/terrainnet --help`. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+#if !defined(_WIN32)
+#include <unistd.h>
+#endif
+
+/* ---- small helpers ------------------------------------------------------------------------ */
+
+static int fail_status(tn_status st)
+{
+    const char *msg = tn_last_error();
+    fprintf(stderr, "terrainnet: error: %s%s%s\n", tn_status_string(st), msg[0] ? ": " : "", msg);
+    return 1;
+}
+
+static int usage_error(const char *cmd, const char *msg, const char *arg)
+{
+    fprintf(stderr, "terrainnet %s: %s%s%s\n(see `terrainnet %s --help`)\n", cmd, msg, arg ? " " : "", arg ? arg : "", cmd);
+    return 2;
+}
+
+static int parse_double(const char *s, double *out)
+{
+    char *end;
+    double v;
+    if (!s || !*s) return 0;
+    v = strtod(s, &end);
+    if (*end || v != v || v > 1e300 || v < -1e300) return 0;
+    *out = v;
+    return 1;
+}
+
+static int parse_int(const char *s, int *out)
+{
+    char *end;
+    long v;
+    if (!s || !*s) return 0;
+    v = strtol(s, &end, 10);
+    if (*end || v < -1000000000L || v > 1000000000L) return 0;
+    *out = (int)v;
+    return 1;
+}
+
+static int wants_help(int argc, char **argv)
+{
+    int i;
+    for (i = 0; i < argc; i++)
+        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) return 1;
+    return 0;
+}
+
+/* Progress: a bar with ETA when stderr is a terminal, otherwise a plain line every ~10 %. */
+typedef struct progress_state { double t0; int tty; int last_decile; char stage[64]; } progress_state;
+
+static int cli_progress(void *user, const char *stage, double f)
+{
+    progress_state *p = (progress_state *)user;
+    double el;
+    if (strncmp(p->stage, stage, sizeof p->stage - 1) != 0) {
+        snprintf(p->stage, sizeof p->stage, "%s", stage);
+        p->t0 = tn_time_seconds();
+        p->last_decile = -1;
+    }
+    el = tn_time_seconds() - p->t0;
+    if (p->tty) {
+        int i, w = 30, fill = (int)(f * w + 0.5);
+        double eta = f > 0.01 ? el * (1.0 - f) / f : 0.0;
+        fprintf(stderr, "\r%-18.18s [", stage);
+        for (i = 0; i < w; i++) fputc(i < fill ? '#' : '.', stderr);
+        fprintf(stderr, "] %5.1f%%  %6.1fs  ETA %6.1fs", 100.0 * f, el, eta);
+        if (f >= 1.0) fputc('\n', stderr);
+    } else {
+        int d = (int)(f * 10.0);
+        if (d != p->last_decile) {
+            p->last_decile = d;
+            fprintf(stderr, "%s: %3.0f%% (%.1f s)\n", stage, 100.0 * f, el);
+        }
+    }
+    return 0;
+}
+
+static progress_state g_progress;
+
+static void install_progress(void)
+{
+#if !defined(_WIN32)
+    g_progress.tty = isatty(2);
+#endif
+    g_progress.last_decile = -1;
+    tn_set_progress(cli_progress, &g_progress);
+}
+
+/* ---- info -------------------------------------------------------------------------------- */
+
+static int cmd_info(int argc, char **argv)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_image_info info;
+    tn_load_opts lo;
+    tn_status st;
+    float mn, mx;
+    size_t bad, i, n;
+    double sum = 0.0;
+    const char *path = NULL;
+    int a;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet info FILE [--raw-size W H]\n"
+               "Prints the format, size, channels, bit depth, height range (metres when the file\n"
+               "records them) and value statistics of an image or heightmap.\n");
+        return 0;
+    }
+    memset(&lo, 0, sizeof lo);
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "--raw-size") && a + 2 < argc) {
+            if (!parse_int(argv[a + 1], &lo.raw_width) || !parse_int(argv[a + 2], &lo.raw_height))
+                return usage_error("info", "bad --raw-size", argv[a + 1]);
+            a += 2;
+        } else if (argv[a][0] == '-') return usage_error("info", "unknown option", argv[a]);
+        else if (!path) path = argv[a];
+        else return usage_error("info", "too many arguments:", argv[a]);
+    }
+    if (!path) return usage_error("info", "missing FILE", NULL);
+    if ((st = tn_image_load_ex(path, &img, &info, &lo))) return fail_status(st);
+    bad = tn_image_range(&img, &mn, &mx);
+    n = (size_t)img.width * img.height * img.channels;
+    for (i = 0; i < n; i++) sum += img.data[i];
+    printf("file: %s\nformat: %s\nsize: %d x %d\nchannels: %d\nbit_depth: %d\n", path, tn_format_name(info.format),
+           img.width, img.height, img.channels, info.bit_depth);
+    if (info.interlaced) printf("interlaced: adam7\n");
+    if (info.has_range) printf("height_range_m: %.6g %.6g\n", info.range_lo, info.range_hi);
+    else if (info.format == TN_FORMAT_HGT || info.format == TN_FORMAT_ASC) printf("units: metres (as stored)\n");
+    else printf("units: normalised [0, 1] (the file records no height range)\n");
+    if (info.cellsize > 0) printf("cellsize: %.6g\norigin: %.6g %.6g\n", info.cellsize, info.x_origin, info.y_origin);
+    if (info.voids_filled) printf("voids_filled: %zu\n", info.voids_filled);
+    printf("min: %.6g\nmax: %.6g\nmean: %.6g\n", mn, mx, sum / (double)n);
+    if (bad) printf("nan_or_inf: %zu\n", bad);
+    tn_image_free(&img);
+    return 0;
+}
+
+/* ---- convert ----------------------------------------------------------------------------- */
+
+static int cmd_convert(int argc, char **argv)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_image_info info;
+    tn_load_opts lo;
+    tn_save_opts so;
+    tn_status st;
+    const char *in = NULL, *out = NULL;
+    int a, keep_range = 1;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet convert IN OUT [--range LO HI] [--bits 8|16] [--raw-size W H] [--cellsize M]\n"
+               "Converts between PNG, PGM/PPM, PFM, SRTM .hgt, ESRI .asc and .r16 (format from OUT's\n"
+               "extension). Heights keep their metres: a range recorded in IN (or given with --range,\n"
+               "which maps codes 0..max of an 8/16-bit output to LO..HI) is written to OUT where the\n"
+               "format can hold it. OUT is written atomically and never half-written.\n");
+        return 0;
+    }
+    memset(&lo, 0, sizeof lo);
+    memset(&so, 0, sizeof so);
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "--range") && a + 2 < argc) {
+            if (!parse_double(argv[a + 1], &so.range_lo) || !parse_double(argv[a + 2], &so.range_hi) ||
+                so.range_hi <= so.range_lo)
+                return usage_error("convert", "--range needs two numbers LO < HI", NULL);
+            so.has_range = 1;
+            keep_range = 0;
+            a += 2;
+        } else if (!strcmp(argv[a], "--bits") && a + 1 < argc) {
+            if (!parse_int(argv[a + 1], &so.bit_depth) || (so.bit_depth != 8 && so.bit_depth != 16))
+                return usage_error("convert", "--bits must be 8 or 16, not", argv[a + 1]);
+            a++;
+        } else if (!strcmp(argv[a], "--raw-size") && a + 2 < argc) {
+            if (!parse_int(argv[a + 1], &lo.raw_width) || !parse_int(argv[a + 2], &lo.raw_height))
+                return usage_error("convert", "bad --raw-size", argv[a + 1]);
+            a += 2;
+        } else if (!strcmp(argv[a], "--cellsize") && a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &so.cellsize) || so.cellsize <= 0)
+                return usage_error("convert", "bad --cellsize", argv[a + 1]);
+            a++;
+        } else if (argv[a][0] == '-') return usage_error("convert", "unknown option", argv[a]);
+        else if (!in) in = argv[a];
+        else if (!out) out = argv[a];
+        else return usage_error("convert", "too many arguments:", argv[a]);
+    }
+    if (!in || !out) return usage_error("convert", "needs IN and OUT", NULL);
+    if ((st = tn_image_load_ex(in, &img, &info, &lo))) return fail_status(st);
+    if (keep_range && info.has_range) {
+        so.has_range = 1;
+        so.range_lo = info.range_lo;
+        so.range_hi = info.range_hi;
+    }
+    if (!so.cellsize && info.cellsize > 0) so.cellsize = info.cellsize;
+    st = tn_image_save(out, &img, &so);
+    tn_image_free(&img);
+    if (st) return fail_status(st);
+    return 0;
+}
+
+/* ---- metrics ----------------------------------------------------------------------------- */
+
+static int cmd_metrics(int argc, char **argv)
+{
+    tn_image a_img = {0, 0, 0, NULL}, b_img = {0, 0, 0, NULL};
+    tn_metrics m;
+    tn_status st;
+    const char *pa = NULL, *pb = NULL;
+    double range = 0.0;
+    int a;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet metrics REFERENCE IMAGE [--range R]\n"
+               "Compares IMAGE with REFERENCE (same size and channels). The data range R defaults to\n"
+               "max(REFERENCE) - min(REFERENCE), so the figures do not depend on units.\n"
+               "Prints ssim (Gaussian 11x11, sigma 1.5, as scikit-image), psnr (dB), rmse and mae.\n");
+        return 0;
+    }
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "--range") && a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &range) || range <= 0)
+                return usage_error("metrics", "--range must be a positive number, not", argv[a + 1]);
+            a++;
+        } else if (argv[a][0] == '-') return usage_error("metrics", "unknown option", argv[a]);
+        else if (!pa) pa = argv[a];
+        else if (!pb) pb = argv[a];
+        else return usage_error("metrics", "too many arguments:", argv[a]);
+    }
+    if (!pa || !pb) return usage_error("metrics", "needs REFERENCE and IMAGE", NULL);
+    if ((st = tn_image_load(pa, &a_img, NULL))) return fail_status(st);
+    if ((st = tn_image_load(pb, &b_img, NULL))) {
+        tn_image_free(&a_img);
+        return fail_status(st);
+    }
+    st = tn_compare(&a_img, &b_img, range, &m);
+    tn_image_free(&a_img);
+    tn_image_free(&b_img);
+    if (st) return fail_status(st);
+    printf("ssim: %.6f\npsnr: %.4f\nrmse: %.6g\nmae: %.6g\n", m.ssim, m.psnr, m.rmse, m.mae);
+    return 0;
+}
+
+/* ---- render ------------------------------------------------------------------------------ */
+
+static int cmd_render(int argc, char **argv)
+{
+    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_view_opts vo;
+    tn_status st;
+    const char *in = NULL, *outp = NULL;
+    int a, view = 0;
+    double v;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet render DEM -o OUT.png [--3d] [--size W H] [--azimuth DEG] [--pitch DEG]\n"
+               "                                [--relief F] [--light DEG]\n"
+               "Writes a preview: hypsometric colours times a hillshade (default), or with --3d a\n"
+               "perspective view of the terrain (camera --azimuth clockwise from north, default 180 =\n"
+               "from the south; --pitch downward angle, default 30; --relief = height of the full\n"
+               "range as a fraction of the DEM width, default 0.2). --light sets the sun azimuth.\n");
+        return 0;
+    }
+    memset(&vo, 0, sizeof vo);
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--3d")) view = 1;
+        else if (!strcmp(argv[a], "--size") && a + 2 < argc) {
+            if (!parse_int(argv[a + 1], &vo.width) || !parse_int(argv[a + 2], &vo.height) || vo.width < 16 ||
+                vo.height < 16 || vo.width > 16384 || vo.height > 16384)
+                return usage_error("render", "--size needs W H between 16 and 16384", NULL);
+            a += 2;
+        } else if ((!strcmp(argv[a], "--azimuth") || !strcmp(argv[a], "--pitch") || !strcmp(argv[a], "--relief") ||
+                    !strcmp(argv[a], "--light")) && a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &v)) return usage_error("render", "not a number:", argv[a + 1]);
+            if (!strcmp(argv[a], "--azimuth")) vo.azimuth_deg = (float)v;
+            else if (!strcmp(argv[a], "--pitch")) vo.pitch_deg = (float)v;
+            else if (!strcmp(argv[a], "--relief")) vo.relief = (float)v;
+            else vo.colours.shade.azimuth_deg = (float)v;
+            a++;
+        } else if (argv[a][0] == '-') return usage_error("render", "unknown option", argv[a]);
+        else if (!in) in = argv[a];
+        else return usage_error("render", "too many arguments:", argv[a]);
+    }
+    if (!in) return usage_error("render", "missing DEM", NULL);
+    if (!outp) return usage_error("render", "missing -o OUT.png", NULL);
+    if ((st = tn_image_load(in, &dem, NULL))) return fail_status(st);
+    st = view ? tn_render_view(&dem, &vo, &out) : tn_render_preview(&dem, &vo.colours, &out);
+    tn_image_free(&dem);
+    if (st) return fail_status(st);
+    {
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 8;
+        st = tn_image_save(outp, &out, &so);
+    }
+    tn_image_free(&out);
+    if (st) return fail_status(st);
+    return 0;
+}
+
+/* ---- main -------------------------------------------------------------------------------- */
+
+typedef struct command { const char *name; int (*fn)(int, char **); const char *summary; } command;
+
+static const command commands[] = {
+    {"info", cmd_info, "describe an image or heightmap file"},
+    {"convert", cmd_convert, "convert between heightmap/image formats, keeping metres"},
+    {"metrics", cmd_metrics, "compare two images: SSIM, PSNR, RMSE, MAE"},
+    {"render", cmd_render, "hillshaded colour preview or 3D view of a DEM"},
+};
+
+static void print_usage(FILE *f)
+{
+    size_t i;
+    fprintf(f, "terrainnet %s - learn terrain from one example; synthesise terrain and textures\n\n"
+               "usage: terrainnet [--threads N] COMMAND [ARGS]   (COMMAND --help for details)\n\ncommands:\n",
+            TN_VERSION_STRING);
+    for (i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
+}
+
+int main(int argc, char **argv)
+{
+    int a = 1;
+    size_t i;
+    while (a < argc && argv[a][0] == '-') {
+        if (!strcmp(argv[a], "--help") || !strcmp(argv[a], "-h")) {
+            print_usage(stdout);
+            return 0;
+        } else if (!strcmp(argv[a], "--version")) {
+            printf("terrainnet %s\n", TN_VERSION_STRING);
+            return 0;
+        } else if (!strcmp(argv[a], "--threads") && a + 1 < argc) {
+            int n;
+            if (!parse_int(argv[a + 1], &n) || n < 1 || n > 64) {
+                fprintf(stderr, "terrainnet: --threads needs a number from 1 to 64\n");
+                return 2;
+            }
+            tn_set_threads(n);
+            a += 2;
+        } else {
+            fprintf(stderr, "terrainnet: unknown option %s\n", argv[a]);
+            print_usage(stderr);
+            return 2;
+        }
+    }
+    if (a >= argc) {
+        print_usage(stderr);
+        return 2;
+    }
+    install_progress();
+    for (i = 0; i < sizeof commands / sizeof commands[0]; i++)
+        if (!strcmp(argv[a], commands[i].name)) return commands[i].fn(argc - a - 1, argv + a + 1);
+    fprintf(stderr, "terrainnet: unknown command '%s'\n", argv[a]);
+    print_usage(stderr);
+    return 2;
+}

@@ -1,0 +1,36 @@
+#!/bin/sh
+# Runs the compile checks, every test binary given, and the CLI tests; sums their
+# "<name>: N passed, N failed, N skipped" lines into one closing line.
+set -u
+P=0; F=0; S=0; crashed=0
+log=build/test/last_run.log
+: > "$log"
+tally() { # reads the summary line of one program's output
+    line=$(grep -E '^[A-Za-z0-9_./-]+: [0-9]+ passed, [0-9]+ failed, [0-9]+ skipped$' "$1" | tail -n 1)
+    if [ -z "$line" ]; then echo "$2: no summary line (crashed?)"; crashed=$((crashed + 1)); F=$((F + 1)); return; fi
+    echo "$line"
+    p=$(echo "$line" | sed -E 's/.*: ([0-9]+) passed.*/\1/')
+    f=$(echo "$line" | sed -E 's/.* ([0-9]+) failed.*/\1/')
+    s=$(echo "$line" | sed -E 's/.* ([0-9]+) skipped$/\1/')
+    P=$((P + p)); F=$((F + f)); S=$((S + s))
+}
+out=build/test/out.txt
+sh tests/check_compile.sh > "$out" 2>&1; rc=$?
+cat "$out" >> "$log"; grep -v '^check_compile:' "$out" | grep -v ': ok$' || true
+tally "$out" check_compile
+for t in "$@"; do
+    "$t" > "$out" 2>&1; rc=$?
+    cat "$out" >> "$log"
+    grep -E '^(FAIL|skipped)' "$out" || true
+    tally "$out" "$t"
+    if [ $rc -ne 0 ] && ! grep -qE ' [1-9][0-9]* failed' "$out"; then
+        echo "$t exited with status $rc"; tail -n 30 "$out"; F=$((F + 1))
+    fi
+done
+sh tests/test_cli.sh > "$out" 2>&1
+cat "$out" >> "$log"
+grep -E '^(FAIL|skipped)' "$out" || true
+tally "$out" test_cli
+echo "(full output: $log)"
+echo "$P passed, $F failed, $S skipped"
+[ "$F" -eq 0 ]

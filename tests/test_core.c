@@ -1,0 +1,166 @@
+/* Tests of @@core and @@thread: status strings, errors, size checks, RNG, pool, progress. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+TN_TEST(status_strings_are_distinct)
+{
+    int i, j;
+    for (i = 0; i < TN_STATUS_COUNT; i++) {
+        TN_CHECK(tn_status_string((tn_status)i) != NULL);
+        for (j = 0; j < i; j++) TN_CHECK(strcmp(tn_status_string((tn_status)i), tn_status_string((tn_status)j)) != 0);
+    }
+    TN_CHECK(strcmp(tn_status_string((tn_status)999), "unknown status") == 0);
+}
+
+TN_TEST(image_create_rejects_bad_sizes)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_clear_error();
+    TN_CHECK(tn_image_create(&img, 0, 10, 1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strlen(tn_last_error()) > 0);
+    TN_CHECK(tn_image_create(&img, -5, 10, 1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_create(&img, 2000000000, 2000000000, 4) == TN_ERR_TOO_LARGE);
+    TN_CHECK(img.data == NULL);
+    TN_CHECK(tn_image_create(&img, 3, 2, 2) == TN_OK);
+    TN_CHECK(img.width == 3 && img.height == 2 && img.channels == 2 && img.data[11] == 0.0f);
+    TN_PIXEL(&img, 2, 1, 1) = 7.0f;
+    TN_CHECK(img.data[11] == 7.0f);
+    tn_image_free(&img);
+    TN_CHECK(img.data == NULL && img.width == 0);
+    tn_image_free(&img); /* safe twice */
+}
+
+TN_TEST(image_range_skips_nan)
+{
+    tn_image img = {0, 0, 0, NULL};
+    float lo, hi;
+    TN_CHECK(tn_image_create(&img, 4, 1, 1) == TN_OK);
+    img.data[0] = 3.0f; img.data[1] = (float)NAN; img.data[2] = -2.0f; img.data[3] = 1.0f;
+    TN_CHECK(tn_image_range(&img, &lo, &hi) == 1);
+    TN_CHECK(lo == -2.0f && hi == 3.0f);
+    tn_image_free(&img);
+}
+
+/* Reference sequence of the PCG32 paper's demo program (pcg32-demo, seed 42, stream 54). */
+TN_TEST(rng_matches_pcg32_reference)
+{
+    static const uint32_t expect[6] = {0xa15c02b7u, 0x7b47f409u, 0xba1d3330u, 0x83d2f293u, 0xbfa4784bu, 0xcbed606eu};
+    tn_rng r;
+    int i;
+    tn_rng_seed(&r, 42u, 54u);
+    for (i = 0; i < 6; i++) TN_CHECK(tn_rng_u32(&r) == expect[i]);
+}
+
+TN_TEST(rng_distributions)
+{
+    tn_rng r;
+    int i, counts[7] = {0};
+    double sum = 0, sum2 = 0;
+    tn_rng_seed(&r, 1, 2);
+    for (i = 0; i < 70000; i++) {
+        float u = tn_rng_uniform(&r);
+        TN_CHECK(u >= 0.0f && u < 1.0f);
+        counts[tn_rng_below(&r, 7)]++;
+    }
+    for (i = 0; i < 7; i++) TN_CHECK(counts[i] > 9400 && counts[i] < 10600);
+    for (i = 0; i < 100000; i++) {
+        double g = tn_rng_normal(&r);
+        sum += g;
+        sum2 += g * g;
+    }
+    TN_CHECK_NEAR(sum / 100000, 0.0, 0.02);
+    TN_CHECK_NEAR(sum2 / 100000, 1.0, 0.02);
+}
+
+typedef struct { double *out; } fill_ctx;
+static void fill_range(void *ctx, size_t b, size_t e)
+{
+    fill_ctx *c = (fill_ctx *)ctx;
+    size_t i;
+    for (i = b; i < e; i++) c->out[i] = sin((double)i) * 3.0 + (double)i;
+}
+
+TN_TEST(parallel_for_same_for_any_thread_count)
+{
+    enum { N = 100003 };
+    double *a = (double *)malloc(N * sizeof(double)), *b = (double *)malloc(N * sizeof(double));
+    fill_ctx c;
+    tn_set_threads(1);
+    c.out = a;
+    tn_parallel_for(N, 64, fill_range, &c);
+    tn_set_threads(2);
+    TN_CHECK(tn_get_threads() == 2);
+    c.out = b;
+    tn_parallel_for(N, 64, fill_range, &c);
+    TN_CHECK(memcmp(a, b, N * sizeof(double)) == 0);
+    TN_CHECK(a[N - 1] == sin((double)(N - 1)) * 3.0 + (double)(N - 1));
+    tn_set_threads(0);
+    TN_CHECK(tn_get_threads() >= 1);
+    free(a);
+    free(b);
+}
+
+typedef struct { int hits[8]; int nested_nth[8]; } run_ctx;
+static void inner_task(void *ctx, int ith, int nth) { (void)ith; *(int *)ctx = nth; }
+static void outer_task(void *ctx, int ith, int nth)
+{
+    run_ctx *c = (run_ctx *)ctx;
+    (void)nth;
+    c->hits[ith]++;
+    tn_parallel_run(inner_task, &c->nested_nth[ith]); /* nested: must run inline with nth 1 */
+}
+
+TN_TEST(parallel_run_covers_every_thread_and_nests)
+{
+    run_ctx c;
+    int i, rep;
+    memset(&c, 0, sizeof c);
+    tn_set_threads(2);
+    for (rep = 0; rep < 1000; rep++) tn_parallel_run(outer_task, &c);
+    for (i = 0; i < 2; i++) TN_CHECK(c.hits[i] == 1000);
+    TN_CHECK(c.hits[2] == 0);
+    TN_CHECK(c.nested_nth[0] == 1 && c.nested_nth[1] == 1);
+    tn_set_threads(0);
+}
+
+static int cancel_after_half(void *user, const char *stage, double f)
+{
+    (void)stage;
+    ++*(int *)user;
+    return f >= 0.5;
+}
+
+TN_TEST(progress_hook_can_cancel)
+{
+    int calls = 0;
+    tn_set_progress(cancel_after_half, &calls);
+    TN_CHECK(tn__progress("stage", 0.25) == TN_OK);
+    TN_CHECK(tn__progress("stage", 0.75) == TN_ERR_CANCELLED);
+    TN_CHECK(strstr(tn_last_error(), "stage") != NULL);
+    TN_CHECK(calls == 2);
+    tn_set_progress(NULL, NULL);
+    TN_CHECK(tn__progress("stage", 0.75) == TN_OK);
+}
+
+TN_TEST(size_checks_overflow)
+{
+    size_t out = 0;
+    TN_CHECK(tn__size4(1000, 1000, 3, 4, &out) == TN_OK && out == 12000000u);
+    TN_CHECK(tn__size4((size_t)1 << 40, (size_t)1 << 40, 1, 1, &out) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn__size4(SIZE_MAX / 2, 3, 1, 1, &out) == TN_ERR_TOO_LARGE);
+}
+
+int main(void)
+{
+    TN_RUN(status_strings_are_distinct);
+    TN_RUN(image_create_rejects_bad_sizes);
+    TN_RUN(image_range_skips_nan);
+    TN_RUN(rng_matches_pcg32_reference);
+    TN_RUN(rng_distributions);
+    TN_RUN(parallel_for_same_for_any_thread_count);
+    TN_RUN(parallel_run_covers_every_thread_and_nests);
+    TN_RUN(progress_hook_can_cancel);
+    TN_RUN(size_checks_overflow);
+    return tn_test_summary("test_core");
+}
