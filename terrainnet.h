@@ -54,6 +54,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@ops       differentiable ops: broadcasting arithmetic, conv (im2col), pooling, norms, graph ops
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
+    @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -543,6 +544,40 @@ TN_API float tn_optim_lr(const tn_optim *o);
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
+
+/* ============================================================================================
+   @@noise  procedural maps (paper 002, section 2.1)
+   Perlin fBm (improved gradient noise, seeded permutation, octaves summed with frequency x
+   lacunarity and amplitude x gain per octave, as Algorithm 2) and explicit noise (Algorithm 1:
+   uniform random matrices at several scales, upscaled, Gaussian-smoothed, averaged). Outputs are
+   one-channel images normalised to [0, 1]; the same seed gives the same map everywhere, for any
+   thread count.
+   ============================================================================================ */
+
+typedef struct tn_perlin_opts {
+    uint64_t seed;
+    int octaves;          /* 0 = 8 */
+    float frequency;      /* lattice cells across the width at octave 0; 0 = 4 */
+    float lacunarity;     /* frequency factor per octave; 0 = 2 */
+    float gain;           /* amplitude factor per octave; 0 = 0.5 */
+    int periodic;         /* 1: tiles seamlessly (cell counts rounded to integers per octave) */
+} tn_perlin_opts;
+/* Fills *out (allocated here, width x height x 1) with Perlin fBm. opts may be NULL. */
+TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts);
+
+typedef struct tn_explicit_opts {
+    uint64_t seed;
+    int layers;           /* random matrices; layer i (1..layers) is max(1, size / 2^i) square; 0 = 5 */
+    const float *sigmas;  /* Gaussian smoothing passes in output pixels; NULL = {size / 64, size / 32} */
+    int nsigmas;
+} tn_explicit_opts;
+/* Explicit multi-scale noise (Algorithm 1). opts may be NULL. */
+TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const tn_explicit_opts *opts);
+
+/* Steers a noise map with a drawn map (Figure 5 of paper 002): out = weight * drawn +
+   (1 - weight) * noise, with drawn (channel 0) resampled to the noise size and normalised to
+   [0, 1]; weight in [0, 1]. */
+TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -7385,6 +7420,204 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     TN_FREE(S);
     TN_FREE(rho);
     return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>noise  (@@noise implementation)
+   Improved Perlin noise (Perlin 2002): quintic fade, a seeded permutation of 0..255, 8 gradient
+   directions. Rows are independent, so the map is computed row-parallel and is identical for any
+   thread count.
+   -------------------------------------------------------------------------------------------- */
+
+typedef struct tn__perlin_job {
+    uint8_t perm[512];
+    int width, height, octaves, periodic;
+    float freq, lacunarity, gain;
+    float *out;
+} tn__perlin_job;
+
+static float tn__perlin_grad(int h, float x, float y)
+{
+    switch (h & 7) { /* 8 directions: axes and diagonals */
+    case 0: return x + y;
+    case 1: return -x + y;
+    case 2: return x - y;
+    case 3: return -x - y;
+    case 4: return x;
+    case 5: return -x;
+    case 6: return y;
+    default: return -y;
+    }
+}
+
+static float tn__fade(float t) { return t * t * t * (t * (t * 6.0f - 15.0f) + 10.0f); }
+
+static void tn__perlin_rows(void *ctx, size_t yb, size_t ye)
+{
+    const tn__perlin_job *j = (const tn__perlin_job *)ctx;
+    const uint8_t *p = j->perm;
+    size_t y;
+    int x, o;
+    for (y = yb; y < ye; y++) {
+        float *row = j->out + y * (size_t)j->width, freq = j->freq, amp = 1.0f;
+        for (x = 0; x < j->width; x++) row[x] = 0.0f;
+        for (o = 0; o < j->octaves; o++) {
+            /* lattice cells across the width and height at this octave */
+            float cells_x = freq, cells_y = freq * (float)j->height / (float)j->width;
+            int px, py;
+            float sy, fy, v;
+            int iy, y0, y1;
+            if (j->periodic) {
+                cells_x = (float)floor(cells_x + 0.5f);
+                cells_y = (float)floor(cells_y + 0.5f);
+                if (cells_x < 1) cells_x = 1;
+                if (cells_y < 1) cells_y = 1;
+            }
+            px = j->periodic ? (int)cells_x : 256;
+            py = j->periodic ? (int)cells_y : 256;
+            sy = ((float)y + 0.5f) * cells_y / (float)j->height + (float)(o * 37);
+            iy = (int)floor(sy);
+            fy = sy - (float)iy;
+            v = tn__fade(fy);
+            y0 = ((iy % py) + py) % py & 255;
+            y1 = (((iy + 1) % py) + py) % py & 255;
+            for (x = 0; x < j->width; x++) {
+                float sx = ((float)x + 0.5f) * cells_x / (float)j->width + (float)(o * 59);
+                int ix = (int)floor(sx), x0 = ((ix % px) + px) % px & 255, x1 = (((ix + 1) % px) + px) % px & 255;
+                float fx = sx - (float)ix, u = tn__fade(fx);
+                float a = tn__perlin_grad(p[p[x0] + y0], fx, fy), b = tn__perlin_grad(p[p[x1] + y0], fx - 1, fy);
+                float c = tn__perlin_grad(p[p[x0] + y1], fx, fy - 1), d = tn__perlin_grad(p[p[x1] + y1], fx - 1, fy - 1);
+                float top = a + u * (b - a), bot = c + u * (d - c);
+                row[x] += amp * (top + v * (bot - top));
+            }
+            freq *= j->lacunarity;
+            amp *= j->gain;
+        }
+    }
+}
+
+/* Rescales a one-channel image to [0, 1] (a constant image becomes 0.5). */
+static void tn__normalise01(tn_image *img)
+{
+    float lo, hi;
+    size_t i, n = (size_t)img->width * img->height * img->channels;
+    tn_image_range(img, &lo, &hi);
+    for (i = 0; i < n; i++) img->data[i] = hi > lo ? (img->data[i] - lo) / (hi - lo) : 0.5f;
+}
+
+TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts)
+{
+    tn_perlin_opts o;
+    tn__perlin_job *j;
+    tn_image img = {0, 0, 0, NULL};
+    tn_rng rng;
+    tn_status st;
+    int i;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (o.octaves <= 0) o.octaves = 8;
+    if (o.frequency <= 0) o.frequency = 4.0f;
+    if (o.lacunarity <= 0) o.lacunarity = 2.0f;
+    if (o.gain <= 0) o.gain = 0.5f;
+    if (o.octaves > 24 || o.frequency > 1e6f || o.lacunarity > 16.0f || o.gain > 4.0f)
+        return tn__fail(TN_ERR_INVALID_ARG, "perlin: octaves <= 24, frequency <= 1e6, lacunarity <= 16, gain <= 4");
+    if ((st = tn_image_create(&img, width, height, 1))) return st;
+    j = (tn__perlin_job *)tn__alloc(sizeof *j);
+    if (!j) {
+        tn_image_free(&img);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < 256; i++) j->perm[i] = (uint8_t)i;
+    tn_rng_seed(&rng, o.seed, 0x5e71u);
+    for (i = 255; i > 0; i--) { /* Fisher-Yates */
+        int k = (int)tn_rng_below(&rng, (uint32_t)i + 1);
+        uint8_t t = j->perm[i];
+        j->perm[i] = j->perm[k];
+        j->perm[k] = t;
+    }
+    for (i = 0; i < 256; i++) j->perm[256 + i] = j->perm[i];
+    j->width = width;
+    j->height = height;
+    j->octaves = o.octaves;
+    j->periodic = o.periodic != 0;
+    j->freq = o.frequency;
+    j->lacunarity = o.lacunarity;
+    j->gain = o.gain;
+    j->out = img.data;
+    tn_parallel_for((size_t)height, 4, tn__perlin_rows, j);
+    TN_FREE(j);
+    tn__normalise01(&img);
+    *out = img;
+    return TN_OK;
+}
+
+TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const tn_explicit_opts *opts)
+{
+    tn_explicit_opts o;
+    tn_image acc = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, big = {0, 0, 0, NULL};
+    tn_rng rng;
+    tn_status st;
+    float defaults[2];
+    int layer, k, size = width > height ? width : height;
+    size_t i, n;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (o.layers <= 0) o.layers = 5;
+    if (o.layers > 30) return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: at most 30 layers");
+    if (!o.sigmas || o.nsigmas <= 0) {
+        defaults[0] = (float)size / 64.0f;
+        defaults[1] = (float)size / 32.0f;
+        o.sigmas = defaults;
+        o.nsigmas = 2;
+    }
+    if ((st = tn_image_create(&acc, width, height, 1))) return st;
+    n = (size_t)width * height;
+    tn_rng_seed(&rng, o.seed, 0xe7u);
+    for (layer = 1; layer <= o.layers && !st; layer++) {
+        int sw = width >> layer, sh = height >> layer;
+        if (sw < 1) sw = 1;
+        if (sh < 1) sh = 1;
+        if ((st = tn_image_create(&small, sw, sh, 1))) break;
+        for (i = 0; i < (size_t)sw * sh; i++) small.data[i] = tn_rng_uniform(&rng);
+        st = tn_image_resize(&big, &small, width, height, TN_RESIZE_NEAREST);
+        tn_image_free(&small);
+        for (k = 0; k < o.nsigmas && !st; k++)
+            if (o.sigmas[k] > 0) st = tn_image_blur(&big, &big, o.sigmas[k]);
+        if (!st)
+            for (i = 0; i < n; i++) acc.data[i] += big.data[i] / (float)o.layers;
+        tn_image_free(&big);
+    }
+    if (st) {
+        tn_image_free(&acc);
+        return st;
+    }
+    tn__normalise01(&acc);
+    *out = acc;
+    return TN_OK;
+}
+
+TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight)
+{
+    tn_image d = {0, 0, 0, NULL}, r = {0, 0, 0, NULL};
+    tn_status st;
+    size_t i, n;
+    if (!noise || !noise->data || !drawn || !drawn->data || noise->channels != 1)
+        return tn__fail(TN_ERR_INVALID_ARG, "noise blend: needs a one-channel noise map and a drawn map");
+    if (!(weight >= 0.0f && weight <= 1.0f)) return tn__fail(TN_ERR_INVALID_ARG, "noise blend: weight must be in [0, 1]");
+    if ((st = tn_image_create(&d, drawn->width, drawn->height, 1))) return st;
+    for (i = 0; i < (size_t)drawn->width * drawn->height; i++) d.data[i] = drawn->data[i * drawn->channels];
+    if (tn_image_range(&d, NULL, NULL)) {
+        tn_image_free(&d);
+        return tn__fail(TN_ERR_NUMERIC, "noise blend: the drawn map holds NaN/Inf");
+    }
+    tn__normalise01(&d);
+    st = tn_image_resize(&r, &d, noise->width, noise->height, TN_RESIZE_BILINEAR);
+    tn_image_free(&d);
+    if (st) return st;
+    n = (size_t)noise->width * noise->height;
+    for (i = 0; i < n; i++) r.data[i] = weight * r.data[i] + (1.0f - weight) * noise->data[i];
+    *out = r;
+    return TN_OK;
 }
 
 /* --------------------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render; do
+for c in info convert metrics render noise; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -34,6 +34,13 @@ expect_error "absurd pgm size" "too large" $T info "$W/huge.pgm"
 printf '\211PNG\r\n\032\nthis is not a png' > "$W/garbage.png"
 expect_error "garbage png" "garbage.png" $T info "$W/garbage.png"
 expect_error "bad threads" "threads" $T --threads 0 info x.png
+
+# procedural terrain needs no data: a 16-bit heightmap in metres, then its pictures
+if $T noise -o "$W/noise.png" --size 96 64 --seed 3 --range 100 900 && $T info "$W/noise.png" > "$W/ninfo.txt" &&
+    grep -q "height_range_m: 100 900" "$W/ninfo.txt" && grep -q "size: 96 x 64" "$W/ninfo.txt"; then ok; else bad "noise"; fi
+if $T noise -o "$W/noise2.png" --size 96 64 --seed 3 --range 100 900 && cmp -s "$W/noise.png" "$W/noise2.png"; then ok;
+else bad "noise is not deterministic"; fi
+expect_error "noise bad weight" "weight" $T noise -o "$W/x.png" --draw "$W/noise.png" --weight 3
 
 HGT="$D/dem/alps_n47e009/original/N47E009.hgt"
 if [ -f "$HGT" ]; then
