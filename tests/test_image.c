@@ -396,5 +396,5 @@ int main(void)
     TN_RUN(gradient_slope_normals_of_a_plane);
     TN_RUN(hillshade_lighting_and_auto_scale);
     TN_RUN(colour_ramp_runs_from_water_to_snow);
-    return tn_test_summary("test_image.c");
+    return tn_test_summary("test_image");
 }

@@ -171,5 +171,5 @@ int main(void)
     TN_RUN(compare_errors_and_identity);
     TN_RUN(ssim_same_for_any_thread_count);
     TN_RUN(bad_inputs_fail_and_leave_output);
-    return tn_test_summary("test_metrics.c");
+    return tn_test_summary("test_metrics");
 }
