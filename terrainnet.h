@@ -284,7 +284,7 @@ typedef struct tn_metrics {
 /* Compares img against the reference; both must have the same size and channels.
    data_range <= 0 means max(ref) - min(ref). Matches scikit-image structural_similarity(
    gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=R), including its
-   cropping of the 5-pixel border. Images smaller than 7 x 7 fail with TN_ERR_INVALID_ARG. */
+   cropping of the 5-pixel border. Images smaller than 11 x 11 fail with TN_ERR_INVALID_ARG. */
 TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double data_range, tn_metrics *out);
 /* SSIM only (same definition). */
 TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_range, double *ssim);
@@ -649,6 +649,11 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
 #if !defined(TN_NO_THREADS)
 #include <pthread.h>
 #include <unistd.h>
+#endif
+
+/* SIMD kernels (blur, SSIM, GEMM) when the compiler targets AVX-512 or AVX2+FMA; portable C otherwise. */
+#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
+#include <immintrin.h>
 #endif
 
 #ifdef __cplusplus
@@ -1131,16 +1136,6 @@ TN_API size_t tn_image_range(const tn_image *img, float *lo, float *hi)
    whatever the thread split, so results are bit-identical for any thread count.
    The small SIMD layer (tn__vf float, tn__vd double) is shared with >>metrics.
    -------------------------------------------------------------------------------------------- */
-
-#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
-#ifdef __cplusplus
-} /* the intrinsics header must not be inside extern "C" */
-#endif
-#include <immintrin.h>
-#ifdef __cplusplus
-extern "C" {
-#endif
-#endif
 
 #if defined(__AVX512F__)
 #define TN__VF_N 16
@@ -4862,10 +4857,6 @@ TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double dat
    always summed in the same order, so results do not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
 
-#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
-#include <immintrin.h>
-#endif
-
 #if defined(__AVX512F__)
 #define TN__GEMM_MR 8
 #define TN__GEMM_VW 16
@@ -7513,24 +7504,36 @@ typedef struct tn__perlin_job {
     uint8_t perm[512];
     int width, height, octaves, periodic;
     float freq, lacunarity, gain;
+    /* per octave and column (the same for every row): hashed x lattice corners, offset, fade */
+    int *hx0, *hx1;
+    float *fx, *ux;
     float *out;
 } tn__perlin_job;
 
-static float tn__perlin_grad(int h, float x, float y)
-{
-    switch (h & 7) { /* 8 directions: axes and diagonals */
-    case 0: return x + y;
-    case 1: return -x + y;
-    case 2: return x - y;
-    case 3: return -x - y;
-    case 4: return x;
-    case 5: return -x;
-    case 6: return y;
-    default: return -y;
-    }
-}
+/* The 8 gradient directions of improved noise in 2-D: axes and diagonals. */
+static const float tn__perlin_gx[8] = {1, -1, 1, -1, 1, -1, 0, 0};
+static const float tn__perlin_gy[8] = {1, 1, -1, -1, 0, 0, 1, -1};
 
 static float tn__fade(float t) { return t * t * t * (t * (t * 6.0f - 15.0f) + 10.0f); }
+
+/* Lattice cells across `size` pixels at octave o, rounded to whole cells in periodic mode. */
+static float tn__perlin_cells(const tn__perlin_job *j, float cells)
+{
+    if (!j->periodic) return cells;
+    cells = (float)floor(cells + 0.5f);
+    return cells < 1 ? 1 : cells;
+}
+
+/* Lattice coordinate of pixel i at octave o: integer cell (wrapped) and fraction. */
+static void tn__perlin_coord(const tn__perlin_job *j, int i, int size, float cells, float offset, int *c0, int *c1, float *f)
+{
+    int period = j->periodic ? (int)cells : 256;
+    float s = ((float)i + 0.5f) * cells / (float)size + offset;
+    int ic = (int)floor(s);
+    *f = s - (float)ic;
+    *c0 = ((ic % period) + period) % period & 255;
+    *c1 = (((ic + 1) % period) + period) % period & 255;
+}
 
 static void tn__perlin_rows(void *ctx, size_t yb, size_t ye)
 {
@@ -7542,31 +7545,19 @@ static void tn__perlin_rows(void *ctx, size_t yb, size_t ye)
         float *row = j->out + y * (size_t)j->width, freq = j->freq, amp = 1.0f;
         for (x = 0; x < j->width; x++) row[x] = 0.0f;
         for (o = 0; o < j->octaves; o++) {
-            /* lattice cells across the width and height at this octave */
-            float cells_x = freq, cells_y = freq * (float)j->height / (float)j->width;
-            int px, py;
-            float sy, fy, v;
-            int iy, y0, y1;
-            if (j->periodic) {
-                cells_x = (float)floor(cells_x + 0.5f);
-                cells_y = (float)floor(cells_y + 0.5f);
-                if (cells_x < 1) cells_x = 1;
-                if (cells_y < 1) cells_y = 1;
-            }
-            px = j->periodic ? (int)cells_x : 256;
-            py = j->periodic ? (int)cells_y : 256;
-            sy = ((float)y + 0.5f) * cells_y / (float)j->height + (float)(o * 37);
-            iy = (int)floor(sy);
-            fy = sy - (float)iy;
+            const int *hx0 = j->hx0 + (size_t)o * j->width, *hx1 = j->hx1 + (size_t)o * j->width;
+            const float *fxs = j->fx + (size_t)o * j->width, *uxs = j->ux + (size_t)o * j->width;
+            float cells_y = tn__perlin_cells(j, freq * (float)j->height / (float)j->width), fy, v;
+            int y0, y1;
+            tn__perlin_coord(j, (int)y, j->height, cells_y, (float)(o * 37), &y0, &y1, &fy);
             v = tn__fade(fy);
-            y0 = ((iy % py) + py) % py & 255;
-            y1 = (((iy + 1) % py) + py) % py & 255;
             for (x = 0; x < j->width; x++) {
-                float sx = ((float)x + 0.5f) * cells_x / (float)j->width + (float)(o * 59);
-                int ix = (int)floor(sx), x0 = ((ix % px) + px) % px & 255, x1 = (((ix + 1) % px) + px) % px & 255;
-                float fx = sx - (float)ix, u = tn__fade(fx);
-                float a = tn__perlin_grad(p[p[x0] + y0], fx, fy), b = tn__perlin_grad(p[p[x1] + y0], fx - 1, fy);
-                float c = tn__perlin_grad(p[p[x0] + y1], fx, fy - 1), d = tn__perlin_grad(p[p[x1] + y1], fx - 1, fy - 1);
+                int h00 = p[hx0[x] + y0] & 7, h10 = p[hx1[x] + y0] & 7, h01 = p[hx0[x] + y1] & 7, h11 = p[hx1[x] + y1] & 7;
+                float fx = fxs[x], u = uxs[x];
+                float a = tn__perlin_gx[h00] * fx + tn__perlin_gy[h00] * fy;
+                float b = tn__perlin_gx[h10] * (fx - 1) + tn__perlin_gy[h10] * fy;
+                float c = tn__perlin_gx[h01] * fx + tn__perlin_gy[h01] * (fy - 1);
+                float d = tn__perlin_gx[h11] * (fx - 1) + tn__perlin_gy[h11] * (fy - 1);
                 float top = a + u * (b - a), bot = c + u * (d - c);
                 row[x] += amp * (top + v * (bot - top));
             }
@@ -7624,7 +7615,32 @@ TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_
     j->lacunarity = o.lacunarity;
     j->gain = o.gain;
     j->out = img.data;
+    j->hx0 = (int *)tn__alloc(2 * (size_t)o.octaves * (size_t)width * (sizeof(int) + sizeof(float)));
+    if (!j->hx0) {
+        TN_FREE(j);
+        tn_image_free(&img);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    j->hx1 = j->hx0 + (size_t)o.octaves * width;
+    j->fx = (float *)(j->hx1 + (size_t)o.octaves * width);
+    j->ux = j->fx + (size_t)o.octaves * width;
+    {
+        float freq = o.frequency;
+        int oc, x;
+        for (oc = 0; oc < o.octaves; oc++, freq *= o.lacunarity) {
+            float cells_x = tn__perlin_cells(j, freq);
+            for (x = 0; x < width; x++) {
+                size_t k = (size_t)oc * width + x;
+                int x0, x1;
+                tn__perlin_coord(j, x, width, cells_x, (float)(oc * 59), &x0, &x1, &j->fx[k]);
+                j->hx0[k] = j->perm[x0];
+                j->hx1[k] = j->perm[x1];
+                j->ux[k] = tn__fade(j->fx[k]);
+            }
+        }
+    }
     tn_parallel_for((size_t)height, 4, tn__perlin_rows, j);
+    TN_FREE(j->hx0);
     TN_FREE(j);
     tn__normalise01(&img);
     *out = img;

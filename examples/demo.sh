@@ -3,7 +3,7 @@
 set -e
 T=bin/terrainnet
 mkdir -p demo
-$T noise -o demo/terrain.png --size 512 512 --seed 7 --octaves 8 --frequency 3 --range 200 2400
+$T noise -o demo/terrain.png --type perlin --size 512 --seed 7 --octaves 8 --frequency 3 --range 200 2400
 $T info demo/terrain.png
 $T render demo/terrain.png -o demo/terrain_preview.png
 $T render demo/terrain.png --3d --size 960 540 --relief 0.18 -o demo/terrain_view.png

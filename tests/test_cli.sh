@@ -40,7 +40,7 @@ if $T noise -o "$W/noise.png" --size 96 64 --seed 3 --range 100 900 && $T info "
     grep -q "height_range_m: 100 900" "$W/ninfo.txt" && grep -q "size: 96 x 64" "$W/ninfo.txt"; then ok; else bad "noise"; fi
 if $T noise -o "$W/noise2.png" --size 96 64 --seed 3 --range 100 900 && cmp -s "$W/noise.png" "$W/noise2.png"; then ok;
 else bad "noise is not deterministic"; fi
-expect_error "noise bad weight" "weight" $T noise -o "$W/x.png" --draw "$W/noise.png" --weight 3
+expect_error "noise bad weight" "weight" $T noise -o "$W/x.png" --draw "$W/noise.png" --draw-weight 3
 
 HGT="$D/dem/alps_n47e009/original/N47E009.hgt"
 if [ -f "$HGT" ]; then

@@ -316,24 +316,35 @@ static int cmd_noise(int argc, char **argv)
     int a, w = 512, h = 512, explicit_noise = 0;
     double v, seed = 1, weight = 0.5, range_lo = 0, range_hi = 0;
     if (wants_help(argc, argv)) {
-        printf("usage: terrainnet noise -o OUT [--size W H] [--seed S] [--explicit] [--octaves N]\n"
-               "                        [--frequency F] [--lacunarity L] [--gain G] [--periodic]\n"
-               "                        [--draw MAP --weight W] [--range LO HI]\n"
+        printf("usage: terrainnet noise -o OUT [--type perlin|explicit] [--size N [M]] [--seed S]\n"
+               "                        [--octaves N] [--frequency F] [--lacunarity L] [--gain G]\n"
+               "                        [--periodic] [--draw MAP --draw-weight W] [--range LO HI]\n"
                "Writes a procedural heightmap in [0, 1] (or metres with --range): Perlin fBm\n"
-               "(default: 8 octaves, 4 cells across, lacunarity 2, gain 0.5) or --explicit multi-scale\n"
-               "smoothed noise. --periodic makes Perlin tile seamlessly. --draw blends a drawn grey map\n"
-               "(resized to the output) with weight W in [0, 1] to steer the layout.\n");
+               "(default: 8 octaves, 4 cells across, lacunarity 2, gain 0.5) or explicit multi-scale\n"
+               "smoothed noise. --size N is N x N (default 512); N M is N wide, M high. --periodic\n"
+               "makes Perlin tile seamlessly. --draw blends a drawn grey map (resized to the output)\n"
+               "with weight W in [0, 1] (default 0.5) to steer the layout.\n");
         return 0;
     }
     memset(&po, 0, sizeof po);
     memset(&eo, 0, sizeof eo);
     for (a = 0; a < argc; a++) {
         if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--size") && a + 2 < argc) {
-            if (!parse_int(argv[a + 1], &w) || !parse_int(argv[a + 2], &h) || w < 1 || h < 1 || w > 65536 || h > 65536)
-                return usage_error("noise", "--size needs W H between 1 and 65536", NULL);
-            a += 2;
-        } else if (!strcmp(argv[a], "--explicit")) explicit_noise = 1;
+        else if (!strcmp(argv[a], "--size") && a + 1 < argc) {
+            if (!parse_int(argv[a + 1], &w) || w < 1 || w > 65536)
+                return usage_error("noise", "--size needs N (or N M) between 1 and 65536", NULL);
+            h = w;
+            a++;
+            if (a + 1 < argc && parse_int(argv[a + 1], &h)) {
+                if (h < 1 || h > 65536) return usage_error("noise", "--size needs N (or N M) between 1 and 65536", NULL);
+                a++;
+            }
+        } else if (!strcmp(argv[a], "--type") && a + 1 < argc) {
+            a++;
+            if (!strcmp(argv[a], "explicit")) explicit_noise = 1;
+            else if (!strcmp(argv[a], "perlin")) explicit_noise = 0;
+            else return usage_error("noise", "--type must be perlin or explicit, not", argv[a]);
+        }
         else if (!strcmp(argv[a], "--periodic")) po.periodic = 1;
         else if (!strcmp(argv[a], "--draw") && a + 1 < argc) draw = argv[++a];
         else if (!strcmp(argv[a], "--range") && a + 2 < argc) {
@@ -341,7 +352,7 @@ static int cmd_noise(int argc, char **argv)
                 return usage_error("noise", "--range needs two numbers LO < HI", NULL);
             a += 2;
         } else if ((!strcmp(argv[a], "--seed") || !strcmp(argv[a], "--octaves") || !strcmp(argv[a], "--frequency") ||
-                    !strcmp(argv[a], "--lacunarity") || !strcmp(argv[a], "--gain") || !strcmp(argv[a], "--weight")) &&
+                    !strcmp(argv[a], "--lacunarity") || !strcmp(argv[a], "--gain") || !strcmp(argv[a], "--draw-weight")) &&
                    a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v) || v < 0) return usage_error("noise", "not a non-negative number:", argv[a + 1]);
             if (!strcmp(argv[a], "--seed")) seed = v;
@@ -349,7 +360,7 @@ static int cmd_noise(int argc, char **argv)
             else if (!strcmp(argv[a], "--frequency")) po.frequency = (float)v;
             else if (!strcmp(argv[a], "--lacunarity")) po.lacunarity = (float)v;
             else if (!strcmp(argv[a], "--gain")) po.gain = (float)v;
-            else if (v > 1) return usage_error("noise", "--weight must be in [0, 1]", NULL);
+            else if (v > 1) return usage_error("noise", "--draw-weight must be in [0, 1]", NULL);
             else weight = v;
             a++;
         } else return usage_error("noise", "unknown option or missing value:", argv[a]);
