@@ -55,6 +55,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
+    @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -578,6 +579,32 @@ TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const t
    (1 - weight) * noise, with drawn (channel 0) resampled to the noise size and normalised to
    [0, 1]; weight in [0, 1]. */
 TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight);
+
+/* ============================================================================================
+   @@sketch  contour sets: ridge and valley polylines (paper 000, sections 4.1 and 5)
+   One type carries extracted ridge/valley networks, their contour parts and user sketches: a
+   canvas size and a list of polylines, each point (x, y, height) in canvas pixels and the
+   height units of its source (metres for an extracted DEM, [0, 1] for a drawn sketch).
+   ============================================================================================ */
+
+typedef enum tn_contour_type { TN_VALLEY = 0, TN_RIDGE = 1 } tn_contour_type;
+
+typedef struct tn_contour {
+    tn_contour_type type;
+    int order;             /* Strahler order (1 = source segment); 0 when unknown */
+    int npoints;
+    float mean_gradient;   /* mean slope magnitude along the polyline; 0 when unknown */
+    float *points;         /* npoints * 3 floats: x, y, height */
+} tn_contour;
+
+typedef struct tn_contour_set {
+    int width, height;     /* canvas size in pixels */
+    int count;
+    tn_contour *items;
+} tn_contour_set;
+
+/* Frees every polyline and zeroes *set. Safe on a zeroed set. */
+TN_API void tn_contour_set_free(tn_contour_set *set);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -7714,6 +7741,18 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
     for (i = 0; i < n; i++) r.data[i] = weight * r.data[i] + (1.0f - weight) * noise->data[i];
     *out = r;
     return TN_OK;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>sketch  (@@sketch implementation)
+   -------------------------------------------------------------------------------------------- */
+
+TN_API void tn_contour_set_free(tn_contour_set *set) {
+    int i;
+    if (!set) return;
+    for (i = 0; i < set->count; i++) TN_FREE(set->items[i].points);
+    TN_FREE(set->items);
+    memset(set, 0, sizeof(*set));
 }
 
 /* --------------------------------------------------------------------------------------------
