@@ -5427,7 +5427,8 @@ static float *tn__ctx_floats(tn_ctx *ctx, size_t n, int zero)
     return p;
 }
 
-TN_API tn_tensor *tn_tensor_new(tn_ctx *ctx, int ndim, const int *shape)
+/* A tensor in the arena; its data is zeroed only when `zero` (ops that write every element skip it). */
+static tn_tensor *tn__tensor_make(tn_ctx *ctx, int ndim, const int *shape, int zero)
 {
     tn_tensor *t;
     size_t n = 1;
@@ -5446,9 +5447,11 @@ TN_API tn_tensor *tn_tensor_new(tn_ctx *ctx, int ndim, const int *shape)
     t->ndim = ndim;
     for (i = 0; i < TN_MAX_DIMS; i++) t->shape[i] = i < ndim ? shape[i] : 1;
     t->numel = n;
-    t->data = tn__ctx_floats(ctx, n, 1);
+    t->data = tn__ctx_floats(ctx, n, zero);
     return t->data ? t : NULL;
 }
+
+TN_API tn_tensor *tn_tensor_new(tn_ctx *ctx, int ndim, const int *shape) { return tn__tensor_make(ctx, ndim, shape, 1); }
 
 TN_API tn_tensor *tn_tensor_1d(tn_ctx *ctx, int n) { return tn_tensor_new(ctx, 1, &n); }
 TN_API tn_tensor *tn_tensor_2d(tn_ctx *ctx, int rows, int cols)
@@ -5522,11 +5525,12 @@ static float *tn__grad(tn_ctx *ctx, tn_tensor *t)
     return t->grad;
 }
 
-/* Creates an op's output and, when any source needs a gradient, records it on the tape. */
-static tn_tensor *tn__op(tn_ctx *ctx, int ndim, const int *shape, tn_backward_fn bw, tn_tensor *s0, tn_tensor *s1,
-                         tn_tensor *s2)
+/* Creates an op's output (zeroed when `zero`) and, when any source needs a gradient, records it
+   on the tape. */
+static tn_tensor *tn__op_make(tn_ctx *ctx, int ndim, const int *shape, tn_backward_fn bw, tn_tensor *s0, tn_tensor *s1,
+                              tn_tensor *s2, int zero)
 {
-    tn_tensor *t = tn_tensor_new(ctx, ndim, shape);
+    tn_tensor *t = tn__tensor_make(ctx, ndim, shape, zero);
     int need;
     if (!t) return NULL;
     need = ctx->grad_enabled && ((s0 && s0->requires_grad) || (s1 && s1->requires_grad) || (s2 && s2->requires_grad));
@@ -5549,6 +5553,12 @@ static tn_tensor *tn__op(tn_ctx *ctx, int ndim, const int *shape, tn_backward_fn
         t->backward = bw;
     }
     return t;
+}
+
+static tn_tensor *tn__op(tn_ctx *ctx, int ndim, const int *shape, tn_backward_fn bw, tn_tensor *s0, tn_tensor *s1,
+                         tn_tensor *s2)
+{
+    return tn__op_make(ctx, ndim, shape, bw, s0, s1, s2, 1);
 }
 
 /* Same shape as a. */
@@ -6085,7 +6095,13 @@ TN_API tn_tensor *tn_slice(tn_ctx *ctx, tn_tensor *a, int axis, int start, int l
 /* ---- convolution ----
    im2col lays the receptive field of every output pixel out as a column:
    col[(ci * KH + ky) * KW + kx][oy * OW + ox] = x[ci][oy * s - p + ky * d][ox * s - p + kx * d]
-   so the convolution is one GEMM, W (Cout x Cin*KH*KW) times col. col2im is its adjoint (+=). */
+   so the convolution is a GEMM, W (M x C*KH*KW) times col. The output rows are cut into row groups
+   whose number depends on the geometry only (never on the thread count); a thread takes whole
+   groups and runs im2col + GEMM on L2-sized sub-bands of each, so the threads never meet. The
+   weight gradient is summed per group, then over the groups in a fixed order: 1 and 2 threads
+   give the same bits. The input gradient is itself a convolution (stride 1, zero padding: with
+   the flipped, transposed kernel), otherwise col2im of W^T dY in two phases (even groups, then
+   odd ones) whose groups never write the same input rows. */
 
 typedef struct tn__conv_geom {
     int C, H, W, KH, KW, OH, OW, stride, pad, dil, reflect;
@@ -6102,111 +6118,348 @@ static int tn__conv_src(int o, int k, int stride, int pad, int dil, int size, in
     return i;
 }
 
-/* im2col / col2im work on a band of output rows [oy0, oy1) so the column buffer stays in cache:
-   col row r = (ci * KH + ky) * KW + kx holds (oy1 - oy0) * OW values. */
-typedef struct tn__im2col_job { const tn__conv_geom *g; float *x; float *col; int oy0, oy1; } tn__im2col_job;
-
-static void tn__im2col_rows(void *ctx, size_t rb, size_t re)
+/* Output columns [*lo, *hi) whose tap kx reads inside the row without padding: ix = ox*s + x0. */
+static void tn__conv_inner(const tn__conv_geom *g, int kx, int *lo, int *hi)
 {
-    const tn__im2col_job *j = (const tn__im2col_job *)ctx;
-    const tn__conv_geom *g = j->g;
-    size_t r, band = (size_t)(j->oy1 - j->oy0) * g->OW;
-    for (r = rb; r < re; r++) {
-        int kx = (int)(r % (size_t)g->KW), ky = (int)((r / (size_t)g->KW) % (size_t)g->KH), ci = (int)(r / ((size_t)g->KW * g->KH));
-        const float *xc = j->x + (size_t)ci * g->H * g->W;
-        float *dst = j->col + r * band;
-        int oy, ox;
-        for (oy = j->oy0; oy < j->oy1; oy++) {
-            int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
-            float *d = dst + (size_t)(oy - j->oy0) * g->OW;
-            if (iy < 0) {
-                memset(d, 0, (size_t)g->OW * sizeof(float));
-                continue;
-            }
-            if (g->stride == 1 && !g->reflect) { /* fast path: a contiguous run plus zero edges */
-                int x0 = kx * g->dil - g->pad, lo = x0 < 0 ? -x0 : 0, hi = g->W - x0;
-                if (hi > g->OW) hi = g->OW;
-                if (lo > g->OW) lo = g->OW;
-                for (ox = 0; ox < lo; ox++) d[ox] = 0.0f;
-                if (hi > lo) memcpy(d + lo, xc + (size_t)iy * g->W + x0 + lo, (size_t)(hi - lo) * sizeof(float));
-                for (ox = hi > lo ? hi : lo; ox < g->OW; ox++) d[ox] = 0.0f;
-            } else {
-                for (ox = 0; ox < g->OW; ox++) {
-                    int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-                    d[ox] = ix < 0 ? 0.0f : xc[(size_t)iy * g->W + ix];
-                }
-            }
-        }
-    }
+    int x0 = kx * g->dil - g->pad, s = g->stride;
+    *lo = x0 < 0 ? (-x0 + s - 1) / s : 0;
+    *hi = g->W - 1 - x0 < 0 ? 0 : (g->W - 1 - x0) / s + 1;
+    if (*hi > g->OW) *hi = g->OW;
+    if (*lo > *hi) *lo = *hi;
 }
 
-static void tn__im2col(const tn__conv_geom *g, const float *x, float *col, int oy0, int oy1)
+/* col = im2col(x) for output rows [oy0, oy1) of one image (col row r holds (oy1 - oy0) * OW). */
+static void tn__im2col_band(const tn__conv_geom *g, const float *x, float *col, int oy0, int oy1)
 {
-    tn__im2col_job j;
-    j.g = g;
-    j.x = (float *)x;
-    j.col = col;
-    j.oy0 = oy0;
-    j.oy1 = oy1;
-    tn_parallel_for((size_t)g->C * g->KH * g->KW, 4, tn__im2col_rows, &j);
-}
-
-/* dx += col2im(dcol) for one band; parallel over input channels, so no two threads touch the
-   same element and the order of additions into each element is fixed. */
-static void tn__col2im_channels(void *ctx, size_t cb, size_t ce)
-{
-    const tn__im2col_job *j = (const tn__im2col_job *)ctx;
-    const tn__conv_geom *g = j->g;
-    size_t ci, band = (size_t)(j->oy1 - j->oy0) * g->OW;
-    for (ci = cb; ci < ce; ci++) {
-        int ky, kx, oy, ox;
-        float *xc = j->x + ci * (size_t)g->H * g->W;
+    size_t band = (size_t)(oy1 - oy0) * g->OW;
+    int ci, ky, kx, oy, ox, lo, hi;
+    for (ci = 0; ci < g->C; ci++)
         for (ky = 0; ky < g->KH; ky++)
-            for (kx = 0; kx < g->KW; kx++) {
-                const float *src = j->col + ((ci * (size_t)g->KH + ky) * g->KW + kx) * band;
-                for (oy = j->oy0; oy < j->oy1; oy++) {
+            for (kx = 0; kx < g->KW; kx++, col += band) {
+                int x0 = kx * g->dil - g->pad;
+                tn__conv_inner(g, kx, &lo, &hi);
+                for (oy = oy0; oy < oy1; oy++) {
                     int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
-                    const float *sr = src + (size_t)(oy - j->oy0) * g->OW;
-                    if (iy < 0) continue;
-                    if (g->stride == 1 && !g->reflect) { /* fast path: one contiguous run */
-                        int x0 = kx * g->dil - g->pad, lo = x0 < 0 ? -x0 : 0, hi = g->W - x0;
-                        float *d = xc + (size_t)iy * g->W + x0;
-                        if (hi > g->OW) hi = g->OW;
-                        for (ox = lo; ox < hi; ox++) d[ox] += sr[ox];
+                    float *d = col + (size_t)(oy - oy0) * g->OW;
+                    const float *xr = x + ((size_t)ci * g->H + (iy < 0 ? 0 : iy)) * g->W;
+                    if (iy < 0) {
+                        memset(d, 0, (size_t)g->OW * sizeof(float));
                         continue;
                     }
-                    for (ox = 0; ox < g->OW; ox++) {
+                    for (ox = 0; ox < lo; ox++) {
                         int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-                        if (ix >= 0) xc[(size_t)iy * g->W + ix] += sr[ox];
+                        d[ox] = ix < 0 ? 0.0f : xr[ix];
+                    }
+                    if (g->stride == 1) memcpy(d + lo, xr + x0 + lo, (size_t)(hi - lo) * sizeof(float));
+                    else
+                        for (ox = lo; ox < hi; ox++) d[ox] = xr[ox * g->stride + x0];
+                    for (ox = hi; ox < g->OW; ox++) {
+                        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
+                        d[ox] = ix < 0 ? 0.0f : xr[ix];
                     }
                 }
             }
-    }
 }
 
-static void tn__col2im(const tn__conv_geom *g, const float *col, float *dx, int oy0, int oy1)
+/* dx += col2im(col) for output rows [oy0, oy1) of one image: the adjoint of tn__im2col_band, each
+   element's additions in a fixed order. */
+static void tn__col2im_band(const tn__conv_geom *g, const float *col, float *dx, int oy0, int oy1)
 {
-    tn__im2col_job j;
-    j.g = g;
-    j.x = dx;
-    j.col = (float *)col;
-    j.oy0 = oy0;
-    j.oy1 = oy1;
-    tn_parallel_for((size_t)g->C, 1, tn__col2im_channels, &j);
-}
-
-/* Output rows per band: about 512K floats (2 MiB) of columns, at least one row. */
-static int tn__conv_band_rows(const tn__conv_geom *g)
-{
-    size_t k = (size_t)g->C * g->KH * g->KW, per_row = k * (size_t)g->OW, rows = ((size_t)1 << 19) / (per_row ? per_row : 1);
-    if (rows < 1) rows = 1;
-    if (rows > (size_t)g->OH) rows = (size_t)g->OH;
-    return (int)rows;
+    size_t band = (size_t)(oy1 - oy0) * g->OW;
+    int ci, ky, kx, oy, ox, lo, hi;
+    for (ci = 0; ci < g->C; ci++)
+        for (ky = 0; ky < g->KH; ky++)
+            for (kx = 0; kx < g->KW; kx++, col += band) {
+                int x0 = kx * g->dil - g->pad;
+                tn__conv_inner(g, kx, &lo, &hi);
+                for (oy = oy0; oy < oy1; oy++) {
+                    int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
+                    const float *d = col + (size_t)(oy - oy0) * g->OW;
+                    float *xr = dx + ((size_t)ci * g->H + (iy < 0 ? 0 : iy)) * g->W;
+                    if (iy < 0) continue;
+                    for (ox = 0; ox < lo; ox++) {
+                        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
+                        if (ix >= 0) xr[ix] += d[ox];
+                    }
+                    if (g->stride == 1)
+                        for (ox = lo; ox < hi; ox++) xr[ox + x0] += d[ox];
+                    else
+                        for (ox = lo; ox < hi; ox++) xr[ox * g->stride + x0] += d[ox];
+                    for (ox = hi; ox < g->OW; ox++) {
+                        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
+                        if (ix >= 0) xr[ix] += d[ox];
+                    }
+                }
+            }
 }
 
 static int tn__conv_is_1x1(const tn__conv_geom *g)
 {
     return g->KH == 1 && g->KW == 1 && g->stride == 1 && g->pad == 0;
+}
+
+/* Row groups: at most 16 and about 256 output pixels or more each; their M x K weight-gradient
+   partials stay under 16 MiB. A function of the geometry only, so results never depend on it. */
+static int tn__conv_groups(const tn__conv_geom *g, int M)
+{
+    size_t k = (size_t)g->C * g->KH * g->KW, groups = (size_t)g->OH * g->OW / 256;
+    if (groups > 16) groups = 16;
+    if (groups > (size_t)g->OH) groups = (size_t)g->OH;
+    if (groups * M * k > ((size_t)1 << 22)) groups = ((size_t)1 << 22) / (M * k);
+    return groups < 1 ? 1 : (int)groups;
+}
+
+/* Output rows per sub-band: about 64K floats (256 KiB) of columns, so im2col's output is still in
+   L2 when the GEMM packs it. */
+#ifndef TN__CONV_SUB_FLOATS
+#define TN__CONV_SUB_FLOATS (1 << 16)
+#endif
+static int tn__conv_sub_rows(const tn__conv_geom *g)
+{
+    size_t per_row = (size_t)g->C * g->KH * g->KW * g->OW, rows = (size_t)TN__CONV_SUB_FLOATS / (per_row ? per_row : 1);
+    if (rows < 1) rows = 1;
+    if (rows > (size_t)g->OH) rows = (size_t)g->OH;
+    return (int)rows;
+}
+
+/* One convolution pass over row groups; which pass the task function decides. */
+typedef struct tn__conv_job {
+    tn__conv_geom g;
+    int N, M, K, groups, sub, phase; /* phase: col2im pass over groups of this parity */
+    const float *x, *w, *bias, *dy;  /* x: N x C x H x W, w: M x K, dy: N x M x OH x OW */
+    float *y, *dx, *dw;              /* y like dy, dx like x; dw: groups partials of M x K */
+    float beta;                      /* forward: y = beta * y + conv */
+    float *scratch;                  /* one column buffer of K x sub * OW per thread */
+} tn__conv_job;
+
+static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
+{
+    *r0 = (int)((long long)j->g.OH * gi / j->groups);
+    *r1 = (int)((long long)j->g.OH * (gi + 1) / j->groups);
+}
+
+/* Items [*b, *e) of `items` for thread ith of nth. */
+static void tn__conv_share(int items, int ith, int nth, int *b, int *e)
+{
+    *b = (int)((long long)items * ith / nth);
+    *e = (int)((long long)items * (ith + 1) / nth);
+}
+
+/* Items are (image, group) pairs: y rows = W im2col(x rows) (+ bias). */
+static void tn__conv_fwd_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_job *j = (const tn__conv_job *)ctx;
+    const tn__conv_geom *g = &j->g;
+    size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
+    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
+    int it, b, e, r0, r1, oy, m;
+    tn__conv_share(j->N * j->groups, ith, nth, &b, &e);
+    for (it = b; it < e; it++) {
+        const float *xn = j->x + (size_t)(it / j->groups) * chw;
+        float *yn = j->y + (size_t)(it / j->groups) * j->M * ohw;
+        tn__conv_group_rows(j, it % j->groups, &r0, &r1);
+        for (oy = r0; oy < r1; oy += j->sub) {
+            int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
+            float *yb = yn + (size_t)oy * g->OW;
+            if (tn__conv_is_1x1(g)) {
+                tn_sgemm(0, 0, j->M, band, j->K, 1.0f, j->w, j->K, xn + (size_t)oy * g->OW, (int)ohw, j->beta, yb, (int)ohw);
+            } else {
+                tn__im2col_band(g, xn, col, oy, oy1);
+                tn_sgemm(0, 0, j->M, band, j->K, 1.0f, j->w, j->K, col, band, j->beta, yb, (int)ohw);
+            }
+            if (j->bias)
+                for (m = 0; m < j->M; m++) {
+                    float *p = yb + (size_t)m * ohw, bm = j->bias[m];
+                    int i;
+                    for (i = 0; i < band; i++) p[i] += bm;
+                }
+        }
+    }
+}
+
+/* Items are groups: partial[group] = sum over images and sub-bands of dy rows x im2col(x rows)^T. */
+static void tn__conv_dw_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_job *j = (const tn__conv_job *)ctx;
+    const tn__conv_geom *g = &j->g;
+    size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
+    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
+    int gi, b, e, r0, r1, oy, n;
+    tn__conv_share(j->groups, ith, nth, &b, &e);
+    for (gi = b; gi < e; gi++) {
+        float *part = j->dw + (size_t)gi * j->M * j->K, beta = j->groups == 1 ? 1.0f : 0.0f;
+        tn__conv_group_rows(j, gi, &r0, &r1);
+        for (n = 0; n < j->N; n++)
+            for (oy = r0; oy < r1; oy += j->sub) {
+                int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
+                const float *xn = j->x + (size_t)n * chw, *dyb = j->dy + (size_t)n * j->M * ohw + (size_t)oy * g->OW;
+                if (tn__conv_is_1x1(g)) {
+                    tn_sgemm(0, 1, j->M, j->K, band, 1.0f, dyb, (int)ohw, xn + (size_t)oy * g->OW, (int)ohw, beta, part, j->K);
+                } else {
+                    tn__im2col_band(g, xn, col, oy, oy1);
+                    tn_sgemm(0, 1, j->M, j->K, band, 1.0f, dyb, (int)ohw, col, band, beta, part, j->K);
+                }
+                beta = 1.0f; /* the first product of a group initialises its partial */
+            }
+    }
+}
+
+/* Items are (image, group of parity `phase`) pairs: dx += col2im(W^T dy rows). */
+static void tn__conv_dx_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_job *j = (const tn__conv_job *)ctx;
+    const tn__conv_geom *g = &j->g;
+    size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
+    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
+    int per = (j->groups - j->phase + 1) / 2, it, b, e, r0, r1, oy;
+    tn__conv_share(j->N * per, ith, nth, &b, &e);
+    for (it = b; it < e; it++) {
+        int n = it / per;
+        tn__conv_group_rows(j, 2 * (it % per) + j->phase, &r0, &r1);
+        for (oy = r0; oy < r1; oy += j->sub) {
+            int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
+            tn_sgemm(1, 0, j->K, band, j->M, 1.0f, j->w, j->K, j->dy + (size_t)n * j->M * ohw + (size_t)oy * g->OW,
+                     (int)ohw, 0.0f, col, band);
+            tn__col2im_band(g, col, j->dx + (size_t)n * chw, oy, oy1);
+        }
+    }
+}
+
+/* Sets up a job's split and per-thread column buffers; 0 when the arena is out of memory. */
+static int tn__conv_job_init(tn_ctx *ctx, tn__conv_job *j, const tn__conv_geom *g, int N, int M, int groups)
+{
+    memset(j, 0, sizeof *j);
+    j->g = *g;
+    j->N = N;
+    j->M = M;
+    j->K = g->C * g->KH * g->KW;
+    j->groups = groups;
+    j->sub = tn__conv_sub_rows(g);
+    if (tn__conv_is_1x1(g)) return 1;
+    j->scratch = tn__ctx_floats(ctx, (size_t)tn_get_threads() * j->K * j->sub * g->OW, 0);
+    return j->scratch != NULL;
+}
+
+/* Runs fn over the pool, or inline when there is a single item (the GEMMs then use the pool). */
+static void tn__conv_run(tn_task_fn fn, tn__conv_job *j, int items)
+{
+    if (items <= 1 || tn_get_threads() <= 1) fn(j, 0, 1);
+    else tn_parallel_run(fn, j);
+}
+
+/* y = beta * y + conv(x, w) (+ bias): x N x g.C x H x W, w M x K, y N x M x OH x OW. */
+static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
+                            const float *bias, float *y, float beta)
+{
+    tn__conv_job j;
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M))) return 0;
+    j.x = x;
+    j.w = w;
+    j.bias = bias;
+    j.y = y;
+    j.beta = beta;
+    tn__conv_run(tn__conv_fwd_task, &j, N * j.groups);
+    return 1;
+}
+
+typedef struct tn__conv_sum_job { float *dw; const float *parts; size_t n; int groups; } tn__conv_sum_job;
+
+static void tn__conv_sum_parts(void *ctx, size_t b, size_t e)
+{
+    const tn__conv_sum_job *s = (const tn__conv_sum_job *)ctx;
+    size_t i;
+    int k;
+    for (i = b; i < e; i++) {
+        float acc = s->parts[i];
+        for (k = 1; k < s->groups; k++) acc += s->parts[(size_t)k * s->n + i];
+        s->dw[i] += acc;
+    }
+}
+
+/* dw (M x K) += sum over images of dy (M x OH*OW) x im2col(x)^T. */
+static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
+                                float *dw)
+{
+    tn__conv_job j;
+    tn__conv_sum_job s;
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M))) return 0;
+    j.x = x;
+    j.dy = dy;
+    j.dw = j.groups == 1 ? dw : tn__ctx_floats(ctx, (size_t)j.groups * M * j.K, 0);
+    if (!j.dw) return 0;
+    tn__conv_run(tn__conv_dw_task, &j, j.groups);
+    if (j.groups == 1) return 1;
+    s.dw = dw;
+    s.parts = j.dw;
+    s.n = (size_t)M * j.K;
+    s.groups = j.groups;
+    tn_parallel_for(s.n, 16384, tn__conv_sum_parts, &s);
+    return 1;
+}
+
+/* Hull [*lo, *hi] of the input rows that output rows [r0, r1) read; *lo > *hi when none. */
+static void tn__conv_row_hull(const tn__conv_geom *g, int r0, int r1, int *lo, int *hi)
+{
+    int oy, ky;
+    *lo = g->H;
+    *hi = -1;
+    for (oy = r0; oy < r1; oy++)
+        for (ky = 0; ky < g->KH; ky++) {
+            int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
+            if (iy < 0) continue;
+            if (iy < *lo) *lo = iy;
+            if (iy > *hi) *hi = iy;
+        }
+}
+
+/* Most groups (<= `groups`) for which groups g and g + 2 read disjoint input rows, so each col2im
+   phase (even or odd groups) can run in parallel without two threads adding into one element. */
+static int tn__conv_col2im_groups(const tn__conv_geom *g, int groups)
+{
+    for (; groups > 2; groups--) {
+        int k, ok = 1, lo0, hi0, lo2, hi2;
+        for (k = 0; ok && k + 2 < groups; k++) {
+            tn__conv_row_hull(g, (int)((long long)g->OH * k / groups), (int)((long long)g->OH * (k + 1) / groups), &lo0, &hi0);
+            tn__conv_row_hull(g, (int)((long long)g->OH * (k + 2) / groups), (int)((long long)g->OH * (k + 3) / groups), &lo2, &hi2);
+            ok = lo0 > hi0 || lo2 > hi2 || hi0 < lo2 || hi2 < lo0;
+        }
+        if (ok) break;
+    }
+    return groups;
+}
+
+/* dx = beta * dx + conv^T(dy, w): the input gradient of y = conv(x, w) (x N x g.C x H x W). */
+static int tn__conv_input_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *dy, const float *w,
+                               float *dx, float beta)
+{
+    tn__conv_job j;
+    int pad2 = (g->KH - 1) * g->dil - g->pad;
+    if (g->stride == 1 && !g->reflect && g->KH == g->KW && pad2 >= 0 && g->C >= 8 &&
+        g->OH + 2 * pad2 - g->dil * (g->KH - 1) == g->H && g->OW + 2 * pad2 - g->dil * (g->KW - 1) == g->W) {
+        /* dx = conv(dy, w'), w'[c][m][ky][kx] = w[m][c][KH-1-ky][KW-1-kx], padding dil*(K-1) - pad */
+        tn__conv_geom f;
+        size_t kk = (size_t)g->KH * g->KW, c, m, t;
+        float *wf = tn__ctx_floats(ctx, (size_t)g->C * M * kk, 0);
+        if (!wf) return 0;
+        for (c = 0; c < (size_t)g->C; c++)
+            for (m = 0; m < (size_t)M; m++)
+                for (t = 0; t < kk; t++) wf[(c * M + m) * kk + t] = w[(m * g->C + c) * kk + kk - 1 - t];
+        f = *g;
+        f.C = M; f.H = g->OH; f.W = g->OW; f.OH = g->H; f.OW = g->W; f.pad = pad2;
+        return tn__conv_forward(ctx, &f, N, g->C, dy, wf, NULL, dx, beta);
+    }
+    if (beta == 0.0f) memset(dx, 0, (size_t)N * g->C * g->H * g->W * sizeof(float));
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_col2im_groups(g, tn__conv_groups(g, M)))) return 0;
+    if (!j.scratch) { /* 1x1: col2im is the identity but still needs a buffer for W^T dy */
+        j.scratch = tn__ctx_floats(ctx, (size_t)tn_get_threads() * j.K * j.sub * g->OW, 0);
+        if (!j.scratch) return 0;
+    }
+    j.w = w;
+    j.dy = dy;
+    j.dx = dx;
+    for (j.phase = 0; j.phase < 2 && j.phase < j.groups; j.phase++)
+        tn__conv_run(tn__conv_dx_task, &j, N * ((j.groups - j.phase + 1) / 2));
+    return 1;
 }
 
 static void tn__conv_geom_read(tn__conv_geom *g, const tn_tensor *t)
@@ -6235,55 +6488,37 @@ static void tn__bias_add(float *y, const float *bias, int N, int C, size_t hw)
         }
 }
 
+typedef struct tn__bias_job { float *gb; const float *gy; int N, C; size_t hw; } tn__bias_job;
+
+static void tn__bias_grad_channels(void *ctx, size_t cb, size_t ce)
+{
+    const tn__bias_job *j = (const tn__bias_job *)ctx;
+    size_t c;
+    int n;
+    for (c = cb; c < ce; c++)
+        for (n = 0; n < j->N; n++) j->gb[c] += (float)tn__sum_floats(j->gy + ((size_t)n * j->C + c) * j->hw, j->hw);
+}
+
 static void tn__bias_grad(float *gb, const float *gy, int N, int C, size_t hw)
 {
-    int n, c;
-    for (n = 0; n < N; n++)
-        for (c = 0; c < C; c++) gb[c] += (float)tn__sum_floats(gy + ((size_t)n * C + c) * hw, hw);
+    tn__bias_job j;
+    j.gb = gb;
+    j.gy = gy;
+    j.N = N;
+    j.C = C;
+    j.hw = hw;
+    tn_parallel_for((size_t)C, hw * N >= 16384 ? 1 : (size_t)C, tn__bias_grad_channels, &j);
 }
 
 static void tn__conv2d_backward(tn_ctx *ctx, tn_tensor *out)
 {
     tn_tensor *x = out->src[0], *w = out->src[1], *b = out->src[2];
     tn__conv_geom g;
-    int N = x->shape[0], Cout = w->shape[0], n, K, rows, oy;
-    size_t ohw, chw;
-    float *col = NULL, *dcol = NULL;
+    int N = x->shape[0], Cout = w->shape[0];
     tn__conv_geom_read(&g, out);
-    K = g.C * g.KH * g.KW;
-    ohw = (size_t)g.OH * g.OW;
-    chw = (size_t)g.C * g.H * g.W;
-    rows = tn__conv_band_rows(&g);
-    if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, Cout, ohw);
-    if (x->requires_grad && !tn__grad(ctx, x)) return;
-    if (w->requires_grad && !tn__grad(ctx, w)) return;
-    if (!tn__conv_is_1x1(&g)) {
-        col = tn__ctx_floats(ctx, 2 * (size_t)K * rows * g.OW, 0);
-        if (!col) return;
-        dcol = col + (size_t)K * rows * g.OW;
-    }
-    for (n = 0; n < N; n++) {
-        const float *xn = x->data + (size_t)n * chw;
-        float *dxn = x->requires_grad ? x->grad + (size_t)n * chw : NULL;
-        if (tn__conv_is_1x1(&g)) {
-            const float *gy = out->grad + (size_t)n * Cout * ohw;
-            if (w->requires_grad) tn_sgemm(0, 1, Cout, K, (int)ohw, 1.0f, gy, (int)ohw, xn, (int)ohw, 1.0f, w->grad, K);
-            if (dxn) tn_sgemm(1, 0, K, (int)ohw, Cout, 1.0f, w->data, K, gy, (int)ohw, 1.0f, dxn, (int)ohw);
-            continue;
-        }
-        for (oy = 0; oy < g.OH; oy += rows) { /* bands in a fixed order: deterministic sums */
-            int oy1 = oy + rows < g.OH ? oy + rows : g.OH, band = (oy1 - oy) * g.OW;
-            const float *gy = out->grad + (size_t)n * Cout * ohw + (size_t)oy * g.OW;
-            if (w->requires_grad) {
-                tn__im2col(&g, xn, col, oy, oy1);
-                tn_sgemm(0, 1, Cout, K, band, 1.0f, gy, (int)ohw, col, band, 1.0f, w->grad, K);
-            }
-            if (dxn) {
-                tn_sgemm(1, 0, K, band, Cout, 1.0f, w->data, K, gy, (int)ohw, 0.0f, dcol, band);
-                tn__col2im(&g, dcol, dxn, oy, oy1);
-            }
-        }
-    }
+    if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, Cout, (size_t)g.OH * g.OW);
+    if (w->requires_grad && tn__grad(ctx, w) && !tn__conv_weight_grad(ctx, &g, N, Cout, x->data, out->grad, w->grad)) return;
+    if (x->requires_grad && tn__grad(ctx, x)) tn__conv_input_grad(ctx, &g, N, Cout, out->grad, w->data, x->grad, 1.0f);
 }
 
 static int tn__conv_opt(const tn_conv_opts *o, int which)
@@ -6302,13 +6537,9 @@ TN_API tn_tensor *tn_conv2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *
 {
     tn__conv_geom g;
     tn_tensor *o;
-    int N, Cout, K, n, rows, oy;
-    size_t ohw, chw;
-    float *col = NULL;
+    int shape[4];
     if (!x || !w) return NULL;
     TN_ASSERT(x->ndim == 4 && w->ndim == 4 && w->shape[1] == x->shape[1]);
-    N = x->shape[0];
-    Cout = w->shape[0];
     g.C = x->shape[1]; g.H = x->shape[2]; g.W = x->shape[3];
     g.KH = w->shape[2]; g.KW = w->shape[3];
     g.stride = tn__conv_opt(opts, 0);
@@ -6319,73 +6550,38 @@ TN_API tn_tensor *tn_conv2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *
     g.OH = (g.H + 2 * g.pad - g.dil * (g.KH - 1) - 1) / g.stride + 1;
     g.OW = (g.W + 2 * g.pad - g.dil * (g.KW - 1) - 1) / g.stride + 1;
     TN_ASSERT(g.OH >= 1 && g.OW >= 1);
-    TN_ASSERT(!bias || (int)bias->numel == Cout);
-    {
-        int shape[4];
-        shape[0] = N; shape[1] = Cout; shape[2] = g.OH; shape[3] = g.OW;
-        o = tn__op(ctx, 4, shape, tn__conv2d_backward, x, w, bias);
-    }
+    TN_ASSERT(!bias || (int)bias->numel == w->shape[0]);
+    shape[0] = x->shape[0]; shape[1] = w->shape[0]; shape[2] = g.OH; shape[3] = g.OW;
+    o = tn__op_make(ctx, 4, shape, tn__conv2d_backward, x, w, bias, 0); /* every element is written */
     if (!o) return NULL;
     tn__conv_geom_write(&g, o);
-    K = g.C * g.KH * g.KW;
-    ohw = (size_t)g.OH * g.OW;
-    chw = (size_t)g.C * g.H * g.W;
-    rows = tn__conv_band_rows(&g);
-    if (!tn__conv_is_1x1(&g) && !(col = tn__ctx_floats(ctx, (size_t)K * rows * g.OW, 0))) return NULL;
-    for (n = 0; n < N; n++) {
-        const float *xn = x->data + (size_t)n * chw;
-        float *yn = o->data + (size_t)n * Cout * ohw;
-        if (tn__conv_is_1x1(&g)) {
-            tn_sgemm(0, 0, Cout, (int)ohw, K, 1.0f, w->data, K, xn, (int)ohw, 0.0f, yn, (int)ohw);
-            continue;
-        }
-        for (oy = 0; oy < g.OH; oy += rows) {
-            int oy1 = oy + rows < g.OH ? oy + rows : g.OH, band = (oy1 - oy) * g.OW;
-            tn__im2col(&g, xn, col, oy, oy1);
-            tn_sgemm(0, 0, Cout, band, K, 1.0f, w->data, K, col, band, 0.0f, yn + (size_t)oy * g.OW, (int)ohw);
-        }
-    }
-    if (bias) tn__bias_add(o->data, bias->data, N, Cout, ohw);
+    if (!tn__conv_forward(ctx, &g, shape[0], shape[1], x->data, w->data, bias ? bias->data : NULL, o->data, 0.0f))
+        return NULL;
     return o;
 }
 
-/* Transposed convolution: y = col2im(W^T x). Geometry stored as the conv whose input is y. */
+/* Transposed convolution: y = conv^T(x, w) for the conv whose input is y (g.C = Cout, g.H/W = y
+   size, g.OH/OW = x size), so its forward is that conv's input gradient, and its backward is that
+   conv's forward (dx) and weight gradient (dw). */
 static void tn__convt_backward(tn_ctx *ctx, tn_tensor *out)
 {
     tn_tensor *x = out->src[0], *w = out->src[1], *b = out->src[2];
     tn__conv_geom g;
-    int N = x->shape[0], Cin = x->shape[1], K, n;
-    size_t hw, ohw_y;
-    float *col;
-    tn__conv_geom_read(&g, out); /* g.C = Cout, g.H/W = y size, g.OH/OW = x size */
-    K = g.C * g.KH * g.KW;
-    hw = (size_t)g.OH * g.OW;
-    ohw_y = (size_t)g.H * g.W;
-    if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, g.C, ohw_y);
-    col = tn__ctx_floats(ctx, (size_t)K * hw, 0);
-    if (!col) return;
-    if (x->requires_grad && !tn__grad(ctx, x)) return;
-    if (w->requires_grad && !tn__grad(ctx, w)) return;
-    for (n = 0; n < N; n++) {
-        tn__im2col(&g, out->grad + (size_t)n * g.C * ohw_y, col, 0, g.OH); /* dcol = im2col(dy) */
-        if (x->requires_grad) /* dx = W dcol, W as Cin x K */
-            tn_sgemm(0, 0, Cin, (int)hw, K, 1.0f, w->data, K, col, (int)hw, 1.0f, x->grad + (size_t)n * Cin * hw, (int)hw);
-        if (w->requires_grad) /* dW += x dcol^T */
-            tn_sgemm(0, 1, Cin, K, (int)hw, 1.0f, x->data + (size_t)n * Cin * hw, (int)hw, col, (int)hw, 1.0f, w->grad, K);
-    }
+    int N = x->shape[0], Cin = x->shape[1];
+    tn__conv_geom_read(&g, out);
+    if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, g.C, (size_t)g.H * g.W);
+    if (x->requires_grad && tn__grad(ctx, x) && !tn__conv_forward(ctx, &g, N, Cin, out->grad, w->data, NULL, x->grad, 1.0f))
+        return;
+    if (w->requires_grad && tn__grad(ctx, w)) tn__conv_weight_grad(ctx, &g, N, Cin, out->grad, x->data, w->grad);
 }
 
 TN_API tn_tensor *tn_conv_transpose2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *bias, const tn_conv_opts *opts)
 {
     tn__conv_geom g;
     tn_tensor *o;
-    int N, Cin, K, n, op;
-    size_t hw, ohw_y;
-    float *col;
+    int op, shape[4];
     if (!x || !w) return NULL;
     TN_ASSERT(x->ndim == 4 && w->ndim == 4 && w->shape[0] == x->shape[1]);
-    N = x->shape[0];
-    Cin = x->shape[1];
     g.C = w->shape[1];
     g.KH = w->shape[2]; g.KW = w->shape[3];
     g.stride = tn__conv_opt(opts, 0);
@@ -6398,24 +6594,12 @@ TN_API tn_tensor *tn_conv_transpose2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, t
     g.W = (g.OW - 1) * g.stride - 2 * g.pad + g.dil * (g.KW - 1) + op + 1;
     TN_ASSERT(g.H >= 1 && g.W >= 1);
     TN_ASSERT(!bias || (int)bias->numel == g.C);
-    {
-        int shape[4];
-        shape[0] = N; shape[1] = g.C; shape[2] = g.H; shape[3] = g.W;
-        o = tn__op(ctx, 4, shape, tn__convt_backward, x, w, bias);
-    }
+    shape[0] = x->shape[0]; shape[1] = g.C; shape[2] = g.H; shape[3] = g.W;
+    o = tn__op_make(ctx, 4, shape, tn__convt_backward, x, w, bias, 0); /* input_grad with beta 0 writes all */
     if (!o) return NULL;
     tn__conv_geom_write(&g, o);
-    K = g.C * g.KH * g.KW;
-    hw = (size_t)g.OH * g.OW;
-    ohw_y = (size_t)g.H * g.W;
-    col = tn__ctx_floats(ctx, (size_t)K * hw, 0);
-    if (!col) return NULL;
-    for (n = 0; n < N; n++) {
-        /* col = W^T x, W viewed as Cin x K */
-        tn_sgemm(1, 0, K, (int)hw, Cin, 1.0f, w->data, K, x->data + (size_t)n * Cin * hw, (int)hw, 0.0f, col, (int)hw);
-        tn__col2im(&g, col, o->data + (size_t)n * g.C * ohw_y, 0, g.OH);
-    }
-    if (bias) tn__bias_add(o->data, bias->data, N, g.C, ohw_y);
+    if (!tn__conv_input_grad(ctx, &g, shape[0], x->shape[1], x->data, w->data, o->data, 0.0f)) return NULL;
+    if (bias) tn__bias_add(o->data, bias->data, shape[0], g.C, (size_t)g.H * g.W);
     return o;
 }
 
