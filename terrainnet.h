@@ -5103,6 +5103,10 @@ static void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, 
     }
 }
 
+/* Packs op(B)[k0 .. k0+kc) x [j0 .. j0+nc) in the layout of tn__gemm_pack_b, for a B that is
+   never stored (the convolution packs straight from its input instead of an im2col buffer). */
+typedef void (*tn__gemm_pack_fn)(void *ctx, int k0, int kc, int j0, int nc, float *pb);
+
 typedef struct tn__gemm_job {
     int trans_a, trans_b, M, N, K;
     float alpha, beta;
@@ -5111,6 +5115,8 @@ typedef struct tn__gemm_job {
     float *C;
     int split_n;   /* threads split columns (1) or rows (0) */
     int max_parts; /* at most this many threads get work */
+    tn__gemm_pack_fn pack_b; /* if set, produces the packed B blocks (B is unused) */
+    void *pack_ctx;
 } tn__gemm_job;
 
 static float tn__gemm_get(const float *X, int ld, int trans, int r, int c)
@@ -5232,7 +5238,8 @@ static void tn__gemm_blocked(const tn__gemm_job *g, int m0, int m1, int n0, int 
             tn__gemm_pack_a(g->trans_a, g->A, g->lda, ic, mc, pc, kc, pa);
             for (jc = n0; jc < n1; jc += TN__GEMM_NC) {
                 int nc = n1 - jc < TN__GEMM_NC ? n1 - jc : TN__GEMM_NC;
-                tn__gemm_pack_b(g->trans_b, g->B, g->ldb, pc, kc, jc, nc, pb);
+                if (g->pack_b) g->pack_b(g->pack_ctx, pc, kc, jc, nc, pb);
+                else tn__gemm_pack_b(g->trans_b, g->B, g->ldb, pc, kc, jc, nc, pb);
                 tn__gemm_macro(g, ic, mc, jc, nc, kc, pa, pb, beta);
             }
         }
@@ -5303,6 +5310,8 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
     g.ldb = ldb;
     g.ldc = ldc;
     g.C = C;
+    g.pack_b = NULL;
+    g.pack_ctx = NULL;
     if (macs <= TN__GEMM_SMALL) {
         tn__gemm_simple(&g, 0, M, 0, N);
         return;
@@ -5313,6 +5322,40 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
     g.max_parts = g.split_n ? (N + TN__GEMM_NR - 1) / TN__GEMM_NR : (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
     if (macs < TN__GEMM_PAR_MIN) tn__gemm_task(&g, 0, 1);
     else tn_parallel_run(tn__gemm_task, &g);
+}
+
+/* Floats of packing space tn__sgemm_gen_b needs for M rows: an A block, then (64-byte aligned)
+   a B block. */
+static size_t tn__sgemm_gen_b_floats(int M)
+{
+    size_t rows = (size_t)(M < TN__GEMM_MC ? M : TN__GEMM_MC);
+    rows = (rows + TN__GEMM_MR - 1) / TN__GEMM_MR * TN__GEMM_MR;
+    return (rows * TN__GEMM_KC + 15) / 16 * 16 + TN__GEMM_NC / TN__GEMM_NR * tn__gemm_b_stride(TN__GEMM_KC);
+}
+
+/* C = A B + beta C (A M x K, row-major) on the calling thread, B packed block by block by `pack`,
+   using `buf` (64-byte aligned, tn__sgemm_gen_b_floats(M) floats). For use inside a parallel
+   region; results are the same as tn_sgemm's for the same B. */
+static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__gemm_pack_fn pack, void *pack_ctx,
+                            float beta, float *C, int ldc, float *buf)
+{
+    tn__gemm_job g;
+    size_t rows = (size_t)(M < TN__GEMM_MC ? M : TN__GEMM_MC);
+    rows = (rows + TN__GEMM_MR - 1) / TN__GEMM_MR * TN__GEMM_MR;
+    memset(&g, 0, sizeof g);
+    g.M = M;
+    g.N = N;
+    g.K = K;
+    g.alpha = 1.0f;
+    g.beta = beta;
+    g.A = A;
+    g.lda = lda;
+    g.ldb = N;
+    g.ldc = ldc;
+    g.C = C;
+    g.pack_b = pack;
+    g.pack_ctx = pack_ctx;
+    if (M > 0 && N > 0 && K > 0) tn__gemm_blocked(&g, 0, M, 0, N, buf, buf + (rows * TN__GEMM_KC + 15) / 16 * 16);
 }
 
 /* --------------------------------------------------------------------------------------------
@@ -6128,37 +6171,84 @@ static void tn__conv_inner(const tn__conv_geom *g, int kx, int *lo, int *hi)
     if (*lo > *hi) *lo = *hi;
 }
 
+/* d[0 .. ox1-ox0) = input row xr as tap kx sees it at output columns [ox0, ox1) (xr NULL: a
+   padding row); [lo, hi) is the tap's inner range (tn__conv_inner). */
+static void tn__conv_span(const tn__conv_geom *g, const float *xr, int kx, int lo, int hi, int ox0, int ox1, float *d)
+{
+    int ox, a = lo > ox0 ? lo : ox0, b = hi < ox1 ? hi : ox1, x0 = kx * g->dil - g->pad;
+    if (!xr) {
+        memset(d, 0, (size_t)(ox1 - ox0) * sizeof(float));
+        return;
+    }
+    if (a > ox1) a = ox1;
+    if (b < a) b = a;
+    for (ox = ox0; ox < a; ox++) {
+        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
+        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+    }
+    if (g->stride == 1) memcpy(d + (a - ox0), xr + x0 + a, (size_t)(b - a) * sizeof(float));
+    else
+        for (ox = a; ox < b; ox++) d[ox - ox0] = xr[ox * g->stride + x0];
+    for (ox = b; ox < ox1; ox++) {
+        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
+        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+    }
+}
+
 /* col = im2col(x) for output rows [oy0, oy1) of one image (col row r holds (oy1 - oy0) * OW). */
 static void tn__im2col_band(const tn__conv_geom *g, const float *x, float *col, int oy0, int oy1)
 {
     size_t band = (size_t)(oy1 - oy0) * g->OW;
-    int ci, ky, kx, oy, ox, lo, hi;
+    int ci, ky, kx, oy, lo, hi;
     for (ci = 0; ci < g->C; ci++)
         for (ky = 0; ky < g->KH; ky++)
             for (kx = 0; kx < g->KW; kx++, col += band) {
-                int x0 = kx * g->dil - g->pad;
                 tn__conv_inner(g, kx, &lo, &hi);
                 for (oy = oy0; oy < oy1; oy++) {
                     int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
-                    float *d = col + (size_t)(oy - oy0) * g->OW;
-                    const float *xr = x + ((size_t)ci * g->H + (iy < 0 ? 0 : iy)) * g->W;
-                    if (iy < 0) {
-                        memset(d, 0, (size_t)g->OW * sizeof(float));
-                        continue;
-                    }
-                    for (ox = 0; ox < lo; ox++) {
-                        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-                        d[ox] = ix < 0 ? 0.0f : xr[ix];
-                    }
-                    if (g->stride == 1) memcpy(d + lo, xr + x0 + lo, (size_t)(hi - lo) * sizeof(float));
-                    else
-                        for (ox = lo; ox < hi; ox++) d[ox] = xr[ox * g->stride + x0];
-                    for (ox = hi; ox < g->OW; ox++) {
-                        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-                        d[ox] = ix < 0 ? 0.0f : xr[ix];
-                    }
+                    const float *xr = iy < 0 ? NULL : x + ((size_t)ci * g->H + iy) * g->W;
+                    tn__conv_span(g, xr, kx, lo, hi, 0, g->OW, col + (size_t)(oy - oy0) * g->OW);
                 }
             }
+}
+
+/* im2col packed straight into the GEMM's B panels (tn__gemm_pack_fn): column j of the band is
+   output pixel oy0 * OW + j of image x. */
+typedef struct tn__conv_pack { const tn__conv_geom *g; const float *x; int oy0; } tn__conv_pack;
+
+static void tn__conv_pack_b(void *ctx, int k0, int kc, int j0, int nc, float *pb)
+{
+    const tn__conv_pack *p = (const tn__conv_pack *)ctx;
+    const tn__conv_geom *g = p->g;
+    size_t panel = tn__gemm_b_stride(kc);
+    int k, t;
+    for (k = 0; k < kc; k++) {
+        int r = k0 + k, kx = r % g->KW, ky = (r / g->KW) % g->KH, ci = r / (g->KW * g->KH), lo, hi, j = 0;
+        int x0 = kx * g->dil - g->pad;
+        tn__conv_inner(g, kx, &lo, &hi);
+        while (j < nc) { /* one output row at a time, in pieces that stay inside one panel */
+            int pix = j0 + j, oy = p->oy0 + pix / g->OW, ox = pix % g->OW, end = j + g->OW - ox;
+            int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
+            const float *xr = iy < 0 ? NULL : p->x + ((size_t)ci * g->H + iy) * g->W;
+            if (end > nc) end = nc;
+            while (j < end) {
+                int n = TN__GEMM_NR - j % TN__GEMM_NR;
+                float *d = pb + (size_t)(j / TN__GEMM_NR) * panel + (size_t)k * TN__GEMM_NR + j % TN__GEMM_NR;
+                if (n > end - j) n = end - j;
+                if (xr && g->stride == 1 && ox >= lo && ox + n <= hi) {
+                    const float *src = xr + x0 + ox;
+                    for (t = 0; t < n; t++) d[t] = src[t];
+                } else {
+                    tn__conv_span(g, xr, kx, lo, hi, ox, ox + n, d);
+                }
+                j += n;
+                ox += n;
+            }
+        }
+        if (nc % TN__GEMM_NR) /* columns past nc are zero, as in tn__gemm_pack_b */
+            for (t = nc % TN__GEMM_NR; t < TN__GEMM_NR; t++)
+                pb[(size_t)(nc / TN__GEMM_NR) * panel + (size_t)k * TN__GEMM_NR + t] = 0.0f;
+    }
 }
 
 /* dx += col2im(col) for output rows [oy0, oy1) of one image: the adjoint of tn__im2col_band, each
@@ -6226,10 +6316,12 @@ static int tn__conv_sub_rows(const tn__conv_geom *g)
 typedef struct tn__conv_job {
     tn__conv_geom g;
     int N, M, K, groups, sub, phase; /* phase: col2im pass over groups of this parity */
+    int mparts;                      /* forward: output channels split this many ways */
     const float *x, *w, *bias, *dy;  /* x: N x C x H x W, w: M x K, dy: N x M x OH x OW */
     float *y, *dx, *dw;              /* y like dy, dx like x; dw: groups partials of M x K */
     float beta;                      /* forward: y = beta * y + conv */
-    float *scratch;                  /* one column buffer of K x sub * OW per thread */
+    float *scratch;                  /* per thread: scratch_floats for columns / packing */
+    size_t scratch_floats;
 } tn__conv_job;
 
 static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
@@ -6245,31 +6337,44 @@ static void tn__conv_share(int items, int ith, int nth, int *b, int *e)
     *e = (int)((long long)items * (ith + 1) / nth);
 }
 
-/* Items are (image, group) pairs: y rows = W im2col(x rows) (+ bias). */
+/* Products up to this size go through tn_sgemm's unpacked loops (on an im2col buffer of at most
+   this many floats); decided on the whole M, so every split computes them the same way. */
+#define TN__CONV_TINY TN__GEMM_SMALL
+
+/* Items are (image, group, channel part): y rows = W im2col(x rows) (+ bias), with im2col packed
+   straight into the GEMM panels. Each output element's sum is the same for any split. */
 static void tn__conv_fwd_task(void *ctx, int ith, int nth)
 {
     const tn__conv_job *j = (const tn__conv_job *)ctx;
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
-    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
-    int it, b, e, r0, r1, oy, m;
-    tn__conv_share(j->N * j->groups, ith, nth, &b, &e);
+    float *buf = j->scratch + (size_t)ith * j->scratch_floats, *col = buf + j->scratch_floats - TN__CONV_TINY;
+    int parts = j->groups * j->mparts, mtiles = (j->M + TN__GEMM_MR - 1) / TN__GEMM_MR, it, b, e, r0, r1, oy, m;
+    tn__conv_share(j->N * parts, ith, nth, &b, &e);
     for (it = b; it < e; it++) {
-        const float *xn = j->x + (size_t)(it / j->groups) * chw;
-        float *yn = j->y + (size_t)(it / j->groups) * j->M * ohw;
-        tn__conv_group_rows(j, it % j->groups, &r0, &r1);
+        int mp = it % j->mparts, m0 = mtiles * mp / j->mparts * TN__GEMM_MR, m1 = mtiles * (mp + 1) / j->mparts * TN__GEMM_MR;
+        const float *xn = j->x + (size_t)(it / parts) * chw, *wm;
+        float *yn = j->y + (size_t)(it / parts) * j->M * ohw;
+        if (m1 > j->M) m1 = j->M;
+        if (m0 >= m1) continue;
+        wm = j->w + (size_t)m0 * j->K;
+        tn__conv_group_rows(j, it % parts / j->mparts, &r0, &r1);
         for (oy = r0; oy < r1; oy += j->sub) {
             int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
-            float *yb = yn + (size_t)oy * g->OW;
-            if (tn__conv_is_1x1(g)) {
-                tn_sgemm(0, 0, j->M, band, j->K, 1.0f, j->w, j->K, xn + (size_t)oy * g->OW, (int)ohw, j->beta, yb, (int)ohw);
-            } else {
+            float *yb = yn + (size_t)m0 * ohw + (size_t)oy * g->OW;
+            if ((double)j->M * band * j->K <= TN__CONV_TINY) {
                 tn__im2col_band(g, xn, col, oy, oy1);
-                tn_sgemm(0, 0, j->M, band, j->K, 1.0f, j->w, j->K, col, band, j->beta, yb, (int)ohw);
+                tn_sgemm(0, 0, m1 - m0, band, j->K, 1.0f, wm, j->K, col, band, j->beta, yb, (int)ohw);
+            } else {
+                tn__conv_pack pk;
+                pk.g = g;
+                pk.x = xn;
+                pk.oy0 = oy;
+                tn__sgemm_gen_b(m1 - m0, band, j->K, wm, j->K, tn__conv_pack_b, &pk, j->beta, yb, (int)ohw, buf);
             }
             if (j->bias)
-                for (m = 0; m < j->M; m++) {
-                    float *p = yb + (size_t)m * ohw, bm = j->bias[m];
+                for (m = m0; m < m1; m++) {
+                    float *p = yb + (size_t)(m - m0) * ohw, bm = j->bias[m];
                     int i;
                     for (i = 0; i < band; i++) p[i] += bm;
                 }
@@ -6283,7 +6388,7 @@ static void tn__conv_dw_task(void *ctx, int ith, int nth)
     const tn__conv_job *j = (const tn__conv_job *)ctx;
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
-    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
+    float *col = j->scratch + (size_t)ith * j->scratch_floats;
     int gi, b, e, r0, r1, oy, n;
     tn__conv_share(j->groups, ith, nth, &b, &e);
     for (gi = b; gi < e; gi++) {
@@ -6310,7 +6415,7 @@ static void tn__conv_dx_task(void *ctx, int ith, int nth)
     const tn__conv_job *j = (const tn__conv_job *)ctx;
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
-    float *col = j->scratch + (size_t)ith * j->K * j->sub * g->OW;
+    float *col = j->scratch + (size_t)ith * j->scratch_floats;
     int per = (j->groups - j->phase + 1) / 2, it, b, e, r0, r1, oy;
     tn__conv_share(j->N * per, ith, nth, &b, &e);
     for (it = b; it < e; it++) {
@@ -6325,8 +6430,8 @@ static void tn__conv_dx_task(void *ctx, int ith, int nth)
     }
 }
 
-/* Sets up a job's split and per-thread column buffers; 0 when the arena is out of memory. */
-static int tn__conv_job_init(tn_ctx *ctx, tn__conv_job *j, const tn__conv_geom *g, int N, int M, int groups)
+/* Sets up a job's split and `floats` of scratch per thread; 0 when the arena is out of memory. */
+static int tn__conv_job_init(tn_ctx *ctx, tn__conv_job *j, const tn__conv_geom *g, int N, int M, int groups, size_t floats)
 {
     memset(j, 0, sizeof *j);
     j->g = *g;
@@ -6335,9 +6440,16 @@ static int tn__conv_job_init(tn_ctx *ctx, tn__conv_job *j, const tn__conv_geom *
     j->K = g->C * g->KH * g->KW;
     j->groups = groups;
     j->sub = tn__conv_sub_rows(g);
-    if (tn__conv_is_1x1(g)) return 1;
-    j->scratch = tn__ctx_floats(ctx, (size_t)tn_get_threads() * j->K * j->sub * g->OW, 0);
+    j->mparts = 1;
+    j->scratch_floats = (floats + 15) / 16 * 16; /* 64-byte aligned per thread */
+    j->scratch = tn__ctx_floats(ctx, (size_t)tn_get_threads() * j->scratch_floats, 0);
     return j->scratch != NULL;
+}
+
+/* Column buffer of one sub-band (im2col for the weight gradient, W^T dy for col2im). */
+static size_t tn__conv_col_floats(const tn__conv_geom *g)
+{
+    return (size_t)g->C * g->KH * g->KW * tn__conv_sub_rows(g) * g->OW;
 }
 
 /* Runs fn over the pool, or inline when there is a single item (the GEMMs then use the pool). */
@@ -6352,13 +6464,22 @@ static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, c
                             const float *bias, float *y, float beta)
 {
     tn__conv_job j;
-    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M))) return 0;
+    int items, nth = tn_get_threads(), mtiles = (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__sgemm_gen_b_floats(M) + TN__CONV_TINY))
+        return 0;
+    j.sub = (int)(2048 / (size_t)g->OW); /* ~2048 pixels per GEMM: its output is still in L2 for the bias */
+    if (j.sub < 1) j.sub = 1;
+    items = N * j.groups;
+    if (items < 2 * nth) { /* few groups (small images): also split the output channels */
+        j.mparts = (2 * nth + items - 1) / items;
+        if (j.mparts > mtiles) j.mparts = mtiles;
+    }
     j.x = x;
     j.w = w;
     j.bias = bias;
     j.y = y;
     j.beta = beta;
-    tn__conv_run(tn__conv_fwd_task, &j, N * j.groups);
+    tn__conv_run(tn__conv_fwd_task, &j, items * j.mparts);
     return 1;
 }
 
@@ -6382,7 +6503,7 @@ static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
 {
     tn__conv_job j;
     tn__conv_sum_job s;
-    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M))) return 0;
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__conv_col_floats(g))) return 0;
     j.x = x;
     j.dy = dy;
     j.dw = j.groups == 1 ? dw : tn__ctx_floats(ctx, (size_t)j.groups * M * j.K, 0);
@@ -6449,11 +6570,8 @@ static int tn__conv_input_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M
         return tn__conv_forward(ctx, &f, N, g->C, dy, wf, NULL, dx, beta);
     }
     if (beta == 0.0f) memset(dx, 0, (size_t)N * g->C * g->H * g->W * sizeof(float));
-    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_col2im_groups(g, tn__conv_groups(g, M)))) return 0;
-    if (!j.scratch) { /* 1x1: col2im is the identity but still needs a buffer for W^T dy */
-        j.scratch = tn__ctx_floats(ctx, (size_t)tn_get_threads() * j.K * j.sub * g->OW, 0);
-        if (!j.scratch) return 0;
-    }
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_col2im_groups(g, tn__conv_groups(g, M)), tn__conv_col_floats(g)))
+        return 0;
     j.w = w;
     j.dy = dy;
     j.dx = dx;
