@@ -9119,32 +9119,33 @@ static float tn__align_score(const tn__chains *sk, int i, int pi, const tn__chai
     return (float)(fabs(s) + sqrt(s2 > 0 ? s2 : 0));
 }
 
-/* Longest common substring of the sketch part's codes rotated to the DEM part, and its height
-   score, for one direction of the sketch part. */
-static tn__align_cand tn__align_pair(const tn__chains *sk, int i, const tn__chains *dem, int q)
+/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
+   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts. Walks
+   only the diagonals (offsets between the strings) that overlap by at least `need` codes: any
+   answer >= need is exact, a smaller one only says "not good enough". */
+static int tn__align_lcs(const tn__chains *sk, int i, const tn__chains *dem, int q, int need, int *ps, int *qs)
 {
-    int row[TN__ALIGN_MAXCODES + 1], prevrow[TN__ALIGN_MAXCODES + 1];
     uint8_t rot[TN__ALIGN_MAXCODES];
     const uint8_t *p = sk->code + sk->off[i], *qc = dem->code + dem->off[q];
-    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, y, k, pe = 0, qe = 0;
-    tn__align_cand c;
-    /* rotate the sketch part onto the DEM part by the multiple of pi/4 nearest their angle */
+    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, d, k, len = 0;
+    *ps = sk->off[i];
+    *qs = dem->off[q];
+    if (need < 1) need = 1;
+    if (np < need || nq < need) return 0;
     k = (int)lrint(((double)dem->angle[q] - sk->angle[i]) / 0.78539816339744831) & 7;
     for (x = 0; x < np; x++) rot[x] = (uint8_t)((p[x] + k) & 7);
-    c.len = 0;
-    for (y = 0; y <= nq; y++) prevrow[y] = 0;
-    for (x = 1; x <= np; x++) {
-        row[0] = 0;
-        for (y = 1; y <= nq; y++) {
-            int v = rot[x - 1] == qc[y - 1] ? prevrow[y - 1] + 1 : 0;
-            row[y] = v;
-            if (v > c.len) { c.len = v; pe = x; qe = y; }
+    for (d = need - np; d <= nq - need; d++) { /* q index = p index + d */
+        int x0 = d < 0 ? -d : 0, x1 = np < nq - d ? np : nq - d, run = 0;
+        for (x = x0; x < x1; x++) {
+            run = rot[x] == qc[x + d] ? run + 1 : 0;
+            if (run > len) {
+                len = run;
+                *ps = sk->off[i] + x + 1 - run;
+                *qs = dem->off[q] + x + d + 1 - run;
+            }
         }
-        memcpy(prevrow, row, (size_t)(nq + 1) * sizeof(int));
     }
-    c.index = q;
-    c.score = tn__align_score(sk, i, sk->off[i] + pe - c.len, dem, q, dem->off[q] + qe - c.len, c.len);
-    return c;
+    return len;
 }
 
 static void tn__align_rows(void *ctx, size_t begin, size_t end)
@@ -9154,13 +9155,19 @@ static void tn__align_rows(void *ctx, size_t begin, size_t end)
     tn__align_cand cand[64], c, r;
     size_t i;
     for (i = begin; i < end; i++) {
-        int ncand = 0, q, x, y, at, type = job->sk->type[i];
+        int ncand = 0, q, x, y, at, type = job->sk->type[i], ps, qs, ps2, qs2, need;
         tn_rng rng;
         for (q = 0; q < dem->count; q++) {
             if (job->any_type[type] && dem->type[q] != type) continue;
+            need = ncand == job->top ? cand[ncand - 1].len : 0; /* to enter a full list */
             /* both directions of the sketch part: A1's left-to-right rule alone is not rotation invariant */
-            c = tn__align_pair(job->sk, (int)i, dem, q);
-            r = tn__align_pair(job->skr, (int)i, dem, q);
+            c.len = tn__align_lcs(job->sk, (int)i, dem, q, need, &ps, &qs);
+            r.len = tn__align_lcs(job->skr, (int)i, dem, q, need, &ps2, &qs2);
+            if (c.len < need && r.len < need) continue;
+            c.index = r.index = q;
+            c.score = r.score = HUGE_VALF;
+            if (c.len >= r.len) c.score = tn__align_score(job->sk, (int)i, ps, dem, q, qs, c.len);
+            if (r.len >= c.len) r.score = tn__align_score(job->skr, (int)i, ps2, dem, q, qs2, r.len);
             if (tn__cand_better(&r, &c)) c = r;
             if (ncand == job->top && !tn__cand_better(&c, &cand[ncand - 1])) continue;
             if (ncand < job->top) ncand++;
