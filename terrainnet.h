@@ -55,7 +55,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
-    @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
+    @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -605,6 +605,117 @@ typedef struct tn_contour_set {
 
 /* Frees every polyline and zeroes *set. Safe on a zeroed set. */
 TN_API void tn_contour_set_free(tn_contour_set *set);
+
+/* ---- sketch files (.tns) ---------------------------------------------------------------------
+   A human-editable text format for any contour set (user sketches, extracted ridge/valley
+   networks, contour parts). Line by line, '#' starts a comment, blank lines are ignored:
+
+       terrainnet-sketch 1              first line: magic and version
+       canvas 256 256                   canvas width and height in pixels (once, before polylines)
+       ridge order 2 gradient 0.13      opens a polyline: `ridge` or `valley`, then optional
+                                        `order N` (Strahler, default 0), `gradient G` (mean slope,
+                                        default 0), `start H` and `rate R` (see below)
+       10 20 0.8                        one point per line: x y [h], pixels, (0, 0) = top-left
+       40.5 22 0.75                     pixel centre; x in [-0.5, W - 0.5], y likewise
+       end                              closes the polyline
+
+   A point without h takes start + rate * (arc length in pixels from the first point), so
+   `valley start 0.2 rate 0.001` rises 0.001 per pixel. Heights are [0, 1] for drawn sketches
+   and metres for extracted networks. Saving writes every height, order and gradient with
+   %.9g, so load(save(s)) == s exactly. Errors carry "file:line:". */
+
+#define TN_SKETCH_MAX_SIDE 65536           /* largest canvas side */
+#define TN_SKETCH_MAX_POINTS (1 << 26)     /* most points in one file */
+
+/* Parses .tns text (n bytes, need not be NUL-terminated). `name` (may be NULL) prefixes messages.
+   Fails with TN_ERR_FORMAT (not a sketch, unknown version), TN_ERR_CORRUPT (malformed line,
+   missing canvas or end, point outside the canvas), TN_ERR_NUMERIC (NaN/Inf), TN_ERR_TOO_LARGE
+   (canvas side or point count over the limits). On success *out is allocated (tn_contour_set_free). */
+TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out);
+/* Loads a .tns file, or a sketch drawn as an image (see tn_sketch_from_image) when the file is
+   not .tns text. *out is untouched on failure. */
+TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out);
+/* Writes the set as .tns text into a TN_MALLOC'd buffer (free with tn_free). Fails with
+   TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas or empty polyline. */
+TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size);
+/* Saves as .tns through a temporary file and a rename: on any error the target is untouched. */
+TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
+
+/* Reads a sketch drawn as an RGB(A) image: strokes in saturated red are ridges, saturated blue
+   are valleys; everything else (white, black, grey, yellow, ...) is background. A pixel is a
+   stroke when v = max(r, b) >= 0.1, v - g >= v / 2 and |r - b| >= v / 2; its height is v, so a
+   bright stroke is high and a dark one low (heights in [0.1, 1]). Strokes of any width are
+   thinned (Guo-Hall, a Zhang-Suen variant) and traced into polylines between endpoints and junctions; the canvas is
+   the image size. Fails with TN_ERR_SHAPE for 1-2 channel images, TN_ERR_EMPTY without strokes. */
+TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out);
+
+/* Resamples every polyline to an 8-connected chain of integer pixels (consecutive points
+   differ by at most 1 in x and y, no repeats), heights linear between the original points.
+   Use before tn_contour_parts_make on sketches whose points are far apart. *out allocated here. */
+TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out);
+
+/* Rasterises to a width x height x 3 image (any size; coordinates scale from the canvas):
+   channel 0 = 1 on ridge pixels, channel 1 = 1 on valley pixels, channel 2 = the sketch height
+   there (0 elsewhere; where lines overlap, the later polyline wins). *out allocated here. */
+TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out);
+/* RGB preview: ridges yellow, valleys blue, over a hillshade of `dem` (resized; may be NULL for
+   a grey background). Lines are 1 px wide up to 511 px and thicker above. *out allocated here. */
+TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out);
+
+/* ---- random sketches (section 5.2) ---------------------------------------------------------
+   n random nodes with heights in [0.5, 1] joined by a Euclidean minimum spanning tree are the
+   candidate ridges; the Voronoi vertices of the nodes (circumcentres of their Delaunay
+   triangles, inside the canvas) with heights in [0, 0.5] joined by another MST are the candidate
+   valleys. Ridge edges crossing the user's sketch are dropped; valley edges crossing the user's
+   sketch or a kept ridge are dropped. Kept edges are chained between branch points and
+   resampled to 8-connected pixel polylines with heights linear along each edge. */
+
+typedef struct tn_sketch_random_opts {
+    uint64_t seed;
+    int nodes;            /* random ridge nodes; 0 = width * height / 1024, clamped to [8, 2048] */
+} tn_sketch_random_opts;
+/* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
+   valleys, on a width x height canvas (user's canvas size must match when given, else
+   TN_ERR_SHAPE). Same seed, same output. opts may be NULL. */
+TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
+                                  tn_contour_set *out);
+
+/* Delaunay triangulation (Bowyer-Watson, O(n^2) worst case; fine for a few thousand points) of
+   n points xy[2n]. *triangles (3 vertex indices each, counter-clockwise in y-down pixels is not
+   guaranteed) is TN_MALLOC'd; free with tn_free. Exact duplicate points are skipped. */
+TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
+/* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
+   point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. */
+TN_API tn_status tn_mst(const float *xy, int n, int **edges);
+
+/* ---- contour parts (section 4.1) -----------------------------------------------------------
+   Each polyline, in its order from its first point (an endpoint of the contour graph, so the
+   list is the paper's DFS order), is cut into parts of 5-10 points (seeded random lengths; a
+   tail that would be shorter than 5 is taken into the last part when that stays <= 10 points).
+   Where consecutive points are not 8-adjacent (|dx| or |dy| > 1.5 px) the window is split at
+   the break and pieces under 5 points are dropped. Parts keep the type, order and gradient of
+   their polyline; a part's index is its position in *parts. An empty input gives an empty set. */
+TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts);
+
+/* ---- alignment (section 5.3, algorithms A1 and A2) ------------------------------------------
+   Every part becomes an 8-direction chain code (steps quantised to k * pi/4), reversed when it
+   runs right-to-left (first x > last x); each DEM part is rotated by the multiple of pi/4 nearest
+   to the angle between the two parts' first-to-last vectors. The longest common substring of
+   the codes picks the 10 best DEM parts (ties: smaller height score), the height score on the
+   common substring, |mean(d)| + std(d) with d the height differences after each set is scaled
+   to [0, 1] by its own range, ranks them, and one of the best 5 is chosen with the seeded RNG.
+   Only parts of the same type (ridge/valley) are candidates when the DEM has any. */
+
+typedef struct tn_align_opts {
+    uint64_t seed;
+    int top;              /* candidates kept by LCS length; 0 = 10 */
+    int choices;          /* random pick among the best this many by height; 0 = 5 (1 = greedy) */
+    int raw_heights;      /* 1: compare heights as given instead of scaling each set to [0, 1] */
+} tn_align_opts;
+/* match[i] (caller-allocated, sketch_parts->count ints) = index of the DEM part aligned to sketch
+   part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count. */
+TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
+                                 const tn_align_opts *opts, int *match);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -8055,6 +8166,1366 @@ TN_API void tn_contour_set_free(tn_contour_set *set) {
     for (i = 0; i < set->count; i++) TN_FREE(set->items[i].points);
     TN_FREE(set->items);
     memset(set, 0, sizeof(*set));
+}
+
+/* ---- small builders shared by the sketch code ---- */
+
+/* Appends a polyline (points copied) to *s, whose items array has capacity *cap bytes. */
+static tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
+                              const float *pts, int npts)
+{
+    tn_contour *c;
+    tn_status st;
+    if (s->count == INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "more than %d polylines", INT_MAX);
+    st = tn__reserve((void **)&s->items, cap, ((size_t)s->count + 1) * sizeof(tn_contour));
+    if (st) return st;
+    c = &s->items[s->count];
+    c->points = (float *)tn__alloc((size_t)npts * 3 * sizeof(float));
+    if (!c->points) return TN_ERR_OUT_OF_MEMORY;
+    if (npts) memcpy(c->points, pts, (size_t)npts * 3 * sizeof(float));
+    c->type = type;
+    c->order = order;
+    c->npoints = npts;
+    c->mean_gradient = gradient;
+    s->count++;
+    return TN_OK;
+}
+
+/* A growable list of (x, y, h) points; cap in bytes (tn__reserve). */
+typedef struct tn__pts { float *p; int n; size_t cap; } tn__pts;
+
+static tn_status tn__pts_push(tn__pts *b, float x, float y, float h)
+{
+    tn_status st;
+    if (b->n >= TN_SKETCH_MAX_POINTS) return tn__fail(TN_ERR_TOO_LARGE, "polyline longer than %d points", TN_SKETCH_MAX_POINTS);
+    st = tn__reserve((void **)&b->p, &b->cap, ((size_t)b->n + 1) * 3 * sizeof(float));
+    if (st) return st;
+    b->p[3 * b->n] = x;
+    b->p[3 * b->n + 1] = y;
+    b->p[3 * b->n + 2] = h;
+    b->n++;
+    return TN_OK;
+}
+
+/* Appends the 8-connected integer-pixel chain through pts (canvas coordinates mapped by pixel
+   centres: x' = (x + 0.5) * sx - 0.5), heights linear along each segment, no repeated pixels. */
+static tn_status tn__chain_pixels(const float *pts, int n, float sx, float sy, tn__pts *out)
+{
+    int i, t, steps;
+    tn_status st;
+    for (i = 0; i < n; i++) {
+        float x1 = (pts[3 * i] + 0.5f) * sx - 0.5f, y1 = (pts[3 * i + 1] + 0.5f) * sy - 0.5f, h1 = pts[3 * i + 2];
+        float x0 = x1, y0 = y1, h0 = h1;
+        if (i > 0) {
+            x0 = (pts[3 * i - 3] + 0.5f) * sx - 0.5f;
+            y0 = (pts[3 * i - 2] + 0.5f) * sy - 0.5f;
+            h0 = pts[3 * i - 1];
+        }
+        steps = (int)ceilf(fmaxf(fabsf(x1 - x0), fabsf(y1 - y0)));
+        for (t = i > 0 ? 1 : 0; t <= steps; t++) {
+            float f = steps ? (float)t / (float)steps : 1.0f;
+            float px = floorf(x0 + f * (x1 - x0) + 0.5f), py = floorf(y0 + f * (y1 - y0) + 0.5f);
+            if (out->n && out->p[3 * out->n - 3] == px && out->p[3 * out->n - 2] == py) continue;
+            if ((st = tn__pts_push(out, px, py, h0 + f * (h1 - h0)))) return st;
+        }
+    }
+    return TN_OK;
+}
+
+/* Checks that every point is finite and the canvas sane; `what` names the set in messages. */
+static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
+{
+    int i, j;
+    if (!s || s->width <= 0 || s->height <= 0) return tn__fail(TN_ERR_INVALID_ARG, "%s: no canvas size", what);
+    if (s->width > TN_SKETCH_MAX_SIDE || s->height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: canvas %d x %d exceeds %d", what, s->width, s->height, TN_SKETCH_MAX_SIDE);
+    if (s->count < 0 || (s->count > 0 && !s->items)) return tn__fail(TN_ERR_INVALID_ARG, "%s: bad polyline list", what);
+    for (i = 0; i < s->count; i++) {
+        const tn_contour *c = &s->items[i];
+        if (c->npoints <= 0 || !c->points) return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d is empty", what, i);
+        if (!isfinite(c->mean_gradient)) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d has a NaN/Inf gradient", what, i);
+        for (j = 0; j < 3 * c->npoints; j++)
+            if (!isfinite(c->points[j])) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d point %d is NaN/Inf", what, i, j / 3);
+    }
+    return TN_OK;
+}
+
+/* ---- .tns text ---- */
+
+/* Parses a whole token as a number; 1 on success (NaN/Inf included, the caller checks). */
+static int tn__tns_number(const char *tok, double *v)
+{
+    char *end;
+    *v = strtod(tok, &end);
+    return end != tok && *end == 0;
+}
+
+#define TN__TNS_MAXTOK 16
+
+typedef struct tn__tns_parser {
+    const char *name;
+    int line;
+    tn_contour_set set;
+    size_t set_cap;
+    tn__pts pts;
+    long total_points;
+} tn__tns_parser;
+
+/* Fails with "name:line: message". */
+static tn_status tn__tns_err(tn__tns_parser *p, tn_status s, const char *fmt, ...)
+{
+    char msg[256];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof msg, fmt, ap);
+    va_end(ap);
+    return tn__fail(s, "%s:%d: %s", p->name, p->line, msg);
+}
+
+/* Reads a number token for field `what`; NaN/Inf -> TN_ERR_NUMERIC, text -> TN_ERR_CORRUPT. */
+static tn_status tn__tns_num(tn__tns_parser *p, const char *tok, const char *what, double *v)
+{
+    if (!tn__tns_number(tok, v)) return tn__tns_err(p, TN_ERR_CORRUPT, "%s is not a number", what);
+    if (!isfinite(*v) || fabs(*v) > 3.0e38) return tn__tns_err(p, TN_ERR_NUMERIC, "%s is NaN, Inf or out of float range", what);
+    return TN_OK;
+}
+
+/* Polyline header: `ridge|valley [order N] [gradient G] [start H] [rate R]`. */
+static tn_status tn__tns_open(tn__tns_parser *p, char **tok, int ntok, int *order, float *grad, int *has_start,
+                              double *start, double *rate)
+{
+    int i;
+    double v;
+    tn_status st;
+    *order = 0;
+    *grad = 0.0f;
+    *has_start = 0;
+    *start = *rate = 0.0;
+    if ((ntok - 1) % 2) return tn__tns_err(p, TN_ERR_CORRUPT, "'%s' attributes come in pairs: order N, gradient G, start H, rate R", tok[0]);
+    for (i = 1; i + 1 < ntok; i += 2) {
+        if ((st = tn__tns_num(p, tok[i + 1], tok[i], &v))) return st;
+        if (!strcmp(tok[i], "order")) {
+            if (v < 0 || v > 1000 || v != floor(v)) return tn__tns_err(p, TN_ERR_CORRUPT, "order must be an integer 0-1000");
+            *order = (int)v;
+        } else if (!strcmp(tok[i], "gradient")) *grad = (float)v;
+        else if (!strcmp(tok[i], "start")) { *start = v; *has_start = 1; }
+        else if (!strcmp(tok[i], "rate")) *rate = v;
+        else return tn__tns_err(p, TN_ERR_CORRUPT, "unknown polyline attribute '%s'", tok[i]);
+    }
+    return TN_OK;
+}
+
+static tn_status tn__tns_parse_lines(tn__tns_parser *p, char *buf)
+{
+    char *line = buf, *next, *tok[TN__TNS_MAXTOK];
+    int ntok, state = 0, open_line = 0, order = 0, has_start = 0;
+    float grad = 0.0f;
+    double start = 0, rate = 0, arc = 0;
+    tn_contour_type type = TN_RIDGE;
+    tn_status st;
+    for (; line; line = next) {
+        char *c;
+        p->line++;
+        next = strchr(line, '\n');
+        if (next) *next++ = 0;
+        if ((c = strchr(line, '#'))) *c = 0;
+        for (ntok = 0, c = line;;) {
+            while (*c == ' ' || *c == '\t' || *c == '\r' || *c == '\f' || *c == '\v') c++;
+            if (!*c) break;
+            if (ntok == TN__TNS_MAXTOK) return tn__tns_err(p, TN_ERR_CORRUPT, "too many fields on one line");
+            tok[ntok++] = c;
+            while (*c && *c != ' ' && *c != '\t' && *c != '\r' && *c != '\f' && *c != '\v') c++;
+            if (*c) *c++ = 0;
+        }
+        if (!ntok) continue;
+        if (state == 0) {
+            if (strcmp(tok[0], "terrainnet-sketch"))
+                return tn__tns_err(p, TN_ERR_FORMAT, "not a terrainnet sketch (the first line must be 'terrainnet-sketch 1')");
+            if (ntok != 2 || strcmp(tok[1], "1"))
+                return tn__tns_err(p, TN_ERR_FORMAT, "unsupported sketch version '%s' (this reader knows 1)", ntok > 1 ? tok[1] : "");
+            state = 1;
+        } else if (state == 1) {
+            if (!strcmp(tok[0], "canvas")) {
+                double w, h;
+                if (p->set.width) return tn__tns_err(p, TN_ERR_CORRUPT, "a second 'canvas' line");
+                if (ntok != 3) return tn__tns_err(p, TN_ERR_CORRUPT, "expected 'canvas WIDTH HEIGHT'");
+                if ((st = tn__tns_num(p, tok[1], "canvas width", &w)) || (st = tn__tns_num(p, tok[2], "canvas height", &h))) return st;
+                if (w < 1 || h < 1 || w != floor(w) || h != floor(h))
+                    return tn__tns_err(p, TN_ERR_CORRUPT, "canvas size must be positive integers");
+                if (w > TN_SKETCH_MAX_SIDE || h > TN_SKETCH_MAX_SIDE)
+                    return tn__tns_err(p, TN_ERR_TOO_LARGE, "canvas side over the limit of %d pixels", TN_SKETCH_MAX_SIDE);
+                p->set.width = (int)w;
+                p->set.height = (int)h;
+            } else if (!strcmp(tok[0], "ridge") || !strcmp(tok[0], "valley")) {
+                if (!p->set.width) return tn__tns_err(p, TN_ERR_CORRUPT, "'%s' before the 'canvas W H' line", tok[0]);
+                type = tok[0][0] == 'r' ? TN_RIDGE : TN_VALLEY;
+                if ((st = tn__tns_open(p, tok, ntok, &order, &grad, &has_start, &start, &rate))) return st;
+                p->pts.n = 0;
+                arc = 0;
+                open_line = p->line;
+                state = 2;
+            } else if (!strcmp(tok[0], "end")) return tn__tns_err(p, TN_ERR_CORRUPT, "'end' without an open ridge/valley");
+            else return tn__tns_err(p, TN_ERR_CORRUPT, "unknown keyword '%s' (expected canvas, ridge or valley)", tok[0]);
+        } else {
+            double x, y, h;
+            if (!strcmp(tok[0], "end")) {
+                if (ntok != 1) return tn__tns_err(p, TN_ERR_CORRUPT, "'end' takes no arguments");
+                if (!p->pts.n) return tn__tns_err(p, TN_ERR_CORRUPT, "the polyline opened at line %d has no points", open_line);
+                if ((st = tn__cset_add(&p->set, &p->set_cap, type, order, grad, p->pts.p, p->pts.n))) return st;
+                state = 1;
+                continue;
+            }
+            if (!strcmp(tok[0], "ridge") || !strcmp(tok[0], "valley") || !strcmp(tok[0], "canvas"))
+                return tn__tns_err(p, TN_ERR_CORRUPT, "missing 'end' for the polyline opened at line %d", open_line);
+            if (ntok < 2 || ntok > 3) return tn__tns_err(p, TN_ERR_CORRUPT, "expected a point 'x y [h]' or 'end', got '%s'", tok[0]);
+            if ((st = tn__tns_num(p, tok[0], "x", &x)) || (st = tn__tns_num(p, tok[1], "y", &y))) return st;
+            if (x < -0.5 || y < -0.5 || x > p->set.width - 0.5 || y > p->set.height - 0.5)
+                return tn__tns_err(p, TN_ERR_CORRUPT, "point (%g, %g) lies outside the %d x %d canvas", x, y, p->set.width, p->set.height);
+            if (p->pts.n) arc += sqrt((x - p->pts.p[3 * p->pts.n - 3]) * (x - p->pts.p[3 * p->pts.n - 3]) +
+                                      (y - p->pts.p[3 * p->pts.n - 2]) * (y - p->pts.p[3 * p->pts.n - 2]));
+            if (ntok == 3) {
+                if ((st = tn__tns_num(p, tok[2], "height", &h))) return st;
+            } else if (has_start) h = start + rate * arc;
+            else return tn__tns_err(p, TN_ERR_CORRUPT, "point without a height in a polyline without 'start H'");
+            if (!isfinite(h) || fabs(h) > 3.0e38) return tn__tns_err(p, TN_ERR_NUMERIC, "height out of float range");
+            if (++p->total_points > TN_SKETCH_MAX_POINTS)
+                return tn__tns_err(p, TN_ERR_TOO_LARGE, "more than %d points", TN_SKETCH_MAX_POINTS);
+            if ((st = tn__pts_push(&p->pts, (float)x, (float)y, (float)h))) return st;
+        }
+    }
+    if (state == 0) return tn__fail(TN_ERR_FORMAT, "%s: empty file, not a terrainnet sketch", p->name);
+    if (state == 2) return tn__tns_err(p, TN_ERR_CORRUPT, "end of file inside the polyline opened at line %d (missing 'end')", open_line);
+    if (!p->set.width) return tn__tns_err(p, TN_ERR_CORRUPT, "no 'canvas WIDTH HEIGHT' line");
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out)
+{
+    tn__tns_parser p;
+    char *buf;
+    tn_status st;
+    TN_ASSERT(out);
+    memset(&p, 0, sizeof p);
+    p.name = name && name[0] ? name : "sketch";
+    if (!text && n) return tn__fail(TN_ERR_INVALID_ARG, "%s: NULL text", p.name);
+    if (n && memchr(text, 0, n)) return tn__fail(TN_ERR_FORMAT, "%s: binary data, not a terrainnet sketch", p.name);
+    buf = (char *)tn__alloc(n + 1);
+    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (n) memcpy(buf, text, n);
+    buf[n] = 0;
+    st = tn__tns_parse_lines(&p, buf);
+    TN_FREE(buf);
+    TN_FREE(p.pts.p);
+    if (st) {
+        tn_contour_set_free(&p.set);
+        return st;
+    }
+    *out = p.set;
+    return TN_OK;
+}
+
+/* Appends printf output to a growing text buffer (lines here are short). */
+static tn_status tn__text_printf(char **buf, size_t *len, size_t *cap, const char *fmt, ...)
+{
+    char line[256];
+    int k;
+    tn_status st;
+    va_list ap;
+    va_start(ap, fmt);
+    k = vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    if (k < 0 || k >= (int)sizeof line) return tn__fail(TN_ERR_INVALID_ARG, "sketch: line too long to format");
+    if ((st = tn__reserve((void **)buf, cap, *len + (size_t)k + 1))) return st;
+    memcpy(*buf + *len, line, (size_t)k + 1);
+    *len += (size_t)k;
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size)
+{
+    char *buf = NULL;
+    size_t len = 0, cap = 0;
+    int i, j;
+    tn_status st;
+    TN_ASSERT(text && size);
+    *text = NULL;
+    *size = 0;
+    if ((st = tn__cset_check(set, "sketch"))) return st;
+    st = tn__text_printf(&buf, &len, &cap, "terrainnet-sketch 1\n# %d polylines; points are x y height\ncanvas %d %d\n",
+                         set->count, set->width, set->height);
+    for (i = 0; !st && i < set->count; i++) {
+        const tn_contour *c = &set->items[i];
+        st = tn__text_printf(&buf, &len, &cap, "%s", c->type == TN_RIDGE ? "ridge" : "valley");
+        if (!st && c->order) st = tn__text_printf(&buf, &len, &cap, " order %d", c->order);
+        if (!st && c->mean_gradient != 0.0f) st = tn__text_printf(&buf, &len, &cap, " gradient %.9g", (double)c->mean_gradient);
+        if (!st) st = tn__text_printf(&buf, &len, &cap, "\n");
+        for (j = 0; !st && j < c->npoints; j++)
+            st = tn__text_printf(&buf, &len, &cap, "%.9g %.9g %.9g\n", (double)c->points[3 * j], (double)c->points[3 * j + 1],
+                                 (double)c->points[3 * j + 2]);
+        if (!st) st = tn__text_printf(&buf, &len, &cap, "end\n");
+    }
+    if (st) {
+        TN_FREE(buf);
+        return st;
+    }
+    *text = buf;
+    *size = len;
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set)
+{
+    char *text = NULL;
+    size_t n = 0;
+    tn_status st;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "sketch save: empty path");
+    if ((st = tn_sketch_format(set, &text, &n))) return tn__fail_context(st, path);
+    st = tn__io_write_atomic(path, (const uint8_t *)text, n);
+    TN_FREE(text);
+    return st;
+}
+
+TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
+{
+    static const char magic[] = "terrainnet-sketch";
+    uint8_t *buf = NULL;
+    size_t n = 0, plen;
+    tn_image img = {0, 0, 0, NULL};
+    tn_status st;
+    TN_ASSERT(out);
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "sketch load: empty path");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    plen = strlen(path);
+    if ((n >= sizeof magic - 1 && !memcmp(buf, magic, sizeof magic - 1)) || (plen > 4 && !strcmp(path + plen - 4, ".tns"))) {
+        st = tn_sketch_parse((const char *)buf, n, path, out);
+        TN_FREE(buf);
+        return st;
+    }
+    st = tn_image_load_memory(buf, n, path, &img, NULL, NULL);
+    TN_FREE(buf);
+    if (st) return st;
+    st = tn_sketch_from_image(&img, out);
+    tn_image_free(&img);
+    return st ? tn__fail_context(st, path) : TN_OK;
+}
+
+/* ---- sketches drawn as images ---- */
+
+/* Guo-Hall thinning of a 0/1 mask in place (the one-pixel border is treated as background).
+   A Zhang-Suen variant that keeps 8-connectivity and, unlike plain Zhang-Suen, does not erase
+   two-pixel-thick diagonal strokes. */
+static tn_status tn__thin_guo_hall(uint8_t *m, int w, int h)
+{
+    size_t *del, ndel, i;
+    int x, y, pass, changed = 1;
+    size_t bytes;
+    if (tn__size4((size_t)w, (size_t)h, sizeof(size_t), 1, &bytes)) return TN_ERR_TOO_LARGE;
+    if (!(del = (size_t *)tn__alloc(bytes))) return TN_ERR_OUT_OF_MEMORY;
+    for (x = 0; x < w; x++) m[x] = m[(size_t)(h - 1) * w + x] = 0;
+    for (y = 0; y < h; y++) m[(size_t)y * w] = m[(size_t)y * w + w - 1] = 0;
+    while (changed) {
+        changed = 0;
+        for (pass = 0; pass < 2; pass++) {
+            ndel = 0;
+            for (y = 1; y < h - 1; y++)
+                for (x = 1; x < w - 1; x++) {
+                    const uint8_t *c = m + (size_t)y * w + x;
+                    int p2, p3, p4, p5, p6, p7, p8, p9, cc, n1, n2, mm;
+                    if (!*c) continue;
+                    p2 = c[-w]; p3 = c[-w + 1]; p4 = c[1]; p5 = c[w + 1];
+                    p6 = c[w]; p7 = c[w - 1]; p8 = c[-1]; p9 = c[-w - 1];
+                    cc = (!p2 && (p3 || p4)) + (!p4 && (p5 || p6)) + (!p6 && (p7 || p8)) + (!p8 && (p9 || p2));
+                    if (cc != 1) continue;
+                    n1 = (p9 || p2) + (p3 || p4) + (p5 || p6) + (p7 || p8);
+                    n2 = (p2 || p3) + (p4 || p5) + (p6 || p7) + (p8 || p9);
+                    if (n2 < n1) n1 = n2;
+                    if (n1 < 2 || n1 > 3) continue;
+                    mm = pass == 0 ? ((p6 || p7 || !p9) && p8) : ((p2 || p3 || !p5) && p4);
+                    if (mm) continue;
+                    del[ndel++] = (size_t)y * w + x;
+                }
+            for (i = 0; i < ndel; i++) m[del[i]] = 0;
+            if (ndel) changed = 1;
+        }
+    }
+    TN_FREE(del);
+    return TN_OK;
+}
+
+/* 8-neighbour offsets, 4-neighbours first so walks prefer straight steps. */
+static const int tn__nb_dx[8] = {1, 0, -1, 0, 1, -1, -1, 1};
+static const int tn__nb_dy[8] = {0, 1, 0, -1, 1, 1, -1, -1};
+
+/* Rutovitz crossing number: 0->1 transitions around the 8-neighbourhood (clockwise from north).
+   1 = endpoint, 2 = a line pixel, >= 3 = junction. */
+static int tn__crossings(const uint8_t *m, int w, int h, int x, int y)
+{
+    static const int cx[8] = {0, 1, 1, 1, 0, -1, -1, -1}, cy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
+    int k, v[8], t = 0;
+    for (k = 0; k < 8; k++) {
+        int u = x + cx[k], q = y + cy[k];
+        v[k] = u >= 0 && q >= 0 && u < w && q < h && m[(size_t)q * w + u];
+    }
+    for (k = 0; k < 8; k++) t += !v[k] && v[(k + 1) & 7];
+    return t;
+}
+
+typedef struct tn__tracer {
+    const uint8_t *m;       /* skeleton mask */
+    uint8_t *node;          /* 1 where crossings != 2 */
+    uint8_t *seen;          /* line pixels already in a polyline */
+    const float *hgt;       /* height per pixel */
+    int w, h;
+    tn_contour_type type;
+    tn__pts pts;
+    tn_contour_set *out;
+    size_t *cap;
+} tn__tracer;
+
+static tn_status tn__trace_push(tn__tracer *t, size_t i)
+{
+    return tn__pts_push(&t->pts, (float)(i % (size_t)t->w), (float)(i / (size_t)t->w), t->hgt[i]);
+}
+
+/* Walks from `cur` (already pushed; `prev` the pixel before it, `first` the chain's start) along
+   unseen line pixels until it reaches a node or runs out; then stores the chain if >= 3 points. */
+static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t cur)
+{
+    tn_status st;
+    int k;
+    for (;;) {
+        int x = (int)(cur % (size_t)t->w), y = (int)(cur / (size_t)t->w);
+        size_t next = (size_t)-1;
+        for (k = 0; k < 8 && next == (size_t)-1; k++) {
+            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
+            size_t j = (size_t)q * t->w + u;
+            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || j == prev || !t->node[j]) continue;
+            if (j == first && t->pts.n < 4) continue;
+            if ((st = tn__trace_push(t, j))) return st;
+            goto done;
+        }
+        for (k = 0; k < 8; k++) {
+            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
+            size_t j = (size_t)q * t->w + u;
+            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
+            next = j;
+            break;
+        }
+        if (next == (size_t)-1) {
+            /* a loop without nodes closes on its first pixel */
+            if (!t->node[first] && t->pts.n >= 4 && abs(x - (int)(first % (size_t)t->w)) <= 1 &&
+                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__trace_push(t, first)))
+                return st;
+            break;
+        }
+        t->seen[next] = 1;
+        if ((st = tn__trace_push(t, next))) return st;
+        prev = cur;
+        cur = next;
+    }
+done:
+    if (t->pts.n >= 3) return tn__cset_add(t->out, t->cap, t->type, 0, 0.0f, t->pts.p, t->pts.n);
+    return TN_OK;
+}
+
+/* Traces a one-pixel skeleton into polylines between endpoints/junctions, then closed loops. */
+static tn_status tn__trace_skeleton(tn__tracer *t)
+{
+    size_t i, n = (size_t)t->w * t->h;
+    int k;
+    tn_status st;
+    for (i = 0; i < n; i++)
+        t->node[i] = t->m[i] && tn__crossings(t->m, t->w, t->h, (int)(i % (size_t)t->w), (int)(i / (size_t)t->w)) != 2;
+    for (i = 0; i < n; i++) {
+        int x = (int)(i % (size_t)t->w), y = (int)(i / (size_t)t->w);
+        if (!t->node[i]) continue;
+        for (k = 0; k < 8; k++) {
+            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
+            size_t j = (size_t)q * t->w + u;
+            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
+            t->seen[j] = 1;
+            t->pts.n = 0;
+            if ((st = tn__trace_push(t, i)) || (st = tn__trace_push(t, j)) || (st = tn__trace_walk(t, i, i, j))) return st;
+        }
+    }
+    for (i = 0; i < n; i++) {
+        if (!t->m[i] || t->node[i] || t->seen[i]) continue;
+        t->seen[i] = 1;
+        t->pts.n = 0;
+        if ((st = tn__trace_push(t, i)) || (st = tn__trace_walk(t, i, (size_t)-1, i))) return st;
+    }
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
+{
+    tn_contour_set set;
+    size_t cap = 0, n, i, bytes;
+    uint8_t *mask = NULL, *node = NULL, *seen = NULL;
+    float *hgt = NULL;
+    int type, strokes = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(out);
+    if (!img || !img->data || img->width <= 0 || img->height <= 0) return tn__fail(TN_ERR_EMPTY, "sketch image: empty image");
+    if (img->channels < 3)
+        return tn__fail(TN_ERR_SHAPE, "sketch image: needs colour (red ridges, blue valleys), got %d channel(s)", img->channels);
+    if (img->width > TN_SKETCH_MAX_SIDE || img->height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_TOO_LARGE, "sketch image: %d x %d exceeds the canvas limit", img->width, img->height);
+    n = (size_t)img->width * img->height;
+    if (tn__size4(n, 1, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
+    memset(&set, 0, sizeof set);
+    set.width = img->width;
+    set.height = img->height;
+    mask = (uint8_t *)tn__alloc(n);
+    node = (uint8_t *)tn__alloc(n);
+    seen = (uint8_t *)tn__alloc(n);
+    hgt = (float *)tn__alloc(bytes);
+    if (!mask || !node || !seen || !hgt) st = TN_ERR_OUT_OF_MEMORY;
+    for (type = 0; !st && type < 2; type++) {
+        tn__tracer t;
+        for (i = 0; i < n; i++) {
+            const float *p = img->data + i * (size_t)img->channels;
+            float r = p[0], g = p[1], b = p[2], v = r > b ? r : b;
+            int on = v >= 0.1f && v - g >= 0.5f * v && fabsf(r - b) >= 0.5f * v && ((r > b) == (type == TN_RIDGE));
+            mask[i] = (uint8_t)on;
+            hgt[i] = on ? v : 0.0f;
+            strokes += on;
+        }
+        if ((st = tn__thin_guo_hall(mask, img->width, img->height))) break;
+        memset(node, 0, n);
+        memset(seen, 0, n);
+        memset(&t, 0, sizeof t);
+        t.m = mask;
+        t.node = node;
+        t.seen = seen;
+        t.hgt = hgt;
+        t.w = img->width;
+        t.h = img->height;
+        t.type = (tn_contour_type)type;
+        t.out = &set;
+        t.cap = &cap;
+        st = tn__trace_skeleton(&t);
+        TN_FREE(t.pts.p);
+    }
+    TN_FREE(mask);
+    TN_FREE(node);
+    TN_FREE(seen);
+    TN_FREE(hgt);
+    if (!st && !strokes) st = tn__fail(TN_ERR_EMPTY, "sketch image: no red (ridge) or blue (valley) strokes");
+    if (!st && !set.count) st = tn__fail(TN_ERR_EMPTY, "sketch image: strokes too small to trace (need 3+ pixels)");
+    if (st) {
+        tn_contour_set_free(&set);
+        return st;
+    }
+    *out = set;
+    return TN_OK;
+}
+
+/* ---- densify, rasterise, preview ---- */
+
+TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out)
+{
+    tn_contour_set set;
+    tn__pts pts = {NULL, 0, 0};
+    size_t cap = 0;
+    int i;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__cset_check(in, "densify"))) return st;
+    memset(&set, 0, sizeof set);
+    set.width = in->width;
+    set.height = in->height;
+    for (i = 0; !st && i < in->count; i++) {
+        const tn_contour *c = &in->items[i];
+        pts.n = 0;
+        if (!(st = tn__chain_pixels(c->points, c->npoints, 1.0f, 1.0f, &pts)))
+            st = tn__cset_add(&set, &cap, c->type, c->order, c->mean_gradient, pts.p, pts.n);
+    }
+    TN_FREE(pts.p);
+    if (st) {
+        tn_contour_set_free(&set);
+        return st;
+    }
+    *out = set;
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out)
+{
+    tn_image r = {0, 0, 0, NULL};
+    tn__pts pts = {NULL, 0, 0};
+    int i, j;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__cset_check(set, "rasterise"))) return st;
+    if (width <= 0 || height <= 0) return tn__fail(TN_ERR_INVALID_ARG, "rasterise: size %d x %d", width, height);
+    if ((st = tn_image_create(&r, width, height, 3))) return st;
+    for (i = 0; !st && i < set->count; i++) {
+        const tn_contour *c = &set->items[i];
+        pts.n = 0;
+        st = tn__chain_pixels(c->points, c->npoints, (float)width / (float)set->width, (float)height / (float)set->height, &pts);
+        for (j = 0; !st && j < pts.n; j++) {
+            int x = (int)pts.p[3 * j], y = (int)pts.p[3 * j + 1];
+            float *px;
+            if (x < 0 || y < 0 || x >= width || y >= height) continue;
+            px = &TN_PIXEL(&r, x, y, 0);
+            px[0] = c->type == TN_RIDGE ? 1.0f : 0.0f;
+            px[1] = c->type == TN_RIDGE ? 0.0f : 1.0f;
+            px[2] = pts.p[3 * j + 2];
+        }
+    }
+    TN_FREE(pts.p);
+    if (st) {
+        tn_image_free(&r);
+        return st;
+    }
+    *out = r;
+    return TN_OK;
+}
+
+TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out)
+{
+    tn_image lines = {0, 0, 0, NULL}, rgb = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
+    int x, y, u, v, rad = width > height ? width / 512 : height / 512;
+    size_t i, n;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn_sketch_rasterise(set, width, height, &lines))) return st;
+    if ((st = tn_image_create(&rgb, width, height, 3))) goto fail;
+    n = (size_t)width * height;
+    if (dem && dem->data) {
+        if ((st = tn_image_resize(&small, dem, width, height, TN_RESIZE_BILINEAR)) || (st = tn_image_hillshade(&shade, &small, NULL)))
+            goto fail;
+        for (i = 0; i < n; i++) rgb.data[3 * i] = rgb.data[3 * i + 1] = rgb.data[3 * i + 2] = 0.15f + 0.7f * shade.data[i];
+    } else
+        for (i = 0; i < 3 * n; i++) rgb.data[i] = 0.35f;
+    for (y = 0; y < height; y++)
+        for (x = 0; x < width; x++) {
+            const float *l = &TN_PIXEL(&lines, x, y, 0);
+            if (l[0] == 0.0f && l[1] == 0.0f) continue;
+            for (v = y - rad; v <= y + rad; v++)
+                for (u = x - rad; u <= x + rad; u++) {
+                    float *p;
+                    if (u < 0 || v < 0 || u >= width || v >= height) continue;
+                    p = &TN_PIXEL(&rgb, u, v, 0);
+                    if (l[0] != 0.0f) { p[0] = 1.0f; p[1] = 0.9f; p[2] = 0.0f; }            /* ridge: yellow */
+                    else if (p[2] != 0.0f || p[0] != 1.0f) { p[0] = 0.1f; p[1] = 0.35f; p[2] = 1.0f; } /* valley: blue */
+                }
+        }
+    tn_image_free(&lines);
+    tn_image_free(&small);
+    tn_image_free(&shade);
+    *out = rgb;
+    return TN_OK;
+fail:
+    tn_image_free(&lines);
+    tn_image_free(&rgb);
+    tn_image_free(&small);
+    tn_image_free(&shade);
+    return st;
+}
+
+/* ---- Delaunay triangulation and minimum spanning tree ---- */
+
+typedef struct tn__tri { int v[3]; double cx, cy, r2; } tn__tri;
+
+/* Circumcircle of triangle (a, b, c); a degenerate (collinear) one gets an infinite circle so the
+   next insertion replaces it. */
+static void tn__circumcircle(tn__tri *t, const double *p)
+{
+    double ax = p[2 * t->v[0]], ay = p[2 * t->v[0] + 1], bx = p[2 * t->v[1]] - ax, by = p[2 * t->v[1] + 1] - ay;
+    double cx = p[2 * t->v[2]] - ax, cy = p[2 * t->v[2] + 1] - ay, d = 2.0 * (bx * cy - by * cx);
+    double b2 = bx * bx + by * by, c2 = cx * cx + cy * cy, ux, uy;
+    if (fabs(d) < 1e-12 * (b2 + c2)) {
+        t->cx = ax;
+        t->cy = ay;
+        t->r2 = HUGE_VAL;
+        return;
+    }
+    ux = (cy * b2 - by * c2) / d;
+    uy = (bx * c2 - cx * b2) / d;
+    t->cx = ax + ux;
+    t->cy = ay + uy;
+    t->r2 = ux * ux + uy * uy;
+}
+
+TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles)
+{
+    double *p = NULL, lo_x, lo_y, hi_x, hi_y, span;
+    tn__tri *tri = NULL;
+    int *bad = NULL, *edges = NULL, *res = NULL;
+    size_t tri_cap = 0, bad_cap = 0, edge_cap = 0;
+    int ntri = 0, i, j, k, nbad, nedge, nres = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(triangles && ntriangles);
+    *triangles = NULL;
+    *ntriangles = 0;
+    if (n < 0 || n > (1 << 24) || (n > 0 && !xy)) return tn__fail(TN_ERR_INVALID_ARG, "delaunay: %d points", n);
+    if (!(p = (double *)tn__alloc(((size_t)n + 3) * 2 * sizeof(double)))) return TN_ERR_OUT_OF_MEMORY;
+    lo_x = lo_y = 0.0;
+    hi_x = hi_y = 1.0;
+    for (i = 0; i < n; i++) {
+        if (!isfinite(xy[2 * i]) || !isfinite(xy[2 * i + 1])) {
+            TN_FREE(p);
+            return tn__fail(TN_ERR_NUMERIC, "delaunay: point %d is NaN/Inf", i);
+        }
+        p[2 * i] = xy[2 * i];
+        p[2 * i + 1] = xy[2 * i + 1];
+        if (i == 0 || p[2 * i] < lo_x) lo_x = p[2 * i];
+        if (i == 0 || p[2 * i] > hi_x) hi_x = p[2 * i];
+        if (i == 0 || p[2 * i + 1] < lo_y) lo_y = p[2 * i + 1];
+        if (i == 0 || p[2 * i + 1] > hi_y) hi_y = p[2 * i + 1];
+    }
+    /* super triangle far around the points; removed at the end */
+    span = fmax(fmax(hi_x - lo_x, hi_y - lo_y), 1.0) * 64.0;
+    p[2 * n] = 0.5 * (lo_x + hi_x) - 2.0 * span;
+    p[2 * n + 1] = lo_y - span;
+    p[2 * n + 2] = 0.5 * (lo_x + hi_x) + 2.0 * span;
+    p[2 * n + 3] = lo_y - span;
+    p[2 * n + 4] = 0.5 * (lo_x + hi_x);
+    p[2 * n + 5] = hi_y + 2.0 * span;
+    if ((st = tn__reserve((void **)&tri, &tri_cap, sizeof(tn__tri)))) goto done;
+    tri[0].v[0] = n;
+    tri[0].v[1] = n + 1;
+    tri[0].v[2] = n + 2;
+    tn__circumcircle(&tri[0], p);
+    ntri = 1;
+    for (i = 0; i < n; i++) {
+        double x = p[2 * i], y = p[2 * i + 1];
+        int dup = 0;
+        for (nbad = 0, j = 0; j < ntri; j++) {
+            double dx = x - tri[j].cx, dy = y - tri[j].cy;
+            if (dx * dx + dy * dy >= tri[j].r2) continue;
+            if ((st = tn__reserve((void **)&bad, &bad_cap, ((size_t)nbad + 1) * sizeof(int)))) goto done;
+            bad[nbad++] = j;
+            for (k = 0; k < 3; k++) dup |= p[2 * tri[j].v[k]] == x && p[2 * tri[j].v[k] + 1] == y;
+        }
+        if (dup || !nbad) continue; /* exact duplicate of a vertex */
+        /* the cavity boundary: edges of bad triangles not shared by two of them */
+        for (nedge = 0, j = 0; j < nbad; j++)
+            for (k = 0; k < 3; k++) {
+                int a = tri[bad[j]].v[k], b = tri[bad[j]].v[(k + 1) % 3], e, shared = 0;
+                for (e = 0; e < nbad && !shared; e++) {
+                    const int *w = tri[bad[e]].v;
+                    if (e == j) continue;
+                    shared = (w[0] == b && w[1] == a) || (w[1] == b && w[2] == a) || (w[2] == b && w[0] == a) ||
+                             (w[0] == a && w[1] == b) || (w[1] == a && w[2] == b) || (w[2] == a && w[0] == b);
+                }
+                if (shared) continue;
+                if ((st = tn__reserve((void **)&edges, &edge_cap, ((size_t)nedge + 1) * 2 * sizeof(int)))) goto done;
+                edges[2 * nedge] = a;
+                edges[2 * nedge + 1] = b;
+                nedge++;
+            }
+        /* remove bad triangles (highest index first, swap with the last), add the fan */
+        for (j = nbad - 1; j >= 0; j--) tri[bad[j]] = tri[--ntri];
+        if ((st = tn__reserve((void **)&tri, &tri_cap, ((size_t)ntri + nedge) * sizeof(tn__tri)))) goto done;
+        for (j = 0; j < nedge; j++) {
+            tri[ntri].v[0] = edges[2 * j];
+            tri[ntri].v[1] = edges[2 * j + 1];
+            tri[ntri].v[2] = i;
+            tn__circumcircle(&tri[ntri], p);
+            ntri++;
+        }
+    }
+    if (!(res = (int *)tn__alloc(((size_t)ntri + 1) * 3 * sizeof(int)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (j = 0; j < ntri; j++) {
+        if (tri[j].v[0] >= n || tri[j].v[1] >= n || tri[j].v[2] >= n) continue;
+        res[3 * nres] = tri[j].v[0];
+        res[3 * nres + 1] = tri[j].v[1];
+        res[3 * nres + 2] = tri[j].v[2];
+        nres++;
+    }
+done:
+    TN_FREE(p);
+    TN_FREE(tri);
+    TN_FREE(bad);
+    TN_FREE(edges);
+    if (st) {
+        TN_FREE(res);
+        return st;
+    }
+    *triangles = res;
+    *ntriangles = nres;
+    return TN_OK;
+}
+
+TN_API tn_status tn_mst(const float *xy, int n, int **edges)
+{
+    double *best;
+    int *from, *e, i, j, k;
+    uint8_t *in;
+    TN_ASSERT(edges);
+    *edges = NULL;
+    if (n < 1 || n > (1 << 24) || !xy) return tn__fail(TN_ERR_INVALID_ARG, "mst: %d points", n);
+    best = (double *)tn__alloc((size_t)n * sizeof(double));
+    from = (int *)tn__alloc((size_t)n * sizeof(int));
+    in = (uint8_t *)tn__calloc((size_t)n);
+    e = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
+    if (!best || !from || !in || !e) {
+        TN_FREE(best); TN_FREE(from); TN_FREE(in); TN_FREE(e);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < n; i++) {
+        best[i] = HUGE_VAL;
+        from[i] = 0;
+    }
+    k = 0; /* the vertex added last */
+    in[0] = 1;
+    for (i = 1; i < n; i++) {
+        int pick = -1;
+        for (j = 0; j < n; j++) {
+            double dx, dy, d;
+            if (in[j]) continue;
+            dx = (double)xy[2 * j] - xy[2 * k];
+            dy = (double)xy[2 * j + 1] - xy[2 * k + 1];
+            d = dx * dx + dy * dy;
+            if (d < best[j]) { best[j] = d; from[j] = k; }
+            if (pick < 0 || best[j] < best[pick]) pick = j;
+        }
+        in[pick] = 1;
+        e[2 * (i - 1)] = from[pick];
+        e[2 * (i - 1) + 1] = pick;
+        k = pick;
+    }
+    TN_FREE(best);
+    TN_FREE(from);
+    TN_FREE(in);
+    *edges = e;
+    return TN_OK;
+}
+
+/* ---- random sketches ---- */
+
+/* Segments bucketed on a uniform grid, for "does this edge cross anything" queries. */
+typedef struct tn__seg_grid {
+    float *seg;             /* 4 floats per segment */
+    int nseg;
+    size_t seg_cap;
+    int cell, gw, gh;
+    int *start, *list;      /* CSR: segments in cell c are list[start[c] .. start[c + 1]) */
+    int *stamp, query;
+} tn__seg_grid;
+
+static tn_status tn__seg_add(tn__seg_grid *g, float x0, float y0, float x1, float y1)
+{
+    tn_status st = tn__reserve((void **)&g->seg, &g->seg_cap, ((size_t)g->nseg + 1) * 4 * sizeof(float));
+    if (st) return st;
+    g->seg[4 * g->nseg] = x0;
+    g->seg[4 * g->nseg + 1] = y0;
+    g->seg[4 * g->nseg + 2] = x1;
+    g->seg[4 * g->nseg + 3] = y1;
+    g->nseg++;
+    return TN_OK;
+}
+
+static void tn__seg_cells(const tn__seg_grid *g, const float *s, int *c0, int *r0, int *c1, int *r1)
+{
+    *c0 = tn__clampi((int)floorf(fminf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
+    *c1 = tn__clampi((int)floorf(fmaxf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
+    *r0 = tn__clampi((int)floorf(fminf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
+    *r1 = tn__clampi((int)floorf(fmaxf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
+}
+
+/* Builds the buckets after all tn__seg_add calls (two passes: count, fill). */
+static tn_status tn__seg_build(tn__seg_grid *g, int width, int height)
+{
+    int i, c, r, c0, r0, c1, r1, pass;
+    size_t total = 0;
+    g->cell = 16;
+    g->gw = (width + g->cell - 1) / g->cell + 1;
+    g->gh = (height + g->cell - 1) / g->cell + 1;
+    g->start = (int *)tn__calloc(((size_t)g->gw * g->gh + 1) * sizeof(int));
+    g->stamp = (int *)tn__calloc(((size_t)g->nseg + 1) * sizeof(int));
+    if (!g->start || !g->stamp) return TN_ERR_OUT_OF_MEMORY;
+    for (pass = 0; pass < 2; pass++) {
+        for (i = 0; i < g->nseg; i++) {
+            tn__seg_cells(g, g->seg + 4 * i, &c0, &r0, &c1, &r1);
+            for (r = r0; r <= r1; r++)
+                for (c = c0; c <= c1; c++) {
+                    if (pass == 0) {
+                        g->start[(size_t)r * g->gw + c + 1]++;
+                        total++;
+                    } else
+                        g->list[g->start[(size_t)r * g->gw + c]++] = i;
+                }
+        }
+        if (pass == 0) {
+            if (total > (size_t)INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: too many user segments");
+            for (i = 0; i < g->gw * g->gh; i++) g->start[i + 1] += g->start[i];
+            if (!(g->list = (int *)tn__alloc((total + 1) * sizeof(int)))) return TN_ERR_OUT_OF_MEMORY;
+        }
+    }
+    for (i = g->gw * g->gh; i > 0; i--) g->start[i] = g->start[i - 1]; /* undo the fill's shift */
+    g->start[0] = 0;
+    return TN_OK;
+}
+
+static void tn__seg_free(tn__seg_grid *g)
+{
+    TN_FREE(g->seg);
+    TN_FREE(g->start);
+    TN_FREE(g->list);
+    TN_FREE(g->stamp);
+    memset(g, 0, sizeof *g);
+}
+
+static double tn__orient(double ax, double ay, double bx, double by, double cx, double cy)
+{
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+}
+
+/* Closed segments ab and cd intersect (touching counts). */
+static int tn__segments_cross(const float *a, const float *b)
+{
+    double d1 = tn__orient(b[0], b[1], b[2], b[3], a[0], a[1]), d2 = tn__orient(b[0], b[1], b[2], b[3], a[2], a[3]);
+    double d3 = tn__orient(a[0], a[1], a[2], a[3], b[0], b[1]), d4 = tn__orient(a[0], a[1], a[2], a[3], b[2], b[3]);
+    if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return 1;
+    if (d1 == 0 || d2 == 0 || d3 == 0 || d4 == 0) { /* collinear cases: bounding boxes overlap */
+        return fmin(a[0], a[2]) <= fmax(b[0], b[2]) && fmin(b[0], b[2]) <= fmax(a[0], a[2]) &&
+               fmin(a[1], a[3]) <= fmax(b[1], b[3]) && fmin(b[1], b[3]) <= fmax(a[1], a[3]) &&
+               ((d1 == 0 && d2 == 0) || (d1 == 0 && d3 * d4 <= 0) || (d2 == 0 && d3 * d4 <= 0) ||
+                (d3 == 0 && d1 * d2 <= 0) || (d4 == 0 && d1 * d2 <= 0));
+    }
+    return 0;
+}
+
+/* 1 when segment s crosses any segment in the grid. */
+static int tn__seg_hits(tn__seg_grid *g, const float *s)
+{
+    int c, r, c0, r0, c1, r1, k;
+    if (!g->nseg) return 0;
+    g->query++;
+    tn__seg_cells(g, s, &c0, &r0, &c1, &r1);
+    for (r = r0; r <= r1; r++)
+        for (c = c0; c <= c1; c++)
+            for (k = g->start[(size_t)r * g->gw + c]; k < g->start[(size_t)r * g->gw + c + 1]; k++) {
+                int i = g->list[k];
+                if (g->stamp[i] == g->query) continue;
+                g->stamp[i] = g->query;
+                if (tn__segments_cross(s, g->seg + 4 * i)) return 1;
+            }
+    return 0;
+}
+
+/* Chains the kept edges of a forest (vertex positions/heights vx, vy, vh) between vertices of
+   degree != 2 and appends each chain as an 8-connected pixel polyline of the given type. */
+static tn_status tn__add_chains(const float *vx, const float *vh, int nv, const int *edges, int nedges, tn_contour_type type,
+                                tn_contour_set *out, size_t *cap)
+{
+    int *deg = NULL, *adj_start = NULL, *adj = NULL, *fill = NULL, i, k;
+    uint8_t *used = NULL;
+    tn__pts ctrl = {NULL, 0, 0}, pix = {NULL, 0, 0};
+    tn_status st = TN_OK;
+    deg = (int *)tn__calloc(((size_t)nv + 1) * sizeof(int));
+    adj_start = (int *)tn__calloc(((size_t)nv + 1) * sizeof(int));
+    fill = (int *)tn__calloc(((size_t)nv + 1) * sizeof(int));
+    adj = (int *)tn__alloc(((size_t)nedges * 2 + 1) * sizeof(int));
+    used = (uint8_t *)tn__calloc((size_t)nedges + 1);
+    if (!deg || !adj_start || !fill || !adj || !used) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (k = 0; k < nedges; k++) { deg[edges[2 * k]]++; deg[edges[2 * k + 1]]++; }
+    for (i = 0; i < nv; i++) adj_start[i + 1] = adj_start[i] + deg[i];
+    for (k = 0; k < nedges; k++) { /* adjacency holds edge ids */
+        adj[adj_start[edges[2 * k]] + fill[edges[2 * k]]++] = k;
+        adj[adj_start[edges[2 * k + 1]] + fill[edges[2 * k + 1]]++] = k;
+    }
+    for (i = 0; i < nv && !st; i++) {
+        int a;
+        if (deg[i] == 2 || deg[i] == 0) continue;
+        for (a = adj_start[i]; a < adj_start[i + 1] && !st; a++) {
+            int e = adj[a], v = i;
+            if (used[e]) continue;
+            ctrl.n = 0;
+            st = tn__pts_push(&ctrl, vx[2 * v], vx[2 * v + 1], vh[v]);
+            while (!st && e >= 0) {
+                int b;
+                used[e] = 1;
+                v = edges[2 * e] == v ? edges[2 * e + 1] : edges[2 * e];
+                st = tn__pts_push(&ctrl, vx[2 * v], vx[2 * v + 1], vh[v]);
+                e = -1;
+                if (deg[v] != 2) break;
+                for (b = adj_start[v]; b < adj_start[v + 1]; b++)
+                    if (!used[adj[b]]) e = adj[b];
+            }
+            pix.n = 0;
+            if (!st) st = tn__chain_pixels(ctrl.p, ctrl.n, 1.0f, 1.0f, &pix);
+            if (!st && pix.n >= 2) st = tn__cset_add(out, cap, type, 0, 0.0f, pix.p, pix.n);
+        }
+    }
+done:
+    TN_FREE(deg);
+    TN_FREE(adj_start);
+    TN_FREE(fill);
+    TN_FREE(adj);
+    TN_FREE(used);
+    TN_FREE(ctrl.p);
+    TN_FREE(pix.p);
+    return st;
+}
+
+TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
+                                  tn_contour_set *out)
+{
+    tn_contour_set set;
+    tn__seg_grid grid;
+    tn_rng rng;
+    float *node = NULL, *nh = NULL, *vor = NULL, *vh = NULL, s[4];
+    int *redges = NULL, *vedges = NULL, *tris = NULL, *keep_r = NULL, *keep_v = NULL;
+    int n, ntri = 0, nv = 0, nkr = 0, nkv = 0, i, j;
+    size_t cap = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(out);
+    memset(&set, 0, sizeof set);
+    memset(&grid, 0, sizeof grid);
+    if (width < 2 || height < 2) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: canvas %d x %d (need at least 2 x 2)", width, height);
+    if (width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_TOO_LARGE, "random sketch: canvas %d x %d exceeds %d", width, height, TN_SKETCH_MAX_SIDE);
+    if (user && user->count) {
+        if ((st = tn__cset_check(user, "random sketch: user sketch"))) return st;
+        if (user->width != width || user->height != height)
+            return tn__fail(TN_ERR_SHAPE, "random sketch: the user sketch canvas is %d x %d, not %d x %d", user->width,
+                            user->height, width, height);
+    }
+    n = opts && opts->nodes > 0 ? opts->nodes : (int)tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
+    if (n > 65536) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 65536)", n);
+    tn_rng_seed(&rng, opts ? opts->seed : 0, 0x5e7c4u);
+    set.width = width;
+    set.height = height;
+    node = (float *)tn__alloc((size_t)n * 2 * sizeof(float));
+    nh = (float *)tn__alloc((size_t)n * sizeof(float));
+    if (!node || !nh) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (i = 0; i < n; i++) {
+        node[2 * i] = tn_rng_uniform(&rng) * (float)(width - 1);
+        node[2 * i + 1] = tn_rng_uniform(&rng) * (float)(height - 1);
+        nh[i] = 0.5f + 0.5f * tn_rng_uniform(&rng);
+    }
+    if ((st = tn_mst(node, n, &redges)) || (st = tn_delaunay(node, n, &tris, &ntri))) goto done;
+    /* Voronoi vertices = circumcentres of the Delaunay triangles, kept inside the canvas */
+    vor = (float *)tn__alloc(((size_t)ntri + 1) * 2 * sizeof(float));
+    vh = (float *)tn__alloc(((size_t)ntri + 1) * sizeof(float));
+    if (!vor || !vh) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (i = 0; i < ntri; i++) {
+        double pts[6];
+        tn__tri t;
+        for (j = 0; j < 3; j++) {
+            pts[2 * j] = node[2 * tris[3 * i + j]];
+            pts[2 * j + 1] = node[2 * tris[3 * i + j] + 1];
+            t.v[j] = j;
+        }
+        tn__circumcircle(&t, pts);
+        if (!(t.r2 < HUGE_VAL) || t.cx < 0 || t.cy < 0 || t.cx > width - 1 || t.cy > height - 1) continue;
+        vor[2 * nv] = (float)t.cx;
+        vor[2 * nv + 1] = (float)t.cy;
+        vh[nv++] = 0.5f * tn_rng_uniform(&rng);
+    }
+    if (nv >= 2 && (st = tn_mst(vor, nv, &vedges))) goto done;
+    /* the user's segments, then keep ridge edges that cross none of them */
+    for (i = 0; user && i < user->count && !st; i++)
+        for (j = 0; j < user->items[i].npoints && !st; j++) {
+            const float *p = user->items[i].points + 3 * j, *q = j + 1 < user->items[i].npoints ? p + 3 : p;
+            st = tn__seg_add(&grid, p[0], p[1], q[0], q[1]);
+        }
+    keep_r = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
+    keep_v = (int *)tn__alloc(((size_t)nv + 1) * 2 * sizeof(int));
+    if (!st && (!keep_r || !keep_v)) st = TN_ERR_OUT_OF_MEMORY;
+    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
+    for (i = 0; i < n - 1; i++) {
+        int a = redges[2 * i], b = redges[2 * i + 1];
+        s[0] = node[2 * a]; s[1] = node[2 * a + 1]; s[2] = node[2 * b]; s[3] = node[2 * b + 1];
+        if (tn__seg_hits(&grid, s)) continue;
+        keep_r[2 * nkr] = a;
+        keep_r[2 * nkr + 1] = b;
+        nkr++;
+    }
+    /* valleys must avoid the user's sketch and the kept ridges: rebuild the grid with both */
+    TN_FREE(grid.start); TN_FREE(grid.list); TN_FREE(grid.stamp);
+    grid.start = grid.list = grid.stamp = NULL;
+    grid.query = 0;
+    for (i = 0; i < nkr && !st; i++) {
+        int a = keep_r[2 * i], b = keep_r[2 * i + 1];
+        st = tn__seg_add(&grid, node[2 * a], node[2 * a + 1], node[2 * b], node[2 * b + 1]);
+    }
+    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
+    for (i = 0; i + 1 < nv; i++) {
+        int a = vedges[2 * i], b = vedges[2 * i + 1];
+        s[0] = vor[2 * a]; s[1] = vor[2 * a + 1]; s[2] = vor[2 * b]; s[3] = vor[2 * b + 1];
+        if (tn__seg_hits(&grid, s)) continue;
+        keep_v[2 * nkv] = a;
+        keep_v[2 * nkv + 1] = b;
+        nkv++;
+    }
+    for (i = 0; user && i < user->count && !st; i++)
+        st = tn__cset_add(&set, &cap, user->items[i].type, user->items[i].order, user->items[i].mean_gradient,
+                          user->items[i].points, user->items[i].npoints);
+    if (!st) st = tn__add_chains(node, nh, n, keep_r, nkr, TN_RIDGE, &set, &cap);
+    if (!st) st = tn__add_chains(vor, vh, nv, keep_v, nkv, TN_VALLEY, &set, &cap);
+done:
+    TN_FREE(node); TN_FREE(nh); TN_FREE(vor); TN_FREE(vh);
+    TN_FREE(redges); TN_FREE(vedges); TN_FREE(tris); TN_FREE(keep_r); TN_FREE(keep_v);
+    tn__seg_free(&grid);
+    if (st) {
+        tn_contour_set_free(&set);
+        return st;
+    }
+    *out = set;
+    return TN_OK;
+}
+
+/* ---- contour parts ---- */
+
+TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts)
+{
+    tn_contour_set set;
+    tn_rng rng;
+    size_t cap = 0;
+    int i;
+    tn_status st;
+    TN_ASSERT(parts);
+    if ((st = tn__cset_check(lines, "contour parts"))) return st;
+    memset(&set, 0, sizeof set);
+    set.width = lines->width;
+    set.height = lines->height;
+    tn_rng_seed(&rng, seed, 0x9a27u);
+    for (i = 0; i < lines->count && !st; i++) {
+        const tn_contour *c = &lines->items[i];
+        const float *p = c->points;
+        int at = 0;
+        while (!st && c->npoints - at >= 5) {
+            int left = c->npoints - at, len = 5 + (int)tn_rng_below(&rng, 6), j;
+            if (len > left) len = left;
+            if (left - len > 0 && left - len < 5) len = left <= 10 ? left : left - 5; /* no short tail */
+            for (j = at + 1; j < at + len; j++)
+                if (fabsf(p[3 * j] - p[3 * j - 3]) > 1.5f || fabsf(p[3 * j + 1] - p[3 * j - 2]) > 1.5f) break;
+            if (j - at >= 5) st = tn__cset_add(&set, &cap, c->type, c->order, c->mean_gradient, p + 3 * at, j - at);
+            at = j; /* past the part, or at the break */
+        }
+    }
+    if (st) {
+        tn_contour_set_free(&set);
+        return st;
+    }
+    *parts = set;
+    return TN_OK;
+}
+
+/* ---- alignment ---- */
+
+/* Chain codes of a set of parts, each oriented left to right (A1). */
+typedef struct tn__chains {
+    int count;
+    int *off;          /* codes of part i: code[off[i] .. off[i + 1]) */
+    uint8_t *code;     /* 0..7: direction k * pi/4 (x right, y down) */
+    int *at;           /* index into h of the start point of each code's step */
+    float *h;          /* heights, oriented, scaled to [0, 1] unless raw; hoff[i] indexes part i */
+    int *hoff;
+    float *angle;      /* direction of the first-to-last vector */
+    uint8_t *type;
+} tn__chains;
+
+#define TN__ALIGN_MAXCODES 255
+
+static void tn__chains_free(tn__chains *c)
+{
+    TN_FREE(c->off); TN_FREE(c->code); TN_FREE(c->at); TN_FREE(c->h); TN_FREE(c->hoff); TN_FREE(c->angle); TN_FREE(c->type);
+    memset(c, 0, sizeof *c);
+}
+
+static tn_status tn__chains_make(const tn_contour_set *s, int raw, int flip, tn__chains *c)
+{
+    size_t npts = 0;
+    int i, j;
+    float lo = 0, hi = 0, scale;
+    memset(c, 0, sizeof *c);
+    for (i = 0; i < s->count; i++) {
+        npts += (size_t)s->items[i].npoints;
+        for (j = 0; j < s->items[i].npoints; j++) {
+            float h = s->items[i].points[3 * j + 2];
+            if ((i == 0 && j == 0) || h < lo) lo = h;
+            if ((i == 0 && j == 0) || h > hi) hi = h;
+        }
+    }
+    scale = raw ? 1.0f : (hi > lo ? 1.0f / (hi - lo) : 0.0f);
+    if (raw) lo = 0.0f;
+    c->count = s->count;
+    c->off = (int *)tn__alloc(((size_t)s->count + 1) * sizeof(int));
+    c->hoff = (int *)tn__alloc(((size_t)s->count + 1) * sizeof(int));
+    c->code = (uint8_t *)tn__alloc(npts + 1);
+    c->at = (int *)tn__alloc((npts + 1) * sizeof(int));
+    c->h = (float *)tn__alloc((npts + 1) * sizeof(float));
+    c->angle = (float *)tn__alloc(((size_t)s->count + 1) * sizeof(float));
+    c->type = (uint8_t *)tn__alloc((size_t)s->count + 1);
+    if (!c->off || !c->hoff || !c->code || !c->at || !c->h || !c->angle || !c->type) {
+        tn__chains_free(c);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    c->off[0] = c->hoff[0] = 0;
+    for (i = 0; i < s->count; i++) {
+        const tn_contour *p = &s->items[i];
+        int n = p->npoints, rev, nc = 0, base = c->hoff[i];
+        const float *f = p->points, *l = p->points + 3 * (n - 1);
+        rev = (f[0] > l[0] || (f[0] == l[0] && f[1] > l[1])) != flip; /* run in the main direction */
+        for (j = 0; j < n; j++) c->h[base + j] = (p->points[3 * (rev ? n - 1 - j : j) + 2] - lo) * scale;
+        c->angle[i] = (float)atan2(rev ? f[1] - l[1] : l[1] - f[1], rev ? f[0] - l[0] : l[0] - f[0]);
+        for (j = 0; j + 1 < n && nc < TN__ALIGN_MAXCODES; j++) {
+            const float *a = p->points + 3 * (rev ? n - 1 - j : j), *b = p->points + 3 * (rev ? n - 2 - j : j + 1);
+            float dx = b[0] - a[0], dy = b[1] - a[1];
+            if (dx == 0.0f && dy == 0.0f) continue; /* repeated point: no step */
+            c->code[c->off[i] + nc] = (uint8_t)((int)lrint(atan2(dy, dx) / 0.78539816339744831) & 7);
+            c->at[c->off[i] + nc] = base + j;
+            nc++;
+        }
+        c->off[i + 1] = c->off[i] + nc;
+        c->hoff[i + 1] = base + n;
+        c->type[i] = (uint8_t)(p->type == TN_RIDGE);
+    }
+    return TN_OK;
+}
+
+typedef struct tn__align_cand { int len; float score; int index; } tn__align_cand;
+
+/* a ranks before b by LCS length, then height score, then index */
+static int tn__cand_better(const tn__align_cand *a, const tn__align_cand *b)
+{
+    if (a->len != b->len) return a->len > b->len;
+    if (a->score != b->score) return a->score < b->score;
+    return a->index < b->index;
+}
+
+typedef struct tn__align_job {
+    const tn__chains *sk, *skr, *dem; /* skr: the sketch parts run the other way */
+    int top, choices, any_type[2];
+    uint64_t seed;
+    int *match;
+} tn__align_job;
+
+/* |mean(d)| + std(d) of the height differences on the common substring (P from pi, Q from qi,
+   len steps, so len + 1 points); without a common step the first points are compared. */
+static float tn__align_score(const tn__chains *sk, int i, int pi, const tn__chains *dem, int q, int qi, int len)
+{
+    double s = 0, s2 = 0, d;
+    int t, m = len + 1, a, b;
+    if (len == 0) {
+        m = sk->hoff[i + 1] - sk->hoff[i];
+        if (dem->hoff[q + 1] - dem->hoff[q] < m) m = dem->hoff[q + 1] - dem->hoff[q];
+    }
+    for (t = 0; t < m; t++) {
+        if (len == 0) { a = sk->hoff[i] + t; b = dem->hoff[q] + t; }
+        else if (t < len) { a = sk->at[pi + t]; b = dem->at[qi + t]; }
+        else { a = sk->at[pi + len - 1] + 1; b = dem->at[qi + len - 1] + 1; }
+        d = (double)sk->h[a] - dem->h[b];
+        s += d;
+        s2 += d * d;
+    }
+    s /= m;
+    s2 = s2 / m - s * s;
+    return (float)(fabs(s) + sqrt(s2 > 0 ? s2 : 0));
+}
+
+/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
+   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts. Walks
+   only the diagonals (offsets between the strings) that overlap by at least `need` codes: any
+   answer >= need is exact, a smaller one only says "not good enough". */
+static int tn__align_lcs(const tn__chains *sk, int i, const tn__chains *dem, int q, int need, int *ps, int *qs)
+{
+    uint8_t rot[TN__ALIGN_MAXCODES];
+    const uint8_t *p = sk->code + sk->off[i], *qc = dem->code + dem->off[q];
+    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, d, k, len = 0;
+    *ps = sk->off[i];
+    *qs = dem->off[q];
+    if (need < 1) need = 1;
+    if (np < need || nq < need) return 0;
+    k = (int)lrint(((double)dem->angle[q] - sk->angle[i]) / 0.78539816339744831) & 7;
+    for (x = 0; x < np; x++) rot[x] = (uint8_t)((p[x] + k) & 7);
+    for (d = need - np; d <= nq - need; d++) { /* q index = p index + d */
+        int x0 = d < 0 ? -d : 0, x1 = np < nq - d ? np : nq - d, run = 0;
+        for (x = x0; x < x1; x++) {
+            run = rot[x] == qc[x + d] ? run + 1 : 0;
+            if (run > len) {
+                len = run;
+                *ps = sk->off[i] + x + 1 - run;
+                *qs = dem->off[q] + x + d + 1 - run;
+            }
+        }
+    }
+    return len;
+}
+
+static void tn__align_rows(void *ctx, size_t begin, size_t end)
+{
+    const tn__align_job *job = (const tn__align_job *)ctx;
+    const tn__chains *dem = job->dem;
+    tn__align_cand cand[64], c, r;
+    size_t i;
+    for (i = begin; i < end; i++) {
+        int ncand = 0, q, x, y, at, type = job->sk->type[i], ps, qs, ps2, qs2, need;
+        tn_rng rng;
+        for (q = 0; q < dem->count; q++) {
+            if (job->any_type[type] && dem->type[q] != type) continue;
+            need = ncand == job->top ? cand[ncand - 1].len : 0; /* to enter a full list */
+            /* both directions of the sketch part: A1's left-to-right rule alone is not rotation invariant */
+            c.len = tn__align_lcs(job->sk, (int)i, dem, q, need, &ps, &qs);
+            r.len = tn__align_lcs(job->skr, (int)i, dem, q, need, &ps2, &qs2);
+            if (c.len < need && r.len < need) continue;
+            c.index = r.index = q;
+            c.score = r.score = HUGE_VALF;
+            if (c.len >= r.len) c.score = tn__align_score(job->sk, (int)i, ps, dem, q, qs, c.len);
+            if (r.len >= c.len) r.score = tn__align_score(job->skr, (int)i, ps2, dem, q, qs2, r.len);
+            if (tn__cand_better(&r, &c)) c = r;
+            if (ncand == job->top && !tn__cand_better(&c, &cand[ncand - 1])) continue;
+            if (ncand < job->top) ncand++;
+            for (at = ncand - 1; at > 0 && tn__cand_better(&c, &cand[at - 1]); at--) cand[at] = cand[at - 1];
+            cand[at] = c;
+        }
+        if (!ncand) { job->match[i] = -1; continue; }
+        /* rank the top list by height score, pick one of the best `choices` */
+        for (x = 1; x < ncand; x++) {
+            c = cand[x];
+            for (y = x; y > 0 && (c.score < cand[y - 1].score || (c.score == cand[y - 1].score && c.index < cand[y - 1].index)); y--)
+                cand[y] = cand[y - 1];
+            cand[y] = c;
+        }
+        tn_rng_seed(&rng, job->seed, (uint64_t)i);
+        job->match[i] = cand[tn_rng_below(&rng, (uint32_t)(ncand < job->choices ? ncand : job->choices))].index;
+    }
+}
+
+TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts, const tn_align_opts *opts,
+                                 int *match)
+{
+    tn__chains sk, skr, dem;
+    tn__align_job job;
+    int i, raw = opts ? opts->raw_heights : 0;
+    tn_status st;
+    TN_ASSERT(match);
+    if ((st = tn__cset_check(sketch_parts, "align: sketch parts")) || (st = tn__cset_check(dem_parts, "align: DEM parts")))
+        return st;
+    if (!sketch_parts->count) return tn__fail(TN_ERR_EMPTY, "align: the sketch has no parts");
+    if (!dem_parts->count) return tn__fail(TN_ERR_EMPTY, "align: the DEM has no contour parts");
+    memset(&job, 0, sizeof job);
+    job.top = opts && opts->top > 0 ? opts->top : 10;
+    job.choices = opts && opts->choices > 0 ? opts->choices : 5;
+    if (job.top > 64) job.top = 64;
+    job.seed = opts ? opts->seed : 0;
+    job.match = match;
+    if ((st = tn__chains_make(sketch_parts, raw, 0, &sk))) return st;
+    if ((st = tn__chains_make(sketch_parts, raw, 1, &skr))) {
+        tn__chains_free(&sk);
+        return st;
+    }
+    if ((st = tn__chains_make(dem_parts, raw, 0, &dem))) {
+        tn__chains_free(&sk);
+        tn__chains_free(&skr);
+        return st;
+    }
+    for (i = 0; i < dem.count; i++) job.any_type[dem.type[i] ? 1 : 0] = 1;
+    job.sk = &sk;
+    job.skr = &skr;
+    job.dem = &dem;
+    tn_parallel_for((size_t)sk.count, 8, tn__align_rows, &job);
+    tn__chains_free(&sk);
+    tn__chains_free(&skr);
+    tn__chains_free(&dem);
+    return TN_OK;
 }
 
 /* --------------------------------------------------------------------------------------------
