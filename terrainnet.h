@@ -585,6 +585,10 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
    One type carries extracted ridge/valley networks, their contour parts and user sketches: a
    canvas size and a list of polylines, each point (x, y, height) in canvas pixels and the
    height units of its source (metres for an extracted DEM, [0, 1] for a drawn sketch).
+   On it: the .tns text format, sketches drawn as images (thinning + tracing), rasterising,
+   random sketches (5.2: MST of random nodes, MST of their Voronoi vertices), cutting polylines
+   into 5-10 point contour parts (4.1) and aligning sketch parts to DEM parts (5.3, A1/A2:
+   chain codes, rotation by k pi/4, longest common substring, height mean/std, seeded pick).
    ============================================================================================ */
 
 typedef enum tn_contour_type { TN_VALLEY = 0, TN_RIDGE = 1 } tn_contour_type;
@@ -680,9 +684,9 @@ typedef struct tn_sketch_random_opts {
 TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
                                   tn_contour_set *out);
 
-/* Delaunay triangulation (Bowyer-Watson, O(n^2) worst case; fine for a few thousand points) of
-   n points xy[2n]. *triangles (3 vertex indices each, counter-clockwise in y-down pixels is not
-   guaranteed) is TN_MALLOC'd; free with tn_free. Exact duplicate points are skipped. */
+/* Delaunay triangulation (Bowyer-Watson, O(n^2); fine for a few thousand points) of n points
+   xy[2n]: *ntriangles triangles of 3 point indices each (winding unspecified), TN_MALLOC'd, free
+   with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
 TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
    point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. */

@@ -63,6 +63,13 @@ expect_error "sketch NaN" "nan.tns:4: height is NaN" $T sketch-random --sketch "
 printf 'terrainnet-sketch 1\ncanvas 8 8\n' > "$W/empty.tns"
 expect_error "align empty sketch" "empty" $T align "$W/empty.tns" "$W/dem.tns" -o "$W/m.txt"
 expect_error "sketch-random no size" "size" $T sketch-random -o "$W/x.tns"
+# a drawn sketch: a red stroke (P6 image) converts to a .tns ridge
+printf 'P6\n16 8\n255\n' > "$W/drawn.ppm"
+y=0; while [ $y -lt 8 ]; do x=0; while [ $x -lt 16 ]; do
+    if [ $y -eq 4 ] && [ $x -gt 1 ] && [ $x -lt 14 ]; then printf '\310\000\000'; else printf '\377\377\377'; fi
+    x=$((x + 1)); done; y=$((y + 1)); done >> "$W/drawn.ppm"
+if $T sketch "$W/drawn.ppm" --tns "$W/drawn.tns" > /dev/null && grep -q '^ridge' "$W/drawn.tns" && grep -q '^canvas 16 8' "$W/drawn.tns"; then ok;
+else bad "drawn sketch to tns"; fi
 cp "$W/rnd.tns" "$W/keep.tns"
 $T sketch-random --sketch "$W/nan.tns" -o "$W/keep.tns" > /dev/null 2>&1
 if cmp -s "$W/rnd.tns" "$W/keep.tns"; then ok; else bad "a failed sketch-random changed the existing output"; fi
