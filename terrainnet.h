@@ -670,9 +670,10 @@ TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *de
    n random nodes with heights in [0.5, 1] joined by a Euclidean minimum spanning tree are the
    candidate ridges; the Voronoi vertices of the nodes (circumcentres of their Delaunay
    triangles, inside the canvas) with heights in [0, 0.5] joined by another MST are the candidate
-   valleys. Ridge edges crossing the user's sketch are dropped; valley edges crossing the user's
-   sketch or a kept ridge are dropped. Kept edges are chained between branch points and
-   resampled to 8-connected pixel polylines with heights linear along each edge. */
+   valleys. Each edge is drawn as an 8-connected pixel line; ridge edges that touch or cross the
+   user's sketch pixels are dropped, then valley edges that touch or cross the sketch or a kept
+   ridge, so nothing crosses in the output. Kept edges are chained between branch points, heights
+   linear along each edge. */
 
 typedef struct tn_sketch_random_opts {
     uint64_t seed;
@@ -8699,115 +8700,52 @@ TN_API tn_status tn_mst(const float *xy, int n, int **edges)
 
 /* ---- random sketches ---- */
 
-/* Segments bucketed on a uniform grid, for "does this edge cross anything" queries. */
-typedef struct tn__seg_grid {
-    float *seg;             /* 4 floats per segment */
-    int nseg;
-    size_t seg_cap;
-    int cell, gw, gh;
-    int *start, *list;      /* CSR: segments in cell c are list[start[c] .. start[c + 1]) */
-    int *stamp, query;
-} tn__seg_grid;
-
-static tn_status tn__seg_add(tn__seg_grid *g, float x0, float y0, float x1, float y1)
+/* Pixel occupancy for "does this edge cross anything": an 8-connected chain crosses the marked
+   pixels when it steps on one, or steps diagonally between two marked pixels (an X crossing). */
+static void tn__occ_mark(uint8_t *occ, int w, int h, const tn__pts *c)
 {
-    tn_status st = tn__reserve((void **)&g->seg, &g->seg_cap, ((size_t)g->nseg + 1) * 4 * sizeof(float));
-    if (st) return st;
-    g->seg[4 * g->nseg] = x0;
-    g->seg[4 * g->nseg + 1] = y0;
-    g->seg[4 * g->nseg + 2] = x1;
-    g->seg[4 * g->nseg + 3] = y1;
-    g->nseg++;
-    return TN_OK;
-}
-
-static void tn__seg_cells(const tn__seg_grid *g, const float *s, int *c0, int *r0, int *c1, int *r1)
-{
-    *c0 = tn__clampi((int)floorf(fminf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
-    *c1 = tn__clampi((int)floorf(fmaxf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
-    *r0 = tn__clampi((int)floorf(fminf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
-    *r1 = tn__clampi((int)floorf(fmaxf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
-}
-
-/* Builds the buckets after all tn__seg_add calls (two passes: count, fill). */
-static tn_status tn__seg_build(tn__seg_grid *g, int width, int height)
-{
-    int i, c, r, c0, r0, c1, r1, pass;
-    size_t total = 0;
-    g->cell = 16;
-    g->gw = (width + g->cell - 1) / g->cell + 1;
-    g->gh = (height + g->cell - 1) / g->cell + 1;
-    g->start = (int *)tn__calloc(((size_t)g->gw * g->gh + 1) * sizeof(int));
-    g->stamp = (int *)tn__calloc(((size_t)g->nseg + 1) * sizeof(int));
-    if (!g->start || !g->stamp) return TN_ERR_OUT_OF_MEMORY;
-    for (pass = 0; pass < 2; pass++) {
-        for (i = 0; i < g->nseg; i++) {
-            tn__seg_cells(g, g->seg + 4 * i, &c0, &r0, &c1, &r1);
-            for (r = r0; r <= r1; r++)
-                for (c = c0; c <= c1; c++) {
-                    if (pass == 0) {
-                        g->start[(size_t)r * g->gw + c + 1]++;
-                        total++;
-                    } else
-                        g->list[g->start[(size_t)r * g->gw + c]++] = i;
-                }
-        }
-        if (pass == 0) {
-            if (total > (size_t)INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: too many user segments");
-            for (i = 0; i < g->gw * g->gh; i++) g->start[i + 1] += g->start[i];
-            if (!(g->list = (int *)tn__alloc((total + 1) * sizeof(int)))) return TN_ERR_OUT_OF_MEMORY;
-        }
+    int j;
+    for (j = 0; j < c->n; j++) {
+        int x = (int)c->p[3 * j], y = (int)c->p[3 * j + 1];
+        if (x >= 0 && y >= 0 && x < w && y < h) occ[(size_t)y * w + x] = 1;
     }
-    for (i = g->gw * g->gh; i > 0; i--) g->start[i] = g->start[i - 1]; /* undo the fill's shift */
-    g->start[0] = 0;
-    return TN_OK;
 }
 
-static void tn__seg_free(tn__seg_grid *g)
+static int tn__occ_hits(const uint8_t *occ, int w, int h, const tn__pts *c)
 {
-    TN_FREE(g->seg);
-    TN_FREE(g->start);
-    TN_FREE(g->list);
-    TN_FREE(g->stamp);
-    memset(g, 0, sizeof *g);
-}
-
-static double tn__orient(double ax, double ay, double bx, double by, double cx, double cy)
-{
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
-}
-
-/* Closed segments ab and cd intersect (touching counts). */
-static int tn__segments_cross(const float *a, const float *b)
-{
-    double d1 = tn__orient(b[0], b[1], b[2], b[3], a[0], a[1]), d2 = tn__orient(b[0], b[1], b[2], b[3], a[2], a[3]);
-    double d3 = tn__orient(a[0], a[1], a[2], a[3], b[0], b[1]), d4 = tn__orient(a[0], a[1], a[2], a[3], b[2], b[3]);
-    if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return 1;
-    if (d1 == 0 || d2 == 0 || d3 == 0 || d4 == 0) { /* collinear cases: bounding boxes overlap */
-        return fmin(a[0], a[2]) <= fmax(b[0], b[2]) && fmin(b[0], b[2]) <= fmax(a[0], a[2]) &&
-               fmin(a[1], a[3]) <= fmax(b[1], b[3]) && fmin(b[1], b[3]) <= fmax(a[1], a[3]) &&
-               ((d1 == 0 && d2 == 0) || (d1 == 0 && d3 * d4 <= 0) || (d2 == 0 && d3 * d4 <= 0) ||
-                (d3 == 0 && d1 * d2 <= 0) || (d4 == 0 && d1 * d2 <= 0));
+    int j;
+    for (j = 0; j < c->n; j++) {
+        int x = (int)c->p[3 * j], y = (int)c->p[3 * j + 1];
+        if (x < 0 || y < 0 || x >= w || y >= h) continue;
+        if (occ[(size_t)y * w + x]) return 1;
+        if (j > 0) {
+            int px = (int)c->p[3 * j - 3], py = (int)c->p[3 * j - 2];
+            if (px != x && py != y && px >= 0 && py >= 0 && px < w && py < h && occ[(size_t)py * w + x] && occ[(size_t)y * w + px])
+                return 1;
+        }
     }
     return 0;
 }
 
-/* 1 when segment s crosses any segment in the grid. */
-static int tn__seg_hits(tn__seg_grid *g, const float *s)
+/* Keeps the edges (pairs into xy) whose pixel chain misses occ; kept[] gets them, *nkept their count. */
+static tn_status tn__keep_free_edges(const float *xy, const int *edges, int nedges, const uint8_t *occ, int w, int h, int *kept,
+                                     int *nkept, tn__pts *tmp)
 {
-    int c, r, c0, r0, c1, r1, k;
-    if (!g->nseg) return 0;
-    g->query++;
-    tn__seg_cells(g, s, &c0, &r0, &c1, &r1);
-    for (r = r0; r <= r1; r++)
-        for (c = c0; c <= c1; c++)
-            for (k = g->start[(size_t)r * g->gw + c]; k < g->start[(size_t)r * g->gw + c + 1]; k++) {
-                int i = g->list[k];
-                if (g->stamp[i] == g->query) continue;
-                g->stamp[i] = g->query;
-                if (tn__segments_cross(s, g->seg + 4 * i)) return 1;
-            }
-    return 0;
+    int i;
+    tn_status st;
+    float ends[6] = {0, 0, 0, 0, 0, 0};
+    *nkept = 0;
+    for (i = 0; i < nedges; i++) {
+        int a = edges[2 * i], b = edges[2 * i + 1];
+        ends[0] = xy[2 * a]; ends[1] = xy[2 * a + 1]; ends[3] = xy[2 * b]; ends[4] = xy[2 * b + 1];
+        tmp->n = 0;
+        if ((st = tn__chain_pixels(ends, 2, 1.0f, 1.0f, tmp))) return st;
+        if (tn__occ_hits(occ, w, h, tmp)) continue;
+        kept[2 * *nkept] = a;
+        kept[2 * *nkept + 1] = b;
+        (*nkept)++;
+    }
+    return TN_OK;
 }
 
 /* Chains the kept edges of a forest (vertex positions/heights vx, vy, vh) between vertices of
@@ -8869,16 +8807,16 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
                                   tn_contour_set *out)
 {
     tn_contour_set set;
-    tn__seg_grid grid;
+    tn__pts tmp = {NULL, 0, 0};
     tn_rng rng;
-    float *node = NULL, *nh = NULL, *vor = NULL, *vh = NULL, s[4];
+    uint8_t *occ = NULL;
+    float *node = NULL, *nh = NULL, *vor = NULL, *vh = NULL;
     int *redges = NULL, *vedges = NULL, *tris = NULL, *keep_r = NULL, *keep_v = NULL;
     int n, ntri = 0, nv = 0, nkr = 0, nkv = 0, i, j;
     size_t cap = 0;
     tn_status st = TN_OK;
     TN_ASSERT(out);
     memset(&set, 0, sizeof set);
-    memset(&grid, 0, sizeof grid);
     if (width < 2 || height < 2) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: canvas %d x %d (need at least 2 x 2)", width, height);
     if (width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_TOO_LARGE, "random sketch: canvas %d x %d exceeds %d", width, height, TN_SKETCH_MAX_SIDE);
@@ -8921,41 +8859,24 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         vh[nv++] = 0.5f * tn_rng_uniform(&rng);
     }
     if (nv >= 2 && (st = tn_mst(vor, nv, &vedges))) goto done;
-    /* the user's segments, then keep ridge edges that cross none of them */
-    for (i = 0; user && i < user->count && !st; i++)
-        for (j = 0; j < user->items[i].npoints && !st; j++) {
-            const float *p = user->items[i].points + 3 * j, *q = j + 1 < user->items[i].npoints ? p + 3 : p;
-            st = tn__seg_add(&grid, p[0], p[1], q[0], q[1]);
-        }
+    /* user pixels first: ridge edges must miss them; then kept ridges too: valley edges must miss both */
     keep_r = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
     keep_v = (int *)tn__alloc(((size_t)nv + 1) * 2 * sizeof(int));
-    if (!st && (!keep_r || !keep_v)) st = TN_ERR_OUT_OF_MEMORY;
-    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
-    for (i = 0; i < n - 1; i++) {
-        int a = redges[2 * i], b = redges[2 * i + 1];
-        s[0] = node[2 * a]; s[1] = node[2 * a + 1]; s[2] = node[2 * b]; s[3] = node[2 * b + 1];
-        if (tn__seg_hits(&grid, s)) continue;
-        keep_r[2 * nkr] = a;
-        keep_r[2 * nkr + 1] = b;
-        nkr++;
+    occ = (uint8_t *)tn__calloc((size_t)width * height);
+    if (!keep_r || !keep_v || !occ) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (i = 0; user && i < user->count && !st; i++) {
+        tmp.n = 0;
+        if (!(st = tn__chain_pixels(user->items[i].points, user->items[i].npoints, 1.0f, 1.0f, &tmp))) tn__occ_mark(occ, width, height, &tmp);
     }
-    /* valleys must avoid the user's sketch and the kept ridges: rebuild the grid with both */
-    TN_FREE(grid.start); TN_FREE(grid.list); TN_FREE(grid.stamp);
-    grid.start = grid.list = grid.stamp = NULL;
-    grid.query = 0;
+    if (st || (st = tn__keep_free_edges(node, redges, n - 1, occ, width, height, keep_r, &nkr, &tmp))) goto done;
     for (i = 0; i < nkr && !st; i++) {
-        int a = keep_r[2 * i], b = keep_r[2 * i + 1];
-        st = tn__seg_add(&grid, node[2 * a], node[2 * a + 1], node[2 * b], node[2 * b + 1]);
+        float ends[6] = {0, 0, 0, 0, 0, 0};
+        ends[0] = node[2 * keep_r[2 * i]]; ends[1] = node[2 * keep_r[2 * i] + 1];
+        ends[3] = node[2 * keep_r[2 * i + 1]]; ends[4] = node[2 * keep_r[2 * i + 1] + 1];
+        tmp.n = 0;
+        if (!(st = tn__chain_pixels(ends, 2, 1.0f, 1.0f, &tmp))) tn__occ_mark(occ, width, height, &tmp);
     }
-    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
-    for (i = 0; i + 1 < nv; i++) {
-        int a = vedges[2 * i], b = vedges[2 * i + 1];
-        s[0] = vor[2 * a]; s[1] = vor[2 * a + 1]; s[2] = vor[2 * b]; s[3] = vor[2 * b + 1];
-        if (tn__seg_hits(&grid, s)) continue;
-        keep_v[2 * nkv] = a;
-        keep_v[2 * nkv + 1] = b;
-        nkv++;
-    }
+    if (st || (nv >= 2 && (st = tn__keep_free_edges(vor, vedges, nv - 1, occ, width, height, keep_v, &nkv, &tmp)))) goto done;
     for (i = 0; user && i < user->count && !st; i++)
         st = tn__cset_add(&set, &cap, user->items[i].type, user->items[i].order, user->items[i].mean_gradient,
                           user->items[i].points, user->items[i].npoints);
@@ -8964,7 +8885,8 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
 done:
     TN_FREE(node); TN_FREE(nh); TN_FREE(vor); TN_FREE(vh);
     TN_FREE(redges); TN_FREE(vedges); TN_FREE(tris); TN_FREE(keep_r); TN_FREE(keep_v);
-    tn__seg_free(&grid);
+    TN_FREE(occ);
+    TN_FREE(tmp.p);
     if (st) {
         tn_contour_set_free(&set);
         return st;

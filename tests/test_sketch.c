@@ -322,9 +322,18 @@ TN_TEST(random_sketch_no_crossings_and_deterministic)
             if (c1->type == TN_VALLEY && a.items[j].type == TN_RIDGE) touching += polylines_touch(c1, &a.items[j]);
     }
     TN_CHECK(nr > 0 && nv > 0);
-    /* pixel rounding can make an edge that passes within half a pixel share a pixel; the straight
-       edges themselves never cross, so allow at most a couple of such touches */
-    TN_CHECK(touching <= 2);
+    TN_CHECK(touching == 0);
+    for (o.seed = 100; o.seed < 120; o.seed++) { /* more layouts: still nothing crosses */
+        TN_CHECK(tn_sketch_random(&user, 128, 96, &o, &c) == TN_OK);
+        for (i = 2; i < c.count; i++) {
+            touching += polylines_touch(&c.items[i], &dense.items[0]) + polylines_touch(&c.items[i], &dense.items[1]);
+            for (j = 2; j < c.count; j++)
+                if (c.items[i].type == TN_VALLEY && c.items[j].type == TN_RIDGE) touching += polylines_touch(&c.items[i], &c.items[j]);
+        }
+        tn_contour_set_free(&c);
+    }
+    TN_CHECK(touching == 0);
+    o.seed = 11;
     TN_CHECK(tn_sketch_random(&user, 128, 96, &o, &b) == TN_OK);
     TN_CHECK(sets_equal(&a, &b));
     TN_CHECK(tn_sketch_format(&a, &ta, &na) == TN_OK && tn_sketch_format(&b, &tb, &nb) == TN_OK && na == nb && !memcmp(ta, tb, na));
@@ -340,19 +349,6 @@ TN_TEST(random_sketch_no_crossings_and_deterministic)
     tn_contour_set_free(&dense);
     tn_contour_set_free(&a);
     tn_contour_set_free(&b);
-}
-
-/* The crossing test behind the random sketch: proper crossings, touching ends, collinear overlap. */
-TN_TEST(segment_crossing)
-{
-    static const float x1[] = {0, 0, 10, 10}, x2[] = {0, 10, 10, 0}, far[] = {20, 20, 30, 20}, touch[] = {10, 10, 20, 0};
-    static const float col1[] = {0, 0, 4, 0}, col2[] = {3, 0, 8, 0}, col3[] = {5, 0, 8, 0}, near1[] = {0, 1, 10, 11};
-    TN_CHECK(tn__segments_cross(x1, x2));
-    TN_CHECK(!tn__segments_cross(x1, far));
-    TN_CHECK(tn__segments_cross(x1, touch));
-    TN_CHECK(tn__segments_cross(col1, col2));
-    TN_CHECK(!tn__segments_cross(col1, col3));
-    TN_CHECK(!tn__segments_cross(x1, near1));
 }
 
 TN_TEST(parts_lengths_and_adjacency)
@@ -459,7 +455,6 @@ int main(void)
     TN_RUN(mst_known_points);
     TN_RUN(delaunay_empty_circumcircles);
     TN_RUN(random_sketch_no_crossings_and_deterministic);
-    TN_RUN(segment_crossing);
     TN_RUN(parts_lengths_and_adjacency);
     TN_RUN(align_planted_rotated_copy);
     return tn_test_summary("test_sketch");
