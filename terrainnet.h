@@ -713,7 +713,7 @@ TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t see
 
 typedef struct tn_align_opts {
     uint64_t seed;
-    int top;              /* candidates kept by LCS length; 0 = 10 */
+    int top;              /* candidates kept by LCS length; 0 = 10 (at most 64) */
     int choices;          /* random pick among the best this many by height; 0 = 5 (1 = greedy) */
     int raw_heights;      /* 1: compare heights as given instead of scaling each set to [0, 1] */
 } tn_align_opts;
@@ -8273,7 +8273,7 @@ static int tn__crossings(const uint8_t *m, int w, int h, int x, int y)
     return t;
 }
 
-typedef struct tn__tracer {
+typedef struct tn__sketch_tracer {
     const uint8_t *m;       /* skeleton mask */
     uint8_t *node;          /* 1 where crossings != 2 */
     uint8_t *seen;          /* line pixels already in a polyline */
@@ -8283,16 +8283,16 @@ typedef struct tn__tracer {
     tn__pts pts;
     tn_contour_set *out;
     size_t *cap;
-} tn__tracer;
+} tn__sketch_tracer;
 
-static tn_status tn__trace_push(tn__tracer *t, size_t i)
+static tn_status tn__sketch_trace_push(tn__sketch_tracer *t, size_t i)
 {
     return tn__pts_push(&t->pts, (float)(i % (size_t)t->w), (float)(i / (size_t)t->w), t->hgt[i]);
 }
 
 /* Walks from `cur` (already pushed; `prev` the pixel before it, `first` the chain's start) along
    unseen line pixels until it reaches a node or runs out; then stores the chain if >= 3 points. */
-static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t cur)
+static tn_status tn__sketch_trace_walk(tn__sketch_tracer *t, size_t first, size_t prev, size_t cur)
 {
     tn_status st;
     int k;
@@ -8304,7 +8304,7 @@ static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t
             size_t j = (size_t)q * t->w + u;
             if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || j == prev || !t->node[j]) continue;
             if (j == first && t->pts.n < 4) continue;
-            if ((st = tn__trace_push(t, j))) return st;
+            if ((st = tn__sketch_trace_push(t, j))) return st;
             goto done;
         }
         for (k = 0; k < 8; k++) {
@@ -8317,12 +8317,12 @@ static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t
         if (next == (size_t)-1) {
             /* a loop without nodes closes on its first pixel */
             if (!t->node[first] && t->pts.n >= 4 && abs(x - (int)(first % (size_t)t->w)) <= 1 &&
-                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__trace_push(t, first)))
+                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__sketch_trace_push(t, first)))
                 return st;
             break;
         }
         t->seen[next] = 1;
-        if ((st = tn__trace_push(t, next))) return st;
+        if ((st = tn__sketch_trace_push(t, next))) return st;
         prev = cur;
         cur = next;
     }
@@ -8332,7 +8332,7 @@ done:
 }
 
 /* Traces a one-pixel skeleton into polylines between endpoints/junctions, then closed loops. */
-static tn_status tn__trace_skeleton(tn__tracer *t)
+static tn_status tn__sketch_trace_skeleton(tn__sketch_tracer *t)
 {
     size_t i, n = (size_t)t->w * t->h;
     int k;
@@ -8348,14 +8348,14 @@ static tn_status tn__trace_skeleton(tn__tracer *t)
             if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
             t->seen[j] = 1;
             t->pts.n = 0;
-            if ((st = tn__trace_push(t, i)) || (st = tn__trace_push(t, j)) || (st = tn__trace_walk(t, i, i, j))) return st;
+            if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_push(t, j)) || (st = tn__sketch_trace_walk(t, i, i, j))) return st;
         }
     }
     for (i = 0; i < n; i++) {
         if (!t->m[i] || t->node[i] || t->seen[i]) continue;
         t->seen[i] = 1;
         t->pts.n = 0;
-        if ((st = tn__trace_push(t, i)) || (st = tn__trace_walk(t, i, (size_t)-1, i))) return st;
+        if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_walk(t, i, (size_t)-1, i))) return st;
     }
     return TN_OK;
 }
@@ -8385,7 +8385,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
     hgt = (float *)tn__alloc(bytes);
     if (!mask || !node || !seen || !hgt) st = TN_ERR_OUT_OF_MEMORY;
     for (type = 0; !st && type < 2; type++) {
-        tn__tracer t;
+        tn__sketch_tracer t;
         for (i = 0; i < n; i++) {
             const float *p = img->data + i * (size_t)img->channels;
             float r = p[0], g = p[1], b = p[2], v = r > b ? r : b;
@@ -8407,7 +8407,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
         t.type = (tn_contour_type)type;
         t.out = &set;
         t.cap = &cap;
-        st = tn__trace_skeleton(&t);
+        st = tn__sketch_trace_skeleton(&t);
         TN_FREE(t.pts.p);
     }
     TN_FREE(mask);
