@@ -55,7 +55,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
-    @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
+    @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
