@@ -640,7 +640,8 @@ TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, t
    not .tns text. *out is untouched on failure. */
 TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out);
 /* Writes the set as .tns text into a TN_MALLOC'd buffer (free with tn_free). Fails with
-   TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas or empty polyline. */
+   TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas, an empty polyline, an
+   order outside 0-1000 or a point outside the canvas (so whatever is written reads back). */
 TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size);
 /* Saves as .tns through a temporary file and a rename: on any error the target is untouched. */
 TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
@@ -8154,6 +8155,16 @@ TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t
     *text = NULL;
     *size = 0;
     if ((st = tn__cset_check(set, "sketch"))) return st;
+    for (i = 0; i < set->count; i++) { /* write only what tn_sketch_parse reads back */
+        const tn_contour *c = &set->items[i];
+        if (c->order < 0 || c->order > 1000) return tn__fail(TN_ERR_INVALID_ARG, "sketch: polyline %d has order %d (0-1000)", i, c->order);
+        for (j = 0; j < c->npoints; j++) {
+            float x = c->points[3 * j], y = c->points[3 * j + 1];
+            if (x < -0.5f || y < -0.5f || x > set->width - 0.5f || y > set->height - 0.5f)
+                return tn__fail(TN_ERR_INVALID_ARG, "sketch: polyline %d point %d (%g, %g) lies outside the %d x %d canvas", i, j,
+                                (double)x, (double)y, set->width, set->height);
+        }
+    }
     st = tn__text_printf(&buf, &len, &cap, "terrainnet-sketch 1\n# %d polylines; points are x y height\ncanvas %d %d\n",
                          set->count, set->width, set->height);
     for (i = 0; !st && i < set->count; i++) {

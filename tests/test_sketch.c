@@ -36,8 +36,8 @@ static int sets_equal(const tn_contour_set *a, const tn_contour_set *b)
 TN_TEST(tns_parse_and_round_trip)
 {
     tn_contour_set s = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, u = {0, 0, 0, NULL};
-    char *text = NULL, *text2 = NULL;
-    size_t n = 0, n2 = 0;
+    char *text = NULL, *text2 = NULL, *text3 = NULL;
+    size_t n = 0, n2 = 0, n3 = 0;
     int i;
     TN_CHECK(tn_sketch_parse(demo_tns, strlen(demo_tns), "demo.tns", &s) == TN_OK);
     TN_CHECK(s.width == 64 && s.height == 48 && s.count == 2);
@@ -61,12 +61,21 @@ TN_TEST(tns_parse_and_round_trip)
     TN_CHECK(tn_sketch_save("build/test/sketch_rt.tns", &s) == TN_OK);
     TN_CHECK(tn_sketch_load("build/test/sketch_rt.tns", &u) == TN_OK);
     TN_CHECK(sets_equal(&s, &u));
+    /* what the reader would reject is not written */
+    s.items[0].points[0] = 64.0f;
+    TN_CHECK(tn_sketch_format(&s, &text3, &n3) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "outside"));
+    s.items[0].points[0] = 10.0f;
+    s.items[1].order = 1001;
+    TN_CHECK(tn_sketch_format(&s, &text3, &n3) == TN_ERR_INVALID_ARG);
+    s.items[1].order = 0;
+    TN_CHECK(tn_sketch_format(&s, &text3, &n3) == TN_OK);
     /* a failed save (NaN) leaves the file as it was */
     s.items[0].points[0] = NAN;
     TN_CHECK(tn_sketch_save("build/test/sketch_rt.tns", &s) == TN_ERR_NUMERIC);
     tn_contour_set_free(&t);
     TN_CHECK(tn_sketch_load("build/test/sketch_rt.tns", &t) == TN_OK && sets_equal(&t, &u));
     for (i = 0; i < 2; i++) tn_free(i ? text2 : text);
+    tn_free(text3);
     tn_contour_set_free(&s);
     tn_contour_set_free(&t);
     tn_contour_set_free(&u);
