@@ -8953,7 +8953,7 @@ typedef struct tn__chains {
     int *at;           /* index into h of the start point of each code's step */
     float *h;          /* heights, oriented, scaled to [0, 1] unless raw; hoff[i] indexes part i */
     int *hoff;
-    float *angle;      /* direction of the first-to-last vector */
+    float *angle;      /* direction of the first-to-last vector, in units of pi/4 */
     uint8_t *type;
 } tn__chains;
 
@@ -9000,7 +9000,7 @@ static tn_status tn__chains_make(const tn_contour_set *s, int raw, int flip, tn_
         const float *f = p->points, *l = p->points + 3 * (n - 1);
         rev = (f[0] > l[0] || (f[0] == l[0] && f[1] > l[1])) != flip; /* run in the main direction */
         for (j = 0; j < n; j++) c->h[base + j] = (p->points[3 * (rev ? n - 1 - j : j) + 2] - lo) * scale;
-        c->angle[i] = (float)atan2(rev ? f[1] - l[1] : l[1] - f[1], rev ? f[0] - l[0] : l[0] - f[0]);
+        c->angle[i] = (float)(atan2(rev ? f[1] - l[1] : l[1] - f[1], rev ? f[0] - l[0] : l[0] - f[0]) / 0.78539816339744831);
         for (j = 0; j + 1 < n && nc < TN__ALIGN_MAXCODES; j++) {
             const float *a = p->points + 3 * (rev ? n - 1 - j : j), *b = p->points + 3 * (rev ? n - 2 - j : j + 1);
             float dx = b[0] - a[0], dy = b[1] - a[1];
@@ -9056,25 +9056,66 @@ static float tn__align_score(const tn__chains *sk, int i, int pi, const tn__chai
     return (float)(fabs(s) + sqrt(s2 > 0 ? s2 : 0));
 }
 
-/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
-   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts. Walks
-   only the diagonals (offsets between the strings) that overlap by at least `need` codes: any
-   answer >= need is exact, a smaller one only says "not good enough". */
-static int tn__align_lcs(const tn__chains *sk, int i, const tn__chains *dem, int q, int need, int *ps, int *qs)
+/* A sketch part's codes in the 8 rotations: rot[k][x] = code x turned by k * pi/4, and (for
+   parts of at most 64 codes) bit x of mask[k][c] set when rot[k][x] == c. */
+typedef struct tn__align_rot {
+    uint8_t rot[8][TN__ALIGN_MAXCODES];
+    uint64_t mask[8][8];
+} tn__align_rot;
+
+static void tn__align_rotations(const tn__chains *sk, int i, tn__align_rot *r)
 {
-    uint8_t rot[TN__ALIGN_MAXCODES];
-    const uint8_t *p = sk->code + sk->off[i], *qc = dem->code + dem->off[q];
-    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, d, k, len = 0;
+    int k, x, np = sk->off[i + 1] - sk->off[i];
+    memset(r->mask, 0, sizeof r->mask);
+    for (k = 0; k < 8; k++)
+        for (x = 0; x < np; x++) {
+            r->rot[k][x] = (uint8_t)((sk->code[sk->off[i] + x] + k) & 7);
+            if (x < 64) r->mask[k][r->rot[k][x]] |= (uint64_t)1 << x;
+        }
+}
+
+/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
+   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts.
+   Bit-parallel for parts up to 64 codes: e[y] holds the x where p[x - L + 1 .. x] equals
+   q[y - L + 1 .. y], grown one level L at a time until it empties. Longer parts walk only the
+   diagonals that overlap by at least `need` codes (an answer < need then only says "not enough"). */
+static int tn__align_lcs(const tn__chains *sk, int i, const tn__align_rot *r, const tn__chains *dem, int q, int need,
+                         int *ps, int *qs)
+{
+    const uint8_t *p, *qc = dem->code + dem->off[q];
+    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, y, d, len = 0, k;
     *ps = sk->off[i];
     *qs = dem->off[q];
     if (need < 1) need = 1;
     if (np < need || nq < need) return 0;
-    k = (int)lrint(((double)dem->angle[q] - sk->angle[i]) / 0.78539816339744831) & 7;
-    for (x = 0; x < np; x++) rot[x] = (uint8_t)((p[x] + k) & 7);
+    k = (int)lrintf(dem->angle[q] - sk->angle[i]) & 7;
+    if (np <= 64) {
+        uint64_t e[TN__ALIGN_MAXCODES], any = 0;
+        const uint64_t *m = r->mask[k];
+        int hit = -1;
+        for (y = nq - 1; y >= 0; y--) {
+            e[y] = m[qc[y]];
+            if (e[y]) hit = y;
+            any |= e[y];
+        }
+        while (any) {
+            len++;
+            *ps = sk->off[i] + (int)tn__z_ctz64(e[hit]) - len + 1;
+            *qs = dem->off[q] + hit - len + 1;
+            any = 0;
+            for (y = nq - 1; y >= len; y--) {
+                e[y] = (e[y - 1] << 1) & m[qc[y]];
+                if (e[y]) hit = y;
+                any |= e[y];
+            }
+        }
+        return len;
+    }
+    p = r->rot[k];
     for (d = need - np; d <= nq - need; d++) { /* q index = p index + d */
         int x0 = d < 0 ? -d : 0, x1 = np < nq - d ? np : nq - d, run = 0;
         for (x = x0; x < x1; x++) {
-            run = rot[x] == qc[x + d] ? run + 1 : 0;
+            run = p[x] == qc[x + d] ? run + 1 : 0;
             if (run > len) {
                 len = run;
                 *ps = sk->off[i] + x + 1 - run;
@@ -9090,16 +9131,19 @@ static void tn__align_rows(void *ctx, size_t begin, size_t end)
     const tn__align_job *job = (const tn__align_job *)ctx;
     const tn__chains *dem = job->dem;
     tn__align_cand cand[64], c, r;
+    tn__align_rot rotf, rotr;
     size_t i;
     for (i = begin; i < end; i++) {
         int ncand = 0, q, x, y, at, type = job->sk->type[i], ps, qs, ps2, qs2, need;
         tn_rng rng;
+        tn__align_rotations(job->sk, (int)i, &rotf);
+        tn__align_rotations(job->skr, (int)i, &rotr);
         for (q = 0; q < dem->count; q++) {
             if (job->any_type[type] && dem->type[q] != type) continue;
             need = ncand == job->top ? cand[ncand - 1].len : 0; /* to enter a full list */
             /* both directions of the sketch part: A1's left-to-right rule alone is not rotation invariant */
-            c.len = tn__align_lcs(job->sk, (int)i, dem, q, need, &ps, &qs);
-            r.len = tn__align_lcs(job->skr, (int)i, dem, q, need, &ps2, &qs2);
+            c.len = tn__align_lcs(job->sk, (int)i, &rotf, dem, q, need, &ps, &qs);
+            r.len = tn__align_lcs(job->skr, (int)i, &rotr, dem, q, need, &ps2, &qs2);
             if (c.len < need && r.len < need) continue;
             c.index = r.index = q;
             c.score = r.score = HUGE_VALF;

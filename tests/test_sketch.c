@@ -455,6 +455,44 @@ TN_TEST(align_planted_rotated_copy)
     tn_contour_set_free(&sk);
 }
 
+/* Parts longer than 64 codes take the diagonal-walk path of the substring search. */
+TN_TEST(align_long_parts)
+{
+    tn_contour_set dem = {0, 0, 0, NULL}, sk = {0, 0, 0, NULL};
+    size_t cap = 0, cap2 = 0;
+    tn_rng r;
+    float pts[3 * 100];
+    int i, j, match[1];
+    tn_align_opts o;
+    tn_rng_seed(&r, 4, 4);
+    dem.width = dem.height = sk.width = sk.height = 400;
+    for (i = 0; i < 5; i++) {
+        int x = 150, y = 150;
+        for (j = 0; j < 100; j++) {
+            pts[3 * j] = (float)x;
+            pts[3 * j + 1] = (float)y;
+            pts[3 * j + 2] = (float)(i * 10 + j);
+            x += (int)tn_rng_below(&r, 2);
+            y += (int)tn_rng_below(&r, 3) - 1;
+        }
+        TN_CHECK(tn__cset_add(&dem, &cap, TN_RIDGE, 1, 0.0f, pts, 100) == TN_OK);
+    }
+    for (j = 0; j < 100; j++) { /* part 3 turned by pi (x, y) -> (399 - x, 399 - y) */
+        pts[3 * j] = 399.0f - dem.items[3].points[3 * j];
+        pts[3 * j + 1] = 399.0f - dem.items[3].points[3 * j + 1];
+        pts[3 * j + 2] = dem.items[3].points[3 * j + 2];
+    }
+    TN_CHECK(tn__cset_add(&sk, &cap2, TN_RIDGE, 0, 0.0f, pts, 100) == TN_OK);
+    memset(&o, 0, sizeof o);
+    o.choices = 1;
+    o.raw_heights = 1; /* every DEM part is in the top 10 here, so heights decide */
+    TN_CHECK(tn_sketch_align(&sk, &dem, &o, match) == TN_OK);
+    if (match[0] != 3) fprintf(stderr, "long part aligned to %d\n", match[0]);
+    TN_CHECK(match[0] == 3);
+    tn_contour_set_free(&dem);
+    tn_contour_set_free(&sk);
+}
+
 int main(void)
 {
     TN_RUN(tns_parse_and_round_trip);
@@ -466,5 +504,6 @@ int main(void)
     TN_RUN(random_sketch_no_crossings_and_deterministic);
     TN_RUN(parts_lengths_and_adjacency);
     TN_RUN(align_planted_rotated_copy);
+    TN_RUN(align_long_parts);
     return tn_test_summary("test_sketch");
 }
