@@ -719,7 +719,8 @@ typedef struct tn_align_opts {
     int raw_heights;      /* 1: compare heights as given instead of scaling each set to [0, 1] */
 } tn_align_opts;
 /* match[i] (caller-allocated, sketch_parts->count ints) = index of the DEM part aligned to sketch
-   part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count. */
+   part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count.
+   Reports progress as stage "align" every 1024 sketch parts (cancellable). */
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
                                  const tn_align_opts *opts, int *match);
 
@@ -9031,6 +9032,7 @@ typedef struct tn__align_job {
     int top, choices, any_type[2];
     uint64_t seed;
     int *match;
+    size_t first;                     /* this batch starts at sketch part `first` */
 } tn__align_job;
 
 /* |mean(d)| + std(d) of the height differences on the common substring (P from pi, Q from qi,
@@ -9129,6 +9131,8 @@ static int tn__align_lcs(const tn__chains *sk, int i, const tn__align_rot *r, co
 static void tn__align_rows(void *ctx, size_t begin, size_t end)
 {
     const tn__align_job *job = (const tn__align_job *)ctx;
+    begin += job->first;
+    end += job->first;
     const tn__chains *dem = job->dem;
     tn__align_cand cand[64], c, r;
     tn__align_rot rotf, rotr;
@@ -9200,11 +9204,16 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
     job.sk = &sk;
     job.skr = &skr;
     job.dem = &dem;
-    tn_parallel_for((size_t)sk.count, 8, tn__align_rows, &job);
+    /* batches between progress reports; each part's result is independent of the split */
+    for (job.first = 0; !st && job.first < (size_t)sk.count; job.first += 1024) {
+        size_t n = (size_t)sk.count - job.first < 1024 ? (size_t)sk.count - job.first : 1024;
+        tn_parallel_for(n, 8, tn__align_rows, &job);
+        st = tn__progress("align", (double)(job.first + n) / (double)sk.count);
+    }
     tn__chains_free(&sk);
     tn__chains_free(&skr);
     tn__chains_free(&dem);
-    return TN_OK;
+    return st;
 }
 
 /* --------------------------------------------------------------------------------------------

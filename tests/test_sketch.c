@@ -400,6 +400,13 @@ TN_TEST(parts_lengths_and_adjacency)
     tn_contour_set_free(&lines);
 }
 
+static int cancel_progress(void *user, const char *stage, double f)
+{
+    (void)f;
+    *(int *)user += !strcmp(stage, "align");
+    return 1;
+}
+
 /* DEM parts: random pixel walks; the sketch = a few of them rotated by pi/2 about the canvas
    centre (x, y) -> (H - 1 - y, x). Each must align to its source. */
 TN_TEST(align_planted_rotated_copy)
@@ -451,6 +458,11 @@ TN_TEST(align_planted_rotated_copy)
     tn_set_threads(0);
     TN_CHECK(!memcmp(match, match2, sizeof match));
     for (i = 0; i < 6; i++) TN_CHECK(match[i] >= 0 && match[i] < 400 && dem.items[match[i]].type == sk.items[i].type);
+    /* progress reaches the hook, which can cancel */
+    i = 0;
+    tn_set_progress(cancel_progress, &i);
+    TN_CHECK(tn_sketch_align(&sk, &dem, &o, match) == TN_ERR_CANCELLED && i == 1);
+    tn_set_progress(NULL, NULL);
     tn_contour_set_free(&dem);
     tn_contour_set_free(&sk);
 }
