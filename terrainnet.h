@@ -678,7 +678,7 @@ TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *de
 
 typedef struct tn_sketch_random_opts {
     uint64_t seed;
-    int nodes;            /* random ridge nodes; 0 = width * height / 1024, clamped to [8, 2048] */
+    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048] */
 } tn_sketch_random_opts;
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
@@ -8839,7 +8839,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
                             user->height, width, height);
     }
     n = opts && opts->nodes > 0 ? opts->nodes : (int)tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
-    if (n > 65536) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 65536)", n);
+    if (n > 8192) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 8192)", n);
     tn_rng_seed(&rng, opts ? opts->seed : 0, 0x5e7c4u);
     set.width = width;
     set.height = height;
@@ -8980,6 +8980,7 @@ static tn_status tn__chains_make(const tn_contour_set *s, int raw, int flip, tn_
             if ((i == 0 && j == 0) || h > hi) hi = h;
         }
     }
+    if (npts >= (size_t)INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "align: %zu points", npts);
     scale = raw ? 1.0f : (hi > lo ? 1.0f / (hi - lo) : 0.0f);
     if (raw) lo = 0.0f;
     c->count = s->count;

@@ -484,7 +484,7 @@ static int cmd_sketch_random(int argc, char **argv)
                "(heights 0-0.5) joined by another give valleys; edges crossing the sketch (or, for\n"
                "valleys, a kept ridge) are dropped. The output holds the sketch's own polylines first.\n"
                "--size defaults to the sketch canvas (required without --sketch); --nodes defaults to\n"
-               "W*H/1024 clamped to 8-2048; --seed defaults to 1.\n");
+               "W*H/1024 clamped to 8-2048 (at most 8192); --seed defaults to 1.\n");
         return 0;
     }
     for (a = 0; a < argc; a++) {
@@ -496,8 +496,8 @@ static int cmd_sketch_random(int argc, char **argv)
         } else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
             if (!parse_double(argv[++a], &seed) || seed < 0) return usage_error("sketch-random", "--seed needs a non-negative number, not", argv[a]);
         } else if (!strcmp(argv[a], "--nodes") && a + 1 < argc) {
-            if (!parse_int(argv[++a], &nodes) || nodes < 2 || nodes > 65536)
-                return usage_error("sketch-random", "--nodes needs a number from 2 to 65536, not", argv[a]);
+            if (!parse_int(argv[++a], &nodes) || nodes < 2 || nodes > 8192)
+                return usage_error("sketch-random", "--nodes needs a number from 2 to 8192, not", argv[a]);
         } else return usage_error("sketch-random", "unknown option or missing value:", argv[a]);
     }
     if (!outp) return usage_error("sketch-random", "missing -o OUT.tns", NULL);
