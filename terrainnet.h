@@ -55,7 +55,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
-    @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
+    @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -585,6 +585,10 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
    One type carries extracted ridge/valley networks, their contour parts and user sketches: a
    canvas size and a list of polylines, each point (x, y, height) in canvas pixels and the
    height units of its source (metres for an extracted DEM, [0, 1] for a drawn sketch).
+   On it: the .tns text format, sketches drawn as images (thinning + tracing), rasterising,
+   random sketches (5.2: MST of random nodes, MST of their Voronoi vertices), cutting polylines
+   into 5-10 point contour parts (4.1) and aligning sketch parts to DEM parts (5.3, A1/A2:
+   chain codes, rotation by k pi/4, longest common substring, height mean/std, seeded pick).
    ============================================================================================ */
 
 typedef enum tn_contour_type { TN_VALLEY = 0, TN_RIDGE = 1 } tn_contour_type;
@@ -636,7 +640,8 @@ TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, t
    not .tns text. *out is untouched on failure. */
 TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out);
 /* Writes the set as .tns text into a TN_MALLOC'd buffer (free with tn_free). Fails with
-   TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas or empty polyline. */
+   TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas, an empty polyline, an
+   order outside 0-1000 or a point outside the canvas (so whatever is written reads back). */
 TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size);
 /* Saves as .tns through a temporary file and a rename: on any error the target is untouched. */
 TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
@@ -666,13 +671,14 @@ TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *de
    n random nodes with heights in [0.5, 1] joined by a Euclidean minimum spanning tree are the
    candidate ridges; the Voronoi vertices of the nodes (circumcentres of their Delaunay
    triangles, inside the canvas) with heights in [0, 0.5] joined by another MST are the candidate
-   valleys. Ridge edges crossing the user's sketch are dropped; valley edges crossing the user's
-   sketch or a kept ridge are dropped. Kept edges are chained between branch points and
-   resampled to 8-connected pixel polylines with heights linear along each edge. */
+   valleys. Each edge is drawn as an 8-connected pixel line; ridge edges that touch or cross the
+   user's sketch pixels are dropped, then valley edges that touch or cross the sketch or a kept
+   ridge, so nothing crosses in the output. Kept edges are chained between branch points, heights
+   linear along each edge. */
 
 typedef struct tn_sketch_random_opts {
     uint64_t seed;
-    int nodes;            /* random ridge nodes; 0 = width * height / 1024, clamped to [8, 2048] */
+    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048] */
 } tn_sketch_random_opts;
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
@@ -680,9 +686,9 @@ typedef struct tn_sketch_random_opts {
 TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
                                   tn_contour_set *out);
 
-/* Delaunay triangulation (Bowyer-Watson, O(n^2) worst case; fine for a few thousand points) of
-   n points xy[2n]. *triangles (3 vertex indices each, counter-clockwise in y-down pixels is not
-   guaranteed) is TN_MALLOC'd; free with tn_free. Exact duplicate points are skipped. */
+/* Delaunay triangulation (Bowyer-Watson, O(n^2); fine for a few thousand points) of n points
+   xy[2n]: *ntriangles triangles of 3 point indices each (winding unspecified), TN_MALLOC'd, free
+   with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
 TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
    point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. */
@@ -708,12 +714,13 @@ TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t see
 
 typedef struct tn_align_opts {
     uint64_t seed;
-    int top;              /* candidates kept by LCS length; 0 = 10 */
+    int top;              /* candidates kept by LCS length; 0 = 10 (at most 64) */
     int choices;          /* random pick among the best this many by height; 0 = 5 (1 = greedy) */
     int raw_heights;      /* 1: compare heights as given instead of scaling each set to [0, 1] */
 } tn_align_opts;
 /* match[i] (caller-allocated, sketch_parts->count ints) = index of the DEM part aligned to sketch
-   part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count. */
+   part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count.
+   Reports progress as stage "align" every 1024 sketch parts (cancellable). */
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
                                  const tn_align_opts *opts, int *match);
 
@@ -8451,6 +8458,16 @@ TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t
     *text = NULL;
     *size = 0;
     if ((st = tn__cset_check(set, "sketch"))) return st;
+    for (i = 0; i < set->count; i++) { /* write only what tn_sketch_parse reads back */
+        const tn_contour *c = &set->items[i];
+        if (c->order < 0 || c->order > 1000) return tn__fail(TN_ERR_INVALID_ARG, "sketch: polyline %d has order %d (0-1000)", i, c->order);
+        for (j = 0; j < c->npoints; j++) {
+            float x = c->points[3 * j], y = c->points[3 * j + 1];
+            if (x < -0.5f || y < -0.5f || x > set->width - 0.5f || y > set->height - 0.5f)
+                return tn__fail(TN_ERR_INVALID_ARG, "sketch: polyline %d point %d (%g, %g) lies outside the %d x %d canvas", i, j,
+                                (double)x, (double)y, set->width, set->height);
+        }
+    }
     st = tn__text_printf(&buf, &len, &cap, "terrainnet-sketch 1\n# %d polylines; points are x y height\ncanvas %d %d\n",
                          set->count, set->width, set->height);
     for (i = 0; !st && i < set->count; i++) {
@@ -8570,7 +8587,7 @@ static int tn__crossings(const uint8_t *m, int w, int h, int x, int y)
     return t;
 }
 
-typedef struct tn__tracer {
+typedef struct tn__sketch_tracer {
     const uint8_t *m;       /* skeleton mask */
     uint8_t *node;          /* 1 where crossings != 2 */
     uint8_t *seen;          /* line pixels already in a polyline */
@@ -8580,16 +8597,16 @@ typedef struct tn__tracer {
     tn__pts pts;
     tn_contour_set *out;
     size_t *cap;
-} tn__tracer;
+} tn__sketch_tracer;
 
-static tn_status tn__trace_push(tn__tracer *t, size_t i)
+static tn_status tn__sketch_trace_push(tn__sketch_tracer *t, size_t i)
 {
     return tn__pts_push(&t->pts, (float)(i % (size_t)t->w), (float)(i / (size_t)t->w), t->hgt[i]);
 }
 
 /* Walks from `cur` (already pushed; `prev` the pixel before it, `first` the chain's start) along
    unseen line pixels until it reaches a node or runs out; then stores the chain if >= 3 points. */
-static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t cur)
+static tn_status tn__sketch_trace_walk(tn__sketch_tracer *t, size_t first, size_t prev, size_t cur)
 {
     tn_status st;
     int k;
@@ -8601,7 +8618,7 @@ static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t
             size_t j = (size_t)q * t->w + u;
             if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || j == prev || !t->node[j]) continue;
             if (j == first && t->pts.n < 4) continue;
-            if ((st = tn__trace_push(t, j))) return st;
+            if ((st = tn__sketch_trace_push(t, j))) return st;
             goto done;
         }
         for (k = 0; k < 8; k++) {
@@ -8614,12 +8631,12 @@ static tn_status tn__trace_walk(tn__tracer *t, size_t first, size_t prev, size_t
         if (next == (size_t)-1) {
             /* a loop without nodes closes on its first pixel */
             if (!t->node[first] && t->pts.n >= 4 && abs(x - (int)(first % (size_t)t->w)) <= 1 &&
-                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__trace_push(t, first)))
+                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__sketch_trace_push(t, first)))
                 return st;
             break;
         }
         t->seen[next] = 1;
-        if ((st = tn__trace_push(t, next))) return st;
+        if ((st = tn__sketch_trace_push(t, next))) return st;
         prev = cur;
         cur = next;
     }
@@ -8629,7 +8646,7 @@ done:
 }
 
 /* Traces a one-pixel skeleton into polylines between endpoints/junctions, then closed loops. */
-static tn_status tn__trace_skeleton(tn__tracer *t)
+static tn_status tn__sketch_trace_skeleton(tn__sketch_tracer *t)
 {
     size_t i, n = (size_t)t->w * t->h;
     int k;
@@ -8645,14 +8662,14 @@ static tn_status tn__trace_skeleton(tn__tracer *t)
             if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
             t->seen[j] = 1;
             t->pts.n = 0;
-            if ((st = tn__trace_push(t, i)) || (st = tn__trace_push(t, j)) || (st = tn__trace_walk(t, i, i, j))) return st;
+            if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_push(t, j)) || (st = tn__sketch_trace_walk(t, i, i, j))) return st;
         }
     }
     for (i = 0; i < n; i++) {
         if (!t->m[i] || t->node[i] || t->seen[i]) continue;
         t->seen[i] = 1;
         t->pts.n = 0;
-        if ((st = tn__trace_push(t, i)) || (st = tn__trace_walk(t, i, (size_t)-1, i))) return st;
+        if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_walk(t, i, (size_t)-1, i))) return st;
     }
     return TN_OK;
 }
@@ -8682,7 +8699,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
     hgt = (float *)tn__alloc(bytes);
     if (!mask || !node || !seen || !hgt) st = TN_ERR_OUT_OF_MEMORY;
     for (type = 0; !st && type < 2; type++) {
-        tn__tracer t;
+        tn__sketch_tracer t;
         for (i = 0; i < n; i++) {
             const float *p = img->data + i * (size_t)img->channels;
             float r = p[0], g = p[1], b = p[2], v = r > b ? r : b;
@@ -8704,7 +8721,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
         t.type = (tn_contour_type)type;
         t.out = &set;
         t.cap = &cap;
-        st = tn__trace_skeleton(&t);
+        st = tn__sketch_trace_skeleton(&t);
         TN_FREE(t.pts.p);
     }
     TN_FREE(mask);
@@ -8997,115 +9014,52 @@ TN_API tn_status tn_mst(const float *xy, int n, int **edges)
 
 /* ---- random sketches ---- */
 
-/* Segments bucketed on a uniform grid, for "does this edge cross anything" queries. */
-typedef struct tn__seg_grid {
-    float *seg;             /* 4 floats per segment */
-    int nseg;
-    size_t seg_cap;
-    int cell, gw, gh;
-    int *start, *list;      /* CSR: segments in cell c are list[start[c] .. start[c + 1]) */
-    int *stamp, query;
-} tn__seg_grid;
-
-static tn_status tn__seg_add(tn__seg_grid *g, float x0, float y0, float x1, float y1)
+/* Pixel occupancy for "does this edge cross anything": an 8-connected chain crosses the marked
+   pixels when it steps on one, or steps diagonally between two marked pixels (an X crossing). */
+static void tn__occ_mark(uint8_t *occ, int w, int h, const tn__pts *c)
 {
-    tn_status st = tn__reserve((void **)&g->seg, &g->seg_cap, ((size_t)g->nseg + 1) * 4 * sizeof(float));
-    if (st) return st;
-    g->seg[4 * g->nseg] = x0;
-    g->seg[4 * g->nseg + 1] = y0;
-    g->seg[4 * g->nseg + 2] = x1;
-    g->seg[4 * g->nseg + 3] = y1;
-    g->nseg++;
-    return TN_OK;
-}
-
-static void tn__seg_cells(const tn__seg_grid *g, const float *s, int *c0, int *r0, int *c1, int *r1)
-{
-    *c0 = tn__clampi((int)floorf(fminf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
-    *c1 = tn__clampi((int)floorf(fmaxf(s[0], s[2]) / (float)g->cell), 0, g->gw - 1);
-    *r0 = tn__clampi((int)floorf(fminf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
-    *r1 = tn__clampi((int)floorf(fmaxf(s[1], s[3]) / (float)g->cell), 0, g->gh - 1);
-}
-
-/* Builds the buckets after all tn__seg_add calls (two passes: count, fill). */
-static tn_status tn__seg_build(tn__seg_grid *g, int width, int height)
-{
-    int i, c, r, c0, r0, c1, r1, pass;
-    size_t total = 0;
-    g->cell = 16;
-    g->gw = (width + g->cell - 1) / g->cell + 1;
-    g->gh = (height + g->cell - 1) / g->cell + 1;
-    g->start = (int *)tn__calloc(((size_t)g->gw * g->gh + 1) * sizeof(int));
-    g->stamp = (int *)tn__calloc(((size_t)g->nseg + 1) * sizeof(int));
-    if (!g->start || !g->stamp) return TN_ERR_OUT_OF_MEMORY;
-    for (pass = 0; pass < 2; pass++) {
-        for (i = 0; i < g->nseg; i++) {
-            tn__seg_cells(g, g->seg + 4 * i, &c0, &r0, &c1, &r1);
-            for (r = r0; r <= r1; r++)
-                for (c = c0; c <= c1; c++) {
-                    if (pass == 0) {
-                        g->start[(size_t)r * g->gw + c + 1]++;
-                        total++;
-                    } else
-                        g->list[g->start[(size_t)r * g->gw + c]++] = i;
-                }
-        }
-        if (pass == 0) {
-            if (total > (size_t)INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: too many user segments");
-            for (i = 0; i < g->gw * g->gh; i++) g->start[i + 1] += g->start[i];
-            if (!(g->list = (int *)tn__alloc((total + 1) * sizeof(int)))) return TN_ERR_OUT_OF_MEMORY;
-        }
+    int j;
+    for (j = 0; j < c->n; j++) {
+        int x = (int)c->p[3 * j], y = (int)c->p[3 * j + 1];
+        if (x >= 0 && y >= 0 && x < w && y < h) occ[(size_t)y * w + x] = 1;
     }
-    for (i = g->gw * g->gh; i > 0; i--) g->start[i] = g->start[i - 1]; /* undo the fill's shift */
-    g->start[0] = 0;
-    return TN_OK;
 }
 
-static void tn__seg_free(tn__seg_grid *g)
+static int tn__occ_hits(const uint8_t *occ, int w, int h, const tn__pts *c)
 {
-    TN_FREE(g->seg);
-    TN_FREE(g->start);
-    TN_FREE(g->list);
-    TN_FREE(g->stamp);
-    memset(g, 0, sizeof *g);
-}
-
-static double tn__orient(double ax, double ay, double bx, double by, double cx, double cy)
-{
-    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
-}
-
-/* Closed segments ab and cd intersect (touching counts). */
-static int tn__segments_cross(const float *a, const float *b)
-{
-    double d1 = tn__orient(b[0], b[1], b[2], b[3], a[0], a[1]), d2 = tn__orient(b[0], b[1], b[2], b[3], a[2], a[3]);
-    double d3 = tn__orient(a[0], a[1], a[2], a[3], b[0], b[1]), d4 = tn__orient(a[0], a[1], a[2], a[3], b[2], b[3]);
-    if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return 1;
-    if (d1 == 0 || d2 == 0 || d3 == 0 || d4 == 0) { /* collinear cases: bounding boxes overlap */
-        return fmin(a[0], a[2]) <= fmax(b[0], b[2]) && fmin(b[0], b[2]) <= fmax(a[0], a[2]) &&
-               fmin(a[1], a[3]) <= fmax(b[1], b[3]) && fmin(b[1], b[3]) <= fmax(a[1], a[3]) &&
-               ((d1 == 0 && d2 == 0) || (d1 == 0 && d3 * d4 <= 0) || (d2 == 0 && d3 * d4 <= 0) ||
-                (d3 == 0 && d1 * d2 <= 0) || (d4 == 0 && d1 * d2 <= 0));
+    int j;
+    for (j = 0; j < c->n; j++) {
+        int x = (int)c->p[3 * j], y = (int)c->p[3 * j + 1];
+        if (x < 0 || y < 0 || x >= w || y >= h) continue;
+        if (occ[(size_t)y * w + x]) return 1;
+        if (j > 0) {
+            int px = (int)c->p[3 * j - 3], py = (int)c->p[3 * j - 2];
+            if (px != x && py != y && px >= 0 && py >= 0 && px < w && py < h && occ[(size_t)py * w + x] && occ[(size_t)y * w + px])
+                return 1;
+        }
     }
     return 0;
 }
 
-/* 1 when segment s crosses any segment in the grid. */
-static int tn__seg_hits(tn__seg_grid *g, const float *s)
+/* Keeps the edges (pairs into xy) whose pixel chain misses occ; kept[] gets them, *nkept their count. */
+static tn_status tn__keep_free_edges(const float *xy, const int *edges, int nedges, const uint8_t *occ, int w, int h, int *kept,
+                                     int *nkept, tn__pts *tmp)
 {
-    int c, r, c0, r0, c1, r1, k;
-    if (!g->nseg) return 0;
-    g->query++;
-    tn__seg_cells(g, s, &c0, &r0, &c1, &r1);
-    for (r = r0; r <= r1; r++)
-        for (c = c0; c <= c1; c++)
-            for (k = g->start[(size_t)r * g->gw + c]; k < g->start[(size_t)r * g->gw + c + 1]; k++) {
-                int i = g->list[k];
-                if (g->stamp[i] == g->query) continue;
-                g->stamp[i] = g->query;
-                if (tn__segments_cross(s, g->seg + 4 * i)) return 1;
-            }
-    return 0;
+    int i;
+    tn_status st;
+    float ends[6] = {0, 0, 0, 0, 0, 0};
+    *nkept = 0;
+    for (i = 0; i < nedges; i++) {
+        int a = edges[2 * i], b = edges[2 * i + 1];
+        ends[0] = xy[2 * a]; ends[1] = xy[2 * a + 1]; ends[3] = xy[2 * b]; ends[4] = xy[2 * b + 1];
+        tmp->n = 0;
+        if ((st = tn__chain_pixels(ends, 2, 1.0f, 1.0f, tmp))) return st;
+        if (tn__occ_hits(occ, w, h, tmp)) continue;
+        kept[2 * *nkept] = a;
+        kept[2 * *nkept + 1] = b;
+        (*nkept)++;
+    }
+    return TN_OK;
 }
 
 /* Chains the kept edges of a forest (vertex positions/heights vx, vy, vh) between vertices of
@@ -9167,16 +9121,16 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
                                   tn_contour_set *out)
 {
     tn_contour_set set;
-    tn__seg_grid grid;
+    tn__pts tmp = {NULL, 0, 0};
     tn_rng rng;
-    float *node = NULL, *nh = NULL, *vor = NULL, *vh = NULL, s[4];
+    uint8_t *occ = NULL;
+    float *node = NULL, *nh = NULL, *vor = NULL, *vh = NULL;
     int *redges = NULL, *vedges = NULL, *tris = NULL, *keep_r = NULL, *keep_v = NULL;
     int n, ntri = 0, nv = 0, nkr = 0, nkv = 0, i, j;
     size_t cap = 0;
     tn_status st = TN_OK;
     TN_ASSERT(out);
     memset(&set, 0, sizeof set);
-    memset(&grid, 0, sizeof grid);
     if (width < 2 || height < 2) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: canvas %d x %d (need at least 2 x 2)", width, height);
     if (width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_TOO_LARGE, "random sketch: canvas %d x %d exceeds %d", width, height, TN_SKETCH_MAX_SIDE);
@@ -9187,7 +9141,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
                             user->height, width, height);
     }
     n = opts && opts->nodes > 0 ? opts->nodes : (int)tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
-    if (n > 65536) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 65536)", n);
+    if (n > 8192) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 8192)", n);
     tn_rng_seed(&rng, opts ? opts->seed : 0, 0x5e7c4u);
     set.width = width;
     set.height = height;
@@ -9219,41 +9173,24 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         vh[nv++] = 0.5f * tn_rng_uniform(&rng);
     }
     if (nv >= 2 && (st = tn_mst(vor, nv, &vedges))) goto done;
-    /* the user's segments, then keep ridge edges that cross none of them */
-    for (i = 0; user && i < user->count && !st; i++)
-        for (j = 0; j < user->items[i].npoints && !st; j++) {
-            const float *p = user->items[i].points + 3 * j, *q = j + 1 < user->items[i].npoints ? p + 3 : p;
-            st = tn__seg_add(&grid, p[0], p[1], q[0], q[1]);
-        }
+    /* user pixels first: ridge edges must miss them; then kept ridges too: valley edges must miss both */
     keep_r = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
     keep_v = (int *)tn__alloc(((size_t)nv + 1) * 2 * sizeof(int));
-    if (!st && (!keep_r || !keep_v)) st = TN_ERR_OUT_OF_MEMORY;
-    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
-    for (i = 0; i < n - 1; i++) {
-        int a = redges[2 * i], b = redges[2 * i + 1];
-        s[0] = node[2 * a]; s[1] = node[2 * a + 1]; s[2] = node[2 * b]; s[3] = node[2 * b + 1];
-        if (tn__seg_hits(&grid, s)) continue;
-        keep_r[2 * nkr] = a;
-        keep_r[2 * nkr + 1] = b;
-        nkr++;
+    occ = (uint8_t *)tn__calloc((size_t)width * height);
+    if (!keep_r || !keep_v || !occ) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (i = 0; user && i < user->count && !st; i++) {
+        tmp.n = 0;
+        if (!(st = tn__chain_pixels(user->items[i].points, user->items[i].npoints, 1.0f, 1.0f, &tmp))) tn__occ_mark(occ, width, height, &tmp);
     }
-    /* valleys must avoid the user's sketch and the kept ridges: rebuild the grid with both */
-    TN_FREE(grid.start); TN_FREE(grid.list); TN_FREE(grid.stamp);
-    grid.start = grid.list = grid.stamp = NULL;
-    grid.query = 0;
+    if (st || (st = tn__keep_free_edges(node, redges, n - 1, occ, width, height, keep_r, &nkr, &tmp))) goto done;
     for (i = 0; i < nkr && !st; i++) {
-        int a = keep_r[2 * i], b = keep_r[2 * i + 1];
-        st = tn__seg_add(&grid, node[2 * a], node[2 * a + 1], node[2 * b], node[2 * b + 1]);
+        float ends[6] = {0, 0, 0, 0, 0, 0};
+        ends[0] = node[2 * keep_r[2 * i]]; ends[1] = node[2 * keep_r[2 * i] + 1];
+        ends[3] = node[2 * keep_r[2 * i + 1]]; ends[4] = node[2 * keep_r[2 * i + 1] + 1];
+        tmp.n = 0;
+        if (!(st = tn__chain_pixels(ends, 2, 1.0f, 1.0f, &tmp))) tn__occ_mark(occ, width, height, &tmp);
     }
-    if (st || (st = tn__seg_build(&grid, width, height))) goto done;
-    for (i = 0; i + 1 < nv; i++) {
-        int a = vedges[2 * i], b = vedges[2 * i + 1];
-        s[0] = vor[2 * a]; s[1] = vor[2 * a + 1]; s[2] = vor[2 * b]; s[3] = vor[2 * b + 1];
-        if (tn__seg_hits(&grid, s)) continue;
-        keep_v[2 * nkv] = a;
-        keep_v[2 * nkv + 1] = b;
-        nkv++;
-    }
+    if (st || (nv >= 2 && (st = tn__keep_free_edges(vor, vedges, nv - 1, occ, width, height, keep_v, &nkv, &tmp)))) goto done;
     for (i = 0; user && i < user->count && !st; i++)
         st = tn__cset_add(&set, &cap, user->items[i].type, user->items[i].order, user->items[i].mean_gradient,
                           user->items[i].points, user->items[i].npoints);
@@ -9262,7 +9199,8 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
 done:
     TN_FREE(node); TN_FREE(nh); TN_FREE(vor); TN_FREE(vh);
     TN_FREE(redges); TN_FREE(vedges); TN_FREE(tris); TN_FREE(keep_r); TN_FREE(keep_v);
-    tn__seg_free(&grid);
+    TN_FREE(occ);
+    TN_FREE(tmp.p);
     if (st) {
         tn_contour_set_free(&set);
         return st;
@@ -9318,7 +9256,7 @@ typedef struct tn__chains {
     int *at;           /* index into h of the start point of each code's step */
     float *h;          /* heights, oriented, scaled to [0, 1] unless raw; hoff[i] indexes part i */
     int *hoff;
-    float *angle;      /* direction of the first-to-last vector */
+    float *angle;      /* direction of the first-to-last vector, in units of pi/4 */
     uint8_t *type;
 } tn__chains;
 
@@ -9344,6 +9282,7 @@ static tn_status tn__chains_make(const tn_contour_set *s, int raw, int flip, tn_
             if ((i == 0 && j == 0) || h > hi) hi = h;
         }
     }
+    if (npts >= (size_t)INT_MAX) return tn__fail(TN_ERR_TOO_LARGE, "align: %zu points", npts);
     scale = raw ? 1.0f : (hi > lo ? 1.0f / (hi - lo) : 0.0f);
     if (raw) lo = 0.0f;
     c->count = s->count;
@@ -9365,7 +9304,7 @@ static tn_status tn__chains_make(const tn_contour_set *s, int raw, int flip, tn_
         const float *f = p->points, *l = p->points + 3 * (n - 1);
         rev = (f[0] > l[0] || (f[0] == l[0] && f[1] > l[1])) != flip; /* run in the main direction */
         for (j = 0; j < n; j++) c->h[base + j] = (p->points[3 * (rev ? n - 1 - j : j) + 2] - lo) * scale;
-        c->angle[i] = (float)atan2(rev ? f[1] - l[1] : l[1] - f[1], rev ? f[0] - l[0] : l[0] - f[0]);
+        c->angle[i] = (float)(atan2(rev ? f[1] - l[1] : l[1] - f[1], rev ? f[0] - l[0] : l[0] - f[0]) / 0.78539816339744831);
         for (j = 0; j + 1 < n && nc < TN__ALIGN_MAXCODES; j++) {
             const float *a = p->points + 3 * (rev ? n - 1 - j : j), *b = p->points + 3 * (rev ? n - 2 - j : j + 1);
             float dx = b[0] - a[0], dy = b[1] - a[1];
@@ -9396,6 +9335,7 @@ typedef struct tn__align_job {
     int top, choices, any_type[2];
     uint64_t seed;
     int *match;
+    size_t first;                     /* this batch starts at sketch part `first` */
 } tn__align_job;
 
 /* |mean(d)| + std(d) of the height differences on the common substring (P from pi, Q from qi,
@@ -9421,25 +9361,66 @@ static float tn__align_score(const tn__chains *sk, int i, int pi, const tn__chai
     return (float)(fabs(s) + sqrt(s2 > 0 ? s2 : 0));
 }
 
-/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
-   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts. Walks
-   only the diagonals (offsets between the strings) that overlap by at least `need` codes: any
-   answer >= need is exact, a smaller one only says "not good enough". */
-static int tn__align_lcs(const tn__chains *sk, int i, const tn__chains *dem, int q, int need, int *ps, int *qs)
+/* A sketch part's codes in the 8 rotations: rot[k][x] = code x turned by k * pi/4, and (for
+   parts of at most 64 codes) bit x of mask[k][c] set when rot[k][x] == c. */
+typedef struct tn__align_rot {
+    uint8_t rot[8][TN__ALIGN_MAXCODES];
+    uint64_t mask[8][8];
+} tn__align_rot;
+
+static void tn__align_rotations(const tn__chains *sk, int i, tn__align_rot *r)
 {
-    uint8_t rot[TN__ALIGN_MAXCODES];
-    const uint8_t *p = sk->code + sk->off[i], *qc = dem->code + dem->off[q];
-    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, d, k, len = 0;
+    int k, x, np = sk->off[i + 1] - sk->off[i];
+    memset(r->mask, 0, sizeof r->mask);
+    for (k = 0; k < 8; k++)
+        for (x = 0; x < np; x++) {
+            r->rot[k][x] = (uint8_t)((sk->code[sk->off[i] + x] + k) & 7);
+            if (x < 64) r->mask[k][r->rot[k][x]] |= (uint64_t)1 << x;
+        }
+}
+
+/* Longest common substring of sketch part i's codes, rotated onto DEM part q by the multiple of
+   pi/4 nearest the angle between their first-to-last vectors; *ps / *qs: where it starts.
+   Bit-parallel for parts up to 64 codes: e[y] holds the x where p[x - L + 1 .. x] equals
+   q[y - L + 1 .. y], grown one level L at a time until it empties. Longer parts walk only the
+   diagonals that overlap by at least `need` codes (an answer < need then only says "not enough"). */
+static int tn__align_lcs(const tn__chains *sk, int i, const tn__align_rot *r, const tn__chains *dem, int q, int need,
+                         int *ps, int *qs)
+{
+    const uint8_t *p, *qc = dem->code + dem->off[q];
+    int np = sk->off[i + 1] - sk->off[i], nq = dem->off[q + 1] - dem->off[q], x, y, d, len = 0, k;
     *ps = sk->off[i];
     *qs = dem->off[q];
     if (need < 1) need = 1;
     if (np < need || nq < need) return 0;
-    k = (int)lrint(((double)dem->angle[q] - sk->angle[i]) / 0.78539816339744831) & 7;
-    for (x = 0; x < np; x++) rot[x] = (uint8_t)((p[x] + k) & 7);
+    k = (int)lrintf(dem->angle[q] - sk->angle[i]) & 7;
+    if (np <= 64) {
+        uint64_t e[TN__ALIGN_MAXCODES], any = 0;
+        const uint64_t *m = r->mask[k];
+        int hit = -1;
+        for (y = nq - 1; y >= 0; y--) {
+            e[y] = m[qc[y]];
+            if (e[y]) hit = y;
+            any |= e[y];
+        }
+        while (any) {
+            len++;
+            *ps = sk->off[i] + (int)tn__z_ctz64(e[hit]) - len + 1;
+            *qs = dem->off[q] + hit - len + 1;
+            any = 0;
+            for (y = nq - 1; y >= len; y--) {
+                e[y] = (e[y - 1] << 1) & m[qc[y]];
+                if (e[y]) hit = y;
+                any |= e[y];
+            }
+        }
+        return len;
+    }
+    p = r->rot[k];
     for (d = need - np; d <= nq - need; d++) { /* q index = p index + d */
         int x0 = d < 0 ? -d : 0, x1 = np < nq - d ? np : nq - d, run = 0;
         for (x = x0; x < x1; x++) {
-            run = rot[x] == qc[x + d] ? run + 1 : 0;
+            run = p[x] == qc[x + d] ? run + 1 : 0;
             if (run > len) {
                 len = run;
                 *ps = sk->off[i] + x + 1 - run;
@@ -9453,18 +9434,23 @@ static int tn__align_lcs(const tn__chains *sk, int i, const tn__chains *dem, int
 static void tn__align_rows(void *ctx, size_t begin, size_t end)
 {
     const tn__align_job *job = (const tn__align_job *)ctx;
+    begin += job->first;
+    end += job->first;
     const tn__chains *dem = job->dem;
     tn__align_cand cand[64], c, r;
+    tn__align_rot rotf, rotr;
     size_t i;
     for (i = begin; i < end; i++) {
         int ncand = 0, q, x, y, at, type = job->sk->type[i], ps, qs, ps2, qs2, need;
         tn_rng rng;
+        tn__align_rotations(job->sk, (int)i, &rotf);
+        tn__align_rotations(job->skr, (int)i, &rotr);
         for (q = 0; q < dem->count; q++) {
             if (job->any_type[type] && dem->type[q] != type) continue;
             need = ncand == job->top ? cand[ncand - 1].len : 0; /* to enter a full list */
             /* both directions of the sketch part: A1's left-to-right rule alone is not rotation invariant */
-            c.len = tn__align_lcs(job->sk, (int)i, dem, q, need, &ps, &qs);
-            r.len = tn__align_lcs(job->skr, (int)i, dem, q, need, &ps2, &qs2);
+            c.len = tn__align_lcs(job->sk, (int)i, &rotf, dem, q, need, &ps, &qs);
+            r.len = tn__align_lcs(job->skr, (int)i, &rotr, dem, q, need, &ps2, &qs2);
             if (c.len < need && r.len < need) continue;
             c.index = r.index = q;
             c.score = r.score = HUGE_VALF;
@@ -9521,11 +9507,16 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
     job.sk = &sk;
     job.skr = &skr;
     job.dem = &dem;
-    tn_parallel_for((size_t)sk.count, 8, tn__align_rows, &job);
+    /* batches between progress reports; each part's result is independent of the split */
+    for (job.first = 0; !st && job.first < (size_t)sk.count; job.first += 1024) {
+        size_t n = (size_t)sk.count - job.first < 1024 ? (size_t)sk.count - job.first : 1024;
+        tn_parallel_for(n, 8, tn__align_rows, &job);
+        st = tn__progress("align", (double)(job.first + n) / (double)sk.count);
+    }
     tn__chains_free(&sk);
     tn__chains_free(&skr);
     tn__chains_free(&dem);
-    return TN_OK;
+    return st;
 }
 
 /* --------------------------------------------------------------------------------------------

@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render noise; do
+for c in info convert metrics render noise sketch sketch-random align; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -41,6 +41,38 @@ if $T noise -o "$W/noise.png" --size 96 64 --seed 3 --range 100 900 && $T info "
 if $T noise -o "$W/noise2.png" --size 96 64 --seed 3 --range 100 900 && cmp -s "$W/noise.png" "$W/noise2.png"; then ok;
 else bad "noise is not deterministic"; fi
 expect_error "noise bad weight" "weight" $T noise -o "$W/x.png" --draw "$W/noise.png" --draw-weight 3
+
+# sketches: .tns in, random enrichment, raster + preview, alignment map; clear errors on bad files
+printf 'terrainnet-sketch 1\ncanvas 128 96\nridge start 0.9 rate -0.002\n10 50\n64 40\n120 60\nend\nvalley start 0.1 rate 0\n60 2\n70 90\nend\n' > "$W/user.tns"
+if $T sketch-random --sketch "$W/user.tns" --seed 3 -o "$W/rnd.tns" --preview "$W/rnd.png" > /dev/null &&
+    head -1 "$W/rnd.tns" | grep -q "terrainnet-sketch 1" && $T info "$W/rnd.png" | grep -q "size: 128 x 96"; then ok;
+else bad "sketch-random"; fi
+if $T sketch-random --sketch "$W/user.tns" --seed 3 -o "$W/rnd2.tns" > /dev/null && cmp -s "$W/rnd.tns" "$W/rnd2.tns"; then ok;
+else bad "sketch-random is not deterministic"; fi
+if $T sketch "$W/rnd.tns" --size 256 192 -o "$W/raster.png" --tns "$W/again.tns" > /dev/null &&
+    $T info "$W/raster.png" | grep -q "size: 256 x 192" && $T info "$W/raster.png" | grep -q "channels: 3" &&
+    cmp -s "$W/rnd.tns" "$W/again.tns"; then ok; else bad "sketch raster / tns round trip"; fi
+$T sketch-random --size 128 96 --seed 9 --nodes 60 -o "$W/dem.tns" > /dev/null
+if $T align "$W/user.tns" "$W/dem.tns" --cut-dem --seed 2 -o "$W/map.txt" --parts-out "$W/parts.tns" > /dev/null &&
+    [ "$(grep -vc '^#' "$W/map.txt")" -eq "$(grep -c '^end' "$W/parts.tns")" ] && [ "$(grep -vc '^#' "$W/map.txt")" -gt 10 ]; then ok;
+else bad "align map"; fi
+printf 'terrainnet-sketch 1\ncanvas 8 8\nridge\n1 1 0.5\n' > "$W/open.tns"
+expect_error "sketch missing end" "open.tns:5: end of file inside the polyline opened at line 3" $T sketch "$W/open.tns" --tns "$W/x.tns"
+printf 'terrainnet-sketch 1\ncanvas 8 8\nridge\n1 1 nan\nend\n' > "$W/nan.tns"
+expect_error "sketch NaN" "nan.tns:4: height is NaN" $T sketch-random --sketch "$W/nan.tns" -o "$W/x.tns"
+printf 'terrainnet-sketch 1\ncanvas 8 8\n' > "$W/empty.tns"
+expect_error "align empty sketch" "empty" $T align "$W/empty.tns" "$W/dem.tns" -o "$W/m.txt"
+expect_error "sketch-random no size" "size" $T sketch-random -o "$W/x.tns"
+# a drawn sketch: a red stroke (P6 image) converts to a .tns ridge
+printf 'P6\n16 8\n255\n' > "$W/drawn.ppm"
+y=0; while [ $y -lt 8 ]; do x=0; while [ $x -lt 16 ]; do
+    if [ $y -eq 4 ] && [ $x -gt 1 ] && [ $x -lt 14 ]; then printf '\310\000\000'; else printf '\377\377\377'; fi
+    x=$((x + 1)); done; y=$((y + 1)); done >> "$W/drawn.ppm"
+if $T sketch "$W/drawn.ppm" --tns "$W/drawn.tns" > /dev/null && grep -q '^ridge' "$W/drawn.tns" && grep -q '^canvas 16 8' "$W/drawn.tns"; then ok;
+else bad "drawn sketch to tns"; fi
+cp "$W/rnd.tns" "$W/keep.tns"
+$T sketch-random --sketch "$W/nan.tns" -o "$W/keep.tns" > /dev/null 2>&1
+if cmp -s "$W/rnd.tns" "$W/keep.tns"; then ok; else bad "a failed sketch-random changed the existing output"; fi
 
 HGT="$D/dem/alps_n47e009/original/N47E009.hgt"
 if [ -f "$HGT" ]; then

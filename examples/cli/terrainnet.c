@@ -392,6 +392,205 @@ static int cmd_noise(int argc, char **argv)
     return st ? fail_status(st) : 0;
 }
 
+/* ---- sketches ---------------------------------------------------------------------------- */
+
+/* Parses "--size W [H]" at argv[*a]; returns 0 on a bad value. */
+static int parse_size(int argc, char **argv, int *a, int *w, int *h)
+{
+    if (*a + 1 >= argc || !parse_int(argv[*a + 1], w) || *w < 2 || *w > TN_SKETCH_MAX_SIDE) return 0;
+    *h = *w;
+    (*a)++;
+    if (*a + 1 < argc && parse_int(argv[*a + 1], h)) {
+        if (*h < 2 || *h > TN_SKETCH_MAX_SIDE) return 0;
+        (*a)++;
+    }
+    return 1;
+}
+
+/* Rasterises the set (16-bit PNG or float PFM by extension) and/or writes a preview. */
+static tn_status write_sketch_images(const tn_contour_set *s, int w, int h, const char *raster, const char *preview,
+                                     const char *dem_path)
+{
+    tn_image img = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_status st = TN_OK;
+    if (raster) {
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 16;
+        if ((st = tn_sketch_rasterise(s, w, h, &img)) || (st = tn_image_save(raster, &img, &so))) goto done;
+        tn_image_free(&img);
+    }
+    if (preview) {
+        if (dem_path && (st = tn_image_load(dem_path, &dem, NULL))) goto done;
+        if ((st = tn_sketch_preview(s, dem_path ? &dem : NULL, w, h, &img))) goto done;
+        st = tn_image_save(preview, &img, NULL);
+    }
+done:
+    tn_image_free(&img);
+    tn_image_free(&dem);
+    return st;
+}
+
+static int cmd_sketch(int argc, char **argv)
+{
+    tn_contour_set s = {0, 0, 0, NULL};
+    const char *in = NULL, *outp = NULL, *preview = NULL, *tns = NULL, *dem = NULL;
+    int a, w = 0, h = 0;
+    tn_status st;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet sketch IN.tns|IN.png [-o RASTER] [--size W [H]] [--preview PNG] [--dem DEM]\n"
+               "                         [--tns OUT.tns]\n"
+               "Reads a sketch: .tns text, or a drawing (red strokes = ridges, blue = valleys, brighter =\n"
+               "higher; thinned and traced to polylines). -o writes a 3-channel raster (ridge mask, valley\n"
+               "mask, height; 16-bit PNG, or .pfm for floats) at --size (default: the sketch canvas).\n"
+               "--preview draws ridges yellow and valleys blue (over a hillshade of --dem if given).\n"
+               "--tns writes the sketch as .tns text (e.g. to edit a traced drawing).\n");
+        return 0;
+    }
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--preview") && a + 1 < argc) preview = argv[++a];
+        else if (!strcmp(argv[a], "--tns") && a + 1 < argc) tns = argv[++a];
+        else if (!strcmp(argv[a], "--dem") && a + 1 < argc) dem = argv[++a];
+        else if (!strcmp(argv[a], "--size")) {
+            if (!parse_size(argc, argv, &a, &w, &h)) return usage_error("sketch", "--size needs W [H] between 2 and 65536", NULL);
+        } else if (argv[a][0] == '-' || in) return usage_error("sketch", "unknown option or extra argument:", argv[a]);
+        else in = argv[a];
+    }
+    if (!in) return usage_error("sketch", "missing the input sketch (.tns or image)", NULL);
+    if (!outp && !preview && !tns) return usage_error("sketch", "nothing to write: give -o, --preview or --tns", NULL);
+    if ((st = tn_sketch_load(in, &s))) return fail_status(st);
+    if (!w) { w = s.width; h = s.height; }
+    st = tns ? tn_sketch_save(tns, &s) : TN_OK;
+    if (!st) st = write_sketch_images(&s, w, h, outp, preview, dem);
+    if (!st) printf("%d polylines on a %d x %d canvas\n", s.count, s.width, s.height);
+    tn_contour_set_free(&s);
+    return st ? fail_status(st) : 0;
+}
+
+static int cmd_sketch_random(int argc, char **argv)
+{
+    tn_contour_set user = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_sketch_random_opts o;
+    const char *in = NULL, *outp = NULL, *preview = NULL;
+    int a, w = 0, h = 0, nodes = 0;
+    double seed = 1;
+    tn_status st;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet sketch-random -o OUT.tns [--sketch IN.tns|IN.png] [--size W [H]] [--seed S]\n"
+               "                                [--nodes N] [--preview PNG]\n"
+               "Adds random ridges and valleys to a sketch (paper 000, section 5.2): N random nodes\n"
+               "(heights 0.5-1) joined by a minimum spanning tree give ridges, the Voronoi vertices\n"
+               "(heights 0-0.5) joined by another give valleys; edges crossing the sketch (or, for\n"
+               "valleys, a kept ridge) are dropped. The output holds the sketch's own polylines first.\n"
+               "--size defaults to the sketch canvas (required without --sketch); --nodes defaults to\n"
+               "W*H/1024 clamped to 8-2048 (at most 8192); --seed defaults to 1.\n");
+        return 0;
+    }
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--sketch") && a + 1 < argc) in = argv[++a];
+        else if (!strcmp(argv[a], "--preview") && a + 1 < argc) preview = argv[++a];
+        else if (!strcmp(argv[a], "--size")) {
+            if (!parse_size(argc, argv, &a, &w, &h)) return usage_error("sketch-random", "--size needs W [H] between 2 and 65536", NULL);
+        } else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
+            if (!parse_double(argv[++a], &seed) || seed < 0) return usage_error("sketch-random", "--seed needs a non-negative number, not", argv[a]);
+        } else if (!strcmp(argv[a], "--nodes") && a + 1 < argc) {
+            if (!parse_int(argv[++a], &nodes) || nodes < 2 || nodes > 8192)
+                return usage_error("sketch-random", "--nodes needs a number from 2 to 8192, not", argv[a]);
+        } else return usage_error("sketch-random", "unknown option or missing value:", argv[a]);
+    }
+    if (!outp) return usage_error("sketch-random", "missing -o OUT.tns", NULL);
+    if (in && (st = tn_sketch_load(in, &user))) return fail_status(st);
+    if (!w) {
+        if (!in) return usage_error("sketch-random", "give --size W [H] or --sketch", NULL);
+        w = user.width;
+        h = user.height;
+    }
+    memset(&o, 0, sizeof o);
+    o.seed = (uint64_t)seed;
+    o.nodes = nodes;
+    st = tn_sketch_random(in ? &user : NULL, w, h, &o, &out);
+    if (!st) st = tn_sketch_save(outp, &out);
+    if (!st && preview) st = write_sketch_images(&out, w, h, NULL, preview, NULL);
+    if (!st) printf("%d polylines (%d from the sketch) on a %d x %d canvas\n", out.count, user.count, w, h);
+    tn_contour_set_free(&user);
+    tn_contour_set_free(&out);
+    return st ? fail_status(st) : 0;
+}
+
+static int cmd_align(int argc, char **argv)
+{
+    tn_contour_set sk = {0, 0, 0, NULL}, dense = {0, 0, 0, NULL}, parts = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL},
+                   demparts = {0, 0, 0, NULL};
+    tn_align_opts o;
+    const char *files[2] = {NULL, NULL}, *outp = NULL, *parts_out = NULL;
+    int a, nfiles = 0, cut_dem = 0, choices = 0, *match = NULL, i;
+    double seed = 1, t0;
+    tn_status st;
+    FILE *f;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet align SKETCH DEMPARTS.tns -o MAP.txt [--seed S] [--choices K] [--cut-dem]\n"
+               "                        [--parts-out PARTS.tns]\n"
+               "Cuts the sketch (.tns or drawn image) into 5-10 pixel parts and aligns each to a DEM\n"
+               "contour part (paper 000, section 5.3: chain codes, rotation by k*pi/4, longest common\n"
+               "substring, top 10, height mean/std, random pick among the best K = 5). DEMPARTS holds\n"
+               "the DEM's contour parts (one polyline per part, index = position); with --cut-dem it\n"
+               "holds whole contours and is cut here with the same seed. MAP.txt: one line per sketch\n"
+               "part, `SKETCH_PART DEM_PART`. --parts-out writes the sketch parts the map refers to.\n");
+        return 0;
+    }
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--parts-out") && a + 1 < argc) parts_out = argv[++a];
+        else if (!strcmp(argv[a], "--cut-dem")) cut_dem = 1;
+        else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
+            if (!parse_double(argv[++a], &seed) || seed < 0) return usage_error("align", "--seed needs a non-negative number, not", argv[a]);
+        } else if (!strcmp(argv[a], "--choices") && a + 1 < argc) {
+            if (!parse_int(argv[++a], &choices) || choices < 1 || choices > 64)
+                return usage_error("align", "--choices needs a number from 1 to 64, not", argv[a]);
+        } else if (argv[a][0] == '-' || nfiles == 2) return usage_error("align", "unknown option or extra argument:", argv[a]);
+        else files[nfiles++] = argv[a];
+    }
+    if (nfiles != 2) return usage_error("align", "needs SKETCH and DEMPARTS files", NULL);
+    if (!outp) return usage_error("align", "missing -o MAP.txt", NULL);
+    if ((st = tn_sketch_load(files[0], &sk)) || (st = tn_sketch_load(files[1], &dem)) || (st = tn_sketch_densify(&sk, &dense)) ||
+        (st = tn_contour_parts_make(&dense, (uint64_t)seed, &parts)))
+        goto done;
+    if (cut_dem && (st = tn_contour_parts_make(&dem, (uint64_t)seed, &demparts))) goto done;
+    if (!(match = (int *)malloc(((size_t)parts.count + 1) * sizeof(int)))) { fprintf(stderr, "terrainnet: out of memory\n"); goto done; }
+    memset(&o, 0, sizeof o);
+    o.seed = (uint64_t)seed;
+    o.choices = choices;
+    t0 = tn_time_seconds();
+    if ((st = tn_sketch_align(&parts, cut_dem ? &demparts : &dem, &o, match))) goto done;
+    t0 = tn_time_seconds() - t0;
+    if (parts_out && (st = tn_sketch_save(parts_out, &parts))) goto done;
+    if (!(f = fopen(outp, "w"))) {
+        fprintf(stderr, "terrainnet: error: cannot write %s\n", outp);
+        st = TN_ERR_IO;
+        goto done;
+    }
+    fprintf(f, "# terrainnet align: sketch part -> DEM part (%d sketch parts, %d DEM parts, seed %.0f)\n", parts.count,
+            (cut_dem ? &demparts : &dem)->count, seed);
+    for (i = 0; i < parts.count; i++) fprintf(f, "%d %d\n", i, match[i]);
+    if (fclose(f) != 0) {
+        fprintf(stderr, "terrainnet: error: write failed: %s\n", outp);
+        st = TN_ERR_IO;
+        goto done;
+    }
+    printf("aligned %d sketch parts to %d DEM parts in %.1f ms\n", parts.count, (cut_dem ? &demparts : &dem)->count, t0 * 1e3);
+done:
+    free(match);
+    tn_contour_set_free(&sk);
+    tn_contour_set_free(&dense);
+    tn_contour_set_free(&parts);
+    tn_contour_set_free(&dem);
+    tn_contour_set_free(&demparts);
+    if (st == TN_ERR_IO && !tn_last_error()[0]) return 1;
+    return st ? fail_status(st) : (match ? 0 : 1);
+}
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 typedef struct command { const char *name; int (*fn)(int, char **); const char *summary; } command;
@@ -402,6 +601,9 @@ static const command commands[] = {
     {"metrics", cmd_metrics, "compare two images: SSIM, PSNR, RMSE, MAE"},
     {"render", cmd_render, "hillshaded colour preview or 3D view of a DEM"},
     {"noise", cmd_noise, "procedural heightmap: Perlin fBm or explicit noise, optional drawn map"},
+    {"sketch", cmd_sketch, "read a .tns or drawn sketch; rasterise, preview or convert it"},
+    {"sketch-random", cmd_sketch_random, "enrich a sketch with random ridges and valleys (MST + Voronoi)"},
+    {"align", cmd_align, "align sketch parts to a DEM's contour parts (chain codes + LCS)"},
 };
 
 static void print_usage(FILE *f)

@@ -1,0 +1,67 @@
+/* fuzz_sketch.c - fuzz target for the .tns sketch reader (@@sketch). Parses the input; on success
+   the set must format and parse back to identical bits, and densify, cutting into parts and
+   aligning the parts with themselves must not fail on anything but size/emptiness.
+     libFuzzer:  clang -g -O1 -fsanitize=fuzzer,address,undefined -I. fuzz_sketch.c -lm -pthread
+     no libFuzzer: cc -DTN_FUZZ_MAIN -fsanitize=address,undefined -I. fuzz_sketch.c -lm -pthread
+                   ./a.out files...   (runs each file as one input) */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#ifdef __cplusplus
+extern "C"
+#endif
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+    tn_contour_set s = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, d = {0, 0, 0, NULL}, p = {0, 0, 0, NULL};
+    char *text = NULL;
+    size_t n = 0;
+    int i, *match;
+    if (tn_sketch_parse((const char *)data, size, "fuzz", &s) != TN_OK) return 0;
+    if (tn_sketch_format(&s, &text, &n) != TN_OK || tn_sketch_parse(text, n, "again", &t) != TN_OK || t.count != s.count) abort();
+    for (i = 0; i < s.count; i++)
+        if (t.items[i].npoints != s.items[i].npoints ||
+            memcmp(t.items[i].points, s.items[i].points, (size_t)s.items[i].npoints * 3 * sizeof(float)))
+            abort();
+    /* the pixel-chain stages only on small canvases (a chain can be as long as the canvas) */
+    if (s.width <= 512 && s.height <= 512 && tn_sketch_densify(&s, &d) == TN_OK && tn_contour_parts_make(&d, 1, &p) == TN_OK &&
+        p.count > 0 && p.count <= 4096 && (match = (int *)malloc((size_t)p.count * sizeof(int)))) {
+        if (tn_sketch_align(&p, &p, NULL, match) != TN_OK) abort();
+        for (i = 0; i < p.count; i++)
+            if (match[i] < 0 || match[i] >= p.count) abort();
+        free(match);
+    }
+    tn_free(text);
+    tn_contour_set_free(&s);
+    tn_contour_set_free(&t);
+    tn_contour_set_free(&d);
+    tn_contour_set_free(&p);
+    return 0;
+}
+
+#ifdef TN_FUZZ_MAIN
+int main(int argc, char **argv)
+{
+    int i, ran = 0;
+    for (i = 1; i < argc; i++) {
+        FILE *f = fopen(argv[i], "rb");
+        uint8_t *buf;
+        long len;
+        if (!f) { fprintf(stderr, "%s: cannot open\n", argv[i]); continue; }
+        if (fseek(f, 0, SEEK_END) != 0 || (len = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) { fclose(f); continue; }
+        buf = (uint8_t *)malloc((size_t)len + 1);
+        if (buf && fread(buf, 1, (size_t)len, f) == (size_t)len) {
+            LLVMFuzzerTestOneInput(buf, (size_t)len);
+            ran++;
+        }
+        free(buf);
+        fclose(f);
+    }
+    printf("fuzz_sketch: ran %d inputs\n", ran);
+    return 0;
+}
+#endif
