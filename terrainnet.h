@@ -615,7 +615,7 @@ TN_API void tn_contour_set_free(tn_contour_set *set);
    closed (3x3), Strahler-ordered, thinned (Zhang-Suen + removal of the remaining simple pixels,
    so lines are one pixel wide and 8-connected with the topology kept), traced into polylines
    between junctions and endpoints, filtered (dangling contours under 10 px; contours whose mean
-   gradient lies in the lowest 1 % of the DEM's gradients) and split when long. Contour parts cut
+   gradient is in the lowest 1 % of all contours' or exactly 0) and split when long. Contour parts cut
    the network into 5-10 pixel pieces (DFS from an endpoint, seeded random lengths).
    ============================================================================================ */
 
@@ -636,7 +636,8 @@ typedef struct tn_flow {
 TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem);
 /* D8 directions of a (filled) DEM into flow->dir (allocated here; acc left NULL). A cell drains
    to its steepest strictly lower neighbour (drop / distance, distance 1 or sqrt 2; ties go to
-   the first in E, SE, S, ... order); border cells without one are outlets. Threaded. */
+   the first in E, SE, S, ... order). Border cells are outlets: they drain off the map, so no flow
+   runs along the edges. Threaded. */
 TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
 /* Flow accumulation from flow->dir into flow->acc (allocated here), O(n) by walking down from
    cells nobody drains into. Fails with TN_ERR_CORRUPT if the directions hold a cycle. */
@@ -662,8 +663,8 @@ typedef struct tn_extract_opts {
     int threshold;        /* accumulation threshold in cells; 0 = tn_extract_default_threshold() */
     int closing;          /* closing radius in px (3x3 = 1); 0 = 1, < 0 = no closing */
     int min_length;       /* dangling contours shorter than this (px) are dropped; 0 = 10 */
-    float drop_fraction;  /* contours whose mean gradient is under this quantile of all gradients
-                             are dropped; 0 = 0.01, < 0 = keep all */
+    float drop_fraction;  /* contours whose mean gradient is under this quantile of the contours'
+                             mean gradients (or is 0: flat lakes) are dropped; 0 = 0.01, < 0 = keep all */
     int max_length;       /* longer polylines are split into near-equal pieces (px); 0 = 48 */
     float dx, dy;         /* pixel spacing used for gradients; 0 = 1 */
     int which;            /* TN_EXTRACT_BOTH / _VALLEYS / _RIDGES */
@@ -7911,9 +7912,13 @@ typedef struct tn__rheap {
 static int tn__rheap_bucket(uint32_t key, uint32_t last)
 {
     uint32_t x = key ^ last;
+#if defined(__GNUC__) || defined(__clang__)
+    return x ? 32 - __builtin_clz(x) : 0;
+#else
     int b = 0;
     while (x) { b++; x >>= 1; }
     return b;
+#endif
 }
 
 static tn_status tn__rheap_push(tn__rheap *h, uint32_t key, uint32_t cell)
@@ -8060,6 +8065,14 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
             c = tn__pheap_pop(&pit);
             k = keys[c] & ~CLOSED;
         } else if ((st = tn__rheap_pop(&q, &k, &c))) break;
+        { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
+            uint32_t nx = pit.n ? pit.cell[0] : q.n[0] ? q.b[0][q.n[0] - 1].cell : c;
+            if (nx >= (uint32_t)w && (size_t)nx + w + 1 < n) {
+                TN__PREFETCH(keys + nx - w - 1);
+                TN__PREFETCH(keys + nx - 1);
+                TN__PREFETCH(keys + nx + w - 1);
+            }
+        }
         cx = (int)(c % (uint32_t)w);
         cy = (int)(c / (uint32_t)w);
         border = cx == 0 || cy == 0 || cx == w - 1 || cy == h - 1;
@@ -8152,6 +8165,10 @@ static void tn__d8_rows(void *ctx, size_t y0, size_t y1)
         for (x = 0; x < w; x++) {
             double hc = row[x], best = 0.0;
             int bd = TN_FLOW_OUTLET;
+            if (x == 0 || y == 0 || x == w - 1 || y == H - 1) { /* the border drains off the map */
+                dr[x] = TN_FLOW_OUTLET;
+                continue;
+            }
             for (d = 0; d < 8; d++) {
                 int nx = x + tn__d8x[d], ny = y + tn__d8y[d];
                 double drop;
@@ -8723,7 +8740,7 @@ static tn_status tn__prune_spurs(uint8_t *skel, int w, int h, int min_len)
 }
 
 /* Network of one type: mask, Strahler order, closing, thinning, tracing, filtering, splitting. */
-static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, float grad_floor, const tn_extract_opts *o,
+static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, const tn_extract_opts *o,
                                   int ridge, tn_extraction *ex, size_t *cap)
 {
     const int w = dem->width, h = dem->height;
@@ -8735,6 +8752,7 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, flo
     tn_status st;
     size_t i, l;
     int pass, top = 0;
+    float grad_floor = 0.0f;
     if ((st = tn_flow_compute(flow, dem, ridge))) return st;
     if ((st = tn__progress(ridge ? "ridges" : "valleys", 0.3))) return st;
     mask = (uint8_t *)tn__alloc(n);
@@ -8770,6 +8788,20 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, flo
     if ((st = tn__progress(ridge ? "ridges" : "valleys", 0.7))) goto done;
     if ((st = tn__prune_spurs(skel, w, h, o->min_length))) goto done;
     if ((st = tn__trace_skeleton(skel, w, h, &t))) goto done;
+    if (o->drop_fraction > 0 && t.nlines) { /* the floor: this quantile of the contours' mean gradients */
+        float *means = (float *)tn__alloc(t.nlines * sizeof(float));
+        size_t m = 0;
+        if (!means) { st = TN_ERR_OUT_OF_MEMORY; tn__trace_free(&t); goto done; }
+        for (l = 0; l < t.nlines; l++) {
+            size_t a = t.starts[l], b = t.starts[l + 1], k;
+            double g = 0.0;
+            if ((int)(b - a) < o->min_length) continue;
+            for (k = a; k < b; k++) g += grad->data[t.cells[k]];
+            means[m++] = (float)(g / (double)(b - a));
+        }
+        grad_floor = m ? tn__quantile(means, m, o->drop_fraction) : 0.0f;
+        TN_FREE(means);
+    }
     for (l = 0; l < t.nlines && !st; l++) {
         size_t a = t.starts[l], b = t.starts[l + 1], k;
         int counts[256], npts = (int)(b - a), best = 0, bestc = 0, pieces, j;
@@ -8784,7 +8816,8 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, flo
         for (j = 1; j < 256; j++) /* the most common order; ties to the higher */
             if (counts[j] && counts[j] >= bestc) { best = j; bestc = counts[j]; }
         gmean = (float)(gsum / (double)npts);
-        if (gmean <= grad_floor) continue; /* lowest drop_fraction of gradients (flat lakes, plains) */
+        /* lowest drop_fraction of the contours, and dead flat ones (lakes, plains) */
+        if (o->drop_fraction > 0 && (gmean < grad_floor || gmean <= 0.0f)) continue;
         pl.n = 0;
         for (k = a; k < b && !st; k++) {
             size_t c = t.cells[k];
@@ -8813,7 +8846,6 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     tn_image grad = {0, 0, 0, NULL}, gx = {0, 0, 0, NULL}, gy = {0, 0, 0, NULL};
     tn_status st;
     size_t i, n, cap = 0;
-    float floor_g = -1.0f;
     TN_ASSERT(out);
     if ((st = tn__extract_check(dem, "extract"))) return st;
     memset(&o, 0, sizeof o);
@@ -8838,12 +8870,9 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     if ((st = tn_image_gradient(dem, o.dx, o.dy, &gx, &gy))) return st;
     for (i = 0; i < n; i++) gx.data[i] = sqrtf(gx.data[i] * gx.data[i] + gy.data[i] * gy.data[i]);
     grad = gx;
-    if (o.drop_fraction > 0.0f) {
-        floor_g = tn__quantile(grad.data, n, o.drop_fraction);
-    }
     tn_image_free(&gy);
-    if (o.which != TN_EXTRACT_RIDGES) st = tn__extract_type(dem, &grad, floor_g, &o, 0, &ex, &cap);
-    if (!st && o.which != TN_EXTRACT_VALLEYS) st = tn__extract_type(dem, &grad, floor_g, &o, 1, &ex, &cap);
+    if (o.which != TN_EXTRACT_RIDGES) st = tn__extract_type(dem, &grad, &o, 0, &ex, &cap);
+    if (!st && o.which != TN_EXTRACT_VALLEYS) st = tn__extract_type(dem, &grad, &o, 1, &ex, &cap);
     tn_image_free(&grad);
     if (!st) st = tn__progress("extract", 1.0);
     if (st) {
