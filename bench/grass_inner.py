@@ -29,7 +29,7 @@ elif mode == "export":
     load(path, w, h)
     gs.run_command("r.watershed", flags="s", elevation="dem", accumulation="acc", overwrite=True, quiet=True)
     gs.run_command("r.out.bin", flags="f", input="acc", output=out + ".acc", bytes=4, null=0, overwrite=True, quiet=True)
-    gs.run_command("r.stream.extract", elevation="dem", threshold=thr, stream_raster="str", direction="sdir",
+    gs.run_command("r.stream.extract", elevation="dem", accumulation="acc", threshold=thr, d8cut=0, stream_raster="str", direction="sdir",
                    overwrite=True, quiet=True)
     gs.run_command("r.out.bin", input="str", output=out + ".str", bytes=4, null=0, overwrite=True, quiet=True)
     gs.run_command("r.out.bin", input="sdir", output=out + ".dir", bytes=4, null=0, overwrite=True, quiet=True)
