@@ -8041,65 +8041,123 @@ static uint32_t tn__pheap_pop(tn__pheap *h)
    first served): a depression fills from its outlet along its deepest path first, like
    r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
    thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines. */
+/* Neighbour index of cell c in direction d, or -1 outside the map. */
+static ptrdiff_t tn__nbr(size_t c, int d, int w, int h)
+{
+    int x = (int)(c % (size_t)w) + tn__d8x[d], y = (int)(c / (size_t)w) + tn__d8y[d];
+    if (x < 0 || y < 0 || x >= w || y >= h) return -1;
+    return (ptrdiff_t)y * w + x;
+}
+
+typedef struct tn__fill_state {
+    uint32_t *keys;
+    int w, h;
+    tn__rheap q;
+    tn__pheap pit;
+    uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
+    size_t ntrace, cap_trace;
+    uint32_t seq;
+} tn__fill_state;
+
+#define TN__CLOSED 0x80000000u /* in the key word: saves a cache miss per neighbour */
+
+/* Closes the open neighbours of c (filled key k): lower or equal ones are raised to k + 1 and
+   join the pit queue; higher ones keep their height and go on the trace stack. */
+static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
+{
+    const int w = f->w;
+    int cx = (int)(c % (uint32_t)w), cy = (int)(c / (uint32_t)w), d;
+    int border = cx == 0 || cy == 0 || cx == w - 1 || cy == f->h - 1;
+    for (d = 0; d < 8; d++) {
+        size_t ni;
+        uint32_t v;
+        tn_status st;
+        if (border) {
+            ptrdiff_t t = tn__nbr(c, d, w, f->h);
+            if (t < 0) continue;
+            ni = (size_t)t;
+        } else ni = (size_t)c + (size_t)((ptrdiff_t)tn__d8y[d] * w + tn__d8x[d]);
+        v = f->keys[ni];
+        if (v & TN__CLOSED) continue;
+        if (v <= k) { /* in a depression or flat: one step above c */
+            f->keys[ni] = (k + 1) | TN__CLOSED;
+            if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
+        } else {
+            f->keys[ni] = v | TN__CLOSED;
+            if (f->ntrace == f->cap_trace) {
+                size_t bytes = f->cap_trace * sizeof(uint32_t);
+                void *p = f->trace;
+                if ((st = tn__reserve(&p, &bytes, (f->ntrace + 1) * sizeof(uint32_t)))) return st;
+                f->trace = (uint32_t *)p;
+                f->cap_trace = bytes / sizeof(uint32_t);
+            }
+            f->trace[f->ntrace++] = (uint32_t)ni;
+        }
+    }
+    return TN_OK;
+}
+
+/* Fills keys[] in place by priority-flood + epsilon (Barnes et al. 2014) with two speed-ups that
+   keep most cells out of the priority queue and its random memory access:
+   - slope tracing (Zhou, Sun & Fu 2016): a cell reached from below whose open neighbours are all
+     strictly higher keeps its height and is expanded at once, depth first, where its
+     neighbourhood is still in cache; only cells with a lower open neighbour wait in the queue;
+   - the pit queue of the improved variant, here a heap on the ORIGINAL heights (ties first come,
+     first served): a depression fills from its outlet along its deepest path first, like
+     r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
+     thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines.
+   The main queue is a radix heap: every key pushed is above the last one popped. */
 static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
 {
-    const uint32_t CLOSED = 0x80000000u; /* sharing the word with the key saves a cache miss per neighbour */
-    size_t n = (size_t)w * h, done = 0;
-    tn__rheap q;
-    tn__pheap pit = {NULL, NULL, 0, 0};
-    uint32_t seq = 0;
+    tn__fill_state f;
+    size_t n = (size_t)w * h, done = 0, i;
     tn_status st = TN_OK;
     int x, y;
-    memset(&q, 0, sizeof q);
+    memset(&f, 0, sizeof f);
+    f.keys = keys;
+    f.w = w;
+    f.h = h;
     for (y = 0; y < h && !st; y++)
         for (x = 0; x < w && !st; x++)
             if (y == 0 || x == 0 || y == h - 1 || x == w - 1) {
-                size_t i = (size_t)y * w + x;
-                st = tn__rheap_push(&q, keys[i], (uint32_t)i);
-                keys[i] |= CLOSED;
+                i = (size_t)y * w + x;
+                st = tn__rheap_push(&f.q, keys[i], (uint32_t)i);
+                keys[i] |= TN__CLOSED;
             }
-    while (!st && (q.size || pit.n)) {
+    while (!st && (f.q.size || f.pit.n)) {
         uint32_t k, c;
-        int cx, cy, d, border;
-        if (pit.n) {
-            c = tn__pheap_pop(&pit);
-            k = keys[c] & ~CLOSED;
-        } else if ((st = tn__rheap_pop(&q, &k, &c))) break;
+        if (f.pit.n) {
+            c = tn__pheap_pop(&f.pit);
+            k = keys[c] & ~TN__CLOSED;
+        } else if ((st = tn__rheap_pop(&f.q, &k, &c))) break;
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
-            uint32_t nx = pit.n ? pit.cell[0] : q.n[0] ? q.b[0][q.n[0] - 1].cell : c;
+            uint32_t nx = f.pit.n ? f.pit.cell[0] : f.q.n[0] ? f.q.b[0][f.q.n[0] - 1].cell : c;
             if (nx >= (uint32_t)w && (size_t)nx + w + 1 < n) {
                 TN__PREFETCH(keys + nx - w - 1);
                 TN__PREFETCH(keys + nx - 1);
                 TN__PREFETCH(keys + nx + w - 1);
             }
         }
-        cx = (int)(c % (uint32_t)w);
-        cy = (int)(c / (uint32_t)w);
-        border = cx == 0 || cy == 0 || cx == w - 1 || cy == h - 1;
-        for (d = 0; d < 8 && !st; d++) {
-            size_t ni;
-            uint32_t v;
-            if (border) {
-                int nx = cx + tn__d8x[d], ny = cy + tn__d8y[d];
-                if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
-                ni = (size_t)ny * w + nx;
-            } else ni = (size_t)c + (size_t)((ptrdiff_t)tn__d8y[d] * w + tn__d8x[d]);
-            v = keys[ni];
-            if (v & CLOSED) continue;
-            if (v <= k) { /* in a depression or flat: raise one step above c */
-                keys[ni] = (k + 1) | CLOSED;
-                st = tn__pheap_push(&pit, ((uint64_t)v << 32) | seq++, (uint32_t)ni);
-            } else {
-                keys[ni] = v | CLOSED;
-                st = tn__rheap_push(&q, v, (uint32_t)ni);
+        if ((st = tn__fill_expand(&f, c, k))) break;
+        while (f.ntrace && !st) {
+            uint32_t t = f.trace[--f.ntrace], kt = keys[t] & ~TN__CLOSED;
+            int d, lower = 0;
+            for (d = 0; d < 8 && !lower; d++) {
+                ptrdiff_t m = tn__nbr(t, d, w, h);
+                if (m >= 0 && !(keys[m] & TN__CLOSED) && keys[m] <= kt) lower = 1;
             }
+            /* an open neighbour as low or lower may drain elsewhere at a lower level (and raising
+               it here would start a pit cascade above the queue's level): wait in order */
+            st = lower ? tn__rheap_push(&f.q, kt, t) : tn__fill_expand(&f, t, kt);
+            done++;
         }
-        if (!st && (++done & 0xfffff) == 0) st = tn__progress("fill", (double)done / (double)n);
+        if (!st && (++done & 0xfffff) < 16) st = tn__progress("fill", (double)done / (double)n);
     }
-    for (x = 0; (size_t)x < n; x++) keys[x] &= ~CLOSED;
-    tn__rheap_free(&q);
-    TN_FREE(pit.pri);
-    TN_FREE(pit.cell);
+    for (i = 0; i < n; i++) keys[i] &= ~TN__CLOSED;
+    tn__rheap_free(&f.q);
+    TN_FREE(f.pit.pri);
+    TN_FREE(f.pit.cell);
+    TN_FREE(f.trace);
     return st;
 }
 

@@ -32,6 +32,53 @@ static size_t outlet_sum(const tn_flow *f)
     return s;
 }
 
+/* Priority-flood (with its queue tricks) against the plain definition: the filled surface is the
+   lowest one >= the DEM from which every cell reaches the border without climbing, computed by
+   relaxation (Planchon-Darboux without epsilon). They agree up to the epsilon steps. */
+TN_TEST(test_fill_matches_relaxation)
+{
+    enum { W = 48, H = 40 };
+    tn_image dem = {0, 0, 0, NULL}, filled = {0, 0, 0, NULL};
+    float ref[W * H];
+    tn_rng rng;
+    int x, y, d, changed = 1, raised = 0, seed;
+    double worst = 0;
+    for (seed = 1; seed <= 3; seed++) {
+        tn_rng_seed(&rng, (uint64_t)seed, 3);
+        TN_CHECK(tn_image_create(&dem, W, H, 1) == TN_OK);
+        for (y = 0; y < H; y++) /* bumpy noise with many pits and some exact flats */
+            for (x = 0; x < W; x++) {
+                float v = 10.0f * tn_rng_uniform(&rng) + 0.2f * (float)x;
+                dem.data[y * W + x] = seed == 3 ? floorf(v) : v;
+            }
+        for (y = 0; y < H; y++)
+            for (x = 0; x < W; x++)
+                ref[y * W + x] = (x == 0 || y == 0 || x == W - 1 || y == H - 1) ? dem.data[y * W + x] : 1e30f;
+        changed = 1;
+        while (changed) {
+            changed = 0;
+            for (y = 1; y < H - 1; y++)
+                for (x = 1; x < W - 1; x++) {
+                    float m = 1e30f, v;
+                    for (d = 0; d < 8; d++) m = fminf(m, ref[(y + tn__d8y[d]) * W + x + tn__d8x[d]]);
+                    v = fmaxf(dem.data[y * W + x], m);
+                    if (v < ref[y * W + x]) { ref[y * W + x] = v; changed = 1; }
+                }
+        }
+        TN_CHECK(tn_fill_depressions(&filled, &dem) == TN_OK);
+        for (y = 0; y < H; y++)
+            for (x = 0; x < W; x++) {
+                double e = fabs((double)filled.data[y * W + x] - ref[y * W + x]);
+                if (e > worst) worst = e;
+                raised += ref[y * W + x] > dem.data[y * W + x];
+            }
+        tn_image_free(&filled);
+        tn_image_free(&dem);
+    }
+    TN_CHECK(raised > 100); /* the test has depressions to fill */
+    TN_CHECK(worst < 1e-3);
+}
+
 TN_TEST(test_v_valley)
 {
     tn_image dem = make_dem(33, 40, v_valley);
@@ -450,6 +497,7 @@ TN_TEST(test_realism)
 
 int main(void)
 {
+    TN_RUN(test_fill_matches_relaxation);
     TN_RUN(test_v_valley);
     TN_RUN(test_ridge_line);
     TN_RUN(test_cone);
