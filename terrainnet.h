@@ -8324,35 +8324,64 @@ static tn_status tn__flow_check(const tn_flow *f, const char *what)
     return TN_OK;
 }
 
+typedef struct tn__pack_job { const tn_flow *f; const uint8_t *indeg; uint8_t *pk; } tn__pack_job;
+
+/* In-degree and direction in one byte (indeg << 4 | dir, 15 = outlet): the walk below then
+   touches two arrays per step instead of three. */
+static void tn__pack_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__pack_job *j = (const tn__pack_job *)ctx;
+    size_t i, w = (size_t)j->f->width;
+    for (i = y0 * w; i < y1 * w; i++) {
+        int d = j->f->dir[i];
+        j->pk[i] = (uint8_t)(j->indeg[i] << 4 | (d < 8 ? d : 15));
+    }
+}
+
 TN_API tn_status tn_flow_accumulation(tn_flow *flow)
 {
     size_t i, n, seen = 0;
-    uint8_t *indeg = NULL;
+    uint8_t *pk = NULL;
     uint32_t *acc;
+    ptrdiff_t off[16];
+    tn__pack_job j;
     tn_status st;
+    int d;
     if ((st = tn__flow_check(flow, "flow accumulation"))) return st;
     n = (size_t)flow->width * flow->height;
-    if ((st = tn__indegree(flow, NULL, &indeg))) return st;
+    if ((st = tn__indegree(flow, NULL, &pk))) return st;
+    j.f = flow;
+    j.indeg = pk;
+    j.pk = pk; /* row by row in place: each byte is read before it is written */
+    tn_parallel_for((size_t)flow->height, tn__row_grain(flow->width), tn__pack_rows, &j);
     acc = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
     if (!acc) {
-        TN_FREE(indeg);
+        TN_FREE(pk);
         return TN_ERR_OUT_OF_MEMORY;
     }
+    for (d = 0; d < 16; d++) off[d] = d < 8 ? tn__d8y[d] * (ptrdiff_t)flow->width + tn__d8x[d] : 0;
     for (i = 0; i < n; i++) acc[i] = 1;
     for (i = 0; i < n; i++) {
         size_t c = i;
-        if (indeg[i]) continue;
+        uint32_t a = 1;
+        if (pk[i] >> 4) continue; /* has upstream cells, or was reached by a walk (15) */
         for (;;) { /* walk down while each next cell has heard from all its upstream cells */
-            ptrdiff_t r = tn__receiver(flow, c);
+            size_t r;
+            unsigned v;
             seen++;
-            if (r < 0) break;
-            acc[r] += acc[c];
-            if (--indeg[r]) break;
-            indeg[r] = 0x80; /* reached by a walk: not a start cell */
-            c = (size_t)r;
+            if ((pk[c] & 15) == 15) break;
+            r = (size_t)((ptrdiff_t)c + off[pk[c] & 15]);
+            a = (acc[r] += a);
+            v = pk[r];
+            if ((v >> 4) > 1) {
+                pk[r] = (uint8_t)(v - 16);
+                break;
+            }
+            pk[r] = (uint8_t)(0xf0 | (v & 15));
+            c = r;
         }
     }
-    TN_FREE(indeg);
+    TN_FREE(pk);
     if (seen != n) {
         TN_FREE(acc);
         return tn__fail(TN_ERR_CORRUPT, "flow accumulation: the directions hold a cycle (%zu cells never drained)", n - seen);
