@@ -56,6 +56,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
     @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
+    @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton, parts; realism
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -723,6 +724,120 @@ typedef struct tn_align_opts {
    Reports progress as stage "align" every 1024 sketch parts (cancellable). */
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
                                  const tn_align_opts *opts, int *match);
+
+/* ============================================================================================
+   @@extract  ridge and valley networks from a DEM (paper 000, section 4.1); realism report
+   Valleys: depression filling (priority-flood + epsilon, so every cell drains), D8 steepest
+   descent (diagonals at sqrt 2), flow accumulation; cells draining at least `threshold` cells are
+   valley cells. Ridges: the same on the inverted DEM. The masks are then, in the paper's order,
+   closed (3x3), Strahler-ordered, thinned (Zhang-Suen + removal of the remaining simple pixels,
+   so lines are one pixel wide and 8-connected with the topology kept), traced into polylines
+   between junctions and endpoints, filtered (dangling contours under 10 px; contours whose mean
+   gradient is in the lowest 1 % of all contours' or exactly 0) and split when long. Contour parts cut
+   the network into 5-10 pixel pieces (DFS from an endpoint, seeded random lengths).
+   ============================================================================================ */
+
+#define TN_FLOW_OUTLET 255   /* direction code of a cell that drains off the map (no lower neighbour) */
+
+/* D8 flow on a DEM. dir: 0..7 = E, SE, S, SW, W, NW, N, NE (x right, y down the rows), or
+   TN_FLOW_OUTLET. acc: cells draining through each cell, itself included (>= 1). */
+typedef struct tn_flow {
+    int width, height;
+    uint8_t *dir;
+    uint32_t *acc;
+} tn_flow;
+
+/* Priority-flood depression filling with epsilon (Barnes et al. 2014): every cell ends at least
+   one float step (nextafter) above the cell it was flooded from, so every cell has a strictly
+   lower neighbour or lies on the border. Channel 0 is used; the result has one channel.
+   NaN/Inf heights fail with TN_ERR_NUMERIC. Caller frees *dst. */
+TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem);
+/* D8 directions of a (filled) DEM into flow->dir (allocated here; acc left NULL). A cell drains
+   to its steepest strictly lower neighbour (drop / distance, distance 1 or sqrt 2; ties go to
+   the first in E, SE, S, ... order). Border cells are outlets: they drain off the map, so no flow
+   runs along the edges. Threaded. */
+TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
+/* Flow accumulation from flow->dir into flow->acc (allocated here), O(n) by walking down from
+   cells nobody drains into. Fails with TN_ERR_CORRUPT if the directions hold a cycle. */
+TN_API tn_status tn_flow_accumulation(tn_flow *flow);
+/* All three on dem (invert != 0: on -dem, for ridges). Caller frees with tn_flow_free. */
+TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert);
+TN_API void      tn_flow_free(tn_flow *flow);
+
+/* Strahler order of the network cells (mask != 0) along the flow directions: sources are 1; a
+   cell whose upstream network cells reach their maximum order k at least twice gets k + 1, else
+   k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
+   (a threshold mask on the accumulation is). Returns the highest order in *max_order. */
+TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
+/* Thins a binary mask (w*h bytes, non-zero = set) in place to one-pixel-wide 8-connected lines:
+   Zhang-Suen, then any pixel whose removal keeps the 8-connected topology and that is not an
+   endpoint is removed. Blobs of 2x2 or smaller may vanish (a known Zhang-Suen trait). */
+TN_API tn_status tn_skeletonize(uint8_t *mask, int width, int height);
+
+enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
+
+/* Zero means the default everywhere. */
+typedef struct tn_extract_opts {
+    int threshold;        /* accumulation threshold in cells; 0 = tn_extract_default_threshold() */
+    int closing;          /* closing radius in px (3x3 = 1); 0 = 1, < 0 = no closing */
+    int min_length;       /* dangling contours shorter than this (px) are dropped; 0 = 10 */
+    float drop_fraction;  /* contours whose mean gradient is under this quantile of the contours'
+                             mean gradients (or is 0: flat lakes) are dropped; 0 = 0.01, < 0 = keep all */
+    int max_length;       /* longer polylines are split into near-equal pieces (px); 0 = 48 */
+    float dx, dy;         /* pixel spacing used for gradients; 0 = 1 */
+    int which;            /* TN_EXTRACT_BOTH / _VALLEYS / _RIDGES */
+} tn_extract_opts;
+
+/* Everything extraction computed; free with tn_extraction_free. Masks are w*h bytes (0/1). */
+typedef struct tn_extraction {
+    int width, height, threshold;
+    tn_flow valley_flow, ridge_flow;        /* on the DEM and on the inverted DEM */
+    uint8_t *valley_mask, *ridge_mask;      /* accumulation >= threshold, before closing/thinning */
+    uint8_t *valley_order, *ridge_order;    /* Strahler order of the raw network cells */
+    int valley_max_order, ridge_max_order;
+    tn_contour_set contours;                /* final polylines: valleys first, then ridges */
+} tn_extraction;
+
+/* Default accumulation threshold for a w x h DEM: max(8, w*h / 1000) cells, i.e. a valley drains
+   at least 0.1 % of the map, so the same terrain gives the same network at any resolution. */
+TN_API int       tn_extract_default_threshold(int width, int height);
+/* Runs the whole pipeline on channel 0 of dem. opts may be NULL. */
+TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out);
+TN_API void      tn_extraction_free(tn_extraction *ex);
+/* Cuts polylines into contour parts of 5-10 pixels (paper 000, section 4.1): each type's pixels
+   (polylines rasterised, so sparse sketch vertices work too) are listed by DFS from an endpoint;
+   runs of 5 + rng(6) consecutive list entries that are 8-adjacent form a part; a run with a jump
+   is cut there and a piece under 5 px is dropped. Part i of *parts has stable index i for a given
+   seed. Caller frees *parts. */
+TN_API tn_status tn_contour_parts(const tn_contour_set *contours, uint64_t seed, tn_contour_set *parts);
+/* Paper Figure 6: ridges yellow and valleys blue drawn over a grey hillshade of dem. RGB in [0,1]. */
+TN_API tn_status tn_extract_preview(const tn_image *dem, const tn_contour_set *contours, tn_image *out);
+
+/* Realism of a terrain img against a reference (both channel 0, heights in the same units).
+   Histogram distances are earth mover's distances between 256-bin histograms over a common
+   range, divided by the reference's mean value (slope) or mean |value| (curvature): 0 for the
+   same distribution, about 1 when one is a scaled-down copy. */
+typedef struct tn_realism_opts {
+    float dx_a, dy_a;     /* pixel spacing of the reference in height units; 0 = 1 */
+    float dx_b, dy_b;     /* of the compared terrain; 0 = the reference's */
+    int threshold;        /* valley threshold for density and bifurcation; 0 = default per size */
+} tn_realism_opts;
+
+typedef struct tn_realism {
+    double slope_distance;        /* slope (|gradient|) histograms, relative EMD */
+    double curvature_distance;    /* Laplacian histograms, relative EMD */
+    double spectrum_distance;     /* RMS difference of log10 radially averaged power spectra */
+    double spectrum_slope_a, spectrum_slope_b; /* log-log slope of each spectrum (terrain: about -2..-4) */
+    double drainage_density_a, drainage_density_b; /* valley line length per cell (px / px^2) */
+    double bifurcation_ratio_a, bifurcation_ratio_b; /* mean Strahler N_k / N_k+1 (0 if order 1 only) */
+    double ssim, psnr;            /* NaN when the sizes differ; psnr +inf for identical inputs */
+    double distance;              /* summary: mean of the three distances, the relative density and
+                                     bifurcation differences and the relative spectral slope difference */
+} tn_realism;
+
+/* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
+TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
+                                    tn_realism *out);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -9516,6 +9631,1659 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
     tn__chains_free(&sk);
     tn__chains_free(&skr);
     tn__chains_free(&dem);
+    return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>extract  (@@extract implementation)
+   Filling works on order-preserving integer keys of the float heights (key + 1 = nextafter), so
+   the priority queue is a radix heap: priority-flood pops never decrease, which is all a radix
+   heap needs, and pushes/pops are O(1) amortised without the cache misses of a binary heap.
+   Accumulation and Strahler order walk down from cells with no upstream neighbour, each cell
+   once it has heard from all of them (Kahn's order without a queue).
+   -------------------------------------------------------------------------------------------- */
+
+static const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
+static const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+
+/* Order-preserving map float -> uint32 (-0 and +0 share a key). */
+static uint32_t tn__fkey(float f)
+{
+    uint32_t u;
+    if (f == 0.0f) f = 0.0f;
+    memcpy(&u, &f, 4);
+    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+static float tn__fkey_inv(uint32_t k)
+{
+    uint32_t u = (k & 0x80000000u) ? (k & 0x7fffffffu) : ~k;
+    float f;
+    memcpy(&f, &u, 4);
+    return f;
+}
+
+/* Radix heap (monotone priority queue) of (key, cell); bucket b > 0 holds keys whose highest bit
+   differing from `last` is bit b - 1. */
+typedef struct tn__rheap_item { uint32_t key, cell; } tn__rheap_item;
+typedef struct tn__rheap {
+    tn__rheap_item *b[33];
+    size_t n[33], cap[33];
+    uint32_t last;
+    size_t size;
+} tn__rheap;
+
+static int tn__rheap_bucket(uint32_t key, uint32_t last)
+{
+    uint32_t x = key ^ last;
+#if defined(__GNUC__) || defined(__clang__)
+    return x ? 32 - __builtin_clz(x) : 0;
+#else
+    int b = 0;
+    while (x) { b++; x >>= 1; }
+    return b;
+#endif
+}
+
+static tn_status tn__rheap_push(tn__rheap *h, uint32_t key, uint32_t cell)
+{
+    int b = tn__rheap_bucket(key, h->last);
+    if (h->n[b] == h->cap[b]) {
+        size_t bytes = h->cap[b] * sizeof(tn__rheap_item);
+        void *p = h->b[b];
+        tn_status st = tn__reserve(&p, &bytes, (h->n[b] + 1) * sizeof(tn__rheap_item));
+        if (st) return st;
+        h->b[b] = (tn__rheap_item *)p;
+        h->cap[b] = bytes / sizeof(tn__rheap_item);
+    }
+    h->b[b][h->n[b]].key = key;
+    h->b[b][h->n[b]++].cell = cell;
+    h->size++;
+    return TN_OK;
+}
+
+/* Pops a minimum; the heap must not be empty. Redistribution only moves items to lower buckets,
+   whose capacity the moved items already fit in (they came from a bucket at least as big). */
+static tn_status tn__rheap_pop(tn__rheap *h, uint32_t *key, uint32_t *cell)
+{
+    if (!h->n[0]) {
+        int b = 1;
+        size_t i, m;
+        uint32_t mn = 0xffffffffu;
+        while (!h->n[b]) b++;
+        m = h->n[b];
+        for (i = 0; i < m; i++) if (h->b[b][i].key < mn) mn = h->b[b][i].key;
+        h->last = mn;
+        h->n[b] = 0;
+        h->size -= m;
+        for (i = 0; i < m; i++) {
+            tn_status st = tn__rheap_push(h, h->b[b][i].key, h->b[b][i].cell);
+            if (st) return st;
+        }
+    }
+    h->n[0]--;
+    *key = h->b[0][h->n[0]].key;
+    *cell = h->b[0][h->n[0]].cell;
+    h->size--;
+    return TN_OK;
+}
+
+static void tn__rheap_free(tn__rheap *h)
+{
+    int b;
+    for (b = 0; b < 33; b++) TN_FREE(h->b[b]);
+    memset(h, 0, sizeof *h);
+}
+
+/* Checks a DEM for extraction: non-empty, channel 0 finite. */
+static tn_status tn__extract_check(const tn_image *dem, const char *what)
+{
+    size_t i, n, C;
+    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
+        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
+    n = (size_t)dem->width * dem->height;
+    C = (size_t)dem->channels;
+    for (i = 0; i < n; i++) {
+        float v = dem->data[i * C];
+        if (!(v >= -FLT_MAX && v <= FLT_MAX))
+            return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)(i % (size_t)dem->width),
+                            (int)(i / (size_t)dem->width));
+    }
+    return TN_OK;
+}
+
+/* Binary min-heap of (priority, cell) for the cells of depressions and flats. */
+typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap; } tn__pheap;
+
+static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
+{
+    size_t i;
+    if (h->n == h->cap) {
+        size_t nc = h->cap ? h->cap * 2 : 4096;
+        uint64_t *p = (uint64_t *)TN_REALLOC(h->pri, nc * sizeof(uint64_t));
+        uint32_t *c;
+        if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
+        h->pri = p;
+        c = (uint32_t *)TN_REALLOC(h->cell, nc * sizeof(uint32_t));
+        if (!c) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
+        h->cell = c;
+        h->cap = nc;
+    }
+    for (i = h->n++; i > 0 && h->pri[(i - 1) / 2] > pri; i = (i - 1) / 2) {
+        h->pri[i] = h->pri[(i - 1) / 2];
+        h->cell[i] = h->cell[(i - 1) / 2];
+    }
+    h->pri[i] = pri;
+    h->cell[i] = cell;
+    return TN_OK;
+}
+
+static uint32_t tn__pheap_pop(tn__pheap *h)
+{
+    uint32_t top = h->cell[0], lc;
+    uint64_t lp;
+    size_t i = 0;
+    h->n--;
+    lp = h->pri[h->n];
+    lc = h->cell[h->n];
+    for (;;) {
+        size_t c = 2 * i + 1;
+        if (c >= h->n) break;
+        if (c + 1 < h->n && h->pri[c + 1] < h->pri[c]) c++;
+        if (h->pri[c] >= lp) break;
+        h->pri[i] = h->pri[c];
+        h->cell[i] = h->cell[c];
+        i = c;
+    }
+    h->pri[i] = lp;
+    h->cell[i] = lc;
+    return top;
+}
+
+/* Fills keys[] in place by priority-flood + epsilon (Barnes et al. 2014, with the pit queue of
+   their improved variant). The pit queue is a heap on the ORIGINAL heights (ties first come,
+   first served): a depression fills from its outlet along its deepest path first, like
+   r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
+   thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines. */
+/* Neighbour index of cell c in direction d, or -1 outside the map. */
+static ptrdiff_t tn__nbr(size_t c, int d, int w, int h)
+{
+    int x = (int)(c % (size_t)w) + tn__d8x[d], y = (int)(c / (size_t)w) + tn__d8y[d];
+    if (x < 0 || y < 0 || x >= w || y >= h) return -1;
+    return (ptrdiff_t)y * w + x;
+}
+
+typedef struct tn__fill_state {
+    uint32_t *keys;
+    int w, h;
+    tn__rheap q;
+    tn__pheap pit;
+    uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
+    size_t ntrace, cap_trace;
+    uint32_t seq;
+} tn__fill_state;
+
+#define TN__CLOSED 0x80000000u /* in the key word: saves a cache miss per neighbour */
+
+/* Closes the open neighbours of c (filled key k): lower or equal ones are raised to k + 1 and
+   join the pit queue; higher ones keep their height and go on the trace stack. */
+static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
+{
+    const int w = f->w;
+    int cx = (int)(c % (uint32_t)w), cy = (int)(c / (uint32_t)w), d;
+    int border = cx == 0 || cy == 0 || cx == w - 1 || cy == f->h - 1;
+    for (d = 0; d < 8; d++) {
+        size_t ni;
+        uint32_t v;
+        tn_status st;
+        if (border) {
+            ptrdiff_t t = tn__nbr(c, d, w, f->h);
+            if (t < 0) continue;
+            ni = (size_t)t;
+        } else ni = (size_t)c + (size_t)((ptrdiff_t)tn__d8y[d] * w + tn__d8x[d]);
+        v = f->keys[ni];
+        if (v & TN__CLOSED) continue;
+        if (v <= k) { /* in a depression or flat: one step above c */
+            f->keys[ni] = (k + 1) | TN__CLOSED;
+            if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
+        } else {
+            f->keys[ni] = v | TN__CLOSED;
+            if (f->ntrace == f->cap_trace) {
+                size_t bytes = f->cap_trace * sizeof(uint32_t);
+                void *p = f->trace;
+                if ((st = tn__reserve(&p, &bytes, (f->ntrace + 1) * sizeof(uint32_t)))) return st;
+                f->trace = (uint32_t *)p;
+                f->cap_trace = bytes / sizeof(uint32_t);
+            }
+            f->trace[f->ntrace++] = (uint32_t)ni;
+        }
+    }
+    return TN_OK;
+}
+
+/* Fills keys[] in place by priority-flood + epsilon (Barnes et al. 2014) with two speed-ups that
+   keep most cells out of the priority queue and its random memory access:
+   - slope tracing (Zhou, Sun & Fu 2016): a cell reached from below whose open neighbours are all
+     strictly higher keeps its height and is expanded at once, depth first, where its
+     neighbourhood is still in cache; only cells with a lower open neighbour wait in the queue;
+   - the pit queue of the improved variant, here a heap on the ORIGINAL heights (ties first come,
+     first served): a depression fills from its outlet along its deepest path first, like
+     r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
+     thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines.
+   The main queue is a radix heap: every key pushed is above the last one popped. */
+static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
+{
+    tn__fill_state f;
+    size_t n = (size_t)w * h, done = 0, i;
+    tn_status st = TN_OK;
+    int x, y;
+    memset(&f, 0, sizeof f);
+    f.keys = keys;
+    f.w = w;
+    f.h = h;
+    for (y = 0; y < h && !st; y++)
+        for (x = 0; x < w && !st; x++)
+            if (y == 0 || x == 0 || y == h - 1 || x == w - 1) {
+                i = (size_t)y * w + x;
+                st = tn__rheap_push(&f.q, keys[i], (uint32_t)i);
+                keys[i] |= TN__CLOSED;
+            }
+    while (!st && (f.q.size || f.pit.n)) {
+        uint32_t k, c;
+        if (f.pit.n) {
+            c = tn__pheap_pop(&f.pit);
+            k = keys[c] & ~TN__CLOSED;
+        } else if ((st = tn__rheap_pop(&f.q, &k, &c))) break;
+        { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
+            uint32_t nx = f.pit.n ? f.pit.cell[0] : f.q.n[0] ? f.q.b[0][f.q.n[0] - 1].cell : c;
+            if (nx >= (uint32_t)w && (size_t)nx + w + 1 < n) {
+                TN__PREFETCH(keys + nx - w - 1);
+                TN__PREFETCH(keys + nx - 1);
+                TN__PREFETCH(keys + nx + w - 1);
+            }
+        }
+        if ((st = tn__fill_expand(&f, c, k))) break;
+        while (f.ntrace && !st) {
+            uint32_t t = f.trace[--f.ntrace], kt = keys[t] & ~TN__CLOSED;
+            int d, lower = 0;
+            for (d = 0; d < 8 && !lower; d++) {
+                ptrdiff_t m = tn__nbr(t, d, w, h);
+                if (m >= 0 && !(keys[m] & TN__CLOSED) && keys[m] <= kt) lower = 1;
+            }
+            /* an open neighbour as low or lower may drain elsewhere at a lower level (and raising
+               it here would start a pit cascade above the queue's level): wait in order */
+            st = lower ? tn__rheap_push(&f.q, kt, t) : tn__fill_expand(&f, t, kt);
+            done++;
+        }
+        if (!st && (++done & 0xfffff) < 16) st = tn__progress("fill", (double)done / (double)n);
+    }
+    for (i = 0; i < n; i++) keys[i] &= ~TN__CLOSED;
+    tn__rheap_free(&f.q);
+    TN_FREE(f.pit.pri);
+    TN_FREE(f.pit.cell);
+    TN_FREE(f.trace);
+    return st;
+}
+
+/* Heights of channel 0 as 31-bit keys (the float key without its last bit, so the top bit is
+   free for the closed flag); invert flips the sign (ridges). */
+static tn_status tn__dem_keys(const tn_image *dem, int invert, uint32_t **out)
+{
+    size_t i, n = (size_t)dem->width * dem->height, bytes;
+    uint32_t *k;
+    tn_status st = tn__size4(n, 1, 1, sizeof(uint32_t), &bytes);
+    if (st) return st;
+    if (n > 0xfffffffeu) return tn__fail(TN_ERR_TOO_LARGE, "extract: %zu cells exceed the 2^32 cell limit", n);
+    k = (uint32_t *)tn__alloc(bytes);
+    if (!k) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < n; i++) {
+        float v = dem->data[i * (size_t)dem->channels];
+        k[i] = tn__fkey(invert ? -v : v) >> 1;
+    }
+    *out = k;
+    return TN_OK;
+}
+
+/* Filled heights from keys: untouched cells keep their exact height; raised cells get the float
+   of their key, which is above every float of the key below (so each raise stays strict). */
+static void tn__keys_to_heights(const uint32_t *keys, const tn_image *dem, int invert, float *out)
+{
+    size_t i, n = (size_t)dem->width * dem->height;
+    for (i = 0; i < n; i++) {
+        float v = dem->data[i * (size_t)dem->channels];
+        if (invert) v = -v;
+        out[i] = keys[i] == (tn__fkey(v) >> 1) ? v : tn__fkey_inv(keys[i] << 1);
+    }
+}
+
+TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem)
+{
+    uint32_t *keys = NULL;
+    tn_image out = {0, 0, 0, NULL};
+    tn_status st;
+    TN_ASSERT(dst);
+    if ((st = tn__extract_check(dem, "fill depressions"))) return st;
+    if ((st = tn__dem_keys(dem, 0, &keys))) return st;
+    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&out, dem->width, dem->height, 1))) {
+        TN_FREE(keys);
+        return st;
+    }
+    tn__keys_to_heights(keys, dem, 0, out.data);
+    TN_FREE(keys);
+    *dst = out;
+    return TN_OK;
+}
+
+typedef struct tn__d8_job { const float *h; uint8_t *dir; int w, hgt; } tn__d8_job;
+
+static void tn__d8_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__d8_job *j = (const tn__d8_job *)ctx;
+    const int w = j->w, H = j->hgt;
+    int x, y, d;
+    for (y = (int)y0; y < (int)y1; y++) {
+        const float *row = j->h + (size_t)y * w;
+        uint8_t *dr = j->dir + (size_t)y * w;
+        for (x = 0; x < w; x++) {
+            double hc = row[x], best = 0.0;
+            int bd = TN_FLOW_OUTLET;
+            if (x == 0 || y == 0 || x == w - 1 || y == H - 1) { /* the border drains off the map */
+                dr[x] = TN_FLOW_OUTLET;
+                continue;
+            }
+            for (d = 0; d < 8; d++) {
+                int nx = x + tn__d8x[d], ny = y + tn__d8y[d];
+                double drop;
+                if (nx < 0 || ny < 0 || nx >= w || ny >= H) continue;
+                drop = hc - (double)j->h[(size_t)ny * w + nx];
+                if (d & 1) drop *= 0.70710678118654752;
+                if (drop > best) { best = drop; bd = d; }
+            }
+            dr[x] = (uint8_t)bd;
+        }
+    }
+}
+
+TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
+{
+    tn__d8_job j;
+    tn_image tmp = {0, 0, 0, NULL};
+    tn_status st;
+    size_t n;
+    TN_ASSERT(flow);
+    if ((st = tn__extract_check(filled, "flow directions"))) return st;
+    n = (size_t)filled->width * filled->height;
+    if (filled->channels != 1) { /* D8 reads a plain height grid */
+        size_t i;
+        if ((st = tn__image_alloc(&tmp, filled->width, filled->height, 1))) return st;
+        for (i = 0; i < n; i++) tmp.data[i] = filled->data[i * (size_t)filled->channels];
+        filled = &tmp;
+    }
+    memset(flow, 0, sizeof *flow);
+    flow->dir = (uint8_t *)tn__alloc(n);
+    if (!flow->dir) {
+        tn_image_free(&tmp);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    flow->width = filled->width;
+    flow->height = filled->height;
+    j.h = filled->data;
+    j.dir = flow->dir;
+    j.w = filled->width;
+    j.hgt = filled->height;
+    tn_parallel_for((size_t)filled->height, tn__row_grain(filled->width), tn__d8_rows, &j);
+    tn_image_free(&tmp);
+    return TN_OK;
+}
+
+/* Receiver of cell i, or -1 for an outlet. */
+static ptrdiff_t tn__receiver(const tn_flow *f, size_t i)
+{
+    int d = f->dir[i];
+    if (d >= 8) return -1;
+    return (ptrdiff_t)i + tn__d8y[d] * (ptrdiff_t)f->width + tn__d8x[d];
+}
+
+typedef struct tn__indeg_job { const tn_flow *f; const uint8_t *mask; uint8_t *indeg; } tn__indeg_job;
+
+/* In-degree of each cell: neighbours draining into it (only mask cells when mask is given).
+   Each cell counts its own upstream neighbours, so rows are independent. */
+static void tn__indeg_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__indeg_job *j = (const tn__indeg_job *)ctx;
+    const int w = j->f->width, h = j->f->height;
+    int x, y, d;
+    for (y = (int)y0; y < (int)y1; y++)
+        for (x = 0; x < w; x++) {
+            int c = 0;
+            for (d = 0; d < 8; d++) {
+                int nx = x + tn__d8x[d], ny = y + tn__d8y[d];
+                size_t ni;
+                if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+                ni = (size_t)ny * w + nx;
+                /* neighbour in direction d drains here if its direction is the opposite one */
+                if (j->f->dir[ni] == (uint8_t)((d + 4) & 7) && (!j->mask || j->mask[ni])) c++;
+            }
+            j->indeg[(size_t)y * w + x] = (uint8_t)c;
+        }
+}
+
+static tn_status tn__indegree(const tn_flow *f, const uint8_t *mask, uint8_t **out)
+{
+    tn__indeg_job j;
+    uint8_t *indeg = (uint8_t *)tn__alloc((size_t)f->width * f->height);
+    if (!indeg) return TN_ERR_OUT_OF_MEMORY;
+    j.f = f;
+    j.mask = mask;
+    j.indeg = indeg;
+    tn_parallel_for((size_t)f->height, tn__row_grain(f->width), tn__indeg_rows, &j);
+    *out = indeg;
+    return TN_OK;
+}
+
+static tn_status tn__flow_check(const tn_flow *f, const char *what)
+{
+    if (!f || !f->dir || f->width <= 0 || f->height <= 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: no flow directions", what);
+    return TN_OK;
+}
+
+typedef struct tn__pack_job { const tn_flow *f; const uint8_t *indeg; uint8_t *pk; } tn__pack_job;
+
+/* In-degree and direction in one byte (indeg << 4 | dir, 15 = outlet): the walk below then
+   touches two arrays per step instead of three. */
+static void tn__pack_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__pack_job *j = (const tn__pack_job *)ctx;
+    size_t i, w = (size_t)j->f->width;
+    for (i = y0 * w; i < y1 * w; i++) {
+        int d = j->f->dir[i];
+        j->pk[i] = (uint8_t)(j->indeg[i] << 4 | (d < 8 ? d : 15));
+    }
+}
+
+TN_API tn_status tn_flow_accumulation(tn_flow *flow)
+{
+    size_t i, n, seen = 0;
+    uint8_t *pk = NULL;
+    uint32_t *acc;
+    ptrdiff_t off[16];
+    tn__pack_job j;
+    tn_status st;
+    int d;
+    if ((st = tn__flow_check(flow, "flow accumulation"))) return st;
+    n = (size_t)flow->width * flow->height;
+    if ((st = tn__indegree(flow, NULL, &pk))) return st;
+    j.f = flow;
+    j.indeg = pk;
+    j.pk = pk; /* row by row in place: each byte is read before it is written */
+    tn_parallel_for((size_t)flow->height, tn__row_grain(flow->width), tn__pack_rows, &j);
+    acc = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
+    if (!acc) {
+        TN_FREE(pk);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (d = 0; d < 16; d++) off[d] = d < 8 ? tn__d8y[d] * (ptrdiff_t)flow->width + tn__d8x[d] : 0;
+    for (i = 0; i < n; i++) acc[i] = 1;
+    for (i = 0; i < n; i++) {
+        size_t c = i;
+        uint32_t a = 1;
+        if (pk[i] >> 4) continue; /* has upstream cells, or was reached by a walk (15) */
+        for (;;) { /* walk down while each next cell has heard from all its upstream cells */
+            size_t r;
+            unsigned v;
+            seen++;
+            if ((pk[c] & 15) == 15) break;
+            r = (size_t)((ptrdiff_t)c + off[pk[c] & 15]);
+            a = (acc[r] += a);
+            v = pk[r];
+            if ((v >> 4) > 1) {
+                pk[r] = (uint8_t)(v - 16);
+                break;
+            }
+            pk[r] = (uint8_t)(0xf0 | (v & 15));
+            c = r;
+        }
+    }
+    TN_FREE(pk);
+    if (seen != n) {
+        TN_FREE(acc);
+        return tn__fail(TN_ERR_CORRUPT, "flow accumulation: the directions hold a cycle (%zu cells never drained)", n - seen);
+    }
+    TN_FREE(flow->acc);
+    flow->acc = acc;
+    return TN_OK;
+}
+
+TN_API void tn_flow_free(tn_flow *flow)
+{
+    if (!flow) return;
+    TN_FREE(flow->dir);
+    TN_FREE(flow->acc);
+    memset(flow, 0, sizeof *flow);
+}
+
+TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
+{
+    uint32_t *keys = NULL;
+    tn_image filled = {0, 0, 0, NULL};
+    tn_status st;
+    TN_ASSERT(flow);
+    memset(flow, 0, sizeof *flow);
+    if ((st = tn__extract_check(dem, "flow"))) return st;
+    if ((st = tn__dem_keys(dem, invert, &keys))) return st;
+    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&filled, dem->width, dem->height, 1))) {
+        TN_FREE(keys);
+        return st;
+    }
+    tn__keys_to_heights(keys, dem, invert, filled.data);
+    TN_FREE(keys);
+    st = tn_flow_directions(flow, &filled);
+    tn_image_free(&filled);
+    if (!st) st = tn_flow_accumulation(flow);
+    if (st) tn_flow_free(flow);
+    return st;
+}
+
+TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
+{
+    size_t i, n;
+    uint8_t *indeg = NULL, *cnt;
+    int top = 0;
+    tn_status st;
+    if ((st = tn__flow_check(flow, "strahler order"))) return st;
+    TN_ASSERT(mask && order);
+    n = (size_t)flow->width * flow->height;
+    if ((st = tn__indegree(flow, mask, &indeg))) return st;
+    cnt = (uint8_t *)tn__calloc(n); /* how many upstream cells reached order[] so far */
+    if (!cnt) {
+        TN_FREE(indeg);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    memset(order, 0, n);
+    for (i = 0; i < n; i++) {
+        size_t c = i;
+        if (!mask[i] || indeg[i]) continue;
+        for (;;) {
+            ptrdiff_t r;
+            int o = order[c] == 0 ? 1 : (cnt[c] >= 2 ? order[c] + 1 : order[c]);
+            if (o > 255) o = 255;
+            order[c] = (uint8_t)o;
+            if (o > top) top = o;
+            r = tn__receiver(flow, c);
+            if (r < 0 || !mask[r]) break;
+            if (o > order[r]) { order[r] = (uint8_t)o; cnt[r] = 1; }
+            else if (o == order[r] && cnt[r] < 255) cnt[r]++;
+            if (--indeg[r]) break;
+            indeg[r] = 0x80;
+            c = (size_t)r;
+        }
+    }
+    TN_FREE(indeg);
+    TN_FREE(cnt);
+    if (max_order) *max_order = top;
+    return TN_OK;
+}
+
+/* ---- morphology and thinning ---------------------------------------------------------------- */
+
+/* Square dilation (grow != 0) or erosion of radius r, separable; outside the map counts as set
+   for erosion and as clear for dilation, so borders neither erode nor grow. */
+static tn_status tn__morph(uint8_t *m, int w, int h, int r, int grow)
+{
+    size_t n = (size_t)w * h;
+    uint8_t *t = (uint8_t *)tn__alloc(n);
+    int x, y, k;
+    if (!t) return TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) {
+            int v = grow ? 0 : 1;
+            for (k = -r; k <= r; k++) {
+                int xx = x + k, s;
+                if (xx < 0 || xx >= w) continue;
+                s = m[(size_t)y * w + xx] != 0;
+                if (grow ? s : !s) { v = grow; break; }
+            }
+            t[(size_t)y * w + x] = (uint8_t)v;
+        }
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) {
+            int v = grow ? 0 : 1;
+            for (k = -r; k <= r; k++) {
+                int yy = y + k, s;
+                if (yy < 0 || yy >= h) continue;
+                s = t[(size_t)yy * w + x];
+                if (grow ? s : !s) { v = grow; break; }
+            }
+            m[(size_t)y * w + x] = (uint8_t)v;
+        }
+    TN_FREE(t);
+    return TN_OK;
+}
+
+/* The 8 neighbours of (x, y) clockwise from north, P2..P9 in Zhang-Suen's naming; 0 outside. */
+static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
+{
+    static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
+    int k;
+    for (k = 0; k < 8; k++) {
+        int xx = x + ox[k], yy = y + oy[k];
+        p[k] = (xx >= 0 && yy >= 0 && xx < w && yy < h && m[(size_t)yy * w + xx]) ? 1 : 0;
+    }
+}
+
+/* Removing a set pixel keeps the 8-connected topology iff exactly one of the four "north, east,
+   south, west" corners starts a run of foreground (Yokoi's 8-connectivity number == 1). */
+static int tn__yokoi8(const int p[8])
+{
+    int k, c = 0;
+    for (k = 0; k < 8; k += 2) {
+        int a = !p[k], b = !p[(k + 1) & 7], d = !p[(k + 2) & 7];
+        c += a - a * b * d;
+    }
+    return c;
+}
+
+TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
+{
+    size_t n;
+    uint8_t *del;
+    int changed = 1, pass, x, y;
+    if (!m || w <= 0 || h <= 0) return tn__fail(TN_ERR_INVALID_ARG, "skeletonize: empty mask");
+    n = (size_t)w * h;
+    del = (uint8_t *)tn__alloc(n);
+    if (!del) return TN_ERR_OUT_OF_MEMORY;
+    for (x = 0; (size_t)x < n; x++) m[x] = m[x] != 0;
+    while (changed) { /* Zhang-Suen: two parallel sub-iterations until stable */
+        changed = 0;
+        for (pass = 0; pass < 2; pass++) {
+            size_t cnt = 0;
+            memset(del, 0, n);
+            for (y = 0; y < h; y++)
+                for (x = 0; x < w; x++) {
+                    int p[8], b = 0, a = 0, k;
+                    if (!m[(size_t)y * w + x]) continue;
+                    tn__nbrs(m, w, h, x, y, p);
+                    for (k = 0; k < 8; k++) { b += p[k]; a += !p[k] && p[(k + 1) & 7]; }
+                    if (b < 2 || b > 6 || a != 1) continue;
+                    if (pass == 0 ? (p[0] && p[2] && p[4]) || (p[2] && p[4] && p[6])
+                                  : (p[0] && p[2] && p[6]) || (p[0] && p[4] && p[6]))
+                        continue;
+                    del[(size_t)y * w + x] = 1;
+                    cnt++;
+                }
+            if (cnt) {
+                size_t i;
+                for (i = 0; i < n; i++) if (del[i]) m[i] = 0;
+                changed = 1;
+            }
+        }
+    }
+    TN_FREE(del);
+    /* Zhang-Suen leaves staircase corners two pixels thick: drop every remaining simple pixel
+       that is not an endpoint, sequentially, which keeps topology one pixel at a time. */
+    changed = 1;
+    while (changed) {
+        changed = 0;
+        for (y = 0; y < h; y++)
+            for (x = 0; x < w; x++) {
+                int p[8], b = 0, k;
+                if (!m[(size_t)y * w + x]) continue;
+                tn__nbrs(m, w, h, x, y, p);
+                for (k = 0; k < 8; k++) b += p[k];
+                if (b >= 2 && tn__yokoi8(p) == 1) {
+                    m[(size_t)y * w + x] = 0;
+                    changed = 1;
+                }
+            }
+    }
+    return TN_OK;
+}
+
+/* ---- contour graph ------------------------------------------------------------------------ */
+
+/* A growable polyline under construction. */
+typedef struct tn__pline { float *pts; int n, cap; } tn__pline;
+
+static tn_status tn__pline_add(tn__pline *l, float x, float y, float z)
+{
+    if (l->n == l->cap) {
+        size_t bytes = (size_t)l->cap * 3 * sizeof(float);
+        void *p = l->pts;
+        tn_status st = tn__reserve(&p, &bytes, ((size_t)l->n + 1) * 3 * sizeof(float));
+        if (st) return st;
+        l->pts = (float *)p;
+        l->cap = (int)(bytes / (3 * sizeof(float)));
+    }
+    l->pts[l->n * 3] = x;
+    l->pts[l->n * 3 + 1] = y;
+    l->pts[l->n * 3 + 2] = z;
+    l->n++;
+    return TN_OK;
+}
+
+/* Appends a polyline (copying pts) to a contour set. */
+static tn_status tn__set_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float grad,
+                             const float *pts, int npts)
+{
+    tn_contour *c;
+    if ((size_t)s->count == *cap) {
+        size_t bytes = *cap * sizeof(tn_contour);
+        void *p = s->items;
+        tn_status st = tn__reserve(&p, &bytes, ((size_t)s->count + 1) * sizeof(tn_contour));
+        if (st) return st;
+        s->items = (tn_contour *)p;
+        *cap = bytes / sizeof(tn_contour);
+    }
+    c = &s->items[s->count];
+    c->points = (float *)tn__alloc((size_t)npts * 3 * sizeof(float));
+    if (!c->points) return TN_ERR_OUT_OF_MEMORY;
+    memcpy(c->points, pts, (size_t)npts * 3 * sizeof(float));
+    c->type = type;
+    c->order = order;
+    c->npoints = npts;
+    c->mean_gradient = grad;
+    s->count++;
+    return TN_OK;
+}
+
+static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
+{
+    int p[8], k, b = 0;
+    tn__nbrs(m, w, h, x, y, p);
+    for (k = 0; k < 8; k++) b += p[k];
+    return b;
+}
+
+/* Traces the skeleton into polylines between nodes (endpoints, junctions: degree != 2) and
+   closed loops. Each polyline's pixels are listed as cell indices in *cells (per line offsets in
+   *starts, count + 1 entries). Deterministic raster order. */
+typedef struct tn__trace { size_t *cells, *starts; size_t ncells, nlines, cap_c, cap_s; } tn__trace;
+
+static tn_status tn__trace_push(tn__trace *t, size_t cell)
+{
+    if (t->ncells == t->cap_c) {
+        size_t bytes = t->cap_c * sizeof(size_t);
+        void *p = t->cells;
+        tn_status st = tn__reserve(&p, &bytes, (t->ncells + 1) * sizeof(size_t));
+        if (st) return st;
+        t->cells = (size_t *)p;
+        t->cap_c = bytes / sizeof(size_t);
+    }
+    t->cells[t->ncells++] = cell;
+    return TN_OK;
+}
+
+static tn_status tn__trace_end_line(tn__trace *t)
+{
+    if (t->nlines + 2 > t->cap_s) {
+        size_t bytes = t->cap_s * sizeof(size_t);
+        void *p = t->starts;
+        tn_status st = tn__reserve(&p, &bytes, (t->nlines + 2) * sizeof(size_t));
+        if (st) return st;
+        t->starts = (size_t *)p;
+        t->cap_s = bytes / sizeof(size_t);
+    }
+    if (t->nlines == 0) t->starts[0] = 0;
+    t->starts[++t->nlines] = t->ncells;
+    return TN_OK;
+}
+
+static void tn__trace_free(tn__trace *t)
+{
+    TN_FREE(t->cells);
+    TN_FREE(t->starts);
+    memset(t, 0, sizeof *t);
+}
+
+static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t)
+{
+    static const int ox[8] = {1, 1, 0, -1, -1, -1, 0, 1}, oy[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+    size_t n = (size_t)w * h, i;
+    uint8_t *deg = (uint8_t *)tn__alloc(n), *vis = (uint8_t *)tn__calloc(n);
+    tn_status st = TN_OK;
+    int pass;
+    memset(t, 0, sizeof *t);
+    if (!deg || !vis) {
+        TN_FREE(deg);
+        TN_FREE(vis);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < n; i++) deg[i] = m[i] ? (uint8_t)tn__skel_degree(m, w, h, (int)(i % (size_t)w), (int)(i / (size_t)w)) : 0;
+    /* pass 0: lines leaving nodes; pass 1: closed loops of degree-2 pixels left over */
+    for (pass = 0; pass < 2 && !st; pass++)
+        for (i = 0; i < n && !st; i++) {
+            int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w), d;
+            if (!m[i]) continue;
+            if (pass == 0 && deg[i] == 2) continue;
+            if (pass == 1 && vis[i]) continue;
+            if (pass == 0 && deg[i] == 0) { /* isolated pixel: a one-point line */
+                vis[i] = 1;
+                if (!(st = tn__trace_push(t, i))) st = tn__trace_end_line(t);
+                continue;
+            }
+            for (d = 0; d < 8 && !st; d++) {
+                int nx = x + ox[d], ny = y + oy[d];
+                size_t q, prev = i, cur;
+                if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+                q = (size_t)ny * w + nx;
+                if (!m[q]) continue;
+                if (pass == 1 && d > 0 && vis[q]) continue;
+                if (deg[q] != 2) { /* node next to node: a two-point line, listed once */
+                    if (pass == 0 && q > i) {
+                        if (!(st = tn__trace_push(t, i)) && !(st = tn__trace_push(t, q))) st = tn__trace_end_line(t);
+                    }
+                    continue;
+                }
+                if (vis[q]) continue;
+                vis[i] = 1;
+                if ((st = tn__trace_push(t, i))) break;
+                cur = q;
+                for (;;) {
+                    int cx = (int)(cur % (size_t)w), cy = (int)(cur / (size_t)w), e;
+                    size_t next = (size_t)-1;
+                    if ((st = tn__trace_push(t, cur))) break;
+                    if (deg[cur] != 2 || (pass == 1 && cur == i)) break;
+                    vis[cur] = 1;
+                    for (e = 0; e < 8; e++) {
+                        int ex = cx + ox[e], ey = cy + oy[e];
+                        size_t r;
+                        if (ex < 0 || ey < 0 || ex >= w || ey >= h) continue;
+                        r = (size_t)ey * w + ex;
+                        if (!m[r] || r == prev) continue;
+                        if (r == i && pass == 1 && prev != i) { next = r; break; }
+                        if (deg[r] == 2 && vis[r]) continue;
+                        next = r;
+                        break;
+                    }
+                    if (next == (size_t)-1) break;
+                    prev = cur;
+                    cur = next;
+                }
+                if (!st) st = tn__trace_end_line(t);
+                if (pass == 1) break; /* one loop per start pixel */
+            }
+        }
+    TN_FREE(deg);
+    TN_FREE(vis);
+    if (st) tn__trace_free(t);
+    return st;
+}
+
+/* ---- extraction pipeline ------------------------------------------------------------------ */
+
+/* q-quantile of v[0..n) exactly, by a two-pass radix select on order-preserving keys. */
+static float tn__quantile(const float *v, size_t n, double q)
+{
+    size_t *hist, i, k, acc = 0;
+    uint32_t hi = 0, lo = 0;
+    int pass;
+    if (!n) return 0.0f;
+    hist = (size_t *)tn__calloc(65536 * sizeof(size_t));
+    if (!hist) return 0.0f;
+    k = (size_t)(q * (double)(n - 1));
+    for (pass = 0; pass < 2; pass++) {
+        uint32_t b;
+        memset(hist, 0, 65536 * sizeof(size_t));
+        for (i = 0; i < n; i++) {
+            uint32_t key = tn__fkey(v[i]);
+            if (pass == 0) hist[key >> 16]++;
+            else if ((key >> 16) == hi) hist[key & 0xffffu]++;
+        }
+        for (b = 0; b < 65536; b++) {
+            if (acc + hist[b] > k) break;
+            acc += hist[b];
+        }
+        if (pass == 0) hi = b;
+        else lo = b;
+    }
+    TN_FREE(hist);
+    return tn__fkey_inv((hi << 16) | lo);
+}
+
+TN_API int tn_extract_default_threshold(int width, int height)
+{
+    double t = (double)width * (double)height / 1000.0;
+    return t < 8.0 ? 8 : (int)(t + 0.5);
+}
+
+TN_API void tn_extraction_free(tn_extraction *ex)
+{
+    if (!ex) return;
+    tn_flow_free(&ex->valley_flow);
+    tn_flow_free(&ex->ridge_flow);
+    TN_FREE(ex->valley_mask);
+    TN_FREE(ex->ridge_mask);
+    TN_FREE(ex->valley_order);
+    TN_FREE(ex->ridge_order);
+    tn_contour_set_free(&ex->contours);
+    memset(ex, 0, sizeof *ex);
+}
+
+/* Removes dangling lines shorter than min_len pixels (keeping the junction they hang on) until
+   none is left; returns through *st. */
+static tn_status tn__prune_spurs(uint8_t *skel, int w, int h, int min_len)
+{
+    int round;
+    for (round = 0; round < 8; round++) {
+        tn__trace t;
+        size_t l, removed = 0;
+        tn_status st = tn__trace_skeleton(skel, w, h, &t);
+        if (st) return st;
+        for (l = 0; l < t.nlines; l++) {
+            size_t a = t.starts[l], b = t.starts[l + 1], k;
+            size_t c0 = t.cells[a], c1 = t.cells[b - 1];
+            int d0 = tn__skel_degree(skel, w, h, (int)(c0 % (size_t)w), (int)(c0 / (size_t)w));
+            int d1 = tn__skel_degree(skel, w, h, (int)(c1 % (size_t)w), (int)(c1 / (size_t)w));
+            if ((int)(b - a) >= min_len) continue;
+            if (c0 == c1 && b - a > 1) continue; /* a closed loop: not dangling */
+            if (d0 > 1 && d1 > 1) continue;      /* junction to junction: keeps the network connected */
+            for (k = a; k < b; k++) {
+                size_t c = t.cells[k];
+                if ((k == a && d0 > 2) || (k == b - 1 && d1 > 2)) continue;
+                if (skel[c]) { skel[c] = 0; removed++; }
+            }
+        }
+        tn__trace_free(&t);
+        if (!removed) break;
+    }
+    return TN_OK;
+}
+
+/* Network of one type: mask, Strahler order, closing, thinning, tracing, filtering, splitting. */
+static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, const tn_extract_opts *o,
+                                  int ridge, tn_extraction *ex, size_t *cap)
+{
+    const int w = dem->width, h = dem->height;
+    const size_t n = (size_t)w * h;
+    tn_flow *flow = ridge ? &ex->ridge_flow : &ex->valley_flow;
+    uint8_t *mask, *order, *skel = NULL, *ord2 = NULL;
+    tn__trace t;
+    tn__pline pl = {NULL, 0, 0};
+    tn_status st;
+    size_t i, l;
+    int pass, top = 0;
+    float grad_floor = 0.0f;
+    if ((st = tn_flow_compute(flow, dem, ridge))) return st;
+    if ((st = tn__progress(ridge ? "ridges" : "valleys", 0.3))) return st;
+    mask = (uint8_t *)tn__alloc(n);
+    order = (uint8_t *)tn__alloc(n);
+    if (ridge) { ex->ridge_mask = mask; ex->ridge_order = order; }
+    else { ex->valley_mask = mask; ex->valley_order = order; }
+    if (!mask || !order) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < n; i++) mask[i] = flow->acc[i] >= (uint32_t)ex->threshold;
+    if ((st = tn_strahler_order(flow, mask, order, &top))) return st;
+    if (ridge) ex->ridge_max_order = top;
+    else ex->valley_max_order = top;
+    skel = (uint8_t *)tn__alloc(n);
+    ord2 = (uint8_t *)tn__alloc(n);
+    if (!skel || !ord2) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    memcpy(skel, mask, n);
+    memcpy(ord2, order, n);
+    if (o->closing > 0) {
+        if ((st = tn__morph(skel, w, h, o->closing, 1)) || (st = tn__morph(skel, w, h, o->closing, 0))) goto done;
+        /* cells the closing added take the highest order next to them */
+        for (pass = 0; pass <= o->closing; pass++)
+            for (i = 0; i < n; i++)
+                if (skel[i] && !ord2[i]) {
+                    int k, x = (int)(i % (size_t)w), y = (int)(i / (size_t)w), best = 0;
+                    for (k = 0; k < 8; k++) {
+                        int xx = x + tn__d8x[k], yy = y + tn__d8y[k];
+                        if (xx >= 0 && yy >= 0 && xx < w && yy < h && ord2[(size_t)yy * w + xx] > best)
+                            best = ord2[(size_t)yy * w + xx];
+                    }
+                    ord2[i] = (uint8_t)best;
+                }
+    }
+    if ((st = tn_skeletonize(skel, w, h))) goto done;
+    if ((st = tn__progress(ridge ? "ridges" : "valleys", 0.7))) goto done;
+    if ((st = tn__prune_spurs(skel, w, h, o->min_length))) goto done;
+    if ((st = tn__trace_skeleton(skel, w, h, &t))) goto done;
+    if (o->drop_fraction > 0 && t.nlines) { /* the floor: this quantile of the contours' mean gradients */
+        float *means = (float *)tn__alloc(t.nlines * sizeof(float));
+        size_t m = 0;
+        if (!means) { st = TN_ERR_OUT_OF_MEMORY; tn__trace_free(&t); goto done; }
+        for (l = 0; l < t.nlines; l++) {
+            size_t a = t.starts[l], b = t.starts[l + 1], k;
+            double g = 0.0;
+            if ((int)(b - a) < o->min_length) continue;
+            for (k = a; k < b; k++) g += grad->data[t.cells[k]];
+            means[m++] = (float)(g / (double)(b - a));
+        }
+        grad_floor = m ? tn__quantile(means, m, o->drop_fraction) : 0.0f;
+        TN_FREE(means);
+    }
+    for (l = 0; l < t.nlines && !st; l++) {
+        size_t a = t.starts[l], b = t.starts[l + 1], k;
+        int counts[256], npts = (int)(b - a), best = 0, bestc = 0, pieces, j;
+        double gsum = 0.0;
+        float gmean;
+        if (npts < o->min_length) continue; /* what pruning left short: isolated bits */
+        memset(counts, 0, sizeof counts);
+        for (k = a; k < b; k++) {
+            counts[ord2[t.cells[k]]]++;
+            gsum += grad->data[t.cells[k]];
+        }
+        for (j = 1; j < 256; j++) /* the most common order; ties to the higher */
+            if (counts[j] && counts[j] >= bestc) { best = j; bestc = counts[j]; }
+        gmean = (float)(gsum / (double)npts);
+        /* lowest drop_fraction of the contours, and dead flat ones (lakes, plains) */
+        if (o->drop_fraction > 0 && (gmean < grad_floor || gmean <= 0.0f)) continue;
+        pl.n = 0;
+        for (k = a; k < b && !st; k++) {
+            size_t c = t.cells[k];
+            st = tn__pline_add(&pl, (float)(c % (size_t)w), (float)(c / (size_t)w), dem->data[c * (size_t)dem->channels]);
+        }
+        if (st) break;
+        pieces = (npts - 1 + o->max_length - 2) / (o->max_length - 1);
+        if (pieces < 1) pieces = 1;
+        for (j = 0; j < pieces && !st; j++) { /* near-equal pieces sharing their end points */
+            int s = (int)((long)j * (npts - 1) / pieces), e = (int)((long)(j + 1) * (npts - 1) / pieces);
+            st = tn__set_add(&ex->contours, cap, ridge ? TN_RIDGE : TN_VALLEY, best, gmean, pl.pts + (size_t)s * 3, e - s + 1);
+        }
+    }
+    tn__trace_free(&t);
+done:
+    TN_FREE(pl.pts);
+    TN_FREE(skel);
+    TN_FREE(ord2);
+    return st;
+}
+
+TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out)
+{
+    tn_extract_opts o;
+    tn_extraction ex;
+    tn_image grad = {0, 0, 0, NULL}, gx = {0, 0, 0, NULL}, gy = {0, 0, 0, NULL};
+    tn_status st;
+    size_t i, n, cap = 0;
+    TN_ASSERT(out);
+    if ((st = tn__extract_check(dem, "extract"))) return st;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (o.threshold < 0 || o.min_length < 0 || o.max_length < 0 || o.which < 0 || o.which > 2 ||
+        !(o.drop_fraction < 1.0f) || !(o.dx >= 0.0f) || !(o.dy >= 0.0f))
+        return tn__fail(TN_ERR_INVALID_ARG, "extract: negative threshold/lengths, drop_fraction >= 1 or a bad spacing");
+    if (o.closing == 0) o.closing = 1;
+    if (o.closing > 16) return tn__fail(TN_ERR_INVALID_ARG, "extract: closing radius %d is over 16", o.closing);
+    if (o.min_length == 0) o.min_length = 10;
+    if (o.max_length == 0) o.max_length = 48;
+    if (o.max_length < 2) return tn__fail(TN_ERR_INVALID_ARG, "extract: max_length must be at least 2");
+    if (o.drop_fraction == 0.0f) o.drop_fraction = 0.01f;
+    memset(&ex, 0, sizeof ex);
+    ex.width = dem->width;
+    ex.height = dem->height;
+    ex.threshold = o.threshold ? o.threshold : tn_extract_default_threshold(dem->width, dem->height);
+    ex.contours.width = dem->width;
+    ex.contours.height = dem->height;
+    n = (size_t)dem->width * dem->height;
+    /* gradient magnitude: mean per contour and the floor of the lowest drop_fraction */
+    if ((st = tn_image_gradient(dem, o.dx, o.dy, &gx, &gy))) return st;
+    for (i = 0; i < n; i++) gx.data[i] = sqrtf(gx.data[i] * gx.data[i] + gy.data[i] * gy.data[i]);
+    grad = gx;
+    tn_image_free(&gy);
+    if (o.which != TN_EXTRACT_RIDGES) st = tn__extract_type(dem, &grad, &o, 0, &ex, &cap);
+    if (!st && o.which != TN_EXTRACT_VALLEYS) st = tn__extract_type(dem, &grad, &o, 1, &ex, &cap);
+    tn_image_free(&grad);
+    if (!st) st = tn__progress("extract", 1.0);
+    if (st) {
+        tn_extraction_free(&ex);
+        return st;
+    }
+    *out = ex;
+    return TN_OK;
+}
+
+/* ---- contour parts ------------------------------------------------------------------------ */
+
+/* Calls fn for every pixel of the segment a -> b (DDA, both ends included, z interpolated). */
+typedef tn_status (*tn__pixel_fn)(void *ctx, int x, int y, float z);
+
+static tn_status tn__raster_polyline(const tn_contour *c, tn__pixel_fn fn, void *ctx)
+{
+    int i;
+    tn_status st = TN_OK;
+    for (i = 0; i < c->npoints && !st; i++) {
+        const float *p = c->points + (size_t)i * 3, *q = i + 1 < c->npoints ? p + 3 : p;
+        float dx = q[0] - p[0], dy = q[1] - p[1];
+        float len = fabsf(dx) > fabsf(dy) ? fabsf(dx) : fabsf(dy);
+        int steps = (int)ceilf(len), s;
+        if (!(len < 1e7f)) return tn__fail(TN_ERR_INVALID_ARG, "contour point %d is not finite or too far", i);
+        if (i + 1 < c->npoints && steps == 0) continue;
+        for (s = 0; s <= steps && !st; s++) {
+            float f = steps ? (float)s / (float)steps : 0.0f;
+            if (s == steps && i + 1 < c->npoints) break; /* the next segment starts there */
+            st = fn(ctx, (int)floorf(p[0] + f * dx + 0.5f), (int)floorf(p[1] + f * dy + 0.5f), p[2] + f * (q[2] - p[2]));
+        }
+    }
+    return st;
+}
+
+typedef struct tn__pixlist {
+    int w, h;
+    int32_t *map;          /* cell -> pixel index, -1 when empty */
+    float *z;              /* per pixel */
+    int *src;              /* per pixel: index of the contour it came from */
+    size_t n, cap;
+    int cur;
+} tn__pixlist;
+
+static tn_status tn__pixlist_add(void *ctx, int x, int y, float z)
+{
+    tn__pixlist *p = (tn__pixlist *)ctx;
+    size_t c;
+    if (x < 0 || y < 0 || x >= p->w || y >= p->h) return TN_OK;
+    c = (size_t)y * p->w + x;
+    if (p->map[c] >= 0) return TN_OK;
+    if (p->n == p->cap) {
+        size_t nc = p->cap ? p->cap * 2 : 1024;
+        float *nz = (float *)TN_REALLOC(p->z, nc * sizeof(float));
+        int *ns;
+        if (!nz) return tn__fail(TN_ERR_OUT_OF_MEMORY, "contour parts: out of memory");
+        p->z = nz;
+        ns = (int *)TN_REALLOC(p->src, nc * sizeof(int));
+        if (!ns) return tn__fail(TN_ERR_OUT_OF_MEMORY, "contour parts: out of memory");
+        p->src = ns;
+        p->cap = nc;
+    }
+    p->map[c] = (int32_t)p->n;
+    p->z[p->n] = z;
+    p->src[p->n] = p->cur;
+    p->n++;
+    return TN_OK;
+}
+
+/* Emits list[a..b) as a part. */
+static tn_status tn__emit_part(const tn_contour_set *in, const tn__pixlist *pl, const size_t *list, size_t a, size_t b,
+                               tn_contour_type type, tn_contour_set *out, size_t *cap, tn__pline *tmp)
+{
+    size_t k;
+    const tn_contour *src = &in->items[pl->src[pl->map[list[a]]]];
+    tmp->n = 0;
+    for (k = a; k < b; k++) {
+        tn_status st = tn__pline_add(tmp, (float)(list[k] % (size_t)pl->w), (float)(list[k] / (size_t)pl->w), pl->z[pl->map[list[k]]]);
+        if (st) return st;
+    }
+    return tn__set_add(out, cap, type, src->order, src->mean_gradient, tmp->pts, tmp->n);
+}
+
+static int tn__cells_adjacent(size_t a, size_t b, int w)
+{
+    int ax = (int)(a % (size_t)w), ay = (int)(a / (size_t)w), bx = (int)(b % (size_t)w), by = (int)(b / (size_t)w);
+    return a != b && abs(ax - bx) <= 1 && abs(ay - by) <= 1;
+}
+
+TN_API tn_status tn_contour_parts(const tn_contour_set *in, uint64_t seed, tn_contour_set *parts)
+{
+    static const int ox[8] = {1, 1, 0, -1, -1, -1, 0, 1}, oy[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+    tn_contour_set out;
+    tn__pixlist pl;
+    tn__pline tmp = {NULL, 0, 0};
+    size_t cap = 0, ncell = 0, *list = NULL, *stack = NULL, bytes;
+    uint8_t *vis = NULL;
+    tn_rng rng;
+    tn_status st;
+    int type, i;
+    TN_ASSERT(parts);
+    if (!in || in->count <= 0 || !in->items) return tn__fail(TN_ERR_EMPTY, "contour parts: no contours");
+    if (in->width <= 0 || in->height <= 0) return tn__fail(TN_ERR_INVALID_ARG, "contour parts: canvas size %d x %d", in->width, in->height);
+    if ((st = tn__size4((size_t)in->width, (size_t)in->height, 1, sizeof(size_t), &bytes))) return st;
+    ncell = (size_t)in->width * in->height;
+    memset(&out, 0, sizeof out);
+    memset(&pl, 0, sizeof pl);
+    out.width = pl.w = in->width;
+    out.height = pl.h = in->height;
+    pl.map = (int32_t *)tn__alloc(ncell * sizeof(int32_t));
+    list = (size_t *)tn__alloc(bytes);
+    stack = (size_t *)tn__alloc(bytes);
+    vis = (uint8_t *)tn__alloc(ncell);
+    if (!pl.map || !list || !stack || !vis) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    tn_rng_seed(&rng, seed, 0x7061727473ULL); /* "parts" */
+    for (type = 0; type < 2 && !st; type++) {
+        size_t c, pass;
+        for (c = 0; c < ncell; c++) pl.map[c] = -1;
+        pl.n = 0;
+        for (i = 0; i < in->count && !st; i++) {
+            if ((int)in->items[i].type != type || in->items[i].npoints <= 0 || !in->items[i].points) continue;
+            pl.cur = i;
+            st = tn__raster_polyline(&in->items[i], tn__pixlist_add, &pl);
+        }
+        if (st || !pl.n) continue;
+        memset(vis, 0, ncell);
+        /* pass 0 starts at endpoints (one neighbour) or isolated pixels; pass 1 takes loops */
+        for (pass = 0; pass < 2 && !st; pass++)
+            for (c = 0; c < ncell && !st; c++) {
+                size_t nl = 0, sp = 0, a;
+                int deg = 0, d;
+                if (pl.map[c] < 0 || vis[c]) continue;
+                for (d = 0; d < 8; d++) {
+                    int x = (int)(c % (size_t)pl.w) + ox[d], y = (int)(c / (size_t)pl.w) + oy[d];
+                    if (x >= 0 && y >= 0 && x < pl.w && y < pl.h && pl.map[(size_t)y * pl.w + x] >= 0) deg++;
+                }
+                if (pass == 0 && deg > 1) continue;
+                vis[c] = 1;
+                list[nl++] = c;
+                stack[sp++] = c;
+                while (sp) { /* DFS, pre-order: each new pixel is a neighbour of the stack top */
+                    size_t p = stack[sp - 1], q = 0;
+                    int found = 0;
+                    for (d = 0; d < 8 && !found; d++) {
+                        int x = (int)(p % (size_t)pl.w) + ox[d], y = (int)(p / (size_t)pl.w) + oy[d];
+                        if (x < 0 || y < 0 || x >= pl.w || y >= pl.h) continue;
+                        q = (size_t)y * pl.w + x;
+                        if (pl.map[q] >= 0 && !vis[q]) found = 1;
+                    }
+                    if (!found) { sp--; continue; }
+                    vis[q] = 1;
+                    list[nl++] = q;
+                    stack[sp++] = q;
+                }
+                /* cut the list: 5-10 entries; a jump splits the run and short pieces are dropped */
+                a = 0;
+                while (a < nl && !st) {
+                    size_t len = 5 + tn_rng_below(&rng, 6), b = a + 1;
+                    while (b < a + len && b < nl && tn__cells_adjacent(list[b - 1], list[b], pl.w)) b++;
+                    if (b - a >= 5) st = tn__emit_part(in, &pl, list, a, b, (tn_contour_type)type, &out, &cap, &tmp);
+                    a = b;
+                }
+            }
+    }
+done:
+    TN_FREE(pl.map);
+    TN_FREE(pl.z);
+    TN_FREE(pl.src);
+    TN_FREE(list);
+    TN_FREE(stack);
+    TN_FREE(vis);
+    TN_FREE(tmp.pts);
+    if (st) {
+        tn_contour_set_free(&out);
+        return st;
+    }
+    *parts = out;
+    return TN_OK;
+}
+
+/* ---- preview ------------------------------------------------------------------------------ */
+
+typedef struct tn__paint { tn_image *img; float rgb[3]; } tn__paint;
+
+static tn_status tn__paint_pixel(void *ctx, int x, int y, float z)
+{
+    tn__paint *p = (tn__paint *)ctx;
+    int c;
+    (void)z;
+    if (x < 0 || y < 0 || x >= p->img->width || y >= p->img->height) return TN_OK;
+    for (c = 0; c < 3; c++) TN_PIXEL(p->img, x, y, c) = p->rgb[c];
+    return TN_OK;
+}
+
+TN_API tn_status tn_extract_preview(const tn_image *dem, const tn_contour_set *contours, tn_image *out)
+{
+    tn_image shade = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
+    tn_status st;
+    size_t i, n;
+    int k;
+    TN_ASSERT(out);
+    if ((st = tn__extract_check(dem, "extract preview"))) return st;
+    if ((st = tn_image_hillshade(&shade, dem, NULL))) return st;
+    if ((st = tn_image_create(&img, dem->width, dem->height, 3))) {
+        tn_image_free(&shade);
+        return st;
+    }
+    n = (size_t)dem->width * dem->height;
+    for (i = 0; i < n; i++) { /* dimmed grey relief so the lines stand out */
+        float v = 0.15f + 0.6f * shade.data[i];
+        img.data[i * 3] = img.data[i * 3 + 1] = img.data[i * 3 + 2] = v;
+    }
+    tn_image_free(&shade);
+    if (contours) /* valleys first so ridges stay visible where they touch */
+        for (k = 0; k < 2; k++)
+            for (i = 0; i < (size_t)contours->count; i++) {
+                tn__paint p;
+                const tn_contour *c = &contours->items[i];
+                float sx, sy;
+                tn_contour cc;
+                if ((int)c->type != k || c->npoints <= 0) continue;
+                p.img = &img;
+                p.rgb[0] = k ? 1.0f : 0.15f;
+                p.rgb[1] = k ? 0.85f : 0.45f;
+                p.rgb[2] = k ? 0.1f : 1.0f;
+                /* a sketch canvas of another size is scaled onto the DEM */
+                sx = contours->width > 0 ? (float)dem->width / (float)contours->width : 1.0f;
+                sy = contours->height > 0 ? (float)dem->height / (float)contours->height : 1.0f;
+                cc = *c;
+                if (sx != 1.0f || sy != 1.0f) {
+                    int j;
+                    cc.points = (float *)tn__alloc((size_t)c->npoints * 3 * sizeof(float));
+                    if (!cc.points) { tn_image_free(&img); return TN_ERR_OUT_OF_MEMORY; }
+                    for (j = 0; j < c->npoints; j++) {
+                        cc.points[j * 3] = (c->points[j * 3] + 0.5f) * sx - 0.5f;
+                        cc.points[j * 3 + 1] = (c->points[j * 3 + 1] + 0.5f) * sy - 0.5f;
+                        cc.points[j * 3 + 2] = c->points[j * 3 + 2];
+                    }
+                }
+                st = tn__raster_polyline(&cc, tn__paint_pixel, &p);
+                if (cc.points != c->points) TN_FREE(cc.points);
+                if (st) { tn_image_free(&img); return st; }
+            }
+    *out = img;
+    return TN_OK;
+}
+
+/* ---- realism report ----------------------------------------------------------------------- */
+
+/* In-place radix-2 complex FFT of n (a power of two) interleaved doubles, stride 1. */
+static void tn__fft(double *re, double *im, int n)
+{
+    int i, j, len;
+    for (i = 1, j = 0; i < n; i++) { /* bit reversal */
+        int bit = n >> 1;
+        for (; j & bit; bit >>= 1) j ^= bit;
+        j ^= bit;
+        if (i < j) {
+            double t = re[i]; re[i] = re[j]; re[j] = t;
+            t = im[i]; im[i] = im[j]; im[j] = t;
+        }
+    }
+    for (len = 2; len <= n; len <<= 1) {
+        double ang = -6.283185307179586 / len, wr = cos(ang), wi = sin(ang);
+        for (i = 0; i < n; i += len) {
+            double cr = 1.0, ci = 0.0;
+            for (j = 0; j < len / 2; j++) {
+                int a = i + j, b = i + j + len / 2;
+                double xr = re[b] * cr - im[b] * ci, xi = re[b] * ci + im[b] * cr, t;
+                re[b] = re[a] - xr; im[b] = im[a] - xi;
+                re[a] += xr; im[a] += xi;
+                t = cr * wr - ci * wi;
+                ci = cr * wi + ci * wr;
+                cr = t;
+            }
+        }
+    }
+}
+
+#define TN__SPEC_BINS 24
+
+/* Radially averaged power spectral density of the centred largest power-of-two square crop
+   (mean removed, Hann window): bins[k] = mean |F|^2 / sum(w^2) over frequencies in log-spaced
+   band k of [1/64 .. 0.5] cycles/px... scaled to the crop: band edges f_lo * (0.5/f_lo)^(k/K)
+   with f_lo = 2 / S. Empty bands are 0. */
+static tn_status tn__radial_spectrum(const tn_image *img, double f_lo, double *bins, int *size)
+{
+    int S = 16, x, y, k;
+    double *re, *im, *win, mean = 0.0, wsum = 0.0, cnt[TN__SPEC_BINS];
+    size_t bytes;
+    tn_status st;
+    while (S * 2 <= img->width && S * 2 <= img->height && S < 4096) S *= 2;
+    if (img->width < 16 || img->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: terrain of %d x %d is under 16 x 16", img->width, img->height);
+    *size = S;
+    if (f_lo <= 0) f_lo = 2.0 / S;
+    if ((st = tn__size4((size_t)S, (size_t)S, 2, sizeof(double), &bytes))) return st;
+    re = (double *)tn__alloc(bytes);
+    win = (double *)tn__alloc((size_t)S * sizeof(double));
+    if (!re || !win) {
+        TN_FREE(re);
+        TN_FREE(win);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    im = re + (size_t)S * S;
+    {
+        int x0 = (img->width - S) / 2, y0 = (img->height - S) / 2;
+        for (y = 0; y < S; y++)
+            for (x = 0; x < S; x++) {
+                double v = TN_PIXEL(img, x0 + x, y0 + y, 0);
+                re[(size_t)y * S + x] = v;
+                mean += v;
+            }
+    }
+    mean /= (double)S * S;
+    for (x = 0; x < S; x++) win[x] = 0.5 - 0.5 * cos(6.283185307179586 * (x + 0.5) / S);
+    for (y = 0; y < S; y++)
+        for (x = 0; x < S; x++) {
+            double w2 = win[x] * win[y];
+            re[(size_t)y * S + x] = (re[(size_t)y * S + x] - mean) * w2;
+            im[(size_t)y * S + x] = 0.0;
+            wsum += w2 * w2;
+        }
+    for (y = 0; y < S; y++) tn__fft(re + (size_t)y * S, im + (size_t)y * S, S);
+    { /* columns through a scratch row */
+        double *cr = (double *)tn__alloc((size_t)S * 2 * sizeof(double)), *ci;
+        if (!cr) {
+            TN_FREE(re);
+            TN_FREE(win);
+            return TN_ERR_OUT_OF_MEMORY;
+        }
+        ci = cr + S;
+        for (x = 0; x < S; x++) {
+            for (y = 0; y < S; y++) { cr[y] = re[(size_t)y * S + x]; ci[y] = im[(size_t)y * S + x]; }
+            tn__fft(cr, ci, S);
+            for (y = 0; y < S; y++) { re[(size_t)y * S + x] = cr[y]; im[(size_t)y * S + x] = ci[y]; }
+        }
+        TN_FREE(cr);
+    }
+    for (k = 0; k < TN__SPEC_BINS; k++) bins[k] = cnt[k] = 0.0;
+    for (y = 0; y < S; y++)
+        for (x = 0; x < S; x++) {
+            int fx = x <= S / 2 ? x : x - S, fy = y <= S / 2 ? y : y - S;
+            double f = sqrt((double)fx * fx + (double)fy * fy) / S, p;
+            if (f < f_lo || f > 0.5) continue;
+            k = (int)(log(f / f_lo) / log(0.5 / f_lo) * TN__SPEC_BINS);
+            if (k >= TN__SPEC_BINS) k = TN__SPEC_BINS - 1;
+            p = re[(size_t)y * S + x] * re[(size_t)y * S + x] + im[(size_t)y * S + x] * im[(size_t)y * S + x];
+            bins[k] += p / wsum;
+            cnt[k] += 1.0;
+        }
+    for (k = 0; k < TN__SPEC_BINS; k++) bins[k] = cnt[k] > 0 ? bins[k] / cnt[k] : 0.0;
+    TN_FREE(re);
+    TN_FREE(win);
+    return TN_OK;
+}
+
+/* Least-squares slope of log10(bins) against log10(band centre frequency). */
+static double tn__spectrum_slope(const double *bins, double f_lo)
+{
+    double sx = 0, sy = 0, sxx = 0, sxy = 0, m = 0;
+    int k;
+    for (k = 0; k < TN__SPEC_BINS; k++) {
+        double f = f_lo * pow(0.5 / f_lo, (k + 0.5) / TN__SPEC_BINS), lx, ly;
+        if (bins[k] <= 0) continue;
+        lx = log10(f);
+        ly = log10(bins[k]);
+        sx += lx; sy += ly; sxx += lx * lx; sxy += lx * ly; m += 1;
+    }
+    if (m < 2 || m * sxx - sx * sx <= 0) return 0.0;
+    return (m * sxy - sx * sy) / (m * sxx - sx * sx);
+}
+
+/* Relative earth mover's distance between the distributions of a[0..na) and b[0..nb) on 256
+   bins over [lo, hi], divided by `scale` (the reference's mean magnitude). */
+static double tn__hist_emd(const float *a, size_t na, const float *b, size_t nb, float lo, float hi, double scale)
+{
+    double ha[256], hb[256], ca = 0, cb = 0, emd = 0, bw = (double)(hi - lo) / 256.0;
+    size_t i;
+    int k;
+    if (!(hi > lo) || !(scale > 0)) return 0.0;
+    memset(ha, 0, sizeof ha);
+    memset(hb, 0, sizeof hb);
+    for (i = 0; i < na; i++) { k = (int)((a[i] - lo) / (hi - lo) * 256.0f); ha[k < 0 ? 0 : k > 255 ? 255 : k] += 1.0 / (double)na; }
+    for (i = 0; i < nb; i++) { k = (int)((b[i] - lo) / (hi - lo) * 256.0f); hb[k < 0 ? 0 : k > 255 ? 255 : k] += 1.0 / (double)nb; }
+    for (k = 0; k < 256; k++) {
+        ca += ha[k];
+        cb += hb[k];
+        emd += fabs(ca - cb) * bw;
+    }
+    return emd / scale;
+}
+
+/* Slope magnitude (field 0) and 5-point Laplacian (field 1) of channel 0, interior cells only. */
+static tn_status tn__slope_curv(const tn_image *dem, float dx, float dy, float **slope, float **curv, size_t *count)
+{
+    const int w = dem->width, h = dem->height;
+    size_t n = (size_t)(w - 2) * (h - 2), i = 0;
+    float *s, *c, ix, iy;
+    int x, y;
+    if (dx <= 0) dx = 1.0f;
+    if (dy <= 0) dy = dx;
+    ix = 1.0f / dx;
+    iy = 1.0f / dy;
+    s = (float *)tn__alloc(n * sizeof(float));
+    c = (float *)tn__alloc(n * sizeof(float));
+    if (!s || !c) {
+        TN_FREE(s);
+        TN_FREE(c);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (y = 1; y < h - 1; y++)
+        for (x = 1; x < w - 1; x++) {
+            float z = TN_PIXEL(dem, x, y, 0), zl = TN_PIXEL(dem, x - 1, y, 0), zr = TN_PIXEL(dem, x + 1, y, 0);
+            float zu = TN_PIXEL(dem, x, y - 1, 0), zd = TN_PIXEL(dem, x, y + 1, 0);
+            float gx = 0.5f * (zr - zl) * ix, gy = 0.5f * (zd - zu) * iy;
+            s[i] = sqrtf(gx * gx + gy * gy);
+            c[i] = (zr + zl - 2.0f * z) * ix * ix + (zd + zu - 2.0f * z) * iy * iy;
+            i++;
+        }
+    *slope = s;
+    *curv = c;
+    *count = n;
+    return TN_OK;
+}
+
+/* Drainage density (valley line length per cell) and mean bifurcation ratio of one DEM. */
+static tn_status tn__drainage(const tn_image *dem, int threshold, double *density, double *rb)
+{
+    tn_extract_opts o;
+    tn_extraction ex;
+    tn_status st;
+    double len = 0, nk[256];
+    size_t i, n;
+    int k, j, m = 0;
+    memset(&o, 0, sizeof o);
+    o.threshold = threshold;
+    o.which = TN_EXTRACT_VALLEYS;
+    if ((st = tn_extract(dem, &o, &ex))) return st;
+    for (i = 0; i < (size_t)ex.contours.count; i++) {
+        const tn_contour *c = &ex.contours.items[i];
+        for (j = 1; j < c->npoints; j++)
+            len += hypot(c->points[j * 3] - c->points[j * 3 - 3], c->points[j * 3 + 1] - c->points[j * 3 - 2]);
+    }
+    *density = len / ((double)dem->width * dem->height);
+    /* streams of order k: network cells of order k whose receiver is off the network or of another order */
+    memset(nk, 0, sizeof nk);
+    n = (size_t)dem->width * dem->height;
+    for (i = 0; i < n; i++) {
+        ptrdiff_t r;
+        if (!ex.valley_order[i]) continue;
+        r = tn__receiver(&ex.valley_flow, i);
+        if (r < 0 || ex.valley_order[r] != ex.valley_order[i]) nk[ex.valley_order[i]] += 1;
+    }
+    *rb = 0;
+    for (k = 1; k < ex.valley_max_order && k < 255; k++)
+        if (nk[k + 1] > 0) { *rb += nk[k] / nk[k + 1]; m++; }
+    if (m) *rb /= m;
+    tn_extraction_free(&ex);
+    return TN_OK;
+}
+
+TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts, tn_realism *out)
+{
+    tn_realism_opts o;
+    tn_realism r;
+    float *sa = NULL, *ca = NULL, *sb = NULL, *cb = NULL;
+    size_t na = 0, nb = 0, i;
+    double spa[TN__SPEC_BINS], spb[TN__SPEC_BINS], f_lo, mean_s = 0, mean_c = 0, d2 = 0, dm = 0;
+    float hi_s = 0, hi_c = 0;
+    int Sa, Sb, k;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__extract_check(ref, "realism (reference)")) || (st = tn__extract_check(img, "realism (terrain)"))) return st;
+    if (ref->width < 16 || ref->height < 16 || img->width < 16 || img->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: both terrains must be at least 16 x 16");
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing and threshold must be >= 0");
+    if (o.dx_b == 0) { o.dx_b = o.dx_a; if (o.dy_b == 0) o.dy_b = o.dy_a; }
+    memset(&r, 0, sizeof r);
+    if ((st = tn__slope_curv(ref, o.dx_a, o.dy_a, &sa, &ca, &na)) || (st = tn__slope_curv(img, o.dx_b, o.dy_b, &sb, &cb, &nb)))
+        goto done;
+    for (i = 0; i < na; i++) {
+        mean_s += sa[i];
+        mean_c += fabsf(ca[i]);
+        if (sa[i] > hi_s) hi_s = sa[i];
+        if (fabsf(ca[i]) > hi_c) hi_c = fabsf(ca[i]);
+    }
+    for (i = 0; i < nb; i++) {
+        if (sb[i] > hi_s) hi_s = sb[i];
+        if (fabsf(cb[i]) > hi_c) hi_c = fabsf(cb[i]);
+    }
+    mean_s /= (double)na;
+    mean_c /= (double)na;
+    r.slope_distance = tn__hist_emd(sa, na, sb, nb, 0.0f, hi_s, mean_s);
+    r.curvature_distance = tn__hist_emd(ca, na, cb, nb, -hi_c, hi_c, mean_c);
+    if ((st = tn__progress("realism", 0.3))) goto done;
+    /* spectra on common bands: from 2 cycles across the smaller crop to Nyquist */
+    {
+        int s0 = 16;
+        while (s0 * 2 <= ref->width && s0 * 2 <= ref->height && s0 * 2 <= img->width && s0 * 2 <= img->height && s0 < 4096) s0 *= 2;
+        f_lo = 2.0 / s0;
+    }
+    if ((st = tn__radial_spectrum(ref, f_lo, spa, &Sa)) || (st = tn__radial_spectrum(img, f_lo, spb, &Sb))) goto done;
+    for (k = 0; k < TN__SPEC_BINS; k++)
+        if (spa[k] > 0 && spb[k] > 0) {
+            double d = log10(spa[k]) - log10(spb[k]);
+            d2 += d * d;
+            dm += 1;
+        }
+    r.spectrum_distance = dm > 0 ? sqrt(d2 / dm) : 0.0;
+    r.spectrum_slope_a = tn__spectrum_slope(spa, f_lo);
+    r.spectrum_slope_b = tn__spectrum_slope(spb, f_lo);
+    if ((st = tn__progress("realism", 0.6))) goto done;
+    if ((st = tn__drainage(ref, o.threshold, &r.drainage_density_a, &r.bifurcation_ratio_a)) ||
+        (st = tn__drainage(img, o.threshold, &r.drainage_density_b, &r.bifurcation_ratio_b)))
+        goto done;
+    if (ref->width == img->width && ref->height == img->height && ref->width >= 11 && ref->height >= 11) {
+        tn_image a1 = *ref, b1 = *img;
+        tn_image ta = {0, 0, 0, NULL}, tb = {0, 0, 0, NULL};
+        tn_metrics m;
+        if (ref->channels != 1 || img->channels != 1) { /* compare channel 0 only */
+            size_t n = (size_t)ref->width * ref->height;
+            if ((st = tn__image_alloc(&ta, ref->width, ref->height, 1)) || (st = tn__image_alloc(&tb, ref->width, ref->height, 1))) {
+                tn_image_free(&ta);
+                goto done;
+            }
+            for (i = 0; i < n; i++) {
+                ta.data[i] = ref->data[i * (size_t)ref->channels];
+                tb.data[i] = img->data[i * (size_t)img->channels];
+            }
+            a1 = ta;
+            b1 = tb;
+        }
+        st = tn_compare(&a1, &b1, 0.0, &m);
+        tn_image_free(&ta);
+        tn_image_free(&tb);
+        if (st) goto done;
+        r.ssim = m.ssim;
+        r.psnr = m.psnr;
+    } else {
+        r.ssim = r.psnr = NAN;
+    }
+    {
+        double s = r.slope_distance + r.curvature_distance + r.spectrum_distance;
+        double da = r.drainage_density_a, ba = r.bifurcation_ratio_a, pa = r.spectrum_slope_a;
+        s += da > 0 ? fabs(r.drainage_density_b - da) / da : 0.0;
+        s += ba > 0 ? fabs(r.bifurcation_ratio_b - ba) / ba : 0.0;
+        s += pa != 0 ? fabs(r.spectrum_slope_b - pa) / fabs(pa) : 0.0;
+        r.distance = s / 6.0;
+    }
+    st = tn__progress("realism", 1.0);
+done:
+    TN_FREE(sa);
+    TN_FREE(ca);
+    TN_FREE(sb);
+    TN_FREE(cb);
+    if (!st) *out = r;
     return st;
 }
 

@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render noise sketch sketch-random align; do
+for c in info convert metrics render noise sketch sketch-random align extract realism; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -94,6 +94,38 @@ if [ -f "$HGT" ]; then
     if cmp -s "$W/alps.png" "$W/keep.png"; then ok; else bad "failed convert changed the existing output"; fi
 else
     skipped "real DEM tests ($HGT absent)"
+fi
+# extract / realism: errors, then a procedural DEM (no data needed), then real DEMs
+expect_error "extract no DEM" "missing DEM" $T extract
+expect_error "extract bad threshold" "threshold" $T extract "$W/noise.png" --threshold -4
+expect_error "extract missing file" "no_such_dem.png" $T extract no_such_dem.png
+expect_error "realism one arg" "needs" $T realism "$W/noise.png"
+expect_error "realism bad range" "LO < HI" $T realism "$W/noise.png" "$W/noise.png" --range-a 5 1
+if $T extract "$W/noise.png" --threshold 20 --preview "$W/ex.png" --valleys "$W/v.png" --ridges "$W/r.png" \
+        --accumulation "$W/acc.pfm" > "$W/ex.txt" 2>/dev/null &&
+    grep -q "^threshold: 20$" "$W/ex.txt" && grep -q "^valley_contours: [1-9]" "$W/ex.txt" &&
+    $T info "$W/ex.png" | grep -q "channels: 3" && $T info "$W/v.png" | grep -q "size: 96 x 64" &&
+    $T info "$W/acc.pfm" | grep -q "format: pfm"; then ok; else bad "extract outputs: $(cat "$W/ex.txt")"; fi
+# extract -> .tns -> sketch reads it back (the extract/edit/regenerate round trip)
+if $T extract "$W/noise.png" --threshold 20 -o "$W/ex.tns" > /dev/null 2>&1 && head -n 1 "$W/ex.tns" | grep -q "^terrainnet-sketch 1" &&
+    $T sketch "$W/ex.tns" -o "$W/ex_raster.pfm" > /dev/null 2>&1 && $T info "$W/ex_raster.pfm" | grep -q "channels: 3"; then ok;
+else bad "extract -o .tns round trip"; fi
+$T realism "$W/noise.png" "$W/noise.png" > "$W/re.txt" 2>/dev/null
+if grep -q "^slope_distance: 0.000000$" "$W/re.txt" && grep -q "^distance: 0.000000$" "$W/re.txt" &&
+    grep -q "^ssim: 1.000000$" "$W/re.txt"; then ok; else bad "realism identical: $(cat "$W/re.txt")"; fi
+ALPS="$D/dem/alps_n47e009/alps_n47e009_256.png"; MB="$D/dem/alps_montblanc/alps_montblanc_256.png"
+SAH="$D/dem/sahara_erg_oriental/sahara_erg_oriental_256.png"
+if [ -f "$ALPS" ] && [ -f "$MB" ] && [ -f "$SAH" ]; then
+    near=$($T realism "$ALPS" "$MB" --range-a 388 2937 --range-b 454 4810 --spacing 62.6 92.6 --spacing-b 92.7 2>/dev/null |
+        sed -n 's/^distance: //p')
+    far=$($T realism "$ALPS" "$SAH" --range-a 388 2937 --range-b 189 475 --spacing 62.6 92.6 --spacing-b 92.6 2>/dev/null |
+        sed -n 's/^distance: //p')
+    if [ -n "$near" ] && [ -n "$far" ] && awk "BEGIN { exit !($near < $far) }"; then ok;
+    else bad "realism: alps-montblanc $near should be below alps-sahara $far"; fi
+    if $T extract "$ALPS" > "$W/ex2.txt" 2>/dev/null && grep -q "^valley_max_strahler: [3-7]$" "$W/ex2.txt"; then ok;
+    else bad "extract alps: $(cat "$W/ex2.txt")"; fi
+else
+    skipped "realism on real DEMs (absent)"
 fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]
