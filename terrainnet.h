@@ -6176,22 +6176,23 @@ static void tn__conv_inner(const tn__conv_geom *g, int kx, int *lo, int *hi)
 static void tn__conv_span(const tn__conv_geom *g, const float *xr, int kx, int lo, int hi, int ox0, int ox1, float *d)
 {
     int ox, a = lo > ox0 ? lo : ox0, b = hi < ox1 ? hi : ox1, x0 = kx * g->dil - g->pad;
+    d -= ox0; /* d[ox] from here on */
     if (!xr) {
-        memset(d, 0, (size_t)(ox1 - ox0) * sizeof(float));
+        memset(d + ox0, 0, (size_t)(ox1 - ox0) * sizeof(float));
         return;
     }
     if (a > ox1) a = ox1;
     if (b < a) b = a;
-    for (ox = ox0; ox < a; ox++) {
-        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+    for (ox = ox0; ox < a; ox++) { /* left edge */
+        int ix = g->reflect ? tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, 1) : -1;
+        d[ox] = ix < 0 ? 0.0f : xr[ix];
     }
-    if (g->stride == 1) memcpy(d + (a - ox0), xr + x0 + a, (size_t)(b - a) * sizeof(float));
+    if (g->stride == 1) memcpy(d + a, xr + x0 + a, (size_t)(b - a) * sizeof(float));
     else
-        for (ox = a; ox < b; ox++) d[ox - ox0] = xr[ox * g->stride + x0];
-    for (ox = b; ox < ox1; ox++) {
-        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+        for (ox = a; ox < b; ox++) d[ox] = xr[ox * g->stride + x0];
+    for (ox = b; ox < ox1; ox++) { /* right edge */
+        int ix = g->reflect ? tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, 1) : -1;
+        d[ox] = ix < 0 ? 0.0f : xr[ix];
     }
 }
 
@@ -6214,7 +6215,22 @@ static void tn__im2col_band(const tn__conv_geom *g, const float *x, float *col, 
 
 /* im2col packed straight into the GEMM's B panels (tn__gemm_pack_fn): column j of the band is
    output pixel oy0 * OW + j of image x; row C*KH*KW, if asked for, is ones (times the bias). */
-typedef struct tn__conv_pack { const tn__conv_geom *g; const float *x; int oy0; } tn__conv_pack;
+#define TN__CONV_KW_TAB 16
+typedef struct tn__conv_pack {
+    const tn__conv_geom *g;
+    const float *x;
+    int oy0;
+    int lo[TN__CONV_KW_TAB], hi[TN__CONV_KW_TAB]; /* tn__conv_inner of each kx (if KW fits) */
+} tn__conv_pack;
+
+static void tn__conv_pack_init(tn__conv_pack *p, const tn__conv_geom *g, const float *x, int oy0)
+{
+    int kx;
+    p->g = g;
+    p->x = x;
+    p->oy0 = oy0;
+    for (kx = 0; kx < g->KW && kx < TN__CONV_KW_TAB; kx++) tn__conv_inner(g, kx, &p->lo[kx], &p->hi[kx]);
+}
 
 static void tn__conv_pack_b(void *ctx, int k0, int kc, int j0, int nc, float *pb)
 {
@@ -6235,7 +6251,12 @@ static void tn__conv_pack_b(void *ctx, int k0, int kc, int j0, int nc, float *pb
             ci++;
         }
         x0 = kx * g->dil - g->pad;
-        tn__conv_inner(g, kx, &lo, &hi);
+        if (kx < TN__CONV_KW_TAB) {
+            lo = p->lo[kx];
+            hi = p->hi[kx];
+        } else {
+            tn__conv_inner(g, kx, &lo, &hi);
+        }
         while (j < nc) { /* one output row at a time, in pieces that stay inside one panel */
             int pix = j0 + j, oy = p->oy0 + pix / g->OW, ox = pix % g->OW, end = j + g->OW - ox;
             int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
@@ -6381,9 +6402,7 @@ static void tn__conv_fwd_task(void *ctx, int ith, int nth)
             } else { /* the bias is folded in as weight column K against a row of ones */
                 tn__conv_pack pk;
                 int kb = j->K + (j->bias != NULL);
-                pk.g = g;
-                pk.x = xn;
-                pk.oy0 = oy;
+                tn__conv_pack_init(&pk, g, xn, oy);
                 tn__sgemm_gen_b(m1 - m0, band, kb, j->wb + (size_t)m0 * kb, kb, tn__conv_pack_b, &pk, j->beta, yb, (int)ohw, buf);
                 continue;
             }
