@@ -6353,6 +6353,7 @@ typedef struct tn__conv_job {
     const float *wb;                 /* forward: w with the bias appended to each row (or w) */
     float *scratch;                  /* per thread: scratch_floats for columns / packing */
     size_t scratch_floats;
+    int next;                        /* next unclaimed item (atomic) */
 } tn__conv_job;
 
 static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
@@ -6361,11 +6362,26 @@ static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
     *r1 = (int)((long long)j->g.OH * (gi + 1) / j->groups);
 }
 
-/* Items [*b, *e) of `items` for thread ith of nth. */
-static void tn__conv_share(int items, int ith, int nth, int *b, int *e)
+/* The next item for thread ith of nth, -1 when none is left. With atomics a free thread takes
+   the next one (an item's result does not depend on which thread computes it, and a thread the
+   OS preempts then holds up only its current item); otherwise a fixed contiguous share. */
+#if !defined(TN_NO_THREADS) && (defined(__GNUC__) || defined(__clang__))
+#define TN__CONV_DYNAMIC 1
+#endif
+static int tn__conv_claim(const tn__conv_job *j, int items, int ith, int nth, int *cursor)
 {
-    *b = (int)((long long)items * ith / nth);
-    *e = (int)((long long)items * (ith + 1) / nth);
+#ifdef TN__CONV_DYNAMIC
+    int it = __atomic_fetch_add((int *)&j->next, 1, __ATOMIC_RELAXED);
+    (void)ith;
+    (void)nth;
+    (void)cursor;
+    return it < items ? it : -1;
+#else
+    int b = (int)((long long)items * ith / nth), e = (int)((long long)items * (ith + 1) / nth);
+    (void)j;
+    if (*cursor < b) *cursor = b;
+    return *cursor < e ? (*cursor)++ : -1;
+#endif
 }
 
 /* Products up to this size go through tn_sgemm's unpacked loops (on an im2col buffer of at most
@@ -6383,9 +6399,8 @@ static void tn__conv_fwd_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *buf = j->scratch + (size_t)ith * j->scratch_floats, *col = buf + j->scratch_floats - TN__CONV_TINY;
-    int parts = j->groups * j->mparts, mtiles = (j->M + TN__GEMM_MR - 1) / TN__GEMM_MR, it, b, e, r0, r1, oy, m;
-    tn__conv_share(j->N * parts, ith, nth, &b, &e);
-    for (it = b; it < e; it++) {
+    int parts = j->groups * j->mparts, mtiles = (j->M + TN__GEMM_MR - 1) / TN__GEMM_MR, it, cur = -1, r0, r1, oy, m;
+    while ((it = tn__conv_claim(j, j->N * parts, ith, nth, &cur)) >= 0) {
         int mp = it % j->mparts, m0 = mtiles * mp / j->mparts * TN__GEMM_MR, m1 = mtiles * (mp + 1) / j->mparts * TN__GEMM_MR;
         const float *xn = j->x + (size_t)(it / parts) * chw, *wm;
         float *yn = j->y + (size_t)(it / parts) * j->M * ohw;
@@ -6423,9 +6438,8 @@ static void tn__conv_dw_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *col = j->scratch + (size_t)ith * j->scratch_floats;
-    int gi, b, e, r0, r1, oy, n;
-    tn__conv_share(j->groups, ith, nth, &b, &e);
-    for (gi = b; gi < e; gi++) {
+    int gi, cur = -1, r0, r1, oy, n;
+    while ((gi = tn__conv_claim(j, j->groups, ith, nth, &cur)) >= 0) {
         float *part = j->dw + (size_t)gi * j->M * j->kd, beta = j->dw_direct ? 1.0f : 0.0f;
         tn__conv_group_rows(j, gi, &r0, &r1);
         for (n = 0; n < j->N; n++)
@@ -6459,9 +6473,8 @@ static void tn__conv_dx_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *col = j->scratch + (size_t)ith * j->scratch_floats;
-    int per = (j->groups - j->phase + 1) / 2, it, b, e, r0, r1, oy;
-    tn__conv_share(j->N * per, ith, nth, &b, &e);
-    for (it = b; it < e; it++) {
+    int per = (j->groups - j->phase + 1) / 2, it, cur = -1, r0, r1, oy;
+    while ((it = tn__conv_claim(j, j->N * per, ith, nth, &cur)) >= 0) {
         int n = it / per;
         tn__conv_group_rows(j, 2 * (it % per) + j->phase, &r0, &r1);
         for (oy = r0; oy < r1; oy += j->sub) {
@@ -6498,6 +6511,7 @@ static size_t tn__conv_col_floats(const tn__conv_geom *g)
 /* Runs fn over the pool, or inline when there is a single item (the GEMMs then use the pool). */
 static void tn__conv_run(tn_task_fn fn, tn__conv_job *j, int items)
 {
+    j->next = 0;
     if (items <= 1 || tn_get_threads() <= 1) fn(j, 0, 1);
     else tn_parallel_run(fn, j);
 }
