@@ -6606,10 +6606,14 @@ static void tn__conv_sum_parts(void *ctx, size_t b, size_t e)
     }
 }
 
-/* Whether the weight gradient is better computed transposed (col dy^T): the GEMM packs rows in
-   blocks of MR and columns in blocks of NR at full speed, leftovers element by element. */
+/* Whether the weight gradient is better computed transposed (col dy^T): the micro-kernel pads
+   rows to MR and columns to NR, so take the form with less padding (a lone bias column would
+   cost a whole NR panel), then the one whose packing has fewer element-by-element leftovers. */
 static int tn__conv_dw_transposed(int M, int K)
 {
+    long long mr = TN__GEMM_MR, nr = TN__GEMM_NR;
+    long long plain = (M + mr - 1) / mr * mr * ((K + nr - 1) / nr * nr), trans = (K + mr - 1) / mr * mr * ((M + nr - 1) / nr * nr);
+    if (plain != trans) return trans < plain;
     return K % TN__GEMM_MR + M % TN__GEMM_NR < M % TN__GEMM_MR + K % TN__GEMM_NR;
 }
 
