@@ -6409,22 +6409,23 @@ static void tn__conv_inner(const tn__conv_geom *g, int kx, int *lo, int *hi)
 static void tn__conv_span(const tn__conv_geom *g, const float *xr, int kx, int lo, int hi, int ox0, int ox1, float *d)
 {
     int ox, a = lo > ox0 ? lo : ox0, b = hi < ox1 ? hi : ox1, x0 = kx * g->dil - g->pad;
+    d -= ox0; /* d[ox] from here on */
     if (!xr) {
-        memset(d, 0, (size_t)(ox1 - ox0) * sizeof(float));
+        memset(d + ox0, 0, (size_t)(ox1 - ox0) * sizeof(float));
         return;
     }
     if (a > ox1) a = ox1;
     if (b < a) b = a;
-    for (ox = ox0; ox < a; ox++) {
-        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+    for (ox = ox0; ox < a; ox++) { /* left edge */
+        int ix = g->reflect ? tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, 1) : -1;
+        d[ox] = ix < 0 ? 0.0f : xr[ix];
     }
-    if (g->stride == 1) memcpy(d + (a - ox0), xr + x0 + a, (size_t)(b - a) * sizeof(float));
+    if (g->stride == 1) memcpy(d + a, xr + x0 + a, (size_t)(b - a) * sizeof(float));
     else
-        for (ox = a; ox < b; ox++) d[ox - ox0] = xr[ox * g->stride + x0];
-    for (ox = b; ox < ox1; ox++) {
-        int ix = tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, g->reflect);
-        d[ox - ox0] = ix < 0 ? 0.0f : xr[ix];
+        for (ox = a; ox < b; ox++) d[ox] = xr[ox * g->stride + x0];
+    for (ox = b; ox < ox1; ox++) { /* right edge */
+        int ix = g->reflect ? tn__conv_src(ox, kx, g->stride, g->pad, g->dil, g->W, 1) : -1;
+        d[ox] = ix < 0 ? 0.0f : xr[ix];
     }
 }
 
@@ -6446,19 +6447,49 @@ static void tn__im2col_band(const tn__conv_geom *g, const float *x, float *col, 
 }
 
 /* im2col packed straight into the GEMM's B panels (tn__gemm_pack_fn): column j of the band is
-   output pixel oy0 * OW + j of image x. */
-typedef struct tn__conv_pack { const tn__conv_geom *g; const float *x; int oy0; } tn__conv_pack;
+   output pixel oy0 * OW + j of image x; row C*KH*KW, if asked for, is ones (times the bias). */
+#define TN__CONV_KW_TAB 16
+typedef struct tn__conv_pack {
+    const tn__conv_geom *g;
+    const float *x;
+    int oy0;
+    int lo[TN__CONV_KW_TAB], hi[TN__CONV_KW_TAB]; /* tn__conv_inner of each kx (if KW fits) */
+} tn__conv_pack;
+
+static void tn__conv_pack_init(tn__conv_pack *p, const tn__conv_geom *g, const float *x, int oy0)
+{
+    int kx;
+    p->g = g;
+    p->x = x;
+    p->oy0 = oy0;
+    for (kx = 0; kx < g->KW && kx < TN__CONV_KW_TAB; kx++) tn__conv_inner(g, kx, &p->lo[kx], &p->hi[kx]);
+}
 
 static void tn__conv_pack_b(void *ctx, int k0, int kc, int j0, int nc, float *pb)
 {
     const tn__conv_pack *p = (const tn__conv_pack *)ctx;
     const tn__conv_geom *g = p->g;
     size_t panel = tn__gemm_b_stride(kc);
-    int k, t;
-    for (k = 0; k < kc; k++) {
-        int r = k0 + k, kx = r % g->KW, ky = (r / g->KW) % g->KH, ci = r / (g->KW * g->KH), lo, hi, j = 0;
-        int x0 = kx * g->dil - g->pad;
-        tn__conv_inner(g, kx, &lo, &hi);
+    int k, t, kx = (k0 % g->KW) - 1, ky = (k0 / g->KW) % g->KH, ci = k0 / (g->KW * g->KH);
+    for (k = 0; k < kc; k++) { /* row by row: each source row is read sequentially */
+        int lo, hi, x0, j = 0;
+        if (k0 + k == g->C * g->KH * g->KW) { /* the bias row: ones */
+            float *d = pb + (size_t)k * TN__GEMM_NR;
+            for (j = 0; j < nc; j += TN__GEMM_NR, d += panel)
+                for (t = 0; t < TN__GEMM_NR; t++) d[t] = j + t < nc ? 1.0f : 0.0f;
+            continue;
+        }
+        if (++kx == g->KW && (kx = 0, ++ky == g->KH)) { /* next tap (ci, ky, kx) */
+            ky = 0;
+            ci++;
+        }
+        x0 = kx * g->dil - g->pad;
+        if (kx < TN__CONV_KW_TAB) {
+            lo = p->lo[kx];
+            hi = p->hi[kx];
+        } else {
+            tn__conv_inner(g, kx, &lo, &hi);
+        }
         while (j < nc) { /* one output row at a time, in pieces that stay inside one panel */
             int pix = j0 + j, oy = p->oy0 + pix / g->OW, ox = pix % g->OW, end = j + g->OW - ox;
             int iy = tn__conv_src(oy, ky, g->stride, g->pad, g->dil, g->H, g->reflect);
@@ -6468,12 +6499,10 @@ static void tn__conv_pack_b(void *ctx, int k0, int kc, int j0, int nc, float *pb
                 int n = TN__GEMM_NR - j % TN__GEMM_NR;
                 float *d = pb + (size_t)(j / TN__GEMM_NR) * panel + (size_t)k * TN__GEMM_NR + j % TN__GEMM_NR;
                 if (n > end - j) n = end - j;
-                if (xr && g->stride == 1 && ox >= lo && ox + n <= hi) {
-                    const float *src = xr + x0 + ox;
-                    for (t = 0; t < n; t++) d[t] = src[t];
-                } else {
+                if (xr && g->stride == 1 && n == TN__GEMM_NR && ox >= lo && ox + n <= hi)
+                    memcpy(d, xr + x0 + ox, TN__GEMM_NR * sizeof(float)); /* inlined */
+                else
                     tn__conv_span(g, xr, kx, lo, hi, ox, ox + n, d);
-                }
                 j += n;
                 ox += n;
             }
@@ -6548,13 +6577,16 @@ static int tn__conv_sub_rows(const tn__conv_geom *g)
 /* One convolution pass over row groups; which pass the task function decides. */
 typedef struct tn__conv_job {
     tn__conv_geom g;
-    int N, M, K, groups, sub, phase; /* phase: col2im pass over groups of this parity */
+    int N, M, K, groups, sub, phase; /* col2im: groups of this parity; dw: partials transposed */
     int mparts;                      /* forward: output channels split this many ways */
+    int kd, dw_direct;               /* dw: K (+ 1 with the bias gradient); sums straight into dw */
     const float *x, *w, *bias, *dy;  /* x: N x C x H x W, w: M x K, dy: N x M x OH x OW */
     float *y, *dx, *dw;              /* y like dy, dx like x; dw: groups partials of M x K */
     float beta;                      /* forward: y = beta * y + conv */
+    const float *wb;                 /* forward: w with the bias appended to each row (or w) */
     float *scratch;                  /* per thread: scratch_floats for columns / packing */
     size_t scratch_floats;
+    int next;                        /* next unclaimed item (atomic) */
 } tn__conv_job;
 
 static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
@@ -6563,16 +6595,34 @@ static void tn__conv_group_rows(const tn__conv_job *j, int gi, int *r0, int *r1)
     *r1 = (int)((long long)j->g.OH * (gi + 1) / j->groups);
 }
 
-/* Items [*b, *e) of `items` for thread ith of nth. */
-static void tn__conv_share(int items, int ith, int nth, int *b, int *e)
+/* The next item for thread ith of nth, -1 when none is left. With atomics a free thread takes
+   the next one (an item's result does not depend on which thread computes it, and a thread the
+   OS preempts then holds up only its current item); otherwise a fixed contiguous share. */
+#if !defined(TN_NO_THREADS) && (defined(__GNUC__) || defined(__clang__))
+#define TN__CONV_DYNAMIC 1
+#endif
+static int tn__conv_claim(const tn__conv_job *j, int items, int ith, int nth, int *cursor)
 {
-    *b = (int)((long long)items * ith / nth);
-    *e = (int)((long long)items * (ith + 1) / nth);
+#ifdef TN__CONV_DYNAMIC
+    int it = __atomic_fetch_add((int *)&j->next, 1, __ATOMIC_RELAXED);
+    (void)ith;
+    (void)nth;
+    (void)cursor;
+    return it < items ? it : -1;
+#else
+    int b = (int)((long long)items * ith / nth), e = (int)((long long)items * (ith + 1) / nth);
+    (void)j;
+    if (*cursor < b) *cursor = b;
+    return *cursor < e ? (*cursor)++ : -1;
+#endif
 }
 
 /* Products up to this size go through tn_sgemm's unpacked loops (on an im2col buffer of at most
    this many floats); decided on the whole M, so every split computes them the same way. */
 #define TN__CONV_TINY TN__GEMM_SMALL
+#ifndef TN__CONV_FWD_PIX
+#define TN__CONV_FWD_PIX 2048
+#endif
 
 /* Items are (image, group, channel part): y rows = W im2col(x rows) (+ bias), with im2col packed
    straight into the GEMM panels. Each output element's sum is the same for any split. */
@@ -6582,9 +6632,8 @@ static void tn__conv_fwd_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *buf = j->scratch + (size_t)ith * j->scratch_floats, *col = buf + j->scratch_floats - TN__CONV_TINY;
-    int parts = j->groups * j->mparts, mtiles = (j->M + TN__GEMM_MR - 1) / TN__GEMM_MR, it, b, e, r0, r1, oy, m;
-    tn__conv_share(j->N * parts, ith, nth, &b, &e);
-    for (it = b; it < e; it++) {
+    int parts = j->groups * j->mparts, mtiles = (j->M + TN__GEMM_MR - 1) / TN__GEMM_MR, it, cur = -1, r0, r1, oy, m;
+    while ((it = tn__conv_claim(j, j->N * parts, ith, nth, &cur)) >= 0) {
         int mp = it % j->mparts, m0 = mtiles * mp / j->mparts * TN__GEMM_MR, m1 = mtiles * (mp + 1) / j->mparts * TN__GEMM_MR;
         const float *xn = j->x + (size_t)(it / parts) * chw, *wm;
         float *yn = j->y + (size_t)(it / parts) * j->M * ohw;
@@ -6598,12 +6647,12 @@ static void tn__conv_fwd_task(void *ctx, int ith, int nth)
             if ((double)j->M * band * j->K <= TN__CONV_TINY) {
                 tn__im2col_band(g, xn, col, oy, oy1);
                 tn_sgemm(0, 0, m1 - m0, band, j->K, 1.0f, wm, j->K, col, band, j->beta, yb, (int)ohw);
-            } else {
+            } else { /* the bias is folded in as weight column K against a row of ones */
                 tn__conv_pack pk;
-                pk.g = g;
-                pk.x = xn;
-                pk.oy0 = oy;
-                tn__sgemm_gen_b(m1 - m0, band, j->K, wm, j->K, tn__conv_pack_b, &pk, j->beta, yb, (int)ohw, buf);
+                int kb = j->K + (j->bias != NULL);
+                tn__conv_pack_init(&pk, g, xn, oy);
+                tn__sgemm_gen_b(m1 - m0, band, kb, j->wb + (size_t)m0 * kb, kb, tn__conv_pack_b, &pk, j->beta, yb, (int)ohw, buf);
+                continue;
             }
             if (j->bias)
                 for (m = m0; m < m1; m++) {
@@ -6622,21 +6671,29 @@ static void tn__conv_dw_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *col = j->scratch + (size_t)ith * j->scratch_floats;
-    int gi, b, e, r0, r1, oy, n;
-    tn__conv_share(j->groups, ith, nth, &b, &e);
-    for (gi = b; gi < e; gi++) {
-        float *part = j->dw + (size_t)gi * j->M * j->K, beta = j->groups == 1 ? 1.0f : 0.0f;
+    int gi, cur = -1, r0, r1, oy, n;
+    while ((gi = tn__conv_claim(j, j->groups, ith, nth, &cur)) >= 0) {
+        float *part = j->dw + (size_t)gi * j->M * j->kd, beta = j->dw_direct ? 1.0f : 0.0f;
         tn__conv_group_rows(j, gi, &r0, &r1);
         for (n = 0; n < j->N; n++)
             for (oy = r0; oy < r1; oy += j->sub) {
                 int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
                 const float *xn = j->x + (size_t)n * chw, *dyb = j->dy + (size_t)n * j->M * ohw + (size_t)oy * g->OW;
+                const float *cb = col;
+                int ldc = band;
                 if (tn__conv_is_1x1(g)) {
-                    tn_sgemm(0, 1, j->M, j->K, band, 1.0f, dyb, (int)ohw, xn + (size_t)oy * g->OW, (int)ohw, beta, part, j->K);
+                    cb = xn + (size_t)oy * g->OW;
+                    ldc = (int)ohw;
                 } else {
+                    int i;
                     tn__im2col_band(g, xn, col, oy, oy1);
-                    tn_sgemm(0, 1, j->M, j->K, band, 1.0f, dyb, (int)ohw, col, band, beta, part, j->K);
+                    if (j->kd > j->K) /* a row of ones: the bias gradient comes out as column K */
+                        for (i = 0; i < band; i++) col[(size_t)j->K * band + i] = 1.0f;
                 }
+                if (j->phase) /* transposed partial: kd x M = col dy^T */
+                    tn_sgemm(0, 1, j->kd, j->M, band, 1.0f, cb, ldc, dyb, (int)ohw, beta, part, j->M);
+                else
+                    tn_sgemm(0, 1, j->M, j->kd, band, 1.0f, dyb, (int)ohw, cb, ldc, beta, part, j->kd);
                 beta = 1.0f; /* the first product of a group initialises its partial */
             }
     }
@@ -6649,9 +6706,8 @@ static void tn__conv_dx_task(void *ctx, int ith, int nth)
     const tn__conv_geom *g = &j->g;
     size_t ohw = (size_t)g->OH * g->OW, chw = (size_t)g->C * g->H * g->W;
     float *col = j->scratch + (size_t)ith * j->scratch_floats;
-    int per = (j->groups - j->phase + 1) / 2, it, b, e, r0, r1, oy;
-    tn__conv_share(j->N * per, ith, nth, &b, &e);
-    for (it = b; it < e; it++) {
+    int per = (j->groups - j->phase + 1) / 2, it, cur = -1, r0, r1, oy;
+    while ((it = tn__conv_claim(j, j->N * per, ith, nth, &cur)) >= 0) {
         int n = it / per;
         tn__conv_group_rows(j, 2 * (it % per) + j->phase, &r0, &r1);
         for (oy = r0; oy < r1; oy += j->sub) {
@@ -6688,6 +6744,7 @@ static size_t tn__conv_col_floats(const tn__conv_geom *g)
 /* Runs fn over the pool, or inline when there is a single item (the GEMMs then use the pool). */
 static void tn__conv_run(tn_task_fn fn, tn__conv_job *j, int items)
 {
+    j->next = 0;
     if (items <= 1 || tn_get_threads() <= 1) fn(j, 0, 1);
     else tn_parallel_run(fn, j);
 }
@@ -6700,7 +6757,7 @@ static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, c
     int items, nth = tn_get_threads(), mtiles = (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
     if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__sgemm_gen_b_floats(M) + TN__CONV_TINY))
         return 0;
-    j.sub = (int)(2048 / (size_t)g->OW); /* ~2048 pixels per GEMM: its output is still in L2 for the bias */
+    j.sub = (int)(TN__CONV_FWD_PIX / (size_t)g->OW); /* pixels per GEMM */
     if (j.sub < 1) j.sub = 1;
     items = N * j.groups;
     if (items < 2 * nth) { /* few groups (small images): also split the output channels */
@@ -6708,45 +6765,120 @@ static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, c
         if (j.mparts > mtiles) j.mparts = mtiles;
     }
     j.x = x;
-    j.w = w;
+    j.w = j.wb = w;
     j.bias = bias;
     j.y = y;
     j.beta = beta;
+    if (bias) { /* M x (K + 1): [w | bias] */
+        float *wb = tn__ctx_floats(ctx, (size_t)M * (j.K + 1), 0);
+        int m;
+        if (!wb) return 0;
+        for (m = 0; m < M; m++) {
+            memcpy(wb + (size_t)m * (j.K + 1), w + (size_t)m * j.K, (size_t)j.K * sizeof(float));
+            wb[(size_t)m * (j.K + 1) + j.K] = bias[m];
+        }
+        j.wb = wb;
+    }
     tn__conv_run(tn__conv_fwd_task, &j, items * j.mparts);
     return 1;
 }
 
-typedef struct tn__conv_sum_job { float *dw; const float *parts; size_t n; int groups; } tn__conv_sum_job;
+/* Adds bias[c] to every pixel of channel c; its gradient is the per-channel sum. */
+static void tn__bias_add(float *y, const float *bias, int N, int C, size_t hw)
+{
+    int n, c;
+    size_t i;
+    for (n = 0; n < N; n++)
+        for (c = 0; c < C; c++) {
+            float *p = y + ((size_t)n * C + c) * hw, b = bias[c];
+            for (i = 0; i < hw; i++) p[i] += b;
+        }
+}
 
+typedef struct tn__bias_job { float *gb; const float *gy; int N, C; size_t hw; } tn__bias_job;
+
+static void tn__bias_grad_channels(void *ctx, size_t cb, size_t ce)
+{
+    const tn__bias_job *j = (const tn__bias_job *)ctx;
+    size_t c;
+    int n;
+    for (c = cb; c < ce; c++)
+        for (n = 0; n < j->N; n++) j->gb[c] += (float)tn__sum_floats(j->gy + ((size_t)n * j->C + c) * j->hw, j->hw);
+}
+
+static void tn__bias_grad(float *gb, const float *gy, int N, int C, size_t hw)
+{
+    tn__bias_job j;
+    j.gb = gb;
+    j.gy = gy;
+    j.N = N;
+    j.C = C;
+    j.hw = hw;
+    tn_parallel_for((size_t)C, hw * N >= 16384 ? 1 : (size_t)C, tn__bias_grad_channels, &j);
+}
+
+typedef struct tn__conv_sum_job {
+    float *dw, *db;
+    const float *parts;
+    size_t n;
+    int groups, M, K, kd, transposed;
+} tn__conv_sum_job;
+
+/* Element i = (m, k) of the M x kd weight(+bias) gradient += the groups' partials, in group order. */
 static void tn__conv_sum_parts(void *ctx, size_t b, size_t e)
 {
     const tn__conv_sum_job *s = (const tn__conv_sum_job *)ctx;
     size_t i;
     int k;
     for (i = b; i < e; i++) {
-        float acc = s->parts[i];
-        for (k = 1; k < s->groups; k++) acc += s->parts[(size_t)k * s->n + i];
-        s->dw[i] += acc;
+        size_t m = i / (size_t)s->kd, c = i % (size_t)s->kd, at = s->transposed ? c * s->M + m : i;
+        float acc = s->parts[at];
+        for (k = 1; k < s->groups; k++) acc += s->parts[(size_t)k * s->n + at];
+        if (c < (size_t)s->K) s->dw[m * s->K + c] += acc;
+        else s->db[m] += acc;
     }
 }
 
-/* dw (M x K) += sum over images of dy (M x OH*OW) x im2col(x)^T. */
+/* Whether the weight gradient is better computed transposed (col dy^T): the micro-kernel pads
+   rows to MR and columns to NR, so take the form with less padding (a lone bias column would
+   cost a whole NR panel), then the one whose packing has fewer element-by-element leftovers. */
+static int tn__conv_dw_transposed(int M, int K)
+{
+    long long mr = TN__GEMM_MR, nr = TN__GEMM_NR;
+    long long plain = (M + mr - 1) / mr * mr * ((K + nr - 1) / nr * nr), trans = (K + mr - 1) / mr * mr * ((M + nr - 1) / nr * nr);
+    if (plain != trans) return trans < plain;
+    return K % TN__GEMM_MR + M % TN__GEMM_NR < M % TN__GEMM_MR + K % TN__GEMM_NR;
+}
+
+/* dw (M x K) += sum over images of dy (M x OH*OW) x im2col(x)^T, and db (M, if not NULL) += the
+   sums of dy's channels, taken in the same pass over dy (1x1: separately). */
 static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
-                                float *dw)
+                                float *dw, float *db)
 {
     tn__conv_job j;
     tn__conv_sum_job s;
-    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__conv_col_floats(g))) return 0;
+    int fuse = db && !tn__conv_is_1x1(g);
+    if (db && !fuse) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
+    if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__conv_col_floats(g) + (size_t)g->OH * g->OW))
+        return 0;
     j.x = x;
     j.dy = dy;
-    j.dw = j.groups == 1 ? dw : tn__ctx_floats(ctx, (size_t)j.groups * M * j.K, 0);
+    j.kd = j.K + fuse;
+    j.phase = tn__conv_dw_transposed(M, j.kd); /* here: the partials are kd x M */
+    j.dw_direct = j.groups == 1 && !j.phase && !fuse;
+    j.dw = j.dw_direct ? dw : tn__ctx_floats(ctx, (size_t)j.groups * M * j.kd, 0);
     if (!j.dw) return 0;
     tn__conv_run(tn__conv_dw_task, &j, j.groups);
-    if (j.groups == 1) return 1;
+    if (j.dw_direct) return 1;
     s.dw = dw;
+    s.db = db;
     s.parts = j.dw;
-    s.n = (size_t)M * j.K;
+    s.n = (size_t)M * j.kd;
     s.groups = j.groups;
+    s.M = M;
+    s.K = j.K;
+    s.kd = j.kd;
+    s.transposed = j.phase;
     tn_parallel_for(s.n, 16384, tn__conv_sum_parts, &s);
     return 1;
 }
@@ -6827,48 +6959,19 @@ static void tn__conv_geom_write(const tn__conv_geom *g, tn_tensor *t)
     t->ip[10] = g->reflect;
 }
 
-/* Adds bias[c] to every pixel of channel c; its gradient is the per-channel sum. */
-static void tn__bias_add(float *y, const float *bias, int N, int C, size_t hw)
-{
-    int n, c;
-    size_t i;
-    for (n = 0; n < N; n++)
-        for (c = 0; c < C; c++) {
-            float *p = y + ((size_t)n * C + c) * hw, b = bias[c];
-            for (i = 0; i < hw; i++) p[i] += b;
-        }
-}
-
-typedef struct tn__bias_job { float *gb; const float *gy; int N, C; size_t hw; } tn__bias_job;
-
-static void tn__bias_grad_channels(void *ctx, size_t cb, size_t ce)
-{
-    const tn__bias_job *j = (const tn__bias_job *)ctx;
-    size_t c;
-    int n;
-    for (c = cb; c < ce; c++)
-        for (n = 0; n < j->N; n++) j->gb[c] += (float)tn__sum_floats(j->gy + ((size_t)n * j->C + c) * j->hw, j->hw);
-}
-
-static void tn__bias_grad(float *gb, const float *gy, int N, int C, size_t hw)
-{
-    tn__bias_job j;
-    j.gb = gb;
-    j.gy = gy;
-    j.N = N;
-    j.C = C;
-    j.hw = hw;
-    tn_parallel_for((size_t)C, hw * N >= 16384 ? 1 : (size_t)C, tn__bias_grad_channels, &j);
-}
-
 static void tn__conv2d_backward(tn_ctx *ctx, tn_tensor *out)
 {
     tn_tensor *x = out->src[0], *w = out->src[1], *b = out->src[2];
     tn__conv_geom g;
     int N = x->shape[0], Cout = w->shape[0];
+    float *db = b && b->requires_grad ? tn__grad(ctx, b) : NULL;
     tn__conv_geom_read(&g, out);
-    if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, Cout, (size_t)g.OH * g.OW);
-    if (w->requires_grad && tn__grad(ctx, w) && !tn__conv_weight_grad(ctx, &g, N, Cout, x->data, out->grad, w->grad)) return;
+    if (b && b->requires_grad && !db) return;
+    if (w->requires_grad) { /* the bias gradient rides along */
+        if (!tn__grad(ctx, w) || !tn__conv_weight_grad(ctx, &g, N, Cout, x->data, out->grad, w->grad, db)) return;
+    } else if (db) {
+        tn__bias_grad(db, out->grad, N, Cout, (size_t)g.OH * g.OW);
+    }
     if (x->requires_grad && tn__grad(ctx, x)) tn__conv_input_grad(ctx, &g, N, Cout, out->grad, w->data, x->grad, 1.0f);
 }
 
@@ -6923,7 +7026,7 @@ static void tn__convt_backward(tn_ctx *ctx, tn_tensor *out)
     if (b && b->requires_grad && tn__grad(ctx, b)) tn__bias_grad(b->grad, out->grad, N, g.C, (size_t)g.H * g.W);
     if (x->requires_grad && tn__grad(ctx, x) && !tn__conv_forward(ctx, &g, N, Cin, out->grad, w->data, NULL, x->grad, 1.0f))
         return;
-    if (w->requires_grad && tn__grad(ctx, w)) tn__conv_weight_grad(ctx, &g, N, Cin, out->grad, x->data, w->grad);
+    if (w->requires_grad && tn__grad(ctx, w)) tn__conv_weight_grad(ctx, &g, N, Cin, out->grad, x->data, w->grad, NULL);
 }
 
 TN_API tn_tensor *tn_conv_transpose2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *bias, const tn_conv_opts *opts)
