@@ -7985,7 +7985,7 @@ static tn_status tn__style_net_builtin(tn__style_net *net, uint64_t seed)
     tn_rng_seed(&rng, seed, 0x57f1e);
     for (l = 0; l < 4; l++) {
         int shape[4], o;
-        char name[16];
+        char name[64];
         size_t k, fan;
         tn_tensor *w;
         shape[0] = tn__sn_ch[l];
@@ -8017,7 +8017,7 @@ TN_API tn_status tn_vgg19_create(tn_params **out)
     for (g = 0; g < 5; g++)
         for (i = 0; i < tn__vgg_groups[g]; i++) {
             int ws[4], bs = tn__vgg_ch[g];
-            char name[32];
+            char name[64];
             ws[0] = tn__vgg_ch[g];
             ws[1] = cin;
             ws[2] = ws[3] = 3;
@@ -8056,7 +8056,7 @@ static tn_status tn__style_net_vgg(tn__style_net *net, const tn_params *p)
     net->vgg = 1;
     for (g = 0; g < 5; g++)
         for (i = 0; i < tn__vgg_groups[g]; i++, k++) {
-            char name[32];
+            char name[64];
             tn_tensor *w, *b;
             sprintf(name, "conv%d_%d.weight", g + 1, i + 1);
             w = tn_params_find(p, name);
@@ -8509,6 +8509,21 @@ static float tn__style_ramp(int i, int t, int p, int size, int ov)
 
 #define TN__STYLE_MAXTILES 64
 
+/* A level optimising w x h maps with the configured net and weights (targets still empty). */
+static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
+{
+    memset(L, 0, sizeof *L);
+    L->net = &c->net;
+    L->w = w;
+    L->h = h;
+    L->wc = c->o.content_weight;
+    L->wg = c->o.style_weight;
+    L->wsw = c->o.sw_weight;
+    L->wh = c->o.hist_weight;
+    L->wtv = c->o.tv_weight;
+    L->ctx = tn_ctx_create();
+}
+
 /* Optimises one pyramid level: x (init in, result out), anchor = content target, src = source. */
 static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, const tn_image *anchor, tn_image *x)
 {
@@ -8519,19 +8534,10 @@ static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, cons
     size_t tn = (size_t)tw * th, n = (size_t)W * H, q;
     tn__style_level L;
     tn_status st = TN_OK;
-    memset(&L, 0, sizeof L);
     nx = tn__style_tile_pos(W, tw, ov, px, TN__STYLE_MAXTILES);
     ny = tn__style_tile_pos(H, th, ov, py, TN__STYLE_MAXTILES);
-    L.net = &c->net;
-    L.w = tw;
-    L.h = th;
-    L.wc = c->o.content_weight;
-    L.wg = c->o.style_weight;
-    L.wsw = c->o.sw_weight;
-    L.wh = c->o.hist_weight;
-    L.wtv = c->o.tv_weight;
     ncrop = nx * ny;
-    L.ctx = tn_ctx_create();
+    tn__style_level_init(&L, c, tw, th);
     buf = (float *)tn__alloc(tn * sizeof(float) * (size_t)(ncrop + 1));
     crops = (float **)tn__alloc((size_t)ncrop * sizeof(float *));
     acc = (float *)tn__calloc(2 * n * sizeof(float));
