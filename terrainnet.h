@@ -8509,6 +8509,14 @@ static float tn__style_ramp(int i, int t, int p, int size, int ov)
 
 #define TN__STYLE_MAXTILES 64
 
+/* Tile length along an axis of `size` for tiles of nominal length t overlapping by t / 8: the
+   fewest tiles of at most t that cover it, grown by the overlap (1024 -> 2 tiles of 576). */
+static int tn__style_tile_len(int size, int t)
+{
+    int n = (size + t - 1) / t, len = (size + n - 1) / n + (n > 1 ? t / 8 : 0);
+    return len < size ? len : size;
+}
+
 /* A level optimising w x h maps with the configured net and weights (targets still empty). */
 static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
 {
@@ -8528,7 +8536,7 @@ static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int
 static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, const tn_image *anchor, tn_image *x)
 {
     int W = x->width, H = x->height, T = c->o.tile;
-    int tw = W < T ? W : T, th = H < T ? H : T, ov = T / 8;
+    int tw = tn__style_tile_len(W, T), th = tn__style_tile_len(H, T), ov = T / 8;
     int px[TN__STYLE_MAXTILES], py[TN__STYLE_MAXTILES], nx, ny, i, j, k, ncrop;
     float *buf = NULL, *wsum = NULL, *acc = NULL, **crops = NULL;
     size_t tn = (size_t)tw * th, n = (size_t)W * H, q;
@@ -8618,6 +8626,15 @@ static tn_status tn__style_resize(tn_image *dst, const tn_image *src, int w, int
     return tn_image_resize(dst, src, w, h, down ? TN_RESIZE_AREA : TN_RESIZE_BICUBIC);
 }
 
+/* Size of pyramid level k (0 = full size, each level halves), at least 16 x 16. */
+static void tn__style_level_size(int W, int H, int k, int *lw, int *lh)
+{
+    *lw = (int)(W / (double)(1 << k) + 0.5);
+    *lh = (int)(H / (double)(1 << k) + 0.5);
+    if (*lw < 16) *lw = 16;
+    if (*lh < 16) *lh = 16;
+}
+
 /* Fills defaults and checks the options. */
 static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
 {
@@ -8674,17 +8691,18 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     nl = c->o.levels;
     if (!nl)
         for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= 64;) nl++;
-    for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels */
-        int lw = (int)(W / (double)(1 << k) + 0.5), lh = (int)(H / (double)(1 << k) + 0.5);
-        int tw = lw < c->o.tile ? lw : c->o.tile, th = lh < c->o.tile ? lh : c->o.tile, ov = c->o.tile / 8, p[TN__STYLE_MAXTILES];
-        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw < 16 ? 16 : lw, tw < 16 ? 16 : tw, ov, p, TN__STYLE_MAXTILES) *
-                         tn__style_tile_pos(lh < 16 ? 16 : lh, th < 16 ? 16 : th, ov, p, TN__STYLE_MAXTILES);
+    for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
+        int lw, lh, tw, th, p[TN__STYLE_MAXTILES];
+        tn__style_level_size(W, H, k, &lw, &lh);
+        tw = tn__style_tile_len(lw, c->o.tile);
+        th = tn__style_tile_len(lh, c->o.tile);
+        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, c->o.tile / 8, p, TN__STYLE_MAXTILES) *
+                         tn__style_tile_pos(lh, th, c->o.tile / 8, p, TN__STYLE_MAXTILES);
     }
     for (k = nl - 1; k >= 0 && !st; k--) {
-        int lw = (int)(W / (double)(1 << k) + 0.5), lh = (int)(H / (double)(1 << k) + 0.5);
+        int lw, lh;
         tn_image s = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, x = {0, 0, 0, NULL};
-        if (lw < 16) lw = 16;
-        if (lh < 16) lh = 16;
+        tn__style_level_size(W, H, k, &lw, &lh);
         st = tn__style_resize(&s, &sm, lw, lh);
         if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
         if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
