@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render noise sketch sketch-random align extract realism; do
+for c in info convert metrics render noise sketch sketch-random align extract realism style; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -41,6 +41,15 @@ if $T noise -o "$W/noise.png" --size 96 64 --seed 3 --range 100 900 && $T info "
 if $T noise -o "$W/noise2.png" --size 96 64 --seed 3 --range 100 900 && cmp -s "$W/noise.png" "$W/noise2.png"; then ok;
 else bad "noise is not deterministic"; fi
 expect_error "noise bad weight" "weight" $T noise -o "$W/x.png" --draw "$W/noise.png" --draw-weight 3
+# style transfer: noise restyled by another noise map (tiny, 2 levels, few iterations)
+$T noise -o "$W/src.png" --size 64 --seed 9 --octaves 6 --frequency 8 --range 500 1500 > /dev/null 2>&1
+if $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/styled.png" --size 64 --iters 3 --levels 2 2> "$W/style.txt" &&
+    $T info "$W/styled.png" > "$W/sinfo.txt" && grep -q "size: 64 x 64" "$W/sinfo.txt" && grep -q "style: 64 x 64" "$W/style.txt"; then ok;
+else bad "style: $(head -c 300 "$W/style.txt")"; fi
+expect_error "style no --style" "needs --content" $T style --content "$W/noise.png" -o "$W/x.png"
+expect_error "style bad optimizer" "optimizer" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --optimizer newton
+expect_error "style missing weights" "no_such.tnw" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --weights "$W/no_such.tnw"
+expect_error "style weights not tnw" "not a terrainnet weights" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --weights "$W/noise.png"
 
 # sketches: .tns in, random enrichment, raster + preview, alignment map; clear errors on bad files
 printf 'terrainnet-sketch 1\ncanvas 128 96\nridge start 0.9 rate -0.002\n10 50\n64 40\n120 60\nend\nvalley start 0.1 rate 0\n60 2\n70 90\nend\n' > "$W/user.tns"

@@ -780,6 +780,92 @@ static int cmd_realism(int argc, char **argv)
     return 0;
 }
 
+
+/* ---- style -------------------------------------------------------------------------------- */
+
+static int cmd_style(int argc, char **argv)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
+    tn_style_opts so;
+    tn_params *vgg = NULL;
+    tn_status st;
+    const char *outp = NULL, *cpath = NULL, *spath = NULL, *weights = NULL;
+    int a, size = 0;
+    double v, t0;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet style --content IN --style SOURCE -o OUT [--iters N]\n"
+               "                        [--optimizer lbfgs|sgd|adam] [--weights vgg19.tnw] [--size N]\n"
+               "                        [--levels N] [--seed S] [--lr R] [--content-weight A]\n"
+               "                        [--style-weight B] [--sw-weight W] [--hist-weight H] [--tv-weight G]\n"
+               "Restyles the content map (e.g. from `terrainnet noise`) with the morphology of the\n"
+               "SOURCE heightmap. The output has the content's size (or N x N with --size) and the\n"
+               "source's height units. Defaults: built-in random-feature network (no file needed),\n"
+               "L-BFGS, 40 iterations per pyramid level (Adam 150, SGD 300), levels down to 64 px.\n"
+               "--weights uses VGG-19 from a .tnw file (examples/vgg19_to_tnw.py makes one) with the\n"
+               "paper's layers and weights. Weights: 0 = default, negative = term off.\n");
+        return 0;
+    }
+    memset(&so, 0, sizeof so);
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--content") && a + 1 < argc) cpath = argv[++a];
+        else if (!strcmp(argv[a], "--style") && a + 1 < argc) spath = argv[++a];
+        else if (!strcmp(argv[a], "--weights") && a + 1 < argc) weights = argv[++a];
+        else if (!strcmp(argv[a], "--optimizer") && a + 1 < argc) {
+            a++;
+            if (!strcmp(argv[a], "lbfgs")) so.optimizer = TN_STYLE_LBFGS;
+            else if (!strcmp(argv[a], "sgd")) so.optimizer = TN_STYLE_SGD;
+            else if (!strcmp(argv[a], "adam")) so.optimizer = TN_STYLE_ADAM;
+            else return usage_error("style", "--optimizer must be lbfgs, sgd or adam, not", argv[a]);
+        } else if ((!strcmp(argv[a], "--iters") || !strcmp(argv[a], "--size") || !strcmp(argv[a], "--levels") ||
+                    !strcmp(argv[a], "--seed")) && a + 1 < argc) {
+            int n;
+            if (!parse_int(argv[a + 1], &n) || n < 1 || n > 1000000) return usage_error("style", "not a positive integer:", argv[a + 1]);
+            if (!strcmp(argv[a], "--iters")) so.iters = n;
+            else if (!strcmp(argv[a], "--size")) size = n;
+            else if (!strcmp(argv[a], "--levels")) so.levels = n;
+            else so.seed = (uint64_t)n;
+            a++;
+        } else if ((!strcmp(argv[a], "--lr") || !strcmp(argv[a], "--content-weight") || !strcmp(argv[a], "--style-weight") ||
+                    !strcmp(argv[a], "--sw-weight") || !strcmp(argv[a], "--hist-weight") || !strcmp(argv[a], "--tv-weight")) &&
+                   a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &v)) return usage_error("style", "not a number:", argv[a + 1]);
+            if (!strcmp(argv[a], "--lr")) so.lr = (float)v;
+            else if (!strcmp(argv[a], "--content-weight")) so.content_weight = (float)v;
+            else if (!strcmp(argv[a], "--style-weight")) so.style_weight = (float)v;
+            else if (!strcmp(argv[a], "--sw-weight")) so.sw_weight = (float)v;
+            else if (!strcmp(argv[a], "--hist-weight")) so.hist_weight = (float)v;
+            else so.tv_weight = (float)v;
+            a++;
+        } else return usage_error("style", "unknown option or missing value:", argv[a]);
+    }
+    if (!cpath || !spath) return usage_error("style", "needs --content IN and --style SOURCE", NULL);
+    if (!outp) return usage_error("style", "missing -o OUT", NULL);
+    if (size && size < 16) return usage_error("style", "--size must be at least 16", NULL);
+    if ((st = tn_image_load(cpath, &content, NULL))) return fail_status(st);
+    if ((st = tn_image_load(spath, &style, NULL))) goto done;
+    if (size && (st = tn_image_resize(&tmp, &content, size, size, TN_RESIZE_BICUBIC))) goto done;
+    if (size) {
+        tn_image_free(&content);
+        content = tmp;
+        tmp.data = NULL;
+    }
+    if (weights && (st = tn_vgg19_load(&vgg, weights))) goto done;
+    so.vgg = vgg;
+    t0 = tn_time_seconds();
+    if ((st = tn_style_transfer(&out, &content, &style, &so))) goto done;
+    fprintf(stderr, "style: %d x %d in %.1f s (%s network)\n", out.width, out.height, tn_time_seconds() - t0,
+            vgg ? "VGG-19" : "built-in");
+    st = tn_image_save(outp, &out, NULL);
+done:
+    tn_image_free(&content);
+    tn_image_free(&style);
+    tn_image_free(&out);
+    tn_image_free(&tmp);
+    tn_params_free(vgg);
+    return st ? fail_status(st) : 0;
+}
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 typedef struct command { const char *name; int (*fn)(int, char **); const char *summary; } command;
@@ -795,6 +881,7 @@ static const command commands[] = {
     {"align", cmd_align, "align sketch parts to a DEM's contour parts (chain codes + LCS)"},
     {"extract", cmd_extract, "ridge and valley network of a DEM: masks, accumulation, preview"},
     {"realism", cmd_realism, "realism report: slope/curvature/spectrum distances, drainage, SSIM"},
+    {"style", cmd_style, "restyle a map with the morphology of a real heightmap (style transfer)"},
 };
 
 static void print_usage(FILE *f)

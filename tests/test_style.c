@@ -1,0 +1,355 @@
+/* test_style: terrain style transfer (@@style) - loss decrease, finite-difference gradients of the
+   style terms, determinism across thread counts, bad input, VGG-19 .tnw loading and the VGG path. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+/* A style source with ridges (a rotated sine) plus a little noise, w x h. */
+static void make_style(tn_image *img, int w, int h)
+{
+    tn_rng rng;
+    int x, y;
+    tn_rng_seed(&rng, 3, 0);
+    tn_image_create(img, w, h, 1);
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++)
+            img->data[(size_t)y * w + x] = 1000.0f + 300.0f * fabsf(sinf(0.35f * x + 0.2f * y)) + 20.0f * tn_rng_uniform(&rng);
+}
+
+static void make_content(tn_image *img, int w, int h)
+{
+    tn_perlin_opts po;
+    memset(&po, 0, sizeof po);
+    po.seed = 5;
+    po.octaves = 4;
+    tn_noise_perlin(img, w, h, &po);
+}
+
+/* A single-level setup like tn__style_level_run's, for direct loss/gradient checks. */
+static int level_setup(tn__style_cfg *c, tn__style_level *L, const tn_style_opts *o, tn_image *content, tn_image *style)
+{
+    double a, b;
+    const float *crop;
+    if (tn__style_setup(c, o)) return 0;
+    tn__style_normalise(content, 0, &a, &b);
+    tn__style_normalise(style, 0, &a, &b);
+    tn__style_level_init(L, c, content->width, content->height);
+    crop = style->data;
+    if (tn__style_targets(L, &crop, 1, c->o.seed)) return 0;
+    if (L->wh > 0 && tn__style_hist_targets(L, style->data, style->width, style->height)) return 0;
+    if (L->wc > 0 && tn__style_content_target(L, content->data)) return 0;
+    return 1;
+}
+
+TN_TEST(test_argsort)
+{
+    float v[1000];
+    uint32_t idx[1000], scratch[3000];
+    tn_rng rng;
+    int i, ok = 1;
+    tn_rng_seed(&rng, 9, 0);
+    for (i = 0; i < 1000; i++) v[i] = tn_rng_normal(&rng) * (i % 7 == 0 ? 1e-3f : 100.0f);
+    v[10] = v[20]; /* a tie keeps index order */
+    tn__argsort_f32(v, 1000, idx, scratch);
+    for (i = 1; i < 1000; i++) ok &= v[idx[i - 1]] <= v[idx[i]];
+    TN_CHECK(ok);
+}
+
+TN_TEST(test_loss_decreases)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn__style_cfg *c = (tn__style_cfg *)calloc(1, sizeof *c);
+    tn__style_level L;
+    float *x, *g, f0, f1;
+    size_t n = 64 * 64;
+    memset(&o, 0, sizeof o);
+    o.iters = 15;
+    make_content(&content, 64, 64);
+    make_style(&style, 64, 64);
+    TN_CHECK(level_setup(c, &L, &o, &content, &style));
+    x = (float *)malloc(n * sizeof(float));
+    g = (float *)malloc(n * sizeof(float));
+    memcpy(x, content.data, n * sizeof(float));
+    f0 = tn__style_eval(&L, x, g);
+    c->work_total = 1;
+    TN_CHECK(tn__style_optimise(&L, x, c) == TN_OK);
+    f1 = tn__style_eval(&L, x, g);
+    TN_CHECK(f0 == f0 && f1 == f1);
+    TN_CHECK(f1 < 0.5f * f0);
+    /* Adam and SGD lower it too */
+    memcpy(x, content.data, n * sizeof(float));
+    c->o.optimizer = TN_STYLE_ADAM;
+    c->o.iters = 30;
+    c->o.lr = 0.02f;
+    TN_CHECK(tn__style_optimise(&L, x, c) == TN_OK);
+    TN_CHECK(tn__style_eval(&L, x, g) < f0);
+    memcpy(x, content.data, n * sizeof(float));
+    c->o.optimizer = TN_STYLE_SGD;
+    c->o.lr = 0.5f;
+    TN_CHECK(tn__style_optimise(&L, x, c) == TN_OK);
+    TN_CHECK(tn__style_eval(&L, x, g) < f0);
+    free(x);
+    free(g);
+    tn__style_level_free(&L);
+    tn_params_free(c->net.own);
+    free(c);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+/* Central differences of the style loss (Gram + sliced Wasserstein, no content, no histograms,
+   no TV) against the backward pass on a 16 x 16 map: along random directions (ReLU and sorting
+   kinks average out) and per pixel with a looser bound. */
+static int style_gradient_ok(float hist_weight)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn__style_cfg *c = (tn__style_cfg *)calloc(1, sizeof *c);
+    tn__style_level L;
+    float x[256], g[256], gd[256], v[256], xv[256];
+    const float eps = 1e-3f;
+    int k, r, bad = 0;
+    tn_rng rng;
+    memset(&o, 0, sizeof o);
+    o.content_weight = -1;
+    o.hist_weight = hist_weight;
+    make_content(&content, 16, 16);
+    make_style(&style, 16, 16);
+    if (!level_setup(c, &L, &o, &content, &style)) return 0;
+    memcpy(x, content.data, sizeof x);
+    tn__style_eval(&L, x, g);
+    tn_rng_seed(&rng, 21, 0);
+    for (r = 0; r < 4; r++) {
+        double gv = 0, fd;
+        for (k = 0; k < 256; k++) {
+            v[k] = tn_rng_normal(&rng);
+            gv += (double)g[k] * v[k];
+        }
+        for (k = 0; k < 256; k++) xv[k] = x[k] + 0.1f * eps * v[k];
+        fd = tn__style_eval(&L, xv, gd);
+        for (k = 0; k < 256; k++) xv[k] = x[k] - 0.1f * eps * v[k];
+        fd = (fd - tn__style_eval(&L, xv, gd)) / (0.2 * eps);
+        if (fabs(fd - gv) > 0.02 * fabs(gv) + 1e-4) {
+            fprintf(stderr, "direction %d: finite difference %g, backward %g\n", r, fd, gv);
+            bad++;
+        }
+    }
+    for (k = 0; k < 256; k += 17) {
+        float xp = x[k], fp, fm, fd;
+        x[k] = xp + eps;
+        fp = tn__style_eval(&L, x, gd);
+        x[k] = xp - eps;
+        fm = tn__style_eval(&L, x, gd);
+        x[k] = xp;
+        fd = (fp - fm) / (2 * eps);
+        if (fabsf(fd - g[k]) > 0.1f * fabsf(g[k]) + 1e-4f) {
+            fprintf(stderr, "pixel %d: finite difference %g, backward %g\n", k, fd, g[k]);
+            bad++;
+        }
+    }
+    tn__style_level_free(&L);
+    tn_params_free(c->net.own);
+    free(c);
+    tn_image_free(&content);
+    tn_image_free(&style);
+    return bad == 0;
+}
+
+TN_TEST(test_style_gradient)
+{
+    TN_CHECK(style_gradient_ok(-1)); /* Gram + sliced Wasserstein */
+    TN_CHECK(style_gradient_ok(1));  /* plus the height and slope histogram terms */
+}
+
+TN_TEST(test_transfer_threads_and_units)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn_style_scores before, after;
+    float lo, hi;
+    memset(&o, 0, sizeof o);
+    o.iters = 8;
+    make_content(&content, 96, 80);
+    make_style(&style, 120, 120);
+    tn_set_threads(1);
+    TN_CHECK(tn_style_transfer(&a, &content, &style, &o) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_style_transfer(&b, &content, &style, &o) == TN_OK);
+    tn_set_threads(0);
+    TN_CHECK(a.width == 96 && a.height == 80 && a.channels == 1);
+    TN_CHECK(b.data && a.data && memcmp(a.data, b.data, (size_t)96 * 80 * sizeof(float)) == 0);
+    /* heights come back in the style's units (about 1000..1320 m), not [0, 1] */
+    TN_CHECK(tn_image_range(&a, &lo, &hi) == 0);
+    TN_CHECK(lo > 850 && hi < 1500 && hi - lo > 100);
+    /* and the morphology moved towards the source */
+    TN_CHECK(tn_style_compare(&content, &style, &before) == TN_OK);
+    TN_CHECK(tn_style_compare(&a, &style, &after) == TN_OK);
+    TN_CHECK(after.slope_hist_dist < before.slope_hist_dist);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+TN_TEST(test_tiles_and_progress)
+{
+    /* a 2-level pyramid whose fine level is split into 4 tiles of 48 */
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_style_opts o;
+    memset(&o, 0, sizeof o);
+    o.iters = 3;
+    o.levels = 2;
+    o.tile = 48;
+    make_content(&content, 80, 80);
+    make_style(&style, 80, 80);
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
+    TN_CHECK(out.width == 80 && tn_image_range(&out, NULL, NULL) == 0);
+    tn_image_free(&out);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+static int cancel_at_half(void *user, const char *stage, double f)
+{
+    (void)stage;
+    *(double *)user = f;
+    return f > 0.5;
+}
+
+TN_TEST(test_cancel)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_style_opts o;
+    double last = -1;
+    memset(&o, 0, sizeof o);
+    o.iters = 6;
+    o.optimizer = TN_STYLE_ADAM;
+    make_content(&content, 64, 64);
+    make_style(&style, 64, 64);
+    tn_set_progress(cancel_at_half, &last);
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_CANCELLED);
+    tn_set_progress(NULL, NULL);
+    TN_CHECK(last > 0.5 && last <= 1.0);
+    TN_CHECK(out.data == NULL);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+TN_TEST(test_bad_input)
+{
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, tiny = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn_style_scores sc;
+    make_content(&content, 32, 32);
+    make_style(&style, 32, 32);
+    content.data[100] = NAN;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(strstr(tn_last_error(), "content") != NULL);
+    content.data[100] = 0.5f;
+    style.data[7] = INFINITY;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, NULL) == TN_ERR_NUMERIC);
+    style.data[7] = 1000.0f;
+    tn_image_create(&tiny, 8, 8, 1);
+    TN_CHECK(tn_style_transfer(&out, &tiny, &style, NULL) == TN_ERR_INVALID_ARG);
+    memset(&o, 0, sizeof o);
+    o.optimizer = (tn_style_optimizer)7;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG);
+    o.optimizer = TN_STYLE_SGD;
+    o.lr = -1;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG);
+    TN_CHECK(out.data == NULL);
+    /* scores: a map compared with itself */
+    TN_CHECK(tn_style_compare(&style, &style, &sc) == TN_OK);
+    TN_CHECK_NEAR(sc.ssim, 1.0, 1e-6);
+    TN_CHECK_NEAR(sc.slope_hist_dist, 0.0, 1e-9);
+    TN_CHECK_NEAR(sc.spectrum_dist, 0.0, 1e-6);
+    TN_CHECK(tn_style_compare(&tiny, &style, &sc) == TN_ERR_INVALID_ARG);
+    tn_image_free(&tiny);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+TN_TEST(test_vgg_loader_and_path)
+{
+    const char *path = "build/test/vgg19_random.tnw", *bad = "build/test/vgg19_bad.tnw";
+    tn_params *p = NULL, *q = NULL, *wrong;
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn_rng rng;
+    int i, shape[4] = {64, 1, 3, 3};
+    TN_CHECK(tn_vgg19_create(&p) == TN_OK);
+    TN_CHECK(tn_params_count(p) == 32 && tn_params_numel(p) == 0); /* all buffers: no gradients */
+    tn_rng_seed(&rng, 11, 0);
+    for (i = 0; i < tn_params_count(p); i++) {
+        tn_tensor *t = tn_params_get(p, i);
+        if (t->ndim == 4) tn_init_kaiming(t, &rng, 1.41421356f);
+        else tn_init_uniform(t, &rng, -0.05f, 0.05f);
+    }
+    TN_CHECK(tn_params_find(p, "conv5_4.weight") && tn_params_find(p, "conv5_4.weight")->shape[1] == 512);
+    TN_CHECK(tn_params_save(p, path) == TN_OK);
+    TN_CHECK(tn_vgg19_load(&q, path) == TN_OK);
+    TN_CHECK(q && memcmp(tn_params_find(q, "conv3_2.weight")->data, tn_params_find(p, "conv3_2.weight")->data,
+                         tn_params_find(p, "conv3_2.weight")->numel * sizeof(float)) == 0);
+    /* wrong shape: conv1_1 with one input channel */
+    wrong = tn_params_create();
+    for (i = 0; i < tn_params_count(p); i++) {
+        tn_tensor *t = tn_params_get(p, i);
+        if (!strcmp(t->name, "conv1_1.weight")) tn_params_add_buffer(wrong, t->name, 4, shape);
+        else tn_params_add_buffer(wrong, t->name, t->ndim, t->shape);
+    }
+    TN_CHECK(tn_params_save(wrong, bad) == TN_OK);
+    {
+        tn_params *r = NULL;
+        TN_CHECK(tn_vgg19_load(&r, bad) == TN_ERR_SHAPE);
+        TN_CHECK(strstr(tn_last_error(), "conv1_1.weight") != NULL);
+        TN_CHECK(r == NULL);
+        TN_CHECK(tn_vgg19_load(&r, "build/test/no_such_vgg.tnw") == TN_ERR_IO);
+    }
+    tn_params_free(wrong);
+    /* wrong count: a file with only the built-in layout's first tensor */
+    wrong = tn_params_create();
+    tn_params_add_buffer(wrong, "conv1_1.weight", 4, tn_params_find(p, "conv1_1.weight")->shape);
+    TN_CHECK(tn_params_save(wrong, bad) == TN_OK);
+    {
+        tn_params *r = NULL;
+        TN_CHECK(tn_vgg19_load(&r, bad) == TN_ERR_SHAPE);
+    }
+    tn_params_free(wrong);
+    /* the full VGG path on a small map */
+    make_content(&content, 32, 32);
+    make_style(&style, 40, 40);
+    memset(&o, 0, sizeof o);
+    o.vgg = q;
+    o.iters = 3;
+    o.levels = 1;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
+    TN_CHECK(out.width == 32 && out.height == 32 && tn_image_range(&out, NULL, NULL) == 0);
+    /* a params set that is not VGG-19 is refused with a clear message */
+    o.vgg = p;
+    tn_image_free(&out);
+    wrong = tn_params_create();
+    tn_params_add_buffer(wrong, "conv1_1.weight", 4, shape);
+    o.vgg = wrong;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_SHAPE);
+    tn_params_free(wrong);
+    tn_image_free(&content);
+    tn_image_free(&style);
+    tn_params_free(p);
+    tn_params_free(q);
+    remove(path);
+    remove(bad);
+}
+
+int main(void)
+{
+    TN_RUN(test_argsort);
+    TN_RUN(test_loss_decreases);
+    TN_RUN(test_style_gradient);
+    TN_RUN(test_transfer_threads_and_units);
+    TN_RUN(test_tiles_and_progress);
+    TN_RUN(test_cancel);
+    TN_RUN(test_bad_input);
+    TN_RUN(test_vgg_loader_and_path);
+    return tn_test_summary("test_style");
+}
