@@ -178,6 +178,22 @@ TN_TEST(fast_generator_matches_the_training_graph)
     for (k = 0; a && b && k < a->numel; k++)
         if (fabs((double)a->data[k] - b->data[k]) > d) d = fabs((double)a->data[k] - b->data[k]);
     TN_CHECK(d < 1e-5);
+    { /* and the literal definition: nearest x2 upsampling, then a valid 5x5 conv */
+        tn_tensor *x = z;
+        int i;
+        char name[16];
+        for (i = 0; i < m.stages; i++) {
+            snprintf(name, sizeof name, "g.w%d", i);
+            x = tn_conv2d(c, tn_upsample_nearest(c, x, 2), tn_params_find(m.weights, name), NULL, NULL);
+            snprintf(name, sizeof name, "g.b%d", i);
+            x = tn_add(c, x, tn_reshape(c, tn_params_find(m.weights, name), 4, (int[]){1, x->shape[1], 1, 1}));
+            x = i < m.stages - 1 ? tn__tg_pixel_norm(c, tn_leaky_relu(c, x, 0.2f)) : tn_tanh(c, x);
+        }
+        d = 0;
+        for (k = 0; a && x && k < a->numel; k++)
+            if (fabs((double)a->data[k] - x->data[k]) > d) d = fabs((double)a->data[k] - x->data[k]);
+        TN_CHECK(x && tn_tensor_same_shape(a, x) && d < 1e-5);
+    }
     tn_ctx_free(c);
     tn_texgan_free(&m);
 }
