@@ -637,6 +637,8 @@ typedef struct tn_texgan_opts {
     int disc_width;         /* channels of the first discriminator layer, doubling per layer; 0 = 32 */
     int disc_layers;        /* stride-2 discriminator layers before the score conv; 0 = 3 */
     int patch;              /* training patch side n in pixels; 0 = 64 */
+    int scale;              /* learn the exemplar downscaled by this factor and upsample the output
+                               (bilinear): features `scale` times larger for the same cost; 0 = 1 */
     int batch;              /* patches per step; 0 = 4 */
     float lr;               /* Adam rate for G and D; 0 = 2e-4 (betas 0.5, 0.999) */
     float ema;              /* EMA decay of the kept generator; 0 = 0.995 */
@@ -652,6 +654,7 @@ typedef struct tn_texgan_opts {
 /* A trained generator (the EMA weights) plus what synthesis needs. Free with tn_texgan_free. */
 typedef struct tn_texgan {
     int channels, noise_local, noise_global, noise_periodic, stages, gen_width;
+    int scale;                             /* output pixels per generator pixel (1 = none) */
     float lo, hi;                          /* value range the tanh output maps to */
     float mean[TN_TEXGAN_MAX_CHANNELS];    /* the exemplar's mean per channel */
     long iterations;                       /* training iterations done */
@@ -7980,6 +7983,7 @@ static tn_status tn__tg_check_arch(const tn_texgan *m)
     if (m->noise_local < 1 || m->noise_local > 256 || m->noise_global < 0 || m->noise_global > 256 || m->noise_periodic < 0 ||
         m->noise_periodic > 64)
         return tn__fail(TN_ERR_INVALID_ARG, "texgan: noise dims %d/%d/%d out of range", m->noise_local, m->noise_global, m->noise_periodic);
+    if (m->scale < 1 || m->scale > 16) return tn__fail(TN_ERR_INVALID_ARG, "texgan: scale %d (1..16)", m->scale);
     if (m->gen_width < 1 || m->gen_width > 2048) return tn__fail(TN_ERR_INVALID_ARG, "texgan: generator width %d (1..2048)", m->gen_width);
     if (!(m->lo < m->hi) || m->lo != m->lo || m->hi - m->lo > 1e30f) return tn__fail(TN_ERR_INVALID_ARG, "texgan: bad value range");
     return TN_OK;
@@ -8003,6 +8007,7 @@ static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_lay
     c[11] = (float)m->train_seconds;
     c[12] = (float)disc_width;
     c[13] = (float)disc_layers;
+    c[14] = (float)m->scale;
     for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) c[16 + i] = m->mean[i];
 }
 
@@ -8025,6 +8030,8 @@ static tn_status tn__tg_read_config(tn_texgan *m, int *disc_width, int *disc_lay
     m->hi = c[8];
     m->iterations = (long)c[9] + ((long)c[10] << 24);
     m->train_seconds = c[11];
+    if (c[14] < 0 || c[14] > 16 || c[14] != floorf(c[14])) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan scale", name);
+    m->scale = c[14] > 0 ? (int)c[14] : 1;
     for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) m->mean[i] = c[16 + i];
     if (disc_width) *disc_width = (int)c[12];
     if (disc_layers) *disc_layers = (int)c[13];
@@ -8593,6 +8600,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
 {
     tn_texgan_opts o;
     tn__tg_train s;
+    tn_image small = {0, 0, 0, NULL};
     tn_ctx *ctx = NULL;
     float *exn = NULL, lo = 0, hi = 1, mean[TN_TEXGAN_MAX_CHANNELS], ldh[50], lgh[50];
     double t0, last_ck, sec0, budget;
@@ -8623,6 +8631,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
         s.m.noise_periodic = o.noise_periodic;
         s.m.stages = o.stages;
         s.m.gen_width = o.gen_width;
+        s.m.scale = o.scale > 0 ? o.scale : 1;
         s.m.lo = lo;
         s.m.hi = hi;
         memcpy(s.m.mean, mean, sizeof mean);
@@ -8632,14 +8641,22 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
         if (!st && (s.patch < 8 || s.patch > 4096 || s.batch > 1024)) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: patch %d / batch %d out of range", s.patch, s.batch);
         if (!st) st = tn__tg_build(&s);
     }
+    if (!st && s.m.scale > 1) { /* the generator learns the downscaled exemplar */
+        int sw = (ex->width + s.m.scale / 2) / s.m.scale, sh = (ex->height + s.m.scale / 2) / s.m.scale;
+        if (sw < 1 || sh < 1) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar is too small for scale %d", s.m.scale);
+        else st = tn_image_resize(&small, ex, sw, sh, TN_RESIZE_AREA);
+        if (!st) ex = &small;
+    }
     if (!st && (ex->width < s.patch || ex->height < s.patch))
-        st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar (%d x %d) is smaller than the %d px patch", ex->width, ex->height, s.patch);
+        st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar (%d x %d at scale 1/%d) is smaller than the %d px patch", ex->width, ex->height,
+                      s.m.scale, s.patch);
     if (!st && !(ctx = tn_ctx_create())) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
     npx = (size_t)ex->width * ex->height;
     if (!st && !(exn = (float *)tn__alloc(npx * (size_t)ex->channels * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
     if (st) {
         tn_ctx_free(ctx);
         tn__tg_train_free(&s);
+        tn_image_free(&small);
         return st;
     }
     for (c = 0; c < ex->channels; c++) /* planar, scaled to the generator's tanh range */
@@ -8687,6 +8704,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     }
     TN_FREE(exn);
     tn_ctx_free(ctx);
+    tn_image_free(&small);
     if (!st) {
         s.m.iterations = s.it;
         s.m.train_seconds = s.seconds;
@@ -8786,8 +8804,8 @@ static tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tenso
 
 /* Runs the generator on the cells covering the window and copies the window into out (which
    is w x h x channels, written at column offset ox of a row stride of stride_w pixels). */
-static tn_status tn__tg_window(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, int x0, int y0, int w, int h, float *out,
-                               int stride_w)
+static tn_status tn__tg_window_native(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, int x0, int y0, int w, int h, float *out,
+                                      int stride_w)
 {
     int p = 1 << m->stages, cx0 = x0 / p, cy0 = y0 / p, dx = x0 - cx0 * p, dy = y0 - cy0 * p;
     int sw = tn__tg_cells_for(m->stages, dx + w), sh = tn__tg_cells_for(m->stages, dy + h), C = m->channels, x, y, c;
@@ -8808,6 +8826,53 @@ static tn_status tn__tg_window(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, i
                 out[((size_t)y * stride_w + x) * C + c] =
                     m->lo + (g->data[(size_t)c * plane + (size_t)(dy + y) * g->shape[3] + dx + x] + 1.0f) * scale;
     return TN_OK;
+}
+
+/* Low-resolution source position of output pixel X at scale s (texel centres aligned), from
+   global coordinates only, so every tile samples the same way; clamped at the texture origin. */
+static void tn__tg_src(int X, int s, int *i0, int *i1, float *f)
+{
+    float t = ((float)X + 0.5f) / (float)s - 0.5f, fl = floorf(t);
+    *i0 = (int)fl;
+    *f = t - fl;
+    *i1 = *i0 + 1;
+    if (*i0 < 0) { *i0 = 0; *i1 = 0; *f = 0.0f; }
+}
+
+/* A window of the output texture: the generator's own pixels, or (scale > 1) the low-resolution
+   window with a one-pixel margin, bilinearly upsampled. */
+static tn_status tn__tg_window(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, int x0, int y0, int w, int h, float *out, int stride_w)
+{
+    int s = m->scale, lx0, ly0, lx1, ly1, lw, lh, x, y, c, C = m->channels, a0, a1, b0, b1;
+    float fa, fb, *low;
+    tn_status st;
+    if (s <= 1) return tn__tg_window_native(ctx, m, seed, x0, y0, w, h, out, stride_w);
+    tn__tg_src(x0, s, &lx0, &a1, &fa);
+    tn__tg_src(y0, s, &ly0, &b1, &fb);
+    tn__tg_src(x0 + w - 1, s, &a0, &lx1, &fa);
+    tn__tg_src(y0 + h - 1, s, &b0, &ly1, &fb);
+    lw = lx1 - lx0 + 1;
+    lh = ly1 - ly0 + 1;
+    low = (float *)tn__alloc((size_t)lw * lh * C * sizeof(float));
+    if (!low) return TN_ERR_OUT_OF_MEMORY;
+    st = tn__tg_window_native(ctx, m, seed, lx0, ly0, lw, lh, low, lw);
+    for (y = 0; !st && y < h; y++) {
+        tn__tg_src(y0 + y, s, &b0, &b1, &fb);
+        for (x = 0; x < w; x++) {
+            const float *p00, *p01, *p10, *p11;
+            tn__tg_src(x0 + x, s, &a0, &a1, &fa);
+            p00 = low + ((size_t)(b0 - ly0) * lw + (a0 - lx0)) * C;
+            p01 = low + ((size_t)(b0 - ly0) * lw + (a1 - lx0)) * C;
+            p10 = low + ((size_t)(b1 - ly0) * lw + (a0 - lx0)) * C;
+            p11 = low + ((size_t)(b1 - ly0) * lw + (a1 - lx0)) * C;
+            for (c = 0; c < C; c++) {
+                float top = p00[c] + (p01[c] - p00[c]) * fa, bot = p10[c] + (p11[c] - p10[c]) * fa;
+                out[((size_t)y * stride_w + x) * C + c] = top + (bot - top) * fb;
+            }
+        }
+    }
+    TN_FREE(low);
+    return st;
 }
 
 static tn_status tn__tg_check_size(int w, int h)

@@ -276,7 +276,7 @@ static void bench_one(const char *name, const char *file, const char *model_path
     }
     {
         double he = hf_energy(&ex), hc = hf_energy(&comp), hs = hf_energy(&synth);
-        printf("%s.hf_energy_exemplar: %.6f\n%s.hf_energy_detail: %.6f (%.1f%%, target within 10%%)\n%s.hf_energy_raw_gan: %.6f (%.1f%%)\n", name,
+        printf("%s.hf_energy_exemplar: %.7g\n%s.hf_energy_detail: %.7g (%+.2f%%, target within 10%%)\n%s.hf_energy_raw_gan: %.7g (%+.2f%%)\n", name,
                he, name, hc, 100.0 * (hc - he) / he, name, hs, 100.0 * (hs - he) / he);
     }
     means(&ex, mex);

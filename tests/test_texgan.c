@@ -113,7 +113,7 @@ TN_TEST(checkpoint_resume_continues_identically)
     tn_image_free(&ex);
 }
 
-static tn_status trained_tiny(tn_texgan *m, int channels, int periodic)
+static tn_status trained_tiny_scaled(tn_texgan *m, int channels, int periodic, int scale)
 {
     tn_image ex = make_exemplar(40, 36, channels, 3);
     tn_texgan_opts o;
@@ -121,11 +121,14 @@ static tn_status trained_tiny(tn_texgan *m, int channels, int periodic)
     tiny_opts(&o);
     o.noise_global = 2;
     o.noise_periodic = periodic;
+    o.scale = scale;
     o.max_iters = 2;
     st = tn_texgan_train(m, &ex, &o, NULL);
     tn_image_free(&ex);
     return st;
 }
+
+static tn_status trained_tiny(tn_texgan *m, int channels, int periodic) { return trained_tiny_scaled(m, channels, periodic, 1); }
 
 TN_TEST(tiled_synthesis_equals_one_pass)
 {
@@ -158,6 +161,33 @@ TN_TEST(tiled_synthesis_equals_one_pass)
     tn_image_free(&win);
     tn_image_free(&crop);
     tn_texgan_free(&m);
+}
+
+/* scale 2: the generator learns the half-size exemplar; output is its bilinear upsampling,
+   sampled from global coordinates, so tiles and windows still agree exactly */
+TN_TEST(scaled_model_tiles_exactly)
+{
+    tn_texgan m, l;
+    tn_image one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, crop = {0, 0, 0, NULL};
+    TN_CHECK(trained_tiny_scaled(&m, 3, 0, 2) == TN_OK);
+    TN_CHECK(m.scale == 2);
+    TN_CHECK(tn_texgan_save(&m, "build/test/texgan_s2.tnw") == TN_OK && tn_texgan_load(&l, "build/test/texgan_s2.tnw") == TN_OK);
+    TN_CHECK(l.scale == 2);
+    TN_CHECK(tn_texgan_synthesize_window(&l, 5, 0, 0, 57, 41, &one) == TN_OK);
+    TN_CHECK(tn_image_create(&tiled, 57, 41, 3) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize_stream(&l, 5, 57, 41, 1, tn__tg_collect_band, &tiled) == TN_OK);
+    TN_CHECK(max_abs_diff(&one, &tiled) <= 1e-6);
+    TN_CHECK(tn_texgan_synthesize_window(&l, 5, 9, 6, 31, 20, &win) == TN_OK);
+    TN_CHECK(tn_image_crop(&crop, &one, 9, 6, 31, 20) == TN_OK);
+    TN_CHECK(max_abs_diff(&win, &crop) <= 1e-6);
+    /* upsampled: neighbouring pixels inside one low pixel pair differ less than across the image */
+    TN_CHECK(fabs(TN_PIXEL(&one, 20, 20, 0) - TN_PIXEL(&one, 21, 20, 0)) < 0.5);
+    tn_image_free(&one);
+    tn_image_free(&tiled);
+    tn_image_free(&win);
+    tn_image_free(&crop);
+    tn_texgan_free(&m);
+    tn_texgan_free(&l);
 }
 
 TN_TEST(fast_generator_matches_the_training_graph)
@@ -427,6 +457,7 @@ int main(void)
     TN_RUN(training_steps_stay_finite_and_move_the_generator);
     TN_RUN(checkpoint_resume_continues_identically);
     TN_RUN(tiled_synthesis_equals_one_pass);
+    TN_RUN(scaled_model_tiles_exactly);
     TN_RUN(fast_generator_matches_the_training_graph);
     TN_RUN(deterministic_for_1_and_2_threads);
     TN_RUN(model_file_round_trip_and_streamed_files);

@@ -422,13 +422,14 @@ static int cmd_texgan_train(int argc, char **argv)
         printf("usage: terrainnet texgan-train EXEMPLAR -o MODEL.tnw [--minutes M] [--iters N] [--resume]\n"
                "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
                "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--stages N]\n"
-               "             [--local N] [--global N] [--periodic N]\n"
+               "             [--scale S] [--local N] [--global N] [--periodic N]\n"
                "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
                "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
                "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
                "4, 4 stages of 64-32-16 channels from 16 noise dims. The full training state is saved\n"
                "atomically to MODEL.tnw.ckpt (or --checkpoint) every 60 s (--checkpoint-seconds), so a\n"
-               "killed run loses at most one interval; --resume continues it identically.\n");
+               "killed run loses at most one interval; --resume continues it identically. --scale S learns\n"
+               "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n");
         return 0;
     }
     memset(&o, 0, sizeof o);
@@ -440,7 +441,7 @@ static int cmd_texgan_train(int argc, char **argv)
         else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
         else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
                   !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") ||
-                  !strcmp(k, "--stages") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic")) &&
+                  !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic")) &&
                  a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
             if (!strcmp(k, "--minutes")) o.minutes = v;
@@ -452,6 +453,7 @@ static int cmd_texgan_train(int argc, char **argv)
             else if (!strcmp(k, "--gen-width")) o.gen_width = (int)v;
             else if (!strcmp(k, "--disc-width")) o.disc_width = (int)v;
             else if (!strcmp(k, "--stages")) o.stages = (int)v;
+            else if (!strcmp(k, "--scale")) o.scale = (int)v;
             else if (!strcmp(k, "--local")) o.noise_local = (int)v;
             else if (!strcmp(k, "--global")) o.noise_global = (int)v;
             else o.noise_periodic = (int)v;
