@@ -640,6 +640,8 @@ typedef struct tn_texgan_opts {
     int scale;              /* learn the exemplar downscaled by this factor and upsample the output
                                (bilinear): features `scale` times larger for the same cost; 0 = 1 */
     int batch;              /* patches per step; 0 = 4 */
+    int augment;            /* 1: real patches randomly flipped/transposed (8x the data of a small
+                               exemplar; only for textures without a light direction) */
     float lr;               /* Adam rate for G and D; 0 = 2e-4 (betas 0.5, 0.999) */
     float ema;              /* EMA decay of the kept generator; 0 = 0.995 */
     double minutes;         /* wall-clock budget of the whole run, resumed time included; 0 = 15 */
@@ -8278,7 +8280,7 @@ typedef struct tn__tg_train {
     tn_rng rng;
     long it;
     double seconds;
-    int disc_width, disc_layers, patch, batch;
+    int disc_width, disc_layers, patch, batch, augment;
     float lr, ema;
 } tn__tg_train;
 
@@ -8359,6 +8361,7 @@ static tn_status tn__tg_state_params(tn__tg_train *s, tn_params **out, int save)
         state->data[16] = (float)s->batch;
         state->data[17] = s->lr;
         state->data[18] = s->ema;
+        state->data[19] = (float)s->augment;
     }
     for (i = 1; i < tn_params_count(s->m.weights) && !st; i++) { /* waves + EMA generator */
         tn_tensor *t = tn_params_get(s->m.weights, i);
@@ -8489,6 +8492,7 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
         s->batch = (int)ts[16];
         s->lr = ts[17];
         s->ema = ts[18];
+        s->augment = ts[19] != 0.0f;
         if (s->patch < 8 || s->patch > 4096 || s->batch < 1 || s->batch > 1024 || !(s->lr > 0 && s->lr < 1) || !(s->ema > 0 && s->ema < 1))
             st = tn__fail(TN_ERR_CORRUPT, "%s: bad training settings", path);
     }
@@ -8505,12 +8509,23 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
 /* Random real patches (batch x C x n x n, in [-1, 1]) from the planar normalised exemplar. */
 static void tn__tg_real_batch(tn__tg_train *s, const float *ex, int W, int H, tn_tensor *real)
 {
-    int n = s->patch, C = s->m.channels, b, c, y;
+    int n = s->patch, C = s->m.channels, b, c, y, x;
     for (b = 0; b < s->batch; b++) {
         int x0 = (int)tn_rng_below(&s->rng, (uint32_t)(W - n + 1)), y0 = (int)tn_rng_below(&s->rng, (uint32_t)(H - n + 1));
+        int t = s->augment ? (int)tn_rng_below(&s->rng, 8) : 0; /* bit 0 flip x, bit 1 flip y, bit 2 transpose */
         for (c = 0; c < C; c++)
-            for (y = 0; y < n; y++)
-                memcpy(real->data + (((size_t)b * C + c) * n + y) * n, ex + ((size_t)c * H + y0 + y) * W + x0, (size_t)n * sizeof(float));
+            for (y = 0; y < n; y++) {
+                float *dst = real->data + (((size_t)b * C + c) * n + y) * n;
+                if (!t) {
+                    memcpy(dst, ex + ((size_t)c * H + y0 + y) * W + x0, (size_t)n * sizeof(float));
+                    continue;
+                }
+                for (x = 0; x < n; x++) {
+                    int u = t & 1 ? n - 1 - x : x, v = t & 2 ? n - 1 - y : y;
+                    if (t & 4) { int k = u; u = v; v = k; }
+                    dst[x] = ex[((size_t)c * H + y0 + v) * W + x0 + u];
+                }
+            }
     }
 }
 
@@ -8620,6 +8635,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     s.disc_layers = o.disc_layers;
     s.patch = o.patch;
     s.batch = o.batch;
+    s.augment = o.augment != 0;
     s.lr = o.lr;
     s.ema = o.ema < 1.0f ? o.ema : 0.999f;
     if (o.resume) {

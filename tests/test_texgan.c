@@ -87,6 +87,7 @@ TN_TEST(checkpoint_resume_continues_identically)
     tn_texgan_opts o;
     tn_texgan_stats s;
     tiny_opts(&o);
+    o.augment = 1; /* flipped/transposed real patches: the flag is part of the saved state */
     o.checkpoint = ck1;
     o.max_iters = 6;
     TN_CHECK(tn_texgan_train(&full, &ex, &o, NULL) == TN_OK);

@@ -422,14 +422,15 @@ static int cmd_texgan_train(int argc, char **argv)
         printf("usage: terrainnet texgan-train EXEMPLAR -o MODEL.tnw [--minutes M] [--iters N] [--resume]\n"
                "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
                "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--stages N]\n"
-               "             [--scale S] [--local N] [--global N] [--periodic N]\n"
+               "             [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
                "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
                "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
                "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
                "4, 4 stages of 64-32-16 channels from 16 noise dims. The full training state is saved\n"
                "atomically to MODEL.tnw.ckpt (or --checkpoint) every 60 s (--checkpoint-seconds), so a\n"
                "killed run loses at most one interval; --resume continues it identically. --scale S learns\n"
-               "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n");
+               "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n"
+               "--augment flips/transposes real patches (small exemplars without a light direction).\n");
         return 0;
     }
     memset(&o, 0, sizeof o);
@@ -437,6 +438,7 @@ static int cmd_texgan_train(int argc, char **argv)
         const char *k = argv[a];
         if (!strcmp(k, "-o") && a + 1 < argc) outp = argv[++a];
         else if (!strcmp(k, "--resume")) o.resume = 1;
+        else if (!strcmp(k, "--augment")) o.augment = 1;
         else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
         else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
         else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
