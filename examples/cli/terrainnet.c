@@ -421,8 +421,8 @@ static int cmd_texgan_train(int argc, char **argv)
     if (wants_help(argc, argv)) {
         printf("usage: terrainnet texgan-train EXEMPLAR -o MODEL.tnw [--minutes M] [--iters N] [--resume]\n"
                "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
-               "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--stages N]\n"
-               "             [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
+               "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--disc-layers N]\n"
+               "             [--stages N] [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
                "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
                "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
                "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
@@ -442,7 +442,7 @@ static int cmd_texgan_train(int argc, char **argv)
         else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
         else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
         else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
-                  !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") ||
+                  !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") || !strcmp(k, "--disc-layers") ||
                   !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic")) &&
                  a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
@@ -454,6 +454,7 @@ static int cmd_texgan_train(int argc, char **argv)
             else if (!strcmp(k, "--batch")) o.batch = (int)v;
             else if (!strcmp(k, "--gen-width")) o.gen_width = (int)v;
             else if (!strcmp(k, "--disc-width")) o.disc_width = (int)v;
+            else if (!strcmp(k, "--disc-layers")) o.disc_layers = (int)v;
             else if (!strcmp(k, "--stages")) o.stages = (int)v;
             else if (!strcmp(k, "--scale")) o.scale = (int)v;
             else if (!strcmp(k, "--local")) o.noise_local = (int)v;
