@@ -56,8 +56,9 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
     @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
-    @@sketch    contour sets: ridge/valley polylines shared by extraction, sketches and parts
+    @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton, parts; realism
+    @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@render    previews: hillshaded colour map and 3D perspective view
 */
 #ifndef TERRAINNET_H
@@ -911,6 +912,157 @@ typedef struct tn_realism {
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
 TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
                                     tn_realism *out);
+
+/* ============================================================================================
+   @@texgan  single-texture spatial GAN, huge textures and detail maps (paper 004, section III)
+   A PSGAN-style spatial GAN learns one exemplar (RGB, or RGB + normal map = 6 channels, any
+   count up to TN_TEXGAN_MAX_CHANNELS). The generator is fully convolutional: a noise tensor z
+   of cells (local dims uniform in [0, 1], optional per-image global dims and periodic sin
+   dims) goes through `stages` x (nearest upsample x2, 5x5 valid conv, leaky ReLU, pixel norm;
+   tanh last), so there is no transposed-conv checkerboard and no zero padding: a window of z
+   cells [a, a + T + 4) gives exactly the output pixels [a 2^S, a 2^S + T 2^S + 4). Tiles with
+   2 cells of overlap on each side therefore equal a one-pass synthesis, and any tile of any
+   seed can be made alone (each cell's noise is a hash of seed and cell). The discriminator is
+   fully convolutional too (stride-2 5x5 convs, a per-location score map), spectral-normalised,
+   hinge loss, Adam, alternating D and G steps on random n x n patches; an exponential moving
+   average of G is what the model keeps. Detail maps (paper: Gaussian split): low map = Gaussian
+   low-pass of the colour-corrected synthesis downsampled by f; high map = exemplar minus its
+   Gaussian blur, stored as value / 2 + 0.5; a renderer adds upsampled low + 2 (high - 0.5)
+   tiled `tiling` times.
+   ============================================================================================ */
+
+#define TN_TEXGAN_MAX_CHANNELS 8
+
+/* Zero = default (see tn_texgan_defaults for the values and why). */
+typedef struct tn_texgan_opts {
+    int noise_local;        /* local noise dims per cell; 0 = 16 */
+    int noise_global;       /* dims constant over one image (PSGAN global); 0 = none */
+    int noise_periodic;     /* sin channels with fixed random wave vectors, random phase per image; 0 = none */
+    int stages;             /* upsample+conv stages: one noise cell = 2^stages pixels; 0 = 4 */
+    int gen_width;          /* channels of the first generator stage, halving per stage (min 16); 0 = 64 */
+    int disc_width;         /* channels of the first discriminator layer, doubling per layer; 0 = 32 */
+    int disc_layers;        /* stride-2 discriminator layers before the score conv; 0 = 3 */
+    int patch;              /* training patch side n in pixels; 0 = 64 */
+    int scale;              /* learn the exemplar downscaled by this factor and upsample the output
+                               (bilinear): features `scale` times larger for the same cost; 0 = 1 */
+    int batch;              /* patches per step; 0 = 4 */
+    int augment;            /* 1: real patches randomly flipped/transposed (8x the data of a small
+                               exemplar; only for textures without a light direction) */
+    float lr;               /* Adam rate for G and D; 0 = 2e-4 (betas 0.5, 0.999) */
+    float ema;              /* EMA decay of the kept generator; 0 = 0.995 */
+    double minutes;         /* wall-clock budget of the whole run, resumed time included; 0 = 15 */
+    long max_iters;         /* stop after this many iterations in total; 0 = only the time budget */
+    const char *checkpoint; /* checkpoint file (.tnw); NULL = none */
+    double checkpoint_seconds; /* save at least this often; 0 = 60 */
+    long checkpoint_iters;  /* also save every this many iterations; 0 = only by time */
+    int resume;             /* 1: continue from `checkpoint` (the file's architecture wins) */
+    uint64_t seed;
+} tn_texgan_opts;
+
+/* A trained generator (the EMA weights) plus what synthesis needs. Free with tn_texgan_free. */
+typedef struct tn_texgan {
+    int channels, noise_local, noise_global, noise_periodic, stages, gen_width;
+    int scale;                             /* output pixels per generator pixel (1 = none) */
+    float lo, hi;                          /* value range the tanh output maps to */
+    float mean[TN_TEXGAN_MAX_CHANNELS];    /* the exemplar's mean per channel */
+    long iterations;                       /* training iterations done */
+    double train_seconds;                  /* training wall-clock seconds */
+    tn_params *weights;                    /* "texgan.config", "texgan.waves", "g.w<i>", "g.b<i>" */
+} tn_texgan;
+
+/* What a training run did. */
+typedef struct tn_texgan_stats {
+    long iterations;          /* total, including resumed ones */
+    long resumed_from;        /* iteration the run resumed at (0 = fresh) */
+    double seconds;           /* total training seconds, including resumed time */
+    double seconds_per_iter;  /* this run's average */
+    float loss_d, loss_g;     /* averages over the last 50 iterations */
+    int checkpoints;          /* checkpoints written by this run */
+} tn_texgan_stats;
+
+/* Fills *o with the defaults (what zero fields mean). */
+TN_API void tn_texgan_defaults(tn_texgan_opts *o);
+/* Trains on the exemplar (values in any finite range; 1..TN_TEXGAN_MAX_CHANNELS channels, at
+   least patch x patch). Reports progress as "texgan-train". With opts->checkpoint it saves the
+   full training state atomically every checkpoint interval and at the end; with resume it
+   continues from that file, and the continuation is bit-identical to an uninterrupted run.
+   *model is allocated here (free with tn_texgan_free). stats may be NULL. */
+TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *exemplar, const tn_texgan_opts *opts,
+                                 tn_texgan_stats *stats);
+TN_API void tn_texgan_free(tn_texgan *model);
+/* Model files are .tnw: a config tensor (architecture, value range, exemplar mean) + EMA weights. */
+TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path);
+TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path);
+
+/* Synthesises the w x h window at pixel (x0, y0) of the infinite texture of `seed` (x0, y0 >= 0)
+   in one generator pass. *out is allocated here. */
+TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h,
+                                             tn_image *out);
+/* Called with consecutive row bands of a tiled synthesis: rows [y0, y0 + band->height). */
+typedef tn_status (*tn_band_fn)(void *user, int y0, const tn_image *band);
+/* Tiled synthesis of a width x height texture: z split into tiles of tile_cells cells (0 = 32)
+   with 2 cells of overlap, each tile run alone and cropped; bands of one tile row are handed to
+   fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window(0, 0). */
+TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t seed, int width, int height,
+                                             int tile_cells, tn_band_fn fn, void *user);
+/* Whole image in memory (tiled internally). */
+TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out);
+/* Streams a synthesis to disk band by band (PFM or 8-bit PPM/PGM by extension; other formats are
+   built in memory and saved whole). Channels beyond 3 go to "<stem>.ch3-5<ext>" and so on.
+   shift (channels floats, may be NULL) is added before writing (colour correction), results
+   clipped to the model's range. Files appear atomically. */
+TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height,
+                                           const float *shift, const char *path);
+
+/* Colour correction: adds a per-channel shift so that the mean of the result, clipped to
+   [lo, hi], equals target_mean (found by bisection, so clipping does not spoil it). In place. */
+TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target_mean, float lo, float hi);
+/* The per-channel shift the same correction would apply (for streamed outputs). */
+TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target_mean, float lo, float hi,
+                                         float *shift);
+
+/* Detail maps for a renderer. */
+typedef struct tn_detail_maps {
+    tn_image low;            /* low-pass synthesis, (W / factor) x (H / factor) (rounded up) */
+    tn_image high;           /* exemplar high frequencies as value / 2 + 0.5, exemplar size */
+    int width, height;       /* size of the full texture the maps stand for */
+    float tiling_x, tiling_y;/* repetitions of the high map across the texture (= width / exemplar width) */
+    int factor;              /* low-map downsampling factor */
+    float sigma;             /* Gaussian split sigma in full-resolution pixels */
+    float lo, hi;            /* value range (composition clips to it) */
+} tn_detail_maps;
+
+typedef struct tn_detail_opts {
+    int factor;              /* low-map downsampling; 0 = 10 (memory / 100) */
+    float sigma;             /* split sigma in pixels; 0 = factor / 2 */
+    int no_colour_correct;   /* 1: keep the synthesis' own mean colour */
+    float lo, hi;            /* value range; both 0 = [0, 1] */
+} tn_detail_opts;
+
+/* Detail maps from a synthesis in memory. The low map is an f x f area average followed by a
+   Gaussian of the remaining width (sqrt(sigma^2 - f^2/12) / f low-map pixels): the same
+   low-pass the streaming version applies. */
+TN_API tn_status tn_detail_maps_from_image(tn_detail_maps *maps, const tn_image *synth, const tn_image *exemplar,
+                                           const tn_detail_opts *opts);
+/* Same, synthesising width x height with the model band by band (memory: one band + the maps). */
+TN_API tn_status tn_detail_maps_from_model(tn_detail_maps *maps, const tn_texgan *model, uint64_t seed, int width,
+                                           int height, const tn_image *exemplar, const tn_detail_opts *opts);
+TN_API void tn_detail_maps_free(tn_detail_maps *maps);
+/* One texel as a shader computes it, (u, v) in [0, 1) across the texture: bilinear low map
+   (texel centres, clamped) + 2 (bilinear high map, repeated tiling times - 0.5), clipped.
+   out gets channels floats. */
+TN_API void tn_detail_texel(const tn_detail_maps *maps, float u, float v, float *out);
+/* The whole composed texture at width x height (0, 0 = the maps' size). */
+TN_API tn_status tn_detail_compose(const tn_detail_maps *maps, int width, int height, tn_image *out);
+/* PREFIX_low.png, PREFIX_high.png (8-bit) and PREFIX_detail.txt (size, tiling, factor, sigma,
+   range) as a sidecar, since the tiling factor must travel with the maps. */
+TN_API tn_status tn_detail_maps_save(const tn_detail_maps *maps, const char *prefix);
+TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix);
+/* Side-by-side preview (2 x 2 panels of `panel` pixels, 0 = 384): top far view of the whole
+   texture, bottom a near crop at full resolution; left naive tiling of the exemplar, right
+   the detail-mapped texture; all shaded by the hillshade of dem (NULL = a Perlin terrain). */
+TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *exemplar, const tn_image *dem,
+                                   int panel, tn_image *out);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -12534,6 +12686,1813 @@ done:
     TN_FREE(sb);
     TN_FREE(cb);
     if (!st) *out = r;
+    return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>texgan  (@@texgan implementation)
+   Defaults (measured on the shared 2-core Zen 4, see README "Texture GAN"): 4 stages of
+   64-32-16 channels from 16 local noise dims, discriminator 32-64-128 + score conv, 64 px
+   patches, batch 4. Why: a cell is 16 px, so the generator sees 2 cells (~32 px) each side,
+   enough for grass blades and pebbles at 512 px, and the discriminator's ~60 px field covers a
+   patch; wider nets cost time per iteration roughly quadratically and 15 minutes buys ~2-4k
+   iterations at this size. The GAN output only feeds the low-frequency map, whose content is
+   at scales >= 5 px, so a small generator is enough; the exemplar supplies the fine detail.
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__TG_CONFIG 40
+#define TN__TG_STATE 24
+#define TN__TG_MAX_STAGES 6
+#define TN__TG_MAX_DLAYERS 5
+
+TN_API void tn_texgan_defaults(tn_texgan_opts *o)
+{
+    TN_ASSERT(o);
+    if (o->noise_local <= 0) o->noise_local = 16;
+    if (o->noise_global < 0) o->noise_global = 0;
+    if (o->noise_periodic < 0) o->noise_periodic = 0;
+    if (o->stages <= 0) o->stages = 4;
+    if (o->gen_width <= 0) o->gen_width = 64;
+    if (o->disc_width <= 0) o->disc_width = 32;
+    if (o->disc_layers <= 0) o->disc_layers = 3;
+    if (o->patch <= 0) o->patch = 64;
+    if (o->batch <= 0) o->batch = 4;
+    if (o->lr <= 0) o->lr = 2e-4f;
+    if (o->ema <= 0) o->ema = 0.995f;
+    if (o->minutes <= 0) o->minutes = 15.0;
+    if (o->max_iters < 0) o->max_iters = 0;
+    if (o->checkpoint_seconds <= 0) o->checkpoint_seconds = 60.0;
+    if (o->checkpoint_iters < 0) o->checkpoint_iters = 0;
+}
+
+static uint64_t tn__splitmix64(uint64_t x)
+{
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+
+static int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
+
+/* Output channels of generator stage i. */
+static int tn__tg_gen_out(const tn_texgan *m, int i)
+{
+    int w = m->gen_width >> i;
+    if (i == m->stages - 1) return m->channels;
+    return w < 16 ? 16 : w;
+}
+
+/* Output pixels of a generator run on s cells: every stage doubles, the valid 5x5 conv takes 4. */
+static int tn__tg_out_size(int stages, int cells)
+{
+    int r = cells, i;
+    for (i = 0; i < stages; i++) r = 2 * r - 4;
+    return r;
+}
+
+/* Cells needed so the output covers `pixels` (at least 4 cells). */
+static int tn__tg_cells_for(int stages, int pixels)
+{
+    int p = 1 << stages, need = pixels - 4;
+    return need <= 0 ? 4 : (need + p - 1) / p + 4;
+}
+
+/* ---- model parameters ---- */
+
+static tn_status tn__tg_check_arch(const tn_texgan *m)
+{
+    if (m->channels < 1 || m->channels > TN_TEXGAN_MAX_CHANNELS) return tn__fail(TN_ERR_INVALID_ARG, "texgan: %d channels (1..%d)", m->channels, TN_TEXGAN_MAX_CHANNELS);
+    if (m->stages < 1 || m->stages > TN__TG_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "texgan: %d stages (1..%d)", m->stages, TN__TG_MAX_STAGES);
+    if (m->noise_local < 1 || m->noise_local > 256 || m->noise_global < 0 || m->noise_global > 256 || m->noise_periodic < 0 ||
+        m->noise_periodic > 64)
+        return tn__fail(TN_ERR_INVALID_ARG, "texgan: noise dims %d/%d/%d out of range", m->noise_local, m->noise_global, m->noise_periodic);
+    if (m->scale < 1 || m->scale > 16) return tn__fail(TN_ERR_INVALID_ARG, "texgan: scale %d (1..16)", m->scale);
+    if (m->gen_width < 1 || m->gen_width > 2048) return tn__fail(TN_ERR_INVALID_ARG, "texgan: generator width %d (1..2048)", m->gen_width);
+    if (!(m->lo < m->hi) || m->lo != m->lo || m->hi - m->lo > 1e30f) return tn__fail(TN_ERR_INVALID_ARG, "texgan: bad value range");
+    return TN_OK;
+}
+
+static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_layers, float *c)
+{
+    int i;
+    memset(c, 0, TN__TG_CONFIG * sizeof(float));
+    c[0] = 1.0f; /* config version */
+    c[1] = (float)m->channels;
+    c[2] = (float)m->noise_local;
+    c[3] = (float)m->noise_global;
+    c[4] = (float)m->noise_periodic;
+    c[5] = (float)m->stages;
+    c[6] = (float)m->gen_width;
+    c[7] = m->lo;
+    c[8] = m->hi;
+    c[9] = (float)(m->iterations & 0xffffff);
+    c[10] = (float)(m->iterations >> 24);
+    c[11] = (float)m->train_seconds;
+    c[12] = (float)disc_width;
+    c[13] = (float)disc_layers;
+    c[14] = (float)m->scale;
+    for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) c[16 + i] = m->mean[i];
+}
+
+/* Reads the architecture back; validates every field before anything is allocated from it. */
+static tn_status tn__tg_read_config(tn_texgan *m, int *disc_width, int *disc_layers, const float *c, const char *name)
+{
+    int i;
+    for (i = 0; i < TN__TG_CONFIG; i++)
+        if (c[i] != c[i] || c[i] > 1e30f || c[i] < -1e30f) return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config holds NaN/Inf", name);
+    if (c[0] != 1.0f) return tn__fail(TN_ERR_FORMAT, "%s: texgan config version %g is not supported", name, (double)c[0]);
+    for (i = 1; i <= 6; i++)
+        if (c[i] < 0 || c[i] > 4096 || c[i] != floorf(c[i])) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan config field %d", name, i);
+    m->channels = (int)c[1];
+    m->noise_local = (int)c[2];
+    m->noise_global = (int)c[3];
+    m->noise_periodic = (int)c[4];
+    m->stages = (int)c[5];
+    m->gen_width = (int)c[6];
+    m->lo = c[7];
+    m->hi = c[8];
+    m->iterations = (long)c[9] + ((long)c[10] << 24);
+    m->train_seconds = c[11];
+    if (c[14] < 0 || c[14] > 16 || c[14] != floorf(c[14])) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan scale", name);
+    m->scale = c[14] > 0 ? (int)c[14] : 1;
+    for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) m->mean[i] = c[16 + i];
+    if (disc_width) *disc_width = (int)c[12];
+    if (disc_layers) *disc_layers = (int)c[13];
+    if (tn__tg_check_arch(m)) return tn__fail_context(TN_ERR_CORRUPT, name);
+    return TN_OK;
+}
+
+/* Adds the generator tensors ("<prefix>w<i>", "<prefix>b<i>") to p. */
+static tn_status tn__tg_add_gen(tn_params *p, const tn_texgan *m, const char *prefix, int learned)
+{
+    int i, cin = tn__tg_zdim(m);
+    char name[40];
+    for (i = 0; i < m->stages; i++) {
+        int cout = tn__tg_gen_out(m, i), ws[4], bs;
+        ws[0] = cout; ws[1] = cin; ws[2] = 5; ws[3] = 5;
+        bs = cout;
+        snprintf(name, sizeof name, "%sw%d", prefix, i);
+        if (!(learned ? tn_params_add(p, name, 4, ws) : tn_params_add_buffer(p, name, 4, ws))) return TN_ERR_OUT_OF_MEMORY;
+        snprintf(name, sizeof name, "%sb%d", prefix, i);
+        if (!(learned ? tn_params_add(p, name, 1, &bs) : tn_params_add_buffer(p, name, 1, &bs))) return TN_ERR_OUT_OF_MEMORY;
+        cin = cout;
+    }
+    return TN_OK;
+}
+
+/* The model's params: config, wave vectors (periodic dims, at least one row), EMA generator. */
+static tn_status tn__tg_model_params(tn_texgan *m)
+{
+    int nc = TN__TG_CONFIG, ws[2];
+    ws[0] = m->noise_periodic > 0 ? m->noise_periodic : 1;
+    ws[1] = 2;
+    m->weights = tn_params_create();
+    if (!m->weights) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    if (!tn_params_add_buffer(m->weights, "texgan.config", 1, &nc) || !tn_params_add_buffer(m->weights, "texgan.waves", 2, ws) ||
+        tn__tg_add_gen(m->weights, m, "g.", 0)) {
+        tn_params_free(m->weights);
+        m->weights = NULL;
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    }
+    return TN_OK;
+}
+
+TN_API void tn_texgan_free(tn_texgan *model)
+{
+    if (!model) return;
+    tn_params_free(model->weights);
+    memset(model, 0, sizeof *model);
+}
+
+TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path)
+{
+    tn_tensor *cfg;
+    if (!model || !model->weights) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: no model");
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: empty path");
+    cfg = tn_params_find(model->weights, "texgan.config");
+    tn__tg_write_config(model, (int)cfg->data[12], (int)cfg->data[13], cfg->data);
+    return tn_params_save(model->weights, path);
+}
+
+/* The first tensor of a .tnw image, which texgan files make the config: read before the
+   model can be built, since its shapes depend on it. Bounds-checked; the full load that
+   follows checks the CRC and everything else. */
+static tn_status tn__tg_peek_config(const uint8_t *b, size_t n, float *cfg, const char *name)
+{
+    static const char want[] = "texgan.config";
+    size_t nl, off = 12, k;
+    if (n < 16 || memcmp(b, "TNW1", 4) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a terrainnet weights (.tnw) file", name);
+    if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
+    if (off + 2 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated", name);
+    nl = (size_t)b[off] | ((size_t)b[off + 1] << 8);
+    off += 2;
+    if (nl != sizeof want - 1 || off + nl + 2 + 4 > n - 4 || memcmp(b + off, want, nl) != 0)
+        return tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config first)", name);
+    off += nl;
+    if (b[off] != 1 || tn__get_u32(b + off + 2) != TN__TG_CONFIG) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan.config shape", name);
+    off += 6;
+    if (off + 4 * (size_t)TN__TG_CONFIG > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated config", name);
+    for (k = 0; k < TN__TG_CONFIG; k++) cfg[k] = tn__get_f32(b + off + 4 * k);
+    return TN_OK;
+}
+
+TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    float cfg[TN__TG_CONFIG];
+    tn_texgan m;
+    tn_status st;
+    TN_ASSERT(model);
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    memset(&m, 0, sizeof m);
+    st = tn__tg_peek_config(buf, n, cfg, path);
+    if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg, path);
+    if (!st) st = tn__tg_model_params(&m);
+    if (!st) st = tn_params_load_memory(m.weights, buf, n, path);
+    TN_FREE(buf);
+    if (st) {
+        tn_params_free(m.weights);
+        return st;
+    }
+    *model = m;
+    return TN_OK;
+}
+
+/* ---- noise ---- */
+
+/* Fills batch item `item` of z (N x Cz x s x s) for the cell window starting at (cx0, cy0):
+   local dims hash (seed, cell), so a cell's noise never depends on the window; global dims and
+   the periodic phases come from the image seed. */
+static void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0)
+{
+    int cz = tn__tg_zdim(m), sh = z->shape[2], sw = z->shape[3], x, y, c;
+    size_t plane = (size_t)sh * sw;
+    float *zi = z->data + (size_t)item * cz * plane;
+    float glob[256], phase[64];
+    tn_rng r;
+    tn_rng_seed(&r, tn__splitmix64(seed), 0x676c6f62ULL);
+    for (c = 0; c < m->noise_global; c++) glob[c] = tn_rng_uniform(&r);
+    for (c = 0; c < m->noise_periodic; c++) phase[c] = tn_rng_uniform(&r);
+    for (y = 0; y < sh; y++)
+        for (x = 0; x < sw; x++) {
+            uint64_t cell = ((uint64_t)(uint32_t)(cy0 + y) << 32) | (uint32_t)(cx0 + x);
+            size_t at = (size_t)y * sw + x;
+            tn_rng_seed(&r, tn__splitmix64(seed ^ tn__splitmix64(cell)), 0x6c6f63ULL);
+            for (c = 0; c < m->noise_local; c++) zi[(size_t)c * plane + at] = tn_rng_uniform(&r);
+            for (c = 0; c < m->noise_global; c++) zi[(size_t)(m->noise_local + c) * plane + at] = glob[c];
+            for (c = 0; c < m->noise_periodic; c++) {
+                double t = waves[2 * c] * (double)(cx0 + x) + waves[2 * c + 1] * (double)(cy0 + y) + phase[c];
+                zi[(size_t)(m->noise_local + m->noise_global + c) * plane + at] = (float)(0.5 + 0.5 * sin(6.283185307179586 * t));
+            }
+        }
+}
+
+/* ---- networks ---- */
+
+/* Pixel norm (ProGAN): x / sqrt(mean over channels of x^2 + eps). Per location, so it keeps the
+   generator local (tiling stays exact) and behaves the same in training and synthesis. */
+static tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
+{
+    tn_tensor *r = tn_pow_abs(ctx, tn_scale_shift(ctx, tn_mean_axis(ctx, tn_square(ctx, x), 1), 1.0f, 1e-8f), 0.5f);
+    return tn_div(ctx, x, r);
+}
+
+/* conv5x5_valid(upsample_nearest_x2(x), w) computed as one stride-2 transposed conv with a 6x6
+   kernel v = w folded (v[t] = w[4 - t] + w[5 - t] per axis, taps outside 0..4 dropped; pad 4):
+   the same function with 9 instead of 25 multiply-adds per output pixel and no upsampled copy
+   (2.7x faster forward + backward). v = w M with a fixed 25 x 36 0/1 matrix, so the gradient
+   reaches the 5x5 weights the model keeps. */
+static tn_tensor *tn__tg_up_conv(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *b)
+{
+    int cout = w->shape[0], cin = w->shape[1], sh[2], s4[4], perm[4] = {1, 0, 2, 3}, ty, tx, ky, kx;
+    tn_tensor *fold = tn_tensor_2d(ctx, 25, 36), *v;
+    tn_conv_opts co;
+    if (!fold) return NULL;
+    for (ty = 0; ty < 6; ty++)
+        for (tx = 0; tx < 6; tx++)
+            for (ky = 0; ky < 5; ky++)
+                for (kx = 0; kx < 5; kx++)
+                    fold->data[(ky * 5 + kx) * 36 + ty * 6 + tx] = (float)((ky == 4 - ty || ky == 5 - ty) && (kx == 4 - tx || kx == 5 - tx));
+    sh[0] = cout * cin;
+    sh[1] = 25;
+    s4[0] = cout; s4[1] = cin; s4[2] = 6; s4[3] = 6;
+    v = tn_permute(ctx, tn_reshape(ctx, tn_matmul(ctx, tn_reshape(ctx, w, 2, sh), fold, 0, 0), 4, s4), perm);
+    memset(&co, 0, sizeof co);
+    co.stride = 2;
+    co.pad = 4;
+    return tn_conv_transpose2d(ctx, x, v, b, &co);
+}
+
+static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z)
+{
+    tn_tensor *x = z;
+    char name[40];
+    int i;
+    for (i = 0; i < m->stages; i++) {
+        tn_tensor *w, *b;
+        snprintf(name, sizeof name, "%sw%d", prefix, i);
+        w = tn_params_find(p, name);
+        snprintf(name, sizeof name, "%sb%d", prefix, i);
+        b = tn_params_find(p, name);
+        x = tn__tg_up_conv(ctx, x, w, b);
+        x = i < m->stages - 1 ? tn__tg_pixel_norm(ctx, tn_leaky_relu(ctx, x, 0.2f)) : tn_tanh(ctx, x);
+    }
+    return x;
+}
+
+static tn_status tn__tg_add_disc(tn_params *p, int cin, int width, int layers)
+{
+    int l, c = cin;
+    char name[40];
+    for (l = 0; l <= layers; l++) {
+        int cout = l == layers ? 1 : width << l, ws[4];
+        ws[0] = cout; ws[1] = c; ws[2] = 5; ws[3] = 5;
+        snprintf(name, sizeof name, "d.w%d", l);
+        if (!tn_params_add(p, name, 4, ws)) return TN_ERR_OUT_OF_MEMORY;
+        snprintf(name, sizeof name, "d.b%d", l);
+        if (!tn_params_add(p, name, 1, &cout)) return TN_ERR_OUT_OF_MEMORY;
+        snprintf(name, sizeof name, "d.u%d", l);
+        if (!tn_params_add_buffer(p, name, 1, &cout)) return TN_ERR_OUT_OF_MEMORY;
+        c = cout;
+    }
+    return TN_OK;
+}
+
+/* Spectral-normalised weights of every discriminator layer (one power iteration each). */
+static void tn__tg_disc_weights(tn_ctx *ctx, tn_params *p, int layers, tn_tensor **wn)
+{
+    char name[40];
+    int l;
+    for (l = 0; l <= layers; l++) {
+        tn_tensor *w, *u;
+        snprintf(name, sizeof name, "d.w%d", l);
+        w = tn_params_find(p, name);
+        snprintf(name, sizeof name, "d.u%d", l);
+        u = tn_params_find(p, name);
+        wn[l] = tn_spectral_norm(ctx, w, u, 1);
+    }
+}
+
+/* Per-location scores: stride-2 5x5 convs with leaky ReLU, then a 5x5 score conv. */
+static tn_tensor *tn__tg_discriminate(tn_ctx *ctx, tn_params *p, int layers, tn_tensor **wn, tn_tensor *x)
+{
+    tn_conv_opts co;
+    char name[40];
+    int l;
+    memset(&co, 0, sizeof co);
+    co.pad = 2;
+    for (l = 0; l <= layers; l++) {
+        snprintf(name, sizeof name, "d.b%d", l);
+        co.stride = l == layers ? 1 : 2;
+        x = tn_conv2d(ctx, x, wn[l], tn_params_find(p, name), &co);
+        if (l < layers) x = tn_leaky_relu(ctx, x, 0.2f);
+    }
+    return x;
+}
+
+/* ---- training ---- */
+
+typedef struct tn__tg_train {
+    tn_texgan m;            /* EMA generator = m.weights "g.*" */
+    tn_params *g, *d;
+    tn_optim *og, *od;
+    tn_rng rng;
+    long it;
+    double seconds;
+    int disc_width, disc_layers, patch, batch, augment;
+    float lr, ema;
+} tn__tg_train;
+
+static void tn__tg_put_u64(float *f, uint64_t v)
+{
+    int i;
+    for (i = 0; i < 4; i++) f[i] = (float)((v >> (16 * i)) & 0xffffu);
+}
+
+static uint64_t tn__tg_get_u64(const float *f)
+{
+    uint64_t v = 0;
+    int i;
+    for (i = 0; i < 4; i++) v |= (uint64_t)((uint32_t)f[i] & 0xffffu) << (16 * i);
+    return v;
+}
+
+/* Adds (save) or reads back (load) one checkpoint slot: a copy of `data` shaped like t. */
+static tn_status tn__tg_slot(tn_params *ck, const char *prefix, const tn_tensor *t, float *data, int save)
+{
+    char name[64];
+    tn_tensor *c;
+    snprintf(name, sizeof name, "%s%s", prefix, t->name);
+    if (strlen(name) >= 40) return tn__fail(TN_ERR_INVALID_ARG, "texgan: tensor name %s too long", name);
+    if (save) {
+        c = tn_params_add_buffer(ck, name, t->ndim, t->shape);
+        if (!c) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+        if (data) memcpy(c->data, data, t->numel * sizeof(float));
+    } else {
+        c = tn_params_find(ck, name);
+        TN_ASSERT(c && c->numel == t->numel);
+        memcpy(data, c->data, t->numel * sizeof(float));
+    }
+    return TN_OK;
+}
+
+/* Every learned tensor of p, its Adam moments and (for save) its data. */
+static tn_status tn__tg_slots_net(tn_params *ck, tn_params *p, tn_optim *o, int save)
+{
+    int i;
+    tn_status st = TN_OK;
+    for (i = 0; i < tn_params_count(p) && !st; i++) {
+        tn_tensor *t = tn_params_get(p, i);
+        st = tn__tg_slot(ck, "", t, t->data, save);
+        if (!st && t->requires_grad) st = tn__tg_slot(ck, "am.", t, o->m[i], save);
+        if (!st && t->requires_grad) st = tn__tg_slot(ck, "av.", t, o->v[i], save);
+    }
+    return st;
+}
+
+/* The whole training state as one tn_params (for a load, the layout: tn__tg_state_read copies
+   the loaded values back). Uses tn_optim's moment buffers directly: they are part of the state. */
+static tn_status tn__tg_state_params(tn__tg_train *s, tn_params **out, int save)
+{
+    tn_params *ck = tn_params_create();
+    int nc = TN__TG_CONFIG, ns = TN__TG_STATE, i;
+    tn_tensor *cfg, *state;
+    tn_status st = TN_OK;
+    *out = NULL;
+    if (!ck) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    cfg = tn_params_add_buffer(ck, "texgan.config", 1, &nc);
+    state = tn_params_add_buffer(ck, "train.state", 1, &ns);
+    if (!cfg || !state) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    if (!st && save) {
+        s->m.iterations = s->it;
+        s->m.train_seconds = s->seconds;
+        tn__tg_write_config(&s->m, s->disc_width, s->disc_layers, cfg->data);
+        state->data[0] = (float)(s->it & 0xffffff);
+        state->data[1] = (float)(s->it >> 24);
+        state->data[2] = (float)s->seconds;
+        tn__tg_put_u64(state->data + 3, s->rng.state);
+        tn__tg_put_u64(state->data + 7, s->rng.inc);
+        state->data[11] = (float)(s->og->step & 0xffffff);
+        state->data[12] = (float)(s->og->step >> 24);
+        state->data[13] = (float)(s->od->step & 0xffffff);
+        state->data[14] = (float)(s->od->step >> 24);
+        state->data[15] = (float)s->patch;
+        state->data[16] = (float)s->batch;
+        state->data[17] = s->lr;
+        state->data[18] = s->ema;
+        state->data[19] = (float)s->augment;
+    }
+    for (i = 1; i < tn_params_count(s->m.weights) && !st; i++) { /* waves + EMA generator */
+        tn_tensor *t = tn_params_get(s->m.weights, i);
+        st = tn__tg_slot(ck, "ema.", t, t->data, 1);
+    }
+    if (!st) st = tn__tg_slots_net(ck, s->g, s->og, 1);
+    if (!st) st = tn__tg_slots_net(ck, s->d, s->od, 1);
+    if (st) {
+        tn_params_free(ck);
+        return st;
+    }
+    *out = ck;
+    return TN_OK;
+}
+
+/* Copies a loaded checkpoint back into the training state. */
+static tn_status tn__tg_state_read(tn__tg_train *s, tn_params *ck, const char *name)
+{
+    const float *st = tn_params_find(ck, "train.state")->data;
+    int i;
+    for (i = 0; i < 19; i++)
+        if (st[i] != st[i] || st[i] < 0 || st[i] > 1e12f) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state", name);
+    s->it = (long)st[0] + ((long)st[1] << 24);
+    s->seconds = st[2];
+    s->rng.state = tn__tg_get_u64(st + 3);
+    s->rng.inc = tn__tg_get_u64(st + 7) | 1u;
+    s->og->step = (long)st[11] + ((long)st[12] << 24);
+    s->od->step = (long)st[13] + ((long)st[14] << 24);
+    for (i = 1; i < tn_params_count(s->m.weights); i++) {
+        tn_tensor *t = tn_params_get(s->m.weights, i);
+        tn__tg_slot(ck, "ema.", t, t->data, 0);
+    }
+    for (i = 0; i < tn_params_count(s->g); i++) {
+        tn_tensor *t = tn_params_get(s->g, i);
+        tn__tg_slot(ck, "", t, t->data, 0);
+        tn__tg_slot(ck, "am.", t, s->og->m[i], 0);
+        tn__tg_slot(ck, "av.", t, s->og->v[i], 0);
+    }
+    for (i = 0; i < tn_params_count(s->d); i++) {
+        tn_tensor *t = tn_params_get(s->d, i);
+        tn__tg_slot(ck, "", t, t->data, 0);
+        if (t->requires_grad) {
+            tn__tg_slot(ck, "am.", t, s->od->m[i], 0);
+            tn__tg_slot(ck, "av.", t, s->od->v[i], 0);
+        }
+    }
+    return TN_OK;
+}
+
+static tn_status tn__tg_checkpoint(tn__tg_train *s, const char *path)
+{
+    tn_params *ck = NULL;
+    tn_status st = tn__tg_state_params(s, &ck, 1);
+    if (st) return st;
+    st = tn_params_save(ck, path);
+    tn_params_free(ck);
+    return st;
+}
+
+static void tn__tg_train_free(tn__tg_train *s)
+{
+    tn_optim_free(s->og);
+    tn_optim_free(s->od);
+    tn_params_free(s->g);
+    tn_params_free(s->d);
+    tn_texgan_free(&s->m);
+}
+
+/* Builds nets and optimisers for s->m's architecture, initialised from s->rng. */
+static tn_status tn__tg_build(tn__tg_train *s)
+{
+    tn_optim_opts oo;
+    int i;
+    if (tn__tg_model_params(&s->m)) return TN_ERR_OUT_OF_MEMORY;
+    s->g = tn_params_create();
+    s->d = tn_params_create();
+    if (!s->g || !s->d || tn__tg_add_gen(s->g, &s->m, "g.", 1) || tn__tg_add_disc(s->d, s->m.channels, s->disc_width, s->disc_layers))
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory building the networks");
+    for (i = 0; i < tn_params_count(s->g); i++) {
+        tn_tensor *t = tn_params_get(s->g, i);
+        if (t->ndim == 4) tn_init_kaiming(t, &s->rng, i == tn_params_count(s->g) - 2 ? 0.5f : 1.41f);
+        memcpy(tn_params_get(s->m.weights, i + 2)->data, t->data, t->numel * sizeof(float));
+    }
+    for (i = 0; i < tn_params_count(s->d); i++) {
+        tn_tensor *t = tn_params_get(s->d, i);
+        if (t->ndim == 4) tn_init_kaiming(t, &s->rng, 1.0f);
+        else if (!t->requires_grad) tn_init_normal(t, &s->rng, 0.0f, 1.0f);
+    }
+    { /* periodic wave vectors: random directions, periods of 2 to 16 cells */
+        tn_tensor *w = tn_params_find(s->m.weights, "texgan.waves");
+        for (i = 0; i < s->m.noise_periodic; i++) {
+            double ang = 6.283185307179586 * tn_rng_uniform(&s->rng), f = 1.0 / (2.0 + 14.0 * tn_rng_uniform(&s->rng));
+            w->data[2 * i] = (float)(f * cos(ang));
+            w->data[2 * i + 1] = (float)(f * sin(ang));
+        }
+    }
+    memset(&oo, 0, sizeof oo);
+    oo.lr = s->lr;
+    oo.beta1 = 0.5f;
+    oo.beta2 = 0.999f;
+    s->og = tn_optim_create(s->g, &oo);
+    s->od = tn_optim_create(s->d, &oo);
+    if (!s->og || !s->od) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory for the optimisers");
+    return TN_OK;
+}
+
+/* Loads a checkpoint file: the architecture comes from its config. */
+static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *path)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    float cfg[TN__TG_CONFIG];
+    tn_params *ck = NULL;
+    tn_status st;
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    st = tn__tg_peek_config(buf, n, cfg, path);
+    if (!st) st = tn__tg_read_config(&s->m, &s->disc_width, &s->disc_layers, cfg, path);
+    if (!st && (s->disc_width < 1 || s->disc_width > 1024 || s->disc_layers < 1 || s->disc_layers > TN__TG_MAX_DLAYERS))
+        st = tn__fail(TN_ERR_CORRUPT, "%s: bad discriminator size", path);
+    if (!st && s->m.channels != ex->channels)
+        st = tn__fail(TN_ERR_SHAPE, "%s: checkpoint has %d channels, the exemplar %d", path, s->m.channels, ex->channels);
+    if (!st) st = tn__tg_build(s);
+    if (!st) st = tn__tg_state_params(s, &ck, 0);
+    if (!st) st = tn_params_load_memory(ck, buf, n, path);
+    if (!st) {
+        const float *ts = tn_params_find(ck, "train.state")->data;
+        s->patch = (int)ts[15];
+        s->batch = (int)ts[16];
+        s->lr = ts[17];
+        s->ema = ts[18];
+        s->augment = ts[19] != 0.0f;
+        if (s->patch < 8 || s->patch > 4096 || s->batch < 1 || s->batch > 1024 || !(s->lr > 0 && s->lr < 1) || !(s->ema > 0 && s->ema < 1))
+            st = tn__fail(TN_ERR_CORRUPT, "%s: bad training settings", path);
+    }
+    if (!st) st = tn__tg_state_read(s, ck, path);
+    if (!st) { /* the optimisers keep their rate from creation: rebuild them with the file's */
+        s->og->o.lr = s->lr;
+        s->od->o.lr = s->lr;
+    }
+    tn_params_free(ck);
+    TN_FREE(buf);
+    return st;
+}
+
+/* Random real patches (batch x C x n x n, in [-1, 1]) from the planar normalised exemplar. */
+static void tn__tg_real_batch(tn__tg_train *s, const float *ex, int W, int H, tn_tensor *real)
+{
+    int n = s->patch, C = s->m.channels, b, c, y, x;
+    for (b = 0; b < s->batch; b++) {
+        int x0 = (int)tn_rng_below(&s->rng, (uint32_t)(W - n + 1)), y0 = (int)tn_rng_below(&s->rng, (uint32_t)(H - n + 1));
+        int t = s->augment ? (int)tn_rng_below(&s->rng, 8) : 0; /* bit 0 flip x, bit 1 flip y, bit 2 transpose */
+        for (c = 0; c < C; c++)
+            for (y = 0; y < n; y++) {
+                float *dst = real->data + (((size_t)b * C + c) * n + y) * n;
+                if (!t) {
+                    memcpy(dst, ex + ((size_t)c * H + y0 + y) * W + x0, (size_t)n * sizeof(float));
+                    continue;
+                }
+                for (x = 0; x < n; x++) {
+                    int u = t & 1 ? n - 1 - x : x, v = t & 2 ? n - 1 - y : y;
+                    if (t & 4) { int k = u; u = v; v = k; }
+                    dst[x] = ex[((size_t)c * H + y0 + v) * W + x0 + u];
+                }
+            }
+    }
+}
+
+/* Generator output for a fresh noise batch, cropped to n x n at a random offset (so no phase of
+   the 2^stages cell grid is favoured). */
+static tn_tensor *tn__tg_fake_batch(tn_ctx *ctx, tn__tg_train *s)
+{
+    int cells = tn__tg_cells_for(s->m.stages, s->patch), r = tn__tg_out_size(s->m.stages, cells), b, ox, oy;
+    tn_tensor *z = tn_tensor_4d(ctx, s->batch, tn__tg_zdim(&s->m), cells, cells), *x;
+    const float *waves = tn_params_find(s->m.weights, "texgan.waves")->data;
+    if (!z) return NULL;
+    for (b = 0; b < s->batch; b++) {
+        uint64_t seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
+        tn__tg_noise(&s->m, waves, z, b, seed, 0, 0);
+    }
+    ox = (int)tn_rng_below(&s->rng, (uint32_t)(r - s->patch + 1));
+    oy = (int)tn_rng_below(&s->rng, (uint32_t)(r - s->patch + 1));
+    x = tn__tg_generate(ctx, &s->m, s->g, "g.", z);
+    return tn_slice(ctx, tn_slice(ctx, x, 2, oy, s->patch), 3, ox, s->patch);
+}
+
+/* One D step and one G step; the losses go to *ld, *lg. */
+static tn_status tn__tg_step(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H, float *ld, float *lg)
+{
+    tn_tensor *wn[TN__TG_MAX_DLAYERS + 1], *real, *fake, *loss;
+    tn_status st;
+    int i;
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 0); /* D step: the fake batch is a constant */
+    fake = tn__tg_fake_batch(ctx, s);
+    tn_ctx_set_grad(ctx, 1);
+    real = tn_tensor_4d(ctx, s->batch, s->m.channels, s->patch, s->patch);
+    if (!fake || !real) return tn_ctx_status(ctx);
+    tn__tg_real_batch(s, ex, W, H, real);
+    tn__tg_disc_weights(ctx, s->d, s->disc_layers, wn);
+    loss = tn_hinge_d_loss(ctx, tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, real),
+                           tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, fake));
+    tn_params_zero_grad(s->d);
+    if ((st = tn_backward(ctx, loss))) return st;
+    tn_optim_step(s->od);
+    *ld = loss->data[0];
+
+    tn_ctx_reset(ctx);
+    fake = tn__tg_fake_batch(ctx, s);
+    tn__tg_disc_weights(ctx, s->d, s->disc_layers, wn);
+    loss = tn_hinge_g_loss(ctx, tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, fake));
+    tn_params_zero_grad(s->g);
+    if ((st = tn_backward(ctx, loss))) return st;
+    tn_optim_step(s->og);
+    *lg = loss->data[0];
+    if (*ld != *ld || *lg != *lg || *ld > 1e6f || *lg > 1e6f || *lg < -1e6f)
+        return tn__fail(TN_ERR_NUMERIC, "texgan: training diverged at iteration %ld (D loss %g, G loss %g)", s->it, (double)*ld, (double)*lg);
+    { /* EMA of the generator, with a warm-up so early weights fade quickly */
+        float d = (float)(1.0 + (double)s->it) / (float)(10.0 + (double)s->it);
+        if (d > s->ema) d = s->ema;
+        for (i = 0; i < tn_params_count(s->g); i++) {
+            tn_tensor *t = tn_params_get(s->g, i), *e = tn_params_get(s->m.weights, i + 2);
+            size_t k;
+            for (k = 0; k < t->numel; k++) e->data[k] = d * e->data[k] + (1.0f - d) * t->data[k];
+        }
+    }
+    s->it++;
+    return TN_OK;
+}
+
+/* Checks an exemplar and returns its value range and per-channel mean. */
+static tn_status tn__tg_check_exemplar(const tn_image *ex, float *lo, float *hi, float *mean)
+{
+    size_t n, i;
+    int c;
+    double sum[TN_TEXGAN_MAX_CHANNELS];
+    if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "texgan: the exemplar is empty");
+    if (ex->channels < 1 || ex->channels > TN_TEXGAN_MAX_CHANNELS)
+        return tn__fail(TN_ERR_SHAPE, "texgan: the exemplar has %d channels (1..%d)", ex->channels, TN_TEXGAN_MAX_CHANNELS);
+    if (tn_image_range(ex, lo, hi)) return tn__fail(TN_ERR_NUMERIC, "texgan: the exemplar holds NaN/Inf");
+    if (*lo > 0.0f) *lo = 0.0f;
+    if (*hi < 1.0f) *hi = 1.0f;
+    n = (size_t)ex->width * ex->height;
+    for (c = 0; c < ex->channels; c++) sum[c] = 0;
+    for (i = 0; i < n; i++)
+        for (c = 0; c < ex->channels; c++) sum[c] += ex->data[i * ex->channels + c];
+    for (c = 0; c < TN_TEXGAN_MAX_CHANNELS; c++) mean[c] = c < ex->channels ? (float)(sum[c] / (double)n) : 0.0f;
+    return TN_OK;
+}
+
+TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_texgan_opts *opts_in, tn_texgan_stats *stats)
+{
+    tn_texgan_opts o;
+    tn__tg_train s;
+    tn_image small = {0, 0, 0, NULL};
+    tn_ctx *ctx = NULL;
+    float *exn = NULL, lo = 0, hi = 1, mean[TN_TEXGAN_MAX_CHANNELS], ldh[50], lgh[50];
+    double t0, last_ck, sec0, budget;
+    long it0;
+    int nh = 0, ckpts = 0, c;
+    size_t i, npx;
+    tn_status st;
+    TN_ASSERT(model);
+    memset(&o, 0, sizeof o);
+    if (opts_in) o = *opts_in;
+    tn_texgan_defaults(&o);
+    if ((st = tn__tg_check_exemplar(ex, &lo, &hi, mean))) return st;
+    if (o.resume && (!o.checkpoint || !o.checkpoint[0])) return tn__fail(TN_ERR_INVALID_ARG, "texgan: resume needs a checkpoint path");
+    memset(&s, 0, sizeof s);
+    tn_rng_seed(&s.rng, o.seed, 0x7467616eULL);
+    s.disc_width = o.disc_width;
+    s.disc_layers = o.disc_layers;
+    s.patch = o.patch;
+    s.batch = o.batch;
+    s.augment = o.augment != 0;
+    s.lr = o.lr;
+    s.ema = o.ema < 1.0f ? o.ema : 0.999f;
+    if (o.resume) {
+        st = tn__tg_resume(&s, ex, o.checkpoint);
+    } else {
+        s.m.channels = ex->channels;
+        s.m.noise_local = o.noise_local;
+        s.m.noise_global = o.noise_global;
+        s.m.noise_periodic = o.noise_periodic;
+        s.m.stages = o.stages;
+        s.m.gen_width = o.gen_width;
+        s.m.scale = o.scale > 0 ? o.scale : 1;
+        s.m.lo = lo;
+        s.m.hi = hi;
+        memcpy(s.m.mean, mean, sizeof mean);
+        st = tn__tg_check_arch(&s.m);
+        if (!st && (s.disc_width > 1024 || s.disc_layers > TN__TG_MAX_DLAYERS))
+            st = tn__fail(TN_ERR_INVALID_ARG, "texgan: discriminator of %d layers from %d channels is too large", s.disc_layers, s.disc_width);
+        if (!st && (s.patch < 8 || s.patch > 4096 || s.batch > 1024)) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: patch %d / batch %d out of range", s.patch, s.batch);
+        if (!st) st = tn__tg_build(&s);
+    }
+    if (!st && s.m.scale > 1) { /* the generator learns the downscaled exemplar */
+        int sw = (ex->width + s.m.scale / 2) / s.m.scale, sh = (ex->height + s.m.scale / 2) / s.m.scale;
+        if (sw < 1 || sh < 1) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar is too small for scale %d", s.m.scale);
+        else st = tn_image_resize(&small, ex, sw, sh, TN_RESIZE_AREA);
+        if (!st) ex = &small;
+    }
+    if (!st && (ex->width < s.patch || ex->height < s.patch))
+        st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar (%d x %d at scale 1/%d) is smaller than the %d px patch", ex->width, ex->height,
+                      s.m.scale, s.patch);
+    if (!st && !(ctx = tn_ctx_create())) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    npx = (size_t)ex->width * ex->height;
+    if (!st && !(exn = (float *)tn__alloc(npx * (size_t)ex->channels * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (st) {
+        tn_ctx_free(ctx);
+        tn__tg_train_free(&s);
+        tn_image_free(&small);
+        return st;
+    }
+    for (c = 0; c < ex->channels; c++) /* planar, scaled to the generator's tanh range */
+        for (i = 0; i < npx; i++) exn[(size_t)c * npx + i] = 2.0f * (ex->data[i * ex->channels + c] - s.m.lo) / (s.m.hi - s.m.lo) - 1.0f;
+    t0 = last_ck = tn_time_seconds();
+    sec0 = s.seconds;
+    it0 = s.it;
+    budget = o.minutes * 60.0;
+    while (!st && s.seconds < budget && (!o.max_iters || s.it < o.max_iters)) {
+        float ld = 0, lg = 0;
+        double now, frac;
+        st = tn__tg_step(&s, ctx, exn, ex->width, ex->height, &ld, &lg);
+        if (st) break;
+        ldh[nh % 50] = ld;
+        lgh[nh % 50] = lg;
+        nh++;
+        now = tn_time_seconds();
+        s.seconds = sec0 + (now - t0);
+        if (o.checkpoint && o.checkpoint[0] &&
+            (now - last_ck >= o.checkpoint_seconds || (o.checkpoint_iters && s.it % o.checkpoint_iters == 0))) {
+            if ((st = tn__tg_checkpoint(&s, o.checkpoint))) break;
+            ckpts++;
+            last_ck = now;
+        }
+        frac = s.seconds / budget;
+        if (o.max_iters && (double)s.it / (double)o.max_iters > frac) frac = (double)s.it / (double)o.max_iters;
+        st = tn__progress("texgan-train", frac > 1.0 ? 1.0 : frac);
+    }
+    if (!st && o.checkpoint && o.checkpoint[0] && s.it != it0) {
+        st = tn__tg_checkpoint(&s, o.checkpoint);
+        if (!st) ckpts++;
+    }
+    if (stats) {
+        int k, m = nh < 50 ? nh : 50;
+        memset(stats, 0, sizeof *stats);
+        stats->iterations = s.it;
+        stats->resumed_from = o.resume ? it0 : 0;
+        stats->seconds = s.seconds;
+        stats->seconds_per_iter = s.it > it0 ? (s.seconds - sec0) / (double)(s.it - it0) : 0.0;
+        for (k = 0; k < m; k++) {
+            stats->loss_d += ldh[k] / (float)m;
+            stats->loss_g += lgh[k] / (float)m;
+        }
+        stats->checkpoints = ckpts;
+    }
+    TN_FREE(exn);
+    tn_ctx_free(ctx);
+    tn_image_free(&small);
+    if (!st) {
+        s.m.iterations = s.it;
+        s.m.train_seconds = s.seconds;
+        tn__tg_write_config(&s.m, s.disc_width, s.disc_layers, tn_params_find(s.m.weights, "texgan.config")->data);
+        *model = s.m;
+        memset(&s.m, 0, sizeof s.m); /* handed over */
+    }
+    tn__tg_train_free(&s);
+    return st;
+}
+
+/* ---- synthesis ---- */
+
+static tn_status tn__tg_check_model(const tn_texgan *m)
+{
+    if (!m || !m->weights) return tn__fail(TN_ERR_INVALID_ARG, "texgan: no model");
+    return tn__tg_check_arch(m);
+}
+
+/* Inference form of the generator, same function as tn__tg_generate with fewer operations:
+   a 5x5 valid conv of a nearest-x2-upsampled map is, per output parity (py, px), a 3x3 valid conv
+   of the map itself (taps 0,1 | 2,3 | 4 for even outputs, 0 | 1,2 | 3,4 for odd), so all four
+   phases run as one conv with 4 x Cout filters (2.8x fewer multiply-adds, no upsampled copy),
+   followed by an interleave with the bias and a fused leaky ReLU + pixel norm (tanh last). */
+static const int tn__tg_phase_tap[2][5] = {{0, 0, 1, 1, 2}, {0, 1, 1, 2, 2}};
+
+static tn_tensor *tn__tg_phase_weights(tn_ctx *ctx, const tn_tensor *w)
+{
+    int cout = w->shape[0], cin = w->shape[1], py, px, co, ci, ky, kx;
+    tn_tensor *p = tn_tensor_4d(ctx, 4 * cout, cin, 3, 3);
+    if (!p) return NULL;
+    for (py = 0; py < 2; py++)
+        for (px = 0; px < 2; px++)
+            for (co = 0; co < cout; co++)
+                for (ci = 0; ci < cin; ci++) {
+                    float *dst = p->data + (((size_t)(py * 2 + px) * cout + co) * cin + ci) * 9;
+                    const float *src = w->data + ((size_t)co * cin + ci) * 25;
+                    for (ky = 0; ky < 5; ky++)
+                        for (kx = 0; kx < 5; kx++) dst[tn__tg_phase_tap[py][ky] * 3 + tn__tg_phase_tap[px][kx]] += src[ky * 5 + kx];
+                }
+    return p;
+}
+
+static tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z)
+{
+    tn_tensor *x = z;
+    char name[40];
+    int i;
+    for (i = 0; i < m->stages && x; i++) {
+        tn_tensor *w, *b, *y4, *o;
+        int cout, h, wd, c, yy, xx;
+        size_t plane, oplane;
+        snprintf(name, sizeof name, "g.w%d", i);
+        w = tn_params_find(m->weights, name);
+        snprintf(name, sizeof name, "g.b%d", i);
+        b = tn_params_find(m->weights, name);
+        cout = w->shape[0];
+        y4 = tn_conv2d(ctx, x, tn__tg_phase_weights(ctx, w), NULL, NULL);
+        if (!y4) return NULL;
+        h = y4->shape[2];
+        wd = y4->shape[3];
+        o = tn_tensor_4d(ctx, 1, cout, 2 * h, 2 * wd);
+        if (!o) return NULL;
+        plane = (size_t)h * wd;
+        oplane = (size_t)4 * plane;
+        for (c = 0; c < cout; c++)
+            for (yy = 0; yy < 2 * h; yy++) {
+                const float *r0 = y4->data + ((size_t)((yy & 1) * 2) * cout + c) * plane + (size_t)(yy >> 1) * wd;
+                const float *r1 = r0 + (size_t)cout * plane;
+                float *d = o->data + (size_t)c * oplane + (size_t)yy * 2 * wd, bc = b->data[c];
+                for (xx = 0; xx < wd; xx++) {
+                    d[2 * xx] = r0[xx] + bc;
+                    d[2 * xx + 1] = r1[xx] + bc;
+                }
+            }
+        if (i == m->stages - 1) {
+            size_t k;
+            for (k = 0; k < o->numel; k++) o->data[k] = tanhf(o->data[k]);
+        } else {
+            size_t k;
+            for (k = 0; k < oplane; k++) {
+                double ss = 0;
+                float r;
+                for (c = 0; c < cout; c++) {
+                    float *v = o->data + (size_t)c * oplane + k;
+                    if (*v < 0) *v *= 0.2f;
+                    ss += (double)*v * *v;
+                }
+                r = 1.0f / sqrtf((float)(ss / cout) + 1e-8f);
+                for (c = 0; c < cout; c++) o->data[(size_t)c * oplane + k] *= r;
+            }
+        }
+        x = o;
+    }
+    return x;
+}
+
+/* Runs the generator on the cells covering the window and copies the window into out (which
+   is w x h x channels, written at column offset ox of a row stride of stride_w pixels). */
+static tn_status tn__tg_window_native(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, int x0, int y0, int w, int h, float *out,
+                                      int stride_w)
+{
+    int p = 1 << m->stages, cx0 = x0 / p, cy0 = y0 / p, dx = x0 - cx0 * p, dy = y0 - cy0 * p;
+    int sw = tn__tg_cells_for(m->stages, dx + w), sh = tn__tg_cells_for(m->stages, dy + h), C = m->channels, x, y, c;
+    tn_tensor *z, *g;
+    size_t plane;
+    float scale = 0.5f * (m->hi - m->lo);
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 0);
+    z = tn_tensor_4d(ctx, 1, tn__tg_zdim(m), sh, sw);
+    if (!z) return tn_ctx_status(ctx);
+    tn__tg_noise(m, tn_params_find(m->weights, "texgan.waves")->data, z, 0, seed, cx0, cy0);
+    g = tn__tg_generate_fast(ctx, m, z);
+    if (!g) return tn_ctx_status(ctx);
+    plane = (size_t)g->shape[2] * g->shape[3];
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++)
+            for (c = 0; c < C; c++)
+                out[((size_t)y * stride_w + x) * C + c] =
+                    m->lo + (g->data[(size_t)c * plane + (size_t)(dy + y) * g->shape[3] + dx + x] + 1.0f) * scale;
+    return TN_OK;
+}
+
+/* Low-resolution source position of output pixel X at scale s (texel centres aligned), from
+   global coordinates only, so every tile samples the same way; clamped at the texture origin. */
+static void tn__tg_src(int X, int s, int *i0, int *i1, float *f)
+{
+    float t = ((float)X + 0.5f) / (float)s - 0.5f, fl = floorf(t);
+    *i0 = (int)fl;
+    *f = t - fl;
+    *i1 = *i0 + 1;
+    if (*i0 < 0) { *i0 = 0; *i1 = 0; *f = 0.0f; }
+}
+
+/* A window of the output texture: the generator's own pixels, or (scale > 1) the low-resolution
+   window with a one-pixel margin, bilinearly upsampled. */
+static tn_status tn__tg_window(tn_ctx *ctx, const tn_texgan *m, uint64_t seed, int x0, int y0, int w, int h, float *out, int stride_w)
+{
+    int s = m->scale, lx0, ly0, lx1, ly1, lw, lh, x, y, c, C = m->channels, a0, a1, b0, b1;
+    float fa, fb, *low;
+    tn_status st;
+    if (s <= 1) return tn__tg_window_native(ctx, m, seed, x0, y0, w, h, out, stride_w);
+    tn__tg_src(x0, s, &lx0, &a1, &fa);
+    tn__tg_src(y0, s, &ly0, &b1, &fb);
+    tn__tg_src(x0 + w - 1, s, &a0, &lx1, &fa);
+    tn__tg_src(y0 + h - 1, s, &b0, &ly1, &fb);
+    lw = lx1 - lx0 + 1;
+    lh = ly1 - ly0 + 1;
+    low = (float *)tn__alloc((size_t)lw * lh * C * sizeof(float));
+    if (!low) return TN_ERR_OUT_OF_MEMORY;
+    st = tn__tg_window_native(ctx, m, seed, lx0, ly0, lw, lh, low, lw);
+    for (y = 0; !st && y < h; y++) {
+        tn__tg_src(y0 + y, s, &b0, &b1, &fb);
+        for (x = 0; x < w; x++) {
+            const float *p00, *p01, *p10, *p11;
+            tn__tg_src(x0 + x, s, &a0, &a1, &fa);
+            p00 = low + ((size_t)(b0 - ly0) * lw + (a0 - lx0)) * C;
+            p01 = low + ((size_t)(b0 - ly0) * lw + (a1 - lx0)) * C;
+            p10 = low + ((size_t)(b1 - ly0) * lw + (a0 - lx0)) * C;
+            p11 = low + ((size_t)(b1 - ly0) * lw + (a1 - lx0)) * C;
+            for (c = 0; c < C; c++) {
+                float top = p00[c] + (p01[c] - p00[c]) * fa, bot = p10[c] + (p11[c] - p10[c]) * fa;
+                out[((size_t)y * stride_w + x) * C + c] = top + (bot - top) * fb;
+            }
+        }
+    }
+    TN_FREE(low);
+    return st;
+}
+
+static tn_status tn__tg_check_size(int w, int h)
+{
+    if (w <= 0 || h <= 0) return tn__fail(TN_ERR_INVALID_ARG, "texgan: output size %d x %d is not positive", w, h);
+    if (w > (1 << 24) || h > (1 << 24)) return tn__fail(TN_ERR_TOO_LARGE, "texgan: output size %d x %d is too large", w, h);
+    return TN_OK;
+}
+
+TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h, tn_image *out)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_ctx *ctx;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__tg_check_model(model)) || (st = tn__tg_check_size(w, h))) return st;
+    if (x0 < 0 || y0 < 0) return tn__fail(TN_ERR_INVALID_ARG, "texgan: window origin %d, %d is negative", x0, y0);
+    if ((st = tn_image_create(&img, w, h, model->channels))) return st;
+    if (!(ctx = tn_ctx_create())) {
+        tn_image_free(&img);
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    }
+    st = tn__tg_window(ctx, model, seed, x0, y0, w, h, img.data, w);
+    tn_ctx_free(ctx);
+    if (st) tn_image_free(&img);
+    else *out = img;
+    return st;
+}
+
+/* One band of tiles: threads take tiles i = ith, ith + nth, ... (each tile is computed alone,
+   so the result does not depend on the split); every thread has its own arena. */
+typedef struct tn__tg_band_job {
+    const tn_texgan *m;
+    uint64_t seed;
+    int y0, bh, width, tile_px, ntiles;
+    tn_image *band;
+    tn_ctx **ctx;
+    tn_status st[64];
+} tn__tg_band_job;
+
+static void tn__tg_band_task(void *arg, int ith, int nth)
+{
+    tn__tg_band_job *j = (tn__tg_band_job *)arg;
+    int i;
+    if (ith >= 64) return;
+    j->st[ith] = TN_OK;
+    for (i = ith; i < j->ntiles && !j->st[ith]; i += nth) {
+        int x0 = i * j->tile_px, w = j->width - x0 < j->tile_px ? j->width - x0 : j->tile_px;
+        j->st[ith] = tn__tg_window(j->ctx[ith], j->m, j->seed, x0, j->y0, w, j->bh, j->band->data + (size_t)x0 * j->m->channels,
+                                   j->width);
+    }
+}
+
+TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t seed, int width, int height, int tile_cells,
+                                             tn_band_fn fn, void *user)
+{
+    tn__tg_band_job job;
+    tn_image band = {0, 0, 0, NULL};
+    tn_ctx *ctxs[64];
+    int nth = tn_get_threads(), t, y0, tile_px;
+    tn_status st;
+    TN_ASSERT(fn);
+    if ((st = tn__tg_check_model(model)) || (st = tn__tg_check_size(width, height))) return st;
+    if (tile_cells <= 0) tile_cells = 32;
+    if (tile_cells > 4096) return tn__fail(TN_ERR_INVALID_ARG, "texgan: tile of %d cells is too large", tile_cells);
+    tile_px = tile_cells << model->stages;
+    if (nth > 64) nth = 64;
+    memset(ctxs, 0, sizeof ctxs);
+    for (t = 0; t < nth; t++)
+        if (!(ctxs[t] = tn_ctx_create())) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
+    if (!st) st = tn_image_create(&band, width, height < tile_px ? height : tile_px, model->channels);
+    memset(&job, 0, sizeof job);
+    job.m = model;
+    job.seed = seed;
+    job.width = width;
+    job.tile_px = tile_px;
+    job.ntiles = (width + tile_px - 1) / tile_px;
+    job.band = &band;
+    job.ctx = ctxs;
+    for (y0 = 0; !st && y0 < height; y0 += tile_px) {
+        job.y0 = y0;
+        job.bh = height - y0 < tile_px ? height - y0 : tile_px;
+        band.height = job.bh;
+        for (t = 0; t < 64; t++) job.st[t] = TN_OK;
+        if (nth > 1) tn_parallel_run(tn__tg_band_task, &job);
+        else tn__tg_band_task(&job, 0, 1);
+        for (t = 0; t < 64 && !st; t++) st = job.st[t];
+        if (!st) st = fn(user, y0, &band);
+        if (!st) st = tn__progress("texgan-synth", (double)(y0 + job.bh) / height);
+    }
+    tn_image_free(&band);
+    for (t = 0; t < nth; t++) tn_ctx_free(ctxs[t]);
+    return st;
+}
+
+static tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
+{
+    tn_image *img = (tn_image *)user;
+    memcpy(img->data + (size_t)y0 * img->width * img->channels, band->data,
+           (size_t)band->width * band->height * band->channels * sizeof(float));
+    return TN_OK;
+}
+
+TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__tg_check_model(model)) || (st = tn__tg_check_size(width, height))) return st;
+    if ((st = tn_image_create(&img, width, height, model->channels))) return st;
+    st = tn_texgan_synthesize_stream(model, seed, width, height, 0, tn__tg_collect_band, &img);
+    if (st) tn_image_free(&img);
+    else *out = img;
+    return st;
+}
+
+/* ---- streaming files ---- */
+
+typedef struct tn__tg_writer {
+    FILE *f[TN_TEXGAN_MAX_CHANNELS];
+    char *tmp[TN_TEXGAN_MAX_CHANNELS], *final[TN_TEXGAN_MAX_CHANNELS];
+    long hdr[TN_TEXGAN_MAX_CHANNELS];
+    int groups, pfm, width, height, channels;
+    const float *shift;
+    float lo, hi;
+    uint8_t *row;
+} tn__tg_writer;
+
+/* "<stem>.ch3-5<ext>" for channel group g > 0. */
+static char *tn__tg_group_path(const char *path, int g, int channels)
+{
+    const char *dot = strrchr(path, '.'), *slash = strrchr(path, '/');
+    size_t stem = dot && (!slash || dot > slash) ? (size_t)(dot - path) : strlen(path), cap = strlen(path) + 32;
+    char *s = (char *)tn__alloc(cap);
+    int last = 3 * g + 2 < channels - 1 ? 3 * g + 2 : channels - 1;
+    if (!s) return NULL;
+    if (g == 0) snprintf(s, cap, "%s", path);
+    else snprintf(s, cap, "%.*s.ch%d-%d%s", (int)stem, path, 3 * g, last, path + stem);
+    return s;
+}
+
+static int tn__tg_group_channels(int g, int channels) { return channels - 3 * g >= 3 ? 3 : channels - 3 * g; }
+
+static tn_status tn__tg_writer_band(void *user, int y0, const tn_image *band)
+{
+    tn__tg_writer *w = (tn__tg_writer *)user;
+    int g, y, x, k;
+    for (g = 0; g < w->groups; g++) {
+        int n = tn__tg_group_channels(g, w->channels), fc = n == 1 ? 1 : 3;
+        size_t rowbytes = (size_t)w->width * fc * (w->pfm ? 4 : 1);
+        for (y = 0; y < band->height; y++) {
+            const float *src = band->data + (size_t)y * band->width * band->channels;
+            long off = w->hdr[g] + (long)rowbytes * (w->pfm ? (long)(w->height - 1 - (y0 + y)) : (long)(y0 + y));
+            for (x = 0; x < w->width; x++)
+                for (k = 0; k < fc; k++) {
+                    int c = 3 * g + k;
+                    float v = k < n ? src[(size_t)x * band->channels + c] + (w->shift ? w->shift[c] : 0.0f) : w->lo;
+                    v = tn__clampf(v, w->lo, w->hi);
+                    if (w->pfm) tn__io_put_f32le(w->row + 4 * ((size_t)x * fc + k), v);
+                    else w->row[(size_t)x * fc + k] = (uint8_t)tn__io_code(v, w->lo, 255.0 / ((double)w->hi - w->lo), 255u);
+                }
+            if (fseek(w->f[g], off, SEEK_SET) != 0 || fwrite(w->row, 1, rowbytes, w->f[g]) != rowbytes)
+                return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", w->final[g]);
+        }
+    }
+    return TN_OK;
+}
+
+static void tn__tg_writer_close(tn__tg_writer *w, tn_status *st)
+{
+    int g;
+    for (g = 0; g < w->groups; g++) {
+        if (w->f[g]) {
+            int bad = fflush(w->f[g]) != 0 || ferror(w->f[g]);
+            bad = (fclose(w->f[g]) != 0) || bad;
+            if (bad && !*st) *st = tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", w->final[g]);
+        }
+        if (w->tmp[g]) {
+            if (!*st && rename(w->tmp[g], w->final[g]) != 0) *st = tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", w->final[g]);
+            if (*st) remove(w->tmp[g]);
+        }
+        TN_FREE(w->tmp[g]);
+        TN_FREE(w->final[g]);
+    }
+    TN_FREE(w->row);
+}
+
+/* Whole image in memory, then saved per channel group (formats that cannot stream). */
+static tn_status tn__tg_save_whole(const tn_texgan *m, uint64_t seed, int width, int height, const float *shift, const char *path)
+{
+    tn_image img = {0, 0, 0, NULL}, part = {0, 0, 0, NULL};
+    tn_save_opts so;
+    tn_status st = tn_texgan_synthesize(m, seed, width, height, &img);
+    size_t i, n = (size_t)width * height;
+    int g, c, groups = (m->channels + 2) / 3;
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    so.has_range = 1;
+    so.range_lo = m->lo;
+    so.range_hi = m->hi;
+    if (!st && m->lo == 0.0f && m->hi == 1.0f) so.has_range = 0;
+    for (i = 0; !st && i < n * (size_t)m->channels; i++)
+        img.data[i] = tn__clampf(img.data[i] + (shift ? shift[i % (size_t)m->channels] : 0.0f), m->lo, m->hi);
+    for (g = 0; !st && g < groups; g++) {
+        int k = tn__tg_group_channels(g, m->channels);
+        char *p = tn__tg_group_path(path, g, m->channels);
+        if (!p) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        st = tn_image_create(&part, width, height, k);
+        for (i = 0; !st && i < n; i++)
+            for (c = 0; c < k; c++) part.data[i * k + c] = img.data[i * m->channels + 3 * g + c];
+        if (!st) st = tn_image_save(p, &part, &so);
+        tn_image_free(&part);
+        TN_FREE(p);
+    }
+    tn_image_free(&img);
+    return st;
+}
+
+TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height, const float *shift,
+                                           const char *path)
+{
+    tn__tg_writer w;
+    const char *ext;
+    tn_status st;
+    int g;
+    if ((st = tn__tg_check_model(model)) || (st = tn__tg_check_size(width, height))) return st;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan: empty output path");
+    ext = strrchr(path, '.');
+    memset(&w, 0, sizeof w);
+    if (ext && (!strcmp(ext, ".pfm") || !strcmp(ext, ".PFM"))) w.pfm = 1;
+    else if (!(ext && (!strcmp(ext, ".ppm") || !strcmp(ext, ".pgm") || !strcmp(ext, ".pnm"))))
+        return tn__tg_save_whole(model, seed, width, height, shift, path);
+    w.groups = (model->channels + 2) / 3;
+    w.width = width;
+    w.height = height;
+    w.channels = model->channels;
+    w.shift = shift;
+    w.lo = model->lo;
+    w.hi = model->hi;
+    if (!(w.row = (uint8_t *)tn__alloc((size_t)width * 3 * 4))) return TN_ERR_OUT_OF_MEMORY;
+    for (g = 0; !st && g < w.groups; g++) {
+        int fc = tn__tg_group_channels(g, model->channels) == 1 ? 1 : 3;
+        size_t cap;
+        w.final[g] = tn__tg_group_path(path, g, model->channels);
+        cap = w.final[g] ? strlen(w.final[g]) + 40 : 0;
+        w.tmp[g] = cap ? (char *)tn__alloc(cap) : NULL;
+        if (!w.final[g] || !w.tmp[g]) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        snprintf(w.tmp[g], cap, "%s.tmp.%lu.%lu", w.final[g], tn__io_process_id(), ++tn__io_tmp_counter);
+        if (!(w.f[g] = fopen(w.tmp[g], "wb"))) {
+            st = tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", w.final[g]);
+            TN_FREE(w.tmp[g]);
+            w.tmp[g] = NULL;
+            break;
+        }
+        if (w.pfm) w.hdr[g] = fprintf(w.f[g], "P%c\n%d %d\n-1.0\n", fc == 3 ? 'F' : 'f', width, height);
+        else w.hdr[g] = fprintf(w.f[g], "P%d\n%d %d\n255\n", fc == 3 ? 6 : 5, width, height);
+        if (w.hdr[g] <= 0) st = tn__fail(TN_ERR_IO, "%s: write failed", w.final[g]);
+    }
+    if (!st) st = tn_texgan_synthesize_stream(model, seed, width, height, 0, tn__tg_writer_band, &w);
+    tn__tg_writer_close(&w, &st);
+    return st;
+}
+
+/* ---- colour correction ---- */
+
+static double tn__cc_mean(const tn_image *img, int c, float s, float lo, float hi, int *clipped)
+{
+    size_t n = (size_t)img->width * img->height, i;
+    double sum = 0;
+    int cl = 0;
+    for (i = 0; i < n; i++) {
+        float v = img->data[i * img->channels + c] + s;
+        if (v < lo || v > hi) cl = 1;
+        sum += tn__clampf(v, lo, hi);
+    }
+    if (clipped) *clipped = cl;
+    return sum / (double)n;
+}
+
+TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target, float lo, float hi, float *shift)
+{
+    int c, it;
+    if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0) return tn__fail(TN_ERR_EMPTY, "colour correction: empty image");
+    if (!(lo < hi)) return tn__fail(TN_ERR_INVALID_ARG, "colour correction: range %g..%g is empty", (double)lo, (double)hi);
+    if (tn_image_range(img, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
+    for (c = 0; c < img->channels; c++) {
+        float t = target[c], a, b, s;
+        int clipped;
+        if (t != t) return tn__fail(TN_ERR_NUMERIC, "colour correction: target mean is NaN");
+        t = tn__clampf(t, lo, hi);
+        s = (float)(t - tn__cc_mean(img, c, 0.0f, -FLT_MAX, FLT_MAX, NULL)); /* unclipped mean */
+        tn__cc_mean(img, c, s, lo, hi, &clipped);
+        if (clipped) { /* the clipped mean is monotone in the shift: bisect */
+            a = lo - hi;
+            b = hi - lo;
+            for (it = 0; it < 48; it++) {
+                float mid = 0.5f * (a + b);
+                if (tn__cc_mean(img, c, mid, lo, hi, NULL) < t) a = mid;
+                else b = mid;
+            }
+            s = 0.5f * (a + b);
+        }
+        shift[c] = s;
+    }
+    return TN_OK;
+}
+
+TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target, float lo, float hi)
+{
+    float shift[64];
+    size_t n, i;
+    tn_status st;
+    if (img && img->channels > 64) return tn__fail(TN_ERR_SHAPE, "colour correction: %d channels (at most 64)", img->channels);
+    if ((st = tn_texture_colour_shift(img, target, lo, hi, shift))) return st;
+    n = (size_t)img->width * img->height * img->channels;
+    for (i = 0; i < n; i++) img->data[i] = tn__clampf(img->data[i] + shift[i % (size_t)img->channels], lo, hi);
+    return TN_OK;
+}
+
+/* ---- detail maps ---- */
+
+typedef struct tn__dm_acc {
+    double *sum;
+    int wl, hl, f, width, height, channels;
+} tn__dm_acc;
+
+static tn_status tn__dm_acc_band(void *user, int y0, const tn_image *band)
+{
+    tn__dm_acc *a = (tn__dm_acc *)user;
+    int x, y, c;
+    for (y = 0; y < band->height; y++) {
+        double *row = a->sum + (size_t)((y0 + y) / a->f) * a->wl * a->channels;
+        const float *src = band->data + (size_t)y * band->width * band->channels;
+        for (x = 0; x < band->width; x++)
+            for (c = 0; c < a->channels; c++) row[(size_t)(x / a->f) * a->channels + c] += src[(size_t)x * a->channels + c];
+    }
+    return TN_OK;
+}
+
+static void tn__dm_defaults(const tn_detail_opts *in, tn_detail_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    if (in) *o = *in;
+    if (o->factor <= 0) o->factor = 10;
+    if (o->sigma <= 0) o->sigma = 0.5f * (float)o->factor;
+    if (o->lo == 0 && o->hi == 0) o->hi = 1.0f;
+}
+
+static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width, int height, int channels, const tn_image *ex)
+{
+    size_t n;
+    tn_status st;
+    memset(a, 0, sizeof *a);
+    if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the exemplar is empty");
+    if (ex->channels != channels) return tn__fail(TN_ERR_SHAPE, "detail maps: the exemplar has %d channels, the synthesis %d", ex->channels, channels);
+    if (tn_image_range(ex, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
+    if (o->factor > 4096 || !(o->sigma < 1e4f) || !(o->lo < o->hi)) return tn__fail(TN_ERR_INVALID_ARG, "detail maps: bad factor, sigma or range");
+    if (width <= 0 || height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the synthesis is empty");
+    a->f = o->factor;
+    a->width = width;
+    a->height = height;
+    a->channels = channels;
+    a->wl = (width + a->f - 1) / a->f;
+    a->hl = (height + a->f - 1) / a->f;
+    if ((st = tn__size4((size_t)a->wl, (size_t)a->hl, (size_t)channels, sizeof(double), &n))) return st;
+    a->sum = (double *)tn__calloc(n);
+    return a->sum ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+}
+
+/* Low map from the block sums (area average, then the remaining Gaussian, colour correction),
+   high map from the exemplar. */
+static tn_status tn__dm_finish(tn__dm_acc *a, const tn_detail_opts *o, const tn_image *ex, tn_detail_maps *maps)
+{
+    tn_detail_maps m;
+    tn_image blur = {0, 0, 0, NULL};
+    int x, y, c;
+    size_t i, n;
+    float rest = o->sigma * o->sigma - (float)(a->f * a->f) / 12.0f, mean[64];
+    tn_status st;
+    memset(&m, 0, sizeof m);
+    if (a->channels > 64) return tn__fail(TN_ERR_SHAPE, "detail maps: at most 64 channels");
+    st = tn_image_create(&m.low, a->wl, a->hl, a->channels);
+    for (y = 0; !st && y < a->hl; y++)
+        for (x = 0; x < a->wl; x++) {
+            int bw = (x + 1) * a->f <= a->width ? a->f : a->width - x * a->f, bh = (y + 1) * a->f <= a->height ? a->f : a->height - y * a->f;
+            for (c = 0; c < a->channels; c++) {
+                size_t k = ((size_t)y * a->wl + x) * a->channels + c;
+                m.low.data[k] = (float)(a->sum[k] / ((double)bw * bh));
+            }
+        }
+    if (!st && rest > 0 && sqrtf(rest) / (float)a->f > 0.05f) st = tn_image_blur(&m.low, &m.low, sqrtf(rest) / (float)a->f);
+    if (!st && !o->no_colour_correct) {
+        n = (size_t)ex->width * ex->height;
+        for (c = 0; c < a->channels; c++) {
+            double s = 0;
+            for (i = 0; i < n; i++) s += ex->data[i * a->channels + c];
+            mean[c] = (float)(s / (double)n);
+        }
+        st = tn_texture_colour_correct(&m.low, mean, o->lo, o->hi);
+    }
+    if (!st) st = tn_image_blur(&blur, ex, o->sigma);
+    if (!st) st = tn_image_create(&m.high, ex->width, ex->height, ex->channels);
+    if (!st) {
+        n = (size_t)ex->width * ex->height * ex->channels;
+        for (i = 0; i < n; i++) m.high.data[i] = 0.5f * (ex->data[i] - blur.data[i]) + 0.5f;
+    }
+    tn_image_free(&blur);
+    if (st) {
+        tn_detail_maps_free(&m);
+        return st;
+    }
+    m.width = a->width;
+    m.height = a->height;
+    m.tiling_x = (float)a->width / (float)ex->width;
+    m.tiling_y = (float)a->height / (float)ex->height;
+    m.factor = a->f;
+    m.sigma = o->sigma;
+    m.lo = o->lo;
+    m.hi = o->hi;
+    *maps = m;
+    return TN_OK;
+}
+
+TN_API tn_status tn_detail_maps_from_image(tn_detail_maps *maps, const tn_image *synth, const tn_image *ex, const tn_detail_opts *opts)
+{
+    tn_detail_opts o;
+    tn__dm_acc a;
+    tn_status st;
+    TN_ASSERT(maps);
+    tn__dm_defaults(opts, &o);
+    if (!synth || !synth->data) return tn__fail(TN_ERR_EMPTY, "detail maps: the synthesis is empty");
+    if (tn_image_range(synth, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the synthesis holds NaN/Inf");
+    if ((st = tn__dm_begin(&a, &o, synth->width, synth->height, synth->channels, ex))) return st;
+    st = tn__dm_acc_band(&a, 0, synth);
+    if (!st) st = tn__dm_finish(&a, &o, ex, maps);
+    TN_FREE(a.sum);
+    return st;
+}
+
+TN_API tn_status tn_detail_maps_from_model(tn_detail_maps *maps, const tn_texgan *model, uint64_t seed, int width, int height,
+                                           const tn_image *ex, const tn_detail_opts *opts)
+{
+    tn_detail_opts o;
+    tn__dm_acc a;
+    tn_status st;
+    TN_ASSERT(maps);
+    tn__dm_defaults(opts, &o);
+    if ((st = tn__tg_check_model(model)) || (st = tn__tg_check_size(width, height))) return st;
+    if (!opts || (opts->lo == 0 && opts->hi == 0)) {
+        o.lo = model->lo;
+        o.hi = model->hi;
+    }
+    if ((st = tn__dm_begin(&a, &o, width, height, model->channels, ex))) return st;
+    st = tn_texgan_synthesize_stream(model, seed, width, height, 0, tn__dm_acc_band, &a);
+    if (!st) st = tn__dm_finish(&a, &o, ex, maps);
+    TN_FREE(a.sum);
+    return st;
+}
+
+TN_API void tn_detail_maps_free(tn_detail_maps *maps)
+{
+    if (!maps) return;
+    tn_image_free(&maps->low);
+    tn_image_free(&maps->high);
+    memset(maps, 0, sizeof *maps);
+}
+
+/* Bilinear tap along one axis, as GPU samplers do: texel centres at i + 0.5; clamp or repeat. */
+static void tn__dm_axis(float t, int n, int wrap, int *i0, int *i1, float *w1)
+{
+    float x = t - 0.5f, fl = floorf(x);
+    int a = (int)fl;
+    *w1 = x - fl;
+    if (wrap) {
+        a %= n;
+        if (a < 0) a += n;
+        *i0 = a;
+        *i1 = a + 1 == n ? 0 : a + 1;
+    } else {
+        *i0 = tn__clampi(a, 0, n - 1);
+        *i1 = tn__clampi(a + 1, 0, n - 1);
+    }
+}
+
+static float tn__dm_bilerp(const tn_image *im, int x0, int x1, float fx, int y0, int y1, float fy, int c)
+{
+    float a = TN_PIXEL(im, x0, y0, c), b = TN_PIXEL(im, x1, y0, c), d = TN_PIXEL(im, x0, y1, c), e = TN_PIXEL(im, x1, y1, c);
+    float top = a + (b - a) * fx, bot = d + (e - d) * fx;
+    return top + (bot - top) * fy;
+}
+
+/* Texture-space coordinate u in [0, 1) -> low-map and high-map sample positions (in texels). */
+static float tn__dm_low_t(const tn_detail_maps *m, float u, int axis)
+{
+    return u * (axis ? (float)m->height : (float)m->width) / (float)m->factor;
+}
+static float tn__dm_high_t(const tn_detail_maps *m, float u, int axis)
+{
+    return u * (axis ? m->tiling_y * (float)m->high.height : m->tiling_x * (float)m->high.width);
+}
+
+TN_API void tn_detail_texel(const tn_detail_maps *m, float u, float v, float *out)
+{
+    int lx0, lx1, ly0, ly1, hx0, hx1, hy0, hy1, c;
+    float lfx, lfy, hfx, hfy;
+    tn__dm_axis(tn__dm_low_t(m, u, 0), m->low.width, 0, &lx0, &lx1, &lfx);
+    tn__dm_axis(tn__dm_low_t(m, v, 1), m->low.height, 0, &ly0, &ly1, &lfy);
+    tn__dm_axis(tn__dm_high_t(m, u, 0), m->high.width, 1, &hx0, &hx1, &hfx);
+    tn__dm_axis(tn__dm_high_t(m, v, 1), m->high.height, 1, &hy0, &hy1, &hfy);
+    for (c = 0; c < m->low.channels; c++) {
+        float lo = tn__dm_bilerp(&m->low, lx0, lx1, lfx, ly0, ly1, lfy, c);
+        float hi = tn__dm_bilerp(&m->high, hx0, hx1, hfx, hy0, hy1, hfy, c);
+        out[c] = tn__clampf(lo + 2.0f * (hi - 0.5f), m->lo, m->hi);
+    }
+}
+
+/* The whole-image composer: taps per column and per row computed once, then every row blends
+   its two low rows and two high rows (the same arithmetic as tn_detail_texel). */
+typedef struct tn__dm_job {
+    const tn_detail_maps *m;
+    tn_image *out;
+    int *tx;     /* per column: lx0, lx1, hx0, hx1 */
+    float *fx;   /* per column: lfx, hfx */
+} tn__dm_job;
+
+static void tn__dm_rows(void *arg, size_t y0, size_t y1)
+{
+    tn__dm_job *j = (tn__dm_job *)arg;
+    const tn_detail_maps *m = j->m;
+    size_t y;
+    int x, c, C = m->low.channels;
+    for (y = y0; y < y1; y++) {
+        int ly0, ly1, hy0, hy1;
+        float lfy, hfy, v = ((float)y + 0.5f) / (float)j->out->height;
+        float *dst = j->out->data + y * (size_t)j->out->width * C;
+        tn__dm_axis(tn__dm_low_t(m, v, 1), m->low.height, 0, &ly0, &ly1, &lfy);
+        tn__dm_axis(tn__dm_high_t(m, v, 1), m->high.height, 1, &hy0, &hy1, &hfy);
+        for (x = 0; x < j->out->width; x++) {
+            const int *t = j->tx + 4 * (size_t)x;
+            const float *f = j->fx + 2 * (size_t)x;
+            for (c = 0; c < C; c++) {
+                float lo = tn__dm_bilerp(&m->low, t[0], t[1], f[0], ly0, ly1, lfy, c);
+                float hi = tn__dm_bilerp(&m->high, t[2], t[3], f[1], hy0, hy1, hfy, c);
+                dst[(size_t)x * C + c] = tn__clampf(lo + 2.0f * (hi - 0.5f), m->lo, m->hi);
+            }
+        }
+    }
+}
+
+static tn_status tn__dm_check(const tn_detail_maps *m)
+{
+    if (!m || !m->low.data || !m->high.data || m->factor <= 0 || m->width <= 0 || m->height <= 0 || !(m->tiling_x > 0) || !(m->tiling_y > 0))
+        return tn__fail(TN_ERR_EMPTY, "detail maps: empty or incomplete maps");
+    if (m->low.channels != m->high.channels) return tn__fail(TN_ERR_SHAPE, "detail maps: low and high maps differ in channels");
+    return TN_OK;
+}
+
+TN_API tn_status tn_detail_compose(const tn_detail_maps *m, int width, int height, tn_image *out)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn__dm_job j;
+    tn_status st;
+    int x;
+    TN_ASSERT(out);
+    if ((st = tn__dm_check(m))) return st;
+    if (width == 0 && height == 0) {
+        width = m->width;
+        height = m->height;
+    }
+    if ((st = tn_image_create(&img, width, height, m->low.channels))) return st;
+    j.m = m;
+    j.out = &img;
+    j.tx = (int *)tn__alloc((size_t)width * 4 * sizeof(int));
+    j.fx = (float *)tn__alloc((size_t)width * 2 * sizeof(float));
+    if (!j.tx || !j.fx) {
+        TN_FREE(j.tx);
+        TN_FREE(j.fx);
+        tn_image_free(&img);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (x = 0; x < width; x++) {
+        float u = ((float)x + 0.5f) / (float)width;
+        tn__dm_axis(tn__dm_low_t(m, u, 0), m->low.width, 0, &j.tx[4 * x], &j.tx[4 * x + 1], &j.fx[2 * x]);
+        tn__dm_axis(tn__dm_high_t(m, u, 0), m->high.width, 1, &j.tx[4 * x + 2], &j.tx[4 * x + 3], &j.fx[2 * x + 1]);
+    }
+    tn_parallel_for((size_t)height, 16, tn__dm_rows, &j);
+    TN_FREE(j.tx);
+    TN_FREE(j.fx);
+    *out = img;
+    return TN_OK;
+}
+
+/* ---- detail map files ---- */
+
+static char *tn__dm_path(const char *prefix, const char *suffix)
+{
+    size_t cap = strlen(prefix) + strlen(suffix) + 1;
+    char *s = (char *)tn__alloc(cap);
+    if (s) snprintf(s, cap, "%s%s", prefix, suffix);
+    return s;
+}
+
+/* Saves an image of any channel count as PNGs of up to 3 channels (see tn__tg_group_path). */
+static tn_status tn__dm_save_groups(const tn_image *img, const char *path, int bits, float lo, float hi)
+{
+    tn_image part = {0, 0, 0, NULL};
+    tn_save_opts so;
+    size_t i, n = (size_t)img->width * img->height;
+    int g, c, groups = img->channels <= 4 ? 1 : (img->channels + 2) / 3;
+    tn_status st = TN_OK;
+    memset(&so, 0, sizeof so);
+    so.bit_depth = bits;
+    if (lo != 0.0f || hi != 1.0f) {
+        so.has_range = 1;
+        so.range_lo = lo;
+        so.range_hi = hi;
+    }
+    if (groups == 1) return tn_image_save(path, img, &so);
+    for (g = 0; !st && g < groups; g++) {
+        int k = tn__tg_group_channels(g, img->channels);
+        char *p = tn__tg_group_path(path, g, img->channels);
+        if (!p) return TN_ERR_OUT_OF_MEMORY;
+        st = tn_image_create(&part, img->width, img->height, k);
+        for (i = 0; !st && i < n; i++)
+            for (c = 0; c < k; c++) part.data[i * k + c] = img->data[i * img->channels + 3 * g + c];
+        if (!st) st = tn_image_save(p, &part, &so);
+        tn_image_free(&part);
+        TN_FREE(p);
+    }
+    return st;
+}
+
+static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channels)
+{
+    tn_image part = {0, 0, 0, NULL}, all = {0, 0, 0, NULL};
+    int g, c, groups = channels <= 4 ? 1 : (channels + 2) / 3;
+    size_t i, n = 0;
+    tn_status st = TN_OK;
+    if (groups == 1) {
+        if ((st = tn_image_load(path, img, NULL))) return st;
+        if (img->channels != channels) {
+            tn_image_free(img);
+            return tn__fail(TN_ERR_SHAPE, "%s: %d channels, the sidecar says %d", path, img->channels, channels);
+        }
+        return TN_OK;
+    }
+    for (g = 0; !st && g < groups; g++) {
+        int k = tn__tg_group_channels(g, channels);
+        char *p = tn__tg_group_path(path, g, channels);
+        if (!p) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        st = tn_image_load(p, &part, NULL);
+        if (!st && g == 0) st = tn_image_create(&all, part.width, part.height, channels);
+        if (!st && (part.width != all.width || part.height != all.height || part.channels != k))
+            st = tn__fail(TN_ERR_SHAPE, "%s: size or channels differ from the first group", p);
+        n = (size_t)all.width * all.height;
+        for (i = 0; !st && i < n; i++)
+            for (c = 0; c < k; c++) all.data[i * channels + 3 * g + c] = part.data[i * k + c];
+        tn_image_free(&part);
+        TN_FREE(p);
+    }
+    if (st) tn_image_free(&all);
+    else *img = all;
+    return st;
+}
+
+TN_API tn_status tn_detail_maps_save(const tn_detail_maps *m, const char *prefix)
+{
+    char *lp, *hp, *tp, txt[512];
+    int len;
+    tn_status st;
+    if ((st = tn__dm_check(m))) return st;
+    if (!prefix || !prefix[0]) return tn__fail(TN_ERR_INVALID_ARG, "detail maps: empty prefix");
+    lp = tn__dm_path(prefix, "_low.png");
+    hp = tn__dm_path(prefix, "_high.png");
+    tp = tn__dm_path(prefix, "_detail.txt");
+    if (!lp || !hp || !tp) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__dm_save_groups(&m->low, lp, 16, m->lo, m->hi);
+    if (!st) st = tn__dm_save_groups(&m->high, hp, 8, 0.5f - 0.5f * (m->hi - m->lo), 0.5f + 0.5f * (m->hi - m->lo));
+    if (!st) {
+        len = snprintf(txt, sizeof txt,
+                       "terrainnet detail maps 1\nsize %d %d\nchannels %d\ntiling %.9g %.9g\nfactor %d\nsigma %.9g\nrange %.9g %.9g\n",
+                       m->width, m->height, m->low.channels, (double)m->tiling_x, (double)m->tiling_y, m->factor, (double)m->sigma,
+                       (double)m->lo, (double)m->hi);
+        st = tn__io_write_atomic(tp, (const uint8_t *)txt, (size_t)len);
+    }
+    TN_FREE(lp);
+    TN_FREE(hp);
+    TN_FREE(tp);
+    return st;
+}
+
+TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix)
+{
+    tn_detail_maps m;
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    char *lp, *hp, *tp, *txt = NULL;
+    double tx = 0, ty = 0, sg = 0, lo = 0, hi = 0;
+    int ch = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(maps);
+    if (!prefix || !prefix[0]) return tn__fail(TN_ERR_INVALID_ARG, "detail maps: empty prefix");
+    memset(&m, 0, sizeof m);
+    lp = tn__dm_path(prefix, "_low.png");
+    hp = tn__dm_path(prefix, "_high.png");
+    tp = tn__dm_path(prefix, "_detail.txt");
+    if (!lp || !hp || !tp) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__io_read_file(tp, &buf, &n);
+    if (!st && !(txt = (char *)tn__alloc(n + 1))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) {
+        memcpy(txt, buf, n);
+        txt[n] = 0;
+        if (sscanf(txt, "terrainnet detail maps 1\nsize %d %d\nchannels %d\ntiling %lf %lf\nfactor %d\nsigma %lf\nrange %lf %lf", &m.width,
+                   &m.height, &ch, &tx, &ty, &m.factor, &sg, &lo, &hi) != 9 ||
+            m.width <= 0 || m.height <= 0 || ch < 1 || ch > 64 || !(tx > 0 && tx < 1e7) || !(ty > 0 && ty < 1e7) || m.factor <= 0 ||
+            !(lo < hi))
+            st = tn__fail(TN_ERR_CORRUPT, "%s: not a valid detail-map sidecar", tp);
+    }
+    m.tiling_x = (float)tx;
+    m.tiling_y = (float)ty;
+    m.sigma = (float)sg;
+    m.lo = (float)lo;
+    m.hi = (float)hi;
+    if (!st) st = tn__dm_load_groups(&m.low, lp, ch);
+    if (!st) st = tn__dm_load_groups(&m.high, hp, ch);
+    TN_FREE(buf);
+    TN_FREE(txt);
+    TN_FREE(lp);
+    TN_FREE(hp);
+    TN_FREE(tp);
+    if (st) {
+        tn_detail_maps_free(&m);
+        return st;
+    }
+    *maps = m;
+    return TN_OK;
+}
+
+/* ---- preview: naive tiling vs detail mapping, far and near, over a hillshaded terrain ---- */
+
+static void tn__dm_put(tn_image *out, int ox, int oy, int x, int y, const float *rgb, int channels, float shade)
+{
+    int c;
+    for (c = 0; c < 3; c++) TN_PIXEL(out, ox + x, oy + y, c) = tn__clampf(rgb[channels >= 3 ? c : 0], 0.0f, 1.0f) * shade;
+}
+
+TN_API tn_status tn_detail_preview(const tn_detail_maps *m, const tn_image *ex, const tn_image *dem, int panel, tn_image *out)
+{
+    tn_image shade = {0, 0, 0, NULL}, terrain = {0, 0, 0, NULL}, exs = {0, 0, 0, NULL}, his = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
+    int P = panel > 0 ? panel : 384, gap = 8, C, x, y, c, sw, sh, nx0, ny0;
+    float px[TN_TEXGAN_MAX_CHANNELS * 8], q[TN_TEXGAN_MAX_CHANNELS * 8];
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__dm_check(m))) return st;
+    if (!ex || !ex->data || ex->channels != m->low.channels) return tn__fail(TN_ERR_SHAPE, "preview: the exemplar does not match the maps");
+    if (P < 16 || P > 4096) return tn__fail(TN_ERR_INVALID_ARG, "preview: panel size %d (16..4096)", P);
+    C = m->low.channels;
+    if (C > TN_TEXGAN_MAX_CHANNELS * 8) return tn__fail(TN_ERR_SHAPE, "preview: too many channels");
+    if (dem) st = tn_image_hillshade(&shade, dem, NULL);
+    else {
+        tn_perlin_opts po;
+        memset(&po, 0, sizeof po);
+        po.seed = 7;
+        po.octaves = 6;
+        st = tn_noise_perlin(&terrain, 256, 256, &po);
+        if (!st) st = tn_image_hillshade(&shade, &terrain, NULL);
+    }
+    /* far view: what mip-mapping leaves, i.e. both maps box-filtered to the panel's texel size */
+    sw = (int)((float)ex->width * (float)P / (float)m->width + 0.5f);
+    sh = (int)((float)ex->height * (float)P / (float)m->height + 0.5f);
+    if (sw < 1) sw = 1;
+    if (sh < 1) sh = 1;
+    if (!st) st = tn_image_resize(&exs, ex, sw, sh, TN_RESIZE_AREA);
+    if (!st) st = tn_image_resize(&his, &m->high, sw, sh, TN_RESIZE_AREA);
+    if (!st) st = tn_image_create(&img, 2 * P + gap, 2 * P + gap, 3);
+    if (st) goto done;
+    for (x = 0; x < img.width * img.height * 3; x++) img.data[x] = 1.0f;
+    nx0 = m->width / 2 - P / 2;
+    ny0 = m->height / 2 - P / 2;
+    if (nx0 < 0) nx0 = 0;
+    if (ny0 < 0) ny0 = 0;
+    for (y = 0; y < P; y++)
+        for (x = 0; x < P; x++) {
+            float u = ((float)x + 0.5f) / (float)P, v = ((float)y + 0.5f) / (float)P, f, s;
+            int a0, a1, b0, b1, l0, l1, k0, k1;
+            float fa, fb, fl, fk;
+            /* far */
+            tn__dm_axis(u * (float)shade.width, shade.width, 0, &a0, &a1, &fa);
+            tn__dm_axis(v * (float)shade.height, shade.height, 0, &b0, &b1, &fb);
+            s = 0.3f + 0.7f * tn__dm_bilerp(&shade, a0, a1, fa, b0, b1, fb, 0);
+            tn__dm_axis(u * m->tiling_x * (float)sw, sw, 1, &a0, &a1, &fa);
+            tn__dm_axis(v * m->tiling_y * (float)sh, sh, 1, &b0, &b1, &fb);
+            tn__dm_axis(tn__dm_low_t(m, u, 0), m->low.width, 0, &l0, &l1, &fl);
+            tn__dm_axis(tn__dm_low_t(m, v, 1), m->low.height, 0, &k0, &k1, &fk);
+            for (c = 0; c < C; c++) {
+                px[c] = tn__dm_bilerp(&exs, a0, a1, fa, b0, b1, fb, c);
+                f = tn__dm_bilerp(&his, a0, a1, fa, b0, b1, fb, c);
+                q[c] = tn__dm_bilerp(&m->low, l0, l1, fl, k0, k1, fk, c) + 2.0f * (f - 0.5f);
+            }
+            tn__dm_put(&img, 0, 0, x, y, px, C, s);
+            tn__dm_put(&img, P + gap, 0, x, y, q, C, s);
+            /* near: full resolution crop at the centre */
+            {
+                int tx = (nx0 + x) % m->width, ty = (ny0 + y) % m->height;
+                float tu = ((float)tx + 0.5f) / (float)m->width, tv = ((float)ty + 0.5f) / (float)m->height;
+                tn__dm_axis(tu * (float)shade.width, shade.width, 0, &a0, &a1, &fa);
+                tn__dm_axis(tv * (float)shade.height, shade.height, 0, &b0, &b1, &fb);
+                s = 0.3f + 0.7f * tn__dm_bilerp(&shade, a0, a1, fa, b0, b1, fb, 0);
+                for (c = 0; c < C; c++) px[c] = TN_PIXEL(ex, tx % ex->width, ty % ex->height, c);
+                tn_detail_texel(m, tu, tv, q);
+                tn__dm_put(&img, 0, P + gap, x, y, px, C, s);
+                tn__dm_put(&img, P + gap, P + gap, x, y, q, C, s);
+            }
+        }
+    *out = img;
+    img.data = NULL;
+done:
+    tn_image_free(&img);
+    tn_image_free(&shade);
+    tn_image_free(&terrain);
+    tn_image_free(&exs);
+    tn_image_free(&his);
     return st;
 }
 

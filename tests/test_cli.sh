@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render noise sketch sketch-random align extract realism style; do
+for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -82,6 +82,26 @@ else bad "drawn sketch to tns"; fi
 cp "$W/rnd.tns" "$W/keep.tns"
 $T sketch-random --sketch "$W/nan.tns" -o "$W/keep.tns" > /dev/null 2>&1
 if cmp -s "$W/rnd.tns" "$W/keep.tns"; then ok; else bad "a failed sketch-random changed the existing output"; fi
+
+
+# texture GAN: a tiny model trained on a generated exemplar, resumed, synthesised, detail-mapped
+TG="--patch 16 --stages 2 --gen-width 16 --disc-width 8 --batch 2 --local 4"
+expect_error "texgan-train no -o" "missing -o" $T texgan-train "$W/noise.png"
+expect_error "texgan-synth bad size" "size needs" $T texgan-synth m.tnw --size 0x5 -o "$W/x.pfm"
+expect_error "texgan-synth not a model" "not a terrainnet weights" $T texgan-synth "$W/noise.png" --size 8x8 -o "$W/x.pfm"
+expect_error "detail-maps one arg" "needs" $T detail-maps "$W/noise.png" -o "$W/dm"
+if $T texgan-train "$W/noise.png" -o "$W/tg.tnw" --iters 2 $TG > "$W/tg.txt" 2>&1 && grep -q "iterations: 2" "$W/tg.txt" &&
+    $T texgan-train "$W/noise.png" -o "$W/tg.tnw" --iters 4 --resume $TG > "$W/tg2.txt" 2>&1 && grep -q "resumed at 2" "$W/tg2.txt"; then ok;
+else bad "texgan-train/resume: $(cat "$W/tg.txt" "$W/tg2.txt" 2>/dev/null | head -c 400)"; fi
+if $T texgan-synth "$W/tg.tnw" --size 100x70 -o "$W/s1.pfm" --seed 4 > /dev/null && $T texgan-synth "$W/tg.tnw" --size 100x70 -o "$W/s2.pfm" --seed 4 > /dev/null &&
+    cmp -s "$W/s1.pfm" "$W/s2.pfm" && $T info "$W/s1.pfm" | grep -q "size: 100 x 70"; then ok; else bad "texgan-synth deterministic pfm"; fi
+if $T texgan-synth "$W/tg.tnw" --size 100x70 -o "$W/s1.png" --colour-correct > /dev/null && $T info "$W/s1.png" | grep -q "size: 100 x 70"; then ok;
+else bad "texgan-synth png"; fi
+if $T detail-maps "$W/tg.tnw" "$W/noise.png" -o "$W/dm" --size 200x140 --compose "$W/comp.png" --preview "$W/prev.png" > "$W/dm.txt" 2>&1 &&
+    grep -q "low map: 20 x 14" "$W/dm.txt" && grep -q "tiling 2.08333" "$W/dm_detail.txt" && $T info "$W/comp.png" | grep -q "size: 200 x 140" &&
+    [ -f "$W/dm_low.png" ] && [ -f "$W/dm_high.png" ] && [ -f "$W/prev.png" ]; then ok; else bad "detail-maps: $(head -c 400 "$W/dm.txt")"; fi
+head -c 300 "$W/tg.tnw" > "$W/tg_bad.tnw"
+expect_error "detail-maps corrupt model" "damaged\|truncated" $T detail-maps "$W/tg_bad.tnw" "$W/noise.png" -o "$W/dm2"
 
 HGT="$D/dem/alps_n47e009/original/N47E009.hgt"
 if [ -f "$HGT" ]; then

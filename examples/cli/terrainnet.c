@@ -866,6 +866,264 @@ done:
     return st ? fail_status(st) : 0;
 }
 
+
+/* ---- texture GAN and detail maps ---------------------------------------------------------- */
+
+/* "W", "WxH" or "W H"-style size; returns 1 on success. */
+static int parse_wxh(const char *s, int *w, int *h)
+{
+    char buf[64], *x;
+    if (!s || strlen(s) >= sizeof buf) return 0;
+    strcpy(buf, s);
+    x = strchr(buf, 'x');
+    if (!x) x = strchr(buf, 'X');
+    if (x) *x = 0;
+    if (!parse_int(buf, w) || (x ? !parse_int(x + 1, h) : !parse_int(buf, h))) return 0;
+    return *w >= 1 && *h >= 1 && *w <= (1 << 20) && *h <= (1 << 20);
+}
+
+static int cmd_texgan_train(int argc, char **argv)
+{
+    tn_image ex = {0, 0, 0, NULL}, nrm = {0, 0, 0, NULL};
+    tn_texgan model;
+    tn_texgan_opts o;
+    tn_texgan_stats s;
+    tn_status st;
+    const char *in = NULL, *outp = NULL, *normal = NULL, *ckpt = NULL;
+    char ckbuf[1024];
+    int a;
+    double v;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet texgan-train EXEMPLAR -o MODEL.tnw [--minutes M] [--iters N] [--resume]\n"
+               "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
+               "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--disc-layers N]\n"
+               "             [--stages N] [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
+               "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
+               "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
+               "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
+               "4, 4 stages of 64-32-16 channels from 16 noise dims. The full training state is saved\n"
+               "atomically to MODEL.tnw.ckpt (or --checkpoint) every 60 s (--checkpoint-seconds), so a\n"
+               "killed run loses at most one interval; --resume continues it identically. --scale S learns\n"
+               "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n"
+               "--augment flips/transposes real patches (small exemplars without a light direction).\n");
+        return 0;
+    }
+    memset(&o, 0, sizeof o);
+    for (a = 0; a < argc; a++) {
+        const char *k = argv[a];
+        if (!strcmp(k, "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(k, "--resume")) o.resume = 1;
+        else if (!strcmp(k, "--augment")) o.augment = 1;
+        else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
+        else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
+        else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
+                  !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") || !strcmp(k, "--disc-layers") ||
+                  !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic")) &&
+                 a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
+            if (!strcmp(k, "--minutes")) o.minutes = v;
+            else if (!strcmp(k, "--checkpoint-seconds")) o.checkpoint_seconds = v;
+            else if (!strcmp(k, "--iters")) o.max_iters = (long)v;
+            else if (!strcmp(k, "--seed")) o.seed = (uint64_t)v;
+            else if (!strcmp(k, "--patch")) o.patch = (int)v;
+            else if (!strcmp(k, "--batch")) o.batch = (int)v;
+            else if (!strcmp(k, "--gen-width")) o.gen_width = (int)v;
+            else if (!strcmp(k, "--disc-width")) o.disc_width = (int)v;
+            else if (!strcmp(k, "--disc-layers")) o.disc_layers = (int)v;
+            else if (!strcmp(k, "--stages")) o.stages = (int)v;
+            else if (!strcmp(k, "--scale")) o.scale = (int)v;
+            else if (!strcmp(k, "--local")) o.noise_local = (int)v;
+            else if (!strcmp(k, "--global")) o.noise_global = (int)v;
+            else o.noise_periodic = (int)v;
+            a++;
+        } else if (k[0] == '-') return usage_error("texgan-train", "unknown option or missing value:", k);
+        else if (!in) in = k;
+        else return usage_error("texgan-train", "too many arguments:", k);
+    }
+    if (!in) return usage_error("texgan-train", "missing EXEMPLAR", NULL);
+    if (!outp) return usage_error("texgan-train", "missing -o MODEL.tnw", NULL);
+    if (!ckpt) {
+        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", outp);
+        ckpt = ckbuf;
+    }
+    o.checkpoint = ckpt;
+    if ((st = tn_image_load(in, &ex, NULL))) return fail_status(st);
+    if (normal) {
+        tn_image both = {0, 0, 0, NULL};
+        size_t i, n = (size_t)ex.width * ex.height;
+        int c;
+        if ((st = tn_image_load(normal, &nrm, NULL))) { tn_image_free(&ex); return fail_status(st); }
+        if (nrm.width != ex.width || nrm.height != ex.height || ex.channels + nrm.channels > TN_TEXGAN_MAX_CHANNELS) {
+            tn_image_free(&ex);
+            tn_image_free(&nrm);
+            fprintf(stderr, "terrainnet texgan-train: the normal map must have the exemplar's size\n");
+            return 1;
+        }
+        if ((st = tn_image_create(&both, ex.width, ex.height, ex.channels + nrm.channels))) { tn_image_free(&ex); tn_image_free(&nrm); return fail_status(st); }
+        for (i = 0; i < n; i++)
+            for (c = 0; c < both.channels; c++)
+                both.data[i * both.channels + c] = c < ex.channels ? ex.data[i * ex.channels + c] : nrm.data[i * nrm.channels + c - ex.channels];
+        tn_image_free(&ex);
+        tn_image_free(&nrm);
+        ex = both;
+    }
+    st = tn_texgan_train(&model, &ex, &o, &s);
+    tn_image_free(&ex);
+    if (st) return fail_status(st);
+    st = tn_texgan_save(&model, outp);
+    if (!st)
+        printf("iterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\nloss_d: %.4f\nloss_g: %.4f\n"
+               "checkpoints: %d (%s)\nmodel: %s\n",
+               s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_d, (double)s.loss_g, s.checkpoints, ckpt, outp);
+    tn_texgan_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static int cmd_texgan_synth(int argc, char **argv)
+{
+    tn_texgan model;
+    tn_status st;
+    const char *in = NULL, *outp = NULL;
+    int a, w = 0, h = 0, colour = 0;
+    double v, seed = 1, t0;
+    float shift[TN_TEXGAN_MAX_CHANNELS];
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet texgan-synth MODEL.tnw --size WxH -o OUT [--seed S] [--colour-correct]\n"
+               "Synthesises a texture of any size from a trained model, tile by tile (2 noise cells of\n"
+               "overlap, cropped and stitched; memory is one band of tiles). .pfm/.ppm/.pgm outputs are\n"
+               "streamed to disk band by band; other formats (.png) are built in memory and saved whole.\n"
+               "Channels beyond 3 go to OUT.ch3-5.EXT. The same seed gives the same bytes on any machine.\n"
+               "--colour-correct shifts the mean colour to the exemplar's (measured on a 1024 px window).\n");
+        return 0;
+    }
+    for (a = 0; a < argc; a++) {
+        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
+        else if (!strcmp(argv[a], "--size") && a + 1 < argc) {
+            if (!parse_wxh(argv[++a], &w, &h)) return usage_error("texgan-synth", "--size needs WxH, e.g. 8192x8192, not", argv[a]);
+        } else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &v) || v < 0) return usage_error("texgan-synth", "not a non-negative number:", argv[a + 1]);
+            seed = v;
+            a++;
+        } else if (!strcmp(argv[a], "--colour-correct")) colour = 1;
+        else if (argv[a][0] == '-') return usage_error("texgan-synth", "unknown option or missing value:", argv[a]);
+        else if (!in) in = argv[a];
+        else return usage_error("texgan-synth", "too many arguments:", argv[a]);
+    }
+    if (!in) return usage_error("texgan-synth", "missing MODEL", NULL);
+    if (!outp) return usage_error("texgan-synth", "missing -o OUT", NULL);
+    if (!w) return usage_error("texgan-synth", "missing --size WxH", NULL);
+    if ((st = tn_texgan_load(&model, in))) return fail_status(st);
+    t0 = tn_time_seconds();
+    if (colour) {
+        tn_image probe = {0, 0, 0, NULL};
+        st = tn_texgan_synthesize_window(&model, (uint64_t)seed, 0, 0, w < 1024 ? w : 1024, h < 1024 ? h : 1024, &probe);
+        if (!st) st = tn_texture_colour_shift(&probe, model.mean, model.lo, model.hi, shift);
+        tn_image_free(&probe);
+    }
+    if (!st) st = tn_texgan_synthesize_file(&model, (uint64_t)seed, w, h, colour ? shift : NULL, outp);
+    if (!st) printf("synthesised %d x %d in %.2f s -> %s\n", w, h, tn_time_seconds() - t0, outp);
+    tn_texgan_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static int is_tnw_file(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    char m[4] = {0, 0, 0, 0};
+    int ok;
+    if (!f) return 0;
+    ok = fread(m, 1, 4, f) == 4 && !memcmp(m, "TNW1", 4);
+    fclose(f);
+    return ok;
+}
+
+static int cmd_detail_maps(int argc, char **argv)
+{
+    tn_image ex = {0, 0, 0, NULL}, synth = {0, 0, 0, NULL}, img = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_detail_maps maps;
+    tn_detail_opts o;
+    tn_texgan model;
+    tn_status st;
+    const char *src = NULL, *exp_ = NULL, *prefix = NULL, *compose = NULL, *preview = NULL, *demp = NULL;
+    int a, w = 0, h = 0, have_model;
+    double v, seed = 1;
+    if (wants_help(argc, argv)) {
+        printf("usage: terrainnet detail-maps MODEL_OR_SYNTH EXEMPLAR -o PREFIX [--size WxH] [--seed S]\n"
+               "             [--factor F] [--sigma S] [--no-colour] [--compose OUT] [--preview OUT.png [--dem DEM]]\n"
+               "Writes PREFIX_low.png (16-bit: Gaussian low-pass of the colour-corrected synthesis,\n"
+               "downsampled by F, default 10 = 100x less memory), PREFIX_high.png (8-bit: exemplar minus\n"
+               "its Gaussian blur, as value/2 + 0.5) and PREFIX_detail.txt (texture size, tiling factor,\n"
+               "F, sigma (default F/2), value range). From a MODEL the texture (--size, default 8x the\n"
+               "exemplar) is synthesised band by band; from a SYNTH image its own size is used.\n"
+               "--compose writes the full-resolution texture as a shader would rebuild it (at --size);\n"
+               "--preview writes naive tiling vs detail mapping, far and near, over a hillshaded terrain.\n");
+        return 0;
+    }
+    memset(&o, 0, sizeof o);
+    for (a = 0; a < argc; a++) {
+        const char *k = argv[a];
+        if (!strcmp(k, "-o") && a + 1 < argc) prefix = argv[++a];
+        else if (!strcmp(k, "--compose") && a + 1 < argc) compose = argv[++a];
+        else if (!strcmp(k, "--preview") && a + 1 < argc) preview = argv[++a];
+        else if (!strcmp(k, "--dem") && a + 1 < argc) demp = argv[++a];
+        else if (!strcmp(k, "--no-colour")) o.no_colour_correct = 1;
+        else if (!strcmp(k, "--size") && a + 1 < argc) {
+            if (!parse_wxh(argv[++a], &w, &h)) return usage_error("detail-maps", "--size needs WxH, e.g. 4096x4096, not", argv[a]);
+        } else if ((!strcmp(k, "--seed") || !strcmp(k, "--factor") || !strcmp(k, "--sigma")) && a + 1 < argc) {
+            if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("detail-maps", "not a non-negative number:", argv[a + 1]);
+            if (!strcmp(k, "--seed")) seed = v;
+            else if (!strcmp(k, "--factor")) {
+                if (v < 1 || v > 4096) return usage_error("detail-maps", "--factor must be 1..4096", NULL);
+                o.factor = (int)v;
+            } else o.sigma = (float)v;
+            a++;
+        } else if (k[0] == '-') return usage_error("detail-maps", "unknown option or missing value:", k);
+        else if (!src) src = k;
+        else if (!exp_) exp_ = k;
+        else return usage_error("detail-maps", "too many arguments:", k);
+    }
+    if (!src || !exp_) return usage_error("detail-maps", "needs MODEL_OR_SYNTH and EXEMPLAR", NULL);
+    if (!prefix) return usage_error("detail-maps", "missing -o PREFIX", NULL);
+    if ((st = tn_image_load(exp_, &ex, NULL))) return fail_status(st);
+    have_model = is_tnw_file(src);
+    if (have_model) {
+        if (!(st = tn_texgan_load(&model, src))) {
+            if (!w) { w = 8 * ex.width; h = 8 * ex.height; }
+            st = tn_detail_maps_from_model(&maps, &model, (uint64_t)seed, w, h, &ex, &o);
+            tn_texgan_free(&model);
+        }
+    } else {
+        if (!(st = tn_image_load(src, &synth, NULL))) st = tn_detail_maps_from_image(&maps, &synth, &ex, &o);
+        tn_image_free(&synth);
+        if (!w && !st) { w = maps.width; h = maps.height; }
+    }
+    if (st) { tn_image_free(&ex); return fail_status(st); }
+    st = tn_detail_maps_save(&maps, prefix);
+    if (!st)
+        printf("texture: %d x %d\nlow map: %d x %d (factor %d, %.0fx less memory)\nhigh map: %d x %d, tiled %.3f x %.3f\n", maps.width,
+               maps.height, maps.low.width, maps.low.height, maps.factor,
+               (double)maps.width * maps.height / ((double)maps.low.width * maps.low.height), maps.high.width, maps.high.height,
+               (double)maps.tiling_x, (double)maps.tiling_y);
+    if (!st && compose) {
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 8;
+        st = tn_detail_compose(&maps, w, h, &img);
+        if (!st) st = tn_image_save(compose, &img, &so);
+        tn_image_free(&img);
+    }
+    if (!st && preview) {
+        if (demp) st = tn_image_load(demp, &dem, NULL);
+        if (!st) st = tn_detail_preview(&maps, &ex, demp ? &dem : NULL, 0, &img);
+        if (!st) st = tn_image_save(preview, &img, NULL);
+        tn_image_free(&img);
+        tn_image_free(&dem);
+    }
+    tn_detail_maps_free(&maps);
+    tn_image_free(&ex);
+    return st ? fail_status(st) : 0;
+}
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 typedef struct command { const char *name; int (*fn)(int, char **); const char *summary; } command;
@@ -882,6 +1140,9 @@ static const command commands[] = {
     {"extract", cmd_extract, "ridge and valley network of a DEM: masks, accumulation, preview"},
     {"realism", cmd_realism, "realism report: slope/curvature/spectrum distances, drainage, SSIM"},
     {"style", cmd_style, "restyle a map with the morphology of a real heightmap (style transfer)"},
+    {"texgan-train", cmd_texgan_train, "train a spatial GAN on one texture photo (checkpoints, resume)"},
+    {"texgan-synth", cmd_texgan_synth, "synthesise a texture of any size from a model, streamed tile by tile"},
+    {"detail-maps", cmd_detail_maps, "low/high detail maps (+ composed texture, tiling preview)"},
 };
 
 static void print_usage(FILE *f)
@@ -891,7 +1152,7 @@ static void print_usage(FILE *f)
                "usage: terrainnet [--threads N] COMMAND [ARGS]   (COMMAND --help for details)\n\ncommands:\n",
             TN_VERSION_STRING);
     for (i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
+        fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
 }
 
 int main(int argc, char **argv)

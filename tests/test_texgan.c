@@ -1,0 +1,470 @@
+/* test_texgan.c - @@texgan: spatial GAN training, checkpoints, tiled synthesis, detail maps. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+/* A small RGB exemplar: stripes, blobs and noise in [0, 1]. */
+static tn_image make_exemplar(int w, int h, int channels, uint64_t seed)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_rng r;
+    int x, y, c;
+    tn_rng_seed(&r, seed, 3);
+    if (tn_image_create(&img, w, h, channels)) return img;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++)
+            for (c = 0; c < channels; c++)
+                TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
+    return img;
+}
+
+static void tiny_opts(tn_texgan_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->noise_local = 4;
+    o->stages = 2;
+    o->gen_width = 16;
+    o->disc_width = 8;
+    o->disc_layers = 2;
+    o->patch = 16;
+    o->batch = 2;
+    o->lr = 1e-3f;
+    o->minutes = 100;
+    o->seed = 5;
+}
+
+static int same_params(const tn_params *a, const tn_params *b, int skip_config)
+{
+    int i;
+    if (tn_params_count(a) != tn_params_count(b)) return 0;
+    for (i = skip_config ? 1 : 0; i < tn_params_count(a); i++) {
+        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
+        if (x->numel != y->numel || memcmp(x->data, y->data, x->numel * sizeof(float)) != 0) return 0;
+    }
+    return 1;
+}
+
+static double max_abs_diff(const tn_image *a, const tn_image *b)
+{
+    size_t i, n = (size_t)a->width * a->height * a->channels;
+    double d = 0;
+    if (a->width != b->width || a->height != b->height || a->channels != b->channels) return 1e30;
+    for (i = 0; i < n; i++)
+        if (fabs((double)a->data[i] - b->data[i]) > d) d = fabs((double)a->data[i] - b->data[i]);
+    return d;
+}
+
+TN_TEST(training_steps_stay_finite_and_move_the_generator)
+{
+    tn_image ex = make_exemplar(40, 36, 3, 1);
+    tn_texgan m;
+    tn_texgan_opts o;
+    tn_texgan_stats s;
+    tn_tensor *w;
+    size_t k;
+    int finite = 1;
+    tiny_opts(&o);
+    o.max_iters = 8;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, &s) == TN_OK);
+    TN_CHECK(s.iterations == 8 && m.iterations == 8);
+    TN_CHECK(s.loss_d == s.loss_d && s.loss_g == s.loss_g);
+    TN_CHECK(s.loss_d >= 0 && s.loss_d < 4); /* hinge D loss starts near 2 */
+    TN_CHECK(s.seconds_per_iter > 0);
+    w = tn_params_find(m.weights, "g.w0");
+    TN_CHECK(w != NULL);
+    for (k = 0; w && k < w->numel; k++) finite &= w->data[k] == w->data[k];
+    TN_CHECK(finite);
+    TN_CHECK_NEAR(m.mean[0], 0.4, 0.15);
+    tn_texgan_free(&m);
+    tn_image_free(&ex);
+}
+
+TN_TEST(checkpoint_resume_continues_identically)
+{
+    const char *ck1 = "build/test/texgan_a.ckpt", *ck2 = "build/test/texgan_b.ckpt";
+    tn_image ex = make_exemplar(40, 36, 3, 2);
+    tn_texgan full, part, resumed;
+    tn_texgan_opts o;
+    tn_texgan_stats s;
+    tiny_opts(&o);
+    o.augment = 1; /* flipped/transposed real patches: the flag is part of the saved state */
+    o.checkpoint = ck1;
+    o.max_iters = 6;
+    TN_CHECK(tn_texgan_train(&full, &ex, &o, NULL) == TN_OK);
+    o.checkpoint = ck2;
+    o.max_iters = 3; /* "killed" after 3 iterations: the checkpoint holds them */
+    TN_CHECK(tn_texgan_train(&part, &ex, &o, NULL) == TN_OK);
+    o.max_iters = 6;
+    o.resume = 1;
+    o.seed = 999; /* ignored on resume: the state comes from the file */
+    TN_CHECK(tn_texgan_train(&resumed, &ex, &o, &s) == TN_OK);
+    TN_CHECK(s.resumed_from == 3 && s.iterations == 6);
+    TN_CHECK(same_params(full.weights, resumed.weights, 1));
+    TN_CHECK(!same_params(full.weights, part.weights, 1));
+    /* a checkpoint of another channel count is refused */
+    {
+        tn_image grey = make_exemplar(40, 36, 1, 2);
+        tn_texgan bad;
+        TN_CHECK(tn_texgan_train(&bad, &grey, &o, NULL) == TN_ERR_SHAPE);
+        tn_image_free(&grey);
+    }
+    tn_texgan_free(&full);
+    tn_texgan_free(&part);
+    tn_texgan_free(&resumed);
+    tn_image_free(&ex);
+}
+
+static tn_status trained_tiny_scaled(tn_texgan *m, int channels, int periodic, int scale)
+{
+    tn_image ex = make_exemplar(40, 36, channels, 3);
+    tn_texgan_opts o;
+    tn_status st;
+    tiny_opts(&o);
+    o.noise_global = 2;
+    o.noise_periodic = periodic;
+    o.scale = scale;
+    o.max_iters = 2;
+    st = tn_texgan_train(m, &ex, &o, NULL);
+    tn_image_free(&ex);
+    return st;
+}
+
+static tn_status trained_tiny(tn_texgan *m, int channels, int periodic) { return trained_tiny_scaled(m, channels, periodic, 1); }
+
+TN_TEST(tiled_synthesis_equals_one_pass)
+{
+    tn_texgan m;
+    tn_image one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, crop = {0, 0, 0, NULL};
+    int tiles;
+    TN_CHECK(trained_tiny(&m, 3, 2) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize_window(&m, 42, 0, 0, 61, 45, &one) == TN_OK);
+    for (tiles = 1; tiles <= 5; tiles += 2) { /* tiles of 4, 12, 20 px with 2 cells of overlap */
+        tn_image_free(&tiled);
+        TN_CHECK(tn_image_create(&tiled, 61, 45, 3) == TN_OK);
+        TN_CHECK(tn_texgan_synthesize_stream(&m, 42, 61, 45, tiles, tn__tg_collect_band, &tiled) == TN_OK);
+        TN_CHECK(max_abs_diff(&one, &tiled) <= 1e-6);
+    }
+    /* any window of the infinite texture is the same pixels */
+    TN_CHECK(tn_texgan_synthesize_window(&m, 42, 13, 7, 30, 21, &win) == TN_OK);
+    TN_CHECK(tn_image_crop(&crop, &one, 13, 7, 30, 21) == TN_OK);
+    TN_CHECK(max_abs_diff(&win, &crop) <= 1e-6);
+    /* another seed differs; the output stays inside the exemplar range */
+    tn_image_free(&win);
+    TN_CHECK(tn_texgan_synthesize_window(&m, 43, 0, 0, 61, 45, &win) == TN_OK);
+    TN_CHECK(max_abs_diff(&win, &one) > 1e-3);
+    {
+        float lo, hi;
+        tn_image_range(&one, &lo, &hi);
+        TN_CHECK(lo >= m.lo && hi <= m.hi);
+    }
+    tn_image_free(&one);
+    tn_image_free(&tiled);
+    tn_image_free(&win);
+    tn_image_free(&crop);
+    tn_texgan_free(&m);
+}
+
+/* scale 2: the generator learns the half-size exemplar; output is its bilinear upsampling,
+   sampled from global coordinates, so tiles and windows still agree exactly */
+TN_TEST(scaled_model_tiles_exactly)
+{
+    tn_texgan m, l;
+    tn_image one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, crop = {0, 0, 0, NULL};
+    TN_CHECK(trained_tiny_scaled(&m, 3, 0, 2) == TN_OK);
+    TN_CHECK(m.scale == 2);
+    TN_CHECK(tn_texgan_save(&m, "build/test/texgan_s2.tnw") == TN_OK && tn_texgan_load(&l, "build/test/texgan_s2.tnw") == TN_OK);
+    TN_CHECK(l.scale == 2);
+    TN_CHECK(tn_texgan_synthesize_window(&l, 5, 0, 0, 57, 41, &one) == TN_OK);
+    TN_CHECK(tn_image_create(&tiled, 57, 41, 3) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize_stream(&l, 5, 57, 41, 1, tn__tg_collect_band, &tiled) == TN_OK);
+    TN_CHECK(max_abs_diff(&one, &tiled) <= 1e-6);
+    TN_CHECK(tn_texgan_synthesize_window(&l, 5, 9, 6, 31, 20, &win) == TN_OK);
+    TN_CHECK(tn_image_crop(&crop, &one, 9, 6, 31, 20) == TN_OK);
+    TN_CHECK(max_abs_diff(&win, &crop) <= 1e-6);
+    /* upsampled: neighbouring pixels inside one low pixel pair differ less than across the image */
+    TN_CHECK(fabs(TN_PIXEL(&one, 20, 20, 0) - TN_PIXEL(&one, 21, 20, 0)) < 0.5);
+    tn_image_free(&one);
+    tn_image_free(&tiled);
+    tn_image_free(&win);
+    tn_image_free(&crop);
+    tn_texgan_free(&m);
+    tn_texgan_free(&l);
+}
+
+TN_TEST(fast_generator_matches_the_training_graph)
+{
+    tn_texgan m;
+    tn_ctx *c = tn_ctx_create();
+    tn_tensor *z, *a, *b;
+    size_t k;
+    double d = 0;
+    TN_CHECK(trained_tiny(&m, 3, 0) == TN_OK);
+    tn_ctx_set_grad(c, 0);
+    z = tn_tensor_4d(c, 1, tn__tg_zdim(&m), 7, 6);
+    tn__tg_noise(&m, tn_params_find(m.weights, "texgan.waves")->data, z, 0, 9, 3, 4);
+    a = tn__tg_generate(c, &m, m.weights, "g.", z);
+    b = tn__tg_generate_fast(c, &m, z);
+    TN_CHECK(a && b && tn_tensor_same_shape(a, b));
+    TN_CHECK(a && a->shape[2] == tn__tg_out_size(2, 7) && a->shape[3] == tn__tg_out_size(2, 6));
+    for (k = 0; a && b && k < a->numel; k++)
+        if (fabs((double)a->data[k] - b->data[k]) > d) d = fabs((double)a->data[k] - b->data[k]);
+    TN_CHECK(d < 1e-5);
+    { /* and the literal definition: nearest x2 upsampling, then a valid 5x5 conv */
+        tn_tensor *x = z;
+        int i;
+        char name[16];
+        for (i = 0; i < m.stages; i++) {
+            snprintf(name, sizeof name, "g.w%d", i);
+            x = tn_conv2d(c, tn_upsample_nearest(c, x, 2), tn_params_find(m.weights, name), NULL, NULL);
+            snprintf(name, sizeof name, "g.b%d", i);
+            x = tn_add(c, x, tn_reshape(c, tn_params_find(m.weights, name), 4, (int[]){1, x->shape[1], 1, 1}));
+            x = i < m.stages - 1 ? tn__tg_pixel_norm(c, tn_leaky_relu(c, x, 0.2f)) : tn_tanh(c, x);
+        }
+        d = 0;
+        for (k = 0; a && x && k < a->numel; k++)
+            if (fabs((double)a->data[k] - x->data[k]) > d) d = fabs((double)a->data[k] - x->data[k]);
+        TN_CHECK(x && tn_tensor_same_shape(a, x) && d < 1e-5);
+    }
+    tn_ctx_free(c);
+    tn_texgan_free(&m);
+}
+
+TN_TEST(deterministic_for_1_and_2_threads)
+{
+    tn_image ex = make_exemplar(40, 36, 3, 4), s1 = {0, 0, 0, NULL}, s2 = {0, 0, 0, NULL};
+    tn_texgan a, b;
+    tn_texgan_opts o;
+    tiny_opts(&o);
+    o.max_iters = 3;
+    tn_set_threads(1);
+    TN_CHECK(tn_texgan_train(&a, &ex, &o, NULL) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&a, 7, 70, 50, &s1) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_texgan_train(&b, &ex, &o, NULL) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&b, 7, 70, 50, &s2) == TN_OK);
+    TN_CHECK(same_params(a.weights, b.weights, 1));
+    TN_CHECK(max_abs_diff(&s1, &s2) == 0.0);
+    tn_set_threads(0);
+    tn_image_free(&s1);
+    tn_image_free(&s2);
+    tn_texgan_free(&a);
+    tn_texgan_free(&b);
+    tn_image_free(&ex);
+}
+
+TN_TEST(model_file_round_trip_and_streamed_files)
+{
+    const char *path = "build/test/texgan.tnw";
+    tn_texgan m, l;
+    tn_image mem = {0, 0, 0, NULL}, pfm = {0, 0, 0, NULL}, ppm = {0, 0, 0, NULL}, extra = {0, 0, 0, NULL};
+    float shift[6] = {0.1f, -0.05f, 0, 0, 0, 0};
+    size_t i;
+    double d = 0;
+    TN_CHECK(trained_tiny(&m, 6, 1) == TN_OK); /* RGB + normal map */
+    TN_CHECK(tn_texgan_save(&m, path) == TN_OK);
+    TN_CHECK(tn_texgan_load(&l, path) == TN_OK);
+    TN_CHECK(l.channels == 6 && l.stages == 2 && l.noise_periodic == 1 && l.iterations == 2);
+    TN_CHECK(same_params(m.weights, l.weights, 0));
+    TN_CHECK(tn_texgan_synthesize(&l, 3, 37, 29, &mem) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize_file(&l, 3, 37, 29, shift, "build/test/texgan_out.pfm") == TN_OK);
+    TN_CHECK(tn_image_load("build/test/texgan_out.pfm", &pfm, NULL) == TN_OK);
+    TN_CHECK(tn_image_load("build/test/texgan_out.ch3-5.pfm", &extra, NULL) == TN_OK);
+    TN_CHECK(pfm.width == 37 && pfm.height == 29 && pfm.channels == 3 && extra.channels == 3);
+    for (i = 0; pfm.data && extra.data && i < (size_t)37 * 29; i++) {
+        int c;
+        for (c = 0; c < 3; c++) {
+            float want = tn__clampf(mem.data[i * 6 + c] + shift[c], l.lo, l.hi);
+            if (fabs((double)pfm.data[i * 3 + c] - want) > d) d = fabs((double)pfm.data[i * 3 + c] - want);
+            if (fabs((double)extra.data[i * 3 + c] - mem.data[i * 6 + 3 + c]) > d) d = fabs((double)extra.data[i * 3 + c] - mem.data[i * 6 + 3 + c]);
+        }
+    }
+    TN_CHECK(d == 0.0);
+    TN_CHECK(tn_texgan_synthesize_file(&l, 3, 37, 29, NULL, "build/test/texgan_out.ppm") == TN_OK);
+    TN_CHECK(tn_image_load("build/test/texgan_out.ppm", &ppm, NULL) == TN_OK);
+    TN_CHECK(ppm.width == 37 && ppm.channels == 3 && fabs(ppm.data[5] - mem.data[(5 / 3) * 6 + 5 % 3]) <= 0.5 / 255 + 1e-6);
+    tn_image_free(&mem);
+    tn_image_free(&pfm);
+    tn_image_free(&ppm);
+    tn_image_free(&extra);
+    tn_texgan_free(&m);
+    tn_texgan_free(&l);
+}
+
+TN_TEST(colour_correction_hits_the_target_mean)
+{
+    tn_image a = make_exemplar(30, 20, 3, 5), b = {0, 0, 0, NULL};
+    float target[3] = {0.8f, 0.1f, 0.45f}, shift[3];
+    size_t i, n = 600;
+    int c;
+    TN_CHECK(tn_image_copy(&b, &a) == TN_OK);
+    TN_CHECK(tn_texture_colour_correct(&a, target, 0.0f, 1.0f) == TN_OK);
+    for (c = 0; c < 3; c++) {
+        double s = 0;
+        float lo = 1, hi = 0;
+        for (i = 0; i < n; i++) {
+            s += a.data[i * 3 + c];
+            if (a.data[i * 3 + c] < lo) lo = a.data[i * 3 + c];
+            if (a.data[i * 3 + c] > hi) hi = a.data[i * 3 + c];
+        }
+        TN_CHECK_NEAR(s / n, target[c], 2e-6); /* exact despite the clipping channels 0 and 1 need */
+        TN_CHECK(lo >= 0.0f && hi <= 1.0f);
+    }
+    /* no clipping: a pure shift by the mean difference */
+    TN_CHECK(tn_texture_colour_shift(&b, target, -10.0f, 10.0f, shift) == TN_OK);
+    {
+        double s = 0;
+        for (i = 0; i < n; i++) s += b.data[i * 3 + 2];
+        TN_CHECK_NEAR(shift[2], target[2] - s / n, 1e-6);
+    }
+    b.data[7] = NAN;
+    TN_CHECK(tn_texture_colour_correct(&b, target, 0.0f, 1.0f) == TN_ERR_NUMERIC);
+    tn_image_free(&a);
+    tn_image_free(&b);
+}
+
+TN_TEST(detail_texel_equals_whole_image_composer)
+{
+    tn_image ex = make_exemplar(24, 20, 3, 6), synth = make_exemplar(97, 61, 3, 7), comp = {0, 0, 0, NULL};
+    tn_detail_maps m, l;
+    tn_detail_opts o;
+    int x, y, c, sizes[3][2] = {{97, 61}, {50, 33}, {130, 70}}, k, bad = 0;
+    float t[3];
+    memset(&o, 0, sizeof o);
+    o.factor = 4;
+    TN_CHECK(tn_detail_maps_from_image(&m, &synth, &ex, &o) == TN_OK);
+    TN_CHECK(m.low.width == 25 && m.low.height == 16 && m.high.width == 24);
+    TN_CHECK_NEAR(m.tiling_x, 97.0 / 24, 1e-6);
+    for (k = 0; k < 3; k++) {
+        tn_image_free(&comp);
+        TN_CHECK(tn_detail_compose(&m, sizes[k][0], sizes[k][1], &comp) == TN_OK);
+        for (y = 0; y < comp.height; y++)
+            for (x = 0; x < comp.width; x++) {
+                tn_detail_texel(&m, ((float)x + 0.5f) / (float)comp.width, ((float)y + 0.5f) / (float)comp.height, t);
+                for (c = 0; c < 3; c++) bad += t[c] != TN_PIXEL(&comp, x, y, c);
+            }
+    }
+    TN_CHECK(bad == 0);
+    /* the low map carries the exemplar's mean colour; the high map is centred on 0.5 */
+    {
+        double sl = 0, sh = 0, se = 0;
+        size_t i;
+        for (i = 0; i < (size_t)25 * 16; i++) sl += m.low.data[i * 3];
+        for (i = 0; i < (size_t)24 * 20; i++) {
+            sh += m.high.data[i * 3];
+            se += ex.data[i * 3];
+        }
+        TN_CHECK_NEAR(sl / 400, se / 480, 1e-5);
+        TN_CHECK_NEAR(sh / 480, 0.5, 0.01);
+    }
+    /* save / load keeps the tiling factor (sidecar) and the maps up to 8/16-bit quantisation */
+    TN_CHECK(tn_detail_maps_save(&m, "build/test/texgan_dm") == TN_OK);
+    TN_CHECK(tn_detail_maps_load(&l, "build/test/texgan_dm") == TN_OK);
+    TN_CHECK(l.factor == 4 && l.width == 97 && fabs(l.tiling_y - m.tiling_y) < 1e-6);
+    TN_CHECK(max_abs_diff(&l.low, &m.low) < 1.0 / 65535 && max_abs_diff(&l.high, &m.high) < 0.51 / 255);
+    tn_detail_maps_free(&l);
+    tn_image_free(&comp);
+    TN_CHECK(tn_detail_preview(&m, &ex, NULL, 32, &comp) == TN_OK);
+    TN_CHECK(comp.width == 72 && comp.channels == 3);
+    tn_image_free(&comp);
+    tn_detail_maps_free(&m);
+    tn_image_free(&ex);
+    tn_image_free(&synth);
+}
+
+TN_TEST(detail_maps_from_model_match_the_image_path)
+{
+    tn_texgan m;
+    tn_image ex = make_exemplar(40, 36, 3, 3), synth = {0, 0, 0, NULL};
+    tn_detail_maps a, b;
+    TN_CHECK(trained_tiny(&m, 3, 0) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&m, 11, 90, 70, &synth) == TN_OK);
+    TN_CHECK(tn_detail_maps_from_image(&a, &synth, &ex, NULL) == TN_OK);
+    TN_CHECK(tn_detail_maps_from_model(&b, &m, 11, 90, 70, &ex, NULL) == TN_OK);
+    TN_CHECK(max_abs_diff(&a.low, &b.low) < 1e-6 && max_abs_diff(&a.high, &b.high) == 0.0);
+    TN_CHECK(a.low.width == 9 && a.low.height == 7 && a.factor == 10);
+    tn_detail_maps_free(&a);
+    tn_detail_maps_free(&b);
+    tn_image_free(&synth);
+    tn_image_free(&ex);
+    tn_texgan_free(&m);
+}
+
+TN_TEST(bad_inputs_fail_cleanly)
+{
+    tn_image ex = make_exemplar(40, 36, 3, 8), empty = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = make_exemplar(10, 10, 3, 1);
+    tn_image wide = make_exemplar(20, 20, 9, 1);
+    tn_texgan m, l;
+    tn_texgan_opts o;
+    tn_detail_maps dm;
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    FILE *f;
+    tiny_opts(&o);
+    o.max_iters = 1;
+    TN_CHECK(tn_texgan_train(&m, &empty, &o, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_texgan_train(&m, &small, &o, NULL) == TN_ERR_INVALID_ARG); /* smaller than the patch */
+    TN_CHECK(tn_texgan_train(&m, &wide, &o, NULL) == TN_ERR_SHAPE);
+    ex.data[17] = NAN;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_ERR_NUMERIC);
+    ex.data[17] = 0.5f;
+    o.stages = 9;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_ERR_INVALID_ARG);
+    o.stages = 2;
+    o.resume = 1;
+    o.checkpoint = "build/test/no_such_texgan.ckpt";
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_ERR_IO);
+    o.resume = 0;
+    o.checkpoint = NULL;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&m, 1, 0, 10, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texgan_synthesize_window(&m, 1, -1, 0, 10, 10, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texgan_synthesize(&m, 1, 1 << 25, 10, &out) == TN_ERR_TOO_LARGE);
+    /* model files: corrupt byte, truncated, another .tnw, missing */
+    TN_CHECK(tn_texgan_save(&m, "build/test/texgan_bad.tnw") == TN_OK);
+    TN_CHECK(tn__io_read_file("build/test/texgan_bad.tnw", &buf, &n) == TN_OK);
+    buf[n / 2] ^= 0x40;
+    f = fopen("build/test/texgan_bad.tnw", "wb");
+    fwrite(buf, 1, n, f);
+    fclose(f);
+    TN_CHECK(tn_texgan_load(&l, "build/test/texgan_bad.tnw") == TN_ERR_CORRUPT);
+    f = fopen("build/test/texgan_bad.tnw", "wb");
+    fwrite(buf, 1, 40, f);
+    fclose(f);
+    TN_CHECK(tn_texgan_load(&l, "build/test/texgan_bad.tnw") != TN_OK);
+    TN_FREE(buf);
+    {
+        tn_params *p = tn_params_create();
+        int two = 2;
+        tn_params_add(p, "x", 1, &two);
+        tn_params_save(p, "build/test/texgan_other.tnw");
+        tn_params_free(p);
+        TN_CHECK(tn_texgan_load(&l, "build/test/texgan_other.tnw") == TN_ERR_FORMAT);
+    }
+    TN_CHECK(tn_texgan_load(&l, "build/test/no_such_model.tnw") == TN_ERR_IO);
+    /* detail maps */
+    TN_CHECK(tn_detail_maps_from_image(&dm, &ex, &wide, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_detail_maps_from_image(&dm, &empty, &ex, NULL) == TN_ERR_EMPTY);
+    ex.data[3] = INFINITY;
+    TN_CHECK(tn_detail_maps_from_image(&dm, &ex, &small, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_detail_maps_load(&dm, "build/test/no_such_prefix") == TN_ERR_IO);
+    tn_texgan_free(&m);
+    tn_image_free(&ex);
+    tn_image_free(&small);
+    tn_image_free(&wide);
+}
+
+int main(void)
+{
+    TN_RUN(training_steps_stay_finite_and_move_the_generator);
+    TN_RUN(checkpoint_resume_continues_identically);
+    TN_RUN(tiled_synthesis_equals_one_pass);
+    TN_RUN(scaled_model_tiles_exactly);
+    TN_RUN(fast_generator_matches_the_training_graph);
+    TN_RUN(deterministic_for_1_and_2_threads);
+    TN_RUN(model_file_round_trip_and_streamed_files);
+    TN_RUN(colour_correction_hits_the_target_mean);
+    TN_RUN(detail_texel_equals_whole_image_composer);
+    TN_RUN(detail_maps_from_model_match_the_image_path);
+    TN_RUN(bad_inputs_fail_cleanly);
+    return tn_test_summary("test_texgan");
+}
