@@ -9745,23 +9745,26 @@ static tn_status tn__extract_check(const tn_image *dem, const char *what)
     return TN_OK;
 }
 
+/* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
+static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
+{
+    size_t i, n = (size_t)src->width * src->height;
+    tn_status st = tn__image_alloc(dst, src->width, src->height, 1);
+    if (st) return st;
+    for (i = 0; i < n; i++) dst->data[i] = src->data[i * (size_t)src->channels];
+    return TN_OK;
+}
+
 /* Binary min-heap of (priority, cell) for the cells of depressions and flats. */
-typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap; } tn__pheap;
+typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap_pri, cap_cell; } tn__pheap; /* caps in bytes */
 
 static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
 {
     size_t i;
-    if (h->n == h->cap) {
-        size_t nc = h->cap ? h->cap * 2 : 4096;
-        uint64_t *p = (uint64_t *)TN_REALLOC(h->pri, nc * sizeof(uint64_t));
-        uint32_t *c;
-        if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
-        h->pri = p;
-        c = (uint32_t *)TN_REALLOC(h->cell, nc * sizeof(uint32_t));
-        if (!c) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
-        h->cell = c;
-        h->cap = nc;
-    }
+    tn_status st;
+    if ((st = tn__reserve((void **)&h->pri, &h->cap_pri, (h->n + 1) * sizeof(uint64_t))) ||
+        (st = tn__reserve((void **)&h->cell, &h->cap_cell, (h->n + 1) * sizeof(uint32_t))))
+        return st;
     for (i = h->n++; i > 0 && h->pri[(i - 1) / 2] > pri; i = (i - 1) / 2) {
         h->pri[i] = h->pri[(i - 1) / 2];
         h->cell[i] = h->cell[(i - 1) / 2];
@@ -10007,9 +10010,7 @@ TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
     if ((st = tn__extract_check(filled, "flow directions"))) return st;
     n = (size_t)filled->width * filled->height;
     if (filled->channels != 1) { /* D8 reads a plain height grid */
-        size_t i;
-        if ((st = tn__image_alloc(&tmp, filled->width, filled->height, 1))) return st;
-        for (i = 0; i < n; i++) tmp.data[i] = filled->data[i * (size_t)filled->channels];
+        if ((st = tn__channel0_image(filled, &tmp))) return st;
         filled = &tmp;
     }
     memset(flow, 0, sizeof *flow);
@@ -10852,7 +10853,7 @@ static tn_status tn__slope_curv(const tn_image *dem, float dx, float dy, float *
         for (x = 1; x < w - 1; x++) {
             float z = TN_PIXEL(dem, x, y, 0), zl = TN_PIXEL(dem, x - 1, y, 0), zr = TN_PIXEL(dem, x + 1, y, 0);
             float zu = TN_PIXEL(dem, x, y - 1, 0), zd = TN_PIXEL(dem, x, y + 1, 0);
-            float gx = 0.5f * (zr - zl) * ix, gy = 0.5f * (zd - zu) * iy;
+            float gx = tn__grad_x(dem, x, y) * ix, gy = tn__grad_y(dem, x, y) * iy; /* interior: (zr - zl) / 2 */
             s[i] = sqrtf(gx * gx + gy * gy);
             c[i] = (zr + zl - 2.0f * z) * ix * ix + (zd + zu - 2.0f * z) * iy * iy;
             i++;
@@ -10961,14 +10962,9 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         tn_image ta = {0, 0, 0, NULL}, tb = {0, 0, 0, NULL};
         tn_metrics m;
         if (ref->channels != 1 || img->channels != 1) { /* compare channel 0 only */
-            size_t n = (size_t)ref->width * ref->height;
-            if ((st = tn__image_alloc(&ta, ref->width, ref->height, 1)) || (st = tn__image_alloc(&tb, ref->width, ref->height, 1))) {
+            if ((st = tn__channel0_image(ref, &ta)) || (st = tn__channel0_image(img, &tb))) {
                 tn_image_free(&ta);
                 goto done;
-            }
-            for (i = 0; i < n; i++) {
-                ta.data[i] = ref->data[i * (size_t)ref->channels];
-                tb.data[i] = img->data[i * (size_t)img->channels];
             }
             a1 = ta;
             b1 = tb;
