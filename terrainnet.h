@@ -57,7 +57,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
     @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
     @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
-    @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton, parts; realism
+    @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton; realism
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@render    previews: hillshaded colour map and 3D perspective view
 */
@@ -807,8 +807,9 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
    closed (3x3), Strahler-ordered, thinned (Zhang-Suen + removal of the remaining simple pixels,
    so lines are one pixel wide and 8-connected with the topology kept), traced into polylines
    between junctions and endpoints, filtered (dangling contours under 10 px; contours whose mean
-   gradient is in the lowest 1 % of all contours' or exactly 0) and split when long. Contour parts cut
-   the network into 5-10 pixel pieces (DFS from an endpoint, seeded random lengths).
+   gradient is in the lowest 1 % of all contours' or exactly 0) and split when long. The polylines
+   are 8-connected pixel chains, so tn_contour_parts_make (@@sketch) cuts them into parts directly
+   and tn_sketch_preview draws them over the DEM (the paper's Figure 6).
    ============================================================================================ */
 
 #define TN_FLOW_OUTLET 255   /* direction code of a cell that drains off the map (no lower neighbour) */
@@ -878,14 +879,6 @@ TN_API int       tn_extract_default_threshold(int width, int height);
 /* Runs the whole pipeline on channel 0 of dem. opts may be NULL. */
 TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out);
 TN_API void      tn_extraction_free(tn_extraction *ex);
-/* Cuts polylines into contour parts of 5-10 pixels (paper 000, section 4.1): each type's pixels
-   (polylines rasterised, so sparse sketch vertices work too) are listed by DFS from an endpoint;
-   runs of 5 + rng(6) consecutive list entries that are 8-adjacent form a part; a run with a jump
-   is cut there and a piece under 5 px is dropped. Part i of *parts has stable index i for a given
-   seed. Caller frees *parts. */
-TN_API tn_status tn_contour_parts(const tn_contour_set *contours, uint64_t seed, tn_contour_set *parts);
-/* Paper Figure 6: ridges yellow and valleys blue drawn over a grey hillshade of dem. RGB in [0,1]. */
-TN_API tn_status tn_extract_preview(const tn_image *dem, const tn_contour_set *contours, tn_image *out);
 
 /* Realism of a terrain img against a reference (both channel 0, heights in the same units).
    Histogram distances are earth mover's distances between 256-bin histograms over a common
@@ -11154,23 +11147,26 @@ static tn_status tn__extract_check(const tn_image *dem, const char *what)
     return TN_OK;
 }
 
+/* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
+static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
+{
+    size_t i, n = (size_t)src->width * src->height;
+    tn_status st = tn__image_alloc(dst, src->width, src->height, 1);
+    if (st) return st;
+    for (i = 0; i < n; i++) dst->data[i] = src->data[i * (size_t)src->channels];
+    return TN_OK;
+}
+
 /* Binary min-heap of (priority, cell) for the cells of depressions and flats. */
-typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap; } tn__pheap;
+typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap_pri, cap_cell; } tn__pheap; /* caps in bytes */
 
 static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
 {
     size_t i;
-    if (h->n == h->cap) {
-        size_t nc = h->cap ? h->cap * 2 : 4096;
-        uint64_t *p = (uint64_t *)TN_REALLOC(h->pri, nc * sizeof(uint64_t));
-        uint32_t *c;
-        if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
-        h->pri = p;
-        c = (uint32_t *)TN_REALLOC(h->cell, nc * sizeof(uint32_t));
-        if (!c) return tn__fail(TN_ERR_OUT_OF_MEMORY, "fill: out of memory");
-        h->cell = c;
-        h->cap = nc;
-    }
+    tn_status st;
+    if ((st = tn__reserve((void **)&h->pri, &h->cap_pri, (h->n + 1) * sizeof(uint64_t))) ||
+        (st = tn__reserve((void **)&h->cell, &h->cap_cell, (h->n + 1) * sizeof(uint32_t))))
+        return st;
     for (i = h->n++; i > 0 && h->pri[(i - 1) / 2] > pri; i = (i - 1) / 2) {
         h->pri[i] = h->pri[(i - 1) / 2];
         h->cell[i] = h->cell[(i - 1) / 2];
@@ -11416,9 +11412,7 @@ TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
     if ((st = tn__extract_check(filled, "flow directions"))) return st;
     n = (size_t)filled->width * filled->height;
     if (filled->channels != 1) { /* D8 reads a plain height grid */
-        size_t i;
-        if ((st = tn__image_alloc(&tmp, filled->width, filled->height, 1))) return st;
-        for (i = 0; i < n; i++) tmp.data[i] = filled->data[i * (size_t)filled->channels];
+        if ((st = tn__channel0_image(filled, &tmp))) return st;
         filled = &tmp;
     }
     memset(flow, 0, sizeof *flow);
@@ -11744,50 +11738,7 @@ TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
 
 /* ---- contour graph ------------------------------------------------------------------------ */
 
-/* A growable polyline under construction. */
-typedef struct tn__pline { float *pts; int n, cap; } tn__pline;
-
-static tn_status tn__pline_add(tn__pline *l, float x, float y, float z)
-{
-    if (l->n == l->cap) {
-        size_t bytes = (size_t)l->cap * 3 * sizeof(float);
-        void *p = l->pts;
-        tn_status st = tn__reserve(&p, &bytes, ((size_t)l->n + 1) * 3 * sizeof(float));
-        if (st) return st;
-        l->pts = (float *)p;
-        l->cap = (int)(bytes / (3 * sizeof(float)));
-    }
-    l->pts[l->n * 3] = x;
-    l->pts[l->n * 3 + 1] = y;
-    l->pts[l->n * 3 + 2] = z;
-    l->n++;
-    return TN_OK;
-}
-
-/* Appends a polyline (copying pts) to a contour set. */
-static tn_status tn__set_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float grad,
-                             const float *pts, int npts)
-{
-    tn_contour *c;
-    if ((size_t)s->count == *cap) {
-        size_t bytes = *cap * sizeof(tn_contour);
-        void *p = s->items;
-        tn_status st = tn__reserve(&p, &bytes, ((size_t)s->count + 1) * sizeof(tn_contour));
-        if (st) return st;
-        s->items = (tn_contour *)p;
-        *cap = bytes / sizeof(tn_contour);
-    }
-    c = &s->items[s->count];
-    c->points = (float *)tn__alloc((size_t)npts * 3 * sizeof(float));
-    if (!c->points) return TN_ERR_OUT_OF_MEMORY;
-    memcpy(c->points, pts, (size_t)npts * 3 * sizeof(float));
-    c->type = type;
-    c->order = order;
-    c->npoints = npts;
-    c->mean_gradient = grad;
-    s->count++;
-    return TN_OK;
-}
+/* Polylines are built with tn__pts / tn__pts_push and stored with tn__cset_add (>>sketch). */
 
 static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
 {
@@ -11840,7 +11791,7 @@ static void tn__trace_free(tn__trace *t)
 
 static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t)
 {
-    static const int ox[8] = {1, 1, 0, -1, -1, -1, 0, 1}, oy[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+    const int *ox = tn__d8x, *oy = tn__d8y;
     size_t n = (size_t)w * h, i;
     uint8_t *deg = (uint8_t *)tn__alloc(n), *vis = (uint8_t *)tn__calloc(n);
     tn_status st = TN_OK;
@@ -12001,7 +11952,7 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, con
     tn_flow *flow = ridge ? &ex->ridge_flow : &ex->valley_flow;
     uint8_t *mask, *order, *skel = NULL, *ord2 = NULL;
     tn__trace t;
-    tn__pline pl = {NULL, 0, 0};
+    tn__pts pl = {NULL, 0, 0};
     tn_status st;
     size_t i, l;
     int pass, top = 0;
@@ -12074,19 +12025,19 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, con
         pl.n = 0;
         for (k = a; k < b && !st; k++) {
             size_t c = t.cells[k];
-            st = tn__pline_add(&pl, (float)(c % (size_t)w), (float)(c / (size_t)w), dem->data[c * (size_t)dem->channels]);
+            st = tn__pts_push(&pl, (float)(c % (size_t)w), (float)(c / (size_t)w), dem->data[c * (size_t)dem->channels]);
         }
         if (st) break;
         pieces = (npts - 1 + o->max_length - 2) / (o->max_length - 1);
         if (pieces < 1) pieces = 1;
         for (j = 0; j < pieces && !st; j++) { /* near-equal pieces sharing their end points */
             int s = (int)((long)j * (npts - 1) / pieces), e = (int)((long)(j + 1) * (npts - 1) / pieces);
-            st = tn__set_add(&ex->contours, cap, ridge ? TN_RIDGE : TN_VALLEY, best, gmean, pl.pts + (size_t)s * 3, e - s + 1);
+            st = tn__cset_add(&ex->contours, cap, ridge ? TN_RIDGE : TN_VALLEY, best, gmean, pl.p + (size_t)s * 3, e - s + 1);
         }
     }
     tn__trace_free(&t);
 done:
-    TN_FREE(pl.pts);
+    TN_FREE(pl.p);
     TN_FREE(skel);
     TN_FREE(ord2);
     return st;
@@ -12133,243 +12084,6 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
         return st;
     }
     *out = ex;
-    return TN_OK;
-}
-
-/* ---- contour parts ------------------------------------------------------------------------ */
-
-/* Calls fn for every pixel of the segment a -> b (DDA, both ends included, z interpolated). */
-typedef tn_status (*tn__pixel_fn)(void *ctx, int x, int y, float z);
-
-static tn_status tn__raster_polyline(const tn_contour *c, tn__pixel_fn fn, void *ctx)
-{
-    int i;
-    tn_status st = TN_OK;
-    for (i = 0; i < c->npoints && !st; i++) {
-        const float *p = c->points + (size_t)i * 3, *q = i + 1 < c->npoints ? p + 3 : p;
-        float dx = q[0] - p[0], dy = q[1] - p[1];
-        float len = fabsf(dx) > fabsf(dy) ? fabsf(dx) : fabsf(dy);
-        int steps = (int)ceilf(len), s;
-        if (!(len < 1e7f)) return tn__fail(TN_ERR_INVALID_ARG, "contour point %d is not finite or too far", i);
-        if (i + 1 < c->npoints && steps == 0) continue;
-        for (s = 0; s <= steps && !st; s++) {
-            float f = steps ? (float)s / (float)steps : 0.0f;
-            if (s == steps && i + 1 < c->npoints) break; /* the next segment starts there */
-            st = fn(ctx, (int)floorf(p[0] + f * dx + 0.5f), (int)floorf(p[1] + f * dy + 0.5f), p[2] + f * (q[2] - p[2]));
-        }
-    }
-    return st;
-}
-
-typedef struct tn__pixlist {
-    int w, h;
-    int32_t *map;          /* cell -> pixel index, -1 when empty */
-    float *z;              /* per pixel */
-    int *src;              /* per pixel: index of the contour it came from */
-    size_t n, cap;
-    int cur;
-} tn__pixlist;
-
-static tn_status tn__pixlist_add(void *ctx, int x, int y, float z)
-{
-    tn__pixlist *p = (tn__pixlist *)ctx;
-    size_t c;
-    if (x < 0 || y < 0 || x >= p->w || y >= p->h) return TN_OK;
-    c = (size_t)y * p->w + x;
-    if (p->map[c] >= 0) return TN_OK;
-    if (p->n == p->cap) {
-        size_t nc = p->cap ? p->cap * 2 : 1024;
-        float *nz = (float *)TN_REALLOC(p->z, nc * sizeof(float));
-        int *ns;
-        if (!nz) return tn__fail(TN_ERR_OUT_OF_MEMORY, "contour parts: out of memory");
-        p->z = nz;
-        ns = (int *)TN_REALLOC(p->src, nc * sizeof(int));
-        if (!ns) return tn__fail(TN_ERR_OUT_OF_MEMORY, "contour parts: out of memory");
-        p->src = ns;
-        p->cap = nc;
-    }
-    p->map[c] = (int32_t)p->n;
-    p->z[p->n] = z;
-    p->src[p->n] = p->cur;
-    p->n++;
-    return TN_OK;
-}
-
-/* Emits list[a..b) as a part. */
-static tn_status tn__emit_part(const tn_contour_set *in, const tn__pixlist *pl, const size_t *list, size_t a, size_t b,
-                               tn_contour_type type, tn_contour_set *out, size_t *cap, tn__pline *tmp)
-{
-    size_t k;
-    const tn_contour *src = &in->items[pl->src[pl->map[list[a]]]];
-    tmp->n = 0;
-    for (k = a; k < b; k++) {
-        tn_status st = tn__pline_add(tmp, (float)(list[k] % (size_t)pl->w), (float)(list[k] / (size_t)pl->w), pl->z[pl->map[list[k]]]);
-        if (st) return st;
-    }
-    return tn__set_add(out, cap, type, src->order, src->mean_gradient, tmp->pts, tmp->n);
-}
-
-static int tn__cells_adjacent(size_t a, size_t b, int w)
-{
-    int ax = (int)(a % (size_t)w), ay = (int)(a / (size_t)w), bx = (int)(b % (size_t)w), by = (int)(b / (size_t)w);
-    return a != b && abs(ax - bx) <= 1 && abs(ay - by) <= 1;
-}
-
-TN_API tn_status tn_contour_parts(const tn_contour_set *in, uint64_t seed, tn_contour_set *parts)
-{
-    static const int ox[8] = {1, 1, 0, -1, -1, -1, 0, 1}, oy[8] = {0, 1, 1, 1, 0, -1, -1, -1};
-    tn_contour_set out;
-    tn__pixlist pl;
-    tn__pline tmp = {NULL, 0, 0};
-    size_t cap = 0, ncell = 0, *list = NULL, *stack = NULL, bytes;
-    uint8_t *vis = NULL;
-    tn_rng rng;
-    tn_status st;
-    int type, i;
-    TN_ASSERT(parts);
-    if (!in || in->count <= 0 || !in->items) return tn__fail(TN_ERR_EMPTY, "contour parts: no contours");
-    if (in->width <= 0 || in->height <= 0) return tn__fail(TN_ERR_INVALID_ARG, "contour parts: canvas size %d x %d", in->width, in->height);
-    if ((st = tn__size4((size_t)in->width, (size_t)in->height, 1, sizeof(size_t), &bytes))) return st;
-    ncell = (size_t)in->width * in->height;
-    memset(&out, 0, sizeof out);
-    memset(&pl, 0, sizeof pl);
-    out.width = pl.w = in->width;
-    out.height = pl.h = in->height;
-    pl.map = (int32_t *)tn__alloc(ncell * sizeof(int32_t));
-    list = (size_t *)tn__alloc(bytes);
-    stack = (size_t *)tn__alloc(bytes);
-    vis = (uint8_t *)tn__alloc(ncell);
-    if (!pl.map || !list || !stack || !vis) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-    tn_rng_seed(&rng, seed, 0x7061727473ULL); /* "parts" */
-    for (type = 0; type < 2 && !st; type++) {
-        size_t c, pass;
-        for (c = 0; c < ncell; c++) pl.map[c] = -1;
-        pl.n = 0;
-        for (i = 0; i < in->count && !st; i++) {
-            if ((int)in->items[i].type != type || in->items[i].npoints <= 0 || !in->items[i].points) continue;
-            pl.cur = i;
-            st = tn__raster_polyline(&in->items[i], tn__pixlist_add, &pl);
-        }
-        if (st || !pl.n) continue;
-        memset(vis, 0, ncell);
-        /* pass 0 starts at endpoints (one neighbour) or isolated pixels; pass 1 takes loops */
-        for (pass = 0; pass < 2 && !st; pass++)
-            for (c = 0; c < ncell && !st; c++) {
-                size_t nl = 0, sp = 0, a;
-                int deg = 0, d;
-                if (pl.map[c] < 0 || vis[c]) continue;
-                for (d = 0; d < 8; d++) {
-                    int x = (int)(c % (size_t)pl.w) + ox[d], y = (int)(c / (size_t)pl.w) + oy[d];
-                    if (x >= 0 && y >= 0 && x < pl.w && y < pl.h && pl.map[(size_t)y * pl.w + x] >= 0) deg++;
-                }
-                if (pass == 0 && deg > 1) continue;
-                vis[c] = 1;
-                list[nl++] = c;
-                stack[sp++] = c;
-                while (sp) { /* DFS, pre-order: each new pixel is a neighbour of the stack top */
-                    size_t p = stack[sp - 1], q = 0;
-                    int found = 0;
-                    for (d = 0; d < 8 && !found; d++) {
-                        int x = (int)(p % (size_t)pl.w) + ox[d], y = (int)(p / (size_t)pl.w) + oy[d];
-                        if (x < 0 || y < 0 || x >= pl.w || y >= pl.h) continue;
-                        q = (size_t)y * pl.w + x;
-                        if (pl.map[q] >= 0 && !vis[q]) found = 1;
-                    }
-                    if (!found) { sp--; continue; }
-                    vis[q] = 1;
-                    list[nl++] = q;
-                    stack[sp++] = q;
-                }
-                /* cut the list: 5-10 entries; a jump splits the run and short pieces are dropped */
-                a = 0;
-                while (a < nl && !st) {
-                    size_t len = 5 + tn_rng_below(&rng, 6), b = a + 1;
-                    while (b < a + len && b < nl && tn__cells_adjacent(list[b - 1], list[b], pl.w)) b++;
-                    if (b - a >= 5) st = tn__emit_part(in, &pl, list, a, b, (tn_contour_type)type, &out, &cap, &tmp);
-                    a = b;
-                }
-            }
-    }
-done:
-    TN_FREE(pl.map);
-    TN_FREE(pl.z);
-    TN_FREE(pl.src);
-    TN_FREE(list);
-    TN_FREE(stack);
-    TN_FREE(vis);
-    TN_FREE(tmp.pts);
-    if (st) {
-        tn_contour_set_free(&out);
-        return st;
-    }
-    *parts = out;
-    return TN_OK;
-}
-
-/* ---- preview ------------------------------------------------------------------------------ */
-
-typedef struct tn__paint { tn_image *img; float rgb[3]; } tn__paint;
-
-static tn_status tn__paint_pixel(void *ctx, int x, int y, float z)
-{
-    tn__paint *p = (tn__paint *)ctx;
-    int c;
-    (void)z;
-    if (x < 0 || y < 0 || x >= p->img->width || y >= p->img->height) return TN_OK;
-    for (c = 0; c < 3; c++) TN_PIXEL(p->img, x, y, c) = p->rgb[c];
-    return TN_OK;
-}
-
-TN_API tn_status tn_extract_preview(const tn_image *dem, const tn_contour_set *contours, tn_image *out)
-{
-    tn_image shade = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
-    tn_status st;
-    size_t i, n;
-    int k;
-    TN_ASSERT(out);
-    if ((st = tn__extract_check(dem, "extract preview"))) return st;
-    if ((st = tn_image_hillshade(&shade, dem, NULL))) return st;
-    if ((st = tn_image_create(&img, dem->width, dem->height, 3))) {
-        tn_image_free(&shade);
-        return st;
-    }
-    n = (size_t)dem->width * dem->height;
-    for (i = 0; i < n; i++) { /* dimmed grey relief so the lines stand out */
-        float v = 0.15f + 0.6f * shade.data[i];
-        img.data[i * 3] = img.data[i * 3 + 1] = img.data[i * 3 + 2] = v;
-    }
-    tn_image_free(&shade);
-    if (contours) /* valleys first so ridges stay visible where they touch */
-        for (k = 0; k < 2; k++)
-            for (i = 0; i < (size_t)contours->count; i++) {
-                tn__paint p;
-                const tn_contour *c = &contours->items[i];
-                float sx, sy;
-                tn_contour cc;
-                if ((int)c->type != k || c->npoints <= 0) continue;
-                p.img = &img;
-                p.rgb[0] = k ? 1.0f : 0.15f;
-                p.rgb[1] = k ? 0.85f : 0.45f;
-                p.rgb[2] = k ? 0.1f : 1.0f;
-                /* a sketch canvas of another size is scaled onto the DEM */
-                sx = contours->width > 0 ? (float)dem->width / (float)contours->width : 1.0f;
-                sy = contours->height > 0 ? (float)dem->height / (float)contours->height : 1.0f;
-                cc = *c;
-                if (sx != 1.0f || sy != 1.0f) {
-                    int j;
-                    cc.points = (float *)tn__alloc((size_t)c->npoints * 3 * sizeof(float));
-                    if (!cc.points) { tn_image_free(&img); return TN_ERR_OUT_OF_MEMORY; }
-                    for (j = 0; j < c->npoints; j++) {
-                        cc.points[j * 3] = (c->points[j * 3] + 0.5f) * sx - 0.5f;
-                        cc.points[j * 3 + 1] = (c->points[j * 3 + 1] + 0.5f) * sy - 0.5f;
-                        cc.points[j * 3 + 2] = c->points[j * 3 + 2];
-                    }
-                }
-                st = tn__raster_polyline(&cc, tn__paint_pixel, &p);
-                if (cc.points != c->points) TN_FREE(cc.points);
-                if (st) { tn_image_free(&img); return st; }
-            }
-    *out = img;
     return TN_OK;
 }
 
@@ -12541,7 +12255,7 @@ static tn_status tn__slope_curv(const tn_image *dem, float dx, float dy, float *
         for (x = 1; x < w - 1; x++) {
             float z = TN_PIXEL(dem, x, y, 0), zl = TN_PIXEL(dem, x - 1, y, 0), zr = TN_PIXEL(dem, x + 1, y, 0);
             float zu = TN_PIXEL(dem, x, y - 1, 0), zd = TN_PIXEL(dem, x, y + 1, 0);
-            float gx = 0.5f * (zr - zl) * ix, gy = 0.5f * (zd - zu) * iy;
+            float gx = tn__grad_x(dem, x, y) * ix, gy = tn__grad_y(dem, x, y) * iy; /* interior: (zr - zl) / 2 */
             s[i] = sqrtf(gx * gx + gy * gy);
             c[i] = (zr + zl - 2.0f * z) * ix * ix + (zd + zu - 2.0f * z) * iy * iy;
             i++;
@@ -12650,14 +12364,9 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         tn_image ta = {0, 0, 0, NULL}, tb = {0, 0, 0, NULL};
         tn_metrics m;
         if (ref->channels != 1 || img->channels != 1) { /* compare channel 0 only */
-            size_t n = (size_t)ref->width * ref->height;
-            if ((st = tn__image_alloc(&ta, ref->width, ref->height, 1)) || (st = tn__image_alloc(&tb, ref->width, ref->height, 1))) {
+            if ((st = tn__channel0_image(ref, &ta)) || (st = tn__channel0_image(img, &tb))) {
                 tn_image_free(&ta);
                 goto done;
-            }
-            for (i = 0; i < n; i++) {
-                ta.data[i] = ref->data[i * (size_t)ref->channels];
-                tb.data[i] = img->data[i * (size_t)img->channels];
             }
             a1 = ta;
             b1 = tb;

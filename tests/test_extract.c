@@ -356,10 +356,11 @@ TN_TEST(test_real_dem_pipeline)
             skel_px += ex.valley_mask[k];
         }
     TN_CHECK(skel_px > 500);
-    /* parts: 5-10 adjacent pixels, deterministic per seed */
-    TN_CHECK(tn_contour_parts(&ex.contours, 7, &parts) == TN_OK);
-    TN_CHECK(tn_contour_parts(&ex.contours, 7, &parts2) == TN_OK);
-    TN_CHECK(tn_contour_parts(&ex.contours, 8, &parts3) == TN_OK);
+    /* parts: the contours are pixel chains, so they cut directly into 5-10 adjacent pixels,
+       deterministic per seed */
+    TN_CHECK(tn_contour_parts_make(&ex.contours, 7, &parts) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&ex.contours, 7, &parts2) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&ex.contours, 8, &parts3) == TN_OK);
     TN_CHECK(parts.count > 100);
     TN_CHECK(sets_equal(&parts, &parts2));
     TN_CHECK(!sets_equal(&parts, &parts3));
@@ -373,7 +374,7 @@ TN_TEST(test_real_dem_pipeline)
     }
     TN_CHECK(bad_len == 0);
     TN_CHECK(bad_adj == 0);
-    TN_CHECK(tn_extract_preview(&dem, &ex.contours, &prev) == TN_OK);
+    TN_CHECK(tn_sketch_preview(&ex.contours, &dem, 256, 256, &prev) == TN_OK);
     TN_CHECK(prev.channels == 3 && prev.width == 256);
     { /* a valley pixel is painted blue, a ridge pixel yellow */
         const float *pv = NULL, *pr = NULL;
@@ -400,10 +401,10 @@ TN_TEST(test_real_dem_pipeline)
 
 TN_TEST(test_parts_sparse_sketch)
 {
-    /* a sketch given by sparse vertices is rasterised first: a 30 px straight stroke */
+    /* a sketch given by sparse vertices is densified first: a 30 px straight stroke */
     float pts[6] = {2, 5, 0.8f, 31, 5, 0.5f};
     tn_contour c;
-    tn_contour_set s, parts;
+    tn_contour_set s, dense, parts;
     int i, total = 0;
     c.type = TN_RIDGE;
     c.order = 1;
@@ -414,16 +415,21 @@ TN_TEST(test_parts_sparse_sketch)
     s.height = 12;
     s.count = 1;
     s.items = &c;
-    TN_CHECK(tn_contour_parts(&s, 1, &parts) == TN_OK);
+    /* the two vertices are 29 px apart: without densifying there is no adjacent run to cut */
+    TN_CHECK(tn_contour_parts_make(&s, 1, &parts) == TN_OK && parts.count == 0);
+    tn_contour_set_free(&parts);
+    TN_CHECK(tn_sketch_densify(&s, &dense) == TN_OK && dense.count == 1 && dense.items[0].npoints == 30);
+    TN_CHECK(tn_contour_parts_make(&dense, 1, &parts) == TN_OK);
     for (i = 0; i < parts.count; i++) {
         TN_CHECK(parts.items[i].npoints >= 5 && parts.items[i].npoints <= 10);
         TN_CHECK(parts.items[i].type == TN_RIDGE);
         total += parts.items[i].npoints;
     }
-    TN_CHECK(total >= 25 && total <= 30); /* at most a 4-pixel tail is dropped */
-    TN_CHECK(parts.count >= 3);
+    TN_CHECK(total == 30); /* a short tail joins the last part: every pixel is used */
+    TN_CHECK(parts.count >= 3 && parts.count <= 6);
     TN_CHECK_NEAR(parts.items[0].points[2], 0.8, 1e-5);
     tn_contour_set_free(&parts);
+    tn_contour_set_free(&dense);
 }
 
 TN_TEST(test_bad_input)
@@ -443,8 +449,12 @@ TN_TEST(test_bad_input)
     TN_CHECK(tn_extract(&dem, NULL, &ex) == TN_ERR_NUMERIC);
     TN_CHECK(tn_extract(&empty, NULL, &ex) == TN_ERR_EMPTY);
     TN_CHECK(tn_realism_compare(&empty, &empty, NULL, &r) == TN_ERR_EMPTY);
+    /* no polylines on a canvas: an empty set of parts (documented); no canvas at all: an error */
     memset(&none, 0, sizeof none);
-    TN_CHECK(tn_contour_parts(&none, 1, &parts) == TN_ERR_EMPTY);
+    TN_CHECK(tn_contour_parts_make(&none, 1, &parts) == TN_ERR_INVALID_ARG);
+    none.width = none.height = 16;
+    TN_CHECK(tn_contour_parts_make(&none, 1, &parts) == TN_OK && parts.count == 0 && parts.width == 16);
+    tn_contour_set_free(&parts);
     dem.data[5 * 16 + 7] = 1.0f;
     memset(&o, 0, sizeof o);
     o.threshold = -3;

@@ -684,7 +684,7 @@ static int cmd_extract(int argc, char **argv)
     }
     if (!st && preview) {
         tn_image pv = {0, 0, 0, NULL};
-        if (!(st = tn_extract_preview(&dem, &ex.contours, &pv))) {
+        if (!(st = tn_sketch_preview(&ex.contours, &dem, dem.width, dem.height, &pv))) {
             tn_save_opts so;
             memset(&so, 0, sizeof so);
             so.bit_depth = 8;
