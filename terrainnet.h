@@ -700,8 +700,9 @@ TN_API void tn_contour_set_free(tn_contour_set *set);
 
    A point without h takes start + rate * (arc length in pixels from the first point), so
    `valley start 0.2 rate 0.001` rises 0.001 per pixel. Heights are [0, 1] for drawn sketches
-   and metres for extracted networks. Saving writes every height, order and gradient with
-   %.9g, so load(save(s)) == s exactly. Errors carry "file:line:". */
+   and metres for extracted networks. Saving writes every height, order and gradient as the
+   shortest locale-free text that reads back as the same float, so load(save(s)) == s exactly;
+   reading ignores the C locale too. Errors carry "file:line:". */
 
 #define TN_SKETCH_MAX_SIDE 65536           /* largest canvas side */
 #define TN_SKETCH_MAX_POINTS (1 << 26)     /* most points in one file */
@@ -9769,14 +9770,6 @@ static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
 
 /* ---- .tns text ---- */
 
-/* Parses a whole token as a number; 1 on success (NaN/Inf included, the caller checks). */
-static int tn__tns_number(const char *tok, double *v)
-{
-    char *end;
-    *v = strtod(tok, &end);
-    return end != tok && *end == 0;
-}
-
 #define TN__TNS_MAXTOK 16
 
 typedef struct tn__tns_parser {
@@ -9802,7 +9795,7 @@ static tn_status tn__tns_err(tn__tns_parser *p, tn_status s, const char *fmt, ..
 /* Reads a number token for field `what`; NaN/Inf -> TN_ERR_NUMERIC, text -> TN_ERR_CORRUPT. */
 static tn_status tn__tns_num(tn__tns_parser *p, const char *tok, const char *what, double *v)
 {
-    if (!tn__tns_number(tok, v)) return tn__tns_err(p, TN_ERR_CORRUPT, "%s is not a number", what);
+    if (!tn__io_number(tok, strlen(tok), v)) return tn__tns_err(p, TN_ERR_CORRUPT, "%s is not a number", what);
     if (!isfinite(*v) || fabs(*v) > 3.0e38) return tn__tns_err(p, TN_ERR_NUMERIC, "%s is NaN, Inf or out of float range", what);
     return TN_OK;
 }
@@ -9941,28 +9934,27 @@ TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, t
     return TN_OK;
 }
 
-/* Appends printf output to a growing text buffer (lines here are short). */
-static tn_status tn__text_printf(char **buf, size_t *len, size_t *cap, const char *fmt, ...)
+/* Appends the numbers in the locale-free shortest text that reads back as the same float,
+   separated by spaces (so load(save(s)) == s), then `tail`. */
+static tn_status tn__tns_put_numbers(void **buf, size_t *len, size_t *cap, const float *v, int n, const char *tail)
 {
-    char line[256];
-    int k;
-    tn_status st;
-    va_list ap;
-    va_start(ap, fmt);
-    k = vsnprintf(line, sizeof line, fmt, ap);
-    va_end(ap);
-    if (k < 0 || k >= (int)sizeof line) return tn__fail(TN_ERR_INVALID_ARG, "sketch: line too long to format");
-    if ((st = tn__reserve((void **)buf, cap, *len + (size_t)k + 1))) return st;
-    memcpy(*buf + *len, line, (size_t)k + 1);
-    *len += (size_t)k;
-    return TN_OK;
+    char num[48];
+    int i, k;
+    tn_status st = TN_OK;
+    for (i = 0; !st && i < n; i++) {
+        k = tn__io_format_number(num + 1, sizeof num - 1, (double)v[i], 1);
+        num[0] = ' ';
+        st = i ? tn__io_append(buf, len, cap, num, (size_t)k + 1) : tn__io_append(buf, len, cap, num + 1, (size_t)k);
+    }
+    return st ? st : tn__io_append(buf, len, cap, tail, strlen(tail));
 }
 
 TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size)
 {
-    char *buf = NULL;
+    char line[96];
+    void *buf = NULL;
     size_t len = 0, cap = 0;
-    int i, j;
+    int i, j, k;
     tn_status st;
     TN_ASSERT(text && size);
     *text = NULL;
@@ -9978,24 +9970,26 @@ TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t
                                 (double)x, (double)y, set->width, set->height);
         }
     }
-    st = tn__text_printf(&buf, &len, &cap, "terrainnet-sketch 1\n# %d polylines; points are x y height\ncanvas %d %d\n",
-                         set->count, set->width, set->height);
+    k = snprintf(line, sizeof line, "terrainnet-sketch 1\n# %d polylines; points are x y height\ncanvas %d %d\n", set->count,
+                 set->width, set->height);
+    st = tn__io_append(&buf, &len, &cap, line, (size_t)k);
     for (i = 0; !st && i < set->count; i++) {
         const tn_contour *c = &set->items[i];
-        st = tn__text_printf(&buf, &len, &cap, "%s", c->type == TN_RIDGE ? "ridge" : "valley");
-        if (!st && c->order) st = tn__text_printf(&buf, &len, &cap, " order %d", c->order);
-        if (!st && c->mean_gradient != 0.0f) st = tn__text_printf(&buf, &len, &cap, " gradient %.9g", (double)c->mean_gradient);
-        if (!st) st = tn__text_printf(&buf, &len, &cap, "\n");
-        for (j = 0; !st && j < c->npoints; j++)
-            st = tn__text_printf(&buf, &len, &cap, "%.9g %.9g %.9g\n", (double)c->points[3 * j], (double)c->points[3 * j + 1],
-                                 (double)c->points[3 * j + 2]);
-        if (!st) st = tn__text_printf(&buf, &len, &cap, "end\n");
+        k = snprintf(line, sizeof line, c->order ? "%s order %d" : "%s", c->type == TN_RIDGE ? "ridge" : "valley", c->order);
+        st = tn__io_append(&buf, &len, &cap, line, (size_t)k);
+        if (!st && c->mean_gradient != 0.0f) {
+            st = tn__io_append(&buf, &len, &cap, " gradient ", 10);
+            if (!st) st = tn__tns_put_numbers(&buf, &len, &cap, &c->mean_gradient, 1, "\n");
+        } else if (!st) st = tn__io_append(&buf, &len, &cap, "\n", 1);
+        for (j = 0; !st && j < c->npoints; j++) st = tn__tns_put_numbers(&buf, &len, &cap, c->points + 3 * j, 3, "\n");
+        if (!st) st = tn__io_append(&buf, &len, &cap, "end\n", 4);
     }
+    if (!st && !(st = tn__io_append(&buf, &len, &cap, "", 1))) len--; /* NUL-terminated: text is a C string */
     if (st) {
         TN_FREE(buf);
         return st;
     }
-    *text = buf;
+    *text = (char *)buf;
     *size = len;
     return TN_OK;
 }
@@ -11130,12 +11124,14 @@ static void tn__rheap_free(tn__rheap *h)
     memset(h, 0, sizeof *h);
 }
 
-/* Checks a DEM for extraction: non-empty, channel 0 finite. */
-static tn_status tn__extract_check(const tn_image *dem, const char *what)
+/* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
+static tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
 {
     size_t i, n, C;
     if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
         return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
+    if (dem->width < min_side || dem->height < min_side)
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
     n = (size_t)dem->width * dem->height;
     C = (size_t)dem->channels;
     for (i = 0; i < n; i++) {
@@ -11360,7 +11356,7 @@ TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem)
     tn_image out = {0, 0, 0, NULL};
     tn_status st;
     TN_ASSERT(dst);
-    if ((st = tn__extract_check(dem, "fill depressions"))) return st;
+    if ((st = tn__dem_check(dem, 1, "fill depressions"))) return st;
     if ((st = tn__dem_keys(dem, 0, &keys))) return st;
     if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&out, dem->width, dem->height, 1))) {
         TN_FREE(keys);
@@ -11409,7 +11405,7 @@ TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
     tn_status st;
     size_t n;
     TN_ASSERT(flow);
-    if ((st = tn__extract_check(filled, "flow directions"))) return st;
+    if ((st = tn__dem_check(filled, 1, "flow directions"))) return st;
     n = (size_t)filled->width * filled->height;
     if (filled->channels != 1) { /* D8 reads a plain height grid */
         if ((st = tn__channel0_image(filled, &tmp))) return st;
@@ -11566,7 +11562,7 @@ TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
     tn_status st;
     TN_ASSERT(flow);
     memset(flow, 0, sizeof *flow);
-    if ((st = tn__extract_check(dem, "flow"))) return st;
+    if ((st = tn__dem_check(dem, 1, "flow"))) return st;
     if ((st = tn__dem_keys(dem, invert, &keys))) return st;
     if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&filled, dem->width, dem->height, 1))) {
         TN_FREE(keys);
@@ -12051,7 +12047,7 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     tn_status st;
     size_t i, n, cap = 0;
     TN_ASSERT(out);
-    if ((st = tn__extract_check(dem, "extract"))) return st;
+    if ((st = tn__dem_check(dem, 1, "extract"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     if (o.threshold < 0 || o.min_length < 0 || o.max_length < 0 || o.which < 0 || o.which > 2 ||
@@ -12313,7 +12309,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
     int Sa, Sb, k;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn__extract_check(ref, "realism (reference)")) || (st = tn__extract_check(img, "realism (terrain)"))) return st;
+    if ((st = tn__dem_check(ref, 1, "realism (reference)")) || (st = tn__dem_check(img, 1, "realism (terrain)"))) return st;
     if (ref->width < 16 || ref->height < 16 || img->width < 16 || img->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "realism: both terrains must be at least 16 x 16");
     memset(&o, 0, sizeof o);
@@ -14213,13 +14209,6 @@ done:
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
 
-static tn_status tn__check_dem(const tn_image *dem, const char *what)
-{
-    if (!dem || !dem->data || dem->width < 2 || dem->height < 2)
-        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least 2 x 2 pixels", what);
-    return TN_OK;
-}
-
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
 {
     tn_render_opts o;
@@ -14227,7 +14216,7 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
     tn_status st;
     size_t i, n;
     float k;
-    if ((st = tn__check_dem(dem, "render preview"))) return st;
+    if ((st = tn__dem_check(dem, 2, "render preview"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     k = o.shade_strength > 0 ? tn__clampf(o.shade_strength, 0.0f, 1.0f) : 0.7f;
@@ -14327,7 +14316,7 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     tn__view_job j;
     tn_status st;
     float lo, hi, size, dist, zmax;
-    if ((st = tn__check_dem(dem, "render view"))) return st;
+    if ((st = tn__dem_check(dem, 2, "render view"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     if (o.width <= 0 || o.height <= 0) { o.width = 960; o.height = 540; }

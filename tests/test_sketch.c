@@ -4,6 +4,7 @@
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
+#include <locale.h>
 
 static const char *demo_tns =
     "terrainnet-sketch 1\n"
@@ -79,6 +80,67 @@ TN_TEST(tns_parse_and_round_trip)
     tn_contour_set_free(&s);
     tn_contour_set_free(&t);
     tn_contour_set_free(&u);
+}
+
+/* A set of n random-bit floats (finite, in canvas) of every magnitude. */
+static tn_status random_float_set(tn_contour_set *s, int n, uint64_t seed)
+{
+    tn_rng r;
+    size_t cap = 0;
+    float *pts = (float *)malloc((size_t)n * 3 * sizeof(float));
+    int i;
+    tn_status st;
+    if (!pts) return TN_ERR_OUT_OF_MEMORY;
+    tn_rng_seed(&r, seed, 1);
+    for (i = 0; i < 3 * n; i++) {
+        uint32_t u = tn_rng_u32(&r);
+        float f;
+        if (i % 3 < 2) u = (u & 0x007fffffu) | ((uint32_t)(120 + (u >> 27) % 6) << 23); /* 2^-7..2^-2 times 64 below */
+        else if (((u >> 23) & 0xffu) >= 0xfeu) u &= ~0x01000000u; /* |h| < 2^127: no NaN/Inf, in the reader's range */
+        memcpy(&f, &u, sizeof f);
+        pts[i] = i % 3 < 2 ? f * 64.0f : f;
+    }
+    memset(s, 0, sizeof *s);
+    s->width = s->height = 64;
+    st = tn__cset_add(s, &cap, TN_RIDGE, 3, pts[2], pts, n);
+    free(pts);
+    return st;
+}
+
+/* Every float, including subnormals and 9-significant-digit values, reads back with the same bits. */
+static void check_float_round_trip(uint64_t seed)
+{
+    tn_contour_set s, t = {0, 0, 0, NULL};
+    char *text = NULL;
+    size_t n = 0;
+    TN_CHECK(random_float_set(&s, 2000, seed) == TN_OK);
+    TN_CHECK(tn_sketch_format(&s, &text, &n) == TN_OK);
+    TN_CHECK(text && !strchr(text, ',') && text[n] == 0);
+    TN_CHECK(tn_sketch_parse(text, n, "floats", &t) == TN_OK);
+    TN_CHECK(sets_equal(&s, &t));
+    tn_free(text);
+    tn_contour_set_free(&s);
+    tn_contour_set_free(&t);
+}
+
+TN_TEST(tns_numbers_round_trip_exactly) { check_float_round_trip(7); }
+
+/* A comma-decimal locale changes neither what is written nor what is read. */
+TN_TEST(tns_comma_locale)
+{
+    static const char *names[] = {"de_DE.UTF-8", "de_DE.utf8", "de_DE", "fr_FR.UTF-8", "fr_FR.utf8"};
+    tn_contour_set s = {0, 0, 0, NULL};
+    char *old = setlocale(LC_NUMERIC, NULL), saved[64];
+    size_t i;
+    snprintf(saved, sizeof saved, "%s", old ? old : "C");
+    for (i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (setlocale(LC_NUMERIC, names[i])) break;
+    if (i == sizeof names / sizeof names[0]) { TN_SKIP("no comma-decimal locale (de_DE.UTF-8) installed"); return; }
+    TN_CHECK(tn_sketch_parse(demo_tns, strlen(demo_tns), "demo.tns", &s) == TN_OK);
+    TN_CHECK(s.count == 2 && s.items[0].points[3] == 30.5f && s.items[0].mean_gradient == 0.25f);
+    check_float_round_trip(11);
+    setlocale(LC_NUMERIC, saved);
+    tn_contour_set_free(&s);
 }
 
 /* Every malformed input fails with the right code and names the line. */
@@ -508,6 +570,8 @@ TN_TEST(align_long_parts)
 int main(void)
 {
     TN_RUN(tns_parse_and_round_trip);
+    TN_RUN(tns_numbers_round_trip_exactly);
+    TN_RUN(tns_comma_locale);
     TN_RUN(tns_malformed);
     TN_RUN(png_sketch_read);
     TN_RUN(densify_and_rasterise);
