@@ -726,9 +726,15 @@ TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
    are valleys; everything else (white, black, grey, yellow, ...) is background. A pixel is a
    stroke when v = max(r, b) >= 0.1, v - g >= v / 2 and |r - b| >= v / 2; its height is v, so a
    bright stroke is high and a dark one low (heights in [0.1, 1]). Strokes of any width are
-   thinned (Guo-Hall, a Zhang-Suen variant) and traced into polylines between endpoints and junctions; the canvas is
-   the image size. Fails with TN_ERR_SHAPE for 1-2 channel images, TN_ERR_EMPTY without strokes. */
+   thinned (tn_skeletonize) and traced into polylines between endpoints and junctions; the canvas
+   is the image size. Fails with TN_ERR_SHAPE for 1-2 channel images, TN_ERR_EMPTY without strokes. */
 TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out);
+
+/* Thins a binary mask (w*h bytes, non-zero = set) in place to one-pixel-wide 8-connected lines
+   that keep the topology: Guo-Hall thinning (keeps two-pixel diagonal strokes), then any pixel
+   whose removal keeps the 8-connected topology and that is not an endpoint is removed. Used for
+   drawn sketches and for extracted ridge/valley networks. */
+TN_API tn_status tn_skeletonize(uint8_t *mask, int width, int height);
 
 /* Resamples every polyline to an 8-connected chain of integer pixels (consecutive points
    differ by at most 1 in x and y, no repeats), heights linear between the original points.
@@ -845,10 +851,6 @@ TN_API void      tn_flow_free(tn_flow *flow);
    k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
    (a threshold mask on the accumulation is). Returns the highest order in *max_order. */
 TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
-/* Thins a binary mask (w*h bytes, non-zero = set) in place to one-pixel-wide 8-connected lines:
-   Zhang-Suen, then any pixel whose removal keeps the 8-connected topology and that is not an
-   endpoint is removed. Blobs of 2x2 or smaller may vanish (a known Zhang-Suen trait). */
-TN_API tn_status tn_skeletonize(uint8_t *mask, int width, int height);
 
 enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
 
@@ -10032,37 +10034,60 @@ TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
 
 /* ---- sketches drawn as images ---- */
 
-/* Guo-Hall thinning of a 0/1 mask in place (the one-pixel border is treated as background).
-   A Zhang-Suen variant that keeps 8-connectivity and, unlike plain Zhang-Suen, does not erase
-   two-pixel-thick diagonal strokes. */
-static tn_status tn__thin_guo_hall(uint8_t *m, int w, int h)
+
+/* The 8 neighbours of (x, y) clockwise from north, P2..P9 in the thinning papers' naming; 0 outside. */
+static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
 {
-    size_t *del, ndel, i;
-    int x, y, pass, changed = 1;
-    size_t bytes;
-    if (tn__size4((size_t)w, (size_t)h, sizeof(size_t), 1, &bytes)) return TN_ERR_TOO_LARGE;
+    static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
+    int k;
+    for (k = 0; k < 8; k++) {
+        int xx = x + ox[k], yy = y + oy[k];
+        p[k] = (xx >= 0 && yy >= 0 && xx < w && yy < h && m[(size_t)yy * w + xx]) ? 1 : 0;
+    }
+}
+
+/* Removing a set pixel keeps the 8-connected topology iff exactly one of the four "north, east,
+   south, west" corners starts a run of foreground (Yokoi's 8-connectivity number == 1). */
+static int tn__yokoi8(const int p[8])
+{
+    int k, c = 0;
+    for (k = 0; k < 8; k += 2) {
+        int a = !p[k], b = !p[(k + 1) & 7], d = !p[(k + 2) & 7];
+        c += a - a * b * d;
+    }
+    return c;
+}
+
+/* Guo-Hall thinning (a Zhang-Suen variant that, unlike plain Zhang-Suen, keeps two-pixel-thick
+   diagonal strokes, so thin drawn lines survive), then every remaining simple pixel that is not
+   an endpoint is dropped sequentially, which removes the staircase corners two pixels thick and
+   keeps the topology one pixel at a time. Pixels outside the mask count as background. */
+TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
+{
+    size_t n, i, ndel, bytes, *del;
+    int changed = 1, pass, x, y;
+    if (!m || w <= 0 || h <= 0) return tn__fail(TN_ERR_INVALID_ARG, "skeletonize: empty mask");
+    n = (size_t)w * h;
+    if (tn__size4(n, 1, sizeof(size_t), 1, &bytes)) return TN_ERR_TOO_LARGE;
     if (!(del = (size_t *)tn__alloc(bytes))) return TN_ERR_OUT_OF_MEMORY;
-    for (x = 0; x < w; x++) m[x] = m[(size_t)(h - 1) * w + x] = 0;
-    for (y = 0; y < h; y++) m[(size_t)y * w] = m[(size_t)y * w + w - 1] = 0;
-    while (changed) {
+    for (i = 0; i < n; i++) m[i] = m[i] != 0;
+    while (changed) { /* two parallel sub-iterations until stable */
         changed = 0;
         for (pass = 0; pass < 2; pass++) {
             ndel = 0;
-            for (y = 1; y < h - 1; y++)
-                for (x = 1; x < w - 1; x++) {
-                    const uint8_t *c = m + (size_t)y * w + x;
-                    int p2, p3, p4, p5, p6, p7, p8, p9, cc, n1, n2, mm;
-                    if (!*c) continue;
-                    p2 = c[-w]; p3 = c[-w + 1]; p4 = c[1]; p5 = c[w + 1];
-                    p6 = c[w]; p7 = c[w - 1]; p8 = c[-1]; p9 = c[-w - 1];
+            for (y = 0; y < h; y++)
+                for (x = 0; x < w; x++) {
+                    int p[8], p2, p3, p4, p5, p6, p7, p8, p9, cc, n1, n2;
+                    if (!m[(size_t)y * w + x]) continue;
+                    tn__nbrs(m, w, h, x, y, p);
+                    p2 = p[0]; p3 = p[1]; p4 = p[2]; p5 = p[3]; p6 = p[4]; p7 = p[5]; p8 = p[6]; p9 = p[7];
                     cc = (!p2 && (p3 || p4)) + (!p4 && (p5 || p6)) + (!p6 && (p7 || p8)) + (!p8 && (p9 || p2));
                     if (cc != 1) continue;
                     n1 = (p9 || p2) + (p3 || p4) + (p5 || p6) + (p7 || p8);
                     n2 = (p2 || p3) + (p4 || p5) + (p6 || p7) + (p8 || p9);
                     if (n2 < n1) n1 = n2;
                     if (n1 < 2 || n1 > 3) continue;
-                    mm = pass == 0 ? ((p6 || p7 || !p9) && p8) : ((p2 || p3 || !p5) && p4);
-                    if (mm) continue;
+                    if (pass == 0 ? ((p6 || p7 || !p9) && p8) : ((p2 || p3 || !p5) && p4)) continue;
                     del[ndel++] = (size_t)y * w + x;
                 }
             for (i = 0; i < ndel; i++) m[del[i]] = 0;
@@ -10070,119 +10095,157 @@ static tn_status tn__thin_guo_hall(uint8_t *m, int w, int h)
         }
     }
     TN_FREE(del);
+    changed = 1;
+    while (changed) {
+        changed = 0;
+        for (y = 0; y < h; y++)
+            for (x = 0; x < w; x++) {
+                int p[8], b = 0, k;
+                if (!m[(size_t)y * w + x]) continue;
+                tn__nbrs(m, w, h, x, y, p);
+                for (k = 0; k < 8; k++) b += p[k];
+                if (b >= 2 && tn__yokoi8(p) == 1) {
+                    m[(size_t)y * w + x] = 0;
+                    changed = 1;
+                }
+            }
+    }
+    return TN_OK;
+}
+
+/* D8 neighbour offsets: E, SE, S, SW, W, NW, N, NE (flow directions in >>extract too). */
+static const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
+static const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+
+/* Number of set 8-neighbours. */
+static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
+{
+    int p[8], k, b = 0;
+    tn__nbrs(m, w, h, x, y, p);
+    for (k = 0; k < 8; k++) b += p[k];
+    return b;
+}
+
+/* Traces the skeleton into polylines between nodes (endpoints, junctions: degree != 2) and
+   closed loops. Each polyline's pixels are listed as cell indices in *cells (per line offsets in
+   *starts, count + 1 entries). Deterministic raster order. */
+typedef struct tn__trace { size_t *cells, *starts; size_t ncells, nlines, cap_c, cap_s; } tn__trace;
+
+static tn_status tn__trace_push(tn__trace *t, size_t cell)
+{
+    if (t->ncells == t->cap_c) {
+        size_t bytes = t->cap_c * sizeof(size_t);
+        void *p = t->cells;
+        tn_status st = tn__reserve(&p, &bytes, (t->ncells + 1) * sizeof(size_t));
+        if (st) return st;
+        t->cells = (size_t *)p;
+        t->cap_c = bytes / sizeof(size_t);
+    }
+    t->cells[t->ncells++] = cell;
     return TN_OK;
 }
 
-/* 8-neighbour offsets, 4-neighbours first so walks prefer straight steps. */
-static const int tn__nb_dx[8] = {1, 0, -1, 0, 1, -1, -1, 1};
-static const int tn__nb_dy[8] = {0, 1, 0, -1, 1, 1, -1, -1};
-
-/* Rutovitz crossing number: 0->1 transitions around the 8-neighbourhood (clockwise from north).
-   1 = endpoint, 2 = a line pixel, >= 3 = junction. */
-static int tn__crossings(const uint8_t *m, int w, int h, int x, int y)
+static tn_status tn__trace_end_line(tn__trace *t)
 {
-    static const int cx[8] = {0, 1, 1, 1, 0, -1, -1, -1}, cy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
-    int k, v[8], t = 0;
-    for (k = 0; k < 8; k++) {
-        int u = x + cx[k], q = y + cy[k];
-        v[k] = u >= 0 && q >= 0 && u < w && q < h && m[(size_t)q * w + u];
+    if (t->nlines + 2 > t->cap_s) {
+        size_t bytes = t->cap_s * sizeof(size_t);
+        void *p = t->starts;
+        tn_status st = tn__reserve(&p, &bytes, (t->nlines + 2) * sizeof(size_t));
+        if (st) return st;
+        t->starts = (size_t *)p;
+        t->cap_s = bytes / sizeof(size_t);
     }
-    for (k = 0; k < 8; k++) t += !v[k] && v[(k + 1) & 7];
-    return t;
-}
-
-typedef struct tn__sketch_tracer {
-    const uint8_t *m;       /* skeleton mask */
-    uint8_t *node;          /* 1 where crossings != 2 */
-    uint8_t *seen;          /* line pixels already in a polyline */
-    const float *hgt;       /* height per pixel */
-    int w, h;
-    tn_contour_type type;
-    tn__pts pts;
-    tn_contour_set *out;
-    size_t *cap;
-} tn__sketch_tracer;
-
-static tn_status tn__sketch_trace_push(tn__sketch_tracer *t, size_t i)
-{
-    return tn__pts_push(&t->pts, (float)(i % (size_t)t->w), (float)(i / (size_t)t->w), t->hgt[i]);
-}
-
-/* Walks from `cur` (already pushed; `prev` the pixel before it, `first` the chain's start) along
-   unseen line pixels until it reaches a node or runs out; then stores the chain if >= 3 points. */
-static tn_status tn__sketch_trace_walk(tn__sketch_tracer *t, size_t first, size_t prev, size_t cur)
-{
-    tn_status st;
-    int k;
-    for (;;) {
-        int x = (int)(cur % (size_t)t->w), y = (int)(cur / (size_t)t->w);
-        size_t next = (size_t)-1;
-        for (k = 0; k < 8 && next == (size_t)-1; k++) {
-            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
-            size_t j = (size_t)q * t->w + u;
-            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || j == prev || !t->node[j]) continue;
-            if (j == first && t->pts.n < 4) continue;
-            if ((st = tn__sketch_trace_push(t, j))) return st;
-            goto done;
-        }
-        for (k = 0; k < 8; k++) {
-            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
-            size_t j = (size_t)q * t->w + u;
-            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
-            next = j;
-            break;
-        }
-        if (next == (size_t)-1) {
-            /* a loop without nodes closes on its first pixel */
-            if (!t->node[first] && t->pts.n >= 4 && abs(x - (int)(first % (size_t)t->w)) <= 1 &&
-                abs(y - (int)(first / (size_t)t->w)) <= 1 && (st = tn__sketch_trace_push(t, first)))
-                return st;
-            break;
-        }
-        t->seen[next] = 1;
-        if ((st = tn__sketch_trace_push(t, next))) return st;
-        prev = cur;
-        cur = next;
-    }
-done:
-    if (t->pts.n >= 3) return tn__cset_add(t->out, t->cap, t->type, 0, 0.0f, t->pts.p, t->pts.n);
+    if (t->nlines == 0) t->starts[0] = 0;
+    t->starts[++t->nlines] = t->ncells;
     return TN_OK;
 }
 
-/* Traces a one-pixel skeleton into polylines between endpoints/junctions, then closed loops. */
-static tn_status tn__sketch_trace_skeleton(tn__sketch_tracer *t)
+static void tn__trace_free(tn__trace *t)
 {
-    size_t i, n = (size_t)t->w * t->h;
-    int k;
-    tn_status st;
-    for (i = 0; i < n; i++)
-        t->node[i] = t->m[i] && tn__crossings(t->m, t->w, t->h, (int)(i % (size_t)t->w), (int)(i / (size_t)t->w)) != 2;
-    for (i = 0; i < n; i++) {
-        int x = (int)(i % (size_t)t->w), y = (int)(i / (size_t)t->w);
-        if (!t->node[i]) continue;
-        for (k = 0; k < 8; k++) {
-            int u = x + tn__nb_dx[k], q = y + tn__nb_dy[k];
-            size_t j = (size_t)q * t->w + u;
-            if (u < 0 || q < 0 || u >= t->w || q >= t->h || !t->m[j] || t->node[j] || t->seen[j]) continue;
-            t->seen[j] = 1;
-            t->pts.n = 0;
-            if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_push(t, j)) || (st = tn__sketch_trace_walk(t, i, i, j))) return st;
+    TN_FREE(t->cells);
+    TN_FREE(t->starts);
+    memset(t, 0, sizeof *t);
+}
+
+static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t)
+{
+    const int *ox = tn__d8x, *oy = tn__d8y;
+    size_t n = (size_t)w * h, i;
+    uint8_t *deg = (uint8_t *)tn__alloc(n), *vis = (uint8_t *)tn__calloc(n);
+    tn_status st = TN_OK;
+    int pass;
+    memset(t, 0, sizeof *t);
+    if (!deg || !vis) {
+        TN_FREE(deg);
+        TN_FREE(vis);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < n; i++) deg[i] = m[i] ? (uint8_t)tn__skel_degree(m, w, h, (int)(i % (size_t)w), (int)(i / (size_t)w)) : 0;
+    /* pass 0: lines leaving nodes; pass 1: closed loops of degree-2 pixels left over */
+    for (pass = 0; pass < 2 && !st; pass++)
+        for (i = 0; i < n && !st; i++) {
+            int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w), d;
+            if (!m[i]) continue;
+            if (pass == 0 && deg[i] == 2) continue;
+            if (pass == 1 && vis[i]) continue;
+            if (pass == 0 && deg[i] == 0) { /* isolated pixel: a one-point line */
+                vis[i] = 1;
+                if (!(st = tn__trace_push(t, i))) st = tn__trace_end_line(t);
+                continue;
+            }
+            for (d = 0; d < 8 && !st; d++) {
+                int nx = x + ox[d], ny = y + oy[d];
+                size_t q, prev = i, cur;
+                if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+                q = (size_t)ny * w + nx;
+                if (!m[q]) continue;
+                if (pass == 1 && d > 0 && vis[q]) continue;
+                if (deg[q] != 2) { /* node next to node: a two-point line, listed once */
+                    if (pass == 0 && q > i) {
+                        if (!(st = tn__trace_push(t, i)) && !(st = tn__trace_push(t, q))) st = tn__trace_end_line(t);
+                    }
+                    continue;
+                }
+                if (vis[q]) continue;
+                vis[i] = 1;
+                if ((st = tn__trace_push(t, i))) break;
+                cur = q;
+                for (;;) {
+                    int cx = (int)(cur % (size_t)w), cy = (int)(cur / (size_t)w), e;
+                    size_t next = (size_t)-1;
+                    if ((st = tn__trace_push(t, cur))) break;
+                    if (deg[cur] != 2 || (pass == 1 && cur == i)) break;
+                    vis[cur] = 1;
+                    for (e = 0; e < 8; e++) {
+                        int ex = cx + ox[e], ey = cy + oy[e];
+                        size_t r;
+                        if (ex < 0 || ey < 0 || ex >= w || ey >= h) continue;
+                        r = (size_t)ey * w + ex;
+                        if (!m[r] || r == prev) continue;
+                        if (r == i && pass == 1 && prev != i) { next = r; break; }
+                        if (deg[r] == 2 && vis[r]) continue;
+                        next = r;
+                        break;
+                    }
+                    if (next == (size_t)-1) break;
+                    prev = cur;
+                    cur = next;
+                }
+                if (!st) st = tn__trace_end_line(t);
+                if (pass == 1) break; /* one loop per start pixel */
+            }
         }
-    }
-    for (i = 0; i < n; i++) {
-        if (!t->m[i] || t->node[i] || t->seen[i]) continue;
-        t->seen[i] = 1;
-        t->pts.n = 0;
-        if ((st = tn__sketch_trace_push(t, i)) || (st = tn__sketch_trace_walk(t, i, (size_t)-1, i))) return st;
-    }
-    return TN_OK;
+    TN_FREE(deg);
+    TN_FREE(vis);
+    if (st) tn__trace_free(t);
+    return st;
 }
 
 TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
 {
     tn_contour_set set;
     size_t cap = 0, n, i, bytes;
-    uint8_t *mask = NULL, *node = NULL, *seen = NULL;
+    uint8_t *mask = NULL;
     float *hgt = NULL;
     int type, strokes = 0;
     tn_status st = TN_OK;
@@ -10198,12 +10261,12 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
     set.width = img->width;
     set.height = img->height;
     mask = (uint8_t *)tn__alloc(n);
-    node = (uint8_t *)tn__alloc(n);
-    seen = (uint8_t *)tn__alloc(n);
     hgt = (float *)tn__alloc(bytes);
-    if (!mask || !node || !seen || !hgt) st = TN_ERR_OUT_OF_MEMORY;
+    if (!mask || !hgt) st = TN_ERR_OUT_OF_MEMORY;
     for (type = 0; !st && type < 2; type++) {
-        tn__sketch_tracer t;
+        tn__trace t;
+        tn__pts pts = {NULL, 0, 0};
+        size_t l, k;
         for (i = 0; i < n; i++) {
             const float *p = img->data + i * (size_t)img->channels;
             float r = p[0], g = p[1], b = p[2], v = r > b ? r : b;
@@ -10212,25 +10275,21 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
             hgt[i] = on ? v : 0.0f;
             strokes += on;
         }
-        if ((st = tn__thin_guo_hall(mask, img->width, img->height))) break;
-        memset(node, 0, n);
-        memset(seen, 0, n);
-        memset(&t, 0, sizeof t);
-        t.m = mask;
-        t.node = node;
-        t.seen = seen;
-        t.hgt = hgt;
-        t.w = img->width;
-        t.h = img->height;
-        t.type = (tn_contour_type)type;
-        t.out = &set;
-        t.cap = &cap;
-        st = tn__sketch_trace_skeleton(&t);
-        TN_FREE(t.pts.p);
+        if ((st = tn_skeletonize(mask, img->width, img->height))) break;
+        if ((st = tn__trace_skeleton(mask, img->width, img->height, &t))) break;
+        for (l = 0; !st && l < t.nlines; l++) { /* chains of 3+ pixels become polylines */
+            if (t.starts[l + 1] - t.starts[l] < 3) continue;
+            pts.n = 0;
+            for (k = t.starts[l]; !st && k < t.starts[l + 1]; k++) {
+                size_t c = t.cells[k];
+                st = tn__pts_push(&pts, (float)(c % (size_t)img->width), (float)(c / (size_t)img->width), hgt[c]);
+            }
+            if (!st) st = tn__cset_add(&set, &cap, (tn_contour_type)type, 0, 0.0f, pts.p, pts.n);
+        }
+        TN_FREE(pts.p);
+        tn__trace_free(&t);
     }
     TN_FREE(mask);
-    TN_FREE(node);
-    TN_FREE(seen);
     TN_FREE(hgt);
     if (!st && !strokes) st = tn__fail(TN_ERR_EMPTY, "sketch image: no red (ridge) or blue (valley) strokes");
     if (!st && !set.count) st = tn__fail(TN_ERR_EMPTY, "sketch image: strokes too small to trace (need 3+ pixels)");
@@ -11032,9 +11091,6 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
    once it has heard from all of them (Kahn's order without a queue).
    -------------------------------------------------------------------------------------------- */
 
-static const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
-static const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
-
 /* Order-preserving map float -> uint32 (-0 and +0 share a key). */
 static uint32_t tn__fkey(float f)
 {
@@ -11653,211 +11709,19 @@ static tn_status tn__morph(uint8_t *m, int w, int h, int r, int grow)
     return TN_OK;
 }
 
-/* The 8 neighbours of (x, y) clockwise from north, P2..P9 in Zhang-Suen's naming; 0 outside. */
-static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
-{
-    static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
-    int k;
-    for (k = 0; k < 8; k++) {
-        int xx = x + ox[k], yy = y + oy[k];
-        p[k] = (xx >= 0 && yy >= 0 && xx < w && yy < h && m[(size_t)yy * w + xx]) ? 1 : 0;
-    }
-}
 
-/* Removing a set pixel keeps the 8-connected topology iff exactly one of the four "north, east,
-   south, west" corners starts a run of foreground (Yokoi's 8-connectivity number == 1). */
-static int tn__yokoi8(const int p[8])
-{
-    int k, c = 0;
-    for (k = 0; k < 8; k += 2) {
-        int a = !p[k], b = !p[(k + 1) & 7], d = !p[(k + 2) & 7];
-        c += a - a * b * d;
-    }
-    return c;
-}
 
-TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
-{
-    size_t n;
-    uint8_t *del;
-    int changed = 1, pass, x, y;
-    if (!m || w <= 0 || h <= 0) return tn__fail(TN_ERR_INVALID_ARG, "skeletonize: empty mask");
-    n = (size_t)w * h;
-    del = (uint8_t *)tn__alloc(n);
-    if (!del) return TN_ERR_OUT_OF_MEMORY;
-    for (x = 0; (size_t)x < n; x++) m[x] = m[x] != 0;
-    while (changed) { /* Zhang-Suen: two parallel sub-iterations until stable */
-        changed = 0;
-        for (pass = 0; pass < 2; pass++) {
-            size_t cnt = 0;
-            memset(del, 0, n);
-            for (y = 0; y < h; y++)
-                for (x = 0; x < w; x++) {
-                    int p[8], b = 0, a = 0, k;
-                    if (!m[(size_t)y * w + x]) continue;
-                    tn__nbrs(m, w, h, x, y, p);
-                    for (k = 0; k < 8; k++) { b += p[k]; a += !p[k] && p[(k + 1) & 7]; }
-                    if (b < 2 || b > 6 || a != 1) continue;
-                    if (pass == 0 ? (p[0] && p[2] && p[4]) || (p[2] && p[4] && p[6])
-                                  : (p[0] && p[2] && p[6]) || (p[0] && p[4] && p[6]))
-                        continue;
-                    del[(size_t)y * w + x] = 1;
-                    cnt++;
-                }
-            if (cnt) {
-                size_t i;
-                for (i = 0; i < n; i++) if (del[i]) m[i] = 0;
-                changed = 1;
-            }
-        }
-    }
-    TN_FREE(del);
-    /* Zhang-Suen leaves staircase corners two pixels thick: drop every remaining simple pixel
-       that is not an endpoint, sequentially, which keeps topology one pixel at a time. */
-    changed = 1;
-    while (changed) {
-        changed = 0;
-        for (y = 0; y < h; y++)
-            for (x = 0; x < w; x++) {
-                int p[8], b = 0, k;
-                if (!m[(size_t)y * w + x]) continue;
-                tn__nbrs(m, w, h, x, y, p);
-                for (k = 0; k < 8; k++) b += p[k];
-                if (b >= 2 && tn__yokoi8(p) == 1) {
-                    m[(size_t)y * w + x] = 0;
-                    changed = 1;
-                }
-            }
-    }
-    return TN_OK;
-}
 
 /* ---- contour graph ------------------------------------------------------------------------ */
 
-/* Polylines are built with tn__pts / tn__pts_push and stored with tn__cset_add (>>sketch). */
+/* Polylines are built with tn__pts / tn__pts_push and stored with tn__cset_add; skeletons are
+   traced by tn__trace_skeleton (>>sketch). */
 
-static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
-{
-    int p[8], k, b = 0;
-    tn__nbrs(m, w, h, x, y, p);
-    for (k = 0; k < 8; k++) b += p[k];
-    return b;
-}
 
-/* Traces the skeleton into polylines between nodes (endpoints, junctions: degree != 2) and
-   closed loops. Each polyline's pixels are listed as cell indices in *cells (per line offsets in
-   *starts, count + 1 entries). Deterministic raster order. */
-typedef struct tn__trace { size_t *cells, *starts; size_t ncells, nlines, cap_c, cap_s; } tn__trace;
 
-static tn_status tn__trace_push(tn__trace *t, size_t cell)
-{
-    if (t->ncells == t->cap_c) {
-        size_t bytes = t->cap_c * sizeof(size_t);
-        void *p = t->cells;
-        tn_status st = tn__reserve(&p, &bytes, (t->ncells + 1) * sizeof(size_t));
-        if (st) return st;
-        t->cells = (size_t *)p;
-        t->cap_c = bytes / sizeof(size_t);
-    }
-    t->cells[t->ncells++] = cell;
-    return TN_OK;
-}
 
-static tn_status tn__trace_end_line(tn__trace *t)
-{
-    if (t->nlines + 2 > t->cap_s) {
-        size_t bytes = t->cap_s * sizeof(size_t);
-        void *p = t->starts;
-        tn_status st = tn__reserve(&p, &bytes, (t->nlines + 2) * sizeof(size_t));
-        if (st) return st;
-        t->starts = (size_t *)p;
-        t->cap_s = bytes / sizeof(size_t);
-    }
-    if (t->nlines == 0) t->starts[0] = 0;
-    t->starts[++t->nlines] = t->ncells;
-    return TN_OK;
-}
 
-static void tn__trace_free(tn__trace *t)
-{
-    TN_FREE(t->cells);
-    TN_FREE(t->starts);
-    memset(t, 0, sizeof *t);
-}
 
-static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t)
-{
-    const int *ox = tn__d8x, *oy = tn__d8y;
-    size_t n = (size_t)w * h, i;
-    uint8_t *deg = (uint8_t *)tn__alloc(n), *vis = (uint8_t *)tn__calloc(n);
-    tn_status st = TN_OK;
-    int pass;
-    memset(t, 0, sizeof *t);
-    if (!deg || !vis) {
-        TN_FREE(deg);
-        TN_FREE(vis);
-        return TN_ERR_OUT_OF_MEMORY;
-    }
-    for (i = 0; i < n; i++) deg[i] = m[i] ? (uint8_t)tn__skel_degree(m, w, h, (int)(i % (size_t)w), (int)(i / (size_t)w)) : 0;
-    /* pass 0: lines leaving nodes; pass 1: closed loops of degree-2 pixels left over */
-    for (pass = 0; pass < 2 && !st; pass++)
-        for (i = 0; i < n && !st; i++) {
-            int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w), d;
-            if (!m[i]) continue;
-            if (pass == 0 && deg[i] == 2) continue;
-            if (pass == 1 && vis[i]) continue;
-            if (pass == 0 && deg[i] == 0) { /* isolated pixel: a one-point line */
-                vis[i] = 1;
-                if (!(st = tn__trace_push(t, i))) st = tn__trace_end_line(t);
-                continue;
-            }
-            for (d = 0; d < 8 && !st; d++) {
-                int nx = x + ox[d], ny = y + oy[d];
-                size_t q, prev = i, cur;
-                if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
-                q = (size_t)ny * w + nx;
-                if (!m[q]) continue;
-                if (pass == 1 && d > 0 && vis[q]) continue;
-                if (deg[q] != 2) { /* node next to node: a two-point line, listed once */
-                    if (pass == 0 && q > i) {
-                        if (!(st = tn__trace_push(t, i)) && !(st = tn__trace_push(t, q))) st = tn__trace_end_line(t);
-                    }
-                    continue;
-                }
-                if (vis[q]) continue;
-                vis[i] = 1;
-                if ((st = tn__trace_push(t, i))) break;
-                cur = q;
-                for (;;) {
-                    int cx = (int)(cur % (size_t)w), cy = (int)(cur / (size_t)w), e;
-                    size_t next = (size_t)-1;
-                    if ((st = tn__trace_push(t, cur))) break;
-                    if (deg[cur] != 2 || (pass == 1 && cur == i)) break;
-                    vis[cur] = 1;
-                    for (e = 0; e < 8; e++) {
-                        int ex = cx + ox[e], ey = cy + oy[e];
-                        size_t r;
-                        if (ex < 0 || ey < 0 || ex >= w || ey >= h) continue;
-                        r = (size_t)ey * w + ex;
-                        if (!m[r] || r == prev) continue;
-                        if (r == i && pass == 1 && prev != i) { next = r; break; }
-                        if (deg[r] == 2 && vis[r]) continue;
-                        next = r;
-                        break;
-                    }
-                    if (next == (size_t)-1) break;
-                    prev = cur;
-                    cur = next;
-                }
-                if (!st) st = tn__trace_end_line(t);
-                if (pass == 1) break; /* one loop per start pixel */
-            }
-        }
-    TN_FREE(deg);
-    TN_FREE(vis);
-    if (st) tn__trace_free(t);
-    return st;
-}
 
 /* ---- extraction pipeline ------------------------------------------------------------------ */
 
