@@ -55,9 +55,9 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
-    @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
     @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton; realism
+    @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@render    previews: hillshaded colour map and 3D perspective view
 */
@@ -584,78 +584,6 @@ TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const t
 TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight);
 
 /* ============================================================================================
-   @@style  terrain style transfer (paper 002, sections 2.2, 3, 4)
-   The output map, initialised from the content map, is optimised so that the deep-feature
-   statistics of a real heightmap (the style source) appear in it:
-       alpha * content + beta * style + gamma * TV   (+ histogram terms with the built-in net).
-   The style source is resized to the output size first, so one source pixel keeps its scale.
-   Work runs coarse to fine over an image pyramid (each level x2): the coarse levels lay out
-   ridges and valleys, the fine ones add detail; levels larger than `tile` are optimised in
-   overlapping tiles, so 2048 x 2048 runs in the memory of a 512 x 512 map.
-   Heights: maps are standardised internally; the output is returned in the style source's
-   height units (metres when the source has them), with the source's mean and spread.
-
-   Built-in feature network (no weights file): fixed random zero-mean filters (Kaiming normal,
-   seeded), reflect padding, ReLU, 2 x 2 average pooling:
-       conv 5x5 1->24 | pool | conv 3x3 24->32 | pool | conv 3x3 32->48 | pool | conv 3x3 48->64
-   Style = per layer Gram-matrix distance (relative to the source's Gram) plus a sliced
-   Wasserstein distance (Heitz et al. 2021: features projected on C fixed random directions,
-   sorted, compared with the source's sorted projections); histogram terms match the sorted
-   heights and slopes of the source; content = relative squared distance of the third layer.
-
-   VGG-19 (tn_vgg19_load): the paper's network. Greyscale is fed as three identical channels in
-   [0, 1] with ImageNet normalisation (mean 0.485 0.456 0.406, std 0.229 0.224 0.225), max
-   pooling; content conv5_2 (0.5 * sum of squares), style conv1_1 conv2_1 conv3_1 conv4_1
-   conv5_1 (sum (G1 - G2)^2 / (4 * 3^2 * (H*W)^2), the published code's normaliser),
-   TV sum (dx^2 + dy^2)^1.25; default weights are the published code's (content 2.5e-11,
-   style 1e-5, TV 1e-10).
-   .tnw tensor names and layout (PyTorch order, float32): conv<g>_<i>.weight  Cout x Cin x 3 x 3
-   and conv<g>_<i>.bias  Cout, for the 16 convolutions conv1_1 conv1_2 conv2_1 conv2_2
-   conv3_1..conv3_4 conv4_1..conv4_4 conv5_1..conv5_4 (channels 64, 128, 256, 512, 512; conv1_1
-   has Cin 3), exactly these 32 tensors. examples/vgg19_to_tnw.py converts a torchvision
-   state dict (torchvision.models.vgg19 features.N.weight/bias).
-   ============================================================================================ */
-
-typedef enum tn_style_optimizer { TN_STYLE_LBFGS = 0, TN_STYLE_SGD, TN_STYLE_ADAM } tn_style_optimizer;
-
-typedef struct tn_style_opts {
-    tn_style_optimizer optimizer; /* L-BFGS (default), SGD with exponential decay, Adam */
-    int iters;            /* iterations per pyramid level; 0 = default (L-BFGS 40, Adam 150, SGD 300) */
-    int levels;           /* pyramid levels; 0 = auto (coarsest side >= 64, at most 6) */
-    int tile;             /* levels wider or taller than this are optimised in tiles; 0 = 512 */
-    /* Loss weights; 0 = the network's default, negative = term off. */
-    float content_weight; /* alpha */
-    float style_weight;   /* beta: Gram term */
-    float sw_weight;      /* built-in net: sliced Wasserstein term */
-    float hist_weight;    /* built-in net: height and slope histogram terms */
-    float tv_weight;      /* gamma */
-    float lr;             /* SGD / Adam learning rate; 0 = default (SGD decays x0.96 every iters/20 steps) */
-    uint64_t seed;        /* random filters and projections of the built-in net */
-    const tn_params *vgg; /* VGG-19 weights from tn_vgg19_load; NULL = the built-in network */
-} tn_style_opts;
-
-/* Restyles `content` (any one-channel map, e.g. tn_noise_perlin output; channel 0 is used) with
-   the morphology of `style` (a heightmap). *out has the content's size and the style's height
-   units. opts may be NULL. Reports progress as stage "style". NaN/Inf in either map fails with
-   TN_ERR_NUMERIC; maps smaller than 16 x 16 with TN_ERR_INVALID_ARG. */
-TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts);
-
-/* The VGG-19 convolution layout above with zero weights (to fill and save, e.g. for tests). */
-TN_API tn_status tn_vgg19_create(tn_params **out);
-/* Loads VGG-19 convolution weights from a .tnw file; a wrong tensor name, count or shape fails
-   with TN_ERR_SHAPE naming the tensor. Caller frees with tn_params_free. */
-TN_API tn_status tn_vgg19_load(tn_params **out, const char *path);
-
-/* How well a map reproduces a source's morphology (paper 002, Table 1, plus two distances).
-   The source is resized to the map's size and both are normalised to [0, 1]. */
-typedef struct tn_style_scores {
-    double ssim;            /* SSIM(source, map): higher is closer */
-    double slope_hist_dist; /* L1 distance between 64-bin slope histograms (0..2): lower is closer */
-    double spectrum_dist;   /* mean |log10| ratio of radially averaged power spectra: lower is closer */
-} tn_style_scores;
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out);
-
-/* ============================================================================================
    @@sketch  contour sets: ridge and valley polylines (paper 000, sections 4.1 and 5)
    One type carries extracted ridge/valley networks, their contour parts and user sketches: a
    canvas size and a list of polylines, each point (x, y, height) in canvas pixels and the
@@ -908,6 +836,79 @@ typedef struct tn_realism {
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
 TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
                                     tn_realism *out);
+
+/* ============================================================================================
+   @@style  terrain style transfer (paper 002, sections 2.2, 3, 4)
+   The output map, initialised from the content map, is optimised so that the deep-feature
+   statistics of a real heightmap (the style source) appear in it:
+       alpha * content + beta * style + gamma * TV   (+ histogram terms with the built-in net).
+   The style source is resized to the output size first, so one source pixel keeps its scale.
+   Work runs coarse to fine over an image pyramid (each level x2): the coarse levels lay out
+   ridges and valleys, the fine ones add detail; levels larger than `tile` are optimised in
+   overlapping tiles, so 2048 x 2048 runs in the memory of a 512 x 512 map.
+   Heights: maps are standardised internally; the output is returned in the style source's
+   height units (metres when the source has them), with the source's mean and spread.
+
+   Built-in feature network (no weights file): fixed random zero-mean filters (Kaiming normal,
+   seeded), reflect padding, ReLU, 2 x 2 average pooling:
+       conv 5x5 1->24 | pool | conv 3x3 24->32 | pool | conv 3x3 32->48 | pool | conv 3x3 48->64
+   Style = per layer Gram-matrix distance (relative to the source's Gram) plus a sliced
+   Wasserstein distance (Heitz et al. 2021: features projected on C fixed random directions,
+   sorted, compared with the source's sorted projections); histogram terms match the sorted
+   heights and slopes of the source; content = relative squared distance of the third layer.
+
+   VGG-19 (tn_vgg19_load): the paper's network. Greyscale is fed as three identical channels in
+   [0, 1] with ImageNet normalisation (mean 0.485 0.456 0.406, std 0.229 0.224 0.225), max
+   pooling; content conv5_2 (0.5 * sum of squares), style conv1_1 conv2_1 conv3_1 conv4_1
+   conv5_1 (sum (G1 - G2)^2 / (4 * 3^2 * (H*W)^2), the published code's normaliser),
+   TV sum (dx^2 + dy^2)^1.25; default weights are the published code's (content 2.5e-11,
+   style 1e-5, TV 1e-10).
+   .tnw tensor names and layout (PyTorch order, float32): conv<g>_<i>.weight  Cout x Cin x 3 x 3
+   and conv<g>_<i>.bias  Cout, for the 16 convolutions conv1_1 conv1_2 conv2_1 conv2_2
+   conv3_1..conv3_4 conv4_1..conv4_4 conv5_1..conv5_4 (channels 64, 128, 256, 512, 512; conv1_1
+   has Cin 3), exactly these 32 tensors. examples/vgg19_to_tnw.py converts a torchvision
+   state dict (torchvision.models.vgg19 features.N.weight/bias).
+   ============================================================================================ */
+
+typedef enum tn_style_optimizer { TN_STYLE_LBFGS = 0, TN_STYLE_SGD, TN_STYLE_ADAM } tn_style_optimizer;
+
+typedef struct tn_style_opts {
+    tn_style_optimizer optimizer; /* L-BFGS (default), SGD with exponential decay, Adam */
+    int iters;            /* iterations per pyramid level; 0 = default (L-BFGS 40, Adam 150, SGD 300) */
+    int levels;           /* pyramid levels; 0 = auto (coarsest side >= 64, at most 6) */
+    int tile;             /* levels wider or taller than this are optimised in tiles; 0 = 512 */
+    /* Loss weights; 0 = the network's default, negative = term off. */
+    float content_weight; /* alpha */
+    float style_weight;   /* beta: Gram term */
+    float sw_weight;      /* built-in net: sliced Wasserstein term */
+    float hist_weight;    /* built-in net: height and slope histogram terms */
+    float tv_weight;      /* gamma */
+    float lr;             /* SGD / Adam learning rate; 0 = default (SGD decays x0.96 every iters/20 steps) */
+    uint64_t seed;        /* random filters and projections of the built-in net */
+    const tn_params *vgg; /* VGG-19 weights from tn_vgg19_load; NULL = the built-in network */
+} tn_style_opts;
+
+/* Restyles `content` (any one-channel map, e.g. tn_noise_perlin output; channel 0 is used) with
+   the morphology of `style` (a heightmap). *out has the content's size and the style's height
+   units. opts may be NULL. Reports progress as stage "style". NaN/Inf in either map fails with
+   TN_ERR_NUMERIC; maps smaller than 16 x 16 with TN_ERR_INVALID_ARG. */
+TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts);
+
+/* The VGG-19 convolution layout above with zero weights (to fill and save, e.g. for tests). */
+TN_API tn_status tn_vgg19_create(tn_params **out);
+/* Loads VGG-19 convolution weights from a .tnw file; a wrong tensor name, count or shape fails
+   with TN_ERR_SHAPE naming the tensor. Caller frees with tn_params_free. */
+TN_API tn_status tn_vgg19_load(tn_params **out, const char *path);
+
+/* How well a map reproduces a source's morphology (paper 002, Table 1, plus two distances).
+   The source is resized to the map's size and both are normalised to [0, 1]. The distances are
+   tn_realism_compare's (@@extract), computed on the normalised maps. */
+typedef struct tn_style_scores {
+    double ssim;            /* SSIM(source, map), Table 1: higher is closer */
+    double slope_hist_dist; /* tn_realism slope_distance (relative EMD of slope histograms): lower is closer */
+    double spectrum_dist;   /* tn_realism spectrum_distance (RMS log10 spectrum difference): lower is closer */
+} tn_style_scores;
+TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out);
 
 /* ============================================================================================
    @@texgan  single-texture spatial GAN, huge textures and detail maps (paper 004, section III)
@@ -8603,1080 +8604,6 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
 }
 
 /* --------------------------------------------------------------------------------------------
-   >>style  (@@style implementation)
-   One evaluation = reset the level's arena, run the feature net on the current map with the
-   tape on, sum the loss terms, backward; the gradient wrt the map drives L-BFGS / SGD / Adam.
-   Targets (source Grams, sorted source projections, sorted heights and slopes, content
-   features) are computed once per pyramid level and kept outside the arena.
-   -------------------------------------------------------------------------------------------- */
-
-/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
-static uint32_t tn__float_key(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
-/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
-   (float keys are exact, so ties keep index order and the result is deterministic).
-   scratch holds 3 * n uint32. */
-static void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
-{
-    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
-    size_t cnt[2048], i;
-    int pass;
-    for (i = 0; i < n; i++) {
-        key[i] = tn__float_key(v[i]);
-        ia[i] = (uint32_t)i;
-    }
-    for (pass = 0; pass < 3; pass++) {
-        int sh = pass * 11;
-        size_t sum = 0;
-        memset(cnt, 0, sizeof cnt);
-        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
-        for (i = 0; i < 2048; i++) {
-            size_t c = cnt[i];
-            cnt[i] = sum;
-            sum += c;
-        }
-        for (i = 0; i < n; i++) {
-            size_t d = cnt[(key[i] >> sh) & 2047]++;
-            k2[d] = key[i];
-            i2[d] = ia[i];
-        }
-        t = key; key = k2; k2 = t;
-        t = ia; ia = i2; i2 = t;
-    }
-    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
-}
-
-/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
-static float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
-{
-    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
-    return sorted[j < nt ? j : nt - 1];
-}
-
-/* Per-row sorting work, rows split round-robin over threads (each row's result is independent of
-   the split). mode 0: sorted copy of each row into out; mode 1: residual of the sorted row
-   against the target (written back at the unsorted positions) and the row's squared sum. */
-typedef struct tn__rowsort_job {
-    const float *x, *target;
-    float *out;
-    double *rowsum;
-    size_t rows, n, nt;
-    int mode, failed;
-} tn__rowsort_job;
-
-static void tn__rowsort_task(void *ctx, int ith, int nth)
-{
-    tn__rowsort_job *j = (tn__rowsort_job *)ctx;
-    uint32_t *idx = (uint32_t *)TN_MALLOC(4 * j->n * sizeof(uint32_t));
-    size_t r, i;
-    if (!idx) {
-        j->failed = 1;
-        return;
-    }
-    for (r = (size_t)ith; r < j->rows; r += (size_t)nth) {
-        const float *x = j->x + r * j->n;
-        float *o = j->out + r * j->n;
-        tn__argsort_f32(x, j->n, idx, idx + j->n);
-        if (j->mode == 0) {
-            for (i = 0; i < j->n; i++) o[i] = x[idx[i]];
-        } else {
-            const float *t = j->target + r * j->nt;
-            double s = 0;
-            for (i = 0; i < j->n; i++) {
-                float d = x[idx[i]] - tn__quantile_at(t, j->nt, i, j->n);
-                o[idx[i]] = d;
-                s += (double)d * d;
-            }
-            j->rowsum[r] = s;
-        }
-    }
-    TN_FREE(idx);
-}
-
-static tn_status tn__rowsort_run(tn__rowsort_job *j)
-{
-    j->failed = 0;
-    tn_parallel_run(tn__rowsort_task, j);
-    return j->failed ? tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory sorting %zu values", j->n) : TN_OK;
-}
-
-static void tn__sorted_match_backward(tn_ctx *ctx, tn_tensor *out)
-{
-    tn_tensor *x = out->src[0];
-    const float *r = (const float *)out->aux;
-    float *g = tn__grad(ctx, x), k;
-    size_t i;
-    if (!g) return;
-    k = 2.0f * out->grad[0] * out->fp[0];
-    for (i = 0; i < x->numel; i++) g[i] += k * r[i];
-}
-
-/* scale * mean((sort(row of x) - target row)^2) over the rows of x (rows x n): the squared 1-D
-   Wasserstein-2 distance between each row's values and the sorted target row (length nt). */
-static tn_tensor *tn__sorted_match(tn_ctx *ctx, tn_tensor *x, const float *target, size_t nt, float scale)
-{
-    int one = 1;
-    tn__rowsort_job j;
-    tn_tensor *o;
-    double s = 0;
-    size_t r;
-    if (!x) return NULL;
-    o = tn__op(ctx, 1, &one, tn__sorted_match_backward, x, NULL, NULL);
-    if (!o) return NULL;
-    memset(&j, 0, sizeof j);
-    j.x = x->data;
-    j.target = target;
-    j.rows = (size_t)x->shape[0];
-    j.n = x->numel / j.rows;
-    j.nt = nt;
-    j.mode = 1;
-    j.out = tn__ctx_floats(ctx, x->numel, 0);
-    j.rowsum = (double *)tn_ctx_alloc(ctx, j.rows * sizeof(double));
-    if (!j.out || !j.rowsum) return NULL;
-    if (tn__rowsort_run(&j)) {
-        if (!ctx->status) ctx->status = TN_ERR_OUT_OF_MEMORY;
-        return NULL;
-    }
-    for (r = 0; r < j.rows; r++) s += j.rowsum[r];
-    o->aux = j.out;
-    o->fp[0] = scale / (float)x->numel;
-    o->data[0] = (float)(s * scale / (double)x->numel);
-    return o;
-}
-
-/* ---- feature networks ---- */
-
-#define TN__STYLE_MAXL 5
-static const int tn__sn_ch[4] = {24, 32, 48, 64}, tn__sn_k[4] = {5, 3, 3, 3};
-static const int tn__vgg_groups[5] = {2, 2, 4, 4, 4}, tn__vgg_ch[5] = {64, 128, 256, 512, 512};
-
-typedef struct tn__style_net {
-    int vgg;
-    int nconv;
-    tn_tensor *w[16], *b[16];
-    tn_params *own; /* the built-in net's weights; VGG weights are borrowed */
-} tn__style_net;
-
-static tn_status tn__style_net_builtin(tn__style_net *net, uint64_t seed)
-{
-    tn_rng rng;
-    int l, cin = 1;
-    memset(net, 0, sizeof *net);
-    if (!(net->own = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
-    tn_rng_seed(&rng, seed, 0x57f1e);
-    for (l = 0; l < 4; l++) {
-        int shape[4], o;
-        char name[64];
-        size_t k, fan;
-        tn_tensor *w;
-        shape[0] = tn__sn_ch[l];
-        shape[1] = cin;
-        shape[2] = shape[3] = tn__sn_k[l];
-        sprintf(name, "f%d.weight", l + 1);
-        if (!(w = tn_params_add_buffer(net->own, name, 4, shape))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
-        tn_init_kaiming(w, &rng, 1.41421356f);
-        fan = w->numel / (size_t)shape[0];
-        for (o = 0; o < shape[0]; o++) { /* zero-mean filters respond to shape, not to height level */
-            float *f = w->data + (size_t)o * fan;
-            double m = 0;
-            for (k = 0; k < fan; k++) m += f[k];
-            for (k = 0; k < fan; k++) f[k] -= (float)(m / (double)fan);
-        }
-        net->w[l] = w;
-        cin = shape[0];
-    }
-    net->nconv = 4;
-    return TN_OK;
-}
-
-TN_API tn_status tn_vgg19_create(tn_params **out)
-{
-    tn_params *p = tn_params_create();
-    int g, i, cin = 3;
-    if (!out) return tn__fail(TN_ERR_INVALID_ARG, "vgg19: out is NULL");
-    if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "vgg19: out of memory");
-    for (g = 0; g < 5; g++)
-        for (i = 0; i < tn__vgg_groups[g]; i++) {
-            int ws[4], bs = tn__vgg_ch[g];
-            char name[64];
-            ws[0] = tn__vgg_ch[g];
-            ws[1] = cin;
-            ws[2] = ws[3] = 3;
-            sprintf(name, "conv%d_%d.weight", g + 1, i + 1);
-            if (!tn_params_add_buffer(p, name, 4, ws)) break;
-            sprintf(name, "conv%d_%d.bias", g + 1, i + 1);
-            if (!tn_params_add_buffer(p, name, 1, &bs)) break;
-            cin = ws[0];
-        }
-    if (tn_params_count(p) != 32) {
-        tn_params_free(p);
-        return tn__fail(TN_ERR_OUT_OF_MEMORY, "vgg19: out of memory");
-    }
-    *out = p;
-    return TN_OK;
-}
-
-TN_API tn_status tn_vgg19_load(tn_params **out, const char *path)
-{
-    tn_params *p = NULL;
-    tn_status st;
-    if (!out || !path) return tn__fail(TN_ERR_INVALID_ARG, "vgg19: NULL argument");
-    if ((st = tn_vgg19_create(&p))) return st;
-    if ((st = tn_params_load(p, path))) {
-        tn_params_free(p);
-        return st;
-    }
-    *out = p;
-    return TN_OK;
-}
-
-static tn_status tn__style_net_vgg(tn__style_net *net, const tn_params *p)
-{
-    int g, i, k = 0, cin = 3;
-    memset(net, 0, sizeof *net);
-    net->vgg = 1;
-    for (g = 0; g < 5; g++)
-        for (i = 0; i < tn__vgg_groups[g]; i++, k++) {
-            char name[64];
-            tn_tensor *w, *b;
-            sprintf(name, "conv%d_%d.weight", g + 1, i + 1);
-            w = tn_params_find(p, name);
-            sprintf(name, "conv%d_%d.bias", g + 1, i + 1);
-            b = tn_params_find(p, name);
-            if (!w || !b || w->ndim != 4 || w->shape[0] != tn__vgg_ch[g] || w->shape[1] != cin || w->shape[2] != 3 ||
-                w->shape[3] != 3 || (int)b->numel != tn__vgg_ch[g])
-                return tn__fail(TN_ERR_SHAPE, "style: the VGG-19 weights lack conv%d_%d or have the wrong shape (use tn_vgg19_load)", g + 1, i + 1);
-            net->w[k] = w;
-            net->b[k] = b;
-            cin = tn__vgg_ch[g];
-        }
-    net->nconv = k;
-    return TN_OK;
-}
-
-/* Runs the net on x (1 x 1 x H x W, in the net's input space); fills the style layers and the
-   content layer and returns how many style layers there are (0 when out of memory). */
-static int tn__style_forward(tn_ctx *ctx, const tn__style_net *net, tn_tensor *x, tn_tensor **style, tn_tensor **content)
-{
-    tn_conv_opts co;
-    tn_tensor *h = x;
-    int l;
-    memset(&co, 0, sizeof co);
-    if (!net->vgg) {
-        co.padding = TN_PADDING_REFLECT;
-        for (l = 0; l < 4; l++) {
-            if (l) h = tn_avg_pool2d(ctx, h, 2, 2);
-            co.pad = tn__sn_k[l] / 2;
-            h = tn_relu(ctx, tn_conv2d(ctx, h, net->w[l], NULL, &co));
-            style[l] = h;
-        }
-        *content = style[2];
-        return h ? 4 : 0;
-    } else {
-        static const float mean[3] = {0.485f, 0.456f, 0.406f}, sd[3] = {0.229f, 0.224f, 0.225f};
-        int g, i, k = 0;
-        h = NULL;
-        for (i = 0; i < 3; i++) {
-            tn_tensor *c = tn_scale_shift(ctx, x, 1.0f / sd[i], -mean[i] / sd[i]);
-            h = h ? tn_concat(ctx, h, c, 1) : c;
-        }
-        co.pad = 1;
-        *content = NULL;
-        for (g = 0; g < 5 && !*content; g++) {
-            if (g) h = tn_max_pool2d(ctx, h, 2, 2);
-            for (i = 0; i < tn__vgg_groups[g]; i++, k++) {
-                h = tn_relu(ctx, tn_conv2d(ctx, h, net->w[k], net->b[k], &co));
-                if (i == 0) style[g] = h;
-                if (g == 4 && i == 1) {
-                    *content = h;
-                    break;
-                }
-            }
-        }
-        return *content ? 5 : 0;
-    }
-}
-
-/* ---- one pyramid level (or one tile of it): targets, loss, gradient ---- */
-
-typedef struct tn__style_level {
-    const tn__style_net *net;
-    tn_ctx *ctx;
-    int w, h;                 /* size of the optimised map */
-    float wc, wg, wsw, wh, wtv;
-    int nstyle;
-    float *gram[TN__STYLE_MAXL];  /* C x C source Grams */
-    double gnorm[TN__STYLE_MAXL]; /* their squared Frobenius norms */
-    float *dirs[TN__STYLE_MAXL];  /* C x C random unit directions (rows) */
-    float *sorted[TN__STYLE_MAXL];/* C x snt sorted source projections */
-    size_t snt[TN__STYLE_MAXL];
-    double svar[TN__STYLE_MAXL];  /* mean square of the sorted projections */
-    int ch[TN__STYLE_MAXL];
-    float *content;           /* content-layer features of the anchor map */
-    int cshape[4];
-    double cnorm;
-    float *hsorted, *ssorted; /* sorted source heights and slopes */
-    size_t hn, sn;
-    double s2;
-    tn_status status;
-} tn__style_level;
-
-static void tn__style_level_free(tn__style_level *L)
-{
-    int l;
-    for (l = 0; l < TN__STYLE_MAXL; l++) {
-        TN_FREE(L->gram[l]);
-        TN_FREE(L->dirs[l]);
-        TN_FREE(L->sorted[l]);
-    }
-    TN_FREE(L->content);
-    TN_FREE(L->hsorted);
-    TN_FREE(L->ssorted);
-    tn_ctx_free(L->ctx);
-    memset(L, 0, sizeof *L);
-}
-
-/* Slope magnitude (forward differences) of a 1 x 1 x H x W map, as a 1 x (H-1)(W-1) row. */
-static tn_tensor *tn__style_slope(tn_ctx *ctx, tn_tensor *x)
-{
-    tn_tensor *dx, *dy, *s;
-    int shape[2];
-    tn__diffs(ctx, x, &dx, &dy);
-    s = tn_pow_abs(ctx, tn_scale_shift(ctx, tn_add(ctx, tn_square(ctx, dx), tn_square(ctx, dy)), 1.0f, 1e-6f), 0.5f);
-    if (!s) return NULL;
-    shape[0] = 1;
-    shape[1] = (int)s->numel;
-    return tn_reshape(ctx, s, 2, shape);
-}
-
-static tn_tensor *tn__style_map_tensor(tn_ctx *ctx, const float *v, int w, int h)
-{
-    tn_tensor *t = tn_tensor_4d(ctx, 1, 1, h, w);
-    if (t) memcpy(t->data, v, (size_t)w * h * sizeof(float));
-    return t;
-}
-
-static float *tn__style_dup(const float *v, size_t n)
-{
-    float *p = (float *)tn__alloc(n * sizeof(float));
-    if (p) memcpy(p, v, n * sizeof(float));
-    return p;
-}
-
-static tn_status tn__style_sort_rows(const float *x, size_t rows, size_t n, float *out)
-{
-    tn__rowsort_job j;
-    memset(&j, 0, sizeof j);
-    j.x = x;
-    j.out = out;
-    j.rows = rows;
-    j.n = n;
-    return tn__rowsort_run(&j);
-}
-
-/* Source statistics from `ncrop` crops (each w x h, the size of the optimised map): Grams are
-   averaged; each crop's sorted projections are resampled to n / ncrop values, pooled and sorted. */
-static tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
-{
-    tn_ctx *ctx = L->ctx;
-    tn_rng rng;
-    int c, l;
-    tn_status st = TN_OK;
-    float *pool[TN__STYLE_MAXL];
-    memset(pool, 0, sizeof pool);
-    tn_rng_seed(&rng, seed, 0x5d1ec7);
-    for (c = 0; c < ncrop && !st; c++) {
-        tn_tensor *x, *sf[TN__STYLE_MAXL], *cf;
-        tn_ctx_reset(ctx);
-        tn_ctx_set_grad(ctx, 0);
-        x = tn__style_map_tensor(ctx, crops[c], L->w, L->h);
-        L->nstyle = x ? tn__style_forward(ctx, L->net, x, sf, &cf) : 0;
-        if (!L->nstyle) {
-            st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
-            break;
-        }
-        for (l = 0; l < L->nstyle && !st; l++) {
-            int C = sf[l]->shape[1];
-            size_t hw = sf[l]->numel / (size_t)C, k, part = hw / (size_t)ncrop, i;
-            tn_tensor *g = tn_gram(ctx, sf[l], L->net->vgg ? 1.0f : 1.0f / (float)hw), *D, *F2, *P;
-            int shape[2];
-            L->ch[l] = C;
-            if (!g) { st = TN_ERR_OUT_OF_MEMORY; break; }
-            if (!L->gram[l] && !(L->gram[l] = (float *)tn__calloc((size_t)C * C * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
-            for (k = 0; k < (size_t)C * C; k++) L->gram[l][k] += g->data[k] / (float)ncrop;
-            if (L->net->vgg || L->wsw <= 0) continue;
-            if (!L->dirs[l]) { /* C random unit directions */
-                if (!(L->dirs[l] = (float *)tn__alloc((size_t)C * C * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
-                for (i = 0; i < (size_t)C; i++) {
-                    double s = 0;
-                    for (k = 0; k < (size_t)C; k++) {
-                        float v = tn_rng_normal(&rng);
-                        L->dirs[l][i * C + k] = v;
-                        s += (double)v * v;
-                    }
-                    for (k = 0; k < (size_t)C; k++) L->dirs[l][i * C + k] /= (float)sqrt(s > 0 ? s : 1);
-                }
-                L->snt[l] = part * (size_t)ncrop;
-                if (!(pool[l] = (float *)tn__alloc((size_t)C * L->snt[l] * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
-            }
-            D = tn_tensor_2d(ctx, C, C);
-            shape[0] = C;
-            shape[1] = (int)hw;
-            F2 = tn_reshape(ctx, sf[l], 2, shape);
-            if (D) memcpy(D->data, L->dirs[l], (size_t)C * C * sizeof(float));
-            P = tn_matmul(ctx, D, F2, 0, 0);
-            {
-                float *srt = P ? tn__ctx_floats(ctx, P->numel, 0) : NULL;
-                if (!srt || (st = tn__style_sort_rows(P->data, (size_t)C, hw, srt))) { st = st ? st : TN_ERR_OUT_OF_MEMORY; break; }
-                for (i = 0; i < (size_t)C; i++)
-                    for (k = 0; k < part; k++)
-                        pool[l][i * L->snt[l] + (size_t)c * part + k] = tn__quantile_at(srt + i * hw, hw, k, part);
-            }
-        }
-    }
-    for (l = 0; l < L->nstyle && !st; l++) {
-        size_t k, n = (size_t)L->ch[l] * L->ch[l];
-        double s = 0;
-        for (k = 0; k < n; k++) s += (double)L->gram[l][k] * L->gram[l][k];
-        L->gnorm[l] = s > 1e-30 ? s : 1e-30;
-        if (!pool[l]) continue;
-        if (!(L->sorted[l] = (float *)tn__alloc((size_t)L->ch[l] * L->snt[l] * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
-        if ((st = tn__style_sort_rows(pool[l], (size_t)L->ch[l], L->snt[l], L->sorted[l]))) break;
-        s = 0;
-        for (k = 0; k < (size_t)L->ch[l] * L->snt[l]; k++) s += (double)L->sorted[l][k] * L->sorted[l][k];
-        s /= (double)L->ch[l] * L->snt[l];
-        L->svar[l] = s > 1e-30 ? s : 1e-30;
-    }
-    for (l = 0; l < TN__STYLE_MAXL; l++) TN_FREE(pool[l]);
-    tn_ctx_set_grad(ctx, 1);
-    return st;
-}
-
-/* Sorted heights and slopes of the whole source level (w x h). */
-static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
-{
-    tn_ctx *ctx = L->ctx;
-    tn_tensor *x, *s;
-    tn_status st;
-    size_t k;
-    double m = 0;
-    tn_ctx_reset(ctx);
-    tn_ctx_set_grad(ctx, 0);
-    x = tn__style_map_tensor(ctx, src, w, h);
-    s = x ? tn__style_slope(ctx, x) : NULL;
-    tn_ctx_set_grad(ctx, 1);
-    if (!s) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
-    L->hn = x->numel;
-    L->sn = s->numel;
-    L->hsorted = (float *)tn__alloc(L->hn * sizeof(float));
-    L->ssorted = (float *)tn__alloc(L->sn * sizeof(float));
-    if (!L->hsorted || !L->ssorted) return TN_ERR_OUT_OF_MEMORY;
-    if ((st = tn__style_sort_rows(x->data, 1, L->hn, L->hsorted)) || (st = tn__style_sort_rows(s->data, 1, L->sn, L->ssorted))) return st;
-    for (k = 0; k < L->sn; k++) m += (double)L->ssorted[k] * L->ssorted[k];
-    L->s2 = m / (double)L->sn > 1e-30 ? m / (double)L->sn : 1e-30;
-    return TN_OK;
-}
-
-/* Content-layer features of the anchor map (w x h). */
-static tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
-{
-    tn_ctx *ctx = L->ctx;
-    tn_tensor *x, *sf[TN__STYLE_MAXL], *cf = NULL;
-    size_t k;
-    double s = 0;
-    tn_ctx_reset(ctx);
-    tn_ctx_set_grad(ctx, 0);
-    x = tn__style_map_tensor(ctx, anchor, L->w, L->h);
-    if (!x || !tn__style_forward(ctx, L->net, x, sf, &cf)) {
-        tn_ctx_set_grad(ctx, 1);
-        return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
-    }
-    tn_ctx_set_grad(ctx, 1);
-    TN_FREE(L->content);
-    if (!(L->content = tn__style_dup(cf->data, cf->numel))) return TN_ERR_OUT_OF_MEMORY;
-    memcpy(L->cshape, cf->shape, sizeof L->cshape);
-    for (k = 0; k < cf->numel; k++) s += (double)cf->data[k] * cf->data[k];
-    s /= (double)cf->numel;
-    L->cnorm = s > 1e-30 ? s : 1e-30;
-    return TN_OK;
-}
-
-static tn_tensor *tn__style_acc(tn_ctx *ctx, tn_tensor *acc, tn_tensor *term) { return acc ? tn_add(ctx, acc, term) : term; }
-
-/* The total loss of map x (1 x 1 x h x w, recorded on the tape). */
-static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
-{
-    tn_ctx *ctx = L->ctx;
-    tn_tensor *sf[TN__STYLE_MAXL], *cf = NULL, *loss = NULL, *t;
-    int l, ns = tn__style_forward(ctx, L->net, x, sf, &cf);
-    double hw0 = (double)L->w * L->h;
-    if (!ns) return NULL;
-    if (L->wc > 0) {
-        t = tn_tensor_new(ctx, 4, L->cshape);
-        if (!t) return NULL;
-        memcpy(t->data, L->content, t->numel * sizeof(float));
-        t = tn_sum(ctx, tn_square(ctx, tn_sub(ctx, cf, t)));
-        loss = tn_scale_shift(ctx, t, L->net->vgg ? 0.5f * L->wc : (float)(L->wc / (L->cnorm * (double)cf->numel)), 0.0f);
-    }
-    for (l = 0; l < ns; l++) {
-        int C = sf[l]->shape[1];
-        size_t hw = sf[l]->numel / (size_t)C;
-        if (L->wg > 0) {
-            tn_tensor *g = tn_gram(ctx, sf[l], L->net->vgg ? 1.0f : 1.0f / (float)hw), *gt = tn_tensor_2d(ctx, C, C);
-            double k = L->net->vgg ? L->wg / (4.0 * 9.0 * hw0 * hw0) : L->wg / (L->gnorm[l] * ns);
-            if (!gt) return NULL;
-            memcpy(gt->data, L->gram[l], (size_t)C * C * sizeof(float));
-            loss = tn__style_acc(ctx, loss, tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, g, gt))), (float)k, 0.0f));
-        }
-        if (L->wsw > 0 && L->sorted[l]) {
-            tn_tensor *D = tn_tensor_2d(ctx, C, C), *P;
-            int shape[2];
-            if (!D) return NULL;
-            memcpy(D->data, L->dirs[l], (size_t)C * C * sizeof(float));
-            shape[0] = C;
-            shape[1] = (int)hw;
-            P = tn_matmul(ctx, D, tn_reshape(ctx, sf[l], 2, shape), 0, 0);
-            loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, P, L->sorted[l], L->snt[l], (float)(L->wsw / (L->svar[l] * ns))));
-        }
-    }
-    if (L->wh > 0 && L->hsorted) {
-        int shape[2];
-        shape[0] = 1;
-        shape[1] = (int)x->numel;
-        loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, tn_reshape(ctx, x, 2, shape), L->hsorted, L->hn, L->wh));
-        loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, tn__style_slope(ctx, x), L->ssorted, L->sn, (float)(L->wh / L->s2)));
-    }
-    if (L->wtv > 0) {
-        t = tn_tv_loss(ctx, x, L->net->vgg ? 2.5f : 2.0f);
-        loss = tn__style_acc(ctx, loss, tn_scale_shift(ctx, t, L->net->vgg ? L->wtv : (float)(L->wtv / hw0), 0.0f));
-    }
-    return loss;
-}
-
-/* Loss and gradient at xd (the tn_lbfgs callback). Failures are kept in L->status; NaN is returned. */
-static float tn__style_eval(void *user, const float *xd, float *grad)
-{
-    tn__style_level *L = (tn__style_level *)user;
-    tn_ctx *ctx = L->ctx;
-    size_t n = (size_t)L->w * L->h;
-    tn_tensor *x, *loss;
-    tn_status st;
-    if (L->status) return NAN;
-    tn_ctx_reset(ctx);
-    x = tn_tensor_requires_grad(ctx, tn__style_map_tensor(ctx, xd, L->w, L->h));
-    loss = x ? tn__style_loss(L, x) : NULL;
-    if (!loss) {
-        L->status = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_INVALID_ARG, "style: no loss term is switched on");
-        return NAN;
-    }
-    if ((st = tn_backward(ctx, loss))) {
-        L->status = st;
-        return NAN;
-    }
-    memcpy(grad, x->grad, n * sizeof(float));
-    if (!(loss->data[0] == loss->data[0]) || loss->data[0] > FLT_MAX) {
-        L->status = tn__fail(TN_ERR_NUMERIC, "style: the loss diverged (NaN/Inf); lower the learning rate");
-        return NAN;
-    }
-    return loss->data[0];
-}
-
-/* ---- optimisation ---- */
-
-typedef struct tn__style_cfg {
-    tn_style_opts o;
-    tn__style_net net;
-    double work_done, work_total; /* progress in pixel-iterations */
-    tn_progress_fn user_fn;
-    void *user_data;
-    double span;
-} tn__style_cfg;
-
-/* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer. */
-static int tn__style_progress_fwd(void *user, const char *stage, double f)
-{
-    tn__style_cfg *c = (tn__style_cfg *)user;
-    (void)stage;
-    return c->user_fn ? c->user_fn(c->user_data, "style", (c->work_done + f * c->span) / c->work_total) : 0;
-}
-
-static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
-{
-    size_t n = (size_t)L->w * L->h;
-    int it, iters = c->o.iters;
-    tn_status st = TN_OK;
-    c->span = (double)iters * (double)n;
-    if (c->o.optimizer == TN_STYLE_LBFGS) {
-        tn_lbfgs_opts lo;
-        float f;
-        memset(&lo, 0, sizeof lo);
-        lo.max_iter = iters;
-        lo.history = 10;
-        lo.tol = 1e-9f;
-        tn_set_progress(tn__style_progress_fwd, c);
-        st = tn_lbfgs(x, n, tn__style_eval, L, &lo, &f);
-        tn_set_progress(c->user_fn, c->user_data);
-        if (L->status) st = L->status; /* the real cause, not "objective is NaN" */
-        if (st == TN_ERR_CANCELLED) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
-    } else {
-        tn_params *p = tn_params_create();
-        tn_optim_opts oo;
-        tn_optim *opt = NULL;
-        tn_tensor *t = NULL;
-        int len = (int)n;
-        memset(&oo, 0, sizeof oo);
-        oo.kind = c->o.optimizer == TN_STYLE_ADAM ? TN_OPTIM_ADAM : TN_OPTIM_SGD;
-        oo.lr = c->o.lr;
-        if (c->o.optimizer == TN_STYLE_SGD) { /* the paper's schedule: x0.96 every 1/20 of the run */
-            oo.lr_decay = 0.96f;
-            oo.decay_every = iters / 20 > 0 ? iters / 20 : 1;
-        }
-        if (p) t = tn_params_add(p, "map", 1, &len);
-        if (t) opt = tn_optim_create(p, &oo);
-        if (!opt) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
-        if (t) memcpy(t->data, x, n * sizeof(float));
-        for (it = 0; it < iters && !st; it++) {
-            memset(t->grad, 0, n * sizeof(float));
-            tn__style_eval(L, t->data, t->grad);
-            if ((st = L->status)) break;
-            tn_optim_step(opt);
-            if (c->user_fn && c->user_fn(c->user_data, "style", (c->work_done + (double)(it + 1) * n) / c->work_total))
-                st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
-        }
-        if (!st) memcpy(x, t->data, n * sizeof(float));
-        tn_optim_free(opt);
-        tn_params_free(p);
-    }
-    c->work_done += c->span;
-    return st;
-}
-
-/* Copies the w x h window at (x0, y0) of a one-channel map into dst. */
-static void tn__style_window(float *dst, const tn_image *m, int x0, int y0, int w, int h)
-{
-    int y;
-    for (y = 0; y < h; y++) memcpy(dst + (size_t)y * w, m->data + (size_t)(y0 + y) * m->width + x0, (size_t)w * sizeof(float));
-}
-
-/* Tile origins along one axis: tiles of length t overlapping by ov, the last one flush with the end. */
-static int tn__style_tile_pos(int size, int t, int ov, int *pos, int max)
-{
-    int n = 0, p = 0;
-    if (t >= size) {
-        pos[0] = 0;
-        return 1;
-    }
-    for (;;) {
-        if (p + t >= size || n == max - 1) {
-            pos[n++] = size - t;
-            return n;
-        }
-        pos[n++] = p;
-        p += t - ov;
-    }
-}
-
-/* Blend weight of pixel i of a tile of length t at origin p on an axis of length size. */
-static float tn__style_ramp(int i, int t, int p, int size, int ov)
-{
-    float w = 1.0f;
-    if (p > 0 && i < ov) w = (float)(i + 1) / (float)(ov + 1);
-    if (p + t < size && t - 1 - i < ov) {
-        float v = (float)(t - i) / (float)(ov + 1);
-        if (v < w) w = v;
-    }
-    return w;
-}
-
-#define TN__STYLE_MAXTILES 64
-
-/* Tile length along an axis of `size` for tiles of nominal length t overlapping by t / 8: the
-   fewest tiles of at most t that cover it, grown by the overlap (1024 -> 2 tiles of 576). */
-static int tn__style_tile_len(int size, int t)
-{
-    int n = (size + t - 1) / t, len = (size + n - 1) / n + (n > 1 ? t / 8 : 0);
-    return len < size ? len : size;
-}
-
-/* A level optimising w x h maps with the configured net and weights (targets still empty). */
-static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
-{
-    memset(L, 0, sizeof *L);
-    L->net = &c->net;
-    L->w = w;
-    L->h = h;
-    L->wc = c->o.content_weight;
-    L->wg = c->o.style_weight;
-    L->wsw = c->o.sw_weight;
-    L->wh = c->o.hist_weight;
-    L->wtv = c->o.tv_weight;
-    L->ctx = tn_ctx_create();
-}
-
-/* Optimises one pyramid level: x (init in, result out), anchor = content target, src = source. */
-static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, const tn_image *anchor, tn_image *x)
-{
-    int W = x->width, H = x->height, T = c->o.tile;
-    int tw = tn__style_tile_len(W, T), th = tn__style_tile_len(H, T), ov = T / 8;
-    int px[TN__STYLE_MAXTILES], py[TN__STYLE_MAXTILES], nx, ny, i, j, k, ncrop;
-    float *buf = NULL, *wsum = NULL, *acc = NULL, **crops = NULL;
-    size_t tn = (size_t)tw * th, n = (size_t)W * H, q;
-    tn__style_level L;
-    tn_status st = TN_OK;
-    nx = tn__style_tile_pos(W, tw, ov, px, TN__STYLE_MAXTILES);
-    ny = tn__style_tile_pos(H, th, ov, py, TN__STYLE_MAXTILES);
-    ncrop = nx * ny;
-    tn__style_level_init(&L, c, tw, th);
-    buf = (float *)tn__alloc(tn * sizeof(float) * (size_t)(ncrop + 1));
-    crops = (float **)tn__alloc((size_t)ncrop * sizeof(float *));
-    acc = (float *)tn__calloc(2 * n * sizeof(float));
-    if (!L.ctx || !buf || !crops || !acc) {
-        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
-        goto done;
-    }
-    wsum = acc + n;
-    for (j = 0, k = 0; j < ny; j++)
-        for (i = 0; i < nx; i++, k++) {
-            crops[k] = buf + tn * (size_t)(k + 1);
-            tn__style_window(crops[k], src, px[i], py[j], tw, th);
-        }
-    if ((st = tn__style_targets(&L, (const float *const *)crops, ncrop, c->o.seed))) goto done;
-    if (!c->net.vgg && L.wh > 0 && (st = tn__style_hist_targets(&L, src->data, W, H))) goto done;
-    for (j = 0; j < ny && !st; j++)
-        for (i = 0; i < nx && !st; i++) {
-            int y, xx;
-            tn__style_window(buf, anchor, px[i], py[j], tw, th);
-            if (L.wc > 0 && (st = tn__style_content_target(&L, buf))) break;
-            tn__style_window(buf, x, px[i], py[j], tw, th);
-            if ((st = tn__style_optimise(&L, buf, c))) break;
-            for (y = 0; y < th; y++)
-                for (xx = 0; xx < tw; xx++) {
-                    float w = tn__style_ramp(xx, tw, px[i], W, ov) * tn__style_ramp(y, th, py[j], H, ov);
-                    size_t o = (size_t)(py[j] + y) * W + px[i] + xx;
-                    acc[o] += w * buf[(size_t)y * tw + xx];
-                    wsum[o] += w;
-                }
-        }
-    if (!st)
-        for (q = 0; q < n; q++) x->data[q] = acc[q] / wsum[q];
-done:
-    tn__style_level_free(&L);
-    TN_FREE(buf);
-    TN_FREE(crops);
-    TN_FREE(acc);
-    return st;
-}
-
-/* Channel 0 of img as a new one-channel map. */
-static tn_status tn__style_channel0(tn_image *dst, const tn_image *img)
-{
-    size_t i, n = (size_t)img->width * img->height;
-    tn_status st = tn_image_create(dst, img->width, img->height, 1);
-    if (st) return st;
-    for (i = 0; i < n; i++) dst->data[i] = img->data[i * img->channels];
-    return TN_OK;
-}
-
-/* Affine normalisation of a map to the net's input space: standardised (built-in) or [0, 1]
-   (VGG). Returns the offset and scale so that v = z * scale + offset. */
-static void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
-{
-    size_t i, n = (size_t)m->width * m->height;
-    double a, b;
-    if (unit_range) {
-        float lo, hi;
-        tn_image_range(m, &lo, &hi);
-        a = lo;
-        b = hi - lo;
-    } else {
-        double s = 0, s2 = 0;
-        for (i = 0; i < n; i++) s += m->data[i];
-        a = s / (double)n;
-        for (i = 0; i < n; i++) s2 += (m->data[i] - a) * (m->data[i] - a);
-        b = sqrt(s2 / (double)n);
-    }
-    if (!(b > 1e-12)) b = 1;
-    for (i = 0; i < n; i++) m->data[i] = (float)((m->data[i] - a) / b);
-    *offset = a;
-    *scale = b;
-}
-
-static tn_status tn__style_resize(tn_image *dst, const tn_image *src, int w, int h)
-{
-    int down = w <= src->width && h <= src->height;
-    return tn_image_resize(dst, src, w, h, down ? TN_RESIZE_AREA : TN_RESIZE_BICUBIC);
-}
-
-/* Size of pyramid level k (0 = full size, each level halves), at least 16 x 16. */
-static void tn__style_level_size(int W, int H, int k, int *lw, int *lh)
-{
-    *lw = (int)(W / (double)(1 << k) + 0.5);
-    *lh = (int)(H / (double)(1 << k) + 0.5);
-    if (*lw < 16) *lw = 16;
-    if (*lh < 16) *lh = 16;
-}
-
-/* Fills defaults and checks the options. */
-static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
-{
-    tn_style_opts *o = &c->o;
-    int vgg;
-    memset(c, 0, sizeof *c);
-    if (opts) *o = *opts;
-    vgg = o->vgg != NULL;
-    if (o->optimizer != TN_STYLE_LBFGS && o->optimizer != TN_STYLE_SGD && o->optimizer != TN_STYLE_ADAM)
-        return tn__fail(TN_ERR_INVALID_ARG, "style: unknown optimizer %d", (int)o->optimizer);
-    if (o->iters < 0 || o->iters > 1000000) return tn__fail(TN_ERR_INVALID_ARG, "style: iters must be in 0..1000000");
-    if (o->levels < 0 || o->levels > 8) return tn__fail(TN_ERR_INVALID_ARG, "style: levels must be in 0..8");
-    if (o->tile < 0 || (o->tile > 0 && o->tile < 32)) return tn__fail(TN_ERR_INVALID_ARG, "style: tile must be 0 or >= 32");
-    if (!o->iters) o->iters = o->optimizer == TN_STYLE_LBFGS ? 40 : (o->optimizer == TN_STYLE_ADAM ? 150 : 300);
-    if (!o->tile) o->tile = 512;
-    if (o->content_weight == 0) o->content_weight = vgg ? 2.5e-11f : 0.1f;
-    if (o->style_weight == 0) o->style_weight = vgg ? 1e-5f : 1.0f;
-    if (o->sw_weight == 0) o->sw_weight = vgg ? -1.0f : 1.0f;
-    if (o->hist_weight == 0) o->hist_weight = vgg ? -1.0f : 1.0f;
-    if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
-    if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
-    if (!(o->lr > 0)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive");
-    if (!o->seed) o->seed = 1;
-    return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
-}
-
-TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts)
-{
-    tn__style_cfg *c;
-    tn_image cm = {0, 0, 0, NULL}, sm = {0, 0, 0, NULL}, cur = {0, 0, 0, NULL};
-    double sa, sb, ca, cb;
-    int W, H, nl, k;
-    tn_status st;
-    size_t i;
-    if (!out || !content || !style || !content->data || !style->data || content->channels < 1 || style->channels < 1)
-        return tn__fail(TN_ERR_INVALID_ARG, "style: needs a content map and a style map");
-    W = content->width;
-    H = content->height;
-    if (W < 16 || H < 16 || style->width < 16 || style->height < 16)
-        return tn__fail(TN_ERR_INVALID_ARG, "style: maps must be at least 16 x 16 (content %d x %d, style %d x %d)", W, H,
-                        style->width, style->height);
-    if (tn_image_range(content, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
-    if (tn_image_range(style, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
-    if (!(c = (tn__style_cfg *)tn__alloc(sizeof *c))) return TN_ERR_OUT_OF_MEMORY;
-    if ((st = tn__style_setup(c, opts))) goto done;
-    c->user_fn = tn__progress_fn;
-    c->user_data = tn__progress_user;
-    if ((st = tn__style_channel0(&cur, style))) goto done;
-    st = tn__style_resize(&sm, &cur, W, H);
-    tn_image_free(&cur);
-    if (st || (st = tn__style_channel0(&cm, content))) goto done;
-    tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
-    tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
-    nl = c->o.levels;
-    if (!nl)
-        for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= 64;) nl++;
-    for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
-        int lw, lh, tw, th, p[TN__STYLE_MAXTILES];
-        tn__style_level_size(W, H, k, &lw, &lh);
-        tw = tn__style_tile_len(lw, c->o.tile);
-        th = tn__style_tile_len(lh, c->o.tile);
-        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, c->o.tile / 8, p, TN__STYLE_MAXTILES) *
-                         tn__style_tile_pos(lh, th, c->o.tile / 8, p, TN__STYLE_MAXTILES);
-    }
-    for (k = nl - 1; k >= 0 && !st; k--) {
-        int lw, lh;
-        tn_image s = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, x = {0, 0, 0, NULL};
-        tn__style_level_size(W, H, k, &lw, &lh);
-        st = tn__style_resize(&s, &sm, lw, lh);
-        if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
-        if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
-        if (!st) st = tn__style_level_run(c, &s, &a, &x);
-        tn_image_free(&s);
-        tn_image_free(&a);
-        tn_image_free(&cur);
-        cur = x;
-    }
-    if (!st && c->user_fn && c->user_fn(c->user_data, "style", 1.0)) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
-    if (!st) {
-        for (i = 0; i < (size_t)W * H; i++) cur.data[i] = (float)(cur.data[i] * sb + sa);
-        *out = cur;
-        cur.data = NULL;
-    }
-done:
-    tn_image_free(&cur);
-    tn_image_free(&cm);
-    tn_image_free(&sm);
-    tn_params_free(c->net.own);
-    TN_FREE(c);
-    (void)ca;
-    (void)cb;
-    return st;
-}
-
-/* ---- morphology scores (Table 1 protocol, slope histograms, power spectra) ---- */
-
-/* Slope magnitudes (central differences, in map range per map width) of a [0, 1] map. */
-static tn_status tn__style_slopes(const tn_image *m, float **out)
-{
-    int W = m->width, H = m->height, x, y;
-    float *s = (float *)tn__alloc((size_t)W * H * sizeof(float));
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            int x0 = x > 0 ? x - 1 : x, x1 = x < W - 1 ? x + 1 : x, y0 = y > 0 ? y - 1 : y, y1 = y < H - 1 ? y + 1 : y;
-            float gx = (m->data[(size_t)y * W + x1] - m->data[(size_t)y * W + x0]) / (float)(x1 - x0);
-            float gy = (m->data[(size_t)y1 * W + x] - m->data[(size_t)y0 * W + x]) / (float)(y1 - y0);
-            s[(size_t)y * W + x] = sqrtf(gx * gx + gy * gy) * (float)W;
-        }
-    *out = s;
-    return TN_OK;
-}
-
-/* L1 distance between the 64-bin slope histograms of two [0, 1] maps of the same size; bins span
-   0 .. the larger 99.5th percentile, larger slopes go to the last bin. */
-static tn_status tn__slope_hist_dist(const tn_image *a, const tn_image *b, double *dist)
-{
-    float *sa = NULL, *sb = NULL, *srt = NULL;
-    size_t n = (size_t)a->width * a->height, i;
-    double ha[64], hb[64], hi, d = 0;
-    tn_status st;
-    if ((st = tn__style_slopes(a, &sa)) || (st = tn__style_slopes(b, &sb))) goto done;
-    if (!(srt = (float *)tn__alloc(n * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-    if ((st = tn__style_sort_rows(sa, 1, n, srt))) goto done;
-    hi = srt[(size_t)(0.995 * (double)(n - 1))];
-    if ((st = tn__style_sort_rows(sb, 1, n, srt))) goto done;
-    if (srt[(size_t)(0.995 * (double)(n - 1))] > hi) hi = srt[(size_t)(0.995 * (double)(n - 1))];
-    if (!(hi > 0)) hi = 1;
-    memset(ha, 0, sizeof ha);
-    memset(hb, 0, sizeof hb);
-    for (i = 0; i < n; i++) {
-        int ia = (int)(sa[i] / hi * 64), ib = (int)(sb[i] / hi * 64);
-        ha[ia > 63 ? 63 : ia] += 1.0 / (double)n;
-        hb[ib > 63 ? 63 : ib] += 1.0 / (double)n;
-    }
-    for (i = 0; i < 64; i++) d += fabs(ha[i] - hb[i]);
-    *dist = d;
-done:
-    TN_FREE(sa);
-    TN_FREE(sb);
-    TN_FREE(srt);
-    return st;
-}
-
-/* cos and sin tables of the n-point DFT as n x n matrices (angles reduced mod n for precision). */
-static void tn__dft_tables(int n, float *cs, float *sn)
-{
-    int j, k;
-    for (j = 0; j < n; j++)
-        for (k = 0; k < n; k++) {
-            double a = 2.0 * 3.14159265358979323846 * (double)(((long long)j * k) % n) / (double)n;
-            cs[(size_t)j * n + k] = (float)cos(a);
-            sn[(size_t)j * n + k] = (float)sin(a);
-        }
-}
-
-/* Radially averaged power spectrum of a Hann-windowed, mean-removed map: nb bins of normalised
-   radius r = |(kx / W, ky / H)| * min(W, H), r = 1 .. nb. The 2-D DFT is four matrix products. */
-static tn_status tn__style_radial_spectrum(const tn_image *m, double *bins, int nb)
-{
-    int W = m->width, H = m->height, x, y;
-    size_t n = (size_t)W * H, i;
-    float *cw, *sw, *ch, *sh, *X, *A, *B, *R, *I;
-    double mean = 0, cnt[1024];
-    TN_ASSERT(nb <= 1024);
-    cw = (float *)tn__alloc((2 * (size_t)W * W + 2 * (size_t)H * H + 5 * n) * sizeof(float));
-    if (!cw) return TN_ERR_OUT_OF_MEMORY;
-    sw = cw + (size_t)W * W;
-    ch = sw + (size_t)W * W;
-    sh = ch + (size_t)H * H;
-    X = sh + (size_t)H * H;
-    A = X + n;
-    B = A + n;
-    R = B + n;
-    I = R + n;
-    tn__dft_tables(W, cw, sw);
-    tn__dft_tables(H, ch, sh);
-    for (i = 0; i < n; i++) mean += m->data[i];
-    mean /= (double)n;
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            double wy = 0.5 - 0.5 * cos(2 * 3.14159265358979323846 * (y + 0.5) / H);
-            double wx = 0.5 - 0.5 * cos(2 * 3.14159265358979323846 * (x + 0.5) / W);
-            X[(size_t)y * W + x] = (float)((m->data[(size_t)y * W + x] - mean) * wx * wy);
-        }
-    /* F = (Ch - i Sh) X (Cw - i Sw): Re = Ch A - Sh B, Im = -(Sh A + Ch B), A = X Cw, B = X Sw */
-    tn_sgemm(0, 0, H, W, W, 1.0f, X, W, cw, W, 0.0f, A, W);
-    tn_sgemm(0, 0, H, W, W, 1.0f, X, W, sw, W, 0.0f, B, W);
-    tn_sgemm(0, 0, H, W, H, 1.0f, ch, H, A, W, 0.0f, R, W);
-    tn_sgemm(0, 0, H, W, H, -1.0f, sh, H, B, W, 1.0f, R, W);
-    tn_sgemm(0, 0, H, W, H, 1.0f, sh, H, A, W, 0.0f, I, W);
-    tn_sgemm(0, 0, H, W, H, 1.0f, ch, H, B, W, 1.0f, I, W);
-    memset(cnt, 0, sizeof cnt);
-    for (i = 0; i < (size_t)nb; i++) bins[i] = 0;
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            double fx = (x <= W / 2 ? x : x - W) / (double)W, fy = (y <= H / 2 ? y : y - H) / (double)H;
-            int r = (int)(sqrt(fx * fx + fy * fy) * (W < H ? W : H) + 0.5);
-            size_t o = (size_t)y * W + x;
-            if (r < 1 || r > nb) continue;
-            bins[r - 1] += (double)R[o] * R[o] + (double)I[o] * I[o];
-            cnt[r - 1] += 1;
-        }
-    for (i = 0; i < (size_t)nb; i++) bins[i] = cnt[i] > 0 ? bins[i] / cnt[i] : 0;
-    TN_FREE(cw);
-    return TN_OK;
-}
-
-/* Mean |log10(Pa / Pb)| over the radial bins of two maps of the same size. */
-static tn_status tn__spectrum_dist(const tn_image *a, const tn_image *b, double *dist)
-{
-    int nb = (a->width < a->height ? a->width : a->height) / 2 - 1, i, used = 0;
-    double *pa, *pb, d = 0;
-    tn_status st;
-    if (nb > 1024) nb = 1024;
-    if (nb < 1) return tn__fail(TN_ERR_INVALID_ARG, "spectrum: map too small");
-    pa = (double *)tn__alloc(2 * (size_t)nb * sizeof(double));
-    if (!pa) return TN_ERR_OUT_OF_MEMORY;
-    pb = pa + nb;
-    if (!(st = tn__style_radial_spectrum(a, pa, nb)) && !(st = tn__style_radial_spectrum(b, pb, nb))) {
-        for (i = 0; i < nb; i++)
-            if (pa[i] > 0 && pb[i] > 0) {
-                d += fabs(log10(pa[i] / pb[i]));
-                used++;
-            }
-        *dist = used ? d / used : 0;
-    }
-    TN_FREE(pa);
-    return st;
-}
-
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out)
-{
-    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL};
-    tn_status st;
-    if (!map || !source || !out || !map->data || !source->data || map->channels < 1 || source->channels < 1)
-        return tn__fail(TN_ERR_INVALID_ARG, "style compare: needs a map and a source");
-    if (map->width < 16 || map->height < 16 || source->width < 2 || source->height < 2)
-        return tn__fail(TN_ERR_INVALID_ARG, "style compare: the map must be at least 16 x 16");
-    if (tn_image_range(map, NULL, NULL) || tn_image_range(source, NULL, NULL))
-        return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
-    if (!(st = tn__style_channel0(&a, map)) && !(st = tn__style_channel0(&t, source)) &&
-        !(st = tn__style_resize(&b, &t, map->width, map->height))) {
-        tn__normalise01(&a);
-        tn__normalise01(&b);
-        memset(out, 0, sizeof *out);
-        if (!(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__slope_hist_dist(&a, &b, &out->slope_hist_dist)))
-            st = tn__spectrum_dist(&a, &b, &out->spectrum_dist);
-    }
-    tn_image_free(&a);
-    tn_image_free(&b);
-    tn_image_free(&t);
-    return st;
-}
-
-/* --------------------------------------------------------------------------------------------
    >>sketch  (@@sketch implementation)
    -------------------------------------------------------------------------------------------- */
 
@@ -12162,27 +11089,17 @@ static tn_status tn__drainage(const tn_image *dem, int threshold, double *densit
     return TN_OK;
 }
 
-TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts, tn_realism *out)
+/* The morphology part of the realism report: slope and curvature histogram distances and the
+   radially averaged spectra (distance and log-log slopes). Also the style scores (>>style). */
+static tn_status tn__realism_shape(const tn_image *ref, const tn_image *img, const tn_realism_opts *o, tn_realism *r)
 {
-    tn_realism_opts o;
-    tn_realism r;
     float *sa = NULL, *ca = NULL, *sb = NULL, *cb = NULL;
     size_t na = 0, nb = 0, i;
     double spa[TN__SPEC_BINS], spb[TN__SPEC_BINS], f_lo, mean_s = 0, mean_c = 0, d2 = 0, dm = 0;
     float hi_s = 0, hi_c = 0;
-    int Sa, Sb, k;
+    int Sa, Sb, k, s0 = 16;
     tn_status st;
-    TN_ASSERT(out);
-    if ((st = tn__dem_check(ref, 1, "realism (reference)")) || (st = tn__dem_check(img, 1, "realism (terrain)"))) return st;
-    if (ref->width < 16 || ref->height < 16 || img->width < 16 || img->height < 16)
-        return tn__fail(TN_ERR_INVALID_ARG, "realism: both terrains must be at least 16 x 16");
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0)
-        return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing and threshold must be >= 0");
-    if (o.dx_b == 0) { o.dx_b = o.dx_a; if (o.dy_b == 0) o.dy_b = o.dy_a; }
-    memset(&r, 0, sizeof r);
-    if ((st = tn__slope_curv(ref, o.dx_a, o.dy_a, &sa, &ca, &na)) || (st = tn__slope_curv(img, o.dx_b, o.dy_b, &sb, &cb, &nb)))
+    if ((st = tn__slope_curv(ref, o->dx_a, o->dy_a, &sa, &ca, &na)) || (st = tn__slope_curv(img, o->dx_b, o->dy_b, &sb, &cb, &nb)))
         goto done;
     for (i = 0; i < na; i++) {
         mean_s += sa[i];
@@ -12196,15 +11113,11 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
     }
     mean_s /= (double)na;
     mean_c /= (double)na;
-    r.slope_distance = tn__hist_emd(sa, na, sb, nb, 0.0f, hi_s, mean_s);
-    r.curvature_distance = tn__hist_emd(ca, na, cb, nb, -hi_c, hi_c, mean_c);
-    if ((st = tn__progress("realism", 0.3))) goto done;
+    r->slope_distance = tn__hist_emd(sa, na, sb, nb, 0.0f, hi_s, mean_s);
+    r->curvature_distance = tn__hist_emd(ca, na, cb, nb, -hi_c, hi_c, mean_c);
     /* spectra on common bands: from 2 cycles across the smaller crop to Nyquist */
-    {
-        int s0 = 16;
-        while (s0 * 2 <= ref->width && s0 * 2 <= ref->height && s0 * 2 <= img->width && s0 * 2 <= img->height && s0 < 4096) s0 *= 2;
-        f_lo = 2.0 / s0;
-    }
+    while (s0 * 2 <= ref->width && s0 * 2 <= ref->height && s0 * 2 <= img->width && s0 * 2 <= img->height && s0 < 4096) s0 *= 2;
+    f_lo = 2.0 / s0;
     if ((st = tn__radial_spectrum(ref, f_lo, spa, &Sa)) || (st = tn__radial_spectrum(img, f_lo, spb, &Sb))) goto done;
     for (k = 0; k < TN__SPEC_BINS; k++)
         if (spa[k] > 0 && spb[k] > 0) {
@@ -12212,13 +11125,37 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
             d2 += d * d;
             dm += 1;
         }
-    r.spectrum_distance = dm > 0 ? sqrt(d2 / dm) : 0.0;
-    r.spectrum_slope_a = tn__spectrum_slope(spa, f_lo);
-    r.spectrum_slope_b = tn__spectrum_slope(spb, f_lo);
-    if ((st = tn__progress("realism", 0.6))) goto done;
+    r->spectrum_distance = dm > 0 ? sqrt(d2 / dm) : 0.0;
+    r->spectrum_slope_a = tn__spectrum_slope(spa, f_lo);
+    r->spectrum_slope_b = tn__spectrum_slope(spb, f_lo);
+done:
+    TN_FREE(sa);
+    TN_FREE(ca);
+    TN_FREE(sb);
+    TN_FREE(cb);
+    return st;
+}
+
+TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts, tn_realism *out)
+{
+    tn_realism_opts o;
+    tn_realism r;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__dem_check(ref, 1, "realism (reference)")) || (st = tn__dem_check(img, 1, "realism (terrain)"))) return st;
+    if (ref->width < 16 || ref->height < 16 || img->width < 16 || img->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: both terrains must be at least 16 x 16");
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing and threshold must be >= 0");
+    if (o.dx_b == 0) { o.dx_b = o.dx_a; if (o.dy_b == 0) o.dy_b = o.dy_a; }
+    memset(&r, 0, sizeof r);
+    if ((st = tn__realism_shape(ref, img, &o, &r))) return st;
+    if ((st = tn__progress("realism", 0.6))) return st;
     if ((st = tn__drainage(ref, o.threshold, &r.drainage_density_a, &r.bifurcation_ratio_a)) ||
         (st = tn__drainage(img, o.threshold, &r.drainage_density_b, &r.bifurcation_ratio_b)))
-        goto done;
+        return st;
     if (ref->width == img->width && ref->height == img->height && ref->width >= 11 && ref->height >= 11) {
         tn_image a1 = *ref, b1 = *img;
         tn_image ta = {0, 0, 0, NULL}, tb = {0, 0, 0, NULL};
@@ -12226,7 +11163,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         if (ref->channels != 1 || img->channels != 1) { /* compare channel 0 only */
             if ((st = tn__channel0_image(ref, &ta)) || (st = tn__channel0_image(img, &tb))) {
                 tn_image_free(&ta);
-                goto done;
+                return st;
             }
             a1 = ta;
             b1 = tb;
@@ -12234,7 +11171,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         st = tn_compare(&a1, &b1, 0.0, &m);
         tn_image_free(&ta);
         tn_image_free(&tb);
-        if (st) goto done;
+        if (st) return st;
         r.ssim = m.ssim;
         r.psnr = m.psnr;
     } else {
@@ -12249,12 +11186,952 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         r.distance = s / 6.0;
     }
     st = tn__progress("realism", 1.0);
-done:
-    TN_FREE(sa);
-    TN_FREE(ca);
-    TN_FREE(sb);
-    TN_FREE(cb);
     if (!st) *out = r;
+    return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>style  (@@style implementation)
+   One evaluation = reset the level's arena, run the feature net on the current map with the
+   tape on, sum the loss terms, backward; the gradient wrt the map drives L-BFGS / SGD / Adam.
+   Targets (source Grams, sorted source projections, sorted heights and slopes, content
+   features) are computed once per pyramid level and kept outside the arena.
+   -------------------------------------------------------------------------------------------- */
+
+/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
+static uint32_t tn__float_key(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
+   (float keys are exact, so ties keep index order and the result is deterministic).
+   scratch holds 3 * n uint32. */
+static void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
+{
+    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
+    size_t cnt[2048], i;
+    int pass;
+    for (i = 0; i < n; i++) {
+        key[i] = tn__float_key(v[i]);
+        ia[i] = (uint32_t)i;
+    }
+    for (pass = 0; pass < 3; pass++) {
+        int sh = pass * 11;
+        size_t sum = 0;
+        memset(cnt, 0, sizeof cnt);
+        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
+        for (i = 0; i < 2048; i++) {
+            size_t c = cnt[i];
+            cnt[i] = sum;
+            sum += c;
+        }
+        for (i = 0; i < n; i++) {
+            size_t d = cnt[(key[i] >> sh) & 2047]++;
+            k2[d] = key[i];
+            i2[d] = ia[i];
+        }
+        t = key; key = k2; k2 = t;
+        t = ia; ia = i2; i2 = t;
+    }
+    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
+}
+
+/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
+static float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
+{
+    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
+    return sorted[j < nt ? j : nt - 1];
+}
+
+/* Per-row sorting work, rows split round-robin over threads (each row's result is independent of
+   the split). mode 0: sorted copy of each row into out; mode 1: residual of the sorted row
+   against the target (written back at the unsorted positions) and the row's squared sum. */
+typedef struct tn__rowsort_job {
+    const float *x, *target;
+    float *out;
+    double *rowsum;
+    size_t rows, n, nt;
+    int mode, failed;
+} tn__rowsort_job;
+
+static void tn__rowsort_task(void *ctx, int ith, int nth)
+{
+    tn__rowsort_job *j = (tn__rowsort_job *)ctx;
+    uint32_t *idx = (uint32_t *)TN_MALLOC(4 * j->n * sizeof(uint32_t));
+    size_t r, i;
+    if (!idx) {
+        j->failed = 1;
+        return;
+    }
+    for (r = (size_t)ith; r < j->rows; r += (size_t)nth) {
+        const float *x = j->x + r * j->n;
+        float *o = j->out + r * j->n;
+        tn__argsort_f32(x, j->n, idx, idx + j->n);
+        if (j->mode == 0) {
+            for (i = 0; i < j->n; i++) o[i] = x[idx[i]];
+        } else {
+            const float *t = j->target + r * j->nt;
+            double s = 0;
+            for (i = 0; i < j->n; i++) {
+                float d = x[idx[i]] - tn__quantile_at(t, j->nt, i, j->n);
+                o[idx[i]] = d;
+                s += (double)d * d;
+            }
+            j->rowsum[r] = s;
+        }
+    }
+    TN_FREE(idx);
+}
+
+static tn_status tn__rowsort_run(tn__rowsort_job *j)
+{
+    j->failed = 0;
+    tn_parallel_run(tn__rowsort_task, j);
+    return j->failed ? tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory sorting %zu values", j->n) : TN_OK;
+}
+
+static void tn__sorted_match_backward(tn_ctx *ctx, tn_tensor *out)
+{
+    tn_tensor *x = out->src[0];
+    const float *r = (const float *)out->aux;
+    float *g = tn__grad(ctx, x), k;
+    size_t i;
+    if (!g) return;
+    k = 2.0f * out->grad[0] * out->fp[0];
+    for (i = 0; i < x->numel; i++) g[i] += k * r[i];
+}
+
+/* scale * mean((sort(row of x) - target row)^2) over the rows of x (rows x n): the squared 1-D
+   Wasserstein-2 distance between each row's values and the sorted target row (length nt). */
+static tn_tensor *tn__sorted_match(tn_ctx *ctx, tn_tensor *x, const float *target, size_t nt, float scale)
+{
+    int one = 1;
+    tn__rowsort_job j;
+    tn_tensor *o;
+    double s = 0;
+    size_t r;
+    if (!x) return NULL;
+    o = tn__op(ctx, 1, &one, tn__sorted_match_backward, x, NULL, NULL);
+    if (!o) return NULL;
+    memset(&j, 0, sizeof j);
+    j.x = x->data;
+    j.target = target;
+    j.rows = (size_t)x->shape[0];
+    j.n = x->numel / j.rows;
+    j.nt = nt;
+    j.mode = 1;
+    j.out = tn__ctx_floats(ctx, x->numel, 0);
+    j.rowsum = (double *)tn_ctx_alloc(ctx, j.rows * sizeof(double));
+    if (!j.out || !j.rowsum) return NULL;
+    if (tn__rowsort_run(&j)) {
+        if (!ctx->status) ctx->status = TN_ERR_OUT_OF_MEMORY;
+        return NULL;
+    }
+    for (r = 0; r < j.rows; r++) s += j.rowsum[r];
+    o->aux = j.out;
+    o->fp[0] = scale / (float)x->numel;
+    o->data[0] = (float)(s * scale / (double)x->numel);
+    return o;
+}
+
+/* ---- feature networks ---- */
+
+#define TN__STYLE_MAXL 5
+static const int tn__sn_ch[4] = {24, 32, 48, 64}, tn__sn_k[4] = {5, 3, 3, 3};
+static const int tn__vgg_groups[5] = {2, 2, 4, 4, 4}, tn__vgg_ch[5] = {64, 128, 256, 512, 512};
+
+typedef struct tn__style_net {
+    int vgg;
+    int nconv;
+    tn_tensor *w[16], *b[16];
+    tn_params *own; /* the built-in net's weights; VGG weights are borrowed */
+} tn__style_net;
+
+static tn_status tn__style_net_builtin(tn__style_net *net, uint64_t seed)
+{
+    tn_rng rng;
+    int l, cin = 1;
+    memset(net, 0, sizeof *net);
+    if (!(net->own = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
+    tn_rng_seed(&rng, seed, 0x57f1e);
+    for (l = 0; l < 4; l++) {
+        int shape[4], o;
+        char name[64];
+        size_t k, fan;
+        tn_tensor *w;
+        shape[0] = tn__sn_ch[l];
+        shape[1] = cin;
+        shape[2] = shape[3] = tn__sn_k[l];
+        sprintf(name, "f%d.weight", l + 1);
+        if (!(w = tn_params_add_buffer(net->own, name, 4, shape))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
+        tn_init_kaiming(w, &rng, 1.41421356f);
+        fan = w->numel / (size_t)shape[0];
+        for (o = 0; o < shape[0]; o++) { /* zero-mean filters respond to shape, not to height level */
+            float *f = w->data + (size_t)o * fan;
+            double m = 0;
+            for (k = 0; k < fan; k++) m += f[k];
+            for (k = 0; k < fan; k++) f[k] -= (float)(m / (double)fan);
+        }
+        net->w[l] = w;
+        cin = shape[0];
+    }
+    net->nconv = 4;
+    return TN_OK;
+}
+
+TN_API tn_status tn_vgg19_create(tn_params **out)
+{
+    tn_params *p = tn_params_create();
+    int g, i, cin = 3;
+    if (!out) return tn__fail(TN_ERR_INVALID_ARG, "vgg19: out is NULL");
+    if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "vgg19: out of memory");
+    for (g = 0; g < 5; g++)
+        for (i = 0; i < tn__vgg_groups[g]; i++) {
+            int ws[4], bs = tn__vgg_ch[g];
+            char name[64];
+            ws[0] = tn__vgg_ch[g];
+            ws[1] = cin;
+            ws[2] = ws[3] = 3;
+            sprintf(name, "conv%d_%d.weight", g + 1, i + 1);
+            if (!tn_params_add_buffer(p, name, 4, ws)) break;
+            sprintf(name, "conv%d_%d.bias", g + 1, i + 1);
+            if (!tn_params_add_buffer(p, name, 1, &bs)) break;
+            cin = ws[0];
+        }
+    if (tn_params_count(p) != 32) {
+        tn_params_free(p);
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "vgg19: out of memory");
+    }
+    *out = p;
+    return TN_OK;
+}
+
+TN_API tn_status tn_vgg19_load(tn_params **out, const char *path)
+{
+    tn_params *p = NULL;
+    tn_status st;
+    if (!out || !path) return tn__fail(TN_ERR_INVALID_ARG, "vgg19: NULL argument");
+    if ((st = tn_vgg19_create(&p))) return st;
+    if ((st = tn_params_load(p, path))) {
+        tn_params_free(p);
+        return st;
+    }
+    *out = p;
+    return TN_OK;
+}
+
+static tn_status tn__style_net_vgg(tn__style_net *net, const tn_params *p)
+{
+    int g, i, k = 0, cin = 3;
+    memset(net, 0, sizeof *net);
+    net->vgg = 1;
+    for (g = 0; g < 5; g++)
+        for (i = 0; i < tn__vgg_groups[g]; i++, k++) {
+            char name[64];
+            tn_tensor *w, *b;
+            sprintf(name, "conv%d_%d.weight", g + 1, i + 1);
+            w = tn_params_find(p, name);
+            sprintf(name, "conv%d_%d.bias", g + 1, i + 1);
+            b = tn_params_find(p, name);
+            if (!w || !b || w->ndim != 4 || w->shape[0] != tn__vgg_ch[g] || w->shape[1] != cin || w->shape[2] != 3 ||
+                w->shape[3] != 3 || (int)b->numel != tn__vgg_ch[g])
+                return tn__fail(TN_ERR_SHAPE, "style: the VGG-19 weights lack conv%d_%d or have the wrong shape (use tn_vgg19_load)", g + 1, i + 1);
+            net->w[k] = w;
+            net->b[k] = b;
+            cin = tn__vgg_ch[g];
+        }
+    net->nconv = k;
+    return TN_OK;
+}
+
+/* Runs the net on x (1 x 1 x H x W, in the net's input space); fills the style layers and the
+   content layer and returns how many style layers there are (0 when out of memory). */
+static int tn__style_forward(tn_ctx *ctx, const tn__style_net *net, tn_tensor *x, tn_tensor **style, tn_tensor **content)
+{
+    tn_conv_opts co;
+    tn_tensor *h = x;
+    int l;
+    memset(&co, 0, sizeof co);
+    if (!net->vgg) {
+        co.padding = TN_PADDING_REFLECT;
+        for (l = 0; l < 4; l++) {
+            if (l) h = tn_avg_pool2d(ctx, h, 2, 2);
+            co.pad = tn__sn_k[l] / 2;
+            h = tn_relu(ctx, tn_conv2d(ctx, h, net->w[l], NULL, &co));
+            style[l] = h;
+        }
+        *content = style[2];
+        return h ? 4 : 0;
+    } else {
+        static const float mean[3] = {0.485f, 0.456f, 0.406f}, sd[3] = {0.229f, 0.224f, 0.225f};
+        int g, i, k = 0;
+        h = NULL;
+        for (i = 0; i < 3; i++) {
+            tn_tensor *c = tn_scale_shift(ctx, x, 1.0f / sd[i], -mean[i] / sd[i]);
+            h = h ? tn_concat(ctx, h, c, 1) : c;
+        }
+        co.pad = 1;
+        *content = NULL;
+        for (g = 0; g < 5 && !*content; g++) {
+            if (g) h = tn_max_pool2d(ctx, h, 2, 2);
+            for (i = 0; i < tn__vgg_groups[g]; i++, k++) {
+                h = tn_relu(ctx, tn_conv2d(ctx, h, net->w[k], net->b[k], &co));
+                if (i == 0) style[g] = h;
+                if (g == 4 && i == 1) {
+                    *content = h;
+                    break;
+                }
+            }
+        }
+        return *content ? 5 : 0;
+    }
+}
+
+/* ---- one pyramid level (or one tile of it): targets, loss, gradient ---- */
+
+typedef struct tn__style_level {
+    const tn__style_net *net;
+    tn_ctx *ctx;
+    int w, h;                 /* size of the optimised map */
+    float wc, wg, wsw, wh, wtv;
+    int nstyle;
+    float *gram[TN__STYLE_MAXL];  /* C x C source Grams */
+    double gnorm[TN__STYLE_MAXL]; /* their squared Frobenius norms */
+    float *dirs[TN__STYLE_MAXL];  /* C x C random unit directions (rows) */
+    float *sorted[TN__STYLE_MAXL];/* C x snt sorted source projections */
+    size_t snt[TN__STYLE_MAXL];
+    double svar[TN__STYLE_MAXL];  /* mean square of the sorted projections */
+    int ch[TN__STYLE_MAXL];
+    float *content;           /* content-layer features of the anchor map */
+    int cshape[4];
+    double cnorm;
+    float *hsorted, *ssorted; /* sorted source heights and slopes */
+    size_t hn, sn;
+    double s2;
+    tn_status status;
+} tn__style_level;
+
+static void tn__style_level_free(tn__style_level *L)
+{
+    int l;
+    for (l = 0; l < TN__STYLE_MAXL; l++) {
+        TN_FREE(L->gram[l]);
+        TN_FREE(L->dirs[l]);
+        TN_FREE(L->sorted[l]);
+    }
+    TN_FREE(L->content);
+    TN_FREE(L->hsorted);
+    TN_FREE(L->ssorted);
+    tn_ctx_free(L->ctx);
+    memset(L, 0, sizeof *L);
+}
+
+/* Slope magnitude (forward differences) of a 1 x 1 x H x W map, as a 1 x (H-1)(W-1) row. */
+static tn_tensor *tn__style_slope(tn_ctx *ctx, tn_tensor *x)
+{
+    tn_tensor *dx, *dy, *s;
+    int shape[2];
+    tn__diffs(ctx, x, &dx, &dy);
+    s = tn_pow_abs(ctx, tn_scale_shift(ctx, tn_add(ctx, tn_square(ctx, dx), tn_square(ctx, dy)), 1.0f, 1e-6f), 0.5f);
+    if (!s) return NULL;
+    shape[0] = 1;
+    shape[1] = (int)s->numel;
+    return tn_reshape(ctx, s, 2, shape);
+}
+
+static tn_tensor *tn__style_map_tensor(tn_ctx *ctx, const float *v, int w, int h)
+{
+    tn_tensor *t = tn_tensor_4d(ctx, 1, 1, h, w);
+    if (t) memcpy(t->data, v, (size_t)w * h * sizeof(float));
+    return t;
+}
+
+static float *tn__style_dup(const float *v, size_t n)
+{
+    float *p = (float *)tn__alloc(n * sizeof(float));
+    if (p) memcpy(p, v, n * sizeof(float));
+    return p;
+}
+
+static tn_status tn__style_sort_rows(const float *x, size_t rows, size_t n, float *out)
+{
+    tn__rowsort_job j;
+    memset(&j, 0, sizeof j);
+    j.x = x;
+    j.out = out;
+    j.rows = rows;
+    j.n = n;
+    return tn__rowsort_run(&j);
+}
+
+/* Source statistics from `ncrop` crops (each w x h, the size of the optimised map): Grams are
+   averaged; each crop's sorted projections are resampled to n / ncrop values, pooled and sorted. */
+static tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
+{
+    tn_ctx *ctx = L->ctx;
+    tn_rng rng;
+    int c, l;
+    tn_status st = TN_OK;
+    float *pool[TN__STYLE_MAXL];
+    memset(pool, 0, sizeof pool);
+    tn_rng_seed(&rng, seed, 0x5d1ec7);
+    for (c = 0; c < ncrop && !st; c++) {
+        tn_tensor *x, *sf[TN__STYLE_MAXL], *cf;
+        tn_ctx_reset(ctx);
+        tn_ctx_set_grad(ctx, 0);
+        x = tn__style_map_tensor(ctx, crops[c], L->w, L->h);
+        L->nstyle = x ? tn__style_forward(ctx, L->net, x, sf, &cf) : 0;
+        if (!L->nstyle) {
+            st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
+            break;
+        }
+        for (l = 0; l < L->nstyle && !st; l++) {
+            int C = sf[l]->shape[1];
+            size_t hw = sf[l]->numel / (size_t)C, k, part = hw / (size_t)ncrop, i;
+            tn_tensor *g = tn_gram(ctx, sf[l], L->net->vgg ? 1.0f : 1.0f / (float)hw), *D, *F2, *P;
+            int shape[2];
+            L->ch[l] = C;
+            if (!g) { st = TN_ERR_OUT_OF_MEMORY; break; }
+            if (!L->gram[l] && !(L->gram[l] = (float *)tn__calloc((size_t)C * C * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
+            for (k = 0; k < (size_t)C * C; k++) L->gram[l][k] += g->data[k] / (float)ncrop;
+            if (L->net->vgg || L->wsw <= 0) continue;
+            if (!L->dirs[l]) { /* C random unit directions */
+                if (!(L->dirs[l] = (float *)tn__alloc((size_t)C * C * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
+                for (i = 0; i < (size_t)C; i++) {
+                    double s = 0;
+                    for (k = 0; k < (size_t)C; k++) {
+                        float v = tn_rng_normal(&rng);
+                        L->dirs[l][i * C + k] = v;
+                        s += (double)v * v;
+                    }
+                    for (k = 0; k < (size_t)C; k++) L->dirs[l][i * C + k] /= (float)sqrt(s > 0 ? s : 1);
+                }
+                L->snt[l] = part * (size_t)ncrop;
+                if (!(pool[l] = (float *)tn__alloc((size_t)C * L->snt[l] * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
+            }
+            D = tn_tensor_2d(ctx, C, C);
+            shape[0] = C;
+            shape[1] = (int)hw;
+            F2 = tn_reshape(ctx, sf[l], 2, shape);
+            if (D) memcpy(D->data, L->dirs[l], (size_t)C * C * sizeof(float));
+            P = tn_matmul(ctx, D, F2, 0, 0);
+            {
+                float *srt = P ? tn__ctx_floats(ctx, P->numel, 0) : NULL;
+                if (!srt || (st = tn__style_sort_rows(P->data, (size_t)C, hw, srt))) { st = st ? st : TN_ERR_OUT_OF_MEMORY; break; }
+                for (i = 0; i < (size_t)C; i++)
+                    for (k = 0; k < part; k++)
+                        pool[l][i * L->snt[l] + (size_t)c * part + k] = tn__quantile_at(srt + i * hw, hw, k, part);
+            }
+        }
+    }
+    for (l = 0; l < L->nstyle && !st; l++) {
+        size_t k, n = (size_t)L->ch[l] * L->ch[l];
+        double s = 0;
+        for (k = 0; k < n; k++) s += (double)L->gram[l][k] * L->gram[l][k];
+        L->gnorm[l] = s > 1e-30 ? s : 1e-30;
+        if (!pool[l]) continue;
+        if (!(L->sorted[l] = (float *)tn__alloc((size_t)L->ch[l] * L->snt[l] * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        if ((st = tn__style_sort_rows(pool[l], (size_t)L->ch[l], L->snt[l], L->sorted[l]))) break;
+        s = 0;
+        for (k = 0; k < (size_t)L->ch[l] * L->snt[l]; k++) s += (double)L->sorted[l][k] * L->sorted[l][k];
+        s /= (double)L->ch[l] * L->snt[l];
+        L->svar[l] = s > 1e-30 ? s : 1e-30;
+    }
+    for (l = 0; l < TN__STYLE_MAXL; l++) TN_FREE(pool[l]);
+    tn_ctx_set_grad(ctx, 1);
+    return st;
+}
+
+/* Sorted heights and slopes of the whole source level (w x h). */
+static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
+{
+    tn_ctx *ctx = L->ctx;
+    tn_tensor *x, *s;
+    tn_status st;
+    size_t k;
+    double m = 0;
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 0);
+    x = tn__style_map_tensor(ctx, src, w, h);
+    s = x ? tn__style_slope(ctx, x) : NULL;
+    tn_ctx_set_grad(ctx, 1);
+    if (!s) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    L->hn = x->numel;
+    L->sn = s->numel;
+    L->hsorted = (float *)tn__alloc(L->hn * sizeof(float));
+    L->ssorted = (float *)tn__alloc(L->sn * sizeof(float));
+    if (!L->hsorted || !L->ssorted) return TN_ERR_OUT_OF_MEMORY;
+    if ((st = tn__style_sort_rows(x->data, 1, L->hn, L->hsorted)) || (st = tn__style_sort_rows(s->data, 1, L->sn, L->ssorted))) return st;
+    for (k = 0; k < L->sn; k++) m += (double)L->ssorted[k] * L->ssorted[k];
+    L->s2 = m / (double)L->sn > 1e-30 ? m / (double)L->sn : 1e-30;
+    return TN_OK;
+}
+
+/* Content-layer features of the anchor map (w x h). */
+static tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
+{
+    tn_ctx *ctx = L->ctx;
+    tn_tensor *x, *sf[TN__STYLE_MAXL], *cf = NULL;
+    size_t k;
+    double s = 0;
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 0);
+    x = tn__style_map_tensor(ctx, anchor, L->w, L->h);
+    if (!x || !tn__style_forward(ctx, L->net, x, sf, &cf)) {
+        tn_ctx_set_grad(ctx, 1);
+        return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    }
+    tn_ctx_set_grad(ctx, 1);
+    TN_FREE(L->content);
+    if (!(L->content = tn__style_dup(cf->data, cf->numel))) return TN_ERR_OUT_OF_MEMORY;
+    memcpy(L->cshape, cf->shape, sizeof L->cshape);
+    for (k = 0; k < cf->numel; k++) s += (double)cf->data[k] * cf->data[k];
+    s /= (double)cf->numel;
+    L->cnorm = s > 1e-30 ? s : 1e-30;
+    return TN_OK;
+}
+
+static tn_tensor *tn__style_acc(tn_ctx *ctx, tn_tensor *acc, tn_tensor *term) { return acc ? tn_add(ctx, acc, term) : term; }
+
+/* The total loss of map x (1 x 1 x h x w, recorded on the tape). */
+static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
+{
+    tn_ctx *ctx = L->ctx;
+    tn_tensor *sf[TN__STYLE_MAXL], *cf = NULL, *loss = NULL, *t;
+    int l, ns = tn__style_forward(ctx, L->net, x, sf, &cf);
+    double hw0 = (double)L->w * L->h;
+    if (!ns) return NULL;
+    if (L->wc > 0) {
+        t = tn_tensor_new(ctx, 4, L->cshape);
+        if (!t) return NULL;
+        memcpy(t->data, L->content, t->numel * sizeof(float));
+        t = tn_sum(ctx, tn_square(ctx, tn_sub(ctx, cf, t)));
+        loss = tn_scale_shift(ctx, t, L->net->vgg ? 0.5f * L->wc : (float)(L->wc / (L->cnorm * (double)cf->numel)), 0.0f);
+    }
+    for (l = 0; l < ns; l++) {
+        int C = sf[l]->shape[1];
+        size_t hw = sf[l]->numel / (size_t)C;
+        if (L->wg > 0) {
+            tn_tensor *g = tn_gram(ctx, sf[l], L->net->vgg ? 1.0f : 1.0f / (float)hw), *gt = tn_tensor_2d(ctx, C, C);
+            double k = L->net->vgg ? L->wg / (4.0 * 9.0 * hw0 * hw0) : L->wg / (L->gnorm[l] * ns);
+            if (!gt) return NULL;
+            memcpy(gt->data, L->gram[l], (size_t)C * C * sizeof(float));
+            loss = tn__style_acc(ctx, loss, tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, g, gt))), (float)k, 0.0f));
+        }
+        if (L->wsw > 0 && L->sorted[l]) {
+            tn_tensor *D = tn_tensor_2d(ctx, C, C), *P;
+            int shape[2];
+            if (!D) return NULL;
+            memcpy(D->data, L->dirs[l], (size_t)C * C * sizeof(float));
+            shape[0] = C;
+            shape[1] = (int)hw;
+            P = tn_matmul(ctx, D, tn_reshape(ctx, sf[l], 2, shape), 0, 0);
+            loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, P, L->sorted[l], L->snt[l], (float)(L->wsw / (L->svar[l] * ns))));
+        }
+    }
+    if (L->wh > 0 && L->hsorted) {
+        int shape[2];
+        shape[0] = 1;
+        shape[1] = (int)x->numel;
+        loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, tn_reshape(ctx, x, 2, shape), L->hsorted, L->hn, L->wh));
+        loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, tn__style_slope(ctx, x), L->ssorted, L->sn, (float)(L->wh / L->s2)));
+    }
+    if (L->wtv > 0) {
+        t = tn_tv_loss(ctx, x, L->net->vgg ? 2.5f : 2.0f);
+        loss = tn__style_acc(ctx, loss, tn_scale_shift(ctx, t, L->net->vgg ? L->wtv : (float)(L->wtv / hw0), 0.0f));
+    }
+    return loss;
+}
+
+/* Loss and gradient at xd (the tn_lbfgs callback). Failures are kept in L->status; NaN is returned. */
+static float tn__style_eval(void *user, const float *xd, float *grad)
+{
+    tn__style_level *L = (tn__style_level *)user;
+    tn_ctx *ctx = L->ctx;
+    size_t n = (size_t)L->w * L->h;
+    tn_tensor *x, *loss;
+    tn_status st;
+    if (L->status) return NAN;
+    tn_ctx_reset(ctx);
+    x = tn_tensor_requires_grad(ctx, tn__style_map_tensor(ctx, xd, L->w, L->h));
+    loss = x ? tn__style_loss(L, x) : NULL;
+    if (!loss) {
+        L->status = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_INVALID_ARG, "style: no loss term is switched on");
+        return NAN;
+    }
+    if ((st = tn_backward(ctx, loss))) {
+        L->status = st;
+        return NAN;
+    }
+    memcpy(grad, x->grad, n * sizeof(float));
+    if (!(loss->data[0] == loss->data[0]) || loss->data[0] > FLT_MAX) {
+        L->status = tn__fail(TN_ERR_NUMERIC, "style: the loss diverged (NaN/Inf); lower the learning rate");
+        return NAN;
+    }
+    return loss->data[0];
+}
+
+/* ---- optimisation ---- */
+
+typedef struct tn__style_cfg {
+    tn_style_opts o;
+    tn__style_net net;
+    double work_done, work_total; /* progress in pixel-iterations */
+    tn_progress_fn user_fn;
+    void *user_data;
+    double span;
+} tn__style_cfg;
+
+/* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer. */
+static int tn__style_progress_fwd(void *user, const char *stage, double f)
+{
+    tn__style_cfg *c = (tn__style_cfg *)user;
+    (void)stage;
+    return c->user_fn ? c->user_fn(c->user_data, "style", (c->work_done + f * c->span) / c->work_total) : 0;
+}
+
+static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
+{
+    size_t n = (size_t)L->w * L->h;
+    int it, iters = c->o.iters;
+    tn_status st = TN_OK;
+    c->span = (double)iters * (double)n;
+    if (c->o.optimizer == TN_STYLE_LBFGS) {
+        tn_lbfgs_opts lo;
+        float f;
+        memset(&lo, 0, sizeof lo);
+        lo.max_iter = iters;
+        lo.history = 10;
+        lo.tol = 1e-9f;
+        tn_set_progress(tn__style_progress_fwd, c);
+        st = tn_lbfgs(x, n, tn__style_eval, L, &lo, &f);
+        tn_set_progress(c->user_fn, c->user_data);
+        if (L->status) st = L->status; /* the real cause, not "objective is NaN" */
+        if (st == TN_ERR_CANCELLED) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
+    } else {
+        tn_params *p = tn_params_create();
+        tn_optim_opts oo;
+        tn_optim *opt = NULL;
+        tn_tensor *t = NULL;
+        int len = (int)n;
+        memset(&oo, 0, sizeof oo);
+        oo.kind = c->o.optimizer == TN_STYLE_ADAM ? TN_OPTIM_ADAM : TN_OPTIM_SGD;
+        oo.lr = c->o.lr;
+        if (c->o.optimizer == TN_STYLE_SGD) { /* the paper's schedule: x0.96 every 1/20 of the run */
+            oo.lr_decay = 0.96f;
+            oo.decay_every = iters / 20 > 0 ? iters / 20 : 1;
+        }
+        if (p) t = tn_params_add(p, "map", 1, &len);
+        if (t) opt = tn_optim_create(p, &oo);
+        if (!opt) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
+        if (t) memcpy(t->data, x, n * sizeof(float));
+        for (it = 0; it < iters && !st; it++) {
+            memset(t->grad, 0, n * sizeof(float));
+            tn__style_eval(L, t->data, t->grad);
+            if ((st = L->status)) break;
+            tn_optim_step(opt);
+            if (c->user_fn && c->user_fn(c->user_data, "style", (c->work_done + (double)(it + 1) * n) / c->work_total))
+                st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
+        }
+        if (!st) memcpy(x, t->data, n * sizeof(float));
+        tn_optim_free(opt);
+        tn_params_free(p);
+    }
+    c->work_done += c->span;
+    return st;
+}
+
+/* Copies the w x h window at (x0, y0) of a one-channel map into dst. */
+static void tn__style_window(float *dst, const tn_image *m, int x0, int y0, int w, int h)
+{
+    int y;
+    for (y = 0; y < h; y++) memcpy(dst + (size_t)y * w, m->data + (size_t)(y0 + y) * m->width + x0, (size_t)w * sizeof(float));
+}
+
+/* Tile origins along one axis: tiles of length t overlapping by ov, the last one flush with the end. */
+static int tn__style_tile_pos(int size, int t, int ov, int *pos, int max)
+{
+    int n = 0, p = 0;
+    if (t >= size) {
+        pos[0] = 0;
+        return 1;
+    }
+    for (;;) {
+        if (p + t >= size || n == max - 1) {
+            pos[n++] = size - t;
+            return n;
+        }
+        pos[n++] = p;
+        p += t - ov;
+    }
+}
+
+/* Blend weight of pixel i of a tile of length t at origin p on an axis of length size. */
+static float tn__style_ramp(int i, int t, int p, int size, int ov)
+{
+    float w = 1.0f;
+    if (p > 0 && i < ov) w = (float)(i + 1) / (float)(ov + 1);
+    if (p + t < size && t - 1 - i < ov) {
+        float v = (float)(t - i) / (float)(ov + 1);
+        if (v < w) w = v;
+    }
+    return w;
+}
+
+#define TN__STYLE_MAXTILES 64
+
+/* Tile length along an axis of `size` for tiles of nominal length t overlapping by t / 8: the
+   fewest tiles of at most t that cover it, grown by the overlap (1024 -> 2 tiles of 576). */
+static int tn__style_tile_len(int size, int t)
+{
+    int n = (size + t - 1) / t, len = (size + n - 1) / n + (n > 1 ? t / 8 : 0);
+    return len < size ? len : size;
+}
+
+/* A level optimising w x h maps with the configured net and weights (targets still empty). */
+static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
+{
+    memset(L, 0, sizeof *L);
+    L->net = &c->net;
+    L->w = w;
+    L->h = h;
+    L->wc = c->o.content_weight;
+    L->wg = c->o.style_weight;
+    L->wsw = c->o.sw_weight;
+    L->wh = c->o.hist_weight;
+    L->wtv = c->o.tv_weight;
+    L->ctx = tn_ctx_create();
+}
+
+/* Optimises one pyramid level: x (init in, result out), anchor = content target, src = source. */
+static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, const tn_image *anchor, tn_image *x)
+{
+    int W = x->width, H = x->height, T = c->o.tile;
+    int tw = tn__style_tile_len(W, T), th = tn__style_tile_len(H, T), ov = T / 8;
+    int px[TN__STYLE_MAXTILES], py[TN__STYLE_MAXTILES], nx, ny, i, j, k, ncrop;
+    float *buf = NULL, *wsum = NULL, *acc = NULL, **crops = NULL;
+    size_t tn = (size_t)tw * th, n = (size_t)W * H, q;
+    tn__style_level L;
+    tn_status st = TN_OK;
+    nx = tn__style_tile_pos(W, tw, ov, px, TN__STYLE_MAXTILES);
+    ny = tn__style_tile_pos(H, th, ov, py, TN__STYLE_MAXTILES);
+    ncrop = nx * ny;
+    tn__style_level_init(&L, c, tw, th);
+    buf = (float *)tn__alloc(tn * sizeof(float) * (size_t)(ncrop + 1));
+    crops = (float **)tn__alloc((size_t)ncrop * sizeof(float *));
+    acc = (float *)tn__calloc(2 * n * sizeof(float));
+    if (!L.ctx || !buf || !crops || !acc) {
+        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "style: out of memory");
+        goto done;
+    }
+    wsum = acc + n;
+    for (j = 0, k = 0; j < ny; j++)
+        for (i = 0; i < nx; i++, k++) {
+            crops[k] = buf + tn * (size_t)(k + 1);
+            tn__style_window(crops[k], src, px[i], py[j], tw, th);
+        }
+    if ((st = tn__style_targets(&L, (const float *const *)crops, ncrop, c->o.seed))) goto done;
+    if (!c->net.vgg && L.wh > 0 && (st = tn__style_hist_targets(&L, src->data, W, H))) goto done;
+    for (j = 0; j < ny && !st; j++)
+        for (i = 0; i < nx && !st; i++) {
+            int y, xx;
+            tn__style_window(buf, anchor, px[i], py[j], tw, th);
+            if (L.wc > 0 && (st = tn__style_content_target(&L, buf))) break;
+            tn__style_window(buf, x, px[i], py[j], tw, th);
+            if ((st = tn__style_optimise(&L, buf, c))) break;
+            for (y = 0; y < th; y++)
+                for (xx = 0; xx < tw; xx++) {
+                    float w = tn__style_ramp(xx, tw, px[i], W, ov) * tn__style_ramp(y, th, py[j], H, ov);
+                    size_t o = (size_t)(py[j] + y) * W + px[i] + xx;
+                    acc[o] += w * buf[(size_t)y * tw + xx];
+                    wsum[o] += w;
+                }
+        }
+    if (!st)
+        for (q = 0; q < n; q++) x->data[q] = acc[q] / wsum[q];
+done:
+    tn__style_level_free(&L);
+    TN_FREE(buf);
+    TN_FREE(crops);
+    TN_FREE(acc);
+    return st;
+}
+
+/* Channel 0 of img as a new one-channel map. */
+static tn_status tn__style_channel0(tn_image *dst, const tn_image *img)
+{
+    size_t i, n = (size_t)img->width * img->height;
+    tn_status st = tn_image_create(dst, img->width, img->height, 1);
+    if (st) return st;
+    for (i = 0; i < n; i++) dst->data[i] = img->data[i * img->channels];
+    return TN_OK;
+}
+
+/* Affine normalisation of a map to the net's input space: standardised (built-in) or [0, 1]
+   (VGG). Returns the offset and scale so that v = z * scale + offset. */
+static void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
+{
+    size_t i, n = (size_t)m->width * m->height;
+    double a, b;
+    if (unit_range) {
+        float lo, hi;
+        tn_image_range(m, &lo, &hi);
+        a = lo;
+        b = hi - lo;
+    } else {
+        double s = 0, s2 = 0;
+        for (i = 0; i < n; i++) s += m->data[i];
+        a = s / (double)n;
+        for (i = 0; i < n; i++) s2 += (m->data[i] - a) * (m->data[i] - a);
+        b = sqrt(s2 / (double)n);
+    }
+    if (!(b > 1e-12)) b = 1;
+    for (i = 0; i < n; i++) m->data[i] = (float)((m->data[i] - a) / b);
+    *offset = a;
+    *scale = b;
+}
+
+static tn_status tn__style_resize(tn_image *dst, const tn_image *src, int w, int h)
+{
+    int down = w <= src->width && h <= src->height;
+    return tn_image_resize(dst, src, w, h, down ? TN_RESIZE_AREA : TN_RESIZE_BICUBIC);
+}
+
+/* Size of pyramid level k (0 = full size, each level halves), at least 16 x 16. */
+static void tn__style_level_size(int W, int H, int k, int *lw, int *lh)
+{
+    *lw = (int)(W / (double)(1 << k) + 0.5);
+    *lh = (int)(H / (double)(1 << k) + 0.5);
+    if (*lw < 16) *lw = 16;
+    if (*lh < 16) *lh = 16;
+}
+
+/* Fills defaults and checks the options. */
+static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
+{
+    tn_style_opts *o = &c->o;
+    int vgg;
+    memset(c, 0, sizeof *c);
+    if (opts) *o = *opts;
+    vgg = o->vgg != NULL;
+    if (o->optimizer != TN_STYLE_LBFGS && o->optimizer != TN_STYLE_SGD && o->optimizer != TN_STYLE_ADAM)
+        return tn__fail(TN_ERR_INVALID_ARG, "style: unknown optimizer %d", (int)o->optimizer);
+    if (o->iters < 0 || o->iters > 1000000) return tn__fail(TN_ERR_INVALID_ARG, "style: iters must be in 0..1000000");
+    if (o->levels < 0 || o->levels > 8) return tn__fail(TN_ERR_INVALID_ARG, "style: levels must be in 0..8");
+    if (o->tile < 0 || (o->tile > 0 && o->tile < 32)) return tn__fail(TN_ERR_INVALID_ARG, "style: tile must be 0 or >= 32");
+    if (!o->iters) o->iters = o->optimizer == TN_STYLE_LBFGS ? 40 : (o->optimizer == TN_STYLE_ADAM ? 150 : 300);
+    if (!o->tile) o->tile = 512;
+    if (o->content_weight == 0) o->content_weight = vgg ? 2.5e-11f : 0.1f;
+    if (o->style_weight == 0) o->style_weight = vgg ? 1e-5f : 1.0f;
+    if (o->sw_weight == 0) o->sw_weight = vgg ? -1.0f : 1.0f;
+    if (o->hist_weight == 0) o->hist_weight = vgg ? -1.0f : 1.0f;
+    if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
+    if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
+    if (!(o->lr > 0)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive");
+    if (!o->seed) o->seed = 1;
+    return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
+}
+
+TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts)
+{
+    tn__style_cfg *c;
+    tn_image cm = {0, 0, 0, NULL}, sm = {0, 0, 0, NULL}, cur = {0, 0, 0, NULL};
+    double sa, sb, ca, cb;
+    int W, H, nl, k;
+    tn_status st;
+    size_t i;
+    if (!out || !content || !style || !content->data || !style->data || content->channels < 1 || style->channels < 1)
+        return tn__fail(TN_ERR_INVALID_ARG, "style: needs a content map and a style map");
+    W = content->width;
+    H = content->height;
+    if (W < 16 || H < 16 || style->width < 16 || style->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "style: maps must be at least 16 x 16 (content %d x %d, style %d x %d)", W, H,
+                        style->width, style->height);
+    if (tn_image_range(content, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
+    if (tn_image_range(style, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
+    if (!(c = (tn__style_cfg *)tn__alloc(sizeof *c))) return TN_ERR_OUT_OF_MEMORY;
+    if ((st = tn__style_setup(c, opts))) goto done;
+    c->user_fn = tn__progress_fn;
+    c->user_data = tn__progress_user;
+    if ((st = tn__style_channel0(&cur, style))) goto done;
+    st = tn__style_resize(&sm, &cur, W, H);
+    tn_image_free(&cur);
+    if (st || (st = tn__style_channel0(&cm, content))) goto done;
+    tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
+    tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
+    nl = c->o.levels;
+    if (!nl)
+        for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= 64;) nl++;
+    for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
+        int lw, lh, tw, th, p[TN__STYLE_MAXTILES];
+        tn__style_level_size(W, H, k, &lw, &lh);
+        tw = tn__style_tile_len(lw, c->o.tile);
+        th = tn__style_tile_len(lh, c->o.tile);
+        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, c->o.tile / 8, p, TN__STYLE_MAXTILES) *
+                         tn__style_tile_pos(lh, th, c->o.tile / 8, p, TN__STYLE_MAXTILES);
+    }
+    for (k = nl - 1; k >= 0 && !st; k--) {
+        int lw, lh;
+        tn_image s = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, x = {0, 0, 0, NULL};
+        tn__style_level_size(W, H, k, &lw, &lh);
+        st = tn__style_resize(&s, &sm, lw, lh);
+        if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
+        if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
+        if (!st) st = tn__style_level_run(c, &s, &a, &x);
+        tn_image_free(&s);
+        tn_image_free(&a);
+        tn_image_free(&cur);
+        cur = x;
+    }
+    if (!st && c->user_fn && c->user_fn(c->user_data, "style", 1.0)) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
+    if (!st) {
+        for (i = 0; i < (size_t)W * H; i++) cur.data[i] = (float)(cur.data[i] * sb + sa);
+        *out = cur;
+        cur.data = NULL;
+    }
+done:
+    tn_image_free(&cur);
+    tn_image_free(&cm);
+    tn_image_free(&sm);
+    tn_params_free(c->net.own);
+    TN_FREE(c);
+    (void)ca;
+    (void)cb;
+    return st;
+}
+
+/* ---- morphology scores: Table 1 SSIM, the realism report's slope and spectrum distances ---- */
+
+TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out)
+{
+    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL};
+    tn_status st;
+    if (!map || !source || !out || !map->data || !source->data || map->channels < 1 || source->channels < 1)
+        return tn__fail(TN_ERR_INVALID_ARG, "style compare: needs a map and a source");
+    if (map->width < 16 || map->height < 16 || source->width < 2 || source->height < 2)
+        return tn__fail(TN_ERR_INVALID_ARG, "style compare: the map must be at least 16 x 16");
+    if (tn_image_range(map, NULL, NULL) || tn_image_range(source, NULL, NULL))
+        return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
+    if (!(st = tn__style_channel0(&a, map)) && !(st = tn__style_channel0(&t, source)) &&
+        !(st = tn__style_resize(&b, &t, map->width, map->height))) {
+        tn__normalise01(&a);
+        tn__normalise01(&b);
+        tn_realism_opts ro;
+        tn_realism r;
+        memset(&ro, 0, sizeof ro);
+        memset(&r, 0, sizeof r);
+        memset(out, 0, sizeof *out);
+        if (!(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(&b, &a, &ro, &r))) {
+            out->slope_hist_dist = r.slope_distance;
+            out->spectrum_dist = r.spectrum_distance;
+        }
+    }
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&t);
     return st;
 }
 
