@@ -11960,16 +11960,6 @@ done:
     return st;
 }
 
-/* Channel 0 of img as a new one-channel map. */
-static tn_status tn__style_channel0(tn_image *dst, const tn_image *img)
-{
-    size_t i, n = (size_t)img->width * img->height;
-    tn_status st = tn_image_create(dst, img->width, img->height, 1);
-    if (st) return st;
-    for (i = 0; i < n; i++) dst->data[i] = img->data[i * img->channels];
-    return TN_OK;
-}
-
 /* Affine normalisation of a map to the net's input space: standardised (built-in) or [0, 1]
    (VGG). Returns the offset and scale so that v = z * scale + offset. */
 static void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
@@ -12056,10 +12046,10 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if ((st = tn__style_setup(c, opts))) goto done;
     c->user_fn = tn__progress_fn;
     c->user_data = tn__progress_user;
-    if ((st = tn__style_channel0(&cur, style))) goto done;
+    if ((st = tn__channel0_image(style, &cur))) goto done;
     st = tn__style_resize(&sm, &cur, W, H);
     tn_image_free(&cur);
-    if (st || (st = tn__style_channel0(&cm, content))) goto done;
+    if (st || (st = tn__channel0_image(content, &cm))) goto done;
     tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
     tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
     nl = c->o.levels;
@@ -12115,7 +12105,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: the map must be at least 16 x 16");
     if (tn_image_range(map, NULL, NULL) || tn_image_range(source, NULL, NULL))
         return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
-    if (!(st = tn__style_channel0(&a, map)) && !(st = tn__style_channel0(&t, source)) &&
+    if (!(st = tn__channel0_image(map, &a)) && !(st = tn__channel0_image(source, &t)) &&
         !(st = tn__style_resize(&b, &t, map->width, map->height))) {
         tn__normalise01(&a);
         tn__normalise01(&b);
