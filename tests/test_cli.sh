@@ -63,14 +63,17 @@ if $T sketch "$W/rnd.tns" --size 256 192 -o "$W/raster.png" --tns "$W/again.tns"
     cmp -s "$W/rnd.tns" "$W/again.tns"; then ok; else bad "sketch raster / tns round trip"; fi
 $T sketch-random --size 128 96 --seed 9 --nodes 60 -o "$W/dem.tns" > /dev/null
 if $T align "$W/user.tns" "$W/dem.tns" --cut-dem --seed 2 -o "$W/map.txt" --parts-out "$W/parts.tns" > /dev/null &&
-    [ "$(grep -vc '^#' "$W/map.txt")" -eq "$(grep -c '^end' "$W/parts.tns")" ] && [ "$(grep -vc '^#' "$W/map.txt")" -gt 10 ]; then ok;
+    [ "$(grep -vc '^#' "$W/map.txt")" -eq "$(grep -c '^end' "$W/parts.tns")" ] && [ "$(grep -vc '^#' "$W/map.txt")" -gt 10 ] &&
+    [ ! -e "$W/map.txt.tmp" ]; then ok;
 else bad "align map"; fi
 printf 'terrainnet-sketch 1\ncanvas 8 8\nridge\n1 1 0.5\n' > "$W/open.tns"
 expect_error "sketch missing end" "open.tns:5: end of file inside the polyline opened at line 3" $T sketch "$W/open.tns" --tns "$W/x.tns"
 printf 'terrainnet-sketch 1\ncanvas 8 8\nridge\n1 1 nan\nend\n' > "$W/nan.tns"
 expect_error "sketch NaN" "nan.tns:4: height is NaN" $T sketch-random --sketch "$W/nan.tns" -o "$W/x.tns"
 printf 'terrainnet-sketch 1\ncanvas 8 8\n' > "$W/empty.tns"
+echo keep > "$W/m.txt"
 expect_error "align empty sketch" "empty" $T align "$W/empty.tns" "$W/dem.tns" -o "$W/m.txt"
+if [ "$(cat "$W/m.txt")" = keep ]; then ok; else bad "a failed align overwrote its output"; fi
 expect_error "sketch-random no size" "size" $T sketch-random -o "$W/x.tns"
 # a drawn sketch: a red stroke (P6 image) converts to a .tns ridge
 printf 'P6\n16 8\n255\n' > "$W/drawn.ppm"

@@ -521,6 +521,7 @@ static int cmd_sketch_random(int argc, char **argv)
 
 static int cmd_align(int argc, char **argv)
 {
+    char tmp_path[4096];
     tn_contour_set sk = {0, 0, 0, NULL}, dense = {0, 0, 0, NULL}, parts = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL},
                    demparts = {0, 0, 0, NULL};
     tn_align_opts o;
@@ -566,16 +567,20 @@ static int cmd_align(int argc, char **argv)
     if ((st = tn_sketch_align(&parts, cut_dem ? &demparts : &dem, &o, match))) goto done;
     t0 = tn_time_seconds() - t0;
     if (parts_out && (st = tn_sketch_save(parts_out, &parts))) goto done;
-    if (!(f = fopen(outp, "w"))) {
-        fprintf(stderr, "terrainnet: error: cannot write %s\n", outp);
+    /* written beside the target and renamed over it, so a failed run leaves an old map intact */
+    if (strlen(outp) + 5 > sizeof tmp_path) { fprintf(stderr, "terrainnet: error: path too long: %s\n", outp); st = TN_ERR_IO; goto done; }
+    sprintf(tmp_path, "%s.tmp", outp);
+    if (!(f = fopen(tmp_path, "w"))) {
+        fprintf(stderr, "terrainnet: error: cannot write %s\n", tmp_path);
         st = TN_ERR_IO;
         goto done;
     }
     fprintf(f, "# terrainnet align: sketch part -> DEM part (%d sketch parts, %d DEM parts, seed %.0f)\n", parts.count,
             (cut_dem ? &demparts : &dem)->count, seed);
     for (i = 0; i < parts.count; i++) fprintf(f, "%d %d\n", i, match[i]);
-    if (fclose(f) != 0) {
+    if (fclose(f) != 0 || rename(tmp_path, outp) != 0) {
         fprintf(stderr, "terrainnet: error: write failed: %s\n", outp);
+        remove(tmp_path);
         st = TN_ERR_IO;
         goto done;
     }
