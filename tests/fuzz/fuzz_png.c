@@ -61,24 +61,5 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     return 0;
 }
 
-#ifdef TN_FUZZ_MAIN
-int main(int argc, char **argv)
-{
-    int i;
-    for (i = 1; i < argc; i++) {
-        FILE *f = fopen(argv[i], "rb");
-        long len;
-        uint8_t *buf;
-        if (!f) { fprintf(stderr, "%s: cannot open\n", argv[i]); continue; }
-        fseek(f, 0, SEEK_END);
-        len = ftell(f);
-        fseek(f, 0, SEEK_SET);
-        buf = (uint8_t *)malloc(len > 0 ? (size_t)len : 1);
-        if (buf && len > 0 && fread(buf, 1, (size_t)len, f) == (size_t)len) LLVMFuzzerTestOneInput(buf, (size_t)len);
-        free(buf);
-        fclose(f);
-    }
-    printf("fuzz_png: ran %d inputs\n", argc - 1);
-    return 0;
-}
-#endif
+#define TN_FUZZ_NAME "fuzz_png"
+#include "fuzz_replay.h"

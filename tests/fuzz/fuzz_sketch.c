@@ -43,25 +43,5 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     return 0;
 }
 
-#ifdef TN_FUZZ_MAIN
-int main(int argc, char **argv)
-{
-    int i, ran = 0;
-    for (i = 1; i < argc; i++) {
-        FILE *f = fopen(argv[i], "rb");
-        uint8_t *buf;
-        long len;
-        if (!f) { fprintf(stderr, "%s: cannot open\n", argv[i]); continue; }
-        if (fseek(f, 0, SEEK_END) != 0 || (len = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) { fclose(f); continue; }
-        buf = (uint8_t *)malloc((size_t)len + 1);
-        if (buf && fread(buf, 1, (size_t)len, f) == (size_t)len) {
-            LLVMFuzzerTestOneInput(buf, (size_t)len);
-            ran++;
-        }
-        free(buf);
-        fclose(f);
-    }
-    printf("fuzz_sketch: ran %d inputs\n", ran);
-    return 0;
-}
-#endif
+#define TN_FUZZ_NAME "fuzz_sketch"
+#include "fuzz_replay.h"
