@@ -3670,9 +3670,11 @@ static int tn__png_row(const tn__png *p, const uint8_t *row, uint32_t count, flo
         }
         return 0;
     }
-    if (p->ctype == 0 && ch == 1 && p->has_range) {
+    if (p->has_range) { /* every sample was coded with the recorded range (no palette, no tRNS) */
         double scale = (p->hi - p->lo) / (double)((1u << depth) - 1u);
-        for (x = 0; x < count; x++, dst += dst_step) dst[0] = (float)(p->lo + scale * tn__png_sample(row, x, depth));
+        size_t spp = (size_t)p->spp;
+        for (x = 0; x < count; x++, dst += dst_step)
+            for (c = 0; c < ch; c++) dst[c] = (float)(p->lo + scale * tn__png_sample(row, x * spp + (size_t)c, depth));
         return 0;
     }
     if (depth == 16 && p->ctype == 0 && ch == 1) { /* the DEM case: keep it tight */
@@ -3781,7 +3783,7 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
    Samples become floats code / (2^depth - 1); palettes expand to RGB, or RGBA with tRNS; grey or
    RGB with tRNS gain an alpha channel. info (may be NULL) gets format, bit_depth, file_channels
    (palette: 1), interlaced, and the tEXt "terrainnet.range" mapping, which is applied (v = lo +
-   n (hi - lo)) only to 1-channel images. `name` (may be NULL) prefixes error messages.
+   n (hi - lo)) to every sample of non-palette images without tRNS, as the writer coded them. `name` (may be NULL) prefixes error messages.
    Errors: TN_ERR_FORMAT (signature, unknown critical chunk), TN_ERR_CORRUPT (CRC naming the
    chunk, IHDR, chunk order, truncation, zlib, pixel data size, palette index),
    TN_ERR_TOO_LARGE (sides > 2^24 or buffers beyond TN_MAX_ALLOC, checked before allocating). */
@@ -3871,7 +3873,7 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
     if (st == TN_OK) {
         if (p->ctype == 3 && p->ntrns > p->npal) p->ntrns = 0; /* malformed tRNS: ignore */
         p->channels = p->ctype == 3 ? (p->ntrns ? 4 : 3) : p->spp + (p->has_trns ? 1 : 0);
-        if (p->channels != 1) p->has_range = 0;
+        if (p->ctype == 3 || p->has_trns) p->has_range = 0; /* the writer never records one there */
         /* pass 2: gather IDAT payloads (a single chunk is used in place) */
         if (nidat == 1) {
             zsrc = buf + first_idat + 8;

@@ -448,15 +448,25 @@ TN_TEST(test_png_range_text)
     TN_FREE(png);
     tn_image_free(&back);
     tn_image_free(&img);
-    /* a range recorded on an RGB image is not applied */
-    tn_image_create(&img, 4, 4, 3);
-    TN_CHECK(tn__png_encode(&img, 8, -5.0, 5.0, 1, 1, &png, &n) == TN_OK);
-    TN_CHECK(tn__png_decode(png, n, "rgbrange", &back, &info) == TN_OK);
-    TN_CHECK(info.has_range == 0 && back.channels == 3);
-    if (back.data) TN_CHECK_NEAR(back.data[0], 128.0 / 255.0, 1e-7); /* 0 in [-5, 5] -> code 127.5 -> 128 */
-    TN_FREE(png);
-    tn_image_free(&back);
-    tn_image_free(&img);
+    /* a range recorded on RGB and grey+alpha images applies to every sample, as PNM does */
+    {
+        static const int chans[2] = {3, 2};
+        int t, k;
+        for (t = 0; t < 2; t++) {
+            tn_rng r;
+            tn_rng_seed(&r, 5, (uint64_t)t);
+            tn_image_create(&img, 5, 3, chans[t]);
+            for (k = 0; k < 15 * chans[t]; k++) img.data[k] = -40.0f + 900.0f * tn_rng_uniform(&r);
+            TN_CHECK(tn__png_encode(&img, 16, -40.0, 860.0, 1, 1, &png, &n) == TN_OK);
+            TN_CHECK(tn__png_decode(png, n, "rgbrange", &back, &info) == TN_OK);
+            TN_CHECK(info.has_range == 1 && back.channels == chans[t]);
+            if (back.data)
+                for (k = 0; k < 15 * chans[t]; k++) TN_CHECK_NEAR(back.data[k], img.data[k], 900.0 / 65535.0 * 0.5 + 1e-3);
+            TN_FREE(png);
+            tn_image_free(&back);
+            tn_image_free(&img);
+        }
+    }
 }
 
 /* Big image: several IDAT chunks (the encoder splits at 1 MiB). */
