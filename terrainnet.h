@@ -705,12 +705,17 @@ TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntria
 TN_API tn_status tn_mst(const float *xy, int n, int **edges);
 
 /* ---- contour parts (section 4.1) -----------------------------------------------------------
-   Each polyline, in its order from its first point (an endpoint of the contour graph, so the
-   list is the paper's DFS order), is cut into parts of 5-10 points (seeded random lengths; a
-   tail that would be shorter than 5 is taken into the last part when that stays <= 10 points).
-   Where consecutive points are not 8-adjacent (|dx| or |dy| > 1.5 px) the window is split at
-   the break and pieces under 5 points are dropped. Parts keep the type, order and gradient of
-   their polyline; a part's index is its position in *parts. An empty input gives an empty set. */
+   The polylines form a graph: ends of the same type at the same or 8-adjacent pixels meet (a
+   junction). From each free end (lowest line index first; then from any closed loop left), a
+   depth-first walk lists the points of the lines it reaches, each line from the end it is
+   entered by, the lines on its far end first (lowest index first), a shared junction pixel
+   once. The list is cut into parts of 5-10 points (seeded random lengths; a tail that would be
+   shorter than 5 is taken into the last part when that stays <= 10 points); where consecutive
+   points are not 8-adjacent (|dx| or |dy| > 1.5 px: the walk jumped back to a junction) the
+   window is split at the break and pieces under 5 points are dropped. So parts run through
+   junctions. A part takes the type, order and gradient of the line its first point is on; its
+   index is its position in *parts (same input and seed, same parts). Used for DEM networks and
+   densified sketches alike. An empty input gives an empty set. */
 TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts);
 
 /* ---- alignment (section 5.3, algorithms A1 and A2) ------------------------------------------
@@ -768,7 +773,8 @@ TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem);
    runs along the edges. Threaded. */
 TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
 /* Flow accumulation from flow->dir into flow->acc (allocated here), O(n) by walking down from
-   cells nobody drains into. Fails with TN_ERR_CORRUPT if the directions hold a cycle. */
+   cells nobody drains into; threaded by strips of rows (same result for any thread count).
+   Fails with TN_ERR_CORRUPT if the directions hold a cycle or point off the map. */
 TN_API tn_status tn_flow_accumulation(tn_flow *flow);
 /* All three on dem (invert != 0: on -dem, for ridges). Caller frees with tn_flow_free. */
 TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert);
@@ -9703,33 +9709,180 @@ done:
 
 /* ---- contour parts ---- */
 
+/* A polyline end for the contour-graph DFS: end e = 2 * line (first point) or 2 * line + 1 (last),
+   at pixel (x, y) of a type; sorted so the ends at and around a pixel are found by bisection. */
+typedef struct tn__pend { int type, y, x, e; } tn__pend;
+
+static int tn__pend_cmp(const void *pa, const void *pb)
+{
+    const tn__pend *a = (const tn__pend *)pa, *b = (const tn__pend *)pb;
+    if (a->type != b->type) return a->type < b->type ? -1 : 1;
+    if (a->y != b->y) return a->y < b->y ? -1 : 1;
+    if (a->x != b->x) return a->x < b->x ? -1 : 1;
+    return (a->e > b->e) - (a->e < b->e);
+}
+
+typedef struct tn__pgraph {
+    const tn_contour_set *lines;
+    tn__pend *ends;     /* 2 * count, sorted */
+    int *stack;
+    size_t nstack, cap_stack; /* cap in bytes */
+    uint8_t *seen;      /* per line */
+    float *pts;         /* the DFS list: x, y, h */
+    int *src;           /* line of each listed point */
+    size_t npts;
+} tn__pgraph;
+
+static tn__pend tn__pend_of(const tn_contour_set *s, int e)
+{
+    const tn_contour *c = &s->items[e / 2];
+    const float *p = c->points + (e & 1 ? 3 * (c->npoints - 1) : 0);
+    tn__pend r;
+    r.type = (int)c->type;
+    r.x = (int)floorf(p[0] + 0.5f);
+    r.y = (int)floorf(p[1] + 0.5f);
+    r.e = e;
+    return r;
+}
+
+/* Counts the ends of other lines at the same or an 8-adjacent pixel as end e (same type), in
+   sorted order. push != 0 also pushes those of unseen lines (their entry end) onto the DFS stack. */
+static int tn__pend_attached(tn__pgraph *g, int e, int push, tn_status *st)
+{
+    const tn__pend me = tn__pend_of(g->lines, e);
+    const int m = 2 * g->lines->count;
+    int dy, dx, found = 0;
+    for (dy = -1; dy <= 1; dy++)
+        for (dx = -1; dx <= 1; dx++) {
+            tn__pend key;
+            int lo = 0, hi = m;
+            key.type = me.type;
+            key.y = me.y + dy;
+            key.x = me.x + dx;
+            key.e = -1;
+            while (lo < hi) { /* first end >= key */
+                int mid = lo + (hi - lo) / 2;
+                if (tn__pend_cmp(&g->ends[mid], &key) < 0) lo = mid + 1;
+                else hi = mid;
+            }
+            for (; lo < m && g->ends[lo].type == key.type && g->ends[lo].y == key.y && g->ends[lo].x == key.x; lo++) {
+                int o = g->ends[lo].e;
+                if (o / 2 == e / 2) continue;
+                found++;
+                if (!push || g->seen[o / 2]) continue;
+                if ((g->nstack + 1) * sizeof(int) > g->cap_stack &&
+                    (*st = tn__reserve((void **)&g->stack, &g->cap_stack, (g->nstack + 1) * sizeof(int))))
+                    return found;
+                g->stack[g->nstack++] = o;
+            }
+        }
+    return found;
+}
+
+/* Depth-first walk of the contour graph from end e: each line is listed from the end it is
+   entered by; lines hanging on its far end come next, then those on its near end. */
+static tn_status tn__pgraph_dfs(tn__pgraph *g, int e, size_t *cap_pts, size_t *cap_src)
+{
+    tn_status st = tn__reserve((void **)&g->stack, &g->cap_stack, sizeof(int));
+    if (st) return st;
+    g->nstack = 0;
+    g->stack[g->nstack++] = e;
+    while (g->nstack) {
+        int in = g->stack[--g->nstack], l = in / 2, k;
+        const tn_contour *c = &g->lines->items[l];
+        size_t n0, top;
+        if (g->seen[l]) continue;
+        g->seen[l] = 1;
+        if ((st = tn__reserve((void **)&g->pts, cap_pts, (g->npts + (size_t)c->npoints) * 3 * sizeof(float))) ||
+            (st = tn__reserve((void **)&g->src, cap_src, (g->npts + (size_t)c->npoints) * sizeof(int))))
+            return st;
+        for (k = 0; k < c->npoints; k++) {
+            const float *p = c->points + 3 * (in & 1 ? c->npoints - 1 - k : k);
+            float *q = g->pts + 3 * g->npts;
+            if (g->npts && q[-3] == p[0] && q[-2] == p[1]) continue; /* a shared junction pixel */
+            memcpy(q, p, 3 * sizeof(float));
+            g->src[g->npts++] = l;
+        }
+        n0 = g->nstack;
+        tn__pend_attached(g, in ^ 1, 1, &st);
+        if (!st) tn__pend_attached(g, in, 1, &st);
+        if (st) return st;
+        top = g->nstack; /* reversed, so the far end's lines come next (in sorted order), then the near end's */
+        for (; n0 + 1 < top; n0++, top--) {
+            int t = g->stack[n0];
+            g->stack[n0] = g->stack[top - 1];
+            g->stack[top - 1] = t;
+        }
+    }
+    return TN_OK;
+}
+
+/* Cuts the DFS list into parts: runs of 8-adjacent points, each cut into windows of 5-10 points
+   (a tail under 5 joins the last window when that stays <= 10); shorter runs are dropped. */
+static tn_status tn__parts_cut(const tn__pgraph *g, tn_rng *rng, tn_contour_set *set, size_t *cap)
+{
+    const float *p = g->pts;
+    size_t at = 0, n = g->npts;
+    tn_status st = TN_OK;
+    while (!st && at < n) {
+        size_t end = at + 1;
+        while (end < n && fabsf(p[3 * end] - p[3 * end - 3]) <= 1.5f && fabsf(p[3 * end + 1] - p[3 * end - 2]) <= 1.5f) end++;
+        while (!st && end - at >= 5) {
+            int left = (int)(end - at), len = 5 + (int)tn_rng_below(rng, 6);
+            const tn_contour *c = &g->lines->items[g->src[at]];
+            if (len > left) len = left;
+            if (left - len > 0 && left - len < 5) len = left <= 10 ? left : left - 5; /* no short tail */
+            st = tn__cset_add(set, cap, c->type, c->order, c->mean_gradient, p + 3 * at, len);
+            at += (size_t)len;
+        }
+        at = end;
+    }
+    return st;
+}
+
 TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts)
 {
     tn_contour_set set;
+    tn__pgraph g;
     tn_rng rng;
-    size_t cap = 0;
-    int i;
+    size_t cap = 0, cap_pts = 0, cap_src = 0;
+    int i, pass;
     tn_status st;
     TN_ASSERT(parts);
     if ((st = tn__cset_check(lines, "contour parts"))) return st;
     memset(&set, 0, sizeof set);
+    memset(&g, 0, sizeof g);
     set.width = lines->width;
     set.height = lines->height;
     tn_rng_seed(&rng, seed, 0x9a27u);
-    for (i = 0; i < lines->count && !st; i++) {
-        const tn_contour *c = &lines->items[i];
-        const float *p = c->points;
-        int at = 0;
-        while (!st && c->npoints - at >= 5) {
-            int left = c->npoints - at, len = 5 + (int)tn_rng_below(&rng, 6), j;
-            if (len > left) len = left;
-            if (left - len > 0 && left - len < 5) len = left <= 10 ? left : left - 5; /* no short tail */
-            for (j = at + 1; j < at + len; j++)
-                if (fabsf(p[3 * j] - p[3 * j - 3]) > 1.5f || fabsf(p[3 * j + 1] - p[3 * j - 2]) > 1.5f) break;
-            if (j - at >= 5) st = tn__cset_add(&set, &cap, c->type, c->order, c->mean_gradient, p + 3 * at, j - at);
-            at = j; /* past the part, or at the break */
-        }
+    g.lines = lines;
+    if (lines->count) {
+        g.ends = (tn__pend *)tn__alloc((size_t)lines->count * 2 * sizeof(tn__pend));
+        g.seen = (uint8_t *)tn__calloc((size_t)lines->count);
+        if (!g.ends || !g.seen) st = TN_ERR_OUT_OF_MEMORY;
     }
+    if (!st) {
+        for (i = 0; i < 2 * lines->count; i++) g.ends[i] = tn__pend_of(lines, i);
+        if (lines->count) qsort(g.ends, (size_t)lines->count * 2, sizeof(tn__pend), tn__pend_cmp);
+    }
+    /* DFS from every free end (an endpoint of the graph) in line order, then from whatever is
+       left (closed loops) at its first point */
+    for (pass = 0; pass < 2 && !st; pass++)
+        for (i = 0; i < lines->count && !st; i++) {
+            int e = -1;
+            if (g.seen[i]) continue;
+            if (pass == 1) e = 2 * i;
+            else if (!tn__pend_attached(&g, 2 * i, 0, &st)) e = 2 * i;
+            else if (!tn__pend_attached(&g, 2 * i + 1, 0, &st)) e = 2 * i + 1;
+            if (e < 0) continue;
+            g.npts = 0;
+            if (!(st = tn__pgraph_dfs(&g, e, &cap_pts, &cap_src))) st = tn__parts_cut(&g, &rng, &set, &cap);
+        }
+    TN_FREE(g.ends);
+    TN_FREE(g.stack);
+    TN_FREE(g.seen);
+    TN_FREE(g.pts);
+    TN_FREE(g.src);
     if (st) {
         tn_contour_set_free(&set);
         return st;
@@ -10017,7 +10170,8 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
    the priority queue is a radix heap: priority-flood pops never decrease, which is all a radix
    heap needs, and pushes/pops are O(1) amortised without the cache misses of a binary heap.
    Accumulation and Strahler order walk down from cells with no upstream neighbour, each cell
-   once it has heard from all of them (Kahn's order without a queue).
+   once it has heard from all of them (Kahn's order without a queue); accumulation runs one
+   strip of rows per thread and then finishes the flow that crossed strips in strip order.
    -------------------------------------------------------------------------------------------- */
 
 /* Order-preserving map float -> uint32 (-0 and +0 share a key). */
@@ -10037,76 +10191,104 @@ static float tn__fkey_inv(uint32_t k)
     return f;
 }
 
-/* Radix heap (monotone priority queue) of (key, cell); bucket b > 0 holds keys whose highest bit
-   differing from `last` is bit b - 1. */
+/* Monotone priority queue of (key, cell): a radix heap with byte digits (Ahuja et al. 1990).
+   Bucket [l][v] holds the keys that agree with `last` above byte l and have byte l equal to v
+   (above last's); level 0 bucket v holds the single key (last & ~0xff) | v. When level 0 runs
+   dry, the lowest non-empty bucket above gives the new `last` (its minimum) and its items move
+   down at least one level, so each item moves at most three times. */
 typedef struct tn__rheap_item { uint32_t key, cell; } tn__rheap_item;
 typedef struct tn__rheap {
-    tn__rheap_item *b[33];
-    size_t n[33], cap[33];
+    tn__rheap_item *b[4][256];
+    uint32_t n[4][256];
+    size_t cap[4][256]; /* bytes */
+    uint64_t used[4][4]; /* bit v of level l: bucket [l][v] is not empty */
     uint32_t last;
     size_t size;
 } tn__rheap;
 
-static int tn__rheap_bucket(uint32_t key, uint32_t last)
+static int tn__ctz64(uint64_t x)
 {
-    uint32_t x = key ^ last;
 #if defined(__GNUC__) || defined(__clang__)
-    return x ? 32 - __builtin_clz(x) : 0;
+    return __builtin_ctzll(x);
 #else
     int b = 0;
-    while (x) { b++; x >>= 1; }
+    while (!(x & 1u)) { x >>= 1; b++; }
     return b;
 #endif
 }
 
 static tn_status tn__rheap_push(tn__rheap *h, uint32_t key, uint32_t cell)
 {
-    int b = tn__rheap_bucket(key, h->last);
-    if (h->n[b] == h->cap[b]) {
-        size_t bytes = h->cap[b] * sizeof(tn__rheap_item);
-        void *p = h->b[b];
-        tn_status st = tn__reserve(&p, &bytes, (h->n[b] + 1) * sizeof(tn__rheap_item));
+    uint32_t x = key ^ h->last;
+    int l = x >> 8 ? (x >> 16 ? (x >> 24 ? 3 : 2) : 1) : 0, v = (int)(key >> (8 * l)) & 255;
+    tn__rheap_item *it;
+    if ((size_t)(h->n[l][v] + 1) * sizeof(tn__rheap_item) > h->cap[l][v]) {
+        void *p = h->b[l][v];
+        tn_status st = tn__reserve(&p, &h->cap[l][v], (size_t)(h->n[l][v] + 1) * sizeof(tn__rheap_item));
         if (st) return st;
-        h->b[b] = (tn__rheap_item *)p;
-        h->cap[b] = bytes / sizeof(tn__rheap_item);
+        h->b[l][v] = (tn__rheap_item *)p;
     }
-    h->b[b][h->n[b]].key = key;
-    h->b[b][h->n[b]++].cell = cell;
+    it = h->b[l][v] + h->n[l][v]++;
+    it->key = key;
+    it->cell = cell;
+    h->used[l][v >> 6] |= (uint64_t)1 << (v & 63);
     h->size++;
     return TN_OK;
 }
 
-/* Pops a minimum; the heap must not be empty. Redistribution only moves items to lower buckets,
-   whose capacity the moved items already fit in (they came from a bucket at least as big). */
+/* Lowest non-empty bucket of level l, or -1. */
+static int tn__rheap_first(const tn__rheap *h, int l)
+{
+    int q;
+    for (q = 0; q < 4; q++)
+        if (h->used[l][q]) return q * 64 + tn__ctz64(h->used[l][q]);
+    return -1;
+}
+
+/* Pops a minimum; the heap must not be empty. */
 static tn_status tn__rheap_pop(tn__rheap *h, uint32_t *key, uint32_t *cell)
 {
-    if (!h->n[0]) {
-        int b = 1;
-        size_t i, m;
-        uint32_t mn = 0xffffffffu;
-        while (!h->n[b]) b++;
-        m = h->n[b];
-        for (i = 0; i < m; i++) if (h->b[b][i].key < mn) mn = h->b[b][i].key;
+    int v = tn__rheap_first(h, 0);
+    if (v < 0) {
+        int l = 1, u;
+        uint32_t i, m, mn = 0xffffffffu;
+        tn__rheap_item *b;
+        while ((u = tn__rheap_first(h, l)) < 0) l++;
+        b = h->b[l][u];
+        m = h->n[l][u];
+        for (i = 0; i < m; i++) if (b[i].key < mn) mn = b[i].key;
         h->last = mn;
-        h->n[b] = 0;
+        h->n[l][u] = 0;
+        h->used[l][u >> 6] &= ~((uint64_t)1 << (u & 63));
         h->size -= m;
-        for (i = 0; i < m; i++) {
-            tn_status st = tn__rheap_push(h, h->b[b][i].key, h->b[b][i].cell);
+        for (i = 0; i < m; i++) { /* all land below level l, never in this bucket */
+            tn_status st = tn__rheap_push(h, b[i].key, b[i].cell);
             if (st) return st;
         }
+        v = tn__rheap_first(h, 0);
     }
-    h->n[0]--;
-    *key = h->b[0][h->n[0]].key;
-    *cell = h->b[0][h->n[0]].cell;
-    h->size--;
+    {
+        tn__rheap_item *it = h->b[0][v] + --h->n[0][v];
+        *key = it->key;
+        *cell = it->cell;
+        if (!h->n[0][v]) h->used[0][v >> 6] &= ~((uint64_t)1 << (v & 63));
+        h->size--;
+    }
     return TN_OK;
+}
+
+/* The cell a pop will return next (for prefetching), or `none` when level 0 is empty. */
+static uint32_t tn__rheap_peek(const tn__rheap *h, uint32_t none)
+{
+    int v = tn__rheap_first(h, 0);
+    return v < 0 ? none : h->b[0][v][h->n[0][v] - 1].cell;
 }
 
 static void tn__rheap_free(tn__rheap *h)
 {
-    int b;
-    for (b = 0; b < 33; b++) TN_FREE(h->b[b]);
-    memset(h, 0, sizeof *h);
+    int l, v;
+    for (l = 0; l < 4; l++)
+        for (v = 0; v < 256; v++) TN_FREE(h->b[l][v]);
 }
 
 /* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
@@ -10138,110 +10320,81 @@ static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
     return TN_OK;
 }
 
-/* Binary min-heap of (priority, cell) for the cells of depressions and flats. */
-typedef struct tn__pheap { uint64_t *pri; uint32_t *cell; size_t n, cap_pri, cap_cell; } tn__pheap; /* caps in bytes */
+/* Min-heap of (priority, cell) for the cells of depressions and flats: 4-ary, items of 16 bytes,
+   so a node's children share one cache line. */
+typedef struct tn__pheap_item { uint64_t pri; uint32_t cell, pad; } tn__pheap_item;
+typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap in bytes */
 
 static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
 {
     size_t i;
-    tn_status st;
-    if ((st = tn__reserve((void **)&h->pri, &h->cap_pri, (h->n + 1) * sizeof(uint64_t))) ||
-        (st = tn__reserve((void **)&h->cell, &h->cap_cell, (h->n + 1) * sizeof(uint32_t))))
-        return st;
-    for (i = h->n++; i > 0 && h->pri[(i - 1) / 2] > pri; i = (i - 1) / 2) {
-        h->pri[i] = h->pri[(i - 1) / 2];
-        h->cell[i] = h->cell[(i - 1) / 2];
-    }
-    h->pri[i] = pri;
-    h->cell[i] = cell;
+    tn_status st = tn__reserve((void **)&h->a, &h->cap, (h->n + 1) * sizeof(tn__pheap_item));
+    if (st) return st;
+    for (i = h->n++; i > 0 && h->a[(i - 1) / 4].pri > pri; i = (i - 1) / 4) h->a[i] = h->a[(i - 1) / 4];
+    h->a[i].pri = pri;
+    h->a[i].cell = cell;
     return TN_OK;
 }
 
 static uint32_t tn__pheap_pop(tn__pheap *h)
 {
-    uint32_t top = h->cell[0], lc;
-    uint64_t lp;
+    uint32_t top = h->a[0].cell;
+    tn__pheap_item last = h->a[--h->n];
     size_t i = 0;
-    h->n--;
-    lp = h->pri[h->n];
-    lc = h->cell[h->n];
     for (;;) {
-        size_t c = 2 * i + 1;
+        size_t c = 4 * i + 1, e = c + 4, k, b = c;
         if (c >= h->n) break;
-        if (c + 1 < h->n && h->pri[c + 1] < h->pri[c]) c++;
-        if (h->pri[c] >= lp) break;
-        h->pri[i] = h->pri[c];
-        h->cell[i] = h->cell[c];
-        i = c;
+        if (e > h->n) e = h->n;
+        for (k = c + 1; k < e; k++) if (h->a[k].pri < h->a[b].pri) b = k;
+        if (h->a[b].pri >= last.pri) break;
+        h->a[i] = h->a[b];
+        i = b;
     }
-    h->pri[i] = lp;
-    h->cell[i] = lc;
+    h->a[i] = last;
     return top;
 }
 
-/* Fills keys[] in place by priority-flood + epsilon (Barnes et al. 2014, with the pit queue of
-   their improved variant). The pit queue is a heap on the ORIGINAL heights (ties first come,
-   first served): a depression fills from its outlet along its deepest path first, like
-   r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
-   thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines. */
-/* Neighbour index of cell c in direction d, or -1 outside the map. */
-static ptrdiff_t tn__nbr(size_t c, int d, int w, int h)
-{
-    int x = (int)(c % (size_t)w) + tn__d8x[d], y = (int)(c / (size_t)w) + tn__d8y[d];
-    if (x < 0 || y < 0 || x >= w || y >= h) return -1;
-    return (ptrdiff_t)y * w + x;
-}
+/* Filling runs on a copy of the keys framed by one cell of closed sentinels (TN__FRAME), so no
+   neighbour lookup needs a bounds check. */
+#define TN__CLOSED 0x80000000u /* in the key word: saves a cache miss per neighbour */
+#define TN__FRAME 0xffffffffu
 
 typedef struct tn__fill_state {
-    uint32_t *keys;
-    int w, h;
-    tn__rheap q;
+    uint32_t *keys;           /* framed: (w + 2) x (h + 2) */
+    ptrdiff_t off[8];         /* neighbour offsets in the framed grid */
+    tn__rheap *q;
     tn__pheap pit;
     uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
-    size_t ntrace, cap_trace;
+    size_t ntrace, cap_trace; /* cap in bytes */
     uint32_t seq;
 } tn__fill_state;
-
-#define TN__CLOSED 0x80000000u /* in the key word: saves a cache miss per neighbour */
 
 /* Closes the open neighbours of c (filled key k): lower or equal ones are raised to k + 1 and
    join the pit queue; higher ones keep their height and go on the trace stack. */
 static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
 {
-    const int w = f->w;
-    int cx = (int)(c % (uint32_t)w), cy = (int)(c / (uint32_t)w), d;
-    int border = cx == 0 || cy == 0 || cx == w - 1 || cy == f->h - 1;
+    int d;
     for (d = 0; d < 8; d++) {
-        size_t ni;
-        uint32_t v;
+        size_t ni = (size_t)((ptrdiff_t)c + f->off[d]);
+        uint32_t v = f->keys[ni];
         tn_status st;
-        if (border) {
-            ptrdiff_t t = tn__nbr(c, d, w, f->h);
-            if (t < 0) continue;
-            ni = (size_t)t;
-        } else ni = (size_t)c + (size_t)((ptrdiff_t)tn__d8y[d] * w + tn__d8x[d]);
-        v = f->keys[ni];
         if (v & TN__CLOSED) continue;
         if (v <= k) { /* in a depression or flat: one step above c */
             f->keys[ni] = (k + 1) | TN__CLOSED;
             if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
         } else {
             f->keys[ni] = v | TN__CLOSED;
-            if (f->ntrace == f->cap_trace) {
-                size_t bytes = f->cap_trace * sizeof(uint32_t);
-                void *p = f->trace;
-                if ((st = tn__reserve(&p, &bytes, (f->ntrace + 1) * sizeof(uint32_t)))) return st;
-                f->trace = (uint32_t *)p;
-                f->cap_trace = bytes / sizeof(uint32_t);
-            }
+            if ((f->ntrace + 1) * sizeof(uint32_t) > f->cap_trace &&
+                (st = tn__reserve((void **)&f->trace, &f->cap_trace, (f->ntrace + 1) * sizeof(uint32_t))))
+                return st;
             f->trace[f->ntrace++] = (uint32_t)ni;
         }
     }
     return TN_OK;
 }
 
-/* Fills keys[] in place by priority-flood + epsilon (Barnes et al. 2014) with two speed-ups that
-   keep most cells out of the priority queue and its random memory access:
+/* Fills the framed keys in place by priority-flood + epsilon (Barnes et al. 2014) with two
+   speed-ups that keep most cells out of the priority queue and its random memory access:
    - slope tracing (Zhou, Sun & Fu 2016): a cell reached from below whose open neighbours are all
      strictly higher keeps its height and is expanded at once, depth first, where its
      neighbourhood is still in cache; only cells with a lower open neighbour wait in the queue;
@@ -10253,102 +10406,134 @@ static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
 static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
 {
     tn__fill_state f;
-    size_t n = (size_t)w * h, done = 0, i;
+    const size_t W = (size_t)w + 2, n = (size_t)w * h;
+    size_t done = 0;
     tn_status st = TN_OK;
-    int x, y;
+    int x, y, d;
     memset(&f, 0, sizeof f);
+    f.q = (tn__rheap *)tn__calloc(sizeof(tn__rheap));
+    if (!f.q) return TN_ERR_OUT_OF_MEMORY;
     f.keys = keys;
-    f.w = w;
-    f.h = h;
+    for (d = 0; d < 8; d++) f.off[d] = (ptrdiff_t)tn__d8y[d] * (ptrdiff_t)W + tn__d8x[d];
     for (y = 0; y < h && !st; y++)
-        for (x = 0; x < w && !st; x++)
-            if (y == 0 || x == 0 || y == h - 1 || x == w - 1) {
-                i = (size_t)y * w + x;
-                st = tn__rheap_push(&f.q, keys[i], (uint32_t)i);
-                keys[i] |= TN__CLOSED;
-            }
-    while (!st && (f.q.size || f.pit.n)) {
+        for (x = 0; x < w && !st; x += (y == 0 || y == h - 1 || x == w - 1) ? 1 : w - 1) {
+            size_t i = (size_t)(y + 1) * W + (size_t)x + 1;
+            st = tn__rheap_push(f.q, keys[i], (uint32_t)i);
+            keys[i] |= TN__CLOSED;
+        }
+    while (!st && (f.q->size || f.pit.n)) {
         uint32_t k, c;
         if (f.pit.n) {
             c = tn__pheap_pop(&f.pit);
             k = keys[c] & ~TN__CLOSED;
-        } else if ((st = tn__rheap_pop(&f.q, &k, &c))) break;
+        } else if ((st = tn__rheap_pop(f.q, &k, &c))) break;
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
-            uint32_t nx = f.pit.n ? f.pit.cell[0] : f.q.n[0] ? f.q.b[0][f.q.n[0] - 1].cell : c;
-            if (nx >= (uint32_t)w && (size_t)nx + w + 1 < n) {
-                TN__PREFETCH(keys + nx - w - 1);
-                TN__PREFETCH(keys + nx - 1);
-                TN__PREFETCH(keys + nx + w - 1);
-            }
+            uint32_t nx = f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
+            TN__PREFETCH(keys + nx - W - 1);
+            TN__PREFETCH(keys + nx - 1);
+            TN__PREFETCH(keys + nx + W - 1);
         }
         if ((st = tn__fill_expand(&f, c, k))) break;
         while (f.ntrace && !st) {
-            uint32_t t = f.trace[--f.ntrace], kt = keys[t] & ~TN__CLOSED;
-            int d, lower = 0;
-            for (d = 0; d < 8 && !lower; d++) {
-                ptrdiff_t m = tn__nbr(t, d, w, h);
-                if (m >= 0 && !(keys[m] & TN__CLOSED) && keys[m] <= kt) lower = 1;
-            }
-            /* an open neighbour as low or lower may drain elsewhere at a lower level (and raising
+            const uint32_t t = f.trace[--f.ntrace], kt = keys[t] & ~TN__CLOSED, *p = keys + t;
+            /* closed neighbours (and the frame) have the top bit set, so they are never <= kt.
+               An open neighbour as low or lower may drain elsewhere at a lower level (and raising
                it here would start a pit cascade above the queue's level): wait in order */
-            st = lower ? tn__rheap_push(&f.q, kt, t) : tn__fill_expand(&f, t, kt);
+            int lower = p[f.off[0]] <= kt || p[f.off[1]] <= kt || p[f.off[2]] <= kt || p[f.off[3]] <= kt ||
+                        p[f.off[4]] <= kt || p[f.off[5]] <= kt || p[f.off[6]] <= kt || p[f.off[7]] <= kt;
+            st = lower ? tn__rheap_push(f.q, kt, t) : tn__fill_expand(&f, t, kt);
             done++;
         }
         if (!st && (++done & 0xfffff) < 16) st = tn__progress("fill", (double)done / (double)n);
     }
-    for (i = 0; i < n; i++) keys[i] &= ~TN__CLOSED;
-    tn__rheap_free(&f.q);
-    TN_FREE(f.pit.pri);
-    TN_FREE(f.pit.cell);
+    tn__rheap_free(f.q);
+    TN_FREE(f.q);
+    TN_FREE(f.pit.a);
     TN_FREE(f.trace);
     return st;
 }
 
 /* Heights of channel 0 as 31-bit keys (the float key without its last bit, so the top bit is
-   free for the closed flag); invert flips the sign (ridges). */
-static tn_status tn__dem_keys(const tn_image *dem, int invert, uint32_t **out)
+   free for the closed flag) in a grid framed by TN__FRAME; invert flips the sign (ridges).
+   Fails on NaN/Inf. */
+static tn_status tn__dem_keys(const tn_image *dem, int invert, const char *what, uint32_t **out)
 {
-    size_t i, n = (size_t)dem->width * dem->height, bytes;
+    const int w = dem->width, h = dem->height;
+    const size_t W = (size_t)w + 2, C = (size_t)dem->channels;
+    size_t bytes, x, y;
     uint32_t *k;
-    tn_status st = tn__size4(n, 1, 1, sizeof(uint32_t), &bytes);
+    tn_status st = tn__size4(W, (size_t)h + 2, 1, sizeof(uint32_t), &bytes);
     if (st) return st;
-    if (n > 0xfffffffeu) return tn__fail(TN_ERR_TOO_LARGE, "extract: %zu cells exceed the 2^32 cell limit", n);
+    if (W * ((size_t)h + 2) > 0xfffffffeu) return tn__fail(TN_ERR_TOO_LARGE, "%s: %d x %d cells exceed the 2^32 cell limit", what, w, h);
     k = (uint32_t *)tn__alloc(bytes);
     if (!k) return TN_ERR_OUT_OF_MEMORY;
-    for (i = 0; i < n; i++) {
-        float v = dem->data[i * (size_t)dem->channels];
-        k[i] = tn__fkey(invert ? -v : v) >> 1;
+    for (x = 0; x < W; x++) k[x] = k[(size_t)(h + 1) * W + x] = TN__FRAME;
+    for (y = 0; y < (size_t)h; y++) {
+        const float *src = dem->data + y * (size_t)w * C;
+        uint32_t *row = k + (y + 1) * W;
+        row[0] = row[w + 1] = TN__FRAME;
+        for (x = 0; x < (size_t)w; x++) {
+            float v = src[x * C];
+            if (!(v >= -FLT_MAX && v <= FLT_MAX)) {
+                TN_FREE(k);
+                return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
+            }
+            row[x + 1] = tn__fkey(invert ? -v : v) >> 1;
+        }
     }
     *out = k;
     return TN_OK;
 }
 
-/* Filled heights from keys: untouched cells keep their exact height; raised cells get the float
-   of their key, which is above every float of the key below (so each raise stays strict). */
-static void tn__keys_to_heights(const uint32_t *keys, const tn_image *dem, int invert, float *out)
+typedef struct tn__heights_job { const uint32_t *keys; const tn_image *dem; int invert; float *out; } tn__heights_job;
+
+/* Filled heights from framed keys: untouched cells keep their exact height; raised cells get the
+   float of their key, which is above every float of the key below (so each raise stays strict). */
+static void tn__keys_to_heights(void *ctx, size_t y0, size_t y1)
 {
-    size_t i, n = (size_t)dem->width * dem->height;
-    for (i = 0; i < n; i++) {
-        float v = dem->data[i * (size_t)dem->channels];
-        if (invert) v = -v;
-        out[i] = keys[i] == (tn__fkey(v) >> 1) ? v : tn__fkey_inv(keys[i] << 1);
+    const tn__heights_job *j = (const tn__heights_job *)ctx;
+    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const uint32_t *kr = j->keys + (y + 1) * (w + 2) + 1;
+        const float *src = j->dem->data + y * w * C;
+        float *o = j->out + y * w;
+        for (x = 0; x < w; x++) {
+            float v = j->invert ? -src[x * C] : src[x * C];
+            uint32_t key = kr[x] & ~TN__CLOSED;
+            o[x] = key == (tn__fkey(v) >> 1) ? v : tn__fkey_inv(key << 1);
+        }
     }
+}
+
+/* Depression-filled channel 0 of dem (negated first when invert) into a new one-channel image. */
+static tn_status tn__fill_image(const tn_image *dem, int invert, const char *what, tn_image *out)
+{
+    uint32_t *keys = NULL;
+    tn__heights_job j;
+    tn_status st;
+    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
+        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
+    if ((st = tn__dem_keys(dem, invert, what, &keys))) return st;
+    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(out, dem->width, dem->height, 1))) {
+        TN_FREE(keys);
+        return st;
+    }
+    j.keys = keys;
+    j.dem = dem;
+    j.invert = invert;
+    j.out = out->data;
+    tn_parallel_for((size_t)dem->height, tn__row_grain(dem->width), tn__keys_to_heights, &j);
+    TN_FREE(keys);
+    return TN_OK;
 }
 
 TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem)
 {
-    uint32_t *keys = NULL;
     tn_image out = {0, 0, 0, NULL};
     tn_status st;
     TN_ASSERT(dst);
-    if ((st = tn__dem_check(dem, 1, "fill depressions"))) return st;
-    if ((st = tn__dem_keys(dem, 0, &keys))) return st;
-    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&out, dem->width, dem->height, 1))) {
-        TN_FREE(keys);
-        return st;
-    }
-    tn__keys_to_heights(keys, dem, 0, out.data);
-    TN_FREE(keys);
+    if ((st = tn__fill_image(dem, 0, "fill depressions", &out))) return st;
     *dst = out;
     return TN_OK;
 }
@@ -10361,20 +10546,25 @@ static void tn__d8_rows(void *ctx, size_t y0, size_t y1)
     const int w = j->w, H = j->hgt;
     int x, y, d;
     for (y = (int)y0; y < (int)y1; y++) {
-        const float *row = j->h + (size_t)y * w;
         uint8_t *dr = j->dir + (size_t)y * w;
-        for (x = 0; x < w; x++) {
+        const float *up, *row, *dn, *nb[8];
+        if (y == 0 || y == H - 1 || w < 3) { /* the border drains off the map */
+            memset(dr, TN_FLOW_OUTLET, (size_t)w);
+            continue;
+        }
+        dr[0] = dr[w - 1] = TN_FLOW_OUTLET;
+        /* interior: fixed neighbour offsets and no bounds checks, so the loop vectorises; the
+           strict > keeps the first of equal drops in E, SE, S, ... order */
+        up = j->h + (size_t)(y - 1) * w;
+        row = up + w;
+        dn = row + w;
+        nb[0] = row + 1; nb[1] = dn + 1; nb[2] = dn; nb[3] = dn - 1;
+        nb[4] = row - 1; nb[5] = up - 1; nb[6] = up; nb[7] = up + 1;
+        for (x = 1; x < w - 1; x++) {
             double hc = row[x], best = 0.0;
             int bd = TN_FLOW_OUTLET;
-            if (x == 0 || y == 0 || x == w - 1 || y == H - 1) { /* the border drains off the map */
-                dr[x] = TN_FLOW_OUTLET;
-                continue;
-            }
             for (d = 0; d < 8; d++) {
-                int nx = x + tn__d8x[d], ny = y + tn__d8y[d];
-                double drop;
-                if (nx < 0 || ny < 0 || nx >= w || ny >= H) continue;
-                drop = hc - (double)j->h[(size_t)ny * w + nx];
+                double drop = hc - (double)nb[d][x];
                 if (d & 1) drop *= 0.70710678118654752;
                 if (drop > best) { best = drop; bd = d; }
             }
@@ -10429,20 +10619,45 @@ static void tn__indeg_rows(void *ctx, size_t y0, size_t y1)
 {
     const tn__indeg_job *j = (const tn__indeg_job *)ctx;
     const int w = j->f->width, h = j->f->height;
+    const uint8_t *dir = j->f->dir, *mask = j->mask;
     int x, y, d;
-    for (y = (int)y0; y < (int)y1; y++)
+    for (y = (int)y0; y < (int)y1; y++) {
+        uint8_t *out = j->indeg + (size_t)y * w;
+        int inner = y > 0 && y < h - 1 && w >= 3;
         for (x = 0; x < w; x++) {
             int c = 0;
+            if (inner && x > 0 && x < w - 1) { /* interior: the vectorisable loop below */
+                x = w - 2;
+                continue;
+            }
             for (d = 0; d < 8; d++) {
                 int nx = x + tn__d8x[d], ny = y + tn__d8y[d];
                 size_t ni;
                 if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
                 ni = (size_t)ny * w + nx;
                 /* neighbour in direction d drains here if its direction is the opposite one */
-                if (j->f->dir[ni] == (uint8_t)((d + 4) & 7) && (!j->mask || j->mask[ni])) c++;
+                if (dir[ni] == (uint8_t)((d + 4) & 7) && (!mask || mask[ni])) c++;
             }
-            j->indeg[(size_t)y * w + x] = (uint8_t)c;
+            out[x] = (uint8_t)c;
         }
+        if (inner) { /* one term per neighbour: neighbour d drains here if it points back (d + 4) */
+            const uint8_t *u = dir + (size_t)(y - 1) * w, *m = u + w, *l = m + w;
+            if (!mask) {
+                for (x = 1; x < w - 1; x++)
+                    out[x] = (uint8_t)((m[x + 1] == 4) + (l[x + 1] == 5) + (l[x] == 6) + (l[x - 1] == 7) +
+                                       (m[x - 1] == 0) + (u[x - 1] == 1) + (u[x] == 2) + (u[x + 1] == 3));
+            } else {
+                const uint8_t *mu = mask + (size_t)(y - 1) * w, *mm = mu + w, *ml = mm + w;
+                /* a masked-off neighbour reads as direction 8, which points nowhere (written this
+                   way, not as (dir == k) & (mask != 0): gcc 12 -O2 vectorised that into -1 terms) */
+                for (x = 1; x < w - 1; x++)
+                    out[x] = (uint8_t)(((mm[x + 1] ? m[x + 1] : 8) == 4) + ((ml[x + 1] ? l[x + 1] : 8) == 5) +
+                                       ((ml[x] ? l[x] : 8) == 6) + ((ml[x - 1] ? l[x - 1] : 8) == 7) +
+                                       ((mm[x - 1] ? m[x - 1] : 8) == 0) + ((mu[x - 1] ? u[x - 1] : 8) == 1) +
+                                       ((mu[x] ? u[x] : 8) == 2) + ((mu[x + 1] ? u[x + 1] : 8) == 3));
+            }
+        }
+    }
 }
 
 static tn_status tn__indegree(const tn_flow *f, const uint8_t *mask, uint8_t **out)
@@ -10479,12 +10694,71 @@ static void tn__pack_rows(void *ctx, size_t y0, size_t y1)
     }
 }
 
-TN_API tn_status tn_flow_accumulation(tn_flow *flow)
-{
-    size_t i, n, seen = 0;
-    uint8_t *pk = NULL;
+/* One strip of rows for the threaded accumulation walk. */
+typedef struct tn__acc_job {
+    uint8_t *pk;
     uint32_t *acc;
     ptrdiff_t off[16];
+    size_t w, rows, nstrips;
+    size_t *seen;             /* per strip */
+    uint32_t *out_cell, *out_add; /* per strip: 2w slots of flow leaving the strip */
+    size_t *nout;
+} tn__acc_job;
+
+/* Walks down from cell c carrying a (acc of c, already stored) while each next cell has heard
+   from all its upstream cells; cells in [lo, hi) only, flow leaving that range goes to the
+   outbox (ocell == NULL: flow off the map, which the caller reports as undrained). Returns the cells finished. */
+static size_t tn__acc_walk(const tn__acc_job *j, size_t c, uint32_t a, size_t lo, size_t hi, uint32_t *ocell,
+                           uint32_t *oadd, size_t *nout)
+{
+    size_t seen = 0;
+    for (;;) {
+        size_t r;
+        unsigned v;
+        seen++;
+        if ((j->pk[c] & 15) == 15) break;
+        r = (size_t)((ptrdiff_t)c + j->off[j->pk[c] & 15]);
+        if (r < lo || r >= hi) { /* another strip's cell: hand the flow over */
+            if (ocell) {
+                ocell[*nout] = (uint32_t)r;
+                oadd[(*nout)++] = a;
+            }
+            break;
+        }
+        a = (j->acc[r] += a);
+        v = j->pk[r];
+        if ((v >> 4) > 1) {
+            j->pk[r] = (uint8_t)(v - 16);
+            break;
+        }
+        j->pk[r] = (uint8_t)(0xf0 | (v & 15));
+        c = r;
+    }
+    return seen;
+}
+
+/* Strip ith of nth: every walk that stays inside it. A cell with upstream cells in another strip
+   waits (its in-degree never reaches zero here) for the sequential pass over the outboxes. */
+static void tn__acc_strip(void *ctx, int ith, int nth)
+{
+    const tn__acc_job *j = (const tn__acc_job *)ctx;
+    size_t s, i;
+    for (s = (size_t)ith; s < j->nstrips; s += (size_t)nth) {
+        size_t lo = j->rows * s / j->nstrips * j->w, hi = j->rows * (s + 1) / j->nstrips * j->w, seen = 0;
+        for (i = lo; i < hi; i++) j->acc[i] = 1;
+        j->nout[s] = 0;
+        for (i = lo; i < hi; i++)
+            if (!(j->pk[i] >> 4)) /* no upstream cells, and not reached by a walk (15) */
+                seen += tn__acc_walk(j, i, 1, lo, hi, j->out_cell + 2 * j->w * s, j->out_add + 2 * j->w * s, &j->nout[s]);
+        j->seen[s] = seen;
+    }
+}
+
+TN_API tn_status tn_flow_accumulation(tn_flow *flow)
+{
+    size_t i, s, n, seen = 0, S;
+    uint8_t *pk = NULL;
+    tn__acc_job a;
     tn__pack_job j;
     tn_status st;
     int d;
@@ -10495,40 +10769,54 @@ TN_API tn_status tn_flow_accumulation(tn_flow *flow)
     j.indeg = pk;
     j.pk = pk; /* row by row in place: each byte is read before it is written */
     tn_parallel_for((size_t)flow->height, tn__row_grain(flow->width), tn__pack_rows, &j);
-    acc = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
-    if (!acc) {
-        TN_FREE(pk);
-        return TN_ERR_OUT_OF_MEMORY;
+    memset(&a, 0, sizeof a);
+    /* one strip per thread; the sums do not depend on the split, so neither does the result */
+    S = (size_t)tn_get_threads();
+    if (S > (size_t)flow->height) S = (size_t)flow->height;
+    a.pk = pk;
+    a.w = (size_t)flow->width;
+    a.rows = (size_t)flow->height;
+    a.nstrips = S;
+    for (d = 0; d < 16; d++) a.off[d] = d < 8 ? tn__d8y[d] * (ptrdiff_t)flow->width + tn__d8x[d] : 0;
+    a.acc = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
+    a.seen = (size_t *)tn__alloc(2 * S * sizeof(size_t));
+    a.out_cell = (uint32_t *)tn__alloc(4 * a.w * S * sizeof(uint32_t));
+    if (!a.acc || !a.seen || !a.out_cell) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
     }
-    for (d = 0; d < 16; d++) off[d] = d < 8 ? tn__d8y[d] * (ptrdiff_t)flow->width + tn__d8x[d] : 0;
-    for (i = 0; i < n; i++) acc[i] = 1;
-    for (i = 0; i < n; i++) {
-        size_t c = i;
-        uint32_t a = 1;
-        if (pk[i] >> 4) continue; /* has upstream cells, or was reached by a walk (15) */
-        for (;;) { /* walk down while each next cell has heard from all its upstream cells */
-            size_t r;
+    a.nout = a.seen + S;
+    a.out_add = a.out_cell + 2 * a.w * S;
+    tn_parallel_run(tn__acc_strip, &a);
+    for (s = 0; s < S; s++) seen += a.seen[s];
+    /* flow that crossed strips, in strip order: add it, and walk on (anywhere) from each cell
+       that has now heard from all its upstream cells */
+    for (s = 0; s < S; s++)
+        for (i = 0; i < a.nout[s]; i++) {
+            size_t r = a.out_cell[2 * a.w * s + i];
             unsigned v;
-            seen++;
-            if ((pk[c] & 15) == 15) break;
-            r = (size_t)((ptrdiff_t)c + off[pk[c] & 15]);
-            a = (acc[r] += a);
+            uint32_t acc_r;
+            if (r >= n) continue; /* points off the map: left undrained */
             v = pk[r];
+            acc_r = (a.acc[r] += a.out_add[2 * a.w * s + i]);
             if ((v >> 4) > 1) {
                 pk[r] = (uint8_t)(v - 16);
-                break;
+                continue;
             }
             pk[r] = (uint8_t)(0xf0 | (v & 15));
-            c = r;
+            seen += tn__acc_walk(&a, r, acc_r, 0, n, NULL, NULL, NULL);
         }
-    }
+    if (seen != n) st = tn__fail(TN_ERR_CORRUPT, "flow accumulation: the directions hold a cycle (%zu cells never drained)", n - seen);
+done:
     TN_FREE(pk);
-    if (seen != n) {
-        TN_FREE(acc);
-        return tn__fail(TN_ERR_CORRUPT, "flow accumulation: the directions hold a cycle (%zu cells never drained)", n - seen);
+    TN_FREE(a.seen);
+    TN_FREE(a.out_cell);
+    if (st) {
+        TN_FREE(a.acc);
+        return st;
     }
     TN_FREE(flow->acc);
-    flow->acc = acc;
+    flow->acc = a.acc;
     return TN_OK;
 }
 
@@ -10542,19 +10830,11 @@ TN_API void tn_flow_free(tn_flow *flow)
 
 TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
 {
-    uint32_t *keys = NULL;
     tn_image filled = {0, 0, 0, NULL};
     tn_status st;
     TN_ASSERT(flow);
     memset(flow, 0, sizeof *flow);
-    if ((st = tn__dem_check(dem, 1, "flow"))) return st;
-    if ((st = tn__dem_keys(dem, invert, &keys))) return st;
-    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(&filled, dem->width, dem->height, 1))) {
-        TN_FREE(keys);
-        return st;
-    }
-    tn__keys_to_heights(keys, dem, invert, filled.data);
-    TN_FREE(keys);
+    if ((st = tn__fill_image(dem, invert, "flow", &filled))) return st;
     st = tn_flow_directions(flow, &filled);
     tn_image_free(&filled);
     if (!st) st = tn_flow_accumulation(flow);

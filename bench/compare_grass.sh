@@ -7,6 +7,9 @@
 # d8cut=0); r.stream.order is a GRASS add-on (not in Debian), so GRASS's order is computed by
 # terrainnet's Strahler routine on GRASS's stream cells and directions (documented equivalent).
 # Usage: sh bench/compare_grass.sh [DATA_DIR]   (needs `grass`: apt-get install grass-core)
+# TN_GRASS_REUSE=1 reuses GRASS's outputs from an earlier run (in $TMPDIR/tn_compare_grass) when
+# they are there, so only terrainnet's side is recomputed; TN_COMPARE_INC=DIR compiles the tool
+# against DIR/terrainnet.h instead of this tree's.
 set -e
 cd "$(dirname "$0")/.."
 D=${1:-${TN_SHARED_DATA:-../shared/data}}
@@ -74,10 +77,12 @@ int main(int argc, char **argv) {
     return 2;
 }
 CEOF
-cc -O2 -I. "$W/tool.c" -o "$W/tool" -lm -pthread
+cc -O2 -I"${TN_COMPARE_INC:-.}" "$W/tool.c" -o "$W/tool" -lm -pthread
 grep ',full,' "$D/dem_index.csv" | while IFS=, read -r path region kind w h dx dy lo hi mn mx; do
     set -- $("$W/tool" prep "$D/$path" "$lo" "$hi" "$W/$region.f32")
-    grass --tmp-location XY --exec /usr/bin/python3 bench/grass_inner.py export "$W/$region.f32" "$1" "$2" "$3" "$W/$region" \
-        > "$W/$region.log" 2>&1 || { echo "$region: GRASS failed (see $W/$region.log)"; continue; }
+    if [ "${TN_GRASS_REUSE:-0}" != 1 ] || [ ! -s "$W/$region.dir" ]; then
+        grass --tmp-location XY --exec /usr/bin/python3 bench/grass_inner.py export "$W/$region.f32" "$1" "$2" "$3" "$W/$region" \
+            > "$W/$region.log" 2>&1 || { echo "$region: GRASS failed (see $W/$region.log)"; continue; }
+    fi
     echo "$region ($1 x $2, threshold $3): $("$W/tool" cmp "$W/$region.f32" "$1" "$2" "$3" "$W/$region")"
 done

@@ -462,6 +462,64 @@ TN_TEST(parts_lengths_and_adjacency)
     tn_contour_set_free(&lines);
 }
 
+/* The cutter follows the contour graph across junctions: a T of three polylines meeting at one
+   pixel is listed A, C (through the junction: C is the lower line index), then B after a break; a ring of four lines without
+   a free end is still cut. Every pixel ends up in exactly one part, except the junction and the
+   ring's start, where the list resumes after a break (C starts at the junction; the ring closes). */
+TN_TEST(parts_follow_the_graph_across_junctions)
+{
+    tn_contour_set lines = {0, 0, 0, NULL}, parts = {0, 0, 0, NULL};
+    size_t cap = 0;
+    float pts[3 * 16];
+    uint8_t hit[64 * 64];
+    int i, j, across = 0, total = 0, seed;
+    lines.width = lines.height = 64;
+    /* A: (10..20, 10) ending at the junction; C: (20, 10..20) leaving it downwards; B: (20..30, 10) */
+    for (i = 0; i <= 10; i++) { pts[3 * i] = (float)(10 + i); pts[3 * i + 1] = 10; pts[3 * i + 2] = 1; }
+    TN_CHECK(tn__cset_add(&lines, &cap, TN_VALLEY, 2, 0.0f, pts, 11) == TN_OK);
+    for (i = 0; i <= 10; i++) { pts[3 * i] = 20; pts[3 * i + 1] = (float)(10 + i); pts[3 * i + 2] = 2; }
+    TN_CHECK(tn__cset_add(&lines, &cap, TN_VALLEY, 1, 0.0f, pts, 11) == TN_OK);
+    for (i = 0; i <= 10; i++) { pts[3 * i] = (float)(20 + i); pts[3 * i + 1] = 10; pts[3 * i + 2] = 3; }
+    TN_CHECK(tn__cset_add(&lines, &cap, TN_VALLEY, 1, 0.0f, pts, 11) == TN_OK);
+    /* a ring: four sides of the square (40..50) x (40..50), each from corner to corner */
+    for (j = 0; j < 4; j++) {
+        for (i = 0; i <= 10; i++) {
+            int t = j < 2 ? i : 10 - i;
+            pts[3 * i] = (float)(40 + (j == 0 ? t : j == 1 ? 10 : j == 2 ? t : 0));
+            pts[3 * i + 1] = (float)(40 + (j == 0 ? 0 : j == 1 ? t : j == 2 ? 10 : t));
+            pts[3 * i + 2] = 5;
+        }
+        TN_CHECK(tn__cset_add(&lines, &cap, TN_RIDGE, 1, 0.0f, pts, 11) == TN_OK);
+    }
+    for (seed = 1; seed <= 20; seed++) {
+        TN_CHECK(tn_contour_parts_make(&lines, (uint64_t)seed, &parts) == TN_OK);
+        memset(hit, 0, sizeof hit);
+        total = 0;
+        for (i = 0; i < parts.count; i++) {
+            const tn_contour *p = &parts.items[i];
+            int left = 0, down = 0;
+            TN_CHECK(p->npoints >= 5 && p->npoints <= 10);
+            for (j = 0; j < p->npoints; j++) {
+                int x = (int)p->points[3 * j], y = (int)p->points[3 * j + 1];
+                if (j) TN_CHECK(abs(x - (int)p->points[3 * j - 3]) + abs(y - (int)p->points[3 * j - 2]) == 1);
+                hit[y * 64 + x]++;
+                total++;
+                if (p->type == TN_VALLEY) { left += y == 10 && x < 20; down += x == 20 && y > 10; }
+            }
+            if (left && down) {
+                across++;
+                TN_CHECK(p->order == 2); /* attributes of the line the part starts on: A */
+            }
+        }
+        for (j = 0; j < 64 * 64; j++) TN_CHECK(j == 10 * 64 + 20 || j == 40 * 64 + 40 ? hit[j] == 2 : hit[j] <= 1);
+        TN_CHECK(total == 32 + 41); /* T: 31 pixels and the junction again; ring: 40 and its start again */
+        tn_contour_set_free(&parts);
+    }
+    printf("parts across the junction: %d of 20 seeds\n", across);
+    TN_CHECK(across >= 10); /* parts run from A into C through the junction (unless a cut falls on it) */
+    tn_contour_set_free(&lines);
+}
+
 static int cancel_progress(void *user, const char *stage, double f)
 {
     (void)f;
@@ -579,6 +637,7 @@ int main(void)
     TN_RUN(delaunay_empty_circumcircles);
     TN_RUN(random_sketch_no_crossings_and_deterministic);
     TN_RUN(parts_lengths_and_adjacency);
+    TN_RUN(parts_follow_the_graph_across_junctions);
     TN_RUN(align_planted_rotated_copy);
     TN_RUN(align_long_parts);
     return tn_test_summary("test_sketch");
