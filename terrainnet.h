@@ -10277,6 +10277,19 @@ static tn_status tn__rheap_pop(tn__rheap *h, uint32_t *key, uint32_t *cell)
     return TN_OK;
 }
 
+/* Smallest key in a non-empty heap. */
+static tn_status tn__rheap_min(tn__rheap *h, uint32_t *key)
+{
+    uint32_t c;
+    tn_status st;
+    if (tn__rheap_first(h, 0) < 0) { /* move the next bucket down: pop and push back the minimum */
+        if ((st = tn__rheap_pop(h, key, &c))) return st;
+        return tn__rheap_push(h, *key, c);
+    }
+    *key = (h->last & ~0xffu) | (uint32_t)tn__rheap_first(h, 0);
+    return TN_OK;
+}
+
 /* The cell a pop will return next (for prefetching), or `none` when level 0 is empty. */
 static uint32_t tn__rheap_peek(const tn__rheap *h, uint32_t none)
 {
@@ -10364,14 +10377,18 @@ typedef struct tn__fill_state {
     ptrdiff_t off[8];         /* neighbour offsets in the framed grid */
     tn__rheap *q;
     tn__pheap pit;
+    uint32_t *flat;           /* FIFO of flat cells: (cell, raised key, level of the flat) */
+    size_t flat_head, nflat, cap_flat; /* in items; cap in bytes */
     uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
     size_t ntrace, cap_trace; /* cap in bytes */
     uint32_t seq;
 } tn__fill_state;
 
-/* Closes the open neighbours of c (filled key k): lower or equal ones are raised to k + 1 and
-   join the pit queue; higher ones keep their height and go on the trace stack. */
-static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
+/* Closes the open neighbours of c (filled key k) that lie on a flat of level lvl (k for a cell
+   at its own height; k + 1 inside a depression, where everything up to k is filled in height
+   order): lower ones are raised to k + 1 and join the pit queue; ones at lvl..k are raised to
+   k + 1 and join the flat FIFO; higher ones keep their height and go on the trace stack. */
+static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k, uint32_t lvl)
 {
     int d;
     for (d = 0; d < 8; d++) {
@@ -10379,9 +10396,23 @@ static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k)
         uint32_t v = f->keys[ni];
         tn_status st;
         if (v & TN__CLOSED) continue;
-        if (v <= k) { /* in a depression or flat: one step above c */
+        if (v < lvl) { /* in a depression: one step above c */
             f->keys[ni] = (k + 1) | TN__CLOSED;
             if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
+        } else if (v <= k) {
+            /* on a flat: one step above c, in the FIFO, which runs behind every queued cell of a
+               lower or equal key, so a flat fills in rings from all its lower edges at once (as
+               in r.watershed's A* search, where equal heights pop oldest first) instead of
+               draining to whichever edge cell happened to pop first */
+            uint32_t *it;
+            if ((f->nflat + 1) * 3 * sizeof(uint32_t) > f->cap_flat &&
+                (st = tn__reserve((void **)&f->flat, &f->cap_flat, (f->nflat + 1) * 3 * sizeof(uint32_t))))
+                return st;
+            f->keys[ni] = (k + 1) | TN__CLOSED;
+            it = f->flat + 3 * f->nflat++;
+            it[0] = (uint32_t)ni;
+            it[1] = k + 1;
+            it[2] = lvl;
         } else {
             f->keys[ni] = v | TN__CLOSED;
             if ((f->ntrace + 1) * sizeof(uint32_t) > f->cap_trace &&
@@ -10421,19 +10452,27 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
             st = tn__rheap_push(f.q, keys[i], (uint32_t)i);
             keys[i] |= TN__CLOSED;
         }
-    while (!st && (f.q->size || f.pit.n)) {
-        uint32_t k, c;
+    while (!st && (f.q->size || f.pit.n || f.flat_head < f.nflat)) {
+        uint32_t k, c, lvl, mk = 0xffffffffu;
         if (f.pit.n) {
             c = tn__pheap_pop(&f.pit);
             k = keys[c] & ~TN__CLOSED;
-        } else if ((st = tn__rheap_pop(f.q, &k, &c))) break;
+            lvl = k + 1;
+        } else if (f.flat_head < f.nflat && (!f.q->size || (!(st = tn__rheap_min(f.q, &mk)) && f.flat[3 * f.flat_head + 1] < mk))) {
+            const uint32_t *it = f.flat + 3 * f.flat_head++;
+            c = it[0];
+            k = it[1];
+            lvl = it[2];
+            if (f.flat_head == f.nflat) f.flat_head = f.nflat = 0;
+        } else if (st || (st = tn__rheap_pop(f.q, &k, &c))) break;
+        else lvl = k;
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
             uint32_t nx = f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
             TN__PREFETCH(keys + nx - W - 1);
             TN__PREFETCH(keys + nx - 1);
             TN__PREFETCH(keys + nx + W - 1);
         }
-        if ((st = tn__fill_expand(&f, c, k))) break;
+        if ((st = tn__fill_expand(&f, c, k, lvl))) break;
         while (f.ntrace && !st) {
             const uint32_t t = f.trace[--f.ntrace], kt = keys[t] & ~TN__CLOSED, *p = keys + t;
             /* closed neighbours (and the frame) have the top bit set, so they are never <= kt.
@@ -10441,7 +10480,7 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
                it here would start a pit cascade above the queue's level): wait in order */
             int lower = p[f.off[0]] <= kt || p[f.off[1]] <= kt || p[f.off[2]] <= kt || p[f.off[3]] <= kt ||
                         p[f.off[4]] <= kt || p[f.off[5]] <= kt || p[f.off[6]] <= kt || p[f.off[7]] <= kt;
-            st = lower ? tn__rheap_push(f.q, kt, t) : tn__fill_expand(&f, t, kt);
+            st = lower ? tn__rheap_push(f.q, kt, t) : tn__fill_expand(&f, t, kt, kt);
             done++;
         }
         if (!st && (++done & 0xfffff) < 16) st = tn__progress("fill", (double)done / (double)n);
@@ -10449,6 +10488,7 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
     tn__rheap_free(f.q);
     TN_FREE(f.q);
     TN_FREE(f.pit.a);
+    TN_FREE(f.flat);
     TN_FREE(f.trace);
     return st;
 }

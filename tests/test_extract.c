@@ -187,6 +187,44 @@ TN_TEST(test_pit_is_filled)
     tn_image_free(&dem);
 }
 
+/* A flat plateau (height 1 inside a border ring at 0) fills in rings from all its edges at once,
+   so every cell drains straight to its nearest edge: no path collects more than a short line.
+   (Filling the flat from the first edge cell reached would drain most of it to that cell.) */
+static float plateau(int x, int y) { return x == 0 || y == 0 || x == 63 || y == 63 ? 0.0f : 1.0f; }
+
+TN_TEST(test_flat_drains_to_all_edges)
+{
+    tn_image dem = make_dem(64, 64, plateau), noise = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    tn_flow f, g;
+    size_t i, mx = 0;
+    int t;
+    TN_CHECK(tn_flow_compute(&f, &dem, 0) == TN_OK);
+    TN_CHECK(outlet_sum(&f) == (size_t)64 * 64);
+    for (i = 0; i < (size_t)64 * 64; i++) if (f.dir[i] != TN_FLOW_OUTLET && f.acc[i] > mx) mx = f.acc[i];
+    printf("plateau: largest inner accumulation %zu cells\n", mx);
+    TN_CHECK(mx <= 64);
+    tn_flow_free(&f);
+    /* accumulation is threaded by strips: 1 and 2 threads give the same grids */
+    memset(&po, 0, sizeof po);
+    po.octaves = 6;
+    po.frequency = 6.0f;
+    TN_CHECK(tn_noise_perlin(&noise, 301, 203, &po) == TN_OK);
+    t = tn_get_threads();
+    tn_set_threads(1);
+    TN_CHECK(tn_flow_compute(&f, &noise, 0) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_flow_compute(&g, &noise, 0) == TN_OK);
+    tn_set_threads(t);
+    TN_CHECK(outlet_sum(&g) == (size_t)301 * 203);
+    TN_CHECK(memcmp(f.acc, g.acc, (size_t)301 * 203 * sizeof(uint32_t)) == 0);
+    TN_CHECK(memcmp(f.dir, g.dir, (size_t)301 * 203) == 0);
+    tn_flow_free(&f);
+    tn_flow_free(&g);
+    tn_image_free(&noise);
+    tn_image_free(&dem);
+}
+
 /* A hand-made network: two sources (order 1) meet at a junction (order 2), a third source joins
    the stem lower down (stays 2), on a 7 x 8 grid draining to (3, 7). */
 TN_TEST(test_strahler_y)
@@ -512,6 +550,7 @@ int main(void)
     TN_RUN(test_ridge_line);
     TN_RUN(test_cone);
     TN_RUN(test_pit_is_filled);
+    TN_RUN(test_flat_drains_to_all_edges);
     TN_RUN(test_strahler_y);
     TN_RUN(test_skeleton);
     TN_RUN(test_parts_sparse_sketch);
