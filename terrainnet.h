@@ -862,6 +862,13 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    Wasserstein distance (Heitz et al. 2021: features projected on C fixed random directions,
    sorted, compared with the source's sorted projections); histogram terms match the sorted
    heights and slopes of the source; content = relative squared distance of the third layer.
+   Optional drainage terms (off by default; drain_weight, valley_weight): the depression depths
+   (depression-filled map minus map, @@extract's priority flood) are sorted-matched to the
+   source's, so a source without closed basins removes them; and every cell's relief (height
+   minus its Gaussian-smoothed surroundings, sigma 2 px) is pulled towards the source's mean
+   relief for cells of the same D8 drainage area (log2 bins), on all levels but the finest, so
+   valleys are carved where water collects and the network connects. The filled map and the
+   drainage bins are recomputed every evaluation and held constant in the gradient.
 
    VGG-19 (tn_vgg19_load): the paper's network. Greyscale is fed as three identical channels in
    [0, 1] with ImageNet normalisation (mean 0.485 0.456 0.406, std 0.229 0.224 0.225), max
@@ -888,6 +895,8 @@ typedef struct tn_style_opts {
     float style_weight;   /* beta: Gram term */
     float sw_weight;      /* built-in net: sliced Wasserstein term */
     float hist_weight;    /* built-in net: height and slope histogram terms */
+    float drain_weight;   /* built-in net: closed basins (depressions) as deep as the source's */
+    float valley_weight;  /* built-in net: valley relief per drainage area as in the source (all but the finest level) */
     float tv_weight;      /* gamma */
     float lr;             /* SGD / Adam learning rate; 0 = default (SGD decays x0.96 every iters/20 steps) */
     uint64_t seed;        /* random filters and projections of the built-in net */
@@ -11814,6 +11823,8 @@ static int tn__style_forward(tn_ctx *ctx, const tn__style_net *net, tn_tensor *x
 
 /* ---- one pyramid level (or one tile of it): targets, loss, gradient ---- */
 
+#define TN__STYLE_ABINS 32    /* drainage bins: floor(log2(flow accumulation)) */
+
 typedef struct tn__style_level {
     const tn__style_net *net;
     tn_ctx *ctx;
@@ -11832,6 +11843,11 @@ typedef struct tn__style_level {
     double cnorm;
     float *hsorted, *ssorted; /* sorted source heights and slopes */
     size_t hn, sn;
+    float wdep, wrel;
+    float *dsorted;           /* sorted source depression depths (filled - height) */
+    size_t dn;
+    float relief_t[TN__STYLE_ABINS + 1]; /* source's mean relief per accumulation bin; the edge */
+    double relief2;           /* source's mean squared relief */
     double s2;
     tn_status status;
 } tn__style_level;
@@ -11847,6 +11863,7 @@ static void tn__style_level_free(tn__style_level *L)
     TN_FREE(L->content);
     TN_FREE(L->hsorted);
     TN_FREE(L->ssorted);
+    TN_FREE(L->dsorted);
     tn_ctx_free(L->ctx);
     memset(L, 0, sizeof *L);
 }
@@ -11967,11 +11984,115 @@ static tn_status tn__style_targets(tn__style_level *L, const float *const *crops
     return st;
 }
 
+/* Depression-filled copy of a w x h map (priority flood, @@extract): water leaves every cell. */
+static tn_status tn__style_fill(const float *v, int w, int h, float *filled)
+{
+    tn_image m, f = {0, 0, 0, NULL};
+    tn_status st;
+    m.width = w;
+    m.height = h;
+    m.channels = 1;
+    m.data = (float *)v;
+    if ((st = tn_fill_depressions(&f, &m))) return st;
+    memcpy(filled, f.data, (size_t)w * h * sizeof(float));
+    tn_image_free(&f);
+    return TN_OK;
+}
+
+/* Gaussian kernel of the relief (sigma 2 px, 9 x 9) as a 1 x 1 x 9 x 9 tensor. */
+static tn_tensor *tn__style_relief_kernel(tn_ctx *ctx)
+{
+    tn_tensor *k = tn_tensor_4d(ctx, 1, 1, 9, 9);
+    double g[9], s = 0;
+    int i, j;
+    if (!k) return NULL;
+    for (i = 0; i < 9; i++) s += g[i] = exp(-0.125 * (i - 4) * (i - 4));
+    for (i = 0; i < 9; i++)
+        for (j = 0; j < 9; j++) k->data[i * 9 + j] = (float)(g[i] * g[j] / (s * s));
+    return k;
+}
+
+/* Relief = height minus its Gaussian-smoothed height (reflect padding): negative in valley bottoms,
+   positive on ridges. xs is the map the smoothing reads (x itself, or x with cells held fixed). */
+static tn_tensor *tn__style_relief(tn_ctx *ctx, tn_tensor *x, tn_tensor *xs)
+{
+    tn_conv_opts co;
+    memset(&co, 0, sizeof co);
+    co.padding = TN_PADDING_REFLECT;
+    co.pad = 4;
+    return tn_sub(ctx, x, tn_conv2d(ctx, xs, tn__style_relief_kernel(ctx), NULL, &co));
+}
+
+#define TN__STYLE_LAKE 255 /* drainage bin of a cell left alone: in a depression */
+#define TN__STYLE_EDGE 1   /* px: border cells drain off the map, so channels would run along it:
+                              cells this close to the edge share one bin (TN__STYLE_ABINS) */
+
+/* Drainage bin of every cell of a w x h map v: floor(log2(D8 flow accumulation)) on its filled
+   copy, capped at TN__STYLE_ABINS - 1; TN__STYLE_LAKE inside depressions (filled > v), where
+   the flow crosses flats in straight lines that should not be carved, and near the edge. */
+static tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin)
+{
+    tn_image m;
+    tn_flow f;
+    size_t i, n = (size_t)w * h;
+    tn_status st;
+    m.width = w;
+    m.height = h;
+    m.channels = 1;
+    m.data = (float *)filled;
+    memset(&f, 0, sizeof f);
+    if ((st = tn_flow_directions(&f, &m)) || (st = tn_flow_accumulation(&f))) {
+        tn_flow_free(&f);
+        return st;
+    }
+    for (i = 0; i < n; i++) {
+        uint32_t a = f.acc[i];
+        int b = 0;
+        while (a > 1 && b < TN__STYLE_ABINS - 1) { a >>= 1; b++; }
+        int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w);
+        int edge = x < TN__STYLE_EDGE || y < TN__STYLE_EDGE || x >= w - TN__STYLE_EDGE || y >= h - TN__STYLE_EDGE;
+        bin[i] = filled[i] > v[i] ? TN__STYLE_LAKE : edge ? TN__STYLE_ABINS : (uint8_t)b;
+    }
+    tn_flow_free(&f);
+    return TN_OK;
+}
+
+/* The source's mean relief per drainage bin (empty bins take the next lower bin's value) and
+   its mean squared relief, from the source level x and its filled copy. */
+static tn_status tn__style_relief_targets(tn__style_level *L, tn_tensor *x, const float *filled, int w, int h)
+{
+    size_t i, n = (size_t)w * h;
+    tn_tensor *rt = tn__style_relief(L->ctx, x, x);
+    float *r = rt ? rt->data : NULL;
+    uint8_t *bin = (uint8_t *)tn__alloc(n);
+    double sum[TN__STYLE_ABINS + 1], cnt[TN__STYLE_ABINS + 1], s2 = 0;
+    int b;
+    tn_status st = r && bin ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__style_drain_bins(filled, x->data, w, h, bin);
+    if (!st) {
+        memset(sum, 0, sizeof sum);
+        memset(cnt, 0, sizeof cnt);
+        for (i = 0; i < n; i++) {
+            s2 += (double)r[i] * r[i];
+            if (bin[i] == TN__STYLE_LAKE) continue;
+            sum[bin[i]] += r[i];
+            cnt[bin[i]] += 1;
+        }
+        for (b = 0; b < TN__STYLE_ABINS; b++) L->relief_t[b] = cnt[b] > 0 ? (float)(sum[b] / cnt[b]) : (b ? L->relief_t[b - 1] : 0.0f);
+        L->relief_t[TN__STYLE_ABINS] = cnt[TN__STYLE_ABINS] > 0 ? (float)(sum[TN__STYLE_ABINS] / cnt[TN__STYLE_ABINS]) : 0.0f;
+        s2 /= (double)n;
+        L->relief2 = s2 > 1e-30 ? s2 : 1e-30;
+    }
+    TN_FREE(bin);
+    return st;
+}
+
 /* Sorted heights and slopes of the whole source level (w x h). */
 static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
 {
     tn_ctx *ctx = L->ctx;
     tn_tensor *x, *s;
+    float *f = NULL;
     tn_status st;
     size_t k;
     double m = 0;
@@ -11989,7 +12110,16 @@ static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, in
     if ((st = tn__style_sort_rows(x->data, 1, L->hn, L->hsorted)) || (st = tn__style_sort_rows(s->data, 1, L->sn, L->ssorted))) return st;
     for (k = 0; k < L->sn; k++) m += (double)L->ssorted[k] * L->ssorted[k];
     L->s2 = m / (double)L->sn > 1e-30 ? m / (double)L->sn : 1e-30;
-    return TN_OK;
+    if (L->wdep <= 0 && L->wrel <= 0) return TN_OK;
+    L->dn = L->hn;
+    if (!(L->dsorted = (float *)tn__alloc(L->dn * sizeof(float))) || !(f = (float *)tn__alloc(L->dn * sizeof(float))))
+        return TN_ERR_OUT_OF_MEMORY;
+    if (!(st = tn__style_fill(src, w, h, f)) && !(st = tn__style_relief_targets(L, x, f, w, h))) {
+        for (k = 0; k < L->dn; k++) f[k] -= src[k]; /* depression depths */
+        st = tn__style_sort_rows(f, 1, L->dn, L->dsorted);
+    }
+    TN_FREE(f);
+    return st;
 }
 
 /* Content-layer features of the anchor map (w x h). */
@@ -12025,6 +12155,7 @@ static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
     tn_tensor *sf[TN__STYLE_MAXL], *cf = NULL, *loss = NULL, *t;
     int l, ns = tn__style_forward(ctx, L->net, x, sf, &cf);
     double hw0 = (double)L->w * L->h;
+    size_t q;
     if (!ns) return NULL;
     if (L->wc > 0) {
         t = tn_tensor_new(ctx, 4, L->cshape);
@@ -12052,6 +12183,35 @@ static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
             shape[1] = (int)hw;
             P = tn_matmul(ctx, D, tn_reshape(ctx, sf[l], 2, shape), 0, 0);
             loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, P, L->sorted[l], L->snt[l], (float)(L->wsw / (L->svar[l] * ns))));
+        }
+    }
+    if (L->dsorted) { /* drainage terms; the filled map and the drainage bins are held constant */
+        tn_tensor *f = tn_tensor_new(ctx, 4, x->shape), *rt = tn_tensor_new(ctx, 4, x->shape), *r;
+        tn_tensor *fixed = tn_tensor_new(ctx, 4, x->shape), *free_ = tn_tensor_new(ctx, 4, x->shape);
+        uint8_t *bin = (uint8_t *)tn_ctx_alloc(ctx, x->numel);
+        int shape[2];
+        if (!f || !rt || !fixed || !free_ || !bin) return NULL;
+        if ((ctx->status = tn__style_fill(x->data, L->w, L->h, f->data)) ||
+            (ctx->status = tn__style_drain_bins(f->data, x->data, L->w, L->h, bin)))
+            return NULL;
+        shape[0] = 1;
+        shape[1] = (int)x->numel;
+        /* closed basins as deep as the source's: depths filled - x, sorted-matched */
+        if (L->wdep > 0)
+            loss = tn__style_acc(ctx, loss, tn__sorted_match(ctx, tn_reshape(ctx, tn_sub(ctx, f, x), 2, shape), L->dsorted, L->dn, L->wdep));
+        /* valleys as far below their surroundings as the source's with the same drainage area; cells
+           left alone (lakes, the edge) are also held fixed in the smoothing, so nothing pushes them */
+        if (L->wrel > 0) {
+            for (q = 0; q < x->numel; q++) {
+                int keep = bin[q] == TN__STYLE_LAKE;
+                free_->data[q] = keep ? 0.0f : 1.0f;
+                fixed->data[q] = keep ? x->data[q] : 0.0f;
+            }
+            r = tn__style_relief(ctx, x, tn_add(ctx, tn_mul(ctx, x, free_), fixed));
+            if (!r) return NULL;
+            for (q = 0; q < x->numel; q++) rt->data[q] = bin[q] == TN__STYLE_LAKE ? r->data[q] : L->relief_t[bin[q]];
+            t = tn_sum(ctx, tn_square(ctx, tn_sub(ctx, r, rt)));
+            loss = tn__style_acc(ctx, loss, tn_scale_shift(ctx, t, (float)(L->wrel / (L->relief2 * (double)x->numel)), 0.0f));
         }
     }
     if (L->wh > 0 && L->hsorted) {
@@ -12105,6 +12265,7 @@ typedef struct tn__style_cfg {
     tn_progress_fn user_fn;
     void *user_data;
     double span;
+    int level;                    /* pyramid level being optimised (0 = full size) */
 } tn__style_cfg;
 
 /* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer. */
@@ -12225,6 +12386,8 @@ static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int
     L->wsw = c->o.sw_weight;
     L->wh = c->o.hist_weight;
     L->wtv = c->o.tv_weight;
+    L->wdep = c->o.drain_weight;
+    L->wrel = c->level > 0 ? c->o.valley_weight : -1.0f; /* the finest level only adds detail */
     L->ctx = tn_ctx_create();
 }
 
@@ -12256,7 +12419,7 @@ static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, cons
             tn__style_window(crops[k], src, px[i], py[j], tw, th);
         }
     if ((st = tn__style_targets(&L, (const float *const *)crops, ncrop, c->o.seed))) goto done;
-    if (!c->net.vgg && L.wh > 0 && (st = tn__style_hist_targets(&L, src->data, W, H))) goto done;
+    if (!c->net.vgg && (L.wh > 0 || L.wdep > 0 || L.wrel > 0) && (st = tn__style_hist_targets(&L, src->data, W, H))) goto done;
     for (j = 0; j < ny && !st; j++)
         for (i = 0; i < nx && !st; i++) {
             int y, xx;
@@ -12340,6 +12503,8 @@ static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
     if (o->style_weight == 0) o->style_weight = vgg ? 1e-5f : 1.0f;
     if (o->sw_weight == 0) o->sw_weight = vgg ? -1.0f : 1.0f;
     if (o->hist_weight == 0) o->hist_weight = vgg ? -1.0f : 1.0f;
+    if (o->drain_weight == 0) o->drain_weight = -1.0f; /* opt-in (README: edge artefacts) */
+    if (o->valley_weight == 0) o->valley_weight = -1.0f;
     if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
     if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
     if (!(o->lr > 0)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive");
@@ -12392,6 +12557,7 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
         st = tn__style_resize(&s, &sm, lw, lh);
         if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
         if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
+        c->level = k;
         if (!st) st = tn__style_level_run(c, &s, &a, &x);
         tn_image_free(&s);
         tn_image_free(&a);

@@ -1,12 +1,16 @@
 /* bench_style: terrain style transfer (paper 002) on real heightmaps, default settings.
-   usage: bench_style [PREVIEW_DIR] [--no-1024] [--peer]
+   usage: bench_style [PREVIEW_DIR] [--no-1024] [--peer] [--drain]
    For a mountain, a canyon and a desert source (../shared/data or $TN_SHARED_DATA): a 512 x 512
    Perlin map (seed 7, 8 octaves, 3 cells) is restyled; prints the Table 1 protocol (SSIM of the
    source resized to the map size, both normalised to [0, 1]) before/after, the slope-histogram
    and radial power-spectrum distances before/after, and the time. Then the time for 1024 x 1024,
    and the time of one VGG-19 loss+gradient evaluation at 256 x 256 (random weights) for
    comparison with ../shared/peers/torch_style_transfer.py (run in the same process with --peer).
-   With PREVIEW_DIR, writes <name>_source_noise_result.png: hillshaded source | noise | result. */
+   With PREVIEW_DIR, writes <name>_source_noise_result.png: hillshaded source | noise | result.
+   Also prints SSIM(source, the source mirrored left-right / transposed): maps with exactly the
+   source's morphology but another layout, the reference for what Table 1's SSIM can reach when
+   the layout is not the source's. --drain switches on the drainage terms (drain_weight 10,
+   valley_weight 1, levels 5). */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
@@ -46,6 +50,21 @@ static int save_triptych(const char *dir, const char *name, const tn_image *src,
     return st != TN_OK;
 }
 
+/* SSIM(source, source mirrored left-right (t = 0) or transposed (t = 1)) at n x n. */
+static double ssim_rearranged(const tn_image *src, int n, int t)
+{
+    tn_image r = {0, 0, 0, NULL}, f = {0, 0, 0, NULL};
+    tn_style_scores sc;
+    int x, y;
+    if (tn_image_resize(&r, src, n, n, TN_RESIZE_AREA) || tn_image_copy(&f, &r)) return -1;
+    for (y = 0; y < n; y++)
+        for (x = 0; x < n; x++) f.data[y * n + x] = t ? r.data[x * n + y] : r.data[y * n + n - 1 - x];
+    if (tn_style_compare(&f, src, &sc)) sc.ssim = -1;
+    tn_image_free(&r);
+    tn_image_free(&f);
+    return sc.ssim;
+}
+
 static int perlin(tn_image *img, int n)
 {
     tn_perlin_opts po;
@@ -63,11 +82,20 @@ int main(int argc, char **argv)
                                         {"desert", "dem/sahara_erg_oriental/sahara_erg_oriental_full.png"}};
     const char *dir = NULL;
     int i, do1024 = 1, peer = 0, ok = 1, ran = 0;
+    tn_style_opts so;
     char path[1024];
     tn_image noise = {0, 0, 0, NULL};
+    const tn_style_opts *opts = NULL;
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--no-1024")) do1024 = 0;
         else if (!strcmp(argv[i], "--peer")) peer = 1;
+        else if (!strcmp(argv[i], "--drain")) {
+            memset(&so, 0, sizeof so);
+            so.drain_weight = 10;
+            so.valley_weight = 1;
+            so.levels = 5;
+            opts = &so;
+        }
         else dir = argv[i];
     }
     tn_set_threads(2);
@@ -83,7 +111,7 @@ int main(int argc, char **argv)
             continue;
         }
         t0 = tn_time_seconds();
-        if (tn_style_transfer(&res, &noise, &src, NULL)) {
+        if (tn_style_transfer(&res, &noise, &src, opts)) {
             fprintf(stderr, "%s\n", tn_last_error());
             return 1;
         }
@@ -97,6 +125,8 @@ int main(int argc, char **argv)
         printf("style_%s_spectrum_dist_noise: %.4f\n", sources[i][0], a.spectrum_dist);
         printf("style_%s_spectrum_dist_result: %.4f\n", sources[i][0], b.spectrum_dist);
         printf("style_%s_512_time: %.1f s\n", sources[i][0], t);
+        printf("style_%s_ssim_source_mirrored: %.4f\n", sources[i][0], ssim_rearranged(&src, 512, 0));
+        printf("style_%s_ssim_source_transposed: %.4f\n", sources[i][0], ssim_rearranged(&src, 512, 1));
         ran++;
         ok &= b.ssim > a.ssim && b.slope_hist_dist < a.slope_hist_dist && b.spectrum_dist < a.spectrum_dist;
         fflush(stdout);
@@ -105,7 +135,7 @@ int main(int argc, char **argv)
             tn_image n2 = {0, 0, 0, NULL}, r2 = {0, 0, 0, NULL};
             if (perlin(&n2, 1024)) return 1;
             t0 = tn_time_seconds();
-            if (tn_style_transfer(&r2, &n2, &src, NULL)) {
+            if (tn_style_transfer(&r2, &n2, &src, opts)) {
                 fprintf(stderr, "%s\n", tn_last_error());
                 return 1;
             }

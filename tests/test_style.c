@@ -30,13 +30,15 @@ static int level_setup(tn__style_cfg *c, tn__style_level *L, const tn_style_opts
 {
     double a, b;
     const float *crop;
+    int level = c->level; /* setup clears the config */
     if (tn__style_setup(c, o)) return 0;
+    c->level = level;
     tn__style_normalise(content, 0, &a, &b);
     tn__style_normalise(style, 0, &a, &b);
     tn__style_level_init(L, c, content->width, content->height);
     crop = style->data;
     if (tn__style_targets(L, &crop, 1, c->o.seed)) return 0;
-    if (L->wh > 0 && tn__style_hist_targets(L, style->data, style->width, style->height)) return 0;
+    if ((L->wh > 0 || L->wdep > 0 || L->wrel > 0) && tn__style_hist_targets(L, style->data, style->width, style->height)) return 0;
     if (L->wc > 0 && tn__style_content_target(L, content->data)) return 0;
     return 1;
 }
@@ -190,6 +192,78 @@ TN_TEST(test_transfer_threads_and_units)
     tn_image_free(&b);
     tn_image_free(&content);
     tn_image_free(&style);
+}
+
+/* Mean depression depth (filled - height) of a map, heights standardised first. */
+static double mean_depression(const tn_image *m)
+{
+    tn_image a = {0, 0, 0, NULL}, f = {0, 0, 0, NULL};
+    double off, sc, s = 0;
+    size_t i, n = (size_t)m->width * m->height;
+    tn_image_copy(&a, m);
+    tn__style_normalise(&a, 0, &off, &sc);
+    if (tn_fill_depressions(&f, &a)) return -1;
+    for (i = 0; i < n; i++) s += f.data[i] - a.data[i];
+    tn_image_free(&a);
+    tn_image_free(&f);
+    return s / (double)n;
+}
+
+TN_TEST(test_drainage_terms)
+{
+    /* a source of parallel V-valleys on a tilt (no closed basins); a Perlin content map has many */
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, off = {0, 0, 0, NULL}, on = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn__style_cfg *c = (tn__style_cfg *)calloc(1, sizeof *c);
+    tn__style_level L;
+    tn_style_opts o;
+    int x, y;
+    double d0, d1;
+    TN_CHECK(c != NULL);
+    tn_image_create(&style, 64, 64, 1);
+    for (y = 0; y < 64; y++)
+        for (x = 0; x < 64; x++) style.data[y * 64 + x] = 2.0f * y + 8.0f * fabsf(sinf(0.3f * x));
+    make_content(&content, 64, 64);
+    /* source targets: cells draining much area (valley floors) lie below their surroundings,
+       cells draining only themselves (ridges) above */
+    memset(&o, 0, sizeof o);
+    o.drain_weight = 1;
+    o.valley_weight = 1;
+    c->level = 1;
+    TN_CHECK(level_setup(c, &L, &o, &content, &style));
+    TN_CHECK(L.dsorted != NULL && L.wrel > 0);
+    TN_CHECK(L.relief_t[0] > 0 && L.relief_t[8] < 0);
+    TN_CHECK(L.dsorted[L.dn - 1] < 1e-3f); /* the source has no depressions */
+    tn__style_level_free(&L);
+    tn_params_free(c->net.own);
+    /* the basin term fills the content's depressions; same bytes for 1 and 2 threads */
+    tn_image_free(&content);
+    make_content(&content, 64, 64);
+    for (y = 0; y < 64; y++)
+        for (x = 0; x < 64; x++) style.data[y * 64 + x] = 2.0f * y + 8.0f * fabsf(sinf(0.3f * x));
+    memset(&o, 0, sizeof o);
+    o.iters = 40;
+    o.levels = 2;
+    TN_CHECK(tn_style_transfer(&off, &content, &style, &o) == TN_OK);
+    o.drain_weight = 10;
+    o.valley_weight = 1;
+    tn_set_threads(1);
+    TN_CHECK(tn_style_transfer(&on, &content, &style, &o) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_style_transfer(&b, &content, &style, &o) == TN_OK);
+    tn_set_threads(0);
+    TN_CHECK(on.data && b.data && memcmp(on.data, b.data, (size_t)64 * 64 * sizeof(float)) == 0);
+    d0 = mean_depression(&off);
+    tn_image_free(&on);
+    o.valley_weight = -1; /* the basin term alone */
+    TN_CHECK(tn_style_transfer(&on, &content, &style, &o) == TN_OK);
+    d1 = mean_depression(&on);
+    TN_CHECK(d0 > 0 && d1 >= 0 && d1 < 0.5 * d0);
+    tn_image_free(&content);
+    tn_image_free(&style);
+    tn_image_free(&off);
+    tn_image_free(&on);
+    tn_image_free(&b);
+    free(c);
 }
 
 TN_TEST(test_tiles_and_progress)
@@ -347,6 +421,7 @@ int main(void)
     TN_RUN(test_loss_decreases);
     TN_RUN(test_style_gradient);
     TN_RUN(test_transfer_threads_and_units);
+    TN_RUN(test_drainage_terms);
     TN_RUN(test_tiles_and_progress);
     TN_RUN(test_cancel);
     TN_RUN(test_bad_input);

@@ -802,12 +802,17 @@ static int cmd_style(int argc, char **argv)
                "                        [--optimizer lbfgs|sgd|adam] [--weights vgg19.tnw] [--size N]\n"
                "                        [--levels N] [--seed S] [--lr R] [--content-weight A]\n"
                "                        [--style-weight B] [--sw-weight W] [--hist-weight H] [--tv-weight G]\n"
+               "                        [--drain-weight D] [--valley-weight V]\n"
                "Restyles the content map (e.g. from `terrainnet noise`) with the morphology of the\n"
                "SOURCE heightmap. The output has the content's size (or N x N with --size) and the\n"
                "source's height units. Defaults: built-in random-feature network (no file needed),\n"
                "L-BFGS, 40 iterations per pyramid level (Adam 150, SGD 300), levels down to 64 px.\n"
                "--weights uses VGG-19 from a .tnw file (examples/vgg19_to_tnw.py makes one) with the\n"
-               "paper's layers and weights. Weights: 0 = default, negative = term off.\n");
+               "paper's layers and weights. Weights: 0 = default, negative = term off.\n"
+               "--drain-weight / --valley-weight (built-in net, off by default) switch on the drainage\n"
+               "terms: closed basins as deep as the source's, and valleys carved as deep as the\n"
+               "source's for the same drainage area (e.g. --drain-weight 10 --valley-weight 1\n"
+               "--levels 5; see README).\n");
         return 0;
     }
     memset(&so, 0, sizeof so);
@@ -832,7 +837,8 @@ static int cmd_style(int argc, char **argv)
             else so.seed = (uint64_t)n;
             a++;
         } else if ((!strcmp(argv[a], "--lr") || !strcmp(argv[a], "--content-weight") || !strcmp(argv[a], "--style-weight") ||
-                    !strcmp(argv[a], "--sw-weight") || !strcmp(argv[a], "--hist-weight") || !strcmp(argv[a], "--tv-weight")) &&
+                    !strcmp(argv[a], "--sw-weight") || !strcmp(argv[a], "--hist-weight") || !strcmp(argv[a], "--tv-weight") ||
+                    !strcmp(argv[a], "--drain-weight") || !strcmp(argv[a], "--valley-weight")) &&
                    a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v)) return usage_error("style", "not a number:", argv[a + 1]);
             if (!strcmp(argv[a], "--lr")) so.lr = (float)v;
@@ -840,6 +846,8 @@ static int cmd_style(int argc, char **argv)
             else if (!strcmp(argv[a], "--style-weight")) so.style_weight = (float)v;
             else if (!strcmp(argv[a], "--sw-weight")) so.sw_weight = (float)v;
             else if (!strcmp(argv[a], "--hist-weight")) so.hist_weight = (float)v;
+            else if (!strcmp(argv[a], "--drain-weight")) so.drain_weight = (float)v;
+            else if (!strcmp(argv[a], "--valley-weight")) so.valley_weight = (float)v;
             else so.tv_weight = (float)v;
             a++;
         } else return usage_error("style", "unknown option or missing value:", argv[a]);
