@@ -925,6 +925,15 @@ typedef struct tn_style_scores {
 } tn_style_scores;
 TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out);
 
+/* A Perlin fBm content map of width x height for `source`: the gain is picked from 0.45, 0.50,
+   ..., 0.90 to minimise tn_style_compare's slope-histogram + spectrum distances to the source,
+   so the content starts with the source's roughness and the transfer rebuilds its morphology
+   (smooth gain-0.5 content against a rough source is what made Table-1 SSIM fall; README).
+   opts: seed, octaves, frequency, lacunarity, periodic (its gain is ignored); NULL = defaults.
+   *gain_out (may be NULL) gets the gain. Costs ten noise maps and ten comparisons. */
+TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, const tn_image *source,
+                                        const tn_perlin_opts *opts, float *gain_out);
+
 /* ============================================================================================
    @@texgan  single-texture spatial GAN, huge textures and detail maps (paper 004, section III)
    A PSGAN-style spatial GAN learns one exemplar (RGB, or RGB + normal map = 6 channels, any
@@ -12611,6 +12620,41 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
     tn_image_free(&b);
     tn_image_free(&t);
     return st;
+}
+
+TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, const tn_image *source,
+                                        const tn_perlin_opts *opts, float *gain_out)
+{
+    tn_image best = {0, 0, 0, NULL}, cand = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    tn_style_scores sc;
+    double best_d = 0.0;
+    float best_g = 0.5f;
+    tn_status st = TN_OK;
+    int k;
+    if (!out || !source) return tn__fail(TN_ERR_INVALID_ARG, "style content noise: needs an output and a source");
+    if (opts) po = *opts;
+    else memset(&po, 0, sizeof po);
+    for (k = 0; k < 10 && !st; k++) {
+        po.gain = 0.45f + 0.05f * (float)k;
+        if ((st = tn_noise_perlin(&cand, width, height, &po)) || (st = tn_style_compare(&cand, source, &sc))) break;
+        if (!best.data || sc.slope_hist_dist + sc.spectrum_dist < best_d) {
+            tn_image_free(&best);
+            best = cand;
+            cand.data = NULL;
+            best_d = sc.slope_hist_dist + sc.spectrum_dist;
+            best_g = po.gain;
+        }
+        tn_image_free(&cand);
+    }
+    tn_image_free(&cand);
+    if (st) {
+        tn_image_free(&best);
+        return st;
+    }
+    *out = best;
+    if (gain_out) *gain_out = best_g;
+    return TN_OK;
 }
 
 /* --------------------------------------------------------------------------------------------

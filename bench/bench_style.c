@@ -1,7 +1,8 @@
 /* bench_style: terrain style transfer (paper 002) on real heightmaps, default settings.
-   usage: bench_style [PREVIEW_DIR] [--no-1024] [--peer] [--drain]
+   usage: bench_style [PREVIEW_DIR] [--no-1024] [--peer] [--drain] [--fixed-content]
    For a mountain, a canyon and a desert source (../shared/data or $TN_SHARED_DATA): a 512 x 512
-   Perlin map (seed 7, 8 octaves, 3 cells) is restyled; prints the Table 1 protocol (SSIM of the
+   Perlin map (seed 7, 8 octaves, 3 cells; gain matched to the source by tn_style_content_noise,
+   or 0.5 with --fixed-content) is restyled; prints the Table 1 protocol (SSIM of the
    source resized to the map size, both normalised to [0, 1]) before/after, the slope-histogram
    and radial power-spectrum distances before/after, and the time. Then the time for 1024 x 1024,
    and the time of one VGG-19 loss+gradient evaluation at 256 x 256 (random weights) for
@@ -65,14 +66,33 @@ static double ssim_rearranged(const tn_image *src, int n, int t)
     return sc.ssim;
 }
 
-static int perlin(tn_image *img, int n)
+static tn_perlin_opts perlin_opts(void)
 {
     tn_perlin_opts po;
     memset(&po, 0, sizeof po);
     po.seed = 7;
     po.octaves = 8;
     po.frequency = 3;
+    return po;
+}
+
+static int perlin(tn_image *img, int n)
+{
+    tn_perlin_opts po = perlin_opts();
     return tn_noise_perlin(img, n, n, &po) != TN_OK;
+}
+
+/* The content map for a source: gain-0.5 Perlin (--fixed-content) or the gain matched to the
+   source's slopes by tn_style_content_noise (default). */
+static int content(tn_image *img, int n, const tn_image *src, int fixed, const char *name)
+{
+    tn_perlin_opts po = perlin_opts();
+    float gain = 0.5f;
+    tn_image_free(img);
+    if (fixed) return perlin(img, n);
+    if (tn_style_content_noise(img, n, n, src, &po, &gain)) return 1;
+    printf("style_%s_content_gain_%d: %.2f\n", name, n, gain);
+    return 0;
 }
 
 int main(int argc, char **argv)
@@ -81,7 +101,7 @@ int main(int argc, char **argv)
                                         {"canyon", "dem/grandcanyon_hoppe8bit/grandcanyon_hoppe8bit_full.png"},
                                         {"desert", "dem/sahara_erg_oriental/sahara_erg_oriental_full.png"}};
     const char *dir = NULL;
-    int i, do1024 = 1, peer = 0, ok = 1, ran = 0;
+    int i, do1024 = 1, peer = 0, ok = 1, ran = 0, fixed = 0;
     tn_style_opts so;
     char path[1024];
     tn_image noise = {0, 0, 0, NULL};
@@ -89,6 +109,7 @@ int main(int argc, char **argv)
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--no-1024")) do1024 = 0;
         else if (!strcmp(argv[i], "--peer")) peer = 1;
+        else if (!strcmp(argv[i], "--fixed-content")) fixed = 1;
         else if (!strcmp(argv[i], "--drain")) {
             memset(&so, 0, sizeof so);
             so.drain_weight = 10;
@@ -100,7 +121,7 @@ int main(int argc, char **argv)
     }
     tn_set_threads(2);
     printf("style_threads: %d\n", tn_get_threads());
-    if (perlin(&noise, 512)) return 1;
+    printf("style_content: %s\n", fixed ? "Perlin fBm, gain 0.5" : "Perlin fBm, gain matched to each source (tn_style_content_noise)");
     for (i = 0; i < 3; i++) {
         tn_image src = {0, 0, 0, NULL}, res = {0, 0, 0, NULL};
         tn_style_scores a, b;
@@ -110,6 +131,7 @@ int main(int argc, char **argv)
             printf("style_%s: skipped (%s)\n", sources[i][0], tn_last_error());
             continue;
         }
+        if (content(&noise, 512, &src, fixed, sources[i][0])) return 1;
         t0 = tn_time_seconds();
         if (tn_style_transfer(&res, &noise, &src, opts)) {
             fprintf(stderr, "%s\n", tn_last_error());
@@ -133,7 +155,7 @@ int main(int argc, char **argv)
         if (dir && save_triptych(dir, sources[i][0], &src, &noise, &res)) fprintf(stderr, "cannot write the preview in %s\n", dir);
         if (i == 0 && do1024) {
             tn_image n2 = {0, 0, 0, NULL}, r2 = {0, 0, 0, NULL};
-            if (perlin(&n2, 1024)) return 1;
+            if (content(&n2, 1024, &src, fixed, sources[i][0])) return 1;
             t0 = tn_time_seconds();
             if (tn_style_transfer(&r2, &n2, &src, opts)) {
                 fprintf(stderr, "%s\n", tn_last_error());

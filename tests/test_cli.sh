@@ -46,6 +46,13 @@ $T noise -o "$W/src.png" --size 64 --seed 9 --octaves 6 --frequency 8 --range 50
 if $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/styled.png" --size 64 --iters 3 --levels 2 2> "$W/style.txt" &&
     $T info "$W/styled.png" > "$W/sinfo.txt" && grep -q "size: 64 x 64" "$W/sinfo.txt" && grep -q "style: 64 x 64" "$W/style.txt"; then ok;
 else bad "style: $(head -c 300 "$W/style.txt")"; fi
+# --like: a content map whose Perlin gain follows the source (rough source -> gain above 0.5)
+$T noise -o "$W/rough.png" --size 64 --seed 4 --gain 0.85 > /dev/null 2>&1
+if $T noise -o "$W/like.png" --size 64 --seed 5 --like "$W/rough.png" > "$W/like.txt" 2>&1 &&
+    g=$(sed -n 's/^gain: //p' "$W/like.txt") && $T noise -o "$W/like2.png" --size 64 --seed 5 --gain "$g" > /dev/null 2>&1 &&
+    cmp -s "$W/like.png" "$W/like2.png" && awk -v g="$g" 'BEGIN { exit !(g > 0.6) }'; then ok;
+else bad "noise --like: $(head -c 200 "$W/like.txt")"; fi
+expect_error "noise --like missing" "cannot open" $T noise -o "$W/x.png" --like "$W/nonexistent.png"
 expect_error "style no --style" "needs --content" $T style --content "$W/noise.png" -o "$W/x.png"
 expect_error "style bad optimizer" "optimizer" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --optimizer newton
 expect_error "style missing weights" "no_such.tnw" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --weights "$W/no_such.tnw"

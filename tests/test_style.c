@@ -344,6 +344,34 @@ TN_TEST(test_bad_input)
     tn_image_free(&style);
 }
 
+/* The content map's gain follows the source's roughness: Perlin sources of gain 0.5 and 0.85
+   (another seed) get back a gain near their own, and the map is exactly that Perlin map. */
+TN_TEST(test_content_noise_matches_roughness)
+{
+    static const float gains[2] = {0.5f, 0.85f};
+    tn_image src = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    float g = 0.0f;
+    int t;
+    for (t = 0; t < 2; t++) {
+        memset(&po, 0, sizeof po);
+        po.seed = 99;
+        po.gain = gains[t];
+        TN_CHECK(tn_noise_perlin(&src, 128, 128, &po) == TN_OK);
+        po.seed = 3;
+        TN_CHECK(tn_style_content_noise(&out, 128, 128, &src, &po, &g) == TN_OK);
+        TN_CHECK(fabsf(g - gains[t]) <= 0.101f);
+        po.gain = g;
+        TN_CHECK(tn_noise_perlin(&ref, 128, 128, &po) == TN_OK);
+        TN_CHECK(out.data && ref.data && memcmp(out.data, ref.data, 128 * 128 * sizeof(float)) == 0);
+        tn_image_free(&src);
+        tn_image_free(&out);
+        tn_image_free(&ref);
+    }
+    TN_CHECK(tn_style_content_noise(&out, 128, 128, NULL, NULL, &g) == TN_ERR_INVALID_ARG);
+    TN_CHECK(out.data == NULL);
+}
+
 TN_TEST(test_vgg_loader_and_path)
 {
     const char *path = "build/test/vgg19_random.tnw", *bad = "build/test/vgg19_bad.tnw";
@@ -418,6 +446,7 @@ TN_TEST(test_vgg_loader_and_path)
 int main(void)
 {
     TN_RUN(test_argsort);
+    TN_RUN(test_content_noise_matches_roughness);
     TN_RUN(test_loss_decreases);
     TN_RUN(test_style_gradient);
     TN_RUN(test_transfer_threads_and_units);

@@ -312,18 +312,21 @@ static int cmd_noise(int argc, char **argv)
     tn_explicit_opts eo;
     tn_save_opts so;
     tn_status st;
-    const char *outp = NULL, *draw = NULL;
+    const char *outp = NULL, *draw = NULL, *like = NULL;
     int a, w = 512, h = 512, explicit_noise = 0;
     double v, seed = 1, weight = 0.5, range_lo = 0, range_hi = 0;
     if (wants_help(argc, argv)) {
         printf("usage: terrainnet noise -o OUT [--type perlin|explicit] [--size N [M]] [--seed S]\n"
                "                        [--octaves N] [--frequency F] [--lacunarity L] [--gain G]\n"
                "                        [--periodic] [--draw MAP --draw-weight W] [--range LO HI]\n"
+               "                        [--like SOURCE]\n"
                "Writes a procedural heightmap in [0, 1] (or metres with --range): Perlin fBm\n"
                "(default: 8 octaves, 4 cells across, lacunarity 2, gain 0.5) or explicit multi-scale\n"
                "smoothed noise. --size N is N x N (default 512); N M is N wide, M high. --periodic\n"
                "makes Perlin tile seamlessly. --draw blends a drawn grey map (resized to the output)\n"
-               "with weight W in [0, 1] (default 0.5) to steer the layout.\n");
+               "with weight W in [0, 1] (default 0.5) to steer the layout. --like SOURCE picks the\n"
+               "Perlin gain (0.45..0.9) whose slopes and spectrum are closest to the DEM SOURCE: a\n"
+               "content map for `terrainnet style --style SOURCE` (prints the gain).\n");
         return 0;
     }
     memset(&po, 0, sizeof po);
@@ -347,6 +350,7 @@ static int cmd_noise(int argc, char **argv)
         }
         else if (!strcmp(argv[a], "--periodic")) po.periodic = 1;
         else if (!strcmp(argv[a], "--draw") && a + 1 < argc) draw = argv[++a];
+        else if (!strcmp(argv[a], "--like") && a + 1 < argc) like = argv[++a];
         else if (!strcmp(argv[a], "--range") && a + 2 < argc) {
             if (!parse_double(argv[a + 1], &range_lo) || !parse_double(argv[a + 2], &range_hi) || range_hi <= range_lo)
                 return usage_error("noise", "--range needs two numbers LO < HI", NULL);
@@ -367,7 +371,16 @@ static int cmd_noise(int argc, char **argv)
     }
     if (!outp) return usage_error("noise", "missing -o OUT", NULL);
     po.seed = eo.seed = (uint64_t)seed;
-    st = explicit_noise ? tn_noise_explicit(&out, w, h, &eo) : tn_noise_perlin(&out, w, h, &po);
+    if (like) {
+        tn_image src = {0, 0, 0, NULL};
+        float gain = 0.0f;
+        if (explicit_noise) return usage_error("noise", "--like picks a Perlin gain; it does not go with --type explicit", NULL);
+        if (!(st = tn_image_load(like, &src, NULL))) st = tn_style_content_noise(&out, w, h, &src, &po, &gain);
+        tn_image_free(&src);
+        if (!st) printf("gain: %.2f\n", gain);
+    } else {
+        st = explicit_noise ? tn_noise_explicit(&out, w, h, &eo) : tn_noise_perlin(&out, w, h, &po);
+    }
     if (st) return fail_status(st);
     if (draw) {
         if ((st = tn_image_load(draw, &drawn, NULL)) || (st = tn_noise_blend(&blended, &out, &drawn, (float)weight))) {
