@@ -915,14 +915,14 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
    A PSGAN-style spatial GAN learns one exemplar (RGB, or RGB + normal map = 6 channels, any
    count up to TN_TEXGAN_MAX_CHANNELS). The generator is fully convolutional: a noise tensor z
    of cells (local dims uniform in [0, 1], optional per-image global dims and periodic sin
-   dims) goes through `stages` x (bilinear upsample x2, 5x5 valid conv, + per-pixel noise
-   scaled per channel, leaky ReLU, pixel norm; tanh last), so there is no transposed-conv
-   checkerboard, no blocky cell grid and no zero padding: a window of z cells [a, a + T + 6)
-   gives exactly the output pixels [a 2^S, a 2^S + T 2^S + 6). Tiles with 3 cells of overlap on
-   each side therefore equal a one-pass synthesis, and any tile of any seed can be made alone
+   dims) goes through `stages` x (bilinear upsample x2 + [1 2 1]/4 blur, 5x5 valid conv, +
+   per-pixel noise scaled per channel, leaky ReLU, pixel norm; tanh last), so there is no
+   transposed-conv checkerboard, little cell-grid structure and no zero padding: a window of z
+   cells [a, a + T + 8) gives exactly the output pixels [a 2^S, a 2^S + T 2^S + 8). Tiles with 4
+   cells of overlap on each side therefore equal a one-pass synthesis, and any tile of any seed can be made alone
    (a cell's z and a stage pixel's noise are hashes of the seed and their global position).
    The first design (nearest upsampling, no stage noise: 4 cells of context instead of 6) is
-   kept for its model files. The discriminator is fully convolutional too (stride-2 5x5 convs,
+   kept for its model files (and plain bilinear, `smooth` 1, for the intermediate ones). The discriminator is fully convolutional too (stride-2 5x5 convs,
    a per-location score map), spectral-normalised, hinge loss, Adam, alternating D and G steps
    on random n x n patches; the G loss adds a feature-statistics term (means and covariances of
    fixed random filters at 3 scales vs the exemplar's) that keeps small exemplars from
@@ -950,7 +950,7 @@ typedef struct tn_texgan_opts {
     int augment;            /* 1: real patches randomly flipped/transposed (8x the data of a small
                                exemplar; only for textures without a light direction) */
     int nearest;            /* 1: nearest x2 upsampling and no per-pixel stage noise (the first
-                               design: a visible 2^stages cell grid); 0 = bilinear + stage noise */
+                               design: a visible 2^stages cell grid); 0 = smooth + stage noise */
     float feat_weight;      /* weight of the feature-statistics term in the G loss (random-filter
                                means and covariances at 3 scales vs the exemplar's); 0 = 1, < 0 = off */
     float lr;               /* Adam rate for G and D; 0 = 2e-4 (betas 0.5, 0.999) */
@@ -968,7 +968,8 @@ typedef struct tn_texgan_opts {
 typedef struct tn_texgan {
     int channels, noise_local, noise_global, noise_periodic, stages, gen_width;
     int scale;                             /* output pixels per generator pixel (1 = none) */
-    int smooth;                            /* 1: bilinear x2 upsampling (0: nearest, first models) */
+    int smooth;                            /* upsampling: 2 = bilinear x2 + [1 2 1]/4 blur, 1 = bilinear,
+                                              0 = nearest (first models) */
     int stage_noise;                       /* 1: per-pixel noise added at every stage */
     float lo, hi;                          /* value range the tanh output maps to */
     float mean[TN_TEXGAN_MAX_CHANNELS];    /* the exemplar's mean per channel */
@@ -1008,7 +1009,7 @@ TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t se
 /* Called with consecutive row bands of a tiled synthesis: rows [y0, y0 + band->height). */
 typedef tn_status (*tn_band_fn)(void *user, int y0, const tn_image *band);
 /* Tiled synthesis of a width x height texture: z split into tiles of tile_cells cells (0 = 32)
-   with 3 cells of overlap (2 for nearest models), each tile run alone and cropped; bands of one tile row are handed to
+   with 4 cells of overlap (2 for nearest models), each tile run alone and cropped; bands of one tile row are handed to
    fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window(0, 0). */
 TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t seed, int width, int height,
                                              int tile_cells, tn_band_fn fn, void *user);
@@ -12139,8 +12140,8 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
    >>texgan  (@@texgan implementation)
    Defaults (measured on the shared 2-core Zen 4, see README "Texture GAN"): 4 stages of
    64-32-16 channels from 16 local noise dims, discriminator 32-64-128 + score conv, 64 px
-   patches, batch 4, bilinear upsampling + stage noise, feature-statistics weight 1. Why: a cell
-   is 16 px, so the generator sees 3 cells (~48 px) each side, enough for grass blades at 512 px
+   patches, batch 4, smooth upsampling + stage noise, feature-statistics weight 1. Why: a cell
+   is 16 px, so the generator sees 4 cells (~64 px) each side, enough for grass blades at 512 px
    (larger features such as pebbles and crack cells: 5 stages), and the discriminator's ~60 px
    field covers a patch; wider nets cost time per iteration roughly quadratically and 15 minutes buys ~2-4k
    iterations at this size. The GAN output only feeds the low-frequency map, whose content is
@@ -12191,10 +12192,10 @@ static int tn__tg_gen_out(const tn_texgan *m, int i)
     return w < 16 ? 16 : w;
 }
 
-/* Kernel of one stage on the nearest-upsampled map: the 5x5 conv, or (smooth) the 5x5 conv of
-   the bilinear x2 upsampling = a 7x7 conv of the nearest one (bilinear = nearest then the tent
-   [1 2 1] / 4). A valid stage turns n pixels into 2n - (K - 1). */
-static int tn__tg_k(const tn_texgan *m) { return m->smooth ? 7 : 5; }
+/* Kernel of one stage on the nearest-upsampled map: the 5x5 conv, convolved with the smoothing
+   the upsampling adds to nearest: none (K = 5), [1 2 1]/4 = bilinear (K = 7), or [1 4 6 4 1]/16
+   = bilinear then a [1 2 1]/4 blur (K = 9). A valid stage turns n pixels into 2n - (K - 1). */
+static int tn__tg_k(const tn_texgan *m) { return 5 + 2 * m->smooth; }
 
 /* Output pixels of a generator run on `cells` cells. */
 static int tn__tg_out_size(const tn_texgan *m, int cells)
@@ -12221,7 +12222,7 @@ static tn_status tn__tg_check_arch(const tn_texgan *m)
         m->noise_periodic > 64)
         return tn__fail(TN_ERR_INVALID_ARG, "texgan: noise dims %d/%d/%d out of range", m->noise_local, m->noise_global, m->noise_periodic);
     if (m->scale < 1 || m->scale > 16) return tn__fail(TN_ERR_INVALID_ARG, "texgan: scale %d (1..16)", m->scale);
-    if ((m->smooth != 0 && m->smooth != 1) || (m->stage_noise != 0 && m->stage_noise != 1))
+    if (m->smooth < 0 || m->smooth > 2 || (m->stage_noise != 0 && m->stage_noise != 1))
         return tn__fail(TN_ERR_INVALID_ARG, "texgan: bad upsampling/noise flags");
     if (m->gen_width < 1 || m->gen_width > 2048) return tn__fail(TN_ERR_INVALID_ARG, "texgan: generator width %d (1..2048)", m->gen_width);
     if (!(m->lo < m->hi) || m->lo != m->lo || m->hi - m->lo > 1e30f) return tn__fail(TN_ERR_INVALID_ARG, "texgan: bad value range");
@@ -12449,14 +12450,12 @@ static tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
 }
 
 /* e = the stage's K x K kernel on the nearest-upsampled map, per axis: the 5 taps of w
-   convolved with the upsampling's smoothing filter (1 tap for nearest, the tent for bilinear).
-   Weight of w tap k in e tap a: */
+   convolved with the upsampling's smoothing filter. Weight of w tap k in e tap a: */
 static float tn__tg_tent(const tn_texgan *m, int a, int k)
 {
-    static const float tent[3] = {0.25f, 0.5f, 0.25f};
+    static const float f[3][5] = {{1.0f}, {0.25f, 0.5f, 0.25f}, {0.0625f, 0.25f, 0.375f, 0.25f, 0.0625f}};
     int d = a - k;
-    if (!m->smooth) return d == 0 ? 1.0f : 0.0f;
-    return d >= 0 && d < 3 ? tent[d] : 0.0f;
+    return d >= 0 && d <= 2 * m->smooth ? f[m->smooth][d] : 0.0f;
 }
 
 /* conv_valid(upsample_nearest_x2(x), e) computed as one stride-2 transposed conv with a
@@ -12467,7 +12466,7 @@ static float tn__tg_tent(const tn_texgan *m, int a, int k)
 static tn_tensor *tn__tg_up_conv(tn_ctx *ctx, const tn_texgan *m, tn_tensor *x, tn_tensor *w, tn_tensor *b)
 {
     int K = tn__tg_k(m), V = K + 1, cout = w->shape[0], cin = w->shape[1], sh[2], s4[4], perm[4] = {1, 0, 2, 3}, t, k, j;
-    float A[5][8];
+    float A[5][10];
     tn_tensor *fold = tn_tensor_2d(ctx, 25, V * V), *v;
     tn_conv_opts co;
     if (!fold) return NULL;
@@ -13073,7 +13072,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
         s.m.stages = o.stages;
         s.m.gen_width = o.gen_width;
         s.m.scale = o.scale > 0 ? o.scale : 1;
-        s.m.smooth = !o.nearest;
+        s.m.smooth = o.nearest ? 0 : 2;
         s.m.stage_noise = !o.nearest;
         s.m.lo = lo;
         s.m.hi = hi;
@@ -13185,7 +13184,7 @@ static tn_status tn__tg_check_model(const tn_texgan *m)
 static tn_tensor *tn__tg_phase_weights(tn_ctx *ctx, const tn_texgan *m, const tn_tensor *w)
 {
     int K = tn__tg_k(m), T = (K + 1) / 2, cout = w->shape[0], cin = w->shape[1], py, px, co, ci, k, a, b;
-    float tmp[7][5], e[7][7];
+    float tmp[9][5], e[9][9];
     tn_tensor *p = tn_tensor_4d(ctx, 4 * cout, cin, T, T);
     if (!p) return NULL;
     for (co = 0; co < cout; co++)
@@ -13243,7 +13242,7 @@ static tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tenso
             }
         if (i == m->stages - 1) {
             size_t k;
-            for (k = 0; k < o->numel; k++) o->data[k] = tanhf(o->data[k]);
+            for (k = 0; k < o->numel; k++) o->data[k] = 1.0f - 2.0f / (expf(2.0f * o->data[k]) + 1.0f); /* tanh; glibc's tanhf was 12 % of synthesis */
         } else {
             size_t k;
             for (k = 0; k < oplane; k++) {
