@@ -126,6 +126,34 @@ static void seam_ratio(const tn_image *g, int tile, int cell, double *vs_all, do
     *vs_phase = (eb / (double)(nb ? nb : 1)) / (ep / (double)(np ? np : 1) + 1e-30);
 }
 
+/* Gradient energy across pixel boundaries of each phase p of the cell grid (x % cell == p, both
+   axes) over the mean of all phases: min and max. 1 and 1 = no grid structure at all. */
+static void phase_profile(const tn_image *g, int cell, double *lo, double *hi)
+{
+    double e[64] = {0}, all = 0;
+    long n[64] = {0}, na = 0;
+    int x, y, p;
+    if (cell > 64) cell = 64;
+    for (y = 1; y < g->height; y++)
+        for (x = 1; x < g->width; x++) {
+            double dx = g->data[(size_t)y * g->width + x] - g->data[(size_t)y * g->width + x - 1];
+            double dy = g->data[(size_t)y * g->width + x] - g->data[(size_t)(y - 1) * g->width + x];
+            e[x % cell] += dx * dx;
+            n[x % cell]++;
+            e[y % cell] += dy * dy;
+            n[y % cell]++;
+            all += dx * dx + dy * dy;
+            na += 2;
+        }
+    *lo = 1e30;
+    *hi = 0;
+    for (p = 0; p < cell; p++) {
+        double r = (e[p] / (double)(n[p] ? n[p] : 1)) / (all / (double)na + 1e-30);
+        if (r < *lo) *lo = r;
+        if (r > *hi) *hi = r;
+    }
+}
+
 /* ---- texture-statistics distance: fixed random 5x5 filters (16) at scales 1, 2, 4, ReLU; per
    scale the centred feature covariance and the feature means, relative to the reference's;
    plus the L1 distance of 16-bin colour histograms. ---- */
@@ -291,6 +319,12 @@ static void bench_one(const char *name, const char *file, const char *model_path
     g = grey(&synth);
     seam_ratio(&g, 32 << m.stages, 1 << m.stages, &va, &vp);
     printf("%s.seam_ratio: %.4f (vs same-phase cell borders %.4f; target <= 1.05)\n", name, va, vp);
+    {
+        double lo, hi;
+        phase_profile(&g, (1 << m.stages) * m.scale, &lo, &hi);
+        printf("%s.cell_phase_gradient_energy: %.4f .. %.4f (min .. max over the %d pixel phases of the cell grid, / mean)\n", name, lo, hi,
+               (1 << m.stages) * m.scale);
+    }
     tn_image_free(&g);
     /* likeness: distances to the whole exemplar's statistics, on exemplar-sized windows */
     features(&ex, &fref);

@@ -100,6 +100,9 @@ expect_error "texgan-train no -o" "missing -o" $T texgan-train "$W/noise.png"
 expect_error "texgan-synth bad size" "size needs" $T texgan-synth m.tnw --size 0x5 -o "$W/x.pfm"
 expect_error "texgan-synth not a model" "not a terrainnet weights" $T texgan-synth "$W/noise.png" --size 8x8 -o "$W/x.pfm"
 expect_error "detail-maps one arg" "needs" $T detail-maps "$W/noise.png" -o "$W/dm"
+expect_error "texgan-train negative feature weight" "non-negative" $T texgan-train "$W/noise.png" -o "$W/x.tnw" --feat-weight -1
+if $T texgan-train "$W/noise.png" -o "$W/tgn.tnw" --iters 1 --nearest --feat-weight 0 $TG > /dev/null 2>&1 &&
+    $T texgan-synth "$W/tgn.tnw" --size 40x30 -o "$W/sn.pfm" > /dev/null; then ok; else bad "texgan-train --nearest --feat-weight 0"; fi
 if $T texgan-train "$W/noise.png" -o "$W/tg.tnw" --iters 2 $TG > "$W/tg.txt" 2>&1 && grep -q "iterations: 2" "$W/tg.txt" &&
     $T texgan-train "$W/noise.png" -o "$W/tg.tnw" --iters 4 --resume $TG > "$W/tg2.txt" 2>&1 && grep -q "resumed at 2" "$W/tg2.txt"; then ok;
 else bad "texgan-train/resume: $(cat "$W/tg.txt" "$W/tg2.txt" 2>/dev/null | head -c 400)"; fi

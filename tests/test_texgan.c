@@ -44,6 +44,15 @@ static int same_params(const tn_params *a, const tn_params *b, int skip_config)
     return 1;
 }
 
+static float m_mean(const tn_image *im, int c)
+{
+    double s = 0;
+    int x, y;
+    for (y = 0; y < im->height; y++)
+        for (x = 0; x < im->width; x++) s += TN_PIXEL(im, x, y, c);
+    return (float)(s / ((double)im->width * im->height));
+}
+
 static double max_abs_diff(const tn_image *a, const tn_image *b)
 {
     size_t i, n = (size_t)a->width * a->height * a->channels;
@@ -138,7 +147,7 @@ TN_TEST(tiled_synthesis_equals_one_pass)
     int tiles;
     TN_CHECK(trained_tiny(&m, 3, 2) == TN_OK);
     TN_CHECK(tn_texgan_synthesize_window(&m, 42, 0, 0, 61, 45, &one) == TN_OK);
-    for (tiles = 1; tiles <= 5; tiles += 2) { /* tiles of 4, 12, 20 px with 2 cells of overlap */
+    for (tiles = 1; tiles <= 5; tiles += 2) { /* tiles of 4, 12, 20 px with 4 cells of overlap */
         tn_image_free(&tiled);
         TN_CHECK(tn_image_create(&tiled, 61, 45, 3) == TN_OK);
         TN_CHECK(tn_texgan_synthesize_stream(&m, 42, 61, 45, tiles, tn__tg_collect_band, &tiled) == TN_OK);
@@ -198,26 +207,43 @@ TN_TEST(fast_generator_matches_the_training_graph)
     tn_tensor *z, *a, *b;
     size_t k;
     double d = 0;
+    uint64_t seed = 9;
     TN_CHECK(trained_tiny(&m, 3, 0) == TN_OK);
     tn_ctx_set_grad(c, 0);
-    z = tn_tensor_4d(c, 1, tn__tg_zdim(&m), 7, 6);
-    tn__tg_noise(&m, tn_params_find(m.weights, "texgan.waves")->data, z, 0, 9, 3, 4);
-    a = tn__tg_generate(c, &m, m.weights, "g.", z);
-    b = tn__tg_generate_fast(c, &m, z);
+    z = tn_tensor_4d(c, 1, tn__tg_zdim(&m), 10, 9);
+    tn__tg_noise(&m, tn_params_find(m.weights, "texgan.waves")->data, z, 0, seed, 3, 4);
+    a = tn__tg_generate(c, &m, m.weights, "g.", z, &seed, 3, 4);
+    b = tn__tg_generate_fast(c, &m, z, seed, 3, 4);
+    TN_CHECK(m.smooth == 2 && m.stage_noise == 1);
     TN_CHECK(a && b && tn_tensor_same_shape(a, b));
-    TN_CHECK(a && a->shape[2] == tn__tg_out_size(2, 7) && a->shape[3] == tn__tg_out_size(2, 6));
+    TN_CHECK(a && a->shape[2] == tn__tg_out_size(&m, 10) && a->shape[3] == tn__tg_out_size(&m, 9));
     for (k = 0; a && b && k < a->numel; k++)
         if (fabs((double)a->data[k] - b->data[k]) > d) d = fabs((double)a->data[k] - b->data[k]);
     TN_CHECK(d < 1e-5);
-    { /* and the literal definition: nearest x2 upsampling, then a valid 5x5 conv */
-        tn_tensor *x = z;
-        int i;
+    { /* and the literal definition: bilinear x2 upsampling (its valid part: the outermost rows and
+         columns need pixels outside the window), a valid [1 2 1]/4 blur, a valid 5x5 conv, bias,
+         stage noise */
+        tn_tensor *x = z, *nz, *blur;
+        int i, ci, ky, kx;
         char name[16];
         for (i = 0; i < m.stages; i++) {
+            int h = x->shape[2], w = x->shape[3], C = x->shape[1];
+            static const float t3[3] = {0.25f, 0.5f, 0.25f};
+            x = tn_upsample_bilinear(c, x, 2 * h, 2 * w);
+            x = tn_slice(c, tn_slice(c, x, 2, 1, 2 * h - 2), 3, 1, 2 * w - 2);
+            blur = tn_tensor_4d(c, C, C, 3, 3);
+            for (ci = 0; ci < C; ci++)
+                for (ky = 0; ky < 3; ky++)
+                    for (kx = 0; kx < 3; kx++) blur->data[((size_t)ci * C + ci) * 9 + ky * 3 + kx] = t3[ky] * t3[kx];
+            x = tn_conv2d(c, x, blur, NULL, NULL);
             snprintf(name, sizeof name, "g.w%d", i);
-            x = tn_conv2d(c, tn_upsample_nearest(c, x, 2), tn_params_find(m.weights, name), NULL, NULL);
+            x = tn_conv2d(c, x, tn_params_find(m.weights, name), NULL, NULL);
             snprintf(name, sizeof name, "g.b%d", i);
             x = tn_add(c, x, tn_reshape(c, tn_params_find(m.weights, name), 4, (int[]){1, x->shape[1], 1, 1}));
+            nz = tn_tensor_4d(c, 1, 1, x->shape[2], x->shape[3]);
+            tn__tg_noise_plane(nz->data, seed, i, 3, 4, x->shape[2], x->shape[3]);
+            snprintf(name, sizeof name, "g.n%d", i);
+            x = tn_add(c, x, tn_mul(c, nz, tn_reshape(c, tn_params_find(m.weights, name), 4, (int[]){1, x->shape[1], 1, 1})));
             x = i < m.stages - 1 ? tn__tg_pixel_norm(c, tn_leaky_relu(c, x, 0.2f)) : tn_tanh(c, x);
         }
         d = 0;
@@ -227,6 +253,85 @@ TN_TEST(fast_generator_matches_the_training_graph)
     }
     tn_ctx_free(c);
     tn_texgan_free(&m);
+}
+
+/* the first design (nearest upsampling, no stage noise) still trains, tiles exactly and runs
+   the same in its fast form: its model files stay usable */
+TN_TEST(nearest_design_still_tiles_exactly)
+{
+    tn_image ex = make_exemplar(40, 36, 3, 3), one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL};
+    tn_texgan m;
+    tn_texgan_opts o;
+    tn_ctx *c = tn_ctx_create();
+    tn_tensor *z, *a, *b;
+    uint64_t seed = 4;
+    size_t k;
+    double d = 0;
+    tiny_opts(&o);
+    o.nearest = 1;
+    o.max_iters = 2;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
+    TN_CHECK(m.smooth == 0 && m.stage_noise == 0 && tn_params_find(m.weights, "g.n0") == NULL);
+    TN_CHECK(tn_texgan_synthesize_window(&m, 7, 0, 0, 50, 33, &one) == TN_OK);
+    TN_CHECK(tn_image_create(&tiled, 50, 33, 3) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize_stream(&m, 7, 50, 33, 1, tn__tg_collect_band, &tiled) == TN_OK);
+    TN_CHECK(max_abs_diff(&one, &tiled) <= 1e-6);
+    tn_ctx_set_grad(c, 0);
+    z = tn_tensor_4d(c, 1, tn__tg_zdim(&m), 6, 7);
+    tn__tg_noise(&m, tn_params_find(m.weights, "texgan.waves")->data, z, 0, seed, 1, 2);
+    a = tn__tg_generate(c, &m, m.weights, "g.", z, &seed, 1, 2);
+    b = tn__tg_generate_fast(c, &m, z, seed, 1, 2);
+    TN_CHECK(a && b && tn_tensor_same_shape(a, b) && a->shape[2] == 2 * (2 * 6 - 4) - 4);
+    for (k = 0; a && b && k < a->numel; k++)
+        if (fabs((double)a->data[k] - b->data[k]) > d) d = fabs((double)a->data[k] - b->data[k]);
+    TN_CHECK(d < 1e-5);
+    tn_ctx_free(c);
+    tn_image_free(&one);
+    tn_image_free(&tiled);
+    tn_image_free(&ex);
+    tn_texgan_free(&m);
+}
+
+/* the anti-collapse term: real crops of the exemplar score far lower than a flat colour */
+TN_TEST(feature_statistics_separate_real_from_flat)
+{
+    tn_image ex = make_exemplar(64, 64, 3, 6);
+    tn__tg_train s;
+    tn_ctx *c = tn_ctx_create();
+    tn_tensor *real, *flat, *lr, *lf;
+    float *pl = (float *)malloc(64 * 64 * 3 * sizeof(float));
+    int b, ch, y, x;
+    memset(&s, 0, sizeof s);
+    s.m.channels = 3;
+    s.filt = (float *)malloc(TN__TG_FEATS * 3 * 25 * sizeof(float));
+    for (ch = 0; ch < 3; ch++)
+        for (y = 0; y < 64; y++)
+            for (x = 0; x < 64; x++) pl[(ch * 64 + y) * 64 + x] = 2.0f * TN_PIXEL(&ex, x, y, ch) - 1.0f;
+    tn__tg_make_filters(&s);
+    TN_CHECK(tn__tg_feat_ref(&s, c, pl, 64, 64) == TN_OK);
+    tn_ctx_reset(c);
+    tn_ctx_set_grad(c, 0);
+    real = tn_tensor_4d(c, 2, 3, 32, 32);
+    flat = tn_tensor_4d(c, 2, 3, 32, 32);
+    for (b = 0; b < 2; b++)
+        for (ch = 0; ch < 3; ch++)
+            for (y = 0; y < 32; y++)
+                for (x = 0; x < 32; x++) {
+                    real->data[((b * 3 + ch) * 32 + y) * 32 + x] = pl[(ch * 64 + y + 32 * b) * 64 + x + 16];
+                    flat->data[((b * 3 + ch) * 32 + y) * 32 + x] = 2.0f * m_mean(&ex, ch) - 1.0f;
+                }
+    lr = tn__tg_feat_loss(c, &s, real);
+    lf = tn__tg_feat_loss(c, &s, flat);
+    TN_CHECK(lr && lf);
+    if (lr && lf) {
+        TN_CHECK(lf->data[0] > 1.0f); /* zero covariance on 2 levels: at least 1 each */
+        TN_CHECK(lr->data[0] < 0.25f * lf->data[0]);
+    }
+    free(pl);
+    free(s.filt);
+    free(s.ref);
+    tn_ctx_free(c);
+    tn_image_free(&ex);
 }
 
 TN_TEST(deterministic_for_1_and_2_threads)
@@ -458,6 +563,8 @@ int main(void)
     TN_RUN(training_steps_stay_finite_and_move_the_generator);
     TN_RUN(checkpoint_resume_continues_identically);
     TN_RUN(tiled_synthesis_equals_one_pass);
+    TN_RUN(nearest_design_still_tiles_exactly);
+    TN_RUN(feature_statistics_separate_real_from_flat);
     TN_RUN(scaled_model_tiles_exactly);
     TN_RUN(fast_generator_matches_the_training_graph);
     TN_RUN(deterministic_for_1_and_2_threads);

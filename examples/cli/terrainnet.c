@@ -924,6 +924,7 @@ static int cmd_texgan_train(int argc, char **argv)
                "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
                "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--disc-layers N]\n"
                "             [--stages N] [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
+               "             [--feat-weight W] [--nearest]\n"
                "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
                "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
                "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
@@ -931,7 +932,9 @@ static int cmd_texgan_train(int argc, char **argv)
                "atomically to MODEL.tnw.ckpt (or --checkpoint) every 60 s (--checkpoint-seconds), so a\n"
                "killed run loses at most one interval; --resume continues it identically. --scale S learns\n"
                "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n"
-               "--augment flips/transposes real patches (small exemplars without a light direction).\n");
+               "--augment flips/transposes real patches (small exemplars without a light direction).\n"
+               "--feat-weight W weights the feature-statistics term of the generator loss (default 1, 0 = off).\n"
+               "--nearest builds the first design (nearest upsampling, no per-pixel stage noise).\n");
         return 0;
     }
     memset(&o, 0, sizeof o);
@@ -940,11 +943,13 @@ static int cmd_texgan_train(int argc, char **argv)
         if (!strcmp(k, "-o") && a + 1 < argc) outp = argv[++a];
         else if (!strcmp(k, "--resume")) o.resume = 1;
         else if (!strcmp(k, "--augment")) o.augment = 1;
+        else if (!strcmp(k, "--nearest")) o.nearest = 1;
         else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
         else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
         else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
                   !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") || !strcmp(k, "--disc-layers") ||
-                  !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic")) &&
+                  !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic") ||
+                  !strcmp(k, "--feat-weight")) &&
                  a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
             if (!strcmp(k, "--minutes")) o.minutes = v;
@@ -960,6 +965,7 @@ static int cmd_texgan_train(int argc, char **argv)
             else if (!strcmp(k, "--scale")) o.scale = (int)v;
             else if (!strcmp(k, "--local")) o.noise_local = (int)v;
             else if (!strcmp(k, "--global")) o.noise_global = (int)v;
+            else if (!strcmp(k, "--feat-weight")) o.feat_weight = v > 0 ? (float)v : -1.0f;
             else o.noise_periodic = (int)v;
             a++;
         } else if (k[0] == '-') return usage_error("texgan-train", "unknown option or missing value:", k);
