@@ -952,7 +952,8 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    fixed random filters at 3 scales vs the exemplar's) that keeps small exemplars from
    collapsing to a flat colour; an exponential moving average of G is what the model keeps. Detail maps (paper: Gaussian split): low map = Gaussian
    low-pass of the colour-corrected synthesis downsampled by f; high map = exemplar minus its
-   Gaussian blur, stored as value / 2 + 0.5; a renderer adds upsampled low + 2 (high - 0.5)
+   Gaussian blur, cross-faded with itself shifted by half a side so it tiles seamlessly
+   (energy-preserving weights), stored as value / 2 + 0.5; a renderer adds upsampled low + 2 (high - 0.5)
    tiled `tiling` times.
    ============================================================================================ */
 
@@ -14234,6 +14235,40 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
     return a->sum ? TN_OK : TN_ERR_OUT_OF_MEMORY;
 }
 
+/* Makes high frequencies h periodic along x (axis 0) or y (axis 1), written to out: out = sin(t) h
+   + |cos(t)| h shifted by half the side, t = pi (i + 0.5) / side. At the borders the shifted copy
+   (continuous across the wrap) takes over, at the centre h (where the copy's own seam lies);
+   sin^2 + cos^2 = 1 keeps the energy of uncorrelated detail. Exemplars are rarely seamless, and
+   the high map is tiled, so without this its edge shows as a line every exemplar width. */
+static void tn__dm_seamless(const tn_image *h, float *out, int axis)
+{
+    int w = h->width, ht = h->height, ch = h->channels, side = axis ? ht : w, x, y, c;
+    double wrap = 0, inner = 0;
+    /* an exemplar that already tiles along this axis (steps across the wrap no larger than
+       twice the mean step between neighbours) keeps its detail untouched */
+    for (y = 0; y < ht; y++)
+        for (x = 0; x < w; x++)
+            for (c = 0; c < ch; c++) {
+                int nx = axis ? x : (x + 1) % w, ny = axis ? (y + 1) % ht : y, last = axis ? y == ht - 1 : x == w - 1;
+                double d = h->data[((size_t)ny * w + nx) * ch + c] - h->data[((size_t)y * w + x) * ch + c];
+                if (last) wrap += d * d;
+                else inner += d * d;
+            }
+    if (side < 2 || wrap / (double)(axis ? w : ht) <= 2.0 * inner / ((double)(side - 1) * (axis ? w : ht))) {
+        memcpy(out, h->data, (size_t)w * ht * ch * sizeof(float));
+        return;
+    }
+    for (y = 0; y < ht; y++)
+        for (x = 0; x < w; x++) {
+            int i = axis ? y : x;
+            double t = 3.14159265358979 * (i + 0.5) / side;
+            int sx = axis ? x : (x + w / 2) % w, sy = axis ? (y + ht / 2) % ht : y;
+            const float *a = h->data + ((size_t)y * w + x) * ch, *b = h->data + ((size_t)sy * w + sx) * ch;
+            float *o = out + ((size_t)y * w + x) * ch;
+            for (c = 0; c < ch; c++) o[c] = (float)(sin(t) * a[c] + fabs(cos(t)) * b[c]);
+        }
+}
+
 /* Low map from the block sums (area average, then the remaining Gaussian, colour correction),
    high map from the exemplar. */
 static tn_status tn__dm_finish(tn__dm_acc *a, const tn_detail_opts *o, const tn_image *ex, tn_detail_maps *maps)
@@ -14269,7 +14304,10 @@ static tn_status tn__dm_finish(tn__dm_acc *a, const tn_detail_opts *o, const tn_
     if (!st) st = tn_image_create(&m.high, ex->width, ex->height, ex->channels);
     if (!st) {
         n = (size_t)ex->width * ex->height * ex->channels;
-        for (i = 0; i < n; i++) m.high.data[i] = 0.5f * (ex->data[i] - blur.data[i]) + 0.5f;
+        for (i = 0; i < n; i++) blur.data[i] = ex->data[i] - blur.data[i];
+        tn__dm_seamless(&blur, m.high.data, 0);
+        tn__dm_seamless(&m.high, blur.data, 1);
+        for (i = 0; i < n; i++) m.high.data[i] = 0.5f * blur.data[i] + 0.5f;
     }
     tn_image_free(&blur);
     if (st) {

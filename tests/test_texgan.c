@@ -476,6 +476,82 @@ TN_TEST(detail_texel_equals_whole_image_composer)
     tn_image_free(&synth);
 }
 
+/* Mean squared step across the wrap (last column -> first) over the mean squared step between
+   interior neighbours, channel 0 of a high map stored as value / 2 + 0.5 (or raw values). */
+static double wrap_step_ratio(const tn_image *h)
+{
+    double wrap = 0, inner = 0;
+    int x, y;
+    for (y = 0; y < h->height; y++) {
+        double d = TN_PIXEL(h, 0, y, 0) - TN_PIXEL(h, h->width - 1, y, 0);
+        wrap += d * d;
+        for (x = 0; x + 1 < h->width; x++) {
+            d = TN_PIXEL(h, x + 1, y, 0) - TN_PIXEL(h, x, y, 0);
+            inner += d * d;
+        }
+    }
+    return (wrap / h->height) / (inner / ((double)h->height * (h->width - 1)));
+}
+
+/* Stripes of period 11 on a 48-px exemplar do not wrap: its plain high-pass jumps at the edge;
+   the stored high map must not; the blend keeps the energy of uncorrelated detail. */
+TN_TEST(high_map_tiles_seamlessly)
+{
+    tn_image ex = {0, 0, 0, NULL}, blur = {0, 0, 0, NULL}, synth = make_exemplar(64, 64, 1, 3), t = {0, 0, 0, NULL};
+    tn_detail_maps m;
+    tn_detail_opts o;
+    double e_raw = 0, e_map = 0;
+    size_t i, n = 48 * 40;
+    int x, y;
+    tn_image_create(&ex, 48, 40, 1);
+    for (y = 0; y < 40; y++)
+        for (x = 0; x < 48; x++) ex.data[y * 48 + x] = 0.5f + 0.3f * sinf(6.2831853f * (float)x / 11.0f) * cosf(6.2831853f * (float)y / 13.0f);
+    memset(&o, 0, sizeof o);
+    o.factor = 4;
+    TN_CHECK(tn_detail_maps_from_image(&m, &synth, &ex, &o) == TN_OK);
+    TN_CHECK(tn_image_blur(&blur, &ex, m.sigma) == TN_OK);
+    for (i = 0; i < n; i++) blur.data[i] = ex.data[i] - blur.data[i];
+    TN_CHECK(wrap_step_ratio(&blur) > 3.0);      /* the test can fail: the plain high-pass does not tile */
+    TN_CHECK(wrap_step_ratio(&m.high) < 1.5);
+    TN_CHECK(tn_image_create(&t, 40, 48, 1) == TN_OK); /* the same across the top/bottom wrap */
+    for (y = 0; y < 40; y++)
+        for (x = 0; x < 48; x++) t.data[x * 40 + y] = m.high.data[y * 48 + x];
+    TN_CHECK(wrap_step_ratio(&t) < 1.5);
+    /* energy kept on uncorrelated detail: white noise (128 x 128, so the estimate is tight) with
+       a jump at the wrap, blended along x; columns 0 and 64 (which takes column 0's copy) aside */
+    {
+        tn_rng r;
+        float *o = (float *)malloc((size_t)128 * 128 * sizeof(float));
+        tn_image_free(&ex);
+        tn_image_create(&ex, 128, 128, 1);
+        tn_rng_seed(&r, 21, 0);
+        for (i = 0; i < (size_t)128 * 128; i++) ex.data[i] = tn_rng_uniform(&r) - 0.5f + (i % 128 == 0 ? 3.0f : 0.0f);
+        TN_CHECK(o != NULL);
+        if (o) {
+            tn__dm_seamless(&ex, o, 0);
+            for (i = 0; i < (size_t)128 * 128; i++)
+                if (i % 128 != 0 && i % 128 != 64) {
+                    e_raw += (double)ex.data[i] * ex.data[i];
+                    e_map += (double)o[i] * o[i];
+                }
+            TN_CHECK(fabs(e_map / e_raw - 1.0) < 0.05);
+            TN_CHECK(memcmp(o, ex.data, (size_t)128 * 128 * sizeof(float)) != 0); /* the blend ran */
+            for (i = 0; i < (size_t)128 * 128; i++) ex.data[i] = o[i];
+            TN_CHECK(wrap_step_ratio(&ex) < 1.5);
+            /* detail that already tiles (white noise without the jump) is left as it is */
+            for (i = 0; i < (size_t)128 * 128; i++) ex.data[i] = tn_rng_uniform(&r) - 0.5f;
+            tn__dm_seamless(&ex, o, 0);
+            TN_CHECK(memcmp(o, ex.data, (size_t)128 * 128 * sizeof(float)) == 0);
+        }
+        free(o);
+    }
+    tn_detail_maps_free(&m);
+    tn_image_free(&ex);
+    tn_image_free(&blur);
+    tn_image_free(&synth);
+    tn_image_free(&t);
+}
+
 TN_TEST(detail_maps_from_model_match_the_image_path)
 {
     tn_texgan m;
@@ -572,6 +648,7 @@ int main(void)
     TN_RUN(colour_correction_hits_the_target_mean);
     TN_RUN(detail_texel_equals_whole_image_composer);
     TN_RUN(detail_maps_from_model_match_the_image_path);
+    TN_RUN(high_map_tiles_seamlessly);
     TN_RUN(bad_inputs_fail_cleanly);
     return tn_test_summary("test_texgan");
 }
