@@ -12676,8 +12676,8 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    patches, batch 4, smooth upsampling + stage noise, feature-statistics weight 1. Why: a cell
    is 16 px, so the generator sees 4 cells (~64 px) each side, enough for grass blades at 512 px
    (larger features such as pebbles and crack cells: 5 stages), and the discriminator's ~60 px
-   field covers a patch; wider nets cost time per iteration roughly quadratically and 15 minutes buys ~2-4k
-   iterations at this size. The GAN output only feeds the low-frequency map, whose content is
+   field covers a patch; wider nets cost time per iteration roughly quadratically, and 15 minutes
+   bought only 630-1900 iterations at this size (on a loaded machine, README). The GAN output only feeds the low-frequency map, whose content is
    at scales >= 5 px, so a small generator is enough; the exemplar supplies the fine detail.
    -------------------------------------------------------------------------------------------- */
 
