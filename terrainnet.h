@@ -9094,32 +9094,23 @@ static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
 /* Traces the skeleton into polylines between nodes (endpoints, junctions: degree != 2) and
    closed loops. Each polyline's pixels are listed as cell indices in *cells (per line offsets in
    *starts, count + 1 entries). Deterministic raster order. */
-typedef struct tn__trace { size_t *cells, *starts; size_t ncells, nlines, cap_c, cap_s; } tn__trace;
+typedef struct tn__trace {
+    size_t *cells, *starts;
+    size_t ncells, nlines, cap_c, cap_s; /* caps in bytes (tn__reserve) */
+} tn__trace;
 
 static tn_status tn__trace_push(tn__trace *t, size_t cell)
 {
-    if (t->ncells == t->cap_c) {
-        size_t bytes = t->cap_c * sizeof(size_t);
-        void *p = t->cells;
-        tn_status st = tn__reserve(&p, &bytes, (t->ncells + 1) * sizeof(size_t));
-        if (st) return st;
-        t->cells = (size_t *)p;
-        t->cap_c = bytes / sizeof(size_t);
-    }
+    tn_status st = tn__reserve((void **)&t->cells, &t->cap_c, (t->ncells + 1) * sizeof(size_t));
+    if (st) return st;
     t->cells[t->ncells++] = cell;
     return TN_OK;
 }
 
 static tn_status tn__trace_end_line(tn__trace *t)
 {
-    if (t->nlines + 2 > t->cap_s) {
-        size_t bytes = t->cap_s * sizeof(size_t);
-        void *p = t->starts;
-        tn_status st = tn__reserve(&p, &bytes, (t->nlines + 2) * sizeof(size_t));
-        if (st) return st;
-        t->starts = (size_t *)p;
-        t->cap_s = bytes / sizeof(size_t);
-    }
+    tn_status st = tn__reserve((void **)&t->starts, &t->cap_s, (t->nlines + 2) * sizeof(size_t));
+    if (st) return st;
     if (t->nlines == 0) t->starts[0] = 0;
     t->starts[++t->nlines] = t->ncells;
     return TN_OK;
