@@ -776,7 +776,11 @@ TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
    cells nobody drains into; threaded by strips of rows (same result for any thread count).
    Fails with TN_ERR_CORRUPT if the directions hold a cycle or point off the map. */
 TN_API tn_status tn_flow_accumulation(tn_flow *flow);
-/* All three on dem (invert != 0: on -dem, for ridges). Caller frees with tn_flow_free. */
+/* All three on dem (invert != 0: on -dem, for ridges). Cells the fill raised (depressions and
+   flats) drain instead to the cell the flood reached them from, visiting cells as GRASS
+   r.watershed's A* search does (lowest first, equal heights oldest first, S N W E before the
+   diagonals), so flow crosses flats and lakes where r.watershed -s puts it; the rest is the D8
+   of tn_flow_directions. Caller frees with tn_flow_free. */
 TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert);
 TN_API void      tn_flow_free(tn_flow *flow);
 
@@ -10216,13 +10220,16 @@ static float tn__fkey_inv(uint32_t k)
    Bucket [l][v] holds the keys that agree with `last` above byte l and have byte l equal to v
    (above last's); level 0 bucket v holds the single key (last & ~0xff) | v. When level 0 runs
    dry, the lowest non-empty bucket above gives the new `last` (its minimum) and its items move
-   down at least one level, so each item moves at most three times. */
+   down at least one level, so each item moves at most three times. Equal keys pop first in,
+   first out (moves keep the order), as in r.watershed's A* search, whose tie order decides
+   where flow crosses flats. */
 typedef struct tn__rheap_item { uint32_t key, cell; } tn__rheap_item;
 typedef struct tn__rheap {
     tn__rheap_item *b[4][256];
     uint32_t n[4][256];
     size_t cap[4][256]; /* bytes */
     uint64_t used[4][4]; /* bit v of level l: bucket [l][v] is not empty */
+    uint32_t head[256];  /* next item to pop in each level-0 bucket */
     uint32_t last;
     size_t size;
 } tn__rheap;
@@ -10289,25 +10296,15 @@ static tn_status tn__rheap_pop(tn__rheap *h, uint32_t *key, uint32_t *cell)
         v = tn__rheap_first(h, 0);
     }
     {
-        tn__rheap_item *it = h->b[0][v] + --h->n[0][v];
+        tn__rheap_item *it = h->b[0][v] + h->head[v]++;
         *key = it->key;
         *cell = it->cell;
-        if (!h->n[0][v]) h->used[0][v >> 6] &= ~((uint64_t)1 << (v & 63));
+        if (h->head[v] == h->n[0][v]) {
+            h->head[v] = h->n[0][v] = 0;
+            h->used[0][v >> 6] &= ~((uint64_t)1 << (v & 63));
+        }
         h->size--;
     }
-    return TN_OK;
-}
-
-/* Smallest key in a non-empty heap. */
-static tn_status tn__rheap_min(tn__rheap *h, uint32_t *key)
-{
-    uint32_t c;
-    tn_status st;
-    if (tn__rheap_first(h, 0) < 0) { /* move the next bucket down: pop and push back the minimum */
-        if ((st = tn__rheap_pop(h, key, &c))) return st;
-        return tn__rheap_push(h, *key, c);
-    }
-    *key = (h->last & ~0xffu) | (uint32_t)tn__rheap_first(h, 0);
     return TN_OK;
 }
 
@@ -10315,7 +10312,7 @@ static tn_status tn__rheap_min(tn__rheap *h, uint32_t *key)
 static uint32_t tn__rheap_peek(const tn__rheap *h, uint32_t none)
 {
     int v = tn__rheap_first(h, 0);
-    return v < 0 ? none : h->b[0][v][h->n[0][v] - 1].cell;
+    return v < 0 ? none : h->b[0][v][h->head[v]].cell;
 }
 
 static void tn__rheap_free(tn__rheap *h)
@@ -10354,7 +10351,7 @@ static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
     return TN_OK;
 }
 
-/* Min-heap of (priority, cell) for the cells of depressions and flats: 4-ary, items of 16 bytes,
+/* Min-heap of (priority, cell) for the cells of depressions: 4-ary, items of 16 bytes,
    so a node's children share one cache line. */
 typedef struct tn__pheap_item { uint64_t pri; uint32_t cell, pad; } tn__pheap_item;
 typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap in bytes */
@@ -10395,77 +10392,82 @@ static uint32_t tn__pheap_pop(tn__pheap *h)
 
 typedef struct tn__fill_state {
     uint32_t *keys;           /* framed: (w + 2) x (h + 2) */
+    uint8_t *par;             /* framed, or NULL: direction from each raised cell to the cell that raised it */
     ptrdiff_t off[8];         /* neighbour offsets in the framed grid */
     tn__rheap *q;
     tn__pheap pit;
-    uint32_t *flat;           /* FIFO of flat cells: (cell, raised key, level of the flat) */
-    size_t flat_head, nflat, cap_flat; /* in items; cap in bytes */
     uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
     size_t ntrace, cap_trace; /* cap in bytes */
     uint32_t seq;
 } tn__fill_state;
 
-/* Closes the open neighbours of c (filled key k) that lie on a flat of level lvl (k for a cell
-   at its own height; k + 1 inside a depression, where everything up to k is filled in height
-   order): lower ones are raised to k + 1 and join the pit queue; ones at lvl..k are raised to
-   k + 1 and join the flat FIFO; higher ones keep their height and go on the trace stack. */
+/* r.watershed's neighbour order (S, N, W, E, NE, SW, SE, NW): cardinal cells join the queues
+   first, so they are the older ones when a flat or depression is crossed. */
+static const uint8_t tn__fill_order[8] = {2, 6, 4, 0, 7, 3, 1, 5};
+
+/* Closes the open neighbours of c (filled key k) for a flood at level lvl (k for a cell at its
+   own height; the water level inside a depression): lower ones are raised to k + 1 and join the
+   pit heap; ones at lvl..k are raised to k + 1 and queue at lvl, behind the cells already there
+   (so a flat fills in rings from all its lower edges, oldest first, as in r.watershed's A*
+   search); higher ones keep their height and go on the trace stack. Raised cells remember c. */
 static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k, uint32_t lvl)
 {
-    int d;
-    for (d = 0; d < 8; d++) {
+    int o;
+    for (o = 0; o < 8; o++) {
+        const int d = tn__fill_order[o];
         size_t ni = (size_t)((ptrdiff_t)c + f->off[d]);
         uint32_t v = f->keys[ni];
         tn_status st;
         if (v & TN__CLOSED) continue;
-        if (v < lvl) { /* in a depression: one step above c */
+        if (v <= k) {
             f->keys[ni] = (k + 1) | TN__CLOSED;
-            if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
-        } else if (v <= k) {
-            /* on a flat: one step above c, in the FIFO, which runs behind every queued cell of a
-               lower or equal key, so a flat fills in rings from all its lower edges at once (as
-               in r.watershed's A* search, where equal heights pop oldest first) instead of
-               draining to whichever edge cell happened to pop first */
-            uint32_t *it;
-            if ((f->nflat + 1) * 3 * sizeof(uint32_t) > f->cap_flat &&
-                (st = tn__reserve((void **)&f->flat, &f->cap_flat, (f->nflat + 1) * 3 * sizeof(uint32_t))))
-                return st;
-            f->keys[ni] = (k + 1) | TN__CLOSED;
-            it = f->flat + 3 * f->nflat++;
-            it[0] = (uint32_t)ni;
-            it[1] = k + 1;
-            it[2] = lvl;
-        } else {
-            f->keys[ni] = v | TN__CLOSED;
-            if ((f->ntrace + 1) * sizeof(uint32_t) > f->cap_trace &&
-                (st = tn__reserve((void **)&f->trace, &f->cap_trace, (f->ntrace + 1) * sizeof(uint32_t))))
-                return st;
-            f->trace[f->ntrace++] = (uint32_t)ni;
+            if (f->par) f->par[ni] = (uint8_t)((d + 4) & 7);
+            st = v < lvl ? tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni)
+                         : tn__rheap_push(f->q, lvl, (uint32_t)ni);
+            if (st) return st;
         }
+    }
+    for (o = 7; o >= 0; o--) { /* reversed, so the trace stack hands them out in the order above */
+        const int d = tn__fill_order[o];
+        size_t ni = (size_t)((ptrdiff_t)c + f->off[d]);
+        uint32_t v = f->keys[ni];
+        if (v & TN__CLOSED) continue;
+        f->keys[ni] = v | TN__CLOSED;
+        if ((f->ntrace + 1) * sizeof(uint32_t) > f->cap_trace) {
+            tn_status st = tn__reserve((void **)&f->trace, &f->cap_trace, (f->ntrace + 1) * sizeof(uint32_t));
+            if (st) return st;
+        }
+        f->trace[f->ntrace++] = (uint32_t)ni;
     }
     return TN_OK;
 }
 
-/* Fills the framed keys in place by priority-flood + epsilon (Barnes et al. 2014) with two
-   speed-ups that keep most cells out of the priority queue and its random memory access:
+/* Fills the framed keys in place by priority-flood + epsilon (Barnes et al. 2014), visiting
+   cells in r.watershed's A* order (lowest first, equal heights oldest first), with two speed-ups
+   that keep most cells out of the priority queue and its random memory access:
    - slope tracing (Zhou, Sun & Fu 2016): a cell reached from below whose open neighbours are all
      strictly higher keeps its height and is expanded at once, depth first, where its
      neighbourhood is still in cache; only cells with a lower open neighbour wait in the queue;
    - the pit queue of the improved variant, here a heap on the ORIGINAL heights (ties first come,
      first served): a depression fills from its outlet along its deepest path first, like
-     r.watershed's least-cost search, so the epsilon slopes lead flow along the depression's
-     thalweg (or, on an inverted DEM, a summit's crest) instead of in parallel straight lines.
-   The main queue is a radix heap: every key pushed is above the last one popped. */
-static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
+     r.watershed's least-cost search, so flow follows the depression's thalweg (or, on an
+     inverted DEM, a summit's crest) instead of parallel straight lines.
+   The main queue is a radix heap of (level, cell): every key pushed is at or above the last one
+   popped. When par is given, each raised cell records the cell that raised it: r.watershed's
+   flow direction on flats and in depressions, and a strict descent of the filled keys. */
+static tn_status tn__fill_keys(uint32_t *keys, uint8_t *par, int w, int h)
 {
     tn__fill_state f;
     const size_t W = (size_t)w + 2, n = (size_t)w * h;
     size_t done = 0;
     tn_status st = TN_OK;
+    uint32_t flood = 0; /* level of the last main-queue pop: the water level inside a depression */
     int x, y, d;
     memset(&f, 0, sizeof f);
     f.q = (tn__rheap *)tn__calloc(sizeof(tn__rheap));
     if (!f.q) return TN_ERR_OUT_OF_MEMORY;
     f.keys = keys;
+    f.par = par;
     for (d = 0; d < 8; d++) f.off[d] = (ptrdiff_t)tn__d8y[d] * (ptrdiff_t)W + tn__d8x[d];
     for (y = 0; y < h && !st; y++)
         for (x = 0; x < w && !st; x += (y == 0 || y == h - 1 || x == w - 1) ? 1 : w - 1) {
@@ -10473,20 +10475,14 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
             st = tn__rheap_push(f.q, keys[i], (uint32_t)i);
             keys[i] |= TN__CLOSED;
         }
-    while (!st && (f.q->size || f.pit.n || f.flat_head < f.nflat)) {
-        uint32_t k, c, lvl, mk = 0xffffffffu;
+    while (!st && (f.q->size || f.pit.n)) {
+        uint32_t k, c, lvl;
         if (f.pit.n) {
             c = tn__pheap_pop(&f.pit);
-            k = keys[c] & ~TN__CLOSED;
-            lvl = k + 1;
-        } else if (f.flat_head < f.nflat && (!f.q->size || (!(st = tn__rheap_min(f.q, &mk)) && f.flat[3 * f.flat_head + 1] < mk))) {
-            const uint32_t *it = f.flat + 3 * f.flat_head++;
-            c = it[0];
-            k = it[1];
-            lvl = it[2];
-            if (f.flat_head == f.nflat) f.flat_head = f.nflat = 0;
-        } else if (st || (st = tn__rheap_pop(f.q, &k, &c))) break;
-        else lvl = k;
+            lvl = flood;
+        } else if ((st = tn__rheap_pop(f.q, &lvl, &c))) break;
+        else flood = lvl;
+        k = keys[c] & ~TN__CLOSED; /* above lvl for a raised cell */
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
             uint32_t nx = f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
             TN__PREFETCH(keys + nx - W - 1);
@@ -10509,7 +10505,6 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
     tn__rheap_free(f.q);
     TN_FREE(f.q);
     TN_FREE(f.pit.a);
-    TN_FREE(f.flat);
     TN_FREE(f.trace);
     return st;
 }
@@ -10567,19 +10562,32 @@ static void tn__keys_to_heights(void *ctx, size_t y0, size_t y1)
     }
 }
 
-/* Depression-filled channel 0 of dem (negated first when invert) into a new one-channel image. */
-static tn_status tn__fill_image(const tn_image *dem, int invert, const char *what, tn_image *out)
+/* Depression-filled channel 0 of dem (negated first when invert) into a new one-channel image.
+   With par, also a new framed (w + 2) x (h + 2) grid of the flood's flow directions for the
+   raised cells (TN_FLOW_OUTLET elsewhere). */
+static tn_status tn__fill_image(const tn_image *dem, int invert, const char *what, tn_image *out, uint8_t **par)
 {
     uint32_t *keys = NULL;
+    uint8_t *p = NULL;
     tn__heights_job j;
     tn_status st;
     if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
         return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
     if ((st = tn__dem_keys(dem, invert, what, &keys))) return st;
-    if ((st = tn__fill_keys(keys, dem->width, dem->height)) || (st = tn__image_alloc(out, dem->width, dem->height, 1))) {
+    if (par) {
+        const size_t framed = ((size_t)dem->width + 2) * ((size_t)dem->height + 2);
+        if (!(p = (uint8_t *)tn__alloc(framed))) {
+            TN_FREE(keys);
+            return TN_ERR_OUT_OF_MEMORY;
+        }
+        memset(p, TN_FLOW_OUTLET, framed);
+    }
+    if ((st = tn__fill_keys(keys, p, dem->width, dem->height)) || (st = tn__image_alloc(out, dem->width, dem->height, 1))) {
         TN_FREE(keys);
+        TN_FREE(p);
         return st;
     }
+    if (par) *par = p;
     j.keys = keys;
     j.dem = dem;
     j.invert = invert;
@@ -10594,12 +10602,12 @@ TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem)
     tn_image out = {0, 0, 0, NULL};
     tn_status st;
     TN_ASSERT(dst);
-    if ((st = tn__fill_image(dem, 0, "fill depressions", &out))) return st;
+    if ((st = tn__fill_image(dem, 0, "fill depressions", &out, NULL))) return st;
     *dst = out;
     return TN_OK;
 }
 
-typedef struct tn__d8_job { const float *h; uint8_t *dir; int w, hgt; } tn__d8_job;
+typedef struct tn__d8_job { const float *h; const uint8_t *par; uint8_t *dir; int w, hgt; } tn__d8_job;
 
 static void tn__d8_rows(void *ctx, size_t y0, size_t y1)
 {
@@ -10631,10 +10639,16 @@ static void tn__d8_rows(void *ctx, size_t y0, size_t y1)
             }
             dr[x] = (uint8_t)bd;
         }
+        if (j->par) { /* raised cells drain to the cell the flood came from */
+            const uint8_t *pr = j->par + (size_t)(y + 1) * (size_t)(w + 2) + 1;
+            for (x = 1; x < w - 1; x++)
+                if (pr[x] != TN_FLOW_OUTLET) dr[x] = pr[x];
+        }
     }
 }
 
-TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
+/* D8 of a filled DEM; par (framed, or NULL) overrides the directions of raised cells. */
+static tn_status tn__flow_dirs(tn_flow *flow, const tn_image *filled, const uint8_t *par)
 {
     tn__d8_job j;
     tn_image tmp = {0, 0, 0, NULL};
@@ -10656,12 +10670,18 @@ TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
     flow->width = filled->width;
     flow->height = filled->height;
     j.h = filled->data;
+    j.par = par;
     j.dir = flow->dir;
     j.w = filled->width;
     j.hgt = filled->height;
     tn_parallel_for((size_t)filled->height, tn__row_grain(filled->width), tn__d8_rows, &j);
     tn_image_free(&tmp);
     return TN_OK;
+}
+
+TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled)
+{
+    return tn__flow_dirs(flow, filled, NULL);
 }
 
 /* Receiver of cell i, or -1 for an outlet. */
@@ -10892,12 +10912,14 @@ TN_API void tn_flow_free(tn_flow *flow)
 TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
 {
     tn_image filled = {0, 0, 0, NULL};
+    uint8_t *par = NULL;
     tn_status st;
     TN_ASSERT(flow);
     memset(flow, 0, sizeof *flow);
-    if ((st = tn__fill_image(dem, invert, "flow", &filled))) return st;
-    st = tn_flow_directions(flow, &filled);
+    if ((st = tn__fill_image(dem, invert, "flow", &filled, &par))) return st;
+    st = tn__flow_dirs(flow, &filled, par);
     tn_image_free(&filled);
+    TN_FREE(par);
     if (!st) st = tn_flow_accumulation(flow);
     if (st) tn_flow_free(flow);
     return st;

@@ -225,6 +225,47 @@ TN_TEST(test_flat_drains_to_all_edges)
     tn_image_free(&dem);
 }
 
+/* A lake (flat at 5 inside a rim at 10) with one outlet cell at 0 in the middle of the west
+   edge. The flood visits it as r.watershed's A* search does (equal heights oldest first, S N W E
+   before the diagonals), and raised cells drain to the cell the flood came from, so the lake
+   drains along the outlet's row with diagonal feeders on both sides, symmetrically. */
+static float lake(int x, int y) { return x == 0 && y == 7 ? 0.0f : (x == 0 || y == 0 || x == 14 || y == 14) ? 10.0f : 5.0f; }
+
+TN_TEST(test_lake_drains_like_rwatershed)
+{
+    tn_image dem = make_dem(15, 15, lake), noise = {0, 0, 0, NULL}, filled = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    tn_flow f;
+    size_t i, n, bad = 0;
+    int x;
+    TN_CHECK(tn_flow_compute(&f, &dem, 0) == TN_OK);
+    TN_CHECK(f.acc[7 * 15] == 13 * 13 + 1);
+    for (x = 1; x < 14; x++) TN_CHECK(f.dir[7 * 15 + x] == 4);                /* W along the row */
+    for (x = 2; x < 14; x++) TN_CHECK(f.dir[6 * 15 + x] == 3 && f.dir[8 * 15 + x] == 5); /* SW / NW feeders */
+    TN_CHECK(f.acc[6 * 15 + 13] == f.acc[8 * 15 + 13]);
+    tn_flow_free(&f);
+    /* on a noisy DEM with pits, every flow step still descends the filled surface strictly */
+    memset(&po, 0, sizeof po);
+    po.octaves = 5;
+    po.frequency = 8.0f;
+    TN_CHECK(tn_noise_perlin(&noise, 157, 131, &po) == TN_OK);
+    n = (size_t)157 * 131;
+    for (i = 0; i < n; i++) noise.data[i] = floorf(noise.data[i] * 20.0f); /* terraces: many flats */
+    TN_CHECK(tn_fill_depressions(&filled, &noise) == TN_OK);
+    TN_CHECK(tn_flow_compute(&f, &noise, 0) == TN_OK);
+    TN_CHECK(outlet_sum(&f) == n);
+    for (i = 0; i < n; i++) {
+        int d = f.dir[i];
+        if (d == TN_FLOW_OUTLET) continue;
+        if (!(filled.data[i + (ptrdiff_t)tn__d8y[d] * 157 + tn__d8x[d]] < filled.data[i])) bad++;
+    }
+    TN_CHECK(bad == 0);
+    tn_flow_free(&f);
+    tn_image_free(&filled);
+    tn_image_free(&noise);
+    tn_image_free(&dem);
+}
+
 /* A hand-made network: two sources (order 1) meet at a junction (order 2), a third source joins
    the stem lower down (stays 2), on a 7 x 8 grid draining to (3, 7). */
 TN_TEST(test_strahler_y)
@@ -551,6 +592,7 @@ int main(void)
     TN_RUN(test_cone);
     TN_RUN(test_pit_is_filled);
     TN_RUN(test_flat_drains_to_all_edges);
+    TN_RUN(test_lake_drains_like_rwatershed);
     TN_RUN(test_strahler_y);
     TN_RUN(test_skeleton);
     TN_RUN(test_parts_sparse_sketch);
