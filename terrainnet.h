@@ -10370,19 +10370,48 @@ static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
     return TN_OK;
 }
 
+/* The smallest of the children c .. min(c + 4, n) - 1 (c < n), branch-free when all four exist:
+   the comparisons are unpredictable. Priorities are unique (they hold a sequence number). */
+static size_t tn__pheap_minchild(const tn__pheap_item *a, size_t c, size_t n)
+{
+    size_t b, k;
+    if (c + 4 <= n) {
+        size_t b01 = a[c + 1].pri < a[c].pri ? c + 1 : c, b23 = a[c + 3].pri < a[c + 2].pri ? c + 3 : c + 2;
+        return a[b23].pri < a[b01].pri ? b23 : b01;
+    }
+    for (b = c, k = c + 1; k < n; k++) b = a[k].pri < a[b].pri ? k : b;
+    return b;
+}
+
+/* Replaces the top by `it` (sifted down); returns the old top's cell. */
+static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
+{
+    uint32_t top = h->a[0].cell;
+    size_t i = 0, c, b;
+    while ((c = 4 * i + 1) < h->n && h->a[b = tn__pheap_minchild(h->a, c, h->n)].pri < it.pri) {
+        h->a[i] = h->a[b];
+        i = b;
+    }
+    h->a[i] = it;
+    return top;
+}
+
+/* Pops the top. The last item came from the bottom, so the hole goes down to a leaf along the
+   smaller children and the item climbs back from there: fewer comparisons than testing it on
+   the way down. */
 static uint32_t tn__pheap_pop(tn__pheap *h)
 {
     uint32_t top = h->a[0].cell;
     tn__pheap_item last = h->a[--h->n];
-    size_t i = 0;
-    for (;;) {
-        size_t c = 4 * i + 1, e = c + 4, k, b = c;
-        if (c >= h->n) break;
-        if (e > h->n) e = h->n;
-        for (k = c + 1; k < e; k++) if (h->a[k].pri < h->a[b].pri) b = k;
-        if (h->a[b].pri >= last.pri) break;
+    size_t i = 0, c, b;
+    while ((c = 4 * i + 1) < h->n) {
+        b = tn__pheap_minchild(h->a, c, h->n);
         h->a[i] = h->a[b];
         i = b;
+    }
+    while (i > 0 && h->a[(i - 1) / 4].pri > last.pri) {
+        h->a[i] = h->a[(i - 1) / 4];
+        i = (i - 1) / 4;
     }
     h->a[i] = last;
     return top;
@@ -10403,6 +10432,8 @@ typedef struct tn__fill_state {
     uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
     size_t ntrace, cap_trace; /* cap in bytes */
     uint32_t seq;
+    tn__pheap_item next;      /* the lowest pit cell the last expansion found (when has_next) */
+    int has_next;
 } tn__fill_state;
 
 /* Closes the open neighbours of c (filled key k) that lie on a flat of level lvl (k for a cell
@@ -10418,8 +10449,19 @@ static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k, uint
         tn_status st;
         if (v & TN__CLOSED) continue;
         if (v < lvl) { /* in a depression: one step above c */
+            tn__pheap_item it;
+            it.pri = ((uint64_t)v << 32) | f->seq++;
+            it.cell = (uint32_t)ni;
+            it.pad = 0;
             f->keys[ni] = (k + 1) | TN__CLOSED;
-            if ((st = tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni))) return st;
+            /* the lowest stays out of the heap: it is often the next pop (the flood runs downhill) */
+            if (f->has_next && f->next.pri < it.pri) {
+                if ((st = tn__pheap_push(&f->pit, it.pri, it.cell))) return st;
+            } else {
+                if (f->has_next && (st = tn__pheap_push(&f->pit, f->next.pri, f->next.cell))) return st;
+                f->next = it;
+                f->has_next = 1;
+            }
         } else if (v <= k) {
             /* on a flat: one step above c, in the FIFO, which runs behind every queued cell of a
                lower or equal key, so a flat fills in rings from all its lower edges at once (as
@@ -10473,9 +10515,14 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
             st = tn__rheap_push(f.q, keys[i], (uint32_t)i);
             keys[i] |= TN__CLOSED;
         }
-    while (!st && (f.q->size || f.pit.n || f.flat_head < f.nflat)) {
+    while (!st && (f.q->size || f.pit.n || f.has_next || f.flat_head < f.nflat)) {
         uint32_t k, c, lvl, mk = 0xffffffffu;
-        if (f.pit.n) {
+        if (f.has_next) { /* the heap's minimum is either it or the heap's top */
+            f.has_next = 0;
+            c = f.pit.n && f.pit.a[0].pri < f.next.pri ? tn__pheap_replace(&f.pit, f.next) : f.next.cell;
+            k = keys[c] & ~TN__CLOSED;
+            lvl = k + 1;
+        } else if (f.pit.n) {
             c = tn__pheap_pop(&f.pit);
             k = keys[c] & ~TN__CLOSED;
             lvl = k + 1;
@@ -10488,7 +10535,7 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
         } else if (st || (st = tn__rheap_pop(f.q, &k, &c))) break;
         else lvl = k;
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
-            uint32_t nx = f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
+            uint32_t nx = f.has_next ? f.next.cell : f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
             TN__PREFETCH(keys + nx - W - 1);
             TN__PREFETCH(keys + nx - 1);
             TN__PREFETCH(keys + nx + W - 1);
