@@ -10325,23 +10325,48 @@ static void tn__rheap_free(tn__rheap *h)
         for (v = 0; v < 256; v++) TN_FREE(h->b[l][v]);
 }
 
+typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
+
+/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
+static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__finite_job *j = (const tn__finite_job *)ctx;
+    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *r = j->dem->data + y * w * C;
+        int ok = 1;
+        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
+        j->bad[y] = (uint8_t)!ok;
+    }
+}
+
+/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
+   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
+static tn_status tn__dem_finite(const tn_image *dem, const char *what)
+{
+    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
+    tn__finite_job j;
+    size_t x, y;
+    j.dem = dem;
+    j.bad = (uint8_t *)tn__alloc(h);
+    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
+    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
+    for (y = 0; y < h && !j.bad[y]; y++) {}
+    TN_FREE(j.bad);
+    if (y == h) return TN_OK;
+    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
+    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
+}
+
 /* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
 static tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
 {
-    size_t i, n, C;
     if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
         return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
     if (dem->width < min_side || dem->height < min_side)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
-    n = (size_t)dem->width * dem->height;
-    C = (size_t)dem->channels;
-    for (i = 0; i < n; i++) {
-        float v = dem->data[i * C];
-        if (!(v >= -FLT_MAX && v <= FLT_MAX))
-            return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)(i % (size_t)dem->width),
-                            (int)(i / (size_t)dem->width));
-    }
-    return TN_OK;
+    return tn__dem_finite(dem, what);
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
@@ -10561,35 +10586,41 @@ static tn_status tn__fill_keys(uint32_t *keys, int w, int h)
     return st;
 }
 
+typedef struct tn__keys_job { const tn_image *dem; int invert; uint32_t *k; } tn__keys_job;
+
+static void tn__keys_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__keys_job *j = (const tn__keys_job *)ctx;
+    const size_t w = (size_t)j->dem->width, W = w + 2, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *src = j->dem->data + y * w * C;
+        uint32_t *row = j->k + (y + 1) * W;
+        row[0] = row[w + 1] = TN__FRAME;
+        for (x = 0; x < w; x++) row[x + 1] = tn__fkey(j->invert ? -src[x * C] : src[x * C]) >> 1;
+    }
+}
+
 /* Heights of channel 0 as 31-bit keys (the float key without its last bit, so the top bit is
    free for the closed flag) in a grid framed by TN__FRAME; invert flips the sign (ridges).
    Fails on NaN/Inf. */
 static tn_status tn__dem_keys(const tn_image *dem, int invert, const char *what, uint32_t **out)
 {
     const int w = dem->width, h = dem->height;
-    const size_t W = (size_t)w + 2, C = (size_t)dem->channels;
-    size_t bytes, x, y;
-    uint32_t *k;
+    const size_t W = (size_t)w + 2;
+    size_t bytes, x;
+    tn__keys_job j;
     tn_status st = tn__size4(W, (size_t)h + 2, 1, sizeof(uint32_t), &bytes);
     if (st) return st;
     if (W * ((size_t)h + 2) > 0xfffffffeu) return tn__fail(TN_ERR_TOO_LARGE, "%s: %d x %d cells exceed the 2^32 cell limit", what, w, h);
-    k = (uint32_t *)tn__alloc(bytes);
-    if (!k) return TN_ERR_OUT_OF_MEMORY;
-    for (x = 0; x < W; x++) k[x] = k[(size_t)(h + 1) * W + x] = TN__FRAME;
-    for (y = 0; y < (size_t)h; y++) {
-        const float *src = dem->data + y * (size_t)w * C;
-        uint32_t *row = k + (y + 1) * W;
-        row[0] = row[w + 1] = TN__FRAME;
-        for (x = 0; x < (size_t)w; x++) {
-            float v = src[x * C];
-            if (!(v >= -FLT_MAX && v <= FLT_MAX)) {
-                TN_FREE(k);
-                return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
-            }
-            row[x + 1] = tn__fkey(invert ? -v : v) >> 1;
-        }
-    }
-    *out = k;
+    if ((st = tn__dem_finite(dem, what))) return st;
+    j.k = (uint32_t *)tn__alloc(bytes);
+    if (!j.k) return TN_ERR_OUT_OF_MEMORY;
+    j.dem = dem;
+    j.invert = invert;
+    for (x = 0; x < W; x++) j.k[x] = j.k[(size_t)(h + 1) * W + x] = TN__FRAME;
+    tn_parallel_for((size_t)h, tn__row_grain(w), tn__keys_rows, &j);
+    *out = j.k;
     return TN_OK;
 }
 
