@@ -10322,23 +10322,48 @@ static void tn__rheap_free(tn__rheap *h)
         for (v = 0; v < 256; v++) TN_FREE(h->b[l][v]);
 }
 
+typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
+
+/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
+static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__finite_job *j = (const tn__finite_job *)ctx;
+    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *r = j->dem->data + y * w * C;
+        int ok = 1;
+        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
+        j->bad[y] = (uint8_t)!ok;
+    }
+}
+
+/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
+   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
+static tn_status tn__dem_finite(const tn_image *dem, const char *what)
+{
+    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
+    tn__finite_job j;
+    size_t x, y;
+    j.dem = dem;
+    j.bad = (uint8_t *)tn__alloc(h);
+    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
+    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
+    for (y = 0; y < h && !j.bad[y]; y++) {}
+    TN_FREE(j.bad);
+    if (y == h) return TN_OK;
+    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
+    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
+}
+
 /* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
 static tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
 {
-    size_t i, n, C;
     if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
         return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
     if (dem->width < min_side || dem->height < min_side)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
-    n = (size_t)dem->width * dem->height;
-    C = (size_t)dem->channels;
-    for (i = 0; i < n; i++) {
-        float v = dem->data[i * C];
-        if (!(v >= -FLT_MAX && v <= FLT_MAX))
-            return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)(i % (size_t)dem->width),
-                            (int)(i / (size_t)dem->width));
-    }
-    return TN_OK;
+    return tn__dem_finite(dem, what);
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
@@ -10367,19 +10392,48 @@ static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
     return TN_OK;
 }
 
+/* The smallest of the children c .. min(c + 4, n) - 1 (c < n), branch-free when all four exist:
+   the comparisons are unpredictable. Priorities are unique (they hold a sequence number). */
+static size_t tn__pheap_minchild(const tn__pheap_item *a, size_t c, size_t n)
+{
+    size_t b, k;
+    if (c + 4 <= n) {
+        size_t b01 = a[c + 1].pri < a[c].pri ? c + 1 : c, b23 = a[c + 3].pri < a[c + 2].pri ? c + 3 : c + 2;
+        return a[b23].pri < a[b01].pri ? b23 : b01;
+    }
+    for (b = c, k = c + 1; k < n; k++) b = a[k].pri < a[b].pri ? k : b;
+    return b;
+}
+
+/* Replaces the top by `it` (sifted down); returns the old top's cell. */
+static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
+{
+    uint32_t top = h->a[0].cell;
+    size_t i = 0, c, b;
+    while ((c = 4 * i + 1) < h->n && h->a[b = tn__pheap_minchild(h->a, c, h->n)].pri < it.pri) {
+        h->a[i] = h->a[b];
+        i = b;
+    }
+    h->a[i] = it;
+    return top;
+}
+
+/* Pops the top. The last item came from the bottom, so the hole goes down to a leaf along the
+   smaller children and the item climbs back from there: fewer comparisons than testing it on
+   the way down. */
 static uint32_t tn__pheap_pop(tn__pheap *h)
 {
     uint32_t top = h->a[0].cell;
     tn__pheap_item last = h->a[--h->n];
-    size_t i = 0;
-    for (;;) {
-        size_t c = 4 * i + 1, e = c + 4, k, b = c;
-        if (c >= h->n) break;
-        if (e > h->n) e = h->n;
-        for (k = c + 1; k < e; k++) if (h->a[k].pri < h->a[b].pri) b = k;
-        if (h->a[b].pri >= last.pri) break;
+    size_t i = 0, c, b;
+    while ((c = 4 * i + 1) < h->n) {
+        b = tn__pheap_minchild(h->a, c, h->n);
         h->a[i] = h->a[b];
         i = b;
+    }
+    while (i > 0 && h->a[(i - 1) / 4].pri > last.pri) {
+        h->a[i] = h->a[(i - 1) / 4];
+        i = (i - 1) / 4;
     }
     h->a[i] = last;
     return top;
@@ -10399,6 +10453,8 @@ typedef struct tn__fill_state {
     uint32_t *trace;          /* stack of slope cells processed out of order (Zhou et al. 2016) */
     size_t ntrace, cap_trace; /* cap in bytes */
     uint32_t seq;
+    tn__pheap_item next;      /* the lowest pit cell the last expansion found (when has_next) */
+    int has_next;
 } tn__fill_state;
 
 /* r.watershed's neighbour order (S, N, W, E, NE, SW, SE, NW): cardinal cells join the queues
@@ -10422,9 +10478,20 @@ static tn_status tn__fill_expand(tn__fill_state *f, uint32_t c, uint32_t k, uint
         if (v <= k) {
             f->keys[ni] = (k + 1) | TN__CLOSED;
             if (f->par) f->par[ni] = (uint8_t)((d + 4) & 7);
-            st = v < lvl ? tn__pheap_push(&f->pit, ((uint64_t)v << 32) | f->seq++, (uint32_t)ni)
-                         : tn__rheap_push(f->q, lvl, (uint32_t)ni);
-            if (st) return st;
+            if (v < lvl) { /* in a depression: one step above c */
+                tn__pheap_item it;
+                it.pri = ((uint64_t)v << 32) | f->seq++;
+                it.cell = (uint32_t)ni;
+                it.pad = 0;
+                /* the lowest stays out of the heap: it is often the next pop (the flood runs downhill) */
+                if (f->has_next && f->next.pri < it.pri) {
+                    if ((st = tn__pheap_push(&f->pit, it.pri, it.cell))) return st;
+                } else {
+                    if (f->has_next && (st = tn__pheap_push(&f->pit, f->next.pri, f->next.cell))) return st;
+                    f->next = it;
+                    f->has_next = 1;
+                }
+            } else if ((st = tn__rheap_push(f->q, lvl, (uint32_t)ni))) return st;
         }
     }
     for (o = 7; o >= 0; o--) { /* reversed, so the trace stack hands them out in the order above */
@@ -10475,16 +10542,20 @@ static tn_status tn__fill_keys(uint32_t *keys, uint8_t *par, int w, int h)
             st = tn__rheap_push(f.q, keys[i], (uint32_t)i);
             keys[i] |= TN__CLOSED;
         }
-    while (!st && (f.q->size || f.pit.n)) {
+    while (!st && (f.q->size || f.pit.n || f.has_next)) {
         uint32_t k, c, lvl;
-        if (f.pit.n) {
+        if (f.has_next) { /* the heap's minimum is either it or the heap's top */
+            f.has_next = 0;
+            c = f.pit.n && f.pit.a[0].pri < f.next.pri ? tn__pheap_replace(&f.pit, f.next) : f.next.cell;
+            lvl = flood;
+        } else if (f.pit.n) {
             c = tn__pheap_pop(&f.pit);
             lvl = flood;
         } else if ((st = tn__rheap_pop(f.q, &lvl, &c))) break;
         else flood = lvl;
         k = keys[c] & ~TN__CLOSED; /* above lvl for a raised cell */
         { /* the pops jump around the map: fetch the next cell's rows while this one is processed */
-            uint32_t nx = f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
+            uint32_t nx = f.has_next ? f.next.cell : f.pit.n ? f.pit.a[0].cell : tn__rheap_peek(f.q, c);
             TN__PREFETCH(keys + nx - W - 1);
             TN__PREFETCH(keys + nx - 1);
             TN__PREFETCH(keys + nx + W - 1);
@@ -10509,35 +10580,41 @@ static tn_status tn__fill_keys(uint32_t *keys, uint8_t *par, int w, int h)
     return st;
 }
 
+typedef struct tn__keys_job { const tn_image *dem; int invert; uint32_t *k; } tn__keys_job;
+
+static void tn__keys_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__keys_job *j = (const tn__keys_job *)ctx;
+    const size_t w = (size_t)j->dem->width, W = w + 2, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *src = j->dem->data + y * w * C;
+        uint32_t *row = j->k + (y + 1) * W;
+        row[0] = row[w + 1] = TN__FRAME;
+        for (x = 0; x < w; x++) row[x + 1] = tn__fkey(j->invert ? -src[x * C] : src[x * C]) >> 1;
+    }
+}
+
 /* Heights of channel 0 as 31-bit keys (the float key without its last bit, so the top bit is
    free for the closed flag) in a grid framed by TN__FRAME; invert flips the sign (ridges).
    Fails on NaN/Inf. */
 static tn_status tn__dem_keys(const tn_image *dem, int invert, const char *what, uint32_t **out)
 {
     const int w = dem->width, h = dem->height;
-    const size_t W = (size_t)w + 2, C = (size_t)dem->channels;
-    size_t bytes, x, y;
-    uint32_t *k;
+    const size_t W = (size_t)w + 2;
+    size_t bytes, x;
+    tn__keys_job j;
     tn_status st = tn__size4(W, (size_t)h + 2, 1, sizeof(uint32_t), &bytes);
     if (st) return st;
     if (W * ((size_t)h + 2) > 0xfffffffeu) return tn__fail(TN_ERR_TOO_LARGE, "%s: %d x %d cells exceed the 2^32 cell limit", what, w, h);
-    k = (uint32_t *)tn__alloc(bytes);
-    if (!k) return TN_ERR_OUT_OF_MEMORY;
-    for (x = 0; x < W; x++) k[x] = k[(size_t)(h + 1) * W + x] = TN__FRAME;
-    for (y = 0; y < (size_t)h; y++) {
-        const float *src = dem->data + y * (size_t)w * C;
-        uint32_t *row = k + (y + 1) * W;
-        row[0] = row[w + 1] = TN__FRAME;
-        for (x = 0; x < (size_t)w; x++) {
-            float v = src[x * C];
-            if (!(v >= -FLT_MAX && v <= FLT_MAX)) {
-                TN_FREE(k);
-                return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
-            }
-            row[x + 1] = tn__fkey(invert ? -v : v) >> 1;
-        }
-    }
-    *out = k;
+    if ((st = tn__dem_finite(dem, what))) return st;
+    j.k = (uint32_t *)tn__alloc(bytes);
+    if (!j.k) return TN_ERR_OUT_OF_MEMORY;
+    j.dem = dem;
+    j.invert = invert;
+    for (x = 0; x < W; x++) j.k[x] = j.k[(size_t)(h + 1) * W + x] = TN__FRAME;
+    tn_parallel_for((size_t)h, tn__row_grain(w), tn__keys_rows, &j);
+    *out = j.k;
     return TN_OK;
 }
 

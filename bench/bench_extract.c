@@ -4,7 +4,9 @@
    exists, else terrainnet's own Perlin fBm x 100 + 0.05 (x + y), written there as raw float32.
    Prints `extract_<stage>_4096_t<N>: X ms` (median of 3 wall), `extract_<stage>_cpu_...` (process CPU
    time, less sensitive to a shared machine) and GRASS as `grass_rwatershed_sfd_4096: X ms`.
-   TN_BENCH_GRASS=0 skips GRASS; TN_BENCH_SIZE=N changes the size. */
+   TN_BENCH_GRASS=0 skips GRASS; TN_BENCH_SIZE=N changes the size; TN_BENCH_RUNS=N takes the
+   median of N runs (3, at most 15); TN_BENCH_THREADS=T times only T threads; TN_BENCH_PIPELINE=0
+   skips the whole-pipeline runs (for quick interleaved comparisons on a shared machine). */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
@@ -25,14 +27,17 @@ static int die(void)
 
 int main(void)
 {
-    enum { RUNS = 3 };
-    const char *env = getenv("TN_BENCH_SIZE");
-    int N = env ? atoi(env) : 4096, t, r;
+    enum { MAXRUNS = 15 };
+    const char *env = getenv("TN_BENCH_SIZE"), *e_runs = getenv("TN_BENCH_RUNS"), *e_thr = getenv("TN_BENCH_THREADS"),
+               *e_pipe = getenv("TN_BENCH_PIPELINE");
+    int N = env ? atoi(env) : 4096, t, r, RUNS = e_runs ? atoi(e_runs) : 3, tlo = 1, thi = 2;
     char path[256];
     tn_image dem = {0, 0, 0, NULL};
     FILE *f;
     size_t n;
     if (N < 16 || N > 16384) N = 4096;
+    if (RUNS < 1 || RUNS > MAXRUNS) RUNS = 3;
+    if (e_thr && atoi(e_thr) >= 1) tlo = thi = atoi(e_thr);
     n = (size_t)N * N;
     snprintf(path, sizeof path, "/tmp/peers_data/dem%d.f32", N);
     if (tn_image_create(&dem, N, N, 1)) return die();
@@ -57,8 +62,8 @@ int main(void)
         printf("# DEM: terrainnet Perlin fBm, written to %s\n", path);
     }
     if (f) fclose(f);
-    for (t = 1; t <= 2; t++) {
-        double ms[4][RUNS], cpu[4][RUNS];
+    for (t = tlo; t <= thi; t++) {
+        double ms[4][MAXRUNS], cpu[4][MAXRUNS];
         const char *names[4] = {"fill", "d8", "accumulation", "fill_d8_acc"};
         int k;
         tn_set_threads(t);
@@ -84,7 +89,7 @@ int main(void)
             ms[1][r] = (t2 - t1) * 1e3;
             ms[2][r] = (t3 - t2) * 1e3;
             ms[3][r] = (t3 - t0) * 1e3;
-            if (r == 0 && t == 1) {
+            if (r == 0 && t == tlo) {
                 uint32_t mx = 0;
                 size_t i;
                 for (i = 0; i < n; i++) if (flow.acc[i] > mx) mx = flow.acc[i];
@@ -101,12 +106,12 @@ int main(void)
             /* process CPU time: a shared machine inflates wall time; at 1 thread CPU ~ an idle core's wall */
             printf("extract_%s_cpu_%d_t%d: %.1f ms (min %.1f, all threads)\n", names[k], N, t, cpu[k][RUNS / 2], cpu[k][0]);
         }
-        {
+        if (!(e_pipe && e_pipe[0] == '0')) {
             tn_extraction ex;
-            double t0 = tn_time_seconds();
+            double s0 = tn_time_seconds();
             if (tn_extract(&dem, NULL, &ex)) return die();
             printf("extract_full_pipeline_%d_t%d: %.1f ms (valleys + ridges, %d contours, runs 1)\n", N, t,
-                   (tn_time_seconds() - t0) * 1e3, ex.contours.count);
+                   (tn_time_seconds() - s0) * 1e3, ex.contours.count);
             tn_extraction_free(&ex);
         }
         fflush(stdout);
