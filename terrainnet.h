@@ -866,13 +866,17 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    Wasserstein distance (Heitz et al. 2021: features projected on C fixed random directions,
    sorted, compared with the source's sorted projections); histogram terms match the sorted
    heights and slopes of the source; content = relative squared distance of the third layer.
-   Optional drainage terms (off by default; drain_weight, valley_weight): the depression depths
+   Drainage terms (drain_weight, valley_weight; by default on for fluvial sources, i.e. under 5 %
+   of the source in closed basins deeper than 0.1 % of its height range, off for dunes, craters
+   and karst): the depression depths
    (depression-filled map minus map, @@extract's priority flood) are sorted-matched to the
    source's, so a source without closed basins removes them; and every cell's relief (height
    minus its Gaussian-smoothed surroundings, sigma 2 px) is pulled towards the source's mean
    relief for cells of the same D8 drainage area (log2 bins), on all levels but the finest, so
    valleys are carved where water collects and the network connects. The filled map and the
-   drainage bins are recomputed every evaluation and held constant in the gradient.
+   drainage bins are recomputed every evaluation and held constant in the gradient; a 2-px
+   border band drains straight off the map, so no channel runs along the edge. With them on,
+   the automatic pyramid goes one level coarser (coarsest side >= 32).
 
    VGG-19 (tn_vgg19_load): the paper's network. Greyscale is fed as three identical channels in
    [0, 1] with ImageNet normalisation (mean 0.485 0.456 0.406, std 0.229 0.224 0.225), max
@@ -892,15 +896,15 @@ typedef enum tn_style_optimizer { TN_STYLE_LBFGS = 0, TN_STYLE_SGD, TN_STYLE_ADA
 typedef struct tn_style_opts {
     tn_style_optimizer optimizer; /* L-BFGS (default), SGD with exponential decay, Adam */
     int iters;            /* iterations per pyramid level; 0 = default (L-BFGS 40, Adam 150, SGD 300) */
-    int levels;           /* pyramid levels; 0 = auto (coarsest side >= 64, at most 6) */
+    int levels;           /* pyramid levels; 0 = auto (coarsest side >= 64, >= 32 with drainage terms; at most 6) */
     int tile;             /* levels wider or taller than this are optimised in tiles; 0 = 512 */
     /* Loss weights; 0 = the network's default, negative = term off. */
     float content_weight; /* alpha */
     float style_weight;   /* beta: Gram term */
     float sw_weight;      /* built-in net: sliced Wasserstein term */
     float hist_weight;    /* built-in net: height and slope histogram terms */
-    float drain_weight;   /* built-in net: closed basins (depressions) as deep as the source's */
-    float valley_weight;  /* built-in net: valley relief per drainage area as in the source (all but the finest level) */
+    float drain_weight;   /* built-in net: closed basins (depressions) as deep as the source's; 0 = 10 for fluvial sources, else off */
+    float valley_weight;  /* built-in net: valley relief per drainage area as in the source (all but the finest level); 0 = 1 for fluvial sources, else off */
     float tv_weight;      /* gamma */
     float lr;             /* SGD / Adam learning rate; 0 = default (SGD decays x0.96 every iters/20 steps) */
     uint64_t seed;        /* random filters and projections of the built-in net */
@@ -12135,8 +12139,30 @@ static tn_tensor *tn__style_relief(tn_ctx *ctx, tn_tensor *x, tn_tensor *xs)
 }
 
 #define TN__STYLE_LAKE 255 /* drainage bin of a cell left alone: in a depression */
-#define TN__STYLE_EDGE 1   /* px: border cells drain off the map, so channels would run along it:
-                              cells this close to the edge share one bin (TN__STYLE_ABINS) */
+#define TN__STYLE_BAND 2   /* px: cells this close to the edge drain straight off the map and share
+                              one bin (TN__STYLE_ABINS) */
+
+/* Points the cells of a TN__STYLE_BAND-wide border band straight at their nearest edge (the
+   border row itself is an outlet). Left to D8, the band collects the flow of everything next
+   to it and runs it along the edge, and the relief term then cuts a channel parallel to the
+   border. In their own bin, the band's cells are neither carved nor raised into a rim (as
+   cells draining only themselves would be), so flow leaves the map at any angle. */
+static void tn__style_band_outflow(tn_flow *f)
+{
+    int w = f->width, h = f->height, x, y;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) {
+            int l = x, r = w - 1 - x, t = y, b = h - 1 - y, m = l < r ? l : r, v = t < b ? t : b;
+            uint8_t *d = &f->dir[(size_t)y * w + x];
+            if (m >= TN__STYLE_BAND && v >= TN__STYLE_BAND) {
+                x = w - TN__STYLE_BAND - 1; /* skip the interior of the row */
+                continue;
+            }
+            if (!m || !v) *d = TN_FLOW_OUTLET;
+            else if (m <= v) *d = l <= r ? 4 : 0; /* W or E (tn__d8x order) */
+            else *d = t <= b ? 6 : 2;             /* N or S */
+        }
+}
 
 /* Drainage bin of every cell of a w x h map v: floor(log2(D8 flow accumulation)) on its filled
    copy, capped at TN__STYLE_ABINS - 1; TN__STYLE_LAKE inside depressions (filled > v), where
@@ -12152,7 +12178,8 @@ static tn_status tn__style_drain_bins(const float *filled, const float *v, int w
     m.channels = 1;
     m.data = (float *)filled;
     memset(&f, 0, sizeof f);
-    if ((st = tn_flow_directions(&f, &m)) || (st = tn_flow_accumulation(&f))) {
+    if (!(st = tn_flow_directions(&f, &m))) tn__style_band_outflow(&f);
+    if (st || (st = tn_flow_accumulation(&f))) {
         tn_flow_free(&f);
         return st;
     }
@@ -12161,7 +12188,7 @@ static tn_status tn__style_drain_bins(const float *filled, const float *v, int w
         int b = 0;
         while (a > 1 && b < TN__STYLE_ABINS - 1) { a >>= 1; b++; }
         int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w);
-        int edge = x < TN__STYLE_EDGE || y < TN__STYLE_EDGE || x >= w - TN__STYLE_EDGE || y >= h - TN__STYLE_EDGE;
+        int edge = x < TN__STYLE_BAND || y < TN__STYLE_BAND || x >= w - TN__STYLE_BAND || y >= h - TN__STYLE_BAND;
         bin[i] = filled[i] > v[i] ? TN__STYLE_LAKE : edge ? TN__STYLE_ABINS : (uint8_t)b;
     }
     tn_flow_free(&f);
@@ -12375,15 +12402,18 @@ typedef struct tn__style_cfg {
     double work_done, work_total; /* progress in pixel-iterations */
     tn_progress_fn user_fn;
     void *user_data;
-    double span;
+    double span, frac;            /* work of the tile being optimised, and the fraction done */
     int level;                    /* pyramid level being optimised (0 = full size) */
 } tn__style_cfg;
 
-/* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer. */
+/* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer; the drainage
+   terms' priority flood reports "fill" from inside an evaluation, which only gets a chance to
+   cancel. */
 static int tn__style_progress_fwd(void *user, const char *stage, double f)
 {
     tn__style_cfg *c = (tn__style_cfg *)user;
-    (void)stage;
+    if (strcmp(stage, "lbfgs")) f = c->frac;
+    c->frac = f;
     return c->user_fn ? c->user_fn(c->user_data, "style", (c->work_done + f * c->span) / c->work_total) : 0;
 }
 
@@ -12393,6 +12423,7 @@ static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg 
     int it, iters = c->o.iters;
     tn_status st = TN_OK;
     c->span = (double)iters * (double)n;
+    c->frac = 0;
     if (c->o.optimizer == TN_STYLE_LBFGS) {
         tn_lbfgs_opts lo;
         float f;
@@ -12502,21 +12533,23 @@ static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int
     L->ctx = tn_ctx_create();
 }
 
-/* Optimises one pyramid level: x (init in, result out), anchor = content target, src = source. */
+/* Optimises one pyramid level: x (init in, result out), anchor = content target (x's size),
+   src = source (x's size, or smaller when x carries a margin: its tiles give the targets). */
 static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, const tn_image *anchor, tn_image *x)
 {
-    int W = x->width, H = x->height, T = c->o.tile;
+    int W = x->width, H = x->height, T = c->o.tile, SW = src->width, SH = src->height;
     int tw = tn__style_tile_len(W, T), th = tn__style_tile_len(H, T), ov = T / 8;
+    int sw = tn__style_tile_len(SW, T), sh = tn__style_tile_len(SH, T);
     int px[TN__STYLE_MAXTILES], py[TN__STYLE_MAXTILES], nx, ny, i, j, k, ncrop;
     float *buf = NULL, *wsum = NULL, *acc = NULL, **crops = NULL;
-    size_t tn = (size_t)tw * th, n = (size_t)W * H, q;
+    size_t tn = (size_t)tw * th, sn = (size_t)sw * sh, n = (size_t)W * H, q;
     tn__style_level L;
     tn_status st = TN_OK;
-    nx = tn__style_tile_pos(W, tw, ov, px, TN__STYLE_MAXTILES);
-    ny = tn__style_tile_pos(H, th, ov, py, TN__STYLE_MAXTILES);
+    nx = tn__style_tile_pos(SW, sw, ov, px, TN__STYLE_MAXTILES);
+    ny = tn__style_tile_pos(SH, sh, ov, py, TN__STYLE_MAXTILES);
     ncrop = nx * ny;
-    tn__style_level_init(&L, c, tw, th);
-    buf = (float *)tn__alloc(tn * sizeof(float) * (size_t)(ncrop + 1));
+    tn__style_level_init(&L, c, sw, sh);
+    buf = (float *)tn__alloc((tn + sn * (size_t)ncrop) * sizeof(float));
     crops = (float **)tn__alloc((size_t)ncrop * sizeof(float *));
     acc = (float *)tn__calloc(2 * n * sizeof(float));
     if (!L.ctx || !buf || !crops || !acc) {
@@ -12526,11 +12559,15 @@ static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, cons
     wsum = acc + n;
     for (j = 0, k = 0; j < ny; j++)
         for (i = 0; i < nx; i++, k++) {
-            crops[k] = buf + tn * (size_t)(k + 1);
-            tn__style_window(crops[k], src, px[i], py[j], tw, th);
+            crops[k] = buf + tn + sn * (size_t)k;
+            tn__style_window(crops[k], src, px[i], py[j], sw, sh);
         }
     if ((st = tn__style_targets(&L, (const float *const *)crops, ncrop, c->o.seed))) goto done;
-    if (!c->net.vgg && (L.wh > 0 || L.wdep > 0 || L.wrel > 0) && (st = tn__style_hist_targets(&L, src->data, W, H))) goto done;
+    if (!c->net.vgg && (L.wh > 0 || L.wdep > 0 || L.wrel > 0) && (st = tn__style_hist_targets(&L, src->data, SW, SH))) goto done;
+    L.w = tw; /* the targets are statistics: they hold for tiles of x's size too */
+    L.h = th;
+    nx = tn__style_tile_pos(W, tw, ov, px, TN__STYLE_MAXTILES);
+    ny = tn__style_tile_pos(H, th, ov, py, TN__STYLE_MAXTILES);
     for (j = 0; j < ny && !st; j++)
         for (i = 0; i < nx && !st; i++) {
             int y, xx;
@@ -12614,13 +12651,73 @@ static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
     if (o->style_weight == 0) o->style_weight = vgg ? 1e-5f : 1.0f;
     if (o->sw_weight == 0) o->sw_weight = vgg ? -1.0f : 1.0f;
     if (o->hist_weight == 0) o->hist_weight = vgg ? -1.0f : 1.0f;
-    if (o->drain_weight == 0) o->drain_weight = -1.0f; /* opt-in (README: edge artefacts) */
-    if (o->valley_weight == 0) o->valley_weight = -1.0f;
+    if (vgg && o->drain_weight == 0) o->drain_weight = -1.0f; /* built-in net: tn__style_auto_drainage */
+    if (vgg && o->valley_weight == 0) o->valley_weight = -1.0f;
     if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
     if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
     if (!(o->lr > 0)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive");
     if (!o->seed) o->seed = 1;
     return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
+}
+
+/* Runs a level, with the valley term on a canvas grown by a mirrored margin of 1/8 of the
+   smaller side (at least 2 px) that is cut off again afterwards. Drainage is truncated at the
+   map's edge, and the valley term, optimised there, leaves a frame (a low edge and a rim a few
+   px in); with the margin, that frame falls outside the map. */
+static int tn__style_margin(const tn__style_cfg *c, int level, int w, int h)
+{
+    int m = (w < h ? w : h) / 8;
+    if (level == 0 || !(c->o.valley_weight > 0) || c->net.vgg) return 0;
+    return m < 2 ? 2 : m;
+}
+
+/* Tile size for a w x h level grown by margin m: a level that fits one tile stays in one. */
+static int tn__style_margin_tile(const tn__style_cfg *c, int w, int h, int m)
+{
+    return w <= c->o.tile && h <= c->o.tile && m ? (w > h ? w : h) + 2 * m : c->o.tile;
+}
+
+static tn_status tn__style_level_margin(tn__style_cfg *c, const tn_image *s, tn_image *a, tn_image *x)
+{
+    tn_image pa = {0, 0, 0, NULL}, px = {0, 0, 0, NULL};
+    int w = x->width, h = x->height, m = tn__style_margin(c, c->level, w, h), tile = c->o.tile;
+    tn_status st;
+    if (!m) return tn__style_level_run(c, s, a, x);
+    c->o.tile = tn__style_margin_tile(c, w, h, m);
+    if (!(st = tn_image_pad(&pa, a, m, m, m, m, TN_PAD_REFLECT)) && !(st = tn_image_pad(&px, x, m, m, m, m, TN_PAD_REFLECT)) &&
+        !(st = tn__style_level_run(c, s, &pa, &px))) {
+        tn_image_free(x);
+        st = tn_image_crop(x, &px, m, m, w, h);
+    }
+    c->o.tile = tile;
+    tn_image_free(&pa);
+    tn_image_free(&px);
+    return st;
+}
+
+#define TN__STYLE_BASIN_DEPTH 1e-3 /* of the height range: a cell this far under its filled level is in a closed basin */
+#define TN__STYLE_BASIN_SHARE 0.05 /* sources with less of their area in closed basins are fluvial */
+
+/* Default drainage terms from the source s (at map size): on (drain 10, valley 1) when under
+   5 % of it lies in closed basins deeper than 0.1 % of its range, i.e. water leaves it through
+   valleys (mountains, canyons; the shallow flats of 8-bit DEMs do not count); off for dunes,
+   craters and karst, whose closed basins the valley term would cut open. */
+static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
+{
+    size_t i, n = (size_t)s->width * s->height, deep = 0;
+    float lo, hi, *f;
+    tn_status st;
+    int fluvial;
+    if (c->o.drain_weight != 0 && c->o.valley_weight != 0) return TN_OK;
+    if (!(f = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+    tn_image_range(s, &lo, &hi);
+    if (!(st = tn__style_fill(s->data, s->width, s->height, f)))
+        for (i = 0; i < n; i++) deep += f[i] - s->data[i] > TN__STYLE_BASIN_DEPTH * (hi - lo);
+    TN_FREE(f);
+    fluvial = (double)deep < TN__STYLE_BASIN_SHARE * (double)n;
+    if (c->o.drain_weight == 0) c->o.drain_weight = fluvial ? 10.0f : -1.0f;
+    if (c->o.valley_weight == 0) c->o.valley_weight = fluvial ? 1.0f : -1.0f;
+    return st;
 }
 
 TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts)
@@ -12650,16 +12747,23 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (st || (st = tn__channel0_image(content, &cm))) goto done;
     tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
     tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
+    if (!c->net.vgg && (st = tn__style_auto_drainage(c, &sm))) goto done;
     nl = c->o.levels;
-    if (!nl)
-        for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= 64;) nl++;
+    if (!nl) { /* the drainage terms carve the valley network from one level coarser */
+        int coarsest = c->o.drain_weight > 0 || c->o.valley_weight > 0 ? 32 : 64;
+        for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= coarsest;) nl++;
+    }
     for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
-        int lw, lh, tw, th, p[TN__STYLE_MAXTILES];
+        int lw, lh, tw, th, m, T, p[TN__STYLE_MAXTILES];
         tn__style_level_size(W, H, k, &lw, &lh);
-        tw = tn__style_tile_len(lw, c->o.tile);
-        th = tn__style_tile_len(lh, c->o.tile);
-        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, c->o.tile / 8, p, TN__STYLE_MAXTILES) *
-                         tn__style_tile_pos(lh, th, c->o.tile / 8, p, TN__STYLE_MAXTILES);
+        m = tn__style_margin(c, k, lw, lh);
+        T = tn__style_margin_tile(c, lw, lh, m);
+        lw += 2 * m;
+        lh += 2 * m;
+        tw = tn__style_tile_len(lw, T);
+        th = tn__style_tile_len(lh, T);
+        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, T / 8, p, TN__STYLE_MAXTILES) *
+                         tn__style_tile_pos(lh, th, T / 8, p, TN__STYLE_MAXTILES);
     }
     for (k = nl - 1; k >= 0 && !st; k--) {
         int lw, lh;
@@ -12669,7 +12773,7 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
         if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
         if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
         c->level = k;
-        if (!st) st = tn__style_level_run(c, &s, &a, &x);
+        if (!st) st = tn__style_level_margin(c, &s, &a, &x);
         tn_image_free(&s);
         tn_image_free(&a);
         tn_image_free(&cur);

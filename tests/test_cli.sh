@@ -46,6 +46,10 @@ $T noise -o "$W/src.png" --size 64 --seed 9 --octaves 6 --frequency 8 --range 50
 if $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/styled.png" --size 64 --iters 3 --levels 2 2> "$W/style.txt" &&
     $T info "$W/styled.png" > "$W/sinfo.txt" && grep -q "size: 64 x 64" "$W/sinfo.txt" && grep -q "style: 64 x 64" "$W/style.txt"; then ok;
 else bad "style: $(head -c 300 "$W/style.txt")"; fi
+# --no-drain is the drainage terms switched off by weight: same bytes as -1 / -1
+if $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/nd1.pfm" --size 48 --iters 2 --levels 2 --no-drain 2> /dev/null &&
+    $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/nd2.pfm" --size 48 --iters 2 --levels 2 --drain-weight -1 --valley-weight -1 2> /dev/null &&
+    cmp -s "$W/nd1.pfm" "$W/nd2.pfm"; then ok; else bad "style --no-drain"; fi
 # --like: a content map whose Perlin gain follows the source (rough source -> gain above 0.5)
 $T noise -o "$W/rough.png" --size 64 --seed 4 --gain 0.85 > /dev/null 2>&1
 if $T noise -o "$W/like.png" --size 64 --seed 5 --like "$W/rough.png" > "$W/like.txt" 2>&1 &&

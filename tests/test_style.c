@@ -243,6 +243,7 @@ TN_TEST(test_drainage_terms)
     memset(&o, 0, sizeof o);
     o.iters = 40;
     o.levels = 2;
+    o.drain_weight = o.valley_weight = -1; /* the default would switch them on for this source */
     TN_CHECK(tn_style_transfer(&off, &content, &style, &o) == TN_OK);
     o.drain_weight = 10;
     o.valley_weight = 1;
@@ -266,6 +267,68 @@ TN_TEST(test_drainage_terms)
     free(c);
 }
 
+TN_TEST(test_drain_band_drains_straight_off)
+{
+    /* a slope falling south with a slight west-east tilt: D8 runs every column straight down,
+       so the column next to each side edge would carry a whole column's water along it */
+    enum { W = 24, H = 20 };
+    tn_image dem = {0, 0, 0, NULL};
+    tn_flow f, g;
+    uint8_t bin[W * H];
+    int x, y, ok_dirs = 1, ok_inner = 1;
+    memset(&f, 0, sizeof f);
+    memset(&g, 0, sizeof g);
+    tn_image_create(&dem, W, H, 1);
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) dem.data[y * W + x] = 100.0f - y + 0.01f * x;
+    TN_CHECK(tn_flow_directions(&f, &dem) == TN_OK && tn_flow_directions(&g, &dem) == TN_OK);
+    TN_CHECK(f.dir[5 * W + 1] == 2); /* south, along the edge */
+    tn__style_band_outflow(&f);
+    TN_CHECK(tn_flow_accumulation(&f) == TN_OK);
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            int l = x, r = W - 1 - x, t = y, b = H - 1 - y, m = l < r ? l : r, v = t < b ? t : b, d = f.dir[y * W + x];
+            if (m >= 2 && v >= 2) ok_inner &= d == g.dir[y * W + x];
+            else if (!m || !v) ok_dirs &= d == TN_FLOW_OUTLET;
+            else ok_dirs &= d == (m <= v ? (l <= r ? 4 : 0) : (t <= b ? 6 : 2));
+        }
+    TN_CHECK(ok_dirs && ok_inner);
+    TN_CHECK(f.acc[(H - 3) * W + 1] == 1 && f.acc[(H - 3) * W + W - 2] == 1); /* nothing runs along the side edges */
+    TN_CHECK(f.acc[(H - 3) * W + 2] == H - 4);                               /* the first inner column still collects */
+    /* drainage bins: the band has the edge bin; the first inner column drains H - 4 cells (bin 4) */
+    TN_CHECK(tn__style_drain_bins(dem.data, dem.data, W, H, bin) == TN_OK);
+    TN_CHECK(bin[(H - 3) * W + 1] == TN__STYLE_ABINS && bin[(H - 3) * W] == TN__STYLE_ABINS && bin[(H - 3) * W + 2] == 4);
+    tn_flow_free(&f);
+    tn_flow_free(&g);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_auto_drainage)
+{
+    /* valleys on a tilt drain off the map: fluvial, terms on; an egg-crate of closed basins
+       (dunes, craters): off; the user's own weights are kept */
+    tn__style_cfg *c = (tn__style_cfg *)calloc(1, sizeof *c);
+    tn_image v = {0, 0, 0, NULL}, e = {0, 0, 0, NULL};
+    int x, y;
+    TN_CHECK(c != NULL);
+    tn_image_create(&v, 64, 64, 1);
+    tn_image_create(&e, 64, 64, 1);
+    for (y = 0; y < 64; y++)
+        for (x = 0; x < 64; x++) {
+            v.data[y * 64 + x] = 2.0f * y + 8.0f * fabsf(sinf(0.3f * x));
+            e.data[y * 64 + x] = sinf(0.4f * x) * sinf(0.4f * y);
+        }
+    TN_CHECK(tn__style_auto_drainage(c, &v) == TN_OK && c->o.drain_weight == 10 && c->o.valley_weight == 1);
+    memset(c, 0, sizeof *c);
+    TN_CHECK(tn__style_auto_drainage(c, &e) == TN_OK && c->o.drain_weight < 0 && c->o.valley_weight < 0);
+    memset(c, 0, sizeof *c);
+    c->o.drain_weight = 3;
+    TN_CHECK(tn__style_auto_drainage(c, &e) == TN_OK && c->o.drain_weight == 3 && c->o.valley_weight < 0);
+    tn_image_free(&v);
+    tn_image_free(&e);
+    free(c);
+}
+
 TN_TEST(test_tiles_and_progress)
 {
     /* a 2-level pyramid whose fine level is split into 4 tiles of 48 */
@@ -279,6 +342,46 @@ TN_TEST(test_tiles_and_progress)
     make_style(&style, 80, 80);
     TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
     TN_CHECK(out.width == 80 && tn_image_range(&out, NULL, NULL) == 0);
+    tn_image_free(&out);
+    tn_image_free(&content);
+    tn_image_free(&style);
+}
+
+typedef struct progress_log { double last, max; int backwards; } progress_log;
+
+static int log_progress(void *user, const char *stage, double f)
+{
+    progress_log *p = (progress_log *)user;
+    (void)stage;
+    p->backwards += f < p->last;
+    p->last = f;
+    p->max = f > p->max ? f : p->max;
+    return 0;
+}
+
+TN_TEST(test_margin_progress)
+{
+    /* drainage terms on: the coarse level runs on a canvas grown by a mirrored margin, and the
+       progress total counts that canvas, so progress runs monotonically to exactly 1 */
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_style_opts o;
+    progress_log p = {0, 0, 0};
+    int x, y;
+    memset(&o, 0, sizeof o);
+    o.iters = 3;
+    o.levels = 2;
+    o.drain_weight = 10;
+    o.valley_weight = 1;
+    make_content(&content, 96, 96);
+    tn_image_create(&style, 96, 96, 1);
+    for (y = 0; y < 96; y++)
+        for (x = 0; x < 96; x++) style.data[y * 96 + x] = 2.0f * y + 8.0f * fabsf(sinf(0.3f * x));
+    tn_set_progress(log_progress, &p);
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
+    tn_set_progress(NULL, NULL);
+    TN_CHECK(out.width == 96 && out.height == 96 && tn_image_range(&out, NULL, NULL) == 0);
+    TN_CHECK_NEAR(p.last, 1.0, 1e-9);
+    TN_CHECK(p.max <= 1.0 + 1e-9 && p.backwards == 0);
     tn_image_free(&out);
     tn_image_free(&content);
     tn_image_free(&style);
@@ -451,7 +554,10 @@ int main(void)
     TN_RUN(test_style_gradient);
     TN_RUN(test_transfer_threads_and_units);
     TN_RUN(test_drainage_terms);
+    TN_RUN(test_drain_band_drains_straight_off);
+    TN_RUN(test_auto_drainage);
     TN_RUN(test_tiles_and_progress);
+    TN_RUN(test_margin_progress);
     TN_RUN(test_cancel);
     TN_RUN(test_bad_input);
     TN_RUN(test_vgg_loader_and_path);

@@ -815,17 +815,19 @@ static int cmd_style(int argc, char **argv)
                "                        [--optimizer lbfgs|sgd|adam] [--weights vgg19.tnw] [--size N]\n"
                "                        [--levels N] [--seed S] [--lr R] [--content-weight A]\n"
                "                        [--style-weight B] [--sw-weight W] [--hist-weight H] [--tv-weight G]\n"
-               "                        [--drain-weight D] [--valley-weight V]\n"
+               "                        [--drain-weight D] [--valley-weight V] [--no-drain]\n"
                "Restyles the content map (e.g. from `terrainnet noise`) with the morphology of the\n"
                "SOURCE heightmap. The output has the content's size (or N x N with --size) and the\n"
                "source's height units. Defaults: built-in random-feature network (no file needed),\n"
-               "L-BFGS, 40 iterations per pyramid level (Adam 150, SGD 300), levels down to 64 px.\n"
+               "L-BFGS, 40 iterations per pyramid level (Adam 150, SGD 300), levels down to 64 px\n"
+               "(32 px with the drainage terms).\n"
                "--weights uses VGG-19 from a .tnw file (examples/vgg19_to_tnw.py makes one) with the\n"
                "paper's layers and weights. Weights: 0 = default, negative = term off.\n"
-               "--drain-weight / --valley-weight (built-in net, off by default) switch on the drainage\n"
-               "terms: closed basins as deep as the source's, and valleys carved as deep as the\n"
-               "source's for the same drainage area (e.g. --drain-weight 10 --valley-weight 1\n"
-               "--levels 5; see README).\n");
+               "--drain-weight / --valley-weight (built-in net) weigh the drainage terms: closed\n"
+               "basins as deep as the source's, and valleys carved as deep as the source's for the\n"
+               "same drainage area. By default they are on (10 and 1) for fluvial sources (under 5 %%\n"
+               "of the source in closed basins) and off for dunes, craters and karst; --no-drain\n"
+               "switches them off (see README).\n");
         return 0;
     }
     memset(&so, 0, sizeof so);
@@ -834,6 +836,7 @@ static int cmd_style(int argc, char **argv)
         else if (!strcmp(argv[a], "--content") && a + 1 < argc) cpath = argv[++a];
         else if (!strcmp(argv[a], "--style") && a + 1 < argc) spath = argv[++a];
         else if (!strcmp(argv[a], "--weights") && a + 1 < argc) weights = argv[++a];
+        else if (!strcmp(argv[a], "--no-drain")) so.drain_weight = so.valley_weight = -1.0f;
         else if (!strcmp(argv[a], "--optimizer") && a + 1 < argc) {
             a++;
             if (!strcmp(argv[a], "lbfgs")) so.optimizer = TN_STYLE_LBFGS;
