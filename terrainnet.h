@@ -866,17 +866,18 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    Wasserstein distance (Heitz et al. 2021: features projected on C fixed random directions,
    sorted, compared with the source's sorted projections); histogram terms match the sorted
    heights and slopes of the source; content = relative squared distance of the third layer.
-   Drainage terms (drain_weight, valley_weight; by default on for fluvial sources, i.e. under 5 %
-   of the source in closed basins deeper than 0.1 % of its height range, off for dunes, craters
-   and karst): the depression depths
-   (depression-filled map minus map, @@extract's priority flood) are sorted-matched to the
-   source's, so a source without closed basins removes them; and every cell's relief (height
-   minus its Gaussian-smoothed surroundings, sigma 2 px) is pulled towards the source's mean
-   relief for cells of the same D8 drainage area (log2 bins), on all levels but the finest, so
-   valleys are carved where water collects and the network connects. The filled map and the
-   drainage bins are recomputed every evaluation and held constant in the gradient; a 2-px
-   border band drains straight off the map, so no channel runs along the edge. With them on,
-   the automatic pyramid goes one level coarser (coarsest side >= 32).
+   Drainage terms (drain_weight, valley_weight; by default on for fluvial sources, i.e. under
+   5 % of the source in closed basins deeper than 0.1 % of its height range, off for dunes,
+   craters and karst): the depression depths (depression-filled map minus map, @@extract's
+   priority flood) are sorted-matched to the source's, so a source without closed basins
+   removes them; and every cell's relief (height minus its Gaussian-smoothed surroundings,
+   sigma 2 px) is pulled towards the source's mean relief for cells of the same D8 drainage
+   area (log2 bins), on all levels but the finest, so valleys are carved where water collects
+   and the network connects. The filled map and the drainage bins are recomputed every
+   evaluation and held constant in the gradient. Those levels run on a canvas grown by a
+   mirrored margin (1/8 of the smaller side) that is cut off afterwards, so the truncated
+   drainage at the canvas edge leaves no frame on the map. With the terms on, the automatic
+   pyramid goes one level coarser (coarsest side >= 32).
 
    VGG-19 (tn_vgg19_load): the paper's network. Greyscale is fed as three identical channels in
    [0, 1] with ImageNet normalisation (mean 0.485 0.456 0.406, std 0.229 0.224 0.225), max
