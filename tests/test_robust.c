@@ -98,7 +98,7 @@ static void pattern(tn_image *img, float lo, float hi)
 }
 
 /* Valid seed files, each small so the fuzz loops stay fast. */
-enum { SEED_PNG16, SEED_PNG8RGB, SEED_PNG8GA, SEED_PGM16, SEED_PPM8, SEED_PFM1, SEED_PFM3, SEED_P2, SEED_COUNT };
+enum { SEED_PNG16, SEED_PNG8RGB, SEED_PNG8GA, SEED_PGM16, SEED_PPM8, SEED_PFM1, SEED_PFM3, SEED_P2, SEED_ASC, SEED_COUNT };
 
 static int make_seed(int which, uint8_t **out, size_t *n, const char **name)
 {
@@ -122,10 +122,26 @@ static int make_seed(int which, uint8_t **out, size_t *n, const char **name)
     case SEED_PNG8RGB: case SEED_PNG8GA: so.bit_depth = 8; pattern(&img, 0.0f, 1.0f); *name = "seed.png"; break;
     case SEED_PGM16: so.bit_depth = 16; *name = "seed.pgm"; break;
     case SEED_PPM8: so.bit_depth = 8; *name = "seed.ppm"; break;
+    case SEED_ASC: *name = "seed.asc"; break;
     default: *name = "seed.pfm"; break;
     }
     st = tn_image_save_memory(&img, &so,
-                              which <= SEED_PNG8GA ? TN_FORMAT_PNG : which <= SEED_PPM8 ? TN_FORMAT_PNM : TN_FORMAT_PFM, out, n);
+                              which <= SEED_PNG8GA ? TN_FORMAT_PNG : which <= SEED_PPM8 ? TN_FORMAT_PNM
+                                                   : which == SEED_ASC ? TN_FORMAT_ASC : TN_FORMAT_PFM, out, n);
+    if (st == TN_OK && which == SEED_ASC) { /* a NODATA header and cell, so the void filling runs too */
+        static const char hdr[] = "ncols 13\nnrows 9\nxllcorner 0\nyllcorner 0\ncellsize 30\nNODATA_value -9999\n-9999 ";
+        size_t body = 0, k, lines = 0;
+        uint8_t *b;
+        for (k = 0; k < *n && lines < 5; k++) lines += (*out)[k] == '\n';
+        body = k;
+        while (body < *n && (*out)[body] != ' ') body++; /* drop the first cell's value */
+        b = (uint8_t *)malloc(sizeof hdr - 1 + *n - body);
+        memcpy(b, hdr, sizeof hdr - 1);
+        memcpy(b + sizeof hdr - 1, *out + body + 1, *n - body - 1);
+        *n = sizeof hdr - 1 + *n - body - 1;
+        tn_free(*out);
+        *out = b;
+    }
     tn_image_free(&img);
     return st == TN_OK;
 }
@@ -157,12 +173,18 @@ TN_TEST(test_image_readers_mutated)
         const char *name;
         TN_CHECK(make_seed(which, &seed, &n, &name));
         if (!seed) continue;
-        TN_CHECK(load_checked(seed, n, name));
+        { /* the seed itself must load */
+            tn_image img = {0};
+            tn_image_info info;
+            TN_CHECK(tn_image_load_memory(seed, n, name, &img, &info, NULL) == TN_OK && image_finite(&img));
+            if (which == SEED_ASC) TN_CHECK(info.voids_filled == 1);
+            tn_image_free(&img);
+        }
         b = (uint8_t *)malloc(n + 16);
         /* every truncation */
         for (k = 0; k < n; k++) bad += !load_checked(seed, k, name);
         /* random bit flips and byte stores, with and without repaired PNG CRCs */
-        for (round = 0; round < 400; round++) {
+        for (round = 0; round < 3000; round++) {
             int flips = 1 + (int)tn_rng_below(&rng, 4), f;
             memcpy(b, seed, n);
             for (f = 0; f < flips; f++) {
@@ -394,7 +416,7 @@ TN_TEST(test_sketch_text_mutated)
         TN_CHECK(tn_sketch_parse(whole[5], strlen(whole[5]), NULL, &s) != TN_OK);
         TN_CHECK(tn_sketch_parse(whole[2], strlen(whole[2]), NULL, &s) == TN_ERR_TOO_LARGE);
     }
-    for (round = 0; round < 1500; round++) {
+    for (round = 0; round < 6000; round++) {
         size_t len = n, at, tl;
         const char *tok;
         int edits = 1 + (int)tn_rng_below(&rng, 3), e;
@@ -496,7 +518,7 @@ TN_TEST(test_tnw_loader)
         if (tn_params_load_memory(p, good, k, "w.tnw") == TN_OK || !tn_last_error()[0]) bad++;
     }
     tn_rng_seed(&rng, 3, 3);
-    for (round = 0; round < 300; round++) {
+    for (round = 0; round < 2000; round++) {
         tn_status st;
         memcpy(b, good, gn);
         b[tn_rng_below(&rng, (uint32_t)gn - 4)] ^= (uint8_t)(1u << tn_rng_below(&rng, 8));
@@ -1203,6 +1225,29 @@ TN_TEST(test_texgan_checkpoint_fields)
     remove(model);
 }
 
+/* Detail-map sidecars with absurd numbers: refused before any conversion (was sscanf). */
+TN_TEST(test_detail_sidecar)
+{
+    static const char *const bad[] = {
+        "terrainnet detail maps 1\nsize 99999999999 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1e300\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma nan\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1\nrange -1e39 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2.5\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1,5 1\nfactor 2\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\n",
+        ""};
+    const char *prefix = tmp_path("dm"), *side = tmp_path("dm_detail.txt");
+    tn_detail_maps m;
+    size_t i;
+    for (i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        memset(&m, 0, sizeof m);
+        TN_CHECK(write_file(side, bad[i], strlen(bad[i])));
+        TN_CHECK(tn_detail_maps_load(&m, prefix) == TN_ERR_CORRUPT && m.low.data == NULL);
+    }
+    remove(side);
+}
+
 /* Thinning a filled square and a disk: the rescanning version took rounds proportional to the
    thickness; the work-list one must finish quickly and leave a thin, non-empty skeleton. */
 TN_TEST(test_skeleton_blobs)
@@ -1242,6 +1287,7 @@ int main(void)
     RUN(test_optim_args);
     RUN(test_texgan_config);
     RUN(test_texgan_checkpoint_fields);
+    RUN(test_detail_sidecar);
     RUN(test_skeleton_blobs);
     return tn_test_summary("test_robust");
 }
