@@ -15180,7 +15180,8 @@ static void tn__view_columns(void *ctx, size_t b, size_t e)
             if (px >= 0 && py >= 0 && px <= W - 1 && py <= H - 1) {
                 float z = (tn__sample_bilinear(j->dem, px, py, 0) - j->lo) * j->scale;
                 float depth = t * cosd;
-                int sy = (int)(horizon + (j->cz - z) / depth * j->focal);
+                float fsy = horizon + (j->cz - z) / depth * j->focal;
+                int sy = fsy < -1.0f ? -1 : fsy < (float)ybuf ? (int)fsy : ybuf; /* clamped before the cast */
                 if (sy < ybuf) {
                     float haze = tn__clampf(t / j->far_dist, 0.0f, 1.0f);
                     float col[3];
@@ -15219,7 +15220,11 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     if ((st = tn__dem_check(dem, 2, "render view"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (o.width <= 0 || o.height <= 0) { o.width = 960; o.height = 540; }
+    if (o.width < 0 || o.height < 0 || !(fabsf(o.azimuth_deg) <= 1e6f) || !(fabsf(o.pitch_deg) < 89.0f) ||
+        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
+                        o.width, o.height);
+    if (o.width == 0 || o.height == 0) { o.width = 960; o.height = 540; }
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
     if (o.azimuth_deg == 0) o.azimuth_deg = 180.0f;

@@ -1225,6 +1225,44 @@ TN_TEST(test_texgan_checkpoint_fields)
     remove(model);
 }
 
+TN_TEST(test_render_args)
+{
+    static const float bad[] = {NAN, INFINITY, -INFINITY, 1e30f, -1e30f, 1e-30f, -5.0f, 0.0f, 89.5f, 179.0f};
+    tn_image dem = small_dem(32, 32), out = {0};
+    tn_view_opts vo;
+    tn_render_opts ro;
+    size_t i;
+    int f;
+    for (i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        for (f = 0; f < 6; f++) {
+            tn_status st;
+            memset(&vo, 0, sizeof vo);
+            vo.width = 48;
+            vo.height = 32;
+            if (f == 0) vo.azimuth_deg = bad[i];
+            if (f == 1) vo.pitch_deg = bad[i];
+            if (f == 2) vo.distance = bad[i];
+            if (f == 3) vo.fov_deg = bad[i];
+            if (f == 4) vo.relief = bad[i];
+            if (f == 5) vo.colours.shade.altitude_deg = bad[i];
+            st = tn_render_view(&dem, &vo, &out);
+            TN_CHECK(st != TN_OK ? out.data == NULL && tn_last_error()[0] : image_finite(&out));
+            tn_image_free(&out);
+        }
+        memset(&ro, 0, sizeof ro);
+        ro.lo = bad[i];
+        ro.hi = 1.0f;
+        TN_CHECK(tn_render_preview(&dem, &ro, &out) != TN_OK || image_finite(&out));
+        tn_image_free(&out);
+    }
+    memset(&vo, 0, sizeof vo);
+    vo.width = -5;
+    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    vo.width = vo.height = 100000;
+    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    tn_image_free(&dem);
+}
+
 /* Detail-map sidecars with absurd numbers: refused before any conversion (was sscanf). */
 TN_TEST(test_detail_sidecar)
 {
@@ -1287,6 +1325,7 @@ int main(void)
     RUN(test_optim_args);
     RUN(test_texgan_config);
     RUN(test_texgan_checkpoint_fields);
+    RUN(test_render_args);
     RUN(test_detail_sidecar);
     RUN(test_skeleton_blobs);
     return tn_test_summary("test_robust");
