@@ -219,6 +219,8 @@ TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float 
    Format is picked by magic bytes, then by extension.
    Pixel values on load: integer formats give [0, 1] (code / max code), or metres when the file
    carries a range; .hgt and .asc give their values as stored (metres); PFM gives raw floats.
+   A recorded range beyond float range fails with TN_ERR_NUMERIC (a NaN one is ignored); the
+   range text is read and written without the C locale.
    ============================================================================================ */
 
 typedef enum tn_format {
@@ -536,6 +538,7 @@ typedef struct tn_optim_opts {
     float clip_norm;      /* > 0: clip the global gradient norm before each step */
 } tn_optim_opts;
 typedef struct tn_optim tn_optim;
+/* NULL with tn_last_error() set for NaN/Inf settings, betas outside [0, 1) or negative momentum. */
 TN_API tn_optim *tn_optim_create(tn_params *p, const tn_optim_opts *opts);
 TN_API void tn_optim_free(tn_optim *o);
 /* One update from the current gradients (does not zero them). */
@@ -544,7 +547,9 @@ TN_API float tn_optim_lr(const tn_optim *o);
 
 /* L-BFGS on a flat vector: fn returns f(x) and writes its gradient. History m (0 = 10),
    backtracking line search (Armijo). Stops after max_iter iterations, when the gradient norm
-   drops below tol, or when no step lowers f. final_f may be NULL. */
+   drops below tol, or when no step lowers f. final_f may be NULL. n == 0, a NULL x or fn, history
+   outside 0..65536 or NaN/Inf options fail with TN_ERR_INVALID_ARG; a NaN/Inf objective or
+   gradient with TN_ERR_NUMERIC. */
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
@@ -566,7 +571,8 @@ typedef struct tn_perlin_opts {
     float gain;           /* amplitude factor per octave; 0 = 0.5 */
     int periodic;         /* 1: tiles seamlessly (cell counts rounded to integers per octave) */
 } tn_perlin_opts;
-/* Fills *out (allocated here, width x height x 1) with Perlin fBm. opts may be NULL. */
+/* Fills *out (allocated here, width x height x 1) with Perlin fBm. opts may be NULL. Negative or
+   NaN fields, or frequency x lacunarity^(octaves - 1) over 1e9, fail with TN_ERR_INVALID_ARG. */
 TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts);
 
 typedef struct tn_explicit_opts {
@@ -688,7 +694,8 @@ TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *de
 
 typedef struct tn_sketch_random_opts {
     uint64_t seed;
-    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048] */
+    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048];
+                             negative: TN_ERR_INVALID_ARG */
 } tn_sketch_random_opts;
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
@@ -701,7 +708,8 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
    with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
 TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
-   point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. */
+   point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. NaN/Inf
+   coordinates fail with TN_ERR_NUMERIC. */
 TN_API tn_status tn_mst(const float *xy, int n, int **edges);
 
 /* ---- contour parts (section 4.1) -----------------------------------------------------------
@@ -774,7 +782,8 @@ TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem);
 TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
 /* Flow accumulation from flow->dir into flow->acc (allocated here), O(n) by walking down from
    cells nobody drains into; threaded by strips of rows (same result for any thread count).
-   Fails with TN_ERR_CORRUPT if the directions hold a cycle or point off the map. */
+   Fails with TN_ERR_CORRUPT if the directions hold a cycle, point off the map or hold a code
+   other than 0-7 and TN_FLOW_OUTLET. */
 TN_API tn_status tn_flow_accumulation(tn_flow *flow);
 /* All three on dem (invert != 0: on -dem, for ridges). Cells the fill raised (depressions and
    flats) drain instead to the cell the flood reached them from, visiting cells as GRASS
