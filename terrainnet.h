@@ -8865,8 +8865,12 @@ static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
         const tn_contour *c = &s->items[i];
         if (c->npoints <= 0 || !c->points) return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d is empty", what, i);
         if (!isfinite(c->mean_gradient)) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d has a NaN/Inf gradient", what, i);
-        for (j = 0; j < 3 * c->npoints; j++)
+        for (j = 0; j < 3 * c->npoints; j++) {
             if (!isfinite(c->points[j])) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d point %d is NaN/Inf", what, i, j / 3);
+            /* pixel coordinates are rounded to int: keep them where that is defined */
+            if (j % 3 != 2 && fabsf(c->points[j]) > (float)(16 * TN_SKETCH_MAX_SIDE))
+                return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d point %d lies far outside the canvas", what, i, j / 3);
+        }
     }
     return TN_OK;
 }
@@ -11158,18 +11162,31 @@ static void tn__acc_strip(void *ctx, int ith, int nth)
 
 static tn_status tn__flow_accumulate(tn_flow *flow);
 
-/* Public entry: directions may come from the caller, so codes other than 0-7 and
-   TN_FLOW_OUTLET are refused first (the walk would take them for outlets). */
+/* Directions handed in by a caller: every code must be 0-7 or TN_FLOW_OUTLET and lead to a cell
+   of the map. The walks would take other codes for outlets, and a step off the left or right
+   edge for the neighbouring row. Flows made here (tn_flow_compute) skip this. */
+static tn_status tn__flow_codes_check(const tn_flow *f, const char *what)
+{
+    int x, y;
+    tn_status st;
+    if ((st = tn__flow_check(f, what))) return st;
+    for (y = 0; y < f->height; y++)
+        for (x = 0; x < f->width; x++) {
+            int d = f->dir[(size_t)y * f->width + x], tx, ty;
+            if (d == TN_FLOW_OUTLET) continue;
+            if (d >= 8) return tn__fail(TN_ERR_CORRUPT, "%s: direction code %d at (%d, %d)", what, d, x, y);
+            tx = x + tn__d8x[d];
+            ty = y + tn__d8y[d];
+            if (tx < 0 || ty < 0 || tx >= f->width || ty >= f->height)
+                return tn__fail(TN_ERR_CORRUPT, "%s: the direction at (%d, %d) points off the map", what, x, y);
+        }
+    return TN_OK;
+}
+
 TN_API tn_status tn_flow_accumulation(tn_flow *flow)
 {
-    size_t i, n;
-    tn_status st;
-    if ((st = tn__flow_check(flow, "flow accumulation"))) return st;
-    n = (size_t)flow->width * flow->height;
-    for (i = 0; i < n; i++)
-        if (flow->dir[i] >= 8 && flow->dir[i] != TN_FLOW_OUTLET)
-            return tn__fail(TN_ERR_CORRUPT, "flow accumulation: direction code %d at cell %zu", flow->dir[i], i);
-    return tn__flow_accumulate(flow);
+    tn_status st = tn__flow_codes_check(flow, "flow accumulation");
+    return st ? st : tn__flow_accumulate(flow);
 }
 
 static tn_status tn__flow_accumulate(tn_flow *flow)
@@ -11262,7 +11279,15 @@ TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
     return st;
 }
 
+static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
+
 TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
+{
+    tn_status st = tn__flow_codes_check(flow, "strahler order");
+    return st ? st : tn__strahler(flow, mask, order, max_order);
+}
+
+static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
 {
     size_t i, n;
     uint8_t *indeg = NULL, *cnt;
@@ -11454,7 +11479,7 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, con
     else { ex->valley_mask = mask; ex->valley_order = order; }
     if (!mask || !order) return TN_ERR_OUT_OF_MEMORY;
     for (i = 0; i < n; i++) mask[i] = flow->acc[i] >= (uint32_t)ex->threshold;
-    if ((st = tn_strahler_order(flow, mask, order, &top))) return st;
+    if ((st = tn__strahler(flow, mask, order, &top))) return st; /* own flow: valid codes */
     if (ridge) ex->ridge_max_order = top;
     else ex->valley_max_order = top;
     skel = (uint8_t *)tn__alloc(n);

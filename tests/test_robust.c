@@ -816,6 +816,20 @@ TN_TEST(test_extract_args)
     flow.dir[5 * 32 + 5] = 0;
     flow.dir[5 * 32 + 6] = 4; /* E then W: a cycle */
     TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    flow.dir[5 * 32 + 6] = 0;
+    flow.dir[31] = 0; /* E off the right edge: it used to land on the next row */
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    flow.dir[31] = TN_FLOW_OUTLET;
+    flow.dir[0] = 5; /* NW off the corner */
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    {
+        uint8_t mask[32 * 32], order[32 * 32];
+        int top = 0;
+        memset(mask, 1, sizeof mask);
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+        flow.dir[0] = 200;
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+    }
     tn_flow_free(&flow);
     /* realism */
     memset(&ro, 0, sizeof ro);
@@ -915,8 +929,12 @@ TN_TEST(test_sketch_args)
         TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_NUMERIC && img.data == NULL);
         TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_NUMERIC && out.items == NULL);
         TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_NUMERIC && out.items == NULL);
-        s.items[0].points[0] = 1e30f;
-        TN_CHECK(tn_sketch_densify(&s, &out) != TN_OK && out.items == NULL);
+        s.items[0].points[0] = 1e30f; /* far outside: was an undefined float-to-int conversion */
+        TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_INVALID_ARG && img.data == NULL);
+        s.items[0].points[0] = 0.0f;
+        TN_CHECK(tn_sketch_rasterise(&s, 1 << 14, 1 << 14, &img) == TN_ERR_TOO_LARGE && img.data == NULL);
         s.items[0].npoints = -1;
         TN_CHECK(tn_sketch_densify(&s, &out) != TN_OK && out.items == NULL);
         s.items[0].npoints = 2;
