@@ -796,7 +796,8 @@ TN_API void      tn_flow_free(tn_flow *flow);
 /* Strahler order of the network cells (mask != 0) along the flow directions: sources are 1; a
    cell whose upstream network cells reach their maximum order k at least twice gets k + 1, else
    k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
-   (a threshold mask on the accumulation is). Returns the highest order in *max_order. */
+   (a threshold mask on the accumulation is). Returns the highest order in *max_order. Direction
+   codes other than 0-7 and TN_FLOW_OUTLET, or ones stepping off the map, fail with TN_ERR_CORRUPT. */
 TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
 
 enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
