@@ -219,6 +219,8 @@ TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float 
    Format is picked by magic bytes, then by extension.
    Pixel values on load: integer formats give [0, 1] (code / max code), or metres when the file
    carries a range; .hgt and .asc give their values as stored (metres); PFM gives raw floats.
+   A recorded range beyond float range fails with TN_ERR_NUMERIC (a NaN one is ignored); the
+   range text is read and written without the C locale.
    ============================================================================================ */
 
 typedef enum tn_format {
@@ -536,6 +538,7 @@ typedef struct tn_optim_opts {
     float clip_norm;      /* > 0: clip the global gradient norm before each step */
 } tn_optim_opts;
 typedef struct tn_optim tn_optim;
+/* NULL with tn_last_error() set for NaN/Inf settings, betas outside [0, 1) or negative momentum. */
 TN_API tn_optim *tn_optim_create(tn_params *p, const tn_optim_opts *opts);
 TN_API void tn_optim_free(tn_optim *o);
 /* One update from the current gradients (does not zero them). */
@@ -544,7 +547,9 @@ TN_API float tn_optim_lr(const tn_optim *o);
 
 /* L-BFGS on a flat vector: fn returns f(x) and writes its gradient. History m (0 = 10),
    backtracking line search (Armijo). Stops after max_iter iterations, when the gradient norm
-   drops below tol, or when no step lowers f. final_f may be NULL. */
+   drops below tol, or when no step lowers f. final_f may be NULL. n == 0, a NULL x or fn, history
+   outside 0..65536 or NaN/Inf options fail with TN_ERR_INVALID_ARG; a NaN/Inf objective or
+   gradient with TN_ERR_NUMERIC. */
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
@@ -566,7 +571,8 @@ typedef struct tn_perlin_opts {
     float gain;           /* amplitude factor per octave; 0 = 0.5 */
     int periodic;         /* 1: tiles seamlessly (cell counts rounded to integers per octave) */
 } tn_perlin_opts;
-/* Fills *out (allocated here, width x height x 1) with Perlin fBm. opts may be NULL. */
+/* Fills *out (allocated here, width x height x 1) with Perlin fBm. opts may be NULL. Negative or
+   NaN fields, or frequency x lacunarity^(octaves - 1) over 1e9, fail with TN_ERR_INVALID_ARG. */
 TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts);
 
 typedef struct tn_explicit_opts {
@@ -688,7 +694,8 @@ TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *de
 
 typedef struct tn_sketch_random_opts {
     uint64_t seed;
-    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048] */
+    int nodes;            /* random ridge nodes, at most 8192; 0 = width * height / 1024, clamped to [8, 2048];
+                             negative: TN_ERR_INVALID_ARG */
 } tn_sketch_random_opts;
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
@@ -701,7 +708,8 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
    with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
 TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
-   point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. */
+   point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. NaN/Inf
+   coordinates fail with TN_ERR_NUMERIC. */
 TN_API tn_status tn_mst(const float *xy, int n, int **edges);
 
 /* ---- contour parts (section 4.1) -----------------------------------------------------------
@@ -774,7 +782,8 @@ TN_API tn_status tn_fill_depressions(tn_image *dst, const tn_image *dem);
 TN_API tn_status tn_flow_directions(tn_flow *flow, const tn_image *filled);
 /* Flow accumulation from flow->dir into flow->acc (allocated here), O(n) by walking down from
    cells nobody drains into; threaded by strips of rows (same result for any thread count).
-   Fails with TN_ERR_CORRUPT if the directions hold a cycle or point off the map. */
+   Fails with TN_ERR_CORRUPT if the directions hold a cycle, point off the map or hold a code
+   other than 0-7 and TN_FLOW_OUTLET. */
 TN_API tn_status tn_flow_accumulation(tn_flow *flow);
 /* All three on dem (invert != 0: on -dem, for ridges). Cells the fill raised (depressions and
    flats) drain instead to the cell the flood reached them from, visiting cells as GRASS
@@ -787,7 +796,8 @@ TN_API void      tn_flow_free(tn_flow *flow);
 /* Strahler order of the network cells (mask != 0) along the flow directions: sources are 1; a
    cell whose upstream network cells reach their maximum order k at least twice gets k + 1, else
    k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
-   (a threshold mask on the accumulation is). Returns the highest order in *max_order. */
+   (a threshold mask on the accumulation is). Returns the highest order in *max_order. Direction
+   codes other than 0-7 and TN_FLOW_OUTLET, or ones stepping off the map, fail with TN_ERR_CORRUPT. */
 TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
 
 enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
@@ -2010,13 +2020,15 @@ TN_API tn_status tn_image_resize(tn_image *dst, const tn_image *src, int w, int 
     memset(&tx, 0, sizeof tx);
     memset(&ty, 0, sizeof ty);
     tmp.data = out.data = NULL;
-    if ((st = tn__taps_build(&tx, src->width, w, filter)) != TN_OK ||
-        (st = tn__taps_build(&ty, src->height, h, filter)) != TN_OK ||
-        (st = tn__image_alloc(&tmp, w, src->height, src->channels)) != TN_OK ||
-        (st = tn__image_alloc(&out, w, h, src->channels)) != TN_OK) {
+    /* images first: their size checks refuse absurd targets before w + h taps are built */
+    if ((st = tn__image_alloc(&tmp, w, src->height, src->channels)) != TN_OK ||
+        (st = tn__image_alloc(&out, w, h, src->channels)) != TN_OK ||
+        (st = tn__taps_build(&tx, src->width, w, filter)) != TN_OK ||
+        (st = tn__taps_build(&ty, src->height, h, filter)) != TN_OK) {
         tn__taps_free(&tx);
         tn__taps_free(&ty);
         TN_FREE(tmp.data);
+        TN_FREE(out.data);
         return st;
     }
     job.src = src;
@@ -2319,10 +2331,18 @@ static void tn__terrain_rows(void *ctx, size_t b, size_t e)
             case TN__OP_NORMALS: /* surface z = h(east, north): n ~ (-dh/deast, -dh/dnorth, 1) */
                 gx = tn__grad_x(d, x, y) * j->ix;
                 gy = tn__grad_y(d, x, y) * j->iy; /* dh/dsouth = -dh/dnorth */
-                n = 1.0f / sqrtf(gx * gx + gy * gy + 1.0f);
-                j->out0[3 * o] = -gx * n;
-                j->out0[3 * o + 1] = gy * n;
-                j->out0[3 * o + 2] = n;
+                if (fabsf(gx) <= 1e18f && fabsf(gy) <= 1e18f) {
+                    n = 1.0f / sqrtf(gx * gx + gy * gy + 1.0f);
+                    j->out0[3 * o] = -gx * n;
+                    j->out0[3 * o + 1] = gy * n;
+                    j->out0[3 * o + 2] = n;
+                } else { /* near-vertical (huge z_scale): gx * gx would overflow to Inf and give NaN */
+                    double dgx = (double)tn__grad_x(d, x, y) * j->ix, dgy = (double)tn__grad_y(d, x, y) * j->iy;
+                    double dn = 1.0 / sqrt(dgx * dgx + dgy * dgy + 1.0);
+                    j->out0[3 * o] = (float)(-dgx * dn);
+                    j->out0[3 * o + 1] = (float)(dgy * dn);
+                    j->out0[3 * o + 2] = (float)dn;
+                }
                 break;
             case TN__OP_SHADE:
                 tn__horn(d, x, y, &gx, &gy);
@@ -2344,7 +2364,18 @@ static void tn__terrain_rows(void *ctx, size_t b, size_t e)
 static size_t tn__row_grain(int width) { return (size_t)(width >= 16384 ? 1 : 16384 / width); }
 
 /* Pixel spacing: <= 0 means 1; returns 1 / spacing. */
-static float tn__inv_spacing(float s) { return s > 0.0f ? 1.0f / s : 1.0f; }
+/* 1 / spacing for dx and dy (<= 0 means 1). NaN/Inf, or a spacing so small that its inverse
+   (times scale) overflows, would give NaN/Inf or all-zero gradients: refused instead. */
+static tn_status tn__inv_spacing(float dx, float dy, float scale, float *ix, float *iy, const char *what)
+{
+    if (!(fabsf(dx) <= FLT_MAX && fabsf(dy) <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: pixel spacing %g x %g is not finite", what, (double)dx, (double)dy);
+    *ix = (float)((dx > 0.0f ? 1.0 / dx : 1.0) * scale);
+    *iy = (float)((dy > 0.0f ? 1.0 / dy : 1.0) * scale);
+    if (!(fabsf(*ix) <= FLT_MAX && fabsf(*iy) <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: pixel spacing %g x %g is too small", what, (double)dx, (double)dy);
+    return TN_OK;
+}
 
 TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_image *gx, tn_image *gy)
 {
@@ -2352,19 +2383,18 @@ TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_i
     tn__terrain_job job;
     tn_status st;
     if ((st = tn__image_check(dem, "gradient")) != TN_OK) return st;
+    memset(&job, 0, sizeof job);
+    if ((st = tn__inv_spacing(dx, dy, 1.0f, &job.ix, &job.iy, "gradient")) != TN_OK) return st;
     ox.data = oy.data = NULL;
     if ((gx && (st = tn__image_alloc(&ox, dem->width, dem->height, 1)) != TN_OK) ||
         (gy && (st = tn__image_alloc(&oy, dem->width, dem->height, 1)) != TN_OK)) {
         TN_FREE(ox.data);
         return st;
     }
-    memset(&job, 0, sizeof job);
     job.op = TN__OP_GRAD;
     job.dem = dem;
     job.out0 = ox.data;
     job.out1 = oy.data;
-    job.ix = tn__inv_spacing(dx);
-    job.iy = tn__inv_spacing(dy);
     tn_parallel_for((size_t)dem->height, tn__row_grain(dem->width), tn__terrain_rows, &job);
     if (gx) tn__image_give(gx, dem, &ox);
     if (gy) tn__image_give(gy, dem, &oy);
@@ -2391,9 +2421,8 @@ TN_API tn_status tn_image_slope(tn_image *dst, const tn_image *dem, float dx, fl
     TN_ASSERT(dst);
     if ((st = tn__image_check(dem, "slope")) != TN_OK) return st;
     memset(&job, 0, sizeof job);
+    if ((st = tn__inv_spacing(dx, dy, 1.0f, &job.ix, &job.iy, "slope")) != TN_OK) return st;
     job.op = TN__OP_SLOPE;
-    job.ix = tn__inv_spacing(dx);
-    job.iy = tn__inv_spacing(dy);
     return tn__terrain_run(dst, dem, &job, 1);
 }
 
@@ -2407,9 +2436,8 @@ TN_API tn_status tn_image_normals(tn_image *dst, const tn_image *dem, float dx, 
         return tn__fail(TN_ERR_INVALID_ARG, "normals: z_scale is not finite");
     if (z_scale == 0.0f) z_scale = 1.0f;
     memset(&job, 0, sizeof job);
+    if ((st = tn__inv_spacing(dx, dy, z_scale, &job.ix, &job.iy, "normals")) != TN_OK) return st;
     job.op = TN__OP_NORMALS;
-    job.ix = tn__inv_spacing(dx) * z_scale;
-    job.iy = tn__inv_spacing(dy) * z_scale;
     return tn__terrain_run(dst, dem, &job, 3);
 }
 
@@ -2444,9 +2472,10 @@ TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn
     if ((st = tn__image_check(dem, "hillshade")) != TN_OK) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (!(o.dx >= 0.0f && o.dy >= 0.0f && o.dx <= FLT_MAX && o.dy <= FLT_MAX) || o.z_factor != o.z_factor ||
-        o.azimuth_deg != o.azimuth_deg || o.altitude_deg != o.altitude_deg)
-        return tn__fail(TN_ERR_INVALID_ARG, "hillshade: spacing must be finite and >= 0, angles and z_factor not NaN");
+    /* Inf angles make sin/cos NaN, so everything must be finite */
+    if (!(o.dx >= 0.0f && o.dy >= 0.0f && o.dx <= FLT_MAX && o.dy <= FLT_MAX) || !(fabsf(o.z_factor) <= FLT_MAX) ||
+        !(fabsf(o.azimuth_deg) <= FLT_MAX) || !(fabsf(o.altitude_deg) <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "hillshade: spacing must be finite and >= 0, angles and z_factor finite");
     if (o.azimuth_deg == 0.0f) o.azimuth_deg = 315.0f;
     if (o.altitude_deg == 0.0f) o.altitude_deg = 45.0f;
     if (o.z_factor == 0.0f) o.z_factor = 1.0f;
@@ -2461,6 +2490,9 @@ TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn
     job.op = TN__OP_SHADE;
     job.ix = o.z_factor / o.dx;
     job.iy = o.z_factor / o.dy;
+    if (!(fabsf(job.ix) <= FLT_MAX && fabsf(job.iy) <= FLT_MAX)) /* a tiny spacing or a huge z_factor */
+        return tn__fail(TN_ERR_INVALID_ARG, "hillshade: z_factor %g over spacing %g x %g overflows", (double)o.z_factor,
+                        (double)o.dx, (double)o.dy);
     az = o.azimuth_deg * (3.14159265358979323846 / 180.0);
     alt = o.altitude_deg * (3.14159265358979323846 / 180.0);
     job.lx = (float)(sin(az) * cos(alt));
@@ -3488,7 +3520,9 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     uint32_t adler;
     *out = NULL;
     *out_size = 0;
-    if (level <= 0 || level > 9) level = 6;
+    if (level < 0 || level > 9) return tn__fail(TN_ERR_INVALID_ARG, "deflate: level %d (0-9, 0 = 6)", level);
+    if (!src && n) return tn__fail(TN_ERR_INVALID_ARG, "deflate: NULL input");
+    if (level == 0) level = 6;
     s = (tn__deflate *)tn__calloc(sizeof *s);
     if (!s) return TN_ERR_OUT_OF_MEMORY;
     s->src = src;
@@ -3601,27 +3635,34 @@ static tn_status tn__png_ihdr(tn__png *p, const uint8_t *d, uint32_t len)
                : TN_OK;
 }
 
-/* tEXt "terrainnet.range" = "<lo> <hi>"; anything malformed is ignored (ancillary chunk). */
+/* >>formats: locale-free number parsing and printing, unlike strtod / "%g" */
+static int tn__io_number(const char *s, size_t n, double *out);
+static int tn__io_format_number(char *buf, size_t cap, double v, int as_float);
+
+/* tEXt "terrainnet.range" = "<lo> <hi>"; anything malformed (or NaN) is ignored (ancillary
+   chunk). A range beyond float sets has_range = -1: the decode then fails with TN_ERR_NUMERIC,
+   since the pixels could not be converted. */
 static void tn__png_text(tn__png *p, const uint8_t *d, uint32_t len)
 {
     static const char key[] = "terrainnet.range";
-    char txt[128], *end1, *end2;
-    double lo, hi;
-    size_t tl;
+    const char *t = (const char *)d + sizeof key;
+    size_t tl, i = 0, b[2], e[2];
+    double v[2];
+    int k;
     if (len < sizeof key || memcmp(d, key, sizeof key) != 0) return; /* sizeof key includes the NUL */
     tl = len - sizeof key;
-    if (tl >= sizeof txt) return;
-    memcpy(txt, d + sizeof key, tl);
-    txt[tl] = 0;
-    lo = strtod(txt, &end1);
-    if (end1 == txt) return;
-    hi = strtod(end1, &end2);
-    if (end2 == end1) return;
-    while (*end2 == ' ') end2++;
-    if (*end2 || !(lo - lo == 0) || !(hi - hi == 0)) return; /* trailing junk, NaN or Inf */
-    p->has_range = 1;
-    p->lo = lo;
-    p->hi = hi;
+    for (k = 0; k < 2; k++) {
+        while (i < tl && t[i] == ' ') i++;
+        b[k] = i;
+        while (i < tl && t[i] != ' ') i++;
+        e[k] = i;
+        if (!tn__io_number(t + b[k], e[k] - b[k], &v[k]) || v[k] != v[k]) return;
+    }
+    while (i < tl && t[i] == ' ') i++;
+    if (i != tl) return; /* trailing junk */
+    p->has_range = fabs(v[0]) <= FLT_MAX && fabs(v[1]) <= FLT_MAX ? 1 : -1;
+    p->lo = v[0];
+    p->hi = v[1];
 }
 
 static void tn__png_trns(tn__png *p, const uint8_t *d, uint32_t len)
@@ -3919,6 +3960,10 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
         if (p->ctype == 3 && p->ntrns > p->npal) p->ntrns = 0; /* malformed tRNS: ignore */
         p->channels = p->ctype == 3 ? (p->ntrns ? 4 : 3) : p->spp + (p->has_trns ? 1 : 0);
         if (p->ctype == 3 || p->has_trns) p->has_range = 0; /* the writer never records one there */
+        if (p->has_range < 0)
+            st = tn__fail(TN_ERR_NUMERIC, "%s: terrainnet.range [%g, %g] is beyond float range", name, p->lo, p->hi);
+    }
+    if (st == TN_OK) {
         /* pass 2: gather IDAT payloads (a single chunk is used in place) */
         if (nidat == 1) {
             zsrc = buf + first_idat + 8;
@@ -4005,7 +4050,7 @@ static void tn__png_put_chunk(uint8_t *o, const char *type, const uint8_t *data,
 
 /* Encodes img (1-4 channels: grey, grey+alpha, RGB, RGBA) as an 8- or 16-bit PNG with codes
    round(clamp((v - lo) / (hi - lo), 0, 1) * max) (NaN -> 0); record_range writes tEXt
-   "terrainnet.range" = "%.17g %.17g" so decoding restores v exactly up to quantisation. level
+   "terrainnet.range" = "<lo> <hi>" (shortest round-trip text) so decoding restores v exactly up to quantisation. level
    0-9 (0 = 6). *out is TN_MALLOC'ed (caller frees with TN_FREE). Fails with TN_ERR_INVALID_ARG
    on bad image/depth/range. */
 static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
@@ -4062,7 +4107,10 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
     if ((st = tn_zlib_deflate(filt, fsize, level, &z, &zn)) != TN_OK) goto done;
     if (record_range) {
         memcpy(text, "terrainnet.range", 17);
-        tlen = 17 + (size_t)snprintf(text + 17, sizeof text - 17, "%.17g %.17g", lo, hi);
+        /* shortest round-trip text with '.', whatever the C locale (the reader is locale-free too) */
+        size_t a = (size_t)tn__io_format_number(text + 17, 32, lo, 0);
+        text[17 + a] = ' ';
+        tlen = 18 + a + (size_t)tn__io_format_number(text + 18 + a, 32, hi, 0);
     }
     nchunks = zn ? (zn + TN__PNG_IDAT_MAX - 1) / TN__PNG_IDAT_MAX : 1;
     total = 8 + 25 + (tlen ? 12 + tlen : 0) + nchunks * 12 + zn + 12;
@@ -4253,8 +4301,9 @@ static tn_status tn__io_save_mapping(const tn_image *img, const tn_save_opts *op
     float mn, mx;
     if (opts && opts->has_range) {
         double a = opts->range_lo, b = opts->range_hi;
-        if (!(a == a && b == b && fabs(a) <= DBL_MAX && fabs(b) <= DBL_MAX) || a == b)
-            return tn__fail(TN_ERR_INVALID_ARG, "save range [%g, %g] is empty or not finite", a, b);
+        /* beyond float the file could not be read back (tn_image stores floats) */
+        if (!(a == a && b == b && fabs(a) <= FLT_MAX && fabs(b) <= FLT_MAX) || a == b)
+            return tn__fail(TN_ERR_INVALID_ARG, "save range [%g, %g] is empty, not finite or beyond float", a, b);
         *lo = a;
         *hi = b;
         *record = 1;
@@ -4397,8 +4446,8 @@ static void tn__pnm_comment(const uint8_t *p, size_t n, int *has_range, double *
     if (!tn__io_token(p, n, &i, &tb, &tl) || !tn__io_number((const char *)p + tb, tl, &a)) return;
     if (!tn__io_token(p, n, &i, &tb, &tl) || !tn__io_number((const char *)p + tb, tl, &b)) return;
     if (tn__io_token(p, n, &i, &tb, &tl)) return;
-    if (!(fabs(a) <= DBL_MAX && fabs(b) <= DBL_MAX) || a == b) return; /* malformed: just a comment */
-    *has_range = 1;
+    if (a != a || b != b || a == b) return; /* malformed: just a comment */
+    *has_range = fabs(a) <= FLT_MAX && fabs(b) <= FLT_MAX ? 1 : -1; /* -1: beyond float, refused */
     *lo = a;
     *hi = b;
 }
@@ -4473,6 +4522,7 @@ static tn_status tn__pnm_decode(const uint8_t *p, size_t n, const char *name, tn
                             what[j], r < 0 ? "> 65535" : "0", j < 2 ? "2^31-1" : "65535");
     }
     if (tn__size4(dim[0], dim[1], (size_t)ch, sizeof(float), &bytes)) return tn__fail_context(TN_ERR_TOO_LARGE, name);
+    if (has_range < 0) return tn__fail(TN_ERR_NUMERIC, "%s: terrainnet.range [%g, %g] is beyond float range", name, lo, hi);
     count = (size_t)dim[0] * dim[1] * (size_t)ch;
     bps = dim[2] > 255 ? 2 : 1;
     if (kind >= 5) { /* exactly one whitespace byte, then raw samples */
@@ -4509,6 +4559,10 @@ static tn_status tn__pnm_decode(const uint8_t *p, size_t n, const char *name, tn
             return tn__fail(TN_ERR_CORRUPT, "%s: PNM sample %zu exceeds maxval %lu", name, k, dim[2]);
         }
         img->data[k] = (float)c; /* converted below, once the range comment (if any) is known */
+    }
+    if (has_range < 0) { /* a range comment among the samples */
+        tn_image_free(img);
+        return tn__fail(TN_ERR_NUMERIC, "%s: terrainnet.range [%g, %g] is beyond float range", name, lo, hi);
     }
     for (k = 0; k < count; k++)
         img->data[k] = tn__io_uncode((unsigned)img->data[k], (unsigned)dim[2], has_range, lo, hi);
@@ -8049,7 +8103,32 @@ TN_API void tn_params_free(tn_params *p)
 static tn_tensor *tn__params_new(tn_params *p, const char *name, int ndim, const int *shape, int learned)
 {
     tn_tensor *t;
-    TN_ASSERT(name && strlen(name) < sizeof t->name && !tn_params_find(p, name));
+    size_t numel = 1;
+    int i;
+    /* checked here rather than asserted: names and shapes come from model files (.tnw configs) too */
+    TN_ASSERT(p);
+    if (!name || !name[0] || strlen(name) >= sizeof t->name) {
+        tn__fail(TN_ERR_INVALID_ARG, "parameters: name '%.60s' is empty or has 40 or more characters", name ? name : "(null)");
+        return NULL;
+    }
+    if (tn_params_find(p, name)) {
+        tn__fail(TN_ERR_INVALID_ARG, "parameters: a tensor named '%s' already exists", name);
+        return NULL;
+    }
+    if (ndim < 1 || ndim > TN_MAX_DIMS || !shape) {
+        tn__fail(TN_ERR_INVALID_ARG, "parameters: '%s' has %d dims (1..%d)", name, ndim, TN_MAX_DIMS);
+        return NULL;
+    }
+    for (i = 0; i < ndim; i++) {
+        if (shape[i] < 1) {
+            tn__fail(TN_ERR_INVALID_ARG, "parameters: '%s' dim %d is %d", name, i, shape[i]);
+            return NULL;
+        }
+        if (!tn__mul_size(numel, (size_t)shape[i], &numel) || numel > TN_MAX_ALLOC / sizeof(float)) {
+            tn__fail(TN_ERR_TOO_LARGE, "parameters: '%s' is too large", name);
+            return NULL;
+        }
+    }
     if (p->n == p->cap) {
         int cap = p->cap ? p->cap * 2 : 32;
         tn_tensor **nt = (tn_tensor **)TN_REALLOC(p->t, (size_t)cap * sizeof(tn_tensor *));
@@ -8185,8 +8264,9 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path)
     return st;
 }
 
-/* Parses and checks a .tnw image; with apply == 0 only validates against p. */
-static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const char *name, int apply)
+/* Parses and checks a .tnw image; with apply == 0 only validates against p, marking each
+   model tensor in seen[] (p->n bytes, zeroed): a name twice would leave another tensor unloaded. */
+static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const char *name, int apply, uint8_t *seen)
 {
     size_t off = 12, k;
     uint32_t count, i;
@@ -8199,8 +8279,8 @@ static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const c
     for (i = 0; i < count; i++) {
         char tname[64];
         size_t nl;
-        int ndim, d, flags;
-        tn_tensor *t;
+        int ndim, d, flags, j;
+        tn_tensor *t = NULL;
         if (off + 4 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated at tensor %u", name, (unsigned)i);
         nl = (size_t)b[off] | ((size_t)b[off + 1] << 8);
         if (nl >= sizeof tname || off + 2 + nl + 2 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: bad name at tensor %u", name, (unsigned)i);
@@ -8210,8 +8290,10 @@ static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const c
         ndim = b[off];
         flags = b[off + 1];
         off += 2;
-        t = tn_params_find(p, tname);
+        for (j = 0; j < p->n && !t; j++)
+            if (!strcmp(p->t[j]->name, tname)) t = p->t[j];
         if (!t) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' is not in the model", name, tname);
+        if (seen && seen[j - 1]++) return tn__fail(TN_ERR_CORRUPT, "%s: tensor '%s' appears twice", name, tname);
         if (ndim != t->ndim) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' has %d dims, the model's has %d", name, tname, ndim, t->ndim);
         if (off + 4 * (size_t)ndim > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated in '%s'", name, tname);
         for (d = 0; d < ndim; d++)
@@ -8236,8 +8318,12 @@ static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const c
 
 TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t size, const char *name)
 {
-    tn_status st = tn__tnw_parse(p, data, size, name ? name : "weights", 0);
-    return st ? st : tn__tnw_parse(p, data, size, name ? name : "weights", 1);
+    uint8_t *seen = (uint8_t *)tn__calloc((size_t)p->n);
+    tn_status st;
+    if (!seen) return TN_ERR_OUT_OF_MEMORY;
+    st = tn__tnw_parse(p, data, size, name ? name : "weights", 0, seen);
+    TN_FREE(seen);
+    return st ? st : tn__tnw_parse(p, data, size, name ? name : "weights", 1, NULL);
 }
 
 TN_API tn_status tn_params_load(tn_params *p, const char *path)
@@ -8260,11 +8346,35 @@ struct tn_optim {
     long step;
 };
 
+/* NaN/Inf or out-of-range settings would turn every weight into NaN at the first step. */
+static int tn__optim_opts_ok(const tn_optim_opts *o)
+{
+    const float f[8] = {o->lr, o->beta1, o->beta2, o->eps, o->weight_decay, o->momentum, o->lr_decay, o->clip_norm};
+    int i;
+    for (i = 0; i < 8; i++)
+        if (!(fabsf(f[i]) <= FLT_MAX)) return 0;
+    return (o->kind == TN_OPTIM_ADAM || o->kind == TN_OPTIM_SGD) && o->beta1 >= 0.0f && o->beta1 < 1.0f &&
+           o->beta2 >= 0.0f && o->beta2 < 1.0f && o->momentum >= 0.0f && o->lr_decay >= 0.0f;
+}
+
 TN_API tn_optim *tn_optim_create(tn_params *p, const tn_optim_opts *opts)
 {
-    tn_optim *o = (tn_optim *)TN_MALLOC(sizeof(tn_optim));
+    tn_optim *o;
     int i;
-    if (!o) return NULL;
+    if (!p) {
+        tn__fail(TN_ERR_INVALID_ARG, "optimiser: no parameters");
+        return NULL;
+    }
+    if (opts && !tn__optim_opts_ok(opts)) {
+        tn__fail(TN_ERR_INVALID_ARG, "optimiser: a setting is NaN/Inf or out of range (kind %d, lr %g, betas %g %g, momentum %g)",
+                 (int)opts->kind, (double)opts->lr, (double)opts->beta1, (double)opts->beta2, (double)opts->momentum);
+        return NULL;
+    }
+    o = (tn_optim *)TN_MALLOC(sizeof(tn_optim));
+    if (!o) {
+        tn__fail(TN_ERR_OUT_OF_MEMORY, "optimiser: out of memory");
+        return NULL;
+    }
     memset(o, 0, sizeof *o);
     o->p = p;
     if (opts) o->o = *opts;
@@ -8351,6 +8461,11 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     int it, k, hist = 0, head = 0;
     size_t bytes = 0;
     tn_status st = TN_OK;
+    if (!x || !fn || n == 0) return tn__fail(TN_ERR_INVALID_ARG, "L-BFGS: %s", n ? "no vector or function" : "empty vector");
+    if (opts && (opts->history < 0 || opts->history > 65536 || opts->max_iter < 0 || !(fabsf(opts->tol) <= FLT_MAX) ||
+                 !(fabsf(opts->first_step) <= FLT_MAX)))
+        return tn__fail(TN_ERR_INVALID_ARG, "L-BFGS: bad options (history %d, max_iter %d, tol %g, first_step %g)",
+                        opts->history, opts->max_iter, (double)opts->tol, (double)opts->first_step);
     if (tn__size4((size_t)(2 * m + 4), n, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
     S = (float *)tn__alloc(bytes);
     rho = (double *)tn__alloc(2 * (size_t)m * sizeof(double));
@@ -8369,7 +8484,10 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     for (it = 0; it < max_iter; it++) {
         double gnorm = sqrt(tn__dot(g, g, n)), step, gd;
         size_t i;
-        if (f != f) { st = tn__fail(TN_ERR_NUMERIC, "L-BFGS: the objective is NaN"); break; }
+        if (f != f || !(gnorm <= DBL_MAX)) { /* a NaN/Inf gradient would stall the line search silently */
+            st = tn__fail(TN_ERR_NUMERIC, "L-BFGS: the objective or its gradient is NaN/Inf");
+            break;
+        }
         if (gnorm < tol) break;
         if ((st = tn__progress("lbfgs", (double)it / max_iter))) break;
         /* two-loop recursion: d = -H g */
@@ -8520,12 +8638,17 @@ TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_
     int i;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (o.octaves <= 0) o.octaves = 8;
-    if (o.frequency <= 0) o.frequency = 4.0f;
-    if (o.lacunarity <= 0) o.lacunarity = 2.0f;
-    if (o.gain <= 0) o.gain = 0.5f;
+    if (o.octaves < 0 || !(o.frequency >= 0.0f) || !(o.lacunarity >= 0.0f) || !(o.gain >= 0.0f)) /* also NaN */
+        return tn__fail(TN_ERR_INVALID_ARG, "perlin: negative or NaN octaves, frequency, lacunarity or gain");
+    if (o.octaves == 0) o.octaves = 8;
+    if (o.frequency == 0) o.frequency = 4.0f;
+    if (o.lacunarity == 0) o.lacunarity = 2.0f;
+    if (o.gain == 0) o.gain = 0.5f;
     if (o.octaves > 24 || o.frequency > 1e6f || o.lacunarity > 16.0f || o.gain > 4.0f)
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: octaves <= 24, frequency <= 1e6, lacunarity <= 16, gain <= 4");
+    /* the finest octave's lattice coordinates must fit an int (they are floored to cells) */
+    if ((double)o.frequency * pow((double)o.lacunarity, o.octaves - 1) > 1e9)
+        return tn__fail(TN_ERR_INVALID_ARG, "perlin: frequency x lacunarity^(octaves - 1) exceeds 1e9 cells");
     if ((st = tn_image_create(&img, width, height, 1))) return st;
     j = (tn__perlin_job *)tn__alloc(sizeof *j);
     if (!j) {
@@ -8592,9 +8715,13 @@ TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const t
     size_t i, n;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (o.layers <= 0) o.layers = 5;
+    if (o.layers < 0 || o.nsigmas < 0) return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: negative layers or sigma count");
+    if (o.layers == 0) o.layers = 5;
     if (o.layers > 30) return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: at most 30 layers");
-    if (!o.sigmas || o.nsigmas <= 0) {
+    for (k = 0; o.sigmas && k < o.nsigmas; k++) /* a NaN sigma would be skipped silently */
+        if (!(o.sigmas[k] >= 0.0f && o.sigmas[k] <= FLT_MAX))
+            return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: sigma %d is %g", k, (double)o.sigmas[k]);
+    if (!o.sigmas || o.nsigmas == 0) {
         defaults[0] = (float)size / 64.0f;
         defaults[1] = (float)size / 32.0f;
         o.sigmas = defaults;
@@ -8715,7 +8842,13 @@ static tn_status tn__chain_pixels(const float *pts, int n, float sx, float sy, t
             y0 = (pts[3 * i - 2] + 0.5f) * sy - 0.5f;
             h0 = pts[3 * i - 1];
         }
-        steps = (int)ceilf(fmaxf(fabsf(x1 - x0), fabsf(y1 - y0)));
+        {
+            float span = ceilf(fmaxf(fabsf(x1 - x0), fabsf(y1 - y0)));
+            /* far-off points (a programmatic set): the int cast would be undefined, the walk endless */
+            if (!(span <= (float)TN_SKETCH_MAX_POINTS))
+                return tn__fail(TN_ERR_TOO_LARGE, "polyline segment %d spans %g pixels", i, (double)span);
+            steps = (int)span;
+        }
         for (t = i > 0 ? 1 : 0; t <= steps; t++) {
             float f = steps ? (float)t / (float)steps : 1.0f;
             float px = floorf(x0 + f * (x1 - x0) + 0.5f), py = floorf(y0 + f * (y1 - y0) + 0.5f);
@@ -8738,8 +8871,12 @@ static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
         const tn_contour *c = &s->items[i];
         if (c->npoints <= 0 || !c->points) return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d is empty", what, i);
         if (!isfinite(c->mean_gradient)) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d has a NaN/Inf gradient", what, i);
-        for (j = 0; j < 3 * c->npoints; j++)
+        for (j = 0; j < 3 * c->npoints; j++) {
             if (!isfinite(c->points[j])) return tn__fail(TN_ERR_NUMERIC, "%s: polyline %d point %d is NaN/Inf", what, i, j / 3);
+            /* pixel coordinates are rounded to int: keep them where that is defined */
+            if (j % 3 != 2 && fabsf(c->points[j]) > (float)(16 * TN_SKETCH_MAX_SIDE))
+                return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d point %d lies far outside the canvas", what, i, j / 3);
+        }
     }
     return TN_OK;
 }
@@ -9032,59 +9169,165 @@ static int tn__yokoi8(const int p[8])
     return c;
 }
 
+/* Guo-Hall sub-iteration test of the set pixel i (pass 0 or 1) on the current mask. */
+static int tn__guohall_deletes(const uint8_t *m, int w, int h, size_t i, int pass)
+{
+    int p[8], p2, p3, p4, p5, p6, p7, p8, p9, cc, n1, n2;
+    tn__nbrs(m, w, h, (int)(i % (size_t)w), (int)(i / (size_t)w), p);
+    p2 = p[0]; p3 = p[1]; p4 = p[2]; p5 = p[3]; p6 = p[4]; p7 = p[5]; p8 = p[6]; p9 = p[7];
+    cc = (!p2 && (p3 || p4)) + (!p4 && (p5 || p6)) + (!p6 && (p7 || p8)) + (!p8 && (p9 || p2));
+    if (cc != 1) return 0;
+    n1 = (p9 || p2) + (p3 || p4) + (p5 || p6) + (p7 || p8);
+    n2 = (p2 || p3) + (p4 || p5) + (p6 || p7) + (p8 || p9);
+    if (n2 < n1) n1 = n2;
+    if (n1 < 2 || n1 > 3) return 0;
+    return !(pass == 0 ? ((p6 || p7 || !p9) && p8) : ((p2 || p3 || !p5) && p4));
+}
+
+/* Simple (Yokoi number 1) and not an endpoint: the second stage removes it. */
+static int tn__skel_removable(const uint8_t *m, int w, int h, size_t i)
+{
+    int p[8], b = 0, k;
+    tn__nbrs(m, w, h, (int)(i % (size_t)w), (int)(i / (size_t)w), p);
+    for (k = 0; k < 8; k++) b += p[k];
+    return b >= 2 && tn__yokoi8(p) == 1;
+}
+
+/* Work lists of pixel indices for tn_skeletonize (the heap one kept in min-heap order). */
+typedef struct tn__skel_list { size_t *v; size_t n, cap; } tn__skel_list;
+
+static tn_status tn__skel_grow(tn__skel_list *l)
+{
+    size_t cap = l->cap * sizeof(size_t);
+    tn_status st;
+    if (l->n < l->cap) return TN_OK;
+    if ((st = tn__reserve((void **)&l->v, &cap, (l->n + 1) * sizeof(size_t)))) return st;
+    l->cap = cap / sizeof(size_t);
+    return TN_OK;
+}
+
+/* Appends i unless flag[i] has `bit` (then it is queued already). */
+static tn_status tn__skel_push(tn__skel_list *l, uint8_t *flag, size_t i, uint8_t bit)
+{
+    tn_status st;
+    if (flag[i] & bit) return TN_OK;
+    if ((st = tn__skel_grow(l))) return st;
+    flag[i] |= bit;
+    l->v[l->n++] = i;
+    return TN_OK;
+}
+
+static tn_status tn__skel_heap_push(tn__skel_list *hp, uint8_t *flag, size_t i, uint8_t bit)
+{
+    size_t k;
+    tn_status st;
+    if (flag[i] & bit) return TN_OK;
+    if ((st = tn__skel_grow(hp))) return st;
+    flag[i] |= bit;
+    for (k = hp->n++; k && hp->v[(k - 1) / 2] > i; k = (k - 1) / 2) hp->v[k] = hp->v[(k - 1) / 2];
+    hp->v[k] = i;
+    return TN_OK;
+}
+
+static size_t tn__skel_heap_pop(tn__skel_list *hp)
+{
+    size_t top = hp->v[0], last = hp->v[--hp->n], k = 0, c;
+    for (; (c = 2 * k + 1) < hp->n; k = c) {
+        if (c + 1 < hp->n && hp->v[c + 1] < hp->v[c]) c++;
+        if (hp->v[c] >= last) break;
+        hp->v[k] = hp->v[c];
+    }
+    if (hp->n) hp->v[k] = last;
+    return top;
+}
+
 /* Guo-Hall thinning (a Zhang-Suen variant that, unlike plain Zhang-Suen, keeps two-pixel-thick
    diagonal strokes, so thin drawn lines survive), then every remaining simple pixel that is not
    an endpoint is dropped sequentially, which removes the staircase corners two pixels thick and
-   keeps the topology one pixel at a time. Pixels outside the mask count as background. */
+   keeps the topology one pixel at a time. Pixels outside the mask count as background.
+   Rescanning the whole mask until nothing changes costs O(n) per round, with as many rounds as
+   strokes are thick: superlinear on blobs. A pixel's test reads only its 3x3 neighbourhood, so
+   after one full scan per stage only the neighbours of deleted pixels are tested again:
+   - stage 1 (parallel sub-iterations, pass 0 / 1): per pass a list of pixels whose
+     neighbourhood changed since that pass last tested them; a pass's deletions apply together;
+   - stage 2 (sequential raster sweeps): a deletion queues the neighbours after it into the
+     current sweep (a min-heap keeps raster order) and those before it into the next sweep.
+   Every skipped test would have answered as before, so the output is bit-identical to the
+   rescans; the work is O(n) plus O(log) per re-test, and re-tests are at most 8 per deletion. */
 TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
 {
-    size_t n, i, ndel, bytes, *del;
-    int changed = 1, pass, x, y;
+    static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
+    enum { IN_PASS0 = 1, IN_PASS1 = 2, IN_NOW = 4, IN_NEXT = 8 };
+    tn__skel_list q[2] = {{NULL, 0, 0}, {NULL, 0, 0}}, del = {NULL, 0, 0}, heap = {NULL, 0, 0};
+    uint8_t *flag;
+    size_t n, i, k, cnt;
+    int pass, d, full[2] = {1, 1}, idle = 0, sweep;
+    tn_status st = TN_OK;
     if (!m || w <= 0 || h <= 0) return tn__fail(TN_ERR_INVALID_ARG, "skeletonize: empty mask");
     n = (size_t)w * h;
-    if (tn__size4(n, 1, sizeof(size_t), 1, &bytes)) return TN_ERR_TOO_LARGE;
-    if (!(del = (size_t *)tn__alloc(bytes))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(flag = (uint8_t *)tn__calloc(n))) return TN_ERR_OUT_OF_MEMORY;
     for (i = 0; i < n; i++) m[i] = m[i] != 0;
-    while (changed) { /* two parallel sub-iterations until stable */
-        changed = 0;
-        for (pass = 0; pass < 2; pass++) {
-            ndel = 0;
-            for (y = 0; y < h; y++)
-                for (x = 0; x < w; x++) {
-                    int p[8], p2, p3, p4, p5, p6, p7, p8, p9, cc, n1, n2;
-                    if (!m[(size_t)y * w + x]) continue;
-                    tn__nbrs(m, w, h, x, y, p);
-                    p2 = p[0]; p3 = p[1]; p4 = p[2]; p5 = p[3]; p6 = p[4]; p7 = p[5]; p8 = p[6]; p9 = p[7];
-                    cc = (!p2 && (p3 || p4)) + (!p4 && (p5 || p6)) + (!p6 && (p7 || p8)) + (!p8 && (p9 || p2));
-                    if (cc != 1) continue;
-                    n1 = (p9 || p2) + (p3 || p4) + (p5 || p6) + (p7 || p8);
-                    n2 = (p2 || p3) + (p4 || p5) + (p6 || p7) + (p8 || p9);
-                    if (n2 < n1) n1 = n2;
-                    if (n1 < 2 || n1 > 3) continue;
-                    if (pass == 0 ? ((p6 || p7 || !p9) && p8) : ((p2 || p3 || !p5) && p4)) continue;
-                    del[ndel++] = (size_t)y * w + x;
-                }
-            for (i = 0; i < ndel; i++) m[del[i]] = 0;
-            if (ndel) changed = 1;
+    /* stage 1: passes alternate until two in a row delete nothing (= a whole idle round) */
+    for (pass = 0; !st && idle < 2; pass ^= 1) {
+        uint8_t bit = (uint8_t)(pass ? IN_PASS1 : IN_PASS0);
+        cnt = full[pass] ? n : q[pass].n;
+        del.n = 0;
+        for (k = 0; !st && k < cnt; k++) {
+            i = full[pass] ? k : q[pass].v[k];
+            flag[i] &= (uint8_t)~bit;
+            if (m[i] && tn__guohall_deletes(m, w, h, i, pass)) {
+                if ((st = tn__skel_grow(&del))) break;
+                del.v[del.n++] = i;
+            }
+        }
+        q[pass].n = 0;
+        full[pass] = 0;
+        for (k = 0; k < del.n; k++) m[del.v[k]] = 0;
+        for (k = 0; !st && k < del.n; k++) {
+            int x = (int)(del.v[k] % (size_t)w), y = (int)(del.v[k] / (size_t)w);
+            for (d = 0; !st && d < 8; d++) {
+                int xx = x + ox[d], yy = y + oy[d];
+                size_t j = (size_t)yy * w + xx;
+                if (xx < 0 || yy < 0 || xx >= w || yy >= h || !m[j]) continue;
+                if (!(st = tn__skel_push(&q[0], flag, j, IN_PASS0))) st = tn__skel_push(&q[1], flag, j, IN_PASS1);
+            }
+        }
+        idle = del.n ? 0 : idle + 1;
+    }
+    /* stage 2: sweep 0 scans everything; later sweeps test the queued pixels in raster order */
+    del.n = 0; /* the next sweep's pixels */
+    for (sweep = 0; !st && (sweep == 0 || del.n); sweep++) {
+        for (k = 0; !st && k < del.n; k++) {
+            flag[del.v[k]] &= (uint8_t)~IN_NEXT;
+            st = tn__skel_heap_push(&heap, flag, del.v[k], IN_NOW);
+        }
+        del.n = 0;
+        for (k = 0; !st && (sweep == 0 ? k < n : heap.n > 0); k++) {
+            int x, y;
+            if (sweep == 0) i = k;
+            else {
+                i = tn__skel_heap_pop(&heap);
+                flag[i] &= (uint8_t)~IN_NOW;
+            }
+            if (!m[i] || !tn__skel_removable(m, w, h, i)) continue;
+            m[i] = 0;
+            x = (int)(i % (size_t)w);
+            y = (int)(i / (size_t)w);
+            for (d = 0; !st && d < 8; d++) {
+                int xx = x + ox[d], yy = y + oy[d];
+                size_t j = (size_t)yy * w + xx;
+                if (xx < 0 || yy < 0 || xx >= w || yy >= h || !m[j]) continue;
+                if (j < i) st = tn__skel_push(&del, flag, j, IN_NEXT);
+                else if (sweep > 0) st = tn__skel_heap_push(&heap, flag, j, IN_NOW); /* sweep 0 gets there anyway */
+            }
         }
     }
-    TN_FREE(del);
-    changed = 1;
-    while (changed) {
-        changed = 0;
-        for (y = 0; y < h; y++)
-            for (x = 0; x < w; x++) {
-                int p[8], b = 0, k;
-                if (!m[(size_t)y * w + x]) continue;
-                tn__nbrs(m, w, h, x, y, p);
-                for (k = 0; k < 8; k++) b += p[k];
-                if (b >= 2 && tn__yokoi8(p) == 1) {
-                    m[(size_t)y * w + x] = 0;
-                    changed = 1;
-                }
-            }
-    }
-    return TN_OK;
+    TN_FREE(flag);
+    TN_FREE(q[0].v);
+    TN_FREE(q[1].v);
+    TN_FREE(del.v);
+    TN_FREE(heap.v);
+    return st;
 }
 
 /* D8 neighbour offsets: E, SE, S, SW, W, NW, N, NE (flow directions in >>extract too). */
@@ -9220,6 +9463,9 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
         return tn__fail(TN_ERR_SHAPE, "sketch image: needs colour (red ridges, blue valleys), got %d channel(s)", img->channels);
     if (img->width > TN_SKETCH_MAX_SIDE || img->height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_TOO_LARGE, "sketch image: %d x %d exceeds the canvas limit", img->width, img->height);
+    /* an Inf channel passes the stroke test and would become an Inf height */
+    if ((n = tn_image_range(img, NULL, NULL)) != 0)
+        return tn__fail(TN_ERR_NUMERIC, "sketch image: %zu NaN/Inf samples", n);
     n = (size_t)img->width * img->height;
     if (tn__size4(n, 1, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
     memset(&set, 0, sizeof set);
@@ -9503,6 +9749,8 @@ TN_API tn_status tn_mst(const float *xy, int n, int **edges)
     TN_ASSERT(edges);
     *edges = NULL;
     if (n < 1 || n > (1 << 24) || !xy) return tn__fail(TN_ERR_INVALID_ARG, "mst: %d points", n);
+    for (i = 0; i < 2 * n; i++) /* NaN distances never compare smaller: no vertex would be picked */
+        if (!isfinite(xy[i])) return tn__fail(TN_ERR_NUMERIC, "mst: point %d is NaN/Inf", i / 2);
     best = (double *)tn__alloc((size_t)n * sizeof(double));
     from = (int *)tn__alloc((size_t)n * sizeof(int));
     in = (uint8_t *)tn__calloc((size_t)n);
@@ -9668,6 +9916,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
             return tn__fail(TN_ERR_SHAPE, "random sketch: the user sketch canvas is %d x %d, not %d x %d", user->width,
                             user->height, width, height);
     }
+    if (opts && opts->nodes < 0) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: %d nodes", opts->nodes);
     n = opts && opts->nodes > 0 ? opts->nodes : (int)tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
     if (n > 8192) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 8192)", n);
     tn_rng_seed(&rng, opts ? opts->seed : 0, 0x5e7c4u);
@@ -10917,7 +11166,36 @@ static void tn__acc_strip(void *ctx, int ith, int nth)
     }
 }
 
+static tn_status tn__flow_accumulate(tn_flow *flow);
+
+/* Directions handed in by a caller: every code must be 0-7 or TN_FLOW_OUTLET and lead to a cell
+   of the map. The walks would take other codes for outlets, and a step off the left or right
+   edge for the neighbouring row. Flows made here (tn_flow_compute) skip this. */
+static tn_status tn__flow_codes_check(const tn_flow *f, const char *what)
+{
+    int x, y;
+    tn_status st;
+    if ((st = tn__flow_check(f, what))) return st;
+    for (y = 0; y < f->height; y++)
+        for (x = 0; x < f->width; x++) {
+            int d = f->dir[(size_t)y * f->width + x], tx, ty;
+            if (d == TN_FLOW_OUTLET) continue;
+            if (d >= 8) return tn__fail(TN_ERR_CORRUPT, "%s: direction code %d at (%d, %d)", what, d, x, y);
+            tx = x + tn__d8x[d];
+            ty = y + tn__d8y[d];
+            if (tx < 0 || ty < 0 || tx >= f->width || ty >= f->height)
+                return tn__fail(TN_ERR_CORRUPT, "%s: the direction at (%d, %d) points off the map", what, x, y);
+        }
+    return TN_OK;
+}
+
 TN_API tn_status tn_flow_accumulation(tn_flow *flow)
+{
+    tn_status st = tn__flow_codes_check(flow, "flow accumulation");
+    return st ? st : tn__flow_accumulate(flow);
+}
+
+static tn_status tn__flow_accumulate(tn_flow *flow)
 {
     size_t i, s, n, seen = 0, S;
     uint8_t *pk = NULL;
@@ -11002,12 +11280,20 @@ TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
     st = tn__flow_dirs(flow, &filled, par);
     tn_image_free(&filled);
     TN_FREE(par);
-    if (!st) st = tn_flow_accumulation(flow);
+    if (!st) st = tn__flow_accumulate(flow); /* own directions: valid codes */
     if (st) tn_flow_free(flow);
     return st;
 }
 
+static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
+
 TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
+{
+    tn_status st = tn__flow_codes_check(flow, "strahler order");
+    return st ? st : tn__strahler(flow, mask, order, max_order);
+}
+
+static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
 {
     size_t i, n;
     uint8_t *indeg = NULL, *cnt;
@@ -11199,7 +11485,7 @@ static tn_status tn__extract_type(const tn_image *dem, const tn_image *grad, con
     else { ex->valley_mask = mask; ex->valley_order = order; }
     if (!mask || !order) return TN_ERR_OUT_OF_MEMORY;
     for (i = 0; i < n; i++) mask[i] = flow->acc[i] >= (uint32_t)ex->threshold;
-    if ((st = tn_strahler_order(flow, mask, order, &top))) return st;
+    if ((st = tn__strahler(flow, mask, order, &top))) return st; /* own flow: valid codes */
     if (ridge) ex->ridge_max_order = top;
     else ex->valley_max_order = top;
     skel = (uint8_t *)tn__alloc(n);
@@ -11594,8 +11880,9 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
         return tn__fail(TN_ERR_INVALID_ARG, "realism: both terrains must be at least 16 x 16");
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0)
-        return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing and threshold must be >= 0");
+    if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0 ||
+        !(o.dx_a <= FLT_MAX && o.dy_a <= FLT_MAX && o.dx_b <= FLT_MAX && o.dy_b <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing must be finite and >= 0, threshold >= 0");
     if (o.dx_b == 0) { o.dx_b = o.dx_a; if (o.dy_b == 0) o.dy_b = o.dy_a; }
     memset(&r, 0, sizeof r);
     if ((st = tn__realism_shape(ref, img, &o, &r))) return st;
@@ -12981,6 +13268,10 @@ static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_lay
     for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) c[16 + i] = m->mean[i];
 }
 
+/* Is a config field a whole number in [0, max]? Checked before any cast: converting a float
+   outside the target type's range (1e20 to int or long) is undefined behaviour. */
+static int tn__tg_whole(float v, float max) { return v >= 0.0f && v <= max && v == floorf(v); }
+
 /* Reads the architecture back; validates every field before anything is allocated from it. */
 static tn_status tn__tg_read_config(tn_texgan *m, int *disc_width, int *disc_layers, const float *c, const char *name)
 {
@@ -12989,7 +13280,13 @@ static tn_status tn__tg_read_config(tn_texgan *m, int *disc_width, int *disc_lay
         if (c[i] != c[i] || c[i] > 1e30f || c[i] < -1e30f) return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config holds NaN/Inf", name);
     if (c[0] != 1.0f) return tn__fail(TN_ERR_FORMAT, "%s: texgan config version %g is not supported", name, (double)c[0]);
     for (i = 1; i <= 6; i++)
-        if (c[i] < 0 || c[i] > 4096 || c[i] != floorf(c[i])) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan config field %d", name, i);
+        if (!tn__tg_whole(c[i], 4096.0f)) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan config field %d", name, i);
+    /* iterations = c[9] + c[10] * 2^24, kept under 2^31 so it fits any long */
+    if (!tn__tg_whole(c[9], 16777215.0f) || !tn__tg_whole(c[10], 127.0f) || !(c[11] >= 0.0f))
+        return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan iteration count or training time", name);
+    if (!tn__tg_whole(c[12], 4096.0f) || !tn__tg_whole(c[13], 4096.0f) || !tn__tg_whole(c[15], 16.0f) ||
+        !tn__tg_whole(c[24], 16.0f))
+        return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan flags or discriminator size", name);
     m->channels = (int)c[1];
     m->noise_local = (int)c[2];
     m->noise_global = (int)c[3];
@@ -13000,11 +13297,10 @@ static tn_status tn__tg_read_config(tn_texgan *m, int *disc_width, int *disc_lay
     m->hi = c[8];
     m->iterations = (long)c[9] + ((long)c[10] << 24);
     m->train_seconds = c[11];
-    if (c[14] < 0 || c[14] > 16 || c[14] != floorf(c[14])) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan scale", name);
+    if (!tn__tg_whole(c[14], 16.0f)) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan scale", name);
     m->scale = c[14] > 0 ? (int)c[14] : 1;
     m->smooth = (int)c[15];
     m->stage_noise = (int)c[24];
-    if (c[15] != (float)m->smooth || c[24] != (float)m->stage_noise) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan flags", name);
     for (i = 0; i < TN_TEXGAN_MAX_CHANNELS; i++) m->mean[i] = c[16 + i];
     if (disc_width) *disc_width = (int)c[12];
     if (disc_layers) *disc_layers = (int)c[13];
@@ -13524,6 +13820,13 @@ static tn_status tn__tg_state_read(tn__tg_train *s, tn_params *ck, const char *n
     int i;
     for (i = 0; i < 19; i++)
         if (st[i] != st[i] || st[i] < 0 || st[i] > 1e12f) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state", name);
+    /* counters are 24-bit low + high halves (high <= 127: the long stays under 2^31), the RNG
+       16-bit quarters: checked before the casts, which would be undefined beyond the types */
+    for (i = 0; i < 3; i++)
+        if (!tn__tg_whole(st[i ? 9 + 2 * i : 0], 16777215.0f) || !tn__tg_whole(st[i ? 10 + 2 * i : 1], 127.0f))
+            return tn__fail(TN_ERR_CORRUPT, "%s: bad training state counters", name);
+    for (i = 3; i < 11; i++)
+        if (!tn__tg_whole(st[i], 65535.0f)) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state RNG", name);
     s->it = (long)st[0] + ((long)st[1] << 24);
     s->seconds = st[2];
     s->rng.state = tn__tg_get_u64(st + 3);
@@ -13631,8 +13934,9 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
     if (!st) st = tn_params_load_memory(ck, buf, n, path);
     if (!st) {
         const float *ts = tn_params_find(ck, "train.state")->data;
-        s->patch = (int)ts[15];
-        s->batch = (int)ts[16];
+        /* range before the cast (a float beyond int is undefined behaviour); 0 fails below */
+        s->patch = tn__tg_whole(ts[15], 4096.0f) ? (int)ts[15] : 0;
+        s->batch = tn__tg_whole(ts[16], 1024.0f) ? (int)ts[16] : 0;
         s->lr = ts[17];
         s->ema = ts[18];
         s->augment = ts[19] != 0.0f;
@@ -14777,10 +15081,11 @@ TN_API tn_status tn_detail_maps_save(const tn_detail_maps *m, const char *prefix
     if (!st) st = tn__dm_save_groups(&m->low, lp, 16, m->lo, m->hi);
     if (!st) st = tn__dm_save_groups(&m->high, hp, 8, 0.5f - 0.5f * (m->hi - m->lo), 0.5f + 0.5f * (m->hi - m->lo));
     if (!st) {
-        len = snprintf(txt, sizeof txt,
-                       "terrainnet detail maps 1\nsize %d %d\nchannels %d\ntiling %.9g %.9g\nfactor %d\nsigma %.9g\nrange %.9g %.9g\n",
-                       m->width, m->height, m->low.channels, (double)m->tiling_x, (double)m->tiling_y, m->factor, (double)m->sigma,
-                       (double)m->lo, (double)m->hi);
+        char v[5][40]; /* floats as shortest round-trip text with '.', whatever the C locale */
+        const float f[5] = {m->tiling_x, m->tiling_y, m->sigma, m->lo, m->hi};
+        for (len = 0; len < 5; len++) tn__io_format_number(v[len], sizeof v[len], (double)f[len], 1);
+        len = snprintf(txt, sizeof txt, "terrainnet detail maps 1\nsize %d %d\nchannels %d\ntiling %s %s\nfactor %d\nsigma %s\nrange %s %s\n",
+                       m->width, m->height, m->low.channels, v[0], v[1], m->factor, v[2], v[3], v[4]);
         st = tn__io_write_atomic(tp, (const uint8_t *)txt, (size_t)len);
     }
     TN_FREE(lp);
@@ -14794,8 +15099,7 @@ TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix)
     tn_detail_maps m;
     uint8_t *buf = NULL;
     size_t n = 0;
-    char *lp, *hp, *tp, *txt = NULL;
-    double tx = 0, ty = 0, sg = 0, lo = 0, hi = 0;
+    char *lp, *hp, *tp;
     int ch = 0;
     tn_status st = TN_OK;
     TN_ASSERT(maps);
@@ -14806,25 +15110,39 @@ TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix)
     tp = tn__dm_path(prefix, "_detail.txt");
     if (!lp || !hp || !tp) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__io_read_file(tp, &buf, &n);
-    if (!st && !(txt = (char *)tn__alloc(n + 1))) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) {
-        memcpy(txt, buf, n);
-        txt[n] = 0;
-        if (sscanf(txt, "terrainnet detail maps 1\nsize %d %d\nchannels %d\ntiling %lf %lf\nfactor %d\nsigma %lf\nrange %lf %lf", &m.width,
-                   &m.height, &ch, &tx, &ty, &m.factor, &sg, &lo, &hi) != 9 ||
-            m.width <= 0 || m.height <= 0 || ch < 1 || ch > 64 || !(tx > 0 && tx < 1e7) || !(ty > 0 && ty < 1e7) || m.factor <= 0 ||
-            !(lo < hi))
+        /* locale-free tokens (sscanf's %lf follows LC_NUMERIC, and its %d overflows undefined);
+           every number is range-checked before it is converted */
+        static const char *const words[] = {"terrainnet", "detail", "maps", "1", "size", "", "", "channels", "",
+                                            "tiling", "", "", "factor", "", "sigma", "", "range", "", ""};
+        double v[19];
+        size_t i = 0, tb = 0, tl = 0;
+        int k, ok = 1;
+        for (k = 0; ok && k < 19; k++) {
+            ok = tn__io_token(buf, n, &i, &tb, &tl);
+            if (ok && words[k][0]) ok = tn__io_token_is((const char *)buf + tb, tl, words[k]);
+            else if (ok) ok = tn__io_number((const char *)buf + tb, tl, &v[k]);
+        }
+        if (!ok || !(v[5] >= 1 && v[5] <= INT_MAX && v[5] == floor(v[5])) || !(v[6] >= 1 && v[6] <= INT_MAX && v[6] == floor(v[6])) ||
+            !(v[8] >= 1 && v[8] <= 64 && v[8] == floor(v[8])) || !(v[10] > 0 && v[10] < 1e7) || !(v[11] > 0 && v[11] < 1e7) ||
+            !(v[13] >= 1 && v[13] <= INT_MAX && v[13] == floor(v[13])) || !(v[15] >= 0 && v[15] <= FLT_MAX) ||
+            !(fabs(v[17]) <= FLT_MAX && fabs(v[18]) <= FLT_MAX && v[17] < v[18]))
             st = tn__fail(TN_ERR_CORRUPT, "%s: not a valid detail-map sidecar", tp);
+        else {
+            m.width = (int)v[5];
+            m.height = (int)v[6];
+            ch = (int)v[8];
+            m.tiling_x = (float)v[10];
+            m.tiling_y = (float)v[11];
+            m.factor = (int)v[13];
+            m.sigma = (float)v[15];
+            m.lo = (float)v[17];
+            m.hi = (float)v[18];
+        }
     }
-    m.tiling_x = (float)tx;
-    m.tiling_y = (float)ty;
-    m.sigma = (float)sg;
-    m.lo = (float)lo;
-    m.hi = (float)hi;
     if (!st) st = tn__dm_load_groups(&m.low, lp, ch);
     if (!st) st = tn__dm_load_groups(&m.high, hp, ch);
     TN_FREE(buf);
-    TN_FREE(txt);
     TN_FREE(lp);
     TN_FREE(hp);
     TN_FREE(tp);
@@ -15002,7 +15320,8 @@ static void tn__view_columns(void *ctx, size_t b, size_t e)
             if (px >= 0 && py >= 0 && px <= W - 1 && py <= H - 1) {
                 float z = (tn__sample_bilinear(j->dem, px, py, 0) - j->lo) * j->scale;
                 float depth = t * cosd;
-                int sy = (int)(horizon + (j->cz - z) / depth * j->focal);
+                float fsy = horizon + (j->cz - z) / depth * j->focal;
+                int sy = fsy < -1.0f ? -1 : fsy < (float)ybuf ? (int)fsy : ybuf; /* clamped before the cast */
                 if (sy < ybuf) {
                     float haze = tn__clampf(t / j->far_dist, 0.0f, 1.0f);
                     float col[3];
@@ -15041,7 +15360,11 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     if ((st = tn__dem_check(dem, 2, "render view"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    if (o.width <= 0 || o.height <= 0) { o.width = 960; o.height = 540; }
+    if (o.width < 0 || o.height < 0 || !(fabsf(o.azimuth_deg) <= 1e6f) || !(fabsf(o.pitch_deg) < 89.0f) ||
+        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
+                        o.width, o.height);
+    if (o.width == 0 || o.height == 0) { o.width = 960; o.height = 540; }
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
     if (o.azimuth_deg == 0) o.azimuth_deg = 180.0f;

@@ -1,0 +1,1350 @@
+/* Robustness of the public API against bad input: deterministic mutation fuzzing of the image
+   readers (PNG, PGM/PPM, PFM), the .tns sketch parser and the .tnw weights loader, seeded from
+   valid files written here, plus absurd arguments (negative, zero, huge sizes; NaN/Inf in maps
+   and parameters; NULL where the API documents an error) to the other public calls.
+   Every case must end in an error status with a message, or in success with finite output;
+   crashes, sanitizer reports and hangs are failures too (the Makefile builds tests with ASan and
+   UBSan). Fixed seeds, so a failure reproduces. */
+/* A 256 MiB allocation cap keeps "huge but allowed" sizes from eating the machine under ASan. */
+#define TN_MAX_ALLOC ((size_t)1 << 28)
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+#include <float.h>
+
+/* ---- helpers ---- */
+
+static const char *tmp_path(const char *leaf)
+{
+    static char buf[4][512];
+    static int k;
+    const char *dir = getenv("TMPDIR");
+    k = (k + 1) & 3;
+    snprintf(buf[k], sizeof buf[k], "%s/tn_test_robust_%s", dir && dir[0] ? dir : "/tmp", leaf);
+    return buf[k];
+}
+
+static int write_file(const char *path, const void *data, size_t n)
+{
+    FILE *f = fopen(path, "wb");
+    size_t w;
+    if (!f) return 0;
+    w = fwrite(data, 1, n, f);
+    return fclose(f) == 0 && w == n;
+}
+
+static int image_finite(const tn_image *img)
+{
+    size_t i, n;
+    if (!img->data || img->width < 1 || img->height < 1 || img->channels < 1) return 0;
+    n = (size_t)img->width * img->height * img->channels;
+    for (i = 0; i < n; i++)
+        if (!(img->data[i] == img->data[i] && fabsf(img->data[i]) <= FLT_MAX)) return 0;
+    return 1;
+}
+
+/* A failed call must name the problem; a successful one give finite pixels. */
+static int outcome_ok(tn_status st, const tn_image *img)
+{
+    if (st == TN_OK) return image_finite(img);
+    return st > TN_OK && st < TN_STATUS_COUNT && tn_last_error()[0] != 0 && img->data == NULL;
+}
+
+static uint32_t crc32_bytes(const uint8_t *p, size_t n)
+{
+    uint32_t c = 0xffffffffu;
+    size_t i;
+    int j;
+    for (i = 0; i < n; i++) {
+        c ^= p[i];
+        for (j = 0; j < 8; j++) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
+    }
+    return ~c;
+}
+
+static uint32_t be32(const uint8_t *p) { return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | p[3]; }
+static void put_be32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)(v >> 24); p[1] = (uint8_t)(v >> 16); p[2] = (uint8_t)(v >> 8); p[3] = (uint8_t)v; }
+static void put_le32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
+
+/* Rewrites every PNG chunk CRC so mutations get past the CRC check into the decoder proper. */
+static void png_fix_crcs(uint8_t *b, size_t n)
+{
+    size_t pos = 8;
+    while (pos + 12 <= n) {
+        uint32_t len = be32(b + pos);
+        if (len > n - pos - 12) break;
+        put_be32(b + pos + 8 + len, crc32_bytes(b + pos + 4, (size_t)len + 4));
+        pos += (size_t)len + 12;
+    }
+}
+
+/* Offset of a PNG chunk's length field, or 0. */
+static size_t png_find_chunk(const uint8_t *b, size_t n, const char *type)
+{
+    size_t pos = 8;
+    while (pos + 12 <= n) {
+        uint32_t len = be32(b + pos);
+        if (!memcmp(b + pos + 4, type, 4)) return pos;
+        if (len > n - pos - 12) break;
+        pos += (size_t)len + 12;
+    }
+    return 0;
+}
+
+static void pattern(tn_image *img, float lo, float hi)
+{
+    size_t i, n = (size_t)img->width * img->height * img->channels;
+    for (i = 0; i < n; i++) img->data[i] = lo + (hi - lo) * (float)((i * 7919u) % 1001u) / 1000.0f;
+}
+
+/* Valid seed files, each small so the fuzz loops stay fast. */
+enum { SEED_PNG16, SEED_PNG8RGB, SEED_PNG8GA, SEED_PGM16, SEED_PPM8, SEED_PFM1, SEED_PFM3, SEED_P2, SEED_ASC, SEED_COUNT };
+
+static int make_seed(int which, uint8_t **out, size_t *n, const char **name)
+{
+    tn_image img = {0};
+    tn_save_opts so;
+    tn_status st;
+    int ch = (which == SEED_PNG8RGB || which == SEED_PPM8 || which == SEED_PFM3) ? 3 : which == SEED_PNG8GA ? 2 : 1;
+    memset(&so, 0, sizeof so);
+    if (which == SEED_P2) {
+        static const char p2[] = "P2\n# terrainnet.range -12.5 830\n4 3\n65535\n0 1 2 3\n400 500 600 700\n65535 9 8 7\n";
+        *n = sizeof p2 - 1;
+        *out = (uint8_t *)malloc(*n);
+        memcpy(*out, p2, *n);
+        *name = "seed.pgm";
+        return 1;
+    }
+    if (tn_image_create(&img, 13, 9, ch)) return 0;
+    pattern(&img, -40.0f, 1234.5f);
+    switch (which) {
+    case SEED_PNG16: so.bit_depth = 16; *name = "seed.png"; break;
+    case SEED_PNG8RGB: case SEED_PNG8GA: so.bit_depth = 8; pattern(&img, 0.0f, 1.0f); *name = "seed.png"; break;
+    case SEED_PGM16: so.bit_depth = 16; *name = "seed.pgm"; break;
+    case SEED_PPM8: so.bit_depth = 8; *name = "seed.ppm"; break;
+    case SEED_ASC: *name = "seed.asc"; break;
+    default: *name = "seed.pfm"; break;
+    }
+    st = tn_image_save_memory(&img, &so,
+                              which <= SEED_PNG8GA ? TN_FORMAT_PNG : which <= SEED_PPM8 ? TN_FORMAT_PNM
+                                                   : which == SEED_ASC ? TN_FORMAT_ASC : TN_FORMAT_PFM, out, n);
+    if (st == TN_OK && which == SEED_ASC) { /* a NODATA header and cell, so the void filling runs too */
+        static const char hdr[] = "ncols 13\nnrows 9\nxllcorner 0\nyllcorner 0\ncellsize 30\nNODATA_value -9999\n-9999 ";
+        size_t body = 0, k, lines = 0;
+        uint8_t *b;
+        for (k = 0; k < *n && lines < 5; k++) lines += (*out)[k] == '\n';
+        body = k;
+        while (body < *n && (*out)[body] != ' ') body++; /* drop the first cell's value */
+        b = (uint8_t *)malloc(sizeof hdr - 1 + *n - body);
+        memcpy(b, hdr, sizeof hdr - 1);
+        memcpy(b + sizeof hdr - 1, *out + body + 1, *n - body - 1);
+        *n = sizeof hdr - 1 + *n - body - 1;
+        tn_free(*out);
+        *out = b;
+    }
+    tn_image_free(&img);
+    return st == TN_OK;
+}
+
+static int load_checked(const uint8_t *b, size_t n, const char *name)
+{
+    tn_image img = {0};
+    tn_image_info info;
+    tn_status st;
+    int ok;
+    tn_clear_error();
+    st = tn_image_load_memory(b, n, name, &img, &info, NULL);
+    ok = outcome_ok(st, &img);
+    if (!ok) fprintf(stderr, "  %s (%zu bytes): status %d '%s'\n", name, n, (int)st, tn_last_error());
+    tn_image_free(&img);
+    return ok;
+}
+
+/* ---- image readers ---- */
+
+TN_TEST(test_image_readers_mutated)
+{
+    int which, bad = 0, round;
+    tn_rng rng;
+    tn_rng_seed(&rng, 20261125, 1);
+    for (which = 0; which < SEED_COUNT; which++) {
+        uint8_t *seed = NULL, *b;
+        size_t n = 0, k;
+        const char *name;
+        TN_CHECK(make_seed(which, &seed, &n, &name));
+        if (!seed) continue;
+        { /* the seed itself must load */
+            tn_image img = {0};
+            tn_image_info info;
+            TN_CHECK(tn_image_load_memory(seed, n, name, &img, &info, NULL) == TN_OK && image_finite(&img));
+            if (which == SEED_ASC) TN_CHECK(info.voids_filled == 1);
+            tn_image_free(&img);
+        }
+        b = (uint8_t *)malloc(n + 16);
+        /* every truncation */
+        for (k = 0; k < n; k++) bad += !load_checked(seed, k, name);
+        /* random bit flips and byte stores, with and without repaired PNG CRCs */
+        for (round = 0; round < 3000; round++) {
+            int flips = 1 + (int)tn_rng_below(&rng, 4), f;
+            memcpy(b, seed, n);
+            for (f = 0; f < flips; f++) {
+                size_t at = tn_rng_below(&rng, (uint32_t)n);
+                switch (tn_rng_below(&rng, 4)) {
+                case 0: b[at] ^= (uint8_t)(1u << tn_rng_below(&rng, 8)); break;
+                case 1: b[at] = 0xff; break;
+                case 2: b[at] = 0; break;
+                default: b[at] = (uint8_t)"0123456789e+-.# \n"[tn_rng_below(&rng, 17)]; break;
+                }
+            }
+            if (which <= SEED_PNG8GA && (round & 1)) png_fix_crcs(b, n);
+            bad += !load_checked(b, n, name);
+        }
+        free(b);
+        free(seed);
+    }
+    TN_CHECK(bad == 0);
+}
+
+TN_TEST(test_png_bogus_chunks)
+{
+    uint8_t *seed = NULL, *b;
+    size_t n = 0, ih, te, id;
+    const char *name;
+    static const uint32_t dims[] = {0, 1, 0x7fffffffu, 0x80000000u, 0xffffffffu, 65536, 1u << 20};
+    static const uint32_t lens[] = {0, 1, 12, 0x7fffffffu, 0x80000000u, 0xffffffffu, 0xfffffff4u};
+    size_t i, j;
+    TN_CHECK(make_seed(SEED_PNG16, &seed, &n, &name));
+    if (!seed) return;
+    b = (uint8_t *)malloc(n);
+    ih = png_find_chunk(seed, n, "IHDR");
+    te = png_find_chunk(seed, n, "tEXt");
+    id = png_find_chunk(seed, n, "IDAT");
+    TN_CHECK(ih && te && id);
+    /* huge and zero dimensions (CRC repaired, so the size checks are what stops them) */
+    for (i = 0; i < sizeof dims / sizeof dims[0]; i++)
+        for (j = 0; j < 2; j++) {
+            memcpy(b, seed, n);
+            put_be32(b + ih + 8 + 4 * j, dims[i]);
+            png_fix_crcs(b, n);
+            TN_CHECK(load_checked(b, n, name));
+        }
+    /* both at once: 2^31-1 squared */
+    memcpy(b, seed, n);
+    put_be32(b + ih + 8, 0x7fffffffu);
+    put_be32(b + ih + 12, 0x7fffffffu);
+    png_fix_crcs(b, n);
+    TN_CHECK(load_checked(b, n, name));
+    /* bogus chunk lengths on every chunk */
+    for (i = 0; i < sizeof lens / sizeof lens[0]; i++) {
+        size_t at[3];
+        at[0] = ih; at[1] = te; at[2] = id;
+        for (j = 0; j < 3; j++) {
+            memcpy(b, seed, n);
+            put_be32(b + at[j], lens[i]);
+            TN_CHECK(load_checked(b, n, name));
+            png_fix_crcs(b, n);
+            TN_CHECK(load_checked(b, n, name));
+        }
+    }
+    free(b);
+    free(seed);
+}
+
+/* A PNG whose tEXt range is replaced by `range` (CRCs repaired). */
+static uint8_t *png_with_range(const char *range, size_t *out_n)
+{
+    uint8_t *seed = NULL, *b;
+    size_t n = 0, te, len, nl = strlen(range), tail;
+    const char *name;
+    if (!make_seed(SEED_PNG16, &seed, &n, &name)) return NULL;
+    te = png_find_chunk(seed, n, "tEXt");
+    if (!te) { free(seed); return NULL; }
+    len = be32(seed + te);
+    tail = n - (te + 12 + len);
+    b = (uint8_t *)malloc(n + nl + 64);
+    memcpy(b, seed, te);
+    put_be32(b + te, (uint32_t)(17 + nl));
+    memcpy(b + te + 4, "tEXtterrainnet.range", 20);
+    b[te + 24] = 0;
+    memcpy(b + te + 25, range, nl);
+    memcpy(b + te + 12 + 17 + nl, seed + te + 12 + len, tail);
+    *out_n = te + 12 + 17 + nl + tail;
+    png_fix_crcs(b, *out_n);
+    free(seed);
+    return b;
+}
+
+TN_TEST(test_range_metadata)
+{
+    static const char *const huge[] = {"0 1e300", "-1e39 1", "-3.5e38 3.5e38", "0 1e39", "inf 1", "0 1e400"};
+    static const char *const ignored[] = {"0 nan", "nan 1", "0 1 2", "1,5 2", "0x", ""};
+    char pgm[256];
+    size_t i, n;
+    tn_image img = {0};
+    tn_image_info info;
+    tn_save_opts so;
+    uint8_t *out = NULL;
+    for (i = 0; i < sizeof huge / sizeof huge[0]; i++) {
+        uint8_t *b = png_with_range(huge[i], &n);
+        TN_CHECK(b != NULL);
+        if (!b) continue;
+        TN_CHECK(tn_image_load_memory(b, n, "huge.png", &img, &info, NULL) == TN_ERR_NUMERIC);
+        TN_CHECK(img.data == NULL);
+        free(b);
+        n = (size_t)snprintf(pgm, sizeof pgm, "P2\n# terrainnet.range %s\n2 1\n255\n0 255\n", huge[i]);
+        TN_CHECK(tn_image_load_memory(pgm, n, "huge.pgm", &img, &info, NULL) == TN_ERR_NUMERIC);
+        TN_CHECK(img.data == NULL);
+    }
+    /* malformed range text is an ignored comment / ancillary chunk: [0, 1] codes */
+    for (i = 0; i < sizeof ignored / sizeof ignored[0]; i++) {
+        uint8_t *b = png_with_range(ignored[i], &n);
+        TN_CHECK(b != NULL);
+        if (!b) continue;
+        TN_CHECK(tn_image_load_memory(b, n, "odd.png", &img, &info, NULL) == TN_OK && !info.has_range && image_finite(&img));
+        tn_image_free(&img);
+        free(b);
+    }
+    /* range text is read locale-free: "1e-3 2.5" is a range, whatever LC_NUMERIC says */
+    {
+        uint8_t *b = png_with_range("0.25 2.5", &n);
+        TN_CHECK(b && tn_image_load_memory(b, n, "r.png", &img, &info, NULL) == TN_OK && info.has_range &&
+                 info.range_lo == 0.25 && info.range_hi == 2.5);
+        tn_image_free(&img);
+        free(b);
+    }
+    /* writers refuse ranges that are not finite or beyond float (they could not be read back) */
+    TN_CHECK(tn_image_create(&img, 4, 4, 1) == TN_OK);
+    memset(&so, 0, sizeof so);
+    so.has_range = 1;
+    so.range_lo = 0.0;
+    so.range_hi = HUGE_VAL;
+    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNM, &out, &n) != TN_OK && out == NULL);
+    so.range_hi = NAN;
+    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
+    so.range_hi = 1e300;
+    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNM, &out, &n) != TN_OK && out == NULL);
+    /* a failed save leaves an existing file as it was */
+    {
+        const char *path = tmp_path("keep.png");
+        uint8_t *b = NULL;
+        FILE *f;
+        long len;
+        img.data[0] = 0.5f;
+        TN_CHECK(tn_image_save(path, &img, NULL) == TN_OK);
+        f = fopen(path, "rb");
+        fseek(f, 0, SEEK_END);
+        len = ftell(f);
+        fclose(f);
+        TN_CHECK(tn_image_save(path, &img, &so) != TN_OK);
+        img.data[1] = NAN;
+        TN_CHECK(tn_image_save(path, &img, NULL) == TN_ERR_NUMERIC);
+        f = fopen(path, "rb");
+        fseek(f, 0, SEEK_END);
+        TN_CHECK(ftell(f) == len);
+        fclose(f);
+        remove(path);
+        free(b);
+    }
+    tn_image_free(&img);
+}
+
+/* ---- .tns sketch text ---- */
+
+static int sketch_checked(const char *text, size_t n)
+{
+    tn_contour_set s;
+    tn_status st;
+    int i, j, ok = 1;
+    memset(&s, 0, sizeof s);
+    tn_clear_error();
+    st = tn_sketch_parse(text, n, "fuzz.tns", &s);
+    if (st != TN_OK) {
+        ok = st < TN_STATUS_COUNT && tn_last_error()[0] && s.items == NULL && s.count == 0;
+    } else {
+        for (i = 0; i < s.count && ok; i++)
+            for (j = 0; j < 3 * s.items[i].npoints; j++)
+                if (!(fabsf(s.items[i].points[j]) <= FLT_MAX)) ok = 0;
+    }
+    if (!ok) fprintf(stderr, "  sketch (%zu bytes): status %d '%s'\n", n, (int)st, tn_last_error());
+    tn_contour_set_free(&s);
+    return ok;
+}
+
+TN_TEST(test_sketch_text_mutated)
+{
+    static const char seed[] =
+        "terrainnet-sketch 1\n# comment\ncanvas 64 48\nridge order 2 gradient 0.13\n10 20 0.8\n40.5 22 0.75\n50 30\nend\n"
+        "valley start 0.2 rate 0.001\n1 1\n30 40\n63 47 0.1\nend\n";
+    static const char *const tokens[] = {"nan", "inf", "-inf", "1e39", "-1e400", "1e308", "99999999999999999999",
+                                         "2147483648", "-2147483649", "0x10", "", " ", "\n", "end\n", "canvas 1 1\n",
+                                         "canvas 0 5\n", "canvas -3 4\n", "canvas 2147483647 2147483647\n",
+                                         "canvas 65537 2\n", "ridge\n", "order 1e30", "gradient nan", "start inf",
+                                         "rate 1e38", "#", "1 2 3 4", "valley order -5\n"};
+    static const char *const whole[] = {
+        "terrainnet-sketch 1\ncanvas 1e9 4\n",
+        "terrainnet-sketch 1\ncanvas nan 4\n",
+        "terrainnet-sketch 1\ncanvas 65537 65536\nridge\n0 0\n65535 65535\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge\n1 1 nan\n2 2\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge start 1e38 rate 1e38\n0 0\n7 7\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge start 3e38 rate 3e38\n0 0\n7 0\n7 7\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge order 2147483648\n0 0\n1 1\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge gradient 1e39\n0 0\n1 1\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge\n0 0\n",
+        "terrainnet-sketch 1\nridge\n0 0\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge\n1\nend\n",
+        "terrainnet-sketch 1\ncanvas 8 8\nridge\n-0.5 -0.5\n7.5 7.5\n7.6 7.5\nend\n",
+        "terrainnet-sketch 99\n",
+        "terrainnet-sketch\n",
+        "",
+    };
+    char buf[1024];
+    size_t n = sizeof seed - 1, k, i;
+    int round, bad = 0;
+    tn_rng rng;
+    tn_rng_seed(&rng, 7, 2);
+    TN_CHECK(sketch_checked(seed, n));
+    for (k = 0; k < n; k++) bad += !sketch_checked(seed, k);
+    for (i = 0; i < sizeof whole / sizeof whole[0]; i++) bad += !sketch_checked(whole[i], strlen(whole[i]));
+    /* a "1e39" height is NaN/Inf-class input: TN_ERR_NUMERIC, never a silent inf */
+    {
+        tn_contour_set s;
+        memset(&s, 0, sizeof s);
+        TN_CHECK(tn_sketch_parse(whole[3], strlen(whole[3]), NULL, &s) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_sketch_parse(whole[5], strlen(whole[5]), NULL, &s) != TN_OK);
+        TN_CHECK(tn_sketch_parse(whole[2], strlen(whole[2]), NULL, &s) == TN_ERR_TOO_LARGE);
+    }
+    for (round = 0; round < 6000; round++) {
+        size_t len = n, at, tl;
+        const char *tok;
+        int edits = 1 + (int)tn_rng_below(&rng, 3), e;
+        memcpy(buf, seed, n);
+        for (e = 0; e < edits; e++) {
+            at = tn_rng_below(&rng, (uint32_t)len + 1);
+            switch (tn_rng_below(&rng, 3)) {
+            case 0: /* insert a token */
+                tok = tokens[tn_rng_below(&rng, sizeof tokens / sizeof tokens[0])];
+                tl = strlen(tok);
+                if (len + tl + 1 >= sizeof buf) break;
+                memmove(buf + at + tl, buf + at, len - at);
+                memcpy(buf + at, tok, tl);
+                len += tl;
+                break;
+            case 1: /* delete a run */
+                tl = tn_rng_below(&rng, 8);
+                if (at + tl > len) tl = len - at;
+                memmove(buf + at, buf + at + tl, len - at - tl);
+                len -= tl;
+                break;
+            default: /* overwrite a byte */
+                if (at < len) buf[at] = "0123456789.-+e \n#xnaiNrdgv"[tn_rng_below(&rng, 26)];
+                break;
+            }
+        }
+        bad += !sketch_checked(buf, len);
+    }
+    TN_CHECK(bad == 0);
+}
+
+/* ---- .tnw weights ---- */
+
+/* A .tnw image of the given tensors (names, 1-D shapes, constant data), CRC appended. */
+static size_t tnw_build(uint8_t *b, const char *const *names, const uint32_t *ndims, const uint32_t (*shapes)[9], int count,
+                        float value)
+{
+    size_t o = 0;
+    int i;
+    uint32_t d;
+    memcpy(b, "TNW1", 4);
+    put_le32(b + 4, 1);
+    put_le32(b + 8, (uint32_t)count);
+    o = 12;
+    for (i = 0; i < count; i++) {
+        size_t nl = strlen(names[i]), numel = 1, k;
+        b[o] = (uint8_t)nl;
+        b[o + 1] = 0;
+        memcpy(b + o + 2, names[i], nl);
+        o += 2 + nl;
+        b[o++] = (uint8_t)ndims[i];
+        b[o++] = 0;
+        for (d = 0; d < ndims[i]; d++) {
+            put_le32(b + o, shapes[i][d]);
+            numel *= shapes[i][d];
+            o += 4;
+        }
+        if (numel > 64) numel = 0; /* absurd shapes: no data (the loader must notice) */
+        for (k = 0; k < numel; k++) {
+            uint32_t u;
+            memcpy(&u, &value, 4);
+            put_le32(b + o, u);
+            o += 4;
+        }
+    }
+    {
+        uint32_t c = crc32_bytes(b, o);
+        put_le32(b + o, c);
+        o += 4;
+    }
+    return o;
+}
+
+TN_TEST(test_tnw_loader)
+{
+    tn_params *p = tn_params_create();
+    int s4 = 4, s23[2] = {2, 3}, round, bad = 0;
+    uint8_t *good = NULL, b[4096];
+    size_t gn = 0, k;
+    const char *path = tmp_path("w.tnw");
+    FILE *f;
+    tn_rng rng;
+    TN_CHECK(p != NULL);
+    if (!p) return;
+    TN_CHECK(tn_params_add(p, "a", 1, &s4) != NULL);
+    TN_CHECK(tn_params_add(p, "b", 2, s23) != NULL);
+    TN_CHECK(tn_params_save(p, path) == TN_OK);
+    f = fopen(path, "rb");
+    if (f) {
+        good = (uint8_t *)malloc(4096);
+        gn = fread(good, 1, 4096, f);
+        fclose(f);
+    }
+    TN_CHECK(good && gn > 16);
+    if (!good) { tn_params_free(p); return; }
+    TN_CHECK(tn_params_load_memory(p, good, gn, "w.tnw") == TN_OK);
+    for (k = 0; k < gn; k++) {
+        tn_clear_error();
+        if (tn_params_load_memory(p, good, k, "w.tnw") == TN_OK || !tn_last_error()[0]) bad++;
+    }
+    tn_rng_seed(&rng, 3, 3);
+    for (round = 0; round < 2000; round++) {
+        tn_status st;
+        memcpy(b, good, gn);
+        b[tn_rng_below(&rng, (uint32_t)gn - 4)] ^= (uint8_t)(1u << tn_rng_below(&rng, 8));
+        put_le32(b + gn - 4, crc32_bytes(b, gn - 4)); /* past the CRC, into the parser */
+        tn_clear_error();
+        st = tn_params_load_memory(p, b, gn, "w.tnw");
+        if (st != TN_OK && !tn_last_error()[0]) bad++;
+        if (st == TN_OK) { /* only data bytes changed; values must be finite */
+            for (k = 0; k < 4; k++) if (!(fabsf(tn_params_find(p, "a")->data[k]) <= FLT_MAX)) bad++;
+        }
+    }
+    TN_CHECK(bad == 0);
+    {
+        /* duplicate tensor names */
+        static const char *const dup[] = {"a", "a"};
+        static const uint32_t nd[] = {1, 1}, sh[2][9] = {{4}, {4}};
+        static const char *const two[] = {"a", "b"};
+        static const uint32_t nd2[] = {1, 4}, sh2[2][9] = {{4}, {0xffffffffu, 0xffffffffu, 0xffffffffu, 0xffffffffu}};
+        static const uint32_t nd3[] = {1, 2}, sh3[2][9] = {{4}, {65536, 65536}};
+        static const uint32_t nd4[] = {1, 9}, sh4[2][9] = {{4}, {2, 3, 1, 1, 1, 1, 1, 1, 1}};
+        size_t n = tnw_build(b, dup, nd, sh, 2, 1.0f);
+        TN_CHECK(tn_params_load_memory(p, b, n, "dup.tnw") == TN_ERR_CORRUPT);
+        n = tnw_build(b, two, nd2, sh2, 2, 1.0f);
+        TN_CHECK(tn_params_load_memory(p, b, n, "huge.tnw") != TN_OK && tn_last_error()[0]);
+        n = tnw_build(b, two, nd3, sh3, 2, 1.0f);
+        TN_CHECK(tn_params_load_memory(p, b, n, "huge2.tnw") != TN_OK && tn_last_error()[0]);
+        n = tnw_build(b, two, nd4, sh4, 2, 1.0f);
+        TN_CHECK(tn_params_load_memory(p, b, n, "ndim.tnw") != TN_OK && tn_last_error()[0]);
+        n = tnw_build(b, two, nd, sh, 2, NAN);
+        TN_CHECK(tn_params_load_memory(p, b, n, "nan.tnw") != TN_OK);
+        TN_CHECK(tn_params_load(p, tmp_path("missing.tnw")) == TN_ERR_IO);
+    }
+    remove(path);
+    free(good);
+    tn_params_free(p);
+}
+
+/* ---- absurd arguments ---- */
+
+static tn_image small_dem(int w, int h)
+{
+    tn_image d = {0};
+    int x, y;
+    if (tn_image_create(&d, w, h, 1)) return d;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) d.data[y * w + x] = (float)(sin(x * 0.3) * cos(y * 0.2) * 50.0 + x + 0.5 * y);
+    return d;
+}
+
+TN_TEST(test_image_args)
+{
+    tn_image dem = small_dem(24, 20), out = {0}, gx = {0}, gy = {0}, nanimg = {0};
+    tn_hillshade_opts ho;
+    static const int sizes[][2] = {{0, 5}, {5, 0}, {-1, 5}, {5, -7}, {INT_MAX, 2}, {2, INT_MAX}, {INT_MAX, INT_MAX}, {1 << 20, 1 << 20}};
+    static const float bad_sp[] = {NAN, INFINITY, -INFINITY, 1e-45f, -1e-45f, FLT_MAX, -FLT_MAX};
+    size_t i;
+    int f;
+    for (i = 0; i < sizeof sizes / sizeof sizes[0]; i++)
+        for (f = 0; f < 4; f++) {
+            tn_status st = tn_image_resize(&out, &dem, sizes[i][0], sizes[i][1], (tn_resize_filter)f);
+            TN_CHECK(st != TN_OK && out.data == NULL);
+        }
+    TN_CHECK(tn_image_resize(&out, &dem, 5, 5, (tn_resize_filter)99) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_resize(&out, &dem, 5, 5, (tn_resize_filter)-1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_resize(&out, NULL, 5, 5, TN_RESIZE_BILINEAR) != TN_OK);
+    TN_CHECK(tn_image_resize(&out, &dem, 1, 1, TN_RESIZE_AREA) == TN_OK && image_finite(&out));
+    tn_image_free(&out);
+    TN_CHECK(tn_image_resize(&out, &dem, 3000, 1, TN_RESIZE_BICUBIC) == TN_OK && image_finite(&out));
+    tn_image_free(&out);
+    for (i = 0; i < sizeof bad_sp / sizeof bad_sp[0]; i++) {
+        tn_status st = tn_image_gradient(&dem, bad_sp[i], 1.0f, &gx, &gy);
+        TN_CHECK(st != TN_OK ? gx.data == NULL : image_finite(&gx) && image_finite(&gy));
+        tn_image_free(&gx);
+        tn_image_free(&gy);
+        st = tn_image_slope(&out, &dem, 1.0f, bad_sp[i]);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        st = tn_image_normals(&out, &dem, bad_sp[i], 1.0f, 1.0f);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        st = tn_image_normals(&out, &dem, 1.0f, 1.0f, bad_sp[i]);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&ho, 0, sizeof ho);
+        ho.azimuth_deg = bad_sp[i];
+        st = tn_image_hillshade(&out, &dem, &ho);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&ho, 0, sizeof ho);
+        ho.altitude_deg = bad_sp[i];
+        st = tn_image_hillshade(&out, &dem, &ho);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&ho, 0, sizeof ho);
+        ho.z_factor = bad_sp[i];
+        st = tn_image_hillshade(&out, &dem, &ho);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&ho, 0, sizeof ho);
+        ho.dx = bad_sp[i];
+        st = tn_image_hillshade(&out, &dem, &ho);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        st = tn_image_blur(&out, &dem, bad_sp[i]);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        st = tn_image_colour_ramp(&out, &dem, bad_sp[i], 1.0f);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+    }
+    /* a DEM with NaN/Inf: either refused or finite output */
+    TN_CHECK(tn_image_copy(&nanimg, &dem) == TN_OK);
+    nanimg.data[5] = NAN;
+    nanimg.data[50] = INFINITY;
+    {
+        tn_status st = tn_image_hillshade(&out, &nanimg, NULL);
+        TN_CHECK(st != TN_OK ? out.data == NULL : 1);
+        tn_image_free(&out);
+        st = tn_image_resize(&out, &nanimg, 7, 9, TN_RESIZE_BICUBIC);
+        tn_image_free(&out);
+        (void)st;
+    }
+    TN_CHECK(tn_image_crop(&out, &dem, -1, 0, 2, 2) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_crop(&out, &dem, INT_MAX, INT_MAX, INT_MAX, INT_MAX) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_pad(&out, &dem, -1, 0, 0, 0, TN_PAD_EDGE) != TN_OK);
+    TN_CHECK(tn_image_pad(&out, &dem, INT_MAX, INT_MAX, 0, 0, TN_PAD_REFLECT) != TN_OK);
+    TN_CHECK(tn_image_pad(&out, &dem, 1000, 0, 0, 0, TN_PAD_REFLECT) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    TN_CHECK(tn_image_create(&out, -1, 1, 1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_create(&out, INT_MAX, INT_MAX, 8) == TN_ERR_TOO_LARGE);
+    tn_image_free(&nanimg);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_deflate_and_metrics_args)
+{
+    uint8_t src[100], *out = NULL, *back = NULL;
+    size_t n = 0, bn = 0;
+    static const int levels[] = {-1, 10, 100, INT_MIN, INT_MAX};
+    size_t i;
+    tn_image a = small_dem(16, 16), b = small_dem(16, 16);
+    tn_metrics m;
+    for (i = 0; i < sizeof src; i++) src[i] = (uint8_t)(i * 7);
+    for (i = 0; i < sizeof levels / sizeof levels[0]; i++) {
+        TN_CHECK(tn_zlib_deflate(src, sizeof src, levels[i], &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+        tn_free(out);
+        out = NULL;
+    }
+    TN_CHECK(tn_zlib_deflate(src, 0, 9, &out, &n) == TN_OK && tn_zlib_inflate(out, n, &back, &bn, 0) == TN_OK && bn == 0);
+    tn_free(out);
+    tn_free(back);
+    out = back = NULL;
+    {
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.compression = 11;
+        TN_CHECK(tn_image_save_memory(&a, &so, TN_FORMAT_PNG, &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+        so.compression = -3;
+        TN_CHECK(tn_image_save_memory(&a, &so, TN_FORMAT_PNG, &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+    }
+    TN_CHECK(tn_zlib_inflate(src, sizeof src, &back, &bn, 0) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_compare(&a, &b, NAN, &m) != TN_OK || (m.ssim == m.ssim));
+    b.data[3] = NAN;
+    TN_CHECK(tn_compare(&a, &b, 1.0, &m) != TN_OK || 1);
+    tn_image_free(&a);
+    tn_image_free(&b);
+}
+
+TN_TEST(test_noise_args)
+{
+    tn_image out = {0};
+    tn_perlin_opts po;
+    tn_explicit_opts eo;
+    static const float bad[] = {NAN, INFINITY, -INFINITY, -1.0f, 1e30f, FLT_MAX};
+    float sig[2] = {NAN, 1.0f};
+    size_t i;
+    TN_CHECK(tn_noise_perlin(&out, 0, 5, NULL) != TN_OK && out.data == NULL);
+    TN_CHECK(tn_noise_perlin(&out, -5, 5, NULL) != TN_OK && out.data == NULL);
+    TN_CHECK(tn_noise_perlin(&out, INT_MAX, INT_MAX, NULL) != TN_OK && out.data == NULL);
+    TN_CHECK(tn_noise_explicit(&out, 5, -5, NULL) != TN_OK && out.data == NULL);
+    TN_CHECK(tn_noise_explicit(&out, INT_MAX, INT_MAX, NULL) != TN_OK && out.data == NULL);
+    for (i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        tn_status st;
+        memset(&po, 0, sizeof po);
+        po.frequency = bad[i];
+        st = tn_noise_perlin(&out, 16, 16, &po);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&po, 0, sizeof po);
+        po.lacunarity = bad[i];
+        st = tn_noise_perlin(&out, 16, 16, &po);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&po, 0, sizeof po);
+        po.gain = bad[i];
+        st = tn_noise_perlin(&out, 16, 16, &po);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+        memset(&po, 0, sizeof po);
+        po.periodic = 1;
+        po.frequency = bad[i];
+        st = tn_noise_perlin(&out, 16, 16, &po);
+        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+        tn_image_free(&out);
+    }
+    memset(&po, 0, sizeof po);
+    po.octaves = -3;
+    TN_CHECK(tn_noise_perlin(&out, 16, 16, &po) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    po.octaves = INT_MAX;
+    TN_CHECK(tn_noise_perlin(&out, 16, 16, &po) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    memset(&eo, 0, sizeof eo);
+    eo.layers = -1;
+    TN_CHECK(tn_noise_explicit(&out, 16, 16, &eo) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    eo.layers = INT_MAX;
+    TN_CHECK(tn_noise_explicit(&out, 16, 16, &eo) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    memset(&eo, 0, sizeof eo);
+    eo.sigmas = sig;
+    eo.nsigmas = 2;
+    TN_CHECK(tn_noise_explicit(&out, 16, 16, &eo) != TN_OK && out.data == NULL);
+    eo.sigmas = NULL;
+    eo.nsigmas = 5;
+    TN_CHECK(tn_noise_explicit(&out, 16, 16, &eo) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    eo.sigmas = sig;
+    eo.nsigmas = -1;
+    TN_CHECK(tn_noise_explicit(&out, 16, 16, &eo) != TN_OK || image_finite(&out));
+    tn_image_free(&out);
+    {
+        tn_image n = small_dem(16, 16), d = small_dem(8, 8);
+        TN_CHECK(tn_noise_blend(&out, &n, &d, NAN) != TN_OK && out.data == NULL);
+        TN_CHECK(tn_noise_blend(&out, &n, &d, 2.0f) != TN_OK && out.data == NULL);
+        tn_image_free(&n);
+        tn_image_free(&d);
+    }
+}
+
+TN_TEST(test_extract_args)
+{
+    tn_image dem = small_dem(32, 32), bad = {0};
+    tn_flow flow;
+    tn_extraction ex;
+    tn_extract_opts eo;
+    tn_realism r;
+    tn_realism_opts ro;
+    memset(&flow, 0, sizeof flow);
+    memset(&ex, 0, sizeof ex);
+    TN_CHECK(tn_image_copy(&bad, &dem) == TN_OK);
+    bad.data[40] = NAN;
+    TN_CHECK(tn_flow_compute(&flow, &bad, 0) == TN_ERR_NUMERIC && flow.dir == NULL);
+    TN_CHECK(tn_extract(&bad, NULL, &ex) == TN_ERR_NUMERIC);
+    bad.data[40] = -INFINITY;
+    TN_CHECK(tn_extract(&bad, NULL, &ex) == TN_ERR_NUMERIC);
+    {
+        tn_image f = {0};
+        TN_CHECK(tn_fill_depressions(&f, &bad) == TN_ERR_NUMERIC && f.data == NULL);
+        bad.data[40] = FLT_MAX; /* finite, but no float above it to fill with */
+        TN_CHECK(tn_fill_depressions(&f, &bad) != TN_OK || image_finite(&f));
+        tn_image_free(&f);
+    }
+    memset(&eo, 0, sizeof eo);
+    eo.threshold = -5;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) != TN_OK || ex.contours.count >= 0);
+    tn_extraction_free(&ex);
+    eo.threshold = INT_MAX;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_OK || tn_last_error()[0]);
+    tn_extraction_free(&ex);
+    memset(&eo, 0, sizeof eo);
+    eo.dx = NAN;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    tn_extraction_free(&ex);
+    memset(&eo, 0, sizeof eo);
+    eo.drop_fraction = NAN;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    tn_extraction_free(&ex);
+    memset(&eo, 0, sizeof eo);
+    eo.which = 7;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    tn_extraction_free(&ex);
+    memset(&eo, 0, sizeof eo);
+    eo.max_length = -3;
+    eo.min_length = INT_MAX;
+    eo.closing = INT_MAX;
+    TN_CHECK(tn_extract(&dem, &eo, &ex) != TN_OK || ex.contours.count >= 0);
+    tn_extraction_free(&ex);
+    /* accumulation over corrupt directions */
+    TN_CHECK(tn_flow_compute(&flow, &dem, 0) == TN_OK);
+    flow.dir[5 * 32 + 5] = 77;
+    tn_free(flow.acc);
+    flow.acc = NULL;
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    flow.dir[5 * 32 + 5] = 0;
+    flow.dir[5 * 32 + 6] = 4; /* E then W: a cycle */
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    flow.dir[5 * 32 + 6] = 0;
+    flow.dir[31] = 0; /* E off the right edge: it used to land on the next row */
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    flow.dir[31] = TN_FLOW_OUTLET;
+    flow.dir[0] = 5; /* NW off the corner */
+    TN_CHECK(tn_flow_accumulation(&flow) == TN_ERR_CORRUPT);
+    {
+        uint8_t mask[32 * 32], order[32 * 32];
+        int top = 0;
+        memset(mask, 1, sizeof mask);
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+        flow.dir[0] = 200;
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+    }
+    tn_flow_free(&flow);
+    /* realism */
+    memset(&ro, 0, sizeof ro);
+    bad.data[40] = NAN;
+    TN_CHECK(tn_realism_compare(&dem, &bad, NULL, &r) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_realism_compare(&bad, &dem, NULL, &r) == TN_ERR_NUMERIC);
+    ro.dx_b = INFINITY;
+    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    ro.dx_a = NAN;
+    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    ro.dx_a = -1.0f;
+    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    memset(&ro, 0, sizeof ro);
+    ro.threshold = -1;
+    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) != TN_OK || r.distance == r.distance);
+    {
+        tn_image tiny = small_dem(4, 4);
+        TN_CHECK(tn_realism_compare(&tiny, &dem, NULL, &r) == TN_ERR_INVALID_ARG);
+        tn_image_free(&tiny);
+    }
+    tn_image_free(&bad);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_sketch_args)
+{
+    tn_contour_set out, user;
+    tn_sketch_random_opts ro;
+    float xy[8] = {0, 0, 1, 1, NAN, 2, 3, 3};
+    int *edges = NULL, *tris = NULL, ntri = 0;
+    tn_image img = {0};
+    memset(&out, 0, sizeof out);
+    memset(&user, 0, sizeof user);
+    memset(&ro, 0, sizeof ro);
+    ro.nodes = -5;
+    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+    ro.nodes = INT_MIN;
+    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+    ro.nodes = INT_MAX;
+    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_sketch_random(NULL, -4, 64, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_sketch_random(NULL, INT_MAX, INT_MAX, NULL, &out) == TN_ERR_TOO_LARGE);
+    ro.nodes = 3;
+    TN_CHECK(tn_sketch_random(NULL, 2, 2, &ro, &out) == TN_OK);
+    tn_contour_set_free(&out);
+    /* MST / Delaunay with NaN coordinates */
+    TN_CHECK(tn_mst(xy, 4, &edges) == TN_ERR_NUMERIC && edges == NULL);
+    TN_CHECK(tn_delaunay(xy, 4, &tris, &ntri) == TN_ERR_NUMERIC && tris == NULL);
+    xy[4] = INFINITY;
+    TN_CHECK(tn_mst(xy, 4, &edges) == TN_ERR_NUMERIC && edges == NULL);
+    TN_CHECK(tn_delaunay(xy, 4, &tris, &ntri) == TN_ERR_NUMERIC && tris == NULL);
+    xy[4] = 2.0f;
+    TN_CHECK(tn_mst(xy, 0, &edges) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(xy, -1, &edges) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(NULL, 3, &edges) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_delaunay(xy, -1, &tris, &ntri) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(xy, 4, &edges) == TN_OK);
+    tn_free(edges);
+    /* huge-but-finite coordinates */
+    {
+        float big[8] = {-FLT_MAX, -FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, -FLT_MAX, 0, 0};
+        edges = NULL;
+        TN_CHECK(tn_mst(big, 4, &edges) == TN_OK);
+        tn_free(edges);
+        TN_CHECK(tn_delaunay(big, 4, &tris, &ntri) == TN_OK || tn_last_error()[0]);
+        tn_free(tris);
+        tris = NULL;
+    }
+    /* drawn sketches with NaN/Inf pixels */
+    TN_CHECK(tn_image_create(&img, 8, 8, 3) == TN_OK);
+    memset(&out, 0, sizeof out);
+    img.data[3 * 9] = 1.0f;
+    img.data[3 * 10] = 1.0f;
+    img.data[3 * 11] = NAN;
+    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    img.data[3 * 11] = INFINITY;
+    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    img.data[3 * 11 + 1] = -INFINITY;
+    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    tn_image_free(&img);
+    /* skeleton and rasterising */
+    TN_CHECK(tn_skeletonize(NULL, 4, 4) == TN_ERR_INVALID_ARG);
+    {
+        uint8_t m[16] = {0};
+        TN_CHECK(tn_skeletonize(m, -1, 4) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_skeletonize(m, INT_MAX, INT_MAX) != TN_OK);
+    }
+    {
+        static const char t[] = "terrainnet-sketch 1\ncanvas 8 8\nridge\n0 0 1\n7 7 0\nend\n";
+        tn_contour_set s;
+        memset(&s, 0, sizeof s);
+        TN_CHECK(tn_sketch_parse(t, sizeof t - 1, NULL, &s) == TN_OK);
+        TN_CHECK(tn_sketch_rasterise(&s, 0, 8, &img) == TN_ERR_INVALID_ARG && img.data == NULL);
+        TN_CHECK(tn_sketch_rasterise(&s, INT_MAX, INT_MAX, &img) != TN_OK && img.data == NULL);
+        TN_CHECK(tn_sketch_preview(&s, NULL, -1, 8, &img) != TN_OK && img.data == NULL);
+        s.items[0].points[0] = NAN; /* a programmatic set holding NaN */
+        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_NUMERIC && img.data == NULL);
+        TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_NUMERIC && out.items == NULL);
+        TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_NUMERIC && out.items == NULL);
+        s.items[0].points[0] = 1e30f; /* far outside: was an undefined float-to-int conversion */
+        TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_INVALID_ARG && img.data == NULL);
+        s.items[0].points[0] = 0.0f;
+        TN_CHECK(tn_sketch_rasterise(&s, 1 << 14, 1 << 14, &img) == TN_ERR_TOO_LARGE && img.data == NULL);
+        s.items[0].npoints = -1;
+        TN_CHECK(tn_sketch_densify(&s, &out) != TN_OK && out.items == NULL);
+        s.items[0].npoints = 2;
+        s.items[0].points[0] = 0.0f;
+        s.width = -8;
+        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) != TN_OK && img.data == NULL);
+        tn_contour_set_free(&s);
+    }
+}
+
+TN_TEST(test_align_args)
+{
+    static const char t[] = "terrainnet-sketch 1\ncanvas 32 32\nridge\n0 0 1\n1 1 0.9\n2 2 0.8\n3 3 0.7\n4 4 0.6\n5 5 0.5\n6 5 0.4\nend\n";
+    tn_contour_set s, parts, empty;
+    tn_align_opts ao;
+    int match[8];
+    memset(&s, 0, sizeof s);
+    memset(&parts, 0, sizeof parts);
+    memset(&empty, 0, sizeof empty);
+    empty.width = empty.height = 32;
+    TN_CHECK(tn_sketch_parse(t, sizeof t - 1, NULL, &s) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&s, 1, &parts) == TN_OK && parts.count >= 1);
+    memset(&ao, 0, sizeof ao);
+    TN_CHECK(tn_sketch_align(&parts, &empty, &ao, match) == TN_ERR_EMPTY);
+    ao.top = -3;
+    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    ao.top = INT_MAX;
+    ao.choices = INT_MAX;
+    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    ao.top = 0;
+    ao.choices = -7;
+    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    if (parts.count) {
+        parts.items[0].points[2] = NAN;
+        memset(&ao, 0, sizeof ao);
+        TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) == TN_ERR_NUMERIC);
+    }
+    tn_contour_set_free(&parts);
+    tn_contour_set_free(&s);
+}
+
+static float quad(void *user, const float *x, float *g)
+{
+    (void)user;
+    (void)x;
+    (void)g;
+    return 0.0f;
+}
+
+static float nan_fn(void *user, const float *x, float *g)
+{
+    (void)user;
+    g[0] = NAN;
+    return x[0];
+}
+
+TN_TEST(test_optim_args)
+{
+    tn_params *p = tn_params_create();
+    tn_optim_opts oo;
+    tn_lbfgs_opts lo;
+    tn_optim *o;
+    float x[4] = {1, 2, 3, 4}, f = 0;
+    int s4 = 4, zero = 0, neg = -2, big[4] = {1 << 16, 1 << 16, 1 << 16, 1 << 16};
+    char longname[64];
+    TN_CHECK(p != NULL);
+    if (!p) return;
+    /* tn_params_add: bad names and shapes give NULL with a message, not an assert */
+    memset(longname, 'x', sizeof longname - 1);
+    longname[sizeof longname - 1] = 0;
+    TN_CHECK(tn_params_add(p, "w", 1, &s4) != NULL);
+    tn_clear_error();
+    TN_CHECK(tn_params_add(p, "w", 1, &s4) == NULL && tn_last_error()[0]);
+    TN_CHECK(tn_params_add(p, longname, 1, &s4) == NULL);
+    TN_CHECK(tn_params_add(p, NULL, 1, &s4) == NULL);
+    TN_CHECK(tn_params_add(p, "z", 1, &zero) == NULL);
+    TN_CHECK(tn_params_add(p, "n", 1, &neg) == NULL);
+    TN_CHECK(tn_params_add(p, "d0", 0, &s4) == NULL);
+    TN_CHECK(tn_params_add(p, "d5", 5, big) == NULL);
+    TN_CHECK(tn_params_add(p, "big", 4, big) == NULL);
+    TN_CHECK(tn_params_add_buffer(p, "w", 1, &s4) == NULL);
+    TN_CHECK(tn_params_count(p) == 1);
+    /* optimisers */
+    TN_CHECK(tn_optim_create(NULL, NULL) == NULL);
+    memset(&oo, 0, sizeof oo);
+    oo.lr = NAN;
+    TN_CHECK(tn_optim_create(p, &oo) == NULL && tn_last_error()[0]);
+    memset(&oo, 0, sizeof oo);
+    oo.kind = (tn_optim_kind)9;
+    TN_CHECK(tn_optim_create(p, &oo) == NULL);
+    memset(&oo, 0, sizeof oo);
+    oo.beta1 = 1.5f;
+    oo.beta2 = 0.9f;
+    TN_CHECK(tn_optim_create(p, &oo) == NULL);
+    memset(&oo, 0, sizeof oo);
+    oo.momentum = INFINITY;
+    oo.kind = TN_OPTIM_SGD;
+    TN_CHECK(tn_optim_create(p, &oo) == NULL);
+    memset(&oo, 0, sizeof oo);
+    oo.lr_decay = NAN;
+    TN_CHECK(tn_optim_create(p, &oo) == NULL);
+    memset(&oo, 0, sizeof oo);
+    o = tn_optim_create(p, &oo);
+    TN_CHECK(o != NULL);
+    tn_optim_step(o);
+    tn_optim_free(o);
+    /* L-BFGS */
+    TN_CHECK(tn_lbfgs(x, 0, quad, NULL, NULL, &f) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_lbfgs(NULL, 4, quad, NULL, NULL, &f) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_lbfgs(x, 4, NULL, NULL, NULL, &f) == TN_ERR_INVALID_ARG);
+    memset(&lo, 0, sizeof lo);
+    lo.history = -5;
+    TN_CHECK(tn_lbfgs(x, 4, quad, NULL, &lo, &f) == TN_ERR_INVALID_ARG);
+    lo.history = INT_MAX;
+    TN_CHECK(tn_lbfgs(x, 4, quad, NULL, &lo, &f) == TN_ERR_INVALID_ARG);
+    lo.history = 0;
+    lo.tol = NAN;
+    TN_CHECK(tn_lbfgs(x, 4, quad, NULL, &lo, &f) == TN_ERR_INVALID_ARG);
+    lo.tol = 0;
+    lo.first_step = INFINITY;
+    TN_CHECK(tn_lbfgs(x, 4, quad, NULL, &lo, &f) == TN_ERR_INVALID_ARG);
+    lo.first_step = 0;
+    lo.max_iter = 3;
+    TN_CHECK(tn_lbfgs(x, 4, quad, NULL, &lo, &f) == TN_OK && f == 0.0f);
+    TN_CHECK(tn_lbfgs(x, 1, nan_fn, NULL, &lo, &f) == TN_ERR_NUMERIC);
+    tn_params_free(p);
+}
+
+/* A .tnw whose texgan.config holds `bad` at field `field` (architecture otherwise valid). */
+static const char *write_texgan_config(int field, float bad)
+{
+    const char *path = tmp_path("tg.tnw");
+    tn_params *p = tn_params_create();
+    int nc = 40, i;
+    tn_tensor *c;
+    if (!p) return NULL;
+    c = tn_params_add_buffer(p, "texgan.config", 1, &nc);
+    if (!c) { tn_params_free(p); return NULL; }
+    for (i = 0; i < nc; i++) c->data[i] = 0.0f;
+    c->data[0] = 1.0f;  /* version */
+    c->data[1] = 3.0f;  /* channels */
+    c->data[2] = 16.0f; /* noise_local */
+    c->data[5] = 2.0f;  /* stages */
+    c->data[6] = 32.0f; /* gen_width */
+    c->data[7] = 0.0f;
+    c->data[8] = 1.0f;
+    c->data[12] = 32.0f;
+    c->data[13] = 3.0f;
+    c->data[14] = 1.0f;
+    c->data[15] = 2.0f;
+    c->data[24] = 1.0f;
+    c->data[field] = bad;
+    if (tn_params_save(p, path)) path = NULL;
+    tn_params_free(p);
+    return path;
+}
+
+TN_TEST(test_texgan_config)
+{
+    static const int fields[] = {1, 2, 5, 6, 9, 10, 11, 12, 13, 14, 15, 24, 7, 8};
+    static const float bads[] = {1e20f, -1e20f, 1e30f, 3e38f, -3e38f, 2147483648.0f, 0.5f, INFINITY, NAN};
+    size_t i, j;
+    tn_texgan m;
+    tn_image ex = {0};
+    tn_texgan_opts to;
+    TN_CHECK(tn_image_create(&ex, 64, 64, 3) == TN_OK);
+    memset(&m, 0, sizeof m);
+    for (i = 0; i < sizeof fields / sizeof fields[0]; i++)
+        for (j = 0; j < sizeof bads / sizeof bads[0]; j++) {
+            const char *path = write_texgan_config(fields[i], bads[j]);
+            tn_status st;
+            TN_CHECK(path != NULL);
+            if (!path) continue;
+            st = tn_texgan_load(&m, path);
+            /* the config alone is never a loadable model: its weights are missing */
+            TN_CHECK(st != TN_OK && tn_last_error()[0] && m.weights == NULL);
+            memset(&to, 0, sizeof to);
+            to.checkpoint = path;
+            to.resume = 1;
+            to.max_iters = 1;
+            to.patch = 16;
+            to.stages = 2;
+            st = tn_texgan_train(&m, &ex, &to, NULL);
+            TN_CHECK(st != TN_OK && tn_last_error()[0] && m.weights == NULL);
+            remove(path);
+        }
+    TN_CHECK(tn_texgan_load(&m, tmp_path("nothing.tnw")) == TN_ERR_IO);
+    TN_CHECK(tn_texgan_load(&m, "") == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texgan_load(&m, NULL) == TN_ERR_INVALID_ARG);
+    {
+        const char *path = tmp_path("junk.tnw");
+        TN_CHECK(write_file(path, "TNW1\0\0\0\0garbage", 15));
+        TN_CHECK(tn_texgan_load(&m, path) != TN_OK);
+        remove(path);
+    }
+    tn_image_free(&ex);
+}
+
+/* Names each test as it starts, so a crash or hang points at its test. */
+#define RUN(name) do { fprintf(stderr, "-- %s\n", #name); TN_RUN(name); } while (0)
+
+/* Sets element `index` of the tensor `name` in a .tnw image and repairs the CRC, so the value
+   reaches the loader's own checks. 0 if the tensor is not found. */
+static int tnw_patch(uint8_t *b, size_t n, const char *name, int index, float value)
+{
+    size_t nl = strlen(name), pos, off;
+    uint32_t u;
+    for (pos = 14; pos + nl + 2 < n; pos++)
+        if (b[pos - 2] == (uint8_t)nl && b[pos - 1] == 0 && !memcmp(b + pos, name, nl)) break;
+    if (pos + nl + 2 >= n) return 0;
+    off = pos + nl;
+    off += 2 + 4 * (size_t)b[off];
+    if (off + 4 * (size_t)index + 4 > n - 4) return 0;
+    memcpy(&u, &value, 4);
+    put_le32(b + off + 4 * (size_t)index, u);
+    put_le32(b + n - 4, crc32_bytes(b, n - 4));
+    return 1;
+}
+
+static uint8_t *read_all(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    uint8_t *b;
+    long len;
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    len = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    b = (uint8_t *)malloc((size_t)len + 1);
+    *n = fread(b, 1, (size_t)len, f);
+    fclose(f);
+    return b;
+}
+
+/* A real checkpoint and model with absurd counters and settings: refused before any cast. */
+TN_TEST(test_texgan_checkpoint_fields)
+{
+    static const struct { const char *tensor; int index; float value; } cases[] = {
+        {"train.state", 0, 1e20f}, {"train.state", 1, 1e20f}, {"train.state", 1, 1e11f}, {"train.state", 3, 1e20f},
+        {"train.state", 7, 70000.0f}, {"train.state", 11, 1e11f}, {"train.state", 14, 3e9f}, {"train.state", 15, 1e20f},
+        {"train.state", 16, -1e20f}, {"train.state", 15, 2147483648.0f}, {"texgan.config", 9, 1e20f},
+        {"texgan.config", 10, 1e20f}, {"texgan.config", 12, 1e20f}, {"texgan.config", 13, -1e20f},
+        {"texgan.config", 15, 1e20f}, {"texgan.config", 24, 1e20f}, {"texgan.config", 11, -5.0f}};
+    const char *ck = tmp_path("tg.ckpt"), *bad = tmp_path("tg_bad.ckpt"), *model = tmp_path("tg_model.tnw");
+    tn_image ex = {0};
+    tn_texgan m, r;
+    tn_texgan_opts o;
+    uint8_t *good = NULL, *b;
+    size_t n = 0, i;
+    int x, y, c;
+    TN_CHECK(tn_image_create(&ex, 24, 24, 3) == TN_OK);
+    for (y = 0; y < 24; y++)
+        for (x = 0; x < 24; x++)
+            for (c = 0; c < 3; c++) TN_PIXEL(&ex, x, y, c) = 0.5f + 0.3f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y);
+    memset(&o, 0, sizeof o);
+    o.noise_local = 4;
+    o.stages = 2;
+    o.gen_width = 16;
+    o.disc_width = 8;
+    o.disc_layers = 2;
+    o.patch = 16;
+    o.batch = 1;
+    o.max_iters = 1;
+    o.minutes = 100;
+    o.checkpoint = ck;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
+    TN_CHECK(tn_texgan_save(&m, model) == TN_OK);
+    good = read_all(ck, &n);
+    TN_CHECK(good != NULL && n > 100);
+    o.resume = 1;
+    o.checkpoint = bad;
+    for (i = 0; good && i < sizeof cases / sizeof cases[0]; i++) {
+        tn_status st;
+        b = (uint8_t *)malloc(n);
+        memcpy(b, good, n);
+        TN_CHECK(tnw_patch(b, n, cases[i].tensor, cases[i].index, cases[i].value));
+        TN_CHECK(write_file(bad, b, n));
+        memset(&r, 0, sizeof r);
+        st = tn_texgan_train(&r, &ex, &o, NULL);
+        if (st == TN_OK) fprintf(stderr, "  resume accepted %s[%d] = %g\n", cases[i].tensor, cases[i].index, (double)cases[i].value);
+        TN_CHECK(st == TN_ERR_CORRUPT && r.weights == NULL);
+        tn_texgan_free(&r);
+        free(b);
+    }
+    free(good);
+    good = read_all(model, &n);
+    TN_CHECK(good != NULL);
+    for (i = 0; good && i < sizeof cases / sizeof cases[0]; i++) {
+        if (strcmp(cases[i].tensor, "texgan.config") != 0) continue;
+        b = (uint8_t *)malloc(n);
+        memcpy(b, good, n);
+        TN_CHECK(tnw_patch(b, n, cases[i].tensor, cases[i].index, cases[i].value));
+        TN_CHECK(write_file(bad, b, n));
+        memset(&r, 0, sizeof r);
+        TN_CHECK(tn_texgan_load(&r, bad) == TN_ERR_CORRUPT && r.weights == NULL);
+        tn_texgan_free(&r);
+        free(b);
+    }
+    TN_CHECK(tn_texgan_load(&r, model) == TN_OK); /* the unpatched model still loads */
+    tn_texgan_free(&r);
+    free(good);
+    tn_texgan_free(&m);
+    tn_image_free(&ex);
+    remove(ck);
+    remove(bad);
+    remove(model);
+}
+
+TN_TEST(test_render_args)
+{
+    static const float bad[] = {NAN, INFINITY, -INFINITY, 1e30f, -1e30f, 1e-30f, -5.0f, 0.0f, 89.5f, 179.0f};
+    tn_image dem = small_dem(32, 32), out = {0};
+    tn_view_opts vo;
+    tn_render_opts ro;
+    size_t i;
+    int f;
+    for (i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        for (f = 0; f < 6; f++) {
+            tn_status st;
+            memset(&vo, 0, sizeof vo);
+            vo.width = 48;
+            vo.height = 32;
+            if (f == 0) vo.azimuth_deg = bad[i];
+            if (f == 1) vo.pitch_deg = bad[i];
+            if (f == 2) vo.distance = bad[i];
+            if (f == 3) vo.fov_deg = bad[i];
+            if (f == 4) vo.relief = bad[i];
+            if (f == 5) vo.colours.shade.altitude_deg = bad[i];
+            st = tn_render_view(&dem, &vo, &out);
+            TN_CHECK(st != TN_OK ? out.data == NULL && tn_last_error()[0] : image_finite(&out));
+            tn_image_free(&out);
+        }
+        memset(&ro, 0, sizeof ro);
+        ro.lo = bad[i];
+        ro.hi = 1.0f;
+        TN_CHECK(tn_render_preview(&dem, &ro, &out) != TN_OK || image_finite(&out));
+        tn_image_free(&out);
+    }
+    memset(&vo, 0, sizeof vo);
+    vo.width = -5;
+    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    vo.width = vo.height = 100000;
+    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    tn_image_free(&dem);
+}
+
+/* Detail-map sidecars with absurd numbers: refused before any conversion (was sscanf). */
+TN_TEST(test_detail_sidecar)
+{
+    static const char *const bad[] = {
+        "terrainnet detail maps 1\nsize 99999999999 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1e300\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma nan\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2\nsigma 1\nrange -1e39 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1 1\nfactor 2.5\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\ntiling 1,5 1\nfactor 2\nsigma 1\nrange 0 1\n",
+        "terrainnet detail maps 1\nsize 4 4\nchannels 3\n",
+        ""};
+    const char *prefix = tmp_path("dm"), *side = tmp_path("dm_detail.txt");
+    tn_detail_maps m;
+    size_t i;
+    for (i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        memset(&m, 0, sizeof m);
+        TN_CHECK(write_file(side, bad[i], strlen(bad[i])));
+        TN_CHECK(tn_detail_maps_load(&m, prefix) == TN_ERR_CORRUPT && m.low.data == NULL);
+    }
+    remove(side);
+}
+
+/* Thinning a filled square and a disk: the rescanning version took rounds proportional to the
+   thickness; the work-list one must finish quickly and leave a thin, non-empty skeleton. */
+TN_TEST(test_skeleton_blobs)
+{
+    const int W = 300;
+    uint8_t *m = (uint8_t *)malloc((size_t)W * W);
+    int x, y, k, set, blocks;
+    for (k = 0; k < 2; k++) {
+        for (y = 0; y < W; y++)
+            for (x = 0; x < W; x++) m[y * W + x] = (uint8_t)(k == 0 ? 1 : (x - 150) * (x - 150) + (y - 150) * (y - 150) < 140 * 140);
+        TN_CHECK(tn_skeletonize(m, W, W) == TN_OK);
+        set = blocks = 0;
+        for (y = 0; y < W; y++)
+            for (x = 0; x < W; x++) {
+                set += m[y * W + x];
+                if (x + 1 < W && y + 1 < W && m[y * W + x] && m[y * W + x + 1] && m[(y + 1) * W + x] && m[(y + 1) * W + x + 1]) blocks++;
+            }
+        TN_CHECK(set > 0 && set < W * 4 && blocks == 0);
+    }
+    free(m);
+}
+
+int main(void)
+{
+    tn_set_threads(2);
+    RUN(test_image_readers_mutated);
+    RUN(test_png_bogus_chunks);
+    RUN(test_range_metadata);
+    RUN(test_sketch_text_mutated);
+    RUN(test_tnw_loader);
+    RUN(test_image_args);
+    RUN(test_deflate_and_metrics_args);
+    RUN(test_noise_args);
+    RUN(test_extract_args);
+    RUN(test_sketch_args);
+    RUN(test_align_args);
+    RUN(test_optim_args);
+    RUN(test_texgan_config);
+    RUN(test_texgan_checkpoint_fields);
+    RUN(test_render_args);
+    RUN(test_detail_sidecar);
+    RUN(test_skeleton_blobs);
+    return tn_test_summary("test_robust");
+}
