@@ -11295,7 +11295,7 @@ TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uin
 
 static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
 {
-    size_t i, n;
+    size_t i, n, masked = 0, seen = 0;
     uint8_t *indeg = NULL, *cnt;
     int top = 0;
     tn_status st;
@@ -11311,10 +11311,12 @@ static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t 
     memset(order, 0, n);
     for (i = 0; i < n; i++) {
         size_t c = i;
+        masked += mask[i] != 0;
         if (!mask[i] || indeg[i]) continue;
         for (;;) {
             ptrdiff_t r;
             int o = order[c] == 0 ? 1 : (cnt[c] >= 2 ? order[c] + 1 : order[c]);
+            seen++;
             if (o > 255) o = 255;
             order[c] = (uint8_t)o;
             if (o > top) top = o;
@@ -11330,6 +11332,8 @@ static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t 
     TN_FREE(indeg);
     TN_FREE(cnt);
     if (max_order) *max_order = top;
+    /* cells on a cycle never run out of upstream cells, so the walk never reaches them */
+    if (seen != masked) return tn__fail(TN_ERR_CORRUPT, "strahler order: the directions hold a cycle (%zu network cells never reached)", masked - seen);
     return TN_OK;
 }
 
@@ -12933,6 +12937,12 @@ static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
     if (o->iters < 0 || o->iters > 1000000) return tn__fail(TN_ERR_INVALID_ARG, "style: iters must be in 0..1000000");
     if (o->levels < 0 || o->levels > 8) return tn__fail(TN_ERR_INVALID_ARG, "style: levels must be in 0..8");
     if (o->tile < 0 || (o->tile > 0 && o->tile < 32)) return tn__fail(TN_ERR_INVALID_ARG, "style: tile must be 0 or >= 32");
+    {
+        const float w[7] = {o->content_weight, o->style_weight, o->sw_weight, o->hist_weight, o->drain_weight, o->valley_weight, o->tv_weight};
+        int i;
+        for (i = 0; i < 7; i++)
+            if (!(w[i] >= -FLT_MAX && w[i] <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: loss weights must be finite");
+    }
     if (!o->iters) o->iters = o->optimizer == TN_STYLE_LBFGS ? 40 : (o->optimizer == TN_STYLE_ADAM ? 150 : 300);
     if (!o->tile) o->tile = 512;
     if (o->content_weight == 0) o->content_weight = vgg ? 2.5e-11f : 0.1f;
@@ -12943,7 +12953,7 @@ static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
     if (vgg && o->valley_weight == 0) o->valley_weight = -1.0f;
     if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
     if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
-    if (!(o->lr > 0)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive");
+    if (!(o->lr > 0 && o->lr <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive and finite");
     if (!o->seed) o->seed = 1;
     return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
 }

@@ -829,6 +829,11 @@ TN_TEST(test_extract_args)
         TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
         flow.dir[0] = 200;
         TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+        flow.dir[0] = TN_FLOW_OUTLET;
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_OK);
+        flow.dir[5 * 32 + 5] = 0;
+        flow.dir[5 * 32 + 6] = 4; /* E then W: a cycle inside the network */
+        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT && strstr(tn_last_error(), "cycle"));
     }
     tn_flow_free(&flow);
     /* realism */

@@ -435,6 +435,12 @@ TN_TEST(test_bad_input)
     o.optimizer = TN_STYLE_SGD;
     o.lr = -1;
     TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG);
+    o.optimizer = TN_STYLE_ADAM;
+    o.lr = INFINITY; /* not "out of memory" from the optimiser */
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "learning rate"));
+    o.lr = 0;
+    o.valley_weight = NAN;
+    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "weights"));
     TN_CHECK(out.data == NULL);
     /* scores: a map compared with itself */
     TN_CHECK(tn_style_compare(&style, &style, &sc) == TN_OK);
