@@ -6,7 +6,7 @@ OPT     ?= -O2
 WARN     = -std=c99 -Wall -Wextra -pedantic
 CFLAGS  ?=
 LDLIBS   = -lm -pthread
-SAN      = -fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=undefined
+SAN      = -fsanitize=address,undefined,float-cast-overflow -fno-omit-frame-pointer -fno-sanitize-recover=undefined,float-cast-overflow
 
 EXAMPLES := $(patsubst examples/%.c,bin/%,$(wildcard examples/*.c))
 BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
