@@ -19,15 +19,7 @@ static void *tn_io_test_realloc(void *p, size_t n) { tn_io_test_allocs++; return
 
 /* ---- helpers ---- */
 
-static const char *tmp_path(const char *leaf)
-{
-    static char buf[4][512];
-    static int k;
-    const char *dir = getenv("TMPDIR");
-    k = (k + 1) & 3;
-    snprintf(buf[k], sizeof buf[k], "%s/tn_test_io_%s", dir && dir[0] ? dir : "/tmp", leaf);
-    return buf[k];
-}
+static const char *tmp_path(const char *leaf) { return tn_test_tmp_path("io", leaf); }
 
 /* A smooth deterministic pattern in [lo, hi], reaching both ends. */
 static void fill_pattern(tn_image *img, float lo, float hi)

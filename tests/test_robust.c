@@ -14,15 +14,7 @@
 
 /* ---- helpers ---- */
 
-static const char *tmp_path(const char *leaf)
-{
-    static char buf[4][512];
-    static int k;
-    const char *dir = getenv("TMPDIR");
-    k = (k + 1) & 3;
-    snprintf(buf[k], sizeof buf[k], "%s/tn_test_robust_%s", dir && dir[0] ? dir : "/tmp", leaf);
-    return buf[k];
-}
+static const char *tmp_path(const char *leaf) { return tn_test_tmp_path("robust", leaf); }
 
 static int write_file(const char *path, const void *data, size_t n)
 {

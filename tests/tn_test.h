@@ -50,9 +50,22 @@ static const char *tn_test_cur_name;
 
 static const char *tn_test_data(const char *rel);
 
+/* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
+   four paths can be in use at once. */
+static const char *tn_test_tmp_path(const char *tag, const char *leaf)
+{
+    static char buf[4][512];
+    static int k;
+    const char *dir = getenv("TMPDIR");
+    k = (k + 1) & 3;
+    snprintf(buf[k], sizeof buf[k], "%s/tn_test_%s_%s", dir && dir[0] ? dir : "/tmp", tag, leaf);
+    return buf[k];
+}
+
 static int tn_test_summary(const char *file)
 {
-    (void)tn_test_data; /* not every test file reads shared data */
+    (void)tn_test_data; /* not every test file reads shared data or writes scratch files */
+    (void)tn_test_tmp_path;
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
 }
