@@ -267,7 +267,7 @@ TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_s
 /* Encodes to a malloc'ed (TN_MALLOC) buffer the caller frees with TN_FREE / tn_free. */
 TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format,
                                       uint8_t **out, size_t *out_size);
-/* zlib streams (RFC 1950) with terrainnet's own deflate (level 0-9, 0 = 6) and inflate (Adler-32
+/* zlib streams (RFC 1950) with terrainnet's own deflate (level 0-9; 0 and zlib's -1 = 6) and inflate (Adler-32
    checked; output over max_out bytes, 0 = TN_MAX_ALLOC, fails with TN_ERR_TOO_LARGE). The output
    buffer is allocated here; free it with tn_free. */
 TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_t **out, size_t *out_size);
@@ -3520,9 +3520,9 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     uint32_t adler;
     *out = NULL;
     *out_size = 0;
-    if (level < 0 || level > 9) return tn__fail(TN_ERR_INVALID_ARG, "deflate: level %d (0-9, 0 = 6)", level);
+    if (level < -1 || level > 9) return tn__fail(TN_ERR_INVALID_ARG, "deflate: level %d (0-9; 0 and zlib's -1 = 6)", level);
     if (!src && n) return tn__fail(TN_ERR_INVALID_ARG, "deflate: NULL input");
-    if (level == 0) level = 6;
+    if (level <= 0) level = 6;
     s = (tn__deflate *)tn__calloc(sizeof *s);
     if (!s) return TN_ERR_OUT_OF_MEMORY;
     s->src = src;
@@ -12313,8 +12313,9 @@ static tn_status tn__style_sort_rows(const float *x, size_t rows, size_t n, floa
     return tn__rowsort_run(&j);
 }
 
-/* Source statistics from `ncrop` crops (each w x h, the size of the optimised map): Grams are
-   averaged; each crop's sorted projections are resampled to n / ncrop values, pooled and sorted. */
+/* Source statistics from `ncrop` source tiles (each L->w x L->h; the optimised tiles may differ
+   in size): Grams are averaged; each crop's sorted projections are resampled to n / ncrop
+   values (at least 1), pooled and sorted. */
 static tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
 {
     tn_ctx *ctx = L->ctx;
@@ -12336,7 +12337,7 @@ static tn_status tn__style_targets(tn__style_level *L, const float *const *crops
         }
         for (l = 0; l < L->nstyle && !st; l++) {
             int C = sf[l]->shape[1];
-            size_t hw = sf[l]->numel / (size_t)C, k, part = hw / (size_t)ncrop, i;
+            size_t hw = sf[l]->numel / (size_t)C, k, part = hw >= (size_t)ncrop ? hw / (size_t)ncrop : 1, i;
             tn_tensor *g = tn_gram(ctx, sf[l], L->net->vgg ? 1.0f : 1.0f / (float)hw), *D, *F2, *P;
             int shape[2];
             L->ch[l] = C;
@@ -12434,6 +12435,13 @@ static tn_tensor *tn__style_relief(tn_ctx *ctx, tn_tensor *x, tn_tensor *xs)
 #define TN__STYLE_BAND 2   /* px: cells this close to the edge drain straight off the map and share
                               one bin (TN__STYLE_ABINS) */
 
+/* Distance of cell (x, y) from the nearest edge of a w x h map. */
+static int tn__style_edge_dist(int x, int y, int w, int h)
+{
+    int a = x < w - 1 - x ? x : w - 1 - x, b = y < h - 1 - y ? y : h - 1 - y;
+    return a < b ? a : b;
+}
+
 /* Points the cells of a TN__STYLE_BAND-wide border band straight at their nearest edge (the
    border row itself is an outlet). Left to D8, the band collects the flow of everything next
    to it and runs it along the edge, and the relief term then cuts a channel parallel to the
@@ -12471,7 +12479,7 @@ static tn_status tn__style_drain_bins(const float *filled, const float *v, int w
     m.data = (float *)filled;
     memset(&f, 0, sizeof f);
     if (!(st = tn_flow_directions(&f, &m))) tn__style_band_outflow(&f);
-    if (st || (st = tn_flow_accumulation(&f))) {
+    if (st || (st = tn__flow_accumulate(&f))) { /* codes valid by construction: no check pass */
         tn_flow_free(&f);
         return st;
     }
@@ -12479,8 +12487,7 @@ static tn_status tn__style_drain_bins(const float *filled, const float *v, int w
         uint32_t a = f.acc[i];
         int b = 0;
         while (a > 1 && b < TN__STYLE_ABINS - 1) { a >>= 1; b++; }
-        int x = (int)(i % (size_t)w), y = (int)(i / (size_t)w);
-        int edge = x < TN__STYLE_BAND || y < TN__STYLE_BAND || x >= w - TN__STYLE_BAND || y >= h - TN__STYLE_BAND;
+        int edge = tn__style_edge_dist((int)(i % (size_t)w), (int)(i / (size_t)w), w, h) < TN__STYLE_BAND;
         bin[i] = filled[i] > v[i] ? TN__STYLE_LAKE : edge ? TN__STYLE_ABINS : (uint8_t)b;
     }
     tn_flow_free(&f);
@@ -12698,15 +12705,21 @@ typedef struct tn__style_cfg {
     int level;                    /* pyramid level being optimised (0 = full size) */
 } tn__style_cfg;
 
-/* Maps the optimiser's own progress (0..1 of one tile) onto the whole transfer; the drainage
-   terms' priority flood reports "fill" from inside an evaluation, which only gets a chance to
-   cancel. */
+/* Reports the fraction f of the tile being optimised as progress of the whole transfer. */
+static int tn__style_report(tn__style_cfg *c, double f)
+{
+    c->frac = f;
+    if (!c->user_fn) return 0;
+    return c->user_fn(c->user_data, "style", c->work_total > 0 ? (c->work_done + f * c->span) / c->work_total : 0.0);
+}
+
+/* Installed for the whole transfer: the optimiser's own progress moves "style" on; the priority
+   floods of the drainage terms (and their targets) report "fill", which only gets a chance to
+   cancel, so the user sees one stage that never goes back. */
 static int tn__style_progress_fwd(void *user, const char *stage, double f)
 {
     tn__style_cfg *c = (tn__style_cfg *)user;
-    if (strcmp(stage, "lbfgs")) f = c->frac;
-    c->frac = f;
-    return c->user_fn ? c->user_fn(c->user_data, "style", (c->work_done + f * c->span) / c->work_total) : 0;
+    return tn__style_report(c, strcmp(stage, "lbfgs") ? c->frac : f);
 }
 
 static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
@@ -12723,9 +12736,7 @@ static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg 
         lo.max_iter = iters;
         lo.history = 10;
         lo.tol = 1e-9f;
-        tn_set_progress(tn__style_progress_fwd, c);
         st = tn_lbfgs(x, n, tn__style_eval, L, &lo, &f);
-        tn_set_progress(c->user_fn, c->user_data);
         if (L->status) st = L->status; /* the real cause, not "objective is NaN" */
         if (st == TN_ERR_CANCELLED) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
     } else {
@@ -12750,8 +12761,7 @@ static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg 
             tn__style_eval(L, t->data, t->grad);
             if ((st = L->status)) break;
             tn_optim_step(opt);
-            if (c->user_fn && c->user_fn(c->user_data, "style", (c->work_done + (double)(it + 1) * n) / c->work_total))
-                st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
+            if (tn__style_report(c, (double)(it + 1) / iters)) st = tn__fail(TN_ERR_CANCELLED, "style: cancelled by the progress callback");
         }
         if (!st) memcpy(x, t->data, n * sizeof(float));
         tn_optim_free(opt);
@@ -12777,10 +12787,11 @@ static int tn__style_tile_pos(int size, int t, int ov, int *pos, int max)
         return 1;
     }
     for (;;) {
-        if (p + t >= size || n == max - 1) {
+        if (p + t >= size) {
             pos[n++] = size - t;
             return n;
         }
+        if (n == max - 1) return 0; /* more tiles needed than pos holds */
         pos[n++] = p;
         p += t - ov;
     }
@@ -12837,7 +12848,7 @@ static tn_status tn__style_level_run(tn__style_cfg *c, const tn_image *src, cons
     size_t tn = (size_t)tw * th, sn = (size_t)sw * sh, n = (size_t)W * H, q;
     tn__style_level L;
     tn_status st = TN_OK;
-    nx = tn__style_tile_pos(SW, sw, ov, px, TN__STYLE_MAXTILES);
+    nx = tn__style_tile_pos(SW, sw, ov, px, TN__STYLE_MAXTILES); /* the caller checked the counts */
     ny = tn__style_tile_pos(SH, sh, ov, py, TN__STYLE_MAXTILES);
     ncrop = nx * ny;
     tn__style_level_init(&L, c, sw, sh);
@@ -12958,10 +12969,8 @@ static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
     return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
 }
 
-/* Runs a level, with the valley term on a canvas grown by a mirrored margin of 1/8 of the
-   smaller side (at least 2 px) that is cut off again afterwards. Drainage is truncated at the
-   map's edge, and the valley term, optimised there, leaves a frame (a low edge and a rim a few
-   px in); with the margin, that frame falls outside the map. */
+/* Margin (px per side) of a w x h level: 1/8 of the smaller side, at least 2, on levels with
+   the valley term (built-in net, all but the finest level); 0 elsewhere. */
 static int tn__style_margin(const tn__style_cfg *c, int level, int w, int h)
 {
     int m = (w < h ? w : h) / 8;
@@ -12975,6 +12984,9 @@ static int tn__style_margin_tile(const tn__style_cfg *c, int w, int h, int m)
     return w <= c->o.tile && h <= c->o.tile && m ? (w > h ? w : h) + 2 * m : c->o.tile;
 }
 
+/* Runs a level, with the valley term on a canvas grown by the mirrored margin and cut back
+   afterwards. Drainage is truncated at the map's edge, and the valley term, optimised there,
+   leaves a frame (a low edge and a rim a few px in); with the margin, the frame falls outside. */
 static tn_status tn__style_level_margin(tn__style_cfg *c, const tn_image *s, tn_image *a, tn_image *x)
 {
     tn_image pa = {0, 0, 0, NULL}, px = {0, 0, 0, NULL};
@@ -13036,9 +13048,11 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (tn_image_range(content, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
     if (tn_image_range(style, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
     if (!(c = (tn__style_cfg *)tn__alloc(sizeof *c))) return TN_ERR_OUT_OF_MEMORY;
-    if ((st = tn__style_setup(c, opts))) goto done;
-    c->user_fn = tn__progress_fn;
+    st = tn__style_setup(c, opts); /* clears c */
+    c->user_fn = tn__progress_fn;  /* restored at the end */
     c->user_data = tn__progress_user;
+    if (st) goto done;
+    tn_set_progress(tn__style_progress_fwd, c);
     if ((st = tn__channel0_image(style, &cur))) goto done;
     st = tn__style_resize(&sm, &cur, W, H);
     tn_image_free(&cur);
@@ -13048,11 +13062,11 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (!c->net.vgg && (st = tn__style_auto_drainage(c, &sm))) goto done;
     nl = c->o.levels;
     if (!nl) { /* the drainage terms carve the valley network from one level coarser */
-        int coarsest = c->o.drain_weight > 0 || c->o.valley_weight > 0 ? 32 : 64;
+        int coarsest = !c->net.vgg && (c->o.drain_weight > 0 || c->o.valley_weight > 0) ? 32 : 64;
         for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= coarsest;) nl++;
     }
     for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
-        int lw, lh, tw, th, m, T, p[TN__STYLE_MAXTILES];
+        int lw, lh, tw, th, m, T, nx, ny, p[TN__STYLE_MAXTILES];
         tn__style_level_size(W, H, k, &lw, &lh);
         m = tn__style_margin(c, k, lw, lh);
         T = tn__style_margin_tile(c, lw, lh, m);
@@ -13060,8 +13074,14 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
         lh += 2 * m;
         tw = tn__style_tile_len(lw, T);
         th = tn__style_tile_len(lh, T);
-        c->work_total += (double)c->o.iters * tw * th * tn__style_tile_pos(lw, tw, T / 8, p, TN__STYLE_MAXTILES) *
-                         tn__style_tile_pos(lh, th, T / 8, p, TN__STYLE_MAXTILES);
+        nx = tn__style_tile_pos(lw, tw, T / 8, p, TN__STYLE_MAXTILES);
+        ny = tn__style_tile_pos(lh, th, T / 8, p, TN__STYLE_MAXTILES);
+        if (!nx || !ny) {
+            st = tn__fail(TN_ERR_INVALID_ARG, "style: tiles of %d px are too small for a %d x %d map (at most %d per side)", c->o.tile, W, H,
+                          TN__STYLE_MAXTILES);
+            goto done;
+        }
+        c->work_total += (double)c->o.iters * tw * th * nx * ny;
     }
     for (k = nl - 1; k >= 0 && !st; k--) {
         int lw, lh;
@@ -13084,6 +13104,7 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
         cur.data = NULL;
     }
 done:
+    tn_set_progress(c->user_fn, c->user_data);
     tn_image_free(&cur);
     tn_image_free(&cm);
     tn_image_free(&sm);

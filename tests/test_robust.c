@@ -649,7 +649,7 @@ TN_TEST(test_deflate_and_metrics_args)
 {
     uint8_t src[100], *out = NULL, *back = NULL;
     size_t n = 0, bn = 0;
-    static const int levels[] = {-1, 10, 100, INT_MIN, INT_MAX};
+    static const int levels[] = {-2, 10, 100, INT_MIN, INT_MAX};
     size_t i;
     tn_image a = small_dem(16, 16), b = small_dem(16, 16);
     tn_metrics m;
@@ -663,6 +663,15 @@ TN_TEST(test_deflate_and_metrics_args)
     tn_free(out);
     tn_free(back);
     out = back = NULL;
+    { /* zlib's -1 ("default") is level 6, as 0 is */
+        uint8_t *o6 = NULL;
+        size_t n6 = 0;
+        TN_CHECK(tn_zlib_deflate(src, sizeof src, -1, &out, &n) == TN_OK && tn_zlib_deflate(src, sizeof src, 6, &o6, &n6) == TN_OK &&
+                 n == n6 && memcmp(out, o6, n) == 0);
+        tn_free(out);
+        tn_free(o6);
+        out = NULL;
+    }
     {
         tn_save_opts so;
         memset(&so, 0, sizeof so);

@@ -347,12 +347,12 @@ TN_TEST(test_tiles_and_progress)
     tn_image_free(&style);
 }
 
-typedef struct progress_log { double last, max; int backwards; } progress_log;
+typedef struct progress_log { double last, max; int backwards, other_stage; } progress_log;
 
 static int log_progress(void *user, const char *stage, double f)
 {
     progress_log *p = (progress_log *)user;
-    (void)stage;
+    p->other_stage += strcmp(stage, "style") != 0;
     p->backwards += f < p->last;
     p->last = f;
     p->max = f > p->max ? f : p->max;
@@ -362,11 +362,12 @@ static int log_progress(void *user, const char *stage, double f)
 TN_TEST(test_margin_progress)
 {
     /* drainage terms on: the coarse level runs on a canvas grown by a mirrored margin, and the
-       progress total counts that canvas, so progress runs monotonically to exactly 1 */
+       progress total counts that canvas, so progress runs monotonically to exactly 1; the
+       floods inside (and before) the evaluations do not show as a stage of their own */
     tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
     tn_style_opts o;
-    progress_log p = {0, 0, 0};
-    int x, y;
+    progress_log p = {0, 0, 0, 0};
+    int x, y, k;
     memset(&o, 0, sizeof o);
     o.iters = 3;
     o.levels = 2;
@@ -376,13 +377,17 @@ TN_TEST(test_margin_progress)
     tn_image_create(&style, 96, 96, 1);
     for (y = 0; y < 96; y++)
         for (x = 0; x < 96; x++) style.data[y * 96 + x] = 2.0f * y + 8.0f * fabsf(sinf(0.3f * x));
-    tn_set_progress(log_progress, &p);
-    TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
-    tn_set_progress(NULL, NULL);
-    TN_CHECK(out.width == 96 && out.height == 96 && tn_image_range(&out, NULL, NULL) == 0);
-    TN_CHECK_NEAR(p.last, 1.0, 1e-9);
-    TN_CHECK(p.max <= 1.0 + 1e-9 && p.backwards == 0);
-    tn_image_free(&out);
+    for (k = 0; k < 2; k++) {
+        memset(&p, 0, sizeof p);
+        o.optimizer = k ? TN_STYLE_SGD : TN_STYLE_LBFGS;
+        tn_set_progress(log_progress, &p);
+        TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
+        tn_set_progress(NULL, NULL);
+        TN_CHECK(out.width == 96 && out.height == 96 && tn_image_range(&out, NULL, NULL) == 0);
+        TN_CHECK_NEAR(p.last, 1.0, 1e-9);
+        TN_CHECK(p.max <= 1.0 + 1e-9 && p.backwards == 0 && p.other_stage == 0);
+        tn_image_free(&out);
+    }
     tn_image_free(&content);
     tn_image_free(&style);
 }
@@ -416,6 +421,7 @@ TN_TEST(test_cancel)
 TN_TEST(test_bad_input)
 {
     tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, tiny = {0, 0, 0, NULL};
+    int x;
     tn_style_opts o;
     tn_style_scores sc;
     make_content(&content, 32, 32);
@@ -442,6 +448,23 @@ TN_TEST(test_bad_input)
     o.valley_weight = NAN;
     TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "weights"));
     TN_CHECK(out.data == NULL);
+    { /* tiles too small for the map: more than fit per side, refused before any work */
+        tn_image wide = {0, 0, 0, NULL};
+        memset(&o, 0, sizeof o);
+        o.tile = 32;
+        o.iters = 1;
+        o.levels = 1;
+        tn_image_create(&wide, 2100, 16, 1);
+        TN_CHECK(tn_style_transfer(&out, &wide, &style, &o) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "too small"));
+        /* more tiles than deep-layer positions per tile (36 tiles of 32 x 32, 16 positions at
+           layer 4): each still adds one sorted sample, nothing is read before the pool */
+        tn_image_free(&wide);
+        tn_image_create(&wide, 1000, 32, 1);
+        for (x = 0; x < 1000 * 32; x++) wide.data[x] = (float)sin(0.05 * x) + 0.001f * (float)(x % 97);
+        TN_CHECK(tn_style_transfer(&out, &wide, &style, &o) == TN_OK && tn_image_range(&out, NULL, NULL) == 0);
+        tn_image_free(&out);
+        tn_image_free(&wide);
+    }
     /* scores: a map compared with itself */
     TN_CHECK(tn_style_compare(&style, &style, &sc) == TN_OK);
     TN_CHECK_NEAR(sc.ssim, 1.0, 1e-6);
