@@ -1085,7 +1085,7 @@ typedef struct tn_detail_maps {
 } tn_detail_maps;
 
 typedef struct tn_detail_opts {
-    int factor;              /* low-map downsampling; 0 = 10 (memory / 100) */
+    int factor;              /* low-map downsampling 1..4096; 0 = 10 (memory / 100) */
     float sigma;             /* split sigma in pixels; 0 = factor / 2 */
     int no_colour_correct;   /* 1: keep the synthesis' own mean colour */
     float lo, hi;            /* value range; both 0 = [0, 1] */
@@ -1123,7 +1123,7 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
 typedef struct tn_render_opts {
     float lo, hi;              /* height range for the colour ramp; lo == hi: the DEM's own range */
     tn_hillshade_opts shade;   /* light and spacing (zero = defaults) */
-    float shade_strength;      /* 0..1 how much the hillshade darkens the colours; 0 = default 0.7 */
+    float shade_strength;      /* 0..1 how much the hillshade darkens the colours; 0 = default 0.7; else TN_ERR_INVALID_ARG */
 } tn_render_opts;
 
 /* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used).
@@ -14679,7 +14679,8 @@ TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *targe
 {
     int c, it;
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0) return tn__fail(TN_ERR_EMPTY, "colour correction: empty image");
-    if (!(lo < hi)) return tn__fail(TN_ERR_INVALID_ARG, "colour correction: range %g..%g is empty", (double)lo, (double)hi);
+    if (!(lo < hi) || !(lo >= -FLT_MAX && hi <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "colour correction: range %g..%g is empty or not finite", (double)lo, (double)hi);
     if (tn_image_range(img, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
     for (c = 0; c < img->channels; c++) {
         float t = target[c], a, b, s;
@@ -14739,8 +14740,8 @@ static void tn__dm_defaults(const tn_detail_opts *in, tn_detail_opts *o)
 {
     memset(o, 0, sizeof *o);
     if (in) *o = *in;
-    if (o->factor <= 0) o->factor = 10;
-    if (o->sigma <= 0) o->sigma = 0.5f * (float)o->factor;
+    if (o->factor == 0) o->factor = 10; /* negative and NaN values stay, for tn__dm_begin to refuse */
+    if (o->sigma == 0 && o->factor > 0) o->sigma = 0.5f * (float)o->factor;
     if (o->lo == 0 && o->hi == 0) o->hi = 1.0f;
 }
 
@@ -14752,7 +14753,9 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
     if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the exemplar is empty");
     if (ex->channels != channels) return tn__fail(TN_ERR_SHAPE, "detail maps: the exemplar has %d channels, the synthesis %d", ex->channels, channels);
     if (tn_image_range(ex, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
-    if (o->factor > 4096 || !(o->sigma < 1e4f) || !(o->lo < o->hi)) return tn__fail(TN_ERR_INVALID_ARG, "detail maps: bad factor, sigma or range");
+    if (o->factor < 1 || o->factor > 4096 || !(o->sigma > 0 && o->sigma < 1e4f) || !(o->lo < o->hi) || !(o->lo >= -FLT_MAX && o->hi <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "detail maps: factor %d must be 1..4096, sigma %g in (0, 1e4), range %g..%g finite and not empty",
+                        o->factor, (double)o->sigma, (double)o->lo, (double)o->hi);
     if (width <= 0 || height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the synthesis is empty");
     a->f = o->factor;
     a->width = width;
@@ -15290,7 +15293,9 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
     if ((st = tn__dem_check(dem, 2, "render preview"))) return st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
-    k = o.shade_strength > 0 ? tn__clampf(o.shade_strength, 0.0f, 1.0f) : 0.7f;
+    if (!(o.shade_strength >= 0 && o.shade_strength <= 1))
+        return tn__fail(TN_ERR_INVALID_ARG, "render preview: shade_strength %g is not in 0..1", (double)o.shade_strength);
+    k = o.shade_strength > 0 ? o.shade_strength : 0.7f;
     if ((st = tn_image_colour_ramp(&ramp, dem, o.lo, o.hi))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);

@@ -1284,7 +1284,50 @@ TN_TEST(test_render_args)
     TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
     vo.width = vo.height = 100000;
     TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    { /* shade strength outside 0..1 (was clamped, NaN gave the default) */
+        static const float ss[] = {NAN, -0.5f, 2.0f, INFINITY};
+        for (i = 0; i < 4; i++) {
+            memset(&ro, 0, sizeof ro);
+            ro.shade_strength = ss[i];
+            TN_CHECK(tn_render_preview(&dem, &ro, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+        }
+        ro.shade_strength = 1.0f;
+        TN_CHECK(tn_render_preview(&dem, &ro, &out) == TN_OK && image_finite(&out));
+        tn_image_free(&out);
+    }
     tn_image_free(&dem);
+}
+
+/* Detail maps and colour correction with settings that used to fall back to defaults silently. */
+TN_TEST(test_detail_and_colour_args)
+{
+    tn_image ex = small_dem(32, 32), syn = small_dem(64, 64);
+    tn_detail_maps m;
+    tn_detail_opts o;
+    float target = 0.5f, shift = 0;
+    int k;
+    memset(&m, 0, sizeof m);
+    for (k = 0; k < 6; k++) {
+        memset(&o, 0, sizeof o);
+        if (k == 0) o.factor = -1;
+        if (k == 1) o.factor = 5000;
+        if (k == 2) o.sigma = NAN;
+        if (k == 3) o.sigma = -2;
+        if (k == 4) o.hi = INFINITY;
+        if (k == 5) { o.lo = 1; o.hi = 0; }
+        TN_CHECK(tn_detail_maps_from_image(&m, &syn, &ex, &o) == TN_ERR_INVALID_ARG);
+        tn_detail_maps_free(&m);
+    }
+    memset(&o, 0, sizeof o);
+    o.factor = 4;
+    o.lo = -100;
+    o.hi = 200; /* small_dem's heights */
+    TN_CHECK(tn_detail_maps_from_image(&m, &syn, &ex, &o) == TN_OK);
+    tn_detail_maps_free(&m);
+    TN_CHECK(tn_texture_colour_shift(&ex, &target, 0.0f, INFINITY, &shift) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texture_colour_shift(&ex, &target, -INFINITY, 1.0f, &shift) == TN_ERR_INVALID_ARG);
+    tn_image_free(&ex);
+    tn_image_free(&syn);
 }
 
 /* Detail-map sidecars with absurd numbers: refused before any conversion (was sscanf). */
@@ -1351,6 +1394,7 @@ int main(void)
     RUN(test_texgan_checkpoint_fields);
     RUN(test_render_args);
     RUN(test_detail_sidecar);
+    RUN(test_detail_and_colour_args);
     RUN(test_skeleton_blobs);
     return tn_test_summary("test_robust");
 }
