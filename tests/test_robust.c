@@ -567,7 +567,7 @@ TN_TEST(test_image_args)
     static const int sizes[][2] = {{0, 5}, {5, 0}, {-1, 5}, {5, -7}, {INT_MAX, 2}, {2, INT_MAX}, {INT_MAX, INT_MAX}, {1 << 20, 1 << 20}};
     static const float bad_sp[] = {NAN, INFINITY, -INFINITY, 1e-45f, -1e-45f, FLT_MAX, -FLT_MAX};
     size_t i;
-    int f;
+    int f, k;
     for (i = 0; i < sizeof sizes / sizeof sizes[0]; i++)
         for (f = 0; f < 4; f++) {
             tn_status st = tn_image_resize(&out, &dem, sizes[i][0], sizes[i][1], (tn_resize_filter)f);
@@ -594,26 +594,13 @@ TN_TEST(test_image_args)
         st = tn_image_normals(&out, &dem, 1.0f, 1.0f, bad_sp[i]);
         TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
         tn_image_free(&out);
-        memset(&ho, 0, sizeof ho);
-        ho.azimuth_deg = bad_sp[i];
-        st = tn_image_hillshade(&out, &dem, &ho);
-        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
-        tn_image_free(&out);
-        memset(&ho, 0, sizeof ho);
-        ho.altitude_deg = bad_sp[i];
-        st = tn_image_hillshade(&out, &dem, &ho);
-        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
-        tn_image_free(&out);
-        memset(&ho, 0, sizeof ho);
-        ho.z_factor = bad_sp[i];
-        st = tn_image_hillshade(&out, &dem, &ho);
-        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
-        tn_image_free(&out);
-        memset(&ho, 0, sizeof ho);
-        ho.dx = bad_sp[i];
-        st = tn_image_hillshade(&out, &dem, &ho);
-        TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
-        tn_image_free(&out);
+        for (k = 0; k < 4; k++) { /* one hillshade setting at a time: azimuth, altitude, z factor, dx */
+            memset(&ho, 0, sizeof ho);
+            *(k == 0 ? &ho.azimuth_deg : k == 1 ? &ho.altitude_deg : k == 2 ? &ho.z_factor : &ho.dx) = bad_sp[i];
+            st = tn_image_hillshade(&out, &dem, &ho);
+            TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
+            tn_image_free(&out);
+        }
         st = tn_image_blur(&out, &dem, bad_sp[i]);
         TN_CHECK(st != TN_OK ? out.data == NULL : image_finite(&out));
         tn_image_free(&out);
