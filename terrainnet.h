@@ -54,6 +54,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@ops       differentiable ops: broadcasting arithmetic, conv (im2col), pooling, norms, graph ops
     @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
+    @@train     training runs (budget, progress, checkpoints, resume), model files, shared blocks
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
     @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton; realism
@@ -478,6 +479,10 @@ TN_API tn_tensor *tn_bce_logits_loss(tn_ctx *ctx, tn_tensor *logits, tn_tensor *
 /* Hinge GAN: discriminator mean(relu(1 - real)) + mean(relu(1 + fake)); generator -mean(fake). */
 TN_API tn_tensor *tn_hinge_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores);
 TN_API tn_tensor *tn_hinge_g_loss(tn_ctx *ctx, tn_tensor *fake_scores);
+/* Non-saturating GAN: discriminator mean(softplus(-real)) + mean(softplus(fake)); generator
+   mean(softplus(-fake)). */
+TN_API tn_tensor *tn_nonsat_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores);
+TN_API tn_tensor *tn_nonsat_g_loss(tn_ctx *ctx, tn_tensor *fake_scores);
 /* Gram matrices of N x C x H x W features: N x C x C... returned as (N*C) x C, scaled by `scale`
    (e.g. 1 / (C*H*W)). */
 TN_API tn_tensor *tn_gram(tn_ctx *ctx, tn_tensor *x, float scale);
@@ -493,9 +498,10 @@ TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
    @@optim  parameters, initialisation, optimisers, .tnw files
    tn_params owns a model's tensors (learned weights and saved buffers such as running means)
    in its own arena. Optimisers update every tensor of a tn_params that has a gradient.
-   .tnw layout (little-endian): "TNW1", u32 version (1), u32 count, then per tensor u16 name
-   length, name bytes, u8 ndim, u8 flags (1 = buffer), u32 dims[ndim], float32 data[numel];
-   finally u32 CRC-32 of every byte before it.
+   .tnw layout (little-endian): "TNW1", u32 version, u32 count; version 2 then has u32 n and n
+   bytes of metadata, UTF-8 "key=value\n" lines; then per tensor u16 name length, name bytes,
+   u8 ndim, u8 flags (1 = buffer), u32 dims[ndim], float32 data[numel]; finally u32 CRC-32 of
+   every byte before it. Version 1 (no metadata) is written when a set has no metadata.
    ============================================================================================ */
 
 typedef struct tn_params tn_params;
@@ -518,6 +524,20 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path);
    the error names the first mismatch. */
 TN_API tn_status tn_params_load(tn_params *p, const char *path);
 TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t size, const char *name);
+/* Reads any .tnw file into a new set holding exactly its tensors and metadata (for tools that
+   inspect a file, and loaders whose layout depends on the file). *out is NULL on failure. */
+TN_API tn_status tn_params_open(const char *path, tn_params **out);
+TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out);
+
+/* Metadata: text key/value pairs saved with the tensors (keys [A-Za-z0-9_.-], < 64 chars; values
+   printable, no newline, < 1024 chars). Setting a key again replaces it; value NULL removes it.
+   Loading a file replaces the set's metadata with the file's. */
+TN_API tn_status tn_params_set_meta(tn_params *p, const char *key, const char *value);
+/* The value of key, or NULL. Valid until the key is set again or the set is freed. */
+TN_API const char *tn_params_meta(const tn_params *p, const char *key);
+TN_API int tn_params_meta_count(const tn_params *p);
+/* The i-th pair in insertion order (0 <= i < count); *value may be NULL if not wanted. */
+TN_API const char *tn_params_meta_key(const tn_params *p, int i, const char **value);
 
 /* Initialisers. fan_in = numel / shape[0]. */
 TN_API void tn_init_uniform(tn_tensor *t, tn_rng *rng, float lo, float hi);
@@ -553,6 +573,148 @@ TN_API float tn_optim_lr(const tn_optim *o);
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
+
+/* ============================================================================================
+   @@train  training runs: budget, progress, checkpoints, resume; shared building blocks; models
+   Every learned method trains through one tn_train run. The method registers what makes up its
+   state (networks with their optimisers, extra parameter sets such as EMA weights, RNGs, its
+   own config) and calls tn_train_next() before each iteration. The run keeps the time and
+   iteration budgets, reports progress with an ETA, writes atomic checkpoints, and on resume
+   restores everything so the continuation is bit-identical to an uninterrupted run (for the
+   same iteration budget; time budgets stop wherever the clock says).
+   Checkpoint = .tnw holding every registered set ("<prefix><tensor>"), Adam moments
+   ("am.<tensor>", "av.<tensor>") and metadata: method, kind=checkpoint, iteration,
+   microseconds trained, optimiser steps ("step.<net>"), RNG states ("rng.<name>" = hex).
+   A model file carries metadata too (tn_model_stamp): method, format, library version, seed,
+   iterations, training seconds, and a digest of the example it learned from.
+   ============================================================================================ */
+
+/* What zero means is resolved by tn_train_defaults; methods embed this in their options. */
+typedef struct tn_train_opts {
+    double minutes;             /* wall-clock budget of the whole run, resumed time included;
+                                   0 = the method's default */
+    long max_iters;             /* stop after this many iterations in total; 0 = only the time budget */
+    const char *checkpoint;     /* checkpoint file (.tnw); NULL = none */
+    double checkpoint_seconds;  /* save at least this often; 0 = 60 */
+    long checkpoint_iters;      /* also save every this many iterations; 0 = only by time */
+    int resume;                 /* 1: continue from `checkpoint` */
+    uint64_t seed;
+} tn_train_opts;
+
+/* Resolves the zero fields; default_minutes is the method's own default budget. */
+TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes);
+
+typedef struct tn_train tn_train;
+/* Starts a run of `method` (e.g. "texgan"), reporting progress as `stage`. Settings are checked
+   (NaN/negative budgets, resume without a checkpoint path). Free with tn_train_free. */
+TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out);
+TN_API void tn_train_free(tn_train *run);
+/* Registers state. Names/prefixes must stay the same between the run that wrote a checkpoint
+   and the one resuming. The run does not own what is registered. */
+TN_API tn_status tn_train_add_net(tn_train *run, const char *name, tn_params *p, tn_optim *o);
+TN_API tn_status tn_train_add_params(tn_train *run, const char *prefix, tn_params *p);
+TN_API tn_status tn_train_add_rng(tn_train *run, const char *name, tn_rng *rng);
+/* Metadata stored in checkpoints as "config.<key>" (the method's settings); tn_train_meta reads
+   the opened checkpoint's value when resuming, else the value set. */
+TN_API tn_status tn_train_set_meta(tn_train *run, const char *key, const char *value);
+TN_API const char *tn_train_meta(const tn_train *run, const char *key);
+/* Opens opts->checkpoint for a resume: a .tnw of this method (its architecture is in it, so
+   methods call this before building their networks). The set stays owned by the run; a method
+   may upgrade a checkpoint of an older layout in it before tn_train_restore. */
+TN_API tn_status tn_train_open_checkpoint(tn_train *run, tn_params **ck);
+/* Restores everything registered from the opened checkpoint (every tensor must be there with
+   its shape), the counters, optimiser steps and RNG states. */
+TN_API tn_status tn_train_restore(tn_train *run);
+/* Sets the counters directly (for checkpoints of older layouts). */
+TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds);
+/* Call before every iteration: 1 = run one, 0 = stop (budget spent, cancelled or failed; see
+   tn_train_finish). From the second call on it counts the iteration just done, saves a
+   checkpoint when one is due and reports progress. */
+TN_API int tn_train_next(tn_train *run);
+/* Records a failed iteration: the run stops, tn_train_finish returns st. */
+TN_API void tn_train_fail(tn_train *run, tn_status st);
+/* Ends the run: a final checkpoint if anything was done since the last one (also after a
+   cancel, so a cancelled run resumes), and the first error (TN_ERR_CANCELLED if cancelled). */
+TN_API tn_status tn_train_finish(tn_train *run);
+/* Iterations done (the index of the one about to run), in total and at the start of this run. */
+TN_API long tn_train_iteration(const tn_train *run);
+TN_API long tn_train_start_iteration(const tn_train *run);
+TN_API double tn_train_seconds(const tn_train *run);
+TN_API double tn_train_start_seconds(const tn_train *run);
+/* The run's seed (a resumed run reports the seed of the run that wrote the checkpoint). */
+TN_API uint64_t tn_train_seed(const tn_train *run);
+TN_API int tn_train_checkpoints(const tn_train *run);
+/* Writes a checkpoint now (to opts->checkpoint, or to path if not NULL). */
+TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path);
+
+/* Seconds left in the operation now reporting progress (from inside a progress hook), < 0 when
+   unknown. Training runs keep it current. */
+TN_API double tn_progress_eta(void);
+
+/* Model files: tn_model_stamp writes the metadata every model carries; tn_model_check refuses a
+   file of another method or of a newer format with TN_ERR_FORMAT and a message that says so. */
+typedef struct tn_model_provenance {
+    uint64_t seed;
+    long iterations;
+    double seconds;             /* training wall-clock seconds */
+    uint64_t example_digest;    /* tn_image_digest of the example (0 = none) */
+    int example_width, example_height, example_channels;
+} tn_model_provenance;
+TN_API tn_status tn_model_stamp(tn_params *p, const char *method, int format, const tn_model_provenance *prov);
+/* legacy_tensor: a tensor name that identifies files of this method written before metadata
+   existed (NULL = none accepted). */
+TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_format, const char *legacy_tensor,
+                                const char *name);
+/* FNV-1a 64 of the size and the float bits of every sample (a fingerprint of an example). */
+TN_API uint64_t tn_image_digest(const tn_image *img);
+
+/* Building blocks shared by the learned methods. */
+
+/* Exponential moving average: every learned tensor of src blends into avg's tensor of the same
+   name, with decay min(decay, (1 + step) / (10 + step)) so early weights fade quickly. */
+TN_API void tn_ema_update(tn_params *avg, const tn_params *src, float decay, long step);
+
+typedef enum tn_activation { TN_ACT_NONE = 0, TN_ACT_RELU, TN_ACT_LEAKY, TN_ACT_TANH, TN_ACT_SIGMOID } tn_activation;
+TN_API tn_tensor *tn_activate(tn_ctx *ctx, tn_tensor *x, tn_activation act);
+
+/* MLP: layers `widths[0] -> ... -> widths[n]` ("<prefix>w<i>" (out x in), "<prefix>b<i>"), He
+   initialised from rng; tn_mlp applies it to N x widths[0] rows with `act` between layers and
+   none after the last. */
+TN_API tn_status tn_mlp_add(tn_params *p, const char *prefix, const int *widths, int n, tn_rng *rng);
+TN_API tn_tensor *tn_mlp(tn_ctx *ctx, const tn_params *p, const char *prefix, int n, tn_tensor *x, tn_activation act);
+
+/* Conv block: k x k conv with "same" zero padding ("<prefix>w", "<prefix>b"), then instance norm
+   with learned gain/offset ("<prefix>g", "<prefix>o") when norm is 1, then the activation. */
+TN_API tn_status tn_conv_block_add(tn_params *p, const char *prefix, int cin, int cout, int k, int norm, tn_rng *rng);
+TN_API tn_tensor *tn_conv_block(tn_ctx *ctx, const tn_params *p, const char *prefix, tn_tensor *x, tn_activation act);
+
+/* Spectral-normalised patch discriminator: `layers` k x k convs of stride 2 (width, 2 width,
+   ...; leaky ReLU 0.2), then a k x k score conv: a per-location score map. Tensors
+   "<prefix>w<l>", "<prefix>b<l>", power-iteration vectors "<prefix>u<l>" (buffers). */
+#define TN_DISC_MAX_LAYERS 8
+typedef struct tn_patch_disc {
+    tn_params *p;
+    char prefix[16];
+    int layers, k;
+    tn_tensor *wn[TN_DISC_MAX_LAYERS + 1]; /* this step's normalised weights (tn_patch_disc_begin) */
+} tn_patch_disc;
+/* Adds the tensors to p and fills *d (initialised from rng; rng NULL leaves them zero). */
+TN_API tn_status tn_patch_disc_add(tn_patch_disc *d, tn_params *p, const char *prefix, int cin, int width, int layers, int k,
+                                   tn_rng *rng);
+/* One power iteration per layer and the normalised weights for this step (share them between
+   the real and the fake pass of a step). */
+TN_API void tn_patch_disc_begin(tn_ctx *ctx, tn_patch_disc *d);
+TN_API tn_tensor *tn_patch_disc_score(tn_ctx *ctx, const tn_patch_disc *d, tn_tensor *x);
+
+/* Keep the best k snapshots of a parameter set by a score (lower is better). */
+typedef struct tn_best_k tn_best_k;
+TN_API tn_best_k *tn_best_k_create(int k);
+TN_API void tn_best_k_free(tn_best_k *b);
+/* Copies p if its score is among the k best so far (NaN scores are never kept). 1 = kept. */
+TN_API int tn_best_k_offer(tn_best_k *b, const tn_params *p, double score, long iteration);
+TN_API int tn_best_k_count(const tn_best_k *b);
+/* The i-th best (0 = best); score and iteration may be NULL. */
+TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, long *iteration);
 
 /* ============================================================================================
    @@noise  procedural maps (paper 002, section 2.1)
@@ -999,13 +1161,8 @@ typedef struct tn_texgan_opts {
                                means and covariances at 3 scales vs the exemplar's); 0 = 1, < 0 = off */
     float lr;               /* Adam rate for G and D; 0 = 2e-4 (betas 0.5, 0.999) */
     float ema;              /* EMA decay of the kept generator; 0 = 0.995 */
-    double minutes;         /* wall-clock budget of the whole run, resumed time included; 0 = 15 */
-    long max_iters;         /* stop after this many iterations in total; 0 = only the time budget */
-    const char *checkpoint; /* checkpoint file (.tnw); NULL = none */
-    double checkpoint_seconds; /* save at least this often; 0 = 60 */
-    long checkpoint_iters;  /* also save every this many iterations; 0 = only by time */
-    int resume;             /* 1: continue from `checkpoint` (the file's architecture wins) */
-    uint64_t seed;
+    tn_train_opts train;    /* budget (minutes 0 = 15), checkpoints, resume (the file's
+                               architecture and settings win), seed */
 } tn_texgan_opts;
 
 /* A trained generator (the EMA weights) plus what synthesis needs. Free with tn_texgan_free. */
@@ -7961,6 +8118,17 @@ TN_API tn_tensor *tn_hinge_g_loss(tn_ctx *ctx, tn_tensor *fake_scores)
     return tn_scale_shift(ctx, tn_mean(ctx, fake_scores), -1.0f, 0.0f);
 }
 
+TN_API tn_tensor *tn_nonsat_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores)
+{
+    tn_tensor *r = tn_mean(ctx, tn_softplus(ctx, tn_scale_shift(ctx, real_scores, -1.0f, 0.0f)));
+    return tn_add(ctx, r, tn_mean(ctx, tn_softplus(ctx, fake_scores)));
+}
+
+TN_API tn_tensor *tn_nonsat_g_loss(tn_ctx *ctx, tn_tensor *fake_scores)
+{
+    return tn_mean(ctx, tn_softplus(ctx, tn_scale_shift(ctx, fake_scores, -1.0f, 0.0f)));
+}
+
 static void tn__gram_backward(tn_ctx *ctx, tn_tensor *out)
 {
     tn_tensor *x = out->src[0];
@@ -8077,6 +8245,8 @@ struct tn_params {
     tn_ctx *ctx;
     tn_tensor **t;
     int n, cap;
+    char **meta;  /* 2 * nmeta strings: key, value, key, value, ... (each malloc'd) */
+    int nmeta, metacap;
 };
 
 TN_API tn_params *tn_params_create(void)
@@ -8092,9 +8262,19 @@ TN_API tn_params *tn_params_create(void)
     return p;
 }
 
+static void tn__meta_clear(tn_params *p)
+{
+    int i;
+    for (i = 0; i < 2 * p->nmeta; i++) TN_FREE(p->meta[i]);
+    TN_FREE(p->meta);
+    p->meta = NULL;
+    p->nmeta = p->metacap = 0;
+}
+
 TN_API void tn_params_free(tn_params *p)
 {
     if (!p) return;
+    tn__meta_clear(p);
     tn_ctx_free(p->ctx);
     TN_FREE(p->t);
     TN_FREE(p);
@@ -8233,9 +8413,35 @@ static float tn__get_f32(const uint8_t *p)
     return f;
 }
 
+/* The metadata block of a version-2 file ("key=value\n" lines); its length goes to *n. */
+static size_t tn__meta_size(const tn_params *p)
+{
+    size_t n = 0;
+    int i;
+    for (i = 0; i < p->nmeta; i++) n += strlen(p->meta[2 * i]) + 1 + strlen(p->meta[2 * i + 1]) + 1;
+    return n;
+}
+
+static size_t tn__meta_write(const tn_params *p, uint8_t *out)
+{
+    size_t off = 0, l;
+    int i;
+    for (i = 0; i < p->nmeta; i++) {
+        l = strlen(p->meta[2 * i]);
+        memcpy(out + off, p->meta[2 * i], l);
+        off += l;
+        out[off++] = '=';
+        l = strlen(p->meta[2 * i + 1]);
+        memcpy(out + off, p->meta[2 * i + 1], l);
+        off += l;
+        out[off++] = '\n';
+    }
+    return off;
+}
+
 TN_API tn_status tn_params_save(const tn_params *p, const char *path)
 {
-    size_t size = 12 + 4, off, k;
+    size_t meta = tn__meta_size(p), size = 12 + 4 + (p->nmeta ? 4 + meta : 0), off, k;
     uint8_t *buf;
     tn_status st;
     int i, d;
@@ -8243,9 +8449,13 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path)
     buf = (uint8_t *)tn__alloc(size);
     if (!buf) return tn__fail_context(TN_ERR_OUT_OF_MEMORY, path);
     memcpy(buf, "TNW1", 4);
-    tn__put_u32(buf + 4, 1);
+    tn__put_u32(buf + 4, p->nmeta ? 2 : 1);
     tn__put_u32(buf + 8, (uint32_t)p->n);
     off = 12;
+    if (p->nmeta) {
+        tn__put_u32(buf + 12, (uint32_t)meta);
+        off = 16 + tn__meta_write(p, buf + 16);
+    }
     for (i = 0; i < p->n; i++) {
         const tn_tensor *t = p->t[i];
         size_t nl = strlen(t->name);
@@ -8264,76 +8474,256 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path)
     return st;
 }
 
-/* Parses and checks a .tnw image; with apply == 0 only validates against p, marking each
-   model tensor in seen[] (p->n bytes, zeroed): a name twice would leave another tensor unloaded. */
-static tn_status tn__tnw_parse(tn_params *p, const uint8_t *b, size_t n, const char *name, int apply, uint8_t *seen)
+#define TN__TNW_VERSION 2
+#define TN__META_MAX 65536
+
+static int tn__meta_key_ok(const char *k)
+{
+    size_t i, n = k ? strlen(k) : 0;
+    if (n == 0 || n >= 64) return 0;
+    for (i = 0; i < n; i++)
+        if (!((k[i] >= 'a' && k[i] <= 'z') || (k[i] >= 'A' && k[i] <= 'Z') || (k[i] >= '0' && k[i] <= '9') || k[i] == '_' || k[i] == '.' || k[i] == '-')) return 0;
+    return 1;
+}
+
+static int tn__meta_value_ok(const char *v, size_t n)
+{
+    size_t i;
+    if (n >= 1024) return 0;
+    for (i = 0; i < n; i++)
+        if ((unsigned char)v[i] < 0x20 || v[i] == 0x7f) return 0;
+    return 1;
+}
+
+static char *tn__strndup(const char *s, size_t n)
+{
+    char *d = (char *)TN_MALLOC(n + 1);
+    if (!d) return NULL;
+    memcpy(d, s, n);
+    d[n] = 0;
+    return d;
+}
+
+static tn_status tn__meta_set(tn_params *p, const char *key, size_t kn, const char *value, size_t vn)
+{
+    char *k, *v;
+    int i;
+    for (i = 0; i < p->nmeta; i++)
+        if (strlen(p->meta[2 * i]) == kn && !memcmp(p->meta[2 * i], key, kn)) break;
+    if (!value) { /* remove, keeping the order of the rest */
+        if (i == p->nmeta) return TN_OK;
+        TN_FREE(p->meta[2 * i]);
+        TN_FREE(p->meta[2 * i + 1]);
+        memmove(p->meta + 2 * i, p->meta + 2 * i + 2, (size_t)(p->nmeta - i - 1) * 2 * sizeof(char *));
+        p->nmeta--;
+        return TN_OK;
+    }
+    if (!(v = tn__strndup(value, vn))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "metadata: out of memory");
+    if (i < p->nmeta) {
+        TN_FREE(p->meta[2 * i + 1]);
+        p->meta[2 * i + 1] = v;
+        return TN_OK;
+    }
+    if (p->nmeta == p->metacap) {
+        int cap = p->metacap ? 2 * p->metacap : 16;
+        char **m = (char **)TN_REALLOC(p->meta, 2 * (size_t)cap * sizeof(char *));
+        if (!m) { TN_FREE(v); return tn__fail(TN_ERR_OUT_OF_MEMORY, "metadata: out of memory"); }
+        p->meta = m;
+        p->metacap = cap;
+    }
+    if (!(k = tn__strndup(key, kn))) { TN_FREE(v); return tn__fail(TN_ERR_OUT_OF_MEMORY, "metadata: out of memory"); }
+    p->meta[2 * p->nmeta] = k;
+    p->meta[2 * p->nmeta + 1] = v;
+    p->nmeta++;
+    return TN_OK;
+}
+
+TN_API tn_status tn_params_set_meta(tn_params *p, const char *key, const char *value)
+{
+    TN_ASSERT(p);
+    if (!tn__meta_key_ok(key)) return tn__fail(TN_ERR_INVALID_ARG, "metadata: bad key '%.80s'", key ? key : "(null)");
+    if (value && !tn__meta_value_ok(value, strlen(value)))
+        return tn__fail(TN_ERR_INVALID_ARG, "metadata: the value of '%s' is too long or holds control characters", key);
+    return tn__meta_set(p, key, strlen(key), value, value ? strlen(value) : 0);
+}
+
+TN_API const char *tn_params_meta(const tn_params *p, const char *key)
+{
+    int i;
+    for (i = 0; p && key && i < p->nmeta; i++)
+        if (!strcmp(p->meta[2 * i], key)) return p->meta[2 * i + 1];
+    return NULL;
+}
+
+TN_API int tn_params_meta_count(const tn_params *p) { return p ? p->nmeta : 0; }
+
+TN_API const char *tn_params_meta_key(const tn_params *p, int i, const char **value)
+{
+    if (!p || i < 0 || i >= p->nmeta) return NULL;
+    if (value) *value = p->meta[2 * i + 1];
+    return p->meta[2 * i];
+}
+
+/* Parses the metadata block into p: every line key=value, checked as tn_params_set_meta would. */
+static tn_status tn__meta_parse(tn_params *p, const uint8_t *b, size_t n, const char *name)
+{
+    size_t off = 0;
+    while (off < n) {
+        const char *line = (const char *)b + off, *eq, *nl = (const char *)memchr(line, '\n', n - off);
+        char key[64];
+        size_t len, kn;
+        tn_status st;
+        if (!nl) return tn__fail(TN_ERR_CORRUPT, "%s: metadata line without an end", name);
+        len = (size_t)(nl - line);
+        eq = (const char *)memchr(line, '=', len);
+        kn = eq ? (size_t)(eq - line) : 0;
+        if (!eq || kn == 0 || kn >= sizeof key) return tn__fail(TN_ERR_CORRUPT, "%s: bad metadata line", name);
+        memcpy(key, line, kn);
+        key[kn] = 0;
+        if (!tn__meta_key_ok(key) || !tn__meta_value_ok(eq + 1, len - kn - 1) || tn_params_meta(p, key))
+            return tn__fail(TN_ERR_CORRUPT, "%s: bad or repeated metadata key '%s'", name, key);
+        if ((st = tn__meta_set(p, key, kn, eq + 1, len - kn - 1))) return st;
+        off += len + 1;
+    }
+    return TN_OK;
+}
+
+/* Reads a .tnw image into a new set: every tensor with its name, shape and flag, the metadata.
+   Everything is bounds-checked before it is allocated; NaN/Inf data is refused. */
+static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_params **out)
 {
     size_t off = 12, k;
-    uint32_t count, i;
+    uint32_t count, i, version;
+    tn_params *p;
+    tn_status st = TN_OK;
+    *out = NULL;
     if (n < 16 || memcmp(b, "TNW1", 4) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a terrainnet weights (.tnw) file", name);
-    if (tn__get_u32(b + 4) != 1) return tn__fail(TN_ERR_FORMAT, "%s: .tnw version %u is not supported", name, (unsigned)tn__get_u32(b + 4));
+    version = tn__get_u32(b + 4);
+    if (version < 1 || version > TN__TNW_VERSION)
+        return tn__fail(TN_ERR_FORMAT, "%s: .tnw version %u is not supported (this library reads 1..%d; a newer terrainnet wrote it?)", name,
+                        (unsigned)version, TN__TNW_VERSION);
     if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
     count = tn__get_u32(b + 8);
-    if ((int)count != p->n || count > 1000000u)
-        return tn__fail(TN_ERR_SHAPE, "%s: holds %u tensors, the model has %d", name, (unsigned)count, p->n);
-    for (i = 0; i < count; i++) {
+    if (count > (n - 16) / 9) return tn__fail(TN_ERR_CORRUPT, "%s: %u tensors cannot fit in %zu bytes", name, (unsigned)count, n);
+    if (!(p = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", name);
+    if (version >= 2) {
+        size_t ml = tn__get_u32(b + 12);
+        off = 16;
+        if (ml > TN__META_MAX || ml > n - 4 - off) st = tn__fail(TN_ERR_CORRUPT, "%s: bad metadata size", name);
+        if (!st) st = tn__meta_parse(p, b + off, ml, name);
+        off += ml;
+    }
+    for (i = 0; i < count && !st; i++) {
         char tname[64];
-        size_t nl;
-        int ndim, d, flags, j;
-        tn_tensor *t = NULL;
-        if (off + 4 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated at tensor %u", name, (unsigned)i);
+        size_t nl, numel = 1;
+        int ndim, d, shape[TN_MAX_DIMS], flags;
+        tn_tensor *t;
+        if (off + 4 > n - 4) { st = tn__fail(TN_ERR_CORRUPT, "%s: truncated at tensor %u", name, (unsigned)i); break; }
         nl = (size_t)b[off] | ((size_t)b[off + 1] << 8);
-        if (nl >= sizeof tname || off + 2 + nl + 2 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: bad name at tensor %u", name, (unsigned)i);
+        if (nl == 0 || nl >= 40 || off + 2 + nl + 2 > n - 4) { st = tn__fail(TN_ERR_CORRUPT, "%s: bad name at tensor %u", name, (unsigned)i); break; }
         memcpy(tname, b + off + 2, nl);
         tname[nl] = 0;
         off += 2 + nl;
         ndim = b[off];
         flags = b[off + 1];
         off += 2;
-        for (j = 0; j < p->n && !t; j++)
-            if (!strcmp(p->t[j]->name, tname)) t = p->t[j];
-        if (!t) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' is not in the model", name, tname);
-        if (seen && seen[j - 1]++) return tn__fail(TN_ERR_CORRUPT, "%s: tensor '%s' appears twice", name, tname);
-        if (ndim != t->ndim) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' has %d dims, the model's has %d", name, tname, ndim, t->ndim);
-        if (off + 4 * (size_t)ndim > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated in '%s'", name, tname);
-        for (d = 0; d < ndim; d++)
-            if (tn__get_u32(b + off + 4 * (size_t)d) != (uint32_t)t->shape[d])
-                return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' dim %d is %u, the model's is %d", name, tname, d,
-                                (unsigned)tn__get_u32(b + off + 4 * (size_t)d), t->shape[d]);
+        if (ndim < 1 || ndim > TN_MAX_DIMS || off + 4 * (size_t)ndim > n - 4) {
+            st = tn__fail(TN_ERR_CORRUPT, "%s: tensor '%s' has %d dims or is truncated", name, tname, ndim);
+            break;
+        }
+        for (d = 0; d < ndim; d++) {
+            uint32_t v = tn__get_u32(b + off + 4 * (size_t)d);
+            if (v < 1 || v > (uint32_t)INT_MAX || !tn__mul_size(numel, v, &numel)) break;
+            shape[d] = (int)v;
+        }
         off += 4 * (size_t)ndim;
-        (void)flags;
-        if (t->numel > (n - 4 - off) / 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated data of '%s'", name, tname);
-        if (apply)
-            for (k = 0; k < t->numel; k++) t->data[k] = tn__get_f32(b + off + 4 * k);
-        else
-            for (k = 0; k < t->numel; k++) {
-                float v = tn__get_f32(b + off + 4 * k);
-                if (v != v || v > FLT_MAX || v < -FLT_MAX) return tn__fail(TN_ERR_NUMERIC, "%s: tensor '%s' holds NaN/Inf", name, tname);
-            }
-        off += 4 * t->numel;
+        if (d < ndim || numel > (n - 4 - off) / 4) { st = tn__fail(TN_ERR_CORRUPT, "%s: truncated data of '%s'", name, tname); break; }
+        if (tn_params_find(p, tname)) { st = tn__fail(TN_ERR_CORRUPT, "%s: tensor '%s' appears twice", name, tname); break; }
+        for (k = 0; k < numel; k++) {
+            float v = tn__get_f32(b + off + 4 * k);
+            if (v != v || v > FLT_MAX || v < -FLT_MAX) break;
+        }
+        if (k < numel) { st = tn__fail(TN_ERR_NUMERIC, "%s: tensor '%s' holds NaN/Inf", name, tname); break; }
+        t = flags & 1 ? tn_params_add_buffer(p, tname, ndim, shape) : tn_params_add(p, tname, ndim, shape);
+        if (!t) { st = tn__fail_context(TN_ERR_OUT_OF_MEMORY, name); break; }
+        for (k = 0; k < numel; k++) t->data[k] = tn__get_f32(b + off + 4 * k);
+        off += 4 * numel;
     }
-    if (off != n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: %zu unexpected bytes after the last tensor", name, n - 4 - off);
+    if (!st && off != n - 4) st = tn__fail(TN_ERR_CORRUPT, "%s: %zu unexpected bytes after the last tensor", name, n - 4 - off);
+    if (st) {
+        tn_params_free(p);
+        return st;
+    }
+    *out = p;
+    return TN_OK;
+}
+
+TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out)
+{
+    TN_ASSERT(out);
+    *out = NULL;
+    if (!data) return tn__fail(TN_ERR_INVALID_ARG, "weights: no data");
+    return tn__tnw_read(data, size, name ? name : "weights", out);
+}
+
+TN_API tn_status tn_params_open(const char *path, tn_params **out)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    tn_status st;
+    TN_ASSERT(out);
+    *out = NULL;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "weights: empty path");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    st = tn__tnw_read(buf, n, path, out);
+    TN_FREE(buf);
+    return st;
+}
+
+/* Copies src's tensors into p's same-named ones: the same count, every name present with the
+   same shape, checked before anything changes; then the metadata. */
+static tn_status tn__params_assign(tn_params *p, const tn_params *src, const char *name)
+{
+    int i, j;
+    if (src->n != p->n) return tn__fail(TN_ERR_SHAPE, "%s: holds %d tensors, the model has %d", name, src->n, p->n);
+    for (i = 0; i < src->n; i++) {
+        const tn_tensor *s = src->t[i], *t = tn_params_find(p, s->name);
+        if (!t) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' is not in the model", name, s->name);
+        if (s->ndim != t->ndim) return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' has %d dims, the model's has %d", name, s->name, s->ndim, t->ndim);
+        for (j = 0; j < s->ndim; j++)
+            if (s->shape[j] != t->shape[j])
+                return tn__fail(TN_ERR_SHAPE, "%s: tensor '%s' dim %d is %d, the model's is %d", name, s->name, j, s->shape[j], t->shape[j]);
+    }
+    for (i = 0; i < src->n; i++) memcpy(tn_params_find(p, src->t[i]->name)->data, src->t[i]->data, src->t[i]->numel * sizeof(float));
+    tn__meta_clear(p);
+    for (i = 0; i < src->nmeta; i++) {
+        const char *k = src->meta[2 * i], *v = src->meta[2 * i + 1];
+        tn_status st = tn__meta_set(p, k, strlen(k), v, strlen(v));
+        if (st) return st;
+    }
     return TN_OK;
 }
 
 TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t size, const char *name)
 {
-    uint8_t *seen = (uint8_t *)tn__calloc((size_t)p->n);
+    tn_params *f = NULL;
     tn_status st;
-    if (!seen) return TN_ERR_OUT_OF_MEMORY;
-    st = tn__tnw_parse(p, data, size, name ? name : "weights", 0, seen);
-    TN_FREE(seen);
-    return st ? st : tn__tnw_parse(p, data, size, name ? name : "weights", 1, NULL);
+    TN_ASSERT(p);
+    name = name ? name : "weights";
+    if ((st = tn_params_open_memory(data, size, name, &f))) return st;
+    st = tn__params_assign(p, f, name);
+    tn_params_free(f);
+    return st;
 }
 
 TN_API tn_status tn_params_load(tn_params *p, const char *path)
 {
-    uint8_t *buf = NULL;
-    size_t n = 0;
-    tn_status st = tn__io_read_file(path, &buf, &n);
-    if (st) return st;
-    st = tn_params_load_memory(p, buf, n, path);
-    TN_FREE(buf);
+    tn_params *f = NULL;
+    tn_status st;
+    TN_ASSERT(p);
+    if ((st = tn_params_open(path, &f))) return st;
+    st = tn__params_assign(p, f, path);
+    tn_params_free(f);
     return st;
 }
 
@@ -8543,6 +8933,735 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     TN_FREE(S);
     TN_FREE(rho);
     return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>train  (@@train implementation)
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__TRAIN_MAX 8
+
+typedef struct tn__train_item {
+    char name[24];      /* net name, set prefix or RNG name */
+    tn_params *p;
+    tn_optim *o;
+    tn_rng *rng;
+} tn__train_item;
+
+struct tn_train {
+    char method[32], stage[48];
+    tn_train_opts o;
+    tn__train_item nets[TN__TRAIN_MAX], sets[TN__TRAIN_MAX], rngs[TN__TRAIN_MAX];
+    int nnets, nsets, nrngs;
+    tn_params *meta;        /* the method's settings (metadata only) */
+    tn_params *ck;          /* the checkpoint opened for a resume */
+    long it, it0, last_ck_it;
+    double seconds, sec0, t0, last_ck;
+    int started, stopped, ckpts;
+    tn_status st;
+};
+
+static double tn__progress_eta_s = -1.0;
+
+TN_API double tn_progress_eta(void) { return tn__progress_eta_s; }
+
+TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes)
+{
+    TN_ASSERT(o);
+    if (o->minutes <= 0) o->minutes = default_minutes > 0 ? default_minutes : 10.0;
+    if (o->max_iters < 0) o->max_iters = 0;
+    if (o->checkpoint_seconds <= 0) o->checkpoint_seconds = 60.0;
+    if (o->checkpoint_iters < 0) o->checkpoint_iters = 0;
+}
+
+static int tn__train_name_ok(const char *s, size_t cap) { return s && strlen(s) < cap; }
+
+TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out)
+{
+    tn_train *r;
+    TN_ASSERT(out);
+    *out = NULL;
+    if (!tn__meta_key_ok(method) || strlen(method) >= sizeof r->method || !stage || strlen(stage) >= sizeof r->stage)
+        return tn__fail(TN_ERR_INVALID_ARG, "training: bad method or stage name");
+    if (opts && (!(opts->minutes <= 1e9) || !(opts->checkpoint_seconds <= 1e9) || opts->max_iters < 0 || opts->checkpoint_iters < 0))
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: bad training budget (minutes %g, checkpoint every %g s)", method, opts->minutes,
+                        opts->checkpoint_seconds);
+    if (opts && opts->resume && (!opts->checkpoint || !opts->checkpoint[0]))
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: resume needs a checkpoint path", method);
+    r = (tn_train *)tn__calloc(sizeof *r);
+    if (!r) return TN_ERR_OUT_OF_MEMORY;
+    strcpy(r->method, method);
+    strcpy(r->stage, stage);
+    if (opts) r->o = *opts;
+    tn_train_defaults(&r->o, 0.0);
+    if (!(r->meta = tn_params_create())) {
+        TN_FREE(r);
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", method);
+    }
+    *out = r;
+    return TN_OK;
+}
+
+TN_API void tn_train_free(tn_train *run)
+{
+    if (!run) return;
+    tn_params_free(run->meta);
+    tn_params_free(run->ck);
+    TN_FREE(run);
+}
+
+static tn_status tn__train_add(tn_train *run, tn__train_item *items, int *n, const char *name, tn_params *p, tn_optim *o, tn_rng *rng)
+{
+    TN_ASSERT(run && name);
+    if (*n >= TN__TRAIN_MAX || !tn__train_name_ok(name, sizeof items->name))
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: too many registered items or name '%s' too long", run->method, name);
+    memset(&items[*n], 0, sizeof items[*n]);
+    strcpy(items[*n].name, name);
+    items[*n].p = p;
+    items[*n].o = o;
+    items[*n].rng = rng;
+    (*n)++;
+    return TN_OK;
+}
+
+TN_API tn_status tn_train_add_net(tn_train *run, const char *name, tn_params *p, tn_optim *o)
+{
+    TN_ASSERT(p && o && o->p == p);
+    if (!tn__meta_key_ok(name)) return tn__fail(TN_ERR_INVALID_ARG, "training: bad net name");
+    return tn__train_add(run, run->nets, &run->nnets, name, p, o, NULL);
+}
+
+TN_API tn_status tn_train_add_params(tn_train *run, const char *prefix, tn_params *p)
+{
+    TN_ASSERT(p);
+    return tn__train_add(run, run->sets, &run->nsets, prefix, p, NULL, NULL);
+}
+
+TN_API tn_status tn_train_add_rng(tn_train *run, const char *name, tn_rng *rng)
+{
+    TN_ASSERT(rng);
+    if (!tn__meta_key_ok(name)) return tn__fail(TN_ERR_INVALID_ARG, "training: bad RNG name");
+    return tn__train_add(run, run->rngs, &run->nrngs, name, NULL, NULL, rng);
+}
+
+TN_API tn_status tn_train_set_meta(tn_train *run, const char *key, const char *value) { return tn_params_set_meta(run->meta, key, value); }
+
+TN_API const char *tn_train_meta(const tn_train *run, const char *key)
+{
+    char k[80];
+    if (!run->ck) return tn_params_meta(run->meta, key);
+    snprintf(k, sizeof k, "config.%s", key);
+    return tn_params_meta(run->ck, k);
+}
+
+TN_API long tn_train_iteration(const tn_train *run) { return run->it; }
+TN_API long tn_train_start_iteration(const tn_train *run) { return run->it0; }
+TN_API double tn_train_seconds(const tn_train *run) { return run->seconds; }
+TN_API double tn_train_start_seconds(const tn_train *run) { return run->sec0; }
+TN_API uint64_t tn_train_seed(const tn_train *run) { return run->o.seed; }
+TN_API int tn_train_checkpoints(const tn_train *run) { return run->ckpts; }
+
+TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds)
+{
+    run->it = run->it0 = run->last_ck_it = iteration;
+    run->seconds = run->sec0 = seconds;
+}
+
+/* ---- metadata numbers (locale-free) ---- */
+
+static tn_status tn__meta_put_num(tn_params *p, const char *key, double v)
+{
+    char buf[40];
+    tn__io_format_number(buf, sizeof buf, v, 0);
+    return tn_params_set_meta(p, key, buf);
+}
+
+/* A whole number in [0, max] from metadata; 0 (with an error) if absent or malformed. */
+static int tn__meta_get_whole(const tn_params *p, const char *key, double max, double *out, const char *name)
+{
+    const char *v = tn_params_meta(p, key);
+    double d;
+    if (!v || !tn__io_number(v, strlen(v), &d) || !(d >= 0 && d <= max) || d != floor(d)) {
+        tn__fail(TN_ERR_CORRUPT, "%s: metadata '%s' is missing or not a whole number in 0..%.0f", name, key, max);
+        return 0;
+    }
+    *out = d;
+    return 1;
+}
+
+static void tn__hex64(char *buf, uint64_t v)
+{
+    static const char hex[] = "0123456789abcdef";
+    int i;
+    for (i = 0; i < 16; i++) buf[i] = hex[(v >> (60 - 4 * i)) & 15u];
+    buf[16] = 0;
+}
+
+static int tn__parse_hex64(const char *s, size_t n, uint64_t *out)
+{
+    uint64_t v = 0;
+    size_t i;
+    if (n == 0 || n > 16) return 0;
+    for (i = 0; i < n; i++) {
+        int c = s[i], d = c >= '0' && c <= '9' ? c - '0' : c >= 'a' && c <= 'f' ? c - 'a' + 10 : -1;
+        if (d < 0) return 0;
+        v = (v << 4) | (uint64_t)d;
+    }
+    *out = v;
+    return 1;
+}
+
+/* ---- checkpoints ---- */
+
+static tn_status tn__train_copy_tensor(tn_params *ck, const char *prefix, const tn_tensor *t, const float *data, const char *method)
+{
+    char name[64];
+    tn_tensor *c;
+    snprintf(name, sizeof name, "%s%s", prefix, t->name);
+    if (strlen(name) >= 40) return tn__fail(TN_ERR_INVALID_ARG, "%s: checkpoint tensor name %s too long", method, name);
+    if (!(c = tn_params_add_buffer(ck, name, t->ndim, t->shape))) return tn__fail_context(TN_ERR_OUT_OF_MEMORY, method);
+    memcpy(c->data, data, t->numel * sizeof(float));
+    return TN_OK;
+}
+
+/* The whole state as one set of tensors + metadata. */
+static tn_status tn__train_state(tn_train *run, tn_params **out)
+{
+    tn_params *ck = tn_params_create();
+    tn_status st = TN_OK;
+    char key[64], hex[40];
+    int i, j;
+    *out = NULL;
+    if (!ck) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", run->method);
+    st = tn_params_set_meta(ck, "method", run->method);
+    if (!st) st = tn_params_set_meta(ck, "kind", "checkpoint");
+    if (!st) st = tn_params_set_meta(ck, "library", TN_VERSION_STRING);
+    if (!st) st = tn__meta_put_num(ck, "iteration", (double)run->it);
+    if (!st) st = tn__meta_put_num(ck, "microseconds", floor(run->seconds * 1e6));
+    if (!st) {
+        tn__hex64(hex, run->o.seed);
+        st = tn_params_set_meta(ck, "seed", hex);
+    }
+    for (i = 0; i < run->nnets && !st; i++) {
+        snprintf(key, sizeof key, "step.%s", run->nets[i].name);
+        st = tn__meta_put_num(ck, key, (double)run->nets[i].o->step);
+    }
+    for (i = 0; i < run->nrngs && !st; i++) {
+        snprintf(key, sizeof key, "rng.%s", run->rngs[i].name);
+        tn__hex64(hex, run->rngs[i].rng->state);
+        hex[16] = ':';
+        tn__hex64(hex + 17, run->rngs[i].rng->inc);
+        st = tn_params_set_meta(ck, key, hex);
+    }
+    for (i = 0; i < tn_params_meta_count(run->meta) && !st; i++) {
+        const char *v = NULL, *k = tn_params_meta_key(run->meta, i, &v);
+        snprintf(key, sizeof key, "config.%s", k);
+        st = tn_params_set_meta(ck, key, v);
+    }
+    for (i = 0; i < run->nsets && !st; i++)
+        for (j = 0; j < tn_params_count(run->sets[i].p) && !st; j++) {
+            const tn_tensor *t = tn_params_get(run->sets[i].p, j);
+            st = tn__train_copy_tensor(ck, run->sets[i].name, t, t->data, run->method);
+        }
+    for (i = 0; i < run->nnets && !st; i++)
+        for (j = 0; j < tn_params_count(run->nets[i].p) && !st; j++) {
+            const tn_tensor *t = tn_params_get(run->nets[i].p, j);
+            st = tn__train_copy_tensor(ck, "", t, t->data, run->method);
+            if (!st && t->requires_grad) st = tn__train_copy_tensor(ck, "am.", t, run->nets[i].o->m[j], run->method);
+            if (!st && t->requires_grad && run->nets[i].o->v[j]) st = tn__train_copy_tensor(ck, "av.", t, run->nets[i].o->v[j], run->method);
+        }
+    if (st) {
+        tn_params_free(ck);
+        return st;
+    }
+    *out = ck;
+    return TN_OK;
+}
+
+TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path)
+{
+    tn_params *ck = NULL;
+    tn_status st;
+    path = path ? path : run->o.checkpoint;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "%s: no checkpoint path", run->method);
+    if ((st = tn__train_state(run, &ck))) return st;
+    st = tn_params_save(ck, path);
+    tn_params_free(ck);
+    if (!st) {
+        run->ckpts++;
+        run->last_ck_it = run->it;
+    }
+    return st;
+}
+
+TN_API tn_status tn_train_open_checkpoint(tn_train *run, tn_params **ck)
+{
+    tn_status st;
+    const char *m;
+    TN_ASSERT(ck);
+    *ck = NULL;
+    if (!run->o.resume) return tn__fail(TN_ERR_INVALID_ARG, "%s: not resuming", run->method);
+    if (!run->ck) {
+        if ((st = tn_params_open(run->o.checkpoint, &run->ck))) return st;
+        m = tn_params_meta(run->ck, "method");
+        if (m && strcmp(m, run->method) != 0) {
+            st = tn__fail(TN_ERR_FORMAT, "%s: a checkpoint of method '%s', not '%s'", run->o.checkpoint, m, run->method);
+            tn_params_free(run->ck);
+            run->ck = NULL;
+            return st;
+        }
+    }
+    *ck = run->ck;
+    return TN_OK;
+}
+
+/* Copies a checkpoint tensor back; its presence and shape are required. */
+static tn_status tn__train_take(const tn_params *ck, const char *prefix, const tn_tensor *t, float *data, const char *path)
+{
+    char name[64];
+    const tn_tensor *c;
+    int d;
+    snprintf(name, sizeof name, "%s%s", prefix, t->name);
+    c = tn_params_find(ck, name);
+    if (!c) return tn__fail(TN_ERR_SHAPE, "%s: checkpoint has no tensor '%s'", path, name);
+    for (d = 0; d < TN_MAX_DIMS; d++)
+        if (c->ndim != t->ndim || c->shape[d] != t->shape[d]) return tn__fail(TN_ERR_SHAPE, "%s: checkpoint tensor '%s' has another shape", path, name);
+    memcpy(data, c->data, t->numel * sizeof(float));
+    return TN_OK;
+}
+
+TN_API tn_status tn_train_restore(tn_train *run)
+{
+    tn_params *ck;
+    const char *path = run->o.checkpoint;
+    char key[64];
+    double it, us, step;
+    long steps[TN__TRAIN_MAX];
+    tn_rng rngs[TN__TRAIN_MAX];
+    int i, j;
+    tn_status st = tn_train_open_checkpoint(run, &ck);
+    if (st) return st;
+    /* every scalar first, so a bad file changes nothing */
+    if (!tn__meta_get_whole(ck, "iteration", 2147483647.0, &it, path) || !tn__meta_get_whole(ck, "microseconds", 1e15, &us, path))
+        return TN_ERR_CORRUPT;
+    for (i = 0; i < run->nnets; i++) {
+        snprintf(key, sizeof key, "step.%s", run->nets[i].name);
+        if (!tn__meta_get_whole(ck, key, 2147483647.0, &step, path)) return TN_ERR_CORRUPT;
+        steps[i] = (long)step;
+    }
+    for (i = 0; i < run->nrngs; i++) {
+        const char *v;
+        snprintf(key, sizeof key, "rng.%s", run->rngs[i].name);
+        v = tn_params_meta(ck, key);
+        if (!v || strlen(v) != 33 || v[16] != ':' || !tn__parse_hex64(v, 16, &rngs[i].state) || !tn__parse_hex64(v + 17, 16, &rngs[i].inc) ||
+            !(rngs[i].inc & 1u))
+            return tn__fail(TN_ERR_CORRUPT, "%s: bad RNG state '%s'", path, key);
+    }
+    for (i = 0; i < run->nsets; i++) /* then the tensors: presence and shapes */
+        for (j = 0; j < tn_params_count(run->sets[i].p); j++) {
+            tn_tensor *t = tn_params_get(run->sets[i].p, j);
+            char name[64];
+            const tn_tensor *c;
+            snprintf(name, sizeof name, "%s%s", run->sets[i].name, t->name);
+            if (!(c = tn_params_find(ck, name)) || c->numel != t->numel) return tn__fail(TN_ERR_SHAPE, "%s: checkpoint lacks '%s' or it has another size", path, name);
+        }
+    for (i = 0; i < run->nsets && !st; i++)
+        for (j = 0; j < tn_params_count(run->sets[i].p) && !st; j++) {
+            tn_tensor *t = tn_params_get(run->sets[i].p, j);
+            st = tn__train_take(ck, run->sets[i].name, t, t->data, path);
+        }
+    for (i = 0; i < run->nnets && !st; i++)
+        for (j = 0; j < tn_params_count(run->nets[i].p) && !st; j++) {
+            tn_tensor *t = tn_params_get(run->nets[i].p, j);
+            st = tn__train_take(ck, "", t, t->data, path);
+            if (!st && t->requires_grad) st = tn__train_take(ck, "am.", t, run->nets[i].o->m[j], path);
+            if (!st && t->requires_grad && run->nets[i].o->v[j]) st = tn__train_take(ck, "av.", t, run->nets[i].o->v[j], path);
+        }
+    if (st) return st;
+    { /* checkpoints of older layouts may not name their seed */
+        const char *sd = tn_params_meta(ck, "seed");
+        uint64_t seed;
+        if (sd && tn__parse_hex64(sd, strlen(sd), &seed)) run->o.seed = seed;
+    }
+    for (i = 0; i < run->nnets; i++) run->nets[i].o->step = steps[i];
+    for (i = 0; i < run->nrngs; i++) *run->rngs[i].rng = rngs[i];
+    tn_train_set_position(run, (long)it, us * 1e-6);
+    return TN_OK;
+}
+
+/* ---- the loop ---- */
+
+static void tn__train_eta(tn_train *run)
+{
+    double left = run->o.minutes * 60.0 - run->seconds, done = (double)(run->it - run->it0);
+    if (run->o.max_iters && done > 0) {
+        double per = (run->seconds - run->sec0) / done, by_iter = per * (double)(run->o.max_iters - run->it);
+        if (by_iter < left) left = by_iter;
+    }
+    tn__progress_eta_s = left > 0 ? left : 0.0;
+}
+
+TN_API int tn_train_next(tn_train *run)
+{
+    double now, frac;
+    if (run->stopped) return 0;
+    now = tn_time_seconds();
+    if (!run->started) {
+        run->started = 1;
+        run->t0 = run->last_ck = now;
+        run->sec0 = run->seconds;
+        run->it0 = run->last_ck_it = run->it;
+    } else {
+        run->it++;
+        run->seconds = run->sec0 + (now - run->t0);
+        if (run->o.checkpoint && run->o.checkpoint[0] &&
+            (now - run->last_ck >= run->o.checkpoint_seconds || (run->o.checkpoint_iters && run->it % run->o.checkpoint_iters == 0))) {
+            if ((run->st = tn_train_checkpoint(run, NULL))) {
+                run->stopped = 1;
+                return 0;
+            }
+            run->last_ck = now;
+        }
+        frac = run->seconds / (run->o.minutes * 60.0);
+        if (run->o.max_iters && (double)run->it / (double)run->o.max_iters > frac) frac = (double)run->it / (double)run->o.max_iters;
+        tn__train_eta(run);
+        run->st = tn__progress(run->stage, frac > 1.0 ? 1.0 : frac);
+        tn__progress_eta_s = -1.0;
+        if (run->st) {
+            run->stopped = 1;
+            return 0;
+        }
+    }
+    if (run->seconds >= run->o.minutes * 60.0 || (run->o.max_iters && run->it >= run->o.max_iters)) {
+        run->stopped = 1;
+        return 0;
+    }
+    return 1;
+}
+
+TN_API void tn_train_fail(tn_train *run, tn_status st)
+{
+    if (!run->st) run->st = st;
+    run->stopped = 1;
+}
+
+TN_API tn_status tn_train_finish(tn_train *run)
+{
+    run->stopped = 1;
+    if ((run->st == TN_OK || run->st == TN_ERR_CANCELLED) && run->o.checkpoint && run->o.checkpoint[0] && run->it != run->last_ck_it) {
+        tn_status st = tn_train_checkpoint(run, NULL); /* leaves the cancel message alone when it succeeds */
+        if (st) return st;
+    }
+    return run->st;
+}
+
+/* ---- model files ---- */
+
+TN_API uint64_t tn_image_digest(const tn_image *img)
+{
+    uint64_t h = 0xcbf29ce484222325ULL;
+    size_t n, i;
+    int k, dims[3];
+    if (!img || !img->data) return 0;
+    dims[0] = img->width;
+    dims[1] = img->height;
+    dims[2] = img->channels;
+    for (k = 0; k < 3; k++) {
+        h ^= (uint64_t)(uint32_t)dims[k];
+        h *= 0x100000001b3ULL;
+    }
+    n = (size_t)img->width * img->height * img->channels;
+    for (i = 0; i < n; i++) {
+        uint32_t u;
+        memcpy(&u, &img->data[i], 4);
+        for (k = 0; k < 4; k++) {
+            h ^= (u >> (8 * k)) & 0xffu;
+            h *= 0x100000001b3ULL;
+        }
+    }
+    return h;
+}
+
+TN_API tn_status tn_model_stamp(tn_params *p, const char *method, int format, const tn_model_provenance *prov)
+{
+    char buf[64];
+    tn_status st;
+    TN_ASSERT(p && method);
+    st = tn_params_set_meta(p, "method", method);
+    if (!st) st = tn__meta_put_num(p, "format", (double)format);
+    if (!st) st = tn_params_set_meta(p, "library", TN_VERSION_STRING);
+    if (!st && prov) {
+        tn__hex64(buf, prov->seed);
+        st = tn_params_set_meta(p, "seed", buf);
+        if (!st) st = tn__meta_put_num(p, "iterations", (double)prov->iterations);
+        if (!st) st = tn__meta_put_num(p, "train_seconds", floor(prov->seconds * 1000.0 + 0.5) / 1000.0);
+        if (!st && prov->example_digest) {
+            char hex[20];
+            tn__hex64(hex, prov->example_digest);
+            snprintf(buf, sizeof buf, "%dx%dx%d:%s", prov->example_width, prov->example_height, prov->example_channels, hex);
+            st = tn_params_set_meta(p, "example", buf);
+        }
+    }
+    return st;
+}
+
+TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_format, const char *legacy_tensor, const char *name)
+{
+    const char *m = tn_params_meta(p, "method"), *kind = tn_params_meta(p, "kind");
+    double f;
+    name = name ? name : "model";
+    if (!m) {
+        if (legacy_tensor && tn_params_find(p, legacy_tensor)) return TN_OK;
+        return tn__fail(TN_ERR_FORMAT, "%s: not a %s model (the file names no method)", name, method);
+    }
+    if (strcmp(m, method) != 0) return tn__fail(TN_ERR_FORMAT, "%s: a %s model, not a %s model", name, m, method);
+    if (kind && !strcmp(kind, "checkpoint"))
+        return tn__fail(TN_ERR_FORMAT, "%s: a %s training checkpoint, not a model (resume training from it)", name, method);
+    if (!tn__meta_get_whole(p, "format", 1e6, &f, name)) return TN_ERR_CORRUPT;
+    if (f > max_format)
+        return tn__fail(TN_ERR_FORMAT, "%s: %s model format %.0f is newer than this library's (%d): update terrainnet", name, method, f, max_format);
+    return TN_OK;
+}
+
+/* ---- building blocks ---- */
+
+TN_API void tn_ema_update(tn_params *avg, const tn_params *src, float decay, long step)
+{
+    float d = (float)(1.0 + (double)step) / (float)(10.0 + (double)step);
+    int i;
+    if (d > decay) d = decay;
+    for (i = 0; i < tn_params_count(src); i++) {
+        const tn_tensor *t = tn_params_get(src, i);
+        tn_tensor *e;
+        size_t k;
+        if (!t->requires_grad || !(e = tn_params_find(avg, t->name))) continue;
+        TN_ASSERT(e->numel == t->numel);
+        for (k = 0; k < t->numel; k++) e->data[k] = d * e->data[k] + (1.0f - d) * t->data[k];
+    }
+}
+
+TN_API tn_tensor *tn_activate(tn_ctx *ctx, tn_tensor *x, tn_activation act)
+{
+    switch (act) {
+    case TN_ACT_RELU: return tn_relu(ctx, x);
+    case TN_ACT_LEAKY: return tn_leaky_relu(ctx, x, 0.2f);
+    case TN_ACT_TANH: return tn_tanh(ctx, x);
+    case TN_ACT_SIGMOID: return tn_sigmoid(ctx, x);
+    default: return x;
+    }
+}
+
+static tn_tensor *tn__param_named(const tn_params *p, const char *prefix, const char *kind, int i)
+{
+    char name[64];
+    if (i >= 0) snprintf(name, sizeof name, "%s%s%d", prefix, kind, i);
+    else snprintf(name, sizeof name, "%s%s", prefix, kind);
+    return tn_params_find(p, name);
+}
+
+static tn_tensor *tn__param_new(tn_params *p, const char *prefix, const char *kind, int i, int ndim, const int *shape, int learned)
+{
+    char name[64];
+    if (i >= 0) snprintf(name, sizeof name, "%s%s%d", prefix, kind, i);
+    else snprintf(name, sizeof name, "%s%s", prefix, kind);
+    return learned ? tn_params_add(p, name, ndim, shape) : tn_params_add_buffer(p, name, ndim, shape);
+}
+
+TN_API tn_status tn_mlp_add(tn_params *p, const char *prefix, const int *widths, int n, tn_rng *rng)
+{
+    int i;
+    if (n < 1 || n > 64 || !widths) return tn__fail(TN_ERR_INVALID_ARG, "MLP: %d layers", n);
+    for (i = 0; i <= n; i++)
+        if (widths[i] < 1) return tn__fail(TN_ERR_INVALID_ARG, "MLP: layer width %d", widths[i]);
+    for (i = 0; i < n; i++) {
+        int ws[2], bs = widths[i + 1];
+        tn_tensor *w, *b;
+        ws[0] = widths[i + 1];
+        ws[1] = widths[i];
+        w = tn__param_new(p, prefix, "w", i, 2, ws, 1);
+        b = w ? tn__param_new(p, prefix, "b", i, 1, &bs, 1) : NULL;
+        if (!b) return tn_last_error()[0] ? TN_ERR_INVALID_ARG : TN_ERR_OUT_OF_MEMORY;
+        if (rng) tn_init_kaiming(w, rng, i < n - 1 ? 1.41f : 1.0f);
+    }
+    return TN_OK;
+}
+
+TN_API tn_tensor *tn_mlp(tn_ctx *ctx, const tn_params *p, const char *prefix, int n, tn_tensor *x, tn_activation act)
+{
+    int i;
+    for (i = 0; i < n && x; i++) {
+        x = tn_linear(ctx, x, tn__param_named(p, prefix, "w", i), tn__param_named(p, prefix, "b", i));
+        if (i < n - 1) x = tn_activate(ctx, x, act);
+    }
+    return x;
+}
+
+TN_API tn_status tn_conv_block_add(tn_params *p, const char *prefix, int cin, int cout, int k, int norm, tn_rng *rng)
+{
+    int ws[4], bs = cout;
+    tn_tensor *w, *g;
+    if (cin < 1 || cout < 1 || k < 1 || !(k & 1)) return tn__fail(TN_ERR_INVALID_ARG, "conv block: %d -> %d channels, kernel %d (odd)", cin, cout, k);
+    ws[0] = cout;
+    ws[1] = cin;
+    ws[2] = ws[3] = k;
+    if (!(w = tn__param_new(p, prefix, "w", -1, 4, ws, 1)) || !tn__param_new(p, prefix, "b", -1, 1, &bs, 1)) return TN_ERR_INVALID_ARG;
+    if (rng) tn_init_kaiming(w, rng, 1.41f);
+    if (norm) {
+        if (!(g = tn__param_new(p, prefix, "g", -1, 1, &bs, 1)) || !tn__param_new(p, prefix, "o", -1, 1, &bs, 1)) return TN_ERR_INVALID_ARG;
+        tn_tensor_fill(g, 1.0f);
+    }
+    return TN_OK;
+}
+
+TN_API tn_tensor *tn_conv_block(tn_ctx *ctx, const tn_params *p, const char *prefix, tn_tensor *x, tn_activation act)
+{
+    tn_tensor *w = tn__param_named(p, prefix, "w", -1), *g = tn__param_named(p, prefix, "g", -1);
+    tn_conv_opts co;
+    TN_ASSERT(w);
+    memset(&co, 0, sizeof co);
+    co.pad = w->shape[2] / 2;
+    x = tn_conv2d(ctx, x, w, tn__param_named(p, prefix, "b", -1), &co);
+    if (g) x = tn_instance_norm(ctx, x, g, tn__param_named(p, prefix, "o", -1), 1e-5f);
+    return tn_activate(ctx, x, act);
+}
+
+TN_API tn_status tn_patch_disc_add(tn_patch_disc *d, tn_params *p, const char *prefix, int cin, int width, int layers, int k, tn_rng *rng)
+{
+    int l, c = cin;
+    TN_ASSERT(d && p && prefix);
+    memset(d, 0, sizeof *d);
+    if (layers < 0 || layers > TN_DISC_MAX_LAYERS || cin < 1 || width < 1 || (long)width << layers > 65536 || k < 1 || !(k & 1) ||
+        strlen(prefix) >= sizeof d->prefix)
+        return tn__fail(TN_ERR_INVALID_ARG, "patch discriminator: %d layers of width %d, kernel %d", layers, width, k);
+    for (l = 0; l <= layers; l++) {
+        int cout = l == layers ? 1 : width << l, ws[4];
+        tn_tensor *w, *u;
+        ws[0] = cout;
+        ws[1] = c;
+        ws[2] = ws[3] = k;
+        if (!(w = tn__param_new(p, prefix, "w", l, 4, ws, 1)) || !tn__param_new(p, prefix, "b", l, 1, &cout, 1) ||
+            !(u = tn__param_new(p, prefix, "u", l, 1, &cout, 0)))
+            return TN_ERR_OUT_OF_MEMORY;
+        c = cout;
+    }
+    d->p = p;
+    strcpy(d->prefix, prefix);
+    d->layers = layers;
+    d->k = k;
+    if (rng) /* initialised after every tensor exists: weights then vectors, layer by layer */
+        for (l = 0; l <= layers; l++) {
+            tn_init_kaiming(tn__param_named(p, prefix, "w", l), rng, 1.0f);
+            tn_init_normal(tn__param_named(p, prefix, "u", l), rng, 0.0f, 1.0f);
+        }
+    return TN_OK;
+}
+
+TN_API void tn_patch_disc_begin(tn_ctx *ctx, tn_patch_disc *d)
+{
+    int l;
+    for (l = 0; l <= d->layers; l++)
+        d->wn[l] = tn_spectral_norm(ctx, tn__param_named(d->p, d->prefix, "w", l), tn__param_named(d->p, d->prefix, "u", l), 1);
+}
+
+TN_API tn_tensor *tn_patch_disc_score(tn_ctx *ctx, const tn_patch_disc *d, tn_tensor *x)
+{
+    tn_conv_opts co;
+    int l;
+    memset(&co, 0, sizeof co);
+    co.pad = d->k / 2;
+    for (l = 0; l <= d->layers; l++) {
+        co.stride = l == d->layers ? 1 : 2;
+        x = tn_conv2d(ctx, x, d->wn[l], tn__param_named(d->p, d->prefix, "b", l), &co);
+        if (l < d->layers) x = tn_leaky_relu(ctx, x, 0.2f);
+    }
+    return x;
+}
+
+struct tn_best_k {
+    int k, n;
+    tn_params **snap;
+    double *score;
+    long *iter;
+};
+
+TN_API tn_best_k *tn_best_k_create(int k)
+{
+    tn_best_k *b;
+    if (k < 1 || k > 1024) {
+        tn__fail(TN_ERR_INVALID_ARG, "best-k: k = %d (1..1024)", k);
+        return NULL;
+    }
+    b = (tn_best_k *)tn__calloc(sizeof *b);
+    if (!b) return NULL;
+    b->k = k;
+    b->snap = (tn_params **)tn__calloc((size_t)k * sizeof *b->snap);
+    b->score = (double *)tn__calloc((size_t)k * sizeof *b->score);
+    b->iter = (long *)tn__calloc((size_t)k * sizeof *b->iter);
+    if (!b->snap || !b->score || !b->iter) {
+        tn_best_k_free(b);
+        return NULL;
+    }
+    return b;
+}
+
+TN_API void tn_best_k_free(tn_best_k *b)
+{
+    int i;
+    if (!b) return;
+    for (i = 0; b->snap && i < b->k; i++) tn_params_free(b->snap[i]);
+    TN_FREE(b->snap);
+    TN_FREE(b->score);
+    TN_FREE(b->iter);
+    TN_FREE(b);
+}
+
+/* A copy of p (tensors, flags and metadata). */
+static tn_params *tn__params_clone(const tn_params *p)
+{
+    tn_params *c = tn_params_create();
+    int i;
+    for (i = 0; c && i < tn_params_count(p); i++) {
+        const tn_tensor *t = tn_params_get(p, i);
+        tn_tensor *d = t->requires_grad ? tn_params_add(c, t->name, t->ndim, t->shape) : tn_params_add_buffer(c, t->name, t->ndim, t->shape);
+        if (!d) break;
+        memcpy(d->data, t->data, t->numel * sizeof(float));
+    }
+    if (c && i < tn_params_count(p)) {
+        tn_params_free(c);
+        return NULL;
+    }
+    return c;
+}
+
+TN_API int tn_best_k_offer(tn_best_k *b, const tn_params *p, double score, long iteration)
+{
+    int pos, i;
+    tn_params *c;
+    if (score != score) return 0;
+    for (pos = 0; pos < b->n && b->score[pos] <= score; pos++) {}
+    if (pos >= b->k) return 0;
+    if (!(c = tn__params_clone(p))) return 0;
+    if (b->n == b->k) tn_params_free(b->snap[--b->n]);
+    for (i = b->n; i > pos; i--) {
+        b->snap[i] = b->snap[i - 1];
+        b->score[i] = b->score[i - 1];
+        b->iter[i] = b->iter[i - 1];
+    }
+    b->snap[pos] = c;
+    b->score[pos] = score;
+    b->iter[pos] = iteration;
+    b->n++;
+    return 1;
+}
+
+TN_API int tn_best_k_count(const tn_best_k *b) { return b ? b->n : 0; }
+
+TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, long *iteration)
+{
+    if (!b || i < 0 || i >= b->n) return NULL;
+    if (score) *score = b->score[i];
+    if (iteration) *iteration = b->iter[i];
+    return b->snap[i];
 }
 
 /* --------------------------------------------------------------------------------------------
@@ -13213,11 +14332,8 @@ TN_API void tn_texgan_defaults(tn_texgan_opts *o)
     if (o->batch <= 0) o->batch = 4;
     if (o->lr <= 0) o->lr = 2e-4f;
     if (o->ema <= 0) o->ema = 0.995f;
-    if (o->minutes <= 0) o->minutes = 15.0;
-    if (o->max_iters < 0) o->max_iters = 0;
-    if (o->checkpoint_seconds <= 0) o->checkpoint_seconds = 60.0;
-    if (o->checkpoint_iters < 0) o->checkpoint_iters = 0;
     if (o->feat_weight == 0) o->feat_weight = 1.0f;
+    tn_train_defaults(&o->train, 15.0);
 }
 
 static uint64_t tn__splitmix64(uint64_t x)
@@ -13397,44 +14513,25 @@ TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
-/* The first tensor of a .tnw image, which texgan files make the config: read before the
-   model can be built, since its shapes depend on it. Bounds-checked; the full load that
-   follows checks the CRC and everything else. */
-static tn_status tn__tg_peek_config(const uint8_t *b, size_t n, float *cfg, const char *name)
-{
-    static const char want[] = "texgan.config";
-    size_t nl, off = 12, k;
-    if (n < 16 || memcmp(b, "TNW1", 4) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a terrainnet weights (.tnw) file", name);
-    if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
-    if (off + 2 > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated", name);
-    nl = (size_t)b[off] | ((size_t)b[off + 1] << 8);
-    off += 2;
-    if (nl != sizeof want - 1 || off + nl + 2 + 4 > n - 4 || memcmp(b + off, want, nl) != 0)
-        return tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config first)", name);
-    off += nl;
-    if (b[off] != 1 || tn__get_u32(b + off + 2) != TN__TG_CONFIG) return tn__fail(TN_ERR_CORRUPT, "%s: bad texgan.config shape", name);
-    off += 6;
-    if (off + 4 * (size_t)TN__TG_CONFIG > n - 4) return tn__fail(TN_ERR_CORRUPT, "%s: truncated config", name);
-    for (k = 0; k < TN__TG_CONFIG; k++) cfg[k] = tn__get_f32(b + off + 4 * k);
-    return TN_OK;
-}
+#define TN__TG_FORMAT 1
 
 TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
 {
-    uint8_t *buf = NULL;
-    size_t n = 0;
-    float cfg[TN__TG_CONFIG];
+    tn_params *f = NULL;
     tn_texgan m;
+    tn_tensor *cfg;
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
-    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    if ((st = tn_params_open(path, &f))) return st;
     memset(&m, 0, sizeof m);
-    st = tn__tg_peek_config(buf, n, cfg, path);
-    if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg, path);
+    st = tn_model_check(f, "texgan", TN__TG_FORMAT, "texgan.config", path);
+    if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
+        st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
+    if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
     if (!st) st = tn__tg_model_params(&m);
-    if (!st) st = tn_params_load_memory(m.weights, buf, n, path);
-    TN_FREE(buf);
+    if (!st) st = tn__params_assign(m.weights, f, path);
+    tn_params_free(f);
     if (st) {
         tn_params_free(m.weights);
         return st;
@@ -13572,65 +14669,15 @@ static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p,
     return x;
 }
 
-static tn_status tn__tg_add_disc(tn_params *p, int cin, int width, int layers)
-{
-    int l, c = cin;
-    char name[40];
-    for (l = 0; l <= layers; l++) {
-        int cout = l == layers ? 1 : width << l, ws[4];
-        ws[0] = cout; ws[1] = c; ws[2] = 5; ws[3] = 5;
-        snprintf(name, sizeof name, "d.w%d", l);
-        if (!tn_params_add(p, name, 4, ws)) return TN_ERR_OUT_OF_MEMORY;
-        snprintf(name, sizeof name, "d.b%d", l);
-        if (!tn_params_add(p, name, 1, &cout)) return TN_ERR_OUT_OF_MEMORY;
-        snprintf(name, sizeof name, "d.u%d", l);
-        if (!tn_params_add_buffer(p, name, 1, &cout)) return TN_ERR_OUT_OF_MEMORY;
-        c = cout;
-    }
-    return TN_OK;
-}
-
-/* Spectral-normalised weights of every discriminator layer (one power iteration each). */
-static void tn__tg_disc_weights(tn_ctx *ctx, tn_params *p, int layers, tn_tensor **wn)
-{
-    char name[40];
-    int l;
-    for (l = 0; l <= layers; l++) {
-        tn_tensor *w, *u;
-        snprintf(name, sizeof name, "d.w%d", l);
-        w = tn_params_find(p, name);
-        snprintf(name, sizeof name, "d.u%d", l);
-        u = tn_params_find(p, name);
-        wn[l] = tn_spectral_norm(ctx, w, u, 1);
-    }
-}
-
-/* Per-location scores: stride-2 5x5 convs with leaky ReLU, then a 5x5 score conv. */
-static tn_tensor *tn__tg_discriminate(tn_ctx *ctx, tn_params *p, int layers, tn_tensor **wn, tn_tensor *x)
-{
-    tn_conv_opts co;
-    char name[40];
-    int l;
-    memset(&co, 0, sizeof co);
-    co.pad = 2;
-    for (l = 0; l <= layers; l++) {
-        snprintf(name, sizeof name, "d.b%d", l);
-        co.stride = l == layers ? 1 : 2;
-        x = tn_conv2d(ctx, x, wn[l], tn_params_find(p, name), &co);
-        if (l < layers) x = tn_leaky_relu(ctx, x, 0.2f);
-    }
-    return x;
-}
-
 /* ---- training ---- */
 
 typedef struct tn__tg_train {
     tn_texgan m;            /* EMA generator = m.weights "g.*" */
     tn_params *g, *d;
+    tn_patch_disc disc;     /* over d */
     tn_optim *og, *od;
     tn_rng rng;
-    long it;
-    double seconds;
+    tn_train *run;
     int disc_width, disc_layers, patch, batch, augment;
     float lr, ema, feat_weight;
     float *filt;            /* TN__TG_FEATS random 5x5 filters over the channels (fixed seed) */
@@ -13750,151 +14797,6 @@ static tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x)
     return loss;
 }
 
-static void tn__tg_put_u64(float *f, uint64_t v)
-{
-    int i;
-    for (i = 0; i < 4; i++) f[i] = (float)((v >> (16 * i)) & 0xffffu);
-}
-
-static uint64_t tn__tg_get_u64(const float *f)
-{
-    uint64_t v = 0;
-    int i;
-    for (i = 0; i < 4; i++) v |= (uint64_t)((uint32_t)f[i] & 0xffffu) << (16 * i);
-    return v;
-}
-
-/* Adds (save) or reads back (load) one checkpoint slot: a copy of `data` shaped like t. */
-static tn_status tn__tg_slot(tn_params *ck, const char *prefix, const tn_tensor *t, float *data, int save)
-{
-    char name[64];
-    tn_tensor *c;
-    snprintf(name, sizeof name, "%s%s", prefix, t->name);
-    if (strlen(name) >= 40) return tn__fail(TN_ERR_INVALID_ARG, "texgan: tensor name %s too long", name);
-    if (save) {
-        c = tn_params_add_buffer(ck, name, t->ndim, t->shape);
-        if (!c) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
-        if (data) memcpy(c->data, data, t->numel * sizeof(float));
-    } else {
-        c = tn_params_find(ck, name);
-        TN_ASSERT(c && c->numel == t->numel);
-        memcpy(data, c->data, t->numel * sizeof(float));
-    }
-    return TN_OK;
-}
-
-/* Every learned tensor of p, its Adam moments and (for save) its data. */
-static tn_status tn__tg_slots_net(tn_params *ck, tn_params *p, tn_optim *o, int save)
-{
-    int i;
-    tn_status st = TN_OK;
-    for (i = 0; i < tn_params_count(p) && !st; i++) {
-        tn_tensor *t = tn_params_get(p, i);
-        st = tn__tg_slot(ck, "", t, t->data, save);
-        if (!st && t->requires_grad) st = tn__tg_slot(ck, "am.", t, o->m[i], save);
-        if (!st && t->requires_grad) st = tn__tg_slot(ck, "av.", t, o->v[i], save);
-    }
-    return st;
-}
-
-/* The whole training state as one tn_params (for a load, the layout: tn__tg_state_read copies
-   the loaded values back). Uses tn_optim's moment buffers directly: they are part of the state. */
-static tn_status tn__tg_state_params(tn__tg_train *s, tn_params **out, int save)
-{
-    tn_params *ck = tn_params_create();
-    int nc = TN__TG_CONFIG, ns = TN__TG_STATE, i;
-    tn_tensor *cfg, *state;
-    tn_status st = TN_OK;
-    *out = NULL;
-    if (!ck) return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
-    cfg = tn_params_add_buffer(ck, "texgan.config", 1, &nc);
-    state = tn_params_add_buffer(ck, "train.state", 1, &ns);
-    if (!cfg || !state) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory");
-    if (!st && save) {
-        s->m.iterations = s->it;
-        s->m.train_seconds = s->seconds;
-        tn__tg_write_config(&s->m, s->disc_width, s->disc_layers, cfg->data);
-        state->data[0] = (float)(s->it & 0xffffff);
-        state->data[1] = (float)(s->it >> 24);
-        state->data[2] = (float)s->seconds;
-        tn__tg_put_u64(state->data + 3, s->rng.state);
-        tn__tg_put_u64(state->data + 7, s->rng.inc);
-        state->data[11] = (float)(s->og->step & 0xffffff);
-        state->data[12] = (float)(s->og->step >> 24);
-        state->data[13] = (float)(s->od->step & 0xffffff);
-        state->data[14] = (float)(s->od->step >> 24);
-        state->data[15] = (float)s->patch;
-        state->data[16] = (float)s->batch;
-        state->data[17] = s->lr;
-        state->data[18] = s->ema;
-        state->data[19] = (float)s->augment;
-        state->data[20] = s->feat_weight; /* 0 (off) in the first checkpoints */
-    }
-    for (i = 1; i < tn_params_count(s->m.weights) && !st; i++) { /* waves + EMA generator */
-        tn_tensor *t = tn_params_get(s->m.weights, i);
-        st = tn__tg_slot(ck, "ema.", t, t->data, 1);
-    }
-    if (!st) st = tn__tg_slots_net(ck, s->g, s->og, 1);
-    if (!st) st = tn__tg_slots_net(ck, s->d, s->od, 1);
-    if (st) {
-        tn_params_free(ck);
-        return st;
-    }
-    *out = ck;
-    return TN_OK;
-}
-
-/* Copies a loaded checkpoint back into the training state. */
-static tn_status tn__tg_state_read(tn__tg_train *s, tn_params *ck, const char *name)
-{
-    const float *st = tn_params_find(ck, "train.state")->data;
-    int i;
-    for (i = 0; i < 19; i++)
-        if (st[i] != st[i] || st[i] < 0 || st[i] > 1e12f) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state", name);
-    /* counters are 24-bit low + high halves (high <= 127: the long stays under 2^31), the RNG
-       16-bit quarters: checked before the casts, which would be undefined beyond the types */
-    for (i = 0; i < 3; i++)
-        if (!tn__tg_whole(st[i ? 9 + 2 * i : 0], 16777215.0f) || !tn__tg_whole(st[i ? 10 + 2 * i : 1], 127.0f))
-            return tn__fail(TN_ERR_CORRUPT, "%s: bad training state counters", name);
-    for (i = 3; i < 11; i++)
-        if (!tn__tg_whole(st[i], 65535.0f)) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state RNG", name);
-    s->it = (long)st[0] + ((long)st[1] << 24);
-    s->seconds = st[2];
-    s->rng.state = tn__tg_get_u64(st + 3);
-    s->rng.inc = tn__tg_get_u64(st + 7) | 1u;
-    s->og->step = (long)st[11] + ((long)st[12] << 24);
-    s->od->step = (long)st[13] + ((long)st[14] << 24);
-    for (i = 1; i < tn_params_count(s->m.weights); i++) {
-        tn_tensor *t = tn_params_get(s->m.weights, i);
-        tn__tg_slot(ck, "ema.", t, t->data, 0);
-    }
-    for (i = 0; i < tn_params_count(s->g); i++) {
-        tn_tensor *t = tn_params_get(s->g, i);
-        tn__tg_slot(ck, "", t, t->data, 0);
-        tn__tg_slot(ck, "am.", t, s->og->m[i], 0);
-        tn__tg_slot(ck, "av.", t, s->og->v[i], 0);
-    }
-    for (i = 0; i < tn_params_count(s->d); i++) {
-        tn_tensor *t = tn_params_get(s->d, i);
-        tn__tg_slot(ck, "", t, t->data, 0);
-        if (t->requires_grad) {
-            tn__tg_slot(ck, "am.", t, s->od->m[i], 0);
-            tn__tg_slot(ck, "av.", t, s->od->v[i], 0);
-        }
-    }
-    return TN_OK;
-}
-
-static tn_status tn__tg_checkpoint(tn__tg_train *s, const char *path)
-{
-    tn_params *ck = NULL;
-    tn_status st = tn__tg_state_params(s, &ck, 1);
-    if (st) return st;
-    st = tn_params_save(ck, path);
-    tn_params_free(ck);
-    return st;
-}
-
 static void tn__tg_train_free(tn__tg_train *s)
 {
     TN_FREE(s->filt);
@@ -13914,7 +14816,7 @@ static tn_status tn__tg_build(tn__tg_train *s)
     if (tn__tg_model_params(&s->m)) return TN_ERR_OUT_OF_MEMORY;
     s->g = tn_params_create();
     s->d = tn_params_create();
-    if (!s->g || !s->d || tn__tg_add_gen(s->g, &s->m, "g.", 1) || tn__tg_add_disc(s->d, s->m.channels, s->disc_width, s->disc_layers))
+    if (!s->g || !s->d || tn__tg_add_gen(s->g, &s->m, "g.", 1))
         return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory building the networks");
     for (i = 0; i < tn_params_count(s->g); i++) {
         tn_tensor *t = tn_params_get(s->g, i);
@@ -13922,11 +14824,8 @@ static tn_status tn__tg_build(tn__tg_train *s)
         else if (t->name[2] == 'n') tn_init_normal(t, &s->rng, 0.1f, 0.0f); /* stage noise on from the start */
         memcpy(tn_params_get(s->m.weights, i + 2)->data, t->data, t->numel * sizeof(float));
     }
-    for (i = 0; i < tn_params_count(s->d); i++) {
-        tn_tensor *t = tn_params_get(s->d, i);
-        if (t->ndim == 4) tn_init_kaiming(t, &s->rng, 1.0f);
-        else if (!t->requires_grad) tn_init_normal(t, &s->rng, 0.0f, 1.0f);
-    }
+    if (tn_patch_disc_add(&s->disc, s->d, "d.", s->m.channels, s->disc_width, s->disc_layers, 5, &s->rng))
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory building the discriminator");
     { /* periodic wave vectors: random directions, periods of 2 to 16 cells */
         tn_tensor *w = tn_params_find(s->m.weights, "texgan.waves");
         for (i = 0; i < s->m.noise_periodic; i++) {
@@ -13945,44 +14844,127 @@ static tn_status tn__tg_build(tn__tg_train *s)
     return TN_OK;
 }
 
-/* Loads a checkpoint file: the architecture comes from its config. */
+/* The settings a checkpoint keeps beside the architecture (its config tensor). */
+static const char *const tn__tg_settings[6] = {"patch", "batch", "lr", "ema", "augment", "feat_weight"};
+
+static tn_status tn__tg_put_settings(tn__tg_train *s)
+{
+    const double v[6] = {(double)s->patch, (double)s->batch, s->lr, s->ema, (double)s->augment, s->feat_weight};
+    tn_status st = TN_OK;
+    char buf[40];
+    int i;
+    for (i = 0; i < 6 && !st; i++) {
+        tn__io_format_number(buf, sizeof buf, v[i], i >= 2);
+        st = tn_train_set_meta(s->run, tn__tg_settings[i], buf);
+    }
+    return st;
+}
+
+static tn_status tn__tg_get_settings(tn__tg_train *s, const char *path)
+{
+    double v[6];
+    int i;
+    for (i = 0; i < 6; i++) {
+        const char *t = tn_train_meta(s->run, tn__tg_settings[i]);
+        if (!t || !tn__io_number(t, strlen(t), &v[i]) || !(fabs(v[i]) < 1e9))
+            return tn__fail(TN_ERR_CORRUPT, "%s: bad or missing texgan setting '%s'", path, tn__tg_settings[i]);
+    }
+    if (v[0] != floor(v[0]) || v[1] != floor(v[1]) || v[0] < 8 || v[0] > 4096 || v[1] < 1 || v[1] > 1024 || !(v[2] > 0 && v[2] < 1) ||
+        !(v[3] > 0 && v[3] < 1) || !(v[5] >= 0 && v[5] < 1e6))
+        return tn__fail(TN_ERR_CORRUPT, "%s: bad training settings", path);
+    s->patch = (int)v[0];
+    s->batch = (int)v[1];
+    s->lr = (float)v[2];
+    s->ema = (float)v[3];
+    s->augment = v[4] != 0.0;
+    s->feat_weight = (float)v[5];
+    return TN_OK;
+}
+
+static void tn__tg_put_u64_meta(tn_params *ck, const char *key, uint64_t state, uint64_t inc)
+{
+    char hex[40];
+    tn__hex64(hex, state);
+    hex[16] = ':';
+    tn__hex64(hex + 17, inc);
+    tn_params_set_meta(ck, key, hex);
+}
+
+static uint64_t tn__tg_get_u64(const float *f)
+{
+    uint64_t v = 0;
+    int i;
+    for (i = 0; i < 4; i++) v |= (uint64_t)((uint32_t)f[i] & 0xffffu) << (16 * i);
+    return v;
+}
+
+/* Checkpoints written before @@train held a "train.state" vector (counters as 24-bit halves, the
+   RNG in 16-bit quarters, the settings) and the config unprefixed: rewritten in memory into the
+   current layout, every field range-checked before its cast. */
+static tn_status tn__tg_upgrade_legacy(tn_params *ck, const char *name)
+{
+    const tn_tensor *ts = tn_params_find(ck, "train.state"), *cfg = tn_params_find(ck, "texgan.config");
+    const float *st;
+    tn_tensor *c;
+    char buf[40];
+    int i;
+    if (tn_params_meta(ck, "iteration")) return TN_OK;
+    if (!ts || ts->numel != TN__TG_STATE || !cfg || cfg->numel != TN__TG_CONFIG)
+        return tn__fail(TN_ERR_FORMAT, "%s: not a texgan checkpoint", name);
+    st = ts->data;
+    for (i = 0; i < 19; i++)
+        if (st[i] != st[i] || st[i] < 0 || st[i] > 1e12f) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state", name);
+    for (i = 0; i < 3; i++)
+        if (!tn__tg_whole(st[i ? 9 + 2 * i : 0], 16777215.0f) || !tn__tg_whole(st[i ? 10 + 2 * i : 1], 127.0f))
+            return tn__fail(TN_ERR_CORRUPT, "%s: bad training state counters", name);
+    for (i = 3; i < 11; i++)
+        if (!tn__tg_whole(st[i], 65535.0f)) return tn__fail(TN_ERR_CORRUPT, "%s: bad training state RNG", name);
+    tn__meta_put_num(ck, "iteration", (double)st[0] + 16777216.0 * st[1]);
+    tn__meta_put_num(ck, "microseconds", floor((double)st[2] * 1e6));
+    tn__meta_put_num(ck, "step.g", (double)st[11] + 16777216.0 * st[12]);
+    tn__meta_put_num(ck, "step.d", (double)st[13] + 16777216.0 * st[14]);
+    tn__tg_put_u64_meta(ck, "rng.main", tn__tg_get_u64(st + 3), tn__tg_get_u64(st + 7) | 1u);
+    for (i = 0; i < 6; i++) {
+        const double v = i == 5 ? st[20] : st[15 + i];
+        char key[40];
+        tn__io_format_number(buf, sizeof buf, v, i >= 2);
+        snprintf(key, sizeof key, "config.%s", tn__tg_settings[i]);
+        tn_params_set_meta(ck, key, buf);
+    }
+    if (!(c = tn_params_add_buffer(ck, "ema.texgan.config", 1, cfg->shape))) return TN_ERR_OUT_OF_MEMORY;
+    memcpy(c->data, cfg->data, cfg->numel * sizeof(float));
+    return TN_OK;
+}
+
+/* Registers the whole training state with the run. */
+static tn_status tn__tg_register(tn__tg_train *s)
+{
+    tn_status st = tn_train_add_params(s->run, "ema.", s->m.weights);
+    if (!st) st = tn_train_add_net(s->run, "g", s->g, s->og);
+    if (!st) st = tn_train_add_net(s->run, "d", s->d, s->od);
+    if (!st) st = tn_train_add_rng(s->run, "main", &s->rng);
+    return st;
+}
+
+/* Resumes from the run's checkpoint: the architecture and settings come from the file. */
 static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *path)
 {
-    uint8_t *buf = NULL;
-    size_t n = 0;
-    float cfg[TN__TG_CONFIG];
     tn_params *ck = NULL;
-    tn_status st;
-    if ((st = tn__io_read_file(path, &buf, &n))) return st;
-    st = tn__tg_peek_config(buf, n, cfg, path);
-    if (!st) st = tn__tg_read_config(&s->m, &s->disc_width, &s->disc_layers, cfg, path);
+    tn_tensor *cfg;
+    tn_status st = tn_train_open_checkpoint(s->run, &ck);
+    if (!st) st = tn__tg_upgrade_legacy(ck, path);
+    if (!st && (!(cfg = tn_params_find(ck, "ema.texgan.config")) || cfg->numel != TN__TG_CONFIG))
+        st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan checkpoint", path);
+    if (!st) st = tn__tg_read_config(&s->m, &s->disc_width, &s->disc_layers, cfg->data, path);
     if (!st && (s->disc_width < 1 || s->disc_width > 1024 || s->disc_layers < 1 || s->disc_layers > TN__TG_MAX_DLAYERS))
         st = tn__fail(TN_ERR_CORRUPT, "%s: bad discriminator size", path);
     if (!st && s->m.channels != ex->channels)
         st = tn__fail(TN_ERR_SHAPE, "%s: checkpoint has %d channels, the exemplar %d", path, s->m.channels, ex->channels);
+    if (!st) st = tn__tg_get_settings(s, path);
     if (!st) st = tn__tg_build(s);
-    if (!st) st = tn__tg_state_params(s, &ck, 0);
-    if (!st) st = tn_params_load_memory(ck, buf, n, path);
-    if (!st) {
-        const float *ts = tn_params_find(ck, "train.state")->data;
-        /* range before the cast (a float beyond int is undefined behaviour); 0 fails below */
-        s->patch = tn__tg_whole(ts[15], 4096.0f) ? (int)ts[15] : 0;
-        s->batch = tn__tg_whole(ts[16], 1024.0f) ? (int)ts[16] : 0;
-        s->lr = ts[17];
-        s->ema = ts[18];
-        s->augment = ts[19] != 0.0f;
-        s->feat_weight = ts[20];
-        if (!(s->feat_weight >= 0 && s->feat_weight < 1e6f)) st = tn__fail(TN_ERR_CORRUPT, "%s: bad feature weight", path);
-        if (s->patch < 8 || s->patch > 4096 || s->batch < 1 || s->batch > 1024 || !(s->lr > 0 && s->lr < 1) || !(s->ema > 0 && s->ema < 1))
-            st = tn__fail(TN_ERR_CORRUPT, "%s: bad training settings", path);
-    }
-    if (!st) st = tn__tg_state_read(s, ck, path);
-    if (!st) { /* the optimisers keep their rate from creation: rebuild them with the file's */
-        s->og->o.lr = s->lr;
-        s->od->o.lr = s->lr;
-    }
-    tn_params_free(ck);
-    TN_FREE(buf);
+    if (!st) st = tn__tg_register(s);
+    if (!st) st = tn_train_restore(s->run);
+    if (!st) st = tn__tg_put_settings(s);
     return st;
 }
 
@@ -14031,9 +15013,9 @@ static tn_tensor *tn__tg_fake_batch(tn_ctx *ctx, tn__tg_train *s)
 /* One D step and one G step; the losses go to *ld, *lg. */
 static tn_status tn__tg_step(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H, float *ld, float *lg)
 {
-    tn_tensor *wn[TN__TG_MAX_DLAYERS + 1], *real, *fake, *loss;
+    tn_tensor *real, *fake, *loss;
     tn_status st;
-    int i;
+    long it = tn_train_iteration(s->run);
     tn_ctx_reset(ctx);
     tn_ctx_set_grad(ctx, 0); /* D step: the fake batch is a constant */
     fake = tn__tg_fake_batch(ctx, s);
@@ -14041,9 +15023,8 @@ static tn_status tn__tg_step(tn__tg_train *s, tn_ctx *ctx, const float *ex, int 
     real = tn_tensor_4d(ctx, s->batch, s->m.channels, s->patch, s->patch);
     if (!fake || !real) return tn_ctx_status(ctx);
     tn__tg_real_batch(s, ex, W, H, real);
-    tn__tg_disc_weights(ctx, s->d, s->disc_layers, wn);
-    loss = tn_hinge_d_loss(ctx, tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, real),
-                           tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, fake));
+    tn_patch_disc_begin(ctx, &s->disc);
+    loss = tn_hinge_d_loss(ctx, tn_patch_disc_score(ctx, &s->disc, real), tn_patch_disc_score(ctx, &s->disc, fake));
     tn_params_zero_grad(s->d);
     if ((st = tn_backward(ctx, loss))) return st;
     tn_optim_step(s->od);
@@ -14051,8 +15032,8 @@ static tn_status tn__tg_step(tn__tg_train *s, tn_ctx *ctx, const float *ex, int 
 
     tn_ctx_reset(ctx);
     fake = tn__tg_fake_batch(ctx, s);
-    tn__tg_disc_weights(ctx, s->d, s->disc_layers, wn);
-    loss = tn_hinge_g_loss(ctx, tn__tg_discriminate(ctx, s->d, s->disc_layers, wn, fake));
+    tn_patch_disc_begin(ctx, &s->disc);
+    loss = tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc, fake));
     if (s->feat_weight > 0 && s->ref && loss) {
         tn_tensor *fl = tn__tg_feat_loss(ctx, s, fake);
         if (fl) loss = tn_add(ctx, loss, tn_scale_shift(ctx, fl, s->feat_weight, 0.0f));
@@ -14063,17 +15044,8 @@ static tn_status tn__tg_step(tn__tg_train *s, tn_ctx *ctx, const float *ex, int 
     tn_optim_step(s->og);
     *lg = loss->data[0];
     if (*ld != *ld || *lg != *lg || *ld > 1e6f || *lg > 1e6f || *lg < -1e6f)
-        return tn__fail(TN_ERR_NUMERIC, "texgan: training diverged at iteration %ld (D loss %g, G loss %g)", s->it, (double)*ld, (double)*lg);
-    { /* EMA of the generator, with a warm-up so early weights fade quickly */
-        float d = (float)(1.0 + (double)s->it) / (float)(10.0 + (double)s->it);
-        if (d > s->ema) d = s->ema;
-        for (i = 0; i < tn_params_count(s->g); i++) {
-            tn_tensor *t = tn_params_get(s->g, i), *e = tn_params_get(s->m.weights, i + 2);
-            size_t k;
-            for (k = 0; k < t->numel; k++) e->data[k] = d * e->data[k] + (1.0f - d) * t->data[k];
-        }
-    }
-    s->it++;
+        return tn__fail(TN_ERR_NUMERIC, "texgan: training diverged at iteration %ld (D loss %g, G loss %g)", it, (double)*ld, (double)*lg);
+    tn_ema_update(s->m.weights, s->g, s->ema, it);
     return TN_OK;
 }
 
@@ -14097,16 +15069,56 @@ static tn_status tn__tg_check_exemplar(const tn_image *ex, float *lo, float *hi,
     return TN_OK;
 }
 
+/* Fresh training state from the options. */
+static tn_status tn__tg_fresh(tn__tg_train *s, const tn_image *ex, const tn_texgan_opts *o, float lo, float hi, const float *mean)
+{
+    tn_status st;
+    s->m.channels = ex->channels;
+    s->m.noise_local = o->noise_local;
+    s->m.noise_global = o->noise_global;
+    s->m.noise_periodic = o->noise_periodic;
+    s->m.stages = o->stages;
+    s->m.gen_width = o->gen_width;
+    s->m.scale = o->scale > 0 ? o->scale : 1;
+    s->m.smooth = o->nearest ? 0 : 2;
+    s->m.stage_noise = !o->nearest;
+    s->m.lo = lo;
+    s->m.hi = hi;
+    memcpy(s->m.mean, mean, TN_TEXGAN_MAX_CHANNELS * sizeof(float));
+    if ((st = tn__tg_check_arch(&s->m))) return st;
+    if (s->disc_width > 1024 || s->disc_layers > TN__TG_MAX_DLAYERS)
+        return tn__fail(TN_ERR_INVALID_ARG, "texgan: discriminator of %d layers from %d channels is too large", s->disc_layers, s->disc_width);
+    if (s->patch < 8 || s->patch > 4096 || s->batch > 1024) return tn__fail(TN_ERR_INVALID_ARG, "texgan: patch %d / batch %d out of range", s->patch, s->batch);
+    if ((st = tn__tg_build(s))) return st;
+    tn__tg_write_config(&s->m, s->disc_width, s->disc_layers, tn_params_find(s->m.weights, "texgan.config")->data); /* checkpoints carry it */
+    if ((st = tn__tg_register(s))) return st;
+    return tn__tg_put_settings(s);
+}
+
+/* The model's metadata: method, format and where it came from. */
+static tn_status tn__tg_stamp(tn__tg_train *s, const tn_image *ex, uint64_t seed)
+{
+    tn_model_provenance pv;
+    memset(&pv, 0, sizeof pv);
+    pv.seed = seed;
+    pv.iterations = tn_train_iteration(s->run);
+    pv.seconds = tn_train_seconds(s->run);
+    pv.example_digest = tn_image_digest(ex);
+    pv.example_width = ex->width;
+    pv.example_height = ex->height;
+    pv.example_channels = ex->channels;
+    return tn_model_stamp(s->m.weights, "texgan", TN__TG_FORMAT, &pv);
+}
+
 TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_texgan_opts *opts_in, tn_texgan_stats *stats)
 {
     tn_texgan_opts o;
     tn__tg_train s;
     tn_image small = {0, 0, 0, NULL};
+    const tn_image *ex0 = ex;
     tn_ctx *ctx = NULL;
     float *exn = NULL, lo = 0, hi = 1, mean[TN_TEXGAN_MAX_CHANNELS], ldh[50], lgh[50];
-    double t0, last_ck, sec0, budget;
-    long it0;
-    int nh = 0, ckpts = 0, c;
+    int nh = 0, c;
     size_t i, npx;
     tn_status st;
     TN_ASSERT(model);
@@ -14114,9 +15126,9 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     if (opts_in) o = *opts_in;
     tn_texgan_defaults(&o);
     if ((st = tn__tg_check_exemplar(ex, &lo, &hi, mean))) return st;
-    if (o.resume && (!o.checkpoint || !o.checkpoint[0])) return tn__fail(TN_ERR_INVALID_ARG, "texgan: resume needs a checkpoint path");
     memset(&s, 0, sizeof s);
-    tn_rng_seed(&s.rng, o.seed, 0x7467616eULL);
+    if ((st = tn_train_create("texgan", "texgan-train", &o.train, &s.run))) return st;
+    tn_rng_seed(&s.rng, o.train.seed, 0x7467616eULL);
     s.disc_width = o.disc_width;
     s.disc_layers = o.disc_layers;
     s.patch = o.patch;
@@ -14125,27 +15137,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     s.lr = o.lr;
     s.ema = o.ema < 1.0f ? o.ema : 0.999f;
     s.feat_weight = o.feat_weight > 0 ? o.feat_weight : 0.0f;
-    if (o.resume) {
-        st = tn__tg_resume(&s, ex, o.checkpoint);
-    } else {
-        s.m.channels = ex->channels;
-        s.m.noise_local = o.noise_local;
-        s.m.noise_global = o.noise_global;
-        s.m.noise_periodic = o.noise_periodic;
-        s.m.stages = o.stages;
-        s.m.gen_width = o.gen_width;
-        s.m.scale = o.scale > 0 ? o.scale : 1;
-        s.m.smooth = o.nearest ? 0 : 2;
-        s.m.stage_noise = !o.nearest;
-        s.m.lo = lo;
-        s.m.hi = hi;
-        memcpy(s.m.mean, mean, sizeof mean);
-        st = tn__tg_check_arch(&s.m);
-        if (!st && (s.disc_width > 1024 || s.disc_layers > TN__TG_MAX_DLAYERS))
-            st = tn__fail(TN_ERR_INVALID_ARG, "texgan: discriminator of %d layers from %d channels is too large", s.disc_layers, s.disc_width);
-        if (!st && (s.patch < 8 || s.patch > 4096 || s.batch > 1024)) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: patch %d / batch %d out of range", s.patch, s.batch);
-        if (!st) st = tn__tg_build(&s);
-    }
+    st = o.train.resume ? tn__tg_resume(&s, ex, o.train.checkpoint) : tn__tg_fresh(&s, ex, &o, lo, hi, mean);
     if (!st && s.m.scale > 1) { /* the generator learns the downscaled exemplar */
         int sw = (ex->width + s.m.scale / 2) / s.m.scale, sh = (ex->height + s.m.scale / 2) / s.m.scale;
         if (sw < 1 || sh < 1) st = tn__fail(TN_ERR_INVALID_ARG, "texgan: the exemplar is too small for scale %d", s.m.scale);
@@ -14168,64 +15160,46 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
             st = tn__tg_feat_ref(&s, ctx, exn, ex->width, ex->height);
         }
     }
-    if (st) {
-        TN_FREE(exn);
-        tn_ctx_free(ctx);
-        tn__tg_train_free(&s);
-        tn_image_free(&small);
-        return st;
-    }
-    t0 = last_ck = tn_time_seconds();
-    sec0 = s.seconds;
-    it0 = s.it;
-    budget = o.minutes * 60.0;
-    while (!st && s.seconds < budget && (!o.max_iters || s.it < o.max_iters)) {
+    while (!st && tn_train_next(s.run)) {
         float ld = 0, lg = 0;
-        double now, frac;
-        st = tn__tg_step(&s, ctx, exn, ex->width, ex->height, &ld, &lg);
-        if (st) break;
+        tn_status e = tn__tg_step(&s, ctx, exn, ex->width, ex->height, &ld, &lg);
+        if (e) {
+            tn_train_fail(s.run, e);
+            break;
+        }
         ldh[nh % 50] = ld;
         lgh[nh % 50] = lg;
         nh++;
-        now = tn_time_seconds();
-        s.seconds = sec0 + (now - t0);
-        if (o.checkpoint && o.checkpoint[0] &&
-            (now - last_ck >= o.checkpoint_seconds || (o.checkpoint_iters && s.it % o.checkpoint_iters == 0))) {
-            if ((st = tn__tg_checkpoint(&s, o.checkpoint))) break;
-            ckpts++;
-            last_ck = now;
-        }
-        frac = s.seconds / budget;
-        if (o.max_iters && (double)s.it / (double)o.max_iters > frac) frac = (double)s.it / (double)o.max_iters;
-        st = tn__progress("texgan-train", frac > 1.0 ? 1.0 : frac);
     }
-    if (!st && o.checkpoint && o.checkpoint[0] && s.it != it0) {
-        st = tn__tg_checkpoint(&s, o.checkpoint);
-        if (!st) ckpts++;
-    }
+    if (!st) st = tn_train_finish(s.run);
     if (stats) {
         int k, m = nh < 50 ? nh : 50;
+        long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
         memset(stats, 0, sizeof *stats);
-        stats->iterations = s.it;
-        stats->resumed_from = o.resume ? it0 : 0;
-        stats->seconds = s.seconds;
-        stats->seconds_per_iter = s.it > it0 ? (s.seconds - sec0) / (double)(s.it - it0) : 0.0;
+        stats->iterations = it;
+        stats->resumed_from = o.train.resume ? it0 : 0;
+        stats->seconds = tn_train_seconds(s.run);
+        stats->seconds_per_iter = it > it0 ? (tn_train_seconds(s.run) - tn_train_start_seconds(s.run)) / (double)(it - it0) : 0.0;
         for (k = 0; k < m; k++) {
             stats->loss_d += ldh[k] / (float)m;
             stats->loss_g += lgh[k] / (float)m;
         }
-        stats->checkpoints = ckpts;
+        stats->checkpoints = tn_train_checkpoints(s.run);
     }
     TN_FREE(exn);
     tn_ctx_free(ctx);
     tn_image_free(&small);
     if (!st) {
-        s.m.iterations = s.it;
-        s.m.train_seconds = s.seconds;
+        s.m.iterations = tn_train_iteration(s.run);
+        s.m.train_seconds = tn_train_seconds(s.run);
         tn__tg_write_config(&s.m, s.disc_width, s.disc_layers, tn_params_find(s.m.weights, "texgan.config")->data);
+        st = tn__tg_stamp(&s, ex0, tn_train_seed(s.run));
+    }
+    if (!st) {
         *model = s.m;
         memset(&s.m, 0, sizeof s.m); /* handed over */
     }
+    tn_train_free(s.run);
     tn__tg_train_free(&s);
     return st;
 }

@@ -283,8 +283,8 @@ static void bench_one(const char *name, const char *file, const char *model_path
         tn_texgan_opts o;
         tn_texgan_stats s;
         memset(&o, 0, sizeof o);
-        o.minutes = minutes;
-        o.seed = 1;
+        o.train.minutes = minutes;
+        o.train.seed = 1;
         if ((st = tn_texgan_train(&m, &ex, &o, &s))) die("train", st);
         printf("%s.model: trained here\n%s.train_minutes: %.2f\n%s.train_iterations: %ld\n%s.seconds_per_iteration: %.4f\n", name, name,
                s.seconds / 60.0, name, s.iterations, name, s.seconds_per_iter);

@@ -1105,9 +1105,9 @@ TN_TEST(test_texgan_config)
             /* the config alone is never a loadable model: its weights are missing */
             TN_CHECK(st != TN_OK && tn_last_error()[0] && m.weights == NULL);
             memset(&to, 0, sizeof to);
-            to.checkpoint = path;
-            to.resume = 1;
-            to.max_iters = 1;
+            to.train.checkpoint = path;
+            to.train.resume = 1;
+            to.train.max_iters = 1;
             to.patch = 16;
             to.stages = 2;
             st = tn_texgan_train(&m, &ex, &to, NULL);
@@ -1162,15 +1162,43 @@ static uint8_t *read_all(const char *path, size_t *n)
     return b;
 }
 
-/* A real checkpoint and model with absurd counters and settings: refused before any cast. */
+/* Replaces the value of metadata `key` in a version-2 .tnw image (b has room for cap bytes),
+   fixing the block length and the CRC. Returns the new size, 0 if the key is not there. */
+static size_t tnw_patch_meta(uint8_t *b, size_t n, size_t cap, const char *key, const char *value)
+{
+    size_t kl = strlen(key), vl = strlen(value), pos, end, ml;
+    if (n < 20 || b[4] != 2) return 0;
+    ml = (size_t)b[12] | ((size_t)b[13] << 8) | ((size_t)b[14] << 16) | ((size_t)b[15] << 24);
+    for (pos = 16; pos + kl + 1 < 16 + ml; pos++)
+        if ((pos == 16 || b[pos - 1] == '\n') && !memcmp(b + pos, key, kl) && b[pos + kl] == '=') break;
+    if (pos + kl + 1 >= 16 + ml) return 0;
+    pos += kl + 1;
+    for (end = pos; b[end] != '\n'; end++) {}
+    if (n - (end - pos) + vl > cap) return 0;
+    memmove(b + pos + vl, b + end, n - end);
+    memcpy(b + pos, value, vl);
+    n = n - (end - pos) + vl;
+    put_le32(b + 12, (uint32_t)(ml - (end - pos) + vl));
+    put_le32(b + n - 4, crc32_bytes(b, n - 4));
+    return n;
+}
+
+/* Checkpoints and models with absurd counters and settings: refused before any cast. Checkpoints
+   of the layout before @@train (tests/refs/texgan_v1_checkpoint.tnw, train.state) and of today's
+   (metadata) both. */
 TN_TEST(test_texgan_checkpoint_fields)
 {
-    static const struct { const char *tensor; int index; float value; } cases[] = {
+    static const struct { const char *tensor; int index; float value; } legacy[] = {
         {"train.state", 0, 1e20f}, {"train.state", 1, 1e20f}, {"train.state", 1, 1e11f}, {"train.state", 3, 1e20f},
         {"train.state", 7, 70000.0f}, {"train.state", 11, 1e11f}, {"train.state", 14, 3e9f}, {"train.state", 15, 1e20f},
         {"train.state", 16, -1e20f}, {"train.state", 15, 2147483648.0f}, {"texgan.config", 9, 1e20f},
         {"texgan.config", 10, 1e20f}, {"texgan.config", 12, 1e20f}, {"texgan.config", 13, -1e20f},
         {"texgan.config", 15, 1e20f}, {"texgan.config", 24, 1e20f}, {"texgan.config", 11, -5.0f}};
+    static const struct { const char *key, *value; } meta[] = {
+        {"iteration", "1e20"}, {"iteration", "-1"}, {"iteration", "0.5"}, {"iteration", "nan"}, {"microseconds", "-7"},
+        {"step.g", "1e20"}, {"step.d", "x"}, {"rng.main", "zz"}, {"rng.main", "0000000000000001:0000000000000002"},
+        {"config.patch", "1e20"}, {"config.patch", "2147483648"}, {"config.batch", "0.5"}, {"config.batch", "-1e20"},
+        {"config.lr", "nan"}, {"config.lr", "5"}, {"config.ema", "inf"}, {"config.feat_weight", "-1"}, {"method", "gnn"}};
     const char *ck = tmp_path("tg.ckpt"), *bad = tmp_path("tg_bad.ckpt"), *model = tmp_path("tg_model.tnw");
     tn_image ex = {0};
     tn_texgan m, r;
@@ -1190,24 +1218,46 @@ TN_TEST(test_texgan_checkpoint_fields)
     o.disc_layers = 2;
     o.patch = 16;
     o.batch = 1;
-    o.max_iters = 1;
-    o.minutes = 100;
-    o.checkpoint = ck;
+    o.train.max_iters = 1;
+    o.train.minutes = 100;
+    o.train.checkpoint = ck;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
     TN_CHECK(tn_texgan_save(&m, model) == TN_OK);
+    o.train.resume = 1;
+    o.train.checkpoint = bad;
+    o.train.max_iters = 2;
     good = read_all(ck, &n);
     TN_CHECK(good != NULL && n > 100);
-    o.resume = 1;
-    o.checkpoint = bad;
-    for (i = 0; good && i < sizeof cases / sizeof cases[0]; i++) {
+    for (i = 0; good && i < sizeof meta / sizeof meta[0]; i++) {
+        size_t bn;
+        tn_status st;
+        b = (uint8_t *)malloc(n + 256);
+        memcpy(b, good, n);
+        bn = tnw_patch_meta(b, n, n + 256, meta[i].key, meta[i].value);
+        TN_CHECK(bn > 0);
+        TN_CHECK(write_file(bad, b, bn));
+        memset(&r, 0, sizeof r);
+        st = tn_texgan_train(&r, &ex, &o, NULL);
+        if (st != TN_ERR_CORRUPT && st != TN_ERR_FORMAT) fprintf(stderr, "  resume accepted %s=%s\n", meta[i].key, meta[i].value);
+        TN_CHECK((st == TN_ERR_CORRUPT || st == TN_ERR_FORMAT) && r.weights == NULL && tn_last_error()[0]);
+        tn_texgan_free(&r);
+        free(b);
+    }
+    TN_CHECK(write_file(bad, good, n));
+    TN_CHECK(tn_texgan_train(&r, &ex, &o, NULL) == TN_OK); /* the unpatched checkpoint resumes */
+    tn_texgan_free(&r);
+    free(good);
+    good = tn_test_ref("texgan_v1_checkpoint.tnw") ? read_all(tn_test_ref("texgan_v1_checkpoint.tnw"), &n) : NULL;
+    TN_CHECK(good != NULL);
+    for (i = 0; good && i < sizeof legacy / sizeof legacy[0]; i++) {
         tn_status st;
         b = (uint8_t *)malloc(n);
         memcpy(b, good, n);
-        TN_CHECK(tnw_patch(b, n, cases[i].tensor, cases[i].index, cases[i].value));
+        TN_CHECK(tnw_patch(b, n, legacy[i].tensor, legacy[i].index, legacy[i].value));
         TN_CHECK(write_file(bad, b, n));
         memset(&r, 0, sizeof r);
         st = tn_texgan_train(&r, &ex, &o, NULL);
-        if (st == TN_OK) fprintf(stderr, "  resume accepted %s[%d] = %g\n", cases[i].tensor, cases[i].index, (double)cases[i].value);
+        if (st == TN_OK) fprintf(stderr, "  resume accepted %s[%d] = %g\n", legacy[i].tensor, legacy[i].index, (double)legacy[i].value);
         TN_CHECK(st == TN_ERR_CORRUPT && r.weights == NULL);
         tn_texgan_free(&r);
         free(b);
@@ -1215,11 +1265,11 @@ TN_TEST(test_texgan_checkpoint_fields)
     free(good);
     good = read_all(model, &n);
     TN_CHECK(good != NULL);
-    for (i = 0; good && i < sizeof cases / sizeof cases[0]; i++) {
-        if (strcmp(cases[i].tensor, "texgan.config") != 0) continue;
+    for (i = 0; good && i < sizeof legacy / sizeof legacy[0]; i++) {
+        if (strcmp(legacy[i].tensor, "texgan.config") != 0) continue;
         b = (uint8_t *)malloc(n);
         memcpy(b, good, n);
-        TN_CHECK(tnw_patch(b, n, cases[i].tensor, cases[i].index, cases[i].value));
+        TN_CHECK(tnw_patch(b, n, legacy[i].tensor, legacy[i].index, legacy[i].value));
         TN_CHECK(write_file(bad, b, n));
         memset(&r, 0, sizeof r);
         TN_CHECK(tn_texgan_load(&r, bad) == TN_ERR_CORRUPT && r.weights == NULL);

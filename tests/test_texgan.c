@@ -29,8 +29,8 @@ static void tiny_opts(tn_texgan_opts *o)
     o->patch = 16;
     o->batch = 2;
     o->lr = 1e-3f;
-    o->minutes = 100;
-    o->seed = 5;
+    o->train.minutes = 100;
+    o->train.seed = 5;
 }
 
 static int same_params(const tn_params *a, const tn_params *b, int skip_config)
@@ -73,7 +73,7 @@ TN_TEST(training_steps_stay_finite_and_move_the_generator)
     size_t k;
     int finite = 1;
     tiny_opts(&o);
-    o.max_iters = 8;
+    o.train.max_iters = 8;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, &s) == TN_OK);
     TN_CHECK(s.iterations == 8 && m.iterations == 8);
     TN_CHECK(s.loss_d == s.loss_d && s.loss_g == s.loss_g);
@@ -97,15 +97,15 @@ TN_TEST(checkpoint_resume_continues_identically)
     tn_texgan_stats s;
     tiny_opts(&o);
     o.augment = 1; /* flipped/transposed real patches: the flag is part of the saved state */
-    o.checkpoint = ck1;
-    o.max_iters = 6;
+    o.train.checkpoint = ck1;
+    o.train.max_iters = 6;
     TN_CHECK(tn_texgan_train(&full, &ex, &o, NULL) == TN_OK);
-    o.checkpoint = ck2;
-    o.max_iters = 3; /* "killed" after 3 iterations: the checkpoint holds them */
+    o.train.checkpoint = ck2;
+    o.train.max_iters = 3; /* "killed" after 3 iterations: the checkpoint holds them */
     TN_CHECK(tn_texgan_train(&part, &ex, &o, NULL) == TN_OK);
-    o.max_iters = 6;
-    o.resume = 1;
-    o.seed = 999; /* ignored on resume: the state comes from the file */
+    o.train.max_iters = 6;
+    o.train.resume = 1;
+    o.train.seed = 999; /* ignored on resume: the state comes from the file */
     TN_CHECK(tn_texgan_train(&resumed, &ex, &o, &s) == TN_OK);
     TN_CHECK(s.resumed_from == 3 && s.iterations == 6);
     TN_CHECK(same_params(full.weights, resumed.weights, 1));
@@ -132,7 +132,7 @@ static tn_status trained_tiny_scaled(tn_texgan *m, int channels, int periodic, i
     o.noise_global = 2;
     o.noise_periodic = periodic;
     o.scale = scale;
-    o.max_iters = 2;
+    o.train.max_iters = 2;
     st = tn_texgan_train(m, &ex, &o, NULL);
     tn_image_free(&ex);
     return st;
@@ -269,7 +269,7 @@ TN_TEST(nearest_design_still_tiles_exactly)
     double d = 0;
     tiny_opts(&o);
     o.nearest = 1;
-    o.max_iters = 2;
+    o.train.max_iters = 2;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
     TN_CHECK(m.smooth == 0 && m.stage_noise == 0 && tn_params_find(m.weights, "g.n0") == NULL);
     TN_CHECK(tn_texgan_synthesize_window(&m, 7, 0, 0, 50, 33, &one) == TN_OK);
@@ -340,7 +340,7 @@ TN_TEST(deterministic_for_1_and_2_threads)
     tn_texgan a, b;
     tn_texgan_opts o;
     tiny_opts(&o);
-    o.max_iters = 3;
+    o.train.max_iters = 3;
     tn_set_threads(1);
     TN_CHECK(tn_texgan_train(&a, &ex, &o, NULL) == TN_OK);
     TN_CHECK(tn_texgan_synthesize(&a, 7, 70, 50, &s1) == TN_OK);
@@ -581,7 +581,7 @@ TN_TEST(bad_inputs_fail_cleanly)
     size_t n = 0;
     FILE *f;
     tiny_opts(&o);
-    o.max_iters = 1;
+    o.train.max_iters = 1;
     TN_CHECK(tn_texgan_train(&m, &empty, &o, NULL) == TN_ERR_EMPTY);
     TN_CHECK(tn_texgan_train(&m, &small, &o, NULL) == TN_ERR_INVALID_ARG); /* smaller than the patch */
     TN_CHECK(tn_texgan_train(&m, &wide, &o, NULL) == TN_ERR_SHAPE);
@@ -591,11 +591,11 @@ TN_TEST(bad_inputs_fail_cleanly)
     o.stages = 9;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_ERR_INVALID_ARG);
     o.stages = 2;
-    o.resume = 1;
-    o.checkpoint = "build/test/no_such_texgan.ckpt";
+    o.train.resume = 1;
+    o.train.checkpoint = "build/test/no_such_texgan.ckpt";
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_ERR_IO);
-    o.resume = 0;
-    o.checkpoint = NULL;
+    o.train.resume = 0;
+    o.train.checkpoint = NULL;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
     TN_CHECK(tn_texgan_synthesize(&m, 1, 0, 10, &out) == TN_ERR_INVALID_ARG);
     TN_CHECK(tn_texgan_synthesize_window(&m, 1, -1, 0, 10, 10, &out) == TN_ERR_INVALID_ARG);

@@ -49,6 +49,7 @@ static const char *tn_test_cur_name;
     } while (0)
 
 static const char *tn_test_data(const char *rel);
+static const char *tn_test_ref(const char *rel);
 
 /* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
    four paths can be in use at once. */
@@ -66,8 +67,17 @@ static int tn_test_summary(const char *file)
 {
     (void)tn_test_data; /* not every test file reads shared data or writes scratch files */
     (void)tn_test_tmp_path;
+    (void)tn_test_ref;
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
+}
+
+/* Path of a reference file kept in the repository (tests/refs/, tests run from the top). */
+static const char *tn_test_ref(const char *rel)
+{
+    static char buf[512];
+    snprintf(buf, sizeof buf, "tests/refs/%s", rel);
+    return buf;
 }
 
 /* Path of a file under ../shared/data (or $TN_SHARED_DATA), or NULL when it is not there. */

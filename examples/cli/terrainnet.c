@@ -944,7 +944,7 @@ static int cmd_texgan_train(int argc, char **argv)
     for (a = 0; a < argc; a++) {
         const char *k = argv[a];
         if (!strcmp(k, "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(k, "--resume")) o.resume = 1;
+        else if (!strcmp(k, "--resume")) o.train.resume = 1;
         else if (!strcmp(k, "--augment")) o.augment = 1;
         else if (!strcmp(k, "--nearest")) o.nearest = 1;
         else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
@@ -955,10 +955,10 @@ static int cmd_texgan_train(int argc, char **argv)
                   !strcmp(k, "--feat-weight")) &&
                  a + 1 < argc) {
             if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
-            if (!strcmp(k, "--minutes")) o.minutes = v;
-            else if (!strcmp(k, "--checkpoint-seconds")) o.checkpoint_seconds = v;
-            else if (!strcmp(k, "--iters")) o.max_iters = (long)v;
-            else if (!strcmp(k, "--seed")) o.seed = (uint64_t)v;
+            if (!strcmp(k, "--minutes")) o.train.minutes = v;
+            else if (!strcmp(k, "--checkpoint-seconds")) o.train.checkpoint_seconds = v;
+            else if (!strcmp(k, "--iters")) o.train.max_iters = (long)v;
+            else if (!strcmp(k, "--seed")) o.train.seed = (uint64_t)v;
             else if (!strcmp(k, "--patch")) o.patch = (int)v;
             else if (!strcmp(k, "--batch")) o.batch = (int)v;
             else if (!strcmp(k, "--gen-width")) o.gen_width = (int)v;
@@ -981,7 +981,7 @@ static int cmd_texgan_train(int argc, char **argv)
         snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", outp);
         ckpt = ckbuf;
     }
-    o.checkpoint = ckpt;
+    o.train.checkpoint = ckpt;
     if ((st = tn_image_load(in, &ex, NULL))) return fail_status(st);
     if (normal) {
         tn_image both = {0, 0, 0, NULL};
