@@ -17,6 +17,77 @@ for c in info convert metrics render noise sketch sketch-random align extract re
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
 
+# the generated help lists every option of each command with its help text; -h and `help CMD`
+# print the same; `terrainnet --help` lists the command
+while read -r c opts; do
+    if $T $c --help > "$W/help.txt" 2> "$W/help_err.txt" && [ ! -s "$W/help_err.txt" ]; then ok; else bad "$c --help: exit status or stderr"; fi
+    for o in $opts; do
+        if grep -qE -- "^ +(-o, )?$o([ ,]|\$).*[a-z]" "$W/help.txt"; then ok; else bad "$c --help does not list $o"; fi
+    done
+    if $T $c -h | cmp -s - "$W/help.txt" && $T help $c | cmp -s - "$W/help.txt"; then ok; else bad "$c: -h or help $c differs from --help"; fi
+    if $T --help | grep -q "^  $c "; then ok; else bad "terrainnet --help does not list $c"; fi
+done <<EOF
+info --raw-size --tensors
+convert --range --bits --raw-size --cellsize
+metrics --range
+render -o --output --3d --size --azimuth --pitch --relief --light
+noise -o --type --size --seed --octaves --frequency --lacunarity --gain --periodic --draw --draw-weight --range --like
+sketch -o --size --preview --dem --tns
+sketch-random -o --sketch --size --seed --nodes --preview
+align -o --seed --choices --cut-dem --parts-out
+extract -o --preview --threshold --valleys --ridges --accumulation --spacing
+realism --spacing --spacing-b --range-a --range-b --threshold
+style --content --style -o --iters --optimizer --weights --size --levels --seed --lr --content-weight --style-weight --sw-weight --hist-weight --tv-weight --drain-weight --valley-weight --no-drain
+texgan-train -o --minutes --iters --resume --checkpoint --checkpoint-seconds --normal --seed --patch --batch --gen-width --disc-width --disc-layers --stages --scale --augment --local --global --periodic --feat-weight --nearest
+texgan-synth --size -o --seed --colour-correct
+detail-maps -o --size --seed --factor --sigma --no-colour --compose --preview --dem
+EOF
+if $T noise --help | grep -q -- "--size N \[M\] .*(default: 512)" && $T render --help | grep -q -- "-o, --output OUT.png .*(required)"; then ok;
+else bad "help shows defaults and required options"; fi
+if $T help | grep -q commands && $T help noise | grep -q "usage: terrainnet noise"; then ok; else bad "terrainnet help [CMD]"; fi
+# every option the README's command-line section shows is one its command's help lists
+if [ -f README.md ]; then
+    awk '/^    bin\/terrainnet [a-z]/ { cmd = $2 }
+         /^    bin\/terrainnet / || (/^                    +\[/ && cmd != "") {
+             for (i = 1; i <= NF; i++) { t = $i; if (t == "#") break; gsub(/[][]/, "", t); if (t ~ /^-/) print cmd, t }
+             next }
+         { cmd = "" }' README.md > "$W/readme_opts.txt"
+    if [ -s "$W/readme_opts.txt" ]; then ok; else bad "no options found in the README's command-line section"; fi
+    while read -r c o; do
+        if $T $c --help | grep -qE -- "^ +(-o, )?$o([ ,]|\$)"; then ok; else bad "README shows $c $o, which $c --help does not list"; fi
+    done < "$W/readme_opts.txt"
+fi
+
+# usage errors: exit status 2 and a message naming the command and what is wrong
+expect_usage() { # name, grep pattern (fixed string), command...
+    name=$1; pat=$2; shift 2
+    "$@" > "$W/out.txt" 2>&1; rc=$?
+    if [ $rc -eq 2 ] && grep -qF -- "$pat" "$W/out.txt"; then ok; else bad "$name (rc $rc): $(head -c 300 "$W/out.txt")"; fi
+}
+for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps; do
+    expect_usage "$c unknown option" "terrainnet $c: unknown option --no-such-option" $T $c --no-such-option
+done
+expect_usage "missing value" "noise: missing value for --seed S" $T noise -o "$W/x.png" --seed
+expect_usage "missing -o value" "render: missing value for -o OUT.png" $T render a.png -o
+expect_usage "missing second value" "info: missing value for --raw-size W H" $T info a.r16 --raw-size 5
+expect_usage "not a number" "noise: --seed needs a non-negative whole number, not abc" $T noise -o "$W/x.png" --seed abc
+expect_usage "trailing garbage" "noise: --octaves needs a non-negative whole number, not 8x" $T noise -o "$W/x.png" --octaves 8x
+expect_usage "fraction for a count" "style: --iters needs a whole number from 1 to 1000000, not 2.5" $T style --content a --style b -o c --iters 2.5
+expect_usage "float out of range" "render: --pitch needs a number, not 1e999" $T render a.png -o b.png --pitch 1e999
+expect_usage "int out of range" "sketch-random: --nodes needs a whole number from 2 to 8192, not 1" $T sketch-random -o x.tns --nodes 1
+expect_usage "int overflow" "texgan-train: --patch needs a non-negative whole number up to 1000000000, not 99999999999" \
+    $T texgan-train a.png -o x.tnw --patch 99999999999
+expect_usage "positive" "extract: --spacing needs a positive number, not 0" $T extract a.png --spacing 0
+expect_usage "second value" "extract: --spacing needs a positive number, not -2" $T extract a.png --spacing 1 -2
+expect_usage "bad choice" "noise: --type must be one of perlin|explicit, not fbm" $T noise -o "$W/x.png" --type fbm
+expect_usage "bad WxH" "texgan-synth: --size needs WxH" $T texgan-synth m.tnw -o x.pfm --size 12x
+expect_usage "extra positional" "metrics: too many arguments: c" $T metrics a b c
+expect_usage "no positionals" "noise: unexpected argument stray" $T noise -o "$W/x.png" stray
+expect_usage "missing positionals" "convert: needs IN and OUT" $T convert a.png
+expect_usage "missing required option" "sketch-random: missing -o OUT.tns" $T sketch-random --size 8
+expect_usage "missing required options" "style: needs --content IN, --style SOURCE and -o OUT" $T style --content a
+expect_usage "help of an unknown command" "unknown command 'frobnicate'" $T help frobnicate
+
 # errors: one clear message, non-zero exit, no crash
 expect_error() { # name, grep pattern, command...
     name=$1; pat=$2; shift 2
@@ -117,6 +188,13 @@ else bad "texgan-synth png"; fi
 if $T detail-maps "$W/tg.tnw" "$W/noise.png" -o "$W/dm" --size 200x140 --compose "$W/comp.png" --preview "$W/prev.png" > "$W/dm.txt" 2>&1 &&
     grep -q "low map: 20 x 14" "$W/dm.txt" && grep -q "tiling 2.08333" "$W/dm_detail.txt" && $T info "$W/comp.png" | grep -q "size: 200 x 140" &&
     [ -f "$W/dm_low.png" ] && [ -f "$W/dm_high.png" ] && [ -f "$W/prev.png" ]; then ok; else bad "detail-maps: $(head -c 400 "$W/dm.txt")"; fi
+# a model says what it is; a checkpoint too; a model from before metadata still reads
+if $T info "$W/tg.tnw" > "$W/tgi.txt" 2>&1 && grep -q "method: texgan" "$W/tgi.txt" && grep -q "iterations: 4" "$W/tgi.txt" &&
+    grep -q "example: 96x64x1:" "$W/tgi.txt" && grep -q "kind: model" "$W/tgi.txt" &&
+    $T info "$W/tg.tnw.ckpt" --tensors > "$W/tgc.txt" 2>&1 && grep -q "kind: checkpoint" "$W/tgc.txt" && grep -q "iteration: 4" "$W/tgc.txt" &&
+    grep -q "tensor: am.g.w0 " "$W/tgc.txt" &&
+    $T info tests/refs/texgan_v1_model.tnw | grep -q "before metadata"; then ok; else bad "info on models: $(head -c 400 "$W/tgi.txt")"; fi
+expect_error "texgan-synth given a checkpoint" "checkpoint, not a model" $T texgan-synth "$W/tg.tnw.ckpt" --size 10x10 -o "$W/x.pfm"
 head -c 300 "$W/tg.tnw" > "$W/tg_bad.tnw"
 expect_error "detail-maps corrupt model" "damaged\|truncated" $T detail-maps "$W/tg_bad.tnw" "$W/noise.png" -o "$W/dm2"
 

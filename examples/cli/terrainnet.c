@@ -1,5 +1,8 @@
 /* terrainnet command-line tool: every library feature as a subcommand.
-   Build: make   (bin/terrainnet). Run `bin/terrainnet --help`. */
+   Build: make   (bin/terrainnet). Run `bin/terrainnet --help`.
+   A command is a static argument struct, a table of its positionals and options (parsed, checked
+   and turned into --help by the option parser below), a run function and a cli_command naming
+   them; `commands` lists them. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 
@@ -7,6 +10,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
+#include <float.h>
+#include <errno.h>
+#include <limits.h>
+#include <stdarg.h>
 #if !defined(_WIN32)
 #include <unistd.h>
 #endif
@@ -20,40 +27,19 @@ static int fail_status(tn_status st)
     return 1;
 }
 
-static int usage_error(const char *cmd, const char *msg, const char *arg)
+/* A usage error (exit status 2): "terrainnet CMD: message" and where to read more. */
+#if defined(__GNUC__)
+__attribute__((format(printf, 2, 3)))
+#endif
+static int usage_error(const char *cmd, const char *fmt, ...)
 {
-    fprintf(stderr, "terrainnet %s: %s%s%s\n(see `terrainnet %s --help`)\n", cmd, msg, arg ? " " : "", arg ? arg : "", cmd);
+    va_list ap;
+    fprintf(stderr, "terrainnet %s: ", cmd);
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fprintf(stderr, "\n(see `terrainnet %s --help`)\n", cmd);
     return 2;
-}
-
-static int parse_double(const char *s, double *out)
-{
-    char *end;
-    double v;
-    if (!s || !*s) return 0;
-    v = strtod(s, &end);
-    if (*end || v != v || v > 1e300 || v < -1e300) return 0;
-    *out = v;
-    return 1;
-}
-
-static int parse_int(const char *s, int *out)
-{
-    char *end;
-    long v;
-    if (!s || !*s) return 0;
-    v = strtol(s, &end, 10);
-    if (*end || v < -1000000000L || v > 1000000000L) return 0;
-    *out = (int)v;
-    return 1;
-}
-
-static int wants_help(int argc, char **argv)
-{
-    int i;
-    for (i = 0; i < argc; i++)
-        if (!strcmp(argv[i], "--help") || !strcmp(argv[i], "-h")) return 1;
-    return 0;
 }
 
 /* Progress: a bar with ETA when stderr is a terminal, otherwise a plain line every ~10 %. */
@@ -71,7 +57,7 @@ static int cli_progress(void *user, const char *stage, double f)
     el = tn_time_seconds() - p->t0;
     if (p->tty) {
         int i, w = 30, fill = (int)(f * w + 0.5);
-        double eta = f > 0.01 ? el * (1.0 - f) / f : 0.0;
+        double eta = tn_progress_eta() >= 0 ? tn_progress_eta() : f > 0.01 ? el * (1.0 - f) / f : 0.0; /* training runs know theirs */
         fprintf(stderr, "\r%-18.18s [", stage);
         for (i = 0; i < w; i++) fputc(i < fill ? '#' : '.', stderr);
         fprintf(stderr, "] %5.1f%%  %6.1fs  ETA %6.1fs", 100.0 * f, el, eta);
@@ -80,7 +66,8 @@ static int cli_progress(void *user, const char *stage, double f)
         int d = (int)(f * 10.0);
         if (d != p->last_decile) {
             p->last_decile = d;
-            fprintf(stderr, "%s: %3.0f%% (%.1f s)\n", stage, 100.0 * f, el);
+            if (tn_progress_eta() >= 0) fprintf(stderr, "%s: %3.0f%% (%.1f s, ETA %.0f s)\n", stage, 100.0 * f, el, tn_progress_eta());
+            else fprintf(stderr, "%s: %3.0f%% (%.1f s)\n", stage, 100.0 * f, el);
         }
     }
     return 0;
@@ -97,41 +84,327 @@ static void install_progress(void)
     tn_set_progress(cli_progress, &g_progress);
 }
 
+/* ---- option parser ----------------------------------------------------------------------- */
+
+/* A command declares its arguments once, as rows of a cli_opt table: positionals (ARG_POS, in
+   order, all required) and options, each pointing at a field of the command's static argument
+   struct. The parser applies the SET defaults, fills the fields from argv and checks every value;
+   --help is printed from the same rows, so the usage text cannot drift from what is accepted.
+   A usage error exits with status 2. */
+typedef enum cli_kind {
+    ARG_POS, ARG_STR,           /* const char * */
+    ARG_FLAG,                   /* no value: int set to 1 */
+    ARG_CHOICE,                 /* one of the words of meta, "a|b|c": int set to its index */
+    ARG_INT, ARG_LONG, ARG_U64, /* int, long, uint64_t (decimal) */
+    ARG_DOUBLE, ARG_FLOAT,      /* finite numbers */
+    ARG_WXH                     /* "WxH" or "N" (= NxN): ints at dst and dst2 */
+} cli_kind;
+
+enum {
+    REQ = 1,     /* the option must be given */
+    PAIR = 2,    /* two numbers, at dst and dst2 */
+    OPT2 = 4,    /* with PAIR: the second may be left out (then it equals the first) */
+    ORDERED = 8, /* with PAIR (ARG_DOUBLE): the first must be below the second */
+    ABOVE = 16,  /* the range excludes min */
+    SET = 32     /* def is parsed into the field before argv; else it is only shown (the field
+                    stays 0 and the library applies that default) */
+};
+#define NO_MAX 1e300 /* max of a range open at the top */
+
+typedef struct cli_opt {
+    const char *name;  /* long option name without "--", or the positional's name */
+    char short_name;   /* 'o' for -o, else 0 */
+    cli_kind kind;
+    int flags;
+    void *dst, *dst2;  /* where the value goes: a field of the command's argument struct */
+    double min, max;   /* accepted range of a number when min < max */
+    const char *meta;  /* value placeholder in --help ("N [M]", "LO HI"); ARG_CHOICE: the words */
+    const char *help;  /* one line; --help wraps it */
+    const char *def;   /* default as --help shows it; with SET also the field's initial value */
+} cli_opt;
+
+typedef struct cli_command {
+    const char *name;
+    const cli_opt *opts;
+    int nopts;
+    int (*run)(void);  /* runs the command on its parsed argument struct */
+    const char *summary;
+    const char *about; /* --help text after the synopsis; wrapped, '\n' starts a paragraph */
+} cli_command;
+
+/* Command X has its arguments in the static struct X_arg, its table in X_opts, its code in run_X. */
+#define CLI_CMD(x) x##_opts, (int)(sizeof x##_opts / sizeof x##_opts[0]), run_##x
+
+/* What a number of o must be, e.g. "a whole number from 2 to 8192". */
+static const char *cli_wanted(const cli_opt *o, char *buf, size_t n)
+{
+    const char *num = o->kind == ARG_DOUBLE || o->kind == ARG_FLOAT ? "number" : "whole number";
+    int top = o->max < NO_MAX, nonneg = o->min == 0 && (!top || o->max >= 1e9);
+    if (o->min >= o->max) snprintf(buf, n, "a %s%s", o->kind == ARG_U64 ? "non-negative " : "", num);
+    else if (o->flags & ABOVE) snprintf(buf, n, "a positive %s", num); /* ABOVE goes with min 0 */
+    else if (nonneg) snprintf(buf, n, "a non-negative %s", num);
+    else if (!top) snprintf(buf, n, "a %s of at least %.10g", num, o->min);
+    else snprintf(buf, n, "a %s from %.10g to %.10g", num, o->min, o->max);
+    if (o->min < o->max && top && ((o->flags & ABOVE) || nonneg)) snprintf(buf + strlen(buf), n - strlen(buf), " up to %.10g", o->max);
+    return buf;
+}
+
+/* Parses s as one number of o into dst; 0 if it is none or out of range. */
+static int cli_number(const cli_opt *o, const char *s, void *dst)
+{
+    char *end;
+    long l = 0;
+    unsigned long long u = 0;
+    double v;
+    errno = 0;
+    if (o->kind == ARG_DOUBLE || o->kind == ARG_FLOAT) v = strtod(s, &end);
+    else if (o->kind == ARG_U64) v = (double)(u = strtoull(s, &end, 10));
+    else v = (double)(l = strtol(s, &end, 10));
+    if (end == s || *end || errno || !(v >= -1e300 && v <= 1e300) || (o->kind == ARG_U64 && strchr(s, '-'))) return 0;
+    if ((o->kind == ARG_FLOAT && fabs(v) > FLT_MAX) || ((o->kind == ARG_INT || o->kind == ARG_WXH) && (l < INT_MIN || l > INT_MAX))) return 0;
+    if (o->min < o->max && (v < o->min || v > o->max || (v == o->min && (o->flags & ABOVE)))) return 0;
+    switch (o->kind) {
+    case ARG_DOUBLE: *(double *)dst = v; break;
+    case ARG_FLOAT: *(float *)dst = (float)v; break;
+    case ARG_U64: *(uint64_t *)dst = (uint64_t)u; break;
+    case ARG_LONG: *(long *)dst = l; break;
+    default: *(int *)dst = (int)l;
+    }
+    return 1;
+}
+
+/* "--name" or "-o" */
+static const char *cli_spelled(const cli_opt *o, char *buf, size_t n)
+{
+    if (o->short_name) snprintf(buf, n, "-%c", o->short_name);
+    else snprintf(buf, n, "--%s", o->name);
+    return buf;
+}
+
+/* Stores the value(s) of option o from argv[0..n-1]; returns how many it used, -1 after a usage error. */
+static int cli_value(const cli_command *c, const cli_opt *o, int n, char **argv)
+{
+    char sp[64], want[96], buf[64], *x = NULL;
+    const char *bad = argv[0], *m = o->meta, *bar;
+    int i;
+    cli_spelled(o, sp, sizeof sp);
+    if (n < ((o->flags & PAIR) && !(o->flags & OPT2) ? 2 : 1)) return usage_error(c->name, "missing value for %s %s", sp, o->meta), -1;
+    if (o->kind == ARG_STR) return *(const char **)o->dst = argv[0], 1;
+    if (o->kind == ARG_CHOICE) {
+        for (i = 0;; i++, m = bar + 1) {
+            if (!(bar = strchr(m, '|'))) bar = m + strlen(m);
+            if ((size_t)(bar - m) == strlen(argv[0]) && !strncmp(m, argv[0], (size_t)(bar - m))) return *(int *)o->dst = i, 1;
+            if (!*bar) return usage_error(c->name, "%s must be one of %s, not %s", sp, o->meta, argv[0]), -1;
+        }
+    }
+    if (o->kind == ARG_WXH) {
+        snprintf(buf, sizeof buf, "%s", argv[0]);
+        if ((x = strchr(buf, 'x')) != NULL || (x = strchr(buf, 'X')) != NULL) *x++ = 0;
+        if (strlen(argv[0]) < sizeof buf && cli_number(o, buf, o->dst) && cli_number(o, x ? x : buf, o->dst2)) return 1;
+        return usage_error(c->name, "%s needs WxH (e.g. 512x512), each side %s, not %s", sp, cli_wanted(o, want, sizeof want), argv[0]), -1;
+    }
+    if (cli_number(o, argv[0], o->dst)) {
+        cli_opt any = *o; /* OPT2: the next word is the second value if it is a number at all */
+        any.min = any.max = 0;
+        if (!(o->flags & PAIR)) return 1;
+        if ((o->flags & OPT2) && (n < 2 || !cli_number(&any, argv[1], o->dst2))) return cli_number(o, argv[0], o->dst2);
+        if (!cli_number(o, argv[1], o->dst2)) bad = argv[1];
+        else if (!(o->flags & ORDERED) || *(double *)o->dst < *(double *)o->dst2) return 2;
+        else return usage_error(c->name, "%s needs two numbers %s with LO < HI, not %s %s", sp, o->meta, argv[0], argv[1]), -1;
+    }
+    return usage_error(c->name, "%s needs %s, not %s", sp, cli_wanted(o, want, sizeof want), bad), -1;
+}
+
+/* "A", "A and B", "A, B and C": the positionals (pos = 1) or the required options of c. */
+static const char *cli_list(const cli_command *c, int pos, char *buf, size_t n)
+{
+    int i, k = 0, total = 0;
+    char sp[64];
+    for (i = 0; i < c->nopts; i++) total += pos ? c->opts[i].kind == ARG_POS : (c->opts[i].flags & REQ) != 0;
+    for (buf[0] = 0, i = 0; i < c->nopts; i++) {
+        const cli_opt *o = &c->opts[i];
+        size_t len = strlen(buf);
+        if (pos ? o->kind != ARG_POS : !(o->flags & REQ)) continue;
+        k++;
+        snprintf(buf + len, n - len, "%s%s%s%s", k == 1 ? "" : k == total ? " and " : ", ", pos ? o->name : cli_spelled(o, sp, sizeof sp),
+                 pos ? "" : " ", pos ? "" : o->meta);
+    }
+    return total == 1 ? "missing" : "needs";
+}
+
+/* Fills c's argument struct (zero, as static) from argv; 0, or 2 after a usage error. */
+static int cli_parse(const cli_command *c, int argc, char **argv)
+{
+    char list[512];
+    unsigned char given[64] = {0};
+    int a, i, k, npos = 0, used;
+    TN_ASSERT(c->nopts <= (int)sizeof given);
+    for (i = 0; i < c->nopts; i++) {
+        char *def = (char *)c->opts[i].def;
+        if ((c->opts[i].flags & SET) && cli_value(c, &c->opts[i], 1, &def) != 1) TN_ASSERT(!"a SET default must parse");
+    }
+    for (a = 0; a < argc; a++) {
+        const char *s = argv[a];
+        const cli_opt *o = NULL;
+        if (s[0] != '-') { /* the next positional */
+            for (i = k = 0; i < c->nopts && !o; i++)
+                if (c->opts[i].kind == ARG_POS && k++ == npos) o = &c->opts[i];
+            if (!o) return usage_error(c->name, k ? "too many arguments: %s" : "unexpected argument %s", s);
+            *(const char **)o->dst = s;
+            npos++;
+            continue;
+        }
+        for (i = 0; i < c->nopts && !o; i++)
+            if (c->opts[i].kind != ARG_POS && (s[1] == '-' ? !strcmp(s + 2, c->opts[i].name) : s[1] == c->opts[i].short_name && s[1] && !s[2]))
+                o = &c->opts[i];
+        if (!o) return usage_error(c->name, "unknown option %s", s);
+        if (o->kind == ARG_FLAG) *(int *)o->dst = 1;
+        else if ((used = cli_value(c, o, argc - a - 1, argv + a + 1)) < 0) return 2;
+        else a += used;
+        given[o - c->opts] = 1;
+    }
+    for (i = k = 0; i < c->nopts; i++) k += c->opts[i].kind == ARG_POS;
+    if (npos < k) return usage_error(c->name, "%s %s", cli_list(c, 1, list, sizeof list), list);
+    for (i = 0; i < c->nopts; i++)
+        if ((c->opts[i].flags & REQ) && !given[i]) return usage_error(c->name, "%s %s", cli_list(c, 0, list, sizeof list), list);
+    return 0;
+}
+
+/* ---- generated help ---------------------------------------------------------------------- */
+
+#define HELP_WIDTH 100
+
+/* Prints the words of text from column col on, wrapping to lines indented by indent; '\n' in
+   text starts a new line. */
+static void cli_wrap(const char *text, int col, int indent)
+{
+    int fresh = 1;
+    for (;;) {
+        int len = (int)strcspn(text, " \n");
+        if (!fresh && col + 1 + len > HELP_WIDTH) col = printf("\n%*s", indent, "") - 1, fresh = 1;
+        col += printf("%s%.*s", fresh ? "" : " ", len, text);
+        fresh = 0;
+        text += len;
+        if (*text == '\n') col = printf("\n%*s", indent, "") - 1, fresh = 1;
+        if (!*text++) break;
+    }
+    putchar('\n');
+}
+
+/* "-o, --output OUT", "    --size N [M]" or a positional's name. */
+static const char *cli_label(const cli_opt *o, char *buf, size_t n)
+{
+    if (o->kind == ARG_POS) snprintf(buf, n, "%s", o->name);
+    else snprintf(buf, n, "%c%c%c --%s%s%s", o->short_name ? '-' : ' ', o->short_name ? o->short_name : ' ', o->short_name ? ',' : ' ',
+                  o->name, o->meta ? " " : "", o->meta ? o->meta : "");
+    return buf;
+}
+
+/* Usage generated from c's table: synopsis, about text, arguments, options with defaults. */
+static void cli_help(const cli_command *c)
+{
+    char item[160], sp[64], text[700];
+    int i, pass, header, w = 10, col = printf("usage: terrainnet %s", c->name), indent = col;
+    for (pass = 0; pass < 3; pass++) /* synopsis: positionals, required options, the others */
+        for (i = 0; i < c->nopts; i++) {
+            const cli_opt *o = &c->opts[i];
+            int req = (o->flags & REQ) != 0, opt = o->kind != ARG_POS && !req;
+            if (pass != (o->kind == ARG_POS ? 0 : req ? 1 : 2)) continue;
+            snprintf(item, sizeof item, "%s%s%s%s%s", opt ? "[" : "", o->kind == ARG_POS ? o->name : cli_spelled(o, sp, sizeof sp),
+                     o->meta ? " " : "", o->meta ? o->meta : "", opt ? "]" : "");
+            if (col + 1 + (int)strlen(item) > HELP_WIDTH) col = printf("\n%*s", indent, "") - 1;
+            col += printf(" %s", item);
+        }
+    putchar('\n');
+    cli_wrap(c->about, 0, 0);
+    for (i = 0; i < c->nopts; i++)
+        if ((col = (int)strlen(cli_label(&c->opts[i], item, sizeof item))) > w && col <= 28) w = col;
+    for (pass = 0; pass < 2; pass++) /* arguments, then options */
+        for (i = 0, header = 0; i < c->nopts; i++) {
+            const cli_opt *o = &c->opts[i];
+            if ((o->kind == ARG_POS) == pass) continue;
+            if (!header++) printf(pass ? "\noptions:\n" : "\narguments:\n");
+            col = printf("  %s", cli_label(o, item, sizeof item));
+            printf("%-*s", col > w + 2 ? w + 5 : w + 4 - col, col > w + 2 ? "\n" : "");
+            snprintf(text, sizeof text, "%s%s%s%s", o->help, o->flags & REQ ? " (required)" : o->def ? " (default: " : "",
+                     o->flags & REQ || !o->def ? "" : o->def, o->flags & REQ || !o->def ? "" : ")");
+            cli_wrap(text, w + 4, w + 4);
+        }
+    printf("%s  %-*s  show this help\n", header ? "" : "\noptions:\n", w, "-h, --help");
+}
+
 /* ---- info -------------------------------------------------------------------------------- */
 
-static int cmd_info(int argc, char **argv)
+static struct info_args { const char *path; int tensors; tn_load_opts lo; } info_arg;
+static const cli_opt info_opts[] = {
+    {"FILE", 0, ARG_POS, 0, &info_arg.path, NULL, 0, 0, NULL, "image, heightmap, model or checkpoint (.tnw) file", NULL},
+    {"raw-size", 0, ARG_INT, PAIR, &info_arg.lo.raw_width, &info_arg.lo.raw_height, 0, 0, "W H",
+     "size of a headerless .r16 file", "a square from the file size"},
+    {"tensors", 0, ARG_FLAG, 0, &info_arg.tensors, NULL, 0, 0, NULL, ".tnw: list every tensor with its shape", NULL},
+};
+
+static int is_tnw(const char *path)
 {
+    char magic[4] = {0, 0, 0, 0};
+    FILE *f = fopen(path, "rb");
+    size_t n = f ? fread(magic, 1, 4, f) : 0;
+    if (f) fclose(f);
+    return n == 4 && !memcmp(magic, "TNW1", 4);
+}
+
+/* A .tnw: what it is (its metadata), its tensors, and a digest of all their values. */
+static int info_tnw(const char *path, int list)
+{
+    tn_params *p = NULL;
+    tn_status st = tn_params_open(path, &p);
+    const char *kind, *method;
+    size_t learned = 0, buffers = 0, k;
+    uint64_t h = 0xcbf29ce484222325ULL;
+    int i, d;
+    if (st) return fail_status(st);
+    method = tn_params_meta(p, "method");
+    kind = tn_params_meta(p, "kind");
+    printf("file: %s\nkind: %s\n", path, kind ? kind : method ? "model" : tn_params_find(p, "texgan.config") ? "model (texgan, before metadata)" : "weights");
+    for (i = 0; i < tn_params_meta_count(p); i++) {
+        const char *v, *key = tn_params_meta_key(p, i, &v);
+        if (strcmp(key, "kind") != 0) printf("%s: %s\n", key, v);
+    }
+    for (i = 0; i < tn_params_count(p); i++) {
+        const tn_tensor *t = tn_params_get(p, i);
+        if (t->requires_grad) learned += t->numel;
+        else buffers += t->numel;
+        for (k = 0; k < t->numel; k++) {
+            uint32_t u;
+            memcpy(&u, &t->data[k], 4);
+            for (d = 0; d < 4; d++) h = (h ^ ((u >> (8 * d)) & 0xffu)) * 0x100000001b3ULL;
+        }
+        if (list) {
+            printf("tensor: %-24s %s", t->name, t->requires_grad ? "learned" : "buffer ");
+            for (d = 0; d < t->ndim; d++) printf("%s%d", d ? " x " : " ", t->shape[d]);
+            printf("\n");
+        }
+    }
+    printf("tensors: %d\nlearned_values: %zu\nbuffer_values: %zu\nvalues_digest: %016llx\n", tn_params_count(p), learned, buffers,
+           (unsigned long long)h);
+    tn_params_free(p);
+    return 0;
+}
+
+static int run_info(void)
+{
+    struct info_args *a = &info_arg;
     tn_image img = {0, 0, 0, NULL};
     tn_image_info info;
-    tn_load_opts lo;
     tn_status st;
     float mn, mx;
     size_t bad, i, n;
     double sum = 0.0;
-    const char *path = NULL;
-    int a;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet info FILE [--raw-size W H]\n"
-               "Prints the format, size, channels, bit depth, height range (metres when the file\n"
-               "records them) and value statistics of an image or heightmap.\n");
-        return 0;
-    }
-    memset(&lo, 0, sizeof lo);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "--raw-size") && a + 2 < argc) {
-            if (!parse_int(argv[a + 1], &lo.raw_width) || !parse_int(argv[a + 2], &lo.raw_height))
-                return usage_error("info", "bad --raw-size", argv[a + 1]);
-            a += 2;
-        } else if (argv[a][0] == '-') return usage_error("info", "unknown option", argv[a]);
-        else if (!path) path = argv[a];
-        else return usage_error("info", "too many arguments:", argv[a]);
-    }
-    if (!path) return usage_error("info", "missing FILE", NULL);
-    if ((st = tn_image_load_ex(path, &img, &info, &lo))) return fail_status(st);
+    if (is_tnw(a->path)) return info_tnw(a->path, a->tensors);
+    if ((st = tn_image_load_ex(a->path, &img, &info, &a->lo))) return fail_status(st);
     bad = tn_image_range(&img, &mn, &mx);
     n = (size_t)img.width * img.height * img.channels;
     for (i = 0; i < n; i++) sum += img.data[i];
-    printf("file: %s\nformat: %s\nsize: %d x %d\nchannels: %d\nbit_depth: %d\n", path, tn_format_name(info.format),
+    printf("file: %s\nformat: %s\nsize: %d x %d\nchannels: %d\nbit_depth: %d\n", a->path, tn_format_name(info.format),
            img.width, img.height, img.channels, info.bit_depth);
     if (info.interlaced) printf("interlaced: adam7\n");
     if (info.has_range) printf("height_range_m: %.6g %.6g\n", info.range_lo, info.range_hi);
@@ -145,100 +418,73 @@ static int cmd_info(int argc, char **argv)
     return 0;
 }
 
+static const cli_command info_cmd = {"info", CLI_CMD(info), "describe an image, heightmap, model or checkpoint",
+    "Prints the format, size, channels, bit depth, height range (metres when the file records them) and value statistics "
+    "of an image or heightmap. For a .tnw model or checkpoint: its method, format, library version and provenance (seed, "
+    "iterations, training seconds, the example's size and digest), its tensors and a digest of their values."};
+
 /* ---- convert ----------------------------------------------------------------------------- */
 
-static int cmd_convert(int argc, char **argv)
+static struct convert_args { const char *in, *out; tn_load_opts lo; tn_save_opts so; } convert_arg;
+static const cli_opt convert_opts[] = {
+    {"IN", 0, ARG_POS, 0, &convert_arg.in, NULL, 0, 0, NULL, "file to read", NULL},
+    {"OUT", 0, ARG_POS, 0, &convert_arg.out, NULL, 0, 0, NULL, "file to write; its extension picks the format", NULL},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &convert_arg.so.range_lo, &convert_arg.so.range_hi, 0, 0, "LO HI",
+     "heights that codes 0..max of an 8/16-bit OUT stand for", "the range recorded in IN"},
+    {"bits", 0, ARG_INT, 0, &convert_arg.so.bit_depth, NULL, 8, 16, "8|16", "bit depth of an integer format", "16 for one channel, else 8"},
+    {"raw-size", 0, ARG_INT, PAIR, &convert_arg.lo.raw_width, &convert_arg.lo.raw_height, 0, 0, "W H",
+     "size of a headerless .r16 IN", "a square from the file size"},
+    {"cellsize", 0, ARG_DOUBLE, ABOVE, &convert_arg.so.cellsize, NULL, 0, NO_MAX, "M", "cell size of an .asc OUT", "IN's, else 1"},
+};
+
+static int run_convert(void)
 {
+    struct convert_args *a = &convert_arg;
     tn_image img = {0, 0, 0, NULL};
     tn_image_info info;
-    tn_load_opts lo;
-    tn_save_opts so;
     tn_status st;
-    const char *in = NULL, *out = NULL;
-    int a, keep_range = 1;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet convert IN OUT [--range LO HI] [--bits 8|16] [--raw-size W H] [--cellsize M]\n"
-               "Converts between PNG, PGM/PPM, PFM, SRTM .hgt, ESRI .asc and .r16 (format from OUT's\n"
-               "extension). Heights keep their metres: a range recorded in IN (or given with --range,\n"
-               "which maps codes 0..max of an 8/16-bit output to LO..HI) is written to OUT where the\n"
-               "format can hold it. OUT is written atomically and never half-written.\n");
-        return 0;
+    if (a->so.bit_depth && a->so.bit_depth != 8 && a->so.bit_depth != 16)
+        return usage_error("convert", "--bits must be 8 or 16, not %d", a->so.bit_depth);
+    a->so.has_range = a->so.range_hi > a->so.range_lo; /* --range given (it checks LO < HI) */
+    if ((st = tn_image_load_ex(a->in, &img, &info, &a->lo))) return fail_status(st);
+    if (!a->so.has_range && info.has_range) {
+        a->so.has_range = 1;
+        a->so.range_lo = info.range_lo;
+        a->so.range_hi = info.range_hi;
     }
-    memset(&lo, 0, sizeof lo);
-    memset(&so, 0, sizeof so);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "--range") && a + 2 < argc) {
-            if (!parse_double(argv[a + 1], &so.range_lo) || !parse_double(argv[a + 2], &so.range_hi) ||
-                so.range_hi <= so.range_lo)
-                return usage_error("convert", "--range needs two numbers LO < HI", NULL);
-            so.has_range = 1;
-            keep_range = 0;
-            a += 2;
-        } else if (!strcmp(argv[a], "--bits") && a + 1 < argc) {
-            if (!parse_int(argv[a + 1], &so.bit_depth) || (so.bit_depth != 8 && so.bit_depth != 16))
-                return usage_error("convert", "--bits must be 8 or 16, not", argv[a + 1]);
-            a++;
-        } else if (!strcmp(argv[a], "--raw-size") && a + 2 < argc) {
-            if (!parse_int(argv[a + 1], &lo.raw_width) || !parse_int(argv[a + 2], &lo.raw_height))
-                return usage_error("convert", "bad --raw-size", argv[a + 1]);
-            a += 2;
-        } else if (!strcmp(argv[a], "--cellsize") && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &so.cellsize) || so.cellsize <= 0)
-                return usage_error("convert", "bad --cellsize", argv[a + 1]);
-            a++;
-        } else if (argv[a][0] == '-') return usage_error("convert", "unknown option", argv[a]);
-        else if (!in) in = argv[a];
-        else if (!out) out = argv[a];
-        else return usage_error("convert", "too many arguments:", argv[a]);
-    }
-    if (!in || !out) return usage_error("convert", "needs IN and OUT", NULL);
-    if ((st = tn_image_load_ex(in, &img, &info, &lo))) return fail_status(st);
-    if (keep_range && info.has_range) {
-        so.has_range = 1;
-        so.range_lo = info.range_lo;
-        so.range_hi = info.range_hi;
-    }
-    if (!so.cellsize && info.cellsize > 0) so.cellsize = info.cellsize;
-    st = tn_image_save(out, &img, &so);
+    if (!a->so.cellsize && info.cellsize > 0) a->so.cellsize = info.cellsize;
+    st = tn_image_save(a->out, &img, &a->so);
     tn_image_free(&img);
     if (st) return fail_status(st);
     return 0;
 }
 
+static const cli_command convert_cmd = {"convert", CLI_CMD(convert), "convert between heightmap/image formats, keeping metres",
+    "Converts between PNG, PGM/PPM, PFM, SRTM .hgt, ESRI .asc and .r16 (format from OUT's extension). Heights keep their "
+    "metres: a range recorded in IN (or given with --range) is written to OUT where the format can hold it. OUT is "
+    "written atomically and never half-written."};
+
 /* ---- metrics ----------------------------------------------------------------------------- */
 
-static int cmd_metrics(int argc, char **argv)
+static struct metrics_args { const char *ref, *img; double range; } metrics_arg;
+static const cli_opt metrics_opts[] = {
+    {"REFERENCE", 0, ARG_POS, 0, &metrics_arg.ref, NULL, 0, 0, NULL, "the image to compare with", NULL},
+    {"IMAGE", 0, ARG_POS, 0, &metrics_arg.img, NULL, 0, 0, NULL, "the image to judge (same size and channels)", NULL},
+    {"range", 0, ARG_DOUBLE, ABOVE, &metrics_arg.range, NULL, 0, NO_MAX, "R", "data range for SSIM and PSNR", "max(REFERENCE) - min(REFERENCE)"},
+};
+
+static int run_metrics(void)
 {
+    struct metrics_args *a = &metrics_arg;
     tn_image a_img = {0, 0, 0, NULL}, b_img = {0, 0, 0, NULL};
     tn_metrics m;
     tn_status st;
-    const char *pa = NULL, *pb = NULL;
-    double range = 0.0;
-    int a;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet metrics REFERENCE IMAGE [--range R]\n"
-               "Compares IMAGE with REFERENCE (same size and channels). The data range R defaults to\n"
-               "max(REFERENCE) - min(REFERENCE), so the figures do not depend on units.\n"
-               "Prints ssim (Gaussian 11x11, sigma 1.5, as scikit-image), psnr (dB), rmse and mae.\n");
-        return 0;
-    }
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "--range") && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &range) || range <= 0)
-                return usage_error("metrics", "--range must be a positive number, not", argv[a + 1]);
-            a++;
-        } else if (argv[a][0] == '-') return usage_error("metrics", "unknown option", argv[a]);
-        else if (!pa) pa = argv[a];
-        else if (!pb) pb = argv[a];
-        else return usage_error("metrics", "too many arguments:", argv[a]);
-    }
-    if (!pa || !pb) return usage_error("metrics", "needs REFERENCE and IMAGE", NULL);
-    if ((st = tn_image_load(pa, &a_img, NULL))) return fail_status(st);
-    if ((st = tn_image_load(pb, &b_img, NULL))) {
+    if ((st = tn_image_load(a->ref, &a_img, NULL))) return fail_status(st);
+    if ((st = tn_image_load(a->img, &b_img, NULL))) {
         tn_image_free(&a_img);
         return fail_status(st);
     }
-    st = tn_compare(&a_img, &b_img, range, &m);
+    st = tn_compare(&a_img, &b_img, a->range, &m);
     tn_image_free(&a_img);
     tn_image_free(&b_img);
     if (st) return fail_status(st);
@@ -246,144 +492,96 @@ static int cmd_metrics(int argc, char **argv)
     return 0;
 }
 
+static const cli_command metrics_cmd = {"metrics", CLI_CMD(metrics), "compare two images: SSIM, PSNR, RMSE, MAE",
+    "Compares IMAGE with REFERENCE. The default data range does not depend on units. Prints ssim (Gaussian 11x11, sigma "
+    "1.5, as scikit-image), psnr (dB), rmse and mae."};
+
 /* ---- render ------------------------------------------------------------------------------ */
 
-static int cmd_render(int argc, char **argv)
+static struct render_args { const char *in, *out; int view; tn_view_opts vo; } render_arg;
+static const cli_opt render_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &render_arg.in, NULL, 0, 0, NULL, "heightmap to draw", NULL},
+    {"output", 'o', ARG_STR, REQ, &render_arg.out, NULL, 0, 0, "OUT.png", "picture to write (8-bit)", NULL},
+    {"3d", 0, ARG_FLAG, 0, &render_arg.view, NULL, 0, 0, NULL, "perspective view of the terrain instead of the map view", NULL},
+    {"size", 0, ARG_INT, PAIR, &render_arg.vo.width, &render_arg.vo.height, 16, 16384, "W H", "size of the 3D view", "960 540"},
+    {"azimuth", 0, ARG_FLOAT, 0, &render_arg.vo.azimuth_deg, NULL, 0, 0, "DEG", "3D camera direction, clockwise from north", "180, from the south"},
+    {"pitch", 0, ARG_FLOAT, 0, &render_arg.vo.pitch_deg, NULL, 0, 0, "DEG", "3D camera's downward angle", "30"},
+    {"relief", 0, ARG_FLOAT, 0, &render_arg.vo.relief, NULL, 0, 0, "F", "3D height of the full range as a fraction of the DEM width", "0.2"},
+    {"light", 0, ARG_FLOAT, 0, &render_arg.vo.colours.shade.azimuth_deg, NULL, 0, 0, "DEG", "sun azimuth, clockwise from north", "315"},
+};
+
+static int run_render(void)
 {
+    struct render_args *a = &render_arg;
     tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
-    tn_view_opts vo;
+    tn_save_opts so;
     tn_status st;
-    const char *in = NULL, *outp = NULL;
-    int a, view = 0;
-    double v;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet render DEM -o OUT.png [--3d] [--size W H] [--azimuth DEG] [--pitch DEG]\n"
-               "                                [--relief F] [--light DEG]\n"
-               "Writes a preview: hypsometric colours times a hillshade (default), or with --3d a\n"
-               "perspective view of the terrain (camera --azimuth clockwise from north, default 180 =\n"
-               "from the south; --pitch downward angle, default 30; --relief = height of the full\n"
-               "range as a fraction of the DEM width, default 0.2). --light sets the sun azimuth.\n");
-        return 0;
-    }
-    memset(&vo, 0, sizeof vo);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--3d")) view = 1;
-        else if (!strcmp(argv[a], "--size") && a + 2 < argc) {
-            if (!parse_int(argv[a + 1], &vo.width) || !parse_int(argv[a + 2], &vo.height) || vo.width < 16 ||
-                vo.height < 16 || vo.width > 16384 || vo.height > 16384)
-                return usage_error("render", "--size needs W H between 16 and 16384", NULL);
-            a += 2;
-        } else if ((!strcmp(argv[a], "--azimuth") || !strcmp(argv[a], "--pitch") || !strcmp(argv[a], "--relief") ||
-                    !strcmp(argv[a], "--light")) && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v)) return usage_error("render", "not a number:", argv[a + 1]);
-            if (!strcmp(argv[a], "--azimuth")) vo.azimuth_deg = (float)v;
-            else if (!strcmp(argv[a], "--pitch")) vo.pitch_deg = (float)v;
-            else if (!strcmp(argv[a], "--relief")) vo.relief = (float)v;
-            else vo.colours.shade.azimuth_deg = (float)v;
-            a++;
-        } else if (argv[a][0] == '-') return usage_error("render", "unknown option", argv[a]);
-        else if (!in) in = argv[a];
-        else return usage_error("render", "too many arguments:", argv[a]);
-    }
-    if (!in) return usage_error("render", "missing DEM", NULL);
-    if (!outp) return usage_error("render", "missing -o OUT.png", NULL);
-    if ((st = tn_image_load(in, &dem, NULL))) return fail_status(st);
-    st = view ? tn_render_view(&dem, &vo, &out) : tn_render_preview(&dem, &vo.colours, &out);
+    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    st = a->view ? tn_render_view(&dem, &a->vo, &out) : tn_render_preview(&dem, &a->vo.colours, &out);
     tn_image_free(&dem);
     if (st) return fail_status(st);
-    {
-        tn_save_opts so;
-        memset(&so, 0, sizeof so);
-        so.bit_depth = 8;
-        st = tn_image_save(outp, &out, &so);
-    }
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    st = tn_image_save(a->out, &out, &so);
     tn_image_free(&out);
     if (st) return fail_status(st);
     return 0;
 }
 
+static const cli_command render_cmd = {"render", CLI_CMD(render), "hillshaded colour preview or 3D view of a DEM",
+    "Writes a preview: hypsometric colours times a hillshade (default), or with --3d a perspective view of the terrain."};
+
 /* ---- noise ------------------------------------------------------------------------------- */
 
-static int cmd_noise(int argc, char **argv)
-{
-    tn_image out = {0, 0, 0, NULL}, drawn = {0, 0, 0, NULL}, blended = {0, 0, 0, NULL};
+static struct noise_args {
+    const char *out, *draw, *like;
+    int w, h, explicit_noise;
+    uint64_t seed;
+    double weight, range_lo, range_hi;
     tn_perlin_opts po;
+} noise_arg;
+static const cli_opt noise_opts[] = {
+    {"output", 'o', ARG_STR, REQ, &noise_arg.out, NULL, 0, 0, "OUT", "heightmap to write", NULL},
+    {"type", 0, ARG_CHOICE, SET, &noise_arg.explicit_noise, NULL, 0, 0, "perlin|explicit",
+     "Perlin fBm or explicit multi-scale smoothed noise", "perlin"},
+    {"size", 0, ARG_INT, PAIR | OPT2 | SET, &noise_arg.w, &noise_arg.h, 1, 65536, "N [M]", "N x N, or N wide and M high", "512"},
+    {"seed", 0, ARG_U64, SET, &noise_arg.seed, NULL, 0, 0, "S", "random seed", "1"},
+    {"octaves", 0, ARG_INT, 0, &noise_arg.po.octaves, NULL, 0, NO_MAX, "N", "Perlin octaves", "8"},
+    {"frequency", 0, ARG_FLOAT, 0, &noise_arg.po.frequency, NULL, 0, NO_MAX, "F", "Perlin cells across the width", "4"},
+    {"lacunarity", 0, ARG_FLOAT, 0, &noise_arg.po.lacunarity, NULL, 0, NO_MAX, "L", "Perlin frequency factor per octave", "2"},
+    {"gain", 0, ARG_FLOAT, 0, &noise_arg.po.gain, NULL, 0, NO_MAX, "G", "Perlin amplitude factor per octave", "0.5"},
+    {"periodic", 0, ARG_FLAG, 0, &noise_arg.po.periodic, NULL, 0, 0, NULL, "Perlin tiles seamlessly", NULL},
+    {"draw", 0, ARG_STR, 0, &noise_arg.draw, NULL, 0, 0, "MAP", "drawn grey map (resized to the output) blended in to steer the layout", NULL},
+    {"draw-weight", 0, ARG_DOUBLE, SET, &noise_arg.weight, NULL, 0, 1, "W", "weight of the drawn map", "0.5"},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &noise_arg.range_lo, &noise_arg.range_hi, 0, 0, "LO HI",
+     "heights in metres instead of [0, 1]", "[0, 1]"},
+    {"like", 0, ARG_STR, 0, &noise_arg.like, NULL, 0, 0, "SOURCE",
+     "pick the Perlin gain (0.45..0.9) whose slopes and spectrum are closest to the DEM SOURCE, a content map for `terrainnet style --style "
+     "SOURCE` (prints the gain)", NULL},
+};
+
+static int run_noise(void)
+{
+    struct noise_args *a = &noise_arg;
+    tn_image out = {0, 0, 0, NULL}, drawn = {0, 0, 0, NULL}, blended = {0, 0, 0, NULL};
     tn_explicit_opts eo;
     tn_save_opts so;
     tn_status st;
-    const char *outp = NULL, *draw = NULL, *like = NULL;
-    int a, w = 512, h = 512, explicit_noise = 0;
-    double v, seed = 1, weight = 0.5, range_lo = 0, range_hi = 0;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet noise -o OUT [--type perlin|explicit] [--size N [M]] [--seed S]\n"
-               "                        [--octaves N] [--frequency F] [--lacunarity L] [--gain G]\n"
-               "                        [--periodic] [--draw MAP --draw-weight W] [--range LO HI]\n"
-               "                        [--like SOURCE]\n"
-               "Writes a procedural heightmap in [0, 1] (or metres with --range): Perlin fBm\n"
-               "(default: 8 octaves, 4 cells across, lacunarity 2, gain 0.5) or explicit multi-scale\n"
-               "smoothed noise. --size N is N x N (default 512); N M is N wide, M high. --periodic\n"
-               "makes Perlin tile seamlessly. --draw blends a drawn grey map (resized to the output)\n"
-               "with weight W in [0, 1] (default 0.5) to steer the layout. --like SOURCE picks the\n"
-               "Perlin gain (0.45..0.9) whose slopes and spectrum are closest to the DEM SOURCE: a\n"
-               "content map for `terrainnet style --style SOURCE` (prints the gain).\n");
-        return 0;
-    }
-    memset(&po, 0, sizeof po);
     memset(&eo, 0, sizeof eo);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--size") && a + 1 < argc) {
-            if (!parse_int(argv[a + 1], &w) || w < 1 || w > 65536)
-                return usage_error("noise", "--size needs N (or N M) between 1 and 65536", NULL);
-            h = w;
-            a++;
-            if (a + 1 < argc && parse_int(argv[a + 1], &h)) {
-                if (h < 1 || h > 65536) return usage_error("noise", "--size needs N (or N M) between 1 and 65536", NULL);
-                a++;
-            }
-        } else if (!strcmp(argv[a], "--type") && a + 1 < argc) {
-            a++;
-            if (!strcmp(argv[a], "explicit")) explicit_noise = 1;
-            else if (!strcmp(argv[a], "perlin")) explicit_noise = 0;
-            else return usage_error("noise", "--type must be perlin or explicit, not", argv[a]);
-        }
-        else if (!strcmp(argv[a], "--periodic")) po.periodic = 1;
-        else if (!strcmp(argv[a], "--draw") && a + 1 < argc) draw = argv[++a];
-        else if (!strcmp(argv[a], "--like") && a + 1 < argc) like = argv[++a];
-        else if (!strcmp(argv[a], "--range") && a + 2 < argc) {
-            if (!parse_double(argv[a + 1], &range_lo) || !parse_double(argv[a + 2], &range_hi) || range_hi <= range_lo)
-                return usage_error("noise", "--range needs two numbers LO < HI", NULL);
-            a += 2;
-        } else if ((!strcmp(argv[a], "--seed") || !strcmp(argv[a], "--octaves") || !strcmp(argv[a], "--frequency") ||
-                    !strcmp(argv[a], "--lacunarity") || !strcmp(argv[a], "--gain") || !strcmp(argv[a], "--draw-weight")) &&
-                   a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v) || v < 0) return usage_error("noise", "not a non-negative number:", argv[a + 1]);
-            if (!strcmp(argv[a], "--seed")) seed = v;
-            else if (!strcmp(argv[a], "--octaves")) po.octaves = (int)v;
-            else if (!strcmp(argv[a], "--frequency")) po.frequency = (float)v;
-            else if (!strcmp(argv[a], "--lacunarity")) po.lacunarity = (float)v;
-            else if (!strcmp(argv[a], "--gain")) po.gain = (float)v;
-            else if (v > 1) return usage_error("noise", "--draw-weight must be in [0, 1]", NULL);
-            else weight = v;
-            a++;
-        } else return usage_error("noise", "unknown option or missing value:", argv[a]);
-    }
-    if (!outp) return usage_error("noise", "missing -o OUT", NULL);
-    po.seed = eo.seed = (uint64_t)seed;
-    if (like) {
+    a->po.seed = eo.seed = a->seed;
+    if (a->like) {
         tn_image src = {0, 0, 0, NULL};
         float gain = 0.0f;
-        if (explicit_noise) return usage_error("noise", "--like picks a Perlin gain; it does not go with --type explicit", NULL);
-        if (!(st = tn_image_load(like, &src, NULL))) st = tn_style_content_noise(&out, w, h, &src, &po, &gain);
+        if (a->explicit_noise) return usage_error("noise", "--like picks a Perlin gain; it does not go with --type explicit");
+        if (!(st = tn_image_load(a->like, &src, NULL))) st = tn_style_content_noise(&out, a->w, a->h, &src, &a->po, &gain);
         tn_image_free(&src);
         if (!st) printf("gain: %.2f\n", gain);
     } else {
-        st = explicit_noise ? tn_noise_explicit(&out, w, h, &eo) : tn_noise_perlin(&out, w, h, &po);
+        st = a->explicit_noise ? tn_noise_explicit(&out, a->w, a->h, &eo) : tn_noise_perlin(&out, a->w, a->h, &a->po);
     }
     if (st) return fail_status(st);
-    if (draw) {
-        if ((st = tn_image_load(draw, &drawn, NULL)) || (st = tn_noise_blend(&blended, &out, &drawn, (float)weight))) {
+    if (a->draw) {
+        if ((st = tn_image_load(a->draw, &drawn, NULL)) || (st = tn_noise_blend(&blended, &out, &drawn, (float)a->weight))) {
             tn_image_free(&out);
             tn_image_free(&drawn);
             return fail_status(st);
@@ -393,32 +591,23 @@ static int cmd_noise(int argc, char **argv)
         out = blended;
     }
     memset(&so, 0, sizeof so);
-    if (range_hi > range_lo) {
+    if (a->range_hi > a->range_lo) {
         size_t i;
-        for (i = 0; i < (size_t)w * h; i++) out.data[i] = (float)(range_lo + out.data[i] * (range_hi - range_lo));
+        for (i = 0; i < (size_t)a->w * a->h; i++) out.data[i] = (float)(a->range_lo + out.data[i] * (a->range_hi - a->range_lo));
         so.has_range = 1;
-        so.range_lo = range_lo;
-        so.range_hi = range_hi;
+        so.range_lo = a->range_lo;
+        so.range_hi = a->range_hi;
     }
-    st = tn_image_save(outp, &out, &so);
+    st = tn_image_save(a->out, &out, &so);
     tn_image_free(&out);
     return st ? fail_status(st) : 0;
 }
 
-/* ---- sketches ---------------------------------------------------------------------------- */
+static const cli_command noise_cmd = {"noise", CLI_CMD(noise), "procedural heightmap: Perlin fBm or explicit noise, optional drawn map",
+    "Writes a procedural heightmap in [0, 1] (or metres with --range): Perlin fBm or explicit multi-scale smoothed noise, "
+    "optionally blended with a drawn map."};
 
-/* Parses "--size W [H]" at argv[*a]; returns 0 on a bad value. */
-static int parse_size(int argc, char **argv, int *a, int *w, int *h)
-{
-    if (*a + 1 >= argc || !parse_int(argv[*a + 1], w) || *w < 2 || *w > TN_SKETCH_MAX_SIDE) return 0;
-    *h = *w;
-    (*a)++;
-    if (*a + 1 < argc && parse_int(argv[*a + 1], h)) {
-        if (*h < 2 || *h > TN_SKETCH_MAX_SIDE) return 0;
-        (*a)++;
-    }
-    return 1;
-}
+/* ---- sketches ---------------------------------------------------------------------------- */
 
 /* Rasterises the set (16-bit PNG or float PFM by extension) and/or writes a preview. */
 static tn_status write_sketch_images(const tn_contour_set *s, int w, int h, const char *raster, const char *preview,
@@ -444,160 +633,121 @@ done:
     return st;
 }
 
-static int cmd_sketch(int argc, char **argv)
+static struct sketch_args { const char *in, *out, *preview, *tns, *dem; int w, h; } sketch_arg;
+static const cli_opt sketch_opts[] = {
+    {"IN.tns|IN.png", 0, ARG_POS, 0, &sketch_arg.in, NULL, 0, 0, NULL,
+     "the sketch: .tns text, or a drawing (red strokes = ridges, blue = valleys, brighter = higher; thinned and traced to polylines)", NULL},
+    {"output", 'o', ARG_STR, 0, &sketch_arg.out, NULL, 0, 0, "RASTER",
+     "3-channel raster (ridge mask, valley mask, height): 16-bit PNG, or .pfm for floats", NULL},
+    {"size", 0, ARG_INT, PAIR | OPT2, &sketch_arg.w, &sketch_arg.h, 2, TN_SKETCH_MAX_SIDE, "W [H]", "raster and preview size", "the sketch canvas"},
+    {"preview", 0, ARG_STR, 0, &sketch_arg.preview, NULL, 0, 0, "PNG", "ridges yellow and valleys blue (over a hillshade of --dem if given)", NULL},
+    {"dem", 0, ARG_STR, 0, &sketch_arg.dem, NULL, 0, 0, "DEM", "heightmap under the preview", NULL},
+    {"tns", 0, ARG_STR, 0, &sketch_arg.tns, NULL, 0, 0, "OUT.tns", "the sketch as .tns text (e.g. to edit a traced drawing)", NULL},
+};
+
+static int run_sketch(void)
 {
+    struct sketch_args *a = &sketch_arg;
     tn_contour_set s = {0, 0, 0, NULL};
-    const char *in = NULL, *outp = NULL, *preview = NULL, *tns = NULL, *dem = NULL;
-    int a, w = 0, h = 0;
+    int w = a->w, h = a->h;
     tn_status st;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet sketch IN.tns|IN.png [-o RASTER] [--size W [H]] [--preview PNG] [--dem DEM]\n"
-               "                         [--tns OUT.tns]\n"
-               "Reads a sketch: .tns text, or a drawing (red strokes = ridges, blue = valleys, brighter =\n"
-               "higher; thinned and traced to polylines). -o writes a 3-channel raster (ridge mask, valley\n"
-               "mask, height; 16-bit PNG, or .pfm for floats) at --size (default: the sketch canvas).\n"
-               "--preview draws ridges yellow and valleys blue (over a hillshade of --dem if given).\n"
-               "--tns writes the sketch as .tns text (e.g. to edit a traced drawing).\n");
-        return 0;
-    }
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--preview") && a + 1 < argc) preview = argv[++a];
-        else if (!strcmp(argv[a], "--tns") && a + 1 < argc) tns = argv[++a];
-        else if (!strcmp(argv[a], "--dem") && a + 1 < argc) dem = argv[++a];
-        else if (!strcmp(argv[a], "--size")) {
-            if (!parse_size(argc, argv, &a, &w, &h)) return usage_error("sketch", "--size needs W [H] between 2 and 65536", NULL);
-        } else if (argv[a][0] == '-' || in) return usage_error("sketch", "unknown option or extra argument:", argv[a]);
-        else in = argv[a];
-    }
-    if (!in) return usage_error("sketch", "missing the input sketch (.tns or image)", NULL);
-    if (!outp && !preview && !tns) return usage_error("sketch", "nothing to write: give -o, --preview or --tns", NULL);
-    if ((st = tn_sketch_load(in, &s))) return fail_status(st);
+    if (!a->out && !a->preview && !a->tns) return usage_error("sketch", "nothing to write: give -o, --preview or --tns");
+    if ((st = tn_sketch_load(a->in, &s))) return fail_status(st);
     if (!w) { w = s.width; h = s.height; }
-    st = tns ? tn_sketch_save(tns, &s) : TN_OK;
-    if (!st) st = write_sketch_images(&s, w, h, outp, preview, dem);
+    st = a->tns ? tn_sketch_save(a->tns, &s) : TN_OK;
+    if (!st) st = write_sketch_images(&s, w, h, a->out, a->preview, a->dem);
     if (!st) printf("%d polylines on a %d x %d canvas\n", s.count, s.width, s.height);
     tn_contour_set_free(&s);
     return st ? fail_status(st) : 0;
 }
 
-static int cmd_sketch_random(int argc, char **argv)
+static const cli_command sketch_cmd = {"sketch", CLI_CMD(sketch), "read a .tns or drawn sketch; rasterise, preview or convert it",
+    "Reads a sketch and writes it as a raster (-o), a preview and/or .tns text."};
+
+static struct sketch_random_args { const char *in, *out, *preview; int w, h; tn_sketch_random_opts o; } sketch_random_arg;
+static const cli_opt sketch_random_opts[] = {
+    {"output", 'o', ARG_STR, REQ, &sketch_random_arg.out, NULL, 0, 0, "OUT.tns", "the enriched sketch", NULL},
+    {"sketch", 0, ARG_STR, 0, &sketch_random_arg.in, NULL, 0, 0, "IN.tns|IN.png", "the sketch to enrich", "none, random lines only"},
+    {"size", 0, ARG_INT, PAIR | OPT2, &sketch_random_arg.w, &sketch_random_arg.h, 2, TN_SKETCH_MAX_SIDE, "W [H]",
+     "canvas size (required without --sketch)", "the sketch canvas"},
+    {"seed", 0, ARG_U64, SET, &sketch_random_arg.o.seed, NULL, 0, 0, "S", "random seed", "1"},
+    {"nodes", 0, ARG_INT, 0, &sketch_random_arg.o.nodes, NULL, 2, 8192, "N", "random ridge nodes", "W*H/1024 clamped to 8-2048"},
+    {"preview", 0, ARG_STR, 0, &sketch_random_arg.preview, NULL, 0, 0, "PNG", "ridges yellow and valleys blue", NULL},
+};
+
+static int run_sketch_random(void)
 {
+    struct sketch_random_args *a = &sketch_random_arg;
     tn_contour_set user = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
-    tn_sketch_random_opts o;
-    const char *in = NULL, *outp = NULL, *preview = NULL;
-    int a, w = 0, h = 0, nodes = 0;
-    double seed = 1;
     tn_status st;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet sketch-random -o OUT.tns [--sketch IN.tns|IN.png] [--size W [H]] [--seed S]\n"
-               "                                [--nodes N] [--preview PNG]\n"
-               "Adds random ridges and valleys to a sketch (paper 000, section 5.2): N random nodes\n"
-               "(heights 0.5-1) joined by a minimum spanning tree give ridges, the Voronoi vertices\n"
-               "(heights 0-0.5) joined by another give valleys; edges crossing the sketch (or, for\n"
-               "valleys, a kept ridge) are dropped. The output holds the sketch's own polylines first.\n"
-               "--size defaults to the sketch canvas (required without --sketch); --nodes defaults to\n"
-               "W*H/1024 clamped to 8-2048 (at most 8192); --seed defaults to 1.\n");
-        return 0;
+    if (!a->w && !a->in) return usage_error("sketch-random", "give --size W [H] or --sketch");
+    if (a->in && (st = tn_sketch_load(a->in, &user))) return fail_status(st);
+    if (!a->w) {
+        a->w = user.width;
+        a->h = user.height;
     }
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--sketch") && a + 1 < argc) in = argv[++a];
-        else if (!strcmp(argv[a], "--preview") && a + 1 < argc) preview = argv[++a];
-        else if (!strcmp(argv[a], "--size")) {
-            if (!parse_size(argc, argv, &a, &w, &h)) return usage_error("sketch-random", "--size needs W [H] between 2 and 65536", NULL);
-        } else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
-            if (!parse_double(argv[++a], &seed) || seed < 0) return usage_error("sketch-random", "--seed needs a non-negative number, not", argv[a]);
-        } else if (!strcmp(argv[a], "--nodes") && a + 1 < argc) {
-            if (!parse_int(argv[++a], &nodes) || nodes < 2 || nodes > 8192)
-                return usage_error("sketch-random", "--nodes needs a number from 2 to 8192, not", argv[a]);
-        } else return usage_error("sketch-random", "unknown option or missing value:", argv[a]);
-    }
-    if (!outp) return usage_error("sketch-random", "missing -o OUT.tns", NULL);
-    if (in && (st = tn_sketch_load(in, &user))) return fail_status(st);
-    if (!w) {
-        if (!in) return usage_error("sketch-random", "give --size W [H] or --sketch", NULL);
-        w = user.width;
-        h = user.height;
-    }
-    memset(&o, 0, sizeof o);
-    o.seed = (uint64_t)seed;
-    o.nodes = nodes;
-    st = tn_sketch_random(in ? &user : NULL, w, h, &o, &out);
-    if (!st) st = tn_sketch_save(outp, &out);
-    if (!st && preview) st = write_sketch_images(&out, w, h, NULL, preview, NULL);
-    if (!st) printf("%d polylines (%d from the sketch) on a %d x %d canvas\n", out.count, user.count, w, h);
+    st = tn_sketch_random(a->in ? &user : NULL, a->w, a->h, &a->o, &out);
+    if (!st) st = tn_sketch_save(a->out, &out);
+    if (!st && a->preview) st = write_sketch_images(&out, a->w, a->h, NULL, a->preview, NULL);
+    if (!st) printf("%d polylines (%d from the sketch) on a %d x %d canvas\n", out.count, user.count, a->w, a->h);
     tn_contour_set_free(&user);
     tn_contour_set_free(&out);
     return st ? fail_status(st) : 0;
 }
 
-static int cmd_align(int argc, char **argv)
+static const cli_command sketch_random_cmd = {"sketch-random", CLI_CMD(sketch_random), "enrich a sketch with random ridges and valleys (MST + Voronoi)",
+    "Adds random ridges and valleys to a sketch (paper 000, section 5.2): N random nodes (heights 0.5-1) joined by a "
+    "minimum spanning tree give ridges, the Voronoi vertices (heights 0-0.5) joined by another give valleys; edges "
+    "crossing the sketch (or, for valleys, a kept ridge) are dropped. The output holds the sketch's own polylines first."};
+
+static struct align_args { const char *sketch, *dem, *out, *parts_out; int cut_dem; tn_align_opts o; } align_arg;
+static const cli_opt align_opts[] = {
+    {"SKETCH", 0, ARG_POS, 0, &align_arg.sketch, NULL, 0, 0, NULL, "the sketch (.tns or drawn image)", NULL},
+    {"DEMPARTS.tns", 0, ARG_POS, 0, &align_arg.dem, NULL, 0, 0, NULL, "the DEM's contour parts (one polyline per part, index = position)", NULL},
+    {"output", 'o', ARG_STR, REQ, &align_arg.out, NULL, 0, 0, "MAP.txt", "the map: one line per sketch part, `SKETCH_PART DEM_PART`", NULL},
+    {"seed", 0, ARG_U64, SET, &align_arg.o.seed, NULL, 0, 0, "S", "random seed of the cuts and picks", "1"},
+    {"choices", 0, ARG_INT, 0, &align_arg.o.choices, NULL, 1, 64, "K", "random pick among the best K by height (1 = greedy)", "5"},
+    {"cut-dem", 0, ARG_FLAG, 0, &align_arg.cut_dem, NULL, 0, 0, NULL, "DEMPARTS holds whole contours: cut them here with the same seed", NULL},
+    {"parts-out", 0, ARG_STR, 0, &align_arg.parts_out, NULL, 0, 0, "PARTS.tns", "the sketch parts the map refers to", NULL},
+};
+
+static int run_align(void)
 {
+    struct align_args *a = &align_arg;
     char tmp_path[4096];
     tn_contour_set sk = {0, 0, 0, NULL}, dense = {0, 0, 0, NULL}, parts = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL},
                    demparts = {0, 0, 0, NULL};
-    tn_align_opts o;
-    const char *files[2] = {NULL, NULL}, *outp = NULL, *parts_out = NULL;
-    int a, nfiles = 0, cut_dem = 0, choices = 0, *match = NULL, i;
-    double seed = 1, t0;
+    int *match = NULL, i;
+    double t0;
     tn_status st;
     FILE *f;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet align SKETCH DEMPARTS.tns -o MAP.txt [--seed S] [--choices K] [--cut-dem]\n"
-               "                        [--parts-out PARTS.tns]\n"
-               "Cuts the sketch (.tns or drawn image) into 5-10 pixel parts and aligns each to a DEM\n"
-               "contour part (paper 000, section 5.3: chain codes, rotation by k*pi/4, longest common\n"
-               "substring, top 10, height mean/std, random pick among the best K = 5). DEMPARTS holds\n"
-               "the DEM's contour parts (one polyline per part, index = position); with --cut-dem it\n"
-               "holds whole contours and is cut here with the same seed. MAP.txt: one line per sketch\n"
-               "part, `SKETCH_PART DEM_PART`. --parts-out writes the sketch parts the map refers to.\n");
-        return 0;
-    }
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--parts-out") && a + 1 < argc) parts_out = argv[++a];
-        else if (!strcmp(argv[a], "--cut-dem")) cut_dem = 1;
-        else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
-            if (!parse_double(argv[++a], &seed) || seed < 0) return usage_error("align", "--seed needs a non-negative number, not", argv[a]);
-        } else if (!strcmp(argv[a], "--choices") && a + 1 < argc) {
-            if (!parse_int(argv[++a], &choices) || choices < 1 || choices > 64)
-                return usage_error("align", "--choices needs a number from 1 to 64, not", argv[a]);
-        } else if (argv[a][0] == '-' || nfiles == 2) return usage_error("align", "unknown option or extra argument:", argv[a]);
-        else files[nfiles++] = argv[a];
-    }
-    if (nfiles != 2) return usage_error("align", "needs SKETCH and DEMPARTS files", NULL);
-    if (!outp) return usage_error("align", "missing -o MAP.txt", NULL);
-    if ((st = tn_sketch_load(files[0], &sk)) || (st = tn_sketch_load(files[1], &dem)) || (st = tn_sketch_densify(&sk, &dense)) ||
-        (st = tn_contour_parts_make(&dense, (uint64_t)seed, &parts)))
+    if ((st = tn_sketch_load(a->sketch, &sk)) || (st = tn_sketch_load(a->dem, &dem)) || (st = tn_sketch_densify(&sk, &dense)) ||
+        (st = tn_contour_parts_make(&dense, a->o.seed, &parts)))
         goto done;
-    if (cut_dem && (st = tn_contour_parts_make(&dem, (uint64_t)seed, &demparts))) goto done;
+    if (a->cut_dem && (st = tn_contour_parts_make(&dem, a->o.seed, &demparts))) goto done;
     if (!(match = (int *)malloc(((size_t)parts.count + 1) * sizeof(int)))) { fprintf(stderr, "terrainnet: out of memory\n"); goto done; }
-    memset(&o, 0, sizeof o);
-    o.seed = (uint64_t)seed;
-    o.choices = choices;
     t0 = tn_time_seconds();
-    if ((st = tn_sketch_align(&parts, cut_dem ? &demparts : &dem, &o, match))) goto done;
+    if ((st = tn_sketch_align(&parts, a->cut_dem ? &demparts : &dem, &a->o, match))) goto done;
     t0 = tn_time_seconds() - t0;
-    if (parts_out && (st = tn_sketch_save(parts_out, &parts))) goto done;
+    if (a->parts_out && (st = tn_sketch_save(a->parts_out, &parts))) goto done;
     /* written beside the target and renamed over it, so a failed run leaves an old map intact */
-    if (strlen(outp) + 5 > sizeof tmp_path) { fprintf(stderr, "terrainnet: error: path too long: %s\n", outp); st = TN_ERR_IO; goto done; }
-    sprintf(tmp_path, "%s.tmp", outp);
+    if (strlen(a->out) + 5 > sizeof tmp_path) { fprintf(stderr, "terrainnet: error: path too long: %s\n", a->out); st = TN_ERR_IO; goto done; }
+    sprintf(tmp_path, "%s.tmp", a->out);
     if (!(f = fopen(tmp_path, "w"))) {
         fprintf(stderr, "terrainnet: error: cannot write %s\n", tmp_path);
         st = TN_ERR_IO;
         goto done;
     }
-    fprintf(f, "# terrainnet align: sketch part -> DEM part (%d sketch parts, %d DEM parts, seed %.0f)\n", parts.count,
-            (cut_dem ? &demparts : &dem)->count, seed);
+    fprintf(f, "# terrainnet align: sketch part -> DEM part (%d sketch parts, %d DEM parts, seed %llu)\n", parts.count,
+            (a->cut_dem ? &demparts : &dem)->count, (unsigned long long)a->o.seed);
     for (i = 0; i < parts.count; i++) fprintf(f, "%d %d\n", i, match[i]);
-    if (fclose(f) != 0 || rename(tmp_path, outp) != 0) {
-        fprintf(stderr, "terrainnet: error: write failed: %s\n", outp);
+    if (fclose(f) != 0 || rename(tmp_path, a->out) != 0) {
+        fprintf(stderr, "terrainnet: error: write failed: %s\n", a->out);
         remove(tmp_path);
         st = TN_ERR_IO;
         goto done;
     }
-    printf("aligned %d sketch parts to %d DEM parts in %.1f ms\n", parts.count, (cut_dem ? &demparts : &dem)->count, t0 * 1e3);
+    printf("aligned %d sketch parts to %d DEM parts in %.1f ms\n", parts.count, (a->cut_dem ? &demparts : &dem)->count, t0 * 1e3);
 done:
     free(match);
     tn_contour_set_free(&sk);
@@ -609,6 +759,9 @@ done:
     return st ? fail_status(st) : (match ? 0 : 1);
 }
 
+static const cli_command align_cmd = {"align", CLI_CMD(align), "align sketch parts to a DEM's contour parts (chain codes + LCS)",
+    "Cuts the sketch into 5-10 pixel parts and aligns each to a DEM contour part (paper 000, section 5.3: chain codes, "
+    "rotation by k*pi/4, longest common substring, top 10, height mean/std, random pick among the best K)."};
 
 /* ---- extract ----------------------------------------------------------------------------- */
 
@@ -628,56 +781,30 @@ static tn_status save_mask(const char *path, const uint8_t *m, int w, int h)
     return st;
 }
 
-static int cmd_extract(int argc, char **argv)
+static struct extract_args { const char *in, *tns, *preview, *valleys, *ridges, *acc; tn_extract_opts eo; } extract_arg;
+static const cli_opt extract_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &extract_arg.in, NULL, 0, 0, NULL, "heightmap to analyse", NULL},
+    {"output", 'o', ARG_STR, 0, &extract_arg.tns, NULL, 0, 0, "SKETCH.tns", "the ridge and valley polylines as a sketch", NULL},
+    {"preview", 0, ARG_STR, 0, &extract_arg.preview, NULL, 0, 0, "PNG", "ridges yellow, valleys blue over a hillshade (paper Figure 6)", NULL},
+    {"threshold", 0, ARG_INT, 0, &extract_arg.eo.threshold, NULL, 1, NO_MAX, "CELLS",
+     "cells draining at least CELLS cells are valleys", "0.1 % of the map, at least 8"},
+    {"valleys", 0, ARG_STR, 0, &extract_arg.valleys, NULL, 0, 0, "PNG",
+     "binary valley mask (accumulation >= CELLS) before closing and thinning", NULL},
+    {"ridges", 0, ARG_STR, 0, &extract_arg.ridges, NULL, 0, 0, "PNG", "binary ridge mask, the same on the inverted DEM", NULL},
+    {"accumulation", 0, ARG_STR, 0, &extract_arg.acc, NULL, 0, 0, "FILE.pfm", "cells draining through each cell (valley flow), float", NULL},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &extract_arg.eo.dx, &extract_arg.eo.dy, 0, NO_MAX, "DX [DY]",
+     "pixel spacing in height units for the gradient filter", "1"},
+};
+
+static int run_extract(void)
 {
+    struct extract_args *a = &extract_arg;
     tn_image dem = {0, 0, 0, NULL};
-    tn_extract_opts eo;
     tn_extraction ex;
     tn_status st = TN_OK;
-    const char *in = NULL, *tns = NULL, *preview = NULL, *valleys = NULL, *ridges = NULL, *accp = NULL;
-    int a, i, nv = 0, nr = 0;
-    double v;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet extract DEM [-o SKETCH.tns] [--preview PNG] [--threshold CELLS] [--valleys PNG] [--ridges PNG]\n"
-               "                          [--accumulation FILE.pfm] [--spacing DX [DY]]\n"
-               "Extracts the ridge and valley network of a DEM (paper 000, section 4.1): priority-flood\n"
-               "depression filling, D8 flow, flow accumulation; cells draining at least CELLS cells are\n"
-               "valleys (default: 0.1 %% of the map, at least 8), the same on the inverted DEM gives ridges.\n"
-               "Then closing, Strahler order, thinning to 1-px lines, dropping dangling lines under 10 px\n"
-               "and the flattest 1 %%, splitting at 48 px. Prints a summary (name: value lines).\n"
-               "  --preview PNG        ridges yellow, valleys blue over a hillshade (paper Figure 6)\n"
-               "  --valleys/--ridges   binary masks (accumulation >= CELLS) before closing and thinning\n"
-               "  --accumulation PFM   cells draining through each cell (valley flow), float\n"
-               "  --spacing DX [DY]    pixel spacing in height units for the gradient filter (default 1)\n");
-        return 0;
-    }
-    memset(&eo, 0, sizeof eo);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) tns = argv[++a];
-        else if (!strcmp(argv[a], "--preview") && a + 1 < argc) preview = argv[++a];
-        else if (!strcmp(argv[a], "--valleys") && a + 1 < argc) valleys = argv[++a];
-        else if (!strcmp(argv[a], "--ridges") && a + 1 < argc) ridges = argv[++a];
-        else if (!strcmp(argv[a], "--accumulation") && a + 1 < argc) accp = argv[++a];
-        else if (!strcmp(argv[a], "--threshold") && a + 1 < argc) {
-            if (!parse_int(argv[a + 1], &eo.threshold) || eo.threshold < 1)
-                return usage_error("extract", "--threshold needs a positive cell count, not", argv[a + 1]);
-            a++;
-        } else if (!strcmp(argv[a], "--spacing") && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v) || v <= 0) return usage_error("extract", "--spacing needs DX > 0, not", argv[a + 1]);
-            eo.dx = eo.dy = (float)v;
-            a++;
-            if (a + 1 < argc && parse_double(argv[a + 1], &v)) {
-                if (v <= 0) return usage_error("extract", "--spacing needs DY > 0, not", argv[a + 1]);
-                eo.dy = (float)v;
-                a++;
-            }
-        } else if (argv[a][0] == '-') return usage_error("extract", "unknown option or missing value:", argv[a]);
-        else if (!in) in = argv[a];
-        else return usage_error("extract", "too many arguments:", argv[a]);
-    }
-    if (!in) return usage_error("extract", "missing DEM", NULL);
-    if ((st = tn_image_load(in, &dem, NULL))) return fail_status(st);
-    if ((st = tn_extract(&dem, &eo, &ex))) {
+    int i, nv = 0, nr = 0;
+    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    if ((st = tn_extract(&dem, &a->eo, &ex))) {
         tn_image_free(&dem);
         return fail_status(st);
     }
@@ -688,25 +815,25 @@ static int cmd_extract(int argc, char **argv)
     printf("size: %d x %d\nthreshold: %d\nvalley_contours: %d\nridge_contours: %d\n"
            "valley_max_strahler: %d\nridge_max_strahler: %d\n",
            ex.width, ex.height, ex.threshold, nv, nr, ex.valley_max_order, ex.ridge_max_order);
-    if (!st && tns) st = tn_sketch_save(tns, &ex.contours);
-    if (!st && valleys) st = save_mask(valleys, ex.valley_mask, ex.width, ex.height);
-    if (!st && ridges) st = save_mask(ridges, ex.ridge_mask, ex.width, ex.height);
-    if (!st && accp) {
+    if (!st && a->tns) st = tn_sketch_save(a->tns, &ex.contours);
+    if (!st && a->valleys) st = save_mask(a->valleys, ex.valley_mask, ex.width, ex.height);
+    if (!st && a->ridges) st = save_mask(a->ridges, ex.ridge_mask, ex.width, ex.height);
+    if (!st && a->acc) {
         tn_image acc = {0, 0, 0, NULL};
         if (!(st = tn_image_create(&acc, ex.width, ex.height, 1))) {
             size_t k;
             for (k = 0; k < (size_t)ex.width * ex.height; k++) acc.data[k] = (float)ex.valley_flow.acc[k];
-            st = tn_image_save(accp, &acc, NULL);
+            st = tn_image_save(a->acc, &acc, NULL);
             tn_image_free(&acc);
         }
     }
-    if (!st && preview) {
+    if (!st && a->preview) {
         tn_image pv = {0, 0, 0, NULL};
         if (!(st = tn_sketch_preview(&ex.contours, &dem, dem.width, dem.height, &pv))) {
             tn_save_opts so;
             memset(&so, 0, sizeof so);
             so.bit_depth = 8;
-            st = tn_image_save(preview, &pv, &so);
+            st = tn_image_save(a->preview, &pv, &so);
             tn_image_free(&pv);
         }
     }
@@ -715,77 +842,48 @@ static int cmd_extract(int argc, char **argv)
     return st ? fail_status(st) : 0;
 }
 
+static const cli_command extract_cmd = {"extract", CLI_CMD(extract), "ridge and valley network of a DEM: masks, accumulation, preview",
+    "Extracts the ridge and valley network of a DEM (paper 000, section 4.1): priority-flood depression filling, D8 flow, "
+    "flow accumulation; cells draining at least CELLS cells are valleys, the same on the inverted DEM gives ridges. Then "
+    "closing, Strahler order, thinning to 1-px lines, dropping dangling lines under 10 px and the flattest 1 %, splitting "
+    "at 48 px. Prints a summary (name: value lines)."};
+
 /* ---- realism ----------------------------------------------------------------------------- */
 
-/* Parses "--flag X [Y]" spacing; returns the number of extra arguments used, -1 on error. */
-static int parse_spacing(int argc, char **argv, int a, float *dx, float *dy)
-{
-    double v;
-    if (a + 1 >= argc || !parse_double(argv[a + 1], &v) || v <= 0) return -1;
-    *dx = *dy = (float)v;
-    if (a + 2 < argc && parse_double(argv[a + 2], &v)) {
-        if (v <= 0) return -1;
-        *dy = (float)v;
-        return 2;
-    }
-    return 1;
-}
+static struct realism_args { const char *path[2]; double range[2][2]; tn_realism_opts ro; } realism_arg;
+static const cli_opt realism_opts[] = {
+    {"REFERENCE", 0, ARG_POS, 0, &realism_arg.path[0], NULL, 0, 0, NULL, "the terrain to compare with (e.g. a generator's example)", NULL},
+    {"TERRAIN", 0, ARG_POS, 0, &realism_arg.path[1], NULL, 0, 0, NULL, "the terrain to judge", NULL},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &realism_arg.ro.dx_a, &realism_arg.ro.dy_a, 0, NO_MAX, "DX [DY]",
+     "REFERENCE's pixel size in height units", "1"},
+    {"spacing-b", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &realism_arg.ro.dx_b, &realism_arg.ro.dy_b, 0, NO_MAX, "DX [DY]",
+     "TERRAIN's pixel size in height units", "REFERENCE's"},
+    {"range-a", 0, ARG_DOUBLE, PAIR | ORDERED, &realism_arg.range[0][0], &realism_arg.range[0][1], 0, 0, "LO HI",
+     "heights of a [0, 1] REFERENCE (PNG without a recorded range)", "as stored"},
+    {"range-b", 0, ARG_DOUBLE, PAIR | ORDERED, &realism_arg.range[1][0], &realism_arg.range[1][1], 0, 0, "LO HI",
+     "heights of a [0, 1] TERRAIN", "as stored"},
+    {"threshold", 0, ARG_INT, 0, &realism_arg.ro.threshold, NULL, 1, NO_MAX, "CELLS",
+     "valley threshold for drainage density and bifurcation", "by size"},
+};
 
-static int cmd_realism(int argc, char **argv)
+static int run_realism(void)
 {
+    struct realism_args *a = &realism_arg;
     tn_image img[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
-    tn_realism_opts ro;
     tn_realism r;
     tn_status st;
-    const char *path[2] = {NULL, NULL};
-    double range[2][2] = {{0, 0}, {0, 0}};
-    int a, k;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet realism REFERENCE TERRAIN [--spacing DX [DY]] [--spacing-b DX [DY]]\n"
-               "                          [--range-a LO HI] [--range-b LO HI] [--threshold CELLS]\n"
-               "Realism report of TERRAIN against REFERENCE (e.g. a generated DEM against its example),\n"
-               "one `name: value` line per figure: slope and curvature (Laplacian) histogram distances\n"
-               "(earth mover's distance / the reference's mean, 0 = same distribution), distance of the\n"
-               "radially averaged power spectra (RMS of log10 ratios) and each spectrum's log-log slope,\n"
-               "drainage density and Strahler bifurcation ratio of each, SSIM and PSNR (same size only,\n"
-               "else nan), and `distance`, the mean of the relative differences (0 = identical).\n"
-               "Heights must share units: --range-a/-b map a [0, 1] file (PNG without a recorded range)\n"
-               "to LO..HI; --spacing is the pixel size in height units (default 1; -b defaults to A's).\n");
-        return 0;
-    }
-    memset(&ro, 0, sizeof ro);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "--spacing") || !strcmp(argv[a], "--spacing-b")) {
-            int used = !strcmp(argv[a], "--spacing") ? parse_spacing(argc, argv, a, &ro.dx_a, &ro.dy_a)
-                                                      : parse_spacing(argc, argv, a, &ro.dx_b, &ro.dy_b);
-            if (used < 0) return usage_error("realism", "--spacing needs DX [DY] > 0 after", argv[a]);
-            a += used;
-        } else if ((!strcmp(argv[a], "--range-a") || !strcmp(argv[a], "--range-b")) && a + 2 < argc) {
-            k = argv[a][8] == 'b';
-            if (!parse_double(argv[a + 1], &range[k][0]) || !parse_double(argv[a + 2], &range[k][1]) || range[k][1] <= range[k][0])
-                return usage_error("realism", "needs two numbers LO < HI after", argv[a]);
-            a += 2;
-        } else if (!strcmp(argv[a], "--threshold") && a + 1 < argc) {
-            if (!parse_int(argv[a + 1], &ro.threshold) || ro.threshold < 1)
-                return usage_error("realism", "--threshold needs a positive cell count, not", argv[a + 1]);
-            a++;
-        } else if (argv[a][0] == '-') return usage_error("realism", "unknown option or missing value:", argv[a]);
-        else if (!path[0]) path[0] = argv[a];
-        else if (!path[1]) path[1] = argv[a];
-        else return usage_error("realism", "too many arguments:", argv[a]);
-    }
-    if (!path[0] || !path[1]) return usage_error("realism", "needs REFERENCE and TERRAIN", NULL);
+    int k;
     for (k = 0; k < 2; k++) {
-        if ((st = tn_image_load(path[k], &img[k], NULL))) {
+        if ((st = tn_image_load(a->path[k], &img[k], NULL))) {
             tn_image_free(&img[0]);
             return fail_status(st);
         }
-        if (range[k][1] > range[k][0]) {
+        if (a->range[k][1] > a->range[k][0]) {
             size_t i, n = (size_t)img[k].width * img[k].height * img[k].channels;
-            for (i = 0; i < n; i++) img[k].data[i] = (float)(range[k][0] + img[k].data[i] * (range[k][1] - range[k][0]));
+            for (i = 0; i < n; i++) img[k].data[i] = (float)(a->range[k][0] + img[k].data[i] * (a->range[k][1] - a->range[k][0]));
         }
     }
-    st = tn_realism_compare(&img[0], &img[1], &ro, &r);
+    st = tn_realism_compare(&img[0], &img[1], &a->ro, &r);
     tn_image_free(&img[0]);
     tn_image_free(&img[1]);
     if (st) return fail_status(st);
@@ -798,94 +896,68 @@ static int cmd_realism(int argc, char **argv)
     return 0;
 }
 
+static const cli_command realism_cmd = {"realism", CLI_CMD(realism), "realism report: slope/curvature/spectrum distances, drainage, SSIM",
+    "Realism report of TERRAIN against REFERENCE, one `name: value` line per figure: slope and curvature (Laplacian) "
+    "histogram distances (earth mover's distance / the reference's mean, 0 = same distribution), distance of the radially "
+    "averaged power spectra (RMS of log10 ratios) and each spectrum's log-log slope, drainage density and Strahler "
+    "bifurcation ratio of each, SSIM and PSNR (same size only, else nan), and `distance`, the mean of the relative "
+    "differences (0 = identical). Heights must share units."};
 
 /* ---- style -------------------------------------------------------------------------------- */
 
-static int cmd_style(int argc, char **argv)
-{
-    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
+static struct style_args {
+    const char *out, *content, *style, *weights;
+    int size, no_drain, optimizer;
     tn_style_opts so;
+} style_arg;
+static const cli_opt style_opts[] = {
+    {"content", 0, ARG_STR, REQ, &style_arg.content, NULL, 0, 0, "IN", "the map to restyle (e.g. from `terrainnet noise`)", NULL},
+    {"style", 0, ARG_STR, REQ, &style_arg.style, NULL, 0, 0, "SOURCE", "the heightmap whose morphology and height units the output takes", NULL},
+    {"output", 'o', ARG_STR, REQ, &style_arg.out, NULL, 0, 0, "OUT", "the restyled heightmap", NULL},
+    {"iters", 0, ARG_INT, 0, &style_arg.so.iters, NULL, 1, 1000000, "N", "iterations per pyramid level", "L-BFGS 40, Adam 150, SGD 300"},
+    {"optimizer", 0, ARG_CHOICE, SET, &style_arg.optimizer, NULL, 0, 0, "lbfgs|sgd|adam", "optimiser", "lbfgs"},
+    {"weights", 0, ARG_STR, 0, &style_arg.weights, NULL, 0, 0, "vgg19.tnw",
+     "VGG-19 weights (examples/vgg19_to_tnw.py makes them), with the paper's layers and loss weights", "the built-in random-feature network"},
+    {"size", 0, ARG_INT, 0, &style_arg.size, NULL, 16, 1000000, "N", "output N x N (the content resized)", "the content's size"},
+    {"levels", 0, ARG_INT, 0, &style_arg.so.levels, NULL, 1, 1000000, "N", "pyramid levels", "down to 64 px, 32 px with the drainage terms"},
+    {"seed", 0, ARG_U64, 0, &style_arg.so.seed, NULL, 1, 1000000, "S", "seed of the built-in network's random filters", "0"},
+    {"lr", 0, ARG_FLOAT, 0, &style_arg.so.lr, NULL, 0, 0, "R", "SGD / Adam learning rate", "by optimiser and network"},
+    {"content-weight", 0, ARG_FLOAT, 0, &style_arg.so.content_weight, NULL, 0, 0, "A", "content term weight (alpha)", "0"},
+    {"style-weight", 0, ARG_FLOAT, 0, &style_arg.so.style_weight, NULL, 0, 0, "B", "Gram term weight (beta)", "0"},
+    {"sw-weight", 0, ARG_FLOAT, 0, &style_arg.so.sw_weight, NULL, 0, 0, "W", "sliced Wasserstein term weight (built-in net)", "0"},
+    {"hist-weight", 0, ARG_FLOAT, 0, &style_arg.so.hist_weight, NULL, 0, 0, "H", "height and slope histogram terms weight (built-in net)", "0"},
+    {"tv-weight", 0, ARG_FLOAT, 0, &style_arg.so.tv_weight, NULL, 0, 0, "G", "total variation term weight (gamma)", "0"},
+    {"drain-weight", 0, ARG_FLOAT, 0, &style_arg.so.drain_weight, NULL, 0, 0, "D",
+     "closed basins as deep as the source's (built-in net)", "10 for fluvial sources (under 5 % in closed basins), else off"},
+    {"valley-weight", 0, ARG_FLOAT, 0, &style_arg.so.valley_weight, NULL, 0, 0, "V",
+     "valleys carved as deep as the source's for the same drainage area (built-in net)", "1 for fluvial sources, else off"},
+    {"no-drain", 0, ARG_FLAG, 0, &style_arg.no_drain, NULL, 0, 0, NULL, "drainage terms off (--drain-weight -1 --valley-weight -1)", NULL},
+};
+
+static int run_style(void)
+{
+    struct style_args *a = &style_arg;
+    tn_image content = {0, 0, 0, NULL}, style = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
     tn_params *vgg = NULL;
     tn_status st;
-    const char *outp = NULL, *cpath = NULL, *spath = NULL, *weights = NULL;
-    int a, size = 0;
-    double v, t0;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet style --content IN --style SOURCE -o OUT [--iters N]\n"
-               "                        [--optimizer lbfgs|sgd|adam] [--weights vgg19.tnw] [--size N]\n"
-               "                        [--levels N] [--seed S] [--lr R] [--content-weight A]\n"
-               "                        [--style-weight B] [--sw-weight W] [--hist-weight H] [--tv-weight G]\n"
-               "                        [--drain-weight D] [--valley-weight V] [--no-drain]\n"
-               "Restyles the content map (e.g. from `terrainnet noise`) with the morphology of the\n"
-               "SOURCE heightmap. The output has the content's size (or N x N with --size) and the\n"
-               "source's height units. Defaults: built-in random-feature network (no file needed),\n"
-               "L-BFGS, 40 iterations per pyramid level (Adam 150, SGD 300), levels down to 64 px\n"
-               "(32 px with the drainage terms).\n"
-               "--weights uses VGG-19 from a .tnw file (examples/vgg19_to_tnw.py makes one) with the\n"
-               "paper's layers and weights. Weights: 0 = default, negative = term off.\n"
-               "--drain-weight / --valley-weight (built-in net) weigh the drainage terms: closed\n"
-               "basins as deep as the source's, and valleys carved as deep as the source's for the\n"
-               "same drainage area. By default they are on (10 and 1) for fluvial sources (under 5 %%\n"
-               "of the source in closed basins) and off for dunes, craters and karst; --no-drain\n"
-               "switches them off (see README).\n");
-        return 0;
-    }
-    memset(&so, 0, sizeof so);
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--content") && a + 1 < argc) cpath = argv[++a];
-        else if (!strcmp(argv[a], "--style") && a + 1 < argc) spath = argv[++a];
-        else if (!strcmp(argv[a], "--weights") && a + 1 < argc) weights = argv[++a];
-        else if (!strcmp(argv[a], "--no-drain")) so.drain_weight = so.valley_weight = -1.0f;
-        else if (!strcmp(argv[a], "--optimizer") && a + 1 < argc) {
-            a++;
-            if (!strcmp(argv[a], "lbfgs")) so.optimizer = TN_STYLE_LBFGS;
-            else if (!strcmp(argv[a], "sgd")) so.optimizer = TN_STYLE_SGD;
-            else if (!strcmp(argv[a], "adam")) so.optimizer = TN_STYLE_ADAM;
-            else return usage_error("style", "--optimizer must be lbfgs, sgd or adam, not", argv[a]);
-        } else if ((!strcmp(argv[a], "--iters") || !strcmp(argv[a], "--size") || !strcmp(argv[a], "--levels") ||
-                    !strcmp(argv[a], "--seed")) && a + 1 < argc) {
-            int n;
-            if (!parse_int(argv[a + 1], &n) || n < 1 || n > 1000000) return usage_error("style", "not a positive integer:", argv[a + 1]);
-            if (!strcmp(argv[a], "--iters")) so.iters = n;
-            else if (!strcmp(argv[a], "--size")) size = n;
-            else if (!strcmp(argv[a], "--levels")) so.levels = n;
-            else so.seed = (uint64_t)n;
-            a++;
-        } else if ((!strcmp(argv[a], "--lr") || !strcmp(argv[a], "--content-weight") || !strcmp(argv[a], "--style-weight") ||
-                    !strcmp(argv[a], "--sw-weight") || !strcmp(argv[a], "--hist-weight") || !strcmp(argv[a], "--tv-weight") ||
-                    !strcmp(argv[a], "--drain-weight") || !strcmp(argv[a], "--valley-weight")) &&
-                   a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v)) return usage_error("style", "not a number:", argv[a + 1]);
-            if (!strcmp(argv[a], "--lr")) so.lr = (float)v;
-            else if (!strcmp(argv[a], "--content-weight")) so.content_weight = (float)v;
-            else if (!strcmp(argv[a], "--style-weight")) so.style_weight = (float)v;
-            else if (!strcmp(argv[a], "--sw-weight")) so.sw_weight = (float)v;
-            else if (!strcmp(argv[a], "--hist-weight")) so.hist_weight = (float)v;
-            else if (!strcmp(argv[a], "--drain-weight")) so.drain_weight = (float)v;
-            else if (!strcmp(argv[a], "--valley-weight")) so.valley_weight = (float)v;
-            else so.tv_weight = (float)v;
-            a++;
-        } else return usage_error("style", "unknown option or missing value:", argv[a]);
-    }
-    if (!cpath || !spath) return usage_error("style", "needs --content IN and --style SOURCE", NULL);
-    if (!outp) return usage_error("style", "missing -o OUT", NULL);
-    if (size && size < 16) return usage_error("style", "--size must be at least 16", NULL);
-    if ((st = tn_image_load(cpath, &content, NULL))) return fail_status(st);
-    if ((st = tn_image_load(spath, &style, NULL))) goto done;
-    if (size && (st = tn_image_resize(&tmp, &content, size, size, TN_RESIZE_BICUBIC))) goto done;
-    if (size) {
+    double t0;
+    a->so.optimizer = a->optimizer == 1 ? TN_STYLE_SGD : a->optimizer == 2 ? TN_STYLE_ADAM : TN_STYLE_LBFGS;
+    if (a->no_drain) a->so.drain_weight = a->so.valley_weight = -1.0f;
+    if ((st = tn_image_load(a->content, &content, NULL))) return fail_status(st);
+    if ((st = tn_image_load(a->style, &style, NULL))) goto done;
+    if (a->size && (st = tn_image_resize(&tmp, &content, a->size, a->size, TN_RESIZE_BICUBIC))) goto done;
+    if (a->size) {
         tn_image_free(&content);
         content = tmp;
         tmp.data = NULL;
     }
-    if (weights && (st = tn_vgg19_load(&vgg, weights))) goto done;
-    so.vgg = vgg;
+    if (a->weights && (st = tn_vgg19_load(&vgg, a->weights))) goto done;
+    a->so.vgg = vgg;
     t0 = tn_time_seconds();
-    if ((st = tn_style_transfer(&out, &content, &style, &so))) goto done;
+    if ((st = tn_style_transfer(&out, &content, &style, &a->so))) goto done;
     fprintf(stderr, "style: %d x %d in %.1f s (%s network)\n", out.width, out.height, tn_time_seconds() - t0,
             vgg ? "VGG-19" : "built-in");
-    st = tn_image_save(outp, &out, NULL);
+    st = tn_image_save(a->out, &out, NULL);
 done:
     tn_image_free(&content);
     tn_image_free(&style);
@@ -895,99 +967,64 @@ done:
     return st ? fail_status(st) : 0;
 }
 
+static const cli_command style_cmd = {"style", CLI_CMD(style), "restyle a map with the morphology of a real heightmap (style transfer)",
+    "Restyles the content map with the morphology of the SOURCE heightmap (see README). The output has the content's size "
+    "and the source's height units. Loss weights: 0 = the network's default, negative = term off. The drainage terms are "
+    "on by default for fluvial sources and off for dunes, craters and karst."};
 
 /* ---- texture GAN and detail maps ---------------------------------------------------------- */
 
-/* "W", "WxH" or "W H"-style size; returns 1 on success. */
-static int parse_wxh(const char *s, int *w, int *h)
-{
-    char buf[64], *x;
-    if (!s || strlen(s) >= sizeof buf) return 0;
-    strcpy(buf, s);
-    x = strchr(buf, 'x');
-    if (!x) x = strchr(buf, 'X');
-    if (x) *x = 0;
-    if (!parse_int(buf, w) || (x ? !parse_int(x + 1, h) : !parse_int(buf, h))) return 0;
-    return *w >= 1 && *h >= 1 && *w <= (1 << 20) && *h <= (1 << 20);
-}
+static struct texgan_train_args { const char *in, *out, *normal, *ckpt; double feat_weight; tn_texgan_opts o; } texgan_train_arg;
+static const cli_opt texgan_train_opts[] = {
+    {"EXEMPLAR", 0, ARG_POS, 0, &texgan_train_arg.in, NULL, 0, 0, NULL, "the texture photo to learn", NULL},
+    {"output", 'o', ARG_STR, REQ, &texgan_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the model: EMA generator + architecture", NULL},
+    {"minutes", 0, ARG_DOUBLE, 0, &texgan_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget of the whole run, resumed time included", "15"},
+    {"iters", 0, ARG_LONG, 0, &texgan_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations in total", "0 = only the time budget"},
+    {"resume", 0, ARG_FLAG, 0, &texgan_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
+    {"checkpoint", 0, ARG_STR, 0, &texgan_train_arg.ckpt, NULL, 0, 0, "PATH", "full training state, saved atomically", "MODEL.tnw.ckpt"},
+    {"checkpoint-seconds", 0, ARG_DOUBLE, 0, &texgan_train_arg.o.train.checkpoint_seconds, NULL, 0, 1e9, "S",
+     "checkpoint interval (a killed run loses at most one)", "60"},
+    {"normal", 0, ARG_STR, 0, &texgan_train_arg.normal, NULL, 0, 0, "MAP", "normal map stacked as channels 4-6 (the exemplar's size)", NULL},
+    {"seed", 0, ARG_U64, 0, &texgan_train_arg.o.train.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"patch", 0, ARG_INT, 0, &texgan_train_arg.o.patch, NULL, 0, 1e9, "N", "training patch side in pixels", "64"},
+    {"batch", 0, ARG_INT, 0, &texgan_train_arg.o.batch, NULL, 0, 1e9, "N", "patches per step", "4"},
+    {"gen-width", 0, ARG_INT, 0, &texgan_train_arg.o.gen_width, NULL, 0, 1e9, "N", "channels of the first generator stage, halving per stage", "64"},
+    {"disc-width", 0, ARG_INT, 0, &texgan_train_arg.o.disc_width, NULL, 0, 1e9, "N", "channels of the first discriminator layer", "32"},
+    {"disc-layers", 0, ARG_INT, 0, &texgan_train_arg.o.disc_layers, NULL, 0, 1e9, "N", "stride-2 discriminator layers", "3"},
+    {"stages", 0, ARG_INT, 0, &texgan_train_arg.o.stages, NULL, 0, 1e9, "N", "generator stages: one noise cell = 2^N pixels", "4"},
+    {"scale", 0, ARG_INT, 0, &texgan_train_arg.o.scale, NULL, 0, 1e9, "S",
+     "learn the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsample", "1"},
+    {"augment", 0, ARG_FLAG, 0, &texgan_train_arg.o.augment, NULL, 0, 0, NULL,
+     "flip/transpose real patches (small exemplars without a light direction)", NULL},
+    {"local", 0, ARG_INT, 0, &texgan_train_arg.o.noise_local, NULL, 0, 1e9, "N", "local noise dims per cell", "16"},
+    {"global", 0, ARG_INT, 0, &texgan_train_arg.o.noise_global, NULL, 0, 1e9, "N", "noise dims constant over one image", "0"},
+    {"periodic", 0, ARG_INT, 0, &texgan_train_arg.o.noise_periodic, NULL, 0, 1e9, "N", "periodic (sin) noise channels", "0"},
+    {"feat-weight", 0, ARG_DOUBLE, SET, &texgan_train_arg.feat_weight, NULL, 0, 1e9, "W",
+     "weight of the feature-statistics term of the generator loss (0 = off)", "1"},
+    {"nearest", 0, ARG_FLAG, 0, &texgan_train_arg.o.nearest, NULL, 0, 0, NULL,
+     "the first design: nearest upsampling, no per-pixel stage noise", NULL},
+};
 
-static int cmd_texgan_train(int argc, char **argv)
+static int run_texgan_train(void)
 {
+    struct texgan_train_args *a = &texgan_train_arg;
     tn_image ex = {0, 0, 0, NULL}, nrm = {0, 0, 0, NULL};
     tn_texgan model;
-    tn_texgan_opts o;
     tn_texgan_stats s;
     tn_status st;
-    const char *in = NULL, *outp = NULL, *normal = NULL, *ckpt = NULL;
     char ckbuf[1024];
-    int a;
-    double v;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet texgan-train EXEMPLAR -o MODEL.tnw [--minutes M] [--iters N] [--resume]\n"
-               "             [--checkpoint PATH] [--checkpoint-seconds S] [--normal MAP] [--seed S]\n"
-               "             [--patch N] [--batch N] [--gen-width N] [--disc-width N] [--disc-layers N]\n"
-               "             [--stages N] [--scale S] [--augment] [--local N] [--global N] [--periodic N]\n"
-               "             [--feat-weight W] [--nearest]\n"
-               "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture\n"
-               "photo and writes the model (EMA generator + architecture). --normal stacks a normal map as\n"
-               "channels 4-6. Defaults: 15 minutes in total (resumed time included), 64 px patches, batch\n"
-               "4, 4 stages of 64-32-16 channels from 16 noise dims. The full training state is saved\n"
-               "atomically to MODEL.tnw.ckpt (or --checkpoint) every 60 s (--checkpoint-seconds), so a\n"
-               "killed run loses at most one interval; --resume continues it identically. --scale S learns\n"
-               "the exemplar downscaled by S (features S times larger, e.g. crack cells) and upsamples.\n"
-               "--augment flips/transposes real patches (small exemplars without a light direction).\n"
-               "--feat-weight W weights the feature-statistics term of the generator loss (default 1, 0 = off).\n"
-               "--nearest builds the first design (nearest upsampling, no per-pixel stage noise).\n");
-        return 0;
+    a->o.feat_weight = a->feat_weight > 0 ? (float)a->feat_weight : -1.0f;
+    if (!a->ckpt) {
+        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
+        a->ckpt = ckbuf;
     }
-    memset(&o, 0, sizeof o);
-    for (a = 0; a < argc; a++) {
-        const char *k = argv[a];
-        if (!strcmp(k, "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(k, "--resume")) o.train.resume = 1;
-        else if (!strcmp(k, "--augment")) o.augment = 1;
-        else if (!strcmp(k, "--nearest")) o.nearest = 1;
-        else if (!strcmp(k, "--normal") && a + 1 < argc) normal = argv[++a];
-        else if (!strcmp(k, "--checkpoint") && a + 1 < argc) ckpt = argv[++a];
-        else if ((!strcmp(k, "--minutes") || !strcmp(k, "--checkpoint-seconds") || !strcmp(k, "--iters") || !strcmp(k, "--seed") ||
-                  !strcmp(k, "--patch") || !strcmp(k, "--batch") || !strcmp(k, "--gen-width") || !strcmp(k, "--disc-width") || !strcmp(k, "--disc-layers") ||
-                  !strcmp(k, "--stages") || !strcmp(k, "--scale") || !strcmp(k, "--local") || !strcmp(k, "--global") || !strcmp(k, "--periodic") ||
-                  !strcmp(k, "--feat-weight")) &&
-                 a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("texgan-train", "not a non-negative number:", argv[a + 1]);
-            if (!strcmp(k, "--minutes")) o.train.minutes = v;
-            else if (!strcmp(k, "--checkpoint-seconds")) o.train.checkpoint_seconds = v;
-            else if (!strcmp(k, "--iters")) o.train.max_iters = (long)v;
-            else if (!strcmp(k, "--seed")) o.train.seed = (uint64_t)v;
-            else if (!strcmp(k, "--patch")) o.patch = (int)v;
-            else if (!strcmp(k, "--batch")) o.batch = (int)v;
-            else if (!strcmp(k, "--gen-width")) o.gen_width = (int)v;
-            else if (!strcmp(k, "--disc-width")) o.disc_width = (int)v;
-            else if (!strcmp(k, "--disc-layers")) o.disc_layers = (int)v;
-            else if (!strcmp(k, "--stages")) o.stages = (int)v;
-            else if (!strcmp(k, "--scale")) o.scale = (int)v;
-            else if (!strcmp(k, "--local")) o.noise_local = (int)v;
-            else if (!strcmp(k, "--global")) o.noise_global = (int)v;
-            else if (!strcmp(k, "--feat-weight")) o.feat_weight = v > 0 ? (float)v : -1.0f;
-            else o.noise_periodic = (int)v;
-            a++;
-        } else if (k[0] == '-') return usage_error("texgan-train", "unknown option or missing value:", k);
-        else if (!in) in = k;
-        else return usage_error("texgan-train", "too many arguments:", k);
-    }
-    if (!in) return usage_error("texgan-train", "missing EXEMPLAR", NULL);
-    if (!outp) return usage_error("texgan-train", "missing -o MODEL.tnw", NULL);
-    if (!ckpt) {
-        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", outp);
-        ckpt = ckbuf;
-    }
-    o.train.checkpoint = ckpt;
-    if ((st = tn_image_load(in, &ex, NULL))) return fail_status(st);
-    if (normal) {
+    a->o.train.checkpoint = a->ckpt;
+    if ((st = tn_image_load(a->in, &ex, NULL))) return fail_status(st);
+    if (a->normal) {
         tn_image both = {0, 0, 0, NULL};
         size_t i, n = (size_t)ex.width * ex.height;
         int c;
-        if ((st = tn_image_load(normal, &nrm, NULL))) { tn_image_free(&ex); return fail_status(st); }
+        if ((st = tn_image_load(a->normal, &nrm, NULL))) { tn_image_free(&ex); return fail_status(st); }
         if (nrm.width != ex.width || nrm.height != ex.height || ex.channels + nrm.channels > TN_TEXGAN_MAX_CHANNELS) {
             tn_image_free(&ex);
             tn_image_free(&nrm);
@@ -1002,64 +1039,58 @@ static int cmd_texgan_train(int argc, char **argv)
         tn_image_free(&nrm);
         ex = both;
     }
-    st = tn_texgan_train(&model, &ex, &o, &s);
+    st = tn_texgan_train(&model, &ex, &a->o, &s);
     tn_image_free(&ex);
     if (st) return fail_status(st);
-    st = tn_texgan_save(&model, outp);
+    st = tn_texgan_save(&model, a->out);
     if (!st)
         printf("iterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\nloss_d: %.4f\nloss_g: %.4f\n"
                "checkpoints: %d (%s)\nmodel: %s\n",
-               s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_d, (double)s.loss_g, s.checkpoints, ckpt, outp);
+               s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_d, (double)s.loss_g, s.checkpoints, a->ckpt, a->out);
     tn_texgan_free(&model);
     return st ? fail_status(st) : 0;
 }
 
-static int cmd_texgan_synth(int argc, char **argv)
+static const cli_command texgan_train_cmd = {"texgan-train", CLI_CMD(texgan_train), "train a spatial GAN on one texture photo (checkpoints, resume)",
+    "Trains a spatial GAN (PSGAN-style, spectral-norm + hinge) on random patches of one texture photo and writes the "
+    "model. The full training state is saved atomically to the checkpoint every interval, so a killed run loses at most "
+    "one; --resume continues it identically."};
+
+static struct texgan_synth_args { const char *in, *out; int w, h, colour; uint64_t seed; } texgan_synth_arg;
+static const cli_opt texgan_synth_opts[] = {
+    {"MODEL.tnw", 0, ARG_POS, 0, &texgan_synth_arg.in, NULL, 0, 0, NULL, "a model from texgan-train", NULL},
+    {"size", 0, ARG_WXH, REQ, &texgan_synth_arg.w, &texgan_synth_arg.h, 1, 1 << 20, "WxH", "texture size, e.g. 8192x8192", NULL},
+    {"output", 'o', ARG_STR, REQ, &texgan_synth_arg.out, NULL, 0, 0, "OUT", "texture to write (.pfm/.ppm/.pgm streamed band by band)", NULL},
+    {"seed", 0, ARG_U64, SET, &texgan_synth_arg.seed, NULL, 0, 0, "S", "random seed: the same seed gives the same bytes on any machine", "1"},
+    {"colour-correct", 0, ARG_FLAG, 0, &texgan_synth_arg.colour, NULL, 0, 0, NULL,
+     "shift the mean colour to the exemplar's (measured on a 1024 px window)", NULL},
+};
+
+static int run_texgan_synth(void)
 {
+    struct texgan_synth_args *a = &texgan_synth_arg;
     tn_texgan model;
     tn_status st;
-    const char *in = NULL, *outp = NULL;
-    int a, w = 0, h = 0, colour = 0;
-    double v, seed = 1, t0;
+    double t0;
     float shift[TN_TEXGAN_MAX_CHANNELS];
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet texgan-synth MODEL.tnw --size WxH -o OUT [--seed S] [--colour-correct]\n"
-               "Synthesises a texture of any size from a trained model, tile by tile (2 noise cells of\n"
-               "overlap, cropped and stitched; memory is one band of tiles). .pfm/.ppm/.pgm outputs are\n"
-               "streamed to disk band by band; other formats (.png) are built in memory and saved whole.\n"
-               "Channels beyond 3 go to OUT.ch3-5.EXT. The same seed gives the same bytes on any machine.\n"
-               "--colour-correct shifts the mean colour to the exemplar's (measured on a 1024 px window).\n");
-        return 0;
-    }
-    for (a = 0; a < argc; a++) {
-        if (!strcmp(argv[a], "-o") && a + 1 < argc) outp = argv[++a];
-        else if (!strcmp(argv[a], "--size") && a + 1 < argc) {
-            if (!parse_wxh(argv[++a], &w, &h)) return usage_error("texgan-synth", "--size needs WxH, e.g. 8192x8192, not", argv[a]);
-        } else if (!strcmp(argv[a], "--seed") && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v) || v < 0) return usage_error("texgan-synth", "not a non-negative number:", argv[a + 1]);
-            seed = v;
-            a++;
-        } else if (!strcmp(argv[a], "--colour-correct")) colour = 1;
-        else if (argv[a][0] == '-') return usage_error("texgan-synth", "unknown option or missing value:", argv[a]);
-        else if (!in) in = argv[a];
-        else return usage_error("texgan-synth", "too many arguments:", argv[a]);
-    }
-    if (!in) return usage_error("texgan-synth", "missing MODEL", NULL);
-    if (!outp) return usage_error("texgan-synth", "missing -o OUT", NULL);
-    if (!w) return usage_error("texgan-synth", "missing --size WxH", NULL);
-    if ((st = tn_texgan_load(&model, in))) return fail_status(st);
+    if ((st = tn_texgan_load(&model, a->in))) return fail_status(st);
     t0 = tn_time_seconds();
-    if (colour) {
+    if (a->colour) {
         tn_image probe = {0, 0, 0, NULL};
-        st = tn_texgan_synthesize_window(&model, (uint64_t)seed, 0, 0, w < 1024 ? w : 1024, h < 1024 ? h : 1024, &probe);
+        st = tn_texgan_synthesize_window(&model, a->seed, 0, 0, a->w < 1024 ? a->w : 1024, a->h < 1024 ? a->h : 1024, &probe);
         if (!st) st = tn_texture_colour_shift(&probe, model.mean, model.lo, model.hi, shift);
         tn_image_free(&probe);
     }
-    if (!st) st = tn_texgan_synthesize_file(&model, (uint64_t)seed, w, h, colour ? shift : NULL, outp);
-    if (!st) printf("synthesised %d x %d in %.2f s -> %s\n", w, h, tn_time_seconds() - t0, outp);
+    if (!st) st = tn_texgan_synthesize_file(&model, a->seed, a->w, a->h, a->colour ? shift : NULL, a->out);
+    if (!st) printf("synthesised %d x %d in %.2f s -> %s\n", a->w, a->h, tn_time_seconds() - t0, a->out);
     tn_texgan_free(&model);
     return st ? fail_status(st) : 0;
 }
+
+static const cli_command texgan_synth_cmd = {"texgan-synth", CLI_CMD(texgan_synth), "synthesise a texture of any size from a model, streamed tile by tile",
+    "Synthesises a texture of any size from a trained model, tile by tile (2 noise cells of overlap, cropped and "
+    "stitched; memory is one band of tiles). .pfm/.ppm/.pgm outputs are streamed to disk band by band; other formats "
+    "(.png) are built in memory and saved whole. Channels beyond 3 go to OUT.ch3-5.EXT."};
 
 static int is_tnw_file(const char *path)
 {
@@ -1072,85 +1103,69 @@ static int is_tnw_file(const char *path)
     return ok;
 }
 
-static int cmd_detail_maps(int argc, char **argv)
+static struct detail_maps_args {
+    const char *src, *exemplar, *prefix, *compose, *preview, *dem;
+    int w, h;
+    uint64_t seed;
+    tn_detail_opts o;
+} detail_maps_arg;
+static const cli_opt detail_maps_opts[] = {
+    {"MODEL_OR_SYNTH", 0, ARG_POS, 0, &detail_maps_arg.src, NULL, 0, 0, NULL,
+     "a texgan model (synthesised band by band) or a synthesised image", NULL},
+    {"EXEMPLAR", 0, ARG_POS, 0, &detail_maps_arg.exemplar, NULL, 0, 0, NULL, "the texture photo the model learnt", NULL},
+    {"output", 'o', ARG_STR, REQ, &detail_maps_arg.prefix, NULL, 0, 0, "PREFIX",
+     "writes PREFIX_low.png, PREFIX_high.png and PREFIX_detail.txt", NULL},
+    {"size", 0, ARG_WXH, 0, &detail_maps_arg.w, &detail_maps_arg.h, 1, 1 << 20, "WxH",
+     "texture size from a model, e.g. 4096x4096", "8x the exemplar; a SYNTH image's own size"},
+    {"seed", 0, ARG_U64, SET, &detail_maps_arg.seed, NULL, 0, 0, "S", "synthesis seed", "1"},
+    {"factor", 0, ARG_INT, 0, &detail_maps_arg.o.factor, NULL, 1, 4096, "F", "low map downsampling (F = 10: 100x less memory)", "10"},
+    {"sigma", 0, ARG_FLOAT, 0, &detail_maps_arg.o.sigma, NULL, 0, 1e9, "S", "Gaussian split sigma in pixels", "F/2"},
+    {"no-colour", 0, ARG_FLAG, 0, &detail_maps_arg.o.no_colour_correct, NULL, 0, 0, NULL, "keep the synthesis' own mean colour", NULL},
+    {"compose", 0, ARG_STR, 0, &detail_maps_arg.compose, NULL, 0, 0, "OUT",
+     "the full-resolution texture as a shader would rebuild it (at --size)", NULL},
+    {"preview", 0, ARG_STR, 0, &detail_maps_arg.preview, NULL, 0, 0, "OUT.png",
+     "naive tiling vs detail mapping, far and near, over a hillshaded terrain", NULL},
+    {"dem", 0, ARG_STR, 0, &detail_maps_arg.dem, NULL, 0, 0, "DEM", "the terrain under the preview", "a built-in one"},
+};
+
+static int run_detail_maps(void)
 {
+    struct detail_maps_args *a = &detail_maps_arg;
     tn_image ex = {0, 0, 0, NULL}, synth = {0, 0, 0, NULL}, img = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
     tn_detail_maps maps;
-    tn_detail_opts o;
     tn_texgan model;
     tn_status st;
-    const char *src = NULL, *exp_ = NULL, *prefix = NULL, *compose = NULL, *preview = NULL, *demp = NULL;
-    int a, w = 0, h = 0, have_model;
-    double v, seed = 1;
-    if (wants_help(argc, argv)) {
-        printf("usage: terrainnet detail-maps MODEL_OR_SYNTH EXEMPLAR -o PREFIX [--size WxH] [--seed S]\n"
-               "             [--factor F] [--sigma S] [--no-colour] [--compose OUT] [--preview OUT.png [--dem DEM]]\n"
-               "Writes PREFIX_low.png (16-bit: Gaussian low-pass of the colour-corrected synthesis,\n"
-               "downsampled by F, default 10 = 100x less memory), PREFIX_high.png (8-bit: exemplar minus\n"
-               "its Gaussian blur, as value/2 + 0.5) and PREFIX_detail.txt (texture size, tiling factor,\n"
-               "F, sigma (default F/2), value range). From a MODEL the texture (--size, default 8x the\n"
-               "exemplar) is synthesised band by band; from a SYNTH image its own size is used.\n"
-               "--compose writes the full-resolution texture as a shader would rebuild it (at --size);\n"
-               "--preview writes naive tiling vs detail mapping, far and near, over a hillshaded terrain.\n");
-        return 0;
-    }
-    memset(&o, 0, sizeof o);
-    for (a = 0; a < argc; a++) {
-        const char *k = argv[a];
-        if (!strcmp(k, "-o") && a + 1 < argc) prefix = argv[++a];
-        else if (!strcmp(k, "--compose") && a + 1 < argc) compose = argv[++a];
-        else if (!strcmp(k, "--preview") && a + 1 < argc) preview = argv[++a];
-        else if (!strcmp(k, "--dem") && a + 1 < argc) demp = argv[++a];
-        else if (!strcmp(k, "--no-colour")) o.no_colour_correct = 1;
-        else if (!strcmp(k, "--size") && a + 1 < argc) {
-            if (!parse_wxh(argv[++a], &w, &h)) return usage_error("detail-maps", "--size needs WxH, e.g. 4096x4096, not", argv[a]);
-        } else if ((!strcmp(k, "--seed") || !strcmp(k, "--factor") || !strcmp(k, "--sigma")) && a + 1 < argc) {
-            if (!parse_double(argv[a + 1], &v) || v < 0 || v > 1e9) return usage_error("detail-maps", "not a non-negative number:", argv[a + 1]);
-            if (!strcmp(k, "--seed")) seed = v;
-            else if (!strcmp(k, "--factor")) {
-                if (v < 1 || v > 4096) return usage_error("detail-maps", "--factor must be 1..4096", NULL);
-                o.factor = (int)v;
-            } else o.sigma = (float)v;
-            a++;
-        } else if (k[0] == '-') return usage_error("detail-maps", "unknown option or missing value:", k);
-        else if (!src) src = k;
-        else if (!exp_) exp_ = k;
-        else return usage_error("detail-maps", "too many arguments:", k);
-    }
-    if (!src || !exp_) return usage_error("detail-maps", "needs MODEL_OR_SYNTH and EXEMPLAR", NULL);
-    if (!prefix) return usage_error("detail-maps", "missing -o PREFIX", NULL);
-    if ((st = tn_image_load(exp_, &ex, NULL))) return fail_status(st);
-    have_model = is_tnw_file(src);
-    if (have_model) {
-        if (!(st = tn_texgan_load(&model, src))) {
-            if (!w) { w = 8 * ex.width; h = 8 * ex.height; }
-            st = tn_detail_maps_from_model(&maps, &model, (uint64_t)seed, w, h, &ex, &o);
+    if ((st = tn_image_load(a->exemplar, &ex, NULL))) return fail_status(st);
+    if (is_tnw_file(a->src)) {
+        if (!(st = tn_texgan_load(&model, a->src))) {
+            if (!a->w) { a->w = 8 * ex.width; a->h = 8 * ex.height; }
+            st = tn_detail_maps_from_model(&maps, &model, a->seed, a->w, a->h, &ex, &a->o);
             tn_texgan_free(&model);
         }
     } else {
-        if (!(st = tn_image_load(src, &synth, NULL))) st = tn_detail_maps_from_image(&maps, &synth, &ex, &o);
+        if (!(st = tn_image_load(a->src, &synth, NULL))) st = tn_detail_maps_from_image(&maps, &synth, &ex, &a->o);
         tn_image_free(&synth);
-        if (!w && !st) { w = maps.width; h = maps.height; }
+        if (!a->w && !st) { a->w = maps.width; a->h = maps.height; }
     }
     if (st) { tn_image_free(&ex); return fail_status(st); }
-    st = tn_detail_maps_save(&maps, prefix);
+    st = tn_detail_maps_save(&maps, a->prefix);
     if (!st)
         printf("texture: %d x %d\nlow map: %d x %d (factor %d, %.0fx less memory)\nhigh map: %d x %d, tiled %.3f x %.3f\n", maps.width,
                maps.height, maps.low.width, maps.low.height, maps.factor,
                (double)maps.width * maps.height / ((double)maps.low.width * maps.low.height), maps.high.width, maps.high.height,
                (double)maps.tiling_x, (double)maps.tiling_y);
-    if (!st && compose) {
+    if (!st && a->compose) {
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        st = tn_detail_compose(&maps, w, h, &img);
-        if (!st) st = tn_image_save(compose, &img, &so);
+        st = tn_detail_compose(&maps, a->w, a->h, &img);
+        if (!st) st = tn_image_save(a->compose, &img, &so);
         tn_image_free(&img);
     }
-    if (!st && preview) {
-        if (demp) st = tn_image_load(demp, &dem, NULL);
-        if (!st) st = tn_detail_preview(&maps, &ex, demp ? &dem : NULL, 0, &img);
-        if (!st) st = tn_image_save(preview, &img, NULL);
+    if (!st && a->preview) {
+        if (a->dem) st = tn_image_load(a->dem, &dem, NULL);
+        if (!st) st = tn_detail_preview(&maps, &ex, a->dem ? &dem : NULL, 0, &img);
+        if (!st) st = tn_image_save(a->preview, &img, NULL);
         tn_image_free(&img);
         tn_image_free(&dem);
     }
@@ -1159,41 +1174,33 @@ static int cmd_detail_maps(int argc, char **argv)
     return st ? fail_status(st) : 0;
 }
 
+static const cli_command detail_maps_cmd = {"detail-maps", CLI_CMD(detail_maps), "low/high detail maps (+ composed texture, tiling preview)",
+    "Writes PREFIX_low.png (16-bit: Gaussian low-pass of the colour-corrected synthesis, downsampled by F), "
+    "PREFIX_high.png (8-bit: exemplar minus its Gaussian blur, as value/2 + 0.5) and PREFIX_detail.txt (texture size, "
+    "tiling factor, F, sigma, value range)."};
+
 /* ---- main -------------------------------------------------------------------------------- */
 
-typedef struct command { const char *name; int (*fn)(int, char **); const char *summary; } command;
-
-static const command commands[] = {
-    {"info", cmd_info, "describe an image or heightmap file"},
-    {"convert", cmd_convert, "convert between heightmap/image formats, keeping metres"},
-    {"metrics", cmd_metrics, "compare two images: SSIM, PSNR, RMSE, MAE"},
-    {"render", cmd_render, "hillshaded colour preview or 3D view of a DEM"},
-    {"noise", cmd_noise, "procedural heightmap: Perlin fBm or explicit noise, optional drawn map"},
-    {"sketch", cmd_sketch, "read a .tns or drawn sketch; rasterise, preview or convert it"},
-    {"sketch-random", cmd_sketch_random, "enrich a sketch with random ridges and valleys (MST + Voronoi)"},
-    {"align", cmd_align, "align sketch parts to a DEM's contour parts (chain codes + LCS)"},
-    {"extract", cmd_extract, "ridge and valley network of a DEM: masks, accumulation, preview"},
-    {"realism", cmd_realism, "realism report: slope/curvature/spectrum distances, drainage, SSIM"},
-    {"style", cmd_style, "restyle a map with the morphology of a real heightmap (style transfer)"},
-    {"texgan-train", cmd_texgan_train, "train a spatial GAN on one texture photo (checkpoints, resume)"},
-    {"texgan-synth", cmd_texgan_synth, "synthesise a texture of any size from a model, streamed tile by tile"},
-    {"detail-maps", cmd_detail_maps, "low/high detail maps (+ composed texture, tiling preview)"},
+static const cli_command *const commands[] = {
+    &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
+    &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd,
 };
+#define NCOMMANDS (sizeof commands / sizeof commands[0])
 
 static void print_usage(FILE *f)
 {
     size_t i;
     fprintf(f, "terrainnet %s - learn terrain from one example; synthesise terrain and textures\n\n"
-               "usage: terrainnet [--threads N] COMMAND [ARGS]   (COMMAND --help for details)\n\ncommands:\n",
+               "usage: terrainnet [--threads N] COMMAND [ARGS]   (`terrainnet COMMAND --help` or\n"
+               "       `terrainnet help COMMAND` for its arguments)\n\ncommands:\n",
             TN_VERSION_STRING);
-    for (i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        fprintf(f, "  %-13s %s\n", commands[i].name, commands[i].summary);
+    for (i = 0; i < NCOMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i]->name, commands[i]->summary);
 }
 
 int main(int argc, char **argv)
 {
-    int a = 1;
-    size_t i;
+    const cli_command *c = NULL;
+    int a = 1, i, rc, help;
     while (a < argc && argv[a][0] == '-') {
         if (!strcmp(argv[a], "--help") || !strcmp(argv[a], "-h")) {
             print_usage(stdout);
@@ -1202,12 +1209,13 @@ int main(int argc, char **argv)
             printf("terrainnet %s\n", TN_VERSION_STRING);
             return 0;
         } else if (!strcmp(argv[a], "--threads") && a + 1 < argc) {
-            int n;
-            if (!parse_int(argv[a + 1], &n) || n < 1 || n > 64) {
+            char *end;
+            long n = strtol(argv[a + 1], &end, 10);
+            if (*end || end == argv[a + 1] || n < 1 || n > 64) {
                 fprintf(stderr, "terrainnet: --threads needs a number from 1 to 64\n");
                 return 2;
             }
-            tn_set_threads(n);
+            tn_set_threads((int)n);
             a += 2;
         } else {
             fprintf(stderr, "terrainnet: unknown option %s\n", argv[a]);
@@ -1219,10 +1227,24 @@ int main(int argc, char **argv)
         print_usage(stderr);
         return 2;
     }
+    help = !strcmp(argv[a], "help"); /* `terrainnet help [COMMAND]` */
+    if (help && a + 1 >= argc) {
+        print_usage(stdout);
+        return 0;
+    }
+    for (i = 0; i < (int)NCOMMANDS; i++)
+        if (!strcmp(argv[a + help], commands[i]->name)) c = commands[i];
+    if (!c) {
+        fprintf(stderr, "terrainnet: unknown command '%s'\n", argv[a + help]);
+        print_usage(stderr);
+        return 2;
+    }
+    for (i = a + 1; i < argc; i++) help |= !strcmp(argv[i], "--help") || !strcmp(argv[i], "-h");
+    if (help) {
+        cli_help(c);
+        return 0;
+    }
+    if ((rc = cli_parse(c, argc - a - 1, argv + a + 1))) return rc;
     install_progress();
-    for (i = 0; i < sizeof commands / sizeof commands[0]; i++)
-        if (!strcmp(argv[a], commands[i].name)) return commands[i].fn(argc - a - 1, argv + a + 1);
-    fprintf(stderr, "terrainnet: unknown command '%s'\n", argv[a]);
-    print_usage(stderr);
-    return 2;
+    return c->run();
 }
