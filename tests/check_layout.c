@@ -29,6 +29,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <ctype.h>
+#include <stdarg.h>
 
 /* ---- growable report text ----------------------------------------------------------------- */
 
@@ -86,6 +87,11 @@ typedef struct cl_def {
     int len, line, sect, is_fn, defined; /* defined = 0: only a tentative declaration so far */
 } cl_def;
 
+typedef struct cl_mention {
+    const char *s;
+    int len, line;
+} cl_mention;
+
 typedef struct cl_waiver {
     char sect[CL_NAME_MAX], name[CL_NAME_MAX];
     int used;
@@ -115,10 +121,7 @@ typedef struct cl_ctx {
     int toc_line, end_line; /* "TABLE OF CONTENTS" and "//// end header file" lines */
     cl_tok *toks;
     int ntoks, ctoks;
-    /* >>x mentioned in comments (checked against the banners) */
-    int *mention_line;
-    const char **mention_name;
-    int *mention_len;
+    cl_mention *mentions; /* >>x written in comments (checked against the banners) */
     int nmentions, cmentions;
     cl_def *defs;
     int ndefs, cdefs;
@@ -129,9 +132,6 @@ typedef struct cl_ctx {
     int oom;
 } cl_ctx;
 
-static void cl_error(cl_ctx *c, int line, const char *fmt, ...);
-
-#include <stdarg.h>
 static void cl_vmsg(cl_ctx *c, const char *kind, int line, const char *fmt, va_list ap)
 {
     char msg[CL_MSG_MAX], full[CL_MSG_MAX + 300];
@@ -408,22 +408,18 @@ static void cl_push(cl_ctx *c, const char *s, int len, int line, int kind, int w
     t->c = ch;
 }
 
-static void cl_mention(cl_ctx *c, const char *s, int len, int line)
+static void cl_mention_add(cl_ctx *c, const char *s, int len, int line)
 {
     if (c->nmentions == c->cmentions) {
         int cap = c->cmentions ? 2 * c->cmentions : 64;
-        int *l = (int *)realloc(c->mention_line, sizeof(int) * (size_t)cap);
-        int *n = l ? (int *)realloc(c->mention_len, sizeof(int) * (size_t)cap) : NULL;
-        const char **m = n ? (const char **)realloc((void *)c->mention_name, sizeof(char *) * (size_t)cap) : NULL;
-        if (l) c->mention_line = l;
-        if (n) c->mention_len = n;
+        cl_mention *m = (cl_mention *)realloc(c->mentions, sizeof(cl_mention) * (size_t)cap);
         if (!m) { c->oom = 1; return; }
-        c->mention_name = m;
+        c->mentions = m;
         c->cmentions = cap;
     }
-    c->mention_line[c->nmentions] = line;
-    c->mention_name[c->nmentions] = s;
-    c->mention_len[c->nmentions++] = len;
+    c->mentions[c->nmentions].s = s;
+    c->mentions[c->nmentions].len = len;
+    c->mentions[c->nmentions++].line = line;
 }
 
 /* Splits the text into identifiers, punctuation and string tokens. Comments vanish (">>x" inside
@@ -447,7 +443,7 @@ static void cl_tokenize(cl_ctx *c)
             for (i += 2; i < n && !(s[i] == '*' && i + 1 < n && s[i + 1] == '/'); i++) {
                 if (s[i] == '\n') line++;
                 else if (s[i] == '>' && i + 2 < n && s[i + 1] == '>' && cl_ident_len(s + i + 2, end))
-                    cl_mention(c, s + i + 2, cl_ident_len(s + i + 2, end), line);
+                    cl_mention_add(c, s + i + 2, cl_ident_len(s + i + 2, end), line);
             }
             i += 2;
             continue;
@@ -456,7 +452,7 @@ static void cl_tokenize(cl_ctx *c)
             for (i += 2; i < n && s[i] != '\n'; i++) {
                 if (s[i] == '\\' && i + 1 < n && s[i + 1] == '\n') { i++; line++; }
                 else if (s[i] == '>' && i + 2 < n && s[i + 1] == '>' && cl_ident_len(s + i + 2, end))
-                    cl_mention(c, s + i + 2, cl_ident_len(s + i + 2, end), line);
+                    cl_mention_add(c, s + i + 2, cl_ident_len(s + i + 2, end), line);
             }
             continue;
         }
@@ -762,12 +758,10 @@ static int cl_check(const char *file, const char *text, size_t n, const char *al
         if (!c.oom) cl_tokenize(&c);
         for (k = 0; k < c.nmentions && !c.oom; k++) {
             int b, found = 0;
+            const cl_mention *m = &c.mentions[k];
             for (b = 0; b < c.nbanners && !found; b++)
-                found = (int)strlen(c.banners[b].name) == c.mention_len[k] &&
-                        !memcmp(c.banners[b].name, c.mention_name[k], (size_t)c.mention_len[k]);
-            if (!found)
-                cl_error(&c, c.mention_line[k], "the comment names >>%.*s, but there is no such banner",
-                         c.mention_len[k], c.mention_name[k]);
+                found = (int)strlen(c.banners[b].name) == m->len && !memcmp(c.banners[b].name, m->s, (size_t)m->len);
+            if (!found) cl_error(&c, m->line, "the comment names >>%.*s, but there is no such banner", m->len, m->s);
         }
         if (!c.oom) cl_walk(&c, 0);
         if (!c.oom) cl_walk(&c, 1);
@@ -787,9 +781,7 @@ static int cl_check(const char *file, const char *text, size_t n, const char *al
     free(c.tags);
     free(c.banners);
     free(c.toks);
-    free(c.mention_line);
-    free((void *)c.mention_name);
-    free(c.mention_len);
+    free(c.mentions);
     free(c.defs);
     free(c.hash);
     free(c.waivers);

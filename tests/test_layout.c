@@ -6,7 +6,7 @@
 #include "check_layout.c"
 #include "tn_test.h"
 
-static char *header;   /* terrainnet.h as read */
+static char *header;   /* terrainnet.h as read (NUL-terminated) */
 static size_t header_n;
 static char *allow;    /* tests/layout_allow.txt, NULL if absent */
 static cl_report rep;  /* the report of the last check() */
@@ -322,9 +322,9 @@ TN_TEST(tiny_header)
 
 int main(void)
 {
+    size_t allow_n;
     header = cl_read_file("terrainnet.h", &header_n);
-    allow = cl_read_file("tests/layout_allow.txt", &header_n);
-    if (header) header_n = strlen(header);
+    allow = cl_read_file("tests/layout_allow.txt", &allow_n); /* waivers, while the lead fixes the header */
     TN_RUN(real_header_passes);
     TN_RUN(swapped_toc_entries);
     TN_RUN(swapped_implementation_banners);
