@@ -13,7 +13,7 @@ BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
-.PHONY: all test check-compile demo bench fuzz clean
+.PHONY: all test check-compile check-layout demo bench fuzz clean
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
 
 bin/terrainnet: examples/cli/terrainnet.c terrainnet.h | bin
@@ -35,6 +35,12 @@ build/test/%: tests/%.c terrainnet.h tests/tn_test.h | build/test
 # The header must compile warning-free as C99 with gcc and clang, as C++, and without threads.
 check-compile: | build/check
 	@sh tests/check_compile.sh
+
+# Section layout of terrainnet.h (tests/check_layout.c); `make test` runs it inside test_layout.
+check-layout: | build/check
+	$(CC) $(WARN) -O1 $(CFLAGS) tests/check_layout.c -o build/check/check_layout
+	./build/check/check_layout terrainnet.h
+build/test/test_layout: tests/check_layout.c
 
 # Test binaries build two at a time even from a plain `make test`: each is a full sanitised
 # compile of the header, so a serial build would dominate the run.
