@@ -63,12 +63,12 @@ int main(int argc, char **argv)
     memset(&model, 0, sizeof model); /* so the cleanup below is safe whatever fails */
     memset(&maps, 0, sizeof maps);
     memset(&o, 0, sizeof o);         /* zero = defaults (tn_texgan_defaults lists them) */
-    o.minutes = 0.5;
-    o.seed = 1;
+    o.train.minutes = 0.5;
+    o.train.seed = 1;
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "-o") && i + 1 < argc) prefix = argv[++i];
-        else if (!strcmp(argv[i], "--minutes") && i + 1 < argc) o.minutes = atof(argv[++i]);
-        else if (!strcmp(argv[i], "--iters") && i + 1 < argc) o.max_iters = atol(argv[++i]);
+        else if (!strcmp(argv[i], "--minutes") && i + 1 < argc) o.train.minutes = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--iters") && i + 1 < argc) o.train.max_iters = atol(argv[++i]);
         else if (!strcmp(argv[i], "--crop") && i + 1 < argc) crop = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--scale") && i + 1 < argc) scale = atoi(argv[++i]);
         else if (argv[i][0] == '-' || in) {
@@ -77,7 +77,7 @@ int main(int argc, char **argv)
             return 2;
         } else in = argv[i];
     }
-    if (!(o.minutes > 0) || o.max_iters < 0 || crop < 64 || scale < 1 || scale > 64) {
+    if (!(o.train.minutes > 0) || o.train.max_iters < 0 || crop < 64 || scale < 1 || scale > 64) {
         fprintf(stderr, "texture_gan: --minutes must be > 0, --iters >= 0, --crop >= 64 (the training patch), "
                         "--scale 1..64\n");
         return 2;
