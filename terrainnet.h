@@ -25,15 +25,18 @@ CONFIGURATION (define before including the implementation)
     TN_MALLOC(sz) / TN_REALLOC(p,sz) / TN_FREE(p)  allocation; define all three or none
     TN_ASSERT(x)        programmer-error checks (default: assert); never used on user input
     TN_NO_THREADS       no pthread use at all; everything runs on the calling thread
+    TN_NO_TLS           keep the per-thread error detail under a pthread key instead of in
+                        thread-local storage (for toolchains whose thread-locals misbehave)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
 
 ERRORS
     Every fallible call returns tn_status (TN_OK = 0). tn_status_string() names the code and
-    tn_last_error() gives the detail of the most recent failure (file, reason). Nothing in the
-    library exits or aborts on user input; TN_ASSERT only guards programmer misuse
-    (e.g. a NULL where the API says non-NULL).
+    tn_last_error() gives the detail of the calling thread's most recent failure (file, reason);
+    each thread has its own, and a failure inside the pool's workers is handed to the thread
+    that started the parallel work. Nothing in the library exits or aborts on user input;
+    TN_ASSERT only guards programmer misuse (e.g. a NULL where the API says non-NULL).
 
 MEMORY
     Functions that fill a struct (tn_image and friends) allocate its buffers; the caller frees them
@@ -100,10 +103,11 @@ typedef enum tn_status {
 
 /* Name of a status code, e.g. "corrupt data". Never NULL. */
 TN_API const char *tn_status_string(tn_status s);
-/* Detail of the most recent failure ("alps.png: CRC mismatch in IDAT chunk"); "" if none.
-   The buffer is owned by the library and shared by all threads: read it right after a failure. */
+/* Detail of the calling thread's most recent failure ("alps.png: CRC mismatch in IDAT chunk");
+   "" if none. Each thread has its own buffer, owned by the library and overwritten by that
+   thread's next failure: read it right after a failure. */
 TN_API const char *tn_last_error(void);
-/* Clears the last error message. */
+/* Clears the calling thread's last error message. */
 TN_API void tn_clear_error(void);
 
 /* Deterministic RNG: PCG32 (O'Neill). The same seed/stream gives the same sequence everywhere. */
@@ -132,7 +136,9 @@ TN_API void tn_set_threads(int n);
 TN_API int  tn_get_threads(void);
 
 /* Runs fn(ctx, ith, nth) for ith = 0..nth-1 on nth threads (the caller runs ith = 0) and returns
-   when all are done. nth = tn_get_threads(), or 1 when called from inside a parallel region. */
+   when all are done. nth = tn_get_threads(), or 1 when called from inside a parallel region.
+   If a pool thread records a failure and the caller's share does not, the caller's
+   tn_last_error() then holds that thread's message (the lowest ith's when several fail). */
 typedef void (*tn_task_fn)(void *ctx, int ith, int nth);
 TN_API void tn_parallel_run(tn_task_fn fn, void *ctx);
 
@@ -1201,7 +1207,57 @@ extern "C" {
    >>core  (@@core implementation)
    -------------------------------------------------------------------------------------------- */
 
-static char tn__error_msg[1024];
+/* Error detail, one per thread, so pool workers and the caller's other threads never overwrite
+   each other's message. `fails` counts the failures recorded on this thread; the pool compares it
+   around a task to see whether a worker failed (>>thread forwards that message to the caller).
+   Thread-local storage where the compiler has it (C++11, C11, MSVC, gcc/clang's __thread, which
+   -std=c99 -pedantic accepts); otherwise, or with TN_NO_TLS, a pthread key; without threads a
+   plain static. */
+typedef struct tn__error_state { char msg[1024]; unsigned long fails; } tn__error_state;
+
+#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
+#if defined(_MSC_VER)
+#define TN__TLS __declspec(thread)
+#elif defined(__cplusplus) && __cplusplus >= 201103L
+#define TN__TLS thread_local
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TN__TLS _Thread_local
+#elif defined(__GNUC__) || defined(__clang__)
+#define TN__TLS __thread
+#endif
+#endif
+
+#if defined(TN_NO_THREADS)
+static tn__error_state tn__error_static;
+static tn__error_state *tn__err(void) { return &tn__error_static; }
+#elif defined(TN__TLS)
+static TN__TLS tn__error_state tn__error_tls;
+static tn__error_state *tn__err(void) { return &tn__error_tls; }
+#else
+/* pthread key: each thread's state is allocated on its first failure and freed when it exits;
+   if that allocation fails the thread falls back to one shared state. */
+static pthread_key_t tn__error_key;
+static pthread_once_t tn__error_once = PTHREAD_ONCE_INIT;
+static int tn__error_key_ok;
+static tn__error_state tn__error_shared;
+static void tn__error_state_free(void *e) { TN_FREE(e); }
+static void tn__error_key_create(void) { tn__error_key_ok = pthread_key_create(&tn__error_key, tn__error_state_free) == 0; }
+static tn__error_state *tn__err(void)
+{
+    tn__error_state *e;
+    pthread_once(&tn__error_once, tn__error_key_create);
+    if (!tn__error_key_ok) return &tn__error_shared;
+    e = (tn__error_state *)pthread_getspecific(tn__error_key);
+    if (!e && (e = (tn__error_state *)TN_MALLOC(sizeof *e)) != NULL) {
+        memset(e, 0, sizeof *e);
+        if (pthread_setspecific(tn__error_key, e) != 0) {
+            TN_FREE(e);
+            e = NULL;
+        }
+    }
+    return e ? e : &tn__error_shared;
+}
+#endif
 
 TN_API const char *tn_status_string(tn_status s)
 {
@@ -1213,34 +1269,38 @@ TN_API const char *tn_status_string(tn_status s)
     return names[s];
 }
 
-TN_API const char *tn_last_error(void) { return tn__error_msg; }
-TN_API void tn_clear_error(void) { tn__error_msg[0] = 0; }
+TN_API const char *tn_last_error(void) { return tn__err()->msg; }
+TN_API void tn_clear_error(void) { tn__err()->msg[0] = 0; }
 
 /* Records a failure message (printf-style) and returns the status, so callers can write
    `return tn__fail(TN_ERR_IO, "%s: cannot open", path);`. */
 static tn_status tn__fail(tn_status s, const char *fmt, ...)
 {
+    tn__error_state *e = tn__err();
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(tn__error_msg, sizeof tn__error_msg, fmt, ap);
+    vsnprintf(e->msg, sizeof e->msg, fmt, ap);
     va_end(ap);
+    e->fails++;
     return s;
 }
 
 /* Prefixes the current message with a context string ("alps.png: " ...), keeping the status. */
 static tn_status tn__fail_context(tn_status s, const char *context)
 {
+    char *msg = tn__err()->msg;
+    const size_t cap = sizeof tn__err()->msg;
     size_t lc, lm;
     if (!context || !context[0]) return s;
     lc = strlen(context);
-    lm = strlen(tn__error_msg);
-    if (lc + 3 >= sizeof tn__error_msg) return s;
-    if (lc + 2 + lm >= sizeof tn__error_msg) lm = sizeof tn__error_msg - lc - 3;
-    memmove(tn__error_msg + lc + 2, tn__error_msg, lm);
-    tn__error_msg[lc + 2 + lm] = 0;
-    memcpy(tn__error_msg, context, lc);
-    tn__error_msg[lc] = ':';
-    tn__error_msg[lc + 1] = ' ';
+    lm = strlen(msg);
+    if (lc + 3 >= cap) return s;
+    if (lc + 2 + lm >= cap) lm = cap - lc - 3;
+    memmove(msg + lc + 2, msg, lm);
+    msg[lc + 2 + lm] = 0;
+    memcpy(msg, context, lc);
+    msg[lc] = ':';
+    msg[lc + 1] = ' ';
     return s;
 }
 
@@ -1459,6 +1519,22 @@ static tn__pool tn__the_pool = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALI
 typedef struct tn__worker_arg { int ith; unsigned long gen0; } tn__worker_arg;
 static tn__worker_arg tn__worker_args[TN__MAX_THREADS];
 
+/* The error detail of a worker that failed during the current task (the lowest-numbered one,
+   so the choice does not depend on timing), for the caller to take over: the detail is per
+   thread, and the caller returns the status. Both under tn__the_pool.mu; ith 0 = none. */
+static int tn__pool_error_ith;
+static char tn__pool_error_msg[sizeof tn__err()->msg];
+
+static void tn__pool_keep_error(tn__pool *p, int ith)
+{
+    pthread_mutex_lock(&p->mu);
+    if (!tn__pool_error_ith || ith < tn__pool_error_ith) {
+        tn__pool_error_ith = ith;
+        memcpy(tn__pool_error_msg, tn__err()->msg, sizeof tn__pool_error_msg);
+    }
+    pthread_mutex_unlock(&p->mu);
+}
+
 typedef struct tn__pool_task { unsigned long gen; tn_task_fn fn; void *ctx; int nth; } tn__pool_task;
 
 /* Waits for a task newer than generation `seen` and returns a consistent copy of it: spin first
@@ -1516,7 +1592,9 @@ static void *tn__worker_main(void *arg)
         tn__pool_task t = tn__pool_wait_task(p, seen);
         seen = t.gen;
         if (ith < t.nth) {
+            unsigned long fails = tn__err()->fails;
             t.fn(t.ctx, ith, t.nth);
+            if (tn__err()->fails != fails) tn__pool_keep_error(p, ith);
             tn__pool_task_done(p);
         }
     }
@@ -1531,6 +1609,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
 #else
     tn__pool *p = &tn__the_pool;
     int nth = tn_get_threads();
+    unsigned long fails;
     long spin;
     pthread_mutex_lock(&p->mu);
     if (p->busy || nth <= 1) {
@@ -1553,6 +1632,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
         return;
     }
     p->busy = 1;
+    tn__pool_error_ith = 0;
     TN__STORE(&p->pending, nth - 1);
     TN__STORE(&p->gen, p->gen + 1); /* odd: spinning workers ignore the half-written task */
     TN__STORE(&p->fn, fn);
@@ -1561,6 +1641,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
     TN__STORE(&p->gen, p->gen + 1); /* even again: published */
     if (p->sleeping_workers > 0) pthread_cond_broadcast(&p->wake);
     pthread_mutex_unlock(&p->mu);
+    fails = tn__err()->fails;
     fn(ctx, 0, nth);
     for (spin = 0; spin < TN_POOL_SPIN && TN__LOAD(&p->pending) > 0; spin++) TN__PAUSE();
     pthread_mutex_lock(&p->mu);
@@ -1568,6 +1649,10 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
         TN__STORE(&p->caller_sleeping, 1); /* pairs with the last worker's decrement-then-check */
         while (TN__LOAD(&p->pending) > 0) pthread_cond_wait(&p->done, &p->mu);
         TN__STORE(&p->caller_sleeping, 0);
+    }
+    if (tn__pool_error_ith && tn__err()->fails == fails) { /* a worker failed, the caller did not */
+        memcpy(tn__err()->msg, tn__pool_error_msg, sizeof tn__pool_error_msg);
+        tn__err()->fails++;
     }
     p->busy = 0;
     pthread_mutex_unlock(&p->mu);
