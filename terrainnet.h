@@ -46,6 +46,13 @@ THREADS
     A persistent pool (default: all online CPUs; tn_set_threads(n) to change) runs parallel loops.
     Work is split so results are bit-identical for any thread count.
 
+ARGUMENTS
+    Order: the object the call works on (a ctx, params, optimiser or trained model; something
+    changed in place; the thing being saved), then inputs, a file path first among them, then
+    options (const tn_x_opts *, NULL = defaults), then outputs, the optional ones (NULL = not
+    wanted) last: tn_image_load(path, &img, &info), tn_render_preview(&dem, &opts, &out). A struct
+    the call fills (a new tn_image, a model being trained or loaded) is an output.
+
 TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once in the code)
     @@core      status codes, errors, allocation, RNG, progress, timing
     @@thread    thread pool and parallel-for
