@@ -1241,7 +1241,7 @@ static tn__error_state *tn__err(void) { return &tn__error_static; }
 static TN__TLS tn__error_state tn__error_tls;
 static tn__error_state *tn__err(void) { return &tn__error_tls; }
 #else
-/* pthread key: each thread's state is allocated on its first failure and freed when it exits;
+/* pthread key: each thread's state is allocated on its first use and freed when it exits;
    if that allocation fails the thread falls back to one shared state. */
 static pthread_key_t tn__error_key;
 static pthread_once_t tn__error_once = PTHREAD_ONCE_INIT;
