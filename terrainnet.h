@@ -25,15 +25,18 @@ CONFIGURATION (define before including the implementation)
     TN_MALLOC(sz) / TN_REALLOC(p,sz) / TN_FREE(p)  allocation; define all three or none
     TN_ASSERT(x)        programmer-error checks (default: assert); never used on user input
     TN_NO_THREADS       no pthread use at all; everything runs on the calling thread
+    TN_NO_TLS           keep the per-thread error detail under a pthread key instead of in
+                        thread-local storage (for toolchains whose thread-locals misbehave)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
 
 ERRORS
     Every fallible call returns tn_status (TN_OK = 0). tn_status_string() names the code and
-    tn_last_error() gives the detail of the most recent failure (file, reason). Nothing in the
-    library exits or aborts on user input; TN_ASSERT only guards programmer misuse
-    (e.g. a NULL where the API says non-NULL).
+    tn_last_error() gives the detail of the calling thread's most recent failure (file, reason);
+    each thread has its own, and a failure inside the pool's workers is handed to the thread
+    that started the parallel work. Nothing in the library exits or aborts on user input;
+    TN_ASSERT only guards programmer misuse (e.g. a NULL where the API says non-NULL).
 
 MEMORY
     Functions that fill a struct (tn_image and friends) allocate its buffers; the caller frees them
@@ -42,6 +45,13 @@ MEMORY
 THREADS
     A persistent pool (default: all online CPUs; tn_set_threads(n) to change) runs parallel loops.
     Work is split so results are bit-identical for any thread count.
+
+ARGUMENTS
+    Order: the object the call works on (a ctx, params, optimiser or trained model; something
+    changed in place; the thing being saved), then inputs, a file path first among them, then
+    options (const tn_x_opts *, NULL = defaults), then outputs, the optional ones (NULL = not
+    wanted) last: tn_image_load(path, &img, &info), tn_render_preview(&dem, &opts, &out). A struct
+    the call fills (a new tn_image, a model being trained or loaded) is an output.
 
 TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once in the code)
     @@core      status codes, errors, allocation, RNG, progress, timing
@@ -101,10 +111,11 @@ typedef enum tn_status {
 
 /* Name of a status code, e.g. "corrupt data". Never NULL. */
 TN_API const char *tn_status_string(tn_status s);
-/* Detail of the most recent failure ("alps.png: CRC mismatch in IDAT chunk"); "" if none.
-   The buffer is owned by the library and shared by all threads: read it right after a failure. */
+/* Detail of the calling thread's most recent failure ("alps.png: CRC mismatch in IDAT chunk");
+   "" if none. Each thread has its own buffer, owned by the library and overwritten by that
+   thread's next failure: read it right after a failure. */
 TN_API const char *tn_last_error(void);
-/* Clears the last error message. */
+/* Clears the calling thread's last error message. */
 TN_API void tn_clear_error(void);
 
 /* Deterministic RNG: PCG32 (O'Neill). The same seed/stream gives the same sequence everywhere. */
@@ -133,7 +144,9 @@ TN_API void tn_set_threads(int n);
 TN_API int  tn_get_threads(void);
 
 /* Runs fn(ctx, ith, nth) for ith = 0..nth-1 on nth threads (the caller runs ith = 0) and returns
-   when all are done. nth = tn_get_threads(), or 1 when called from inside a parallel region. */
+   when all are done. nth = tn_get_threads(), or 1 when called from inside a parallel region.
+   If a pool thread records a failure and the caller's share does not, the caller's
+   tn_last_error() then holds that thread's message (the lowest ith's when several fail). */
 typedef void (*tn_task_fn)(void *ctx, int ith, int nth);
 TN_API void tn_parallel_run(tn_task_fn fn, void *ctx);
 
@@ -998,7 +1011,7 @@ TN_API void      tn_extraction_free(tn_extraction *ex);
    range, divided by the reference's mean value (slope) or mean |value| (curvature): 0 for the
    same distribution, about 1 when one is a scaled-down copy. */
 typedef struct tn_realism_opts {
-    float dx_a, dy_a;     /* pixel spacing of the reference in height units; 0 = 1 */
+    float dx_a, dy_a;     /* pixel spacing of the reference in height units; 0 = 1 (dy 0 = dx) */
     float dx_b, dy_b;     /* of the compared terrain; 0 = the reference's */
     int threshold;        /* valley threshold for density and bifurcation; 0 = default per size */
 } tn_realism_opts;
@@ -1358,7 +1371,57 @@ extern "C" {
    >>core  (@@core implementation)
    -------------------------------------------------------------------------------------------- */
 
-static char tn__error_msg[1024];
+/* Error detail, one per thread, so pool workers and the caller's other threads never overwrite
+   each other's message. `fails` counts the failures recorded on this thread; the pool compares it
+   around a task to see whether a worker failed (>>thread forwards that message to the caller).
+   Thread-local storage where the compiler has it (C++11, C11, MSVC, gcc/clang's __thread, which
+   -std=c99 -pedantic accepts); otherwise, or with TN_NO_TLS, a pthread key; without threads a
+   plain static. */
+typedef struct tn__error_state { char msg[1024]; unsigned long fails; } tn__error_state;
+
+#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
+#if defined(_MSC_VER)
+#define TN__TLS __declspec(thread)
+#elif defined(__cplusplus) && __cplusplus >= 201103L
+#define TN__TLS thread_local
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TN__TLS _Thread_local
+#elif defined(__GNUC__) || defined(__clang__)
+#define TN__TLS __thread
+#endif
+#endif
+
+#if defined(TN_NO_THREADS)
+static tn__error_state tn__error_static;
+static tn__error_state *tn__err(void) { return &tn__error_static; }
+#elif defined(TN__TLS)
+static TN__TLS tn__error_state tn__error_tls;
+static tn__error_state *tn__err(void) { return &tn__error_tls; }
+#else
+/* pthread key: each thread's state is allocated on its first use and freed when it exits;
+   if that allocation fails the thread falls back to one shared state. */
+static pthread_key_t tn__error_key;
+static pthread_once_t tn__error_once = PTHREAD_ONCE_INIT;
+static int tn__error_key_ok;
+static tn__error_state tn__error_shared;
+static void tn__error_state_free(void *e) { TN_FREE(e); }
+static void tn__error_key_create(void) { tn__error_key_ok = pthread_key_create(&tn__error_key, tn__error_state_free) == 0; }
+static tn__error_state *tn__err(void)
+{
+    tn__error_state *e;
+    pthread_once(&tn__error_once, tn__error_key_create);
+    if (!tn__error_key_ok) return &tn__error_shared;
+    e = (tn__error_state *)pthread_getspecific(tn__error_key);
+    if (!e && (e = (tn__error_state *)TN_MALLOC(sizeof *e)) != NULL) {
+        memset(e, 0, sizeof *e);
+        if (pthread_setspecific(tn__error_key, e) != 0) {
+            TN_FREE(e);
+            e = NULL;
+        }
+    }
+    return e ? e : &tn__error_shared;
+}
+#endif
 
 TN_API const char *tn_status_string(tn_status s)
 {
@@ -1370,34 +1433,38 @@ TN_API const char *tn_status_string(tn_status s)
     return names[s];
 }
 
-TN_API const char *tn_last_error(void) { return tn__error_msg; }
-TN_API void tn_clear_error(void) { tn__error_msg[0] = 0; }
+TN_API const char *tn_last_error(void) { return tn__err()->msg; }
+TN_API void tn_clear_error(void) { tn__err()->msg[0] = 0; }
 
 /* Records a failure message (printf-style) and returns the status, so callers can write
    `return tn__fail(TN_ERR_IO, "%s: cannot open", path);`. */
 static tn_status tn__fail(tn_status s, const char *fmt, ...)
 {
+    tn__error_state *e = tn__err();
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(tn__error_msg, sizeof tn__error_msg, fmt, ap);
+    vsnprintf(e->msg, sizeof e->msg, fmt, ap);
     va_end(ap);
+    e->fails++;
     return s;
 }
 
 /* Prefixes the current message with a context string ("alps.png: " ...), keeping the status. */
 static tn_status tn__fail_context(tn_status s, const char *context)
 {
+    char *msg = tn__err()->msg;
+    const size_t cap = sizeof tn__err()->msg;
     size_t lc, lm;
     if (!context || !context[0]) return s;
     lc = strlen(context);
-    lm = strlen(tn__error_msg);
-    if (lc + 3 >= sizeof tn__error_msg) return s;
-    if (lc + 2 + lm >= sizeof tn__error_msg) lm = sizeof tn__error_msg - lc - 3;
-    memmove(tn__error_msg + lc + 2, tn__error_msg, lm);
-    tn__error_msg[lc + 2 + lm] = 0;
-    memcpy(tn__error_msg, context, lc);
-    tn__error_msg[lc] = ':';
-    tn__error_msg[lc + 1] = ' ';
+    lm = strlen(msg);
+    if (lc + 3 >= cap) return s;
+    if (lc + 2 + lm >= cap) lm = cap - lc - 3;
+    memmove(msg + lc + 2, msg, lm);
+    msg[lc + 2 + lm] = 0;
+    memcpy(msg, context, lc);
+    msg[lc] = ':';
+    msg[lc + 1] = ' ';
     return s;
 }
 
@@ -1616,6 +1683,22 @@ static tn__pool tn__the_pool = {PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALI
 typedef struct tn__worker_arg { int ith; unsigned long gen0; } tn__worker_arg;
 static tn__worker_arg tn__worker_args[TN__MAX_THREADS];
 
+/* The error detail of a worker that failed during the current task (the lowest-numbered one,
+   so the choice does not depend on timing), for the caller to take over: the detail is per
+   thread, and the caller returns the status. Both under tn__the_pool.mu; ith 0 = none. */
+static int tn__pool_error_ith;
+static char tn__pool_error_msg[sizeof tn__err()->msg];
+
+static void tn__pool_keep_error(tn__pool *p, int ith)
+{
+    pthread_mutex_lock(&p->mu);
+    if (!tn__pool_error_ith || ith < tn__pool_error_ith) {
+        tn__pool_error_ith = ith;
+        memcpy(tn__pool_error_msg, tn__err()->msg, sizeof tn__pool_error_msg);
+    }
+    pthread_mutex_unlock(&p->mu);
+}
+
 typedef struct tn__pool_task { unsigned long gen; tn_task_fn fn; void *ctx; int nth; } tn__pool_task;
 
 /* Waits for a task newer than generation `seen` and returns a consistent copy of it: spin first
@@ -1673,7 +1756,9 @@ static void *tn__worker_main(void *arg)
         tn__pool_task t = tn__pool_wait_task(p, seen);
         seen = t.gen;
         if (ith < t.nth) {
+            unsigned long fails = tn__err()->fails;
             t.fn(t.ctx, ith, t.nth);
+            if (tn__err()->fails != fails) tn__pool_keep_error(p, ith);
             tn__pool_task_done(p);
         }
     }
@@ -1688,6 +1773,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
 #else
     tn__pool *p = &tn__the_pool;
     int nth = tn_get_threads();
+    unsigned long fails;
     long spin;
     pthread_mutex_lock(&p->mu);
     if (p->busy || nth <= 1) {
@@ -1710,6 +1796,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
         return;
     }
     p->busy = 1;
+    tn__pool_error_ith = 0;
     TN__STORE(&p->pending, nth - 1);
     TN__STORE(&p->gen, p->gen + 1); /* odd: spinning workers ignore the half-written task */
     TN__STORE(&p->fn, fn);
@@ -1718,6 +1805,7 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
     TN__STORE(&p->gen, p->gen + 1); /* even again: published */
     if (p->sleeping_workers > 0) pthread_cond_broadcast(&p->wake);
     pthread_mutex_unlock(&p->mu);
+    fails = tn__err()->fails;
     fn(ctx, 0, nth);
     for (spin = 0; spin < TN_POOL_SPIN && TN__LOAD(&p->pending) > 0; spin++) TN__PAUSE();
     pthread_mutex_lock(&p->mu);
@@ -1725,6 +1813,10 @@ TN_API void tn_parallel_run(tn_task_fn fn, void *ctx)
         TN__STORE(&p->caller_sleeping, 1); /* pairs with the last worker's decrement-then-check */
         while (TN__LOAD(&p->pending) > 0) pthread_cond_wait(&p->done, &p->mu);
         TN__STORE(&p->caller_sleeping, 0);
+    }
+    if (tn__pool_error_ith && tn__err()->fails == fails) { /* a worker failed, the caller did not */
+        memcpy(tn__err()->msg, tn__pool_error_msg, sizeof tn__pool_error_msg);
+        tn__err()->fails++;
     }
     p->busy = 0;
     pthread_mutex_unlock(&p->mu);
@@ -2619,6 +2711,22 @@ static void tn__channel0_range(const tn_image *img, float *lo, float *hi)
    exaggerated and [0, 1] PNG heights and metre DEMs give the same picture. */
 #define TN__SHADE_AUTO_RELIEF 0.1f
 
+/* The zero rules of tn_hillshade_opts: sun at 315 / 45 degrees, z_factor 1, one spacing given
+   means square pixels, none means the "auto" spacing from dem's relief. */
+static void tn__hillshade_opts_defaults(tn_hillshade_opts *o, const tn_image *dem)
+{
+    if (o->azimuth_deg == 0.0f) o->azimuth_deg = 315.0f;
+    if (o->altitude_deg == 0.0f) o->altitude_deg = 45.0f;
+    if (o->z_factor == 0.0f) o->z_factor = 1.0f;
+    if (o->dx == 0.0f) o->dx = o->dy;
+    if (o->dy == 0.0f) o->dy = o->dx;
+    if (o->dx == 0.0f) {
+        float lo, hi;
+        tn__channel0_range(dem, &lo, &hi);
+        o->dx = o->dy = hi > lo ? (hi - lo) / (TN__SHADE_AUTO_RELIEF * (float)(dem->width > dem->height ? dem->width : dem->height)) : 1.0f;
+    }
+}
+
 TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn_hillshade_opts *opts)
 {
     tn_hillshade_opts o;
@@ -2633,16 +2741,7 @@ TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn
     if (!(o.dx >= 0.0f && o.dy >= 0.0f && o.dx <= FLT_MAX && o.dy <= FLT_MAX) || !(fabsf(o.z_factor) <= FLT_MAX) ||
         !(fabsf(o.azimuth_deg) <= FLT_MAX) || !(fabsf(o.altitude_deg) <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "hillshade: spacing must be finite and >= 0, angles and z_factor finite");
-    if (o.azimuth_deg == 0.0f) o.azimuth_deg = 315.0f;
-    if (o.altitude_deg == 0.0f) o.altitude_deg = 45.0f;
-    if (o.z_factor == 0.0f) o.z_factor = 1.0f;
-    if (o.dx == 0.0f) o.dx = o.dy; /* one given: square pixels */
-    if (o.dy == 0.0f) o.dy = o.dx;
-    if (o.dx == 0.0f) {
-        float lo, hi;
-        tn__channel0_range(dem, &lo, &hi);
-        o.dx = o.dy = hi > lo ? (hi - lo) / (TN__SHADE_AUTO_RELIEF * (float)(dem->width > dem->height ? dem->width : dem->height)) : 1.0f;
-    }
+    tn__hillshade_opts_defaults(&o, dem);
     memset(&job, 0, sizeof job);
     job.op = TN__OP_SHADE;
     job.ix = o.z_factor / o.dx;
@@ -4456,7 +4555,7 @@ static int tn__io_finite(float v) { return v == v && v <= FLT_MAX && v >= -FLT_M
 static tn_status tn__io_save_mapping(const tn_image *img, const tn_save_opts *opts, double *lo, double *hi, int *record)
 {
     float mn, mx;
-    if (opts && opts->has_range) {
+    if (opts->has_range) {
         double a = opts->range_lo, b = opts->range_hi;
         /* beyond float the file could not be read back (tn_image stores floats) */
         if (!(a == a && b == b && fabs(a) <= FLT_MAX && fabs(b) <= FLT_MAX) || a == b)
@@ -4991,7 +5090,7 @@ static tn_status tn__io_append(void **buf, size_t *len, size_t *cap, const void 
     return TN_OK;
 }
 
-/* Writes the header (origin 0, cellsize opts->cellsize or 1) and one text row per image row. */
+/* Writes the header (origin 0, the given cell size) and one text row per image row. */
 static tn_status tn__asc_encode(const tn_image *img, double cellsize, uint8_t **out, size_t *out_size)
 {
     char line[160], num[48];
@@ -5000,7 +5099,6 @@ static tn_status tn__asc_encode(const tn_image *img, double cellsize, uint8_t **
     int k;
     tn_status st;
     if (img->channels != 1) return tn__fail(TN_ERR_SHAPE, ".asc stores 1 channel, not %d", img->channels);
-    if (!(cellsize > 0.0 && cellsize <= DBL_MAX)) cellsize = 1.0;
     tn__io_format_number(num, sizeof num, cellsize, 0);
     k = snprintf(line, sizeof line, "ncols %d\nnrows %d\nxllcorner 0\nyllcorner 0\ncellsize %s\n", img->width,
                  img->height, num);
@@ -5210,11 +5308,22 @@ TN_API tn_status tn_image_load(const char *path, tn_image *img, tn_image_info *i
 
 /* ---- save ---- */
 
+/* The zero rules of tn_save_opts for writing a `channels`-channel image as `format`: 16 bits
+   for one channel and for .r16, else 8; PNG level 6; .asc cell size 1 (also for a negative or
+   non-finite one, which is not refused). The format itself is picked by tn_image_save. */
+static void tn__save_opts_defaults(tn_save_opts *o, int channels, tn_format format)
+{
+    if (!o->bit_depth) o->bit_depth = channels == 1 || format == TN_FORMAT_R16 ? 16 : 8;
+    if (!o->compression) o->compression = 6;
+    if (!(o->cellsize > 0.0 && o->cellsize <= DBL_MAX)) o->cellsize = 1.0;
+}
+
 TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format, uint8_t **out,
                                       size_t *out_size)
 {
+    tn_save_opts o;
     double lo = 0.0, hi = 1.0;
-    int record = 0, bits, level;
+    int record = 0;
     size_t bad;
     tn_status st;
     TN_ASSERT(out && out_size);
@@ -5224,23 +5333,25 @@ TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *o
         return tn__fail(TN_ERR_INVALID_ARG, "save: the image is empty");
     bad = tn_image_range(img, NULL, NULL);
     if (bad) return tn__fail(TN_ERR_NUMERIC, "save: the image has %zu NaN/Inf samples", bad);
-    bits = opts && opts->bit_depth ? opts->bit_depth : (img->channels == 1 || format == TN_FORMAT_R16 ? 16 : 8);
-    level = opts && opts->compression ? opts->compression : 6;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    tn__save_opts_defaults(&o, img->channels, format);
     if (format == TN_FORMAT_PNG || format == TN_FORMAT_PNM || format == TN_FORMAT_R16) {
-        if (bits != 8 && bits != 16) return tn__fail(TN_ERR_INVALID_ARG, "save: bit depth %d (use 8 or 16)", bits);
-        if (format == TN_FORMAT_R16 && bits != 16) return tn__fail(TN_ERR_INVALID_ARG, "save: .r16 is always 16-bit");
-        st = tn__io_save_mapping(img, opts, &lo, &hi, &record);
+        if (o.bit_depth != 8 && o.bit_depth != 16) return tn__fail(TN_ERR_INVALID_ARG, "save: bit depth %d (use 8 or 16)", o.bit_depth);
+        if (format == TN_FORMAT_R16 && o.bit_depth != 16) return tn__fail(TN_ERR_INVALID_ARG, "save: .r16 is always 16-bit");
+        st = tn__io_save_mapping(img, &o, &lo, &hi, &record);
         if (st) return st;
     }
     switch (format) {
     case TN_FORMAT_PNG:
         if (img->channels > 4) return tn__fail(TN_ERR_SHAPE, "PNG stores 1 to 4 channels, not %d", img->channels);
-        if (level < 0 || level > 9) return tn__fail(TN_ERR_INVALID_ARG, "save: PNG compression level %d (0-9)", level);
-        return tn__png_encode(img, bits, lo, hi, record, level, out, out_size);
-    case TN_FORMAT_PNM: return tn__pnm_encode(img, bits, lo, hi, record, out, out_size);
+        if (o.compression < 0 || o.compression > 9)
+            return tn__fail(TN_ERR_INVALID_ARG, "save: PNG compression level %d (0-9)", o.compression);
+        return tn__png_encode(img, o.bit_depth, lo, hi, record, o.compression, out, out_size);
+    case TN_FORMAT_PNM: return tn__pnm_encode(img, o.bit_depth, lo, hi, record, out, out_size);
     case TN_FORMAT_PFM: return tn__pfm_encode(img, out, out_size);
     case TN_FORMAT_HGT: return tn__hgt_encode(img, out, out_size);
-    case TN_FORMAT_ASC: return tn__asc_encode(img, opts ? opts->cellsize : 0.0, out, out_size);
+    case TN_FORMAT_ASC: return tn__asc_encode(img, o.cellsize, out, out_size);
     case TN_FORMAT_R16: return tn__r16_encode(img, lo, hi, out, out_size);
     default: break;
     }
@@ -7455,31 +7566,30 @@ static void tn__conv2d_backward(tn_ctx *ctx, tn_tensor *out)
     if (x->requires_grad && tn__grad(ctx, x)) tn__conv_input_grad(ctx, &g, N, Cout, out->grad, w->data, x->grad, 1.0f);
 }
 
-static int tn__conv_opt(const tn_conv_opts *o, int which)
+/* The zero rules of tn_conv_opts: stride and dilation 1 (also for negative values). */
+static void tn__conv_opts_defaults(tn_conv_opts *o)
 {
-    if (!o) return which == 0 || which == 2 ? 1 : 0;
-    switch (which) {
-    case 0: return o->stride > 0 ? o->stride : 1;
-    case 1: return o->pad;
-    case 2: return o->dilation > 0 ? o->dilation : 1;
-    case 3: return o->padding == TN_PADDING_REFLECT;
-    default: return o->output_padding;
-    }
+    if (o->stride <= 0) o->stride = 1;
+    if (o->dilation <= 0) o->dilation = 1;
 }
 
 TN_API tn_tensor *tn_conv2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *bias, const tn_conv_opts *opts)
 {
     tn__conv_geom g;
+    tn_conv_opts co;
     tn_tensor *o;
     int shape[4];
     if (!x || !w) return NULL;
     TN_ASSERT(x->ndim == 4 && w->ndim == 4 && w->shape[1] == x->shape[1]);
+    memset(&co, 0, sizeof co);
+    if (opts) co = *opts;
+    tn__conv_opts_defaults(&co);
     g.C = x->shape[1]; g.H = x->shape[2]; g.W = x->shape[3];
     g.KH = w->shape[2]; g.KW = w->shape[3];
-    g.stride = tn__conv_opt(opts, 0);
-    g.pad = tn__conv_opt(opts, 1);
-    g.dil = tn__conv_opt(opts, 2);
-    g.reflect = tn__conv_opt(opts, 3);
+    g.stride = co.stride;
+    g.pad = co.pad;
+    g.dil = co.dilation;
+    g.reflect = co.padding == TN_PADDING_REFLECT;
     TN_ASSERT(!g.reflect || (g.pad < g.H && g.pad < g.W));
     g.OH = (g.H + 2 * g.pad - g.dil * (g.KH - 1) - 1) / g.stride + 1;
     g.OW = (g.W + 2 * g.pad - g.dil * (g.KW - 1) - 1) / g.stride + 1;
@@ -7512,17 +7622,21 @@ static void tn__convt_backward(tn_ctx *ctx, tn_tensor *out)
 TN_API tn_tensor *tn_conv_transpose2d(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *bias, const tn_conv_opts *opts)
 {
     tn__conv_geom g;
+    tn_conv_opts co;
     tn_tensor *o;
     int op, shape[4];
     if (!x || !w) return NULL;
     TN_ASSERT(x->ndim == 4 && w->ndim == 4 && w->shape[0] == x->shape[1]);
+    memset(&co, 0, sizeof co);
+    if (opts) co = *opts;
+    tn__conv_opts_defaults(&co);
     g.C = w->shape[1];
     g.KH = w->shape[2]; g.KW = w->shape[3];
-    g.stride = tn__conv_opt(opts, 0);
-    g.pad = tn__conv_opt(opts, 1);
-    g.dil = tn__conv_opt(opts, 2);
+    g.stride = co.stride;
+    g.pad = co.pad;
+    g.dil = co.dilation;
     g.reflect = 0;
-    op = tn__conv_opt(opts, 4);
+    op = co.output_padding;
     g.OH = x->shape[2]; g.OW = x->shape[3];
     g.H = (g.OH - 1) * g.stride - 2 * g.pad + g.dil * (g.KH - 1) + op + 1;
     g.W = (g.OW - 1) * g.stride - 2 * g.pad + g.dil * (g.KW - 1) + op + 1;
@@ -9747,6 +9861,15 @@ static void tn__normalise01(tn_image *img)
     for (i = 0; i < n; i++) img->data[i] = hi > lo ? (img->data[i] - lo) / (hi - lo) : 0.5f;
 }
 
+/* The zero rules of tn_perlin_opts: 8 octaves from 4 cells, lacunarity 2, gain 0.5. */
+static void tn__perlin_opts_defaults(tn_perlin_opts *o)
+{
+    if (o->octaves == 0) o->octaves = 8;
+    if (o->frequency == 0) o->frequency = 4.0f;
+    if (o->lacunarity == 0) o->lacunarity = 2.0f;
+    if (o->gain == 0) o->gain = 0.5f;
+}
+
 TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts)
 {
     tn_perlin_opts o;
@@ -9759,10 +9882,7 @@ TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_
     if (opts) o = *opts;
     if (o.octaves < 0 || !(o.frequency >= 0.0f) || !(o.lacunarity >= 0.0f) || !(o.gain >= 0.0f)) /* also NaN */
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: negative or NaN octaves, frequency, lacunarity or gain");
-    if (o.octaves == 0) o.octaves = 8;
-    if (o.frequency == 0) o.frequency = 4.0f;
-    if (o.lacunarity == 0) o.lacunarity = 2.0f;
-    if (o.gain == 0) o.gain = 0.5f;
+    tn__perlin_opts_defaults(&o);
     if (o.octaves > 24 || o.frequency > 1e6f || o.lacunarity > 16.0f || o.gain > 4.0f)
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: octaves <= 24, frequency <= 1e6, lacunarity <= 16, gain <= 4");
     /* the finest octave's lattice coordinates must fit an int (they are floored to cells) */
@@ -9823,29 +9943,38 @@ TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_
     return TN_OK;
 }
 
+/* The zero rules of tn_explicit_opts for a width x height map: 5 layers; no sigmas means
+   {size / 64, size / 32} with size the longer side, written to sigmas[2] (the caller's storage). */
+static void tn__explicit_opts_defaults(tn_explicit_opts *o, int width, int height, float sigmas[2])
+{
+    int size = width > height ? width : height;
+    if (o->layers == 0) o->layers = 5;
+    if (!o->sigmas || o->nsigmas == 0) {
+        sigmas[0] = (float)size / 64.0f;
+        sigmas[1] = (float)size / 32.0f;
+        o->sigmas = sigmas;
+        o->nsigmas = 2;
+    }
+}
+
 TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const tn_explicit_opts *opts)
 {
     tn_explicit_opts o;
     tn_image acc = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, big = {0, 0, 0, NULL};
     tn_rng rng;
     tn_status st;
-    float defaults[2];
-    int layer, k, size = width > height ? width : height;
+    float sigmas[2];
+    int layer, k;
     size_t i, n;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
+    /* checked as given: the defaults would hide a negative sigma count */
     if (o.layers < 0 || o.nsigmas < 0) return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: negative layers or sigma count");
-    if (o.layers == 0) o.layers = 5;
     if (o.layers > 30) return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: at most 30 layers");
     for (k = 0; o.sigmas && k < o.nsigmas; k++) /* a NaN sigma would be skipped silently */
         if (!(o.sigmas[k] >= 0.0f && o.sigmas[k] <= FLT_MAX))
             return tn__fail(TN_ERR_INVALID_ARG, "explicit noise: sigma %d is %g", k, (double)o.sigmas[k]);
-    if (!o.sigmas || o.nsigmas == 0) {
-        defaults[0] = (float)size / 64.0f;
-        defaults[1] = (float)size / 32.0f;
-        o.sigmas = defaults;
-        o.nsigmas = 2;
-    }
+    tn__explicit_opts_defaults(&o, width, height, sigmas);
     if ((st = tn_image_create(&acc, width, height, 1))) return st;
     n = (size_t)width * height;
     tn_rng_seed(&rng, o.seed, 0xe7u);
@@ -11012,9 +11141,16 @@ done:
     return st;
 }
 
+/* The zero rule of tn_sketch_random_opts: one ridge node per 1024 px of the canvas, 8 to 2048. */
+static void tn__sketch_random_opts_defaults(tn_sketch_random_opts *o, int width, int height)
+{
+    if (o->nodes == 0) o->nodes = tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
+}
+
 TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
                                   tn_contour_set *out)
 {
+    tn_sketch_random_opts o;
     tn_contour_set set;
     tn__pts tmp = {NULL, 0, 0};
     tn_rng rng;
@@ -11035,10 +11171,13 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
             return tn__fail(TN_ERR_SHAPE, "random sketch: the user sketch canvas is %d x %d, not %d x %d", user->width,
                             user->height, width, height);
     }
-    if (opts && opts->nodes < 0) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: %d nodes", opts->nodes);
-    n = opts && opts->nodes > 0 ? opts->nodes : (int)tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (o.nodes < 0) return tn__fail(TN_ERR_INVALID_ARG, "random sketch: %d nodes", o.nodes);
+    tn__sketch_random_opts_defaults(&o, width, height);
+    n = o.nodes;
     if (n > 8192) return tn__fail(TN_ERR_TOO_LARGE, "random sketch: %d nodes (at most 8192)", n);
-    tn_rng_seed(&rng, opts ? opts->seed : 0, 0x5e7c4u);
+    tn_rng_seed(&rng, o.seed, 0x5e7c4u);
     set.width = width;
     set.height = height;
     node = (float *)tn__alloc((size_t)n * 2 * sizeof(float));
@@ -11518,30 +11657,42 @@ static void tn__align_rows(void *ctx, size_t begin, size_t end)
     }
 }
 
+/* The zero rules of tn_align_opts: 10 candidates (also for a negative count; at most 64), a
+   pick among the best 5 (also for a negative count). */
+static void tn__align_opts_defaults(tn_align_opts *o)
+{
+    if (o->top <= 0) o->top = 10;
+    if (o->top > 64) o->top = 64;
+    if (o->choices <= 0) o->choices = 5;
+}
+
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts, const tn_align_opts *opts,
                                  int *match)
 {
+    tn_align_opts o;
     tn__chains sk, skr, dem;
     tn__align_job job;
-    int i, raw = opts ? opts->raw_heights : 0;
+    int i;
     tn_status st;
     TN_ASSERT(match);
     if ((st = tn__cset_check(sketch_parts, "align: sketch parts")) || (st = tn__cset_check(dem_parts, "align: DEM parts")))
         return st;
     if (!sketch_parts->count) return tn__fail(TN_ERR_EMPTY, "align: the sketch has no parts");
     if (!dem_parts->count) return tn__fail(TN_ERR_EMPTY, "align: the DEM has no contour parts");
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    tn__align_opts_defaults(&o);
     memset(&job, 0, sizeof job);
-    job.top = opts && opts->top > 0 ? opts->top : 10;
-    job.choices = opts && opts->choices > 0 ? opts->choices : 5;
-    if (job.top > 64) job.top = 64;
-    job.seed = opts ? opts->seed : 0;
+    job.top = o.top;
+    job.choices = o.choices;
+    job.seed = o.seed;
     job.match = match;
-    if ((st = tn__chains_make(sketch_parts, raw, 0, &sk))) return st;
-    if ((st = tn__chains_make(sketch_parts, raw, 1, &skr))) {
+    if ((st = tn__chains_make(sketch_parts, o.raw_heights, 0, &sk))) return st;
+    if ((st = tn__chains_make(sketch_parts, o.raw_heights, 1, &skr))) {
         tn__chains_free(&sk);
         return st;
     }
-    if ((st = tn__chains_make(dem_parts, raw, 0, &dem))) {
+    if ((st = tn__chains_make(dem_parts, o.raw_heights, 0, &dem))) {
         tn__chains_free(&sk);
         tn__chains_free(&skr);
         return st;
@@ -12686,6 +12837,18 @@ done:
     return st;
 }
 
+/* The zero rules of tn_extract_opts for a width x height DEM: the size's default threshold,
+   closing radius 1, min_length 10, max_length 48, drop_fraction 0.01. A zero spacing is left
+   to tn_image_gradient, whose own rule makes it 1. */
+static void tn__extract_opts_defaults(tn_extract_opts *o, int width, int height)
+{
+    if (o->threshold == 0) o->threshold = tn_extract_default_threshold(width, height);
+    if (o->closing == 0) o->closing = 1;
+    if (o->min_length == 0) o->min_length = 10;
+    if (o->max_length == 0) o->max_length = 48;
+    if (o->drop_fraction == 0.0f) o->drop_fraction = 0.01f;
+}
+
 TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out)
 {
     tn_extract_opts o;
@@ -12700,16 +12863,13 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     if (o.threshold < 0 || o.min_length < 0 || o.max_length < 0 || o.which < 0 || o.which > 2 ||
         !(o.drop_fraction < 1.0f) || !(o.dx >= 0.0f) || !(o.dy >= 0.0f))
         return tn__fail(TN_ERR_INVALID_ARG, "extract: negative threshold/lengths, drop_fraction >= 1 or a bad spacing");
-    if (o.closing == 0) o.closing = 1;
+    tn__extract_opts_defaults(&o, dem->width, dem->height);
     if (o.closing > 16) return tn__fail(TN_ERR_INVALID_ARG, "extract: closing radius %d is over 16", o.closing);
-    if (o.min_length == 0) o.min_length = 10;
-    if (o.max_length == 0) o.max_length = 48;
     if (o.max_length < 2) return tn__fail(TN_ERR_INVALID_ARG, "extract: max_length must be at least 2");
-    if (o.drop_fraction == 0.0f) o.drop_fraction = 0.01f;
     memset(&ex, 0, sizeof ex);
     ex.width = dem->width;
     ex.height = dem->height;
-    ex.threshold = o.threshold ? o.threshold : tn_extract_default_threshold(dem->width, dem->height);
+    ex.threshold = o.threshold;
     ex.contours.width = dem->width;
     ex.contours.height = dem->height;
     n = (size_t)dem->width * dem->height;
@@ -12883,8 +13043,6 @@ static tn_status tn__slope_curv(const tn_image *dem, float dx, float dy, float *
     size_t n = (size_t)(w - 2) * (h - 2), i = 0;
     float *s, *c, ix, iy;
     int x, y;
-    if (dx <= 0) dx = 1.0f;
-    if (dy <= 0) dy = dx;
     ix = 1.0f / dx;
     iy = 1.0f / dy;
     s = (float *)tn__alloc(n * sizeof(float));
@@ -12945,8 +13103,24 @@ static tn_status tn__drainage(const tn_image *dem, int threshold, double *densit
     return TN_OK;
 }
 
+/* The zero rules of tn_realism_opts: the compared terrain's spacing is the reference's (dy_b
+   only when dx_b is 0 too), then each dx 0 = 1 and each dy 0 = its dx (square pixels).
+   threshold stays 0: tn_extract picks the default for each map's own size. */
+static void tn__realism_opts_defaults(tn_realism_opts *o)
+{
+    if (o->dx_b == 0) {
+        o->dx_b = o->dx_a;
+        if (o->dy_b == 0) o->dy_b = o->dy_a;
+    }
+    if (o->dx_a == 0) o->dx_a = 1.0f;
+    if (o->dy_a == 0) o->dy_a = o->dx_a;
+    if (o->dx_b == 0) o->dx_b = 1.0f;
+    if (o->dy_b == 0) o->dy_b = o->dx_b;
+}
+
 /* The morphology part of the realism report: slope and curvature histogram distances and the
-   radially averaged spectra (distance and log-log slopes). Also the style scores (>>style). */
+   radially averaged spectra (distance and log-log slopes). Also the style scores (>>style).
+   o has its defaults applied (positive spacings). */
 static tn_status tn__realism_shape(const tn_image *ref, const tn_image *img, const tn_realism_opts *o, tn_realism *r)
 {
     float *sa = NULL, *ca = NULL, *sb = NULL, *cb = NULL;
@@ -13006,7 +13180,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
     if (!(o.dx_a >= 0 && o.dy_a >= 0 && o.dx_b >= 0 && o.dy_b >= 0) || o.threshold < 0 ||
         !(o.dx_a <= FLT_MAX && o.dy_a <= FLT_MAX && o.dx_b <= FLT_MAX && o.dy_b <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "realism: spacing must be finite and >= 0, threshold >= 0");
-    if (o.dx_b == 0) { o.dx_b = o.dx_a; if (o.dy_b == 0) o.dy_b = o.dy_a; }
+    tn__realism_opts_defaults(&o);
     memset(&r, 0, sizeof r);
     if ((st = tn__realism_shape(ref, img, &o, &r))) return st;
     if ((st = tn__progress("realism", 0.6))) return st;
@@ -14054,38 +14228,51 @@ static void tn__style_level_size(int W, int H, int k, int *lw, int *lh)
     if (*lh < 16) *lh = 16;
 }
 
-/* Fills defaults and checks the options. */
-static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
+/* The zero rules of tn_style_opts that follow from the options alone: iterations and learning
+   rate per optimiser, tile 512, loss weights per network (VGG-19 or built-in), seed 1. Two
+   rules need the maps and are applied in tn_style_transfer: the built-in net's drain_weight
+   and valley_weight (tn__style_auto_drainage) and levels (tn__style_auto_levels). */
+static void tn__style_opts_defaults(tn_style_opts *o)
 {
-    tn_style_opts *o = &c->o;
-    int vgg;
-    memset(c, 0, sizeof *c);
-    if (opts) *o = *opts;
-    vgg = o->vgg != NULL;
-    if (o->optimizer != TN_STYLE_LBFGS && o->optimizer != TN_STYLE_SGD && o->optimizer != TN_STYLE_ADAM)
-        return tn__fail(TN_ERR_INVALID_ARG, "style: unknown optimizer %d", (int)o->optimizer);
-    if (o->iters < 0 || o->iters > 1000000) return tn__fail(TN_ERR_INVALID_ARG, "style: iters must be in 0..1000000");
-    if (o->levels < 0 || o->levels > 8) return tn__fail(TN_ERR_INVALID_ARG, "style: levels must be in 0..8");
-    if (o->tile < 0 || (o->tile > 0 && o->tile < 32)) return tn__fail(TN_ERR_INVALID_ARG, "style: tile must be 0 or >= 32");
-    {
-        const float w[7] = {o->content_weight, o->style_weight, o->sw_weight, o->hist_weight, o->drain_weight, o->valley_weight, o->tv_weight};
-        int i;
-        for (i = 0; i < 7; i++)
-            if (!(w[i] >= -FLT_MAX && w[i] <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: loss weights must be finite");
-    }
+    int vgg = o->vgg != NULL;
     if (!o->iters) o->iters = o->optimizer == TN_STYLE_LBFGS ? 40 : (o->optimizer == TN_STYLE_ADAM ? 150 : 300);
     if (!o->tile) o->tile = 512;
     if (o->content_weight == 0) o->content_weight = vgg ? 2.5e-11f : 0.1f;
     if (o->style_weight == 0) o->style_weight = vgg ? 1e-5f : 1.0f;
     if (o->sw_weight == 0) o->sw_weight = vgg ? -1.0f : 1.0f;
     if (o->hist_weight == 0) o->hist_weight = vgg ? -1.0f : 1.0f;
-    if (vgg && o->drain_weight == 0) o->drain_weight = -1.0f; /* built-in net: tn__style_auto_drainage */
+    if (vgg && o->drain_weight == 0) o->drain_weight = -1.0f;
     if (vgg && o->valley_weight == 0) o->valley_weight = -1.0f;
     if (o->tv_weight == 0) o->tv_weight = vgg ? 1e-10f : -1.0f;
     if (o->lr == 0) o->lr = o->optimizer == TN_STYLE_SGD ? (vgg ? 150.0f : 0.5f) : (vgg ? 0.01f : 0.02f);
-    if (!(o->lr > 0 && o->lr <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive and finite");
     if (!o->seed) o->seed = 1;
-    return vgg ? tn__style_net_vgg(&c->net, o->vgg) : tn__style_net_builtin(&c->net, o->seed);
+}
+
+/* Checks options whose defaults are applied (a zero never fails here). */
+static tn_status tn__style_opts_check(const tn_style_opts *o)
+{
+    const float w[7] = {o->content_weight, o->style_weight, o->sw_weight, o->hist_weight, o->drain_weight, o->valley_weight, o->tv_weight};
+    int i;
+    if (o->optimizer != TN_STYLE_LBFGS && o->optimizer != TN_STYLE_SGD && o->optimizer != TN_STYLE_ADAM)
+        return tn__fail(TN_ERR_INVALID_ARG, "style: unknown optimizer %d", (int)o->optimizer);
+    if (o->iters < 0 || o->iters > 1000000) return tn__fail(TN_ERR_INVALID_ARG, "style: iters must be in 0..1000000");
+    if (o->levels < 0 || o->levels > 8) return tn__fail(TN_ERR_INVALID_ARG, "style: levels must be in 0..8");
+    if (o->tile < 0 || (o->tile > 0 && o->tile < 32)) return tn__fail(TN_ERR_INVALID_ARG, "style: tile must be 0 or >= 32");
+    for (i = 0; i < 7; i++)
+        if (!(w[i] >= -FLT_MAX && w[i] <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: loss weights must be finite");
+    if (!(o->lr > 0 && o->lr <= FLT_MAX)) return tn__fail(TN_ERR_INVALID_ARG, "style: the learning rate must be positive and finite");
+    return TN_OK;
+}
+
+/* Resolves and checks the options, and builds the network. */
+static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
+{
+    tn_status st;
+    memset(c, 0, sizeof *c);
+    if (opts) c->o = *opts;
+    tn__style_opts_defaults(&c->o);
+    if ((st = tn__style_opts_check(&c->o))) return st;
+    return c->o.vgg ? tn__style_net_vgg(&c->net, c->o.vgg) : tn__style_net_builtin(&c->net, c->o.seed);
 }
 
 /* Margin (px per side) of a w x h level: 1/8 of the smaller side, at least 2, on levels with
@@ -14149,6 +14336,17 @@ static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
     return st;
 }
 
+/* Pyramid levels for a W x H map when levels is 0: halve while the coarsest side stays >= 64,
+   or >= 32 when the built-in net's drainage terms are on (they carve the valley network from
+   one level coarser); at most 6. */
+static int tn__style_auto_levels(const tn__style_cfg *c, int W, int H)
+{
+    int nl, coarsest = !c->net.vgg && (c->o.drain_weight > 0 || c->o.valley_weight > 0) ? 32 : 64;
+    if (c->o.levels) return c->o.levels;
+    for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= coarsest;) nl++;
+    return nl;
+}
+
 TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const tn_image *style, const tn_style_opts *opts)
 {
     tn__style_cfg *c;
@@ -14179,11 +14377,7 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
     tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
     if (!c->net.vgg && (st = tn__style_auto_drainage(c, &sm))) goto done;
-    nl = c->o.levels;
-    if (!nl) { /* the drainage terms carve the valley network from one level coarser */
-        int coarsest = !c->net.vgg && (c->o.drain_weight > 0 || c->o.valley_weight > 0) ? 32 : 64;
-        for (nl = 1; nl < 6 && ((W < H ? W : H) >> nl) >= coarsest;) nl++;
-    }
+    nl = tn__style_auto_levels(c, W, H);
     for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
         int lw, lh, tw, th, m, T, nx, ny, p[TN__STYLE_MAXTILES];
         tn__style_level_size(W, H, k, &lw, &lh);
@@ -14253,6 +14447,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         tn_realism_opts ro;
         tn_realism r;
         memset(&ro, 0, sizeof ro);
+        tn__realism_opts_defaults(&ro);
         memset(&r, 0, sizeof r);
         memset(out, 0, sizeof *out);
         if (!(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(&b, &a, &ro, &r))) {
@@ -16257,6 +16452,13 @@ done:
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
 
+/* The zero rule of tn_render_opts: shade strength 0.7. lo == hi (the DEM's own range) is the
+   colour ramp's rule, and shade is resolved by tn_image_hillshade. */
+static void tn__render_opts_defaults(tn_render_opts *o)
+{
+    if (o->shade_strength == 0) o->shade_strength = 0.7f;
+}
+
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
 {
     tn_render_opts o;
@@ -16269,7 +16471,8 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
     if (opts) o = *opts;
     if (!(o.shade_strength >= 0 && o.shade_strength <= 1))
         return tn__fail(TN_ERR_INVALID_ARG, "render preview: shade_strength %g is not in 0..1", (double)o.shade_strength);
-    k = o.shade_strength > 0 ? o.shade_strength : 0.7f;
+    tn__render_opts_defaults(&o);
+    k = o.shade_strength;
     if ((st = tn_image_colour_ramp(&ramp, dem, o.lo, o.hi))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);
@@ -16360,6 +16563,22 @@ static void tn__view_columns(void *ctx, size_t b, size_t e)
     }
 }
 
+/* The zero rules of tn_view_opts: 960 x 540 when either side is 0; seen from the south (180),
+   30 degrees down, from 1.1 DEM widths, 60 degree field of view, relief 0.2 (the last three
+   also replace negative values). colours is resolved by tn_render_preview. */
+static void tn__view_opts_defaults(tn_view_opts *o)
+{
+    if (o->width == 0 || o->height == 0) {
+        o->width = 960;
+        o->height = 540;
+    }
+    if (o->azimuth_deg == 0) o->azimuth_deg = 180.0f;
+    if (o->pitch_deg == 0) o->pitch_deg = 30.0f;
+    if (o->distance <= 0) o->distance = 1.1f;
+    if (o->fov_deg <= 0) o->fov_deg = 60.0f;
+    if (o->relief <= 0) o->relief = 0.2f;
+}
+
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out)
 {
     tn_view_opts o;
@@ -16374,14 +16593,9 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
         !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f))
         return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
                         o.width, o.height);
-    if (o.width == 0 || o.height == 0) { o.width = 960; o.height = 540; }
+    tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
-    if (o.azimuth_deg == 0) o.azimuth_deg = 180.0f;
-    if (o.pitch_deg == 0) o.pitch_deg = 30.0f;
-    if (o.distance <= 0) o.distance = 1.1f;
-    if (o.fov_deg <= 0) o.fov_deg = 60.0f;
-    if (o.relief <= 0) o.relief = 0.2f;
     if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "render view: the DEM holds NaN/Inf");
     if ((st = tn_render_preview(dem, &o.colours, &colour))) return st;
     if ((st = tn_image_create(&img, o.width, o.height, 3))) {

@@ -1,5 +1,5 @@
 #!/bin/sh
-# Compiles the whole header (declarations + implementation) in four configurations and fails on
+# Compiles the whole header (declarations + implementation) in several configurations and fails on
 # any warning. Prints one "compile_<config>: ok|FAIL" line each and a summary line.
 set -u
 mkdir -p build/check
@@ -17,6 +17,7 @@ run clang_c99   clang -std=c99 -Wall -Wextra -pedantic -O2 -I. -c "$tu" -o build
 fi
 run gxx_cxx     g++   -x c++ -Wall -Wextra -pedantic -O2 -I. -c "$tu" -o build/check/gxx.o
 run no_threads  gcc   -std=c99 -Wall -Wextra -pedantic -O2 -DTN_NO_THREADS -I. -c "$tu" -o build/check/nothreads.o
+run no_tls      gcc   -std=c99 -Wall -Wextra -pedantic -O2 -DTN_NO_TLS -I. -c "$tu" -o build/check/notls.o
 run portable    gcc   -std=c99 -Wall -Wextra -pedantic -O2 -march=x86-64 -I. -c "$tu" -o build/check/portable.o
 echo "check_compile: $pass passed, $fail failed, 0 skipped"
 [ "$fail" -eq 0 ]

@@ -1,4 +1,5 @@
-/* Tests of @@core and @@thread: status strings, errors, size checks, RNG, pool, progress. */
+/* Tests of @@core and @@thread: status strings, errors (per thread, forwarded from pool workers),
+   size checks, RNG, pool, progress. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
@@ -124,6 +125,106 @@ TN_TEST(parallel_run_covers_every_thread_and_nests)
     tn_set_threads(0);
 }
 
+/* ---- per-thread error detail ---- */
+
+/* Fails with "image size <tag> x <n> x 1 is not positive". */
+static void fail_with(int tag, int n)
+{
+    tn_image img = {0, 0, 0, NULL};
+    (void)tn_image_create(&img, tag, n, 1);
+}
+
+static int is_failure_of(const char *msg, int tag, int n)
+{
+    char want[128];
+    snprintf(want, sizeof want, "image size %d x %d x 1 is not positive", tag, n);
+    return strcmp(msg, want) == 0;
+}
+
+#ifndef TN_NO_THREADS
+enum { ERR_ROUNDS = 20000 };
+typedef struct {
+    pthread_mutex_t *mu;
+    pthread_cond_t *cv;
+    int *ready;
+    int tag, wrong, fresh_empty;
+} err_thread;
+
+static void *err_thread_main(void *arg)
+{
+    err_thread *t = (err_thread *)arg;
+    int i;
+    t->fresh_empty = tn_last_error()[0] == 0; /* a new thread starts with no message */
+    pthread_mutex_lock(t->mu); /* start together, so the two loops overlap */
+    if (++*t->ready == 2) pthread_cond_broadcast(t->cv);
+    while (*t->ready < 2) pthread_cond_wait(t->cv, t->mu);
+    pthread_mutex_unlock(t->mu);
+    for (i = 1; i <= ERR_ROUNDS; i++) {
+        fail_with(t->tag, i);
+        if (!is_failure_of(tn_last_error(), t->tag, i)) t->wrong++;
+    }
+    return NULL;
+}
+#endif
+
+TN_TEST(last_error_is_per_thread)
+{
+#ifdef TN_NO_THREADS
+    TN_SKIP("built with TN_NO_THREADS");
+#else
+    pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
+    pthread_cond_t cv = PTHREAD_COND_INITIALIZER;
+    pthread_t tid[2];
+    err_thread t[2];
+    int ready = 0, i;
+    fail_with(-99, 1); /* the main thread's own message, which the threads must not touch */
+    for (i = 0; i < 2; i++) {
+        t[i].mu = &mu;
+        t[i].cv = &cv;
+        t[i].ready = &ready;
+        t[i].tag = -1 - i;
+        t[i].wrong = 0;
+        t[i].fresh_empty = 0;
+        TN_CHECK(pthread_create(&tid[i], NULL, err_thread_main, &t[i]) == 0);
+    }
+    for (i = 0; i < 2; i++) pthread_join(tid[i], NULL);
+    for (i = 0; i < 2; i++) TN_CHECK(t[i].wrong == 0 && t[i].fresh_empty);
+    TN_CHECK(is_failure_of(tn_last_error(), -99, 1));
+    tn_clear_error();
+    TN_CHECK(tn_last_error()[0] == 0);
+#endif
+}
+
+/* Threads whose share is listed in fail_mask fail with tag -(10 + ith). */
+static void failing_task(void *ctx, int ith, int nth)
+{
+    int mask = *(const int *)ctx;
+    (void)nth;
+    if (mask & (1 << ith)) fail_with(-(10 + ith), 5);
+}
+
+TN_TEST(worker_failure_reaches_the_caller)
+{
+    int mask;
+    tn_set_threads(4);
+    if (tn_get_threads() < 4) TN_SKIP("fewer than 4 threads (TN_NO_THREADS)");
+    tn_clear_error();
+    mask = 1 << 1; /* a worker fails, the caller does not: the caller gets the worker's message */
+    tn_parallel_run(failing_task, &mask);
+    TN_CHECK(is_failure_of(tn_last_error(), -11, 5));
+    mask = (1 << 3) | (1 << 2); /* several workers: the lowest ith, whatever the timing */
+    tn_parallel_run(failing_task, &mask);
+    TN_CHECK(is_failure_of(tn_last_error(), -12, 5));
+    mask = (1 << 0) | (1 << 2); /* the caller failed too: its own message stays */
+    tn_parallel_run(failing_task, &mask);
+    TN_CHECK(is_failure_of(tn_last_error(), -10, 5));
+    fail_with(-20, 5);
+    mask = 0; /* nobody fails: the message is left alone */
+    tn_parallel_run(failing_task, &mask);
+    TN_CHECK(is_failure_of(tn_last_error(), -20, 5));
+    tn_set_threads(0);
+}
+
 static int cancel_after_half(void *user, const char *stage, double f)
 {
     (void)stage;
@@ -160,6 +261,8 @@ int main(void)
     TN_RUN(rng_distributions);
     TN_RUN(parallel_for_same_for_any_thread_count);
     TN_RUN(parallel_run_covers_every_thread_and_nests);
+    TN_RUN(last_error_is_per_thread);
+    TN_RUN(worker_failure_reaches_the_caller);
     TN_RUN(progress_hook_can_cancel);
     TN_RUN(size_checks_overflow);
     return tn_test_summary("test_core");
