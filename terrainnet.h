@@ -51,7 +51,10 @@ ARGUMENTS
     changed in place; the thing being saved), then inputs, a file path first among them, then
     options (const tn_x_opts *, NULL = defaults), then outputs, the optional ones (NULL = not
     wanted) last: tn_image_load(path, &img, &info), tn_render_preview(&dem, &opts, &out). A struct
-    the call fills (a new tn_image, a model being trained or loaded) is an output.
+    the call fills (a new tn_image, a model being trained or loaded) is an output. Calls older
+    than this rule that take their output first (tn_image_crop(dst, src, ...), the other image
+    operations, noise makers, tn_style_transfer, tn_texgan_train/load, tn_detail_maps_*) keep
+    their order for now.
 
 TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once in the code)
     @@core      status codes, errors, allocation, RNG, progress, timing
@@ -62,7 +65,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@gemm      SGEMM: packed, cache-blocked, AVX-512 / AVX2 / portable kernels, threaded
     @@tensor    tensors, arena contexts, the autograd tape
     @@ops       differentiable ops: broadcasting arithmetic, conv (im2col), pooling, norms, graph ops
-    @@loss      MSE, L1, BCE, hinge GAN, Gram, TV, SSIM, gradient difference
+    @@loss      MSE, L1, BCE, hinge and non-saturating GAN, Gram, TV, SSIM, gradient difference
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@train     training runs (budget, progress, checkpoints, resume), model files, shared blocks
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
@@ -712,8 +715,8 @@ typedef struct tn_patch_disc {
     tn_tensor *wn[TN_DISC_MAX_LAYERS + 1]; /* this step's normalised weights (tn_patch_disc_begin) */
 } tn_patch_disc;
 /* Adds the tensors to p and fills *d (initialised from rng; rng NULL leaves them zero). */
-TN_API tn_status tn_patch_disc_add(tn_patch_disc *d, tn_params *p, const char *prefix, int cin, int width, int layers, int k,
-                                   tn_rng *rng);
+TN_API tn_status tn_patch_disc_add(tn_params *p, const char *prefix, int cin, int width, int layers, int k, tn_rng *rng,
+                                   tn_patch_disc *d);
 /* One power iteration per layer and the normalised weights for this step (share them between
    the real and the fake pass of a step). */
 TN_API void tn_patch_disc_begin(tn_ctx *ctx, tn_patch_disc *d);
@@ -8850,6 +8853,14 @@ struct tn_optim {
     long step;
 };
 
+static void tn__optim_opts_defaults(tn_optim_opts *o)
+{
+    if (o->lr <= 0) o->lr = 1e-3f;
+    if (o->beta1 == 0 && o->beta2 == 0) { o->beta1 = 0.9f; o->beta2 = 0.999f; }
+    if (o->eps <= 0) o->eps = 1e-8f;
+    if (o->decay_every <= 0) o->decay_every = 1;
+}
+
 /* NaN/Inf or out-of-range settings would turn every weight into NaN at the first step. */
 static int tn__optim_opts_ok(const tn_optim_opts *o)
 {
@@ -8882,10 +8893,7 @@ TN_API tn_optim *tn_optim_create(tn_params *p, const tn_optim_opts *opts)
     memset(o, 0, sizeof *o);
     o->p = p;
     if (opts) o->o = *opts;
-    if (o->o.lr <= 0) o->o.lr = 1e-3f;
-    if (o->o.beta1 == 0 && o->o.beta2 == 0) { o->o.beta1 = 0.9f; o->o.beta2 = 0.999f; }
-    if (o->o.eps <= 0) o->o.eps = 1e-8f;
-    if (o->o.decay_every <= 0) o->o.decay_every = 1;
+    tn__optim_opts_defaults(&o->o);
     o->m = (float **)TN_MALLOC(2 * sizeof(float *) * (size_t)(p->n ? p->n : 1));
     if (!o->m) { TN_FREE(o); return NULL; }
     o->v = o->m + p->n;
@@ -8956,10 +8964,19 @@ static double tn__dot(const float *a, const float *b, size_t n)
     return s;
 }
 
+static void tn__lbfgs_opts_defaults(tn_lbfgs_opts *o)
+{
+    if (o->history <= 0) o->history = 10;
+    if (o->max_iter <= 0) o->max_iter = 100;
+    if (!(o->tol > 0)) o->tol = 1e-7f;
+    if (!(o->first_step > 0)) o->first_step = 1.0f;
+}
+
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f)
 {
-    int m = opts && opts->history > 0 ? opts->history : 10, max_iter = opts && opts->max_iter > 0 ? opts->max_iter : 100;
-    float tol = opts && opts->tol > 0 ? opts->tol : 1e-7f, first = opts && opts->first_step > 0 ? opts->first_step : 1.0f;
+    tn_lbfgs_opts lo = {0, 0, 0.0f, 0.0f};
+    int m, max_iter;
+    float tol, first;
     float *S, *Y, *g, *gn, *d, *xn, f, fn_;
     double *rho, *alpha;
     int it, k, hist = 0, head = 0;
@@ -8970,6 +8987,12 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
                  !(fabsf(opts->first_step) <= FLT_MAX)))
         return tn__fail(TN_ERR_INVALID_ARG, "L-BFGS: bad options (history %d, max_iter %d, tol %g, first_step %g)",
                         opts->history, opts->max_iter, (double)opts->tol, (double)opts->first_step);
+    if (opts) lo = *opts;
+    tn__lbfgs_opts_defaults(&lo);
+    m = lo.history;
+    max_iter = lo.max_iter;
+    tol = lo.tol;
+    first = lo.first_step;
     if (tn__size4((size_t)(2 * m + 4), n, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
     S = (float *)tn__alloc(bytes);
     rho = (double *)tn__alloc(2 * (size_t)m * sizeof(double));
@@ -9639,7 +9662,7 @@ TN_API tn_tensor *tn_conv_block(tn_ctx *ctx, const tn_params *p, const char *pre
     return tn_activate(ctx, x, act);
 }
 
-TN_API tn_status tn_patch_disc_add(tn_patch_disc *d, tn_params *p, const char *prefix, int cin, int width, int layers, int k, tn_rng *rng)
+TN_API tn_status tn_patch_disc_add(tn_params *p, const char *prefix, int cin, int width, int layers, int k, tn_rng *rng, tn_patch_disc *d)
 {
     int l, c = cin;
     TN_ASSERT(d && p && prefix);
@@ -15019,7 +15042,7 @@ static tn_status tn__tg_build(tn__tg_train *s)
         else if (t->name[2] == 'n') tn_init_normal(t, &s->rng, 0.1f, 0.0f); /* stage noise on from the start */
         memcpy(tn_params_get(s->m.weights, i + 2)->data, t->data, t->numel * sizeof(float));
     }
-    if (tn_patch_disc_add(&s->disc, s->d, "d.", s->m.channels, s->disc_width, s->disc_layers, 5, &s->rng))
+    if (tn_patch_disc_add(s->d, "d.", s->m.channels, s->disc_width, s->disc_layers, 5, &s->rng, &s->disc))
         return tn__fail(TN_ERR_OUT_OF_MEMORY, "texgan: out of memory building the discriminator");
     { /* periodic wave vectors: random directions, periods of 2 to 16 cells */
         tn_tensor *w = tn_params_find(s->m.weights, "texgan.waves");

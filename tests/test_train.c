@@ -461,10 +461,10 @@ TN_TEST(blocks_shapes_and_gradients)
     TN_CHECK(tn_mlp_add(p, "m.", w3, 2, &rng) != TN_OK); /* names taken */
     TN_CHECK(tn_conv_block_add(p, "c.", 3, 8, 3, 1, &rng) == TN_OK);
     TN_CHECK(tn_conv_block_add(p, "e.", 3, 8, 4, 1, &rng) == TN_ERR_INVALID_ARG); /* even kernel */
-    TN_CHECK(tn_patch_disc_add(&d, p, "d.", 8, 4, 2, 3, &rng) == TN_OK);
-    TN_CHECK(tn_patch_disc_add(&d, p, "z.", 8, 4, 99, 3, &rng) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_patch_disc_add(&d, p, "d.", 8, 4, 2, 3, &rng) != TN_OK); /* names taken */
-    TN_CHECK(tn_patch_disc_add(&d, p, "q.", 8, 4, 2, 3, &rng) == TN_OK);
+    TN_CHECK(tn_patch_disc_add(p, "d.", 8, 4, 2, 3, &rng, &d) == TN_OK);
+    TN_CHECK(tn_patch_disc_add(p, "z.", 8, 4, 99, 3, &rng, &d) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_patch_disc_add(p, "d.", 8, 4, 2, 3, &rng, &d) != TN_OK); /* names taken */
+    TN_CHECK(tn_patch_disc_add(p, "q.", 8, 4, 2, 3, &rng, &d) == TN_OK);
     x = tn_tensor_2d(ctx, 4, 5);
     tn_init_normal(x, &rng, 0, 1);
     y = tn_mlp(ctx, p, "m.", 2, x, TN_ACT_RELU);
