@@ -9588,19 +9588,24 @@ TN_API tn_tensor *tn_activate(tn_ctx *ctx, tn_tensor *x, tn_activation act)
     }
 }
 
+/* Block tensors are named "<prefix><kind><i>" ("<prefix><kind>" for i < 0). */
+static const char *tn__param_name(char *buf, size_t cap, const char *prefix, const char *kind, int i)
+{
+    if (i >= 0) snprintf(buf, cap, "%s%s%d", prefix, kind, i);
+    else snprintf(buf, cap, "%s%s", prefix, kind);
+    return buf;
+}
+
 static tn_tensor *tn__param_named(const tn_params *p, const char *prefix, const char *kind, int i)
 {
     char name[64];
-    if (i >= 0) snprintf(name, sizeof name, "%s%s%d", prefix, kind, i);
-    else snprintf(name, sizeof name, "%s%s", prefix, kind);
-    return tn_params_find(p, name);
+    return tn_params_find(p, tn__param_name(name, sizeof name, prefix, kind, i));
 }
 
 static tn_tensor *tn__param_new(tn_params *p, const char *prefix, const char *kind, int i, int ndim, const int *shape, int learned)
 {
     char name[64];
-    if (i >= 0) snprintf(name, sizeof name, "%s%s%d", prefix, kind, i);
-    else snprintf(name, sizeof name, "%s%s", prefix, kind);
+    tn__param_name(name, sizeof name, prefix, kind, i);
     return learned ? tn_params_add(p, name, ndim, shape) : tn_params_add_buffer(p, name, ndim, shape);
 }
 
