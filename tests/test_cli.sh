@@ -188,6 +188,16 @@ else bad "texgan-synth png"; fi
 if $T detail-maps "$W/tg.tnw" "$W/noise.png" -o "$W/dm" --size 200x140 --compose "$W/comp.png" --preview "$W/prev.png" > "$W/dm.txt" 2>&1 &&
     grep -q "low map: 20 x 14" "$W/dm.txt" && grep -q "tiling 2.08333" "$W/dm_detail.txt" && $T info "$W/comp.png" | grep -q "size: 200 x 140" &&
     [ -f "$W/dm_low.png" ] && [ -f "$W/dm_high.png" ] && [ -f "$W/prev.png" ]; then ok; else bad "detail-maps: $(head -c 400 "$W/dm.txt")"; fi
+# Ctrl-C: the run stops at its next iteration, saves its checkpoint and says how to resume
+$T texgan-train "$W/noise.png" -o "$W/int.tnw" --iters 1000000 $TG > "$W/int.txt" 2>&1 &
+pid=$!
+n=0
+while [ $n -lt 200 ] && ! grep -q "texgan-train:" "$W/int.txt" 2>/dev/null; do sleep 0.1; n=$((n + 1)); done
+kill -INT $pid 2>/dev/null
+wait $pid; rc=$?
+if [ $rc -eq 130 ] && grep -q "interrupted after" "$W/int.txt" && [ -f "$W/int.tnw.ckpt" ] && [ ! -f "$W/int.tnw" ] &&
+    $T texgan-train "$W/noise.png" -o "$W/int.tnw" --iters 1 --resume $TG > "$W/int2.txt" 2>&1 && grep -q "resumed at" "$W/int2.txt"; then ok;
+else bad "texgan-train Ctrl-C (rc $rc): $(head -c 400 "$W/int.txt")"; fi
 # a model says what it is; a checkpoint too; a model from before metadata still reads
 if $T info "$W/tg.tnw" > "$W/tgi.txt" 2>&1 && grep -q "method: texgan" "$W/tgi.txt" && grep -q "iterations: 4" "$W/tgi.txt" &&
     grep -q "example: 96x64x1:" "$W/tgi.txt" && grep -q "kind: model" "$W/tgi.txt" &&

@@ -14,6 +14,7 @@
 #include <errno.h>
 #include <limits.h>
 #include <stdarg.h>
+#include <signal.h>
 #if !defined(_WIN32)
 #include <unistd.h>
 #endif
@@ -45,10 +46,21 @@ static int usage_error(const char *cmd, const char *fmt, ...)
 /* Progress: a bar with ETA when stderr is a terminal, otherwise a plain line every ~10 %. */
 typedef struct progress_state { double t0; int tty; int last_decile; char stage[64]; } progress_state;
 
+/* Ctrl-C asks the running operation to stop at its next progress report (training then saves
+   its checkpoint first, so `--resume` continues); a second Ctrl-C kills at once. */
+static volatile sig_atomic_t g_interrupted;
+
+static void on_interrupt(int sig)
+{
+    g_interrupted = 1;
+    signal(sig, SIG_DFL);
+}
+
 static int cli_progress(void *user, const char *stage, double f)
 {
     progress_state *p = (progress_state *)user;
     double el;
+    if (g_interrupted) return 1;
     if (strncmp(p->stage, stage, sizeof p->stage - 1) != 0) {
         snprintf(p->stage, sizeof p->stage, "%s", stage);
         p->t0 = tn_time_seconds();
@@ -82,6 +94,7 @@ static void install_progress(void)
 #endif
     g_progress.last_decile = -1;
     tn_set_progress(cli_progress, &g_progress);
+    signal(SIGINT, on_interrupt);
 }
 
 /* ---- option parser ----------------------------------------------------------------------- */
@@ -1041,6 +1054,11 @@ static int run_texgan_train(void)
     }
     st = tn_texgan_train(&model, &ex, &a->o, &s);
     tn_image_free(&ex);
+    if (st == TN_ERR_CANCELLED) {
+        fprintf(stderr, "terrainnet texgan-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
+                        "command with --resume to continue\n", s.iterations, a->ckpt);
+        return 130;
+    }
     if (st) return fail_status(st);
     st = tn_texgan_save(&model, a->out);
     if (!st)
