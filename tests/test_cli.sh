@@ -12,7 +12,7 @@ bad()  { echo "FAIL test_cli: $1"; fail=$((fail + 1)); }
 skipped() { echo "skipped test_cli: $1"; skip=$((skip + 1)); }
 
 # every subcommand answers --help with exit 0 and a usage line
-for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps; do
+for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps export; do
     if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
 done
 if $T --help | grep -q commands; then ok; else bad "--help"; fi
@@ -41,6 +41,7 @@ style --content --style -o --iters --optimizer --weights --size --levels --seed 
 texgan-train -o --minutes --iters --resume --checkpoint --checkpoint-seconds --normal --seed --patch --batch --gen-width --disc-width --disc-layers --stages --scale --augment --local --global --periodic --feat-weight --nearest
 texgan-synth --size -o --seed --colour-correct
 detail-maps -o --size --seed --factor --sigma --no-colour --compose --preview --dem
+export --to -o --spacing --z-scale --step --texture --preview-texture
 EOF
 if $T noise --help | grep -q -- "--size N \[M\] .*(default: 512)" && $T render --help | grep -q -- "-o, --output OUT.png .*(required)"; then ok;
 else bad "help shows defaults and required options"; fi
@@ -64,7 +65,7 @@ expect_usage() { # name, grep pattern (fixed string), command...
     "$@" > "$W/out.txt" 2>&1; rc=$?
     if [ $rc -eq 2 ] && grep -qF -- "$pat" "$W/out.txt"; then ok; else bad "$name (rc $rc): $(head -c 300 "$W/out.txt")"; fi
 }
-for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps; do
+for c in info convert metrics render noise sketch sketch-random align extract realism style texgan-train texgan-synth detail-maps export; do
     expect_usage "$c unknown option" "terrainnet $c: unknown option --no-such-option" $T $c --no-such-option
 done
 expect_usage "missing value" "noise: missing value for --seed S" $T noise -o "$W/x.png" --seed
@@ -198,6 +199,16 @@ wait $pid; rc=$?
 if [ $rc -eq 130 ] && grep -q "interrupted after" "$W/int.txt" && [ -f "$W/int.tnw.ckpt" ] && [ ! -f "$W/int.tnw" ] &&
     $T texgan-train "$W/noise.png" -o "$W/int.tnw" --iters 1 --resume $TG > "$W/int2.txt" 2>&1 && grep -q "resumed at" "$W/int2.txt"; then ok;
 else bad "texgan-train Ctrl-C (rc $rc): $(head -c 400 "$W/int.txt")"; fi
+# meshes: glb (valid by the Khronos validator when it is installed: `.ci/run` puts it in
+# build/gv) and obj with its material
+if $T export "$W/noise.png" --to glb -o "$W/m.glb" --spacing 30 --preview-texture > /dev/null &&
+    $T export "$W/noise.png" --to obj -o "$W/m.obj" --step 4 --texture "$W/noise.png" > /dev/null &&
+    [ -f "$W/m.mtl" ] && [ -f "$W/m.png" ] && [ "$(grep -c '^f ' "$W/m.obj")" -eq $((2 * 24 * 16)) ]; then ok; else bad "export glb/obj"; fi
+expect_usage "export without --to" "needs --to" $T export "$W/noise.png" -o "$W/m.glb"
+if command -v node > /dev/null && [ -d build/gv/node_modules/gltf-validator ]; then
+    if NODE_PATH=build/gv/node_modules node tests/gltf_validate.js "$W/m.glb" > "$W/gv.txt" 2>&1 && grep -q "errors 0 warnings 0" "$W/gv.txt"; then ok;
+    else bad "glTF validator: $(head -c 400 "$W/gv.txt")"; fi
+else skipped "glTF validator not installed (npm install --prefix build/gv gltf-validator)"; fi
 # a model says what it is; a checkpoint too; a model from before metadata still reads
 if $T info "$W/tg.tnw" > "$W/tgi.txt" 2>&1 && grep -q "method: texgan" "$W/tgi.txt" && grep -q "iterations: 4" "$W/tgi.txt" &&
     grep -q "example: 96x64x1:" "$W/tgi.txt" && grep -q "kind: model" "$W/tgi.txt" &&

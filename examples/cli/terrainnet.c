@@ -544,6 +544,43 @@ static int run_render(void)
 static const cli_command render_cmd = {"render", CLI_CMD(render), "hillshaded colour preview or 3D view of a DEM",
     "Writes a preview: hypsometric colours times a hillshade (default), or with --3d a perspective view of the terrain."};
 
+/* ---- export ------------------------------------------------------------------------------ */
+
+static struct export_args { const char *in, *out, *texture; int to, drape; tn_mesh_opts mo; } export_arg;
+static const cli_opt export_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &export_arg.in, NULL, 0, 0, NULL, "heightmap to export (heights in metres when the file records them)", NULL},
+    {"to", 0, ARG_CHOICE, REQ, &export_arg.to, NULL, 0, 0, "glb|obj", "glTF 2.0 binary mesh, or Wavefront OBJ (+ .mtl and .png with a texture)", NULL},
+    {"output", 'o', ARG_STR, REQ, &export_arg.out, NULL, 0, 0, "OUT", "file to write", NULL},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
+    {"z-scale", 0, ARG_FLOAT, 0, &export_arg.mo.z_scale, NULL, 0, 0, "F", "height exaggeration", "1"},
+    {"step", 0, ARG_INT, 0, &export_arg.mo.step, NULL, 1, 65536, "N", "keep every N-th sample (grid decimation)", "1"},
+    {"texture", 0, ARG_STR, 0, &export_arg.texture, NULL, 0, 0, "IMG", "colour image draped over the mesh", NULL},
+    {"preview-texture", 0, ARG_FLAG, 0, &export_arg.drape, NULL, 0, 0, NULL, "drape the DEM's own hillshaded colour preview", NULL},
+};
+
+static int run_export(void)
+{
+    struct export_args *a = &export_arg;
+    tn_image dem = {0, 0, 0, NULL}, tex = {0, 0, 0, NULL};
+    tn_status st;
+    if (a->texture && a->drape) return usage_error("export", "--texture and --preview-texture exclude each other");
+    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
+    else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
+    if (!st) {
+        a->mo.texture = tex.data ? &tex : NULL;
+        st = a->to == 0 ? tn_export_glb(&dem, a->out, &a->mo) : tn_export_obj(&dem, a->out, &a->mo);
+    }
+    if (!st) printf("wrote %s (%d x %d samples, step %d)\n", a->out, dem.width, dem.height, a->mo.step > 0 ? a->mo.step : 1);
+    tn_image_free(&dem);
+    tn_image_free(&tex);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command export_cmd = {"export", CLI_CMD(export), "a DEM as a mesh for engines and 3D tools (glb, obj)",
+    "Writes the DEM as a regular grid mesh in metres (y up; x east, z south) with normals and UVs: a glTF 2.0 binary (.glb, "
+    "the texture embedded) or an OBJ (with <stem>.mtl and <stem>.png when textured)."};
+
 /* ---- noise ------------------------------------------------------------------------------- */
 
 static struct noise_args {
@@ -1201,7 +1238,7 @@ static const cli_command detail_maps_cmd = {"detail-maps", CLI_CMD(detail_maps),
 
 static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
-    &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd,
+    &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &export_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 

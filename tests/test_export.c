@@ -1,0 +1,190 @@
+/* test_export.c - @@export: .glb structure (header, chunks, accessors, bounds), geometry
+   (normals up, counter-clockwise triangles seen from above, decimation keeps the last sample),
+   OBJ counts and its material files, bad input. Validity by the Khronos glTF validator is
+   checked in test_cli.sh when the validator is installed. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+static uint8_t *slurp(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    uint8_t *b;
+    long len;
+    *n = 0;
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    len = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    b = (uint8_t *)malloc((size_t)len + 1);
+    if (b) *n = fread(b, 1, (size_t)len, f);
+    if (b) b[*n] = 0;
+    fclose(f);
+    return b;
+}
+
+static uint32_t le32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
+
+static float lef(const uint8_t *p)
+{
+    uint32_t u = le32(p);
+    float f;
+    memcpy(&f, &u, 4);
+    return f;
+}
+
+/* A tilted plane with a bump: heights rise to the east, so every normal leans west. */
+static tn_image slope_dem(int w, int h)
+{
+    tn_image d = {0, 0, 0, NULL};
+    int x, y;
+    if (tn_image_create(&d, w, h, 1)) return d;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) TN_PIXEL(&d, x, y, 0) = 100.0f + 2.0f * (float)x + 0.5f * (float)((x * 7 + y * 3) % 5);
+    return d;
+}
+
+/* Reads the .glb's JSON count of accessor `i` (the n-th "count":). */
+static long json_count(const char *js, int i)
+{
+    const char *p = js;
+    int k;
+    for (k = 0; k <= i; k++) {
+        p = strstr(p, "\"count\":");
+        if (!p) return -1;
+        p += 8;
+    }
+    return atol(p);
+}
+
+TN_TEST(glb_structure_and_geometry)
+{
+    const char *path = tn_test_tmp_path("export", "plane.glb");
+    tn_image dem = slope_dem(10, 7), tex = {0, 0, 0, NULL};
+    tn_mesh_opts o;
+    uint8_t *b;
+    size_t n, i;
+    uint32_t jlen, blen;
+    const uint8_t *bin;
+    char *js;
+    long nv, ni;
+    int up = 1, ccw = 1;
+    memset(&o, 0, sizeof o);
+    o.dx = 30.0f;
+    o.step = 3; /* samples 0 3 6 9 across, 0 3 6 down: 4 x 3 vertices */
+    TN_CHECK(tn_image_create(&tex, 5, 4, 3) == TN_OK);
+    o.texture = &tex;
+    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_OK);
+    b = slurp(path, &n);
+    TN_CHECK(b && n > 20 && !memcmp(b, "glTF", 4) && le32(b + 4) == 2 && le32(b + 8) == n);
+    if (!b || n < 28) return;
+    jlen = le32(b + 12);
+    TN_CHECK(!memcmp(b + 16, "JSON", 4) && jlen % 4 == 0);
+    blen = le32(b + 20 + jlen);
+    TN_CHECK(!memcmp(b + 24 + jlen, "BIN\0", 4) && blen % 4 == 0 && 28 + jlen + blen == n);
+    js = (char *)malloc(jlen + 1);
+    memcpy(js, b + 20, jlen);
+    js[jlen] = 0;
+    bin = b + 28 + jlen;
+    nv = json_count(js, 0);
+    ni = json_count(js, 3);
+    TN_CHECK(nv == 12 && ni == 3 * 2 * 6);
+    TN_CHECK(strstr(js, "\"mimeType\":\"image/png\"") != NULL && strstr(js, "\"baseColorTexture\"") != NULL);
+    TN_CHECK(strstr(js, "\"max\":[270,") != NULL); /* the last column is kept: 9 * 30 m */
+    if (nv == 12 && ni == 36) {
+        const uint8_t *pos = bin, *nrm = bin + 12 * 12, *idx = bin + 12 * 12 * 2 + 12 * 8;
+        TN_CHECK(lef(pos + 12 * 11) == 270.0f && lef(pos + 12 * 11 + 8) == 180.0f && lef(pos + 12 * 11 + 4) == TN_PIXEL(&dem, 9, 6, 0));
+        for (i = 0; i < 12; i++) {
+            float nx = lef(nrm + 12 * i), ny = lef(nrm + 12 * i + 4), nz = lef(nrm + 12 * i + 8);
+            if (!(ny > 0 && nx < 0 && fabsf(nx * nx + ny * ny + nz * nz - 1.0f) < 1e-5f)) up = 0;
+        }
+        for (i = 0; i < 12; i++) { /* (b - a) x (c - a) must point up: counter-clockwise from above */
+            const uint8_t *a = pos + 12 * le32(idx + 12 * i), *bb = pos + 12 * le32(idx + 12 * i + 4), *c = pos + 12 * le32(idx + 12 * i + 8);
+            float ux = lef(bb) - lef(a), uz = lef(bb + 8) - lef(a + 8), vx = lef(c) - lef(a), vz = lef(c + 8) - lef(a + 8);
+            if (!(uz * vx - ux * vz > 0)) ccw = 0;
+        }
+        TN_CHECK(up);
+        TN_CHECK(ccw);
+    }
+    free(js);
+    free(b);
+    tn_image_free(&dem);
+    tn_image_free(&tex);
+    remove(path);
+}
+
+TN_TEST(obj_counts_and_material)
+{
+    const char *path = tn_test_tmp_path("export", "mesh.obj");
+    const char *mtl = tn_test_tmp_path("export", "mesh.mtl"), *png = tn_test_tmp_path("export", "mesh.png");
+    tn_image dem = slope_dem(6, 5), tex = {0, 0, 0, NULL}, back = {0, 0, 0, NULL};
+    tn_mesh_opts o;
+    uint8_t *b;
+    size_t n;
+    int v = 0, f = 0, vt = 0;
+    char *p;
+    memset(&o, 0, sizeof o);
+    TN_CHECK(tn_image_create(&tex, 3, 2, 1) == TN_OK);
+    tex.data[1] = 1.0f;
+    o.texture = &tex;
+    TN_CHECK(tn_export_obj(&dem, path, &o) == TN_OK);
+    b = slurp(path, &n);
+    TN_CHECK(b != NULL);
+    if (!b) return;
+    for (p = (char *)b; p && *p; p = strchr(p, '\n') ? strchr(p, '\n') + 1 : NULL) {
+        if (!strncmp(p, "v ", 2)) v++;
+        if (!strncmp(p, "vt ", 3)) vt++;
+        if (!strncmp(p, "f ", 2)) f++;
+    }
+    TN_CHECK(v == 30 && vt == 30 && f == 5 * 4 * 2);
+    TN_CHECK(strstr((char *)b, "mtllib ") != NULL && strstr((char *)b, "usemtl terrain") != NULL);
+    free(b);
+    b = slurp(mtl, &n);
+    TN_CHECK(b && strstr((char *)b, "map_Kd ") != NULL);
+    free(b);
+    TN_CHECK(tn_image_load(png, &back, NULL) == TN_OK && back.width == 3 && back.channels == 3 && back.data[3] == 1.0f);
+    tn_image_free(&back);
+    tn_image_free(&dem);
+    tn_image_free(&tex);
+    remove(path);
+    remove(mtl);
+    remove(png);
+}
+
+TN_TEST(bad_input)
+{
+    const char *path = tn_test_tmp_path("export", "bad.glb");
+    tn_image dem = slope_dem(4, 4), tiny = slope_dem(1, 5), tex = {0, 0, 0, NULL};
+    tn_mesh_opts o;
+    FILE *f;
+    memset(&o, 0, sizeof o);
+    remove(path);
+    TN_CHECK(tn_export_glb(&tiny, path, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_export_glb(&dem, "", NULL) == TN_ERR_INVALID_ARG);
+    o.z_scale = INFINITY;
+    TN_CHECK(tn_export_obj(&dem, path, &o) == TN_ERR_INVALID_ARG);
+    o.z_scale = 0;
+    o.step = 70000;
+    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_INVALID_ARG);
+    o.step = 0;
+    TN_CHECK(tn_image_create(&tex, 2, 2, 2) == TN_OK);
+    o.texture = &tex;
+    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_SHAPE);
+    o.texture = NULL;
+    dem.data[5] = NAN;
+    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN") != NULL);
+    f = fopen(path, "rb");
+    TN_CHECK(f == NULL); /* nothing written on failure */
+    if (f) fclose(f);
+    tn_image_free(&dem);
+    tn_image_free(&tiny);
+    tn_image_free(&tex);
+}
+
+int main(void)
+{
+    TN_RUN(glb_structure_and_geometry);
+    TN_RUN(obj_counts_and_material);
+    TN_RUN(bad_input);
+    return tn_test_summary("test_export");
+}
