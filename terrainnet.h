@@ -74,7 +74,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@render    previews: hillshaded colour map and 3D perspective view
-    @@export    meshes for engines and 3D tools: glTF 2.0 binary (.glb), OBJ
+    @@export    for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes, normal maps, Unity RAW
 */
 #ifndef TERRAINNET_H
 #define TERRAINNET_H
@@ -1319,7 +1319,8 @@ typedef struct tn_view_opts {
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out);
 
 /* ============================================================================================
-   @@export  heightfields for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes
+   @@export  heightfields for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes,
+   normal maps, Unity terrain RAW
    A regular grid mesh of the DEM in metres: x east = column * dx, y up = height * z_scale,
    z south = row * dy (glTF is y-up and right-handed), two triangles per cell wound
    counter-clockwise seen from above, smooth normals from central differences of the mesh,
@@ -1341,6 +1342,16 @@ typedef struct tn_mesh_opts {
    TN_MAX_ALLOC bytes with TN_ERR_TOO_LARGE. opts may be NULL. */
 TN_API tn_status tn_export_glb(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
 TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
+
+/* Normal map of the DEM as RGB in [0, 1] (n / 2 + 0.5, n from tn_image_normals): red = x east,
+   blue = z up, green = y north with directx 0 (OpenGL, "Y+") or y south with directx 1
+   (DirectX, "Y-"). Save it as an 8-bit PNG for an engine. */
+TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out);
+/* Unity terrain RAW: size x size 16-bit little-endian codes, size = 2^n + 1 (33..4097; 0 = the
+   smallest not below the DEM's larger side), the DEM resampled bicubic to it when its size
+   differs; codes 0..65535 span the DEM's range, returned in *lo and *hi (may be NULL) for the
+   terrain's height setting. Written atomically. */
+TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi);
 
 #ifdef __cplusplus
 }
@@ -17010,6 +17021,75 @@ TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_m
     TN_FREE(t.s);
     TN_FREE(stem);
     tn__mesh_free(&m);
+    return st;
+}
+
+TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out)
+{
+    tn_image n = {0, 0, 0, NULL};
+    size_t i, np;
+    float lo, hi;
+    tn_status st;
+    TN_ASSERT(out);
+    if (dem && dem->data && tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "normal map: the DEM holds NaN/Inf");
+    if ((st = tn_image_normals(&n, dem, dx, dy, z_scale))) return st;
+    np = (size_t)n.width * n.height;
+    for (i = 0; i < np; i++) {
+        float *p = n.data + 3 * i;
+        if (directx) p[1] = -p[1];
+        p[0] = 0.5f * p[0] + 0.5f;
+        p[1] = 0.5f * p[1] + 0.5f;
+        p[2] = 0.5f * p[2] + 0.5f;
+    }
+    *out = n;
+    return TN_OK;
+}
+
+TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi)
+{
+    tn_image r = {0, 0, 0, NULL};
+    const tn_image *src = dem;
+    uint8_t *buf;
+    float a, b;
+    size_t i, np;
+    tn_status st = TN_OK;
+    int big;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "unity raw: empty path");
+    if (!dem || !dem->data || dem->width < 2 || dem->height < 2) return tn__fail(TN_ERR_EMPTY, "%s: the DEM must be at least 2 x 2", path);
+    big = dem->width > dem->height ? dem->width : dem->height;
+    if (size == 0)
+        for (size = 33; size < big && size < 4097; size = 2 * size - 1) {}
+    if (size < 33 || size > 4097 || ((size - 1) & (size - 2)) != 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: Unity RAW size %d is not 2^n + 1 in 33..4097", path, size);
+    if (tn_image_range(dem, &a, &b)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
+    if (dem->width != size || dem->height != size || dem->channels != 1) {
+        tn_image one = {0, 0, 0, NULL};
+        if (dem->channels != 1) { /* channel 0 is the height */
+            if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
+            np = (size_t)dem->width * dem->height;
+            for (i = 0; i < np; i++) one.data[i] = dem->data[i * dem->channels];
+        }
+        st = tn_image_resize(&r, dem->channels != 1 ? &one : dem, size, size, TN_RESIZE_BICUBIC);
+        tn_image_free(&one);
+        if (st) return st;
+        src = &r;
+    }
+    np = (size_t)size * size;
+    if (!(buf = (uint8_t *)tn__alloc(2 * np))) {
+        tn_image_free(&r);
+        return tn__fail_context(TN_ERR_OUT_OF_MEMORY, path);
+    }
+    for (i = 0; i < np; i++) { /* bicubic may overshoot the range a little: clamped */
+        double t = b > a ? ((double)src->data[i] - a) / ((double)b - a) : 0.0;
+        unsigned c = (unsigned)(65535.0 * (t < 0 ? 0 : t > 1 ? 1 : t) + 0.5);
+        buf[2 * i] = (uint8_t)c;
+        buf[2 * i + 1] = (uint8_t)(c >> 8);
+    }
+    st = tn__io_write_atomic(path, buf, 2 * np);
+    TN_FREE(buf);
+    tn_image_free(&r);
+    if (!st && lo) *lo = a;
+    if (!st && hi) *hi = b;
     return st;
 }
 

@@ -41,7 +41,7 @@ style --content --style -o --iters --optimizer --weights --size --levels --seed 
 texgan-train -o --minutes --iters --resume --checkpoint --checkpoint-seconds --normal --seed --patch --batch --gen-width --disc-width --disc-layers --stages --scale --augment --local --global --periodic --feat-weight --nearest
 texgan-synth --size -o --seed --colour-correct
 detail-maps -o --size --seed --factor --sigma --no-colour --compose --preview --dem
-export --to -o --spacing --z-scale --step --texture --preview-texture
+export --to -o --spacing --z-scale --step --texture --preview-texture --raw-size
 EOF
 if $T noise --help | grep -q -- "--size N \[M\] .*(default: 512)" && $T render --help | grep -q -- "-o, --output OUT.png .*(required)"; then ok;
 else bad "help shows defaults and required options"; fi
@@ -205,6 +205,10 @@ if $T export "$W/noise.png" --to glb -o "$W/m.glb" --spacing 30 --preview-textur
     $T export "$W/noise.png" --to obj -o "$W/m.obj" --step 4 --texture "$W/noise.png" > /dev/null &&
     [ -f "$W/m.mtl" ] && [ -f "$W/m.png" ] && [ "$(grep -c '^f ' "$W/m.obj")" -eq $((2 * 24 * 16)) ]; then ok; else bad "export glb/obj"; fi
 expect_usage "export without --to" "needs --to" $T export "$W/noise.png" -o "$W/m.glb"
+if $T export "$W/noise.png" --to normal-dx -o "$W/nm.png" --spacing 30 > /dev/null && $T info "$W/nm.png" | grep -q "channels: 3" &&
+    $T export "$W/noise.png" --to unity-raw -o "$W/u.raw" > "$W/u.txt" && [ "$(wc -c < "$W/u.raw")" -eq $((2 * 129 * 129)) ] &&
+    grep -q "set the Unity terrain height" "$W/u.txt"; then ok; else bad "export normal map / unity raw"; fi
+expect_usage "export unity-raw bad size" "--raw-size" $T export "$W/noise.png" --to unity-raw -o "$W/u.raw" --raw-size 20
 if command -v node > /dev/null && [ -d build/gv/node_modules/gltf-validator ]; then
     if NODE_PATH=build/gv/node_modules node tests/gltf_validate.js "$W/m.glb" > "$W/gv.txt" 2>&1 && grep -q "errors 0 warnings 0" "$W/gv.txt"; then ok;
     else bad "glTF validator: $(head -c 400 "$W/gv.txt")"; fi

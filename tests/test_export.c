@@ -1,6 +1,7 @@
 /* test_export.c - @@export: .glb structure (header, chunks, accessors, bounds), geometry
    (normals up, counter-clockwise triangles seen from above, decimation keeps the last sample),
-   OBJ counts and its material files, bad input. Validity by the Khronos glTF validator is
+   OBJ counts and its material files, bad input, normal maps (OpenGL vs DirectX green), Unity
+   RAW (size rule, full code range). Validity by the Khronos glTF validator is
    checked in test_cli.sh when the validator is installed. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -181,10 +182,65 @@ TN_TEST(bad_input)
     tn_image_free(&tex);
 }
 
+TN_TEST(normal_maps_and_unity_raw)
+{
+    const char *path = tn_test_tmp_path("export", "t.raw");
+    tn_image dem = slope_dem(33, 33), small = slope_dem(10, 7), gl = {0, 0, 0, NULL}, dx = {0, 0, 0, NULL};
+    uint8_t *b;
+    size_t n, i;
+    float lo = 0, hi = 0, mn, mx;
+    unsigned cmin = 65535, cmax = 0;
+    int mirrored = 1;
+    TN_CHECK(tn_normal_map(&dem, 1, 1, 1, 0, &gl) == TN_OK && tn_normal_map(&dem, 1, 1, 1, 1, &dx) == TN_OK);
+    TN_CHECK(gl.channels == 3 && TN_PIXEL(&gl, 5, 5, 0) < 0.5f && TN_PIXEL(&gl, 5, 5, 2) > 0.5f); /* leans west, up */
+    for (i = 0; i < (size_t)33 * 33; i++)
+        if (fabsf(gl.data[3 * i + 1] + dx.data[3 * i + 1] - 1.0f) > 1e-6f || gl.data[3 * i] != dx.data[3 * i]) mirrored = 0;
+    TN_CHECK(mirrored);
+    TN_CHECK(tn_image_range(&gl, &mn, &mx) == 0 && mn >= 0.0f && mx <= 1.0f);
+    TN_CHECK(tn_export_unity_raw(&dem, path, 0, &lo, &hi) == TN_OK); /* 33 x 33 already: no resampling */
+    {
+        FILE *f = fopen(path, "rb");
+        b = (uint8_t *)malloc(4 * 33 * 33);
+        n = f && b ? fread(b, 1, 4 * 33 * 33, f) : 0;
+        if (f) fclose(f);
+    }
+    TN_CHECK(n == 2 * 33 * 33);
+    for (i = 0; i < n / 2; i++) {
+        unsigned c = (unsigned)b[2 * i] | ((unsigned)b[2 * i + 1] << 8);
+        if (c < cmin) cmin = c;
+        if (c > cmax) cmax = c;
+    }
+    TN_CHECK(cmin == 0 && cmax == 65535 && lo == 100.0f && hi > lo);
+    free(b);
+    TN_CHECK(tn_export_unity_raw(&small, path, 0, NULL, NULL) == TN_OK); /* resampled to 33 */
+    {
+        FILE *f = fopen(path, "rb");
+        long len = -1;
+        if (f) {
+            fseek(f, 0, SEEK_END);
+            len = ftell(f);
+            fclose(f);
+        }
+        TN_CHECK(len == 2 * 33 * 33);
+    }
+    TN_CHECK(tn_export_unity_raw(&dem, path, 100, NULL, NULL) == TN_ERR_INVALID_ARG); /* not 2^n + 1 */
+    TN_CHECK(tn_export_unity_raw(&dem, path, 8193, NULL, NULL) == TN_ERR_INVALID_ARG);
+    dem.data[7] = NAN;
+    TN_CHECK(tn_export_unity_raw(&dem, path, 0, NULL, NULL) == TN_ERR_NUMERIC);
+    tn_image_free(&gl);
+    TN_CHECK(tn_normal_map(&dem, 1, 1, 1, 0, &gl) == TN_ERR_NUMERIC && gl.data == NULL);
+    tn_image_free(&gl);
+    tn_image_free(&dx);
+    tn_image_free(&dem);
+    tn_image_free(&small);
+    remove(path);
+}
+
 int main(void)
 {
     TN_RUN(glb_structure_and_geometry);
     TN_RUN(obj_counts_and_material);
     TN_RUN(bad_input);
+    TN_RUN(normal_maps_and_unity_raw);
     return tn_test_summary("test_export");
 }

@@ -546,17 +546,41 @@ static const cli_command render_cmd = {"render", CLI_CMD(render), "hillshaded co
 
 /* ---- export ------------------------------------------------------------------------------ */
 
-static struct export_args { const char *in, *out, *texture; int to, drape; tn_mesh_opts mo; } export_arg;
+static struct export_args { const char *in, *out, *texture; int to, drape, raw_size; tn_mesh_opts mo; } export_arg;
 static const cli_opt export_opts[] = {
     {"DEM", 0, ARG_POS, 0, &export_arg.in, NULL, 0, 0, NULL, "heightmap to export (heights in metres when the file records them)", NULL},
-    {"to", 0, ARG_CHOICE, REQ, &export_arg.to, NULL, 0, 0, "glb|obj", "glTF 2.0 binary mesh, or Wavefront OBJ (+ .mtl and .png with a texture)", NULL},
+    {"to", 0, ARG_CHOICE, REQ, &export_arg.to, NULL, 0, 0, "glb|obj|normal-gl|normal-dx|unity-raw",
+     "glTF 2.0 binary mesh; Wavefront OBJ (+ .mtl and .png with a texture); normal map PNG, OpenGL (green = north) or DirectX "
+     "(green = south); Unity terrain RAW (16-bit, 2^n + 1 square)", NULL},
     {"output", 'o', ARG_STR, REQ, &export_arg.out, NULL, 0, 0, "OUT", "file to write", NULL},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
     {"z-scale", 0, ARG_FLOAT, 0, &export_arg.mo.z_scale, NULL, 0, 0, "F", "height exaggeration", "1"},
     {"step", 0, ARG_INT, 0, &export_arg.mo.step, NULL, 1, 65536, "N", "keep every N-th sample (grid decimation)", "1"},
     {"texture", 0, ARG_STR, 0, &export_arg.texture, NULL, 0, 0, "IMG", "colour image draped over the mesh", NULL},
     {"preview-texture", 0, ARG_FLAG, 0, &export_arg.drape, NULL, 0, 0, NULL, "drape the DEM's own hillshaded colour preview", NULL},
+    {"raw-size", 0, ARG_INT, 0, &export_arg.raw_size, NULL, 33, 4097, "N", "unity-raw: side 2^n + 1 (the DEM is resampled to it)",
+     "the smallest 2^n + 1 not below the DEM's larger side"},
 };
+
+/* The normal map and Unity RAW exports: images, not meshes. */
+static tn_status export_image(struct export_args *a, const tn_image *dem)
+{
+    tn_status st;
+    if (a->to == 4) {
+        float lo = 0, hi = 0;
+        if (!(st = tn_export_unity_raw(dem, a->out, a->raw_size, &lo, &hi)))
+            printf("heights: %.6g %.6g (set the Unity terrain height to %.6g m)\n", lo, hi, hi - lo);
+    } else {
+        tn_image n = {0, 0, 0, NULL};
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 8;
+        st = tn_normal_map(dem, a->mo.dx, a->mo.dy, a->mo.z_scale > 0 ? a->mo.z_scale : 1.0f, a->to == 3, &n);
+        if (!st) st = tn_image_save(a->out, &n, &so);
+        tn_image_free(&n);
+    }
+    return st;
+}
 
 static int run_export(void)
 {
@@ -567,19 +591,21 @@ static int run_export(void)
     if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
     if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
     else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
-    if (!st) {
+    if (!st && a->to >= 2) st = export_image(a, &dem);
+    else if (!st) {
         a->mo.texture = tex.data ? &tex : NULL;
         st = a->to == 0 ? tn_export_glb(&dem, a->out, &a->mo) : tn_export_obj(&dem, a->out, &a->mo);
     }
-    if (!st) printf("wrote %s (%d x %d samples, step %d)\n", a->out, dem.width, dem.height, a->mo.step > 0 ? a->mo.step : 1);
+    if (!st) printf("wrote %s (from %d x %d samples)\n", a->out, dem.width, dem.height);
     tn_image_free(&dem);
     tn_image_free(&tex);
     return st ? fail_status(st) : 0;
 }
 
-static const cli_command export_cmd = {"export", CLI_CMD(export), "a DEM as a mesh for engines and 3D tools (glb, obj)",
+static const cli_command export_cmd = {"export", CLI_CMD(export), "a DEM for engines and 3D tools (glb, obj, normal map, Unity RAW)",
     "Writes the DEM as a regular grid mesh in metres (y up; x east, z south) with normals and UVs: a glTF 2.0 binary (.glb, "
-    "the texture embedded) or an OBJ (with <stem>.mtl and <stem>.png when textured)."};
+    "the texture embedded) or an OBJ (with <stem>.mtl and <stem>.png when textured); or as an 8-bit normal map PNG in the "
+    "OpenGL or DirectX convention; or as a Unity terrain RAW."};
 
 /* ---- noise ------------------------------------------------------------------------------- */
 
