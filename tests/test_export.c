@@ -7,23 +7,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-static uint8_t *slurp(const char *path, size_t *n)
-{
-    FILE *f = fopen(path, "rb");
-    uint8_t *b;
-    long len;
-    *n = 0;
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    len = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    b = (uint8_t *)malloc((size_t)len + 1);
-    if (b) *n = fread(b, 1, (size_t)len, f);
-    if (b) b[*n] = 0;
-    fclose(f);
-    return b;
-}
-
 static uint32_t le32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
 
 static float lef(const uint8_t *p)
@@ -76,7 +59,7 @@ TN_TEST(glb_structure_and_geometry)
     TN_CHECK(tn_image_create(&tex, 5, 4, 3) == TN_OK);
     o.texture = &tex;
     TN_CHECK(tn_export_glb(&dem, path, &o) == TN_OK);
-    b = slurp(path, &n);
+    b = tn_test_read_file(path, &n);
     TN_CHECK(b && n > 20 && !memcmp(b, "glTF", 4) && le32(b + 4) == 2 && le32(b + 8) == n);
     if (!b || n < 28) return;
     jlen = le32(b + 12);
@@ -129,7 +112,7 @@ TN_TEST(obj_counts_and_material)
     tex.data[1] = 1.0f;
     o.texture = &tex;
     TN_CHECK(tn_export_obj(&dem, path, &o) == TN_OK);
-    b = slurp(path, &n);
+    b = tn_test_read_file(path, &n);
     TN_CHECK(b != NULL);
     if (!b) return;
     for (p = (char *)b; p && *p; p = strchr(p, '\n') ? strchr(p, '\n') + 1 : NULL) {
@@ -140,7 +123,7 @@ TN_TEST(obj_counts_and_material)
     TN_CHECK(v == 30 && vt == 30 && f == 5 * 4 * 2);
     TN_CHECK(strstr((char *)b, "mtllib ") != NULL && strstr((char *)b, "usemtl terrain") != NULL);
     free(b);
-    b = slurp(mtl, &n);
+    b = tn_test_read_file(mtl, &n);
     TN_CHECK(b && strstr((char *)b, "map_Kd ") != NULL);
     free(b);
     TN_CHECK(tn_image_load(png, &back, NULL) == TN_OK && back.width == 3 && back.channels == 3 && back.data[3] == 1.0f);

@@ -1147,20 +1147,6 @@ static int tnw_patch(uint8_t *b, size_t n, const char *name, int index, float va
     return 1;
 }
 
-static uint8_t *read_all(const char *path, size_t *n)
-{
-    FILE *f = fopen(path, "rb");
-    uint8_t *b;
-    long len;
-    if (!f) return NULL;
-    fseek(f, 0, SEEK_END);
-    len = ftell(f);
-    fseek(f, 0, SEEK_SET);
-    b = (uint8_t *)malloc((size_t)len + 1);
-    *n = fread(b, 1, (size_t)len, f);
-    fclose(f);
-    return b;
-}
 
 /* Replaces the value of metadata `key` in a version-2 .tnw image (b has room for cap bytes),
    fixing the block length and the CRC. Returns the new size, 0 if the key is not there. */
@@ -1226,7 +1212,7 @@ TN_TEST(test_texgan_checkpoint_fields)
     o.train.resume = 1;
     o.train.checkpoint = bad;
     o.train.max_iters = 2;
-    good = read_all(ck, &n);
+    good = tn_test_read_file(ck, &n);
     TN_CHECK(good != NULL && n > 100);
     for (i = 0; good && i < sizeof meta / sizeof meta[0]; i++) {
         size_t bn;
@@ -1247,7 +1233,7 @@ TN_TEST(test_texgan_checkpoint_fields)
     TN_CHECK(tn_texgan_train(&r, &ex, &o, NULL) == TN_OK); /* the unpatched checkpoint resumes */
     tn_texgan_free(&r);
     free(good);
-    good = tn_test_ref("texgan_v1_checkpoint.tnw") ? read_all(tn_test_ref("texgan_v1_checkpoint.tnw"), &n) : NULL;
+    good = tn_test_ref("texgan_v1_checkpoint.tnw") ? tn_test_read_file(tn_test_ref("texgan_v1_checkpoint.tnw"), &n) : NULL;
     TN_CHECK(good != NULL);
     for (i = 0; good && i < sizeof legacy / sizeof legacy[0]; i++) {
         tn_status st;
@@ -1263,7 +1249,7 @@ TN_TEST(test_texgan_checkpoint_fields)
         free(b);
     }
     free(good);
-    good = read_all(model, &n);
+    good = tn_test_read_file(model, &n);
     TN_CHECK(good != NULL);
     for (i = 0; good && i < sizeof legacy / sizeof legacy[0]; i++) {
         if (strcmp(legacy[i].tensor, "texgan.config") != 0) continue;

@@ -3,21 +3,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-/* A small RGB exemplar: stripes, blobs and noise in [0, 1]. */
-static tn_image make_exemplar(int w, int h, int channels, uint64_t seed)
-{
-    tn_image img = {0, 0, 0, NULL};
-    tn_rng r;
-    int x, y, c;
-    tn_rng_seed(&r, seed, 3);
-    if (tn_image_create(&img, w, h, channels)) return img;
-    for (y = 0; y < h; y++)
-        for (x = 0; x < w; x++)
-            for (c = 0; c < channels; c++)
-                TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
-    return img;
-}
-
 static void tiny_opts(tn_texgan_opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -65,7 +50,7 @@ static double max_abs_diff(const tn_image *a, const tn_image *b)
 
 TN_TEST(training_steps_stay_finite_and_move_the_generator)
 {
-    tn_image ex = make_exemplar(40, 36, 3, 1);
+    tn_image ex = tn_test_exemplar(40, 36, 3, 1);
     tn_texgan m;
     tn_texgan_opts o;
     tn_texgan_stats s;
@@ -91,7 +76,7 @@ TN_TEST(training_steps_stay_finite_and_move_the_generator)
 TN_TEST(checkpoint_resume_continues_identically)
 {
     const char *ck1 = "build/test/texgan_a.ckpt", *ck2 = "build/test/texgan_b.ckpt";
-    tn_image ex = make_exemplar(40, 36, 3, 2);
+    tn_image ex = tn_test_exemplar(40, 36, 3, 2);
     tn_texgan full, part, resumed;
     tn_texgan_opts o;
     tn_texgan_stats s;
@@ -112,7 +97,7 @@ TN_TEST(checkpoint_resume_continues_identically)
     TN_CHECK(!same_params(full.weights, part.weights, 1));
     /* a checkpoint of another channel count is refused */
     {
-        tn_image grey = make_exemplar(40, 36, 1, 2);
+        tn_image grey = tn_test_exemplar(40, 36, 1, 2);
         tn_texgan bad;
         TN_CHECK(tn_texgan_train(&bad, &grey, &o, NULL) == TN_ERR_SHAPE);
         tn_image_free(&grey);
@@ -125,7 +110,7 @@ TN_TEST(checkpoint_resume_continues_identically)
 
 static tn_status trained_tiny_scaled(tn_texgan *m, int channels, int periodic, int scale)
 {
-    tn_image ex = make_exemplar(40, 36, channels, 3);
+    tn_image ex = tn_test_exemplar(40, 36, channels, 3);
     tn_texgan_opts o;
     tn_status st;
     tiny_opts(&o);
@@ -259,7 +244,7 @@ TN_TEST(fast_generator_matches_the_training_graph)
    the same in its fast form: its model files stay usable */
 TN_TEST(nearest_design_still_tiles_exactly)
 {
-    tn_image ex = make_exemplar(40, 36, 3, 3), one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL};
+    tn_image ex = tn_test_exemplar(40, 36, 3, 3), one = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL};
     tn_texgan m;
     tn_texgan_opts o;
     tn_ctx *c = tn_ctx_create();
@@ -295,7 +280,7 @@ TN_TEST(nearest_design_still_tiles_exactly)
 /* the anti-collapse term: real crops of the exemplar score far lower than a flat colour */
 TN_TEST(feature_statistics_separate_real_from_flat)
 {
-    tn_image ex = make_exemplar(64, 64, 3, 6);
+    tn_image ex = tn_test_exemplar(64, 64, 3, 6);
     tn__tg_train s;
     tn_ctx *c = tn_ctx_create();
     tn_tensor *real, *flat, *lr, *lf;
@@ -336,7 +321,7 @@ TN_TEST(feature_statistics_separate_real_from_flat)
 
 TN_TEST(deterministic_for_1_and_2_threads)
 {
-    tn_image ex = make_exemplar(40, 36, 3, 4), s1 = {0, 0, 0, NULL}, s2 = {0, 0, 0, NULL};
+    tn_image ex = tn_test_exemplar(40, 36, 3, 4), s1 = {0, 0, 0, NULL}, s2 = {0, 0, 0, NULL};
     tn_texgan a, b;
     tn_texgan_opts o;
     tiny_opts(&o);
@@ -397,7 +382,7 @@ TN_TEST(model_file_round_trip_and_streamed_files)
 
 TN_TEST(colour_correction_hits_the_target_mean)
 {
-    tn_image a = make_exemplar(30, 20, 3, 5), b = {0, 0, 0, NULL};
+    tn_image a = tn_test_exemplar(30, 20, 3, 5), b = {0, 0, 0, NULL};
     float target[3] = {0.8f, 0.1f, 0.45f}, shift[3];
     size_t i, n = 600;
     int c;
@@ -429,7 +414,7 @@ TN_TEST(colour_correction_hits_the_target_mean)
 
 TN_TEST(detail_texel_equals_whole_image_composer)
 {
-    tn_image ex = make_exemplar(24, 20, 3, 6), synth = make_exemplar(97, 61, 3, 7), comp = {0, 0, 0, NULL};
+    tn_image ex = tn_test_exemplar(24, 20, 3, 6), synth = tn_test_exemplar(97, 61, 3, 7), comp = {0, 0, 0, NULL};
     tn_detail_maps m, l;
     tn_detail_opts o;
     int x, y, c, sizes[3][2] = {{97, 61}, {50, 33}, {130, 70}}, k, bad = 0;
@@ -497,7 +482,7 @@ static double wrap_step_ratio(const tn_image *h)
    the stored high map must not; the blend keeps the energy of uncorrelated detail. */
 TN_TEST(high_map_tiles_seamlessly)
 {
-    tn_image ex = {0, 0, 0, NULL}, blur = {0, 0, 0, NULL}, synth = make_exemplar(64, 64, 1, 3), t = {0, 0, 0, NULL};
+    tn_image ex = {0, 0, 0, NULL}, blur = {0, 0, 0, NULL}, synth = tn_test_exemplar(64, 64, 1, 3), t = {0, 0, 0, NULL};
     tn_detail_maps m;
     tn_detail_opts o;
     double e_raw = 0, e_map = 0;
@@ -555,7 +540,7 @@ TN_TEST(high_map_tiles_seamlessly)
 TN_TEST(detail_maps_from_model_match_the_image_path)
 {
     tn_texgan m;
-    tn_image ex = make_exemplar(40, 36, 3, 3), synth = {0, 0, 0, NULL};
+    tn_image ex = tn_test_exemplar(40, 36, 3, 3), synth = {0, 0, 0, NULL};
     tn_detail_maps a, b;
     TN_CHECK(trained_tiny(&m, 3, 0) == TN_OK);
     TN_CHECK(tn_texgan_synthesize(&m, 11, 90, 70, &synth) == TN_OK);
@@ -572,8 +557,8 @@ TN_TEST(detail_maps_from_model_match_the_image_path)
 
 TN_TEST(bad_inputs_fail_cleanly)
 {
-    tn_image ex = make_exemplar(40, 36, 3, 8), empty = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = make_exemplar(10, 10, 3, 1);
-    tn_image wide = make_exemplar(20, 20, 9, 1);
+    tn_image ex = tn_test_exemplar(40, 36, 3, 8), empty = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = tn_test_exemplar(10, 10, 3, 1);
+    tn_image wide = tn_test_exemplar(20, 20, 9, 1);
     tn_texgan m, l;
     tn_texgan_opts o;
     tn_detail_maps dm;

@@ -362,20 +362,6 @@ TN_TEST(texgan_refuses_other_methods)
 
 /* ---- texgan files written before @@train (tests/refs, made by the code at 35647d3) ---- */
 
-static tn_image refs_exemplar(void)
-{
-    tn_image img = {0, 0, 0, NULL};
-    tn_rng r;
-    int x, y, c;
-    tn_rng_seed(&r, 1, 3);
-    if (tn_image_create(&img, 40, 36, 3)) return img;
-    for (y = 0; y < 36; y++)
-        for (x = 0; x < 40; x++)
-            for (c = 0; c < 3; c++)
-                TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
-    return img;
-}
-
 static void refs_opts(tn_texgan_opts *o)
 {
     memset(o, 0, sizeof *o);
@@ -410,7 +396,7 @@ static double gen_diff(const tn_texgan *a, const tn_texgan *b)
 TN_TEST(texgan_v1_files_load_and_reproduce)
 {
     const char *ck = tn_test_tmp_path("train", "v1.ckpt");
-    tn_image ex = refs_exemplar();
+    tn_image ex = tn_test_exemplar(40, 36, 3, 1);
     tn_texgan old, fresh, resumed;
     tn_texgan_opts o;
     FILE *in, *out;

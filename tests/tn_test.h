@@ -50,6 +50,10 @@ static const char *tn_test_cur_name;
 
 static const char *tn_test_data(const char *rel);
 static const char *tn_test_ref(const char *rel);
+static unsigned char *tn_test_read_file(const char *path, size_t *n);
+#ifdef TERRAINNET_H
+static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
+#endif
 
 /* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
    four paths can be in use at once. */
@@ -68,6 +72,10 @@ static int tn_test_summary(const char *file)
     (void)tn_test_data; /* not every test file reads shared data or writes scratch files */
     (void)tn_test_tmp_path;
     (void)tn_test_ref;
+    (void)tn_test_read_file;
+#ifdef TERRAINNET_H
+    (void)tn_test_exemplar;
+#endif
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
 }
@@ -93,4 +101,38 @@ static const char *tn_test_data(const char *rel)
     fclose(f);
     return buf;
 }
+
+/* A whole file in a malloc'ed buffer (NUL-terminated, *n bytes), or NULL. */
+static unsigned char *tn_test_read_file(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    unsigned char *b = NULL;
+    long len;
+    *n = 0;
+    if (!f) return NULL;
+    if (fseek(f, 0, SEEK_END) == 0 && (len = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0 && (b = (unsigned char *)malloc((size_t)len + 1))) {
+        *n = fread(b, 1, (size_t)len, f);
+        b[*n] = 0;
+    }
+    fclose(f);
+    return b;
+}
+
+#ifdef TERRAINNET_H
+/* The texture-GAN tests' exemplar: stripes, blobs and noise in [0, 1] (also the recipe of
+   tests/refs/texgan_v1_*.tnw, made with w 40, h 36, 3 channels, seed 1). */
+static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed)
+{
+    tn_image img = {0, 0, 0, NULL};
+    tn_rng r;
+    int x, y, c;
+    tn_rng_seed(&r, seed, 3);
+    if (tn_image_create(&img, w, h, channels)) return img;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++)
+            for (c = 0; c < channels; c++)
+                TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
+    return img;
+}
+#endif
 #endif
