@@ -1,0 +1,252 @@
+/* bench_gnn: the sketch-to-terrain graph network (paper 000, sections 4.2-5.4) on one region of
+   ../shared/data: train on a 128 x 128 crop for a fixed budget, then
+   - reconstruction: generate from the crop's own extracted network, SSIM / PSNR to the crop;
+   - neighbours (paper Table 1): each of the 8 neighbouring 128 crops generated from its own
+     extracted network, mean SSIM / PSNR, next to two baselines on the same sketch pixels: the
+     constant mean of their heights and their membrane (Laplace) interpolation; at the default
+     extraction threshold (dense sketch) and at 200 and 500 cells (sparse sketches).
+   The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
+   8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
+   Usage: bench_gnn [region] [minutes] [threads]   (defaults alps_montblanc 3 2)
+   Prints `name: value unit` lines. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define SIDE 128
+
+static const char *data_dir(void)
+{
+    const char *d = getenv("TN_DATA");
+    return d && d[0] ? d : "../shared/data";
+}
+
+/* h_at_0 and h_at_65535 of <region>_full.png from dem_index.csv. */
+static int height_mapping(const char *region, double *h0, double *h1)
+{
+    char path[512], line[1024], want[256];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/dem_index.csv", data_dir());
+    snprintf(want, sizeof want, "dem/%s/%s_full.png,", region, region);
+    if (!(f = fopen(path, "r"))) return 0;
+    while (fgets(line, sizeof line, f)) {
+        char *p = line;
+        int col;
+        if (strncmp(line, want, strlen(want)) != 0) continue;
+        for (col = 0; col < 7 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+        if (p && sscanf(p, "%lf,%lf", h0, h1) == 2) {
+            fclose(f);
+            return 1;
+        }
+    }
+    fclose(f);
+    return 0;
+}
+
+static int load_metres(const char *region, const char *suffix, double h0, double h1, tn_image *img)
+{
+    char path[512];
+    size_t i;
+    snprintf(path, sizeof path, "%s/dem/%s/%s_%s.png", data_dir(), region, region, suffix);
+    if (tn_image_load(path, img, NULL)) return 0;
+    for (i = 0; i < (size_t)img->width * img->height * img->channels; i++) img->data[i] = (float)(h0 + img->data[i] * (h1 - h0));
+    return 1;
+}
+
+/* Where crop lies in full (exact match), or -1. */
+static int locate(const tn_image *full, const tn_image *crop, int *cx, int *cy)
+{
+    int x, y, u, v;
+    for (y = 0; y + crop->height <= full->height; y++)
+        for (x = 0; x + crop->width <= full->width; x++) {
+            int ok = 1;
+            for (v = 0; v < crop->height && ok; v++)
+                for (u = 0; u < crop->width && ok; u++) ok = TN_PIXEL(full, x + u, y + v, 0) == TN_PIXEL(crop, u, v, 0);
+            if (ok) {
+                *cx = x;
+                *cy = y;
+                return 1;
+            }
+        }
+    return 0;
+}
+
+typedef struct scores { double ssim, psnr; int n; } scores;
+
+static void add(scores *s, const tn_image *ref, const tn_image *img)
+{
+    tn_metrics m;
+    if (tn_compare(ref, img, 0, &m)) return;
+    s->ssim += m.ssim;
+    s->psnr += m.psnr;
+    s->n++;
+}
+
+/* The crop's own network at threshold thr (0 = default); its sketch pixels' share in *cover. */
+static int sketch_of(const tn_image *crop, int thr, tn_contour_set *out, double *cover)
+{
+    tn_extraction ex;
+    tn_extract_opts eo;
+    tn_image r = {0, 0, 0, NULL};
+    size_t i, n = 0;
+    memset(&eo, 0, sizeof eo);
+    eo.threshold = thr;
+    if (tn_extract(crop, &eo, &ex)) return 0;
+    *out = ex.contours;
+    memset(&ex.contours, 0, sizeof ex.contours);
+    tn_extraction_free(&ex);
+    if (!out->count || tn_sketch_rasterise(out, crop->width, crop->height, &r)) return 0;
+    for (i = 0; i < (size_t)r.width * r.height; i++) n += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
+    *cover = (double)n / ((double)r.width * r.height);
+    tn_image_free(&r);
+    return 1;
+}
+
+/* The constant baseline: the mean height of the sketch pixels. */
+static int mean_baseline(const tn_contour_set *sk, int w, int h, tn_image *out)
+{
+    tn_image r = {0, 0, 0, NULL};
+    double s = 0;
+    size_t i, n = 0;
+    if (tn_sketch_rasterise(sk, w, h, &r) || tn_image_create(out, w, h, 1)) return 0;
+    for (i = 0; i < (size_t)w * h; i++)
+        if (r.data[3 * i] > 0 || r.data[3 * i + 1] > 0) { s += r.data[3 * i + 2]; n++; }
+    for (i = 0; i < (size_t)w * h; i++) out->data[i] = (float)(n ? s / (double)n : 0.0);
+    tn_image_free(&r);
+    return 1;
+}
+
+static int progress(void *user, const char *stage, double f)
+{
+    static double last;
+    double t = tn_time_seconds();
+    (void)user;
+    if (t - last > 15.0 || f >= 1.0) {
+        last = t;
+        fprintf(stderr, "  %s %3.0f %% (eta %.0f s)\n", stage, 100.0 * f, tn_progress_eta());
+    }
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    const char *region = argc > 1 ? argv[1] : "alps_montblanc";
+    double minutes = argc > 2 ? atof(argv[2]) : 3.0, h0, h1, t0;
+    int threads = argc > 3 ? atoi(argv[3]) : 2, thr[3] = {0, 200, 500}, cx, cy, d, ti, dx, dy;
+    tn_image full = {0, 0, 0, NULL}, c128 = {0, 0, 0, NULL}, crop = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_gnn model;
+    tn_gnn_opts o;
+    tn_gnn_stats st;
+    tn_gnn_generate_opts go;
+    tn_contour_set sk;
+    double cover;
+    scores rec = {0, 0, 0};
+    if (!(minutes > 0)) minutes = 3.0;
+    tn_set_threads(threads);
+    if (!height_mapping(region, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &c128)) {
+        fprintf(stderr, "bench_gnn: cannot read %s from %s (set TN_DATA)\n", region, data_dir());
+        return 1;
+    }
+    if (!locate(&full, &c128, &cx, &cy) || full.width < 3 * SIDE || full.height < 3 * SIDE) {
+        fprintf(stderr, "bench_gnn: %s_128 not found in %s_full, or the map is under 384 px\n", region, region);
+        return 1;
+    }
+    if (cx < SIDE) cx = SIDE;
+    if (cy < SIDE) cy = SIDE;
+    if (cx + 2 * SIDE > full.width) cx = full.width - 2 * SIDE;
+    if (cy + 2 * SIDE > full.height) cy = full.height - 2 * SIDE;
+    printf("region: %s\n", region);
+    printf("crop: %d %d px (x y of the trained 128 crop in %s_full)\n", cx, cy, region);
+    printf("threads: %d\n", threads);
+    tn_image_crop(&crop, &full, cx, cy, SIDE, SIDE);
+
+    memset(&o, 0, sizeof o);
+    o.train.minutes = minutes;
+    o.train.seed = 1;
+    tn_set_progress(progress, NULL);
+    t0 = tn_time_seconds();
+    if (tn_gnn_train(&crop, &o, &model, &st)) {
+        fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
+        return 1;
+    }
+    tn_set_progress(NULL, NULL);
+    printf("train_minutes: %.2f min\n", (tn_time_seconds() - t0) / 60.0);
+    printf("train_iterations: %ld\n", st.iterations);
+    printf("train_steps_per_s: %.2f steps/s\n", st.seconds_per_iter > 0 ? 1.0 / st.seconds_per_iter : 0.0);
+    printf("train_parts: %d\n", st.parts);
+    printf("train_edges: %d (fixed)\n", st.edges);
+    printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
+    printf("train_loss_ssim: %.4f (1 - SSIM)\n", st.loss_ssim);
+
+    /* reconstruction from the crop's own network */
+    memset(&go, 0, sizeof go);
+    if (!sketch_of(&crop, 0, &sk, &cover)) {
+        fprintf(stderr, "bench_gnn: no network in the crop\n");
+        return 1;
+    }
+    t0 = tn_time_seconds();
+    if (tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) {
+        fprintf(stderr, "bench_gnn: generation failed: %s\n", tn_last_error());
+        return 1;
+    }
+    printf("generate_128_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
+    add(&rec, &crop, &out);
+    printf("recon_ssim: %.4f\n", rec.ssim);
+    printf("recon_psnr: %.2f dB\n", rec.psnr);
+    tn_image_free(&out);
+    rec.ssim = rec.psnr = 0;
+    rec.n = 0;
+    tn_gnn_membrane(&sk, SIDE, SIDE, &out);
+    add(&rec, &crop, &out);
+    printf("recon_membrane_ssim: %.4f\n", rec.ssim);
+    printf("recon_membrane_psnr: %.2f dB\n", rec.psnr);
+    tn_image_free(&out);
+    tn_contour_set_free(&sk);
+
+    /* the 8 neighbours, dense and sparse sketches */
+    for (ti = 0; ti < 3; ti++) {
+        scores g = {0, 0, 0}, mem = {0, 0, 0}, mean = {0, 0, 0};
+        double cov = 0;
+        int nc = 0;
+        for (dy = -1; dy <= 1; dy++)
+            for (dx = -1; dx <= 1; dx++) {
+                tn_image nb = {0, 0, 0, NULL};
+                if (!dx && !dy) continue;
+                tn_image_crop(&nb, &full, cx + dx * SIDE, cy + dy * SIDE, SIDE, SIDE);
+                if (!sketch_of(&nb, thr[ti], &sk, &cover)) {
+                    tn_image_free(&nb);
+                    continue;
+                }
+                cov += cover;
+                nc++;
+                if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&g, &nb, &out);
+                else fprintf(stderr, "  neighbour (%d, %d): %s\n", dx, dy, tn_last_error());
+                tn_image_free(&out);
+                if (!tn_gnn_membrane(&sk, SIDE, SIDE, &out)) add(&mem, &nb, &out);
+                tn_image_free(&out);
+                if (mean_baseline(&sk, SIDE, SIDE, &out)) add(&mean, &nb, &out);
+                tn_image_free(&out);
+                tn_contour_set_free(&sk);
+                tn_image_free(&nb);
+            }
+        d = thr[ti];
+        if (!nc || !g.n || !mem.n || !mean.n) {
+            printf("neighbours_t%d: no sketch\n", d);
+            continue;
+        }
+        printf("neighbours_t%d_sketch_pixels: %.1f %%\n", d, 100.0 * cov / nc);
+        printf("neighbours_t%d_gnn_ssim: %.4f (%d crops)\n", d, g.ssim / g.n, g.n);
+        printf("neighbours_t%d_gnn_psnr: %.2f dB\n", d, g.psnr / g.n);
+        printf("neighbours_t%d_membrane_ssim: %.4f\n", d, mem.ssim / mem.n);
+        printf("neighbours_t%d_membrane_psnr: %.2f dB\n", d, mem.psnr / mem.n);
+        printf("neighbours_t%d_mean_ssim: %.4f\n", d, mean.ssim / mean.n);
+        printf("neighbours_t%d_mean_psnr: %.2f dB\n", d, mean.psnr / mean.n);
+    }
+    tn_gnn_free(&model);
+    tn_image_free(&crop);
+    tn_image_free(&c128);
+    tn_image_free(&full);
+    return 0;
+}

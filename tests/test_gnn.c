@@ -1,0 +1,334 @@
+/* test_gnn.c - @@gnn: the sketch-to-terrain graph network on a small synthetic example (Perlin
+   terrain in metres): training lowers the loss, the membrane baseline, save/load, bit-identical
+   resume, same results for 1 and 2 threads, and bad inputs (empty sketch, no part of 5 px, NaN
+   DEM, flat DEM, another method's model, a checkpoint as a model, damaged files). */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+/* A 40 x 40 Perlin terrain from 1000 to 2000 m: enough ridges and valleys for ~20 parts. */
+static tn_image make_dem(uint64_t seed)
+{
+    tn_image d = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    size_t i;
+    memset(&po, 0, sizeof po);
+    po.seed = seed;
+    po.octaves = 4;
+    po.frequency = 3;
+    tn_noise_perlin(&d, 40, 40, &po);
+    for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
+    return d;
+}
+
+static void tiny_opts(tn_gnn_opts *o, long iters)
+{
+    memset(o, 0, sizeof *o);
+    o->hidden = 16;
+    o->embed = 8;
+    o->k = 6;
+    o->random_edges = 300;
+    o->train.max_iters = iters;
+    o->train.seed = 7;
+}
+
+static int same_params(const tn_params *a, const tn_params *b)
+{
+    int i;
+    if (tn_params_count(a) != tn_params_count(b)) return 0;
+    for (i = 0; i < tn_params_count(a); i++) {
+        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
+        if (x->numel != y->numel || strcmp(x->name, y->name) || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
+    }
+    return 1;
+}
+
+static int same_image(const tn_image *a, const tn_image *b)
+{
+    return a->width == b->width && a->height == b->height && a->channels == b->channels &&
+           !memcmp(a->data, b->data, (size_t)a->width * a->height * a->channels * sizeof(float));
+}
+
+static tn_contour_set own_sketch(const tn_image *dem)
+{
+    tn_extraction ex;
+    tn_contour_set s;
+    memset(&s, 0, sizeof s);
+    if (tn_extract(dem, NULL, &ex)) return s;
+    s = ex.contours;
+    memset(&ex.contours, 0, sizeof ex.contours);
+    tn_extraction_free(&ex);
+    return s;
+}
+
+TN_TEST(membrane_interpolates_between_lines)
+{
+    /* two vertical valley lines at heights 10 and 30: the membrane is the linear ramp between
+       them and constant outside (no flux across the border) */
+    tn_contour_set s;
+    tn_contour c[2];
+    float p0[3 * 20], p1[3 * 20];
+    tn_image m = {0, 0, 0, NULL};
+    int i;
+    for (i = 0; i < 20; i++) {
+        p0[3 * i] = 4;
+        p1[3 * i] = 24;
+        p0[3 * i + 1] = p1[3 * i + 1] = (float)i;
+        p0[3 * i + 2] = 10;
+        p1[3 * i + 2] = 30;
+    }
+    memset(c, 0, sizeof c);
+    c[0].npoints = c[1].npoints = 20;
+    c[0].points = p0;
+    c[1].points = p1;
+    s.width = 32;
+    s.height = 20;
+    s.count = 2;
+    s.items = c;
+    TN_CHECK(tn_gnn_membrane(&s, 32, 20, &m) == TN_OK);
+    TN_CHECK_NEAR(TN_PIXEL(&m, 14, 10, 0), 20.0f, 1e-3);
+    TN_CHECK_NEAR(TN_PIXEL(&m, 9, 3, 0), 15.0f, 1e-3);
+    TN_CHECK_NEAR(TN_PIXEL(&m, 0, 0, 0), 10.0f, 1e-3);
+    TN_CHECK_NEAR(TN_PIXEL(&m, 31, 19, 0), 30.0f, 1e-3);
+    tn_image_free(&m);
+    s.count = 0;
+    TN_CHECK(tn_gnn_membrane(&s, 32, 20, &m) == TN_ERR_EMPTY);
+}
+
+TN_TEST(training_lowers_the_loss_and_generates_metres)
+{
+    tn_image dem = make_dem(3), out0 = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m0, m;
+    tn_gnn_stats s0, s;
+    tn_contour_set sk = own_sketch(&dem);
+    tn_metrics a0, a, b;
+    /* the loss, on the example's own network alone (the sparse levels have other losses) */
+    tiny_opts(&o, 1);
+    o.sparse_levels = -1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m0, &s0) == TN_OK);
+    tn_gnn_free(&m0);
+    tiny_opts(&o, 80);
+    o.sparse_levels = -1;
+    o.lr = 5e-3f;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, &s) == TN_OK);
+    TN_CHECK(s.levels == 1 && isfinite(s.loss) && s.loss < 0.8f * s0.loss); /* s.loss: mean of the last 50 steps */
+    tn_gnn_free(&m);
+    /* the default run: its reconstruction improves on the first step's and on the membrane */
+    tiny_opts(&o, 1);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m0, &s0) == TN_OK);
+    tiny_opts(&o, 60);
+    o.lr = 5e-3f;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, &s) == TN_OK);
+    TN_CHECK(s.iterations == 60 && s.parts >= 5 && s.edges > 0 && s.levels >= 2);
+    TN_CHECK(strcmp(tn_params_meta(m.weights, "method"), "gnn") == 0);
+    TN_CHECK(m.parts == s.parts && m.width == 40 && m.height == 40);
+    TN_CHECK(tn_gnn_generate(&m0, &sk, 40, 40, NULL, &out0) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_OK);
+    TN_CHECK(out.width == 40 && out.height == 40 && out.channels == 1);
+    TN_CHECK(tn_gnn_membrane(&sk, 40, 40, &mem) == TN_OK);
+    TN_CHECK(tn_compare(&dem, &out0, 0, &a0) == TN_OK && tn_compare(&dem, &out, 0, &a) == TN_OK && tn_compare(&dem, &mem, 0, &b) == TN_OK);
+    TN_CHECK(a.ssim > 0.5 && a.rmse < 200.0); /* metres, not normalised units */
+    TN_CHECK(a.rmse < a0.rmse && a.rmse < b.rmse);
+    tn_image_free(&out0);
+    tn_image_free(&out);
+    tn_image_free(&mem);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m0);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
+TN_TEST(save_load_round_trip)
+{
+    const char *path = tn_test_tmp_path("gnn", "model.tnw");
+    tn_image dem = make_dem(4), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m, l;
+    tn_gnn_generate_opts go;
+    tn_contour_set sk = own_sketch(&dem), p1, p2;
+    tiny_opts(&o, 5);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_OK);
+    TN_CHECK(same_params(m.weights, l.weights));
+    TN_CHECK(l.iterations == 5 && l.parts == m.parts && l.mean == m.mean && l.std == m.std && l.k == m.k && l.membrane == 1);
+    memset(&go, 0, sizeof go);
+    go.seed = 3;
+    go.finetune = 2;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &a) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&l, &sk, 40, 40, &go, &b) == TN_OK);
+    TN_CHECK(same_image(&a, &b));
+    TN_CHECK(tn_gnn_parts(&l, &p1) == TN_OK && tn_gnn_parts(&m, &p2) == TN_OK);
+    TN_CHECK(p1.count == m.parts && p1.count == p2.count && p1.items[0].npoints == p2.items[0].npoints);
+    tn_contour_set_free(&p1);
+    tn_contour_set_free(&p2);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m);
+    tn_gnn_free(&l);
+    tn_image_free(&dem);
+}
+
+TN_TEST(resume_is_bit_identical)
+{
+    const char *ck = tn_test_tmp_path("gnn", "run.ckpt");
+    tn_image dem = make_dem(5);
+    tn_gnn_opts o;
+    tn_gnn full, part, res;
+    tn_gnn_stats st;
+    tiny_opts(&o, 8);
+    TN_CHECK(tn_gnn_train(&dem, &o, &full, NULL) == TN_OK);
+    tiny_opts(&o, 3);
+    o.train.checkpoint = ck;
+    TN_CHECK(tn_gnn_train(&dem, &o, &part, NULL) == TN_OK);
+    tiny_opts(&o, 8);
+    o.train.checkpoint = ck;
+    o.train.resume = 1;
+    o.train.seed = 999; /* the checkpoint's seed wins */
+    o.hidden = 24;      /* and its architecture */
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st) == TN_OK);
+    TN_CHECK(st.resumed_from == 3 && st.iterations == 8);
+    TN_CHECK(res.hidden == 16);
+    TN_CHECK(same_params(full.weights, res.weights));
+    tn_gnn_free(&res);
+    /* a checkpoint is not a model; another example cannot resume it */
+    TN_CHECK(tn_gnn_load(&res, ck) == TN_ERR_FORMAT);
+    tn_gnn_free(&part);
+    tn_gnn_free(&full);
+    {
+        tn_image other = make_dem(6);
+        TN_CHECK(tn_gnn_train(&other, &o, &res, NULL) != TN_OK);
+        tn_image_free(&other);
+    }
+    tn_image_free(&dem);
+}
+
+TN_TEST(same_results_for_1_and_2_threads)
+{
+    tn_image dem = make_dem(8), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m1, m2;
+    tn_gnn_generate_opts go;
+    tn_contour_set sk = own_sketch(&dem);
+    int before = tn_get_threads();
+    tiny_opts(&o, 4);
+    memset(&go, 0, sizeof go);
+    go.finetune = 2;
+    tn_set_threads(1);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m1, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&m1, &sk, 48, 40, &go, &a) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m2, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&m2, &sk, 48, 40, &go, &b) == TN_OK);
+    tn_set_threads(before);
+    TN_CHECK(same_params(m1.weights, m2.weights));
+    TN_CHECK(a.width == 48 && same_image(&a, &b));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m1);
+    tn_gnn_free(&m2);
+    tn_image_free(&dem);
+}
+
+TN_TEST(bad_inputs_fail_cleanly)
+{
+    const char *path = tn_test_tmp_path("gnn", "bad.tnw");
+    tn_image dem = make_dem(9), flat = {0, 0, 0, NULL}, empty = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m, l;
+    tn_contour_set sk, none;
+    tn_contour c;
+    float pts[9] = {5, 5, 1200, 6, 5, 1210, 7, 5, 1220};
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    FILE *f;
+    tiny_opts(&o, 2);
+    /* DEMs */
+    TN_CHECK(tn_gnn_train(&empty, &o, &m, NULL) == TN_ERR_EMPTY);
+    tn_image_create(&small, 10, 10, 1);
+    TN_CHECK(tn_gnn_train(&small, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    tn_image_create(&flat, 40, 40, 1);
+    TN_CHECK(tn_gnn_train(&flat, &o, &m, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "flat"));
+    o.extract.threshold = 1000000; /* no cell drains that much: no ridge or valley */
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "extract"));
+    o.extract.threshold = 0;
+    dem.data[77] = NAN;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN"));
+    dem.data[77] = 1500.0f;
+    o.hidden = 1000;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    tiny_opts(&o, 2);
+    o.train.resume = 1;
+    o.train.checkpoint = "build/test/no_such_gnn.ckpt";
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_IO);
+    tiny_opts(&o, 2);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    /* sketches */
+    memset(&none, 0, sizeof none);
+    none.width = none.height = 40;
+    TN_CHECK(tn_gnn_generate(&m, &none, 40, 40, NULL, &out) == TN_ERR_EMPTY);
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.npoints = 3;
+    c.points = pts;
+    sk.width = sk.height = 40;
+    sk.count = 1;
+    sk.items = &c;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_EMPTY && strstr(tn_last_error(), "5 px"));
+    pts[4] = NAN;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_NUMERIC);
+    pts[4] = 5;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 8, 40, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(out.data == NULL);
+    /* model files: another method's model, another .tnw, a damaged byte, a damaged config */
+    {
+        tn_params *p = tn_params_create();
+        int two = 2;
+        tn_params_add(p, "g.w0", 1, &two);
+        tn_model_stamp(p, "texgan", 1, NULL);
+        tn_params_save(p, path);
+        tn_params_free(p);
+        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT && strstr(tn_last_error(), "texgan"));
+        p = tn_params_create();
+        tn_params_add(p, "x", 1, &two);
+        tn_params_save(p, path);
+        tn_params_free(p);
+        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT);
+    }
+    TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
+    TN_CHECK(tn__io_read_file(path, &buf, &n) == TN_OK);
+    buf[n / 2] ^= 0x40;
+    f = fopen(path, "wb");
+    fwrite(buf, 1, n, f);
+    fclose(f);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    TN_FREE(buf);
+    tn_params_find(m.weights, "gnn.config")->data[3] = 1000.0f; /* k */
+    TN_CHECK(tn_gnn_save(&m, path) == TN_ERR_CORRUPT);           /* refused before writing */
+    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    tn_params_find(m.weights, "gnn.config")->data[3] = 6.0f;
+    tn_params_find(m.weights, "gnn.part_info")->data[1] = 1e6f; /* a part's point count */
+    TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load(&l, "build/test/no_such_model.tnw") == TN_ERR_IO);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+    tn_image_free(&flat);
+    tn_image_free(&small);
+}
+
+int main(void)
+{
+    TN_RUN(membrane_interpolates_between_lines);
+    TN_RUN(training_lowers_the_loss_and_generates_metres);
+    TN_RUN(save_load_round_trip);
+    TN_RUN(resume_is_bit_identical);
+    TN_RUN(same_results_for_1_and_2_threads);
+    TN_RUN(bad_inputs_fail_cleanly);
+    return tn_test_summary("test_gnn");
+}
