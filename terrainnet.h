@@ -139,6 +139,12 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user);
 /* Monotonic wall-clock seconds (for benches and ETA). */
 TN_API double tn_time_seconds(void);
 
+/* One terminal line for a progress hook to redraw with '\r':
+   "style              [##########..........]  50.0%   12.3s  ETA   12.3s", durations as 12.3s,
+   4m05s or 2h07m ("--" when < 0: unknown), the bar as wide as fits in size - 1 characters
+   (none below 57). buf gets at most size bytes, NUL included (size >= 1). Returns buf. */
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s);
+
 /* ============================================================================================
    @@thread  thread pool and parallel-for
    ============================================================================================ */
@@ -1797,6 +1803,36 @@ TN_API double tn_time_seconds(void)
 
 static float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
+static void tn__duration_text(char out[8], double s)
+{
+    if (!(s >= 0)) snprintf(out, 8, "--");
+    else if (s < 99.95) snprintf(out, 8, "%.1fs", s);
+    else if (s < 3600.0) snprintf(out, 8, "%dm%02ds", (int)(s / 60.0), (int)fmod(s, 60.0));
+    else if (s < 999.0 * 3600.0) snprintf(out, 8, "%dh%02dm", (int)(s / 3600.0), (int)fmod(s / 60.0, 60.0));
+    else snprintf(out, 8, "999h+");
+}
+
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s)
+{
+    char el[8], eta[8], bar[64];
+    double f = fraction >= 0 ? (fraction <= 1 ? fraction : 1.0) : 0.0; /* NaN -> 0 */
+    int w = (int)(size > 1000 ? 1000 : size) - 1 - 48, i, fill; /* 48: stage, brackets, percent, times */
+    TN_ASSERT(buf && size >= 1);
+    w = w > (int)sizeof bar - 1 ? (int)sizeof bar - 1 : w;
+    tn__duration_text(el, elapsed_s);
+    tn__duration_text(eta, eta_s);
+    if (w >= 8) {
+        fill = (int)(f * w + 0.5);
+        for (i = 0; i < w; i++) bar[i] = i < fill ? '#' : '.';
+        bar[w] = 0;
+        snprintf(buf, size, "%-18.18s [%s] %5.1f%%  %6s  ETA %6s", stage ? stage : "", bar, 100.0 * f, el, eta);
+    } else {
+        snprintf(buf, size, "%-18.18s %5.1f%%  %6s  ETA %6s", stage ? stage : "", 100.0 * f, el, eta);
+    }
+    return buf;
+}
 
 /* --------------------------------------------------------------------------------------------
    >>thread  (@@thread implementation)

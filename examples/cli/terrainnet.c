@@ -17,13 +17,17 @@
 #include <signal.h>
 #if !defined(_WIN32)
 #include <unistd.h>
+#include <sys/ioctl.h>
 #endif
 
 /* ---- small helpers ------------------------------------------------------------------------ */
 
+static void progress_close(void);
+
 static int fail_status(tn_status st)
 {
     const char *msg = tn_last_error();
+    progress_close();
     fprintf(stderr, "terrainnet: error: %s%s%s\n", tn_status_string(st), msg[0] ? ": " : "", msg);
     return 1;
 }
@@ -43,8 +47,13 @@ static int usage_error(const char *cmd, const char *fmt, ...)
     return 2;
 }
 
-/* Progress: a bar with ETA when stderr is a terminal, otherwise a plain line every ~10 %. */
-typedef struct progress_state { double t0; int tty; int last_decile; char stage[64]; } progress_state;
+/* Progress: on a terminal one line redrawn in place (a bar with elapsed time and ETA, at most
+   ~12 times a second, as wide as the terminal); otherwise a plain line every ~10 %. */
+typedef struct progress_state {
+    double t0, last_draw;
+    int tty, last_decile, open; /* open: a bar line is on screen without its newline */
+    char stage[64];
+} progress_state;
 
 /* Ctrl-C asks the running operation to stop at its next progress report (training then saves
    its checkpoint first, so `--resume` continues); a second Ctrl-C kills at once. */
@@ -56,24 +65,50 @@ static void on_interrupt(int sig)
     signal(sig, SIG_DFL);
 }
 
+/* Columns of the terminal on stderr: its window size, else $COLUMNS, else 80. */
+static size_t terminal_columns(void)
+{
+    const char *c = getenv("COLUMNS");
+    long n = c ? strtol(c, NULL, 10) : 0;
+#if defined(TIOCGWINSZ)
+    struct winsize ws;
+    if (ioctl(2, TIOCGWINSZ, &ws) == 0 && ws.ws_col >= 20) n = ws.ws_col;
+#endif
+    return n >= 20 && n <= 1000 ? (size_t)n : 80;
+}
+
+static progress_state g_progress;
+
+/* Ends a bar line left open (an operation stopped before 100 %), so what follows starts afresh. */
+static void progress_close(void)
+{
+    if (g_progress.open) fputc('\n', stderr);
+    g_progress.open = 0;
+}
+
 static int cli_progress(void *user, const char *stage, double f)
 {
     progress_state *p = (progress_state *)user;
-    double el;
+    double now = tn_time_seconds(), el;
+    int changed = strncmp(p->stage, stage, sizeof p->stage - 1) != 0;
     if (g_interrupted) return 1;
-    if (strncmp(p->stage, stage, sizeof p->stage - 1) != 0) {
+    if (changed) {
         snprintf(p->stage, sizeof p->stage, "%s", stage);
-        p->t0 = tn_time_seconds();
+        p->t0 = now;
         p->last_decile = -1;
     }
-    el = tn_time_seconds() - p->t0;
+    el = now - p->t0;
     if (p->tty) {
-        int i, w = 30, fill = (int)(f * w + 0.5);
-        double eta = tn_progress_eta() >= 0 ? tn_progress_eta() : f > 0.01 ? el * (1.0 - f) / f : 0.0; /* training runs know theirs */
-        fprintf(stderr, "\r%-18.18s [", stage);
-        for (i = 0; i < w; i++) fputc(i < fill ? '#' : '.', stderr);
-        fprintf(stderr, "] %5.1f%%  %6.1fs  ETA %6.1fs", 100.0 * f, el, eta);
-        if (f >= 1.0) fputc('\n', stderr);
+        char line[1001];
+        double eta = tn_progress_eta() >= 0 ? tn_progress_eta() : f > 0.01 ? el * (1.0 - f) / f : -1.0; /* training runs know theirs */
+        if (!changed && f < 1.0 && now - p->last_draw < 0.08) return 0;
+        if (changed) progress_close();
+        p->last_draw = now;
+        tn_progress_line(line, terminal_columns() < sizeof line ? terminal_columns() : sizeof line, stage, f, el, f >= 1.0 ? 0.0 : eta);
+        fprintf(stderr, "\r%s", line);
+        p->open = 1;
+        if (f >= 1.0) progress_close();
+        fflush(stderr);
     } else {
         int d = (int)(f * 10.0);
         if (d != p->last_decile) {
@@ -84,8 +119,6 @@ static int cli_progress(void *user, const char *stage, double f)
     }
     return 0;
 }
-
-static progress_state g_progress;
 
 static void install_progress(void)
 {
@@ -1396,5 +1429,7 @@ int main(int argc, char **argv)
     }
     if ((rc = cli_parse(c, argc - a - 1, argv + a + 1))) return rc;
     install_progress();
-    return c->run();
+    rc = c->run();
+    progress_close();
+    return rc;
 }
