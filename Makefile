@@ -13,7 +13,7 @@ BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
-.PHONY: all test check-compile check-layout demo bench fuzz clean
+.PHONY: all test check-compile check-layout demo demo-check bench fuzz clean
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
 
 bin/terrainnet: examples/cli/terrainnet.c terrainnet.h | bin
@@ -50,6 +50,10 @@ test: bin/terrainnet | build/check build/test
 
 demo: bin/terrainnet
 	@sh examples/demo.sh
+
+# demo/index.html in headless Chromium (needs chromium; test_cli.sh runs it on a fast demo).
+demo-check:
+	@sh tests/demo_page.sh demo
 
 bench: $(BENCHES)
 	@for b in $(BENCHES); do echo "== $$b"; ./$$b; done

@@ -75,7 +75,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
     @@render    previews: hillshaded colour map and 3D perspective view
-    @@export    for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes, normal maps, Unity RAW
+    @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
 */
 #ifndef TERRAINNET_H
 #define TERRAINNET_H
@@ -138,6 +138,12 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user);
 
 /* Monotonic wall-clock seconds (for benches and ETA). */
 TN_API double tn_time_seconds(void);
+
+/* One terminal line for a progress hook to redraw with '\r':
+   "style              [##########..........]  50.0%   12.3s  ETA   12.3s", durations as 12.3s,
+   4m05s or 2h07m ("--" when < 0: unknown), the bar as wide as fits in size - 1 characters
+   (none below 57). buf gets at most size bytes, NUL included (size >= 1). Returns buf. */
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s);
 
 /* ============================================================================================
    @@thread  thread pool and parallel-for
@@ -1459,7 +1465,7 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
 
 /* ============================================================================================
    @@export  heightfields for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes,
-   normal maps, Unity terrain RAW
+   normal maps, Unity terrain RAW, splat maps
    A regular grid mesh of the DEM in metres: x east = column * dx, y up = height * z_scale,
    z south = row * dy (glTF is y-up and right-handed), two triangles per cell wound
    counter-clockwise seen from above, smooth normals from central differences of the mesh,
@@ -1491,6 +1497,36 @@ TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_
    differs; codes 0..65535 span the DEM's range, returned in *lo and *hi (may be NULL) for the
    terrain's height setting. Written atomically. */
 TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi);
+
+/* Splat map: per-pixel weights of four ground materials for an engine's terrain shader,
+   RGBA = (vegetation, bare ground, rock, snow), each in [0, 1], summing to 1 at every pixel.
+   Rock takes the steep slopes, snow what is left of the high ground, vegetation what is left of
+   the low ground, bare ground the rest:
+       rock = ramp(slope, rock_slope_deg, rock_blend_deg)
+       snow = (1 - rock) * S,  S = ramp(h, snow_line, height_blend), or the snow mask
+       vegetation = (1 - rock) * (1 - S) * V,  V = 1 - ramp(h, tree_line, height_blend), or the
+                    vegetation mask
+       bare ground = (1 - rock) * (1 - S) * (1 - V)
+   where ramp(x, c, w) rises smoothly (smoothstep) from 0 at c - w/2 to 1 at c + w/2 and h is the
+   height as a fraction of the DEM's own range (0 = lowest, 1 = highest). Slopes are in degrees
+   with the given spacing, so give the real spacing for a DEM in metres. Zero fields = defaults,
+   resolved in one place. */
+typedef struct tn_splat_opts {
+    float dx, dy;              /* pixel spacing in the DEM's height units; <= 0 = 1 (dy <= 0: = dx) */
+    float rock_slope_deg;      /* slope where rock is half the weight; 0 = 35 */
+    float rock_blend_deg;      /* width of the rock transition; 0 = 10 */
+    float tree_line;           /* height fraction where vegetation gives way to bare ground; 0 = 0.5
+                                  (negative: no vegetation from height) */
+    float snow_line;           /* height fraction where snow starts; 0 = 0.8 (above 1.5: no snow) */
+    float height_blend;        /* width of both height transitions, as a fraction; 0 = 0.1 */
+    const tn_image *snow;      /* optional mask in [0, 1] (channel 0, the DEM's size), e.g. a seasonal
+                                  snow mask; replaces the snow line */
+    const tn_image *vegetation; /* optional mask in [0, 1], the DEM's size; replaces the tree line */
+} tn_splat_opts;
+/* Fills *out (4 channels, the DEM's size; caller frees). opts may be NULL. NaN/Inf heights or
+   mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
+   2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
+TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
 
 #ifdef __cplusplus
 }
@@ -1767,6 +1803,36 @@ TN_API double tn_time_seconds(void)
 
 static float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
+static void tn__duration_text(char out[8], double s)
+{
+    if (!(s >= 0)) snprintf(out, 8, "--");
+    else if (s < 99.95) snprintf(out, 8, "%.1fs", s);
+    else if (s < 3600.0) snprintf(out, 8, "%dm%02ds", (int)(s / 60.0), (int)fmod(s, 60.0));
+    else if (s < 999.0 * 3600.0) snprintf(out, 8, "%dh%02dm", (int)(s / 3600.0), (int)fmod(s / 60.0, 60.0));
+    else snprintf(out, 8, "999h+");
+}
+
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s)
+{
+    char el[8], eta[8], bar[64];
+    double f = fraction >= 0 ? (fraction <= 1 ? fraction : 1.0) : 0.0; /* NaN -> 0 */
+    int w = (int)(size > 1000 ? 1000 : size) - 1 - 48, i, fill; /* 48: stage, brackets, percent, times */
+    TN_ASSERT(buf && size >= 1);
+    w = w > (int)sizeof bar - 1 ? (int)sizeof bar - 1 : w;
+    tn__duration_text(el, elapsed_s);
+    tn__duration_text(eta, eta_s);
+    if (w >= 8) {
+        fill = (int)(f * w + 0.5);
+        for (i = 0; i < w; i++) bar[i] = i < fill ? '#' : '.';
+        bar[w] = 0;
+        snprintf(buf, size, "%-18.18s [%s] %5.1f%%  %6s  ETA %6s", stage ? stage : "", bar, 100.0 * f, el, eta);
+    } else {
+        snprintf(buf, size, "%-18.18s %5.1f%%  %6s  ETA %6s", stage ? stage : "", 100.0 * f, el, eta);
+    }
+    return buf;
+}
 
 /* --------------------------------------------------------------------------------------------
    >>thread  (@@thread implementation)
@@ -19229,6 +19295,88 @@ TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int 
     tn_image_free(&r);
     if (!st && lo) *lo = a;
     if (!st && hi) *hi = b;
+    return st;
+}
+
+static void tn__splat_opts_defaults(tn_splat_opts *o)
+{
+    if (!(o->dx > 0)) o->dx = 1.0f;
+    if (!(o->dy > 0)) o->dy = o->dx;
+    if (o->rock_slope_deg == 0) o->rock_slope_deg = 35.0f;
+    if (o->rock_blend_deg == 0) o->rock_blend_deg = 10.0f;
+    if (o->tree_line == 0) o->tree_line = 0.5f;
+    if (o->snow_line == 0) o->snow_line = 0.8f;
+    if (o->height_blend == 0) o->height_blend = 0.1f;
+}
+
+/* Smooth 0 -> 1 around c over a width w (a step when w is 0). */
+static float tn__splat_ramp(float x, float c, float w)
+{
+    float t = w > 0 ? (x - (c - 0.5f * w)) / w : (x >= c ? 1.0f : 0.0f);
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    return t * t * (3.0f - 2.0f * t);
+}
+
+static tn_status tn__splat_mask_check(const tn_image *m, const tn_image *dem, const char *what)
+{
+    float lo, hi;
+    if (!m) return TN_OK;
+    if (!m->data || m->channels < 1) return tn__fail(TN_ERR_EMPTY, "splat map: the %s mask is empty", what);
+    if (m->width != dem->width || m->height != dem->height)
+        return tn__fail(TN_ERR_SHAPE, "splat map: the %s mask is %d x %d, the DEM %d x %d", what, m->width, m->height, dem->width,
+                        dem->height);
+    if (tn_image_range(m, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the %s mask holds NaN/Inf", what);
+    return TN_OK;
+}
+
+TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out)
+{
+    tn_splat_opts o;
+    tn_image slope = {0, 0, 0, NULL}, w = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
+    const tn_image *h = dem;
+    float lo, hi, span;
+    size_t i, np;
+    tn_status st;
+    TN_ASSERT(out);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (!dem || !dem->data || dem->width < 2 || dem->height < 2 || dem->channels < 1)
+        return tn__fail(TN_ERR_EMPTY, "splat map: the DEM must be at least 2 x 2");
+    if (!(fabsf(o.dx) <= FLT_MAX && fabsf(o.dy) <= FLT_MAX && fabsf(o.rock_slope_deg) <= FLT_MAX && o.rock_blend_deg >= 0 &&
+          o.rock_blend_deg <= FLT_MAX && fabsf(o.tree_line) <= FLT_MAX && fabsf(o.snow_line) <= FLT_MAX && o.height_blend >= 0 &&
+          o.height_blend <= FLT_MAX))
+        return tn__fail(TN_ERR_INVALID_ARG, "splat map: options must be finite, blend widths >= 0");
+    tn__splat_opts_defaults(&o);
+    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the DEM holds NaN/Inf");
+    if ((st = tn__splat_mask_check(o.snow, dem, "snow")) || (st = tn__splat_mask_check(o.vegetation, dem, "vegetation"))) return st;
+    np = (size_t)dem->width * dem->height;
+    if (dem->channels != 1) { /* channel 0 is the height */
+        if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
+        for (i = 0; i < np; i++) one.data[i] = dem->data[i * dem->channels];
+        h = &one;
+        tn_image_range(h, &lo, &hi);
+    }
+    span = hi > lo ? hi - lo : 1.0f;
+    if ((st = tn_image_slope(&slope, h, o.dx, o.dy)) || (st = tn_image_create(&w, dem->width, dem->height, 4))) goto done;
+    for (i = 0; i < np; i++) {
+        float f = (h->data[i] - lo) / span, s, v, rock = tn__splat_ramp(slope.data[i], o.rock_slope_deg, o.rock_blend_deg);
+        float *p = w.data + 4 * i;
+        s = o.snow ? o.snow->data[i * o.snow->channels] : tn__splat_ramp(f, o.snow_line, o.height_blend);
+        v = o.vegetation ? o.vegetation->data[i * o.vegetation->channels] : 1.0f - tn__splat_ramp(f, o.tree_line, o.height_blend);
+        s = s < 0 ? 0 : s > 1 ? 1 : s;
+        v = v < 0 ? 0 : v > 1 ? 1 : v;
+        p[3] = (1.0f - rock) * s;
+        p[0] = (1.0f - rock) * (1.0f - s) * v;
+        p[2] = rock;
+        p[1] = 1.0f - p[0] - p[2] - p[3]; /* the remainder, so the four sum to 1 exactly in float */
+        if (p[1] < 0) p[1] = 0;
+    }
+    *out = w;
+    w.data = NULL;
+done:
+    tn_image_free(&w);
+    tn_image_free(&slope);
+    tn_image_free(&one);
     return st;
 }
 

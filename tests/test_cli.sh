@@ -41,7 +41,7 @@ style --content --style -o --iters --optimizer --weights --size --levels --seed 
 texgan-train -o --minutes --iters --resume --checkpoint --checkpoint-seconds --normal --seed --patch --batch --gen-width --disc-width --disc-layers --stages --scale --augment --local --global --periodic --feat-weight --nearest
 texgan-synth --size -o --seed --colour-correct
 detail-maps -o --size --seed --factor --sigma --no-colour --compose --preview --dem
-export --to -o --spacing --z-scale --step --texture --preview-texture --raw-size
+export --to -o --spacing --z-scale --step --texture --preview-texture --raw-size --rock-slope --tree-line --snow-line --snow --vegetation --splat-preview
 EOF
 if $T noise --help | grep -q -- "--size N \[M\] .*(default: 512)" && $T render --help | grep -q -- "-o, --output OUT.png .*(required)"; then ok;
 else bad "help shows defaults and required options"; fi
@@ -276,5 +276,23 @@ if [ -f "$ALPS" ] && [ -f "$MB" ] && [ -f "$SAH" ]; then
 else
     skipped "realism on real DEMs (absent)"
 fi
+# export --to splat: RGBA weights (8-bit), a cover summary, the colour preview; a mask of the wrong
+# size is an error that writes nothing; --to normal is the OpenGL normal map
+if $T export "$W/noise.png" --to splat -o "$W/splat.png" --spacing 2 --splat-preview "$W/splat_pv.png" > "$W/splat.txt" &&
+    $T info "$W/splat.png" | grep -q "channels: 4" && $T info "$W/splat_pv.png" | grep -q "channels: 3" &&
+    grep -q "^cover: vegetation [0-9.]* %, bare ground [0-9.]* %, rock [0-9.]* %, snow [0-9.]* %" "$W/splat.txt"; then ok;
+else bad "export splat: $(cat "$W/splat.txt")"; fi
+$T noise -o "$W/mask_small.png" --size 10 > /dev/null 2>&1
+expect_error "export splat mask size" "mask is 10 x 10" $T export "$W/noise.png" --to splat -o "$W/splat2.png" --snow "$W/mask_small.png"
+if [ ! -e "$W/splat2.png" ]; then ok; else bad "export splat wrote a file on error"; fi
+if $T export "$W/noise.png" --to normal -o "$W/n1.png" --spacing 30 > /dev/null && $T export "$W/noise.png" --to normal-gl -o "$W/n2.png" --spacing 30 > /dev/null &&
+    cmp -s "$W/n1.png" "$W/n2.png"; then ok; else bad "export --to normal is normal-gl"; fi
+# make demo in its fast mode (seconds-long budgets): every picture and the page; then the page in
+# headless Chromium (tests/demo_page.sh, skipped without chromium)
+if DEMO_FAST=1 DEMO_DIR="$W/demo" sh examples/demo.sh > "$W/demo.log" 2>&1 && grep -q "^demo: wrote .*index.html ([1-9][0-9]* pictures" "$W/demo.log" &&
+    [ -s "$W/demo/terrain.glb" ] && [ -s "$W/demo/splat.png" ]; then ok; else bad "fast demo: $(tail -n 3 "$W/demo.log")"; fi
+sh tests/demo_page.sh "$W/demo" > "$W/demo_page.txt" 2>&1
+if grep -q "^skipped demo_page" "$W/demo_page.txt"; then skipped "demo page in Chromium: $(sed -n 's/^skipped demo_page: //p' "$W/demo_page.txt")";
+elif grep -q "^demo_page: [1-9][0-9]* passed, 0 failed" "$W/demo_page.txt"; then ok; else bad "demo page in Chromium: $(grep -v '^picture' "$W/demo_page.txt" | head -c 600)"; fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

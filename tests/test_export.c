@@ -1,7 +1,8 @@
 /* test_export.c - @@export: .glb structure (header, chunks, accessors, bounds), geometry
    (normals up, counter-clockwise triangles seen from above, decimation keeps the last sample),
    OBJ counts and its material files, bad input, normal maps (OpenGL vs DirectX green), Unity
-   RAW (size rule, full code range). Validity by the Khronos glTF validator is
+   RAW (size rule, full code range), splat maps (weights sum to 1, rock on steep slopes, snow
+   high, vegetation low, masks replace the height rules, bad input). Validity by the Khronos glTF validator is
    checked in test_cli.sh when the validator is installed. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -219,11 +220,81 @@ TN_TEST(normal_maps_and_unity_raw)
     remove(path);
 }
 
+/* A valley profile: flat floor (low), steep walls, flat high plateau; heights in metres at 10 m spacing. */
+static tn_image splat_dem(void)
+{
+    tn_image d = {0, 0, 0, NULL};
+    int x, y;
+    if (tn_image_create(&d, 60, 8, 1)) return d;
+    for (y = 0; y < 8; y++)
+        for (x = 0; x < 60; x++) TN_PIXEL(&d, x, y, 0) = x < 20 ? 0.0f : x < 40 ? 50.0f * (float)(x - 20) : 1000.0f; /* 79 deg walls */
+    return d;
+}
+
+TN_TEST(splat_map)
+{
+    tn_image dem = splat_dem(), w = {0, 0, 0, NULL}, snow = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
+    tn_splat_opts o;
+    size_t i;
+    int sums = 1, y;
+    memset(&o, 0, sizeof o);
+    o.dx = 10.0f;
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && w.channels == 4 && w.width == 60 && w.height == 8);
+    for (i = 0; i < (size_t)60 * 8; i++) {
+        const float *p = w.data + 4 * i;
+        if (fabsf(p[0] + p[1] + p[2] + p[3] - 1.0f) > 1e-5f || p[0] < 0 || p[1] < 0 || p[2] < 0 || p[3] < 0) sums = 0;
+    }
+    TN_CHECK(sums);
+    TN_CHECK(TN_PIXEL(&w, 5, 4, 0) > 0.99f);  /* flat valley floor: vegetation */
+    TN_CHECK(TN_PIXEL(&w, 30, 4, 2) > 0.99f); /* the wall: rock */
+    TN_CHECK(TN_PIXEL(&w, 55, 4, 3) > 0.99f); /* the flat plateau, top of the range: snow */
+    /* the snow line at 1.5 of the range: no snow, the plateau is bare ground (above the tree line) */
+    o.snow_line = 2.0f;
+    tn_image_free(&w);
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && TN_PIXEL(&w, 55, 4, 1) > 0.99f && TN_PIXEL(&w, 55, 4, 3) == 0.0f);
+    /* a snow mask on the lower half of the rows replaces the snow line; rock stays on the wall */
+    TN_CHECK(tn_image_create(&snow, 60, 8, 1) == TN_OK);
+    for (i = 0; i < (size_t)60 * 4; i++) snow.data[60 * 4 + i] = 1.0f;
+    o.snow = &snow;
+    tn_image_free(&w);
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK);
+    for (y = 0; y < 8; y++) {
+        TN_CHECK(TN_PIXEL(&w, 5, y, 3) == (y >= 4 ? 1.0f : 0.0f));
+        TN_CHECK(TN_PIXEL(&w, 30, y, 2) > 0.99f);
+    }
+    /* spacing matters: at 1000 m per pixel the walls are gentle (2.9 deg) and carry no rock */
+    o.dx = 1000.0f;
+    o.snow = NULL;
+    tn_image_free(&w);
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && TN_PIXEL(&w, 30, 4, 2) == 0.0f);
+    /* bad input: mask size, NaN mask, NaN DEM, bad options, tiny DEM; *out untouched */
+    tn_image_free(&w);
+    TN_CHECK(tn_image_create(&small, 10, 8, 1) == TN_OK);
+    o.vegetation = &small;
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_SHAPE && w.data == NULL);
+    o.vegetation = &snow;
+    snow.data[3] = NAN;
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_NUMERIC && w.data == NULL);
+    o.vegetation = NULL;
+    o.height_blend = -1.0f;
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_INVALID_ARG && w.data == NULL);
+    o.height_blend = 0.0f;
+    dem.data[9] = INFINITY;
+    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_NUMERIC && w.data == NULL);
+    small.height = 1;
+    TN_CHECK(tn_export_splat(&small, NULL, &w) == TN_ERR_EMPTY && w.data == NULL);
+    small.height = 8;
+    tn_image_free(&dem);
+    tn_image_free(&snow);
+    tn_image_free(&small);
+}
+
 int main(void)
 {
     TN_RUN(glb_structure_and_geometry);
     TN_RUN(obj_counts_and_material);
     TN_RUN(bad_input);
     TN_RUN(normal_maps_and_unity_raw);
+    TN_RUN(splat_map);
     return tn_test_summary("test_export");
 }

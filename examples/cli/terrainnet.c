@@ -17,13 +17,17 @@
 #include <signal.h>
 #if !defined(_WIN32)
 #include <unistd.h>
+#include <sys/ioctl.h>
 #endif
 
 /* ---- small helpers ------------------------------------------------------------------------ */
 
+static void progress_close(void);
+
 static int fail_status(tn_status st)
 {
     const char *msg = tn_last_error();
+    progress_close();
     fprintf(stderr, "terrainnet: error: %s%s%s\n", tn_status_string(st), msg[0] ? ": " : "", msg);
     return 1;
 }
@@ -43,8 +47,13 @@ static int usage_error(const char *cmd, const char *fmt, ...)
     return 2;
 }
 
-/* Progress: a bar with ETA when stderr is a terminal, otherwise a plain line every ~10 %. */
-typedef struct progress_state { double t0; int tty; int last_decile; char stage[64]; } progress_state;
+/* Progress: on a terminal one line redrawn in place (a bar with elapsed time and ETA, at most
+   ~12 times a second, as wide as the terminal); otherwise a plain line every ~10 %. */
+typedef struct progress_state {
+    double t0, last_draw;
+    int tty, last_decile, open; /* open: a bar line is on screen without its newline */
+    char stage[64];
+} progress_state;
 
 /* Ctrl-C asks the running operation to stop at its next progress report (training then saves
    its checkpoint first, so `--resume` continues); a second Ctrl-C kills at once. */
@@ -56,24 +65,50 @@ static void on_interrupt(int sig)
     signal(sig, SIG_DFL);
 }
 
+/* Columns of the terminal on stderr: its window size, else $COLUMNS, else 80. */
+static size_t terminal_columns(void)
+{
+    const char *c = getenv("COLUMNS");
+    long n = c ? strtol(c, NULL, 10) : 0;
+#if defined(TIOCGWINSZ)
+    struct winsize ws;
+    if (ioctl(2, TIOCGWINSZ, &ws) == 0 && ws.ws_col >= 20) n = ws.ws_col;
+#endif
+    return n >= 20 && n <= 1000 ? (size_t)n : 80;
+}
+
+static progress_state g_progress;
+
+/* Ends a bar line left open (an operation stopped before 100 %), so what follows starts afresh. */
+static void progress_close(void)
+{
+    if (g_progress.open) fputc('\n', stderr);
+    g_progress.open = 0;
+}
+
 static int cli_progress(void *user, const char *stage, double f)
 {
     progress_state *p = (progress_state *)user;
-    double el;
+    double now = tn_time_seconds(), el;
+    int changed = strncmp(p->stage, stage, sizeof p->stage - 1) != 0;
     if (g_interrupted) return 1;
-    if (strncmp(p->stage, stage, sizeof p->stage - 1) != 0) {
+    if (changed) {
         snprintf(p->stage, sizeof p->stage, "%s", stage);
-        p->t0 = tn_time_seconds();
+        p->t0 = now;
         p->last_decile = -1;
     }
-    el = tn_time_seconds() - p->t0;
+    el = now - p->t0;
     if (p->tty) {
-        int i, w = 30, fill = (int)(f * w + 0.5);
-        double eta = tn_progress_eta() >= 0 ? tn_progress_eta() : f > 0.01 ? el * (1.0 - f) / f : 0.0; /* training runs know theirs */
-        fprintf(stderr, "\r%-18.18s [", stage);
-        for (i = 0; i < w; i++) fputc(i < fill ? '#' : '.', stderr);
-        fprintf(stderr, "] %5.1f%%  %6.1fs  ETA %6.1fs", 100.0 * f, el, eta);
-        if (f >= 1.0) fputc('\n', stderr);
+        char line[1001];
+        double eta = tn_progress_eta() >= 0 ? tn_progress_eta() : f > 0.01 ? el * (1.0 - f) / f : -1.0; /* training runs know theirs */
+        if (!changed && f < 1.0 && now - p->last_draw < 0.08) return 0;
+        if (changed) progress_close();
+        p->last_draw = now;
+        tn_progress_line(line, terminal_columns() < sizeof line ? terminal_columns() : sizeof line, stage, f, el, f >= 1.0 ? 0.0 : eta);
+        fprintf(stderr, "\r%s", line);
+        p->open = 1;
+        if (f >= 1.0) progress_close();
+        fflush(stderr);
     } else {
         int d = (int)(f * 10.0);
         if (d != p->last_decile) {
@@ -84,8 +119,6 @@ static int cli_progress(void *user, const char *stage, double f)
     }
     return 0;
 }
-
-static progress_state g_progress;
 
 static void install_progress(void)
 {
@@ -546,12 +579,19 @@ static const cli_command render_cmd = {"render", CLI_CMD(render), "hillshaded co
 
 /* ---- export ------------------------------------------------------------------------------ */
 
-static struct export_args { const char *in, *out, *texture; int to, drape, raw_size; tn_mesh_opts mo; } export_arg;
+static struct export_args {
+    const char *in, *out, *texture, *snow, *vegetation, *splat_preview;
+    int to, drape, raw_size;
+    tn_mesh_opts mo;
+    tn_splat_opts so;
+} export_arg;
+enum { EXPORT_GLB, EXPORT_OBJ, EXPORT_NORMAL_GL, EXPORT_NORMAL_DX, EXPORT_UNITY_RAW, EXPORT_NORMAL, EXPORT_SPLAT }; /* --to words */
 static const cli_opt export_opts[] = {
     {"DEM", 0, ARG_POS, 0, &export_arg.in, NULL, 0, 0, NULL, "heightmap to export (heights in metres when the file records them)", NULL},
-    {"to", 0, ARG_CHOICE, REQ, &export_arg.to, NULL, 0, 0, "glb|obj|normal-gl|normal-dx|unity-raw",
+    {"to", 0, ARG_CHOICE, REQ, &export_arg.to, NULL, 0, 0, "glb|obj|normal-gl|normal-dx|unity-raw|normal|splat",
      "glTF 2.0 binary mesh; Wavefront OBJ (+ .mtl and .png with a texture); normal map PNG, OpenGL (green = north) or DirectX "
-     "(green = south); Unity terrain RAW (16-bit, 2^n + 1 square)", NULL},
+     "(green = south); Unity terrain RAW (16-bit, 2^n + 1 square); normal = normal-gl; splat map PNG, RGBA = weights of "
+     "vegetation, bare ground, rock, snow (sum 1)", NULL},
     {"output", 'o', ARG_STR, REQ, &export_arg.out, NULL, 0, 0, "OUT", "file to write", NULL},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
     {"z-scale", 0, ARG_FLOAT, 0, &export_arg.mo.z_scale, NULL, 0, 0, "F", "height exaggeration", "1"},
@@ -560,13 +600,74 @@ static const cli_opt export_opts[] = {
     {"preview-texture", 0, ARG_FLAG, 0, &export_arg.drape, NULL, 0, 0, NULL, "drape the DEM's own hillshaded colour preview", NULL},
     {"raw-size", 0, ARG_INT, 0, &export_arg.raw_size, NULL, 33, 4097, "N", "unity-raw: side 2^n + 1 (the DEM is resampled to it)",
      "the smallest 2^n + 1 not below the DEM's larger side"},
+    {"rock-slope", 0, ARG_FLOAT, ABOVE, &export_arg.so.rock_slope_deg, NULL, 0, 90, "DEG", "splat: slope where rock is half the weight", "35"},
+    {"tree-line", 0, ARG_FLOAT, 0, &export_arg.so.tree_line, NULL, 0, 0, "F", "splat: height fraction of the DEM's range where vegetation ends",
+     "0.5"},
+    {"snow-line", 0, ARG_FLOAT, 0, &export_arg.so.snow_line, NULL, 0, 0, "F", "splat: height fraction where snow starts", "0.8"},
+    {"snow", 0, ARG_STR, 0, &export_arg.snow, NULL, 0, 0, "MASK", "splat: snow mask in [0, 1] (the DEM's size), instead of the snow line", NULL},
+    {"vegetation", 0, ARG_STR, 0, &export_arg.vegetation, NULL, 0, 0, "MASK", "splat: vegetation mask in [0, 1], instead of the tree line", NULL},
+    {"splat-preview", 0, ARG_STR, 0, &export_arg.splat_preview, NULL, 0, 0, "PNG",
+     "splat: the materials as colours (green, brown, grey, white) times a hillshade", NULL},
 };
+
+/* The splat map and its optional colour preview. */
+static tn_status export_splat(struct export_args *a, const tn_image *dem)
+{
+    static const float colour[4][3] = {{0.30f, 0.50f, 0.18f}, {0.55f, 0.42f, 0.28f}, {0.50f, 0.50f, 0.50f}, {0.97f, 0.97f, 1.0f}};
+    tn_image snow = {0, 0, 0, NULL}, veg = {0, 0, 0, NULL}, w = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL}, pv = {0, 0, 0, NULL};
+    tn_save_opts so;
+    tn_status st = TN_OK;
+    size_t i, np;
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    a->so.dx = a->mo.dx;
+    a->so.dy = a->mo.dy;
+    if (a->snow) st = tn_image_load(a->snow, &snow, NULL);
+    if (!st && a->vegetation) st = tn_image_load(a->vegetation, &veg, NULL);
+    a->so.snow = snow.data ? &snow : NULL;
+    a->so.vegetation = veg.data ? &veg : NULL;
+    if (!st) st = tn_export_splat(dem, &a->so, &w);
+    if (!st) st = tn_image_save(a->out, &w, &so);
+    if (!st && a->splat_preview) {
+        tn_hillshade_opts ho;
+        memset(&ho, 0, sizeof ho);
+        ho.dx = a->mo.dx;
+        ho.dy = a->mo.dy > 0 ? a->mo.dy : a->mo.dx;
+        st = tn_image_hillshade(&shade, dem, &ho);
+        if (!st) st = tn_image_create(&pv, dem->width, dem->height, 3);
+        np = (size_t)dem->width * dem->height;
+        for (i = 0; !st && i < np; i++) {
+            int c, m;
+            float light = 0.35f + 0.65f * shade.data[i];
+            for (c = 0; c < 3; c++) {
+                float v = 0;
+                for (m = 0; m < 4; m++) v += w.data[4 * i + m] * colour[m][c];
+                pv.data[3 * i + c] = v * light;
+            }
+        }
+        if (!st) st = tn_image_save(a->splat_preview, &pv, &so);
+    }
+    if (!st) {
+        double sum[4] = {0, 0, 0, 0};
+        np = (size_t)w.width * w.height;
+        for (i = 0; i < 4 * np; i++) sum[i % 4] += w.data[i];
+        printf("cover: vegetation %.1f %%, bare ground %.1f %%, rock %.1f %%, snow %.1f %%\n", 100.0 * sum[0] / np, 100.0 * sum[1] / np,
+               100.0 * sum[2] / np, 100.0 * sum[3] / np);
+    }
+    tn_image_free(&snow);
+    tn_image_free(&veg);
+    tn_image_free(&w);
+    tn_image_free(&shade);
+    tn_image_free(&pv);
+    return st;
+}
 
 /* The normal map and Unity RAW exports: images, not meshes. */
 static tn_status export_image(struct export_args *a, const tn_image *dem)
 {
     tn_status st;
-    if (a->to == 4) {
+    if (a->to == EXPORT_SPLAT) return export_splat(a, dem);
+    if (a->to == EXPORT_UNITY_RAW) {
         float lo = 0, hi = 0;
         if (!(st = tn_export_unity_raw(dem, a->out, a->raw_size, &lo, &hi)))
             printf("heights: %.6g %.6g (set the Unity terrain height to %.6g m)\n", lo, hi, hi - lo);
@@ -575,7 +676,7 @@ static tn_status export_image(struct export_args *a, const tn_image *dem)
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        st = tn_normal_map(dem, a->mo.dx, a->mo.dy, a->mo.z_scale > 0 ? a->mo.z_scale : 1.0f, a->to == 3, &n);
+        st = tn_normal_map(dem, a->mo.dx, a->mo.dy, a->mo.z_scale > 0 ? a->mo.z_scale : 1.0f, a->to == EXPORT_NORMAL_DX, &n);
         if (!st) st = tn_image_save(a->out, &n, &so);
         tn_image_free(&n);
     }
@@ -591,10 +692,10 @@ static int run_export(void)
     if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
     if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
     else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
-    if (!st && a->to >= 2) st = export_image(a, &dem);
+    if (!st && a->to != EXPORT_GLB && a->to != EXPORT_OBJ) st = export_image(a, &dem);
     else if (!st) {
         a->mo.texture = tex.data ? &tex : NULL;
-        st = a->to == 0 ? tn_export_glb(&dem, a->out, &a->mo) : tn_export_obj(&dem, a->out, &a->mo);
+        st = a->to == EXPORT_GLB ? tn_export_glb(&dem, a->out, &a->mo) : tn_export_obj(&dem, a->out, &a->mo);
     }
     if (!st) printf("wrote %s (from %d x %d samples)\n", a->out, dem.width, dem.height);
     tn_image_free(&dem);
@@ -602,10 +703,11 @@ static int run_export(void)
     return st ? fail_status(st) : 0;
 }
 
-static const cli_command export_cmd = {"export", CLI_CMD(export), "a DEM for engines and 3D tools (glb, obj, normal map, Unity RAW)",
+static const cli_command export_cmd = {"export", CLI_CMD(export), "a DEM for engines and 3D tools (glb, obj, normal/splat map, Unity RAW)",
     "Writes the DEM as a regular grid mesh in metres (y up; x east, z south) with normals and UVs: a glTF 2.0 binary (.glb, "
     "the texture embedded) or an OBJ (with <stem>.mtl and <stem>.png when textured); or as an 8-bit normal map PNG in the "
-    "OpenGL or DirectX convention; or as a Unity terrain RAW."};
+    "OpenGL or DirectX convention; or as a Unity terrain RAW; or as an 8-bit RGBA splat map (weights of vegetation, bare "
+    "ground, rock and snow from slope and height, or from given masks; give --spacing in metres for a DEM in metres)."};
 
 /* ---- noise ------------------------------------------------------------------------------- */
 
@@ -1327,5 +1429,7 @@ int main(int argc, char **argv)
     }
     if ((rc = cli_parse(c, argc - a - 1, argv + a + 1))) return rc;
     install_progress();
-    return c->run();
+    rc = c->run();
+    progress_close();
+    return rc;
 }
