@@ -455,8 +455,16 @@ static int run_info(void)
     if (info.interlaced) printf("interlaced: adam7\n");
     if (info.has_range) printf("height_range_m: %.6g %.6g\n", info.range_lo, info.range_hi);
     else if (info.format == TN_FORMAT_HGT || info.format == TN_FORMAT_ASC) printf("units: metres (as stored)\n");
+    else if (info.format == TN_FORMAT_TIFF && info.bit_depth > 8 && info.file_channels < 3) printf("units: as stored (metres for a DEM)\n");
     else printf("units: normalised [0, 1] (the file records no height range)\n");
     if (info.cellsize > 0) printf("cellsize: %.6g\norigin: %.6g %.6g\n", info.cellsize, info.x_origin, info.y_origin);
+    if (info.georef.has_transform) {
+        const double *t = info.georef.transform;
+        printf("crs: %s\ngeotransform: %.17g %.17g %.17g %.17g %.17g %.17g\n",
+               info.georef.model_type == 1 ? "projected" : info.georef.model_type == 2 ? "geographic" : "not stated", t[0], t[1], t[2], t[3], t[4], t[5]);
+        if (info.georef.dx > 0) printf("spacing_m: %.6g %.6g\n", info.georef.dx, info.georef.dy);
+    }
+    if (info.has_nodata) printf("nodata: %.17g\n", info.nodata);
     if (info.voids_filled) printf("voids_filled: %zu\n", info.voids_filled);
     printf("min: %.6g\nmax: %.6g\nmean: %.6g\n", mn, mx, sum / (double)n);
     if (bad) printf("nan_or_inf: %zu\n", bad);
@@ -477,7 +485,8 @@ static const cli_opt convert_opts[] = {
     {"OUT", 0, ARG_POS, 0, &convert_arg.out, NULL, 0, 0, NULL, "file to write; its extension picks the format", NULL},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &convert_arg.so.range_lo, &convert_arg.so.range_hi, 0, 0, "LO HI",
      "heights that codes 0..max of an 8/16-bit OUT stand for", "the range recorded in IN"},
-    {"bits", 0, ARG_INT, 0, &convert_arg.so.bit_depth, NULL, 8, 16, "8|16", "bit depth of an integer format", "16 for one channel, else 8"},
+    {"bits", 0, ARG_INT, 0, &convert_arg.so.bit_depth, NULL, 8, 16, "8|16", "bit depth of an integer format (.tif: 16 = int16 metres, 8 = 8-bit picture)",
+     "16 for one channel, else 8; .tif float32"},
     {"raw-size", 0, ARG_INT, PAIR, &convert_arg.lo.raw_width, &convert_arg.lo.raw_height, 0, 0, "W H",
      "size of a headerless .r16 IN", "a square from the file size"},
     {"cellsize", 0, ARG_DOUBLE, ABOVE, &convert_arg.so.cellsize, NULL, 0, NO_MAX, "M", "cell size of an .asc OUT", "IN's, else 1"},
@@ -499,6 +508,7 @@ static int run_convert(void)
         a->so.range_hi = info.range_hi;
     }
     if (!a->so.cellsize && info.cellsize > 0) a->so.cellsize = info.cellsize;
+    a->so.georef = &info.georef; /* a GeoTIFF OUT lines up with IN */
     st = tn_image_save(a->out, &img, &a->so);
     tn_image_free(&img);
     if (st) return fail_status(st);
@@ -506,9 +516,9 @@ static int run_convert(void)
 }
 
 static const cli_command convert_cmd = {"convert", CLI_CMD(convert), "convert between heightmap/image formats, keeping metres",
-    "Converts between PNG, PGM/PPM, PFM, SRTM .hgt, ESRI .asc and .r16 (format from OUT's extension). Heights keep their "
-    "metres: a range recorded in IN (or given with --range) is written to OUT where the format can hold it. OUT is "
-    "written atomically and never half-written."};
+    "Converts between PNG, PGM/PPM, PFM, SRTM .hgt, ESRI .asc, .r16 and GeoTIFF (.tif; format from OUT's extension). Heights keep their "
+    "metres: a range recorded in IN (or given with --range) is written to OUT where the format can hold it; a GeoTIFF OUT "
+    "carries IN's georeference. OUT is written atomically and never half-written."};
 
 /* ---- metrics ----------------------------------------------------------------------------- */
 
@@ -560,14 +570,16 @@ static int run_render(void)
 {
     struct render_args *a = &render_arg;
     tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_image_info info;
     tn_save_opts so;
     tn_status st;
-    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    if ((st = tn_image_load_ex(a->in, &dem, &info, NULL))) return fail_status(st);
     st = a->view ? tn_render_view(&dem, &a->vo, &out) : tn_render_preview(&dem, &a->vo.colours, &out);
     tn_image_free(&dem);
     if (st) return fail_status(st);
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
+    if (!a->view) so.georef = &info.georef; /* a .tif map preview lies over its DEM in GIS tools */
     st = tn_image_save(a->out, &out, &so);
     tn_image_free(&out);
     if (st) return fail_status(st);
@@ -593,7 +605,8 @@ static const cli_opt export_opts[] = {
      "(green = south); Unity terrain RAW (16-bit, 2^n + 1 square); normal = normal-gl; splat map PNG, RGBA = weights of "
      "vegetation, bare ground, rock, snow (sum 1)", NULL},
     {"output", 'o', ARG_STR, REQ, &export_arg.out, NULL, 0, 0, "OUT", "file to write", NULL},
-    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres",
+     "a GeoTIFF's own, else 1"},
     {"z-scale", 0, ARG_FLOAT, 0, &export_arg.mo.z_scale, NULL, 0, 0, "F", "height exaggeration", "1"},
     {"step", 0, ARG_INT, 0, &export_arg.mo.step, NULL, 1, 65536, "N", "keep every N-th sample (grid decimation)", "1"},
     {"texture", 0, ARG_STR, 0, &export_arg.texture, NULL, 0, 0, "IMG", "colour image draped over the mesh", NULL},
@@ -687,9 +700,14 @@ static int run_export(void)
 {
     struct export_args *a = &export_arg;
     tn_image dem = {0, 0, 0, NULL}, tex = {0, 0, 0, NULL};
+    tn_image_info info;
     tn_status st;
     if (a->texture && a->drape) return usage_error("export", "--texture and --preview-texture exclude each other");
-    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    if ((st = tn_image_load_ex(a->in, &dem, &info, NULL))) return fail_status(st);
+    if (!a->mo.dx && info.georef.dx > 0) { /* a GeoTIFF knows its pixel size in metres */
+        a->mo.dx = (float)info.georef.dx;
+        a->mo.dy = (float)info.georef.dy;
+    }
     if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
     else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
     if (!st && a->to != EXPORT_GLB && a->to != EXPORT_OBJ) st = export_image(a, &dem);
