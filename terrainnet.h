@@ -20323,19 +20323,23 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     }
     for (c = 0; c < w->out_channels; c++) {
         static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
-        tn__text_add(&vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "UInt16" : "Byte", c + 1);
-        if (w->out_heights) tn__text_add(&vrt, "    <Offset>%s</Offset>\n    <Scale>%s</Scale>\n", num[0], num[1]);
-        else if (w->out_channels >= 3) tn__text_add(&vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
+        /* heights: Float32 metres, code * (hi - lo) / 65535 + lo per source, so every GDAL reader
+           (gdalinfo -stats, QGIS, gdal_translate) sees metres without applying a band scale */
+        tn__text_add(&vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
+        if (!w->out_heights && w->out_channels >= 3) tn__text_add(&vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
         for (row = 0; row < w->rows; row++)
             for (col = 0; col < w->cols; col++) {
                 tn_rect r = tn_world_tile_rect(w, row, col);
                 tn__text_add(&vrt,
-                              "    <SimpleSource>\n      <SourceFilename relativeToVRT=\"1\">r%d_c%d.png</SourceFilename>\n"
-                              "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
-                              "DataType=\"%s\" BlockXSize=\"%d\" BlockYSize=\"1\"/>\n"
-                              "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
-                              "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n    </SimpleSource>\n",
-                              row, col, c + 1, r.w, r.h, w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x, r.y, r.w, r.h);
+                             "    <%s>\n      <SourceFilename relativeToVRT=\"1\">r%d_c%d.png</SourceFilename>\n"
+                             "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
+                             "DataType=\"%s\" BlockXSize=\"%d\" BlockYSize=\"1\"/>\n"
+                             "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
+                             "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n",
+                             w->out_heights ? "ComplexSource" : "SimpleSource", row, col, c + 1, r.w, r.h,
+                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x, r.y, r.w, r.h);
+                if (w->out_heights) tn__text_add(&vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
+                tn__text_add(&vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
             }
         tn__text_add(&vrt, "  </VRTRasterBand>\n");
     }

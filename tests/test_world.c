@@ -303,7 +303,7 @@ TN_TEST(tiles_on_disk_resume_and_index)
     for (n = 0; n < (size_t)tile.width * tile.height; n++) TN_CHECK_NEAR(tile.data[n], ref.data[n], 1800.0 / 65535 * 0.51);
     snprintf(path, sizeof path, "%s/world.vrt", dir);
     text = (char *)tn_test_read_file(path, &n);
-    TN_CHECK(text && strstr(text, "rasterXSize=\"200\"") && strstr(text, "<Offset>100</Offset>") && strstr(text, "r2_c3.png") &&
+    TN_CHECK(text && strstr(text, "rasterXSize=\"200\"") && strstr(text, "<ScaleOffset>100</ScaleOffset>") && strstr(text, "r2_c3.png") &&
              strstr(text, "<DstRect xOff=\"192\" yOff=\"128\" xSize=\"8\" ySize=\"22\"/>"));
     free(text);
     snprintf(path, sizeof path, "%s/manifest.txt", dir);
