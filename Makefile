@@ -8,12 +8,13 @@ CFLAGS  ?=
 LDLIBS   = -lm -pthread
 SAN      = -fsanitize=address,undefined,float-cast-overflow -fno-omit-frame-pointer -fno-sanitize-recover=undefined,float-cast-overflow
 
-EXAMPLES := $(patsubst examples/%.c,bin/%,$(wildcard examples/*.c))
+# world_mpi.c needs MPI: built by `make mpi` only
+EXAMPLES := $(filter-out bin/world_mpi,$(patsubst examples/%.c,bin/%,$(wildcard examples/*.c)))
 BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
-.PHONY: all test check-compile check-layout demo demo-check bench fuzz clean
+.PHONY: all test check-compile check-layout demo demo-check bench fuzz clean mpi
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
 
 bin/terrainnet: examples/cli/terrainnet.c terrainnet.h | bin
@@ -47,6 +48,14 @@ build/test/test_layout: tests/check_layout.c
 test: bin/terrainnet | build/check build/test
 	@$(MAKE) --no-print-directory -j2 $(TESTS)
 	@sh tests/run_tests.sh $(TESTS)
+
+# examples/world_mpi.c with OpenMPI (Debian: openmpi-bin libopenmpi-dev); skipped without mpicc.
+MPICC ?= mpicc
+mpi: | bin
+	@if command -v $(MPICC) >/dev/null 2>&1; then \
+	  echo "$(MPICC) ... examples/world_mpi.c -o bin/world_mpi"; \
+	  $(MPICC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. examples/world_mpi.c -o bin/world_mpi $(LDLIBS); \
+	else echo "make mpi: $(MPICC) not found (Debian: apt-get install openmpi-bin libopenmpi-dev); skipped"; fi
 
 demo: bin/terrainnet
 	@sh examples/demo.sh

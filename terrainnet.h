@@ -76,6 +76,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
+    @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest
 */
 #ifndef TERRAINNET_H
 #define TERRAINNET_H
@@ -231,6 +232,16 @@ TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn
 /* Hypsometric terrain colours (water-blue, green lowlands, brown, rock grey, snow white) for
    heights mapped linearly from [lo, hi] (lo == hi: the DEM's own range). RGB in [0, 1]. */
 TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float lo, float hi);
+
+/* A rectangle of pixels: columns x .. x + w - 1, rows y .. y + h - 1 (a tile of a world). */
+typedef struct tn_rect { int x, y, w, h; } tn_rect;
+/* "Compute this rectangle with a halo of h": r grown by `halo` pixels on every side and clipped
+   to a width x height raster. An operation whose output pixel depends only on inputs at most
+   `halo` pixels away (and on where the raster's edges are) gives exactly its whole-raster pixels
+   of r when run on the grown rectangle alone and cropped at (r.x - grown.x, r.y - grown.y): each
+   edge of the grown rectangle is either the raster's edge, which the whole run sees too, or at
+   least `halo` pixels from r. Chains add their halos. (@@world builds every tile this way.) */
+TN_API tn_rect tn_rect_halo(tn_rect r, int halo, int width, int height);
 
 
 /* ============================================================================================
@@ -1574,6 +1585,84 @@ typedef struct tn_splat_opts {
    mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
    2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
 TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
+
+/* ============================================================================================
+   @@world  worlds in tiles: a generator and local operations, computed tile by tile
+   A world is a pipeline (one generator, then local operations) over a raster far larger than
+   memory, cut into tiles that are computed alone, in any order, on any machine: a tile is
+   exactly the pixels a whole-map run would have there (the halo contract). A generator computes
+   any rectangle from global pixel positions and the seed; an operation of halo h computes a
+   rectangle from its input grown by h (tn_rect_halo), so a tile needs the sum of the halos
+   around it. What cannot be local (style transfer, depression filling, flow accumulation,
+   colour correction) is refused with the reason. docs/world.md lists each method's halo.
+   SPEC text, one setting or stage a line ('#' starts a comment):
+       world 16384 16384         size of the generator's raster in pixels (width height)
+       seed 42
+       height 0 3000             metres of generator value 0 and 1 = the 16-bit range of every tile
+       cellsize 30               metres per pixel (optional; 0 = auto: relief spans 10% of the side)
+       tile 1024                 output tile side (optional)
+       perlin frequency=16 octaves=10
+       hillshade azimuth=315
+   ============================================================================================ */
+
+typedef struct tn_world {
+    int width, height;         /* the generator's raster in pixels */
+    int tile;                  /* output tile side in pixels */
+    uint64_t seed;
+    float lo, hi;              /* metres of generator value 0 and 1; the range of every height tile */
+    float cellsize;            /* metres per pixel; 0 = auto (hillshade's relief rule on lo..hi) */
+    int out_width, out_height, out_channels; /* the pipeline's output raster */
+    int out_heights;           /* 1: tiles hold heights in metres (16-bit PNG, range lo..hi recorded);
+                                  0: values in [0, 1] (8-bit PNG: shading, normals, colour) */
+    int rows, cols;            /* the tile grid over the output raster */
+    int halo;                  /* generator pixels of context a tile needs on each side */
+    uint64_t digest;           /* of the normalised SPEC text */
+    char *text;                /* the normalised SPEC (DIR/world.spec holds it); library-owned */
+    void *impl;                /* the stages; library-owned */
+} tn_world;
+
+typedef struct tn_world_opts {
+    int tile;                  /* overrides the SPEC's tile side (16..65536); 0 = the SPEC's, else 1024 */
+    const char *base_dir;      /* where relative model paths in the SPEC start; NULL = the SPEC file's
+                                  directory (tn_world_load) or the working directory (tn_world_parse) */
+} tn_world_opts;
+
+/* Parses a SPEC (text, NUL-terminated) into *w (free with tn_world_free). Unknown settings,
+   methods or parameters, a pipeline without a generator first, non-local methods and halos
+   the world is too small for fail with TN_ERR_INVALID_ARG and say why. opts may be NULL. */
+TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w);
+/* Reads and parses a SPEC file. */
+TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w);
+TN_API void tn_world_free(tn_world *w);
+/* Any rectangle of the output raster, in global pixel coordinates (inside the raster): the same
+   pixels a whole-map run gives there. Memory is bounded by the rectangle plus its halo. */
+TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out);
+/* Tile (row, col) of the grid: columns col * tile .., rows row * tile .. (smaller at the far edges). */
+TN_API tn_rect tn_world_tile_rect(const tn_world *w, int row, int col);
+
+typedef struct tn_world_run_opts {
+    int row0, row1, col0, col1; /* tiles rows [row0, row1) x columns [col0, col1); row1 = 0: all rows,
+                                   col1 = 0: all columns */
+    int part, parts;            /* take the k-th selected tile (row-major) when k % parts == part;
+                                   parts 0 = 1 (MPI ranks, job arrays) */
+} tn_world_run_opts;
+
+typedef struct tn_world_run_stats {
+    int written, skipped;      /* tiles computed and written; tiles already in DIR */
+    double seconds;
+} tn_world_run_stats;
+
+/* Writes the selected tiles as DIR/r{row}_c{col}.png (created atomically; a tile already there
+   is complete and skipped, so a run resumes). DIR must exist; DIR/world.spec is written on
+   first use and a different world in DIR is refused. Progress stage "world". stats may be NULL. */
+TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts,
+                                      tn_world_run_stats *stats);
+/* Writes DIR/world.vrt (a GDAL mosaic of the whole grid, heights in metres through the band's
+   offset and scale) and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's
+   FNV-1a 64 digest of its file bytes), both atomically. present (may be NULL) gets the count. */
+TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
+/* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
+TN_API const char *tn_world_method_help(int i);
 
 #ifdef __cplusplus
 }
@@ -3084,6 +3173,24 @@ TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float 
     job.lo = lo;
     job.inv_span = hi != lo ? 1.0f / (hi - lo) : 0.0f; /* flat DEM: every pixel gets t = 0 */
     return tn__terrain_run(dst, dem, &job, 3);
+}
+
+/* ---- halo rectangles ------------------------------------------------------------------------ */
+
+TN_API tn_rect tn_rect_halo(tn_rect r, int halo, int width, int height)
+{
+    long long x0 = (long long)r.x - halo, y0 = (long long)r.y - halo;
+    long long x1 = (long long)r.x + r.w + halo, y1 = (long long)r.y + r.h + halo;
+    tn_rect g;
+    if (x0 < 0) x0 = 0;
+    if (y0 < 0) y0 = 0;
+    if (x1 > width) x1 = width;
+    if (y1 > height) y1 = height;
+    g.x = (int)x0;
+    g.y = (int)y0;
+    g.w = x1 > x0 ? (int)(x1 - x0) : 0;
+    g.h = y1 > y0 ? (int)(y1 - y0) : 0;
+    return g;
 }
 
 /* --------------------------------------------------------------------------------------------
@@ -11280,7 +11387,8 @@ TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, 
 
 typedef struct tn__perlin_job {
     uint8_t perm[512];
-    int width, height, octaves, periodic;
+    int width, height, octaves, periodic; /* the whole map's size: lattice coordinates depend on it */
+    int x0, y0, w;                        /* the window computed: columns x0 .. x0 + w - 1, rows from y0 */
     float freq, lacunarity, gain;
     /* per octave and column (the same for every row): hashed x lattice corners, offset, fade */
     int *hx0, *hx1;
@@ -11320,16 +11428,16 @@ static void tn__perlin_rows(void *ctx, size_t yb, size_t ye)
     size_t y;
     int x, o;
     for (y = yb; y < ye; y++) {
-        float *row = j->out + y * (size_t)j->width, freq = j->freq, amp = 1.0f;
-        for (x = 0; x < j->width; x++) row[x] = 0.0f;
+        float *row = j->out + y * (size_t)j->w, freq = j->freq, amp = 1.0f;
+        for (x = 0; x < j->w; x++) row[x] = 0.0f;
         for (o = 0; o < j->octaves; o++) {
-            const int *hx0 = j->hx0 + (size_t)o * j->width, *hx1 = j->hx1 + (size_t)o * j->width;
-            const float *fxs = j->fx + (size_t)o * j->width, *uxs = j->ux + (size_t)o * j->width;
+            const int *hx0 = j->hx0 + (size_t)o * j->w, *hx1 = j->hx1 + (size_t)o * j->w;
+            const float *fxs = j->fx + (size_t)o * j->w, *uxs = j->ux + (size_t)o * j->w;
             float cells_y = tn__perlin_cells(j, freq * (float)j->height / (float)j->width), fy, v;
             int y0, y1;
-            tn__perlin_coord(j, (int)y, j->height, cells_y, (float)(o * 37), &y0, &y1, &fy);
+            tn__perlin_coord(j, j->y0 + (int)y, j->height, cells_y, (float)(o * 37), &y0, &y1, &fy);
             v = tn__fade(fy);
-            for (x = 0; x < j->width; x++) {
+            for (x = 0; x < j->w; x++) {
                 int h00 = p[hx0[x] + y0] & 7, h10 = p[hx1[x] + y0] & 7, h01 = p[hx0[x] + y1] & 7, h11 = p[hx1[x] + y1] & 7;
                 float fx = fxs[x], u = uxs[x];
                 float a = tn__perlin_gx[h00] * fx + tn__perlin_gy[h00] * fy;
@@ -11363,32 +11471,34 @@ static void tn__perlin_opts_defaults(tn_perlin_opts *o)
     if (o->gain == 0) o->gain = 0.5f;
 }
 
-TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts)
+/* Checks opts and resolves its zero rules into *o. */
+static tn_status tn__perlin_resolve(const tn_perlin_opts *opts, tn_perlin_opts *o)
 {
-    tn_perlin_opts o;
-    tn__perlin_job *j;
-    tn_image img = {0, 0, 0, NULL};
-    tn_rng rng;
-    tn_status st;
-    int i;
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    if (o.octaves < 0 || !(o.frequency >= 0.0f) || !(o.lacunarity >= 0.0f) || !(o.gain >= 0.0f)) /* also NaN */
+    memset(o, 0, sizeof *o);
+    if (opts) *o = *opts;
+    if (o->octaves < 0 || !(o->frequency >= 0.0f) || !(o->lacunarity >= 0.0f) || !(o->gain >= 0.0f)) /* also NaN */
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: negative or NaN octaves, frequency, lacunarity or gain");
-    tn__perlin_opts_defaults(&o);
-    if (o.octaves > 24 || o.frequency > 1e6f || o.lacunarity > 16.0f || o.gain > 4.0f)
+    tn__perlin_opts_defaults(o);
+    if (o->octaves > 24 || o->frequency > 1e6f || o->lacunarity > 16.0f || o->gain > 4.0f)
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: octaves <= 24, frequency <= 1e6, lacunarity <= 16, gain <= 4");
     /* the finest octave's lattice coordinates must fit an int (they are floored to cells) */
-    if ((double)o.frequency * pow((double)o.lacunarity, o.octaves - 1) > 1e9)
+    if ((double)o->frequency * pow((double)o->lacunarity, o->octaves - 1) > 1e9)
         return tn__fail(TN_ERR_INVALID_ARG, "perlin: frequency x lacunarity^(octaves - 1) exceeds 1e9 cells");
-    if ((st = tn_image_create(&img, width, height, 1))) return st;
+    return TN_OK;
+}
+
+/* Raw (unnormalised) fBm of the w x h window at (x0, y0) of a width x height map into out
+   (w * h floats), o resolved. Every pixel is a function of its global position and the map's
+   size only, so any window equals the same pixels of the whole map, bit for bit. */
+static tn_status tn__perlin_window(const tn_perlin_opts *o, int width, int height, int x0, int y0, int w, int h, float *out)
+{
+    tn__perlin_job *j;
+    tn_rng rng;
+    int i;
     j = (tn__perlin_job *)tn__alloc(sizeof *j);
-    if (!j) {
-        tn_image_free(&img);
-        return TN_ERR_OUT_OF_MEMORY;
-    }
+    if (!j) return TN_ERR_OUT_OF_MEMORY;
     for (i = 0; i < 256; i++) j->perm[i] = (uint8_t)i;
-    tn_rng_seed(&rng, o.seed, 0x5e71u);
+    tn_rng_seed(&rng, o->seed, 0x5e71u);
     for (i = 255; i > 0; i--) { /* Fisher-Yates */
         int k = (int)tn_rng_below(&rng, (uint32_t)i + 1);
         uint8_t t = j->perm[i];
@@ -11398,39 +11508,55 @@ TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_
     for (i = 0; i < 256; i++) j->perm[256 + i] = j->perm[i];
     j->width = width;
     j->height = height;
-    j->octaves = o.octaves;
-    j->periodic = o.periodic != 0;
-    j->freq = o.frequency;
-    j->lacunarity = o.lacunarity;
-    j->gain = o.gain;
-    j->out = img.data;
-    j->hx0 = (int *)tn__alloc(2 * (size_t)o.octaves * (size_t)width * (sizeof(int) + sizeof(float)));
+    j->x0 = x0;
+    j->y0 = y0;
+    j->w = w;
+    j->octaves = o->octaves;
+    j->periodic = o->periodic != 0;
+    j->freq = o->frequency;
+    j->lacunarity = o->lacunarity;
+    j->gain = o->gain;
+    j->out = out;
+    j->hx0 = (int *)tn__alloc(2 * (size_t)o->octaves * (size_t)w * (sizeof(int) + sizeof(float)));
     if (!j->hx0) {
         TN_FREE(j);
-        tn_image_free(&img);
         return TN_ERR_OUT_OF_MEMORY;
     }
-    j->hx1 = j->hx0 + (size_t)o.octaves * width;
-    j->fx = (float *)(j->hx1 + (size_t)o.octaves * width);
-    j->ux = j->fx + (size_t)o.octaves * width;
+    j->hx1 = j->hx0 + (size_t)o->octaves * w;
+    j->fx = (float *)(j->hx1 + (size_t)o->octaves * w);
+    j->ux = j->fx + (size_t)o->octaves * w;
     {
-        float freq = o.frequency;
+        float freq = o->frequency;
         int oc, x;
-        for (oc = 0; oc < o.octaves; oc++, freq *= o.lacunarity) {
+        for (oc = 0; oc < o->octaves; oc++, freq *= o->lacunarity) {
             float cells_x = tn__perlin_cells(j, freq);
-            for (x = 0; x < width; x++) {
-                size_t k = (size_t)oc * width + x;
-                int x0, x1;
-                tn__perlin_coord(j, x, width, cells_x, (float)(oc * 59), &x0, &x1, &j->fx[k]);
-                j->hx0[k] = j->perm[x0];
-                j->hx1[k] = j->perm[x1];
+            for (x = 0; x < w; x++) {
+                size_t k = (size_t)oc * w + x;
+                int c0, c1;
+                tn__perlin_coord(j, x0 + x, width, cells_x, (float)(oc * 59), &c0, &c1, &j->fx[k]);
+                j->hx0[k] = j->perm[c0];
+                j->hx1[k] = j->perm[c1];
                 j->ux[k] = tn__fade(j->fx[k]);
             }
         }
     }
-    tn_parallel_for((size_t)height, 4, tn__perlin_rows, j);
+    tn_parallel_for((size_t)h, 4, tn__perlin_rows, j);
     TN_FREE(j->hx0);
     TN_FREE(j);
+    return TN_OK;
+}
+
+TN_API tn_status tn_noise_perlin(tn_image *out, int width, int height, const tn_perlin_opts *opts)
+{
+    tn_perlin_opts o;
+    tn_image img = {0, 0, 0, NULL};
+    tn_status st;
+    if ((st = tn__perlin_resolve(opts, &o))) return st;
+    if ((st = tn_image_create(&img, width, height, 1))) return st;
+    if ((st = tn__perlin_window(&o, width, height, 0, 0, width, height, img.data))) {
+        tn_image_free(&img);
+        return st;
+    }
     tn__normalise01(&img);
     *out = img;
     return TN_OK;
@@ -20601,6 +20727,1030 @@ done:
     tn_image_free(&w);
     tn_image_free(&slope);
     tn_image_free(&one);
+    return st;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>world  (@@world implementation)
+   A stage computes any rectangle of its own raster. The runner asks the stage below it for the
+   rectangle grown by the stage's halo (tn_rect_halo, scaled by the stage's factor) and hands
+   that over with its position; a generator computes from global positions alone. So a tile is
+   the whole-map pixels whenever every stage is, and memory holds one rectangle per stage.
+   A new method is one row of tn__world_methods: setup (parameters -> halo, factor, output
+   raster) and run (rectangle + grown input -> rectangle).
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__WORLD_MAX_KV 8
+#define TN__WORLD_MAX_STAGES 16
+#define TN__WORLD_MAX_SIDE (1 << 28)
+
+struct tn__world_method;
+
+typedef struct tn__world_stage {
+    const struct tn__world_method *m;
+    int line;                             /* SPEC line, for messages */
+    int nkv;
+    char key[TN__WORLD_MAX_KV][32];
+    char val[TN__WORLD_MAX_KV][512];
+    unsigned used;                        /* bit k: key k was read by setup */
+    int halo;                             /* input pixels of context on each side */
+    int factor;                           /* input pixels per output pixel (1: same raster) */
+    int in_w, in_h, in_c, in_heights;     /* the input raster (none for a generator) */
+    int out_w, out_h, out_c, out_heights; /* this stage's raster */
+    float p[8];                           /* method parameters */
+    int np;                               /* explicit noise: how many sigmas in p[2..] */
+    tn_texgan *model;
+} tn__world_stage;
+
+typedef struct tn__world_method {
+    const char *name;
+    int source;          /* 1: a generator (the first stage, and only there) */
+    const char *refuse;  /* not NULL: cannot be computed tile by tile, and why */
+    const char *help;    /* parameters and halo, for tn_world_method_help */
+    tn_status (*setup)(tn__world_stage *s, const tn_world *w, const char *base_dir);
+    tn_status (*run)(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r, tn_image *out);
+} tn__world_method;
+
+typedef struct tn__world_impl {
+    int n;
+    tn__world_stage st[TN__WORLD_MAX_STAGES];
+} tn__world_impl;
+
+/* ---- stage parameters ---- */
+
+static int tn__world_find(tn__world_stage *s, const char *key)
+{
+    int k;
+    for (k = 0; k < s->nkv; k++)
+        if (!strcmp(s->key[k], key)) {
+            s->used |= 1u << k;
+            return k;
+        }
+    return -1;
+}
+
+/* Parameter `key` as a number in [lo, hi] (def when absent). */
+static tn_status tn__world_num(tn__world_stage *s, const char *key, double def, double lo, double hi, double *out)
+{
+    int k = tn__world_find(s, key);
+    double v;
+    *out = def;
+    if (k < 0) return TN_OK;
+    if (!tn__io_number(s->val[k], strlen(s->val[k]), &v) || !(v >= lo && v <= hi))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s %s=%s must be a number from %g to %g", s->line, s->m->name, key,
+                        s->val[k], lo, hi);
+    *out = v;
+    return TN_OK;
+}
+
+/* Metres per input pixel for slopes: the SPEC's cellsize, else hillshade's "auto" rule applied
+   to the world's height range (not to a tile's, which would differ from tile to tile). */
+static float tn__world_spacing(const tn__world_stage *s, const tn_world *w)
+{
+    int side = s->in_w > s->in_h ? s->in_w : s->in_h;
+    float f = (float)w->width / (float)s->in_w;
+    if (w->cellsize > 0) return w->cellsize * f;
+    return w->hi > w->lo ? (w->hi - w->lo) / (TN__SHADE_AUTO_RELIEF * (float)side) : 1.0f;
+}
+
+static tn_status tn__world_need_heights(const tn__world_stage *s)
+{
+    if (s->in_heights) return TN_OK;
+    return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs heights, but the stage before it gives values in [0, 1]", s->line,
+                    s->m->name);
+}
+
+/* A Gaussian of `radius` (tn_image_blur's kernel) must fit the raster the whole-map run blurs,
+   else that run folds the kernel and a tile cannot match it. */
+static tn_status tn__world_fits(const tn__world_stage *s, int radius, int w, int h)
+{
+    if (radius < w && radius < h) return TN_OK;
+    return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s: a halo of %d pixels needs a raster larger than %d x %d", s->line,
+                    s->m->name, radius, w, h);
+}
+
+static void tn__world_same_raster(tn__world_stage *s)
+{
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_c = s->in_c;
+    s->out_heights = s->in_heights;
+    s->factor = 1;
+}
+
+/* out = the r part of img, which covers img_r. */
+static tn_status tn__world_crop(const tn_image *img, tn_rect img_r, tn_rect r, tn_image *out)
+{
+    return tn_image_crop(out, img, r.x - img_r.x, r.y - img_r.y, r.w, r.h);
+}
+
+/* ---- generators ---- */
+
+static tn_status tn__world_perlin_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    tn_perlin_opts o, chk;
+    double v[6];
+    tn_status st;
+    float amp = 1.0f, sum = 0.0f;
+    int i;
+    (void)base_dir;
+    if ((st = tn__world_num(s, "frequency", 4, 1e-6, 1e6, &v[0])) || (st = tn__world_num(s, "octaves", 8, 1, 24, &v[1])) ||
+        (st = tn__world_num(s, "lacunarity", 2, 1e-3, 16, &v[2])) || (st = tn__world_num(s, "gain", 0.5, 1e-6, 4, &v[3])) ||
+        (st = tn__world_num(s, "contrast", 1, 1e-6, 1e6, &v[4])) || (st = tn__world_num(s, "periodic", 0, 0, 1, &v[5])))
+        return st;
+    memset(&o, 0, sizeof o);
+    o.frequency = (float)v[0];
+    o.octaves = (int)v[1];
+    o.lacunarity = (float)v[2];
+    o.gain = (float)v[3];
+    o.periodic = v[5] != 0;
+    if ((st = tn__perlin_resolve(&o, &chk))) return st;
+    for (i = 0; i < o.octaves; i++, amp *= o.gain) sum += amp;
+    for (i = 0; i < 6; i++) s->p[i] = (float)v[i];
+    s->p[6] = sum;
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = 1;
+    s->out_heights = 1;
+    return TN_OK;
+}
+
+/* Value v in [0, 1] (nominal) -> metres. */
+static float tn__world_metres(const tn_world *w, float v) { return w->lo + v * (w->hi - w->lo); }
+
+/* Perlin fBm at global positions. tn_noise_perlin stretches each map to its own min..max, a
+   whole-map statistic; here the fixed bound of improved noise (|n| <= 1 per octave, so |fBm|
+   <= the sum of amplitudes S) maps it instead: v = 0.5 + 0.5 contrast fBm / S. */
+static tn_status tn__world_perlin_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn_perlin_opts o;
+    tn_image img = {0, 0, 0, NULL};
+    tn_status st;
+    size_t i, n = (size_t)r.w * r.h;
+    float k = 0.5f * s->p[4] / s->p[6];
+    (void)in;
+    (void)in_r;
+    memset(&o, 0, sizeof o);
+    o.seed = w->seed;
+    o.frequency = s->p[0];
+    o.octaves = (int)s->p[1];
+    o.lacunarity = s->p[2];
+    o.gain = s->p[3];
+    o.periodic = s->p[5] != 0;
+    if ((st = tn_image_create(&img, r.w, r.h, 1))) return st;
+    if ((st = tn__perlin_window(&o, w->width, w->height, r.x, r.y, r.w, r.h, img.data))) {
+        tn_image_free(&img);
+        return st;
+    }
+    for (i = 0; i < n; i++) img.data[i] = tn__world_metres(w, 0.5f + k * img.data[i]);
+    *out = img;
+    return TN_OK;
+}
+
+static int tn__world_gauss_radius(float sigma) { return (int)floor(4.0 * sigma + 0.5); }
+
+static tn_status tn__world_explicit_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double layers, contrast;
+    tn_status st;
+    int k = tn__world_find(s, "sigma"), i;
+    (void)base_dir;
+    if ((st = tn__world_num(s, "layers", 5, 1, 30, &layers)) || (st = tn__world_num(s, "contrast", 1, 1e-6, 1e6, &contrast))) return st;
+    s->p[0] = (float)layers;
+    s->p[1] = (float)contrast;
+    if (k < 0) { /* tn_noise_explicit's defaults at 1024 px: a world-size sigma would need a world-size halo */
+        s->p[2] = 16.0f;
+        s->p[3] = 32.0f;
+        s->np = 2;
+    } else {
+        const char *v = s->val[k];
+        while (*v) {
+            size_t len = strcspn(v, ",");
+            double x;
+            if (s->np >= 6 || !tn__io_number(v, len, &x) || !(x >= 0 && x <= 1e4))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: explicit sigma=%s must be up to 6 numbers 0..1e4, e.g. sigma=16,32",
+                                s->line, s->val[k]);
+            s->p[2 + s->np++] = (float)x;
+            v += len + (v[len] == ',');
+        }
+    }
+    s->halo = 0;
+    for (i = 0; i < s->np; i++) {
+        if (s->p[2 + i] <= 0) continue;
+        if ((st = tn__world_fits(s, tn__world_gauss_radius(s->p[2 + i]), w->width, w->height))) return st;
+        s->halo += tn__world_gauss_radius(s->p[2 + i]);
+    }
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = 1;
+    s->out_heights = 1;
+    return TN_OK;
+}
+
+/* Uniform [0, 1) of (seed, layer, cell): a hash, so any cell is computed alone. */
+static float tn__world_cell_uniform(uint64_t seed, int layer, int cx, int cy)
+{
+    uint64_t h = tn__splitmix64(tn__splitmix64(seed ^ ((uint64_t)layer << 58)) ^ (((uint64_t)(uint32_t)cy << 32) | (uint32_t)cx));
+    return (float)(h >> 40) * (1.0f / 16777216.0f);
+}
+
+/* Explicit noise (Algorithm 1 as tn_noise_explicit) made position-based: layer i's random matrix
+   ((W >> i) x (H >> i) cells) is a hash of each cell instead of an RNG sequence, the layers are
+   averaged, then smoothed by the sigmas: computed on r grown by their radii, which the
+   generator's own halo covers. No min..max stretch (a whole-map statistic): v = 0.5 +
+   contrast (mean - 0.5). */
+static tn_status tn__world_explicit_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                        tn_image *out)
+{
+    tn_rect g = tn_rect_halo(r, s->halo, w->width, w->height);
+    tn_image img = {0, 0, 0, NULL}, res = {0, 0, 0, NULL};
+    int layers = (int)s->p[0], x, y, l, i;
+    tn_status st;
+    size_t n;
+    (void)in;
+    (void)in_r;
+    if ((st = tn_image_create(&img, g.w, g.h, 1))) return st;
+    for (y = 0; y < g.h; y++)
+        for (x = 0; x < g.w; x++) {
+            float acc = 0.0f;
+            for (l = 1; l <= layers; l++) {
+                long long sw = w->width >> l, sh = w->height >> l, gx = g.x + x, gy = g.y + y;
+                if (sw < 1) sw = 1;
+                if (sh < 1) sh = 1;
+                acc += tn__world_cell_uniform(w->seed, l, (int)((2 * gx + 1) * sw / (2LL * w->width)),
+                                              (int)((2 * gy + 1) * sh / (2LL * w->height)));
+            }
+            img.data[(size_t)y * g.w + x] = acc / (float)layers;
+        }
+    for (i = 0; i < s->np && !st; i++)
+        if (s->p[2 + i] > 0) st = tn_image_blur(&img, &img, s->p[2 + i]);
+    if (!st) st = tn__world_crop(&img, g, r, &res);
+    tn_image_free(&img);
+    if (st) return st;
+    n = (size_t)r.w * r.h;
+    for (i = 0; i < (int)n; i++) res.data[i] = tn__world_metres(w, 0.5f + s->p[1] * (res.data[i] - 0.5f));
+    *out = res;
+    return TN_OK;
+}
+
+/* "dir/path" unless path is absolute or dir is empty; malloc'ed. */
+static char *tn__world_join(const char *dir, const char *path)
+{
+    size_t a = dir ? strlen(dir) : 0, b = strlen(path);
+    char *p = (char *)tn__alloc(a + b + 2);
+    if (!p) return NULL;
+    if (!a || path[0] == '/') memcpy(p, path, b + 1);
+    else {
+        memcpy(p, dir, a);
+        p[a] = '/';
+        memcpy(p + a + 1, path, b + 1);
+    }
+    return p;
+}
+
+static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    int k = tn__world_find(s, "model");
+    char *path;
+    tn_status st;
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan needs model=FILE.tnw", s->line);
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    s->model = (tn_texgan *)tn__calloc(sizeof *s->model);
+    st = s->model ? tn_texgan_load(s->model, path) : TN_ERR_OUT_OF_MEMORY;
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->model);
+        s->model = NULL;
+        return st;
+    }
+    if (s->model->channels > 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan model with %d channels; a tile holds at most 4", s->line,
+                        s->model->channels);
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = s->model->channels;
+    s->out_heights = s->out_c == 1; /* a one-channel model learnt a heightfield */
+    return TN_OK;
+}
+
+/* The texture GAN's windows are already exact (a window of z cells [a, a + T + 8) gives exactly
+   its output pixels): bands of 256 rows bound the generator's memory. Values map from the
+   model's range to metres (one channel) or to [0, 1]. */
+static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn_image img = {0, 0, 0, NULL}, band = {0, 0, 0, NULL};
+    const tn_texgan *m = s->model;
+    float span = m->hi > m->lo ? m->hi - m->lo : 1.0f;
+    tn_status st;
+    int y0;
+    size_t i, n;
+    (void)in;
+    (void)in_r;
+    if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
+    for (y0 = 0; y0 < r.h && !st; y0 += 256) {
+        int bh = r.h - y0 < 256 ? r.h - y0 : 256;
+        st = tn_texgan_synthesize_window(m, w->seed, r.x, r.y + y0, r.w, bh, &band);
+        if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
+        tn_image_free(&band);
+    }
+    if (st) {
+        tn_image_free(&img);
+        return st;
+    }
+    n = (size_t)r.w * r.h * m->channels;
+    for (i = 0; i < n; i++) {
+        float v = (img.data[i] - m->lo) / span;
+        img.data[i] = s->out_heights ? tn__world_metres(w, v) : v;
+    }
+    *out = img;
+    return TN_OK;
+}
+
+/* ---- local operations ---- */
+
+static tn_status tn__world_blur_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double sigma;
+    tn_status st;
+    (void)w;
+    (void)base_dir;
+    if ((st = tn__world_num(s, "sigma", 1, 1e-3, 1e4, &sigma))) return st;
+    s->p[0] = (float)sigma;
+    s->halo = tn__world_gauss_radius(s->p[0]);
+    tn__world_same_raster(s);
+    return tn__world_fits(s, s->halo, s->in_w, s->in_h);
+}
+
+static tn_status tn__world_blur_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                    tn_image *out)
+{
+    tn_image b = {0, 0, 0, NULL};
+    tn_status st = tn_image_blur(&b, in, s->p[0]);
+    (void)w;
+    if (!st) st = tn__world_crop(&b, in_r, r, out);
+    tn_image_free(&b);
+    return st;
+}
+
+static tn_status tn__world_hillshade_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double v[3];
+    tn_status st;
+    (void)base_dir;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((st = tn__world_num(s, "azimuth", 315, -360, 360, &v[0])) || (st = tn__world_num(s, "altitude", 45, 1e-3, 90, &v[1])) ||
+        (st = tn__world_num(s, "z", 1, 1e-6, 1e6, &v[2])))
+        return st;
+    s->p[0] = (float)v[0];
+    s->p[1] = (float)v[1];
+    s->p[2] = (float)v[2];
+    s->p[3] = tn__world_spacing(s, w);
+    s->halo = 1; /* Horn's 3 x 3 window */
+    s->factor = 1;
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_c = 1;
+    s->out_heights = 0;
+    return TN_OK;
+}
+
+static tn_status tn__world_hillshade_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                         tn_image *out)
+{
+    tn_hillshade_opts o;
+    tn_image b = {0, 0, 0, NULL};
+    tn_status st;
+    (void)w;
+    memset(&o, 0, sizeof o);
+    o.azimuth_deg = s->p[0] == 0 ? 360.0f : s->p[0]; /* 0 would mean "default" to tn_image_hillshade */
+    o.altitude_deg = s->p[1];
+    o.z_factor = s->p[2];
+    o.dx = o.dy = s->p[3];
+    st = tn_image_hillshade(&b, in, &o);
+    if (!st) st = tn__world_crop(&b, in_r, r, out);
+    tn_image_free(&b);
+    return st;
+}
+
+static tn_status tn__world_normalmap_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double z, dx;
+    tn_status st;
+    (void)base_dir;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((st = tn__world_num(s, "z", 1, 1e-6, 1e6, &z)) || (st = tn__world_num(s, "directx", 0, 0, 1, &dx))) return st;
+    s->p[0] = (float)z;
+    s->p[1] = (float)dx;
+    s->p[2] = tn__world_spacing(s, w);
+    s->halo = 1; /* central differences */
+    s->factor = 1;
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_c = 3;
+    s->out_heights = 0;
+    return TN_OK;
+}
+
+static tn_status tn__world_normalmap_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                         tn_image *out)
+{
+    tn_image b = {0, 0, 0, NULL};
+    tn_status st = tn_normal_map(in, s->p[2], s->p[2], s->p[0], s->p[1] != 0, &b);
+    (void)w;
+    if (!st) st = tn__world_crop(&b, in_r, r, out);
+    tn_image_free(&b);
+    return st;
+}
+
+static tn_status tn__world_detail_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double f, sigma;
+    float rest, sl = 0.0f;
+    tn_status st;
+    (void)w;
+    (void)base_dir;
+    if ((st = tn__world_num(s, "factor", 10, 1, 4096, &f))) return st;
+    if ((st = tn__world_num(s, "sigma", 0.5 * (int)f, 1e-3, 1e4, &sigma))) return st;
+    s->factor = (int)f;
+    /* tn__dm_finish's low-pass: the f x f area average, then the Gaussian of the remaining width */
+    rest = (float)sigma * (float)sigma - (float)(s->factor * s->factor) / 12.0f;
+    if (rest > 0 && sqrtf(rest) / (float)s->factor > 0.05f) sl = sqrtf(rest) / (float)s->factor;
+    s->p[0] = sl;
+    s->out_w = (s->in_w + s->factor - 1) / s->factor;
+    s->out_h = (s->in_h + s->factor - 1) / s->factor;
+    s->out_c = s->in_c;
+    s->out_heights = s->in_heights;
+    s->halo = (sl > 0 ? tn__world_gauss_radius(sl) : 0) * s->factor;
+    return tn__world_fits(s, s->halo / s->factor, s->out_w, s->out_h);
+}
+
+/* The low detail map of tn_detail_maps_from_image (without its colour correction, a whole-map
+   mean) for rectangle r of the low raster: in is block-aligned (its start is a multiple of f,
+   its end one or the raster's edge), so its block sums are the whole map's, added in the same
+   order by the same code. */
+static tn_status tn__world_detail_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn__dm_acc a;
+    tn_image low = {0, 0, 0, NULL};
+    tn_rect low_r;
+    int f = s->factor, x, y, c;
+    size_t n;
+    tn_status st;
+    (void)w;
+    memset(&a, 0, sizeof a);
+    a.f = f;
+    a.channels = in->channels;
+    a.wl = (in->width + f - 1) / f;
+    a.hl = (in->height + f - 1) / f;
+    if ((st = tn__size4((size_t)a.wl, (size_t)a.hl, (size_t)a.channels, sizeof(double), &n))) return st;
+    if (!(a.sum = (double *)tn__calloc(n))) return TN_ERR_OUT_OF_MEMORY;
+    tn__dm_acc_band(&a, 0, in);
+    st = tn_image_create(&low, a.wl, a.hl, a.channels);
+    for (y = 0; !st && y < a.hl; y++)
+        for (x = 0; x < a.wl; x++) {
+            int bw = (x + 1) * f <= in->width ? f : in->width - x * f, bh = (y + 1) * f <= in->height ? f : in->height - y * f;
+            for (c = 0; c < a.channels; c++) {
+                size_t k = ((size_t)y * a.wl + x) * a.channels + c;
+                low.data[k] = (float)(a.sum[k] / ((double)bw * bh));
+            }
+        }
+    TN_FREE(a.sum);
+    if (!st && s->p[0] > 0) st = tn_image_blur(&low, &low, s->p[0]);
+    low_r.x = in_r.x / f;
+    low_r.y = in_r.y / f;
+    low_r.w = a.wl;
+    low_r.h = a.hl;
+    if (!st) st = tn__world_crop(&low, low_r, r, out);
+    tn_image_free(&low);
+    return st;
+}
+
+/* ---- the method table ---- */
+
+static const tn__world_method tn__world_methods[] = {
+    {"perlin", 1, NULL, "generator, halo 0: frequency=4 (cells across the world) octaves=8 lacunarity=2 gain=0.5 contrast=1 periodic=0",
+     tn__world_perlin_setup, tn__world_perlin_run},
+    {"explicit", 1, NULL, "generator, halo = sum of round(4 sigma): layers=5 sigma=16,32 contrast=1", tn__world_explicit_setup,
+     tn__world_explicit_run},
+    {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
+     tn__world_texgan_setup, tn__world_texgan_run},
+    {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
+    {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
+     tn__world_hillshade_run},
+    {"normalmap", 0, NULL, "operation on heights, halo 1: z=1 directx=0 (spacing: cellsize)", tn__world_normalmap_setup,
+     tn__world_normalmap_run},
+    {"detail", 0, NULL, "operation, 1/factor size, halo factor x round(4 sigma_low): factor=10 sigma=factor/2 (no colour correction)",
+     tn__world_detail_setup, tn__world_detail_run},
+    {"style", 0, "style transfer optimises the whole map at once (its losses are statistics over every pixel, and maps over 512 px "
+                 "run as feathered tiles that see each other's results), so a tile cannot equal a whole-map run; "
+                 "run `terrainnet style` on a map of up to 2048 px instead", NULL, NULL, NULL},
+    {"fill", 0, "depression filling is global: a pit is raised to the lowest spill point of its basin, which may lie any number "
+                "of tiles away; run `terrainnet extract` on a whole map instead", NULL, NULL, NULL},
+    {"flow", 0, "flow accumulation is global: a pixel counts every pixel upstream of it, across any number of tiles; run "
+                "`terrainnet extract` on a whole map instead", NULL, NULL, NULL},
+    {"extract", 0, "ridge and valley extraction fills depressions and accumulates flow, both global", NULL, NULL, NULL},
+    {"colour-correct", 0, "colour correction shifts by the mean of the whole texture, a whole-map statistic (the world's detail "
+                          "stage leaves it out)", NULL, NULL, NULL},
+};
+#define TN__WORLD_NMETHODS ((int)(sizeof tn__world_methods / sizeof tn__world_methods[0]))
+
+TN_API const char *tn_world_method_help(int i)
+{
+    static char buf[TN__WORLD_NMETHODS][400];
+    const tn__world_method *m;
+    if (i < 0 || i >= TN__WORLD_NMETHODS) return NULL;
+    m = &tn__world_methods[i];
+    snprintf(buf[i], sizeof buf[i], "%s: %s%s", m->name, m->refuse ? "not local: " : "", m->refuse ? m->refuse : m->help);
+    return buf[i];
+}
+
+/* ---- SPEC parsing ---- */
+
+static uint64_t tn__world_fnv(uint64_t h, const uint8_t *p, size_t n)
+{
+    size_t i;
+    for (i = 0; i < n; i++) {
+        h ^= p[i];
+        h *= 0x100000001b3ULL;
+    }
+    return h;
+}
+
+#define TN__WORLD_FNV0 0xcbf29ce484222325ULL
+
+static void tn__world_release(tn__world_impl *im)
+{
+    int k;
+    if (!im) return;
+    for (k = 0; k < im->n; k++)
+        if (im->st[k].model) {
+            tn_texgan_free(im->st[k].model);
+            TN_FREE(im->st[k].model);
+        }
+    TN_FREE(im);
+}
+
+TN_API void tn_world_free(tn_world *w)
+{
+    if (!w) return;
+    tn__world_release((tn__world_impl *)w->impl);
+    TN_FREE(w->text);
+    memset(w, 0, sizeof *w);
+}
+
+/* Splits line into up to `max` space-separated words (in place). */
+static int tn__world_words(char *line, char **word, int max)
+{
+    int n = 0;
+    while (*line) {
+        while (*line == ' ' || *line == '\t' || *line == '\r') *line++ = 0;
+        if (!*line) break;
+        if (n == max) return max + 1;
+        word[n++] = line;
+        while (*line && *line != ' ' && *line != '\t' && *line != '\r') line++;
+    }
+    return n;
+}
+
+static int tn__world_int(const char *s, long long lo, long long hi, int *out)
+{
+    double v;
+    if (!tn__io_number(s, strlen(s), &v) || v != floor(v) || v < (double)lo || v > (double)hi) return 0;
+    *out = (int)v;
+    return 1;
+}
+
+static int tn__world_u64(const char *s, uint64_t *out)
+{
+    uint64_t v = 0;
+    if (!*s) return 0;
+    for (; *s; s++) {
+        if (*s < '0' || *s > '9' || v > (UINT64_MAX - (uint64_t)(*s - '0')) / 10) return 0;
+        v = v * 10 + (uint64_t)(*s - '0');
+    }
+    *out = v;
+    return 1;
+}
+
+static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, const tn_world_opts *opts, const char *base_dir)
+{
+    char *line = text, *word[TN__WORLD_MAX_KV + 2];
+    int ln = 0, have_size = 0, k, i;
+    tn_status st;
+    w->tile = 1024;
+    w->seed = 1;
+    w->lo = 0.0f;
+    w->hi = 1.0f;
+    while (line) {
+        char *next = strchr(line, '\n'), *hash;
+        int nw;
+        double a, b;
+        if (next) *next++ = 0;
+        ln++;
+        if ((hash = strchr(line, '#')) != NULL) *hash = 0;
+        nw = tn__world_words(line, word, TN__WORLD_MAX_KV + 1);
+        line = next;
+        if (nw == 0) continue;
+        if (!strcmp(word[0], "world")) {
+            if (nw != 3 || !tn__world_int(word[1], 1, TN__WORLD_MAX_SIDE, &w->width) || !tn__world_int(word[2], 1, TN__WORLD_MAX_SIDE, &w->height))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `world WIDTH HEIGHT` in pixels, 1..%d", ln, TN__WORLD_MAX_SIDE);
+            have_size = 1;
+        } else if (!strcmp(word[0], "seed")) {
+            if (nw != 2 || !tn__world_u64(word[1], &w->seed))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `seed N` with N a whole number 0..2^64-1", ln);
+        } else if (!strcmp(word[0], "height")) {
+            if (nw != 3 || !tn__io_number(word[1], strlen(word[1]), &a) || !tn__io_number(word[2], strlen(word[2]), &b) ||
+                !(a < b) || !(fabs(a) <= 1e9 && fabs(b) <= 1e9))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `height LO HI` in metres with LO < HI", ln);
+            w->lo = (float)a;
+            w->hi = (float)b;
+        } else if (!strcmp(word[0], "cellsize")) {
+            if (nw != 2 || !tn__io_number(word[1], strlen(word[1]), &a) || !(a >= 0 && a <= 1e9))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `cellsize METRES` (0 = auto)", ln);
+            w->cellsize = (float)a;
+        } else if (!strcmp(word[0], "tile")) {
+            if (nw != 2 || !tn__world_int(word[1], 16, 65536, &w->tile))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `tile N` with N 16..65536", ln);
+        } else {
+            tn__world_stage *s;
+            const tn__world_method *m = NULL;
+            for (k = 0; k < TN__WORLD_NMETHODS; k++)
+                if (!strcmp(word[0], tn__world_methods[k].name)) m = &tn__world_methods[k];
+            if (!m)
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: unknown setting or method '%s' (settings: world seed height "
+                                "cellsize tile; methods: perlin explicit texgan blur hillshade normalmap detail)", ln, word[0]);
+            if (m->refuse) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s cannot be computed tile by tile: %s", ln, m->name, m->refuse);
+            if (im->n == TN__WORLD_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d stages", ln, TN__WORLD_MAX_STAGES);
+            if (nw > TN__WORLD_MAX_KV + 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d parameters", ln, TN__WORLD_MAX_KV);
+            s = &im->st[im->n++];
+            s->m = m;
+            s->line = ln;
+            for (i = 1; i < nw; i++) {
+                char *eq = strchr(word[i], '=');
+                if (!eq || eq == word[i] || (size_t)(eq - word[i]) >= sizeof s->key[0] || strlen(eq + 1) >= sizeof s->val[0] || !eq[1])
+                    return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s: parameters are KEY=VALUE, not '%s'", ln, m->name, word[i]);
+                memcpy(s->key[s->nkv], word[i], (size_t)(eq - word[i]));
+                s->key[s->nkv][eq - word[i]] = 0;
+                strcpy(s->val[s->nkv], eq + 1);
+                s->nkv++;
+            }
+        }
+    }
+    if (!have_size) return tn__fail(TN_ERR_INVALID_ARG, "world: the SPEC needs `world WIDTH HEIGHT`");
+    if (im->n == 0 || !im->st[0].m->source)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit or texgan)");
+    if (opts && opts->tile) {
+        if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
+        w->tile = opts->tile;
+    }
+    w->halo = 0;
+    for (k = 0; k < im->n; k++) {
+        tn__world_stage *s = &im->st[k];
+        if (k > 0 && s->m->source) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: only the first stage may be a generator", s->line);
+        if (k > 0) {
+            s->in_w = im->st[k - 1].out_w;
+            s->in_h = im->st[k - 1].out_h;
+            s->in_c = im->st[k - 1].out_c;
+            s->in_heights = im->st[k - 1].out_heights;
+        }
+        s->factor = 1;
+        if ((st = s->m->setup(s, w, base_dir))) return st;
+        for (i = 0; i < s->nkv; i++)
+            if (!(s->used & (1u << i)))
+                return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s has no parameter '%s' (%s)", s->line, s->m->name, s->key[i], s->m->help);
+    }
+    /* halo in generator pixels: each stage's context, scaled back through the factors below it */
+    {
+        long long h = 0;
+        for (k = im->n - 1; k >= 0; k--) h = h * im->st[k].factor + im->st[k].halo;
+        w->halo = h > INT_MAX ? INT_MAX : (int)h;
+    }
+    w->out_width = im->st[im->n - 1].out_w;
+    w->out_height = im->st[im->n - 1].out_h;
+    w->out_channels = im->st[im->n - 1].out_c;
+    w->out_heights = im->st[im->n - 1].out_heights;
+    w->cols = (w->out_width + w->tile - 1) / w->tile;
+    w->rows = (w->out_height + w->tile - 1) / w->tile;
+    return TN_OK;
+}
+
+/* The SPEC as DIR/world.spec holds it: settings in a fixed order, then the stages as written. */
+static tn_status tn__world_normalise(tn_world *w, const tn__world_impl *im)
+{
+    tn__text t = {NULL, 0, 0, 0};
+    char lo[40], hi[40], cs[40];
+    int k, i;
+    tn__io_format_number(lo, sizeof lo, w->lo, 1);
+    tn__io_format_number(hi, sizeof hi, w->hi, 1);
+    tn__io_format_number(cs, sizeof cs, w->cellsize, 1);
+    tn__text_add(&t, "# terrainnet world %s\nworld %d %d\nseed %llu\nheight %s %s\ncellsize %s\ntile %d\n", TN_VERSION_STRING,
+                  w->width, w->height, (unsigned long long)w->seed, lo, hi, cs, w->tile);
+    for (k = 0; k < im->n; k++) {
+        tn__text_add(&t, "%s", im->st[k].m->name);
+        for (i = 0; i < im->st[k].nkv; i++) tn__text_add(&t, " %s=%s", im->st[k].key[i], im->st[k].val[i]);
+        tn__text_add(&t, "\n");
+    }
+    if (t.failed) {
+        TN_FREE(t.s);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    w->text = t.s;
+    w->digest = tn__world_fnv(TN__WORLD_FNV0, (const uint8_t *)t.s, t.n);
+    return TN_OK;
+}
+
+static tn_status tn__world_parse_with(const char *text, const tn_world_opts *opts, const char *base_dir, tn_world *out)
+{
+    tn_world w;
+    tn__world_impl *im;
+    size_t n;
+    char *copy;
+    tn_status st;
+    TN_ASSERT(out);
+    if (!text) return tn__fail(TN_ERR_INVALID_ARG, "world: no SPEC text");
+    memset(&w, 0, sizeof w);
+    n = strlen(text);
+    im = (tn__world_impl *)tn__calloc(sizeof *im);
+    copy = (char *)tn__alloc(n + 1);
+    if (!im || !copy) {
+        TN_FREE(im);
+        TN_FREE(copy);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    memcpy(copy, text, n + 1);
+    st = tn__world_parse(&w, im, copy, opts, base_dir);
+    TN_FREE(copy);
+    w.impl = im;
+    if (!st) st = tn__world_normalise(&w, im);
+    if (st) {
+        tn_world_free(&w);
+        return st;
+    }
+    *out = w;
+    return TN_OK;
+}
+
+TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w)
+{
+    return tn__world_parse_with(text, opts, opts ? opts->base_dir : NULL, w);
+}
+
+TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0, i;
+    char *text, *dir, *slash;
+    tn_status st;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: empty SPEC path");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    for (i = 0; i < n; i++)
+        if (buf[i] == 0) {
+            TN_FREE(buf);
+            return tn__fail(TN_ERR_FORMAT, "%s: a SPEC is text (found a NUL byte)", path);
+        }
+    text = (char *)tn__alloc(n + 1);
+    dir = (char *)tn__alloc(strlen(path) + 1);
+    if (!text || !dir) {
+        TN_FREE(buf);
+        TN_FREE(text);
+        TN_FREE(dir);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    if (n) memcpy(text, buf, n);
+    text[n] = 0;
+    TN_FREE(buf);
+    strcpy(dir, path);
+    slash = strrchr(dir, '/');
+    if (slash) *slash = 0;
+    else dir[0] = 0;
+    st = tn__world_parse_with(text, opts, opts && opts->base_dir ? opts->base_dir : dir, w);
+    TN_FREE(text);
+    TN_FREE(dir);
+    return st ? tn__fail_context(st, path) : TN_OK;
+}
+
+/* ---- tiles ---- */
+
+/* Rectangle r of stage k's raster: stage k - 1 computes r (scaled by the factor) grown by
+   stage k's halo, then stage k runs on it. */
+static tn_status tn__world_compute(const tn_world *w, int k, tn_rect r, tn_image *out)
+{
+    const tn__world_stage *s = &((const tn__world_impl *)w->impl)->st[k];
+    tn_image in = {0, 0, 0, NULL};
+    tn_rect sr, in_r;
+    tn_status st;
+    if (k == 0) return s->m->run(s, w, r, NULL, r, out);
+    sr.x = r.x * s->factor;
+    sr.y = r.y * s->factor;
+    sr.w = r.w * s->factor; /* past the raster's edge in a partial block: tn_rect_halo clips it */
+    sr.h = r.h * s->factor;
+    in_r = tn_rect_halo(sr, s->halo, s->in_w, s->in_h);
+    if ((st = tn__world_compute(w, k - 1, in_r, &in))) return st;
+    st = s->m->run(s, w, r, &in, in_r, out);
+    tn_image_free(&in);
+    return st;
+}
+
+TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out)
+{
+    TN_ASSERT(w && out);
+    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
+    if (r.w <= 0 || r.h <= 0 || r.x < 0 || r.y < 0 || r.x > w->out_width - r.w || r.y > w->out_height - r.h)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: rectangle %d,%d %dx%d is not inside the %d x %d world", r.x, r.y, r.w, r.h,
+                        w->out_width, w->out_height);
+    return tn__world_compute(w, ((const tn__world_impl *)w->impl)->n - 1, r, out);
+}
+
+TN_API tn_rect tn_world_tile_rect(const tn_world *w, int row, int col)
+{
+    tn_rect r;
+    r.x = col * w->tile;
+    r.y = row * w->tile;
+    r.w = w->out_width - r.x < w->tile ? w->out_width - r.x : w->tile;
+    r.h = w->out_height - r.y < w->tile ? w->out_height - r.y : w->tile;
+    return r;
+}
+
+static char *tn__world_path(const char *dir, const char *leaf)
+{
+    return tn__world_join(dir, leaf);
+}
+
+static int tn__world_exists(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return 0;
+    fclose(f);
+    return 1;
+}
+
+/* DIR/world.spec: written on first use; another world's is refused, so a resumed or shared
+   directory never mixes tiles of two worlds. */
+static tn_status tn__world_claim_dir(const tn_world *w, const char *dir)
+{
+    char *path = tn__world_path(dir, "world.spec");
+    uint8_t *buf = NULL;
+    size_t n = 0, len = strlen(w->text);
+    tn_status st = TN_OK;
+    if (!path) return TN_ERR_OUT_OF_MEMORY;
+    if (tn__world_exists(path)) {
+        st = tn__io_read_file(path, &buf, &n);
+        if (!st && (n != len || memcmp(buf, w->text, len) != 0))
+            st = tn__fail(TN_ERR_INVALID_ARG, "%s holds another world (its world.spec differs from this SPEC); use another directory",
+                          dir);
+        TN_FREE(buf);
+    } else {
+        st = tn__io_write_atomic(path, (const uint8_t *)w->text, len);
+    }
+    TN_FREE(path);
+    return st;
+}
+
+static tn_status tn__world_save_tile(const tn_world *w, tn_image *img, const char *path)
+{
+    tn_save_opts o;
+    size_t i, n = (size_t)img->width * img->height * img->channels;
+    memset(&o, 0, sizeof o);
+    o.format = TN_FORMAT_PNG;
+    if (w->out_heights) { /* one world-wide range: every tile quantises alike, and one VRT scale reads them */
+        o.bit_depth = 16;
+        o.has_range = 1;
+        o.range_lo = w->lo;
+        o.range_hi = w->hi;
+        for (i = 0; i < n; i++) img->data[i] = tn__clampf(img->data[i], w->lo, w->hi);
+    } else {
+        o.bit_depth = 8;
+        for (i = 0; i < n; i++) img->data[i] = tn__clampf(img->data[i], 0.0f, 1.0f);
+    }
+    return tn_image_save(path, img, &o);
+}
+
+TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts, tn_world_run_stats *stats)
+{
+    tn_world_run_opts o;
+    tn_world_run_stats s;
+    tn_status st;
+    int row, col;
+    long long k = 0, total, done = 0;
+    TN_ASSERT(w);
+    memset(&o, 0, sizeof o);
+    memset(&s, 0, sizeof s);
+    if (opts) o = *opts;
+    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
+    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
+    if (o.row1 == 0) o.row1 = w->rows;
+    if (o.col1 == 0) o.col1 = w->cols;
+    if (o.parts == 0) o.parts = 1;
+    if (o.row0 < 0 || o.row0 >= o.row1 || o.row1 > w->rows || o.col0 < 0 || o.col0 >= o.col1 || o.col1 > w->cols)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: tiles rows %d:%d, columns %d:%d are not inside the %d x %d grid", o.row0, o.row1,
+                        o.col0, o.col1, w->rows, w->cols);
+    if (o.parts < 1 || o.part < 0 || o.part >= o.parts) return tn__fail(TN_ERR_INVALID_ARG, "world: part %d of %d", o.part, o.parts);
+    if ((st = tn__world_claim_dir(w, dir))) return st;
+    s.seconds = tn_time_seconds();
+    total = ((long long)(o.row1 - o.row0) * (o.col1 - o.col0) - o.part + o.parts - 1) / o.parts;
+    for (row = o.row0; row < o.row1 && !st; row++)
+        for (col = o.col0; col < o.col1 && !st; col++, k++) {
+            char leaf[48], *path;
+            if (k % o.parts != o.part) continue;
+            snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
+            if (!(path = tn__world_path(dir, leaf))) {
+                st = TN_ERR_OUT_OF_MEMORY;
+                break;
+            }
+            if (tn__world_exists(path)) s.skipped++;
+            else {
+                tn_image img = {0, 0, 0, NULL};
+                st = tn_world_rect(w, tn_world_tile_rect(w, row, col), &img);
+                if (!st) st = tn__world_save_tile(w, &img, path);
+                tn_image_free(&img);
+                if (!st) s.written++;
+            }
+            TN_FREE(path);
+            if (!st) st = tn__progress("world", (double)++done / (double)(total > 0 ? total : 1));
+        }
+    s.seconds = tn_time_seconds() - s.seconds;
+    if (stats) *stats = s;
+    return st;
+}
+
+TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+{
+    tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
+    char num[3][40], hex[17], *path = NULL;
+    int row, col, c, count = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(w);
+    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
+    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
+    if ((st = tn__world_claim_dir(w, dir))) return st;
+    tn__io_format_number(num[0], sizeof num[0], w->lo, 1);
+    tn__io_format_number(num[1], sizeof num[1], ((double)w->hi - w->lo) / 65535.0, 0);
+    tn__text_add(&vrt, "<VRTDataset rasterXSize=\"%d\" rasterYSize=\"%d\">\n", w->out_width, w->out_height);
+    if (w->cellsize > 0) {
+        tn__io_format_number(num[2], sizeof num[2], (double)w->cellsize * w->width / w->out_width, 0);
+        tn__text_add(&vrt, "  <GeoTransform>0, %s, 0, 0, 0, -%s</GeoTransform>\n", num[2], num[2]);
+    }
+    for (c = 0; c < w->out_channels; c++) {
+        static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
+        /* heights: Float32 metres, code * (hi - lo) / 65535 + lo per source, so every GDAL reader
+           (gdalinfo -stats, QGIS, gdal_translate) sees metres without applying a band scale */
+        tn__text_add(&vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
+        if (!w->out_heights && w->out_channels >= 3) tn__text_add(&vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
+        for (row = 0; row < w->rows; row++)
+            for (col = 0; col < w->cols; col++) {
+                tn_rect r = tn_world_tile_rect(w, row, col);
+                tn__text_add(&vrt,
+                             "    <%s>\n      <SourceFilename relativeToVRT=\"1\">r%d_c%d.png</SourceFilename>\n"
+                             "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
+                             "DataType=\"%s\" BlockXSize=\"%d\" BlockYSize=\"1\"/>\n"
+                             "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
+                             "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n",
+                             w->out_heights ? "ComplexSource" : "SimpleSource", row, col, c + 1, r.w, r.h,
+                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x, r.y, r.w, r.h);
+                if (w->out_heights) tn__text_add(&vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
+                tn__text_add(&vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
+            }
+        tn__text_add(&vrt, "  </VRTRasterBand>\n");
+    }
+    tn__text_add(&vrt, "</VRTDataset>\n");
+    tn__hex64(hex, w->digest);
+    tn__text_add(&man, "terrainnet world manifest\nversion %s\nspec_digest %s\nseed %llu\nsize %d %d\ntile %d\ngrid %d %d\n",
+                  TN_VERSION_STRING, hex, (unsigned long long)w->seed, w->out_width, w->out_height, w->tile, w->rows, w->cols);
+    if (w->out_heights) tn__text_add(&man, "range %s %s\n", num[0], (tn__io_format_number(num[2], sizeof num[2], w->hi, 1), num[2]));
+    for (row = 0; row < w->rows && !st; row++)
+        for (col = 0; col < w->cols && !st; col++) {
+            char leaf[48];
+            uint8_t *buf = NULL;
+            size_t n = 0;
+            snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
+            if (!(path = tn__world_path(dir, leaf))) {
+                st = TN_ERR_OUT_OF_MEMORY;
+                break;
+            }
+            if (tn__world_exists(path) && !(st = tn__io_read_file(path, &buf, &n))) {
+                tn__hex64(hex, tn__world_fnv(TN__WORLD_FNV0, buf, n));
+                tn__text_add(&man, "%s %s\n", leaf, hex);
+                count++;
+                TN_FREE(buf);
+            }
+            TN_FREE(path);
+            path = NULL;
+        }
+    tn__text_add(&man, "tiles %d of %d\n", count, w->rows * w->cols);
+    if (!st && (vrt.failed || man.failed)) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(path = tn__world_path(dir, "world.vrt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__io_write_atomic(path, (const uint8_t *)vrt.s, vrt.n);
+    TN_FREE(path);
+    path = NULL;
+    if (!st && !(path = tn__world_path(dir, "manifest.txt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__io_write_atomic(path, (const uint8_t *)man.s, man.n);
+    TN_FREE(path);
+    TN_FREE(vrt.s);
+    TN_FREE(man.s);
+    if (!st && present) *present = count;
     return st;
 }
 

@@ -294,5 +294,30 @@ if DEMO_FAST=1 DEMO_DIR="$W/demo" sh examples/demo.sh > "$W/demo.log" 2>&1 && gr
 sh tests/demo_page.sh "$W/demo" > "$W/demo_page.txt" 2>&1
 if grep -q "^skipped demo_page" "$W/demo_page.txt"; then skipped "demo page in Chromium: $(sed -n 's/^skipped demo_page: //p' "$W/demo_page.txt")";
 elif grep -q "^demo_page: [1-9][0-9]* passed, 0 failed" "$W/demo_page.txt"; then ok; else bad "demo page in Chromium: $(grep -v '^picture' "$W/demo_page.txt" | head -c 600)"; fi
+# world: tiles resume, index, VRT read by GDAL (when installed), refusals; MPI (when installed)
+if $T world --help | grep -q "usage: terrainnet world SPEC -o DIR"; then ok; else bad "world --help"; fi
+printf 'world 300 200\nseed 4\nheight 50 1250\ncellsize 25\ntile 128\nperlin frequency=4\nhillshade\n' > "$W/shade.spec"
+printf 'world 300 200\nseed 4\nheight 50 1250\ntile 128\nperlin frequency=4\n' > "$W/w.spec"
+if $T world "$W/w.spec" -o "$W/world" --tiles 0:1,1:3 > "$W/wo1.txt" 2>/dev/null && grep -q "^tiles: 2 written, 0 already" "$W/wo1.txt" &&
+    $T world "$W/w.spec" -o "$W/world" > "$W/wo2.txt" 2>/dev/null && grep -q "^tiles: 4 written, 2 already there" "$W/wo2.txt" &&
+    grep -q "^tiles 6 of 6$" "$W/world/manifest.txt" && $T info "$W/world/r1_c2.png" | grep -q "size: 44 x 72"; then ok;
+else bad "world tiles + resume: $(cat "$W/wo1.txt" "$W/wo2.txt")"; fi
+if $T world "$W/shade.spec" -o "$W/shade" > /dev/null 2>&1 && $T info "$W/shade/r0_c0.png" | grep -q "bit_depth: 8"; then ok; else bad "world hillshade"; fi
+printf 'world 100 100\nperlin\nstyle\n' > "$W/style.spec"
+expect_error "world refuses style" "style transfer optimises the whole map" $T world "$W/style.spec" -o "$W/style"
+expect_error "world other world in DIR" "holds another world" $T world "$W/shade.spec" -o "$W/world"
+expect_error "world bad --tiles" "I0:I1,J0:J1" $T world "$W/w.spec" -o "$W/world" --tiles 1:0,0:1
+if command -v gdalinfo > /dev/null 2>&1; then
+    if gdalinfo -stats "$W/world/world.vrt" > "$W/gdal.txt" 2>&1 && grep -q "Size is 300, 200" "$W/gdal.txt" &&
+        awk -F= '/STATISTICS_MINIMUM/ { lo = $2 } /STATISTICS_MAXIMUM/ { hi = $2 } END { exit !(lo >= 50 && hi <= 1250 && hi - lo > 300) }' "$W/gdal.txt"
+    then ok; else bad "gdalinfo -stats world.vrt: $(cat "$W/gdal.txt")"; fi
+else
+    skipped "gdalinfo -stats on world.vrt (gdal-bin absent)"
+fi
+if command -v mpirun > /dev/null 2>&1; then
+    if sh tests/test_world_mpi.sh > "$W/mpi.txt" 2>&1; then ok; else bad "test_world_mpi.sh: $(cat "$W/mpi.txt")"; fi
+else
+    skipped "world with MPI (mpirun absent)"
+fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

@@ -18,6 +18,7 @@
 #if !defined(_WIN32)
 #include <unistd.h>
 #include <sys/ioctl.h>
+#include <sys/stat.h>
 #endif
 
 /* ---- small helpers ------------------------------------------------------------------------ */
@@ -1380,11 +1381,67 @@ static const cli_command detail_maps_cmd = {"detail-maps", CLI_CMD(detail_maps),
     "PREFIX_high.png (8-bit: exemplar minus its Gaussian blur, as value/2 + 0.5) and PREFIX_detail.txt (texture size, "
     "tiling factor, F, sigma, value range)."};
 
+/* ---- world ------------------------------------------------------------------------------- */
+
+static struct world_args {
+    const char *spec, *dir, *tiles, *part;
+    int tile, no_index;
+} world_arg;
+static const cli_opt world_opts[] = {
+    {"SPEC", 0, ARG_POS, 0, &world_arg.spec, NULL, 0, 0, NULL, "the world: size, seed, height range, generator and operations (docs/world.md)", NULL},
+    {"output", 'o', ARG_STR, REQ, &world_arg.dir, NULL, 0, 0, "DIR", "tiles DIR/r{row}_c{col}.png, DIR/world.vrt, DIR/manifest.txt (created if missing)", NULL},
+    {"tiles", 0, ARG_STR, 0, &world_arg.tiles, NULL, 0, 0, "I0:I1,J0:J1", "only tile rows I0..I1-1 and columns J0..J1-1", "all"},
+    {"tile", 0, ARG_INT, 0, &world_arg.tile, NULL, 16, 65536, "N", "tile side in pixels", "the SPEC's, else 1024"},
+    {"part", 0, ARG_STR, 0, &world_arg.part, NULL, 0, 0, "K/N", "only every N-th selected tile from the K-th (K = 0..N-1): one of N processes", "0/1"},
+    {"no-index", 0, ARG_FLAG, 0, &world_arg.no_index, NULL, 0, 0, NULL, "skip world.vrt and manifest.txt (a last run without it writes them)", NULL},
+};
+
+static int run_world(void)
+{
+    struct world_args *a = &world_arg;
+    tn_world w;
+    tn_world_opts wo;
+    tn_world_run_opts ro;
+    tn_world_run_stats s;
+    tn_status st;
+    int present = 0, n = 0;
+    memset(&wo, 0, sizeof wo);
+    memset(&ro, 0, sizeof ro);
+    wo.tile = a->tile;
+    if (a->tiles && (sscanf(a->tiles, "%d:%d,%d:%d%n", &ro.row0, &ro.row1, &ro.col0, &ro.col1, &n) != 4 || a->tiles[n] ||
+                     ro.row1 <= ro.row0 || ro.col1 <= ro.col0 || ro.row0 < 0 || ro.col0 < 0))
+        return usage_error("world", "--tiles needs I0:I1,J0:J1 with I0 < I1 and J0 < J1 (e.g. 0:4,2:3), not %s", a->tiles);
+    if (a->part && (sscanf(a->part, "%d/%d%n", &ro.part, &ro.parts, &n) != 2 || a->part[n] || ro.parts < 1 || ro.part < 0 || ro.part >= ro.parts))
+        return usage_error("world", "--part needs K/N with 0 <= K < N (e.g. 1/4), not %s", a->part);
+    if ((st = tn_world_load(a->spec, &wo, &w))) return fail_status(st);
+#if !defined(_WIN32)
+    mkdir(a->dir, 0777); /* an existing one is fine; a failure shows when the first file is written */
+#endif
+    printf("world: %d x %d x %d %s, %d x %d tiles of %d px, halo %d px\n", w.out_width, w.out_height, w.out_channels,
+           w.out_heights ? "heights (16-bit, metres)" : "values (8-bit)", w.rows, w.cols, w.tile, w.halo);
+    if (!(st = tn_world_write_tiles(&w, a->dir, &ro, &s))) {
+        printf("tiles: %d written, %d already there, %.2f s (%.3f tiles/s)\n", s.written, s.skipped, s.seconds,
+               s.seconds > 0 ? s.written / s.seconds : 0.0);
+        if (!a->no_index && !(st = tn_world_write_index(&w, a->dir, &present)))
+            printf("index: %s/world.vrt, %s/manifest.txt (%d of %d tiles present)\n", a->dir, a->dir, present, w.rows * w.cols);
+    }
+    tn_world_free(&w);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command world_cmd = {"world", CLI_CMD(world), "a world of any size in tiles equal to a whole-map run (PNG tiles + GDAL VRT)",
+    "SPEC lines: `world W H` (pixels), `seed N`, `height LO HI` (metres of value 0 and 1; the 16-bit range of every tile), "
+    "`cellsize M`, `tile N`, then a generator (perlin, explicit, texgan model=F.tnw) and local operations (blur, hillshade, "
+    "normalmap, detail), each `name key=value ...`. Every tile is exactly the pixels a whole-map run has there, so any subset "
+    "can be computed alone, in any order, on any machine; tiles already in DIR are skipped (resume), files appear atomically. "
+    "Methods that are not local (style, fill, flow, extract) are refused with the reason. See docs/world.md."};
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
     &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &export_cmd,
+    &world_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 

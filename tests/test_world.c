@@ -1,0 +1,335 @@
+/* test_world.c - @@world: every local method's tiles equal a whole-map run (at 1 and 2
+   threads), non-local methods are refused, and tiles on disk resume, index and read back. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+#include <sys/stat.h>
+
+/* Largest |difference| between the tiles of `tile` px and the whole-map run of the SPEC;
+   *bits = 1 when every tile is bit-identical. -1 on a failure. */
+static double tiles_vs_whole(const char *spec, int tile, int threads_tiles, int threads_whole, int *bits)
+{
+    tn_world w;
+    tn_world_opts o;
+    tn_image whole = {0, 0, 0, NULL};
+    double worst = 0;
+    int row, col;
+    memset(&o, 0, sizeof o);
+    o.tile = tile;
+    *bits = 1;
+    if (tn_world_parse(spec, &o, &w) != TN_OK) {
+        fprintf(stderr, "parse: %s\n", tn_last_error());
+        return -1;
+    }
+    tn_set_threads(threads_whole);
+    {
+        tn_rect all;
+        all.x = all.y = 0;
+        all.w = w.out_width;
+        all.h = w.out_height;
+        if (tn_world_rect(&w, all, &whole) != TN_OK) {
+            tn_world_free(&w);
+            return -1;
+        }
+    }
+    tn_set_threads(threads_tiles);
+    for (row = 0; row < w.rows && worst >= 0; row++)
+        for (col = 0; col < w.cols && worst >= 0; col++) {
+            tn_rect r = tn_world_tile_rect(&w, row, col);
+            tn_image t = {0, 0, 0, NULL};
+            int x, y, c;
+            if (tn_world_rect(&w, r, &t) != TN_OK || t.width != r.w || t.height != r.h || t.channels != whole.channels) {
+                worst = -1;
+                break;
+            }
+            for (y = 0; y < r.h; y++)
+                for (x = 0; x < r.w; x++)
+                    for (c = 0; c < t.channels; c++) {
+                        float a = TN_PIXEL(&t, x, y, c), b = TN_PIXEL(&whole, r.x + x, r.y + y, c);
+                        if (memcmp(&a, &b, sizeof a)) *bits = 0;
+                        if (fabs((double)a - b) > worst) worst = fabs((double)a - b);
+                    }
+            tn_image_free(&t);
+        }
+    tn_set_threads(0);
+    tn_image_free(&whole);
+    tn_world_free(&w);
+    return worst;
+}
+
+/* Tiles (1 thread) and whole map (2 threads), then the other way round: bit-identical. */
+static void check_exact(const char *spec, int tile)
+{
+    int bits = 0;
+    TN_CHECK(tiles_vs_whole(spec, tile, 1, 2, &bits) == 0.0);
+    TN_CHECK(bits);
+    TN_CHECK(tiles_vs_whole(spec, tile, 2, 1, &bits) == 0.0);
+    TN_CHECK(bits);
+}
+
+TN_TEST(rect_halo_clips_to_the_raster)
+{
+    tn_rect r = {10, 0, 20, 5}, g;
+    g = tn_rect_halo(r, 4, 100, 50);
+    TN_CHECK(g.x == 6 && g.y == 0 && g.w == 28 && g.h == 9);
+    r.x = 90;
+    r.w = 10;
+    g = tn_rect_halo(r, 7, 100, 50);
+    TN_CHECK(g.x == 83 && g.w == 17);
+    g = tn_rect_halo(r, 0, 100, 50);
+    TN_CHECK(g.x == 90 && g.w == 10 && g.h == 5);
+}
+
+TN_TEST(perlin_tiles_equal_the_whole_map)
+{
+    const char *spec = "world 301 203\nseed 7\nheight -100 2500\nperlin frequency=5 octaves=7\n";
+    tn_world w;
+    tn_image whole = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    tn_rect all = {0, 0, 301, 203};
+    float lo, hi;
+    size_t i;
+    double d = 0;
+    check_exact(spec, 64);
+    check_exact(spec, 100);
+    /* the same field as tn_noise_perlin, which only stretches it to its own min..max */
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    memset(&po, 0, sizeof po);
+    po.seed = 7;
+    po.frequency = 5;
+    po.octaves = 7;
+    TN_CHECK(tn_noise_perlin(&ref, 301, 203, &po) == TN_OK);
+    tn_image_range(&whole, &lo, &hi);
+    TN_CHECK(lo > -100 && hi < 2500 && hi - lo > 500); /* inside the fixed bound, not flat */
+    for (i = 0; i < (size_t)301 * 203; i++) {
+        double v = (whole.data[i] - lo) / (hi - lo);
+        if (fabs(v - ref.data[i]) > d) d = fabs(v - ref.data[i]);
+    }
+    TN_CHECK(d < 1e-4);
+    tn_image_free(&whole);
+    tn_image_free(&ref);
+    tn_world_free(&w);
+}
+
+TN_TEST(explicit_noise_tiles_equal_the_whole_map)
+{
+    const char *spec = "world 230 170\nseed 3\nheight 0 1000\nexplicit layers=5 sigma=3,6 contrast=6\n";
+    tn_world w;
+    check_exact(spec, 64);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.halo == 12 + 24);
+    tn_world_free(&w);
+}
+
+TN_TEST(local_operations_tiles_equal_the_whole_map)
+{
+    check_exact("world 260 190\nseed 11\nheight 0 3000\ncellsize 30\nperlin frequency=6 octaves=8\nblur sigma=2.5\nhillshade azimuth=300\n", 64);
+    check_exact("world 260 190\nseed 12\nheight 0 3000\nperlin frequency=6\nnormalmap z=2\n", 50);
+    check_exact("world 260 190\nseed 13\nheight 0 3000\nexplicit sigma=2\ndetail factor=4\nblur sigma=1\n", 16);
+}
+
+static void tiny_texgan(tn_texgan *m, int channels)
+{
+    tn_image ex = tn_test_exemplar(40, 36, channels, 3);
+    tn_texgan_opts o;
+    memset(&o, 0, sizeof o);
+    o.noise_local = 4;
+    o.stages = 2;
+    o.gen_width = 16;
+    o.disc_width = 8;
+    o.disc_layers = 2;
+    o.patch = 16;
+    o.batch = 2;
+    o.noise_global = 2;
+    o.train.minutes = 100;
+    o.train.seed = 5;
+    o.train.max_iters = 2;
+    TN_CHECK(tn_texgan_train(m, &ex, &o, NULL) == TN_OK);
+    tn_image_free(&ex);
+}
+
+TN_TEST(texgan_tiles_and_detail_maps_equal_the_whole_map)
+{
+    tn_texgan m;
+    tn_world w;
+    tn_image whole = {0, 0, 0, NULL}, synth = {0, 0, 0, NULL}, ex = tn_test_exemplar(40, 36, 3, 3);
+    tn_detail_maps maps;
+    tn_detail_opts dopts;
+    tn_rect all = {0, 0, 150, 110};
+    char spec[1024];
+    int bits, x, y, c;
+    double d = 0, worst;
+    const char *path = tn_test_tmp_path("world", "tg3.tnw");
+    tiny_texgan(&m, 3);
+    TN_CHECK(tn_texgan_save(&m, path) == TN_OK);
+    snprintf(spec, sizeof spec, "world 150 110\nseed 21\ntexgan model=%s\n", path);
+    worst = tiles_vs_whole(spec, 32, 1, 2, &bits);
+    TN_CHECK(worst >= 0 && worst <= 1e-6); /* documented tolerance: windows run other GEMM sizes */
+    fprintf(stderr, "texgan tiles vs whole: max |diff| %g, bit-identical %d\n", worst, bits);
+    /* the whole world is the model's synthesis mapped to [0, 1] */
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.out_channels == 3 && !w.out_heights);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&m, 21, 150, 110, &synth) == TN_OK);
+    for (y = 0; y < 110; y++)
+        for (x = 0; x < 150; x++)
+            for (c = 0; c < 3; c++) {
+                double v = (TN_PIXEL(&synth, x, y, c) - m.lo) / (m.hi - m.lo);
+                if (fabs(v - TN_PIXEL(&whole, x, y, c)) > d) d = fabs(v - TN_PIXEL(&whole, x, y, c));
+            }
+    TN_CHECK(d < 1e-5);
+    tn_world_free(&w);
+    tn_image_free(&whole);
+    /* detail maps: tiles of the low map equal the whole low map, which is tn_detail_maps' */
+    snprintf(spec, sizeof spec, "world 150 110\nseed 21\ntexgan model=%s\ndetail factor=5\n", path);
+    worst = tiles_vs_whole(spec, 16, 2, 1, &bits);
+    TN_CHECK(worst >= 0 && worst <= 1e-6);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.out_width == 30 && w.out_height == 22);
+    all.w = 30;
+    all.h = 22;
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    for (y = 0; y < 110; y++) /* in the model's units, as tn_detail_maps works */
+        for (x = 0; x < 150; x++)
+            for (c = 0; c < 3; c++) TN_PIXEL(&synth, x, y, c) = (TN_PIXEL(&synth, x, y, c) - m.lo) / (m.hi - m.lo);
+    memset(&dopts, 0, sizeof dopts);
+    dopts.factor = 5;
+    dopts.no_colour_correct = 1;
+    TN_CHECK(tn_detail_maps_from_image(&maps, &synth, &ex, &dopts) == TN_OK);
+    d = 0;
+    for (x = 0; x < 30 * 22 * 3; x++)
+        if (fabs(maps.low.data[x] - whole.data[x]) > d) d = fabs(maps.low.data[x] - whole.data[x]);
+    TN_CHECK(d < 1e-5);
+    tn_detail_maps_free(&maps);
+    tn_world_free(&w);
+    tn_image_free(&whole);
+    tn_image_free(&synth);
+    tn_image_free(&ex);
+    tn_texgan_free(&m);
+    remove(path);
+}
+
+static int refused(const char *spec, const char *words)
+{
+    tn_world w;
+    tn_status st = tn_world_parse(spec, NULL, &w);
+    if (st == TN_OK) tn_world_free(&w);
+    if (st != TN_ERR_INVALID_ARG || !strstr(tn_last_error(), words)) {
+        fprintf(stderr, "  spec %s-> %s\n", spec, tn_last_error());
+        return 0;
+    }
+    return 1;
+}
+
+TN_TEST(non_local_methods_and_bad_specs_are_refused)
+{
+    int i;
+    TN_CHECK(refused("world 100 100\nperlin\nstyle\n", "style transfer optimises the whole map"));
+    TN_CHECK(refused("world 100 100\nperlin\nfill\n", "depression filling is global"));
+    TN_CHECK(refused("world 100 100\nperlin\nflow\n", "flow accumulation is global"));
+    TN_CHECK(refused("world 100 100\nperlin\nextract\n", "cannot be computed tile by tile"));
+    TN_CHECK(refused("perlin\n", "needs `world WIDTH HEIGHT`"));
+    TN_CHECK(refused("world 100 100\nblur sigma=1\n", "first stage must be a generator"));
+    TN_CHECK(refused("world 100 100\nperlin\nperlin\n", "only the first stage"));
+    TN_CHECK(refused("world 100 100\nperlin octaves=3 colour=red\n", "no parameter 'colour'"));
+    TN_CHECK(refused("world 100 100\nperlin octaves=99\n", "octaves=99 must be a number"));
+    TN_CHECK(refused("world 100 100\nperlin\nhillshade\nhillshade\n", "needs heights"));
+    TN_CHECK(refused("world 100 100\nperlin\nblur sigma=40\n", "needs a raster larger"));
+    TN_CHECK(refused("world 100 -5\nperlin\n", "line 1"));
+    TN_CHECK(refused("world 100 100\nheight 5 5\nperlin\n", "LO < HI"));
+    TN_CHECK(refused("world 100 100\nmountains\n", "unknown setting or method 'mountains'"));
+    {
+        tn_world w;
+        TN_CHECK(tn_world_parse("world 100 100\ntexgan model=/nonexistent/m.tnw\n", NULL, &w) == TN_ERR_IO);
+        TN_CHECK(strstr(tn_last_error(), "/nonexistent/m.tnw") != NULL);
+    }
+    TN_CHECK(refused("world 100 100\nperlin frequency\n", "KEY=VALUE"));
+    for (i = 0; tn_world_method_help(i); i++) TN_CHECK(strchr(tn_world_method_help(i), ':') != NULL);
+    TN_CHECK(i >= 10);
+}
+
+TN_TEST(tiles_on_disk_resume_and_index)
+{
+    const char *spec = "world 200 150\nseed 5\nheight 100 1900\ncellsize 10\nperlin frequency=3\n";
+    const char *dir = tn_test_tmp_path("world", "dir");
+    char path[600], *text;
+    tn_world w, other;
+    tn_world_opts o;
+    tn_world_run_opts ro;
+    tn_world_run_stats s;
+    tn_image tile = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_image_info info;
+    int present = -1, row, col;
+    size_t n;
+    memset(&o, 0, sizeof o);
+    o.tile = 64;
+    mkdir(dir, 0755);
+    for (row = 0; row < 3; row++) /* leftovers of an earlier run */
+        for (col = 0; col < 4; col++) {
+            snprintf(path, sizeof path, "%s/r%d_c%d.png", dir, row, col);
+            remove(path);
+        }
+    snprintf(path, sizeof path, "%s/world.spec", dir);
+    remove(path);
+    TN_CHECK(tn_world_parse(spec, &o, &w) == TN_OK);
+    TN_CHECK(w.rows == 3 && w.cols == 4);
+    memset(&ro, 0, sizeof ro);
+    ro.row0 = 1;
+    ro.row1 = 3;
+    ro.col0 = 2;
+    ro.col1 = 4;
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(s.written == 4 && s.skipped == 0);
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK); /* resumed: nothing to do */
+    TN_CHECK(s.written == 0 && s.skipped == 4);
+    memset(&ro, 0, sizeof ro);
+    ro.part = 1;
+    ro.parts = 2; /* every second tile of the grid */
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(s.written + s.skipped == 6 && s.skipped == 2);
+    ro.part = 0;
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(s.written == 4 && s.skipped == 2);
+    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK);
+    TN_CHECK(present == 12);
+    /* a tile reads back in metres: the whole map quantised to 16 bits over the world's range */
+    snprintf(path, sizeof path, "%s/r2_c3.png", dir);
+    TN_CHECK(tn_image_load(path, &tile, &info) == TN_OK);
+    TN_CHECK(info.has_range && info.range_lo == 100 && info.range_hi == 1900 && info.bit_depth == 16);
+    TN_CHECK(tile.width == 200 - 192 && tile.height == 150 - 128);
+    TN_CHECK(tn_world_rect(&w, tn_world_tile_rect(&w, 2, 3), &ref) == TN_OK);
+    for (n = 0; n < (size_t)tile.width * tile.height; n++) TN_CHECK_NEAR(tile.data[n], ref.data[n], 1800.0 / 65535 * 0.51);
+    snprintf(path, sizeof path, "%s/world.vrt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && strstr(text, "rasterXSize=\"200\"") && strstr(text, "<ScaleOffset>100</ScaleOffset>") && strstr(text, "r2_c3.png") &&
+             strstr(text, "<DstRect xOff=\"192\" yOff=\"128\" xSize=\"8\" ySize=\"22\"/>"));
+    free(text);
+    snprintf(path, sizeof path, "%s/manifest.txt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && strstr(text, "seed 5\n") && strstr(text, "r0_c0.png ") && strstr(text, "tiles 12 of 12"));
+    free(text);
+    /* another world in the same directory is refused */
+    TN_CHECK(tn_world_parse("world 200 150\nseed 6\nperlin\n", &o, &other) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(&other, dir, NULL, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "holds another world") != NULL);
+    ro.row0 = 3;
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, NULL) == TN_ERR_INVALID_ARG);
+    tn_world_free(&other);
+    tn_world_free(&w);
+    tn_image_free(&tile);
+    tn_image_free(&ref);
+}
+
+int main(void)
+{
+    TN_RUN(rect_halo_clips_to_the_raster);
+    TN_RUN(perlin_tiles_equal_the_whole_map);
+    TN_RUN(explicit_noise_tiles_equal_the_whole_map);
+    TN_RUN(local_operations_tiles_equal_the_whole_map);
+    TN_RUN(texgan_tiles_and_detail_maps_equal_the_whole_map);
+    TN_RUN(non_local_methods_and_bad_specs_are_refused);
+    TN_RUN(tiles_on_disk_resume_and_index);
+    return tn_test_summary("test_world");
+}
