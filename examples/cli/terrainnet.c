@@ -1436,12 +1436,144 @@ static const cli_command world_cmd = {"world", CLI_CMD(world), "a world of any s
     "can be computed alone, in any order, on any machine; tiles already in DIR are skipped (resume), files appear atomically. "
     "Methods that are not local (style, fill, flow, extract) are refused with the reason. See docs/world.md."};
 
+/* ---- SinGAN: random terrain, refinement, upscaling ---------------------------------------- */
+
+static struct singan_train_args { const char *in, *out, *ckpt; tn_singan_opts o; } singan_train_arg;
+static const cli_opt singan_train_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &singan_train_arg.in, NULL, 0, 0, NULL, "the example heightmap (channel 0; heights kept in its units)", NULL},
+    {"output", 'o', ARG_STR, REQ, &singan_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the model: one generator per scale + the height mapping", NULL},
+    {"minutes", 0, ARG_DOUBLE, 0, &singan_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget of the whole run, shared by the scales", "10"},
+    {"iters", 0, ARG_LONG, 0, &singan_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations in total (N / scales per scale)", "0 = only the time budget"},
+    {"scale-iters", 0, ARG_INT, 0, &singan_train_arg.o.iters, NULL, 0, 1e9, "N", "iterations per scale at most", "2000"},
+    {"resume", 0, ARG_FLAG, 0, &singan_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
+    {"checkpoint", 0, ARG_STR, 0, &singan_train_arg.ckpt, NULL, 0, 0, "PATH", "full training state, saved atomically", "MODEL.tnw.ckpt"},
+    {"checkpoint-seconds", 0, ARG_DOUBLE, 0, &singan_train_arg.o.train.checkpoint_seconds, NULL, 0, 1e9, "S", "checkpoint at least this often", "60"},
+    {"seed", 0, ARG_U64, 0, &singan_train_arg.o.train.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"coarsest", 0, ARG_INT, 0, &singan_train_arg.o.coarsest, NULL, 0, 1e9, "PX", "side of the coarsest scale", "25"},
+    {"factor", 0, ARG_FLOAT, 0, &singan_train_arg.o.factor, NULL, 0, 0, "R", "size ratio between scales (0.5..0.9)", "0.75"},
+    {"channels", 0, ARG_INT, 0, &singan_train_arg.o.channels, NULL, 0, 1e9, "N", "network width at the coarsest scale", "32"},
+    {"max-channels", 0, ARG_INT, 0, &singan_train_arg.o.max_channels, NULL, 0, 1e9, "N", "the width doubles every 4 scales up to N", "32"},
+};
+
+static int run_singan_train(void)
+{
+    struct singan_train_args *a = &singan_train_arg;
+    tn_image dem = {0, 0, 0, NULL};
+    tn_singan model;
+    tn_singan_stats s;
+    tn_status st;
+    char ckbuf[1024];
+    if (!a->ckpt) {
+        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
+        a->ckpt = ckbuf;
+    }
+    a->o.train.checkpoint = a->ckpt;
+    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    st = tn_singan_train(&dem, &a->o, &model, &s);
+    tn_image_free(&dem);
+    if (st == TN_ERR_CANCELLED) {
+        fprintf(stderr, "terrainnet singan-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
+                        "command with --resume to continue\n", s.iterations, a->ckpt);
+        return 130;
+    }
+    if (st) return fail_status(st);
+    st = tn_singan_save(&model, a->out);
+    if (!st) {
+        int i;
+        printf("scales: %d (trained %d)\niterations: %ld (resumed at %ld)\nper_scale:", s.scales, s.trained, s.iterations, s.resumed_from);
+        for (i = 0; i < s.scales; i++) printf(" %ld", s.scale_iters[i]);
+        printf("\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f (finest scale %.4f)\nloss_d: %.4f\nloss_g: %.4f\nloss_rec: %.5f\n"
+               "checkpoints: %d (%s)\nmodel: %s\n",
+               s.seconds / 60.0, s.seconds_per_iter, s.seconds_per_iter_finest, (double)s.loss_d, (double)s.loss_g, (double)s.loss_rec,
+               s.checkpoints, a->ckpt, a->out);
+    }
+    tn_singan_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command singan_train_cmd = {"singan-train", CLI_CMD(singan_train), "train a multi-scale SinGAN on one DEM (checkpoints, resume)",
+    "Trains SinGAN (one small generator per scale, coarse to fine, spectral-norm + hinge patch discriminators and a "
+    "reconstruction loss) on one heightmap and writes the model; the time budget is shared over the scales by their cost "
+    "and progress names the scale being trained. The full training state is saved atomically to the checkpoint every "
+    "interval; --resume continues it identically. See docs/singan.md."};
+
+static struct singan_gen_args { const char *model, *in, *out; int w, h, x0, y0; double factor; tn_singan_gen_opts g; } singan_gen_arg;
+static const cli_opt singan_sample_opts[] = {
+    {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
+    {"output", 'o', ARG_STR, REQ, &singan_gen_arg.out, NULL, 0, 0, "OUT", "heightmap to write (the example's units)", NULL},
+    {"size", 0, ARG_WXH, 0, &singan_gen_arg.w, &singan_gen_arg.h, 1, 1 << 20, "WxH", "output size", "the example's size"},
+    {"origin", 0, ARG_INT, PAIR, &singan_gen_arg.x0, &singan_gen_arg.y0, -(1 << 29), 1 << 29, "X Y",
+     "the window's corner in the infinite sample (tiles of one seed fit together exactly)", "0 0"},
+    {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+};
+static const cli_opt singan_refine_opts[] = {
+    {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
+    {"IN", 0, ARG_POS, 0, &singan_gen_arg.in, NULL, 0, 0, NULL, "a smooth map in the example's units and pixel size", NULL},
+    {"output", 'o', ARG_STR, REQ, &singan_gen_arg.out, NULL, 0, 0, "OUT", "refined heightmap (IN's size)", NULL},
+    {"from-scale", 0, ARG_INT, 0, &singan_gen_arg.g.from_scale, NULL, 1, 64, "K", "first scale whose generator runs (higher = finer detail only)", "scales - 3"},
+    {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+};
+static const cli_opt singan_upscale_opts[] = {
+    {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
+    {"IN", 0, ARG_POS, 0, &singan_gen_arg.in, NULL, 0, 0, NULL, "the map to upscale (the example's units)", NULL},
+    {"output", 'o', ARG_STR, REQ, &singan_gen_arg.out, NULL, 0, 0, "OUT", "upscaled heightmap (factor x IN's size)", NULL},
+    {"factor", 0, ARG_DOUBLE, REQ | ABOVE, &singan_gen_arg.factor, NULL, 1, 64, "F", "upscaling factor", NULL},
+    {"from-scale", 0, ARG_INT, 0, &singan_gen_arg.g.from_scale, NULL, 1, 64, "K",
+     "the scale IN stands for + 1 (= scales: IN at the example's pixel size, the finest generator repeats)", "output at the example's pixel size"},
+    {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+};
+
+/* kind: 0 sample, 1 refine, 2 upscale */
+static int singan_generate(int kind)
+{
+    struct singan_gen_args *a = &singan_gen_arg;
+    tn_singan model;
+    tn_image in = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_status st;
+    double t0;
+    if ((st = tn_singan_load(a->model, &model))) return fail_status(st);
+    if (kind && (st = tn_image_load(a->in, &in, NULL))) {
+        tn_singan_free(&model);
+        return fail_status(st);
+    }
+    t0 = tn_time_seconds();
+    if (kind == 0) st = tn_singan_sample(&model, a->x0, a->y0, a->w ? a->w : model.width, a->h ? a->h : model.height, &a->g, &out);
+    else if (kind == 1) st = tn_singan_refine(&model, &in, &a->g, &out);
+    else st = tn_singan_upscale(&model, &in, (float)a->factor, &a->g, &out);
+    if (!st) {
+        fprintf(stderr, "singan: %d x %d in %.2f s\n", out.width, out.height, tn_time_seconds() - t0);
+        st = tn_image_save(a->out, &out, NULL);
+    }
+    tn_image_free(&in);
+    tn_image_free(&out);
+    tn_singan_free(&model);
+    return st ? fail_status(st) : 0;
+}
+static int run_singan_sample(void) { return singan_generate(0); }
+static int run_singan_refine(void) { return singan_generate(1); }
+static int run_singan_upscale(void) { return singan_generate(2); }
+
+static const cli_command singan_sample_cmd = {"singan-sample", CLI_CMD(singan_sample), "random terrain of any size from a SinGAN model",
+    "Samples new terrain like the example, at any size, in the example's height units. The sample is defined on an "
+    "infinite grid: --origin X Y with --size gives that window, and windows of one seed fit together exactly. Large "
+    "sizes are made tile by tile in bounded memory."};
+static const cli_command singan_refine_cmd = {"singan-refine", CLI_CMD(singan_refine), "add a SinGAN model's detail to a smooth map",
+    "Injects IN (a smooth map, e.g. a GNN output, a membrane or a blurred DEM) at scale K of the model and runs the "
+    "finer generators: the example's detail on IN's layout."};
+static const cli_command singan_upscale_cmd = {"singan-upscale", CLI_CMD(singan_upscale), "upscale a map with a SinGAN model's learned detail",
+    "Super-resolution: IN stands for a scale log(F)/log(1/0.75) scales coarser than the output, and the generators above "
+    "it add the detail; by default the output has the example's pixel size."};
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
     &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &export_cmd,
     &world_cmd,
+    &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 

@@ -1,0 +1,237 @@
+/* test_singan.c - @@singan: the multi-scale single-image GAN on a small synthetic DEM (Perlin
+   terrain in metres, 3 scales of 12..24 px, 8 channels): training lowers the reconstruction
+   loss, save/load, bit-identical resume, a tile equals the same pixels of a whole-map sample,
+   two seeds differ, refine and upscale keep sizes and units, and bad inputs (a DEM smaller than
+   the coarsest scale, a constant DEM, NaN, another method's model, a checkpoint as a model). */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+/* A 24 x 24 Perlin terrain from 1000 to 2000 m. */
+static tn_image make_dem(uint64_t seed, int n)
+{
+    tn_image d = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    size_t i;
+    memset(&po, 0, sizeof po);
+    po.seed = seed;
+    po.octaves = 4;
+    po.frequency = 3;
+    tn_noise_perlin(&d, n, n, &po);
+    for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
+    return d;
+}
+
+static void tiny_opts(tn_singan_opts *o, int iters)
+{
+    memset(o, 0, sizeof *o);
+    o->coarsest = 12;
+    o->factor = 0.7f;
+    o->channels = 8;
+    o->max_channels = 8;
+    o->iters = iters;
+    o->train.seed = 3;
+}
+
+static int same_params(const tn_params *a, const tn_params *b)
+{
+    int i;
+    if (tn_params_count(a) != tn_params_count(b)) return 0;
+    for (i = 0; i < tn_params_count(a); i++) {
+        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
+        if (x->numel != y->numel || strcmp(x->name, y->name) || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
+    }
+    return 1;
+}
+
+static tn_singan trained;   /* shared by the generation tests */
+static int have_trained;
+
+TN_TEST(training_lowers_the_reconstruction_loss)
+{
+    tn_image dem = make_dem(1, 24);
+    tn_singan_opts o;
+    tn_singan_stats st;
+    tiny_opts(&o, 40);
+    TN_CHECK(tn_singan_train(&dem, &o, &trained, &st) == TN_OK);
+    have_trained = 1;
+    TN_CHECK(trained.scales == 3 && st.scales == 3 && trained.trained == 3);
+    TN_CHECK(st.iterations == 120);
+    TN_CHECK(st.scale_iters[0] == 40 && st.scale_iters[1] == 40 && st.scale_iters[2] == 40);
+    TN_CHECK(st.loss_rec < 0.5f * st.loss_rec_first);
+    TN_CHECK(trained.amp[0] == 1.0f && trained.amp[1] > 0 && trained.amp[1] < 0.2f && trained.amp[2] > 0);
+    TN_CHECK_NEAR(trained.offset, 1500, 501);
+    tn_image_free(&dem);
+}
+
+TN_TEST(save_load_round_trip)
+{
+    const char *path = tn_test_tmp_path("singan", "model.tnw");
+    tn_singan m;
+    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_singan_gen_opts g;
+    if (!have_trained) TN_SKIP("no model");
+    memset(&g, 0, sizeof g);
+    g.seed = 5;
+    TN_CHECK(tn_singan_save(&trained, path) == TN_OK);
+    TN_CHECK(tn_singan_load(path, &m) == TN_OK);
+    TN_CHECK(same_params(trained.weights, m.weights));
+    TN_CHECK(m.scales == trained.scales && m.trained == trained.trained && m.offset == trained.offset && m.range == trained.range);
+    TN_CHECK(m.iterations == 120);
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 30, 20, &g, &a) == TN_OK);
+    TN_CHECK(tn_singan_sample(&m, 0, 0, 30, 20, &g, &b) == TN_OK);
+    TN_CHECK(a.data && b.data && !memcmp(a.data, b.data, 600 * sizeof(float)));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_singan_free(&m);
+    remove(path);
+}
+
+TN_TEST(tile_equals_whole_map_and_seeds_differ)
+{
+    tn_image whole = {0, 0, 0, NULL}, tile = {0, 0, 0, NULL}, other = {0, 0, 0, NULL};
+    tn_singan_gen_opts g;
+    int x, y, same = 1, differ = 0;
+    float lo, hi;
+    if (!have_trained) TN_SKIP("no model");
+    memset(&g, 0, sizeof g);
+    g.seed = 11;
+    g.tile = 16; /* the whole map is itself made of 16 px tiles */
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &whole) == TN_OK);
+    g.tile = 0;
+    TN_CHECK(tn_singan_sample(&trained, 13, 7, 21, 18, &g, &tile) == TN_OK);
+    for (y = 0; y < 18 && whole.data && tile.data; y++)
+        for (x = 0; x < 21; x++) same &= TN_PIXEL(&tile, x, y, 0) == TN_PIXEL(&whole, x + 13, y + 7, 0);
+    TN_CHECK(same);
+    g.seed = 12;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &other) == TN_OK);
+    for (x = 0; x < 2000 && other.data && whole.data; x++) differ += fabsf(other.data[x] - whole.data[x]) > 1.0f;
+    TN_CHECK(differ > 1000);
+    tn_image_range(&whole, &lo, &hi); /* metres, near the example's range */
+    TN_CHECK(lo > 500 && hi < 2500 && hi - lo > 100);
+    tn_image_free(&whole);
+    tn_image_free(&tile);
+    tn_image_free(&other);
+}
+
+TN_TEST(refine_and_upscale)
+{
+    tn_image dem = make_dem(1, 24), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
+    tn_singan_gen_opts g;
+    float lo, hi;
+    if (!have_trained) TN_SKIP("no model");
+    memset(&g, 0, sizeof g);
+    TN_CHECK(tn_image_blur(&blur, &dem, 2.0f) == TN_OK);
+    g.from_scale = 1;
+    TN_CHECK(tn_singan_refine(&trained, &blur, &g, &out) == TN_OK);
+    TN_CHECK(out.width == 24 && out.height == 24);
+    tn_image_range(&out, &lo, &hi);
+    TN_CHECK(lo > 500 && hi < 2500);
+    tn_image_free(&out);
+    g.from_scale = 3; /* scale 3 of 3: no generator left */
+    TN_CHECK(tn_singan_refine(&trained, &blur, &g, &out) == TN_ERR_INVALID_ARG);
+    g.from_scale = 0;
+    TN_CHECK(tn_image_resize(&small, &dem, 12, 12, TN_RESIZE_AREA) == TN_OK);
+    TN_CHECK(tn_singan_upscale(&trained, &small, 2.0f, &g, &out) == TN_OK);
+    TN_CHECK(out.width == 24 && out.height == 24);
+    tn_image_free(&out);
+    TN_CHECK(tn_singan_upscale(&trained, &small, 1.0f, &g, &out) == TN_ERR_INVALID_ARG);
+    g.from_scale = 3; /* SR mode: the input stands for the finest scale, the finest generator repeats */
+    TN_CHECK(tn_singan_upscale(&trained, &small, 3.0f, &g, &out) == TN_OK);
+    TN_CHECK(out.width == 36 && out.height == 36);
+    tn_image_free(&out);
+    tn_image_free(&small);
+    tn_image_free(&blur);
+    tn_image_free(&dem);
+}
+
+TN_TEST(resume_is_bit_identical)
+{
+    const char *ck = tn_test_tmp_path("singan", "run.ckpt");
+    tn_image dem = make_dem(2, 24);
+    tn_singan_opts o;
+    tn_singan a, b;
+    tn_singan_stats st;
+    tiny_opts(&o, 6);
+    TN_CHECK(tn_singan_train(&dem, &o, &a, NULL) == TN_OK);
+    o.train.checkpoint = ck;
+    o.train.max_iters = 8; /* stops in the middle of scale 2 */
+    TN_CHECK(tn_singan_train(&dem, &o, &b, &st) == TN_OK);
+    TN_CHECK(st.iterations == 8 && b.trained == 2);
+    tn_singan_free(&b);
+    o.train.max_iters = 0;
+    o.train.resume = 1;
+    o.train.seed = 99; /* the checkpoint's seed wins */
+    TN_CHECK(tn_singan_train(&dem, &o, &b, &st) == TN_OK);
+    TN_CHECK(st.resumed_from == 8 && st.iterations == 18 && b.trained == 3);
+    TN_CHECK(same_params(a.weights, b.weights));
+    tn_singan_free(&b);
+    { /* a checkpoint is not a model; another example is refused */
+        tn_image other = make_dem(3, 24);
+        TN_CHECK(tn_singan_load(ck, &b) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_train(&other, &o, &b, NULL) == TN_ERR_SHAPE);
+        tn_image_free(&other);
+    }
+    tn_singan_free(&a);
+    tn_image_free(&dem);
+    remove(ck);
+}
+
+TN_TEST(bad_inputs)
+{
+    tn_image dem = make_dem(1, 24), small = make_dem(1, 10), flat = {0, 0, 0, NULL};
+    tn_singan_opts o;
+    tn_singan m;
+    tn_image out = {0, 0, 0, NULL};
+    const char *path = tn_test_tmp_path("singan", "other.tnw");
+    tiny_opts(&o, 2);
+    TN_CHECK(tn_singan_train(&small, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "smaller than the coarsest") != NULL);
+    tn_image_create(&flat, 24, 24, 1);
+    TN_CHECK(tn_singan_train(&flat, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "constant") != NULL);
+    dem.data[30] = NAN;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_NUMERIC);
+    dem.data[30] = 1000;
+    o.factor = 0.95f;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    { /* a model of another method */
+        tn_params *p = tn_params_create();
+        tn_model_provenance pv;
+        int n = 4;
+        memset(&pv, 0, sizeof pv);
+        tn_params_add(p, "x", 1, &n);
+        TN_CHECK(tn_model_stamp(p, "texgan", 1, &pv) == TN_OK);
+        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        tn_params_free(p);
+        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(strstr(tn_last_error(), "texgan") != NULL);
+        remove(path);
+    }
+    if (have_trained) {
+        tn_singan_gen_opts g;
+        memset(&g, 0, sizeof g);
+        TN_CHECK(tn_singan_sample(&trained, 0, 0, 0, 10, &g, &out) == TN_ERR_INVALID_ARG);
+        flat.data[5] = NAN;
+        TN_CHECK(tn_singan_refine(&trained, &flat, &g, &out) == TN_ERR_NUMERIC);
+        TN_CHECK(out.data == NULL);
+    }
+    memset(&m, 0, sizeof m);
+    TN_CHECK(tn_singan_sample(&m, 0, 0, 10, 10, NULL, &out) == TN_ERR_INVALID_ARG);
+    tn_image_free(&flat);
+    tn_image_free(&small);
+    tn_image_free(&dem);
+}
+
+int main(void)
+{
+    tn_set_threads(2);
+    TN_RUN(training_lowers_the_reconstruction_loss);
+    TN_RUN(save_load_round_trip);
+    TN_RUN(tile_equals_whole_map_and_seeds_differ);
+    TN_RUN(refine_and_upscale);
+    TN_RUN(resume_is_bit_identical);
+    TN_RUN(bad_inputs);
+    tn_singan_free(&trained);
+    return tn_test_summary("test_singan");
+}
