@@ -1507,6 +1507,9 @@ typedef struct tn_gnn_opts {
     int hidden;            /* node state and MLP hidden width; 0 = 32 (A.5) */
     int rounds;            /* T gather/scatter rounds; 0 = 2 */
     int k;                 /* fixed edges per pixel (its k nearest parts); 0 = 10 (4.2) */
+    float radius;          /* only parts closer than this many pixels are a pixel's neighbours, so a
+                              pixel depends on the sketch within a fixed distance (seamless tiles);
+                              0 = 24 */
     int embed;             /* part embedding dims; 0 = 16 */
     int random_edges;      /* random pixel-part edges per step; 0 = 10000 (4.2), < 0 = none */
     float mask;            /* share of parts masked per step; 0 = 0.05 (A.2), < 0 = none */
@@ -1535,6 +1538,7 @@ typedef struct tn_gnn_opts {
    nothing else) and the example's height normalisation. Free with tn_gnn_free. */
 typedef struct tn_gnn {
     int hidden, rounds, k, embed;
+    float radius;            /* neighbour radius in pixels */
     int membrane;            /* 1: output = membrane of the sketch heights + learned residual */
     int parts;               /* example parts (one embedding each) */
     int width, height;       /* example size */
@@ -1577,6 +1581,9 @@ typedef struct tn_gnn_generate_opts {
     int embeddings;          /* TN_GNN_EMBED_* */
     int align_choices;       /* EMBED_ALIGNED: pick at random among the best this many aligned
                                 example parts; 0 = 1 (the best), the paper uses 5 (variety) */
+    int random_nodes;        /* random sketches (5.2) densify the sketch: this many random ridge nodes
+                                (tn_sketch_random; their ridges and valleys avoid the sketch's
+                                lines, heights in the example's range); 0 = none, at most 8192 */
     int finetune;            /* embedding fine-tune steps (5.4); 0 = none */
     float finetune_lr;       /* Adam rate of the fine-tune; 0 = 1e-2 */
     float smooth_weight;     /* fine-tune smoothness weight; 0 = 0.1, < 0 = off */
@@ -1602,6 +1609,14 @@ TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out);
    part of 5 px fails with TN_ERR_EMPTY, NaN/Inf points with TN_ERR_NUMERIC. */
 TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
                                  const tn_gnn_generate_opts *opts, tn_image *out);
+/* Pixels (x, y) .. (x + w - 1, y + h - 1) of the width x height map tn_gnn_generate would give,
+   computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
+   pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
+   the network plus the membrane's blocks (see >>gnn), so the window is computed on itself grown
+   by that halo. Large maps and windows run in tiles of 256 px (+ halo) internally, so memory
+   follows the tile, not the map (except a fine-tune, which works on the whole map first). */
+TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
+                                        int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
 
 /* The membrane baseline: heights fixed on the sketch's rasterised ridge and valley pixels
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
@@ -19287,6 +19302,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->hidden <= 0) o->hidden = 32;
     if (o->rounds <= 0) o->rounds = 2;
     if (o->k <= 0) o->k = 10;
+    if (!(o->radius > 0)) o->radius = 24.0f;
     if (o->embed <= 0) o->embed = 16;
     if (o->random_edges == 0) o->random_edges = 10000;
     if (o->mask == 0) o->mask = 0.05f;
@@ -19419,6 +19435,137 @@ static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, 
     return TN_OK;
 }
 
+/* The membrane with bounded influence, so that a window of a map can be computed alone (tiled
+   generation): the map is cut into blocks of B = 128 px; each block's membrane is solved on the
+   block grown by a halo of 64 px (clipped to the map; grown further, step by step, while it holds
+   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it bilinearly by its
+   distance to their centres. A pixel therefore depends only on sketch pixels within ~256 px, on
+   any map size, and the result is continuous. Maps whose every block would see the whole map
+   (up to 128 + 64 px a side, the training crops) take one plain solve: the global membrane. */
+#define TN__GNN_MB 128
+#define TN__GNN_MHALO 64
+
+typedef struct tn__gnn_mblock {
+    int x0, y0, w, h;         /* solved domain */
+    float *sol;               /* w x h */
+    tn_status st;
+} tn__gnn_mblock;
+
+typedef struct tn__gnn_mjob {
+    const float *val;
+    const uint8_t *fixed;
+    int W, H;
+    tn__gnn_mblock *b;
+} tn__gnn_mjob;
+
+static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
+{
+    tn__gnn_mjob *J = (tn__gnn_mjob *)vj;
+    size_t bi;
+    for (bi = b0; bi < b1; bi++) {
+        tn__gnn_mblock *B = &J->b[bi];
+        int bx = B->x0, by = B->y0, halo = TN__GNN_MHALO, x, y, any = 0;
+        float *v = NULL;
+        uint8_t *f = NULL;
+        for (;;) { /* the domain: block + halo, grown until it holds a fixed pixel */
+            B->x0 = bx - halo > 0 ? bx - halo : 0;
+            B->y0 = by - halo > 0 ? by - halo : 0;
+            B->w = (bx + TN__GNN_MB + halo < J->W ? bx + TN__GNN_MB + halo : J->W) - B->x0;
+            B->h = (by + TN__GNN_MB + halo < J->H ? by + TN__GNN_MB + halo : J->H) - B->y0;
+            for (y = 0; y < B->h && !any; y++)
+                for (x = 0; x < B->w && !any; x++) any = J->fixed[(size_t)(B->y0 + y) * J->W + B->x0 + x];
+            if (any || (B->w == J->W && B->h == J->H)) break;
+            halo *= 2;
+        }
+        v = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
+        f = (uint8_t *)tn__alloc((size_t)B->w * B->h);
+        B->sol = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
+        if (!v || !f || !B->sol) B->st = TN_ERR_OUT_OF_MEMORY;
+        else {
+            for (y = 0; y < B->h; y++) {
+                memcpy(v + (size_t)y * B->w, J->val + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w * sizeof(float));
+                memcpy(f + (size_t)y * B->w, J->fixed + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w);
+            }
+            B->st = tn__gnn_membrane_solve(v, f, B->w, B->h, B->sol);
+        }
+        TN_FREE(v);
+        TN_FREE(f);
+    }
+}
+
+/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t. */
+static void tn__gnn_mblend(int x, int n, int *a, int *b, float *t)
+{
+    float u = ((float)x + 0.5f) / (float)TN__GNN_MB - 0.5f, fl = floorf(u);
+    *a = (int)fl;
+    *t = u - fl;
+    *b = *a + 1;
+    if (*a < 0) *a = 0;
+    if (*b < 0) *b = 0;
+    if (*a > n - 1) *a = n - 1;
+    if (*b > n - 1) *b = n - 1;
+}
+
+/* out (rw x rh) = the bounded-influence membrane on the rectangle (rx, ry, rw, rh) of the W x H
+   map given by val / fixed (W x H). Needs at least one fixed pixel in the map. */
+static tn_status tn__gnn_membrane_rect(const float *val, const uint8_t *fixed, int W, int H, int rx, int ry, int rw, int rh, float *out)
+{
+    int nbx = (W + TN__GNN_MB - 1) / TN__GNN_MB, nby = (H + TN__GNN_MB - 1) / TN__GNN_MB, bxa, bxb, bya, byb, x, y, i, nb;
+    float t;
+    tn__gnn_mjob J;
+    tn_status st = TN_OK;
+    if ((nbx - 1) * TN__GNN_MB <= TN__GNN_MHALO && TN__GNN_MB + TN__GNN_MHALO >= W && (nby - 1) * TN__GNN_MB <= TN__GNN_MHALO &&
+        TN__GNN_MB + TN__GNN_MHALO >= H) {
+        float *all = out;
+        if ((rw != W || rh != H) && !(all = (float *)tn__alloc((size_t)W * H * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+        st = tn__gnn_membrane_solve(val, fixed, W, H, all);
+        if (all != out) {
+            for (y = 0; !st && y < rh; y++) memcpy(out + (size_t)y * rw, all + (size_t)(ry + y) * W + rx, (size_t)rw * sizeof(float));
+            TN_FREE(all);
+        }
+        return st;
+    }
+    tn__gnn_mblend(rx, nbx, &bxa, &i, &t);
+    tn__gnn_mblend(rx + rw - 1, nbx, &i, &bxb, &t);
+    tn__gnn_mblend(ry, nby, &bya, &i, &t);
+    tn__gnn_mblend(ry + rh - 1, nby, &i, &byb, &t);
+    nb = (bxb - bxa + 1) * (byb - bya + 1);
+    memset(&J, 0, sizeof J);
+    J.val = val;
+    J.fixed = fixed;
+    J.W = W;
+    J.H = H;
+    if (!(J.b = (tn__gnn_mblock *)tn__calloc((size_t)nb * sizeof(tn__gnn_mblock)))) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < nb; i++) {
+        J.b[i].x0 = (bxa + i % (bxb - bxa + 1)) * TN__GNN_MB;
+        J.b[i].y0 = (bya + i / (bxb - bxa + 1)) * TN__GNN_MB;
+    }
+    tn_parallel_for((size_t)nb, 1, tn__gnn_mblock_task, &J);
+    for (i = 0; i < nb; i++)
+        if (J.b[i].st && !st) st = J.b[i].st;
+    for (y = 0; !st && y < rh; y++)
+        for (x = 0; x < rw; x++) {
+            int gx = rx + x, gy = ry + y, xa, xb, ya, yb, q;
+            float tx, ty, v = 0, w[4];
+            const tn__gnn_mblock *bl[4];
+            tn__gnn_mblend(gx, nbx, &xa, &xb, &tx);
+            tn__gnn_mblend(gy, nby, &ya, &yb, &ty);
+            bl[0] = &J.b[(ya - bya) * (bxb - bxa + 1) + xa - bxa];
+            bl[1] = &J.b[(ya - bya) * (bxb - bxa + 1) + xb - bxa];
+            bl[2] = &J.b[(yb - bya) * (bxb - bxa + 1) + xa - bxa];
+            bl[3] = &J.b[(yb - bya) * (bxb - bxa + 1) + xb - bxa];
+            w[0] = (1 - tx) * (1 - ty);
+            w[1] = tx * (1 - ty);
+            w[2] = (1 - tx) * ty;
+            w[3] = tx * ty;
+            for (q = 0; q < 4; q++) v += w[q] * bl[q]->sol[(size_t)(gy - bl[q]->y0) * bl[q]->w + gx - bl[q]->x0];
+            out[(size_t)y * rw + x] = v;
+        }
+    for (i = 0; i < nb; i++) TN_FREE(J.b[i].sol);
+    TN_FREE(J.b);
+    return st;
+}
+
 /* Rasterised sketch -> pixel type (+1 ridge, -1 valley, 0 none), fixed heights, membrane. */
 static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, float *type, float *height, float *membrane)
 {
@@ -19439,7 +19586,7 @@ static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, 
         height[i] = fixed[i] ? p[2] : 0.0f;
     }
     if (!nf) st = tn__fail(TN_ERR_EMPTY, "gnn: the sketch covers no pixel of the %d x %d map", W, H);
-    if (!st && membrane) st = tn__gnn_membrane_solve(height, fixed, W, H, membrane);
+    if (!st && membrane) st = tn__gnn_membrane_rect(height, fixed, W, H, 0, 0, W, H, membrane);
     TN_FREE(fixed);
     tn_image_free(&r);
     return st;
@@ -19551,7 +19698,8 @@ typedef struct tn__gnn_cand { int part, pt; float d2; } tn__gnn_cand;
 
 typedef struct tn__gnn_knn_job {
     const tn__gnn_parts *P;
-    int W, H, k, gw, gh;
+    int W, H, ox, oy, k, gw, gh, rcap;  /* window W x H at (ox, oy) of the map; rcap: last ring searched */
+    float r2;                           /* squared search radius; 0 = none */
     const int *cell_start, *cell_pts;   /* bucket grid of point indices */
     const float *base;                  /* per pixel baseline (normalised) or NULL */
     int *nbr;                           /* npix x k parts (-1 = none) */
@@ -19582,7 +19730,9 @@ static void tn__gnn_knn_task(void *vjob, int ith, int nth)
     for (y = y0; y < y1; y++)
         for (x = 0; x < J->W; x++) {
             int pix = y * J->W + x, bx = x / TN__GNN_CELL, by = y / TN__GNN_CELL, r, nc = 0, rmax = J->gw > J->gh ? J->gw : J->gh;
+            float gx = (float)(x + J->ox), gy = (float)(y + J->oy);
             size_t o = (size_t)pix * k;
+            if (J->rcap < rmax) rmax = J->rcap;
             for (r = 0; r <= rmax; r++) {
                 int cx, cy;
                 for (cy = by - r; cy <= by + r; cy++) {
@@ -19593,7 +19743,8 @@ static void tn__gnn_knn_task(void *vjob, int ith, int nth)
                         c = cy * J->gw + cx;
                         for (q = J->cell_start[c]; q < J->cell_start[c + 1]; q++) {
                             int pt = J->cell_pts[q], part = P->of[pt];
-                            float dx = P->pts[3 * pt] - (float)x, dy = P->pts[3 * pt + 1] - (float)y, d2 = dx * dx + dy * dy;
+                            float dx = P->pts[3 * pt] - gx, dy = P->pts[3 * pt + 1] - gy, d2 = dx * dx + dy * dy;
+                            if (J->r2 > 0 && !(d2 < J->r2)) continue;
                             if (stamp[part] != pix) {
                                 stamp[part] = pix;
                                 slot[part] = nc;
@@ -19634,8 +19785,12 @@ static void tn__gnn_knn_task(void *vjob, int ith, int nth)
     TN_FREE(cand);
 }
 
-/* nbr (npix x k) and feat (npix x k x F) allocated here. */
-static tn_status tn__gnn_knn(const tn__gnn_parts *P, int W, int H, int k, const float *base, int **nbr, float **feat)
+/* The k nearest parts (closer than `radius` px when radius > 0) of every pixel of the W x H
+   window at (ox, oy) of the map (parts in map coordinates); base: the window's baselines.
+   nbr (npix x k) and feat (npix x k x F) allocated here. Points outside the window sit in the
+   grid's border cells, nearer than they are, so the ring search stays exact. */
+static tn_status tn__gnn_knn(const tn__gnn_parts *P, int W, int H, int ox, int oy, int k, float radius, const float *base, int **nbr,
+                             float **feat)
 {
     tn__gnn_knn_job J;
     int *cnt = NULL, i, ncell;
@@ -19646,9 +19801,13 @@ static tn_status tn__gnn_knn(const tn__gnn_parts *P, int W, int H, int k, const 
     J.W = W;
     J.H = H;
     J.k = k;
+    J.ox = ox;
+    J.oy = oy;
     J.base = base;
     J.gw = (W + TN__GNN_CELL - 1) / TN__GNN_CELL;
     J.gh = (H + TN__GNN_CELL - 1) / TN__GNN_CELL;
+    J.r2 = radius > 0 ? radius * radius : 0.0f;
+    J.rcap = radius > 0 ? (int)ceilf(radius / TN__GNN_CELL) + 1 : INT_MAX;
     ncell = J.gw * J.gh;
     cnt = (int *)tn__calloc(((size_t)ncell + 1) * sizeof(int));
     J.cell_pts = (int *)tn__alloc(((size_t)P->npts + 1) * sizeof(int));
@@ -19658,8 +19817,8 @@ static tn_status tn__gnn_knn(const tn__gnn_parts *P, int W, int H, int k, const 
     if (!st) {
         int *cp = (int *)J.cell_pts, *fill;
 #define TN__GNN_CELLOF(pt) \
-    ((P->pts[3 * (pt) + 1] < 0 ? 0 : (int)P->pts[3 * (pt) + 1] / TN__GNN_CELL >= J.gh ? J.gh - 1 : (int)P->pts[3 * (pt) + 1] / TN__GNN_CELL) * J.gw + \
-     (P->pts[3 * (pt)] < 0 ? 0 : (int)P->pts[3 * (pt)] / TN__GNN_CELL >= J.gw ? J.gw - 1 : (int)P->pts[3 * (pt)] / TN__GNN_CELL))
+    ((P->pts[3 * (pt) + 1] - oy < 0 ? 0 : (int)(P->pts[3 * (pt) + 1] - oy) / TN__GNN_CELL >= J.gh ? J.gh - 1 : (int)(P->pts[3 * (pt) + 1] - oy) / TN__GNN_CELL) * J.gw + \
+     (P->pts[3 * (pt)] - ox < 0 ? 0 : (int)(P->pts[3 * (pt)] - ox) / TN__GNN_CELL >= J.gw ? J.gw - 1 : (int)(P->pts[3 * (pt)] - ox) / TN__GNN_CELL))
         for (i = 0; i < P->npts; i++) cnt[TN__GNN_CELLOF(i) + 1]++;
         for (i = 0; i < ncell; i++) cnt[i + 1] += cnt[i];
         if (!(fill = (int *)tn__alloc(((size_t)ncell + 1) * sizeof(int)))) st = TN_ERR_OUT_OF_MEMORY;
@@ -20128,7 +20287,7 @@ static tn_tensor *tn__gnn_mean(tn_ctx *ctx, tn_tensor *x, const tn__gnn_dir *g)
 
 typedef struct tn__gnn_arch {
     int hidden, rounds, k, embed, membrane, parts, width, height, npts;
-    float mean, std, lo, hi, part_noise;
+    float mean, std, lo, hi, part_noise, radius;
 } tn__gnn_arch;
 
 static tn_status tn__gnn_linear_add(tn_params *p, const char *name, int in, int out, tn_rng *rng)
@@ -20278,6 +20437,7 @@ static void tn__gnn_write_config(const tn__gnn_arch *A, float *c)
     c[13] = A->part_noise;
     c[14] = (float)A->npts;
     c[15] = TN__GNN_F;
+    c[16] = A->radius;
 }
 
 static int tn__gnn_whole(float v, float lo, float hi) { return v >= lo && v <= hi && v == floorf(v); }
@@ -20292,7 +20452,7 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
         !tn__gnn_whole(c[4], 1, 256) || !tn__gnn_whole(c[5], 0, 1) || !tn__gnn_whole(c[6], 1, 1 << 24) ||
         !tn__gnn_whole(c[7], 16, TN_SKETCH_MAX_SIDE) || !tn__gnn_whole(c[8], 16, TN_SKETCH_MAX_SIDE) || !isfinite(c[9]) ||
         !(c[10] > 0) || !isfinite(c[10]) || !isfinite(c[11]) || !isfinite(c[12]) || !(c[13] >= 0 && c[13] <= 100) ||
-        !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F)
+        !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged gnn configuration", name);
     A->hidden = (int)c[1];
     A->rounds = (int)c[2];
@@ -20308,6 +20468,7 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
     A->hi = c[12];
     A->part_noise = c[13];
     A->npts = (int)c[14];
+    A->radius = c[16] > 0 ? c[16] : 24.0f; /* files written before the radius existed */
     return TN_OK;
 }
 
@@ -20401,6 +20562,7 @@ static void tn__gnn_model_fields(tn_gnn *m, const tn__gnn_arch *A)
     m->hidden = A->hidden;
     m->rounds = A->rounds;
     m->k = A->k;
+    m->radius = A->radius;
     m->embed = A->embed;
     m->membrane = A->membrane;
     m->parts = A->parts;
@@ -20492,7 +20654,7 @@ static tn_status tn__gnn_level_make(const tn__gnn_arch *A, const tn_contour_set 
     if (st) return st;
     for (i = 0; i < n; i++) L->base[i] = A->membrane ? (L->base[i] - A->mean) / A->std : 0.0f;
     if ((st = tn__gnn_parts_make(parts, A->mean, A->std, &L->P))) return st;
-    return tn__gnn_knn(&L->P, A->width, A->height, A->k, L->base, &L->nbr, &L->nfeat);
+    return tn__gnn_knn(&L->P, A->width, A->height, 0, 0, A->k, A->radius, L->base, &L->nbr, &L->nfeat);
 }
 
 /* A random thinning of sparse level L into T: each part kept with probability 1 - q, q uniform
@@ -20541,10 +20703,10 @@ static tn_status tn__gnn_level_thin(tn__gnn_train *s, const tn__gnn_level *L, tn
         T->P.n = n;
         T->P.npts = m;
         T->P.start[n] = m;
-        if (s->A.membrane) st = tn__gnn_membrane_solve(hgt, fixed, W, H, T->base);
+        if (s->A.membrane) st = tn__gnn_membrane_rect(hgt, fixed, W, H, 0, 0, W, H, T->base);
         else memset(T->base, 0, npix * sizeof(float));
     }
-    if (!st) st = tn__gnn_knn(&T->P, W, H, s->A.k, T->base, &T->nbr, &T->nfeat);
+    if (!st) st = tn__gnn_knn(&T->P, W, H, 0, 0, s->A.k, s->A.radius, T->base, &T->nbr, &T->nfeat);
     TN_FREE(fixed);
     TN_FREE(hgt);
     return st;
@@ -20766,7 +20928,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     if (opts_in) s.o = *opts_in;
     tn_gnn_defaults(&s.o);
     if ((st = tn__gnn_check_dem(dem, &lo, &hi, &mean, &std))) return st;
-    if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
+    if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
         s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
         !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
@@ -20815,6 +20977,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         s.A.hidden = s.o.hidden;
         s.A.rounds = s.o.rounds;
         s.A.k = s.o.k;
+        s.A.radius = s.o.radius;
         s.A.embed = s.o.embed;
         s.A.membrane = s.o.membrane >= 0;
         s.A.width = d1->width;
@@ -21078,48 +21241,251 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
     }
 }
 
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out)
-{
-    tn_gnn_generate_opts o;
+/* What every window of one generation shares: the sketch's parts, cut once from the whole
+   sketch so that every window sees the same parts in the same order, their embeddings and
+   initial states, and the rasterised sketch. */
+typedef struct tn__gnn_gen {
     tn__gnn_arch A;
-    tn_contour_set sk, dense, parts, ex_parts;
+    int W, H, halo;
+    tn__gnn_parts P;           /* every part of the sketch, normalised heights */
+    float *emb;                /* P.n x embed */
+    float *E0;                 /* P.n x hidden initial states; NULL = zero */
+    float *type, *hgt;         /* W x H: +1 / -1 / 0; the sketch height (example units) or 0 */
+    uint8_t *fixed;            /* W x H: sketch pixel */
+} tn__gnn_gen;
+
+/* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
+typedef struct tn__gnn_region {
+    int rx, ry, rw, rh;
     tn__gnn_parts P;
+    int *of;                   /* region part -> sketch part */
+    float *type, *base;        /* rw x rh; base normalised (0 without membrane) */
     tn__gnn_graph g;
+} tn__gnn_region;
+
+static void tn__gnn_gen_free(tn__gnn_gen *G)
+{
+    tn__gnn_parts_free(&G->P);
+    TN_FREE(G->emb);
+    TN_FREE(G->E0);
+    TN_FREE(G->type);
+    TN_FREE(G->hgt);
+    TN_FREE(G->fixed);
+    memset(G, 0, sizeof *G);
+}
+
+static void tn__gnn_region_free(tn__gnn_region *R)
+{
+    tn__gnn_parts_free(&R->P);
+    TN_FREE(R->of);
+    TN_FREE(R->type);
+    TN_FREE(R->base);
+    tn__gnn_graph_free(&R->g);
+    memset(R, 0, sizeof *R);
+}
+
+/* The graph of the region: its pixels' k nearest parts within the radius, from the parts with a
+   point less than radius + 1 px from the region (every part a region pixel can reach). */
+static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int rw, int rh, tn__gnn_region *R)
+{
+    const tn__gnn_parts *S = &G->P;
+    size_t npix = (size_t)rw * rh, i;
+    float m = G->A.radius + 1.0f;
+    int *nbr = NULL, j, p, n = 0, q = 0, y;
+    float *nfeat = NULL;
+    tn_status st = TN_OK;
+    memset(R, 0, sizeof *R);
+    R->rx = rx;
+    R->ry = ry;
+    R->rw = rw;
+    R->rh = rh;
+    R->type = (float *)tn__alloc(npix * sizeof(float));
+    R->base = (float *)tn__alloc(npix * sizeof(float));
+    R->of = (int *)tn__alloc(((size_t)S->n + 1) * sizeof(int));
+    R->P.start = (int *)tn__alloc(((size_t)S->n + 1) * sizeof(int));
+    R->P.of = (int *)tn__alloc(((size_t)S->npts + 1) * sizeof(int));
+    R->P.pts = (float *)tn__alloc(((size_t)S->npts + 1) * 3 * sizeof(float));
+    R->P.sign = (float *)tn__alloc(((size_t)S->n + 1) * sizeof(float));
+    if (!R->type || !R->base || !R->of || !R->P.start || !R->P.of || !R->P.pts || !R->P.sign) st = TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; !st && y < rh; y++) memcpy(R->type + (size_t)y * rw, G->type + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
+    if (!st && G->A.membrane) {
+        st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
+        for (i = 0; !st && i < npix; i++) R->base[i] = (R->base[i] - G->A.mean) / G->A.std;
+    } else if (!st)
+        memset(R->base, 0, npix * sizeof(float));
+    for (p = 0; !st && p < S->n; p++) {
+        int near = 0;
+        for (j = S->start[p]; j < S->start[p + 1] && !near; j++) {
+            float x = S->pts[3 * j], yy = S->pts[3 * j + 1];
+            near = x > (float)rx - m && x < (float)(rx + rw - 1) + m && yy > (float)ry - m && yy < (float)(ry + rh - 1) + m;
+        }
+        if (!near && (n > 0 || p < S->n - 1)) continue; /* none near: the last part stays, without edges (no empty tensor) */
+        R->of[n] = p;
+        R->P.start[n] = q;
+        R->P.sign[n] = S->sign[p];
+        for (j = S->start[p]; j < S->start[p + 1]; j++, q++) {
+            memcpy(R->P.pts + 3 * (size_t)q, S->pts + 3 * (size_t)j, 3 * sizeof(float));
+            R->P.of[q] = n;
+        }
+        n++;
+    }
+    if (st) return st;
+    R->P.n = n;
+    R->P.npts = q;
+    R->P.start[n] = q;
+    if ((st = tn__gnn_knn(&R->P, rw, rh, rx, ry, G->A.k, G->A.radius, R->base, &nbr, &nfeat))) return st;
+    if (!(st = tn__gnn_graph_alloc(&R->g, (int)npix, n > 0 ? n : 1, (int)npix * G->A.k))) {
+        R->g.nparts = n;
+        for (i = 0; i < npix; i++)
+            for (j = 0; j < G->A.k; j++) {
+                int r = nbr[i * G->A.k + j];
+                if (r < 0) continue;
+                R->g.e_pix[R->g.E] = (int)i;
+                R->g.e_part[R->g.E] = r;
+                memcpy(R->g.feat + (size_t)R->g.E * TN__GNN_F, nfeat + (i * G->A.k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
+                R->g.E++;
+            }
+        tn__gnn_graph_finish(&R->g);
+    }
+    TN_FREE(nbr);
+    TN_FREE(nfeat);
+    return st;
+}
+
+/* The region's prediction (npix x 1, normalised). emb: the sketch's embeddings as a tensor (the
+   fine-tune's, which must then cover every part) or NULL for G's. */
+static tn_tensor *tn__gnn_region_forward(tn_ctx *ctx, const tn__gnn_gen *G, const tn_params *w, const tn__gnn_region *R, tn_tensor *emb)
+{
     tn__gnn_in in;
-    tn_align_opts ao;
-    tn_image res = {0, 0, 0, NULL};
+    tn_tensor *E0;
+    int i, D = G->A.embed, Hd = G->A.hidden;
+    if (!emb || R->P.n != G->P.n) {
+        if (!(emb = tn_tensor_2d(ctx, R->P.n, D))) return NULL;
+        for (i = 0; i < R->P.n; i++) memcpy(emb->data + (size_t)i * D, G->emb + (size_t)R->of[i] * D, (size_t)D * sizeof(float));
+    }
+    if (tn__gnn_inputs(ctx, &R->g, R->type, G->A.membrane ? R->base : NULL, R->P.sign, emb, &in)) return NULL;
+    if (!(E0 = tn_tensor_2d(ctx, R->P.n, Hd))) return NULL;
+    if (G->E0)
+        for (i = 0; i < R->P.n; i++) memcpy(E0->data + (size_t)i * Hd, G->E0 + (size_t)R->of[i] * Hd, (size_t)Hd * sizeof(float));
+    in.E0 = E0;
+    return tn__gnn_forward(ctx, w, &G->A, &in);
+}
+
+/* 5.4: only the sketch parts' embeddings move, loss on the sketch pixels + smoothness, on the
+   whole map (its memory is the whole map's graph; the tiles then share the tuned embeddings). */
+static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_gnn_generate_opts *o)
+{
+    tn__gnn_region R;
     tn_ctx *ctx = NULL;
     tn_params *ft = NULL, *frozen = NULL;
     tn_optim *fopt = NULL;
-    tn_tensor *emb, *pred;
-    tn_rng rng;
-    int *match = NULL, *nbr = NULL, i, j, npix;
-    float *type = NULL, *hgt = NULL, *base = NULL, *nfeat = NULL;
+    tn_optim_opts oo;
+    tn_tensor *emb;
+    int step, shape[4], s[2], i, nsk = 0, npix = G->W * G->H;
+    float sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
     tn_status st;
-    TN_ASSERT(out);
+    if ((st = tn__gnn_region_make(G, 0, 0, G->W, G->H, &R))) goto done;
+    s[0] = G->P.n;
+    s[1] = G->A.embed;
+    if (!(ctx = tn_ctx_create()) || !(ft = tn_params_create()) || !(emb = tn_params_add(ft, "emb", 2, s)) || !(frozen = tn_params_create())) {
+        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+        goto done;
+    }
+    memcpy(emb->data, G->emb, (size_t)G->P.n * G->A.embed * sizeof(float));
+    memset(&oo, 0, sizeof oo);
+    oo.lr = o->finetune_lr > 0 ? o->finetune_lr : 1e-2f;
+    if (!(fopt = tn_optim_create(ft, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
+    /* a frozen copy of the network (buffers: no gradient), so the model is only read */
+    for (i = 0; i < tn_params_count(model->weights); i++) {
+        const tn_tensor *t = tn_params_get(model->weights, i);
+        tn_tensor *c = tn_params_add_buffer(frozen, t->name, t->ndim, t->shape);
+        if (!c) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        memcpy(c->data, t->data, t->numel * sizeof(float));
+    }
+    for (i = 0; i < npix; i++) nsk += G->type[i] != 0;
+    shape[0] = shape[1] = 1;
+    shape[2] = G->H;
+    shape[3] = G->W;
+    for (step = 0; step < o->finetune && !st; step++) {
+        tn_tensor *p4, *mask, *tg, *loss;
+        tn_ctx_reset(ctx);
+        p4 = tn_reshape(ctx, tn__gnn_region_forward(ctx, G, frozen, &R, emb), 4, shape);
+        mask = tn_tensor_4d(ctx, 1, 1, G->H, G->W);
+        tg = tn_tensor_4d(ctx, 1, 1, G->H, G->W);
+        if (!p4 || !mask || !tg) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
+        for (i = 0; i < npix; i++) {
+            mask->data[i] = G->type[i] != 0 ? 1.0f : 0.0f;
+            tg->data[i] = G->type[i] != 0 ? (G->hgt[i] - G->A.mean) / G->A.std : 0.0f;
+        }
+        loss = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_mul(ctx, tn_sub(ctx, p4, tg), mask))), 1.0f / (float)(nsk ? nsk : 1), 0.0f);
+        if (sw > 0) loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_tv_loss(ctx, p4, 2.0f), sw / (float)npix, 0.0f));
+        tn_params_zero_grad(ft);
+        if ((st = tn_backward(ctx, loss))) break;
+        tn_optim_step(fopt);
+        if ((st = tn__progress("gnn-finetune", (double)(step + 1) / o->finetune))) break;
+    }
+    if (!st) memcpy(G->emb, emb->data, (size_t)G->P.n * G->A.embed * sizeof(float));
+done:
+    tn__gnn_region_free(&R);
+    tn_ctx_free(ctx);
+    tn_optim_free(fopt);
+    tn_params_free(ft);
+    tn_params_free(frozen);
+    return st;
+}
+
+/* Everything of a generation but the network passes: sketch in the output's pixels and the
+   example's units, random sketches, parts, embeddings (matched or aligned, then fine-tuned),
+   part states, raster. */
+static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                  tn__gnn_gen *G)
+{
+    tn_gnn_generate_opts o;
+    tn_contour_set sk, rnd, dense, parts, ex_parts;
+    tn_image r = {0, 0, 0, NULL};
+    tn_align_opts ao;
+    int *match = NULL, i, nf = 0;
+    size_t n, q;
+    tn_status st;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
+    memset(G, 0, sizeof *G);
     memset(&sk, 0, sizeof sk);
+    memset(&rnd, 0, sizeof rnd);
     memset(&dense, 0, sizeof dense);
     memset(&parts, 0, sizeof parts);
     memset(&ex_parts, 0, sizeof ex_parts);
-    memset(&P, 0, sizeof P);
-    memset(&g, 0, sizeof g);
-    if ((st = tn__gnn_arch_of(model, &A))) return st;
+    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
     if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
     if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
     if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
     if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
         !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d)", o.heights, o.finetune,
-                        o.align_choices);
-    if ((size_t)width * height * A.k > TN__GNN_MAX_EDGES)
-        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: %d x %d pixels with %d edges each exceed %d edges", width, height, A.k, TN__GNN_MAX_EDGES);
-    npix = width * height;
-    if ((st = tn__gnn_sketch_units(&A, sketch, width, height, o.heights, &sk))) goto done;
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192)",
+                        o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if (o.finetune > 0 && (size_t)width * height * G->A.k > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: the fine-tune works on the whole map; %d x %d is too large for it", width, height);
+    G->W = width;
+    G->H = height;
+    G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
+    n = (size_t)width * height;
+    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
+    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
+        tn_sketch_random_opts ro;
+        memset(&ro, 0, sizeof ro);
+        ro.seed = o.seed;
+        ro.nodes = o.random_nodes;
+        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        for (i = sk.count; i < rnd.count; i++) {
+            int j;
+            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
+        }
+        tn_contour_set_free(&sk);
+        sk = rnd;
+        memset(&rnd, 0, sizeof rnd);
+    }
     if ((st = tn_sketch_densify(&sk, &dense))) goto done;
     if ((st = tn_contour_parts_make(&dense, o.seed, &parts))) goto done;
     if (!parts.count) {
@@ -21127,7 +21493,7 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
         goto done;
     }
     /* the example part whose embedding each sketch part takes (-1: none) */
-    if ((st = tn__gnn_stored_parts(model->weights, &A, "gnn", &ex_parts))) goto done;
+    if ((st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex_parts))) goto done;
     if (!(match = (int *)tn__alloc((size_t)parts.count * sizeof(int)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     if (o.embeddings == TN_GNN_EMBED_ALIGNED) { /* 5.3: shape (LCS of chain codes) and heights */
         memset(&ao, 0, sizeof ao);
@@ -21135,117 +21501,123 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
         ao.choices = o.align_choices > 0 ? o.align_choices : 1;
         if ((st = tn_sketch_align(&parts, &ex_parts, &ao, match))) goto done;
     } else
-        tn__gnn_same_parts(&parts, &ex_parts, o.embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * A.std : -1.0f, match);
-    /* baseline and pixel types from the rasterised sketch */
-    type = (float *)tn__alloc((size_t)npix * sizeof(float));
-    hgt = (float *)tn__alloc((size_t)npix * sizeof(float));
-    base = (float *)tn__alloc((size_t)npix * sizeof(float));
-    if (!type || !hgt || !base) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-    if ((st = tn__gnn_sketch_pixels(&sk, width, height, type, hgt, base))) goto done;
-    for (i = 0; i < npix; i++) {
-        base[i] = A.membrane ? (base[i] - A.mean) / A.std : 0.0f;
-        hgt[i] = type[i] != 0 ? (hgt[i] - A.mean) / A.std : 0.0f;
-    }
-    if ((st = tn__gnn_parts_make(&parts, A.mean, A.std, &P))) goto done;
-    if ((st = tn__gnn_knn(&P, width, height, A.k, base, &nbr, &nfeat))) goto done;
-    if ((st = tn__gnn_graph_alloc(&g, npix, P.n, npix * A.k))) goto done;
-    for (i = 0; i < npix; i++)
-        for (j = 0; j < A.k; j++) {
-            int r = nbr[(size_t)i * A.k + j];
-            if (r < 0) continue;
-            g.e_pix[g.E] = i;
-            g.e_part[g.E] = r;
-            memcpy(g.feat + (size_t)g.E * TN__GNN_F, nfeat + ((size_t)i * A.k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
-            g.E++;
-        }
-    tn__gnn_graph_finish(&g);
-    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    /* the sketch parts' embeddings, as a learnable set for the fine-tune */
+        tn__gnn_same_parts(&parts, &ex_parts, o.embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
+    if ((st = tn__gnn_parts_make(&parts, G->A.mean, G->A.std, &G->P))) goto done;
+    G->emb = (float *)tn__calloc((size_t)G->P.n * G->A.embed * sizeof(float));
+    G->type = (float *)tn__alloc(n * sizeof(float));
+    G->hgt = (float *)tn__alloc(n * sizeof(float));
+    G->fixed = (uint8_t *)tn__alloc(n);
+    if (!G->emb || !G->type || !G->hgt || !G->fixed) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     {
-        int s[2];
         const tn_tensor *me = tn_params_find(model->weights, "gnn.emb");
-        s[0] = P.n;
-        s[1] = A.embed;
-        if (!(ft = tn_params_create()) || !(emb = tn_params_add(ft, "emb", 2, s))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-        for (i = 0; i < P.n; i++)
-            if (match[i] >= 0) memcpy(emb->data + (size_t)i * A.embed, me->data + (size_t)match[i] * A.embed, (size_t)A.embed * sizeof(float));
+        for (i = 0; i < G->P.n; i++)
+            if (match[i] >= 0) memcpy(G->emb + (size_t)i * G->A.embed, me->data + (size_t)match[i] * G->A.embed, (size_t)G->A.embed * sizeof(float));
     }
-    tn_rng_seed(&rng, o.seed, 0x67656eULL);
-    if (o.finetune > 0) { /* 5.4: only the embeddings move; loss on the sketch pixels + smoothness */
-        tn_optim_opts oo;
-        int step, shape[4];
-        float sw = o.smooth_weight == 0 ? 0.1f : o.smooth_weight > 0 ? o.smooth_weight : 0.0f;
-        tn_rng frng = rng;
-        int nsk = 0;
-        for (i = 0; i < npix; i++) nsk += type[i] != 0;
-        memset(&oo, 0, sizeof oo);
-        oo.lr = o.finetune_lr > 0 ? o.finetune_lr : 1e-2f;
-        if (!(fopt = tn_optim_create(ft, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
-        /* a frozen copy of the network (buffers: no gradient), so the model is only read */
-        if (!(frozen = tn_params_create())) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-        for (i = 0; i < tn_params_count(model->weights); i++) {
-            const tn_tensor *t = tn_params_get(model->weights, i);
-            tn_tensor *c = tn_params_add_buffer(frozen, t->name, t->ndim, t->shape);
-            if (!c) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-            memcpy(c->data, t->data, t->numel * sizeof(float));
+    if (G->A.part_noise > 0) { /* each part's state from its own stream: the same in every window */
+        if (!(G->E0 = (float *)tn__alloc((size_t)G->P.n * G->A.hidden * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        for (i = 0; i < G->P.n; i++) {
+            tn_rng pr;
+            int h;
+            tn_rng_seed(&pr, o.seed ^ 0x67656eULL, (uint64_t)i);
+            for (h = 0; h < G->A.hidden; h++) G->E0[(size_t)i * G->A.hidden + h] = G->A.part_noise * tn_rng_normal(&pr);
         }
-        shape[0] = shape[1] = 1;
-        shape[2] = height;
-        shape[3] = width;
-        for (step = 0; step < o.finetune && !st; step++) {
-            tn_tensor *p4, *mask, *tg, *loss;
-            tn_ctx_reset(ctx);
-            frng = rng; /* the same part states as the final pass */
-            if ((st = tn__gnn_inputs(ctx, &g, type, A.membrane ? base : NULL, P.sign, emb, &in))) break;
-            in.E0 = tn__gnn_part_states(ctx, &A, P.n, &frng);
-            p4 = tn_reshape(ctx, tn__gnn_forward(ctx, frozen, &A, &in), 4, shape);
-            mask = tn_tensor_4d(ctx, 1, 1, height, width);
-            tg = tn_tensor_4d(ctx, 1, 1, height, width);
-            if (!p4 || !mask || !tg) { st = tn_ctx_status(ctx); break; }
-            for (i = 0; i < npix; i++) {
-                mask->data[i] = type[i] != 0 ? 1.0f : 0.0f;
-                tg->data[i] = hgt[i];
-            }
-            loss = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_mul(ctx, tn_sub(ctx, p4, tg), mask))), 1.0f / (float)(nsk ? nsk : 1), 0.0f);
-            if (sw > 0) loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_tv_loss(ctx, p4, 2.0f), sw / (float)npix, 0.0f));
-            tn_params_zero_grad(ft);
-            if ((st = tn_backward(ctx, loss))) break;
-            tn_optim_step(fopt);
-        }
-        if (st) goto done;
     }
-    tn_ctx_reset(ctx);
-    tn_ctx_set_grad(ctx, 0);
-    if ((st = tn__gnn_inputs(ctx, &g, type, A.membrane ? base : NULL, P.sign, emb, &in))) goto done;
-    in.E0 = tn__gnn_part_states(ctx, &A, P.n, &rng);
-    pred = tn__gnn_forward(ctx, model->weights, &A, &in);
-    if (!pred) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; goto done; }
-    if ((st = tn_image_create(&res, width, height, 1))) goto done;
-    for (i = 0; i < npix; i++) {
-        res.data[i] = A.mean + A.std * pred->data[i];
-        if (!isfinite(res.data[i])) { st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)"); goto done; }
+    if ((st = tn_sketch_rasterise(&sk, width, height, &r))) goto done;
+    for (q = 0; q < n; q++) {
+        const float *px = r.data + 3 * q;
+        G->fixed[q] = (uint8_t)(px[0] > 0 || px[1] > 0);
+        nf += G->fixed[q];
+        G->type[q] = px[0] > 0 ? 1.0f : px[1] > 0 ? -1.0f : 0.0f;
+        G->hgt[q] = G->fixed[q] ? px[2] : 0.0f;
     }
-    *out = res;
-    res.data = NULL;
+    if (!nf) {
+        st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch covers no pixel of the %d x %d map", width, height);
+        goto done;
+    }
+    if (o.finetune > 0) st = tn__gnn_finetune(G, model, &o);
 done:
-    tn_image_free(&res);
-    tn_ctx_free(ctx);
-    tn_optim_free(fopt);
-    tn_params_free(ft);
-    tn_params_free(frozen);
+    tn_image_free(&r);
     tn_contour_set_free(&sk);
+    tn_contour_set_free(&rnd);
     tn_contour_set_free(&dense);
     tn_contour_set_free(&parts);
     tn_contour_set_free(&ex_parts);
-    tn__gnn_parts_free(&P);
-    tn__gnn_graph_free(&g);
     TN_FREE(match);
-    TN_FREE(nbr);
-    TN_FREE(nfeat);
-    TN_FREE(type);
-    TN_FREE(hgt);
-    TN_FREE(base);
+    if (st) tn__gnn_gen_free(G);
     return st;
+}
+
+/* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
+   grown by the halo, its graph and one pass without gradients. */
+static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, size_t stride)
+{
+    tn__gnn_region R;
+    tn_tensor *pred;
+    int rx = x - G->halo > 0 ? x - G->halo : 0, ry = y - G->halo > 0 ? y - G->halo : 0, u, v;
+    int rx1 = x + ww + G->halo < G->W ? x + ww + G->halo : G->W, ry1 = y + wh + G->halo < G->H ? y + wh + G->halo : G->H;
+    tn_status st;
+    if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
+    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, &R))) return st;
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 0);
+    pred = tn__gnn_region_forward(ctx, G, w, &R, NULL);
+    if (!pred) st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    for (v = 0; !st && v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            float h = G->A.mean + G->A.std * pred->data[(size_t)(y - ry + v) * R.rw + (x - rx + u)];
+            if (!isfinite(h)) {
+                st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
+                break;
+            }
+            dst[(size_t)v * stride + u] = h;
+        }
+    tn__gnn_region_free(&R);
+    tn_ctx_reset(ctx);
+    return st;
+}
+
+#define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
+TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
+                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    tn__gnn_gen G;
+    tn_image res = {0, 0, 0, NULL};
+    tn_ctx *ctx = NULL;
+    int tx, ty, nt, done_t = 0, tile;
+    tn_status st;
+    TN_ASSERT(out);
+    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
+    if ((st = tn_image_create(&res, w, h, 1))) goto done;
+    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
+    /* a pixel depends only on the sketch within the halo, so any split gives the same pixels */
+    tile = (size_t)w * h <= TN__GNN_ONE_PASS ? (w > h ? w : h) : TN__GNN_TILE;
+    nt = ((w + tile - 1) / tile) * ((h + tile - 1) / tile);
+    for (ty = 0; !st && ty < h; ty += tile)
+        for (tx = 0; !st && tx < w; tx += tile) {
+            int tw = w - tx < tile ? w - tx : tile, th = h - ty < tile ? h - ty : tile;
+            st = tn__gnn_gen_window(&G, model->weights, ctx, x + tx, y + ty, tw, th, res.data + (size_t)ty * w + tx, (size_t)w);
+            if (!st && nt > 1) st = tn__progress("gnn-generate", (double)++done_t / nt);
+        }
+    if (!st) {
+        *out = res;
+        res.data = NULL;
+    }
+done:
+    tn_image_free(&res);
+    tn_ctx_free(ctx);
+    tn__gnn_gen_free(&G);
+    return st;
+}
+
+TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                 const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
 }
 
 /* --------------------------------------------------------------------------------------------

@@ -5,6 +5,11 @@
      extracted network, mean SSIM / PSNR, next to two baselines on the same sketch pixels: the
      constant mean of their heights and their membrane (Laplace) interpolation; at the default
      extraction threshold (dense sketch) and at 200 and 500 cells (sparse sketches).
+   - spectrum distance (tn_realism_compare) of the neighbours to the truth, GNN vs membrane;
+   - speed: training steps/s, the training time at which the reconstruction first reaches SSIM
+     0.95 and 0.97 (the run is trained in segments of 150 iterations, checkpoint + resume, which
+     is bit-identical to one run), generation of 128 x 128 (with a 30-step fine-tune too) and of
+     512 x 512 (the sketch of the map's top-left 512 crop; tiled internally), peak memory (RSS).
    The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
    8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
    Usage: bench_gnn [region] [minutes] [threads]   (defaults alps_montblanc 3 2)
@@ -14,6 +19,15 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+static double peak_rss_mb(void)
+{
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return ru.ru_maxrss / 1024.0; /* kB on Linux */
+}
 
 #define SIDE 128
 
@@ -73,14 +87,16 @@ static int locate(const tn_image *full, const tn_image *crop, int *cx, int *cy)
     return 0;
 }
 
-typedef struct scores { double ssim, psnr; int n; } scores;
+typedef struct scores { double ssim, psnr, spec; int n; } scores;
 
 static void add(scores *s, const tn_image *ref, const tn_image *img)
 {
     tn_metrics m;
+    tn_realism r;
     if (tn_compare(ref, img, 0, &m)) return;
     s->ssim += m.ssim;
     s->psnr += m.psnr;
+    if (!tn_realism_compare(ref, img, NULL, &r)) s->spec += r.spectrum_distance;
     s->n++;
 }
 
@@ -142,9 +158,13 @@ int main(int argc, char **argv)
     tn_gnn_generate_opts go;
     tn_contour_set sk;
     double cover;
-    scores rec = {0, 0, 0};
+    scores rec = {0, 0, 0, 0};
+    double t95 = -1, t97 = -1;
+    int seg;
+    char ckpt[256];
     if (!(minutes > 0)) minutes = 3.0;
     tn_set_threads(threads);
+    snprintf(ckpt, sizeof ckpt, "/tmp/bench_gnn_%s_%ld.ckpt", region, (long)getpid());
     if (!height_mapping(region, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &c128)) {
         fprintf(stderr, "bench_gnn: cannot read %s from %s (set TN_DATA)\n", region, data_dir());
         return 1;
@@ -165,38 +185,64 @@ int main(int argc, char **argv)
     memset(&o, 0, sizeof o);
     o.train.minutes = minutes;
     o.train.seed = 1;
+    o.train.checkpoint = ckpt;
     tn_set_progress(progress, NULL);
-    t0 = tn_time_seconds();
-    if (tn_gnn_train(&crop, &o, &model, &st)) {
-        fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
+    if (!sketch_of(&crop, 0, &sk, &cover)) {
+        fprintf(stderr, "bench_gnn: no network in the crop\n");
         return 1;
     }
-    tn_set_progress(NULL, NULL);
+    memset(&go, 0, sizeof go);
+    t0 = tn_time_seconds();
+    for (seg = 1;; seg++) {
+        tn_metrics mt;
+        o.train.max_iters = 150L * seg;
+        o.train.resume = seg > 1;
+        if (tn_gnn_train(&crop, &o, &model, &st)) {
+            fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
+            return 1;
+        }
+        if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out) && !tn_compare(&crop, &out, 0, &mt)) {
+            if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
+            if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
+            fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
+        }
+        tn_image_free(&out);
+        if (st.iterations < o.train.max_iters) break; /* the time budget ended the run */
+        tn_gnn_free(&model);
+    }
+    remove(ckpt);
     printf("train_minutes: %.2f min\n", (tn_time_seconds() - t0) / 60.0);
     printf("train_iterations: %ld\n", st.iterations);
-    printf("train_steps_per_s: %.2f steps/s\n", st.seconds_per_iter > 0 ? 1.0 / st.seconds_per_iter : 0.0);
+    printf("train_steps_per_s: %.2f steps/s\n", st.seconds > 0 ? st.iterations / st.seconds : 0.0);
+    if (t95 >= 0) printf("train_seconds_to_ssim_0.95: %.0f s\n", t95);
+    else printf("train_seconds_to_ssim_0.95: not reached\n");
+    if (t97 >= 0) printf("train_seconds_to_ssim_0.97: %.0f s\n", t97);
+    else printf("train_seconds_to_ssim_0.97: not reached\n");
     printf("train_parts: %d\n", st.parts);
     printf("train_edges: %d (fixed)\n", st.edges);
     printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
     printf("train_loss_ssim: %.4f (1 - SSIM)\n", st.loss_ssim);
 
     /* reconstruction from the crop's own network */
-    memset(&go, 0, sizeof go);
-    if (!sketch_of(&crop, 0, &sk, &cover)) {
-        fprintf(stderr, "bench_gnn: no network in the crop\n");
-        return 1;
-    }
     t0 = tn_time_seconds();
     if (tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) {
         fprintf(stderr, "bench_gnn: generation failed: %s\n", tn_last_error());
         return 1;
     }
     printf("generate_128_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
+    {
+        tn_image ft = {0, 0, 0, NULL};
+        go.finetune = 30;
+        t0 = tn_time_seconds();
+        if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &ft)) printf("generate_128_finetune30_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
+        tn_image_free(&ft);
+        go.finetune = 0;
+    }
     add(&rec, &crop, &out);
     printf("recon_ssim: %.4f\n", rec.ssim);
     printf("recon_psnr: %.2f dB\n", rec.psnr);
     tn_image_free(&out);
-    rec.ssim = rec.psnr = 0;
+    rec.ssim = rec.psnr = rec.spec = 0;
     rec.n = 0;
     tn_gnn_membrane(&sk, SIDE, SIDE, &out);
     add(&rec, &crop, &out);
@@ -207,7 +253,7 @@ int main(int argc, char **argv)
 
     /* the 8 neighbours, dense and sparse sketches */
     for (ti = 0; ti < 3; ti++) {
-        scores g = {0, 0, 0}, mem = {0, 0, 0}, mean = {0, 0, 0};
+        scores g = {0, 0, 0, 0}, mem = {0, 0, 0, 0}, mean = {0, 0, 0, 0};
         double cov = 0;
         int nc = 0;
         for (dy = -1; dy <= 1; dy++)
@@ -243,7 +289,30 @@ int main(int argc, char **argv)
         printf("neighbours_t%d_membrane_psnr: %.2f dB\n", d, mem.psnr / mem.n);
         printf("neighbours_t%d_mean_ssim: %.4f\n", d, mean.ssim / mean.n);
         printf("neighbours_t%d_mean_psnr: %.2f dB\n", d, mean.psnr / mean.n);
+        printf("neighbours_t%d_gnn_spectrum_distance: %.3f\n", d, g.spec / g.n);
+        printf("neighbours_t%d_membrane_spectrum_distance: %.3f\n", d, mem.spec / mem.n);
     }
+    /* 512 x 512 from the sketch of the map's top-left 512 crop */
+    if (full.width >= 512 && full.height >= 512) {
+        tn_image big = {0, 0, 0, NULL};
+        scores b = {0, 0, 0, 0}, bm = {0, 0, 0, 0};
+        tn_image_crop(&big, &full, 0, 0, 512, 512);
+        if (sketch_of(&big, 0, &sk, &cover)) {
+            t0 = tn_time_seconds();
+            if (!tn_gnn_generate(&model, &sk, 512, 512, &go, &out)) {
+                printf("generate_512_s: %.2f s\n", tn_time_seconds() - t0);
+                add(&b, &big, &out);
+            } else
+                fprintf(stderr, "  512: %s\n", tn_last_error());
+            tn_image_free(&out);
+            if (!tn_gnn_membrane(&sk, 512, 512, &out)) add(&bm, &big, &out);
+            tn_image_free(&out);
+            if (b.n && bm.n) printf("generate_512_ssim: %.4f (membrane %.4f)\n", b.ssim, bm.ssim);
+            tn_contour_set_free(&sk);
+        }
+        tn_image_free(&big);
+    }
+    printf("peak_rss: %.0f MB\n", peak_rss_mb());
     tn_gnn_free(&model);
     tn_image_free(&crop);
     tn_image_free(&c128);

@@ -319,5 +319,49 @@ if command -v mpirun > /dev/null 2>&1; then
 else
     skipped "world with MPI (mpirun absent)"
 fi
+# gnn-train / gnn-generate: help, bad inputs, a tiny model from a procedural DEM, every SKETCH kind,
+# seeded determinism, Ctrl-C checkpoint and resume
+for c in gnn-train gnn-generate; do
+    if $T $c --help 2>&1 | grep -q "usage: terrainnet $c" && $T --help | grep -q "^  $c "; then ok; else bad "$c --help"; fi
+done
+expect_usage "gnn-train no -o" "gnn-train: missing -o MODEL.tnw" $T gnn-train "$W/noise.png"
+expect_usage "gnn-train bad size" "gnn-train: --size needs a whole number from 16 to 4096, not 8" $T gnn-train "$W/noise.png" -o "$W/g.tnw" --size 8
+expect_usage "gnn-train crop outside" "does not fit" $T gnn-train "$W/noise.png" -o "$W/g.tnw" --crop 60 0 --size 48
+expect_error "gnn-train missing DEM" "no_such_dem.png" $T gnn-train no_such_dem.png -o "$W/g.tnw"
+{ echo "P2 32 32 255"; i=0; while [ $i -lt 1024 ]; do echo 7; i=$((i + 1)); done; } > "$W/flat.pgm"
+expect_error "gnn-train flat DEM" "flat" $T gnn-train "$W/flat.pgm" -o "$W/g.tnw" --iters 1
+GT="--iters 2 --size 48"
+if $T --threads 2 gnn-train "$W/noise.png" -o "$W/g.tnw" $GT > "$W/gt.txt" 2>&1 && grep -q "^window: 48 x 48 at" "$W/gt.txt" &&
+    grep -q "highest relief" "$W/gt.txt" && grep -q "^iterations: 2" "$W/gt.txt" && $T info "$W/g.tnw" | grep -q "gnn"; then ok;
+else bad "gnn-train: $(head -c 400 "$W/gt.txt")"; fi
+expect_usage "gnn-generate no -o" "gnn-generate: missing -o OUT" $T gnn-generate "$W/g.tnw" "$W/ex.tns"
+expect_usage "gnn-generate bad size" "gnn-generate: --size needs WxH" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --size 8x8
+expect_usage "gnn-generate bad choice" "must be one of auto|aligned|none" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --embeddings all
+expect_error "gnn-generate texgan model" "gnn" $T gnn-generate "$W/tg.tnw" "$W/ex.tns" -o "$W/x.png"
+expect_error "gnn-generate missing sketch" "no_such.tns" $T gnn-generate "$W/g.tnw" no_such.tns -o "$W/x.png"
+printf 'terrainnet-sketch 1\ncanvas 40 40\nridge\n3 3 0.5\n5 3 0.5\nend\n' > "$W/tiny.tns"
+expect_error "gnn-generate no part of 5 px" "5 px" $T gnn-generate "$W/g.tnw" "$W/tiny.tns" -o "$W/x.png"
+expect_error "gnn-generate flat DEM sketch" "extracted" $T gnn-generate "$W/g.tnw" "$W/flat.pgm" -o "$W/x.png"
+cp "$W/noise.png" "$W/keep_g.png"
+$T gnn-generate "$W/g.tnw" "$W/tiny.tns" -o "$W/keep_g.png" > /dev/null 2>&1
+if cmp -s "$W/noise.png" "$W/keep_g.png"; then ok; else bad "a failed gnn-generate changed the existing output"; fi
+if $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/g1.png" --preview "$W/gp.png" > "$W/gg.txt" 2>&1 &&
+    grep -q "^size: 96 x 64" "$W/gg.txt" && $T info "$W/g1.png" | grep -q "height_range_m" && $T info "$W/gp.png" | grep -q "channels: 3" &&
+    $T --threads 1 gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/g2.png" > /dev/null 2>&1 && cmp -s "$W/g1.png" "$W/g2.png"; then ok;
+else bad "gnn-generate from .tns (same bytes for 1 and 2 threads): $(head -c 300 "$W/gg.txt")"; fi
+if $T gnn-generate "$W/g.tnw" "$W/noise.png" -o "$W/g3.pfm" --size 120x80 --random 12 --finetune 2 --seed 4 > "$W/gg.txt" 2>&1 &&
+    grep -q "DEM (its extracted network)" "$W/gg.txt" && $T info "$W/g3.pfm" | grep -q "size: 120 x 80"; then ok;
+else bad "gnn-generate from a DEM with --random and --finetune: $(head -c 300 "$W/gg.txt")"; fi
+if $T sketch-random --size 64 -o "$W/gr.tns" > /dev/null 2>&1 && $T sketch "$W/gr.tns" -o "$W/grr.pfm" > /dev/null 2>&1 &&
+    $T gnn-generate "$W/g.tnw" "$W/gr.tns" -o "$W/g4.png" --heights unit > /dev/null 2>&1; then ok; else bad "gnn-generate --heights unit"; fi
+$T gnn-train "$W/noise.png" -o "$W/gint.tnw" --iters 1000000 --size 48 > "$W/gint.txt" 2>&1 &
+pid=$!
+n=0
+while [ $n -lt 300 ] && ! grep -q "gnn-train:" "$W/gint.txt" 2>/dev/null; do sleep 0.1; n=$((n + 1)); done
+kill -INT $pid 2>/dev/null
+wait $pid; rc=$?
+if [ $rc -eq 130 ] && grep -q "interrupted after" "$W/gint.txt" && [ -f "$W/gint.tnw.ckpt" ] && [ ! -f "$W/gint.tnw" ] &&
+    $T gnn-train "$W/noise.png" -o "$W/gint.tnw" --iters 1 --size 48 --resume > "$W/gint2.txt" 2>&1 && grep -q "resumed at" "$W/gint2.txt"; then ok;
+else bad "gnn-train Ctrl-C (rc $rc): $(head -c 400 "$W/gint.txt")"; fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

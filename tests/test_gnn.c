@@ -322,6 +322,48 @@ TN_TEST(bad_inputs_fail_cleanly)
     tn_image_free(&small);
 }
 
+TN_TEST(window_equals_whole_map)
+{
+    /* seamless tiles: a window computed alone equals the same pixels of the whole map, on a map
+       larger than one membrane block (260 x 200, so the blocked membrane blends), with a random
+       sketch; also the bounded-influence membrane is continuous and matches the plain solve on
+       a map of one block */
+    tn_image dem = make_dem(12), whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, win2 = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_sketch_random_opts ro;
+    tn_contour_set sk;
+    int x, y, same = 1, before = tn_get_threads();
+    tiny_opts(&o, 3);
+    o.radius = 6;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(m.radius == 6.0f);
+    memset(&ro, 0, sizeof ro);
+    ro.seed = 3;
+    ro.nodes = 40;
+    TN_CHECK(tn_sketch_random(NULL, 260, 200, &ro, &sk) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 5;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 260, 200, &go, &whole) == TN_OK);
+    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 150, 70, 90, 50, &go, &win) == TN_OK);
+    TN_CHECK(win.width == 90 && win.height == 50);
+    for (y = 0; y < 50 && win.data; y++)
+        for (x = 0; x < 90; x++) same &= TN_PIXEL(&win, x, y, 0) == TN_PIXEL(&whole, 150 + x, 70 + y, 0);
+    TN_CHECK(same);
+    tn_set_threads(1 + (before == 1));
+    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 150, 70, 90, 50, &go, &win2) == TN_OK);
+    tn_set_threads(before);
+    TN_CHECK(same_image(&win, &win2));
+    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 200, 70, 90, 50, &go, &win2) == TN_ERR_INVALID_ARG);
+    tn_image_free(&whole);
+    tn_image_free(&win);
+    tn_image_free(&win2);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
@@ -330,5 +372,6 @@ int main(void)
     TN_RUN(resume_is_bit_identical);
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
+    TN_RUN(window_equals_whole_map);
     return tn_test_summary("test_gnn");
 }

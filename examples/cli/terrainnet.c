@@ -1567,13 +1567,270 @@ static const cli_command singan_upscale_cmd = {"singan-upscale", CLI_CMD(singan_
     "Super-resolution: IN stands for a scale log(F)/log(1/0.75) scales coarser than the output, and the generators above "
     "it add the detail; by default the output has the example's pixel size."};
 
+/* ---- sketch-to-terrain GNN ----------------------------------------------------------------- */
+
+/* The side x side window of highest relief (max - min; first on ties, scanned on an 8 px grid
+   through 8 x 8 block extremes): the part of a large DEM with the most to learn. */
+static void highest_relief_window(const tn_image *dem, int side, int *x0, int *y0)
+{
+    int bw = dem->width / 8, bh = dem->height / 8, nb = side / 8, x, y, u, v;
+    float *lo, *hi, best = -1;
+    *x0 = *y0 = 0;
+    if (nb < 1 || bw < nb || bh < nb) return;
+    lo = (float *)malloc((size_t)bw * bh * sizeof(float));
+    hi = (float *)malloc((size_t)bw * bh * sizeof(float));
+    if (!lo || !hi) {
+        free(lo);
+        free(hi);
+        return;
+    }
+    for (y = 0; y < bh; y++)
+        for (x = 0; x < bw; x++) {
+            float a = FLT_MAX, b = -FLT_MAX;
+            for (v = 0; v < 8; v++)
+                for (u = 0; u < 8; u++) {
+                    float h = TN_PIXEL(dem, 8 * x + u, 8 * y + v, 0);
+                    if (h < a) a = h;
+                    if (h > b) b = h;
+                }
+            lo[y * bw + x] = a;
+            hi[y * bw + x] = b;
+        }
+    for (y = 0; y + nb <= bh; y++)
+        for (x = 0; x + nb <= bw; x++) {
+            float a = FLT_MAX, b = -FLT_MAX;
+            for (v = 0; v < nb; v++)
+                for (u = 0; u < nb; u++) {
+                    if (lo[(y + v) * bw + x + u] < a) a = lo[(y + v) * bw + x + u];
+                    if (hi[(y + v) * bw + x + u] > b) b = hi[(y + v) * bw + x + u];
+                }
+            if (b - a > best) {
+                best = b - a;
+                *x0 = 8 * x;
+                *y0 = 8 * y;
+            }
+        }
+    free(lo);
+    free(hi);
+}
+
+/* A DEM as metres: the file's own range, else --range LO HI applied to its [0, 1] codes. */
+static tn_status load_dem_metres(const char *path, double lo, double hi, tn_image *dem, int *metres)
+{
+    tn_image_info info;
+    tn_status st = tn_image_load(path, dem, &info);
+    size_t i;
+    *metres = !st && info.has_range;
+    if (st || info.has_range || !(hi > lo)) return st;
+    for (i = 0; i < (size_t)dem->width * dem->height * dem->channels; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
+    *metres = 1;
+    return TN_OK;
+}
+
+static struct gnn_train_args {
+    const char *in, *out, *ckpt;
+    int crop[2], size;
+    double range[2];
+    tn_gnn_opts o;
+} gnn_train_arg = {.crop = {-1, -1}}; /* -1: not given */
+static const cli_opt gnn_train_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &gnn_train_arg.in, NULL, 0, 0, NULL, "the example heightmap (its style is learnt)", NULL},
+    {"output", 'o', ARG_STR, REQ, &gnn_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the model: network, the example's parts and heights", NULL},
+    {"minutes", 0, ARG_DOUBLE, 0, &gnn_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget of the whole run, resumed time included", "10"},
+    {"iters", 0, ARG_LONG, 0, &gnn_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations in total", "0 = only the time budget"},
+    {"crop", 0, ARG_INT, PAIR, &gnn_train_arg.crop[0], &gnn_train_arg.crop[1], 0, 1 << 20, "X Y", "top-left corner of the training window",
+     "the window of highest relief"},
+    {"size", 0, ARG_INT, 0, &gnn_train_arg.size, NULL, 16, 4096, "N", "side of the training window (whole DEM if smaller)", "128"},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_train_arg.range[0], &gnn_train_arg.range[1], 0, 0, "LO HI",
+     "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for", "the file's range, else its [0, 1] codes"},
+    {"resume", 0, ARG_FLAG, 0, &gnn_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
+    {"checkpoint", 0, ARG_STR, 0, &gnn_train_arg.ckpt, NULL, 0, 0, "PATH", "full training state, saved atomically", "MODEL.tnw.ckpt"},
+    {"checkpoint-seconds", 0, ARG_DOUBLE, 0, &gnn_train_arg.o.train.checkpoint_seconds, NULL, 0, 1e9, "S", "checkpoint interval", "60"},
+    {"seed", 0, ARG_U64, 0, &gnn_train_arg.o.train.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"threshold", 0, ARG_INT, 0, &gnn_train_arg.o.extract.threshold, NULL, 1, NO_MAX, "CELLS",
+     "extraction threshold of the example's network (extract --threshold)", "0.1 % of the window, at least 8"},
+    {"radius", 0, ARG_FLOAT, ABOVE, &gnn_train_arg.o.radius, NULL, 0, 4096, "PX", "a pixel's neighbour parts lie within this distance", "24"},
+};
+
+static int run_gnn_train(void)
+{
+    struct gnn_train_args *a = &gnn_train_arg;
+    tn_image dem = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
+    tn_gnn model;
+    tn_gnn_stats s;
+    tn_status st;
+    char ckbuf[1024];
+    int side = a->size ? a->size : 128, x = a->crop[0], y = a->crop[1], w, h, metres, given = a->crop[0] >= 0;
+    if (!a->ckpt) {
+        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
+        a->ckpt = ckbuf;
+    }
+    a->o.train.checkpoint = a->ckpt;
+    if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres))) return fail_status(st);
+    w = side < dem.width ? side : dem.width;
+    h = side < dem.height ? side : dem.height;
+    if (!given) highest_relief_window(&dem, side, &x, &y);
+    if (x + w > dem.width || y + h > dem.height) {
+        tn_image_free(&dem);
+        return usage_error("gnn-train", "the %d x %d window at (%d, %d) does not fit in the %d x %d DEM", w, h, x, y, dem.width, dem.height);
+    }
+    st = tn_image_crop(&win, &dem, x, y, w, h);
+    tn_image_free(&dem);
+    if (st) return fail_status(st);
+    printf("window: %d x %d at (%d, %d)%s\nunits: %s\n", w, h, x, y, given ? "" : " (highest relief)",
+           metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)");
+    fflush(stdout);
+    st = tn_gnn_train(&win, &a->o, &model, &s);
+    tn_image_free(&win);
+    if (st == TN_ERR_CANCELLED) {
+        fprintf(stderr, "terrainnet gnn-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
+                        "command with --resume to continue\n", s.iterations, a->ckpt);
+        return 130;
+    }
+    if (st) return fail_status(st);
+    st = tn_gnn_save(&model, a->out);
+    if (!st)
+        printf("parts: %d\nsketch_levels: %d\niterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nsteps_per_second: %.2f\n"
+               "loss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
+               s.parts, s.levels, s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter > 0 ? 1.0 / s.seconds_per_iter : 0.0,
+               (double)s.loss_mse, (double)s.loss_ssim, s.checkpoints, a->ckpt, a->out);
+    tn_gnn_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command gnn_train_cmd = {"gnn-train", CLI_CMD(gnn_train), "learn one DEM for sketch-to-terrain generation (graph network)",
+    "Learns one example DEM (paper 000): its ridge and valley network is cut into 5-10 px parts and a graph network learns "
+    "to turn such a network, and sparser ones, into the example's terrain. Trains on a window of the DEM (default the "
+    "128 x 128 window of highest relief). The model records the example's parts and heights, so gnn-generate needs only "
+    "it and a sketch. The full training state is saved atomically to the checkpoint every interval and on Ctrl-C; "
+    "--resume continues it identically."};
+
+static struct gnn_generate_args {
+    const char *model, *sketch, *out, *preview;
+    int w, h, heights, embeddings;
+    double range[2];
+    tn_gnn_generate_opts o;
+} gnn_generate_arg;
+static const cli_opt gnn_generate_opts[] = {
+    {"MODEL.tnw", 0, ARG_POS, 0, &gnn_generate_arg.model, NULL, 0, 0, NULL, "a model from gnn-train", NULL},
+    {"SKETCH", 0, ARG_POS, 0, &gnn_generate_arg.sketch, NULL, 0, 0, NULL,
+     "a .tns sketch, a drawn sketch image (as `sketch` reads: red ridges, blue valleys) or a DEM, whose extracted network "
+     "is then the sketch", NULL},
+    {"output", 'o', ARG_STR, REQ, &gnn_generate_arg.out, NULL, 0, 0, "OUT", "the terrain, in the example's units (metres)", NULL},
+    {"size", 0, ARG_WXH, 0, &gnn_generate_arg.w, &gnn_generate_arg.h, 16, TN_SKETCH_MAX_SIDE, "WxH", "output size (the sketch scales to it)",
+     "the sketch's canvas or the DEM's size"},
+    {"seed", 0, ARG_U64, 0, &gnn_generate_arg.o.seed, NULL, 0, 0, "S", "random seed (part cutting, random sketches, alignment)", "0"},
+    {"random", 0, ARG_INT, 0, &gnn_generate_arg.o.random_nodes, NULL, 0, 8192, "N",
+     "densify the sketch with random ridges and valleys from N random nodes (paper 5.2)", "0 = none"},
+    {"finetune", 0, ARG_INT, 0, &gnn_generate_arg.o.finetune, NULL, 0, 100000, "STEPS",
+     "tune the sketch parts' embeddings to the sketch heights first (paper 5.4)", "0 = none"},
+    {"embeddings", 0, ARG_CHOICE, 0, &gnn_generate_arg.embeddings, NULL, 0, 0, "auto|aligned|none",
+     "which sketch parts take an example part's embedding: identical ones, every one by alignment, none", "auto"},
+    {"heights", 0, ARG_CHOICE, 0, &gnn_generate_arg.heights, NULL, 0, 0, "auto|example|unit",
+     "sketch heights are the example's units, or [0, 1] over the example's range", "unit when all lie in [0, 1]"},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_generate_arg.range[0], &gnn_generate_arg.range[1], 0, 0, "LO HI",
+     "a DEM SKETCH without a recorded range: the metres its codes 0..max stand for", NULL},
+    {"preview", 0, ARG_STR, 0, &gnn_generate_arg.preview, NULL, 0, 0, "PNG", "hillshaded colour preview of the terrain", NULL},
+};
+
+/* The sketch of SKETCH: .tns text, a drawing, or a DEM's extracted network. */
+static tn_status load_gnn_sketch(const char *path, double lo, double hi, tn_contour_set *out, const char **kind)
+{
+    FILE *f = fopen(path, "rb");
+    char head[20] = {0};
+    tn_image img = {0, 0, 0, NULL};
+    tn_status st;
+    int metres;
+    if (f) {
+        size_t n = fread(head, 1, sizeof head - 1, f);
+        fclose(f);
+        head[n] = 0;
+    }
+    if (!strncmp(head, "terrainnet-sketch", 17)) {
+        *kind = "sketch (.tns)";
+        return tn_sketch_load(path, out);
+    }
+    if ((st = load_dem_metres(path, lo, hi, &img, &metres))) return st;
+    if (img.channels >= 3) {
+        *kind = "drawn sketch";
+        st = tn_sketch_from_image(&img, out);
+    } else {
+        tn_extraction ex;
+        *kind = "DEM (its extracted network)";
+        if (!(st = tn_extract(&img, NULL, &ex))) {
+            *out = ex.contours;
+            memset(&ex.contours, 0, sizeof ex.contours);
+            tn_extraction_free(&ex);
+            if (!out->count) st = TN_ERR_EMPTY, fprintf(stderr, "terrainnet: %s: no ridge or valley was extracted from the DEM\n", path);
+        }
+    }
+    tn_image_free(&img);
+    return st;
+}
+
+static int run_gnn_generate(void)
+{
+    struct gnn_generate_args *a = &gnn_generate_arg;
+    tn_gnn model;
+    tn_contour_set sk;
+    tn_image terrain = {0, 0, 0, NULL};
+    const char *kind = "";
+    double t0, lo, hi;
+    size_t i;
+    tn_status st;
+    memset(&sk, 0, sizeof sk);
+    if ((st = tn_gnn_load(&model, a->model))) return fail_status(st);
+    if ((st = load_gnn_sketch(a->sketch, a->range[0], a->range[1], &sk, &kind))) {
+        tn_gnn_free(&model);
+        return fail_status(st);
+    }
+    if (!a->w) {
+        a->w = sk.width;
+        a->h = sk.height;
+    }
+    a->o.heights = a->heights == 1 ? TN_GNN_HEIGHTS_EXAMPLE : a->heights == 2 ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_AUTO;
+    a->o.embeddings = a->embeddings == 1 ? TN_GNN_EMBED_ALIGNED : a->embeddings == 2 ? TN_GNN_EMBED_NONE : TN_GNN_EMBED_AUTO;
+    t0 = tn_time_seconds();
+    st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
+    /* A refiner (SinGAN detail of the example, @@singan) takes `terrain` (example units, w x h)
+       here, between generation and saving. */
+    if (!st) st = tn_image_save(a->out, &terrain, NULL);
+    if (!st && a->preview) {
+        tn_image shade = {0, 0, 0, NULL};
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 8;
+        if (!(st = tn_render_preview(&terrain, NULL, &shade))) st = tn_image_save(a->preview, &shade, &so);
+        tn_image_free(&shade);
+    }
+    if (!st) {
+        lo = hi = terrain.data[0];
+        for (i = 0; i < (size_t)terrain.width * terrain.height; i++) {
+            if (terrain.data[i] < lo) lo = terrain.data[i];
+            if (terrain.data[i] > hi) hi = terrain.data[i];
+        }
+        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n", kind, sk.count,
+               sk.width, sk.height, a->w, a->h, tn_time_seconds() - t0, lo, hi, a->out);
+    }
+    tn_image_free(&terrain);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command gnn_generate_cmd = {"gnn-generate", CLI_CMD(gnn_generate), "terrain from a sketch in the style of a gnn-train model",
+    "Turns a sketch of ridges and valleys into terrain in the style and units of the model's example. The sketch is cut "
+    "into 5-10 px parts as in training; --random adds random ridges and valleys around it (they never cross it). Any "
+    "size: a pixel depends only on the sketch near it, so large maps are computed in seamless tiles with bounded memory. "
+    "The same inputs and seed give the same output on any thread count."};
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
-    &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &export_cmd,
+    &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &gnn_train_cmd,
+    &gnn_generate_cmd, &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd, &export_cmd,
     &world_cmd,
-    &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 
