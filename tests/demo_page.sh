@@ -21,7 +21,7 @@ ${CC:-cc} -std=c99 -O0 -I. tests/check_demo_page.c -o "$W/check_demo_page" -lm -
 # chrome PAGE_DIR OUT_PREFIX: the DOM after load (OUT.dom) and a screenshot (OUT.png)
 chrome() {
     url="file://$(cd "$1" && pwd)/index.html"
-    flags="--headless --no-sandbox --disable-gpu --hide-scrollbars --force-device-scale-factor=1 --window-size=1440,1400
+    flags="--headless --no-sandbox --disable-gpu --hide-scrollbars --force-device-scale-factor=1 --window-size=1440,2000
            --virtual-time-budget=10000 --user-data-dir=$W/profile --no-first-run --disable-extensions"
     # shellcheck disable=SC2086
     timeout 120 $CHROME $flags --dump-dom "$url" > "$2.dom" 2> "$2.err" &&
