@@ -31,7 +31,8 @@ fi
 STEPS='
 example  The example: a real DEM (SRTM 3", Alps), hillshaded colour map
 ridges   Its ridges (yellow) and valleys (blue), extracted
-style    Style transfer: Perlin noise restyled by the example
+noise    Input for style transfer: Perlin noise (no learning)
+style    Style transfer: that noise restyled by the example
 texture  Texture GAN: grass learnt from one photo over the example; left tiled, right detail-mapped; top far, bottom near
 splat    Splat map: vegetation, bare ground, rock, snow weights
 view3d   3D preview of the example
@@ -52,8 +53,12 @@ step_ridges() {
     run $T extract "$DEM" --preview "$OUT/ridges.png" -o "$OUT/ridges.tns"
     PIC=ridges.png; LINK=ridges.tns
 }
-step_style() {
+step_noise() {
     run $T noise -o "$OUT/noise.png" --type perlin --size 256 --seed 7 --octaves 8 --frequency 3
+    run $T render "$OUT/noise.png" -o "$OUT/noise_preview.png"
+    PIC=noise_preview.png; LINK=noise.png
+}
+step_style() { # restyles the noise step's map
     run $T style --content "$OUT/noise.png" --style "$DEM" -o "$OUT/styled.png" $STYLE_ARGS
     run $T render "$OUT/styled.png" -o "$OUT/styled_preview.png"
     PIC=styled_preview.png; LINK=styled.png

@@ -1,7 +1,7 @@
 #!/bin/sh
 # The demo page in headless Chromium: every picture loads (the page's own report, read from the
 # DOM) and shows in the screenshot (tests/check_demo_page.c). Also checks that a page with a
-# missing picture is caught. Run by tests/test_cli.sh on a fast demo (DEMO_FAST=1); by hand:
+# missing picture and a flat grey one is caught. Run by tests/test_cli.sh on a fast demo (DEMO_FAST=1); by hand:
 #   sh tests/demo_page.sh [DEMO_DIR]        (default demo/, e.g. after `make demo`)
 # Prints "demo_page: N passed, N failed, N skipped"; exit status 1 on a failure.
 set -u
@@ -21,7 +21,7 @@ ${CC:-cc} -std=c99 -O0 -I. tests/check_demo_page.c -o "$W/check_demo_page" -lm -
 # chrome PAGE_DIR OUT_PREFIX: the DOM after load (OUT.dom) and a screenshot (OUT.png)
 chrome() {
     url="file://$(cd "$1" && pwd)/index.html"
-    flags="--headless --no-sandbox --disable-gpu --hide-scrollbars --force-device-scale-factor=1 --window-size=1440,1400
+    flags="--headless --no-sandbox --disable-gpu --hide-scrollbars --force-device-scale-factor=1 --window-size=1440,2000
            --virtual-time-budget=10000 --user-data-dir=$W/profile --no-first-run --disable-extensions"
     # shellcheck disable=SC2086
     timeout 120 $CHROME $flags --dump-dom "$url" > "$2.dom" 2> "$2.err" &&
@@ -39,11 +39,15 @@ check() { # name, page dir, expect pass (1) or fail (0)
 }
 check page "$DIR" 1
 tail -n 1 "$W/page.out" 2>/dev/null
-# the same page with one picture gone must fail
+# the same page with its first picture gone and its second a flat grey must fail, naming both
 mkdir -p "$W/broken"
 cp "$DIR"/index.html "$DIR"/*.png "$W/broken/"
-first=$(sed -n 's/.*<img src="\([^"]*\)".*/\1/p' "$DIR/index.html" | head -n 1)
+first=$(sed -n 's/.*<img src="\([^"]*\)".*/\1/p' "$DIR/index.html" | sed -n 1p)
+second=$(sed -n 's/.*<img src="\([^"]*\)".*/\1/p' "$DIR/index.html" | sed -n 2p)
 rm -f "$W/broken/$first"
+{ printf 'P5 64 64 255\n'; head -c 4096 /dev/zero | tr '\000' '\200'; } > "$W/flat.pgm"
+bin/terrainnet convert "$W/flat.pgm" "$W/broken/$second" > /dev/null 2>&1 || echo "FAIL demo_page: no flat picture"
 check broken "$W/broken" 0
-grep -q "picture 1 did not load" "$W/broken.out" 2>/dev/null && pass=$((pass + 1)) || { echo "FAIL demo_page: the missing $first was not named"; fail=$((fail + 1)); }
+if grep -q "picture 1 did not load" "$W/broken.out" 2>/dev/null && grep -q "picture 2 shows no image" "$W/broken.out"; then pass=$((pass + 1));
+else echo "FAIL demo_page: the missing $first or the flat $second was not named: $(cat "$W/broken.out" 2>/dev/null)"; fail=$((fail + 1)); fi
 say

@@ -636,6 +636,8 @@ static tn_status export_splat(struct export_args *a, const tn_image *dem)
     so.bit_depth = 8;
     a->so.dx = a->mo.dx;
     a->so.dy = a->mo.dy;
+    if (!(a->mo.dx > 0)) /* slopes decide rock: at 1 m per pixel a DEM in metres is nearly all cliff */
+        fprintf(stderr, "export: no --spacing: slopes assume pixels 1 height unit wide (give the pixel size in metres)\n");
     if (a->snow) st = tn_image_load(a->snow, &snow, NULL);
     if (!st && a->vegetation) st = tn_image_load(a->vegetation, &veg, NULL);
     a->so.snow = snow.data ? &snow : NULL;
