@@ -23131,11 +23131,6 @@ TN_API tn_rect tn_world_tile_rect(const tn_world *w, int row, int col)
     return r;
 }
 
-static char *tn__world_path(const char *dir, const char *leaf)
-{
-    return tn__world_join(dir, leaf);
-}
-
 static int tn__world_exists(const char *path)
 {
     FILE *f = fopen(path, "rb");
@@ -23148,7 +23143,7 @@ static int tn__world_exists(const char *path)
    directory never mixes tiles of two worlds. */
 static tn_status tn__world_claim_dir(const tn_world *w, const char *dir)
 {
-    char *path = tn__world_path(dir, "world.spec");
+    char *path = tn__world_join(dir, "world.spec");
     uint8_t *buf = NULL;
     size_t n = 0, len = strlen(w->text);
     tn_status st = TN_OK;
@@ -23213,7 +23208,7 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             char leaf[48], *path;
             if (k % o.parts != o.part) continue;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
-            if (!(path = tn__world_path(dir, leaf))) {
+            if (!(path = tn__world_join(dir, leaf))) {
                 st = TN_ERR_OUT_OF_MEMORY;
                 break;
             }
@@ -23276,14 +23271,17 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     tn__hex64(hex, w->digest);
     tn__text_add(&man, "terrainnet world manifest\nversion %s\nspec_digest %s\nseed %llu\nsize %d %d\ntile %d\ngrid %d %d\n",
                   TN_VERSION_STRING, hex, (unsigned long long)w->seed, w->out_width, w->out_height, w->tile, w->rows, w->cols);
-    if (w->out_heights) tn__text_add(&man, "range %s %s\n", num[0], (tn__io_format_number(num[2], sizeof num[2], w->hi, 1), num[2]));
+    if (w->out_heights) {
+        tn__io_format_number(num[2], sizeof num[2], w->hi, 1);
+        tn__text_add(&man, "range %s %s\n", num[0], num[2]);
+    }
     for (row = 0; row < w->rows && !st; row++)
         for (col = 0; col < w->cols && !st; col++) {
             char leaf[48];
             uint8_t *buf = NULL;
             size_t n = 0;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
-            if (!(path = tn__world_path(dir, leaf))) {
+            if (!(path = tn__world_join(dir, leaf))) {
                 st = TN_ERR_OUT_OF_MEMORY;
                 break;
             }
@@ -23298,11 +23296,11 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
         }
     tn__text_add(&man, "tiles %d of %d\n", count, w->rows * w->cols);
     if (!st && (vrt.failed || man.failed)) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && !(path = tn__world_path(dir, "world.vrt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(path = tn__world_join(dir, "world.vrt"))) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)vrt.s, vrt.n);
     TN_FREE(path);
     path = NULL;
-    if (!st && !(path = tn__world_path(dir, "manifest.txt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(path = tn__world_join(dir, "manifest.txt"))) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)man.s, man.n);
     TN_FREE(path);
     TN_FREE(vrt.s);
