@@ -1319,8 +1319,12 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
    sparse sketch leaves out. Generation gives a sketch part the embedding
    of an identical example part (its own network: reconstruction) and none otherwise by default;
    the paper's alignment is TN_GNN_EMBED_ALIGNED. An optional fine-tune (5.4) then adjusts only
-   the sketch parts' embeddings (loss on the sketch pixels + smoothness). Output in the
-   example's height units.
+   the sketch parts' embeddings (loss on the sketch pixels + smoothness, optionally a
+   ridge-above / valley-below hinge). Output in the example's height units.
+   Seamless tiles: a pixel's neighbour parts lie within `radius` px and the membrane is solved on
+   overlapping blocks, so a pixel depends only on the sketch within a fixed distance; any window
+   computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
+   tiles with memory of one tile. Random sketches (5.2) can densify a sparse user sketch.
    ============================================================================================ */
 
 /* Zero = default (tn_gnn_defaults gives the values and the reasons). */
