@@ -1414,7 +1414,7 @@ typedef struct tn_gnn_generate_opts {
     float smooth_weight;     /* fine-tune smoothness weight; 0 = 0.1, < 0 = off */
     float order_weight;      /* fine-tune sketch-ordering weight (6.1's sketch loss as a hinge): a ridge
                                 pixel below, or a valley pixel above, a pixel 3 px across its line is
-                                penalised by the difference; 0 = off */
+                                penalised by the difference; 0 = 1, < 0 = off */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -18873,7 +18873,10 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_
     tn_tensor *emb;
     int step, shape[4], s[2], i, nsk = 0, npix = G->W * G->H, npairs = 0, *ip = NULL, *iq = NULL;
     float *psign = NULL;
+    /* ordering on by default: on the A sketch it took a 180-step alps model from 89.0 to 97.8 %
+       and left one already at 94.3 % there (docs/gnn.md) */
     float sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
+    float ow = o->order_weight == 0 ? 1.0f : o->order_weight > 0 ? o->order_weight : 0.0f;
     tn_status st;
     if ((st = tn__gnn_region_make(G, 0, 0, G->W, G->H, &R))) goto done;
     s[0] = G->P.n;
@@ -18894,7 +18897,7 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_
         memcpy(c->data, t->data, t->numel * sizeof(float));
     }
     for (i = 0; i < npix; i++) nsk += G->type[i] != 0;
-    if (o->order_weight > 0) { /* across-line pairs of every part point: (p, q) and the sign */
+    if (ow > 0) { /* across-line pairs of every part point: (p, q) and the sign */
         int p, j, a, b, c;
         if (!(ip = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) || !(iq = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) ||
             !(psign = (float *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(float)))) {
@@ -18936,7 +18939,7 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_
             if (!sg) { st = tn_ctx_status(ctx); break; }
             memcpy(sg->data, psign, (size_t)npairs * sizeof(float));
             d = tn_mul(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, iq, npairs), tn_gather_rows(ctx, pred, ip, npairs)), sg);
-            loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_mean(ctx, tn_relu(ctx, d)), o->order_weight, 0.0f));
+            loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_mean(ctx, tn_relu(ctx, d)), ow, 0.0f));
         }
         if (!loss) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
         tn_params_zero_grad(ft);
@@ -18985,7 +18988,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
     if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
         o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
-        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight >= 0 && o.order_weight <= 1e6))
+        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192)",
                         o.heights, o.finetune, o.align_choices, o.random_nodes);
     if (o.finetune > 0 && (size_t)width * height * G->A.k > TN__GNN_MAX_EDGES)

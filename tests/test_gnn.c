@@ -283,6 +283,15 @@ TN_TEST(bad_inputs_fail_cleanly)
     TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_NUMERIC);
     pts[4] = 5;
     TN_CHECK(tn_gnn_generate(&m, &sk, 8, 40, NULL, &out) == TN_ERR_INVALID_ARG);
+    {
+        tn_gnn_generate_opts go;
+        memset(&go, 0, sizeof go);
+        go.random_nodes = 9000;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        go.random_nodes = 0;
+        go.order_weight = NAN;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+    }
     TN_CHECK(out.data == NULL);
     /* model files: another method's model, another .tnw, a damaged byte, a damaged config */
     {
