@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <math.h>
 #include <sys/resource.h>
 #include <unistd.h>
 
@@ -132,6 +133,58 @@ static int mean_baseline(const tn_contour_set *sk, int w, int h, tn_image *out)
     for (i = 0; i < (size_t)w * h; i++) out->data[i] = (float)(n ? s / (double)n : 0.0);
     tn_image_free(&r);
     return 1;
+}
+
+
+/* The paper's Figure 10 sketch: a ridge shaped like the letter A (high at the apex) inside a
+   circular valley (low), heights in [0, 1]; rot = 1 turns it by 90 degrees (x, y) -> (S-1-y, x). */
+static void add_line(tn_contour_set *s, tn_contour_type type, const float *p, int n, int side, int rot)
+{
+    tn_contour *c = &s->items[s->count++];
+    int i;
+    memset(c, 0, sizeof *c);
+    c->type = type;
+    c->npoints = n;
+    c->points = (float *)malloc((size_t)n * 3 * sizeof(float));
+    for (i = 0; i < n; i++) {
+        float x = p[3 * i] * (float)(side - 1), y = p[3 * i + 1] * (float)(side - 1);
+        c->points[3 * i] = rot ? (float)(side - 1) - y : x;
+        c->points[3 * i + 1] = rot ? x : y;
+        c->points[3 * i + 2] = p[3 * i + 2];
+    }
+}
+
+static void a_in_circle(int side, int rot, tn_contour_set *s)
+{
+    static const float left[] = {0.33f, 0.72f, 0.55f, 0.5f, 0.26f, 0.95f};
+    static const float right[] = {0.5f, 0.26f, 0.95f, 0.67f, 0.72f, 0.55f};
+    static const float bar[] = {0.4f, 0.55f, 0.7f, 0.6f, 0.55f, 0.7f};
+    float circle[3 * 65];
+    int i;
+    for (i = 0; i <= 64; i++) {
+        double a = 2 * 3.14159265358979 * i / 64;
+        circle[3 * i] = (float)(0.5 + 0.42 * cos(a));
+        circle[3 * i + 1] = (float)(0.5 + 0.42 * sin(a));
+        circle[3 * i + 2] = 0.1f;
+    }
+    memset(s, 0, sizeof *s);
+    s->width = s->height = side;
+    s->items = (tn_contour *)calloc(4, sizeof(tn_contour));
+    add_line(s, TN_RIDGE, left, 2, side, rot);
+    add_line(s, TN_RIDGE, right, 2, side, rot);
+    add_line(s, TN_RIDGE, bar, 2, side, rot);
+    add_line(s, TN_VALLEY, circle, 65, side, rot);
+}
+
+/* Ordering share and realism distance to the example of one user-sketch output. */
+static void user_scores(const char *name, const tn_contour_set *sk, const tn_image *ex, const tn_image *img)
+{
+    double share = 0;
+    int n = 0;
+    tn_realism r;
+    tn_gnn_ordering(sk, img, 0, &share, &n);
+    printf("user_%s_ordering: %.1f %% (%d points)\n", name, 100.0 * share, n);
+    if (!tn_realism_compare(ex, img, NULL, &r)) printf("user_%s_realism_distance: %.4f\n", name, r.distance);
 }
 
 static int progress(void *user, const char *stage, double f)
@@ -291,6 +344,49 @@ int main(int argc, char **argv)
         printf("neighbours_t%d_mean_psnr: %.2f dB\n", d, mean.psnr / mean.n);
         printf("neighbours_t%d_gnn_spectrum_distance: %.3f\n", d, g.spec / g.n);
         printf("neighbours_t%d_membrane_spectrum_distance: %.3f\n", d, mem.spec / mem.n);
+    }
+    /* a sparse drawn sketch (paper Figure 10): ordering, realism, random sketches, rotation */
+    {
+        tn_contour_set a, ar, units;
+        tn_image g = {0, 0, 0, NULL}, gr = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
+        tn_metrics mt;
+        int c, j, U = 256, x, y;
+        a_in_circle(U, 0, &a);
+        a_in_circle(U, 1, &ar);
+        a_in_circle(U, 0, &units);
+        for (c = 0; c < units.count; c++)
+            for (j = 0; j < units.items[c].npoints; j++) units.items[c].points[3 * j + 2] = model.lo + (model.hi - model.lo) * units.items[c].points[3 * j + 2];
+        memset(&go, 0, sizeof go);
+        go.seed = 1;
+        if (!tn_gnn_membrane(&units, U, U, &mem)) user_scores("membrane", &a, &crop, &mem);
+        t0 = tn_time_seconds();
+        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) {
+            printf("user_generate_256_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
+            user_scores("gnn", &a, &crop, &g);
+        }
+        if (!tn_gnn_generate(&model, &ar, U, U, &go, &gr) && g.data) { /* rotate the output back: (x, y) of gr is (S-1-y, x) of g */
+            tn_image back = {0, 0, 0, NULL};
+            tn_image_create(&back, U, U, 1);
+            for (y = 0; y < U; y++)
+                for (x = 0; x < U; x++) TN_PIXEL(&back, x, y, 0) = TN_PIXEL(&gr, U - 1 - y, x, 0);
+            if (!tn_compare(&g, &back, 0, &mt)) printf("user_rotation_90_ssim: %.4f (output of the rotated sketch vs the rotated output)\n", mt.ssim);
+            tn_image_free(&back);
+        }
+        tn_image_free(&g);
+        tn_image_free(&gr);
+        go.random_nodes = 48;
+        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) user_scores("gnn_random48", &a, &crop, &g);
+        tn_image_free(&g);
+        go.random_nodes = 0;
+        go.finetune = 30;
+        go.order_weight = 1;
+        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) user_scores("gnn_finetune30_order", &a, &crop, &g);
+        tn_image_free(&g);
+        memset(&go, 0, sizeof go);
+        tn_image_free(&mem);
+        tn_contour_set_free(&a);
+        tn_contour_set_free(&ar);
+        tn_contour_set_free(&units);
     }
     /* 512 x 512 from the sketch of the map's top-left 512 crop */
     if (full.width >= 512 && full.height >= 512) {

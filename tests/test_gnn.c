@@ -216,6 +216,7 @@ TN_TEST(same_results_for_1_and_2_threads)
     tiny_opts(&o, 4);
     memset(&go, 0, sizeof go);
     go.finetune = 2;
+    go.order_weight = 1;
     tn_set_threads(1);
     TN_CHECK(tn_gnn_train(&dem, &o, &m1, NULL) == TN_OK);
     TN_CHECK(tn_gnn_generate(&m1, &sk, 48, 40, &go, &a) == TN_OK);
@@ -282,6 +283,15 @@ TN_TEST(bad_inputs_fail_cleanly)
     TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_NUMERIC);
     pts[4] = 5;
     TN_CHECK(tn_gnn_generate(&m, &sk, 8, 40, NULL, &out) == TN_ERR_INVALID_ARG);
+    {
+        tn_gnn_generate_opts go;
+        memset(&go, 0, sizeof go);
+        go.random_nodes = 9000;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        go.random_nodes = 0;
+        go.order_weight = NAN;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+    }
     TN_CHECK(out.data == NULL);
     /* model files: another method's model, another .tnw, a damaged byte, a damaged config */
     {
@@ -364,6 +374,38 @@ TN_TEST(window_equals_whole_map)
     tn_image_free(&dem);
 }
 
+TN_TEST(ordering_share)
+{
+    /* a horizontal ridge on a tent-shaped terrain obeys the ordering everywhere; on the inverted
+       terrain nowhere; a valley on the inverted one everywhere */
+    tn_contour_set s;
+    tn_contour c;
+    float pts[3 * 2] = {2, 10, 1, 37, 10, 1};
+    tn_image t = {0, 0, 0, NULL};
+    double share = -1;
+    int n = 0, x, y;
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.npoints = 2;
+    c.points = pts;
+    s.width = s.height = 40;
+    s.count = 1;
+    s.items = &c;
+    TN_CHECK(tn_image_create(&t, 40, 40, 1) == TN_OK);
+    for (y = 0; y < 40; y++)
+        for (x = 0; x < 40; x++) TN_PIXEL(&t, x, y, 0) = 100.0f - (float)abs(y - 10);
+    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_OK && n >= 30 && share == 1.0);
+    for (y = 0; y < 40; y++)
+        for (x = 0; x < 40; x++) TN_PIXEL(&t, x, y, 0) = -TN_PIXEL(&t, x, y, 0);
+    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_OK && share == 0.0);
+    c.type = TN_VALLEY;
+    TN_CHECK(tn_gnn_ordering(&s, &t, 2, &share, &n) == TN_OK && share == 1.0);
+    TN_CHECK(tn_gnn_ordering(&s, &t, -1, &share, &n) == TN_ERR_INVALID_ARG);
+    s.count = 0;
+    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_ERR_EMPTY);
+    tn_image_free(&t);
+}
+
 int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
@@ -373,5 +415,6 @@ int main(void)
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);
+    TN_RUN(ordering_share);
     return tn_test_summary("test_gnn");
 }

@@ -1732,6 +1732,8 @@ static const cli_opt gnn_generate_opts[] = {
      "sketch heights are the example's units, or [0, 1] over the example's range", "unit when all lie in [0, 1]"},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_generate_arg.range[0], &gnn_generate_arg.range[1], 0, 0, "LO HI",
      "a DEM SKETCH without a recorded range: the metres its codes 0..max stand for", NULL},
+    {"order-weight", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.order_weight, NULL, -1, 1e6, "W",
+     "with --finetune: weight of keeping ridges above and valleys below the terrain beside them (-1 = off)", "1"},
     {"preview", 0, ARG_STR, 0, &gnn_generate_arg.preview, NULL, 0, 0, "PNG", "hillshaded colour preview of the terrain", NULL},
 };
 
