@@ -701,6 +701,15 @@ TN_API tn_status tn_train_add_rng(tn_train *run, const char *name, tn_rng *rng);
    the opened checkpoint's value when resuming, else the value set. */
 TN_API tn_status tn_train_set_meta(tn_train *run, const char *key, const char *value);
 TN_API const char *tn_train_meta(const tn_train *run, const char *key);
+/* A number setting, written without the C locale so that it reads back to the same float or
+   integer; reading fails with TN_ERR_CORRUPT (naming the checkpoint and key) when it is missing,
+   malformed or outside [lo, hi], so a damaged checkpoint never becomes a wild setting. */
+TN_API tn_status tn_train_set_meta_number(tn_train *run, const char *key, double value);
+TN_API tn_status tn_train_meta_number(const tn_train *run, const char *key, double lo, double hi, double *out);
+/* The example a run learns from (its tn_image_digest) as config.example; on resume
+   tn_train_check_example refuses, with TN_ERR_SHAPE, a checkpoint trained on another example. */
+TN_API tn_status tn_train_set_example(tn_train *run, uint64_t digest);
+TN_API tn_status tn_train_check_example(const tn_train *run, uint64_t digest);
 /* Opens opts->checkpoint for a resume: a .tnw of this method (its architecture is in it, so
    methods call this before building their networks). The set stays owned by the run; a method
    may upgrade a checkpoint of an older layout in it before tn_train_restore. */
@@ -10907,6 +10916,42 @@ TN_API const char *tn_train_meta(const tn_train *run, const char *key)
     return tn_params_meta(run->ck, k);
 }
 
+static void tn__hex64(char *buf, uint64_t v);
+
+TN_API tn_status tn_train_set_meta_number(tn_train *run, const char *key, double value)
+{
+    char buf[40];
+    tn__io_format_number(buf, sizeof buf, value, 0);
+    return tn_train_set_meta(run, key, buf);
+}
+
+TN_API tn_status tn_train_meta_number(const tn_train *run, const char *key, double lo, double hi, double *out)
+{
+    const char *v = tn_train_meta(run, key), *name = run->o.checkpoint ? run->o.checkpoint : run->method;
+    double d;
+    if (!v) return tn__fail(TN_ERR_CORRUPT, "%s: no %s in the checkpoint", name, key);
+    if (!tn__io_number(v, strlen(v), &d) || !(d >= lo && d <= hi)) return tn__fail(TN_ERR_CORRUPT, "%s: bad %s '%s'", name, key, v);
+    *out = d;
+    return TN_OK;
+}
+
+TN_API tn_status tn_train_set_example(tn_train *run, uint64_t digest)
+{
+    char buf[20];
+    tn__hex64(buf, digest);
+    return tn_train_set_meta(run, "example", buf);
+}
+
+TN_API tn_status tn_train_check_example(const tn_train *run, uint64_t digest)
+{
+    const char *v = tn_train_meta(run, "example");
+    char buf[20];
+    tn__hex64(buf, digest);
+    if (!v || strcmp(v, buf) != 0)
+        return tn__fail(TN_ERR_SHAPE, "%s: the checkpoint was trained on another example", run->o.checkpoint ? run->o.checkpoint : run->method);
+    return TN_OK;
+}
+
 TN_API long tn_train_iteration(const tn_train *run) { return run->it; }
 TN_API long tn_train_start_iteration(const tn_train *run) { return run->it0; }
 TN_API double tn_train_seconds(const tn_train *run) { return run->seconds; }
@@ -16802,34 +16847,29 @@ static tn_status tn__tg_build(tn__tg_train *s)
     return TN_OK;
 }
 
-/* The settings a checkpoint keeps beside the architecture (its config tensor). */
+/* The settings a checkpoint keeps beside the architecture (its config tensor), with the range
+   each must lie in when read back. */
 static const char *const tn__tg_settings[6] = {"patch", "batch", "lr", "ema", "augment", "feat_weight"};
+static const double tn__tg_settings_lo[6] = {8, 1, 1e-30, 1e-30, -1e9, 0}, tn__tg_settings_hi[6] = {4096, 1024, 0.999999, 0.999999, 1e9, 1e6};
 
 static tn_status tn__tg_put_settings(tn__tg_train *s)
 {
     const double v[6] = {(double)s->patch, (double)s->batch, s->lr, s->ema, (double)s->augment, s->feat_weight};
     tn_status st = TN_OK;
-    char buf[40];
     int i;
-    for (i = 0; i < 6 && !st; i++) {
-        tn__io_format_number(buf, sizeof buf, v[i], i >= 2);
-        st = tn_train_set_meta(s->run, tn__tg_settings[i], buf);
-    }
+    for (i = 0; i < 6 && !st; i++) st = tn_train_set_meta_number(s->run, tn__tg_settings[i], v[i]);
     return st;
 }
 
-static tn_status tn__tg_get_settings(tn__tg_train *s, const char *path)
+static tn_status tn__tg_get_settings(tn__tg_train *s)
 {
     double v[6];
+    tn_status st = TN_OK;
     int i;
-    for (i = 0; i < 6; i++) {
-        const char *t = tn_train_meta(s->run, tn__tg_settings[i]);
-        if (!t || !tn__io_number(t, strlen(t), &v[i]) || !(fabs(v[i]) < 1e9))
-            return tn__fail(TN_ERR_CORRUPT, "%s: bad or missing texgan setting '%s'", path, tn__tg_settings[i]);
-    }
-    if (v[0] != floor(v[0]) || v[1] != floor(v[1]) || v[0] < 8 || v[0] > 4096 || v[1] < 1 || v[1] > 1024 || !(v[2] > 0 && v[2] < 1) ||
-        !(v[3] > 0 && v[3] < 1) || !(v[5] >= 0 && v[5] < 1e6))
-        return tn__fail(TN_ERR_CORRUPT, "%s: bad training settings", path);
+    for (i = 0; i < 6 && !st; i++) st = tn_train_meta_number(s->run, tn__tg_settings[i], tn__tg_settings_lo[i], tn__tg_settings_hi[i], &v[i]);
+    if (!st && (v[0] != floor(v[0]) || v[1] != floor(v[1])))
+        st = tn__fail(TN_ERR_CORRUPT, "texgan: the checkpoint's patch and batch must be whole numbers");
+    if (st) return st;
     s->patch = (int)v[0];
     s->batch = (int)v[1];
     s->lr = (float)v[2];
@@ -16918,7 +16958,7 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
         st = tn__fail(TN_ERR_CORRUPT, "%s: bad discriminator size", path);
     if (!st && s->m.channels != ex->channels)
         st = tn__fail(TN_ERR_SHAPE, "%s: checkpoint has %d channels, the exemplar %d", path, s->m.channels, ex->channels);
-    if (!st) st = tn__tg_get_settings(s, path);
+    if (!st) st = tn__tg_get_settings(s);
     if (!st) st = tn__tg_build(s);
     if (!st) st = tn__tg_register(s);
     if (!st) st = tn_train_restore(s->run);
@@ -20887,62 +20927,35 @@ static tn_status tn__gnn_check_dem(const tn_image *dem, float *lo, float *hi, do
     return TN_OK;
 }
 
+/* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
+#define TN__GNN_SETTINGS(X)                                                                                        \
+    X("random_edges", random_edges, int, -1e9, 1e9) X("mask", mask, float, -1, 1) X("embed_drop", embed_drop, float, -1, 1) \
+    X("sparse_levels", sparse_levels, int, -1, TN__GNN_MAX_LEVELS - 1) X("thin", thin, float, -1, 1)               \
+    X("threshold", extract.threshold, int, -1, 1e9) X("edge_noise", edge_noise, float, -1, 100) X("lr", lr, float, 0, 10) \
+    X("mse_weight", mse_weight, float, -1e6, 1e6) X("ssim_weight", ssim_weight, float, -1e6, 1e6)                     \
+    X("grad_weight", grad_weight, float, -1e6, 1e6)
+
 static tn_status tn__gnn_set_meta(tn__gnn_train *s, uint64_t digest)
 {
-    char buf[64];
-    tn_status st;
-    snprintf(buf, sizeof buf, "%016llx", (unsigned long long)digest);
-    st = tn_train_set_meta(s->run, "example", buf);
-#define TN__GNN_META_I(key, v) \
-    if (!st) { snprintf(buf, sizeof buf, "%ld", (long)(v)); st = tn_train_set_meta(s->run, key, buf); }
-#define TN__GNN_META_F(key, v) \
-    if (!st) { snprintf(buf, sizeof buf, "%.9g", (double)(v)); st = tn_train_set_meta(s->run, key, buf); }
-    TN__GNN_META_I("random_edges", s->o.random_edges)
-    TN__GNN_META_F("mask", s->o.mask)
-    TN__GNN_META_F("embed_drop", s->o.embed_drop)
-    TN__GNN_META_I("sparse_levels", s->o.sparse_levels)
-    TN__GNN_META_F("thin", s->o.thin)
-    TN__GNN_META_I("threshold", s->o.extract.threshold)
-    TN__GNN_META_F("edge_noise", s->o.edge_noise)
-    TN__GNN_META_F("lr", s->o.lr)
-    TN__GNN_META_F("mse_weight", s->o.mse_weight)
-    TN__GNN_META_F("ssim_weight", s->o.ssim_weight)
-    TN__GNN_META_F("grad_weight", s->o.grad_weight)
-#undef TN__GNN_META_I
-#undef TN__GNN_META_F
+    tn_status st = tn_train_set_example(s->run, digest);
+#define TN__GNN_PUT(key, field, type, lo, hi) \
+    if (!st) st = tn_train_set_meta_number(s->run, key, (double)s->o.field);
+    TN__GNN_SETTINGS(TN__GNN_PUT)
+#undef TN__GNN_PUT
     return st;
 }
 
-/* A resumed run continues with the settings it started with (they are part of its state). */
-static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest, const char *name)
+static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 {
-    const char *v;
-    char buf[32];
-    snprintf(buf, sizeof buf, "%016llx", (unsigned long long)digest);
-    if (!(v = tn_train_meta(s->run, "example")) || strcmp(v, buf) != 0)
-        return tn__fail(TN_ERR_SHAPE, "%s: the checkpoint was trained on another example DEM", name);
-#define TN__GNN_GET(key, dst, lo, hi)                                                     \
-    if (!(v = tn_train_meta(s->run, key))) return tn__fail(TN_ERR_CORRUPT, "%s: no %s in the checkpoint", name, key); \
-    else {                                                                                \
-        char *end;                                                                        \
-        double d = strtod(v, &end);                                               \
-        if (end == v || *end || !(d >= (lo) && d <= (hi))) return tn__fail(TN_ERR_CORRUPT, "%s: bad %s '%s'", name, key, v); \
-        dst = d;                                                                          \
-    }
-    TN__GNN_GET("random_edges", s->o.random_edges, -1e9, 1e9)
-    TN__GNN_GET("mask", s->o.mask, -1, 1)
-    TN__GNN_GET("embed_drop", s->o.embed_drop, -1, 1)
-    TN__GNN_GET("sparse_levels", s->o.sparse_levels, -1, TN__GNN_MAX_LEVELS - 1)
-    TN__GNN_GET("thin", s->o.thin, -1, 1)
-    TN__GNN_GET("threshold", s->o.extract.threshold, -1, 1e9)
-    TN__GNN_GET("edge_noise", s->o.edge_noise, -1, 100)
-    TN__GNN_GET("lr", s->o.lr, 0, 10)
-    TN__GNN_GET("mse_weight", s->o.mse_weight, -1e6, 1e6)
-    TN__GNN_GET("ssim_weight", s->o.ssim_weight, -1e6, 1e6)
-    TN__GNN_GET("grad_weight", s->o.grad_weight, -1e6, 1e6)
+    double d = 0;
+    tn_status st = tn_train_check_example(s->run, digest);
+#define TN__GNN_GET(key, field, type, lo, hi) \
+    if (!st && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d;
+    TN__GNN_SETTINGS(TN__GNN_GET)
 #undef TN__GNN_GET
-    return TN_OK;
+    return st;
 }
+#undef TN__GNN_SETTINGS
 
 TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
 {
@@ -20992,7 +21005,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             goto done;
         }
         if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
-        if ((st = tn__gnn_get_meta(&s, digest, s.o.train.checkpoint))) goto done;
+        if ((st = tn__gnn_get_meta(&s, digest))) goto done;
         sd = tn_params_meta(ck, "seed");
         if (!sd || !tn__parse_hex64(sd, strlen(sd), &seed)) {
             st = tn__fail(TN_ERR_CORRUPT, "%s: the checkpoint names no seed", s.o.train.checkpoint);
