@@ -1377,7 +1377,7 @@ typedef struct tn_singan_gen_opts {
 
 /* Fills *o with the defaults (what zero fields mean). */
 TN_API void tn_singan_defaults(tn_singan_opts *o);
-/* The generation defaults for this model (from_scale is resolved per call). */
+/* Resolves the zero fields of generation options (from_scale is resolved per call, by the model). */
 TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
 /* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
    Reports progress as "singan-train scale S/N". *model is allocated here (free with
