@@ -1450,7 +1450,7 @@ typedef struct tn_singan_gen_opts {
 
 /* Fills *o with the defaults (what zero fields mean). */
 TN_API void tn_singan_defaults(tn_singan_opts *o);
-/* The generation defaults for this model (from_scale is resolved per call). */
+/* Resolves the zero fields of generation options (from_scale is resolved per call, by the model). */
 TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
 /* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
    Reports progress as "singan-train scale S/N". *model is allocated here (free with
@@ -18259,7 +18259,7 @@ done:
 
 #define TN__SG_FORMAT 1
 #define TN__SG_CONFIG (8 + 2 * TN_SINGAN_MAX_SCALES)
-#define TN__SG_SCHED (4 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, iterations per scale */
+#define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
 #define TN__SG_M 5 /* context of 5 valid 3 x 3 convolutions */
 
 TN_API void tn_singan_defaults(tn_singan_opts *o)
@@ -18355,8 +18355,8 @@ static tn_status tn__sg_read_config(const float *c, tn__sg_arch *A, const char *
 /* ---- networks ---- */
 
 /* Generator of scale s: "g<s>.w<l>" (Cout x Cin x 3 x 3), "b<l>", batch norm gain "n<l>",
-   offset "o<l>", running mean / variance buffers "m<l>" / "v<l>" for l < 4. SinGAN's init:
-   conv weights N(0, 0.02), norm gains N(1, 0.02). */
+   offset "o<l>", running mean / variance buffers "m<l>" / "v<l>" for l < 4. SinGAN's init
+   (conv weights N(0, 0.02), norm gains N(1, 0.02)) except the tail conv, which starts at zero. */
 static tn_status tn__sg_gen_add(tn_params *p, int s, int ch, tn_rng *rng)
 {
     int l;
@@ -18370,6 +18370,8 @@ static tn_status tn__sg_gen_add(tn_params *p, int s, int ch, tn_rng *rng)
         snprintf(pre, sizeof pre, "g%d.", s);
         if (!(w = tn__param_new(p, pre, "w", l, 4, ws, 1)) || !(b = tn__param_new(p, pre, "b", l, 1, &cout, 1))) return TN_ERR_OUT_OF_MEMORY;
         if (rng) tn_init_normal(w, rng, 0.0f, 0.02f);
+        if (l == 4) tn_tensor_fill(w, 0.0f); /* a scale starts as the identity on its input, so a
+                                                short run's little-trained scales add no noise */
         if (l < 4) {
             tn_tensor *g, *o, *m, *v;
             if (!(g = tn__param_new(p, pre, "n", l, 1, &cout, 1)) || !(o = tn__param_new(p, pre, "o", l, 1, &cout, 1)) ||
@@ -18649,6 +18651,15 @@ static void tn__sg_patch_size(const tn__sg_train *s, int sc, int *pw, int *ph)
     *ph = P > 0 && s->real[sc].height > P ? P : s->real[sc].height;
 }
 
+/* Iterations of scale k relative to the finest: equal counts as in SinGAN, but a scale that
+   costs less gets up to 4 times as many (they are cheap and lay out the terrain). */
+static double tn__sg_cost(const tn__sg_train *s, int sc);
+static double tn__sg_weight(const tn__sg_train *s, int k)
+{
+    double w = tn__sg_cost(s, s->A.scales - 1) / tn__sg_cost(s, k);
+    return w < 1 ? 1 : w > 4 ? 4 : w;
+}
+
 /* Relative cost of one iteration at scale sc: G forward + backward on the fake and the
    reconstruction, and the forward passes of the coarser scales that make the random base. */
 static double tn__sg_cost(const tn__sg_train *s, int sc)
@@ -18768,6 +18779,38 @@ static tn_tensor *tn__sg_tensor(tn_ctx *ctx, const float *buf, int bw, int x0, i
     if (t)
         for (y = 0; y < h; y++) memcpy(t->data + (size_t)y * w, buf + (size_t)(y + y0) * bw + x0, (size_t)w * sizeof(float));
     return t;
+}
+
+/* Sampling uses the norms' running statistics, and a short run leaves them lagging behind the
+   batch statistics of the final weights (momentum 0.1). So when a scale ends its running
+   statistics are refreshed by 20 training-mode passes without gradients on random windows of
+   the reconstruction's input, every other one with the scale's noise added (the two kinds of
+   input of training; no coarser passes needed), from an RNG of their own. */
+#define TN__SG_CALIB 20
+static tn_status tn__sg_calibrate(tn__sg_train *s, tn_ctx *ctx, int sc)
+{
+    const int M = TN__SG_M;
+    int W = s->real[sc].width, ew = W + 2 * M, pw, ph, pew, peh, k, j;
+    tn_rng rng;
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    pew = pw + 2 * M;
+    peh = ph + 2 * M;
+    tn_rng_seed(&rng, tn_train_seed(s->run), 0x63616c00ULL + (uint64_t)sc);
+    for (k = 0; k < TN__SG_CALIB; k++) {
+        int ox = (int)tn_rng_below(&rng, (uint32_t)(W - pw + 1)), oy = (int)tn_rng_below(&rng, (uint32_t)(s->real[sc].height - ph + 1));
+        tn_tensor *x;
+        tn_ctx_reset(ctx);
+        tn_ctx_set_grad(ctx, 0);
+        x = tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh);
+        if (x && (k & 1)) {
+            tn__sg_gen_run r = tn__sg_train_gen(s, ctx, 0, ((uint64_t)tn_rng_u32(&rng) << 32) | tn_rng_u32(&rng));
+            for (j = 0; j < pew * peh; j++) x->data[j] -= sc == 0 ? x->data[j] : 0.0f; /* scale 0: noise only */
+            tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, x->data);
+        }
+        if (!tn__sg_gen(ctx, s->g, sc, x, 1)) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    }
+    tn_ctx_set_grad(ctx, 1);
+    return TN_OK;
 }
 
 /* One G step and one D step at scale sc on a random window (the whole scale or a patch): the G
@@ -19024,22 +19067,32 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         long it = tn_train_iteration(s.run);
         tn_status e;
         if (sch[2] == 0 && it - (long)sch[1] == 1) sch[3] = (float)tn_train_seconds(s.run); /* after the warm-up iteration */
-        if (sch[2] == 0 && it - (long)sch[1] == 3) { /* equal counts for this and the finer scales at this speed */
-            double per = (tn_train_seconds(s.run) - sch[3]) / 2.0, need = 0, nit;
+        if (sch[2] == 0 && it - (long)sch[1] == 3) {
+            /* equal counts (x weights) for this and the finer scales at this speed, after the
+               fixed cost of each scale change (~5 iterations: calibration, reconstruction);
+               and a deadline at 1.25 x this scale's share, so a slow spell here cannot starve
+               the finer scales */
+            double per = (tn_train_seconds(s.run) - sch[3]) / 2.0, need = 0, fixed = 0, nit, rem = s.budget - tn_train_seconds(s.run);
             int k;
-            for (k = sc; k < s.A.scales; k++) need += per * tn__sg_cost(&s, k) / tn__sg_cost(&s, sc);
-            nit = (s.budget - tn_train_seconds(s.run)) / need + 3;
+            for (k = sc; k < s.A.scales; k++) {
+                double pk = per * tn__sg_cost(&s, k) / tn__sg_cost(&s, sc);
+                need += pk * tn__sg_weight(&s, k);
+                fixed += 5.0 * pk;
+            }
+            nit = (rem - fixed) / need * tn__sg_weight(&s, sc) + 3;
             sch[2] = (float)(nit < 3 ? 3 : nit > s.o.iters ? s.o.iters : floor(nit));
+            sch[4] = (float)(tn_train_seconds(s.run) + 1.25 * (nit - 3) * per);
         }
-        if (it - (long)sch[1] >= s.o.iters || (sch[2] > 0 && it - (long)sch[1] >= (long)sch[2])) { /* this scale is done */
-            sch[4 + sc] = (float)(it - (long)sch[1]);
+        if (it - (long)sch[1] >= s.o.iters || (sch[2] > 0 && it - (long)sch[1] >= (long)sch[2]) ||
+            (sch[2] > 0 && it - (long)sch[1] > 3 && tn_train_seconds(s.run) > sch[4])) { /* this scale is done */
+            sch[5 + sc] = (float)(it - (long)sch[1]);
             if (sc == s.A.scales - 1) {
                 done_all = 1;
                 break;
             }
             nh = 0;
             rec_first = NAN;
-            if ((e = tn__sg_enter_scale(&s, ctx, ++sc, 0))) {
+            if ((e = tn__sg_calibrate(&s, ctx, sc)) || (e = tn__sg_enter_scale(&s, ctx, ++sc, 0))) {
                 tn_train_fail(s.run, e);
                 break;
             }
@@ -19054,10 +19107,11 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         memcpy(hist[nh % 50], l, sizeof l);
         nh++;
     }
-    if (!done_all) sch[4 + sc] = (float)(tn_train_iteration(s.run) - (long)sch[1]);
+    if (!done_all) sch[5 + sc] = (float)(tn_train_iteration(s.run) - (long)sch[1]);
     s.A.trained = sc + 1;
     tn__sg_write_config(&s.A, tn_params_find(s.g, "singan.config")->data);
     st = tn_train_finish(s.run);
+    if (!st) st = tn__sg_calibrate(&s, ctx, sc); /* after the final checkpoint: a resumed run calibrates again */
     if (stats) {
         int k, m = nh < 50 ? nh : 50;
         long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
@@ -19069,7 +19123,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         stats->seconds_per_iter_finest = fin_it ? (tn_train_seconds(s.run) - fin_sec) / (double)fin_it : 0.0;
         stats->scales = s.A.scales;
         stats->trained = s.A.trained;
-        for (k = 0; k < s.A.scales; k++) stats->scale_iters[k] = (long)sch[4 + k];
+        for (k = 0; k < s.A.scales; k++) stats->scale_iters[k] = (long)sch[5 + k];
         for (k = 0; k < m; k++) {
             stats->loss_d += hist[k][0] / (float)m;
             stats->loss_g += hist[k][1] / (float)m;

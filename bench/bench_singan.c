@@ -9,7 +9,8 @@
        spectrum distance to the example before / after, SSIM to the input,
      - 4x upscaling of the example downsampled to 64 px: spectrum distance vs bicubic,
      - a 2048 x 2048 sample: time and the child process' peak memory.
-   Usage: bench_singan [--minutes M] [--threads N] [--no-peer] [name ...]
+   Usage: bench_singan [--minutes M] [--threads N] [--patch P] [--no-peer] [name ...]
+   (--patch -1: train whole scales, the work per iteration the PyTorch step does at 256 px)
    (names: mountain canyon dunes moon volcano; default all, M = 10) */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -18,7 +19,6 @@
 #include <string.h>
 #include <math.h>
 #include <sys/resource.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 typedef struct demdef { const char *name, *dir; int ox, oy; } demdef; /* another crop of the full DEM, off the example */
@@ -75,6 +75,9 @@ static double best_crop_ssim(const tn_image *ex, const tn_image *win)
     return best;
 }
 
+static const char *g_argv0;
+static int g_patch; /* --patch: 0 = the default (128 px windows), -1 = whole scales */
+
 static void bench_dem(const demdef *d, double minutes, int threads)
 {
     tn_image ex = {0, 0, 0, NULL}, full = {0, 0, 0, NULL}, other = {0, 0, 0, NULL}, per = {0, 0, 0, NULL};
@@ -94,6 +97,7 @@ static void bench_dem(const demdef *d, double minutes, int threads)
     memset(&o, 0, sizeof o);
     o.train.minutes = minutes;
     o.train.seed = 1;
+    o.patch = g_patch;
     t0 = tn_time_seconds();
     if (tn_singan_train(&ex, &o, &m, &st)) {
         printf("# %s: training failed: %s\n", n, tn_last_error());
@@ -182,30 +186,15 @@ static void bench_dem(const demdef *d, double minutes, int threads)
         tn_image_free(&up);
         tn_image_free(&bic);
     }
-    { /* 2048 x 2048 in a child process, so its peak memory is the sample's alone */
-        char path[256];
-        pid_t pid;
+    { /* 2048 x 2048 in a fresh process (this program re-run with --sample2048), so its peak
+         memory is the sample's alone; a fork without exec would inherit a thread pool whose
+         workers do not exist in the child */
+        char path[256], cmd[1024];
         snprintf(path, sizeof path, "/tmp/bench_singan_%s_%d.tnw", n, (int)getpid());
         tn_singan_save(&m, path);
         fflush(stdout);
-        pid = fork();
-        if (pid == 0) {
-            tn_singan mm;
-            tn_image s = {0, 0, 0, NULL};
-            struct rusage ru;
-            double t;
-            if (tn_singan_load(path, &mm)) _exit(1);
-            memset(&g, 0, sizeof g);
-            t = tn_time_seconds();
-            if (tn_singan_sample(&mm, 0, 0, 2048, 2048, &g, &s)) _exit(1);
-            t = tn_time_seconds() - t;
-            getrusage(RUSAGE_SELF, &ru);
-            printf("%s_sample_2048_seconds: %.2f s\n%s_sample_2048_peak_memory: %.0f MB (whole process; the output alone is 16 MB)\n", n, t, n,
-                   ru.ru_maxrss / 1024.0);
-            fflush(stdout);
-            _exit(0);
-        } else if (pid > 0)
-            waitpid(pid, NULL, 0);
+        snprintf(cmd, sizeof cmd, "%s --threads %d --sample2048 %s %s", g_argv0, threads, path, n);
+        if (system(cmd)) printf("# %s: the 2048 sample failed\n", n);
         remove(path);
     }
     tn_singan_free(&m);
@@ -219,12 +208,35 @@ int main(int argc, char **argv)
 {
     double minutes = 10;
     int threads = 2, peer = 1, i, k, any = 0;
+    g_argv0 = argv[0];
+    for (i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "--threads") && i + 1 < argc) threads = atoi(argv[i + 1]);
+    if (argc >= 4 && !strcmp(argv[argc - 3], "--sample2048")) { /* child mode: MODEL NAME */
+        tn_singan mm;
+        tn_singan_gen_opts g;
+        tn_image s = {0, 0, 0, NULL};
+        struct rusage ru;
+        double t;
+        tn_set_threads(threads);
+        if (tn_singan_load(argv[argc - 2], &mm)) return 1;
+        memset(&g, 0, sizeof g);
+        t = tn_time_seconds();
+        if (tn_singan_sample(&mm, 0, 0, 2048, 2048, &g, &s)) return 1;
+        t = tn_time_seconds() - t;
+        getrusage(RUSAGE_SELF, &ru);
+        printf("%s_sample_2048_seconds: %.2f s\n%s_sample_2048_peak_memory: %.0f MB (whole process; the output alone is 16 MB)\n", argv[argc - 1], t,
+               argv[argc - 1], ru.ru_maxrss / 1024.0);
+        tn_image_free(&s);
+        tn_singan_free(&mm);
+        return 0;
+    }
     for (i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--minutes") && i + 1 < argc) minutes = atof(argv[++i]);
         else if (!strcmp(argv[i], "--threads") && i + 1 < argc) threads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--no-peer")) peer = 0;
+        else if (!strcmp(argv[i], "--patch") && i + 1 < argc) g_patch = atoi(argv[++i]);
     }
-    printf("# bench_singan: %.1f min per DEM, %d threads\n", minutes, threads);
+    printf("# bench_singan: %.1f min per DEM, %d threads, patch %d\n", minutes, threads, g_patch);
     fflush(stdout);
     if (peer) { /* the host's 2-core scaling now, then the PyTorch step at the same size */
         if (system("sh /work/shared/peers/probe.sh 2>&1 | sed 's/^/# /'")) printf("# probe failed\n");
@@ -236,7 +248,7 @@ int main(int argc, char **argv)
     for (k = 0; k < (int)(sizeof dems / sizeof dems[0]); k++) {
         int want = 1;
         for (i = 1; i < argc; i++)
-            if (argv[i][0] != '-' && !(i > 1 && (!strcmp(argv[i - 1], "--minutes") || !strcmp(argv[i - 1], "--threads")))) {
+            if (argv[i][0] != '-' && !(i > 1 && (!strcmp(argv[i - 1], "--minutes") || !strcmp(argv[i - 1], "--threads") || !strcmp(argv[i - 1], "--patch")))) {
                 want = 0;
                 any = 1;
                 break;

@@ -363,5 +363,31 @@ wait $pid; rc=$?
 if [ $rc -eq 130 ] && grep -q "interrupted after" "$W/gint.txt" && [ -f "$W/gint.tnw.ckpt" ] && [ ! -f "$W/gint.tnw" ] &&
     $T gnn-train "$W/noise.png" -o "$W/gint.tnw" --iters 1 --size 48 --resume > "$W/gint2.txt" 2>&1 && grep -q "resumed at" "$W/gint2.txt"; then ok;
 else bad "gnn-train Ctrl-C (rc $rc): $(head -c 400 "$W/gint.txt")"; fi
+# singan: a tiny model (2 scales, 8 channels) trains, checkpoints and resumes, samples (a window
+# equals those pixels of a larger sample), refines and upscales in the example's units; errors
+for c in singan-train singan-sample singan-refine singan-upscale; do
+    if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
+done
+expect_usage "singan-upscale needs factor" "--factor F" $T singan-upscale m.tnw a.png -o b.png
+$T noise -o "$W/sg_dem.pfm" --size 32 32 --seed 5 --range 100 900 > /dev/null 2>&1
+if $T singan-train "$W/sg_dem.pfm" -o "$W/sg.tnw" --coarsest 24 --channels 8 --scale-iters 2 --iters 3 > "$W/sg_train.txt" 2>/dev/null &&
+    grep -q "^scales: 2 (trained 2)" "$W/sg_train.txt" && $T info "$W/sg.tnw" | grep -q "singan"; then ok;
+else bad "singan-train: $(cat "$W/sg_train.txt")"; fi
+if $T singan-train "$W/sg_dem.pfm" -o "$W/sg2.tnw" --coarsest 24 --channels 8 --iters 6 --resume > "$W/sg_res.txt" 2>&1 ||
+    ! grep -q "sg2.tnw.ckpt" "$W/sg_res.txt"; then bad "singan-train --resume without a checkpoint: $(cat "$W/sg_res.txt")"; else ok; fi
+if cp "$W/sg.tnw.ckpt" "$W/sg2.tnw.ckpt" && $T singan-train "$W/sg_dem.pfm" -o "$W/sg2.tnw" --iters 4 --resume \
+        > "$W/sg_res.txt" 2>/dev/null && grep -q "^iterations: 4 (resumed at 3)" "$W/sg_res.txt" && grep -q "^per_scale: 2 2" "$W/sg_res.txt"; then ok;
+else bad "singan-train --resume: $(cat "$W/sg_res.txt")"; fi
+if $T singan-sample "$W/sg.tnw" -o "$W/sg_big.pfm" --size 40x30 --seed 2 2>/dev/null &&
+    $T singan-sample "$W/sg.tnw" -o "$W/sg_big2.pfm" --size 40x30 --seed 2 2>/dev/null && cmp -s "$W/sg_big.pfm" "$W/sg_big2.pfm" &&
+    $T singan-sample "$W/sg.tnw" -o "$W/sg_big3.pfm" --size 40x30 --seed 3 2>/dev/null && ! cmp -s "$W/sg_big.pfm" "$W/sg_big3.pfm" &&
+    $T singan-sample "$W/sg.tnw" -o "$W/sg_win.pfm" --size 10x10 --origin -20 15 2>/dev/null &&
+    $T info "$W/sg_big.pfm" | grep -q "size: 40 x 30"; then ok; else bad "singan-sample: same seed same bytes, seeds differ, windows"; fi
+if $T singan-refine "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_ref.pfm" --from-scale 1 2>/dev/null && $T info "$W/sg_ref.pfm" | grep -q "size: 32 x 32" &&
+    $T singan-upscale "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_up.pfm" --factor 1.5 --from-scale 2 2>/dev/null &&
+    $T info "$W/sg_up.pfm" | grep -q "size: 48 x 48"; then ok; else bad "singan-refine / singan-upscale sizes"; fi
+expect_error "singan-sample of a checkpoint" "checkpoint" $T singan-sample "$W/sg.tnw.ckpt" -o "$W/x.pfm"
+$T noise -o "$W/sg_small.pfm" --size 16 16 --seed 5 > /dev/null 2>&1
+expect_error "singan-train DEM below the coarsest scale" "smaller than the coarsest" $T singan-train "$W/sg_small.pfm" -o "$W/x.tnw"
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]
