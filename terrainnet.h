@@ -710,6 +710,9 @@ TN_API tn_status tn_train_meta_number(const tn_train *run, const char *key, doub
    tn_train_check_example refuses, with TN_ERR_SHAPE, a checkpoint trained on another example. */
 TN_API tn_status tn_train_set_example(tn_train *run, uint64_t digest);
 TN_API tn_status tn_train_check_example(const tn_train *run, uint64_t digest);
+/* Renames the stage progress reports from now on (e.g. "singan-train scale 3/8"); truncated to
+   47 characters. */
+TN_API void tn_train_set_stage(tn_train *run, const char *stage);
 /* Opens opts->checkpoint for a resume: a .tnw of this method (its architecture is in it, so
    methods call this before building their networks). The set stays owned by the run; a method
    may upgrade a checkpoint of an older layout in it before tn_train_restore. */
@@ -1615,7 +1618,7 @@ TN_API void tn_gnn_free(tn_gnn *model);
 /* .tnw model files stamped with method "gnn"; load refuses other methods' files and
    checkpoints with TN_ERR_FORMAT, and damaged configurations with TN_ERR_CORRUPT. */
 TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path);
-TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path);
+TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model);
 /* The example's contour parts as the model stores them (example units). *out allocated here. */
 TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out);
 
@@ -10935,6 +10938,11 @@ TN_API tn_status tn_train_meta_number(const tn_train *run, const char *key, doub
     return TN_OK;
 }
 
+TN_API void tn_train_set_stage(tn_train *run, const char *stage)
+{
+    snprintf(run->stage, sizeof run->stage, "%s", stage ? stage : "");
+}
+
 TN_API tn_status tn_train_set_example(tn_train *run, uint64_t digest)
 {
     char buf[20];
@@ -18697,7 +18705,11 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * TN__SG_M, eh = H + 2 * TN__SG_M, i, pw, ph;
     tn__sg_gen_run r;
     tn_status st;
-    snprintf(s->run->stage, sizeof s->run->stage, "singan-train scale %d/%d", sc + 1, s->A.scales);
+    {
+        char stage[48];
+        snprintf(stage, sizeof stage, "singan-train scale %d/%d", sc + 1, s->A.scales);
+        tn_train_set_stage(s->run, stage);
+    }
     s->A.trained = sc; /* the coarser scales are done; the window recursion uses them */
     TN_FREE(s->recbase);
     TN_FREE(s->xrec);
@@ -18893,48 +18905,32 @@ static tn_status tn__sg_check_dem(const tn_image *dem, int coarsest, float *lo, 
     return TN_OK;
 }
 
+/* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
+#define TN__SG_SETTINGS(X)                                                                                          \
+    X("iters", iters, int, 1, 1e9) X("patch", patch, int, -1, 1e9) X("lr", lr, float, 1e-9, 10)                     \
+    X("rec_weight", rec_weight, float, -1e6, 1e6) X("noise_amp", noise_amp, float, 0, 100)
+
 static tn_status tn__sg_set_meta(tn__sg_train *s, uint64_t digest)
 {
-    char buf[40];
-    tn_status st;
-    snprintf(buf, sizeof buf, "%016llx", (unsigned long long)digest);
-    if ((st = tn_train_set_meta(s->run, "example", buf))) return st;
-#define TN__SG_META(key, fmt, v)                          \
-    snprintf(buf, sizeof buf, fmt, v);                    \
-    if ((st = tn_train_set_meta(s->run, key, buf))) return st;
-    TN__SG_META("iters", "%d", s->o.iters)
-    TN__SG_META("patch", "%d", s->o.patch)
-    TN__SG_META("lr", "%.9g", (double)s->o.lr)
-    TN__SG_META("rec_weight", "%.9g", (double)s->o.rec_weight)
-    TN__SG_META("noise_amp", "%.9g", (double)s->o.noise_amp)
-#undef TN__SG_META
-    return TN_OK;
+    tn_status st = tn_train_set_example(s->run, digest);
+#define TN__SG_PUT(key, field, type, lo, hi) \
+    if (!st) st = tn_train_set_meta_number(s->run, key, (double)s->o.field);
+    TN__SG_SETTINGS(TN__SG_PUT)
+#undef TN__SG_PUT
+    return st;
 }
 
-/* A resumed run continues with the settings it started with. */
-static tn_status tn__sg_get_meta(tn__sg_train *s, uint64_t digest, const char *name)
+static tn_status tn__sg_get_meta(tn__sg_train *s, uint64_t digest)
 {
-    const char *v;
-    char buf[40];
-    snprintf(buf, sizeof buf, "%016llx", (unsigned long long)digest);
-    if (!(v = tn_train_meta(s->run, "example")) || strcmp(v, buf) != 0)
-        return tn__fail(TN_ERR_SHAPE, "%s: the checkpoint was trained on another example DEM", name);
-#define TN__SG_GET(key, dst, lo, hi)                                                                                      \
-    if (!(v = tn_train_meta(s->run, key))) return tn__fail(TN_ERR_CORRUPT, "%s: no %s in the checkpoint", name, key);   \
-    else {                                                                                                              \
-        char *end;                                                                                                      \
-        double d = strtod(v, &end);                                                                                     \
-        if (end == v || *end || !(d >= (lo) && d <= (hi))) return tn__fail(TN_ERR_CORRUPT, "%s: bad %s '%s'", name, key, v); \
-        dst = d;                                                                                                        \
-    }
-    TN__SG_GET("iters", s->o.iters, 1, 1e9)
-    TN__SG_GET("patch", s->o.patch, -1, 1e9)
-    TN__SG_GET("lr", s->o.lr, 1e-9, 10)
-    TN__SG_GET("rec_weight", s->o.rec_weight, -1e6, 1e6)
-    TN__SG_GET("noise_amp", s->o.noise_amp, 0, 100)
+    double d = 0;
+    tn_status st = tn_train_check_example(s->run, digest);
+#define TN__SG_GET(key, field, type, lo, hi) \
+    if (!st && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d;
+    TN__SG_SETTINGS(TN__SG_GET)
 #undef TN__SG_GET
-    return TN_OK;
+    return st;
 }
+#undef TN__SG_SETTINGS
 
 /* The networks of a run: G (the model's layout), one discriminator per scale, the schedule. */
 static tn_status tn__sg_train_nets(tn__sg_train *s)
@@ -19000,7 +18996,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
             goto done;
         }
         if ((st = tn__sg_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
-        if ((st = tn__sg_get_meta(&s, digest, s.o.train.checkpoint))) goto done;
+        if ((st = tn__sg_get_meta(&s, digest))) goto done;
         if (s.A.width != d1->width || s.A.height != d1->height) {
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example is %d x %d, this one %d x %d", s.o.train.checkpoint, s.A.width, s.A.height,
                           d1->width, d1->height);
@@ -21225,7 +21221,7 @@ TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
-TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path)
+TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg;

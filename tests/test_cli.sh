@@ -389,5 +389,11 @@ if $T singan-refine "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_ref.pfm" --from-scale 
 expect_error "singan-sample of a checkpoint" "checkpoint" $T singan-sample "$W/sg.tnw.ckpt" -o "$W/x.pfm"
 $T noise -o "$W/sg_small.pfm" --size 16 16 --seed 5 > /dev/null 2>&1
 expect_error "singan-train DEM below the coarsest scale" "smaller than the coarsest" $T singan-train "$W/sg_small.pfm" -o "$W/x.tnw"
+# gnn-generate --detail: the SinGAN model adds detail to the network's terrain (same size, other
+# values); a model of another method is refused
+if $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gd0.pfm" --size 40x40 > /dev/null 2>&1 &&
+    $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gd1.pfm" --size 40x40 --detail "$W/sg.tnw" --detail-from-scale 1 > /dev/null 2>&1 &&
+    $T info "$W/gd1.pfm" | grep -q "size: 40 x 40" && ! cmp -s "$W/gd0.pfm" "$W/gd1.pfm"; then ok; else bad "gnn-generate --detail"; fi
+expect_error "gnn-generate --detail with a gnn model" "singan" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --detail "$W/g.tnw"
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

@@ -150,7 +150,7 @@ TN_TEST(save_load_round_trip)
     tiny_opts(&o, 5);
     TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
     TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(&l, path) == TN_OK);
+    TN_CHECK(tn_gnn_load(path, &l) == TN_OK);
     TN_CHECK(same_params(m.weights, l.weights));
     TN_CHECK(l.iterations == 5 && l.parts == m.parts && l.mean == m.mean && l.std == m.std && l.k == m.k && l.membrane == 1);
     memset(&go, 0, sizeof go);
@@ -194,7 +194,7 @@ TN_TEST(resume_is_bit_identical)
     TN_CHECK(same_params(full.weights, res.weights));
     tn_gnn_free(&res);
     /* a checkpoint is not a model; another example cannot resume it */
-    TN_CHECK(tn_gnn_load(&res, ck) == TN_ERR_FORMAT);
+    TN_CHECK(tn_gnn_load(ck, &res) == TN_ERR_FORMAT);
     tn_gnn_free(&part);
     tn_gnn_free(&full);
     {
@@ -301,12 +301,12 @@ TN_TEST(bad_inputs_fail_cleanly)
         tn_model_stamp(p, "texgan", 1, NULL);
         tn_params_save(p, path);
         tn_params_free(p);
-        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT && strstr(tn_last_error(), "texgan"));
+        TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_FORMAT && strstr(tn_last_error(), "texgan"));
         p = tn_params_create();
         tn_params_add(p, "x", 1, &two);
         tn_params_save(p, path);
         tn_params_free(p);
-        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT);
+        TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_FORMAT);
     }
     TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
     TN_CHECK(tn__io_read_file(path, &buf, &n) == TN_OK);
@@ -314,18 +314,18 @@ TN_TEST(bad_inputs_fail_cleanly)
     f = fopen(path, "wb");
     fwrite(buf, 1, n, f);
     fclose(f);
-    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
     TN_FREE(buf);
     tn_params_find(m.weights, "gnn.config")->data[3] = 1000.0f; /* k */
     TN_CHECK(tn_gnn_save(&m, path) == TN_ERR_CORRUPT);           /* refused before writing */
     TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_CORRUPT);
     TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
     tn_params_find(m.weights, "gnn.config")->data[3] = 6.0f;
     tn_params_find(m.weights, "gnn.part_info")->data[1] = 1e6f; /* a part's point count */
     TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
-    TN_CHECK(tn_gnn_load(&l, "build/test/no_such_model.tnw") == TN_ERR_IO);
+    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load("build/test/no_such_model.tnw", &l) == TN_ERR_IO);
     tn_gnn_free(&m);
     tn_image_free(&dem);
     tn_image_free(&flat);

@@ -1708,10 +1708,11 @@ static const cli_command gnn_train_cmd = {"gnn-train", CLI_CMD(gnn_train), "lear
     "--resume continues it identically."};
 
 static struct gnn_generate_args {
-    const char *model, *sketch, *out, *preview;
+    const char *model, *sketch, *out, *preview, *detail;
     int w, h, heights, embeddings;
     double range[2];
     tn_gnn_generate_opts o;
+    tn_singan_gen_opts detail_opts;
 } gnn_generate_arg;
 static const cli_opt gnn_generate_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &gnn_generate_arg.model, NULL, 0, 0, NULL, "a model from gnn-train", NULL},
@@ -1734,6 +1735,10 @@ static const cli_opt gnn_generate_opts[] = {
      "a DEM SKETCH without a recorded range: the metres its codes 0..max stand for", NULL},
     {"order-weight", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.order_weight, NULL, -1, 1e6, "W",
      "with --finetune: weight of keeping ridges above and valleys below the terrain beside them (-1 = off)", "1"},
+    {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "SINGAN.tnw",
+     "add the example's fine detail with a singan-train model of the same example (singan-refine)", NULL},
+    {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
+     "with --detail: first SinGAN scale that runs on the terrain (higher = finer detail only)", "scales - 3"},
     {"preview", 0, ARG_STR, 0, &gnn_generate_arg.preview, NULL, 0, 0, "PNG", "hillshaded colour preview of the terrain", NULL},
 };
 
@@ -1776,6 +1781,7 @@ static int run_gnn_generate(void)
 {
     struct gnn_generate_args *a = &gnn_generate_arg;
     tn_gnn model;
+    tn_singan detail;
     tn_contour_set sk;
     tn_image terrain = {0, 0, 0, NULL};
     const char *kind = "";
@@ -1783,9 +1789,15 @@ static int run_gnn_generate(void)
     size_t i;
     tn_status st;
     memset(&sk, 0, sizeof sk);
-    if ((st = tn_gnn_load(&model, a->model))) return fail_status(st);
+    memset(&detail, 0, sizeof detail);
+    if (a->detail && (st = tn_singan_load(a->detail, &detail))) return fail_status(st);
+    if ((st = tn_gnn_load(a->model, &model))) {
+        tn_singan_free(&detail);
+        return fail_status(st);
+    }
     if ((st = load_gnn_sketch(a->sketch, a->range[0], a->range[1], &sk, &kind))) {
         tn_gnn_free(&model);
+        tn_singan_free(&detail);
         return fail_status(st);
     }
     if (!a->w) {
@@ -1796,8 +1808,14 @@ static int run_gnn_generate(void)
     a->o.embeddings = a->embeddings == 1 ? TN_GNN_EMBED_ALIGNED : a->embeddings == 2 ? TN_GNN_EMBED_NONE : TN_GNN_EMBED_AUTO;
     t0 = tn_time_seconds();
     st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
-    /* A refiner (SinGAN detail of the example, @@singan) takes `terrain` (example units, w x h)
-       here, between generation and saving. */
+    if (!st && a->detail) { /* SinGAN adds the fine detail the graph network cannot rebuild (paper 000) */
+        tn_image refined = {0, 0, 0, NULL};
+        a->detail_opts.seed = a->o.seed;
+        if (!(st = tn_singan_refine(&detail, &terrain, &a->detail_opts, &refined))) {
+            tn_image_free(&terrain);
+            terrain = refined;
+        }
+    }
     if (!st) st = tn_image_save(a->out, &terrain, NULL);
     if (!st && a->preview) {
         tn_image shade = {0, 0, 0, NULL};
@@ -1819,6 +1837,7 @@ static int run_gnn_generate(void)
     tn_image_free(&terrain);
     tn_contour_set_free(&sk);
     tn_gnn_free(&model);
+    tn_singan_free(&detail);
     return st ? fail_status(st) : 0;
 }
 
