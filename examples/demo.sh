@@ -22,10 +22,10 @@ Vorarlberg, the Rhine valley and the northern Rätikon, 431-2908 m, 62.6 x 92.6 
 TEXTURE_ABOUT=${TEXTURE_ABOUT:-'128 x 128 crop of three.js grasslight-big (CC BY 3.0, from opengameart.org).'}
 if [ -n "${DEMO_FAST:-}" ]; then
     STYLE_ARGS="--size 64 --iters 3 --levels 1"; TEXGAN_ARGS="--iters 2 --patch 32 --gen-width 16 --disc-width 8"
-    VIEW_SIZE="320 180"; DETAIL_SIZE=256x256; GNN_ARGS="--iters 3"
+    VIEW_SIZE="320 180"; DETAIL_SIZE=256x256; GNN_ARGS="--iters 3"; SINGAN_ARGS="--channels 8 --scale-iters 1 --iters 9"
 else
     STYLE_ARGS=""; TEXGAN_ARGS="--minutes ${DEMO_MINUTES:-2}"; VIEW_SIZE="960 540"; DETAIL_SIZE=1024x1024
-    GNN_ARGS="--minutes ${DEMO_MINUTES:-2}"
+    GNN_ARGS="--minutes ${DEMO_MINUTES:-2}"; SINGAN_ARGS="--minutes ${DEMO_MINUTES:-2}"
 fi
 
 # One line per picture, in page order: `name  title`.
@@ -35,14 +35,12 @@ ridges   Its ridges (yellow) and valleys (blue), extracted
 noise    Input for style transfer: Perlin noise (no learning)
 style    Style transfer: that noise restyled by the example
 gnn      Sketch to terrain: the letter A ridge in a circular valley (examples/data/sketch_a.tns), in the style of the example
+singan   SinGAN: new terrain like the example, 1.5 times its size (a new sample, not a copy)
 texture  Texture GAN: grass learnt from one photo over the example; left tiled, right detail-mapped; top far, bottom near
 splat    Splat map: vegetation, bare ground, rock, snow weights
 view3d   3D preview of the example
 glb      Engine exports: glTF 2.0 mesh (splat colours draped), Unity RAW, normal map (shown)
 '
-# Later steps, once their commands exist on this branch:
-#   singan  SinGAN: a new sample of the example
-
 # ---- steps: each runs its commands with `run` and sets PIC (and LINK) ------------------------
 
 step_example() {
@@ -68,6 +66,12 @@ step_gnn() {
     run $T gnn-train "$DEM" -o "$OUT/gnn.tnw" $GNN_ARGS
     run $T gnn-generate "$OUT/gnn.tnw" $DATA/sketch_a.tns -o "$OUT/sketch_terrain.png" --size 256x256 --random 48 --preview "$OUT/sketch_terrain_preview.png"
     PIC=sketch_terrain_preview.png; LINK=sketch_terrain.png
+}
+step_singan() {
+    run $T singan-train "$DEM" -o "$OUT/singan.tnw" $SINGAN_ARGS
+    run $T singan-sample "$OUT/singan.tnw" -o "$OUT/singan_sample.png" --size 384x384 --seed 7
+    run $T render "$OUT/singan_sample.png" -o "$OUT/singan_preview.png"
+    PIC=singan_preview.png; LINK=singan_sample.png
 }
 step_texture() {
     run $T texgan-train "$TEXTURE" -o "$OUT/grass.tnw" $TEXGAN_ARGS
