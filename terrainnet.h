@@ -6439,6 +6439,8 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
                 gt[0] += 0.5 * (gt[1] + gt[2]);
                 gt[3] += 0.5 * (gt[4] + gt[5]);
             }
+        if (!(fabs(gt[0]) <= DBL_MAX && fabs(gt[3]) <= DBL_MAX))
+            return tn__fail(TN_ERR_INVALID_ARG, "TIFF: georeference transform overflows at the pixel centre");
         use_matrix = gt[2] != 0.0 || gt[4] != 0.0 || gt[5] > 0.0;
     }
     memset(&j, 0, sizeof j);
