@@ -5768,6 +5768,16 @@ static void tn__tif_unpredict_h(uint8_t *r, size_t n, size_t stride, size_t bps,
         for (i = stride; i < n; i++) r[i] = (uint8_t)(r[i] + r[i - stride]);
         return;
     }
+    if (bps == 2) { /* the common int16 DEM: 16-bit sums without the byte loop */
+        int hi = le ? 1 : 0, lo = 1 - hi;
+        for (i = stride; i < n; i++) {
+            uint8_t *c = r + 2 * i, *p = c - 2 * stride;
+            unsigned v = ((unsigned)c[hi] << 8 | c[lo]) + ((unsigned)p[hi] << 8 | p[lo]);
+            c[hi] = (uint8_t)(v >> 8);
+            c[lo] = (uint8_t)v;
+        }
+        return;
+    }
     for (i = stride; i < n; i++) {
         uint8_t *c = r + i * bps, *p = c - stride * bps;
         unsigned carry = 0;
