@@ -244,7 +244,7 @@ TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float 
    or 3 (floating point); 8/16/32/64-bit signed and unsigned integers, 32/64-bit floats, any
    number of samples; the first full-resolution image of the file (overviews and masks are
    skipped). Values are as stored (metres for a DEM), except 8-bit unsigned data and RGB
-   pictures of unsigned integers, which give [0, 1] like PNG. GDAL_NODATA cells and NaN/Inf
+   pictures of 8/16-bit unsigned integers, which give [0, 1] like PNG. GDAL_NODATA cells and NaN/Inf
    are voids, filled like .hgt voids. The georeference (ModelPixelScale + ModelTiepoint or
    ModelTransformation, and the GeoKey directory) goes to info->georef; see tn_georef.
    TIFF write: one image, strips, Deflate with predictor: float32 (predictor 3; the default),
