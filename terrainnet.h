@@ -262,7 +262,7 @@ TN_API tn_rect tn_rect_halo(tn_rect r, int halo, int width, int height);
    or 3 (floating point); 8/16/32/64-bit signed and unsigned integers, 32/64-bit floats, any
    number of samples; the first full-resolution image of the file (overviews and masks are
    skipped). Values are as stored (metres for a DEM), except 8-bit unsigned data and RGB
-   pictures of unsigned integers, which give [0, 1] like PNG. GDAL_NODATA cells and NaN/Inf
+   pictures of 8/16-bit unsigned integers, which give [0, 1] like PNG. GDAL_NODATA cells and NaN/Inf
    are voids, filled like .hgt voids. The georeference (ModelPixelScale + ModelTiepoint or
    ModelTransformation, and the GeoKey directory) goes to info->georef; see tn_georef.
    TIFF write: one image, strips, Deflate with predictor: float32 (predictor 3; the default),
@@ -6097,6 +6097,16 @@ static void tn__tif_unpredict_h(uint8_t *r, size_t n, size_t stride, size_t bps,
         for (i = stride; i < n; i++) r[i] = (uint8_t)(r[i] + r[i - stride]);
         return;
     }
+    if (bps == 2) { /* the common int16 DEM: 16-bit sums without the byte loop */
+        int hi = le ? 1 : 0, lo = 1 - hi;
+        for (i = stride; i < n; i++) {
+            uint8_t *c = r + 2 * i, *p = c - 2 * stride;
+            unsigned v = ((unsigned)c[hi] << 8 | c[lo]) + ((unsigned)p[hi] << 8 | p[lo]);
+            c[hi] = (uint8_t)(v >> 8);
+            c[lo] = (uint8_t)v;
+        }
+        return;
+    }
     for (i = stride; i < n; i++) {
         uint8_t *c = r + i * bps, *p = c - stride * bps;
         unsigned carry = 0;
@@ -6768,6 +6778,8 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
                 gt[0] += 0.5 * (gt[1] + gt[2]);
                 gt[3] += 0.5 * (gt[4] + gt[5]);
             }
+        if (!(fabs(gt[0]) <= DBL_MAX && fabs(gt[3]) <= DBL_MAX))
+            return tn__fail(TN_ERR_INVALID_ARG, "TIFF: georeference transform overflows at the pixel centre");
         use_matrix = gt[2] != 0.0 || gt[4] != 0.0 || gt[5] > 0.0;
     }
     memset(&j, 0, sizeof j);

@@ -395,5 +395,32 @@ if $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gd0.pfm" --size 40x40 > /dev/nu
     $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gd1.pfm" --size 40x40 --detail "$W/sg.tnw" --detail-from-scale 1 > /dev/null 2>&1 &&
     $T info "$W/gd1.pfm" | grep -q "size: 40 x 40" && ! cmp -s "$W/gd0.pfm" "$W/gd1.pfm"; then ok; else bad "gnn-generate --detail"; fi
 expect_error "gnn-generate --detail with a gnn model" "singan" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --detail "$W/g.tnw"
+# GeoTIFF: read any command's DEM from .tif, write -o x.tif carrying the georeference; then GDAL
+# as the reference (tests/gdal_geotiff.py) when python3-gdal and gdal-bin are installed
+GT=tests/refs/tiff/int16_geographic_point.tif
+if $T info "$GT" > "$W/gt_info.txt" 2>&1 && grep -q "^format: tiff$" "$W/gt_info.txt" && grep -q "^crs: geographic$" "$W/gt_info.txt" &&
+    grep -q "^geotransform: 9.25 0.001 0 47.75 0 -0.00050000000000000001$" "$W/gt_info.txt" && grep -q "^spacing_m: 74.99" "$W/gt_info.txt"; then ok;
+else bad "info of a GeoTIFF: $(cat "$W/gt_info.txt")"; fi
+if $T convert "$GT" "$W/gt32.tif" 2>/dev/null && $T convert --bits 16 "$GT" "$W/gt16.tif" 2>/dev/null &&
+    $T info "$W/gt32.tif" | grep -q "^bit_depth: 32$" && $T info "$W/gt16.tif" | grep -q "^bit_depth: 16$" &&
+    [ "$($T info "$W/gt32.tif" | grep -v "^file\|^bit_depth")" = "$(grep -v "^file\|^bit_depth" "$W/gt_info.txt")" ]; then ok;
+else bad "GeoTIFF -> float32 / int16 GeoTIFF keeps values and georeference"; fi
+if $T render "$GT" -o "$W/gt_preview.tif" 2>/dev/null && $T info "$W/gt_preview.tif" | grep -q "^channels: 3$" &&
+    $T info "$W/gt_preview.tif" | grep -q "^geotransform: 9.25 0.001"; then ok; else bad "render -o .tif keeps the georeference"; fi
+if $T extract "$GT" --threshold 8 > /dev/null 2>&1 && $T export "$GT" --to glb -o "$W/gt.glb" > /dev/null 2>&1 &&
+    $T convert "$W/noise.png" "$W/noise.tif" 2>/dev/null && $T metrics "$W/noise.png" "$W/noise.tif" | grep -q "^rmse: 0$"; then ok;
+else bad "extract/export/metrics read .tif, convert writes it"; fi
+expect_error "tiff truncated" "corrupt" sh -c "head -c 300 $GT > $W/cut.tif && $T info $W/cut.tif"
+GDALPY=""
+for py in python3 /usr/bin/python3; do
+    if [ -z "$GDALPY" ] && command -v gdalinfo > /dev/null 2>&1 && $py -c "from osgeo import gdal" > /dev/null 2>&1; then GDALPY=$py; fi
+done
+if [ -n "$GDALPY" ]; then
+    HGT="$D/dem/alps_n47e009/original/N47E009.hgt"
+    if $GDALPY tests/gdal_geotiff.py "$T" "$W/gdal" "$HGT" > "$W/gdal.txt" 2>&1 && grep -q "gdal_geotiff: [0-9]* passed, 0 failed" "$W/gdal.txt"; then ok;
+    else bad "GeoTIFF against GDAL: $(grep "FAIL\|passed\|Error" "$W/gdal.txt" | head -5)"; fi
+else
+    skipped "GeoTIFF against GDAL (python3-gdal / gdal-bin not installed)"
+fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

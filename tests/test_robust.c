@@ -1126,6 +1126,281 @@ TN_TEST(test_texgan_config)
     tn_image_free(&ex);
 }
 
+/* ---- TIFF / GeoTIFF ---- */
+
+/* First IFD entry of `tag` in a little-endian classic TIFF, or NULL. */
+static uint8_t *tiff_entry(uint8_t *b, size_t n, unsigned tag)
+{
+    uint32_t ifd = (uint32_t)b[4] | ((uint32_t)b[5] << 8) | ((uint32_t)b[6] << 16) | ((uint32_t)b[7] << 24);
+    unsigned cnt, i;
+    if ((size_t)ifd + 2 > n) return NULL;
+    cnt = b[ifd] | (b[ifd + 1] << 8);
+    for (i = 0; i < cnt && (size_t)ifd + 2 + 12 * (i + 1) <= n; i++)
+        if ((unsigned)(b[ifd + 2 + 12 * i] | (b[ifd + 3 + 12 * i] << 8)) == tag) return b + ifd + 2 + 12 * i;
+    return NULL;
+}
+
+/* Makes entry `tag` a single LONG of value v. */
+static int tiff_set(uint8_t *b, size_t n, unsigned tag, uint32_t v)
+{
+    uint8_t *e = tiff_entry(b, n, tag);
+    if (!e) return 0;
+    e[2] = 4; e[3] = 0;
+    put_le32(e + 4, 1);
+    put_le32(e + 8, v);
+    return 1;
+}
+
+/* Turns entry `from` into a single SHORT entry `to` of value v (to plant a tag the file lacks). */
+static int tiff_retag(uint8_t *b, size_t n, unsigned from, unsigned to, unsigned v)
+{
+    uint8_t *e = tiff_entry(b, n, from);
+    if (!e) return 0;
+    e[0] = (uint8_t)to; e[1] = (uint8_t)(to >> 8);
+    e[2] = 3; e[3] = 0;
+    put_le32(e + 4, 1);
+    e[8] = (uint8_t)v; e[9] = (uint8_t)(v >> 8); e[10] = e[11] = 0;
+    return 1;
+}
+
+/* Sets value k of an out-of-line SHORT or LONG array entry (StripOffsets, StripByteCounts). */
+static int tiff_set_array(uint8_t *b, size_t n, unsigned tag, uint32_t k, uint32_t v)
+{
+    uint8_t *e = tiff_entry(b, n, tag);
+    uint32_t at, type;
+    if (!e) return 0;
+    type = e[2] | (e[3] << 8);
+    at = (uint32_t)e[8] | ((uint32_t)e[9] << 8) | ((uint32_t)e[10] << 16) | ((uint32_t)e[11] << 24);
+    if (type == 3) { /* SHORT values: widen the entry to LONG values at the end of the file is not possible; clamp */
+        if ((size_t)at + 2 * (k + 1) > n) return 0;
+        if (v > 65535u) v = 65535u;
+        b[at + 2 * k] = (uint8_t)v;
+        b[at + 2 * k + 1] = (uint8_t)(v >> 8);
+        return 1;
+    }
+    if (type != 4 || (size_t)at + 4 * (k + 1) > n) return 0;
+    put_le32(b + at + 4 * k, v);
+    return 1;
+}
+
+static uint8_t *tiff_fixture(const char *name, size_t *n)
+{
+    char rel[128];
+    snprintf(rel, sizeof rel, "tiff/%s", name);
+    return tn_test_read_file(tn_test_ref(rel), n);
+}
+
+/* Every truncation and random damage (half of it in the header and directory) of GDAL-made
+   TIFFs of each codec and layout, and of one terrainnet wrote. */
+TN_TEST(test_tiff_mutated)
+{
+    static const char *const seeds[] = {"int16_none_strips.tif", "int16_lzw_strips.tif", "int16_packbits_tiled_be.tif",
+                                        "int16_deflate_p2_strips_bigtiff.tif", "float32_deflate_p3_tiled.tif",
+                                        "uint16_b4_lzw_p2_tiled.tif", "int16_b3_planar2_deflate_p2_tiled.tif",
+                                        "int16_nodata_deflate.tif", "float64_lzw_tiled_be_bigtiff.tif", NULL};
+    tn_rng rng;
+    int s, round, bad = 0;
+    tn_rng_seed(&rng, 20261125, 18);
+    for (s = 0; s < 10; s++) {
+        uint8_t *seed = NULL, *b;
+        size_t n = 0, k;
+        if (seeds[s]) seed = tiff_fixture(seeds[s], &n);
+        else {
+            tn_image img = {0, 0, 0, NULL};
+            TN_CHECK(tn_image_create(&img, 21, 13, 2) == TN_OK);
+            pattern(&img, -40.0f, 1234.5f);
+            TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_TIFF, &seed, &n) == TN_OK);
+            tn_image_free(&img);
+        }
+        TN_CHECK(seed != NULL);
+        if (!seed) continue;
+        TN_CHECK(load_checked(seed, n, "seed.tif"));
+        for (k = 0; k < n; k++) bad += !load_checked(seed, k, "cut.tif");
+        b = (uint8_t *)malloc(n);
+        for (round = 0; round < 1500; round++) {
+            int flips = 1 + (int)tn_rng_below(&rng, 4), f;
+            memcpy(b, seed, n);
+            for (f = 0; f < flips; f++) {
+                size_t at = (round & 1) && n > 512 ? tn_rng_below(&rng, 512) : tn_rng_below(&rng, (uint32_t)n);
+                switch (tn_rng_below(&rng, 4)) {
+                case 0: b[at] ^= (uint8_t)(1u << tn_rng_below(&rng, 8)); break;
+                case 1: b[at] = 0xff; break;
+                case 2: b[at] = 0; break;
+                default: b[at] = (uint8_t)tn_rng_below(&rng, 256); break;
+                }
+            }
+            bad += !load_checked(b, n, "mutated.tif");
+        }
+        free(b);
+        if (seeds[s]) free(seed);
+        else tn_free(seed);
+    }
+    TN_CHECK(bad == 0);
+}
+
+/* Hand-made hostile directories: each must be an error (or, where noted, a clean success). */
+TN_TEST(test_tiff_hostile)
+{
+    static const uint32_t dims[] = {0, 0x7fffffffu, 0x80000000u, 0xffffffffu, 1u << 20};
+    size_t n = 0, nt = 0, nd = 0, i;
+    uint8_t *seed = tiff_fixture("int16_none_strips.tif", &n), *tiled = tiff_fixture("int16_none_tiled_bigtiff_be.tif", &nt);
+    uint8_t *defl = tiff_fixture("int16_deflate_strips.tif", &nd), *b;
+    tn_image img = {0, 0, 0, NULL};
+    TN_CHECK(seed && tiled && defl);
+    if (!seed || !tiled || !defl) { free(seed); free(tiled); free(defl); return; }
+    b = (uint8_t *)malloc(n + nd);
+#define HOSTILE(expr, want)                                                                   \
+    do {                                                                                      \
+        tn_status st_;                                                                        \
+        memcpy(b, seed, n);                                                                   \
+        TN_CHECK(expr);                                                                       \
+        tn_clear_error();                                                                     \
+        st_ = tn_image_load_memory(b, n, "hostile.tif", &img, NULL, NULL);                    \
+        TN_CHECK(outcome_ok(st_, &img));                                                      \
+        if ((int)(want) >= 0) TN_CHECK(st_ == (want)); /* -1: either outcome */              \
+        tn_image_free(&img);                                                                  \
+    } while (0)
+    /* huge and zero dimensions */
+    for (i = 0; i < sizeof dims / sizeof dims[0]; i++) {
+        HOSTILE(tiff_set(b, n, 256, dims[i]), dims[i] == 0 ? TN_ERR_CORRUPT : (tn_status)-1);
+        HOSTILE(tiff_set(b, n, 257, dims[i]), dims[i] == 0 ? TN_ERR_CORRUPT : (tn_status)-1);
+    }
+    HOSTILE(tiff_set(b, n, 256, 0x7fffffffu) && tiff_set(b, n, 257, 0x7fffffffu), TN_ERR_TOO_LARGE);
+    /* strip counts: one row per strip (23 strips, 5 listed); a count field claiming 2^31 strips */
+    HOSTILE(tiff_set(b, n, 278, 1), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set(b, n, 278, 0), TN_ERR_CORRUPT);
+    HOSTILE(tiff_entry(b, n, 273) && (put_le32(tiff_entry(b, n, 273) + 4, 0x7fffffffu), 1), TN_ERR_CORRUPT);
+    HOSTILE(tiff_entry(b, n, 279) && (put_le32(tiff_entry(b, n, 279) + 4, 0xffffffffu), 1), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set(b, n, 256, 1) && tiff_set(b, n, 257, 0x7fffffffu) && tiff_set(b, n, 278, 1), TN_ERR_TOO_LARGE);
+    HOSTILE(tiff_set(b, n, 256, 1) && tiff_set(b, n, 257, 1u << 20) && tiff_set(b, n, 278, 1), TN_ERR_CORRUPT);
+    /* strip offsets and sizes past the end of the file */
+    HOSTILE(tiff_set_array(b, n, 273, 0, 0xfffffff0u), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set_array(b, n, 273, 4, (uint32_t)n - 3), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set_array(b, n, 279, 2, 0x7fffffffu), (tn_status)-1); /* SHORT: clamped, not past the end */
+    HOSTILE(tiff_entry(b, n, 279) && tiff_set(b, n, 279, 0x7fffffffu), TN_ERR_CORRUPT); /* one count for 5 strips */
+    HOSTILE(tiff_set_array(b, n, 279, 1, 0), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set_array(b, n, 279, 1, 3), TN_ERR_CORRUPT); /* uncompressed strip too short */
+    /* directory offsets: past the end, into the header, a loop through a marked overview */
+    HOSTILE((put_le32(b + 4, 0xfffffff0u), 1), TN_ERR_CORRUPT);
+    HOSTILE((put_le32(b + 4, 2), 1), TN_ERR_CORRUPT);
+    HOSTILE((put_le32(b + 4, (uint32_t)n - 1), 1), TN_ERR_CORRUPT);
+    {
+        uint32_t ifd = (uint32_t)seed[4] | ((uint32_t)seed[5] << 8) | ((uint32_t)seed[6] << 16) | ((uint32_t)seed[7] << 24);
+        unsigned cnt = seed[ifd] | (seed[ifd + 1] << 8);
+        uint8_t *e;
+        memcpy(b, seed, n);
+        e = tiff_entry(b, n, 284); /* PlanarConfiguration becomes NewSubfileType = 1 (an overview) */
+        TN_CHECK(e != NULL);
+        if (e) {
+            e[0] = 254; e[1] = 0;
+            put_le32(b + ifd + 2 + 12 * cnt, ifd); /* and the chain points back at itself */
+            TN_CHECK(tn_image_load_memory(b, n, "loop.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && strstr(tn_last_error(), "loop"));
+            put_le32(b + ifd + 2 + 12 * cnt, 0); /* only an overview: FORMAT */
+            TN_CHECK(tn_image_load_memory(b, n, "ovr.tif", &img, NULL, NULL) == TN_ERR_FORMAT && !img.data);
+        }
+    }
+    /* sample layout nonsense */
+    HOSTILE(tiff_set(b, n, 277, 0), TN_ERR_FORMAT);
+    HOSTILE(tiff_set(b, n, 277, 65535), TN_ERR_FORMAT);
+    HOSTILE(tiff_set(b, n, 277, 3), TN_ERR_CORRUPT); /* one BitsPerSample value fits, strips do not */
+    HOSTILE(tiff_set(b, n, 258, 0), TN_ERR_FORMAT);
+    HOSTILE(tiff_set(b, n, 339, 3), TN_ERR_FORMAT); /* 16-bit float */
+    HOSTILE(tiff_retag(b, n, 284, 317, 3), TN_ERR_CORRUPT); /* float predictor on integers */
+    HOSTILE(tiff_retag(b, n, 284, 317, 9), TN_ERR_FORMAT);
+    HOSTILE(tiff_retag(b, n, 284, 317, 2), TN_OK); /* predictor 2 on raw data: wrong sums, still finite */
+    HOSTILE(tiff_set(b, n, 284, 7), TN_ERR_CORRUPT);
+    HOSTILE(tiff_retag(b, n, 284, 266, 2), TN_ERR_FORMAT); /* fill order */
+    /* raw bytes read as LZW / PackBits / Deflate: garbage must end in an error or finite pixels */
+    HOSTILE(tiff_set(b, n, 259, 5), (tn_status)-1);
+    HOSTILE(tiff_set(b, n, 259, 32773), (tn_status)-1);
+    HOSTILE(tiff_set(b, n, 259, 8), TN_ERR_CORRUPT);
+    HOSTILE(tiff_set(b, n, 259, 34887), TN_ERR_FORMAT);
+    /* truncated deflate: a strip's byte count cut short, and its stream cut inside the file */
+    memcpy(b, defl, nd);
+    TN_CHECK(tiff_set_array(b, nd, 279, 0, 9));
+    TN_CHECK(tn_image_load_memory(b, nd, "cut.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+    tn_image_free(&img);
+    memcpy(b, defl, nd);
+    TN_CHECK(tiff_set_array(b, nd, 279, 3, 1));
+    TN_CHECK(tn_image_load_memory(b, nd, "cut.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+    tn_image_free(&img);
+    /* tiles: zero and huge tile sizes in the BigTIFF big-endian fixture (values patched by search) */
+    {
+        static const uint32_t tsz[] = {0, 1, 0x7fffffffu, 0xffffffffu};
+        size_t k, j;
+        tn_status st;
+        for (j = 0; j < sizeof tsz / sizeof tsz[0]; j++) {
+            uint8_t *t2 = (uint8_t *)malloc(nt);
+            int hit = 0;
+            memcpy(t2, tiled, nt);
+            for (k = 16; k + 20 <= 400 && k + 20 <= nt; k += 2) /* BigTIFF entry: tag 322, type SHORT/LONG, count 1 */
+                if (t2[k] == 0x01 && t2[k + 1] == 0x42 && t2[k + 2] == 0 && (t2[k + 3] == 3 || t2[k + 3] == 4)) {
+                    t2[k + 3] = 4;
+                    t2[k + 12] = (uint8_t)(tsz[j] >> 24); t2[k + 13] = (uint8_t)(tsz[j] >> 16);
+                    t2[k + 14] = (uint8_t)(tsz[j] >> 8); t2[k + 15] = (uint8_t)tsz[j];
+                    hit = 1;
+                    break;
+                }
+            TN_CHECK(hit);
+            tn_clear_error();
+            st = tn_image_load_memory(t2, nt, "tiles.tif", &img, NULL, NULL);
+            if (st == TN_OK || !tn_last_error()[0]) fprintf(stderr, "  tile size %u: status %d '%s'\n", tsz[j], (int)st, tn_last_error());
+            TN_CHECK(outcome_ok(st, &img));
+            TN_CHECK(img.data == NULL); /* every changed tile size breaks the tile count */
+            tn_image_free(&img);
+            free(t2);
+        }
+    }
+#undef HOSTILE
+    free(b);
+    free(seed);
+    free(tiled);
+    free(defl);
+}
+
+/* The LZW decoder on streams no encoder writes: codes beyond the table, a code past a clear,
+   a table that fills without a clear (it stops growing), an old-style stream. */
+TN_TEST(test_tiff_lzw_streams)
+{
+    tn__tif t;
+    uint8_t s[8192], out[70000];
+    size_t tab[4096], len = 0, bit, i;
+    uint16_t lens[4096];
+    memset(&t, 0, sizeof t);
+    t.name = "lzw";
+    memset(s, 0, sizeof s);
+    /* clear, 'A', then code 300 (table has 258 entries) */
+#define PUT(code, width) do { unsigned c_ = (code); int w_; for (w_ = (width) - 1; w_ >= 0; w_--, bit++) if ((c_ >> w_) & 1u) s[bit >> 3] |= (uint8_t)(0x80u >> (bit & 7)); } while (0)
+    bit = 0;
+    PUT(256, 9); PUT(65, 9); PUT(300, 9);
+    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
+    memset(s, 0, sizeof s);
+    bit = 0;
+    PUT(256, 9); PUT(258, 9);
+    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
+    /* 5000 literals and no clear: the table fills at 4096 entries and decoding goes on */
+    memset(s, 0, sizeof s);
+    bit = 0;
+    PUT(256, 9);
+    for (i = 0; i < 5000; i++) {
+        /* the width the decoder reads code i with: from the table size after code i - 1 */
+        unsigned nx = i == 0 ? 258u : 257u + (unsigned)i, w;
+        if (nx > 4096) nx = 4096;
+        w = nx < 511 ? 9 : nx < 1023 ? 10 : nx < 2047 ? 11 : 12;
+        PUT((unsigned)(i * 7) & 255u, w);
+    }
+    PUT(257, 12);
+    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_OK);
+    TN_CHECK(len == 5000);
+    for (i = 0; i < 5000 && len == 5000; i++) TN_CHECK(out[i] == (uint8_t)((i * 7) & 255u));
+    /* the output buffer bounds decoding: a long stream into 10 bytes */
+    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, 10, &len, tab, lens) == TN_OK && len == 10);
+    /* pre-1991 LZW (LSB-first) is named, not misread */
+    s[0] = 0; s[1] = 1;
+    TN_CHECK(tn__tif_lzw(&t, s, 16, out, sizeof out, &len, tab, lens) == TN_ERR_FORMAT);
+#undef PUT
+}
+
 /* Names each test as it starts, so a crash or hang points at its test. */
 #define RUN(name) do { fprintf(stderr, "-- %s\n", #name); TN_RUN(name); } while (0)
 
@@ -1419,5 +1694,8 @@ int main(void)
     RUN(test_detail_sidecar);
     RUN(test_detail_and_colour_args);
     RUN(test_skeleton_blobs);
+    RUN(test_tiff_mutated);
+    RUN(test_tiff_hostile);
+    RUN(test_tiff_lzw_streams);
     return tn_test_summary("test_robust");
 }
