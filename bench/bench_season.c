@@ -8,8 +8,13 @@
    - hemisphere (paper Figure 7): Cfb at 46 N against the same climate shifted by six months at
      46 S on the same DEM: RMSE between month m and month m + 6 textures (0 = same sequence),
      next to the RMSE between months m and m + 6 at 46 N (how different the seasons are).
+   - real data (../shared/data/seasonal_slovenia, Sentinel-2 NDVI, cloud and no-data masks): the
+     procedural texturer's greenness (Cfb, Ljubljana normals at the patch's 664-801 m, no fit to
+     the images) against the masked mean NDVI of every 2017 frame under 30 % cloud; a linear map
+     green -> NDVI fitted on 2017 then predicts the 2015 frames (held out), next to the
+     same-month-of-2017 baseline (mean NDVI of 2017's frames in that calendar month).
    GRASS r.sun comparison: bench/compare_rsun.sh (needs grass). Prints `name: value unit` lines.
-   Usage: bench_season [threads]   (default 2) */
+   Usage: bench_season [threads] [ndvi]   (default 2; `ndvi` runs only the real-data part) */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
@@ -79,6 +84,97 @@ static double rmse_rgb(const tn_image *a, const tn_image *b)
     return sqrt(s / n);
 }
 
+/* Masked mean NDVI of one frame (cloud and no-data pixels left out); -2 if none is clear. */
+static double frame_ndvi(const char *stem)
+{
+    char p[512];
+    tn_image nd = {0, 0, 0, NULL}, cl = {0, 0, 0, NULL}, no = {0, 0, 0, NULL};
+    double s = 0;
+    size_t i, n, k = 0;
+    snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_ndvi.pfm", stem);
+    if (tn_image_load(data_path(p), &nd, NULL)) return -2;
+    snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_cloud.pgm", stem);
+    if (tn_image_load(data_path(p), &cl, NULL)) { tn_image_free(&nd); return -2; }
+    snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_nodata.pgm", stem);
+    if (tn_image_load(data_path(p), &no, NULL)) { tn_image_free(&nd); tn_image_free(&cl); return -2; }
+    n = (size_t)nd.width * nd.height;
+    if (cl.width == nd.width && cl.height == nd.height && no.width == nd.width && no.height == nd.height)
+        for (i = 0; i < n; i++)
+            if (cl.data[i] < 0.5f && no.data[i] < 0.5f && isfinite(nd.data[i])) s += nd.data[i], k++;
+    tn_image_free(&nd); tn_image_free(&cl); tn_image_free(&no);
+    return k ? s / k : -2;
+}
+
+static int ndvi_check(void)
+{
+    static const int first[12] = {0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334};
+    char line[256], stems[64][32];
+    float times[64];
+    int year[64], month[64], nf = 0, i;
+    double obs[64], green[64], sx = 0, sy = 0, sxx = 0, syy = 0, sxy = 0, a, b, r, mae_m = 0, mae_b = 0;
+    double msum[12] = {0}, mcnt[12] = {0};
+    int k17 = 0, k15 = 0;
+    FILE *f = fopen(data_path("seasonal_slovenia/frames.csv"), "r");
+    tn_image dem = {0, 0, 0, NULL}, out[64];
+    tn_season_state st[64];
+    tn_season_opts so;
+    tn_climate c;
+    if (!f || tn_image_load(data_path("seasonal_slovenia/dem_m.pfm"), &dem, NULL)) {
+        printf("# no seasonal_slovenia data\n");
+        if (f) fclose(f);
+        return 0;
+    }
+    while (fgets(line, sizeof line, f) && nf < 64) {
+        int y, mo, d;
+        double cf;
+        char stem[32];
+        if (sscanf(line, "%d-%d-%d%*[^,],%31[^,],%lf", &y, &mo, &d, stem, &cf) != 5 || cf > 0.3) continue;
+        if ((obs[nf] = frame_ndvi(stem)) < -1) continue;
+        snprintf(stems[nf], sizeof stems[nf], "%s", stem);
+        year[nf] = y;
+        month[nf] = mo - 1;
+        times[nf] = (float)((first[mo - 1] + d - 15) / (365.0 / 12.0));
+        nf++;
+    }
+    fclose(f);
+    memset(&so, 0, sizeof so);
+    so.insolation.dx = 10.0f;
+    so.detail = -1;
+    tn_climate_koppen("Cfb", &c);
+    if (tn_season_texture(&dem, &c, 45.87, NULL, times, nf, &so, out, st)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    for (i = 0; i < nf; i++) {
+        size_t q, n = (size_t)dem.width * dem.height;
+        double g = 0;
+        for (q = 0; q < n; q++) g += st[i].green.data[q];
+        green[i] = g / n;
+        tn_image_free(&out[i]);
+        tn_season_state_free(&st[i]);
+        if (year[i] != 2017) continue;
+        k17++;
+        sx += green[i]; sy += obs[i]; sxx += green[i] * green[i]; syy += obs[i] * obs[i]; sxy += green[i] * obs[i];
+        msum[month[i]] += obs[i];
+        mcnt[month[i]] += 1;
+    }
+    r = (sxy - sx * sy / k17) / sqrt((sxx - sx * sx / k17) * (syy - sy * sy / k17));
+    b = (sxy - sx * sy / k17) / (sxx - sx * sx / k17);
+    a = (sy - b * sx) / k17;
+    for (i = 0; i < nf; i++) {
+        if (year[i] != 2015 || !mcnt[month[i]]) continue;
+        k15++;
+        mae_m += fabs(a + b * green[i] - obs[i]);
+        mae_b += fabs(msum[month[i]] / mcnt[month[i]] - obs[i]);
+        printf("# %s: ndvi %.3f  model %.3f  same-month-2017 %.3f\n", stems[i], obs[i], a + b * green[i], msum[month[i]] / mcnt[month[i]]);
+    }
+    printf("ndvi_2017_frames: %d (cloud <= 30 %%)\n", k17);
+    printf("ndvi_2017_pearson_procedural_greenness: %.3f\n", r);
+    if (k15) {
+        printf("ndvi_2015_heldout_mae_procedural: %.3f (%d frames, green -> ndvi fitted on 2017)\n", mae_m / k15, k15);
+        printf("ndvi_2015_heldout_mae_same_month_2017: %.3f\n", mae_b / k15);
+    }
+    tn_image_free(&dem);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     int threads = argc > 1 ? atoi(argv[1]) : 2, m;
@@ -90,6 +186,8 @@ int main(int argc, char **argv)
     size_t i, n;
     float times[12];
     tn_image tex[12], texs[12];
+    if (argc > 2 && !strcmp(argv[2], "ndvi")) return ndvi_check();
+    if (threads < 1) threads = 2;
 
     printf("insolation_flat_max_rel_error: %.2e (7 latitudes x 12 months)\n", analytic_error(0, 1));
     printf("insolation_south30_max_rel_error_no_shadows: %.2e\n", analytic_error(30, 0));
@@ -165,5 +263,5 @@ int main(int argc, char **argv)
         tn_image_free(&crop);
     }
     tn_image_free(&dem);
-    return 0;
+    return ndvi_check();
 }
