@@ -19332,7 +19332,7 @@ typedef struct tn__season_job {
     const tn_image *dem, *ins, *slope, *noise, *shade;
     const tn_climate *clim;
     tn_season_opts o;
-    float pdd[TN__SEASON_LUT], snowfrac[TN__SEASON_LUT];
+    float pdd[TN__SEASON_LUT], snowfrac[TN__SEASON_LUT], cover[TN__SEASON_LUT];
     float tc[12 * TN__SEASON_SUB], pc[12 * TN__SEASON_SUB]; /* climate per step (station height), mm/day */
     int start;                                                /* first spin-up step */
     int row0;                                                 /* first row of the band being run */
@@ -19396,7 +19396,7 @@ static void tn__season_pixel(const tn__season_job *j, int x, int y, size_t pix)
         if (melt > swe) melt = swe;
         swe -= melt;
         if (swe > 5000.0f) swe = 5000.0f; /* a glacier: no point growing it further */
-        cover = 1.0f - expf(-swe / 15.0f);
+        cover = swe >= 150.0f ? 1.0f : tn__season_lut(j->cover, swe * 0.4f - 60.0f); /* 1 - exp(-swe / 15), 1 past 150 mm */
         pet = (1.0f - cover) * 0.17f * (t > 0.0f ? t : 0.0f) * dt;
         water = tn__clampf(water + p * (1.0f - sf) + melt - pet, 0.0f, cap);
         target = (1.0f - cover) * tn__smooth(2.0f, 14.0f, t) * tn__smooth(0.0f, 0.5f, water / cap);
@@ -19550,6 +19550,7 @@ TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climat
         double t = -60.0 + i * 0.05, sig = 4.0, z = t / sig;
         j->pdd[i] = (float)(sig * exp(-0.5 * z * z) / sqrt(2.0 * TN__SEASON_PI) + t * 0.5 * (1.0 + erf(z / sqrt(2.0))));
         j->snowfrac[i] = (float)(0.5 * (1.0 + erf((j->o.snow_temp - t) / (sig * sqrt(2.0)))));
+        j->cover[i] = (float)(1.0 - exp(-(i * 0.125) / 15.0)); /* snow cover of 0..300 mm SWE in 1/8 mm steps */
     }
     /* the climate per model step: linear between mid-month values, cyclic */
     {
