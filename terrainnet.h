@@ -75,6 +75,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@singan    multi-scale single-image GAN (SinGAN): random terrain of any size, refinement, upscaling
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
+    @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
     @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest
@@ -1648,6 +1649,117 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+
+/* ============================================================================================
+   @@season  seasonal terrain: insolation, climate, seasonal textures (paper 003)
+   A heightfield and a climate (12 monthly mean temperatures T and precipitations P, a latitude)
+   give the terrain's look for every month of the year.
+   Insolation: the daily direct-beam sum of extraterrestrial sunlight (no atmosphere) on each
+   pixel's slope, on the 15th of every month, in W h/m^2 per day. The sun's path comes from the
+   latitude, Spencer's declination and orbit-eccentricity series and the hour angle; the day is
+   cut into steps (15 min by default) and the cosine of incidence is integrated EXACTLY over each
+   step (it is a + b cos(w) + c sin(w) in the hour angle w), clipped at sunrise, sunset and the
+   moment the sun passes behind the pixel's own slope. Terrain shadows come from horizon angles
+   cast once per pixel in `directions` azimuths (ray marching over the heightfield with geometric
+   steps, stopped when no higher point can follow) and looked up per step. So a flat plane gives
+   the textbook daily extraterrestrial insolation and a tilted plane its closed form, to
+   rounding; GRASS r.sun's beam output is the real-DEM reference (docs/season.md).
+   Climate: a small CSV (docs/season.md) or a built-in Koppen preset (a named station's monthly
+   normals per group); temperature follows elevation at the lapse rate (-0.6 C / 100 m by
+   default) from the climate's reference height.
+   Seasonal texturer (no data files): a cyclic year of degree-day snow (snow below +1 C, melt
+   proportional to the positive temperature plus an insolation term, Hock 1999), vegetation
+   greenness from temperature and moisture with a memory, forest below the warmest-month 10 C
+   isotherm (the tree line), bare rock on steep slopes, colours measured from the real ground
+   textures of ../shared/data/textures. Its state can be read at any time of the year, so frames
+   between months follow the snow and vegetation, not a cross-fade of two pictures.
+   ============================================================================================ */
+
+/* Zero = default. */
+typedef struct tn_insolation_opts {
+    float dx, dy;            /* pixel spacing in metres (heights must be metres); 0 = 1, dy 0 = dx */
+    int month;               /* 1..12: that month only (one channel); 0 = all twelve (12 channels) */
+    int day;                 /* day of the month the sun path is taken on; 0 = 15 */
+    float step_minutes;      /* time step of the shadow test; 0 = 15 (r.sun's default is 30) */
+    int directions;          /* horizon azimuths; 0 = 32 */
+    float max_distance;      /* horizon search radius in metres; 0 = the whole map */
+    int no_shadows;          /* 1: slope and aspect only, no terrain horizon */
+    float solar_constant;    /* W/m^2; 0 = 1367 (as r.sun) */
+} tn_insolation_opts;
+
+/* Fills *o with the defaults (what zero fields mean). */
+TN_API void tn_insolation_defaults(tn_insolation_opts *o);
+/* Daily direct-beam insolation (W h/m^2 per day) on channel 0 of dem (heights in metres, finite,
+   at least 2 x 2) at latitude_deg (-90..90; south negative; row 0 is north). *out (allocated
+   here) has 12 channels, channel m = month m + 1, or one channel with opts->month. Threaded,
+   bit-identical for any thread count; progress "insolation". */
+TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out);
+/* Sun on day_of_year (1..366): declination (radians) and the orbit's eccentricity factor
+   (Spencer 1971). Either output may be NULL. */
+TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity);
+/* Day of the year of `day` in `month` (1..12) of a non-leap year. */
+TN_API int tn_day_of_year(int month, int day);
+
+/* A year of climate: monthly means. Temperatures hold at `elevation` metres. */
+typedef struct tn_climate {
+    float t[12];             /* mean air temperature, degrees C, January first */
+    float p[12];             /* precipitation, mm per month */
+    float latitude;          /* degrees, south negative; valid when has_latitude */
+    int has_latitude;
+    float elevation;         /* reference height of t in metres (the station's) */
+    char name[64];           /* preset code and station, or the file name */
+} tn_climate;
+
+/* Checks a climate: finite values, -90 <= T <= 60, 0 <= P <= 5000, |latitude| <= 90. */
+TN_API tn_status tn_climate_check(const tn_climate *c);
+/* Parses the CSV text of docs/season.md ("month,t_c,p_mm" rows for months 1..12, each once;
+   optional "latitude,L" and "elevation,H" rows; '#' comments). A missing month, a NaN, an
+   unknown row or |latitude| > 90 fails with a message naming the line. name may be NULL. */
+TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out);
+TN_API tn_status tn_climate_load(const char *path, tn_climate *out);
+/* Built-in Koppen presets ("Af", "Aw", "BWh", "Csa", "Cfb", "Dfb", "Dfc", "ET"; a group letter
+   "A".."E" picks the first of its group). Unknown codes fail with TN_ERR_INVALID_ARG. */
+TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out);
+/* The i-th preset's code (i from 0), or NULL past the end. */
+TN_API const char *tn_climate_koppen_code(int i);
+/* Temperature of month m (0..11) at height h (metres): t[m] + lapse_rate * (h - elevation);
+   lapse_rate 0 = -0.006 C/m. */
+TN_API float tn_climate_temperature(const tn_climate *c, int month, float height, float lapse_rate);
+
+/* Zero = default. */
+typedef struct tn_season_opts {
+    tn_insolation_opts insolation; /* how insolation is computed when none is given (dx, dy also
+                                      give the slopes here; month is ignored) */
+    float lapse_rate;        /* C per metre; 0 = -0.006 */
+    float melt_factor;       /* degree-day snow melt, mm / (C day); 0 = 2 */
+    float radiation_factor;  /* extra melt per mean W/m^2 of insolation, mm m^2 / (W C day); 0 = 0.006 */
+    float snow_temp;         /* precipitation falls as snow below this, C; 0 = 1 */
+    float rock_slope;        /* degrees where bare rock takes over (half-way); 0 = 40 */
+    float shade;             /* 0..1 hillshade mixed into the colours (0 = flat albedo) */
+    float detail;            /* 0..1 strength of the fine noise that breaks up the zones; 0 = 0.5, < 0 = none */
+    uint64_t seed;           /* of the detail noise */
+} tn_season_opts;
+
+/* Per-pixel seasonal state at one time of the year. */
+typedef struct tn_season_state {
+    tn_image snow;           /* snow water equivalent, mm */
+    tn_image green;          /* vegetation greenness 0..1 */
+} tn_season_state;
+
+TN_API void tn_season_defaults(tn_season_opts *o);
+/* Procedural seasonal textures of dem (metres) under climate at `count` times of the year:
+   times[i] in months from mid-January (0 = Jan 15, 1 = Feb 15, 11.5 = Dec 30; taken modulo 12).
+   insolation: 12-channel tn_insolation output for this dem, or NULL to compute it (latitude
+   from latitude_deg if finite, else the climate's; neither fails). out[i] (RGB in [0, 1],
+   allocated here) and state[i] (may be NULL) are filled for each time. A wrong-sized insolation
+   fails with TN_ERR_SHAPE. Progress "season". */
+TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
+                                   const tn_image *insolation, const float *times, int count,
+                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state);
+TN_API void tn_season_state_free(tn_season_state *s);
+/* A preview sheet: the images side by side in `columns` columns (0 = 4), each scaled to
+   `cell` pixels wide (0 = 256), 4 px gaps. *out allocated here. */
+TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out);
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -21857,6 +21969,884 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
     *share = n ? (double)good / n : 0.0;
     if (count) *count = n;
     return TN_OK;
+}
+
+/* --------------------------------------------------------------------------------------------
+   >>season  (@@season implementation)
+   Insolation runs row by row over the thread pool: each pixel casts its horizon in every
+   direction into a small per-thread buffer, then sums its 12 months, so memory stays at a few
+   rows whatever the map size. The sun's per-step direction and the exact step integrals of
+   sin/cos are shared by all pixels of a month; a pixel only adds its normal's three
+   coefficients.
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__SEASON_PI 3.14159265358979323846
+#define TN__HORIZON_GROWTH 1.15 /* distance ratio of successive far horizon samples */
+
+TN_API void tn_insolation_defaults(tn_insolation_opts *o)
+{
+    if (o->dx <= 0) o->dx = 1.0f;
+    if (o->dy <= 0) o->dy = o->dx;
+    if (o->day <= 0) o->day = 15;
+    if (o->step_minutes <= 0) o->step_minutes = 15.0f;
+    if (o->directions <= 0) o->directions = 32;
+    if (o->solar_constant <= 0) o->solar_constant = 1367.0f;
+}
+
+TN_API int tn_day_of_year(int month, int day)
+{
+    static const int first[12] = {0, 31, 59, 90, 120, 151, 181, 212, 243, 273, 304, 334};
+    month = tn__clampi(month, 1, 12);
+    return first[month - 1] + day;
+}
+
+TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity)
+{
+    double g = 2.0 * TN__SEASON_PI * (double)(day_of_year - 1) / 365.0;
+    if (declination)
+        *declination = 0.006918 - 0.399912 * cos(g) + 0.070257 * sin(g) - 0.006758 * cos(2 * g) + 0.000907 * sin(2 * g) -
+                       0.002697 * cos(3 * g) + 0.00148 * sin(3 * g);
+    if (eccentricity) *eccentricity = 1.000110 + 0.034221 * cos(g) + 0.001280 * sin(g) + 0.000719 * cos(2 * g) + 0.000077 * sin(2 * g);
+}
+
+/* One time step of a month, clipped to the hours the sun is above the horizontal: hour angles
+   [a, b], the exact integrals of 1, cos and sin over it, and the sun at its middle (tangent of the
+   elevation, horizon direction k and the weight of k + 1). */
+typedef struct tn__sun_step {
+    double a, b;
+    float d, dsin, dcos; /* b - a, sin b - sin a, cos b - cos a */
+    float tan_el, w;
+    int k;
+} tn__sun_step;
+
+typedef struct tn__sun_month {
+    double sd, cd;        /* sin and cos of the declination */
+    double scale;         /* solar constant x eccentricity x 24 h / 2 pi: W h/m^2 per radian */
+    double ws, dstep;     /* sunset hour angle; step length */
+    int first;            /* index of steps[0] among the day's steps from -pi */
+    int nsteps;
+    tn__sun_step *steps;
+} tn__sun_month;
+
+typedef struct tn__insol_job {
+    const float *h;
+    int w, ht, nm, dirs, nsamp;
+    float dx, dy, hmax;
+    double sphi, cphi;
+    const int *ix, *iy;           /* [dirs][nsamp] whole-pixel offsets of the horizon samples, */
+    const float *fx, *fy, *inv_t; /* their bilinear weights and 1 / distance (1/m) */
+    const unsigned char *need;    /* [dirs] the sun shines from this direction on some day */
+    const tn__sun_month *months;
+    int no_shadows;
+    float *hbuf;                  /* [threads][w * dirs] */
+    float *out;
+    int row0, row1;
+} tn__insol_job;
+
+/* Sun at hour angle w: tangent of its elevation and horizon direction index + weight. */
+static void tn__sun_at(double sphi, double cphi, double sd, double cd, double w, int dirs, float *tan_el, int *k, float *wt)
+{
+    double e = -cd * sin(w), n = cphi * sd - sphi * cd * cos(w), u = sphi * sd + cphi * cd * cos(w);
+    double hz = sqrt(e * e + n * n), az = atan2(e, n), f;
+    *tan_el = (float)(hz > 1e-12 ? u / hz : 1e30);
+    if (az < 0) az += 2.0 * TN__SEASON_PI;
+    f = az / (2.0 * TN__SEASON_PI) * dirs;
+    *k = (int)floor(f);
+    *wt = (float)(f - *k);
+    if (*k >= dirs) *k -= dirs;
+    if (*k < 0) *k = 0;
+}
+
+/* Tangent of the horizon elevation from every pixel of row y in direction k, into
+   hz[x * dirs + k]; -1e30 where a ray leaves the map at once (nothing blocks). A sample's offset
+   from its pixel is the same for every pixel, so its integer part and bilinear weights are
+   tabulated, and a direction is swept along the whole row so neighbouring pixels read
+   neighbouring memory. A ray stops at the map's edge or where even the map's highest point
+   could not rise above the horizon found so far. */
+static void tn__insol_horizon(const tn__insol_job *j, int y, int k, float *hz)
+{
+    const float *h = j->h;
+    size_t o = (size_t)k * j->nsamp;
+    const int *ix = j->ix + o, *iy = j->iy + o;
+    const float *fx = j->fx + o, *fy = j->fy + o, *it = j->inv_t + o;
+    int x, s, w = j->w;
+    for (x = 0; x < w; x++) {
+        float h0 = h[(size_t)y * w + x], best = -1e30f, rise = j->hmax - h0;
+        for (s = 0; s < j->nsamp; s++) {
+            int cx = x + ix[s], cy = y + iy[s], cx1, cy1;
+            const float *p, *q;
+            float t;
+            if (cx < 0 || cy < 0 || cx > w - 1 || cy > j->ht - 1 || rise * it[s] <= best) break;
+            cx1 = cx < w - 1 ? 1 : 0;
+            cy1 = cy < j->ht - 1 ? w : 0;
+            p = h + (size_t)cy * w + cx;
+            q = p + cy1;
+            t = ((p[0] + (p[cx1] - p[0]) * fx[s]) * (1.0f - fy[s]) + (q[0] + (q[cx1] - q[0]) * fx[s]) * fy[s] - h0) * it[s];
+            if (t > best) best = t;
+        }
+        hz[(size_t)x * j->dirs + k] = best;
+    }
+}
+
+/* Daily sum of max(0, A + B cos w + C sin w) while the sun is up and above the pixel's horizon.
+   The positive part of the sinusoid is the arc |w - psi| < alpha (mod 2 pi); its overlap with the
+   daylight [-ws, ws] is at most two intervals. Without shadows each is one closed form; with
+   them the steps inside an interval use the month's shared integrals and the (at most two)
+   steps it cuts are integrated exactly between the cut points, the shadow tested at the lit
+   part's middle. */
+static double tn__insol_day(const tn__insol_job *j, const tn__sun_month *m, double A, double B, double C, const float *hz)
+{
+    const double twopi = 2.0 * TN__SEASON_PI;
+    double R = sqrt(B * B + C * C), psi = 0, alpha = TN__SEASON_PI, sum = 0, lo[3], hi[3];
+    int nint = 0, c, s;
+    if (m->nsteps == 0) return 0.0;
+    if (R <= 1e-12 || A >= R) {
+        if (A <= 0) return 0.0;
+        lo[0] = -m->ws;
+        hi[0] = m->ws;
+        nint = 1;
+    } else {
+        if (A <= -R) return 0.0;
+        alpha = acos(-A / R);
+        psi = atan2(C, B);
+        for (c = -1; c <= 1; c++) {
+            double l = psi + c * twopi - alpha, h = psi + c * twopi + alpha;
+            if (l < -m->ws) l = -m->ws;
+            if (h > m->ws) h = m->ws;
+            if (h > l) lo[nint] = l, hi[nint] = h, nint++;
+        }
+    }
+    for (c = 0; c < nint; c++) {
+        int s0, s1;
+        if (j->no_shadows) {
+            sum += A * (hi[c] - lo[c]) + B * (sin(hi[c]) - sin(lo[c])) - C * (cos(hi[c]) - cos(lo[c]));
+            continue;
+        }
+        s0 = (int)floor((lo[c] + TN__SEASON_PI) / m->dstep) - m->first;
+        s1 = (int)floor((hi[c] + TN__SEASON_PI) / m->dstep) - m->first;
+        if (s0 < 0) s0 = 0;
+        if (s1 > m->nsteps - 1) s1 = m->nsteps - 1;
+        for (s = s0; s <= s1; s++) {
+            const tn__sun_step *st = &m->steps[s];
+            double l = st->a > lo[c] ? st->a : lo[c], h = st->b < hi[c] ? st->b : hi[c];
+            float te = st->tan_el, w = st->w;
+            int k = st->k, k1;
+            if (h <= l) continue;
+            if (l == st->a && h == st->b) {
+                k1 = k + 1 == j->dirs ? 0 : k + 1;
+                if (te >= hz[k] + (hz[k1] - hz[k]) * w) sum += A * st->d + B * st->dsin - C * st->dcos;
+                continue;
+            }
+            tn__sun_at(j->sphi, j->cphi, m->sd, m->cd, 0.5 * (l + h), j->dirs, &te, &k, &w);
+            k1 = k + 1 == j->dirs ? 0 : k + 1;
+            if (te >= hz[k] + (hz[k1] - hz[k]) * w) sum += A * (h - l) + B * (sin(h) - sin(l)) - C * (cos(h) - cos(l));
+        }
+    }
+    return sum * m->scale;
+}
+
+static void tn__insol_rows(void *ctx, int ith, int nth)
+{
+    const tn__insol_job *j = (const tn__insol_job *)ctx;
+    float *hzrow = j->hbuf + (size_t)ith * j->dirs * j->w;
+    int x, y, mo, k;
+    for (y = j->row0 + ith; y < j->row1; y += nth) {
+        if (!j->no_shadows)
+            for (k = 0; k < j->dirs; k++) {
+                if (j->need[k]) tn__insol_horizon(j, y, k, hzrow);
+                else for (x = 0; x < j->w; x++) hzrow[(size_t)x * j->dirs + k] = -1e30f;
+            }
+        const float *r = j->h + (size_t)y * j->w;
+        const float *up = y > 0 ? r - j->w : r, *dn = y < j->ht - 1 ? r + j->w : r;
+        float ry = (y > 0 && y < j->ht - 1 ? 2.0f : 1.0f) * j->dy;
+        for (x = 0; x < j->w; x++) {
+            int xl = x > 0 ? x - 1 : x, xr = x < j->w - 1 ? x + 1 : x;
+            double gx = (r[xr] - r[xl]) / ((double)(xr - xl) * j->dx), gs = (dn[x] - up[x]) / (double)ry;
+            double inv = 1.0 / sqrt(gx * gx + gs * gs + 1.0), nE = -gx * inv, nN = gs * inv, nU = inv;
+            float *o = j->out + ((size_t)y * j->w + x) * j->nm;
+            const float *hz = hzrow + (size_t)x * j->dirs;
+            for (mo = 0; mo < j->nm; mo++) {
+                const tn__sun_month *m = &j->months[mo];
+                double A = m->sd * (nN * j->cphi + nU * j->sphi), B = m->cd * (nU * j->cphi - nN * j->sphi), C = -m->cd * nE;
+                o[mo] = (float)tn__insol_day(j, m, A, B, C, hz);
+            }
+        }
+    }
+}
+
+TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out)
+{
+    static const int mdays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+    tn_insolation_opts o;
+    tn__insol_job j;
+    tn__sun_month months[12];
+    tn_image res = {0, 0, 0, NULL};
+    float *fx = NULL, *fy = NULL, *it = NULL, *hbuf = NULL, *h = NULL;
+    int *ix = NULL, *iy = NULL;
+    unsigned char *need = NULL;
+    double phi, dstep, tmax, base;
+    size_t n, i;
+    int mo, nm, m0, s, k, nthr, band;
+    tn_status st = TN_OK;
+    memset(months, 0, sizeof months);
+    if (!dem || !out) return tn__fail(TN_ERR_INVALID_ARG, "insolation: NULL argument");
+    if (!dem->data || dem->width < 2 || dem->height < 2 || dem->channels < 1)
+        return tn__fail(TN_ERR_EMPTY, "insolation: the heightfield must be at least 2 x 2 (got %d x %d)", dem->width, dem->height);
+    if (!(latitude_deg >= -90.0 && latitude_deg <= 90.0))
+        return tn__fail(TN_ERR_INVALID_ARG, "insolation: latitude %g is outside -90..90", latitude_deg);
+    if (opts) o = *opts;
+    else memset(&o, 0, sizeof o);
+    if (!(o.dx >= 0 && o.dy >= 0 && o.step_minutes >= 0 && o.max_distance >= 0 && o.solar_constant >= 0) ||
+        !isfinite(o.dx) || !isfinite(o.dy) || !isfinite(o.step_minutes) || !isfinite(o.max_distance) || !isfinite(o.solar_constant))
+        return tn__fail(TN_ERR_INVALID_ARG, "insolation: spacing, step, distance and solar constant must be finite and >= 0");
+    if (o.month < 0 || o.month > 12) return tn__fail(TN_ERR_INVALID_ARG, "insolation: month %d is not 1..12 (0 = all)", o.month);
+    if (o.directions < 0 || o.directions > 1024) return tn__fail(TN_ERR_INVALID_ARG, "insolation: directions %d is not 4..1024", o.directions);
+    if (o.directions && o.directions < 4) return tn__fail(TN_ERR_INVALID_ARG, "insolation: at least 4 horizon directions (got %d)", o.directions);
+    if (o.step_minutes > 720) return tn__fail(TN_ERR_INVALID_ARG, "insolation: a time step of %g min is over half a day", o.step_minutes);
+    tn_insolation_defaults(&o);
+    nm = o.month ? 1 : 12;
+    m0 = o.month ? o.month - 1 : 0;
+    for (mo = m0; mo < m0 + nm; mo++)
+        if (o.day > mdays[mo]) return tn__fail(TN_ERR_INVALID_ARG, "insolation: day %d does not exist in month %d", o.day, mo + 1);
+    n = (size_t)dem->width * dem->height;
+    if (!(h = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < n; i++) {
+        h[i] = dem->data[i * dem->channels];
+        if (!isfinite(h[i])) {
+            TN_FREE(h);
+            return tn__fail(TN_ERR_NUMERIC, "insolation: NaN/Inf height at pixel (%d, %d)", (int)(i % dem->width), (int)(i / dem->width));
+        }
+    }
+    memset(&j, 0, sizeof j);
+    j.h = h;
+    j.w = dem->width;
+    j.ht = dem->height;
+    j.nm = nm;
+    j.dx = o.dx;
+    j.dy = o.dy;
+    j.no_shadows = o.no_shadows;
+    j.dirs = o.directions;
+    phi = latitude_deg * TN__SEASON_PI / 180.0;
+    j.sphi = sin(phi);
+    j.cphi = cos(phi);
+    /* 90 degrees exactly: cos is 6e-17, the sun circles at a fixed height, which is right */
+    j.hmax = h[0];
+    for (i = 1; i < n; i++)
+        if (h[i] > j.hmax) j.hmax = h[i];
+    /* horizon samples: one pixel apart for the first 8, then 15 % further each */
+    base = o.dx < o.dy ? o.dx : o.dy;
+    tmax = sqrt((double)j.w * j.w * o.dx * o.dx + (double)j.ht * j.ht * o.dy * o.dy);
+    if (o.max_distance > 0 && o.max_distance < tmax) tmax = o.max_distance;
+    {
+        double t = base;
+        j.nsamp = 0;
+        while (t <= tmax && j.nsamp < 4096) { j.nsamp++; t = j.nsamp < 8 ? t + base : t * TN__HORIZON_GROWTH; }
+        if (j.nsamp < 1) j.nsamp = 1;
+    }
+    nthr = tn_get_threads();
+    {
+        size_t tab = (size_t)j.dirs * j.nsamp;
+        if (!(fx = (float *)tn__alloc(tab * sizeof(float))) || !(fy = (float *)tn__alloc(tab * sizeof(float))) ||
+            !(it = (float *)tn__alloc(tab * sizeof(float))) || !(ix = (int *)tn__alloc(tab * sizeof(int))) ||
+            !(iy = (int *)tn__alloc(tab * sizeof(int))) || !(need = (unsigned char *)tn__calloc((size_t)j.dirs)) ||
+            !(hbuf = (float *)tn__alloc((size_t)nthr * j.dirs * j.w * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    }
+    for (k = 0; k < j.dirs; k++) {
+        double az = 2.0 * TN__SEASON_PI * k / j.dirs, t = base;
+        for (s = 0; s < j.nsamp; s++) {
+            size_t q = (size_t)k * j.nsamp + s;
+            double px = t * sin(az) / o.dx, py = -t * cos(az) / o.dy;
+            if (fabs(px) < 1e-9) px = 0; /* exactly along the grid: no neighbour needed */
+            if (fabs(py) < 1e-9) py = 0;
+            ix[q] = (int)floor(px);
+            iy[q] = (int)floor(py);
+            fx[q] = (float)(px - ix[q]);
+            fy[q] = (float)(py - iy[q]);
+            it[q] = (float)(1.0 / t);
+            t = s + 1 < 8 ? t + base : t * TN__HORIZON_GROWTH;
+        }
+    }
+    j.ix = ix;
+    j.iy = iy;
+    j.fx = fx;
+    j.fy = fy;
+    j.inv_t = it;
+    j.need = need;
+    j.hbuf = hbuf;
+    /* the months' sun paths, cut into steps of the day, clipped to sunrise .. sunset */
+    dstep = 2.0 * TN__SEASON_PI * o.step_minutes / 1440.0;
+    for (mo = 0; mo < nm; mo++) {
+        tn__sun_month *m = &months[mo];
+        double dec, ecc, ws, cw;
+        int nst = (int)ceil(2.0 * TN__SEASON_PI / dstep - 1e-9);
+        tn_sun_day(tn_day_of_year(m0 + mo + 1, o.day), &dec, &ecc);
+        m->sd = sin(dec);
+        m->cd = cos(dec);
+        m->scale = o.solar_constant * ecc * 24.0 / (2.0 * TN__SEASON_PI);
+        cw = -(j.sphi * m->sd) / (j.cphi * m->cd);
+        ws = j.cphi < 1e-12 ? (j.sphi * m->sd > 0 ? TN__SEASON_PI : 0.0) : cw <= -1.0 ? TN__SEASON_PI : cw >= 1.0 ? 0.0 : acos(cw);
+        if (!(m->steps = (tn__sun_step *)tn__alloc((size_t)nst * sizeof(tn__sun_step)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        m->ws = ws;
+        m->dstep = dstep;
+        m->first = -1;
+        for (s = 0; s < nst; s++) {
+            double a = -TN__SEASON_PI + s * dstep, b = a + dstep;
+            tn__sun_step *p = &m->steps[m->nsteps];
+            if (b > TN__SEASON_PI) b = TN__SEASON_PI;
+            if (a < -ws) a = -ws;
+            if (b > ws) b = ws;
+            if (b <= a) continue;
+            if (m->first < 0) m->first = s;
+            p->a = a;
+            p->b = b;
+            p->d = (float)(b - a);
+            p->dsin = (float)(sin(b) - sin(a));
+            p->dcos = (float)(cos(b) - cos(a));
+            tn__sun_at(j.sphi, j.cphi, m->sd, m->cd, 0.5 * (a + b), j.dirs, &p->tan_el, &p->k, &p->w);
+            m->nsteps++;
+            {   /* the directions the sun passes through in this step (and one either side) */
+                int q, kk;
+                for (q = 0; q <= 8; q++) {
+                    float te, ww;
+                    tn__sun_at(j.sphi, j.cphi, m->sd, m->cd, a + (b - a) * q / 8.0, j.dirs, &te, &kk, &ww);
+                    need[kk] = need[(kk + 1) % j.dirs] = need[(kk + j.dirs - 1) % j.dirs] = need[(kk + 2) % j.dirs] = 1;
+                }
+            }
+        }
+    }
+    j.months = months;
+    if ((st = tn_image_create(&res, j.w, j.ht, nm))) goto done;
+    j.out = res.data;
+    /* bands of rows between progress reports; rows inside a band go to the threads in turn */
+    band = 16;
+    for (j.row0 = 0; j.row0 < j.ht; j.row0 += band) {
+        j.row1 = j.row0 + band < j.ht ? j.row0 + band : j.ht;
+        tn_parallel_run(tn__insol_rows, &j);
+        if ((st = tn__progress("insolation", (double)j.row1 / j.ht))) goto done;
+    }
+    *out = res;
+    res.data = NULL;
+done:
+    for (mo = 0; mo < 12; mo++) TN_FREE(months[mo].steps);
+    tn_image_free(&res);
+    TN_FREE(h);
+    TN_FREE(fx);
+    TN_FREE(fy);
+    TN_FREE(ix);
+    TN_FREE(iy);
+    TN_FREE(need);
+    TN_FREE(it);
+    TN_FREE(hbuf);
+    return st;
+}
+
+/* ---- climate ---- */
+
+TN_API tn_status tn_climate_check(const tn_climate *c)
+{
+    int m;
+    if (!c) return tn__fail(TN_ERR_INVALID_ARG, "climate: NULL");
+    for (m = 0; m < 12; m++) {
+        if (!isfinite(c->t[m]) || !isfinite(c->p[m])) return tn__fail(TN_ERR_NUMERIC, "climate %s: month %d has a NaN/Inf value", c->name, m + 1);
+        if (c->t[m] < -90.0f || c->t[m] > 60.0f)
+            return tn__fail(TN_ERR_INVALID_ARG, "climate %s: month %d temperature %g C is outside -90..60", c->name, m + 1, c->t[m]);
+        if (c->p[m] < 0.0f || c->p[m] > 5000.0f)
+            return tn__fail(TN_ERR_INVALID_ARG, "climate %s: month %d precipitation %g mm is outside 0..5000", c->name, m + 1, c->p[m]);
+    }
+    if (c->has_latitude && !(c->latitude >= -90.0f && c->latitude <= 90.0f))
+        return tn__fail(TN_ERR_INVALID_ARG, "climate %s: latitude %g is outside -90..90", c->name, c->latitude);
+    if (!isfinite(c->elevation) || c->elevation < -1000.0f || c->elevation > 9000.0f)
+        return tn__fail(TN_ERR_INVALID_ARG, "climate %s: reference elevation %g m is outside -1000..9000", c->name, c->elevation);
+    return TN_OK;
+}
+
+/* The fields of one CSV line (commas, optional spaces); returns how many, at most max. */
+static int tn__climate_fields(const char *s, size_t n, const char **fb, size_t *fl, int max)
+{
+    int k = 0;
+    size_t i = 0;
+    while (i <= n && k < max + 1) {
+        size_t b = i, e;
+        while (i < n && s[i] != ',') i++;
+        e = i;
+        while (b < e && tn__io_space((unsigned char)s[b])) b++;
+        while (e > b && tn__io_space((unsigned char)s[e - 1])) e--;
+        if (k < max) { fb[k] = s + b; fl[k] = e - b; }
+        k++;
+        i++;
+    }
+    return k;
+}
+
+TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out)
+{
+    tn_climate c;
+    int seen[12] = {0}, line = 0, m;
+    size_t i = 0;
+    if (!text || !out) return tn__fail(TN_ERR_INVALID_ARG, "climate: NULL argument");
+    memset(&c, 0, sizeof c);
+    snprintf(c.name, sizeof c.name, "%s", name ? name : "climate");
+    while (i < size) {
+        const char *fb[4];
+        size_t fl[4], b = i, e;
+        double v[3];
+        int nf;
+        while (i < size && text[i] != '\n') i++;
+        e = i++;
+        line++;
+        while (b < e && tn__io_space((unsigned char)text[b])) b++;
+        if (b == e || text[b] == '#') continue;
+        nf = tn__climate_fields(text + b, e - b, fb, fl, 4);
+        if (tn__io_token_is(fb[0], fl[0], "month")) continue; /* the header row */
+        if (tn__io_token_is(fb[0], fl[0], "latitude") || tn__io_token_is(fb[0], fl[0], "elevation")) {
+            int lat = tn__io_token_is(fb[0], fl[0], "latitude");
+            if (nf != 2 || !tn__io_number(fb[1], fl[1], &v[0]))
+                return tn__fail(TN_ERR_FORMAT, "%s:%d: expected \"%s,<number>\"", c.name, line, lat ? "latitude" : "elevation");
+            if (!isfinite(v[0])) return tn__fail(TN_ERR_NUMERIC, "%s:%d: %s is NaN/Inf", c.name, line, lat ? "latitude" : "elevation");
+            if (lat && (v[0] < -90.0 || v[0] > 90.0)) return tn__fail(TN_ERR_INVALID_ARG, "%s:%d: latitude %g is outside -90..90", c.name, line, v[0]);
+            if (lat) c.latitude = (float)v[0], c.has_latitude = 1;
+            else c.elevation = (float)v[0];
+            continue;
+        }
+        if (nf != 3 || !tn__io_number(fb[0], fl[0], &v[0]) || !tn__io_number(fb[1], fl[1], &v[1]) || !tn__io_number(fb[2], fl[2], &v[2]))
+            return tn__fail(TN_ERR_FORMAT, "%s:%d: expected \"month,t_c,p_mm\" (three numbers), \"latitude,L\" or \"elevation,H\"", c.name, line);
+        if (!(v[0] >= 1 && v[0] <= 12) || v[0] != floor(v[0])) return tn__fail(TN_ERR_FORMAT, "%s:%d: month %g is not 1..12", c.name, line, v[0]);
+        m = (int)v[0] - 1;
+        if (seen[m]) return tn__fail(TN_ERR_FORMAT, "%s:%d: month %d given twice", c.name, line, m + 1);
+        if (!isfinite(v[1]) || !isfinite(v[2])) return tn__fail(TN_ERR_NUMERIC, "%s:%d: month %d has a NaN/Inf value", c.name, line, m + 1);
+        seen[m] = 1;
+        c.t[m] = (float)v[1];
+        c.p[m] = (float)v[2];
+    }
+    for (m = 0; m < 12; m++)
+        if (!seen[m]) {
+            int k, have = 0;
+            for (k = 0; k < 12; k++) have += seen[k];
+            return tn__fail(TN_ERR_FORMAT, "%s: a climate needs all 12 months; %d given, month %d is missing", c.name, have, m + 1);
+        }
+    {
+        tn_status st = tn_climate_check(&c);
+        if (st) return st;
+    }
+    *out = c;
+    return TN_OK;
+}
+
+TN_API tn_status tn_climate_load(const char *path, tn_climate *out)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    tn_status st;
+    if (!path || !out) return tn__fail(TN_ERR_INVALID_ARG, "climate: NULL argument");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    st = tn_climate_parse((const char *)buf, n, path, out);
+    TN_FREE(buf);
+    return st;
+}
+
+/* Monthly normals of one station per Koppen type, rounded from the published normals (sources
+   in docs/season.md); typical values to start from, not a data set. */
+typedef struct tn__koppen_preset {
+    const char *code, *station;
+    float lat, elev, t[12], p[12];
+} tn__koppen_preset;
+
+static const tn__koppen_preset tn__koppen[] = {
+    {"Af", "Singapore (Changi)", 1.37f, 15.0f,
+     {26.6f, 27.1f, 27.6f, 28.0f, 28.4f, 28.4f, 28.0f, 27.9f, 27.7f, 27.6f, 27.0f, 26.5f},
+     {242, 162, 185, 179, 172, 162, 158, 176, 169, 194, 256, 288}},
+    {"Aw", "Darwin Airport", -12.42f, 30.0f,
+     {28.6f, 28.3f, 28.4f, 28.3f, 27.0f, 25.3f, 25.0f, 25.8f, 27.6f, 28.9f, 29.3f, 29.1f},
+     {427, 374, 317, 102, 21, 1, 1, 5, 15, 70, 142, 249}},
+    {"BWh", "Cairo", 30.05f, 23.0f,
+     {14.0f, 15.3f, 17.6f, 21.1f, 24.9f, 27.2f, 28.0f, 28.0f, 26.3f, 23.6f, 19.3f, 15.6f},
+     {5, 4, 4, 1, 0, 0, 0, 0, 0, 1, 4, 6}},
+    {"Cfb", "Ljubljana", 46.07f, 299.0f,
+     {-0.3f, 1.6f, 6.0f, 10.6f, 15.6f, 19.1f, 21.1f, 20.4f, 15.6f, 10.9f, 5.0f, 0.8f},
+     {69, 70, 89, 98, 109, 143, 113, 133, 147, 144, 129, 100}},
+    {"Csa", "Rome (Ciampino)", 41.80f, 105.0f,
+     {7.5f, 8.2f, 10.2f, 12.6f, 17.2f, 21.1f, 24.1f, 24.5f, 20.8f, 16.4f, 11.4f, 8.4f},
+     {67, 73, 58, 81, 53, 34, 19, 37, 73, 113, 115, 81}},
+    {"Dfc", "Fairbanks", 64.80f, 133.0f,
+     {-21.9f, -18.6f, -10.7f, 0.1f, 9.5f, 15.6f, 16.9f, 13.8f, 7.8f, -3.7f, -15.1f, -19.9f},
+     {14, 11, 8, 7, 16, 36, 53, 48, 28, 22, 17, 17}},
+    {"Dfb", "Moscow", 55.83f, 156.0f,
+     {-6.5f, -6.7f, -1.0f, 6.7f, 13.2f, 17.0f, 19.2f, 17.0f, 11.3f, 5.6f, -1.2f, -5.2f},
+     {52, 41, 35, 37, 49, 80, 85, 82, 68, 71, 55, 52}},
+    {"ET", "Utqiagvik (Barrow)", 71.29f, 9.0f,
+     {-25.4f, -27.2f, -26.0f, -17.9f, -6.3f, 2.3f, 5.0f, 3.9f, 0.4f, -8.4f, -17.5f, -23.0f},
+     {4, 4, 3, 4, 4, 7, 27, 26, 16, 11, 6, 4}},
+};
+#define TN__KOPPEN_N ((int)(sizeof tn__koppen / sizeof tn__koppen[0]))
+
+TN_API const char *tn_climate_koppen_code(int i) { return i >= 0 && i < TN__KOPPEN_N ? tn__koppen[i].code : NULL; }
+
+TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out)
+{
+    int i, m;
+    if (!code || !out) return tn__fail(TN_ERR_INVALID_ARG, "koppen: NULL argument");
+    for (i = 0; i < TN__KOPPEN_N; i++) {
+        const tn__koppen_preset *k = &tn__koppen[i];
+        size_t n = strlen(code);
+        if (tn__io_token_is(code, n, k->code) || (n == 1 && tn__io_lower((unsigned char)code[0]) == tn__io_lower((unsigned char)k->code[0]))) {
+            memset(out, 0, sizeof *out);
+            for (m = 0; m < 12; m++) out->t[m] = k->t[m], out->p[m] = k->p[m];
+            out->latitude = k->lat;
+            out->has_latitude = 1;
+            out->elevation = k->elev;
+            snprintf(out->name, sizeof out->name, "%s %s", k->code, k->station);
+            return TN_OK;
+        }
+    }
+    return tn__fail(TN_ERR_INVALID_ARG, "koppen: unknown preset \"%s\" (Af, Aw, BWh, Cfb, Csa, Dfc, Dfb, ET or a group letter A-E)", code);
+}
+
+TN_API float tn_climate_temperature(const tn_climate *c, int month, float height, float lapse_rate)
+{
+    if (lapse_rate == 0.0f) lapse_rate = -0.006f;
+    month = ((month % 12) + 12) % 12;
+    return c->t[month] + lapse_rate * (height - c->elevation);
+}
+
+/* ---- seasonal texturer ---- */
+
+TN_API void tn_season_defaults(tn_season_opts *o)
+{
+    tn_insolation_defaults(&o->insolation);
+    if (o->lapse_rate == 0.0f) o->lapse_rate = -0.006f;
+    if (o->melt_factor <= 0.0f) o->melt_factor = 2.0f;
+    if (o->radiation_factor <= 0.0f) o->radiation_factor = 0.006f;
+    if (o->snow_temp == 0.0f) o->snow_temp = 1.0f;
+    if (o->rock_slope <= 0.0f) o->rock_slope = 40.0f;
+    if (o->detail == 0.0f) o->detail = 0.5f;
+    if (o->detail < 0.0f) o->detail = 0.0f;
+}
+
+/* Mean colours (sRGB) of the real ground textures in ../shared/data/textures (docs/season.md:
+   grass_threejs_grasslight, rock_pebbles_gatys, sand_ripples, snow_surface, soil_cracked_mud);
+   forest and straw are mixtures of them (no forest photo there). */
+static const float tn__col_grass[3] = {0.383f, 0.519f, 0.131f};
+static const float tn__col_rock[3] = {0.524f, 0.519f, 0.541f};
+static const float tn__col_sand[3] = {0.661f, 0.596f, 0.489f};
+static const float tn__col_snow[3] = {0.718f, 0.754f, 0.815f};
+static const float tn__col_soil[3] = {0.647f, 0.600f, 0.577f};
+
+#define TN__SEASON_SUB 4      /* model steps per month (about a week) */
+#define TN__SEASON_LUT 2401   /* temperature tables: -60..60 C every 0.05 C */
+
+static float tn__smooth(float e0, float e1, float x)
+{
+    float t = tn__clampf((x - e0) / (e1 - e0), 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
+typedef struct tn__season_job {
+    const tn_image *dem, *ins, *slope, *noise, *shade;
+    const tn_climate *clim;
+    tn_season_opts o;
+    float pdd[TN__SEASON_LUT], snowfrac[TN__SEASON_LUT], cover[TN__SEASON_LUT];
+    float tc[12 * TN__SEASON_SUB], pc[12 * TN__SEASON_SUB]; /* climate per step (station height), mm/day */
+    int start;                                                /* first spin-up step */
+    int row0;                                                 /* first row of the band being run */
+    const float *times;
+    int count;
+    float ins_sx, ins_sy;                                     /* insolation map pixels per DEM pixel */
+    tn_image *out;
+    tn_season_state *state;
+} tn__season_job;
+
+static float tn__season_lut(const float *lut, float t)
+{
+    float f = (t + 60.0f) * 20.0f;
+    int i;
+    if (f <= 0.0f) return lut[0];
+    if (f >= (float)(TN__SEASON_LUT - 1)) return lut[TN__SEASON_LUT - 1];
+    i = (int)f;
+    return lut[i] + (lut[i + 1] - lut[i]) * (f - (float)i);
+}
+
+static void tn__season_pixel(const tn__season_job *j, int x, int y, size_t pix)
+{
+    const int ns = 12 * TN__SEASON_SUB;
+    const float dt = 365.0f / (float)ns, relax = 1.0f - expf(-dt / 20.0f), cap = 150.0f;
+    float ins[12], hist_swe[12 * TN__SEASON_SUB + 1], hist_g[12 * TN__SEASON_SUB + 1];
+    float h = j->dem->data[pix * j->dem->channels], slope = j->slope->data[pix];
+    float nz = j->noise ? j->noise->data[pix] - 0.5f : 0.0f;
+    float toff = j->o.lapse_rate * (h - j->clim->elevation) + 3.0f * j->o.detail * nz;
+    float swe = 0.0f, water = 0.5f * cap, g = 0.0f, twarm = -1e9f, wsum = 0.0f;
+    int m, s, i, c;
+    {   /* the insolation map may be coarser than the DEM: bilinear */
+        float fx = ((float)x + 0.5f) * j->ins_sx - 0.5f, fy = ((float)y + 0.5f) * j->ins_sy - 0.5f;
+        int iw = j->ins->width, ih = j->ins->height, x0, y0, x1, y1;
+        fx = tn__clampf(fx, 0.0f, (float)(iw - 1));
+        fy = tn__clampf(fy, 0.0f, (float)(ih - 1));
+        x0 = (int)fx; y0 = (int)fy;
+        x1 = x0 + 1 < iw ? x0 + 1 : x0;
+        y1 = y0 + 1 < ih ? y0 + 1 : y0;
+        fx -= (float)x0; fy -= (float)y0;
+        for (m = 0; m < 12; m++) {
+            float a = TN_PIXEL(j->ins, x0, y0, m), b = TN_PIXEL(j->ins, x1, y0, m), cc = TN_PIXEL(j->ins, x0, y1, m), d = TN_PIXEL(j->ins, x1, y1, m);
+            ins[m] = ((a + (b - a) * fx) * (1.0f - fy) + (cc + (d - cc) * fx) * fy) / 24.0f; /* mean W/m^2 */
+        }
+    }
+    for (m = 0; m < 12; m++) {
+        float t = j->clim->t[m] + toff;
+        if (t > twarm) twarm = t;
+    }
+    /* one spin-up year from the step after the warmest month (least snow), then the recorded
+       year from mid-January; history[k] is the state at k / SUB months after mid-January */
+    {
+    const int rec0 = ns + (ns - j->start) % ns; /* first step of the recorded year */
+    for (i = 0; i <= rec0 + ns; i++) {
+        int k = (j->start + i) % ns, rec = i - rec0;
+        int m0 = k / TN__SEASON_SUB;
+        float f = (float)(k % TN__SEASON_SUB) / (float)TN__SEASON_SUB;
+        float t = j->tc[k] + toff, p = j->pc[k] * dt, ir = ins[m0] + (ins[(m0 + 1) % 12] - ins[m0]) * f;
+        float pdd = tn__season_lut(j->pdd, t) * dt, sf = tn__season_lut(j->snowfrac, t);
+        float melt = (j->o.melt_factor + j->o.radiation_factor * ir) * pdd, cover, pet, target;
+        swe += p * sf;
+        if (melt > swe) melt = swe;
+        swe -= melt;
+        if (swe > 5000.0f) swe = 5000.0f; /* a glacier: no point growing it further */
+        cover = swe >= 150.0f ? 1.0f : tn__season_lut(j->cover, swe * 0.4f - 60.0f); /* 1 - exp(-swe / 15), 1 past 150 mm */
+        pet = (1.0f - cover) * 0.17f * (t > 0.0f ? t : 0.0f) * dt;
+        water = tn__clampf(water + p * (1.0f - sf) + melt - pet, 0.0f, cap);
+        target = (1.0f - cover) * tn__smooth(2.0f, 14.0f, t) * tn__smooth(0.0f, 0.5f, water / cap);
+        g += (target - g) * relax;
+        if (rec >= 0) {
+            wsum += water / cap;
+            hist_swe[rec] = swe;
+            hist_g[rec] = g;
+        }
+    }
+    }
+    wsum /= (float)(ns + 1);
+    for (c = 0; c < j->count; c++) {
+        float tm = fmodf(j->times[c], 12.0f), pos, fr, sw, gr, cover, steep, rock, veg, forest, arid, col[3], lum;
+        int k0;
+        if (tm < 0.0f) tm += 12.0f;
+        pos = tm * (float)TN__SEASON_SUB;
+        k0 = (int)pos;
+        if (k0 >= ns) k0 = ns - 1;
+        fr = pos - (float)k0;
+        sw = hist_swe[k0] + (hist_swe[k0 + 1] - hist_swe[k0]) * fr;
+        gr = hist_g[k0] + (hist_g[k0 + 1] - hist_g[k0]) * fr;
+        steep = 1.0f - tn__smooth(35.0f, 60.0f, slope);           /* snow slides off cliffs */
+        cover = (1.0f - expf(-sw / 15.0f)) * (0.15f + 0.85f * steep);
+        rock = tn__smooth(j->o.rock_slope - 10.0f, j->o.rock_slope + 10.0f, slope);
+        veg = tn__smooth(2.0f, 8.0f, twarm) * tn__smooth(0.05f, 0.4f, wsum);
+        forest = tn__smooth(9.0f, 12.0f, twarm) * tn__smooth(0.3f, 0.7f, wsum); /* tree line: warmest month 10 C */
+        arid = 1.0f - tn__smooth(0.05f, 0.5f, wsum);
+        if (twarm < 2.0f) arid = 0.0f;
+        for (s = 0; s < 3; s++) {
+            float straw = tn__col_grass[s] + (tn__col_sand[s] - tn__col_grass[s]) * 0.65f;
+            float grass = straw + (tn__col_grass[s] - straw) * gr;
+            float fgreen = tn__col_grass[s] * 0.5f, fdorm = 0.5f * fgreen + 0.25f * tn__col_soil[s];
+            float fcol = fdorm + (fgreen - fdorm) * (0.4f + 0.6f * gr); /* conifers keep some green */
+            float vcol = grass + (fcol - grass) * forest;
+            float bare = tn__col_soil[s] + (tn__col_sand[s] - tn__col_soil[s]) * arid;
+            float v;
+            if (twarm < 2.0f) bare = tn__col_rock[s] * 0.85f + tn__col_soil[s] * 0.15f;
+            v = bare + (vcol - bare) * veg * (1.0f - rock);
+            v += (tn__col_rock[s] - v) * rock;
+            v += (tn__col_snow[s] - v) * cover;
+            col[s] = v;
+        }
+        lum = 1.0f + 0.16f * j->o.detail * nz;
+        if (j->shade) lum *= 1.0f - j->o.shade + j->o.shade * j->shade->data[pix] / 0.7071f;
+        for (s = 0; s < 3; s++) j->out[c].data[pix * 3 + s] = tn__clampf(col[s] * lum, 0.0f, 1.0f);
+        if (j->state) {
+            j->state[c].snow.data[pix] = sw;
+            j->state[c].green.data[pix] = gr;
+        }
+    }
+}
+
+static void tn__season_rows(void *ctx, size_t begin, size_t end)
+{
+    const tn__season_job *j = (const tn__season_job *)ctx;
+    size_t y;
+    int x;
+    for (y = begin + (size_t)j->row0; y < end + (size_t)j->row0; y++)
+        for (x = 0; x < j->dem->width; x++) tn__season_pixel(j, x, (int)y, y * (size_t)j->dem->width + (size_t)x);
+}
+
+TN_API void tn_season_state_free(tn_season_state *s)
+{
+    if (!s) return;
+    tn_image_free(&s->snow);
+    tn_image_free(&s->green);
+}
+
+TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
+                                   const tn_image *insolation, const float *times, int count,
+                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state)
+{
+    tn__season_job *j = NULL;
+    tn_image ins = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, slope = {0, 0, 0, NULL}, noise = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
+    tn_status st = TN_OK;
+    int i, k, m, made = 0;
+    size_t n;
+    if (!dem || !climate || !times || !out) return tn__fail(TN_ERR_INVALID_ARG, "season: NULL argument");
+    if (!dem->data || dem->width < 2 || dem->height < 2 || dem->channels < 1)
+        return tn__fail(TN_ERR_EMPTY, "season: the heightfield must be at least 2 x 2");
+    if (count < 1 || count > 10000) return tn__fail(TN_ERR_INVALID_ARG, "season: %d times (1..10000)", count);
+    for (i = 0; i < count; i++)
+        if (!isfinite(times[i])) return tn__fail(TN_ERR_NUMERIC, "season: time %d is NaN/Inf", i);
+    if ((st = tn_climate_check(climate))) return st;
+    if (!isfinite(latitude_deg)) {
+        if (!climate->has_latitude) return tn__fail(TN_ERR_INVALID_ARG, "season: no latitude (give one, or a climate with a latitude)");
+        latitude_deg = climate->latitude;
+    }
+    if (!(latitude_deg >= -90.0 && latitude_deg <= 90.0)) return tn__fail(TN_ERR_INVALID_ARG, "season: latitude %g is outside -90..90", latitude_deg);
+    if (insolation && (insolation->width != dem->width || insolation->height != dem->height || insolation->channels != 12 || !insolation->data))
+        return tn__fail(TN_ERR_SHAPE, "season: the insolation must be 12 channels of %d x %d (got %d channels of %d x %d)", dem->width,
+                        dem->height, insolation->channels, insolation->width, insolation->height);
+    n = (size_t)dem->width * dem->height;
+    if (!(j = (tn__season_job *)tn__calloc(sizeof *j))) return TN_ERR_OUT_OF_MEMORY;
+    if (opts) j->o = *opts;
+    if (!isfinite(j->o.lapse_rate) || !isfinite(j->o.melt_factor) || !isfinite(j->o.radiation_factor) || !isfinite(j->o.snow_temp) ||
+        !isfinite(j->o.rock_slope) || !isfinite(j->o.shade) || !isfinite(j->o.detail) || j->o.shade < 0.0f || j->o.shade > 1.0f ||
+        j->o.detail > 1.0f || j->o.rock_slope > 90.0f) {
+        st = tn__fail(TN_ERR_INVALID_ARG, "season: options must be finite, shade and detail at most 1, rock slope at most 90");
+        goto done;
+    }
+    tn_season_defaults(&j->o);
+    {
+        size_t q;
+        for (q = 0; q < n; q++)
+            if (!isfinite(dem->data[q * dem->channels])) { st = tn__fail(TN_ERR_NUMERIC, "season: NaN/Inf height at pixel %zu", q); goto done; }
+    }
+    if (!insolation) {
+        /* shadows and aspect at up to 1024 px: beyond that the year's insolation costs more than
+           the texture, and snow patterns follow slopes larger than a few pixels */
+        tn_insolation_opts io = j->o.insolation;
+        int side = dem->width > dem->height ? dem->width : dem->height;
+        io.month = 0;
+        if (side > 1024) {
+            int w = (int)((double)dem->width * 1024 / side + 0.5), h = (int)((double)dem->height * 1024 / side + 0.5);
+            if (w < 2) w = 2;
+            if (h < 2) h = 2;
+            if ((st = tn_image_resize(&small, dem, w, h, TN_RESIZE_AREA))) goto done;
+            io.dx = j->o.insolation.dx * (float)dem->width / (float)w;
+            io.dy = j->o.insolation.dy * (float)dem->height / (float)h;
+            st = tn_insolation(&small, latitude_deg, &io, &ins);
+        } else st = tn_insolation(dem, latitude_deg, &io, &ins);
+        if (st) goto done;
+        insolation = &ins;
+    }
+    j->ins = insolation;
+    j->ins_sx = (float)insolation->width / (float)dem->width;
+    j->ins_sy = (float)insolation->height / (float)dem->height;
+    if ((st = tn_image_slope(&slope, dem, j->o.insolation.dx, j->o.insolation.dy))) goto done;
+    if (j->o.detail > 0.0f) {
+        tn_perlin_opts po;
+        memset(&po, 0, sizeof po);
+        po.seed = j->o.seed;
+        po.octaves = 5;
+        po.frequency = (float)(dem->width > 32 ? dem->width / 16 : 2);
+        if ((st = tn_noise_perlin(&noise, dem->width, dem->height, &po))) goto done;
+        j->noise = &noise;
+    }
+    if (j->o.shade > 0.0f) {
+        tn_hillshade_opts ho;
+        memset(&ho, 0, sizeof ho);
+        ho.dx = j->o.insolation.dx;
+        ho.dy = j->o.insolation.dy;
+        if ((st = tn_image_hillshade(&shade, dem, &ho))) goto done;
+        j->shade = &shade;
+    }
+    /* tables of the expected positive degree-days and snow share per day for a month mean t,
+       daily temperatures spread normally with 4 C (Calov & Greve 2005) */
+    for (i = 0; i < TN__SEASON_LUT; i++) {
+        double t = -60.0 + i * 0.05, sig = 4.0, z = t / sig;
+        j->pdd[i] = (float)(sig * exp(-0.5 * z * z) / sqrt(2.0 * TN__SEASON_PI) + t * 0.5 * (1.0 + erf(z / sqrt(2.0))));
+        j->snowfrac[i] = (float)(0.5 * (1.0 + erf((j->o.snow_temp - t) / (sig * sqrt(2.0)))));
+        j->cover[i] = (float)(1.0 - exp(-(i * 0.125) / 15.0)); /* snow cover of 0..300 mm SWE in 1/8 mm steps */
+    }
+    /* the climate per model step: linear between mid-month values, cyclic */
+    {
+        int wm = 0;
+        for (k = 0; k < 12 * TN__SEASON_SUB; k++) {
+            int m0 = k / TN__SEASON_SUB, m1 = (m0 + 1) % 12;
+            float f = (float)(k % TN__SEASON_SUB) / (float)TN__SEASON_SUB;
+            j->tc[k] = climate->t[m0] + (climate->t[m1] - climate->t[m0]) * f;
+            j->pc[k] = (climate->p[m0] + (climate->p[m1] - climate->p[m0]) * f) * 12.0f / 365.0f;
+        }
+        for (m = 1; m < 12; m++)
+            if (climate->t[m] > climate->t[wm]) wm = m;
+        j->start = ((wm + 1) % 12) * TN__SEASON_SUB;
+    }
+    j->dem = dem;
+    j->slope = &slope;
+    j->clim = climate;
+    j->times = times;
+    j->count = count;
+    j->out = out;
+    j->state = state;
+    for (made = 0; made < count; made++) {
+        if ((st = tn_image_create(&out[made], dem->width, dem->height, 3))) goto done;
+        if (state) {
+            memset(&state[made], 0, sizeof state[made]);
+            if ((st = tn_image_create(&state[made].snow, dem->width, dem->height, 1)) ||
+                (st = tn_image_create(&state[made].green, dem->width, dem->height, 1))) { made++; goto done; }
+        }
+    }
+    for (j->row0 = 0; j->row0 < dem->height; j->row0 += 32) {
+        int y1 = j->row0 + 32 < dem->height ? j->row0 + 32 : dem->height;
+        tn_parallel_for((size_t)(y1 - j->row0), 1, tn__season_rows, j);
+        if ((st = tn__progress("season", (double)y1 / dem->height))) goto done;
+    }
+done:
+    if (st) for (i = 0; i < made; i++) {
+        tn_image_free(&out[i]);
+        if (state) tn_season_state_free(&state[i]);
+    }
+    tn_image_free(&ins);
+    tn_image_free(&small);
+    tn_image_free(&slope);
+    tn_image_free(&noise);
+    tn_image_free(&shade);
+    TN_FREE(j);
+    return st;
+}
+
+TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out)
+{
+    tn_image sheet = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
+    int i, rows, ch = 0, gap = 4, x, y, c;
+    tn_status st = TN_OK;
+    if (!images || !out || count < 1) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: no images");
+    if (columns < 0 || cell < 0 || cell > 8192) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: bad columns %d or cell %d", columns, cell);
+    if (!columns) columns = 4;
+    if (!cell) cell = 256;
+    if (columns > count) columns = count;
+    for (i = 0; i < count; i++) {
+        int h;
+        if (!images[i].data || images[i].width < 1 || images[i].height < 1 || (images[i].channels != 1 && images[i].channels != 3))
+            return tn__fail(TN_ERR_SHAPE, "season sheet: image %d is empty or not 1 or 3 channels", i);
+        h = (int)((double)images[i].height * cell / images[i].width + 0.5);
+        if (h < 1) h = 1;
+        if (h > ch) ch = h;
+    }
+    rows = (count + columns - 1) / columns;
+    if ((st = tn_image_create(&sheet, columns * cell + (columns + 1) * gap, rows * ch + (rows + 1) * gap, 3))) return st;
+    for (i = 0; i < (int)((size_t)sheet.width * sheet.height * 3); i++) sheet.data[i] = 1.0f;
+    for (i = 0; i < count; i++) {
+        int h = (int)((double)images[i].height * cell / images[i].width + 0.5), ox = gap + (i % columns) * (cell + gap), oy = gap + (i / columns) * (ch + gap);
+        if (h < 1) h = 1;
+        if ((st = tn_image_resize(&tmp, &images[i], cell, h, cell < images[i].width ? TN_RESIZE_AREA : TN_RESIZE_BILINEAR))) goto done;
+        for (y = 0; y < h; y++)
+            for (x = 0; x < cell; x++)
+                for (c = 0; c < 3; c++) TN_PIXEL(&sheet, ox + x, oy + y, c) = TN_PIXEL(&tmp, x, y, tmp.channels == 3 ? c : 0);
+        tn_image_free(&tmp);
+    }
+    *out = sheet;
+    sheet.data = NULL;
+done:
+    tn_image_free(&tmp);
+    tn_image_free(&sheet);
+    return st;
 }
 
 /* --------------------------------------------------------------------------------------------

@@ -422,5 +422,29 @@ if [ -n "$GDALPY" ]; then
 else
     skipped "GeoTIFF against GDAL (python3-gdal / gdal-bin not installed)"
 fi
+# insolation / season (@@season): errors, a procedural DEM, then a real one
+printf 'latitude,46\nelevation,300\nmonth,t_c,p_mm\n1,-0.3,69\n2,1.6,70\n3,6,89\n4,10.6,98\n5,15.6,109\n6,19.1,143\n7,21.1,113\n8,20.4,133\n9,15.6,147\n10,10.9,144\n11,5,129\n' > "$W/clim11.csv"
+cp "$W/clim11.csv" "$W/clim.csv"; printf '12,0.8,100\n' >> "$W/clim.csv"
+for c in insolation season; do
+    if $T $c --help 2>&1 | grep -q "usage: terrainnet $c"; then ok; else bad "$c --help"; fi
+done
+expect_error "insolation no lat" "needs .*lat DEG" $T insolation "$W/noise.png" -o "$W/ins"
+expect_error "insolation lat 91" "from -90 to 90" $T insolation "$W/noise.png" --lat 91 -o "$W/ins"
+expect_error "season no climate" "exactly one of" $T season "$W/noise.png" -o "$W/sea"
+expect_error "season 11 months" "month 12 is missing" $T season "$W/noise.png" --climate "$W/clim11.csv" -o "$W/sea"
+expect_error "season unknown koppen" "unknown preset" $T season "$W/noise.png" --koppen Qxx -o "$W/sea"
+if $T insolation "$W/noise.png" --lat 46 --spacing 30 -o "$W/ins" --step 30 > "$W/ins.txt" 2>/dev/null &&
+    [ "$(grep -c 'W h/m^2 per day' "$W/ins.txt")" = 12 ] && $T info "$W/ins_07.pfm" | grep -q "size: 96 x 64"; then ok;
+else bad "insolation year: $(cat "$W/ins.txt")"; fi
+if $T season "$W/noise.png" --spacing 30 --climate "$W/clim.csv" --insolation "$W/ins" --frames 6 -o "$W/sea" > /dev/null 2>&1 &&
+    [ -f "$W/sea_f005.png" ] && $T info "$W/sea_sheet.png" | grep -q "channels: 3"; then ok; else bad "season frames from a CSV"; fi
+$T noise -o "$W/noise64.png" --size 64 64 --range 100 900 > /dev/null 2>&1
+expect_error "season wrong-size insolation" "insolation must be 12 channels of 64 x 64" $T season "$W/noise64.png" --koppen Cfb --insolation "$W/ins" -o "$W/sea"
+if [ -f "$MB" ]; then
+    if $T season "$MB" --heights 454 4810 --spacing 92.7 --koppen Cfb --month 2 -o "$W/mb" > /dev/null 2>&1 &&
+        $T info "$W/mb_02.png" | grep -q "size: 256 x 256" && [ ! -f "$W/mb_sheet.png" ]; then ok; else bad "season --month on alps_montblanc"; fi
+else
+    skipped "season on a real DEM (absent)"
+fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

@@ -1847,13 +1847,197 @@ static const cli_command gnn_generate_cmd = {"gnn-generate", CLI_CMD(gnn_generat
     "size: a pixel depends only on the sketch near it, so large maps are computed in seamless tiles with bounded memory. "
     "The same inputs and seed give the same output on any thread count."};
 
+/* ---- insolation, season ------------------------------------------------------------------- */
+
+/* Loads a DEM for the seasonal commands; --heights LO HI maps a file without a recorded range
+   (values 0..1) to metres. */
+static tn_status season_load_dem(const char *path, double lo, double hi, tn_image *dem)
+{
+    tn_image_info info;
+    tn_status st = tn_image_load(path, dem, &info);
+    size_t i, n;
+    if (st || lo == hi) return st;
+    n = (size_t)dem->width * dem->height * dem->channels;
+    for (i = 0; i < n; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
+    return TN_OK;
+}
+
+static struct insolation_args { const char *in, *out; double lat, lo, hi; tn_insolation_opts o; } insolation_arg;
+static const cli_opt insolation_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &insolation_arg.in, NULL, 0, 0, NULL, "heightmap in metres", NULL},
+    {"lat", 0, ARG_DOUBLE, REQ, &insolation_arg.lat, NULL, -90, 90, "DEG", "latitude (south negative; row 0 is north)", NULL},
+    {"output", 'o', ARG_STR, REQ, &insolation_arg.out, NULL, 0, 0, "PREFIX", "writes PREFIX_01.pfm .. PREFIX_12.pfm (W h/m^2 per day)", NULL},
+    {"month", 0, ARG_INT, 0, &insolation_arg.o.month, NULL, 1, 12, "M", "only month M (PREFIX_MM.pfm)", "all twelve"},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &insolation_arg.o.dx, &insolation_arg.o.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED, &insolation_arg.lo, &insolation_arg.hi, 0, 0, "LO HI",
+     "metres of the lowest and highest code, for a file that records no range", "the file's values"},
+    {"step", 0, ARG_FLOAT, 0, &insolation_arg.o.step_minutes, NULL, 1, 720, "MIN", "time step of the shadow test", "15"},
+    {"directions", 0, ARG_INT, 0, &insolation_arg.o.directions, NULL, 4, 1024, "N", "horizon azimuths", "32"},
+    {"day", 0, ARG_INT, 0, &insolation_arg.o.day, NULL, 1, 31, "D", "day of the month of the sun path", "15"},
+    {"no-shadows", 0, ARG_FLAG, 0, &insolation_arg.o.no_shadows, NULL, 0, 0, NULL, "slope and aspect only, no terrain horizon", NULL},
+};
+
+/* Channel c of a multi-channel image as a one-channel image. */
+static tn_status season_channel(const tn_image *src, int c, tn_image *dst)
+{
+    size_t i, n = (size_t)src->width * src->height;
+    tn_status st = tn_image_create(dst, src->width, src->height, 1);
+    if (st) return st;
+    for (i = 0; i < n; i++) dst->data[i] = src->data[i * src->channels + c];
+    return TN_OK;
+}
+
+static int run_insolation(void)
+{
+    struct insolation_args *a = &insolation_arg;
+    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
+    tn_status st;
+    char path[4096];
+    int c;
+    double t0 = tn_time_seconds();
+    if ((st = season_load_dem(a->in, a->lo, a->hi, &dem))) return fail_status(st);
+    st = tn_insolation(&dem, a->lat, &a->o, &out);
+    tn_image_free(&dem);
+    if (st) return fail_status(st);
+    for (c = 0; c < out.channels && !st; c++) {
+        int month = a->o.month ? a->o.month : c + 1;
+        float lo, hi;
+        double sum = 0;
+        size_t i, n = (size_t)out.width * out.height;
+        snprintf(path, sizeof path, "%s_%02d.pfm", a->out, month);
+        if ((st = season_channel(&out, c, &one))) break;
+        tn_image_range(&one, &lo, &hi);
+        for (i = 0; i < n; i++) sum += one.data[i];
+        st = tn_image_save(path, &one, NULL);
+        if (!st) printf("%s: month %2d mean %.0f min %.0f max %.0f W h/m^2 per day\n", path, month, sum / (double)n, lo, hi);
+        tn_image_free(&one);
+    }
+    tn_image_free(&out);
+    if (st) return fail_status(st);
+    printf("insolation: %.2f s\n", tn_time_seconds() - t0);
+    return 0;
+}
+
+static const cli_command insolation_cmd = {"insolation", CLI_CMD(insolation), "monthly direct-sun maps with terrain shadows (PFM)",
+    "Daily direct-beam insolation outside the atmosphere (W h/m^2 per day) on each pixel's slope on the 15th of every month, "
+    "with shadows cast by the terrain (docs/season.md). Heights must be metres: give --spacing, and --heights for a file "
+    "that records no range."};
+
+static struct season_args {
+    const char *in, *out, *climate, *koppen, *insol;
+    double lat, lo, hi;
+    int month, months, frames, columns;
+    tn_season_opts o;
+} season_arg = {NULL, NULL, NULL, NULL, NULL, -999.0, 0, 0, 0, 0, 0, 0, {{0, 0, 0, 0, 0, 0, 0, 0, 0}, 0, 0, 0, 0, 0, 0, 0, 0}}; /* lat -999: not given */
+static const cli_opt season_opts[] = {
+    {"DEM", 0, ARG_POS, 0, &season_arg.in, NULL, 0, 0, NULL, "heightmap in metres", NULL},
+    {"output", 'o', ARG_STR, REQ, &season_arg.out, NULL, 0, 0, "PREFIX",
+     "writes PREFIX_MM.png per month (or PREFIX_fNNN.png per frame) and PREFIX_sheet.png, the year at a glance", NULL},
+    {"climate", 0, ARG_STR, 0, &season_arg.climate, NULL, 0, 0, "CSV", "12 months of temperature and precipitation (docs/season.md)", NULL},
+    {"koppen", 0, ARG_STR, 0, &season_arg.koppen, NULL, 0, 0, "CODE", "built-in climate: Af, Aw, BWh, Cfb, Csa, Dfc, Dfb, ET", NULL},
+    {"lat", 0, ARG_DOUBLE, 0, &season_arg.lat, NULL, -90, 90, "DEG", "latitude (south negative)", "the climate's"},
+    {"month", 0, ARG_INT, 0, &season_arg.month, NULL, 1, 12, "M", "only month M (its 15th)", NULL},
+    {"months", 0, ARG_FLAG, 0, &season_arg.months, NULL, 0, 0, NULL, "all twelve months (the default)", NULL},
+    {"frames", 0, ARG_INT, 0, &season_arg.frames, NULL, 1, 1000, "N", "N frames evenly through the year from mid-January", NULL},
+    {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &season_arg.o.insolation.dx, &season_arg.o.insolation.dy, 0, NO_MAX, "DX [DY]",
+     "pixel spacing in metres", "1"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED, &season_arg.lo, &season_arg.hi, 0, 0, "LO HI",
+     "metres of the lowest and highest code, for a file that records no range", "the file's values"},
+    {"insolation", 0, ARG_STR, 0, &season_arg.insol, NULL, 0, 0, "PREFIX", "read PREFIX_01..12.pfm from `terrainnet insolation`", "computed"},
+    {"shade", 0, ARG_FLOAT, SET, &season_arg.o.shade, NULL, 0, 1, "F", "hillshade mixed into the colours (0 = albedo only)", "0.5"},
+    {"seed", 0, ARG_U64, 0, &season_arg.o.seed, NULL, 0, 0, "S", "seed of the fine detail noise", "0"},
+    {"columns", 0, ARG_INT, 0, &season_arg.columns, NULL, 1, 64, "N", "columns of the preview sheet", "4"},
+};
+
+/* Reads PREFIX_01..12.pfm into one 12-channel image. */
+static tn_status season_read_insolation(const char *prefix, tn_image *out)
+{
+    tn_image one = {0, 0, 0, NULL}, all = {0, 0, 0, NULL};
+    char path[4096];
+    tn_status st = TN_OK;
+    size_t i, n = 0;
+    int m;
+    for (m = 0; m < 12 && !st; m++) {
+        snprintf(path, sizeof path, "%s_%02d.pfm", prefix, m + 1);
+        if ((st = tn_image_load(path, &one, NULL))) break;
+        if (m == 0) {
+            n = (size_t)one.width * one.height;
+            if ((st = tn_image_create(&all, one.width, one.height, 12))) break;
+        } else if (one.width != all.width || one.height != all.height) {
+            fprintf(stderr, "terrainnet: %s is %d x %d, month 1 was %d x %d\n", path, one.width, one.height, all.width, all.height);
+            st = TN_ERR_SHAPE;
+        }
+        for (i = 0; !st && i < n; i++) all.data[i * 12 + m] = one.data[i * one.channels];
+        tn_image_free(&one);
+    }
+    if (st) tn_image_free(&all);
+    else *out = all;
+    return st;
+}
+
+static int run_season(void)
+{
+    struct season_args *a = &season_arg;
+    tn_image dem = {0, 0, 0, NULL}, ins = {0, 0, 0, NULL}, sheet = {0, 0, 0, NULL}, *imgs = NULL;
+    tn_climate clim;
+    tn_save_opts so;
+    tn_status st;
+    float times[1000];
+    char path[4096];
+    int i, count;
+    double t0 = tn_time_seconds();
+    if (!a->climate == !a->koppen) return usage_error("season", "give exactly one of --climate CSV and --koppen CODE");
+    if ((a->month != 0) + (a->frames != 0) + (a->months != 0) > 1) return usage_error("season", "--month, --months and --frames exclude each other");
+    st = a->climate ? tn_climate_load(a->climate, &clim) : tn_climate_koppen(a->koppen, &clim);
+    if (st) return fail_status(st);
+    count = a->month ? 1 : a->frames ? a->frames : 12;
+    for (i = 0; i < count; i++) times[i] = a->month ? (float)(a->month - 1) : a->frames ? 12.0f * (float)i / (float)count : (float)i;
+    if ((st = season_load_dem(a->in, a->lo, a->hi, &dem))) return fail_status(st);
+    if (a->insol && (st = season_read_insolation(a->insol, &ins))) {
+        tn_image_free(&dem);
+        return fail_status(st);
+    }
+    if (!(imgs = (tn_image *)calloc((size_t)count, sizeof *imgs))) {
+        tn_image_free(&dem);
+        tn_image_free(&ins);
+        fprintf(stderr, "terrainnet: out of memory\n");
+        return 1;
+    }
+    /* without --lat (still -999) the climate's latitude is used */
+    st = tn_season_texture(&dem, &clim, a->lat < -90 ? NAN : a->lat, ins.data ? &ins : NULL, times, count, &a->o, imgs, NULL);
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    for (i = 0; i < count && !st; i++) {
+        if (a->frames) snprintf(path, sizeof path, "%s_f%03d.png", a->out, i);
+        else snprintf(path, sizeof path, "%s_%02d.png", a->out, a->month ? a->month : i + 1);
+        st = tn_image_save(path, &imgs[i], &so);
+    }
+    if (!st && count > 1) {
+        snprintf(path, sizeof path, "%s_sheet.png", a->out);
+        if (!(st = tn_season_sheet(imgs, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet))) st = tn_image_save(path, &sheet, &so);
+    }
+    if (!st) printf("season: %s, %d image%s of %d x %d in %.2f s\n", clim.name, count, count > 1 ? "s" : "", dem.width, dem.height, tn_time_seconds() - t0);
+    for (i = 0; i < count; i++) tn_image_free(&imgs[i]);
+    free(imgs);
+    tn_image_free(&sheet);
+    tn_image_free(&dem);
+    tn_image_free(&ins);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command season_cmd = {"season", CLI_CMD(season), "seasonal textures of a DEM for a climate (procedural, no data files)",
+    "Textures for every month (or N frames through the year) from the built-in procedural texturer: degree-day snow through "
+    "a cyclic year with insolation and the -0.6 C / 100 m lapse rate, vegetation greenness from temperature and moisture, "
+    "forest below the tree line, bare rock on steep slopes, colours measured from real ground textures. No trained network "
+    "is involved (docs/season.md)."};
+
 /* ---- main -------------------------------------------------------------------------------- */
 
 static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
     &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &gnn_train_cmd,
-    &gnn_generate_cmd, &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd, &export_cmd,
-    &world_cmd,
+    &gnn_generate_cmd, &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd, &insolation_cmd,
+    &season_cmd, &export_cmd, &world_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 

@@ -1,0 +1,334 @@
+/* @@season: insolation against the closed forms (flat plane, tilted planes), terrain shadows,
+   thread-count independence, the climate CSV and presets, the seasonal texturer's snow and
+   vegetation, and bad input. */
+#define TERRAINNET_IMPLEMENTATION
+#include "terrainnet.h"
+#include "tn_test.h"
+
+#define PI 3.14159265358979323846
+
+/* Daily extraterrestrial insolation on a horizontal plane (W h/m^2): (24/pi) Gsc E0
+   (cos phi cos d sin ws + ws sin phi sin d), ws = acos(-tan phi tan d) (Duffie & Beckman 1.10.3). */
+static double flat_h0(double lat_deg, int doy)
+{
+    double d, e, phi = lat_deg * PI / 180.0, c, ws;
+    tn_sun_day(doy, &d, &e);
+    c = -tan(phi) * tan(d);
+    ws = c <= -1 ? PI : c >= 1 ? 0 : acos(c);
+    return 24.0 / PI * 1367.0 * e * (cos(phi) * cos(d) * sin(ws) + ws * sin(phi) * sin(d));
+}
+
+/* A south-facing plane of slope beta (north hemisphere): the horizontal at latitude phi - beta,
+   with the sunset hour angle min(ws(phi), ws(phi - beta)) (Klein 1977). */
+static double south_plane_h0(double lat_deg, double beta_deg, int doy)
+{
+    double d, e, phi = lat_deg * PI / 180.0, pb = (lat_deg - beta_deg) * PI / 180.0, c1, c2, w1, w2, ws;
+    tn_sun_day(doy, &d, &e);
+    c1 = -tan(phi) * tan(d);
+    c2 = -tan(pb) * tan(d);
+    w1 = c1 <= -1 ? PI : c1 >= 1 ? 0 : acos(c1);
+    w2 = c2 <= -1 ? PI : c2 >= 1 ? 0 : acos(c2);
+    ws = w1 < w2 ? w1 : w2;
+    return 24.0 / PI * 1367.0 * e * (cos(pb) * cos(d) * sin(ws) + ws * sin(pb) * sin(d));
+}
+
+/* A brute-force reference for any plane: the sun vector every 2 s of the day. */
+static double plane_numeric(double lat_deg, double nE, double nN, double nU, int doy)
+{
+    double d, e, phi = lat_deg * PI / 180.0, sum = 0, dw = 2.0 * PI / 43200.0;
+    int i;
+    tn_sun_day(doy, &d, &e);
+    for (i = 0; i < 43200; i++) {
+        double w = -PI + (i + 0.5) * dw;
+        double sE = -cos(d) * sin(w), sN = cos(phi) * sin(d) - sin(phi) * cos(d) * cos(w), sU = sin(phi) * sin(d) + cos(phi) * cos(d) * cos(w);
+        double ci = nE * sE + nN * sN + nU * sU;
+        if (sU > 0 && ci > 0) sum += ci * dw;
+    }
+    return 1367.0 * e * 24.0 / (2.0 * PI) * sum;
+}
+
+/* A plane z = a x_east + b y_north (metres) on a w x h grid of spacing sp. */
+static tn_image plane(int w, int h, float sp, double a, double b)
+{
+    tn_image im = {0, 0, 0, NULL};
+    int x, y;
+    tn_image_create(&im, w, h, 1);
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) im.data[(size_t)y * w + x] = (float)(1000.0 + a * x * sp + b * (h - 1 - y) * sp);
+    return im;
+}
+
+TN_TEST(test_flat_plane_matches_formula)
+{
+    static const double lats[] = {0.0, 45.87, -33.9, 68.0, 80.0, -89.0};
+    tn_image dem = plane(8, 8, 30.0f, 0, 0), out = {0, 0, 0, NULL};
+    tn_insolation_opts o;
+    size_t li;
+    int m;
+    memset(&o, 0, sizeof o);
+    o.dx = 30.0f;
+    for (li = 0; li < sizeof lats / sizeof lats[0]; li++) {
+        TN_CHECK(tn_insolation(&dem, lats[li], &o, &out) == TN_OK);
+        TN_CHECK(out.channels == 12);
+        for (m = 0; m < 12 && out.data; m++) {
+            double ref = flat_h0(lats[li], tn_day_of_year(m + 1, 15));
+            TN_CHECK_NEAR(TN_PIXEL(&out, 4, 4, m), ref, 1e-4 * ref + 0.05);
+            TN_CHECK_NEAR(TN_PIXEL(&out, 0, 7, m), ref, 1e-4 * ref + 0.05); /* border pixels too */
+        }
+        tn_image_free(&out);
+    }
+    /* the textbook value: 45.87 N in mid-June about 11.6 kWh/m^2, mid-December about 2.3 */
+    TN_CHECK(flat_h0(45.87, 166) > 11000 && flat_h0(45.87, 166) < 12000);
+    TN_CHECK(flat_h0(45.87, 349) > 2500 && flat_h0(45.87, 349) < 3500);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_tilted_planes)
+{
+    tn_insolation_opts o;
+    tn_image out = {0, 0, 0, NULL};
+    int m, sh;
+    double beta = 30.0, g = tan(beta * PI / 180.0);
+    memset(&o, 0, sizeof o);
+    o.dx = 10.0f;
+    for (sh = 0; sh < 2; sh++) { /* without and with the horizon test (a plane shades nothing but itself) */
+        tn_image south = plane(24, 24, 10.0f, 0, g); /* rises to the north: faces south */
+        tn_image east = plane(24, 24, 10.0f, -0.5, 0.2);
+        double inv = 1.0 / sqrt(0.25 + 0.04 + 1.0);
+        o.no_shadows = !sh;
+        TN_CHECK(tn_insolation(&south, 46.0, &o, &out) == TN_OK);
+        for (m = 0; m < 12 && out.data; m++) {
+            double ref = south_plane_h0(46.0, beta, tn_day_of_year(m + 1, 15));
+            TN_CHECK_NEAR(TN_PIXEL(&out, 12, 12, m), ref, (sh ? 2e-3 : 1e-4) * ref + 0.05);
+        }
+        tn_image_free(&out);
+        TN_CHECK(tn_insolation(&east, -20.0, &o, &out) == TN_OK);
+        for (m = 0; m < 12 && out.data; m++) {
+            double ref = plane_numeric(-20.0, 0.5 * inv, -0.2 * inv, inv, tn_day_of_year(m + 1, 15));
+            TN_CHECK_NEAR(TN_PIXEL(&out, 12, 12, m), ref, (sh ? 3e-3 : 2e-4) * ref + 0.5);
+        }
+        tn_image_free(&out);
+        tn_image_free(&south);
+        tn_image_free(&east);
+    }
+}
+
+TN_TEST(test_wall_shadow_and_threads)
+{
+    /* flat ground with a 100 m wall along the south edge: in December at 46 N (noon sun 20.7
+       degrees high) its foot (50 m away, 63 degrees) is in shadow all day, the north edge
+       (580 m, 10 degrees) only early and late; in June the foot is lit most of the day */
+    tn_image dem = plane(64, 64, 10.0f, 0, 0), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_insolation_opts o;
+    int x, y;
+    size_t i, n;
+    for (y = 60; y < 64; y++)
+        for (x = 0; x < 64; x++) dem.data[y * 64 + x] += 100.0f;
+    memset(&o, 0, sizeof o);
+    o.dx = 10.0f;
+    tn_set_threads(1);
+    TN_CHECK(tn_insolation(&dem, 46.0, &o, &a) == TN_OK);
+    tn_set_threads(2);
+    TN_CHECK(tn_insolation(&dem, 46.0, &o, &b) == TN_OK);
+    tn_set_threads(0);
+    if (!a.data || !b.data) return;
+    n = (size_t)64 * 64 * 12;
+    for (i = 0; i < n; i++) if (a.data[i] != b.data[i]) break;
+    TN_CHECK(i == n);
+    TN_CHECK(TN_PIXEL(&a, 32, 55, 11) < 0.05 * flat_h0(46.0, 349));
+    TN_CHECK(TN_PIXEL(&a, 32, 2, 11) > 0.85 * flat_h0(46.0, 349) && TN_PIXEL(&a, 32, 2, 11) < flat_h0(46.0, 349));
+    TN_CHECK(TN_PIXEL(&a, 32, 55, 5) > 0.6 * flat_h0(46.0, 166));
+    /* one month alone equals that month of the year */
+    o.month = 12;
+    tn_image_free(&b);
+    TN_CHECK(tn_insolation(&dem, 46.0, &o, &b) == TN_OK);
+    TN_CHECK(b.channels == 1 && b.data && b.data[55 * 64 + 32] == TN_PIXEL(&a, 32, 55, 11));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_insolation_bad_input)
+{
+    tn_image dem = plane(8, 8, 1.0f, 0, 0), out = {0, 0, 0, NULL}, tiny = {0, 0, 0, NULL};
+    tn_insolation_opts o;
+    memset(&o, 0, sizeof o);
+    TN_CHECK(tn_insolation(&dem, 91.0, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "latitude") != NULL);
+    TN_CHECK(tn_insolation(&dem, NAN, NULL, &out) == TN_ERR_INVALID_ARG);
+    o.month = 13;
+    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    o.month = 2;
+    o.day = 30;
+    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    o.day = 0;
+    o.dx = -1;
+    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    dem.data[5] = NAN;
+    TN_CHECK(tn_insolation(&dem, 10.0, NULL, &out) == TN_ERR_NUMERIC);
+    tn_image_create(&tiny, 1, 5, 1);
+    TN_CHECK(tn_insolation(&tiny, 10.0, NULL, &out) == TN_ERR_EMPTY);
+    TN_CHECK(out.data == NULL);
+    tn_image_free(&tiny);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_climate_csv)
+{
+    static const char good[] = "# Ljubljana-like\nlatitude, 45.9\nelevation,299\nmonth,t_c,p_mm\n"
+                               "1,-0.3,69\n2,1.6,70\n3,6,89\n4,10.6,98\n5,15.6,109\n6,19.1,143\n7,21.1,113\n8,20.4,133\n"
+                               "9,15.6,147\n10,10.9,144\n11,5,129\n12,0.8,100\n";
+    tn_climate c;
+    char buf[1024];
+    char *p;
+    TN_CHECK(tn_climate_parse(good, strlen(good), "good.csv", &c) == TN_OK);
+    TN_CHECK(c.has_latitude && fabs(c.latitude - 45.9f) < 1e-5 && c.elevation == 299.0f);
+    TN_CHECK(c.t[0] == -0.3f && c.p[11] == 100.0f);
+    /* the lapse rate: 1299 m is 6 C colder than the station */
+    TN_CHECK_NEAR(tn_climate_temperature(&c, 6, 1299.0f, 0.0f), 21.1 - 6.0, 1e-4);
+    /* eleven months */
+    snprintf(buf, sizeof buf, "%s", good);
+    p = strstr(buf, "12,0.8,100\n");
+    *p = 0;
+    TN_CHECK(tn_climate_parse(buf, strlen(buf), "eleven.csv", &c) == TN_ERR_FORMAT);
+    TN_CHECK(strstr(tn_last_error(), "11 given") != NULL && strstr(tn_last_error(), "month 12") != NULL);
+    /* NaN */
+    snprintf(buf, sizeof buf, "%s", good);
+    memcpy(strstr(buf, "4,10.6,98"), "4,nan ,98", 9);
+    TN_CHECK(tn_climate_parse(buf, strlen(buf), "nan.csv", &c) == TN_ERR_NUMERIC);
+    TN_CHECK(strstr(tn_last_error(), "nan.csv:8") != NULL);
+    /* latitude out of range, a month twice, garbage */
+    snprintf(buf, sizeof buf, "%s", good);
+    memcpy(strstr(buf, "45.9"), "95.9", 4);
+    TN_CHECK(tn_climate_parse(buf, strlen(buf), "lat.csv", &c) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "latitude") != NULL);
+    snprintf(buf, sizeof buf, "%s", good);
+    memcpy(strstr(buf, "\n2,1.6"), "\n1,1.6", 6);
+    TN_CHECK(tn_climate_parse(buf, strlen(buf), "twice.csv", &c) == TN_ERR_FORMAT);
+    TN_CHECK(tn_climate_parse("1,2\n", 4, "short.csv", &c) == TN_ERR_FORMAT);
+    TN_CHECK(tn_climate_load("/nonexistent/climate.csv", &c) == TN_ERR_IO);
+}
+
+TN_TEST(test_koppen_presets)
+{
+    tn_climate c;
+    int i, m, n = 0;
+    const char *code;
+    for (i = 0; (code = tn_climate_koppen_code(i)) != NULL; i++, n++) {
+        float lo = 1e9f, hi = -1e9f, ptot = 0;
+        TN_CHECK(tn_climate_koppen(code, &c) == TN_OK);
+        TN_CHECK(tn_climate_check(&c) == TN_OK && c.has_latitude);
+        for (m = 0; m < 12; m++) {
+            if (c.t[m] < lo) lo = c.t[m];
+            if (c.t[m] > hi) hi = c.t[m];
+            ptot += c.p[m];
+        }
+        /* each preset satisfies its own group's Koppen rule */
+        if (code[0] == 'A') TN_CHECK(lo >= 18.0f);
+        if (code[0] == 'B') TN_CHECK(ptot < 200.0f);
+        if (code[0] == 'C') TN_CHECK(lo > -3.0f && lo < 18.0f && hi >= 10.0f);
+        if (code[0] == 'D') TN_CHECK(lo <= -3.0f && hi >= 10.0f);
+        if (code[0] == 'E') TN_CHECK(hi < 10.0f);
+    }
+    TN_CHECK(n >= 5);
+    TN_CHECK(tn_climate_koppen("D", &c) == TN_OK && strncmp(c.name, "Dfc", 3) == 0);
+    TN_CHECK(tn_climate_koppen("cfb", &c) == TN_OK && c.latitude > 45);
+    TN_CHECK(tn_climate_koppen("Xyz", &c) == TN_ERR_INVALID_ARG);
+}
+
+/* a cone 200 m .. 2600 m high on 10 km, pixels 80 m */
+static tn_image cone(int n)
+{
+    tn_image im = {0, 0, 0, NULL};
+    int x, y;
+    tn_image_create(&im, n, n, 1);
+    for (y = 0; y < n; y++)
+        for (x = 0; x < n; x++) {
+            double r = sqrt((x - n / 2.0) * (x - n / 2.0) + (y - n / 2.0) * (y - n / 2.0)) / (n / 2.0);
+            im.data[y * n + x] = (float)(200.0 + 2400.0 * (r < 1 ? 1 - r : 0));
+        }
+    return im;
+}
+
+TN_TEST(test_season_snow_and_green)
+{
+    tn_image dem = cone(48), out[3], bad = {0, 0, 0, NULL};
+    tn_season_state st[3];
+    tn_season_opts o;
+    tn_climate c;
+    float times[3] = {0.0f, 6.0f, 3.0f}; /* mid-January, mid-July, mid-April */
+    int n = 48;
+    memset(&o, 0, sizeof o);
+    o.insolation.dx = 80.0f;
+    o.insolation.step_minutes = 30.0f;
+    o.insolation.directions = 16;
+    TN_CHECK(tn_climate_koppen("Cfb", &c) == TN_OK);
+    TN_CHECK(tn_season_texture(&dem, &c, NAN, NULL, times, 3, &o, out, st) == TN_OK);
+    if (!out[0].data) return;
+    /* January: snow on the summit, little in the lowland corner; July: none on the lowland */
+    TN_CHECK(TN_PIXEL(&st[0].snow, n / 2, n / 2, 0) > 50.0f);
+    TN_CHECK(TN_PIXEL(&st[0].snow, 0, 0, 0) < TN_PIXEL(&st[0].snow, n / 2, n / 2, 0) * 0.2f);
+    TN_CHECK(TN_PIXEL(&st[1].snow, 0, 0, 0) < 1.0f);
+    /* greenness: lowland summer greener than winter */
+    TN_CHECK(TN_PIXEL(&st[1].green, 0, 0, 0) > TN_PIXEL(&st[0].green, 0, 0, 0) + 0.3f);
+    /* mid-April at mid-height: the north face keeps more snow than the south face */
+    TN_CHECK(TN_PIXEL(&st[2].snow, n / 2, n / 2 - 12, 0) > TN_PIXEL(&st[2].snow, n / 2, n / 2 + 12, 0) + 1.0f);
+    /* colours in range; the snowy summit is brighter in winter than the lowland in summer */
+    TN_CHECK(TN_PIXEL(&out[0], n / 2, n / 2, 2) > TN_PIXEL(&out[1], 0, 0, 2));
+    tn_image_free(&out[0]); tn_image_free(&out[1]); tn_image_free(&out[2]);
+    tn_season_state_free(&st[0]); tn_season_state_free(&st[1]); tn_season_state_free(&st[2]);
+    /* bad input: a wrong-sized insolation, no latitude, NaN time */
+    tn_image_create(&bad, 47, 48, 12);
+    TN_CHECK(tn_season_texture(&dem, &c, NAN, &bad, times, 1, &o, out, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(strstr(tn_last_error(), "insolation") != NULL);
+    tn_image_free(&bad);
+    c.has_latitude = 0;
+    TN_CHECK(tn_season_texture(&dem, &c, NAN, NULL, times, 1, &o, out, NULL) == TN_ERR_INVALID_ARG);
+    times[0] = NAN;
+    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, times, 1, &o, out, NULL) == TN_ERR_NUMERIC);
+    c.t[3] = NAN;
+    times[0] = 0;
+    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, times, 1, &o, out, NULL) == TN_ERR_NUMERIC);
+    tn_image_free(&dem);
+}
+
+TN_TEST(test_season_real_dem)
+{
+    tn_image dem = {0, 0, 0, NULL}, out[2];
+    tn_season_state st[2];
+    tn_season_opts o;
+    tn_climate c;
+    float times[2] = {1.0f, 7.0f};
+    double s0 = 0, s1 = 0;
+    size_t i, n;
+    if (tn_image_load(tn_test_data("dem/alps_montblanc/alps_montblanc_128.png"), &dem, NULL)) TN_SKIP("no ../shared/data");
+    n = (size_t)dem.width * dem.height;
+    for (i = 0; i < n; i++) dem.data[i] = 454.0f + dem.data[i] * (4810.0f - 454.0f); /* MANIFEST.md's mapping */
+    memset(&o, 0, sizeof o);
+    o.insolation.dx = 92.7f;
+    o.insolation.step_minutes = 30.0f;
+    TN_CHECK(tn_climate_koppen("Cfb", &c) == TN_OK);
+    TN_CHECK(tn_season_texture(&dem, &c, 45.8, NULL, times, 2, &o, out, st) == TN_OK);
+    if (!out[0].data) { tn_image_free(&dem); return; }
+    for (i = 0; i < n; i++) { s0 += st[0].snow.data[i] > 10.0f; s1 += st[1].snow.data[i] > 10.0f; }
+    /* Mont Blanc: most of the 560-4240 m crop is snowy in February, far less in August, and
+       the highest ground keeps snow through summer */
+    printf("# alps_montblanc_128 (Cfb, 45.8 N): snowy share %.3f in February, %.3f in August\n", s0 / n, s1 / n);
+    TN_CHECK(s0 / n > 0.7 && s1 / n < 0.5 * s0 / n && s1 > 0);
+    tn_image_free(&out[0]); tn_image_free(&out[1]);
+    tn_season_state_free(&st[0]); tn_season_state_free(&st[1]);
+    tn_image_free(&dem);
+}
+
+int main(void)
+{
+    TN_RUN(test_flat_plane_matches_formula);
+    TN_RUN(test_tilted_planes);
+    TN_RUN(test_wall_shadow_and_threads);
+    TN_RUN(test_insolation_bad_input);
+    TN_RUN(test_climate_csv);
+    TN_RUN(test_koppen_presets);
+    TN_RUN(test_season_snow_and_green);
+    TN_RUN(test_season_real_dem);
+    return tn_test_summary("test_season");
+}
