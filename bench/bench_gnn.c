@@ -136,44 +136,26 @@ static int mean_baseline(const tn_contour_set *sk, int w, int h, tn_image *out)
 }
 
 
-/* The paper's Figure 10 sketch: a ridge shaped like the letter A (high at the apex) inside a
-   circular valley (low), heights in [0, 1]; rot = 1 turns it by 90 degrees (x, y) -> (S-1-y, x). */
-static void add_line(tn_contour_set *s, tn_contour_type type, const float *p, int n, int side, int rot)
+/* The paper's Figure 10 sketch (examples/data/sketch_a.tns: a ridge shaped like the letter A,
+   high at the apex, inside a low circular valley; heights in [0, 1]) on a side x side canvas;
+   rot = 1 turns it by 90 degrees, (x, y) -> (side-1-y, x). */
+static int a_in_circle(int side, int rot, tn_contour_set *s)
 {
-    tn_contour *c = &s->items[s->count++];
-    int i;
-    memset(c, 0, sizeof *c);
-    c->type = type;
-    c->npoints = n;
-    c->points = (float *)malloc((size_t)n * 3 * sizeof(float));
-    for (i = 0; i < n; i++) {
-        float x = p[3 * i] * (float)(side - 1), y = p[3 * i + 1] * (float)(side - 1);
-        c->points[3 * i] = rot ? (float)(side - 1) - y : x;
-        c->points[3 * i + 1] = rot ? x : y;
-        c->points[3 * i + 2] = p[3 * i + 2];
+    float k;
+    int i, j;
+    if (tn_sketch_load("examples/data/sketch_a.tns", s) != TN_OK) {
+        fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
+        return 0;
     }
-}
-
-static void a_in_circle(int side, int rot, tn_contour_set *s)
-{
-    static const float left[] = {0.33f, 0.72f, 0.55f, 0.5f, 0.26f, 0.95f};
-    static const float right[] = {0.5f, 0.26f, 0.95f, 0.67f, 0.72f, 0.55f};
-    static const float bar[] = {0.4f, 0.55f, 0.7f, 0.6f, 0.55f, 0.7f};
-    float circle[3 * 65];
-    int i;
-    for (i = 0; i <= 64; i++) {
-        double a = 2 * 3.14159265358979 * i / 64;
-        circle[3 * i] = (float)(0.5 + 0.42 * cos(a));
-        circle[3 * i + 1] = (float)(0.5 + 0.42 * sin(a));
-        circle[3 * i + 2] = 0.1f;
-    }
-    memset(s, 0, sizeof *s);
+    k = (float)(side - 1) / (float)(s->width - 1);
+    for (i = 0; i < s->count; i++)
+        for (j = 0; j < s->items[i].npoints; j++) {
+            float *p = s->items[i].points + 3 * j, x = p[0] * k, y = p[1] * k;
+            p[0] = rot ? (float)(side - 1) - y : x;
+            p[1] = rot ? x : y;
+        }
     s->width = s->height = side;
-    s->items = (tn_contour *)calloc(4, sizeof(tn_contour));
-    add_line(s, TN_RIDGE, left, 2, side, rot);
-    add_line(s, TN_RIDGE, right, 2, side, rot);
-    add_line(s, TN_RIDGE, bar, 2, side, rot);
-    add_line(s, TN_VALLEY, circle, 65, side, rot);
+    return 1;
 }
 
 /* Ordering share and realism distance to the example of one user-sketch output. */
@@ -351,9 +333,7 @@ int main(int argc, char **argv)
         tn_image g = {0, 0, 0, NULL}, gr = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
         tn_metrics mt;
         int c, j, U = 256, x, y;
-        a_in_circle(U, 0, &a);
-        a_in_circle(U, 1, &ar);
-        a_in_circle(U, 0, &units);
+        if (!a_in_circle(U, 0, &a) || !a_in_circle(U, 1, &ar) || !a_in_circle(U, 0, &units)) return 1;
         for (c = 0; c < units.count; c++)
             for (j = 0; j < units.items[c].npoints; j++) units.items[c].points[3 * j + 2] = model.lo + (model.hi - model.lo) * units.items[c].points[3 * j + 2];
         memset(&go, 0, sizeof go);

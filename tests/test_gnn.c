@@ -32,17 +32,6 @@ static void tiny_opts(tn_gnn_opts *o, long iters)
     o->train.seed = 7;
 }
 
-static int same_params(const tn_params *a, const tn_params *b)
-{
-    int i;
-    if (tn_params_count(a) != tn_params_count(b)) return 0;
-    for (i = 0; i < tn_params_count(a); i++) {
-        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
-        if (x->numel != y->numel || strcmp(x->name, y->name) || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
-    }
-    return 1;
-}
-
 static int same_image(const tn_image *a, const tn_image *b)
 {
     return a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -151,7 +140,7 @@ TN_TEST(save_load_round_trip)
     TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
     TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
     TN_CHECK(tn_gnn_load(path, &l) == TN_OK);
-    TN_CHECK(same_params(m.weights, l.weights));
+    TN_CHECK(tn_test_same_params(m.weights, l.weights, 0));
     TN_CHECK(l.iterations == 5 && l.parts == m.parts && l.mean == m.mean && l.std == m.std && l.k == m.k && l.membrane == 1);
     memset(&go, 0, sizeof go);
     go.seed = 3;
@@ -191,7 +180,7 @@ TN_TEST(resume_is_bit_identical)
     TN_CHECK(tn_gnn_train(&dem, &o, &res, &st) == TN_OK);
     TN_CHECK(st.resumed_from == 3 && st.iterations == 8);
     TN_CHECK(res.hidden == 16);
-    TN_CHECK(same_params(full.weights, res.weights));
+    TN_CHECK(tn_test_same_params(full.weights, res.weights, 0));
     tn_gnn_free(&res);
     /* a checkpoint is not a model; another example cannot resume it */
     TN_CHECK(tn_gnn_load(ck, &res) == TN_ERR_FORMAT);
@@ -224,7 +213,7 @@ TN_TEST(same_results_for_1_and_2_threads)
     TN_CHECK(tn_gnn_train(&dem, &o, &m2, NULL) == TN_OK);
     TN_CHECK(tn_gnn_generate(&m2, &sk, 48, 40, &go, &b) == TN_OK);
     tn_set_threads(before);
-    TN_CHECK(same_params(m1.weights, m2.weights));
+    TN_CHECK(tn_test_same_params(m1.weights, m2.weights, 0));
     TN_CHECK(a.width == 48 && same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);

@@ -33,17 +33,6 @@ static void tiny_opts(tn_singan_opts *o, int iters)
     o->train.seed = 3;
 }
 
-static int same_params(const tn_params *a, const tn_params *b)
-{
-    int i;
-    if (tn_params_count(a) != tn_params_count(b)) return 0;
-    for (i = 0; i < tn_params_count(a); i++) {
-        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
-        if (x->numel != y->numel || strcmp(x->name, y->name) || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
-    }
-    return 1;
-}
-
 static tn_singan trained;   /* shared by the generation tests */
 static int have_trained;
 
@@ -84,7 +73,7 @@ TN_TEST(save_load_round_trip)
     g.seed = 5;
     TN_CHECK(tn_singan_save(&trained, path) == TN_OK);
     TN_CHECK(tn_singan_load(path, &m) == TN_OK);
-    TN_CHECK(same_params(trained.weights, m.weights));
+    TN_CHECK(tn_test_same_params(trained.weights, m.weights, 0));
     TN_CHECK(m.scales == trained.scales && m.trained == trained.trained && m.offset == trained.offset && m.range == trained.range);
     TN_CHECK(m.iterations == 120);
     TN_CHECK(tn_singan_sample(&trained, 0, 0, 30, 20, &g, &a) == TN_OK);
@@ -173,7 +162,7 @@ TN_TEST(resume_is_bit_identical)
     o.train.seed = 99; /* the checkpoint's seed wins */
     TN_CHECK(tn_singan_train(&dem, &o, &b, &st) == TN_OK);
     TN_CHECK(st.resumed_from == 8 && st.iterations == 18 && b.trained == 3);
-    TN_CHECK(same_params(a.weights, b.weights));
+    TN_CHECK(tn_test_same_params(a.weights, b.weights, 0));
     tn_singan_free(&b);
     { /* a checkpoint is not a model; another example is refused */
         tn_image other = make_dem(3, 24);

@@ -18,17 +18,6 @@ static void tiny_opts(tn_texgan_opts *o)
     o->train.seed = 5;
 }
 
-static int same_params(const tn_params *a, const tn_params *b, int skip_config)
-{
-    int i;
-    if (tn_params_count(a) != tn_params_count(b)) return 0;
-    for (i = skip_config ? 1 : 0; i < tn_params_count(a); i++) {
-        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
-        if (x->numel != y->numel || memcmp(x->data, y->data, x->numel * sizeof(float)) != 0) return 0;
-    }
-    return 1;
-}
-
 static float m_mean(const tn_image *im, int c)
 {
     double s = 0;
@@ -93,8 +82,8 @@ TN_TEST(checkpoint_resume_continues_identically)
     o.train.seed = 999; /* ignored on resume: the state comes from the file */
     TN_CHECK(tn_texgan_train(&resumed, &ex, &o, &s) == TN_OK);
     TN_CHECK(s.resumed_from == 3 && s.iterations == 6);
-    TN_CHECK(same_params(full.weights, resumed.weights, 1));
-    TN_CHECK(!same_params(full.weights, part.weights, 1));
+    TN_CHECK(tn_test_same_params(full.weights, resumed.weights, 1));
+    TN_CHECK(!tn_test_same_params(full.weights, part.weights, 1));
     /* a checkpoint of another channel count is refused */
     {
         tn_image grey = tn_test_exemplar(40, 36, 1, 2);
@@ -332,7 +321,7 @@ TN_TEST(deterministic_for_1_and_2_threads)
     tn_set_threads(2);
     TN_CHECK(tn_texgan_train(&b, &ex, &o, NULL) == TN_OK);
     TN_CHECK(tn_texgan_synthesize(&b, 7, 70, 50, &s2) == TN_OK);
-    TN_CHECK(same_params(a.weights, b.weights, 1));
+    TN_CHECK(tn_test_same_params(a.weights, b.weights, 1));
     TN_CHECK(max_abs_diff(&s1, &s2) == 0.0);
     tn_set_threads(0);
     tn_image_free(&s1);
@@ -354,7 +343,7 @@ TN_TEST(model_file_round_trip_and_streamed_files)
     TN_CHECK(tn_texgan_save(&m, path) == TN_OK);
     TN_CHECK(tn_texgan_load(&l, path) == TN_OK);
     TN_CHECK(l.channels == 6 && l.stages == 2 && l.noise_periodic == 1 && l.iterations == 2);
-    TN_CHECK(same_params(m.weights, l.weights, 0));
+    TN_CHECK(tn_test_same_params(m.weights, l.weights, 0));
     TN_CHECK(tn_texgan_synthesize(&l, 3, 37, 29, &mem) == TN_OK);
     TN_CHECK(tn_texgan_synthesize_file(&l, 3, 37, 29, shift, "build/test/texgan_out.pfm") == TN_OK);
     TN_CHECK(tn_image_load("build/test/texgan_out.pfm", &pfm, NULL) == TN_OK);

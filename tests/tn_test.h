@@ -53,6 +53,7 @@ static const char *tn_test_ref(const char *rel);
 static unsigned char *tn_test_read_file(const char *path, size_t *n);
 #ifdef TERRAINNET_H
 static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
+static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip);
 #endif
 
 /* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
@@ -75,6 +76,7 @@ static int tn_test_summary(const char *file)
     (void)tn_test_read_file;
 #ifdef TERRAINNET_H
     (void)tn_test_exemplar;
+    (void)tn_test_same_params;
 #endif
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
@@ -133,6 +135,19 @@ static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed)
             for (c = 0; c < channels; c++)
                 TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
     return img;
+}
+
+/* 1 when two parameter sets hold the same tensors bit for bit (names, sizes, values), from the
+   skip-th tensor on (texgan's first tensor is its configuration). */
+static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip)
+{
+    int i;
+    if (tn_params_count(a) != tn_params_count(b)) return 0;
+    for (i = skip; i < tn_params_count(a); i++) {
+        const tn_tensor *x = tn_params_get(a, i), *y = tn_params_get(b, i);
+        if (x->numel != y->numel || strcmp(x->name, y->name) || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
+    }
+    return 1;
 }
 #endif
 #endif
