@@ -23546,6 +23546,7 @@ typedef struct tn__world_stage {
     float p[8];                           /* method parameters */
     int np;                               /* explicit noise: how many sigmas in p[2..] */
     tn_texgan *model;
+    tn_singan *singan;
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -23854,6 +23855,41 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
     return TN_OK;
 }
 
+static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    int k = tn__world_find(s, "model");
+    char *path;
+    tn_status st;
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
+    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->singan);
+        s->singan = NULL;
+        return st;
+    }
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = 1;
+    s->out_heights = 1;
+    return TN_OK;
+}
+
+/* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
+   in the model's metres; the world's height range clips them. */
+static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn_singan_gen_opts go;
+    (void)in;
+    (void)in_r;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    return tn_singan_sample(s->singan, r.x, r.y, r.w, r.h, &go, out);
+}
+
 /* ---- local operations ---- */
 
 static tn_status tn__world_blur_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
@@ -24023,6 +24059,8 @@ static const tn__world_method tn__world_methods[] = {
      tn__world_explicit_run},
     {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
      tn__world_texgan_setup, tn__world_texgan_run},
+    {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
+                        "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
     {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
     {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
      tn__world_hillshade_run},
@@ -24071,11 +24109,16 @@ static void tn__world_release(tn__world_impl *im)
 {
     int k;
     if (!im) return;
-    for (k = 0; k < im->n; k++)
+    for (k = 0; k < im->n; k++) {
         if (im->st[k].model) {
             tn_texgan_free(im->st[k].model);
             TN_FREE(im->st[k].model);
         }
+        if (im->st[k].singan) {
+            tn_singan_free(im->st[k].singan);
+            TN_FREE(im->st[k].singan);
+        }
+    }
     TN_FREE(im);
 }
 
@@ -24167,7 +24210,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
                 if (!strcmp(word[0], tn__world_methods[k].name)) m = &tn__world_methods[k];
             if (!m)
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: unknown setting or method '%s' (settings: world seed height "
-                                "cellsize tile; methods: perlin explicit texgan blur hillshade normalmap detail)", ln, word[0]);
+                                "cellsize tile; methods: perlin explicit texgan singan blur hillshade normalmap detail)", ln, word[0]);
             if (m->refuse) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s cannot be computed tile by tile: %s", ln, m->name, m->refuse);
             if (im->n == TN__WORLD_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d stages", ln, TN__WORLD_MAX_STAGES);
             if (nw > TN__WORLD_MAX_KV + 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d parameters", ln, TN__WORLD_MAX_KV);
@@ -24187,7 +24230,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
     }
     if (!have_size) return tn__fail(TN_ERR_INVALID_ARG, "world: the SPEC needs `world WIDTH HEIGHT`");
     if (im->n == 0 || !im->st[0].m->source)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit or texgan)");
+        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit, texgan or singan)");
     if (opts && opts->tile) {
         if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
         w->tile = opts->tile;

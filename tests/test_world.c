@@ -223,6 +223,52 @@ static int refused(const char *spec, const char *words)
     return 1;
 }
 
+TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
+{
+    tn_singan m;
+    tn_singan_opts o;
+    tn_singan_gen_opts go;
+    tn_perlin_opts po;
+    tn_world w;
+    tn_image dem = {0, 0, 0, NULL}, whole = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_rect all = {0, 0, 120, 90};
+    char spec[1024];
+    int bits = 0;
+    size_t i;
+    const char *path = tn_test_tmp_path("world", "sg.tnw");
+    memset(&po, 0, sizeof po);
+    po.seed = 4;
+    TN_CHECK(tn_noise_perlin(&dem, 32, 32, &po) == TN_OK);
+    for (i = 0; i < (size_t)32 * 32; i++) dem.data[i] = 500.0f + 1000.0f * dem.data[i];
+    memset(&o, 0, sizeof o);
+    o.coarsest = 12;
+    o.factor = 0.7f;
+    o.channels = 8;
+    o.max_channels = 8;
+    o.iters = 3;
+    o.train.seed = 3;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_singan_save(&m, path) == TN_OK);
+    snprintf(spec, sizeof spec, "world 120 90\nseed 9\nheight -5000 10000\nsingan model=%s\n", path);
+    TN_CHECK(tiles_vs_whole(spec, 40, 1, 2, &bits) == 0.0 && bits);
+    /* the world is the model's own sample of the world seed, in metres */
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.out_heights && w.out_channels == 1);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 9;
+    TN_CHECK(tn_singan_sample(&m, 0, 0, 120, 90, &go, &ref) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)120 * 90 * sizeof(float)));
+    tn_world_free(&w);
+    /* a model of another method is refused when the SPEC is read */
+    snprintf(spec, sizeof spec, "world 120 90\nsingan model=%s\n", tn_test_ref("texgan_v1_model.tnw"));
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_ERR_FORMAT);
+    tn_image_free(&dem);
+    tn_image_free(&whole);
+    tn_image_free(&ref);
+    tn_singan_free(&m);
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -329,6 +375,7 @@ int main(void)
     TN_RUN(explicit_noise_tiles_equal_the_whole_map);
     TN_RUN(local_operations_tiles_equal_the_whole_map);
     TN_RUN(texgan_tiles_and_detail_maps_equal_the_whole_map);
+    TN_RUN(singan_tiles_equal_the_whole_map_and_the_sample);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     return tn_test_summary("test_world");
