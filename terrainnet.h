@@ -14429,10 +14429,9 @@ static tn_status tn__style_resize(tn_image *dst, const tn_image *src, int w, int
 
 /* The source at the pixel scale the transfer matches (dst, one channel): resized to the map's
    w x h when the map is no larger than it, kept at its own size when the map is larger on either
-   side. Upsampling a 648 px source 3.2x for a 2048 map smoothed its statistics and the result
-   turned blobby (spectrum distance 0.43 -> 0.77); at the source's own scale the map is a larger
-   field with the source's morphology, and each pyramid level matches the source's level of the
-   same pixel size (tn__style_level_run takes a source of any size: it only gives statistics). */
+   side: an upsampled source has smoothed statistics and the result turns blobby (docs/style.md).
+   The map is then a larger field with the source's morphology, each pyramid level matched to
+   the source's level of the same pixel size (tn__style_level_run only takes statistics from it). */
 static tn_status tn__style_source_scale(tn_image *dst, const tn_image *src, int w, int h)
 {
     if (w > src->width || h > src->height) return tn_image_copy(dst, src);
