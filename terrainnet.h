@@ -1120,7 +1120,10 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    The output map, initialised from the content map, is optimised so that the deep-feature
    statistics of a real heightmap (the style source) appear in it:
        alpha * content + beta * style + gamma * TV   (+ histogram terms with the built-in net).
-   The style source is resized to the output size first, so one source pixel keeps its scale.
+   The style source is resized to the output size when the output is no larger than it; for a
+   larger output it keeps its own pixel size (the output is a larger field of the same
+   morphology: each pyramid level matches the source's level of the same pixel size, and the
+   automatic pyramid stops where the source's coarsest level would be too small).
    Work runs coarse to fine over an image pyramid (each level x2): the coarse levels lay out
    ridges and valleys, the fine ones add detail; levels larger than `tile` are optimised in
    overlapping tiles, so 2048 x 2048 runs in the memory of a 512 x 512 map.
@@ -1193,8 +1196,9 @@ TN_API tn_status tn_vgg19_create(tn_params **out);
 TN_API tn_status tn_vgg19_load(tn_params **out, const char *path);
 
 /* How well a map reproduces a source's morphology (paper 002, Table 1, plus two distances).
-   The source is resized to the map's size and both are normalised to [0, 1]. The distances are
-   tn_realism_compare's (@@extract), computed on the normalised maps. */
+   Both are normalised to [0, 1]. SSIM compares with the source resized to the map's size; the
+   distances are tn_realism_compare's (@@extract) against the source at the pixel scale
+   tn_style_transfer matches: resized to the map, or its own size when the map is larger. */
 typedef struct tn_style_scores {
     double ssim;            /* SSIM(source, map), Table 1: higher is closer */
     double slope_hist_dist; /* tn_realism slope_distance (relative EMD of slope histograms): lower is closer */
@@ -16001,6 +16005,7 @@ static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg 
         tn_params_free(p);
     }
     c->work_done += c->span;
+    c->frac = 0; /* the next level's target fills report from here, not one tile ahead */
     return st;
 }
 
@@ -16159,6 +16164,17 @@ static tn_status tn__style_resize(tn_image *dst, const tn_image *src, int w, int
     return tn_image_resize(dst, src, w, h, down ? TN_RESIZE_AREA : TN_RESIZE_BICUBIC);
 }
 
+/* The source at the pixel scale the transfer matches (dst, one channel): resized to the map's
+   w x h when the map is no larger than it, kept at its own size when the map is larger on either
+   side: an upsampled source has smoothed statistics and the result turns blobby (docs/style.md).
+   The map is then a larger field with the source's morphology, each pyramid level matched to
+   the source's level of the same pixel size (tn__style_level_run only takes statistics from it). */
+static tn_status tn__style_source_scale(tn_image *dst, const tn_image *src, int w, int h)
+{
+    if (w > src->width || h > src->height) return tn_image_copy(dst, src);
+    return tn__style_resize(dst, src, w, h);
+}
+
 /* Size of pyramid level k (0 = full size, each level halves), at least 16 x 16. */
 static void tn__style_level_size(int W, int H, int k, int *lw, int *lh)
 {
@@ -16311,13 +16327,14 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (st) goto done;
     tn_set_progress(tn__style_progress_fwd, c);
     if ((st = tn__channel0_image(style, &cur))) goto done;
-    st = tn__style_resize(&sm, &cur, W, H);
+    st = tn__style_source_scale(&sm, &cur, W, H);
     tn_image_free(&cur);
     if (st || (st = tn__channel0_image(content, &cm))) goto done;
     tn__style_normalise(&sm, c->net.vgg, &sa, &sb);
     tn__style_normalise(&cm, c->net.vgg, &ca, &cb);
     if (!c->net.vgg && (st = tn__style_auto_drainage(c, &sm))) goto done;
-    nl = tn__style_auto_levels(c, W, H);
+    /* a source smaller than the map also bounds the pyramid: its coarsest level must hold statistics */
+    nl = tn__style_auto_levels(c, W < sm.width ? W : sm.width, H < sm.height ? H : sm.height);
     for (k = nl - 1; k >= 0; k--) { /* progress total: pixel-iterations over all levels and tiles */
         int lw, lh, tw, th, m, T, nx, ny, p[TN__STYLE_MAXTILES];
         tn__style_level_size(W, H, k, &lw, &lh);
@@ -16339,8 +16356,9 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     for (k = nl - 1; k >= 0 && !st; k--) {
         int lw, lh;
         tn_image s = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, x = {0, 0, 0, NULL};
-        tn__style_level_size(W, H, k, &lw, &lh);
+        tn__style_level_size(sm.width, sm.height, k, &lw, &lh); /* the source's level k: the same pixel scale as the map's */
         st = tn__style_resize(&s, &sm, lw, lh);
+        tn__style_level_size(W, H, k, &lw, &lh);
         if (!st) st = cur.data ? tn_image_resize(&x, &cur, lw, lh, TN_RESIZE_BILINEAR) : tn__style_resize(&x, &cm, lw, lh);
         if (!st) st = tn_image_copy(&a, &x); /* finer levels are anchored to the coarser result */
         c->level = k;
@@ -16372,7 +16390,7 @@ done:
 
 TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out)
 {
-    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL};
+    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, n = {0, 0, 0, NULL};
     tn_status st;
     if (!map || !source || !out || !map->data || !source->data || map->channels < 1 || source->channels < 1)
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: needs a map and a source");
@@ -16382,15 +16400,18 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
     if (!(st = tn__channel0_image(map, &a)) && !(st = tn__channel0_image(source, &t)) &&
         !(st = tn__style_resize(&b, &t, map->width, map->height))) {
-        tn__normalise01(&a);
-        tn__normalise01(&b);
+        int native = map->width > t.width || map->height > t.height;
         tn_realism_opts ro;
         tn_realism r;
+        tn__normalise01(&a);
+        tn__normalise01(&b);
+        /* the distances compare with the source at the pixel scale the transfer matches */
+        if (native && !(st = tn_image_copy(&n, &t))) tn__normalise01(&n);
         memset(&ro, 0, sizeof ro);
         tn__realism_opts_defaults(&ro);
         memset(&r, 0, sizeof r);
         memset(out, 0, sizeof *out);
-        if (!(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(&b, &a, &ro, &r))) {
+        if (!st && !(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(native ? &n : &b, &a, &ro, &r))) {
             out->slope_hist_dist = r.slope_distance;
             out->spectrum_dist = r.spectrum_distance;
         }
@@ -16398,6 +16419,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
     tn_image_free(&a);
     tn_image_free(&b);
     tn_image_free(&t);
+    tn_image_free(&n);
     return st;
 }
 

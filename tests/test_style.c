@@ -575,6 +575,77 @@ TN_TEST(test_vgg_loader_and_path)
     remove(bad);
 }
 
+/* Mean power of the rows of m (Hann window, mean removed) at wavelength lam px (direct DFT). */
+static double row_power(const tn_image *m, double lam)
+{
+    int x, y, w = m->width;
+    double p = 0;
+    for (y = 0; y < m->height; y++) {
+        const float *r = m->data + (size_t)y * w;
+        double mean = 0, re = 0, im = 0;
+        for (x = 0; x < w; x++) mean += r[x];
+        mean /= w;
+        for (x = 0; x < w; x++) {
+            double hw = 0.5 - 0.5 * cos(6.283185307 * x / (w - 1)), v = (r[x] - mean) * hw;
+            re += v * cos(6.283185307 * x / lam);
+            im += v * sin(6.283185307 * x / lam);
+        }
+        p += re * re + im * im;
+    }
+    return p / m->height;
+}
+
+/* Mean row power over wavelengths lam0..lam1 px (steps of 0.25). */
+static double band_power(const tn_image *m, double lam0, double lam1)
+{
+    double lam, p = 0;
+    int n = 0;
+    for (lam = lam0; lam <= lam1 + 1e-9; lam += 0.25, n++) p += row_power(m, lam);
+    return p / n;
+}
+
+TN_TEST(test_large_map_keeps_source_scale)
+{
+    /* A 64 px source of ridges 8 px apart (along x) styles a 3x larger map: the map must gain
+       power at 8 px, the source's wavelength in its own pixels. The control run gives the
+       source upsampled to the map's size, as the transfer did before: its ridges are 24 px
+       apart, and so are the map's. Fails if the source is upsampled again. */
+    tn_image content = {0, 0, 0, NULL}, src = {0, 0, 0, NULL}, up = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_style_opts o;
+    tn_style_scores sa, sb;
+    tn_rng rng;
+    double a8, a24, b8, b24;
+    int x, y;
+    tn_rng_seed(&rng, 11, 0);
+    tn_image_create(&src, 64, 64, 1);
+    for (y = 0; y < 64; y++)
+        for (x = 0; x < 64; x++) src.data[y * 64 + x] = 100.0f * sinf(6.2831853f * x / 8.0f) + 5.0f * tn_rng_uniform(&rng);
+    make_content(&content, 192, 192);
+    memset(&o, 0, sizeof o);
+    o.iters = 12;
+    o.levels = 1;
+    o.drain_weight = o.valley_weight = -1;
+    TN_CHECK(tn_style_transfer(&a, &content, &src, &o) == TN_OK);
+    TN_CHECK(tn_image_resize(&up, &src, 192, 192, TN_RESIZE_BICUBIC) == TN_OK);
+    TN_CHECK(tn_style_transfer(&b, &content, &up, &o) == TN_OK);
+    a8 = band_power(&a, 7, 9);
+    a24 = band_power(&a, 21, 27);
+    b8 = band_power(&b, 7, 9);
+    b24 = band_power(&b, 21, 27);
+    printf("  row power at 8 / 24 px: native source %.3g / %.3g, upsampled source %.3g / %.3g\n", a8, a24, b8, b24);
+    TN_CHECK(a8 > b8);                     /* the source's ridges at their own pixel size */
+    TN_CHECK(a8 / a24 > 4.0 * (b8 / b24)); /* and relatively less power at the upsampled wavelength */
+    TN_CHECK(tn_style_compare(&a, &src, &sa) == TN_OK);
+    TN_CHECK(tn_style_compare(&b, &src, &sb) == TN_OK);
+    printf("  slope dist to the source: native %.3f, upsampled %.3f\n", sa.slope_hist_dist, sb.slope_hist_dist);
+    TN_CHECK(sa.slope_hist_dist < sb.slope_hist_dist);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&up);
+    tn_image_free(&src);
+    tn_image_free(&content);
+}
+
 int main(void)
 {
     TN_RUN(test_argsort);
@@ -586,6 +657,7 @@ int main(void)
     TN_RUN(test_drain_band_drains_straight_off);
     TN_RUN(test_auto_drainage);
     TN_RUN(test_tiles_and_progress);
+    TN_RUN(test_large_map_keeps_source_scale);
     TN_RUN(test_margin_progress);
     TN_RUN(test_cancel);
     TN_RUN(test_bad_input);
