@@ -6,21 +6,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-/* A 40 x 40 Perlin terrain from 1000 to 2000 m: enough ridges and valleys for ~20 parts. */
-static tn_image make_dem(uint64_t seed)
-{
-    tn_image d = {0, 0, 0, NULL};
-    tn_perlin_opts po;
-    size_t i;
-    memset(&po, 0, sizeof po);
-    po.seed = seed;
-    po.octaves = 4;
-    po.frequency = 3;
-    tn_noise_perlin(&d, 40, 40, &po);
-    for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
-    return d;
-}
-
 static void tiny_opts(tn_gnn_opts *o, long iters)
 {
     memset(o, 0, sizeof *o);
@@ -86,7 +71,7 @@ TN_TEST(membrane_interpolates_between_lines)
 
 TN_TEST(training_lowers_the_loss_and_generates_metres)
 {
-    tn_image dem = make_dem(3), out0 = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(40, 3), out0 = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m0, m;
     tn_gnn_stats s0, s;
@@ -131,7 +116,7 @@ TN_TEST(training_lowers_the_loss_and_generates_metres)
 TN_TEST(save_load_round_trip)
 {
     const char *path = tn_test_tmp_path("gnn", "model.tnw");
-    tn_image dem = make_dem(4), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(40, 4), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m, l;
     tn_gnn_generate_opts go;
@@ -163,7 +148,7 @@ TN_TEST(save_load_round_trip)
 TN_TEST(resume_is_bit_identical)
 {
     const char *ck = tn_test_tmp_path("gnn", "run.ckpt");
-    tn_image dem = make_dem(5);
+    tn_image dem = tn_test_dem(40, 5);
     tn_gnn_opts o;
     tn_gnn full, part, res;
     tn_gnn_stats st;
@@ -187,7 +172,7 @@ TN_TEST(resume_is_bit_identical)
     tn_gnn_free(&part);
     tn_gnn_free(&full);
     {
-        tn_image other = make_dem(6);
+        tn_image other = tn_test_dem(40, 6);
         TN_CHECK(tn_gnn_train(&other, &o, &res, NULL) != TN_OK);
         tn_image_free(&other);
     }
@@ -196,7 +181,7 @@ TN_TEST(resume_is_bit_identical)
 
 TN_TEST(same_results_for_1_and_2_threads)
 {
-    tn_image dem = make_dem(8), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(40, 8), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m1, m2;
     tn_gnn_generate_opts go;
@@ -226,7 +211,7 @@ TN_TEST(same_results_for_1_and_2_threads)
 TN_TEST(bad_inputs_fail_cleanly)
 {
     const char *path = tn_test_tmp_path("gnn", "bad.tnw");
-    tn_image dem = make_dem(9), flat = {0, 0, 0, NULL}, empty = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(40, 9), flat = {0, 0, 0, NULL}, empty = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m, l;
     tn_contour_set sk, none;
@@ -327,7 +312,7 @@ TN_TEST(window_equals_whole_map)
        larger than one membrane block (260 x 200, so the blocked membrane blends), with a random
        sketch; also the bounded-influence membrane is continuous and matches the plain solve on
        a map of one block */
-    tn_image dem = make_dem(12), whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, win2 = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(40, 12), whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, win2 = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m;
     tn_gnn_generate_opts go;

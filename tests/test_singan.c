@@ -7,21 +7,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-/* A 24 x 24 Perlin terrain from 1000 to 2000 m. */
-static tn_image make_dem(uint64_t seed, int n)
-{
-    tn_image d = {0, 0, 0, NULL};
-    tn_perlin_opts po;
-    size_t i;
-    memset(&po, 0, sizeof po);
-    po.seed = seed;
-    po.octaves = 4;
-    po.frequency = 3;
-    tn_noise_perlin(&d, n, n, &po);
-    for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
-    return d;
-}
-
 static void tiny_opts(tn_singan_opts *o, int iters)
 {
     memset(o, 0, sizeof *o);
@@ -38,7 +23,7 @@ static int have_trained;
 
 TN_TEST(training_lowers_the_reconstruction_loss)
 {
-    tn_image dem = make_dem(1, 24);
+    tn_image dem = tn_test_dem(24, 1);
     tn_singan_opts o;
     tn_singan_stats st;
     tiny_opts(&o, 40);
@@ -114,7 +99,7 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
 
 TN_TEST(refine_and_upscale)
 {
-    tn_image dem = make_dem(1, 24), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(24, 1), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
     tn_singan_gen_opts g;
     float lo, hi;
     if (!have_trained) TN_SKIP("no model");
@@ -146,7 +131,7 @@ TN_TEST(refine_and_upscale)
 TN_TEST(resume_is_bit_identical)
 {
     const char *ck = tn_test_tmp_path("singan", "run.ckpt");
-    tn_image dem = make_dem(2, 24);
+    tn_image dem = tn_test_dem(24, 2);
     tn_singan_opts o;
     tn_singan a, b;
     tn_singan_stats st;
@@ -165,7 +150,7 @@ TN_TEST(resume_is_bit_identical)
     TN_CHECK(tn_test_same_params(a.weights, b.weights, 0));
     tn_singan_free(&b);
     { /* a checkpoint is not a model; another example is refused */
-        tn_image other = make_dem(3, 24);
+        tn_image other = tn_test_dem(24, 3);
         TN_CHECK(tn_singan_load(ck, &b) == TN_ERR_FORMAT);
         TN_CHECK(tn_singan_train(&other, &o, &b, NULL) == TN_ERR_SHAPE);
         tn_image_free(&other);
@@ -177,7 +162,7 @@ TN_TEST(resume_is_bit_identical)
 
 TN_TEST(bad_inputs)
 {
-    tn_image dem = make_dem(1, 24), small = make_dem(1, 10), flat = {0, 0, 0, NULL};
+    tn_image dem = tn_test_dem(24, 1), small = tn_test_dem(10, 1), flat = {0, 0, 0, NULL};
     tn_singan_opts o;
     tn_singan m;
     tn_image out = {0, 0, 0, NULL};

@@ -54,6 +54,7 @@ static unsigned char *tn_test_read_file(const char *path, size_t *n);
 #ifdef TERRAINNET_H
 static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
 static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip);
+static tn_image tn_test_dem(int n, uint64_t seed);
 #endif
 
 /* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
@@ -77,6 +78,7 @@ static int tn_test_summary(const char *file)
 #ifdef TERRAINNET_H
     (void)tn_test_exemplar;
     (void)tn_test_same_params;
+    (void)tn_test_dem;
 #endif
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
@@ -135,6 +137,22 @@ static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed)
             for (c = 0; c < channels; c++)
                 TN_PIXEL(&img, x, y, c) = 0.3f + 0.2f * sinf(0.7f * (float)x + (float)c) * cosf(0.4f * (float)y) + 0.2f * tn_rng_uniform(&r);
     return img;
+}
+
+/* An n x n Perlin terrain (4 octaves, 3 cells across) from 1000 to 2000 m: a small DEM with
+   ridges and valleys for the learned methods' tests. */
+static tn_image tn_test_dem(int n, uint64_t seed)
+{
+    tn_image d = {0, 0, 0, NULL};
+    tn_perlin_opts po;
+    size_t i;
+    memset(&po, 0, sizeof po);
+    po.seed = seed;
+    po.octaves = 4;
+    po.frequency = 3;
+    if (tn_noise_perlin(&d, n, n, &po)) return d;
+    for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
+    return d;
 }
 
 /* 1 when two parameter sets hold the same tensors bit for bit (names, sizes, values), from the
