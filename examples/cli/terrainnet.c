@@ -23,6 +23,14 @@
 
 /* ---- small helpers ------------------------------------------------------------------------ */
 
+/* A training command stopped by Ctrl-C: its checkpoint holds the run (exit status 130). */
+static int train_interrupted(const char *cmd, long iterations, const char *ckpt)
+{
+    fprintf(stderr, "terrainnet %s: interrupted after %ld iterations; the checkpoint %s holds them: run the same command with "
+                    "--resume to continue\n", cmd, iterations, ckpt);
+    return 130;
+}
+
 static void progress_close(void);
 
 static int fail_status(tn_status st)
@@ -1240,11 +1248,7 @@ static int run_texgan_train(void)
     }
     st = tn_texgan_train(&model, &ex, &a->o, &s);
     tn_image_free(&ex);
-    if (st == TN_ERR_CANCELLED) {
-        fprintf(stderr, "terrainnet texgan-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
-                        "command with --resume to continue\n", s.iterations, a->ckpt);
-        return 130;
-    }
+    if (st == TN_ERR_CANCELLED) return train_interrupted("texgan-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
     st = tn_texgan_save(&model, a->out);
     if (!st)
@@ -1473,11 +1477,7 @@ static int run_singan_train(void)
     if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
     st = tn_singan_train(&dem, &a->o, &model, &s);
     tn_image_free(&dem);
-    if (st == TN_ERR_CANCELLED) {
-        fprintf(stderr, "terrainnet singan-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
-                        "command with --resume to continue\n", s.iterations, a->ckpt);
-        return 130;
-    }
+    if (st == TN_ERR_CANCELLED) return train_interrupted("singan-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
     st = tn_singan_save(&model, a->out);
     if (!st) {
@@ -1684,11 +1684,7 @@ static int run_gnn_train(void)
     fflush(stdout);
     st = tn_gnn_train(&win, &a->o, &model, &s);
     tn_image_free(&win);
-    if (st == TN_ERR_CANCELLED) {
-        fprintf(stderr, "terrainnet gnn-train: interrupted after %ld iterations; the checkpoint %s holds them: run the same "
-                        "command with --resume to continue\n", s.iterations, a->ckpt);
-        return 130;
-    }
+    if (st == TN_ERR_CANCELLED) return train_interrupted("gnn-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
     st = tn_gnn_save(&model, a->out);
     if (!st)
