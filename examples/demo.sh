@@ -2,7 +2,7 @@
 # make demo: learn from one real DEM (examples/data/alps_n47e009_256.png, an SRTM crop of the Alps)
 # and write a one-page demo/index.html: each picture beside the command that made it.
 #
-#   sh examples/demo.sh                 a few minutes on 2 cores (texture GAN: DEMO_MINUTES=2)
+#   sh examples/demo.sh                 minutes on 2 cores (GNN, SinGAN, texture GAN: DEMO_MINUTES=2 each)
 #   DEMO_FAST=1 sh examples/demo.sh     seconds-long budgets, for tests (pictures are rough)
 #   DEMO_DIR=out DEM=my.png DEM_SPACING="30 30" sh examples/demo.sh   another place, another example
 #
