@@ -320,6 +320,302 @@ TN_TEST(test_season_real_dem)
     tn_image_free(&dem);
 }
 
+/* ---- KPD generator ---- */
+
+/* A small paired set: the procedural texturer's pictures of a Perlin DEM at four months. */
+typedef struct kpd_set {
+    tn_image dem, ins, tex[4], mask;
+    tn_climate c;
+    tn_season_sample s[4];
+} kpd_set;
+
+static int kpd_set_make(kpd_set *k, int n)
+{
+    tn_insolation_opts io;
+    float times[4] = {0.0f, 3.0f, 6.0f, 9.0f};
+    int i;
+    size_t p;
+    memset(k, 0, sizeof *k);
+    k->dem = tn_test_dem(n, 5);
+    memset(&io, 0, sizeof io);
+    io.dx = 30.0f;
+    io.step_minutes = 60.0f;
+    io.directions = 8;
+    if (!k->dem.data || tn_climate_koppen("Dfb", &k->c) || tn_insolation(&k->dem, 55.8, &io, &k->ins)) return 0;
+    if (tn_season_texture(&k->dem, &k->c, 55.8, &k->ins, times, 4, NULL, k->tex, NULL)) return 0;
+    if (tn_image_create(&k->mask, n, n, 1)) return 0;
+    for (p = 0; p < (size_t)n * n; p++) k->mask.data[p] = (p % 7) != 0; /* every 7th pixel unusable */
+    for (i = 0; i < 4; i++) {
+        k->s[i].dem = &k->dem;
+        k->s[i].insolation = &k->ins;
+        k->s[i].climate = &k->c;
+        k->s[i].time = times[i];
+        k->s[i].target = &k->tex[i];
+        k->s[i].mask = &k->mask;
+    }
+    return 1;
+}
+
+static void kpd_set_free(kpd_set *k)
+{
+    int i;
+    tn_image_free(&k->dem);
+    tn_image_free(&k->ins);
+    tn_image_free(&k->mask);
+    for (i = 0; i < 4; i++) tn_image_free(&k->tex[i]);
+}
+
+static void kpd_small_opts(tn_kpd_opts *o, long iters)
+{
+    memset(o, 0, sizeof *o);
+    o->width = 8;
+    o->crop = 32;
+    o->batch = 2;
+    o->train.max_iters = iters;
+    o->train.minutes = 5;
+    o->train.seed = 3;
+}
+
+static int same_image(const tn_image *a, const tn_image *b)
+{
+    return a->data && b->data && a->width == b->width && a->height == b->height && a->channels == b->channels &&
+           !memcmp(a->data, b->data, (size_t)a->width * a->height * a->channels * sizeof(float));
+}
+
+/* Any window equals those pixels of the whole map, at a month and between two months, and at 1
+   and 2 threads; the file round trip keeps every weight. */
+TN_TEST(test_kpd_window_equals_whole_map)
+{
+    kpd_set k;
+    tn_kpd_opts o;
+    tn_kpd m, m2;
+    tn_image whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, whole2 = {0, 0, 0, NULL}, between = {0, 0, 0, NULL};
+    int x, y, c, ok = 1, moved = 0;
+    const char *path = tn_test_tmp_path("season", "kpd.tnw");
+    TN_CHECK(kpd_set_make(&k, 72));
+    kpd_small_opts(&o, 4);
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_OK);
+    if (!m.weights) { kpd_set_free(&k); return; }
+    TN_CHECK(m.out_channels == 3 && m.cond_channels == 39 && m.iterations == 4);
+    tn_set_threads(2);
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72, &whole) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 21, 38, 30, 27, &win) == TN_OK);
+    for (y = 0; y < 27 && whole.data && win.data; y++)
+        for (x = 0; x < 30; x++)
+            for (c = 0; c < 3; c++) ok &= TN_PIXEL(&win, x, y, c) == TN_PIXEL(&whole, 21 + x, 38 + y, c);
+    TN_CHECK(ok);
+    tn_set_threads(1);
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72, &whole2) == TN_OK);
+    TN_CHECK(same_image(&whole, &whole2));
+    tn_image_free(&whole2);
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 16.0f, 0, 0, 72, 72, &whole2) == TN_OK); /* a year later */
+    TN_CHECK(same_image(&whole, &whole2));
+    /* between April and May: not April's picture, and a window still equals the whole map */
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 3.5f, 0, 0, 72, 72, &between) == TN_OK);
+    tn_image_free(&win);
+    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 3.5f, 40, 9, 32, 50, &win) == TN_OK);
+    ok = 1;
+    for (y = 0; y < 50 && between.data && win.data; y++)
+        for (x = 0; x < 32; x++)
+            for (c = 0; c < 3; c++) {
+                ok &= TN_PIXEL(&win, x, y, c) == TN_PIXEL(&between, 40 + x, 9 + y, c);
+                moved += TN_PIXEL(&between, 40 + x, 9 + y, c) != TN_PIXEL(&whole, 40 + x, 9 + y, c);
+            }
+    TN_CHECK(ok && moved > 0);
+    tn_set_threads(0);
+    TN_CHECK(tn_kpd_save(&m, path) == TN_OK);
+    TN_CHECK(tn_kpd_load(path, &m2) == TN_OK);
+    if (m2.weights) {
+        TN_CHECK(m2.condition == TN_KPD_OURS && m2.h_offset == m.h_offset && m2.g_scale == m.g_scale && m2.iterations == 4);
+        TN_CHECK(tn_test_same_params(m.weights, m2.weights, 0));
+    }
+    tn_kpd_free(&m2);
+    tn_image_free(&whole);
+    tn_image_free(&whole2);
+    tn_image_free(&win);
+    tn_image_free(&between);
+    tn_kpd_free(&m);
+    kpd_set_free(&k);
+    remove(path);
+}
+
+/* Training lowers the masked L1, and an interrupted run resumes bit-identically. */
+TN_TEST(test_kpd_learns_and_resumes)
+{
+    kpd_set k;
+    tn_kpd_opts o;
+    tn_kpd a, b;
+    tn_kpd_stats st;
+    const char *ck = tn_test_tmp_path("season", "kpd_ck.tnw");
+    TN_CHECK(kpd_set_make(&k, 48));
+    kpd_small_opts(&o, 40);
+    o.gan_weight = -1; /* L1 only: a quick, steady descent */
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, &st) == TN_OK);
+    printf("# kpd L1 first %.4f, last 50 mean %.4f\n", st.loss_l1_first, st.loss_l1);
+    TN_CHECK(st.loss_l1 < 0.7f * st.loss_l1_first);
+    tn_kpd_free(&a);
+    kpd_small_opts(&o, 6);
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, NULL) == TN_OK);
+    remove(ck);
+    kpd_small_opts(&o, 3);
+    o.train.checkpoint = ck;
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &b, NULL) == TN_OK);
+    tn_kpd_free(&b);
+    o.train.max_iters = 6;
+    o.train.resume = 1;
+    o.train.seed = 99; /* the checkpoint's seed wins */
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &b, &st) == TN_OK);
+    TN_CHECK(st.resumed_from == 3 && st.iterations == 6);
+    if (a.weights && b.weights) TN_CHECK(tn_test_same_params(a.weights, b.weights, 0));
+    /* a checkpoint of these pictures refuses other pictures */
+    k.s[0].time = 1.0f;
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, NULL) == TN_ERR_SHAPE);
+    tn_kpd_free(&a);
+    tn_kpd_free(&b);
+    kpd_set_free(&k);
+    remove(ck);
+}
+
+TN_TEST(test_kpd_bad_input)
+{
+    kpd_set k;
+    tn_kpd_opts o;
+    tn_kpd m;
+    tn_image out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
+    tn_season_data d;
+    char p[512], other[512];
+    FILE *f;
+    float keep;
+    snprintf(p, sizeof p, "%s", tn_test_tmp_path("season", "bad.csv"));
+    snprintf(other, sizeof other, "%s", tn_test_tmp_path("season", "other.tnw"));
+    TN_CHECK(kpd_set_make(&k, 40));
+    kpd_small_opts(&o, 1);
+    TN_CHECK(tn_kpd_train(NULL, 0, &o, &m, NULL) == TN_ERR_EMPTY);
+    keep = k.tex[1].data[5];
+    k.tex[1].data[5] = NAN; /* pixel 5 is valid */
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_NUMERIC);
+    k.tex[1].data[0] = NAN; /* pixel 0 is masked: allowed */
+    k.tex[1].data[5] = keep;
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_image_create(&small, 20, 40, 1) == TN_OK);
+    k.s[2].mask = &small;
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_SHAPE);
+    k.s[2].mask = &k.mask;
+    k.s[3].insolation = NULL;
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_SHAPE);
+    k.s[3].insolation = &k.ins;
+    o.crop = 20; /* not a multiple of 8 */
+    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    if (m.weights) {
+        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, NULL, 2.0f, 0, 0, 40, 40, &out) == TN_ERR_SHAPE);
+        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, NAN, 0, 0, 40, 40, &out) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 2.0f, 30, 0, 20, 40, &out) == TN_ERR_INVALID_ARG);
+        keep = k.dem.data[7];
+        k.dem.data[7] = NAN;
+        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 2.0f, 0, 0, 40, 40, &out) == TN_ERR_NUMERIC);
+        TN_CHECK(out.data == NULL);
+        k.dem.data[7] = keep;
+    }
+    tn_kpd_free(&m);
+    /* another method's model file */
+    {
+        tn_params *q = tn_params_create();
+        int one = 1;
+        tn_model_provenance pv;
+        memset(&pv, 0, sizeof pv);
+        tn_params_add(q, "singan.config", 1, &one);
+        tn_model_stamp(q, "singan", 1, &pv);
+        TN_CHECK(tn_params_save(q, other) == TN_OK);
+        tn_params_free(q);
+        TN_CHECK(tn_kpd_load(other, &m) == TN_ERR_FORMAT);
+        TN_CHECK(m.weights == NULL);
+    }
+    /* data files: a climate of 11 months, an unknown row, a mask of the wrong size */
+    TN_CHECK((f = fopen(p, "w")) != NULL);
+    if (f) {
+        fputs("dem,nothing_here.pfm\n", f);
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_IO);
+    TN_CHECK(tn_image_save(tn_test_tmp_path("season", "d.pfm"), &k.dem, NULL) == TN_OK);
+    TN_CHECK(tn_image_save(tn_test_tmp_path("season", "m.pgm"), &small, NULL) == TN_OK);
+    TN_CHECK(tn_image_save(tn_test_tmp_path("season", "t.pfm"), &k.tex[0], NULL) == TN_OK);
+    if ((f = fopen(tn_test_tmp_path("season", "c.csv"), "w"))) {
+        int mth;
+        for (mth = 1; mth <= 11; mth++) fprintf(f, "%d,%d,50\n", mth, mth);
+        fclose(f);
+    }
+    if ((f = fopen(p, "w"))) {
+        fprintf(f, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    printf("# %s\n", tn_last_error());
+    if ((f = fopen(p, "w"))) {
+        fprintf(f, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    if ((f = fopen(p, "w"))) {
+        fprintf(f, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    if ((f = fopen(p, "w"))) {
+        fprintf(f, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_SHAPE);
+    if ((f = fopen(p, "w"))) {
+        fprintf(f, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
+        fclose(f);
+    }
+    TN_CHECK(tn_season_data_load(p, &d) == TN_OK);
+    if (!d.count) fprintf(stderr, "%s\n", tn_last_error());
+    TN_CHECK(d.count == 2 && d.sites == 1 && d.samples[1].time == 4.5f && d.insolation[0].channels == 12);
+    if (d.count == 2) TN_CHECK(fabsf(d.samples[0].time - (1.0f + (3.0f - 15.0f) / 28.0f)) < 1e-6f);
+    tn_season_data_free(&d);
+    remove(p);
+    remove(other);
+    remove(tn_test_tmp_path("season", "d.pfm"));
+    remove(tn_test_tmp_path("season", "m.pgm"));
+    remove(tn_test_tmp_path("season", "t.pfm"));
+    remove(tn_test_tmp_path("season", "c.csv"));
+    tn_image_free(&small);
+    kpd_set_free(&k);
+}
+
+/* The real Sentinel-2 set: cloudy frames are left out, dates become times of the year. */
+TN_TEST(test_season_data_slovenia)
+{
+    tn_season_data d;
+    int i, n2015 = 0;
+    if (!tn_test_data("seasonal_slovenia/frames.csv")) TN_SKIP("no ../shared/data");
+    TN_CHECK(tn_season_data_load("examples/data/slovenia_season.csv", &d) == TN_OK);
+    if (!d.count) return;
+    /* 47 acquisitions, 15 entirely under cloud */
+    TN_CHECK(d.count == 32 && d.sites == 1 && d.lo == -0.2f && d.hi == 0.9f);
+    TN_CHECK(d.dems[0].width == 100 && d.dems[0].height == 101 && d.insolation[0].channels == 12);
+    for (i = 0; i < d.count; i++) {
+        n2015 += !strncmp(d.labels[i], "2015", 4);
+        TN_CHECK(d.samples[i].time >= 0 && d.samples[i].time < 12);
+    }
+    TN_CHECK(n2015 == 5);
+    /* south-facing slopes get more sun in December than north-facing ones: the insolation's
+       spread is real */
+    {
+        float lo = 1e9f, hi = -1e9f;
+        size_t p;
+        for (p = 0; p < 100 * 101; p++) {
+            float v = d.insolation[0].data[p * 12 + 11];
+            lo = v < lo ? v : lo;
+            hi = v > hi ? v : hi;
+        }
+        TN_CHECK(hi > 1.3f * lo);
+    }
+    tn_season_data_free(&d);
+}
+
 int main(void)
 {
     TN_RUN(test_flat_plane_matches_formula);
@@ -330,5 +626,9 @@ int main(void)
     TN_RUN(test_koppen_presets);
     TN_RUN(test_season_snow_and_green);
     TN_RUN(test_season_real_dem);
+    TN_RUN(test_kpd_window_equals_whole_map);
+    TN_RUN(test_kpd_learns_and_resumes);
+    TN_RUN(test_kpd_bad_input);
+    TN_RUN(test_season_data_slovenia);
     return tn_test_summary("test_season");
 }

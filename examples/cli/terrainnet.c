@@ -1924,7 +1924,8 @@ static struct season_args {
     double lat, lo, hi;
     int month, months, frames, columns;
     tn_season_opts o;
-} season_arg = {NULL, NULL, NULL, NULL, NULL, -999.0, 0, 0, 0, 0, 0, 0, {{0, 0, 0, 0, 0, 0, 0, 0, 0}, 0, 0, 0, 0, 0, 0, 0, 0}}; /* lat -999: not given */
+    const char *model;
+} season_arg = {NULL, NULL, NULL, NULL, NULL, -999.0, 0, 0, 0, 0, 0, 0, {{0, 0, 0, 0, 0, 0, 0, 0, 0}, 0, 0, 0, 0, 0, 0, 0, 0}, NULL}; /* lat -999: not given */
 static const cli_opt season_opts[] = {
     {"DEM", 0, ARG_POS, 0, &season_arg.in, NULL, 0, 0, NULL, "heightmap in metres", NULL},
     {"output", 'o', ARG_STR, REQ, &season_arg.out, NULL, 0, 0, "PREFIX",
@@ -1943,6 +1944,8 @@ static const cli_opt season_opts[] = {
     {"shade", 0, ARG_FLOAT, SET, &season_arg.o.shade, NULL, 0, 1, "F", "hillshade mixed into the colours (0 = albedo only)", "0.5"},
     {"seed", 0, ARG_U64, 0, &season_arg.o.seed, NULL, 0, 0, "S", "seed of the fine detail noise", "0"},
     {"columns", 0, ARG_INT, 0, &season_arg.columns, NULL, 1, 64, "N", "columns of the preview sheet", "4"},
+    {"model", 0, ARG_STR, 0, &season_arg.model, NULL, 0, 0, "MODEL.tnw",
+     "a KPD network from season-train instead of the procedural texturer (times between months interpolate its gamma/beta)", NULL},
 };
 
 /* Reads PREFIX_01..12.pfm into one 12-channel image. */
@@ -1968,6 +1971,35 @@ static tn_status season_read_insolation(const char *prefix, tn_image *out)
     }
     if (st) tn_image_free(&all);
     else *out = all;
+    return st;
+}
+
+/* The KPD network's pictures at each time, mapped from its value range to [0, 1] for saving (a
+   one-channel model, e.g. NDVI, also writes the values as PREFIX_*.pfm). */
+static tn_status season_network(const struct season_args *a, const tn_image *dem, tn_climate *clim, tn_image *ins, const float *times,
+                                int count, tn_image *imgs)
+{
+    tn_kpd m;
+    tn_status st;
+    int i;
+    size_t k;
+    char path[4096];
+    if ((st = tn_kpd_load(a->model, &m))) return st;
+    if (a->lat >= -90) clim->latitude = (float)a->lat, clim->has_latitude = 1;
+    if (m.condition == TN_KPD_OURS && !ins->data) st = tn_insolation(dem, clim->has_latitude ? clim->latitude : NAN, &a->o.insolation, ins);
+    for (i = 0; i < count && !st; i++) {
+        if ((st = tn_kpd_generate(&m, dem, clim, ins->data ? ins : NULL, times[i], 0, 0, dem->width, dem->height, &imgs[i]))) break;
+        if (m.out_channels == 1) {
+            if (a->frames) snprintf(path, sizeof path, "%s_f%03d.pfm", a->out, i);
+            else snprintf(path, sizeof path, "%s_%02d.pfm", a->out, a->month ? a->month : i + 1);
+            if ((st = tn_image_save(path, &imgs[i], NULL))) break;
+        }
+        for (k = 0; k < (size_t)imgs[i].width * imgs[i].height * imgs[i].channels; k++) {
+            float v = (imgs[i].data[k] - m.lo) / (m.hi - m.lo);
+            imgs[i].data[k] = v < 0 ? 0 : v > 1 ? 1 : v;
+        }
+    }
+    tn_kpd_free(&m);
     return st;
 }
 
@@ -2000,7 +2032,8 @@ static int run_season(void)
         return 1;
     }
     /* without --lat (still -999) the climate's latitude is used */
-    st = tn_season_texture(&dem, &clim, a->lat < -90 ? NAN : a->lat, ins.data ? &ins : NULL, times, count, &a->o, imgs, NULL);
+    if (a->model) st = season_network(a, &dem, &clim, &ins, times, count, imgs);
+    else st = tn_season_texture(&dem, &clim, a->lat < -90 ? NAN : a->lat, ins.data ? &ins : NULL, times, count, &a->o, imgs, NULL);
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
     for (i = 0; i < count && !st; i++) {
@@ -2021,11 +2054,78 @@ static int run_season(void)
     return st ? fail_status(st) : 0;
 }
 
-static const cli_command season_cmd = {"season", CLI_CMD(season), "seasonal textures of a DEM for a climate (procedural, no data files)",
+static struct season_train_args { const char *data, *out, *ckpt, *cond, *exclude; tn_kpd_opts o; } season_train_arg;
+static const cli_opt season_train_opts[] = {
+    {"DATA", 0, ARG_POS, 0, &season_train_arg.data, NULL, 0, 0, NULL, "a season data file (sites, climates, dated pictures; docs/season.md)", NULL},
+    {"output", 'o', ARG_STR, REQ, &season_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the KPD generator", NULL},
+    {"minutes", 0, ARG_DOUBLE, 0, &season_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget", "10"},
+    {"iters", 0, ARG_LONG, 0, &season_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations", "0 = only the time budget"},
+    {"resume", 0, ARG_FLAG, 0, &season_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
+    {"checkpoint", 0, ARG_STR, 0, &season_train_arg.ckpt, NULL, 0, 0, "PATH", "full training state, saved atomically", "MODEL.tnw.ckpt"},
+    {"checkpoint-seconds", 0, ARG_DOUBLE, 0, &season_train_arg.o.train.checkpoint_seconds, NULL, 0, 1e9, "S", "checkpoint at least this often", "60"},
+    {"seed", 0, ARG_U64, 0, &season_train_arg.o.train.seed, NULL, 0, 0, "S", "random seed", "0"},
+    {"condition", 0, ARG_STR, 0, &season_train_arg.cond, NULL, 0, 0, "C",
+     "ours (T12+P12+S12 rotated), cond1 (T'12+P'12+month), cond2 (T1+P1), cond3 (latitude+month), cond4 (T12+P12)", "ours"},
+    {"exclude", 0, ARG_STR, 0, &season_train_arg.exclude, NULL, 0, 0, "PREFIX", "leave out the frames whose date starts with PREFIX (held out)", NULL},
+    {"width", 0, ARG_INT, 0, &season_train_arg.o.width, NULL, 4, 256, "N", "features at the coarsest level", "32"},
+    {"crop", 0, ARG_INT, 0, &season_train_arg.o.crop, NULL, 16, 4096, "PX", "training window side (a multiple of 8)", "64"},
+    {"batch", 0, ARG_INT, 0, &season_train_arg.o.batch, NULL, 1, 64, "N", "windows per step", "4"},
+    {"lr", 0, ARG_FLOAT, 0, &season_train_arg.o.lr, NULL, 0, 1, "R", "Adam rate", "2e-4"},
+    {"gan", 0, ARG_FLOAT, 0, &season_train_arg.o.gan_weight, NULL, -1, 1000, "W", "adversarial weight (< 0: L1 only)", "1"},
+};
+
+static int run_season_train(void)
+{
+    struct season_train_args *a = &season_train_arg;
+    tn_season_data d;
+    tn_season_sample *use = NULL;
+    tn_kpd model;
+    tn_kpd_stats s;
+    tn_status st;
+    char ckbuf[1024];
+    int i, n = 0;
+    if (!a->ckpt) {
+        snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
+        a->ckpt = ckbuf;
+    }
+    a->o.train.checkpoint = a->ckpt;
+    if (a->cond && (st = tn_kpd_condition_parse(a->cond, &a->o.condition))) return fail_status(st);
+    if ((st = tn_season_data_load(a->data, &d))) return fail_status(st);
+    if (!(use = (tn_season_sample *)calloc((size_t)d.count, sizeof *use))) {
+        tn_season_data_free(&d);
+        fprintf(stderr, "terrainnet: out of memory\n");
+        return 1;
+    }
+    for (i = 0; i < d.count; i++)
+        if (!a->exclude || strncmp(d.labels[i], a->exclude, strlen(a->exclude))) use[n++] = d.samples[i];
+    printf("data: %d site%s, %d usable frames, %d for training\n", d.sites, d.sites > 1 ? "s" : "", d.count, n);
+    a->o.lo = d.lo;
+    a->o.hi = d.hi;
+    st = tn_kpd_train(use, n, &a->o, &model, &s);
+    free(use);
+    tn_season_data_free(&d);
+    if (st == TN_ERR_CANCELLED) return train_interrupted("season-train", s.iterations, a->ckpt);
+    if (st) return fail_status(st);
+    st = tn_kpd_save(&model, a->out);
+    if (!st)
+        printf("condition: %s\niterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\n"
+               "loss_l1: %.5f (first %.5f)\nloss_g: %.4f\nloss_d: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
+               tn_kpd_condition_name(model.condition), s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_l1,
+               (double)s.loss_l1_first, (double)s.loss_g, (double)s.loss_d, s.checkpoints, a->ckpt, a->out);
+    tn_kpd_free(&model);
+    return st ? fail_status(st) : 0;
+}
+
+static const cli_command season_train_cmd = {"season-train", CLI_CMD(season_train), "train the KPD seasonal texture network on dated pictures",
+    "Trains paper 003's KPD generator (SPADE-style blocks conditioned on the heightfield and the year of temperature, "
+    "precipitation and insolation rotated to the target month) on the pictures of a season data file, with clouds and "
+    "no-data pixels left out of every loss. Checkpoints atomically; --resume continues identically. See docs/season.md."};
+
+static const cli_command season_cmd = {"season", CLI_CMD(season), "seasonal textures of a DEM for a climate (procedural, or a KPD network)",
     "Textures for every month (or N frames through the year) from the built-in procedural texturer: degree-day snow through "
     "a cyclic year with insolation and the -0.6 C / 100 m lapse rate, vegetation greenness from temperature and moisture, "
-    "forest below the tree line, bare rock on steep slopes, colours measured from real ground textures. No trained network "
-    "is involved (docs/season.md)."};
+    "forest below the tree line, bare rock on steep slopes, colours measured from real ground textures; or, with --model, "
+    "a KPD network from season-train (docs/season.md)."};
 
 /* ---- main -------------------------------------------------------------------------------- */
 
@@ -2033,7 +2133,7 @@ static const cli_command *const commands[] = {
     &info_cmd, &convert_cmd, &metrics_cmd, &render_cmd, &noise_cmd, &sketch_cmd, &sketch_random_cmd, &align_cmd,
     &extract_cmd, &realism_cmd, &style_cmd, &texgan_train_cmd, &texgan_synth_cmd, &detail_maps_cmd, &gnn_train_cmd,
     &gnn_generate_cmd, &singan_train_cmd, &singan_sample_cmd, &singan_refine_cmd, &singan_upscale_cmd, &insolation_cmd,
-    &season_cmd, &export_cmd, &world_cmd,
+    &season_cmd, &season_train_cmd, &export_cmd, &world_cmd,
 };
 #define NCOMMANDS (sizeof commands / sizeof commands[0])
 
