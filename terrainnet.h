@@ -18604,6 +18604,8 @@ typedef struct tn__sg_gen_run {
     float noise;          /* multiplier of the amplitudes */
     const float *map;     /* injected map on level map_level's grid (origin 0), or NULL */
     int mw, mh, map_level;
+    int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
+                              mstride apart (0 = mw: the whole map); @@world's refine tiles */
     int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
 } tn__sg_gen_run;
 
@@ -18628,13 +18630,14 @@ static tn_status tn__sg_base(const tn__sg_gen_run *r, int level, long x0, long y
     size_t n = (size_t)w * h;
     tn_status st = TN_OK;
     if (r->map && level == r->map_level) { /* clamped at the map's border */
+        size_t stride = (size_t)(r->mstride ? r->mstride : r->mw);
         for (y = 0; y < h; y++) {
             long yy = y0 + y;
             yy = yy < 0 ? 0 : yy >= r->mh ? r->mh - 1 : yy;
             for (x = 0; x < w; x++) {
                 long xx = x0 + x;
                 xx = xx < 0 ? 0 : xx >= r->mw ? r->mw - 1 : xx;
-                base[(size_t)y * w + x] = r->map[(size_t)yy * r->mw + xx];
+                base[(size_t)y * w + x] = r->map[(size_t)(yy - r->my0) * stride + (size_t)(xx - r->mx0)];
             }
         }
         return TN_OK;
@@ -23914,6 +23917,187 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
 
 /* ---- local operations ---- */
 
+/* SinGAN refinement (tn_singan_refine) of the heights before it: the input resized to the grid
+   of scale K replaces that scale's upsampled coarser output, then the generators of K and the
+   finer scales run. Everything after the resize is already local (valid convolutions, noise and
+   upsampling at global positions), and the area resize is too: map pixel i averages input
+   pixels [i s, (i + 1) s), s = W / mw. So a tile needs the scale-K window its generators read
+   (their margins M and the bilinear footprints, walked down the scales by tn__world_sg_need)
+   and the input under that window's resize taps. The halo bounds both: at each scale the margin
+   grows by M (a generator) and then becomes e f + 1.5 px a scale down (a bilinear pair), and the
+   grids differ by at most s / 2 input pixels (mw is W f^n rounded). */
+static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    tn__sg_arch A;
+    double from, noise;
+    int k = tn__world_find(s, "model"), K, n, mw, mh, level;
+    char *path;
+    float e = 0.0f, sc;
+    tn_status st;
+    (void)w;
+    if ((st = tn__world_need_heights(s))) return st;
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
+    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->singan);
+        s->singan = NULL;
+        return st;
+    }
+    if ((st = tn__sg_arch_of(s->singan, &A))) return st;
+    if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: the model has one scale only", s->line);
+    if ((st = tn__world_num(s, "from_scale", A.scales - 3 > 1 ? A.scales - 3 : 1, 1, A.scales - 1, &from)) ||
+        (st = tn__world_num(s, "noise", 1, 0, 100, &noise)))
+        return st;
+    K = (int)from;
+    n = A.scales - 1 - K;
+    mw = tn__sg_size(s->in_w, A.factor, n);
+    mh = tn__sg_size(s->in_h, A.factor, n);
+    if (n > 0 && (mw >= s->in_w || mh >= s->in_h))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: a %d x %d raster is too small for scale %d", s->line, s->in_w,
+                        s->in_h, K);
+    s->p[0] = (float)K;
+    s->p[1] = noise == 0 ? -1.0f : (float)noise; /* gen opts: 0 means 1, < 0 no noise */
+    for (level = A.scales - 1; level >= K; level--) {
+        if (tn__sg_net(&A, level) < A.trained) e += TN__SG_M;
+        if (level > K) e = e * A.factor + 1.5f;
+    }
+    sc = (float)s->in_w / (float)mw > (float)s->in_h / (float)mh ? (float)s->in_w / (float)mw : (float)s->in_h / (float)mh;
+    s->halo = (int)ceil((double)e * sc + 0.5 * sc) + 2;
+    tn__world_same_raster(s); /* a halo past the raster's edge is clipped: the whole-map run clamps there too */
+    return TN_OK;
+}
+
+/* The scale-K window [*a, *b) that scale `level`'s window [*a, *b) reads: tn__sg_window's
+   margin, then tn__sg_base's bilinear pairs, scale by scale (one axis). */
+static void tn__world_sg_need(const tn__sg_arch *A, int K, int level, long *a, long *b)
+{
+    for (; level >= K; level--) {
+        long i0, i1;
+        float t;
+        if (tn__sg_net(A, level) < A->trained) {
+            *a -= TN__SG_M;
+            *b += TN__SG_M;
+        }
+        if (level == K) break;
+        tn__sg_coord(*a, A->factor, &i0, &t);
+        tn__sg_coord(*b - 1, A->factor, &i1, &t);
+        *a = i0;
+        *b = i1 + 2;
+    }
+}
+
+/* Window [a, b) of an axis of n map pixels clipped to the map (the clamp reads its edge). */
+static void tn__world_clip_axis(long *a, long *b, int n)
+{
+    if (*a < 0) *a = 0;
+    if (*a > n - 1) *a = n - 1;
+    if (*b > n) *b = n;
+    if (*b < *a + 1) *b = *a + 1;
+}
+
+/* The taps of map pixels [a, b) of tn_image_resize's area filter from n_in to n_out pixels,
+   made relative to input pixel i0; 0 if one falls outside [i0, i0 + len) (a halo too small). */
+static int tn__world_sub_taps(const tn__taps *full, long a, long b, int i0, int len, tn__taps *sub)
+{
+    size_t i, cnt = (size_t)(b - a) * full->ntaps;
+    sub->ntaps = full->ntaps;
+    for (i = 0; i < cnt; i++) {
+        int v = full->idx[(size_t)a * full->ntaps + i] - i0;
+        if (v < 0 || v >= len) return 0;
+        sub->idx[i] = v;
+        sub->wt[i] = full->wt[(size_t)a * full->ntaps + i];
+    }
+    return 1;
+}
+
+static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    const tn_singan *m = s->singan;
+    tn__sg_arch A;
+    tn_singan_gen_opts go, o;
+    tn__sg_gen_run run;
+    tn__taps fx, fy, sx, sy;
+    tn_image one = {0, 0, 0, NULL};
+    float *map = NULL, *tmp = NULL;
+    long ax = r.x, bx = (long)r.x + r.w, ay = r.y, by = (long)r.y + r.h;
+    int K = (int)s->p[0], n, mw, mh, ok = 1;
+    size_t i;
+    tn_status st;
+    memset(&go, 0, sizeof go);
+    memset(&fx, 0, sizeof fx);
+    memset(&fy, 0, sizeof fy);
+    memset(&sx, 0, sizeof sx);
+    memset(&sy, 0, sizeof sy);
+    go.seed = w->seed;
+    go.noise = s->p[1];
+    go.from_scale = K;
+    if ((st = tn__sg_gen_prepare(m, &go, &A, &o, &run))) return st;
+    n = A.scales - 1 - K;
+    mw = tn__sg_size(s->in_w, A.factor, n);
+    mh = tn__sg_size(s->in_h, A.factor, n);
+    tn__world_sg_need(&A, K, A.scales - 1, &ax, &bx);
+    tn__world_sg_need(&A, K, A.scales - 1, &ay, &by);
+    tn__world_clip_axis(&ax, &bx, mw);
+    tn__world_clip_axis(&ay, &by, mh);
+    /* the input in network units, as tn__sg_input makes it before resizing */
+    if ((st = tn_image_create(&one, in->width, in->height, 1))) return st;
+    for (i = 0; i < (size_t)in->width * in->height; i++) one.data[i] = (in->data[i * in->channels] - m->offset) / m->range;
+    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && n == 0) { /* scale K is the finest: the input itself */
+        long y;
+        ok = ax >= in_r.x && bx <= (long)in_r.x + in_r.w && ay >= in_r.y && by <= (long)in_r.y + in_r.h;
+        for (y = ay; ok && y < by; y++)
+            memcpy(map + (size_t)(y - ay) * (bx - ax), one.data + (size_t)(y - in_r.y) * in->width + (ax - in_r.x), (size_t)(bx - ax) * sizeof(float));
+    } else if (!st) { /* tn_image_resize's area taps and row passes on the window */
+        tn__resize_job job;
+        if (!(st = tn__taps_build(&fx, s->in_w, mw, TN_RESIZE_AREA)) && !(st = tn__taps_build(&fy, s->in_h, mh, TN_RESIZE_AREA))) {
+            sx.idx = (int *)tn__alloc((size_t)(bx - ax) * fx.ntaps * sizeof(int));
+            sx.wt = (float *)tn__alloc((size_t)(bx - ax) * fx.ntaps * sizeof(float));
+            sy.idx = (int *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(int));
+            sy.wt = (float *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(float));
+            tmp = (float *)tn__alloc((size_t)in->height * (bx - ax) * sizeof(float));
+            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = TN_ERR_OUT_OF_MEMORY;
+        }
+        if (!st) ok = tn__world_sub_taps(&fx, ax, bx, in_r.x, in_r.w, &sx) && tn__world_sub_taps(&fy, ay, by, in_r.y, in_r.h, &sy);
+        if (!st && ok) {
+            job.src = &one;
+            job.tmp = tmp;
+            job.out = map;
+            job.out_w = (int)(bx - ax);
+            job.tx = &sx;
+            job.ty = &sy;
+            tn__resize_rows_x(&job, 0, (size_t)in->height);
+            tn__resize_rows_y(&job, 0, (size_t)(by - ay));
+        }
+    }
+    if (!st && !ok)
+        st = tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: halo %d too small for tile %d,%d %dx%d", s->line, s->halo, r.x,
+                      r.y, r.w, r.h);
+    if (!st) {
+        run.map = map;
+        run.mw = mw;
+        run.mh = mh;
+        run.map_level = K;
+        run.mx0 = (int)ax;
+        run.my0 = (int)ay;
+        run.mstride = (int)(bx - ax);
+        st = tn__sg_generate(m, &run, A.scales - 1, r.x, r.y, r.w, r.h, o.tile, out);
+    }
+    tn__taps_free(&fx);
+    tn__taps_free(&fy);
+    tn__taps_free(&sx);
+    tn__taps_free(&sy);
+    TN_FREE(tmp);
+    TN_FREE(map);
+    tn_image_free(&one);
+    return st;
+}
+
+
 static tn_status tn__world_blur_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
     double sigma;
@@ -24083,6 +24267,8 @@ static const tn__world_method tn__world_methods[] = {
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
                         "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
+    {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
+                               "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
     {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
     {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
      tn__world_hillshade_run},

@@ -265,6 +265,68 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
     tn_singan_free(&m);
 }
 
+/* Perlin heights refined by SinGAN: tiles equal the whole map, which is tn_singan_refine of the
+   whole Perlin map (from the default scale, and from the finest, where no resize happens). */
+TN_TEST(perlin_then_singan_refine_tiles_equal_the_whole_map)
+{
+    tn_singan m;
+    tn_singan_opts o;
+    tn_singan_gen_opts go;
+    tn_image dem = {0, 0, 0, NULL};
+    char spec[1024];
+    const char *path = tn_test_tmp_path("world", "sgr.tnw");
+    int from, bits = 0;
+    dem = tn_test_dem(40, 5);
+    TN_CHECK(dem.data != NULL);
+    memset(&o, 0, sizeof o);
+    o.coarsest = 10;
+    o.factor = 0.7f;
+    o.channels = 8;
+    o.max_channels = 8;
+    o.iters = 2;
+    o.train.seed = 5;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(m.scales >= 4);
+    TN_CHECK(tn_singan_save(&m, path) == TN_OK);
+    for (from = 0; from <= 2; from++) {
+        tn_world w, p;
+        tn_image whole = {0, 0, 0, NULL}, per = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+        tn_rect all = {0, 0, 150, 110};
+        char fs[32] = "";
+        int K = from == 0 ? m.scales - 3 : from == 1 ? 1 : m.scales - 1;
+        if (from) snprintf(fs, sizeof fs, " from_scale=%d", K);
+        snprintf(spec, sizeof spec, "world 150 110\nseed 12\nheight %g %g\nperlin frequency=3 octaves=5\nsingan-refine model=%s%s\n",
+                 (double)m.offset - m.range, (double)m.offset + m.range, path, fs);
+        TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
+        TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
+        TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+        TN_CHECK(w.halo > 0 && w.out_heights);
+        TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+        /* the world's Perlin stage alone, refined whole by the library function */
+        snprintf(spec, sizeof spec, "world 150 110\nseed 12\nheight %g %g\nperlin frequency=3 octaves=5\n", (double)m.offset - m.range,
+                 (double)m.offset + m.range);
+        TN_CHECK(tn_world_parse(spec, NULL, &p) == TN_OK);
+        TN_CHECK(tn_world_rect(&p, all, &per) == TN_OK);
+        memset(&go, 0, sizeof go);
+        go.seed = 12;
+        go.from_scale = K;
+        TN_CHECK(tn_singan_refine(&m, &per, &go, &ref) == TN_OK);
+        TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * sizeof(float)));
+        tn_world_free(&w);
+        tn_world_free(&p);
+        tn_image_free(&whole);
+        tn_image_free(&per);
+        tn_image_free(&ref);
+    }
+    snprintf(spec, sizeof spec, "world 150 110\nperlin\nhillshade\nsingan-refine model=%s\n", path);
+    TN_CHECK(refused(spec, "needs heights"));
+    snprintf(spec, sizeof spec, "world 150 110\nperlin\nsingan-refine model=%s from_scale=99\n", path);
+    TN_CHECK(refused(spec, "from_scale=99"));
+    tn_image_free(&dem);
+    tn_singan_free(&m);
+    remove(path);
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -372,6 +434,7 @@ int main(void)
     TN_RUN(local_operations_tiles_equal_the_whole_map);
     TN_RUN(texgan_tiles_and_detail_maps_equal_the_whole_map);
     TN_RUN(singan_tiles_equal_the_whole_map_and_the_sample);
+    TN_RUN(perlin_then_singan_refine_tiles_equal_the_whole_map);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     return tn_test_summary("test_world");
