@@ -23572,6 +23572,7 @@ typedef struct tn__world_stage {
     int np;                               /* explicit noise: how many sigmas in p[2..] */
     tn_texgan *model;
     tn_singan *singan;
+    tn_climate *climate;                  /* season */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -24098,6 +24099,81 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
 }
 
 
+/* Seasonal texture (tn_season_texture, procedural) of the heights before it at one time of the
+   year. Insolation casts horizons: over the whole map a pixel's shadow may come from any
+   distance, which no tile can see, so the world bounds the horizon search by `distance` metres
+   (tn_insolation_opts.max_distance) and that is the halo: ceil(distance / spacing) px, + 1 for
+   the bilinear horizon samples and + 1 for the slopes. The rest is per pixel (climate, snow and
+   vegetation year, slope, hillshade: halo 1). Two whole-map steps are left out: the detail noise
+   (tn_noise_perlin of the whole map, stretched to its own min..max; detail = none) and the
+   downsampled insolation of maps over 1024 px (the world computes it at full size). The ray's
+   early stop uses the grown rectangle's highest point instead of the map's, a bound as valid
+   for every sample the ray reaches there, so the horizons are the same. */
+static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    int kc = tn__world_find(s, "climate"), kk = tn__world_find(s, "koppen");
+    double lat, tm, dist, dirs, shade;
+    float spacing;
+    tn_status st;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((kc < 0) == (kk < 0)) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs climate=FILE.csv or koppen=CODE (one)", s->line);
+    if (w->cellsize <= 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
+                        "are in metres", s->line);
+    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return TN_ERR_OUT_OF_MEMORY;
+    if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
+    else {
+        char *path = tn__world_join(base_dir, s->val[kc]);
+        st = path ? tn_climate_load(path, s->climate) : TN_ERR_OUT_OF_MEMORY;
+        TN_FREE(path);
+    }
+    if (st) return st;
+    if ((st = tn__world_num(s, "latitude", s->climate->has_latitude ? s->climate->latitude : 1e9, -90, 90, &lat)) ||
+        (st = tn__world_num(s, "time", 6, 0, 12, &tm)) || (st = tn__world_num(s, "distance", 3000, 1e-3, 1e7, &dist)) ||
+        (st = tn__world_num(s, "directions", 32, 4, 1024, &dirs)) || (st = tn__world_num(s, "shade", 0, 0, 1, &shade)))
+        return st;
+    if (lat > 90) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs latitude= (the climate has none)", s->line);
+    spacing = tn__world_spacing(s, w);
+    s->p[0] = (float)lat;
+    s->p[1] = (float)tm;
+    s->p[2] = (float)dist;
+    s->p[3] = (float)(int)dirs;
+    s->p[4] = (float)shade;
+    s->p[5] = spacing;
+    if (ceil(dist / spacing) + 2 > (double)INT_MAX / 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season distance=%g m is %g px", s->line, dist, dist / spacing);
+    s->halo = (int)ceil(dist / spacing) + 2;
+    s->factor = 1;
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_c = 3;
+    s->out_heights = 0;
+    if (s->in_w < 2 || s->in_h < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs a raster of at least 2 x 2", s->line);
+    return TN_OK;
+}
+
+static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn_season_opts so;
+    tn_image ins = {0, 0, 0, NULL}, tex = {0, 0, 0, NULL};
+    float t = s->p[1];
+    tn_status st;
+    (void)w;
+    memset(&so, 0, sizeof so);
+    so.insolation.dx = so.insolation.dy = s->p[5];
+    so.insolation.max_distance = s->p[2];
+    so.insolation.directions = (int)s->p[3];
+    so.shade = s->p[4];
+    so.detail = -1.0f; /* the detail noise is a whole-map Perlin map stretched to its min..max */
+    st = tn_insolation(in, s->p[0], &so.insolation, &ins);
+    if (!st) st = tn_season_texture(in, s->climate, s->p[0], &ins, &t, 1, &so, &tex, NULL);
+    if (!st) st = tn__world_crop(&tex, in_r, r, out);
+    tn_image_free(&ins);
+    tn_image_free(&tex);
+    return st;
+}
+
 static tn_status tn__world_blur_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
     double sigma;
@@ -24269,6 +24345,9 @@ static const tn__world_method tn__world_methods[] = {
                         "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
     {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
                                "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
+    {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
+                        "latitude=(the climate's) time=6 (months from mid-January) distance=3000 (horizon metres) directions=32 shade=0 "
+                        "(no detail noise)", tn__world_season_setup, tn__world_season_run},
     {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
     {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
      tn__world_hillshade_run},
@@ -24326,6 +24405,7 @@ static void tn__world_release(tn__world_impl *im)
             tn_singan_free(im->st[k].singan);
             TN_FREE(im->st[k].singan);
         }
+        TN_FREE(im->st[k].climate);
     }
     TN_FREE(im);
 }

@@ -327,6 +327,46 @@ TN_TEST(perlin_then_singan_refine_tiles_equal_the_whole_map)
     remove(path);
 }
 
+/* Seasonal texture of a Perlin world with a bounded horizon: tiles equal the whole map, which is
+   tn_season_texture of the whole map with the same max_distance and no detail noise. */
+TN_TEST(season_tiles_equal_the_whole_map_with_a_bounded_horizon)
+{
+    const char *spec = "world 150 110\nseed 3\nheight 200 3200\ncellsize 30\nperlin frequency=3 octaves=6 contrast=1.5\n"
+                       "season koppen=Dfb latitude=46 time=1.5 distance=600 shade=0.3\n";
+    const char *heights = "world 150 110\nseed 3\nheight 200 3200\ncellsize 30\nperlin frequency=3 octaves=6 contrast=1.5\n";
+    tn_world w, p;
+    tn_image whole = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_rect all = {0, 0, 150, 110};
+    tn_climate c;
+    tn_season_opts so;
+    float t = 1.5f;
+    int bits = 0;
+    TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.halo == 22 && w.out_channels == 3 && !w.out_heights);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_parse(heights, NULL, &p) == TN_OK);
+    TN_CHECK(tn_world_rect(&p, all, &dem) == TN_OK);
+    TN_CHECK(tn_climate_koppen("Dfb", &c) == TN_OK);
+    memset(&so, 0, sizeof so);
+    so.insolation.dx = so.insolation.dy = 30.0f;
+    so.insolation.max_distance = 600.0f;
+    so.shade = 0.3f;
+    so.detail = -1.0f;
+    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, &t, 1, &so, &ref, NULL) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * 3 * sizeof(float)));
+    tn_world_free(&w);
+    tn_world_free(&p);
+    tn_image_free(&whole);
+    tn_image_free(&dem);
+    tn_image_free(&ref);
+    TN_CHECK(refused("world 150 110\nperlin\nseason koppen=Dfb\n", "needs `cellsize"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nhillshade\nseason koppen=Dfb\n", "needs heights"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nseason\n", "climate=FILE.csv or koppen=CODE"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nseason koppen=Dfb distance=0\n", "distance=0 must be"));
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -435,6 +475,7 @@ int main(void)
     TN_RUN(texgan_tiles_and_detail_maps_equal_the_whole_map);
     TN_RUN(singan_tiles_equal_the_whole_map_and_the_sample);
     TN_RUN(perlin_then_singan_refine_tiles_equal_the_whole_map);
+    TN_RUN(season_tiles_equal_the_whole_map_with_a_bounded_horizon);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     return tn_test_summary("test_world");
