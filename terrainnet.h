@@ -23573,6 +23573,8 @@ typedef struct tn__world_stage {
     tn_texgan *model;
     tn_singan *singan;
     tn_climate *climate;                  /* season */
+    tn_gnn *gnn;
+    tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -23914,6 +23916,71 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
     memset(&go, 0, sizeof go);
     go.seed = w->seed;
     return tn_singan_sample(s->singan, r.x, r.y, r.w, r.h, &go, out);
+}
+
+/* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
+   within 2 rounds (radius + 13) px and the membrane's blocks). The sketch's canvas is scaled to
+   the world. Each call cuts the whole sketch into parts and rasterises it at the world's size
+   (~21 bytes per world pixel), so a tile's memory and time follow the world, not the tile: the
+   row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map optimisation) is not offered. */
+#define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
+
+static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    static const char *hname[3] = {"auto", "example", "unit"}, *ename[3] = {"auto", "aligned", "none"};
+    int km = tn__world_find(s, "model"), ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
+    int i;
+    char *path;
+    tn_status st;
+    if (km < 0 || ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
+    if ((long long)w->width * w->height > TN__WORLD_GNN_MAX_PX || w->width < 16 || w->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn worlds are 16 .. 4096 x 4096 pixels (this one %d x %d): GNN generation "
+                        "rasterises the whole sketch at the world's size for every tile (~21 bytes per world pixel), so its memory "
+                        "follows the world, not the tile", s->line, w->width, w->height);
+    s->p[0] = s->p[1] = 0.0f;
+    for (i = 0; i < 3; i++) {
+        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) s->p[0] = (float)i + 1;
+        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) s->p[1] = (float)i + 1;
+    }
+    if ((kh >= 0 && s->p[0] == 0) || (ke >= 0 && s->p[1] == 0))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
+    s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
+    s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
+    if (!s->gnn || !s->sketch) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[km]))) return TN_ERR_OUT_OF_MEMORY;
+    st = tn_gnn_load(path, s->gnn);
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->gnn);
+        s->gnn = NULL;
+        return st;
+    }
+    if (!(path = tn__world_join(base_dir, s->val[ks]))) return TN_ERR_OUT_OF_MEMORY;
+    st = tn_sketch_load(path, s->sketch);
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->sketch);
+        s->sketch = NULL;
+        return st;
+    }
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = 1;
+    s->out_heights = 1;
+    return TN_OK;
+}
+
+static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                   tn_image *out)
+{
+    tn_gnn_generate_opts go;
+    (void)in;
+    (void)in_r;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    go.heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
+    go.embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
+    return tn_gnn_generate_window(s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go, out);
 }
 
 /* ---- local operations ---- */
@@ -24343,6 +24410,9 @@ static const tn__world_method tn__world_methods[] = {
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
                         "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
+    {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_generate_window), worlds up to 4096 x 4096: "
+                     "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
+     tn__world_gnn_setup, tn__world_gnn_run},
     {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
                                "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
     {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
@@ -24406,6 +24476,14 @@ static void tn__world_release(tn__world_impl *im)
             TN_FREE(im->st[k].singan);
         }
         TN_FREE(im->st[k].climate);
+        if (im->st[k].gnn) {
+            tn_gnn_free(im->st[k].gnn);
+            TN_FREE(im->st[k].gnn);
+        }
+        if (im->st[k].sketch) {
+            tn_contour_set_free(im->st[k].sketch);
+            TN_FREE(im->st[k].sketch);
+        }
     }
     TN_FREE(im);
 }
@@ -24498,7 +24576,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
                 if (!strcmp(word[0], tn__world_methods[k].name)) m = &tn__world_methods[k];
             if (!m)
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: unknown setting or method '%s' (settings: world seed height "
-                                "cellsize tile; methods: perlin explicit texgan singan blur hillshade normalmap detail)", ln, word[0]);
+                                "cellsize tile; methods: perlin explicit texgan singan gnn singan-refine season blur hillshade normalmap detail)", ln, word[0]);
             if (m->refuse) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s cannot be computed tile by tile: %s", ln, m->name, m->refuse);
             if (im->n == TN__WORLD_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d stages", ln, TN__WORLD_MAX_STAGES);
             if (nw > TN__WORLD_MAX_KV + 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d parameters", ln, TN__WORLD_MAX_KV);
@@ -24518,7 +24596,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
     }
     if (!have_size) return tn__fail(TN_ERR_INVALID_ARG, "world: the SPEC needs `world WIDTH HEIGHT`");
     if (im->n == 0 || !im->st[0].m->source)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit, texgan or singan)");
+        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit, texgan, singan or gnn)");
     if (opts && opts->tile) {
         if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
         w->tile = opts->tile;

@@ -367,6 +367,62 @@ TN_TEST(season_tiles_equal_the_whole_map_with_a_bounded_horizon)
     TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nseason koppen=Dfb distance=0\n", "distance=0 must be"));
 }
 
+/* GNN terrain of a random sketch (its canvas scaled to the world): tiles equal the whole map,
+   which is tn_gnn_generate of the world's size; worlds over 4096^2 are refused with the reason. */
+TN_TEST(gnn_tiles_equal_the_whole_map)
+{
+    tn_image dem = tn_test_dem(40, 12), whole = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_sketch_random_opts ro;
+    tn_contour_set sk;
+    tn_world w;
+    tn_rect all = {0, 0, 200, 150};
+    char spec[1024], m_path[512];
+    const char *sk_path;
+    int bits = 0;
+    memset(&o, 0, sizeof o);
+    o.hidden = 16;
+    o.embed = 8;
+    o.k = 6;
+    o.radius = 6;
+    o.random_edges = 300;
+    o.train.max_iters = 3;
+    o.train.seed = 7;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    snprintf(m_path, sizeof m_path, "%s", tn_test_tmp_path("world", "gnn.tnw"));
+    sk_path = tn_test_tmp_path("world", "gnn.tns");
+    TN_CHECK(tn_gnn_save(&m, m_path) == TN_OK);
+    memset(&ro, 0, sizeof ro);
+    ro.seed = 3;
+    ro.nodes = 30;
+    TN_CHECK(tn_sketch_random(NULL, 260, 200, &ro, &sk) == TN_OK);
+    TN_CHECK(tn_sketch_save(sk_path, &sk) == TN_OK);
+    snprintf(spec, sizeof spec, "world 200 150\nseed 5\nheight %g %g\ngnn model=%s sketch=%s\n", (double)m.lo - 100, (double)m.hi + 100,
+             m_path, sk_path);
+    TN_CHECK(tiles_vs_whole(spec, 64, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tiles_vs_whole(spec, 45, 2, 1, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 5;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 200, 150, &go, &ref) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)200 * 150 * sizeof(float)));
+    tn_world_free(&w);
+    snprintf(spec, sizeof spec, "world 5000 4000\ngnn model=%s sketch=%s\n", m_path, sk_path);
+    TN_CHECK(refused(spec, "rasterises the whole sketch"));
+    snprintf(spec, sizeof spec, "world 200 150\ngnn model=%s sketch=%s embed=some\n", m_path, sk_path);
+    TN_CHECK(refused(spec, "embed=auto|aligned|none"));
+    tn_image_free(&whole);
+    tn_image_free(&ref);
+    tn_image_free(&dem);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m);
+    remove(m_path);
+    remove(sk_path);
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -476,6 +532,7 @@ int main(void)
     TN_RUN(singan_tiles_equal_the_whole_map_and_the_sample);
     TN_RUN(perlin_then_singan_refine_tiles_equal_the_whole_map);
     TN_RUN(season_tiles_equal_the_whole_map_with_a_bounded_horizon);
+    TN_RUN(gnn_tiles_equal_the_whole_map);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     return tn_test_summary("test_world");
