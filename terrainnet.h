@@ -1866,7 +1866,8 @@ TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts,
    any rectangle from global pixel positions and the seed; an operation of halo h computes a
    rectangle from its input grown by h (tn_rect_halo), so a tile needs the sum of the halos
    around it. What cannot be local (style transfer, depression filling, flow accumulation,
-   colour correction) is refused with the reason. docs/world.md lists each method's halo.
+   colour correction) is refused with the reason; seasonal texturing is local with its horizon
+   search bounded (distance=). docs/world.md lists each method's halo.
    SPEC text, one setting or stage a line ('#' starts a comment):
        world 16384 16384         size of the generator's raster in pixels (width height)
        seed 42
