@@ -1980,7 +1980,8 @@ TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts,
    any rectangle from global pixel positions and the seed; an operation of halo h computes a
    rectangle from its input grown by h (tn_rect_halo), so a tile needs the sum of the halos
    around it. What cannot be local (style transfer, depression filling, flow accumulation,
-   colour correction) is refused with the reason. docs/world.md lists each method's halo.
+   colour correction) is refused with the reason; seasonal texturing is local with its horizon
+   search bounded (distance=). docs/world.md lists each method's halo.
    SPEC text, one setting or stage a line ('#' starts a comment):
        world 16384 16384         size of the generator's raster in pixels (width height)
        seed 42
@@ -18724,6 +18725,8 @@ typedef struct tn__sg_gen_run {
     float noise;          /* multiplier of the amplitudes */
     const float *map;     /* injected map on level map_level's grid (origin 0), or NULL */
     int mw, mh, map_level;
+    int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
+                              mstride apart (0 = mw: the whole map); @@world's refine tiles */
     int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
 } tn__sg_gen_run;
 
@@ -18748,13 +18751,14 @@ static tn_status tn__sg_base(const tn__sg_gen_run *r, int level, long x0, long y
     size_t n = (size_t)w * h;
     tn_status st = TN_OK;
     if (r->map && level == r->map_level) { /* clamped at the map's border */
+        size_t stride = (size_t)(r->mstride ? r->mstride : r->mw);
         for (y = 0; y < h; y++) {
             long yy = y0 + y;
             yy = yy < 0 ? 0 : yy >= r->mh ? r->mh - 1 : yy;
             for (x = 0; x < w; x++) {
                 long xx = x0 + x;
                 xx = xx < 0 ? 0 : xx >= r->mw ? r->mw - 1 : xx;
-                base[(size_t)y * w + x] = r->map[(size_t)yy * r->mw + xx];
+                base[(size_t)y * w + x] = r->map[(size_t)(yy - r->my0) * stride + (size_t)(xx - r->mx0)];
             }
         }
         return TN_OK;
@@ -24857,6 +24861,9 @@ typedef struct tn__world_stage {
     int np;                               /* explicit noise: how many sigmas in p[2..] */
     tn_texgan *model;
     tn_singan *singan;
+    tn_climate *climate;                  /* season */
+    tn_gnn *gnn;
+    tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -25200,7 +25207,328 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
     return tn_singan_sample(s->singan, r.x, r.y, r.w, r.h, &go, out);
 }
 
+/* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
+   within 2 rounds (radius + 13) px and the membrane's blocks). The sketch's canvas is scaled to
+   the world. Each call cuts the whole sketch into parts and rasterises it at the world's size
+   (~21 bytes per world pixel), so a tile's memory and time follow the world, not the tile: the
+   row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map optimisation) is not offered. */
+#define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
+
+static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    static const char *hname[3] = {"auto", "example", "unit"}, *ename[3] = {"auto", "aligned", "none"};
+    int km = tn__world_find(s, "model"), ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
+    int i;
+    char *path;
+    tn_status st;
+    if (km < 0 || ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
+    if ((long long)w->width * w->height > TN__WORLD_GNN_MAX_PX || w->width < 16 || w->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn worlds are 16 .. 4096 x 4096 pixels (this one %d x %d): GNN generation "
+                        "rasterises the whole sketch at the world's size for every tile (~21 bytes per world pixel), so its memory "
+                        "follows the world, not the tile", s->line, w->width, w->height);
+    s->p[0] = s->p[1] = 0.0f;
+    for (i = 0; i < 3; i++) {
+        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) s->p[0] = (float)i + 1;
+        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) s->p[1] = (float)i + 1;
+    }
+    if ((kh >= 0 && s->p[0] == 0) || (ke >= 0 && s->p[1] == 0))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
+    s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
+    s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
+    if (!s->gnn || !s->sketch) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[km]))) return TN_ERR_OUT_OF_MEMORY;
+    st = tn_gnn_load(path, s->gnn);
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->gnn);
+        s->gnn = NULL;
+        return st;
+    }
+    if (!(path = tn__world_join(base_dir, s->val[ks]))) return TN_ERR_OUT_OF_MEMORY;
+    st = tn_sketch_load(path, s->sketch);
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->sketch);
+        s->sketch = NULL;
+        return st;
+    }
+    s->out_w = w->width;
+    s->out_h = w->height;
+    s->out_c = 1;
+    s->out_heights = 1;
+    return TN_OK;
+}
+
+static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                   tn_image *out)
+{
+    tn_gnn_generate_opts go;
+    (void)in;
+    (void)in_r;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    go.heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
+    go.embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
+    return tn_gnn_generate_window(s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go, out);
+}
+
 /* ---- local operations ---- */
+
+/* SinGAN refinement (tn_singan_refine) of the heights before it: the input resized to the grid
+   of scale K replaces that scale's upsampled coarser output, then the generators of K and the
+   finer scales run. Everything after the resize is already local (valid convolutions, noise and
+   upsampling at global positions), and the area resize is too: map pixel i averages input
+   pixels [i s, (i + 1) s), s = W / mw. So a tile needs the scale-K window its generators read
+   (their margins M and the bilinear footprints, walked down the scales by tn__world_sg_need)
+   and the input under that window's resize taps. The halo bounds both: at each scale the margin
+   grows by M (a generator) and then becomes e f + 1.5 px a scale down (a bilinear pair), and the
+   grids differ by at most s / 2 input pixels (mw is W f^n rounded). */
+static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    tn__sg_arch A;
+    double from, noise;
+    int k = tn__world_find(s, "model"), K, n, mw, mh, level;
+    char *path;
+    float e = 0.0f, sc;
+    tn_status st;
+    (void)w;
+    if ((st = tn__world_need_heights(s))) return st;
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
+    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    TN_FREE(path);
+    if (st) {
+        TN_FREE(s->singan);
+        s->singan = NULL;
+        return st;
+    }
+    if ((st = tn__sg_arch_of(s->singan, &A))) return st;
+    if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: the model has one scale only", s->line);
+    if ((st = tn__world_num(s, "from_scale", A.scales - 3 > 1 ? A.scales - 3 : 1, 1, A.scales - 1, &from)) ||
+        (st = tn__world_num(s, "noise", 1, 0, 100, &noise)))
+        return st;
+    K = (int)from;
+    n = A.scales - 1 - K;
+    mw = tn__sg_size(s->in_w, A.factor, n);
+    mh = tn__sg_size(s->in_h, A.factor, n);
+    if (n > 0 && (mw >= s->in_w || mh >= s->in_h))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: a %d x %d raster is too small for scale %d", s->line, s->in_w,
+                        s->in_h, K);
+    s->p[0] = (float)K;
+    s->p[1] = noise == 0 ? -1.0f : (float)noise; /* gen opts: 0 means 1, < 0 no noise */
+    for (level = A.scales - 1; level >= K; level--) {
+        if (tn__sg_net(&A, level) < A.trained) e += TN__SG_M;
+        if (level > K) e = e * A.factor + 1.5f;
+    }
+    sc = (float)s->in_w / (float)mw > (float)s->in_h / (float)mh ? (float)s->in_w / (float)mw : (float)s->in_h / (float)mh;
+    s->halo = (int)ceil((double)e * sc + 0.5 * sc) + 2;
+    tn__world_same_raster(s); /* a halo past the raster's edge is clipped: the whole-map run clamps there too */
+    return TN_OK;
+}
+
+/* The scale-K window [*a, *b) that scale `level`'s window [*a, *b) reads: tn__sg_window's
+   margin, then tn__sg_base's bilinear pairs, scale by scale (one axis). */
+static void tn__world_sg_need(const tn__sg_arch *A, int K, int level, long *a, long *b)
+{
+    for (; level >= K; level--) {
+        long i0, i1;
+        float t;
+        if (tn__sg_net(A, level) < A->trained) {
+            *a -= TN__SG_M;
+            *b += TN__SG_M;
+        }
+        if (level == K) break;
+        tn__sg_coord(*a, A->factor, &i0, &t);
+        tn__sg_coord(*b - 1, A->factor, &i1, &t);
+        *a = i0;
+        *b = i1 + 2;
+    }
+}
+
+/* Window [a, b) of an axis of n map pixels clipped to the map (the clamp reads its edge). */
+static void tn__world_clip_axis(long *a, long *b, int n)
+{
+    if (*a < 0) *a = 0;
+    if (*a > n - 1) *a = n - 1;
+    if (*b > n) *b = n;
+    if (*b < *a + 1) *b = *a + 1;
+}
+
+/* The taps of map pixels [a, b) of tn_image_resize's area filter from n_in to n_out pixels,
+   made relative to input pixel i0; 0 if one falls outside [i0, i0 + len) (a halo too small). */
+static int tn__world_sub_taps(const tn__taps *full, long a, long b, int i0, int len, tn__taps *sub)
+{
+    size_t i, cnt = (size_t)(b - a) * full->ntaps;
+    sub->ntaps = full->ntaps;
+    for (i = 0; i < cnt; i++) {
+        int v = full->idx[(size_t)a * full->ntaps + i] - i0;
+        if (v < 0 || v >= len) return 0;
+        sub->idx[i] = v;
+        sub->wt[i] = full->wt[(size_t)a * full->ntaps + i];
+    }
+    return 1;
+}
+
+static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    const tn_singan *m = s->singan;
+    tn__sg_arch A;
+    tn_singan_gen_opts go, o;
+    tn__sg_gen_run run;
+    tn__taps fx, fy, sx, sy;
+    tn_image one = {0, 0, 0, NULL};
+    float *map = NULL, *tmp = NULL;
+    long ax = r.x, bx = (long)r.x + r.w, ay = r.y, by = (long)r.y + r.h;
+    int K = (int)s->p[0], n, mw, mh, ok = 1;
+    size_t i;
+    tn_status st;
+    memset(&go, 0, sizeof go);
+    memset(&fx, 0, sizeof fx);
+    memset(&fy, 0, sizeof fy);
+    memset(&sx, 0, sizeof sx);
+    memset(&sy, 0, sizeof sy);
+    go.seed = w->seed;
+    go.noise = s->p[1];
+    go.from_scale = K;
+    if ((st = tn__sg_gen_prepare(m, &go, &A, &o, &run))) return st;
+    n = A.scales - 1 - K;
+    mw = tn__sg_size(s->in_w, A.factor, n);
+    mh = tn__sg_size(s->in_h, A.factor, n);
+    tn__world_sg_need(&A, K, A.scales - 1, &ax, &bx);
+    tn__world_sg_need(&A, K, A.scales - 1, &ay, &by);
+    tn__world_clip_axis(&ax, &bx, mw);
+    tn__world_clip_axis(&ay, &by, mh);
+    /* the input in network units, as tn__sg_input makes it before resizing */
+    if ((st = tn_image_create(&one, in->width, in->height, 1))) return st;
+    for (i = 0; i < (size_t)in->width * in->height; i++) one.data[i] = (in->data[i * in->channels] - m->offset) / m->range;
+    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && n == 0) { /* scale K is the finest: the input itself */
+        long y;
+        ok = ax >= in_r.x && bx <= (long)in_r.x + in_r.w && ay >= in_r.y && by <= (long)in_r.y + in_r.h;
+        for (y = ay; ok && y < by; y++)
+            memcpy(map + (size_t)(y - ay) * (bx - ax), one.data + (size_t)(y - in_r.y) * in->width + (ax - in_r.x), (size_t)(bx - ax) * sizeof(float));
+    } else if (!st) { /* tn_image_resize's area taps and row passes on the window */
+        tn__resize_job job;
+        if (!(st = tn__taps_build(&fx, s->in_w, mw, TN_RESIZE_AREA)) && !(st = tn__taps_build(&fy, s->in_h, mh, TN_RESIZE_AREA))) {
+            sx.idx = (int *)tn__alloc((size_t)(bx - ax) * fx.ntaps * sizeof(int));
+            sx.wt = (float *)tn__alloc((size_t)(bx - ax) * fx.ntaps * sizeof(float));
+            sy.idx = (int *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(int));
+            sy.wt = (float *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(float));
+            tmp = (float *)tn__alloc((size_t)in->height * (bx - ax) * sizeof(float));
+            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = TN_ERR_OUT_OF_MEMORY;
+        }
+        if (!st) ok = tn__world_sub_taps(&fx, ax, bx, in_r.x, in_r.w, &sx) && tn__world_sub_taps(&fy, ay, by, in_r.y, in_r.h, &sy);
+        if (!st && ok) {
+            job.src = &one;
+            job.tmp = tmp;
+            job.out = map;
+            job.out_w = (int)(bx - ax);
+            job.tx = &sx;
+            job.ty = &sy;
+            tn__resize_rows_x(&job, 0, (size_t)in->height);
+            tn__resize_rows_y(&job, 0, (size_t)(by - ay));
+        }
+    }
+    if (!st && !ok)
+        st = tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: halo %d too small for tile %d,%d %dx%d", s->line, s->halo, r.x,
+                      r.y, r.w, r.h);
+    if (!st) {
+        run.map = map;
+        run.mw = mw;
+        run.mh = mh;
+        run.map_level = K;
+        run.mx0 = (int)ax;
+        run.my0 = (int)ay;
+        run.mstride = (int)(bx - ax);
+        st = tn__sg_generate(m, &run, A.scales - 1, r.x, r.y, r.w, r.h, o.tile, out);
+    }
+    tn__taps_free(&fx);
+    tn__taps_free(&fy);
+    tn__taps_free(&sx);
+    tn__taps_free(&sy);
+    TN_FREE(tmp);
+    TN_FREE(map);
+    tn_image_free(&one);
+    return st;
+}
+
+
+/* Seasonal texture (tn_season_texture, procedural) of the heights before it at one time of the
+   year. Insolation casts horizons: over the whole map a pixel's shadow may come from any
+   distance, which no tile can see, so the world bounds the horizon search by `distance` metres
+   (tn_insolation_opts.max_distance) and that is the halo: ceil(distance / spacing) px, + 1 for
+   the bilinear horizon samples and + 1 for the slopes. The rest is per pixel (climate, snow and
+   vegetation year, slope, hillshade: halo 1). Two whole-map steps are left out: the detail noise
+   (tn_noise_perlin of the whole map, stretched to its own min..max; detail = none) and the
+   downsampled insolation of maps over 1024 px (the world computes it at full size). The ray's
+   early stop uses the grown rectangle's highest point instead of the map's, a bound as valid
+   for every sample the ray reaches there, so the horizons are the same. */
+static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    int kc = tn__world_find(s, "climate"), kk = tn__world_find(s, "koppen");
+    double lat, tm, dist, dirs, shade;
+    float spacing;
+    tn_status st;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((kc < 0) == (kk < 0)) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs climate=FILE.csv or koppen=CODE (one)", s->line);
+    if (w->cellsize <= 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
+                        "are in metres", s->line);
+    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return TN_ERR_OUT_OF_MEMORY;
+    if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
+    else {
+        char *path = tn__world_join(base_dir, s->val[kc]);
+        st = path ? tn_climate_load(path, s->climate) : TN_ERR_OUT_OF_MEMORY;
+        TN_FREE(path);
+    }
+    if (st) return st;
+    if ((st = tn__world_num(s, "latitude", s->climate->has_latitude ? s->climate->latitude : 1e9, -90, 90, &lat)) ||
+        (st = tn__world_num(s, "time", 6, 0, 12, &tm)) || (st = tn__world_num(s, "distance", 3000, 1e-3, 1e7, &dist)) ||
+        (st = tn__world_num(s, "directions", 32, 4, 1024, &dirs)) || (st = tn__world_num(s, "shade", 0, 0, 1, &shade)))
+        return st;
+    if (lat > 90) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs latitude= (the climate has none)", s->line);
+    spacing = tn__world_spacing(s, w);
+    s->p[0] = (float)lat;
+    s->p[1] = (float)tm;
+    s->p[2] = (float)dist;
+    s->p[3] = (float)(int)dirs;
+    s->p[4] = (float)shade;
+    s->p[5] = spacing;
+    if (ceil(dist / spacing) + 2 > (double)INT_MAX / 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season distance=%g m is %g px", s->line, dist, dist / spacing);
+    s->halo = (int)ceil(dist / spacing) + 2;
+    s->factor = 1;
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_c = 3;
+    s->out_heights = 0;
+    if (s->in_w < 2 || s->in_h < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs a raster of at least 2 x 2", s->line);
+    return TN_OK;
+}
+
+static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    tn_season_opts so;
+    tn_image ins = {0, 0, 0, NULL}, tex = {0, 0, 0, NULL};
+    float t = s->p[1];
+    tn_status st;
+    (void)w;
+    memset(&so, 0, sizeof so);
+    so.insolation.dx = so.insolation.dy = s->p[5];
+    so.insolation.max_distance = s->p[2];
+    so.insolation.directions = (int)s->p[3];
+    so.shade = s->p[4];
+    so.detail = -1.0f; /* the detail noise is a whole-map Perlin map stretched to its min..max */
+    st = tn_insolation(in, s->p[0], &so.insolation, &ins);
+    if (!st) st = tn_season_texture(in, s->climate, s->p[0], &ins, &t, 1, &so, &tex, NULL);
+    if (!st) st = tn__world_crop(&tex, in_r, r, out);
+    tn_image_free(&ins);
+    tn_image_free(&tex);
+    return st;
+}
 
 static tn_status tn__world_blur_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
@@ -25371,6 +25699,14 @@ static const tn__world_method tn__world_methods[] = {
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
                         "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
+    {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_generate_window), worlds up to 4096 x 4096: "
+                     "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
+     tn__world_gnn_setup, tn__world_gnn_run},
+    {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
+                               "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
+    {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
+                        "latitude=(the climate's) time=6 (months from mid-January) distance=3000 (horizon metres) directions=32 shade=0 "
+                        "(no detail noise)", tn__world_season_setup, tn__world_season_run},
     {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
     {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
      tn__world_hillshade_run},
@@ -25427,6 +25763,15 @@ static void tn__world_release(tn__world_impl *im)
         if (im->st[k].singan) {
             tn_singan_free(im->st[k].singan);
             TN_FREE(im->st[k].singan);
+        }
+        TN_FREE(im->st[k].climate);
+        if (im->st[k].gnn) {
+            tn_gnn_free(im->st[k].gnn);
+            TN_FREE(im->st[k].gnn);
+        }
+        if (im->st[k].sketch) {
+            tn_contour_set_free(im->st[k].sketch);
+            TN_FREE(im->st[k].sketch);
         }
     }
     TN_FREE(im);
@@ -25520,7 +25865,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
                 if (!strcmp(word[0], tn__world_methods[k].name)) m = &tn__world_methods[k];
             if (!m)
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: unknown setting or method '%s' (settings: world seed height "
-                                "cellsize tile; methods: perlin explicit texgan singan blur hillshade normalmap detail)", ln, word[0]);
+                                "cellsize tile; methods: perlin explicit texgan singan gnn singan-refine season blur hillshade normalmap detail)", ln, word[0]);
             if (m->refuse) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s cannot be computed tile by tile: %s", ln, m->name, m->refuse);
             if (im->n == TN__WORLD_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d stages", ln, TN__WORLD_MAX_STAGES);
             if (nw > TN__WORLD_MAX_KV + 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d parameters", ln, TN__WORLD_MAX_KV);
@@ -25540,7 +25885,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
     }
     if (!have_size) return tn__fail(TN_ERR_INVALID_ARG, "world: the SPEC needs `world WIDTH HEIGHT`");
     if (im->n == 0 || !im->st[0].m->source)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit, texgan or singan)");
+        return tn__fail(TN_ERR_INVALID_ARG, "world: the first stage must be a generator (perlin, explicit, texgan, singan or gnn)");
     if (opts && opts->tile) {
         if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
         w->tile = opts->tile;

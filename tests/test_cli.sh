@@ -303,6 +303,11 @@ if $T world "$W/w.spec" -o "$W/world" --tiles 0:1,1:3 > "$W/wo1.txt" 2>/dev/null
     grep -q "^tiles 6 of 6$" "$W/world/manifest.txt" && $T info "$W/world/r1_c2.png" | grep -q "size: 44 x 72"; then ok;
 else bad "world tiles + resume: $(cat "$W/wo1.txt" "$W/wo2.txt")"; fi
 if $T world "$W/shade.spec" -o "$W/shade" > /dev/null 2>&1 && $T info "$W/shade/r0_c0.png" | grep -q "bit_depth: 8"; then ok; else bad "world hillshade"; fi
+printf 'world 160 120\nseed 2\nheight 200 3200\ncellsize 30\ntile 64\nperlin frequency=3\nseason koppen=Dfb latitude=46 time=1 distance=450\n' > "$W/season.spec"
+if $T world "$W/season.spec" -o "$W/season" > "$W/wos.txt" 2>&1 && grep -q "halo 17 px" "$W/wos.txt" &&
+    $T info "$W/season/r1_c2.png" | grep -q "channels: 3"; then ok; else bad "world season: $(cat "$W/wos.txt")"; fi
+printf 'world 100 100\nperlin\nseason koppen=Dfb\n' > "$W/season0.spec"
+expect_error "world season needs cellsize" "season needs .cellsize" $T world "$W/season0.spec" -o "$W/season0"
 printf 'world 100 100\nperlin\nstyle\n' > "$W/style.spec"
 expect_error "world refuses style" "style transfer optimises the whole map" $T world "$W/style.spec" -o "$W/style"
 expect_error "world other world in DIR" "holds another world" $T world "$W/shade.spec" -o "$W/world"

@@ -265,6 +265,164 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
     tn_singan_free(&m);
 }
 
+/* Perlin heights refined by SinGAN: tiles equal the whole map, which is tn_singan_refine of the
+   whole Perlin map (from the default scale, and from the finest, where no resize happens). */
+TN_TEST(perlin_then_singan_refine_tiles_equal_the_whole_map)
+{
+    tn_singan m;
+    tn_singan_opts o;
+    tn_singan_gen_opts go;
+    tn_image dem = {0, 0, 0, NULL};
+    char spec[1024];
+    const char *path = tn_test_tmp_path("world", "sgr.tnw");
+    int from, bits = 0;
+    dem = tn_test_dem(40, 5);
+    TN_CHECK(dem.data != NULL);
+    memset(&o, 0, sizeof o);
+    o.coarsest = 10;
+    o.factor = 0.7f;
+    o.channels = 8;
+    o.max_channels = 8;
+    o.iters = 2;
+    o.train.seed = 5;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(m.scales >= 4);
+    TN_CHECK(tn_singan_save(&m, path) == TN_OK);
+    for (from = 0; from <= 2; from++) {
+        tn_world w, p;
+        tn_image whole = {0, 0, 0, NULL}, per = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+        tn_rect all = {0, 0, 150, 110};
+        char fs[32] = "";
+        int K = from == 0 ? m.scales - 3 : from == 1 ? 1 : m.scales - 1;
+        if (from) snprintf(fs, sizeof fs, " from_scale=%d", K);
+        snprintf(spec, sizeof spec, "world 150 110\nseed 12\nheight %g %g\nperlin frequency=3 octaves=5\nsingan-refine model=%s%s\n",
+                 (double)m.offset - m.range, (double)m.offset + m.range, path, fs);
+        TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
+        TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
+        TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+        TN_CHECK(w.halo > 0 && w.out_heights);
+        TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+        /* the world's Perlin stage alone, refined whole by the library function */
+        snprintf(spec, sizeof spec, "world 150 110\nseed 12\nheight %g %g\nperlin frequency=3 octaves=5\n", (double)m.offset - m.range,
+                 (double)m.offset + m.range);
+        TN_CHECK(tn_world_parse(spec, NULL, &p) == TN_OK);
+        TN_CHECK(tn_world_rect(&p, all, &per) == TN_OK);
+        memset(&go, 0, sizeof go);
+        go.seed = 12;
+        go.from_scale = K;
+        TN_CHECK(tn_singan_refine(&m, &per, &go, &ref) == TN_OK);
+        TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * sizeof(float)));
+        tn_world_free(&w);
+        tn_world_free(&p);
+        tn_image_free(&whole);
+        tn_image_free(&per);
+        tn_image_free(&ref);
+    }
+    snprintf(spec, sizeof spec, "world 150 110\nperlin\nhillshade\nsingan-refine model=%s\n", path);
+    TN_CHECK(refused(spec, "needs heights"));
+    snprintf(spec, sizeof spec, "world 150 110\nperlin\nsingan-refine model=%s from_scale=99\n", path);
+    TN_CHECK(refused(spec, "from_scale=99"));
+    tn_image_free(&dem);
+    tn_singan_free(&m);
+    remove(path);
+}
+
+/* Seasonal texture of a Perlin world with a bounded horizon: tiles equal the whole map, which is
+   tn_season_texture of the whole map with the same max_distance and no detail noise. */
+TN_TEST(season_tiles_equal_the_whole_map_with_a_bounded_horizon)
+{
+    const char *spec = "world 150 110\nseed 3\nheight 200 3200\ncellsize 30\nperlin frequency=3 octaves=6 contrast=1.5\n"
+                       "season koppen=Dfb latitude=46 time=1.5 distance=600 shade=0.3\n";
+    const char *heights = "world 150 110\nseed 3\nheight 200 3200\ncellsize 30\nperlin frequency=3 octaves=6 contrast=1.5\n";
+    tn_world w, p;
+    tn_image whole = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_rect all = {0, 0, 150, 110};
+    tn_climate c;
+    tn_season_opts so;
+    float t = 1.5f;
+    int bits = 0;
+    TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(w.halo == 22 && w.out_channels == 3 && !w.out_heights);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_parse(heights, NULL, &p) == TN_OK);
+    TN_CHECK(tn_world_rect(&p, all, &dem) == TN_OK);
+    TN_CHECK(tn_climate_koppen("Dfb", &c) == TN_OK);
+    memset(&so, 0, sizeof so);
+    so.insolation.dx = so.insolation.dy = 30.0f;
+    so.insolation.max_distance = 600.0f;
+    so.shade = 0.3f;
+    so.detail = -1.0f;
+    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, &t, 1, &so, &ref, NULL) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * 3 * sizeof(float)));
+    tn_world_free(&w);
+    tn_world_free(&p);
+    tn_image_free(&whole);
+    tn_image_free(&dem);
+    tn_image_free(&ref);
+    TN_CHECK(refused("world 150 110\nperlin\nseason koppen=Dfb\n", "needs `cellsize"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nhillshade\nseason koppen=Dfb\n", "needs heights"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nseason\n", "climate=FILE.csv or koppen=CODE"));
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nseason koppen=Dfb distance=0\n", "distance=0 must be"));
+}
+
+/* GNN terrain of a random sketch (its canvas scaled to the world): tiles equal the whole map,
+   which is tn_gnn_generate of the world's size; worlds over 4096^2 are refused with the reason. */
+TN_TEST(gnn_tiles_equal_the_whole_map)
+{
+    tn_image dem = tn_test_dem(40, 12), whole = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_sketch_random_opts ro;
+    tn_contour_set sk;
+    tn_world w;
+    tn_rect all = {0, 0, 200, 150};
+    char spec[1024], m_path[512];
+    const char *sk_path;
+    int bits = 0;
+    memset(&o, 0, sizeof o);
+    o.hidden = 16;
+    o.embed = 8;
+    o.k = 6;
+    o.radius = 6;
+    o.random_edges = 300;
+    o.train.max_iters = 3;
+    o.train.seed = 7;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    snprintf(m_path, sizeof m_path, "%s", tn_test_tmp_path("world", "gnn.tnw"));
+    sk_path = tn_test_tmp_path("world", "gnn.tns");
+    TN_CHECK(tn_gnn_save(&m, m_path) == TN_OK);
+    memset(&ro, 0, sizeof ro);
+    ro.seed = 3;
+    ro.nodes = 30;
+    TN_CHECK(tn_sketch_random(NULL, 260, 200, &ro, &sk) == TN_OK);
+    TN_CHECK(tn_sketch_save(sk_path, &sk) == TN_OK);
+    snprintf(spec, sizeof spec, "world 200 150\nseed 5\nheight %g %g\ngnn model=%s sketch=%s\n", (double)m.lo - 100, (double)m.hi + 100,
+             m_path, sk_path);
+    TN_CHECK(tiles_vs_whole(spec, 64, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tiles_vs_whole(spec, 45, 2, 1, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 5;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 200, 150, &go, &ref) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)200 * 150 * sizeof(float)));
+    tn_world_free(&w);
+    snprintf(spec, sizeof spec, "world 5000 4000\ngnn model=%s sketch=%s\n", m_path, sk_path);
+    TN_CHECK(refused(spec, "rasterises the whole sketch"));
+    snprintf(spec, sizeof spec, "world 200 150\ngnn model=%s sketch=%s embed=some\n", m_path, sk_path);
+    TN_CHECK(refused(spec, "embed=auto|aligned|none"));
+    tn_image_free(&whole);
+    tn_image_free(&ref);
+    tn_image_free(&dem);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m);
+    remove(m_path);
+    remove(sk_path);
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -372,6 +530,9 @@ int main(void)
     TN_RUN(local_operations_tiles_equal_the_whole_map);
     TN_RUN(texgan_tiles_and_detail_maps_equal_the_whole_map);
     TN_RUN(singan_tiles_equal_the_whole_map_and_the_sample);
+    TN_RUN(perlin_then_singan_refine_tiles_equal_the_whole_map);
+    TN_RUN(season_tiles_equal_the_whole_map_with_a_bounded_horizon);
+    TN_RUN(gnn_tiles_equal_the_whole_map);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     return tn_test_summary("test_world");
