@@ -75,7 +75,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@texgan    single-texture spatial GAN, tiled huge textures, colour correction, detail maps
     @@singan    multi-scale single-image GAN (SinGAN): random terrain of any size, refinement, upscaling
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
-    @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures
+    @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures, KPD network
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
     @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest
@@ -11572,6 +11572,29 @@ TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_
     return TN_OK;
 }
 
+/* Every value of a loaded model's weights is finite, else TN_ERR_CORRUPT naming the tensor. */
+static tn_status tn__model_check_finite(const tn_params *p, const char *name)
+{
+    int i;
+    for (i = 0; i < tn_params_count(p); i++) {
+        const tn_tensor *t = tn_params_get(p, i);
+        size_t k;
+        for (k = 0; k < t->numel; k++)
+            if (!isfinite(t->data[k])) return tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in tensor '%s'", name, t->name);
+    }
+    return TN_OK;
+}
+
+/* The training iterations and seconds a model file records (0 where it records none). */
+static void tn__model_training(const tn_params *f, const char *name, long *iterations, double *seconds)
+{
+    double v;
+    const char *s = tn_params_meta(f, "train_seconds");
+    *iterations = tn__meta_get_whole(f, "iterations", 1e15, &v, name) ? (long)v : 0;
+    *seconds = s ? strtod(s, NULL) : 0.0;
+    tn_clear_error();
+}
+
 /* ---- building blocks ---- */
 
 TN_API void tn_ema_update(tn_params *avg, const tn_params *src, float decay, long step)
@@ -19466,8 +19489,6 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     tn_tensor *cfg = NULL;
     tn__sg_arch A;
     tn_singan m;
-    double v;
-    int i;
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
@@ -19478,15 +19499,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
     if (!st) st = tn__sg_model_params(&A, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
-    for (i = 0; !st && i < tn_params_count(w); i++) {
-        const tn_tensor *t = tn_params_get(w, i);
-        size_t k;
-        for (k = 0; k < t->numel; k++)
-            if (!isfinite(t->data[k])) {
-                st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in tensor '%s'", path, t->name);
-                break;
-            }
-    }
+    if (!st) st = tn__model_check_finite(w, path);
     if (st) {
         tn_params_free(f);
         tn_params_free(w);
@@ -19502,12 +19515,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     m.range = A.range;
     memcpy(m.amp, A.amp, sizeof m.amp);
     memcpy(m.channels, A.ch, sizeof m.channels);
-    if (tn__meta_get_whole(f, "iterations", 1e15, &v, path)) m.iterations = (long)v;
-    {
-        const char *sv = tn_params_meta(f, "train_seconds");
-        m.train_seconds = sv ? strtod(sv, NULL) : 0.0;
-    }
-    tn_clear_error();
+    tn__model_training(f, path, &m.iterations, &m.train_seconds);
     tn_params_free(f);
     m.weights = w;
     *model = m;
@@ -21498,7 +21506,6 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     tn__gnn_arch A;
     tn_contour_set parts;
     tn_gnn m;
-    double v;
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
@@ -21528,12 +21535,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     }
     memset(&m, 0, sizeof m);
     tn__gnn_model_fields(&m, &A);
-    if (tn__meta_get_whole(f, "iterations", 1e15, &v, path)) m.iterations = (long)v;
-    {
-        const char *s = tn_params_meta(f, "train_seconds");
-        m.train_seconds = s ? strtod(s, NULL) : 0.0;
-    }
-    tn_clear_error();
+    tn__model_training(f, path, &m.iterations, &m.train_seconds);
     tn_params_free(f);
     m.weights = w;
     *model = m;
@@ -23740,8 +23742,6 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg = NULL;
     tn_kpd m;
-    double v;
-    int i;
     tn_status st;
     TN_ASSERT(model);
     memset(&m, 0, sizeof m);
@@ -23753,21 +23753,8 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     if (!st) st = tn__kpd_read_config(cfg->data, &m, path);
     if (!st) st = tn__kpd_model_params(&m, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
-    for (i = 0; !st && i < tn_params_count(w); i++) {
-        const tn_tensor *t = tn_params_get(w, i);
-        size_t k;
-        for (k = 0; k < t->numel; k++)
-            if (!isfinite(t->data[k])) {
-                st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in tensor '%s'", path, t->name);
-                break;
-            }
-    }
-    if (!st && tn__meta_get_whole(f, "iterations", 1e15, &v, path)) m.iterations = (long)v;
-    if (!st) {
-        const char *sv = tn_params_meta(f, "train_seconds");
-        m.train_seconds = sv ? strtod(sv, NULL) : 0.0;
-        tn_clear_error();
-    }
+    if (!st) st = tn__model_check_finite(w, path);
+    if (!st) tn__model_training(f, path, &m.iterations, &m.train_seconds);
     tn_params_free(f);
     if (st) {
         tn_params_free(w);

@@ -1,5 +1,6 @@
 /* bench_kpd: the KPD seasonal texture network (paper 003) on real and paired data.
-     bench_kpd [REAL_MINUTES [TABLE_MINUTES [real|table|all]]]   (defaults 5, 3, all)
+     bench_kpd [REAL_MINUTES [TABLE_MINUTES [real|table|speed|all]]]   (defaults 5, 3, all; a negative
+     REAL_MINUTES -N trains the real part for N iterations instead, for runs beside other work)
    real:  Sentinel-2 NDVI of ../shared/data/seasonal_slovenia: trained on the 2017 frames, scored
           on the 2015 dates it never saw, next to the nearest-date 2017 frame and the mean of the
           2017 frames of the same calendar month (clouds and no-data left out everywhere).
@@ -10,6 +11,7 @@
           test (a climate shifted by six months, latitude mirrored); interpolation of gamma/beta
           between months vs interpolation of the output pictures, against the texturer's truth
           half-way between months.
+   speed: texturing a 4096 x 4096 heightfield (one month, and between two months).
    Prints `name: value unit` lines. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -55,7 +57,8 @@ static int real_part(double minutes)
     tn_kpd m;
     tn_kpd_stats st;
     int n = 0, i, j;
-    double se[4] = {0, 0, 0, 0}, cnt = 0, t0;
+    double se[4] = {0, 0, 0, 0}, cnt = 0, t0, course[3] = {0, 0, 0};
+    int nco = 0;
     char csv[1100];
     const char *root = getenv("TN_SHARED_DATA");
     FILE *f;
@@ -87,7 +90,8 @@ static int real_part(double minutes)
     memset(&o, 0, sizeof o);
     o.lo = d.lo;
     o.hi = d.hi;
-    o.train.minutes = minutes;
+    if (minutes < 0) o.train.max_iters = (long)-minutes, o.train.minutes = 1e6;
+    else o.train.minutes = minutes;
     t0 = tn_time_seconds();
     if (tn_kpd_train(tr, n, &o, &m, &st)) {
         printf("# real: %s\n", tn_last_error());
@@ -136,6 +140,16 @@ static int real_part(double minutes)
         e[1] = masked_rmse(d.samples[best].target, q->target, q->mask, &mcount, NULL);
         e[2] = masked_rmse(&mean, q->target, q->mask, &mcount, NULL);
         e[3] = masked_rmse(&rnd, q->target, q->mask, &mcount, NULL);
+        { /* the course of the season: mean NDVI of the picture's usable pixels */
+            double so = 0, sm = 0, sn = 0, sb = 0, sa = 0;
+            for (k = 0; k < np; k++)
+                if (q->mask->data[k] > 0.5f && mcount.data[k] > 0.5f) so += q->target->data[k], sm += out.data[k], sb += d.samples[best].target->data[k], sa += mean.data[k], sn++;
+            printf("# %s mean NDVI: observed %.3f, KPD %.3f, nearest 2017 frame %.3f, 2017 month mean %.3f\n", d.labels[i], so / sn, sm / sn, sb / sn, sa / sn);
+            course[0] += fabs(sm / sn - so / sn);
+            course[1] += fabs(sb / sn - so / sn);
+            course[2] += fabs(sa / sn - so / sn);
+            nco++;
+        }
         printf("# %s (time %.2f): KPD %.4f, at the nearest whole month %.4f; nearest 2017 frame %s %.4f; 2017 month-%02d mean %.4f; %.0f px\n",
                d.labels[i], q->time, e[0], e[3], d.labels[best], e[1], mon, e[2], c);
         for (j = 0; j < 4; j++) se[j] += e[j] * e[j] * c;
@@ -150,6 +164,8 @@ static int real_part(double minutes)
     printf("ndvi_heldout_2015_rmse_nearest_2017_frame: %.4f NDVI\n", sqrt(se[1] / cnt));
     printf("ndvi_heldout_2015_rmse_2017_month_mean: %.4f NDVI\n", sqrt(se[2] / cnt));
     printf("ndvi_kpd_over_nearest_frame: %.3f ratio\n", sqrt(se[0] / cnt) / sqrt(se[1] / cnt));
+    printf("ndvi_heldout_2015_mean_abs_error_of_frame_means: KPD %.3f, nearest 2017 frame %.3f, 2017 month mean %.3f NDVI\n", course[0] / nco,
+           course[1] / nco, course[2] / nco);
     /* the course of the year: the network's mean NDVI for each month against the 2017 frames' */
     printf("# month: KPD mean NDVI | 2017 clear-pixel mean of that month's frames\n");
     for (i = 0; i < 12; i++) {
@@ -422,6 +438,68 @@ static int table_part(double minutes)
     return 0;
 }
 
+/* 4096 x 4096 texturing time: a real 1024 DEM upsampled 4x, its insolation computed at 1024 and
+   upsampled (as tn_season_texture does for large maps), a KPD model of 20 iterations (the weights
+   do not change the cost). */
+static int speed_part(void)
+{
+    tn_image dem = {0, 0, 0, NULL}, big = {0, 0, 0, NULL}, ins = {0, 0, 0, NULL}, insb = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
+    tn_insolation_opts io;
+    tn_climate c;
+    tn_season_sample s;
+    tn_kpd_opts o;
+    tn_kpd m;
+    tn_image tex = {0, 0, 0, NULL};
+    float t = 0;
+    double t0;
+    size_t k;
+    if (tn_image_load(data_path("dem/alps_n47e009/alps_n47e009_full.png"), &dem, NULL)) {
+        printf("# speed: no data\n");
+        return 0;
+    }
+    for (k = 0; k < (size_t)dem.width * dem.height; k++) dem.data[k] = 388.0f + dem.data[k] * (2937.0f - 388.0f);
+    memset(&io, 0, sizeof io);
+    io.dx = 62.6f;
+    io.dy = 92.6f;
+    tn_climate_koppen("Cfb", &c);
+    t0 = tn_time_seconds();
+    if (tn_insolation(&dem, 47.4, &io, &ins) || tn_image_resize(&big, &dem, 4096, 4096, TN_RESIZE_BILINEAR) ||
+        tn_image_resize(&insb, &ins, 4096, 4096, TN_RESIZE_BILINEAR) || tn_season_texture(&dem, &c, 47.4, &ins, &t, 1, NULL, &tex, NULL)) {
+        printf("# speed: %s\n", tn_last_error());
+        return 1;
+    }
+    printf("kpd_4096_inputs: %.1f s (insolation at 1024, both upsampled)\n", tn_time_seconds() - t0);
+    memset(&s, 0, sizeof s);
+    s.dem = &dem;
+    s.insolation = &ins;
+    s.climate = &c;
+    s.target = &tex;
+    memset(&o, 0, sizeof o);
+    o.train.max_iters = 20;
+    if (tn_kpd_train(&s, 1, &o, &m, NULL)) {
+        printf("# speed: %s\n", tn_last_error());
+        return 1;
+    }
+    t0 = tn_time_seconds();
+    if (tn_kpd_generate(&m, &big, &c, &insb, 6.0f, 0, 0, 4096, 4096, &out)) {
+        printf("# speed: %s\n", tn_last_error());
+        return 1;
+    }
+    printf("kpd_4096_one_month: %.1f s (2 threads)\n", tn_time_seconds() - t0);
+    tn_image_free(&out);
+    t0 = tn_time_seconds();
+    tn_kpd_generate(&m, &big, &c, &insb, 6.5f, 0, 0, 4096, 4096, &out);
+    printf("kpd_4096_between_months: %.1f s (two conditionings)\n", tn_time_seconds() - t0);
+    tn_image_free(&out);
+    tn_image_free(&tex);
+    tn_image_free(&dem);
+    tn_image_free(&big);
+    tn_image_free(&ins);
+    tn_image_free(&insb);
+    tn_kpd_free(&m);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     double rm = argc > 1 ? atof(argv[1]) : 5.0, tm = argc > 2 ? atof(argv[2]) : 3.0;
@@ -431,5 +509,6 @@ int main(int argc, char **argv)
     tn_set_threads(2);
     if (!strcmp(part, "all") || !strcmp(part, "real")) rc |= real_part(rm);
     if (!strcmp(part, "all") || !strcmp(part, "table")) rc |= table_part(tm);
+    if (!strcmp(part, "all") || !strcmp(part, "speed")) rc |= speed_part();
     return rc;
 }

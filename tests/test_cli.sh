@@ -451,5 +451,25 @@ if [ -f "$MB" ]; then
 else
     skipped "season on a real DEM (absent)"
 fi
+# season-train / season --model: the KPD network on a procedural pair of months (no data needed)
+$T season "$W/noise64.png" --spacing 30 --koppen Cfb --month 1 -o "$W/pa" > /dev/null 2>&1
+$T season "$W/noise64.png" --spacing 30 --koppen Cfb --month 7 -o "$W/pa" > /dev/null 2>&1
+printf 'dem,noise64.png\nspacing,30\nkoppen,Cfb\nframe,2017-01-15,pa_01.png\nframe,6,pa_07.png\n' > "$W/pair.csv"
+if $T season-train "$W/pair.csv" -o "$W/kpd.tnw" --iters 3 --crop 32 --width 8 > "$W/kpd.txt" 2>&1 && grep -q "iterations: 3" "$W/kpd.txt" &&
+    $T season "$W/noise64.png" --spacing 30 --koppen Cfb --model "$W/kpd.tnw" --frames 3 -o "$W/kf" > /dev/null 2>&1 &&
+    $T info "$W/kf_f002.png" | grep -q "size: 64 x 64" && [ -f "$W/kf_sheet.png" ]; then ok; else bad "season-train + season --model: $(cat "$W/kpd.txt")"; fi
+cp "$W/pair.csv" "$W/season.csv"
+if $T season-train "$W" -o "$W/kpd.tnw" --iters 5 --crop 32 --width 8 --resume > "$W/kpd.txt" 2>&1 &&
+    grep -q "resumed at 3" "$W/kpd.txt"; then ok; else bad "season-train --resume: $(cat "$W/kpd.txt")"; fi
+expect_error "season --model of another method" "not a kpd\\|method" $T season "$W/noise64.png" --koppen Cfb --model "$W/sg.tnw" -o "$W/kx"
+expect_error "season-train unknown condition" "unknown condition" $T season-train "$W/pair.csv" -o "$W/k2.tnw" --condition cond9
+printf 'dem,noise64.png\nkoppen,Cfb\nframe,2017-13-01,pa_01.png\n' > "$W/bad.csv"
+expect_error "season-train bad date" "neither YYYY-MM-DD" $T season-train "$W/bad.csv" -o "$W/k2.tnw"
+if [ -f "$D/seasonal_slovenia/frames.csv" ]; then
+    if $T season-train examples/data/slovenia_season.csv -o "$W/slo.tnw" --iters 2 --exclude 2015 > "$W/slo.txt" 2>&1 &&
+        grep -q "32 usable frames, 27 for training" "$W/slo.txt"; then ok; else bad "season-train on Sentinel-2 NDVI: $(cat "$W/slo.txt")"; fi
+else
+    skipped "season-train on Sentinel-2 NDVI (absent)"
+fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

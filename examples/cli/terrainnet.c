@@ -2057,7 +2057,8 @@ static int run_season(void)
 
 static struct season_train_args { const char *data, *out, *ckpt, *cond, *exclude; tn_kpd_opts o; } season_train_arg;
 static const cli_opt season_train_opts[] = {
-    {"DATA", 0, ARG_POS, 0, &season_train_arg.data, NULL, 0, 0, NULL, "a season data file (sites, climates, dated pictures; docs/season.md)", NULL},
+    {"DATA", 0, ARG_POS, 0, &season_train_arg.data, NULL, 0, 0, NULL,
+     "a season data file (sites, climates, dated pictures; docs/season.md), or a folder holding one as season.csv", NULL},
     {"output", 'o', ARG_STR, REQ, &season_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the KPD generator", NULL},
     {"minutes", 0, ARG_DOUBLE, 0, &season_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget", "10"},
     {"iters", 0, ARG_LONG, 0, &season_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations", "0 = only the time budget"},
@@ -2083,7 +2084,7 @@ static int run_season_train(void)
     tn_kpd model;
     tn_kpd_stats s;
     tn_status st;
-    char ckbuf[1024];
+    char ckbuf[1024], dirbuf[4096];
     int i, n = 0;
     if (!a->ckpt) {
         snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
@@ -2091,6 +2092,14 @@ static int run_season_train(void)
     }
     a->o.train.checkpoint = a->ckpt;
     if (a->cond && (st = tn_kpd_condition_parse(a->cond, &a->o.condition))) return fail_status(st);
+    { /* a folder holding season.csv */
+        FILE *f;
+        snprintf(dirbuf, sizeof dirbuf, "%s/season.csv", a->data);
+        if ((f = fopen(dirbuf, "rb"))) {
+            fclose(f);
+            a->data = dirbuf;
+        }
+    }
     if ((st = tn_season_data_load(a->data, &d))) return fail_status(st);
     if (!(use = (tn_season_sample *)calloc((size_t)d.count, sizeof *use))) {
         tn_season_data_free(&d);
