@@ -23946,7 +23946,7 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
 }
 
 /* One frame: the picture, and its validity from the exclusion masks; a frame without a valid
-   pixel is left out (returns 1). */
+   pixel is left out (*skip = 1). */
 static tn_status tn__season_frame(tn_season_data *d, const char *path, const char *line_name, const tn_image *dem, const char **fb,
                                   const size_t *fl, int nf, int *skip)
 {
