@@ -23609,7 +23609,10 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint makes %d channels, these pictures have %d", t.o.train.checkpoint, t.A.out_channels, oc);
             goto done;
         }
-        t.o.condition = t.A.condition;
+        if (t.A.condition != t.o.condition) { /* the checkpoint's condition may need other inputs */
+            t.o.condition = t.A.condition;
+            if ((st = tn__kpd_check_samples(samples, count, t.o.condition, &oc))) goto done;
+        }
     } else {
         t.A.condition = t.o.condition;
         t.A.cond_channels = tn__kpd_cond_channels(t.o.condition);
@@ -23619,12 +23622,6 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
         t.A.lapse_rate = t.o.lapse_rate;
         tn__kpd_scales(samples, count, &t.A);
     }
-    if (t.A.condition == TN_KPD_OURS)
-        for (i = 0; i < count; i++)
-            if (!samples[i].insolation) {
-                st = tn__fail(TN_ERR_INVALID_ARG, "season-train: picture %d needs its DEM's insolation", i);
-                goto done;
-            }
     tn_rng_seed(&t.rng, tn_train_seed(t.run), 0x6b7064ULL);
     if ((st = tn__kpd_model_params(&t.A, &t.rng, &t.g))) goto done;
     if (!(t.d = tn_params_create())) {

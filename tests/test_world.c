@@ -223,10 +223,24 @@ static int refused(const char *spec, const char *words)
     return 1;
 }
 
+/* A small SinGAN model of dem (width 8, factor 0.7), saved to path; 1 on success. */
+static int tiny_singan(const tn_image *dem, int coarsest, int iters, uint64_t seed, const char *path, tn_singan *m)
+{
+    tn_singan_opts o;
+    memset(&o, 0, sizeof o);
+    o.coarsest = coarsest;
+    o.factor = 0.7f;
+    o.channels = 8;
+    o.max_channels = 8;
+    o.iters = iters;
+    o.train.seed = seed;
+    memset(m, 0, sizeof *m);
+    return dem->data && tn_singan_train(dem, &o, m, NULL) == TN_OK && tn_singan_save(m, path) == TN_OK;
+}
+
 TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
 {
     tn_singan m;
-    tn_singan_opts o;
     tn_singan_gen_opts go;
     tn_world w;
     tn_image dem = {0, 0, 0, NULL}, whole = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
@@ -235,16 +249,7 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
     int bits = 0;
     const char *path = tn_test_tmp_path("world", "sg.tnw");
     dem = tn_test_dem(32, 4);
-    TN_CHECK(dem.data != NULL);
-    memset(&o, 0, sizeof o);
-    o.coarsest = 12;
-    o.factor = 0.7f;
-    o.channels = 8;
-    o.max_channels = 8;
-    o.iters = 3;
-    o.train.seed = 3;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
-    TN_CHECK(tn_singan_save(&m, path) == TN_OK);
+    TN_CHECK(tiny_singan(&dem, 12, 3, 3, path, &m));
     snprintf(spec, sizeof spec, "world 120 90\nseed 9\nheight -5000 10000\nsingan model=%s\n", path);
     TN_CHECK(tiles_vs_whole(spec, 40, 1, 2, &bits) == 0.0 && bits);
     /* the world is the model's own sample of the world seed, in metres */
@@ -270,24 +275,14 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
 TN_TEST(perlin_then_singan_refine_tiles_equal_the_whole_map)
 {
     tn_singan m;
-    tn_singan_opts o;
     tn_singan_gen_opts go;
     tn_image dem = {0, 0, 0, NULL};
     char spec[1024];
     const char *path = tn_test_tmp_path("world", "sgr.tnw");
     int from, bits = 0;
     dem = tn_test_dem(40, 5);
-    TN_CHECK(dem.data != NULL);
-    memset(&o, 0, sizeof o);
-    o.coarsest = 10;
-    o.factor = 0.7f;
-    o.channels = 8;
-    o.max_channels = 8;
-    o.iters = 2;
-    o.train.seed = 5;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tiny_singan(&dem, 10, 2, 5, path, &m));
     TN_CHECK(m.scales >= 4);
-    TN_CHECK(tn_singan_save(&m, path) == TN_OK);
     for (from = 0; from <= 2; from++) {
         tn_world w, p;
         tn_image whole = {0, 0, 0, NULL}, per = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
