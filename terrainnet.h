@@ -1553,6 +1553,14 @@ typedef struct tn_gnn_opts {
     float mse_weight;      /* l_gt (MSE of the normalised heights); 0 = 1, < 0 = off */
     float ssim_weight;     /* 1 - SSIM; 0 = 0.1, < 0 = off */
     float grad_weight;     /* gradient-difference loss; 0 = 0.1, < 0 = off */
+    float sketch_weight;   /* 6.1's sketch loss: pixels 1-4 px from a part lie below a ridge's and above a
+                              valley's height at their projection (cross-entropy of a Gumbel-softmax
+                              of the two heights, temperature 0.05 std); 0 = off (docs/gnn.md: it cost
+                              neighbour SSIM) */
+    float smooth_weight;   /* 6.1's smoothness: |y_p - y_q| of random pixel pairs under 5 px apart
+                              (Manhattan); 0 = 0.1, < 0 = off */
+    float further_weight;  /* 6.1's distance term, as read here: a pixel 1-6 px from its nearest part
+                              keeps near the part's height there, weighted 1 / (10 d^2); 0 = off */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
@@ -1600,7 +1608,10 @@ enum { TN_GNN_EMBED_AUTO = 0,     /* a part identical to an example part (same p
        TN_GNN_EMBED_NONE };       /* no part does */
 
 typedef struct tn_gnn_generate_opts {
-    uint64_t seed;           /* part cutting, alignment pick, parts' initial states */
+    uint64_t seed;           /* random sketches, alignment pick, parts' initial states, the gain's held-out
+                                lines; part cutting too except under EMBED_AUTO, which cuts with the
+                                model's training seed (the example's own network then gives the
+                                example's own parts) */
     int heights;             /* TN_GNN_HEIGHTS_* */
     int embeddings;          /* TN_GNN_EMBED_* */
     int align_choices;       /* EMBED_ALIGNED: pick at random among the best this many aligned
@@ -1614,6 +1625,9 @@ typedef struct tn_gnn_generate_opts {
     float order_weight;      /* fine-tune sketch-ordering weight (6.1's sketch loss as a hinge): a ridge
                                 pixel below, or a valley pixel above, a pixel 3 px across its line is
                                 penalised by the difference; 0 = 1, < 0 = off */
+    float gain;              /* how much of the network's residual over the membrane is added:
+                                0 = validated on the sketch (tn_gnn_gain), > 0 = this factor
+                                (1 = the network as trained), < 0 = none (the membrane) */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -1644,6 +1658,18 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    follows the tile, not the map (except a fine-tune, which works on the whole map first). */
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
                                         int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
+
+/* The residual gain that opts->gain = 0 uses: how far the network's residual over the membrane is
+   to be trusted on this sketch, tested on the sketch itself. Three times, 30 % of the user's
+   lines (not random ones) are held out; the rest is generated (without fine-tune) and the
+   least-squares factor a of the residual r against the held-out pixels' true offsets t - m
+   (sum r (t - m) / sum r^2 over them) is pooled and clamped to [0, 1]. Maps over 512 px a side
+   are tested on their central 512 x 512 window, so any window of one map gets the same gain.
+   1 when the network cannot be tested: every part is one of the example's own (its network:
+   the reconstruction), fewer than 2 user lines, a model without membrane, or opts->gain != 0
+   (then that setting, clamped at 0). */
+TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                             float *gain);
 
 /* Does a terrain obey its sketch's ordering? Along every densified sketch line (coordinates
    scaled from the sketch canvas to the terrain), each point is compared with the two pixels
@@ -19698,6 +19724,11 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
     if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
     if (o->grad_weight == 0) o->grad_weight = 0.1f;
+    /* smoothness 0.1: 1000-step runs on Alps, Grand Canyon and Sahara kept the reconstruction
+       (+-0.002 SSIM) and lifted the neighbours' SSIM in 7 of 9 region x density cells (up to
+       +0.012); the sketch term cost 0.01-0.03 everywhere and the distance term the drawn
+       sketch's ordering on Grand Canyon (99.7 -> 80.4 %), so both stay off (docs/gnn.md) */
+    if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -21165,6 +21196,93 @@ static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int np
     return E0;
 }
 
+#define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
+#define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */
+
+/* 6.1's sketch term: pixels 1-4 px from a part and not on a line lie below a ridge's (above a
+   valley's) height at their projection. For a pair of logits the Gumbel-softmax's cross-entropy
+   is softplus(-z), z = sign (h_proj - y) / tau + logistic noise: a BCE on z. NULL if nothing
+   was sampled. */
+static tn_tensor *tn__gnn_sketch_loss(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, int *idx, tn_tensor *a, tn_tensor *b)
+{
+    const tn__gnn_graph *g = &s->g;
+    int n = 0, tries;
+    tn_tensor *one;
+    for (tries = 0; g->E > 0 && tries < 4 * TN__GNN_SAMPLES && n < TN__GNN_SAMPLES; tries++) {
+        int e = (int)tn_rng_below(&s->rng, (uint32_t)g->E);
+        const float *f = g->feat + (size_t)e * TN__GNN_F;
+        float d = f[1] * TN__GNN_DIST, sg = L->P.sign[g->e_part[e]], u;
+        if (d < 0.7f || d > 4.0f || L->type[g->e_pix[e]] != 0) continue; /* a line pixel would be pushed off its own line */
+        u = 1e-6f + 0.999998f * tn_rng_uniform(&s->rng);
+        idx[n] = g->e_pix[e];
+        a->data[n] = -sg / TN__GNN_TAU;
+        b->data[n] = sg * (f[3] + L->base[g->e_pix[e]]) / TN__GNN_TAU + logf(u / (1.0f - u));
+        n++;
+    }
+    if (!n || !(one = tn_tensor_2d(ctx, n, 1))) return NULL;
+    tn_tensor_fill(one, 1.0f);
+    return tn_bce_logits_loss(ctx, tn_add(ctx, tn_mul(ctx, tn_gather_rows(ctx, y, idx, n), tn_slice(ctx, a, 0, 0, n)), tn_slice(ctx, b, 0, 0, n)),
+                              one);
+}
+
+/* 6.1's smoothness: mean |y_p - y_q| over random pixel pairs under 5 px apart (Manhattan). */
+static tn_tensor *tn__gnn_smooth_loss(tn__gnn_train *s, tn_ctx *ctx, tn_tensor *y, int *idx)
+{
+    int n = 0, W = s->A.width, H = s->A.height, cap = TN__GNN_SAMPLES;
+    while (n < cap) {
+        int x = (int)tn_rng_below(&s->rng, (uint32_t)W), yy = (int)tn_rng_below(&s->rng, (uint32_t)H);
+        int dx = (int)tn_rng_below(&s->rng, 9) - 4, dy = (int)tn_rng_below(&s->rng, 9) - 4;
+        if (abs(dx) + abs(dy) >= 5 || (!dx && !dy) || x + dx < 0 || x + dx >= W || yy + dy < 0 || yy + dy >= H) continue;
+        idx[n] = yy * W + x;
+        idx[cap + n] = (yy + dy) * W + x + dx;
+        n++;
+    }
+    return tn_mean(ctx, tn_abs(ctx, tn_sub(ctx, tn_gather_rows(ctx, y, idx, cap), tn_gather_rows(ctx, y, idx + cap, cap))));
+}
+
+/* 6.1's distance term as read here: a pixel 1-6 px from its nearest part keeps near the part's
+   height there, weighted 1 / (10 d^2) (weights normalised to sum 1). NULL if nothing sampled. */
+static tn_tensor *tn__gnn_further_loss(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, int *idx, tn_tensor *a, tn_tensor *b)
+{
+    int n = 0, tries, k = s->A.k;
+    double wsum = 0;
+    for (tries = 0; tries < 4 * TN__GNN_SAMPLES && n < TN__GNN_SAMPLES; tries++) {
+        int p = (int)tn_rng_below(&s->rng, (uint32_t)s->npix), j;
+        float bd = FLT_MAX, bh = 0;
+        for (j = 0; j < k; j++) {
+            const float *f = L->nfeat + ((size_t)p * k + j) * TN__GNN_F;
+            if (L->nbr[(size_t)p * k + j] >= 0 && f[1] * TN__GNN_DIST < bd) {
+                bd = f[1] * TN__GNN_DIST;
+                bh = f[3] + L->base[p];
+            }
+        }
+        if (bd < 0.7f || bd > 6.0f) continue;
+        idx[n] = p;
+        b->data[n] = bh;
+        a->data[n] = 1.0f / (10.0f * bd * bd);
+        wsum += a->data[n++];
+    }
+    if (!n) return NULL;
+    return tn_scale_shift(ctx, tn_sum(ctx, tn_mul(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, y, idx, n), tn_slice(ctx, b, 0, 0, n))),
+                                                 tn_slice(ctx, a, 0, 0, n))), (float)(1.0 / wsum), 0.0f);
+}
+
+/* The weighted sketch, smooth and further terms on this step's prediction y (npix x 1) over
+   level L, added to *loss (zero weights cost nothing). */
+static tn_status tn__gnn_shape_losses(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, tn_tensor **loss)
+{
+    int *idx = (int *)tn_ctx_alloc(ctx, 2 * (size_t)TN__GNN_SAMPLES * sizeof(int));
+    tn_tensor *a = tn_tensor_2d(ctx, TN__GNN_SAMPLES, 1), *b = tn_tensor_2d(ctx, TN__GNN_SAMPLES, 1), *t;
+    if (!idx || !a || !b) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    if (s->o.sketch_weight > 0 && (t = tn__gnn_sketch_loss(s, ctx, L, y, idx, a, b)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.sketch_weight, 0.0f));
+    if (s->o.smooth_weight > 0 && (t = tn__gnn_smooth_loss(s, ctx, y, idx)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.smooth_weight, 0.0f));
+    if (s->o.further_weight > 0 && (t = tn__gnn_further_loss(s, ctx, L, y, idx, a, b)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.further_weight, 0.0f));
+    return *loss ? TN_OK : tn_ctx_status(ctx);
+}
+
 /* One step; the unweighted loss terms go to l[0..2], the total to l[3]. */
 static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, float *l)
 {
@@ -21220,6 +21338,12 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, float *l)
         loss = loss ? tn_add(ctx, loss, t) : t;
     }
     if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_INVALID_ARG, "gnn: every loss term is off");
+    if (s->o.sketch_weight > 0 || s->o.smooth_weight > 0 || s->o.further_weight > 0) {
+        int s2[2];
+        s2[0] = s->npix;
+        s2[1] = 1;
+        if ((st = tn__gnn_shape_losses(s, ctx, L, tn_reshape(ctx, pred, 2, s2), &loss))) return st;
+    }
     l[3] = loss->data[0];
     if (!isfinite(l[3])) return tn__fail(TN_ERR_NUMERIC, "gnn: the loss diverged at iteration %ld (lower the learning rate)", tn_train_iteration(s->run));
     tn_params_zero_grad(s->w);
@@ -21262,6 +21386,9 @@ static tn_status tn__gnn_check_dem(const tn_image *dem, float *lo, float *hi, do
     X("threshold", extract.threshold, int, -1, 1e9) X("edge_noise", edge_noise, float, -1, 100) X("lr", lr, float, 0, 10) \
     X("mse_weight", mse_weight, float, -1e6, 1e6) X("ssim_weight", ssim_weight, float, -1e6, 1e6)                     \
     X("grad_weight", grad_weight, float, -1e6, 1e6)
+/* settings added later: a checkpoint without them trained without them */
+#define TN__GNN_LATER_SETTINGS(X) \
+    X("sketch_weight", sketch_weight, float, 0, 1e6) X("smooth_weight", smooth_weight, float, -1, 1e6) X("further_weight", further_weight, float, 0, 1e6)
 
 static tn_status tn__gnn_set_meta(tn__gnn_train *s, uint64_t digest)
 {
@@ -21269,6 +21396,7 @@ static tn_status tn__gnn_set_meta(tn__gnn_train *s, uint64_t digest)
 #define TN__GNN_PUT(key, field, type, lo, hi) \
     if (!st) st = tn_train_set_meta_number(s->run, key, (double)s->o.field);
     TN__GNN_SETTINGS(TN__GNN_PUT)
+    TN__GNN_LATER_SETTINGS(TN__GNN_PUT)
 #undef TN__GNN_PUT
     return st;
 }
@@ -21281,9 +21409,17 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
     if (!st && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d;
     TN__GNN_SETTINGS(TN__GNN_GET)
 #undef TN__GNN_GET
+#define TN__GNN_GET_LATER(key, field, type, lo, hi) \
+    if (!st) { \
+        s->o.field = 0; \
+        if (tn_train_meta(s->run, key) && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d; \
+    }
+    TN__GNN_LATER_SETTINGS(TN__GNN_GET_LATER)
+#undef TN__GNN_GET_LATER
     return st;
 }
 #undef TN__GNN_SETTINGS
+#undef TN__GNN_LATER_SETTINGS
 
 TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
 {
@@ -21309,9 +21445,10 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     if ((st = tn__gnn_check_dem(dem, &lo, &hi, &mean, &std))) return st;
     if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
         s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
-        !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24))
+        !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24) || !(s.o.sketch_weight >= 0 && s.o.sketch_weight <= 1e6) ||
+        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
-                        "mask %g < 1, finite weights and noise, random edges <= 2^24)", s.o.hidden, TN__GNN_MAXH, s.o.rounds, s.o.k,
+                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24)", s.o.hidden, TN__GNN_MAXH, s.o.rounds, s.o.k,
                         s.o.embed, (double)s.o.mask, s.o.random_edges);
     if ((size_t)dem->width * dem->height * (size_t)s.o.k + (size_t)(s.o.random_edges > 0 ? s.o.random_edges : 0) > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn: %d x %d pixels with %d edges each exceed %d edges; train on a crop", dem->width, dem->height,
@@ -21620,6 +21757,7 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 typedef struct tn__gnn_gen {
     tn__gnn_arch A;
     int W, H, halo;
+    float gain;                /* share of the residual over the membrane that is added */
     tn__gnn_parts P;           /* every part of the sketch, normalised heights */
     float *emb;                /* P.n x embed */
     float *E0;                 /* P.n x hidden initial states; NULL = zero */
@@ -21899,57 +22037,39 @@ done:
 /* Everything of a generation but the network passes: sketch in the output's pixels and the
    example's units, random sketches, parts, embeddings (matched or aligned, then fine-tuned),
    part states, raster. */
-static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                  tn__gnn_gen *G)
+/* The seed the sketch's lines are cut into parts with: under EMBED_AUTO the model's training
+   seed, so the example's own network is cut exactly as in training and every part keeps its
+   embedding (the reconstruction); otherwise opts->seed. */
+static uint64_t tn__gnn_cut_seed(const tn_gnn *model, const tn_gnn_generate_opts *opts)
 {
-    tn_gnn_generate_opts o;
-    tn_contour_set sk, rnd, dense, parts, ex_parts;
+    const char *sd = tn_params_meta(model->weights, "seed");
+    uint64_t v;
+    if (opts->embeddings == TN_GNN_EMBED_AUTO && sd && tn__parse_hex64(sd, strlen(sd), &v)) return v;
+    return opts->seed;
+}
+
+/* G from a sketch already in the example's units on the width x height canvas (random lines
+   included): parts, their embeddings and initial states, the rasterised sketch. *known = 1 when
+   every part is one of the example's own (EMBED_AUTO matched them all). */
+static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk, int width, int height, const tn_gnn_generate_opts *opts,
+                                   tn__gnn_gen *G, int *known)
+{
+    tn_contour_set dense, parts, ex_parts;
     tn_image r = {0, 0, 0, NULL};
     tn_align_opts ao;
     int *match = NULL, i, nf = 0;
-    size_t n, q;
+    size_t n = (size_t)width * height, q;
     tn_status st;
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    memset(G, 0, sizeof *G);
-    memset(&sk, 0, sizeof sk);
-    memset(&rnd, 0, sizeof rnd);
     memset(&dense, 0, sizeof dense);
     memset(&parts, 0, sizeof parts);
     memset(&ex_parts, 0, sizeof ex_parts);
-    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
-    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
-    if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
-    if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
-    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
-        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192)",
-                        o.heights, o.finetune, o.align_choices, o.random_nodes);
-    if (o.finetune > 0 && (size_t)width * height * G->A.k > TN__GNN_MAX_EDGES)
-        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: the fine-tune works on the whole map; %d x %d is too large for it", width, height);
+    *known = 0;
     G->W = width;
     G->H = height;
     G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
-    n = (size_t)width * height;
-    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
-    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
-        tn_sketch_random_opts ro;
-        memset(&ro, 0, sizeof ro);
-        ro.seed = o.seed;
-        ro.nodes = o.random_nodes;
-        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
-        for (i = sk.count; i < rnd.count; i++) {
-            int j;
-            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
-        }
-        tn_contour_set_free(&sk);
-        sk = rnd;
-        memset(&rnd, 0, sizeof rnd);
-    }
-    if ((st = tn_sketch_densify(&sk, &dense))) goto done;
-    if ((st = tn_contour_parts_make(&dense, o.seed, &parts))) goto done;
+    G->gain = 1.0f;
+    if ((st = tn_sketch_densify(sk, &dense))) goto done;
+    if ((st = tn_contour_parts_make(&dense, tn__gnn_cut_seed(model, opts), &parts))) goto done;
     if (!parts.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch has no part of 5 px (draw longer lines)");
         goto done;
@@ -21957,13 +22077,15 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     /* the example part whose embedding each sketch part takes (-1: none) */
     if ((st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex_parts))) goto done;
     if (!(match = (int *)tn__alloc((size_t)parts.count * sizeof(int)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
-    if (o.embeddings == TN_GNN_EMBED_ALIGNED) { /* 5.3: shape (LCS of chain codes) and heights */
+    if (opts->embeddings == TN_GNN_EMBED_ALIGNED) { /* 5.3: shape (LCS of chain codes) and heights */
         memset(&ao, 0, sizeof ao);
-        ao.seed = o.seed;
-        ao.choices = o.align_choices > 0 ? o.align_choices : 1;
+        ao.seed = opts->seed;
+        ao.choices = opts->align_choices > 0 ? opts->align_choices : 1;
         if ((st = tn_sketch_align(&parts, &ex_parts, &ao, match))) goto done;
-    } else
-        tn__gnn_same_parts(&parts, &ex_parts, o.embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
+    } else {
+        tn__gnn_same_parts(&parts, &ex_parts, opts->embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
+        for (i = 0, *known = opts->embeddings == TN_GNN_EMBED_AUTO; i < parts.count; i++) *known &= match[i] >= 0;
+    }
     if ((st = tn__gnn_parts_make(&parts, G->A.mean, G->A.std, &G->P))) goto done;
     G->emb = (float *)tn__calloc((size_t)G->P.n * G->A.embed * sizeof(float));
     G->type = (float *)tn__alloc(n * sizeof(float));
@@ -21980,11 +22102,11 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         for (i = 0; i < G->P.n; i++) {
             tn_rng pr;
             int h;
-            tn_rng_seed(&pr, o.seed ^ 0x67656eULL, (uint64_t)i);
+            tn_rng_seed(&pr, opts->seed ^ 0x67656eULL, (uint64_t)i);
             for (h = 0; h < G->A.hidden; h++) G->E0[(size_t)i * G->A.hidden + h] = G->A.part_noise * tn_rng_normal(&pr);
         }
     }
-    if ((st = tn_sketch_rasterise(&sk, width, height, &r))) goto done;
+    if ((st = tn_sketch_rasterise(sk, width, height, &r))) goto done;
     for (q = 0; q < n; q++) {
         const float *px = r.data + 3 * q;
         G->fixed[q] = (uint8_t)(px[0] > 0 || px[1] > 0);
@@ -21992,26 +22114,133 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         G->type[q] = px[0] > 0 ? 1.0f : px[1] > 0 ? -1.0f : 0.0f;
         G->hgt[q] = G->fixed[q] ? px[2] : 0.0f;
     }
-    if (!nf) {
-        st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch covers no pixel of the %d x %d map", width, height);
-        goto done;
-    }
-    if (o.finetune > 0) st = tn__gnn_finetune(G, model, &o);
+    if (!nf) st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch covers no pixel of the %d x %d map", width, height);
 done:
     tn_image_free(&r);
-    tn_contour_set_free(&sk);
-    tn_contour_set_free(&rnd);
     tn_contour_set_free(&dense);
     tn_contour_set_free(&parts);
     tn_contour_set_free(&ex_parts);
     TN_FREE(match);
+    return st;
+}
+
+static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                 const char *stage);
+
+/* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's. */
+static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
+                                       const tn_gnn_generate_opts *opts, float *gain)
+{
+    int vw = G->W < 512 ? G->W : 512, vh = G->H < 512 ? G->H : 512, vx = (G->W - vw) / 2, vy = (G->H - vh) / 2, round, i;
+    size_t nv = (size_t)vw * vh, q, held = 0;
+    double num = 0, den = 0;
+    tn_contour_set keep, drop;
+    float *pred = (float *)tn__alloc(nv * sizeof(float)), *base = (float *)tn__alloc(nv * sizeof(float));
+    tn_ctx *ctx = tn_ctx_create();
+    tn_rng rng;
+    tn_status st = TN_OK;
+    *gain = 1.0f;
+    keep = drop = *sk;
+    keep.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
+    drop.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
+    if (!pred || !base || !ctx || !keep.items || !drop.items) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    tn_rng_seed(&rng, opts->seed, 0x6761696eULL);
+    for (round = 0; !st && n_user >= 2 && round < 3; round++) {
+        tn__gnn_gen T;
+        tn_image hr = {0, 0, 0, NULL};
+        int known;
+        keep.count = drop.count = 0;
+        for (i = 0; i < sk->count; i++) {
+            if (i < n_user && tn_rng_uniform(&rng) < 0.3f) drop.items[drop.count++] = sk->items[i];
+            else keep.items[keep.count++] = sk->items[i];
+        }
+        if (!drop.count || keep.count == sk->count - n_user) continue; /* nothing held out, or no user line left */
+        memset(&T, 0, sizeof T);
+        T.A = G->A;
+        st = tn__gnn_gen_build(model, &keep, G->W, G->H, opts, &T, &known);
+        if (st == TN_ERR_EMPTY) { /* the kept lines are too short to test with: not a failure */
+            tn__gnn_gen_free(&T);
+            st = TN_OK;
+            continue;
+        }
+        if (!st) st = tn__gnn_gen_run(&T, model->weights, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
+        if (!st) st = tn_sketch_rasterise(&drop, G->W, G->H, &hr);
+        for (q = 0; !st && q < nv; q++) {
+            size_t m = (size_t)(vy + (int)(q / vw)) * G->W + vx + (int)(q % vw);
+            const float *px = hr.data + 3 * m;
+            double r = (double)pred[q] - base[q];
+            if (!(px[0] > 0 || px[1] > 0) || T.fixed[m]) continue;
+            num += r * ((double)px[2] - base[q]);
+            den += r * r;
+            held++;
+        }
+        tn_image_free(&hr);
+        tn__gnn_gen_free(&T);
+    }
+    if (!st && held >= 16 && den > 0) *gain = (float)(num / den < 0 ? 0 : num / den > 1 ? 1 : num / den);
+    TN_FREE(pred);
+    TN_FREE(base);
+    TN_FREE(keep.items);
+    TN_FREE(drop.items);
+    tn_ctx_free(ctx);
+    return st;
+}
+
+static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                  tn__gnn_gen *G)
+{
+    tn_gnn_generate_opts o;
+    tn_contour_set sk, rnd;
+    int i, known = 0;
+    tn_status st;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    memset(G, 0, sizeof *G);
+    memset(&sk, 0, sizeof sk);
+    memset(&rnd, 0, sizeof rnd);
+    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
+    if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
+    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
+        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
+                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if (o.finetune > 0 && (size_t)width * height * G->A.k > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: the fine-tune works on the whole map; %d x %d is too large for it", width, height);
+    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
+    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
+        tn_sketch_random_opts ro;
+        memset(&ro, 0, sizeof ro);
+        ro.seed = o.seed;
+        ro.nodes = o.random_nodes;
+        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        for (i = sk.count; i < rnd.count; i++) {
+            int j;
+            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
+        }
+        tn_contour_set_free(&sk);
+        sk = rnd;
+        memset(&rnd, 0, sizeof rnd);
+    }
+    if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
+    if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
+    else if (G->A.membrane && !known) st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain);
+    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, model, &o);
+done:
+    tn_contour_set_free(&sk);
+    tn_contour_set_free(&rnd);
     if (st) tn__gnn_gen_free(G);
     return st;
 }
 
 /* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
-   grown by the halo, its graph and one pass without gradients. */
-static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, size_t stride)
+   grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
+   the network's residual. base_dst (may be NULL): the membrane there. */
+static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                    size_t stride)
 {
     tn__gnn_region R;
     float *pred = NULL;
@@ -22025,12 +22254,14 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
     for (v = 0; !st && v < wh; v++)
         for (u = 0; u < ww; u++) {
-            float h = G->A.mean + G->A.std * pred[(size_t)(y - ry + v) * R.rw + (x - rx + u)];
+            size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
+            float p = G->gain == 1.0f ? pred[i] : R.base[i] + G->gain * (pred[i] - R.base[i]), h = G->A.mean + G->A.std * p;
             if (!isfinite(h)) {
                 st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
                 break;
             }
             dst[(size_t)v * stride + u] = h;
+            if (base_dst) base_dst[(size_t)v * stride + u] = G->A.mean + G->A.std * R.base[i];
         }
     tn__gnn_region_free(&R);
     TN_FREE(pred);
@@ -22040,13 +22271,31 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
 #define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
 #define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
 
+/* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
+   floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
+   gives the same pixels. */
+static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                 const char *stage)
+{
+    int tile = (size_t)ww * wh <= TN__GNN_ONE_PASS ? (ww > wh ? ww : wh) : TN__GNN_TILE, tx, ty, done_t = 0;
+    int nt = ((ww + tile - 1) / tile) * ((wh + tile - 1) / tile);
+    tn_status st = TN_OK;
+    for (ty = 0; !st && ty < wh; ty += tile)
+        for (tx = 0; !st && tx < ww; tx += tile) {
+            int tw = ww - tx < tile ? ww - tx : tile, th = wh - ty < tile ? wh - ty : tile;
+            size_t o = (size_t)ty * ww + tx;
+            st = tn__gnn_gen_window(G, w, ctx, x + tx, y + ty, tw, th, dst + o, base_dst ? base_dst + o : NULL, (size_t)ww);
+            if (!st && nt > 1) st = tn__progress(stage, (double)++done_t / nt);
+        }
+    return st;
+}
+
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
                                         int h, const tn_gnn_generate_opts *opts, tn_image *out)
 {
     tn__gnn_gen G;
     tn_image res = {0, 0, 0, NULL};
     tn_ctx *ctx = NULL;
-    int tx, ty, nt, done_t = 0, tile;
     tn_status st;
     TN_ASSERT(out);
     if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
@@ -22054,15 +22303,7 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
     if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
     if ((st = tn_image_create(&res, w, h, 1))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    /* a pixel depends only on the sketch within the halo, so any split gives the same pixels */
-    tile = (size_t)w * h <= TN__GNN_ONE_PASS ? (w > h ? w : h) : TN__GNN_TILE;
-    nt = ((w + tile - 1) / tile) * ((h + tile - 1) / tile);
-    for (ty = 0; !st && ty < h; ty += tile)
-        for (tx = 0; !st && tx < w; tx += tile) {
-            int tw = w - tx < tile ? w - tx : tile, th = h - ty < tile ? h - ty : tile;
-            st = tn__gnn_gen_window(&G, model->weights, ctx, x + tx, y + ty, tw, th, res.data + (size_t)ty * w + tx, (size_t)w);
-            if (!st && nt > 1) st = tn__progress("gnn-generate", (double)++done_t / nt);
-        }
+    st = tn__gnn_gen_run(&G, model->weights, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
     if (!st) {
         *out = res;
         res.data = NULL;
@@ -22072,6 +22313,22 @@ done:
     tn_ctx_free(ctx);
     tn__gnn_gen_free(&G);
     return st;
+}
+
+TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                             float *gain)
+{
+    tn__gnn_gen G;
+    tn_gnn_generate_opts o;
+    tn_status st;
+    TN_ASSERT(gain);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    o.finetune = 0; /* the test never fine-tunes */
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    *gain = G.gain;
+    tn__gnn_gen_free(&G);
+    return TN_OK;
 }
 
 TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
@@ -25195,8 +25452,17 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
    within 2 rounds (radius + 13) px and the membrane's blocks). The sketch's canvas is scaled to
    the world. Each call cuts the whole sketch into parts and rasterises it at the world's size
    (~21 bytes per world pixel), so a tile's memory and time follow the world, not the tile: the
-   row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map optimisation) is not offered. */
+   row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map optimisation) is not offered.
+   The residual gain (tn_gnn_gain) is tested once, at setup, and every tile uses it. */
 #define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
+
+static void tn__world_gnn_opts(const tn__world_stage *s, const tn_world *w, tn_gnn_generate_opts *go)
+{
+    memset(go, 0, sizeof *go);
+    go->seed = w->seed;
+    go->heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
+    go->embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
+}
 
 static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
@@ -25236,6 +25502,11 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         s->sketch = NULL;
         return st;
     }
+    {
+        tn_gnn_generate_opts go;
+        tn__world_gnn_opts(s, w, &go);
+        if ((st = tn_gnn_gain(s->gnn, s->sketch, w->width, w->height, &go, &s->p[2]))) return st;
+    }
     s->out_w = w->width;
     s->out_h = w->height;
     s->out_c = 1;
@@ -25249,10 +25520,8 @@ static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, 
     tn_gnn_generate_opts go;
     (void)in;
     (void)in_r;
-    memset(&go, 0, sizeof go);
-    go.seed = w->seed;
-    go.heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
-    go.embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
+    tn__world_gnn_opts(s, w, &go);
+    go.gain = s->p[2] > 0 ? s->p[2] : -1.0f;
     return tn_gnn_generate_window(s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go, out);
 }
 

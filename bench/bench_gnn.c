@@ -4,7 +4,9 @@
    - neighbours (paper Table 1): each of the 8 neighbouring 128 crops generated from its own
      extracted network, mean SSIM / PSNR, next to two baselines on the same sketch pixels: the
      constant mean of their heights and their membrane (Laplace) interpolation; at the default
-     extraction threshold (dense sketch) and at 200 and 500 cells (sparse sketches).
+     extraction threshold (dense sketch) and at 200 and 500 cells (sparse sketches). The GNN
+     figures use the residual gain tested on each sketch (the default, tn_gnn_gain: its mean is
+     printed); the `gain1` lines are the network as trained (gain 1).
    - spectrum distance (tn_realism_compare) of the neighbours to the truth, GNN vs membrane;
    - speed: training steps/s, the training time at which the reconstruction first reaches SSIM
      0.95 and 0.97 (the run is trained in segments of 150 iterations, checkpoint + resume, which
@@ -12,7 +14,11 @@
      512 x 512 (the sketch of the map's top-left 512 crop; tiled internally), peak memory (RSS).
    The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
    8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
-   Usage: bench_gnn [region] [minutes] [threads]   (defaults alps_montblanc 3 2)
+   Usage: bench_gnn [region] [minutes] [threads] [key=value ...]   (defaults alps_montblanc 3 2)
+   Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
+   instead of a time budget (the same model on any machine and load), seed=S (training seed,
+   default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), gain=G (the generation's
+   residual gain for the GNN figures; default 0 = tested on each sketch).
    Prints `name: value unit` lines. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -195,8 +201,29 @@ int main(int argc, char **argv)
     double cover;
     scores rec = {0, 0, 0, 0};
     double t95 = -1, t97 = -1;
-    int seg;
+    float gain = 0.0f;
+    long iters = 0;
+    int seg, a;
     char ckpt[256];
+    memset(&o, 0, sizeof o);
+    o.train.seed = 1;
+    for (a = 4; a < argc; a++) {
+        const char *eq = strchr(argv[a], '=');
+        double v = eq ? atof(eq + 1) : 0.0;
+        size_t kl = eq ? (size_t)(eq - argv[a]) : 0;
+        if (kl == 5 && !strncmp(argv[a], "iters", kl)) iters = (long)v;
+        else if (kl == 4 && !strncmp(argv[a], "seed", kl)) o.train.seed = (uint64_t)v;
+        else if (kl == 6 && !strncmp(argv[a], "smooth", kl)) o.smooth_weight = (float)v;
+        else if (kl == 6 && !strncmp(argv[a], "sketch", kl)) o.sketch_weight = (float)v;
+        else if (kl == 7 && !strncmp(argv[a], "further", kl)) o.further_weight = (float)v;
+        else if (kl == 4 && !strncmp(argv[a], "gain", kl)) gain = (float)v;
+        else {
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= gain=)\n", argv[a]);
+            return 2;
+        }
+        printf("variant: %s\n", argv[a]);
+    }
+    if (iters > 0) minutes = 1e6;
     if (!(minutes > 0)) minutes = 3.0;
     tn_set_threads(threads);
     snprintf(ckpt, sizeof ckpt, "/tmp/bench_gnn_%s_%ld.ckpt", region, (long)getpid());
@@ -217,9 +244,7 @@ int main(int argc, char **argv)
     printf("threads: %d\n", threads);
     tn_image_crop(&crop, &full, cx, cy, SIDE, SIDE);
 
-    memset(&o, 0, sizeof o);
     o.train.minutes = minutes;
-    o.train.seed = 1;
     o.train.checkpoint = ckpt;
     tn_set_progress(progress, NULL);
     if (!sketch_of(&crop, 0, &sk, &cover)) {
@@ -230,7 +255,7 @@ int main(int argc, char **argv)
     t0 = tn_time_seconds();
     for (seg = 1;; seg++) {
         tn_metrics mt;
-        o.train.max_iters = 150L * seg;
+        o.train.max_iters = iters > 0 && iters < 150L * seg ? iters : 150L * seg;
         o.train.resume = seg > 1;
         if (tn_gnn_train(&crop, &o, &model, &st)) {
             fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
@@ -242,7 +267,7 @@ int main(int argc, char **argv)
             fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
         }
         tn_image_free(&out);
-        if (st.iterations < o.train.max_iters) break; /* the time budget ended the run */
+        if (st.iterations < 150L * seg) break; /* the budget ended the run */
         tn_gnn_free(&model);
     }
     remove(ckpt);
@@ -288,8 +313,8 @@ int main(int argc, char **argv)
 
     /* the 8 neighbours, dense and sparse sketches */
     for (ti = 0; ti < 3; ti++) {
-        scores g = {0, 0, 0, 0}, mem = {0, 0, 0, 0}, mean = {0, 0, 0, 0};
-        double cov = 0;
+        scores g = {0, 0, 0, 0}, mem = {0, 0, 0, 0}, mean = {0, 0, 0, 0}, raw = {0, 0, 0, 0};
+        double cov = 0, gains = 0;
         int nc = 0;
         for (dy = -1; dy <= 1; dy++)
             for (dx = -1; dx <= 1; dx++) {
@@ -302,8 +327,17 @@ int main(int argc, char **argv)
                 }
                 cov += cover;
                 nc++;
+                {
+                    float gn = 1.0f;
+                    go.gain = gain;
+                    if (!tn_gnn_gain(&model, &sk, SIDE, SIDE, &go, &gn)) gains += gn;
+                }
                 if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&g, &nb, &out);
                 else fprintf(stderr, "  neighbour (%d, %d): %s\n", dx, dy, tn_last_error());
+                tn_image_free(&out);
+                go.gain = 1.0f; /* the network as trained, without the gain tested on the sketch */
+                if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&raw, &nb, &out);
+                go.gain = gain;
                 tn_image_free(&out);
                 if (!tn_gnn_membrane(&sk, SIDE, SIDE, &out)) add(&mem, &nb, &out);
                 tn_image_free(&out);
@@ -320,6 +354,10 @@ int main(int argc, char **argv)
         printf("neighbours_t%d_sketch_pixels: %.1f %%\n", d, 100.0 * cov / nc);
         printf("neighbours_t%d_gnn_ssim: %.4f (%d crops)\n", d, g.ssim / g.n, g.n);
         printf("neighbours_t%d_gnn_psnr: %.2f dB\n", d, g.psnr / g.n);
+        printf("neighbours_t%d_gain_mean: %.3f (tn_gnn_gain)\n", d, gains / nc);
+        if (raw.n) printf("neighbours_t%d_gnn_gain1_ssim: %.4f (gain 1: the network as trained)\n", d, raw.ssim / raw.n);
+        if (raw.n) printf("neighbours_t%d_gnn_gain1_psnr: %.2f dB\n", d, raw.psnr / raw.n);
+        if (raw.n) printf("neighbours_t%d_gnn_gain1_spectrum_distance: %.3f\n", d, raw.spec / raw.n);
         printf("neighbours_t%d_membrane_ssim: %.4f\n", d, mem.ssim / mem.n);
         printf("neighbours_t%d_membrane_psnr: %.2f dB\n", d, mem.psnr / mem.n);
         printf("neighbours_t%d_mean_ssim: %.4f\n", d, mean.ssim / mean.n);

@@ -354,6 +354,10 @@ if $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/g1.png" --preview "$W/gp.png" >
     grep -q "^size: 96 x 64" "$W/gg.txt" && $T info "$W/g1.png" | grep -q "height_range_m" && $T info "$W/gp.png" | grep -q "channels: 3" &&
     $T --threads 1 gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/g2.png" > /dev/null 2>&1 && cmp -s "$W/g1.png" "$W/g2.png"; then ok;
 else bad "gnn-generate from .tns (same bytes for 1 and 2 threads): $(head -c 300 "$W/gg.txt")"; fi
+# the residual gain: printed (tested on the sketch, in [0, 1]); --gain -1 gives the membrane, not the network's terrain
+if $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gn1.pfm" --gain 1 > /dev/null 2>&1 && $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/gn0.pfm" --gain -1 > /dev/null 2>&1 &&
+    ! cmp -s "$W/gn1.pfm" "$W/gn0.pfm" && grep -Eq "^residual_gain: (0\.[0-9]+|1\.000)$" "$W/gg.txt"; then ok; else bad "gnn-generate --gain: $(grep gain "$W/gg.txt")"; fi
+expect_usage "gnn-generate bad gain" "gnn-generate: --gain" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --gain -2
 if $T gnn-generate "$W/g.tnw" "$W/noise.png" -o "$W/g3.pfm" --size 120x80 --random 12 --finetune 2 --seed 4 > "$W/gg.txt" 2>&1 &&
     grep -q "DEM (its extracted network)" "$W/gg.txt" && $T info "$W/g3.pfm" | grep -q "size: 120 x 80"; then ok;
 else bad "gnn-generate from a DEM with --random and --finetune: $(head -c 300 "$W/gg.txt")"; fi

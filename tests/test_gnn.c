@@ -113,6 +113,59 @@ TN_TEST(training_lowers_the_loss_and_generates_metres)
     tn_image_free(&dem);
 }
 
+/* Trains a model with o and generates the sketch at the DEM's size into *out (freed first). */
+static int train_and_generate(const tn_image *dem, const tn_gnn_opts *o, const tn_contour_set *sk, tn_image *out)
+{
+    tn_gnn m;
+    int ok;
+    tn_image_free(out);
+    if (tn_gnn_train(dem, o, &m, NULL) != TN_OK) return 0;
+    ok = tn_gnn_generate(&m, sk, dem->width, dem->height, NULL, out) == TN_OK;
+    tn_gnn_free(&m);
+    return ok;
+}
+
+TN_TEST(shape_losses)
+{
+    /* 6.1's smooth, sketch and further terms: a heavy smoothness weight gives a smoother
+       reconstruction than none; the sketch term raises the ridge-above / valley-below share of
+       the example's own network; each term changes the model; negative weights are refused */
+    tn_image dem = tn_test_dem(40, 5), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_contour_set sk = own_sketch(&dem);
+    double sh0 = 0, sh1 = 0;
+    int x, y;
+    float g0 = 0, g1 = 0;
+    tiny_opts(&o, 40);
+    o.lr = 5e-3f;
+    o.smooth_weight = -1; /* each term alone */
+    TN_CHECK(train_and_generate(&dem, &o, &sk, &a));
+    o.smooth_weight = 50;
+    TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
+    for (y = 0; y < 40 && a.data && b.data; y++)
+        for (x = 0; x + 1 < 40; x++) {
+            g0 += fabsf(TN_PIXEL(&a, x + 1, y, 0) - TN_PIXEL(&a, x, y, 0));
+            g1 += fabsf(TN_PIXEL(&b, x + 1, y, 0) - TN_PIXEL(&b, x, y, 0));
+        }
+    TN_CHECK(g1 < g0);
+    o.smooth_weight = -1;
+    o.sketch_weight = 20;
+    TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
+    TN_CHECK(tn_gnn_ordering(&sk, &a, 2, &sh0, NULL) == TN_OK && tn_gnn_ordering(&sk, &b, 2, &sh1, NULL) == TN_OK);
+    TN_CHECK(sh1 >= sh0);
+    o.sketch_weight = 0;
+    o.further_weight = 5;
+    TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
+    TN_CHECK(b.data && a.data && !same_image(&a, &b));
+    o.further_weight = -1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_contour_set_free(&sk);
+    tn_image_free(&dem);
+}
+
 TN_TEST(save_load_round_trip)
 {
     const char *path = tn_test_tmp_path("gnn", "model.tnw");
@@ -348,6 +401,59 @@ TN_TEST(window_equals_whole_map)
     tn_image_free(&dem);
 }
 
+TN_TEST(residual_gain)
+{
+    /* the gain validated on the sketch: 1 for the example's own network (the reconstruction),
+       in [0, 1] otherwise; a fixed gain blends the membrane and the network's output linearly;
+       the validated gain gives the same output as that gain set by hand */
+    tn_image dem = tn_test_dem(48, 13), full = {0, 0, 0, NULL}, none = {0, 0, 0, NULL}, half = {0, 0, 0, NULL}, autog = {0, 0, 0, NULL},
+             fixg = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_contour_set own = own_sketch(&dem);
+    float g = -1, ga = -1;
+    size_t i, n = (size_t)48 * 48;
+    int lin = 1;
+    tiny_opts(&o, 20);
+    TN_CHECK(own.count >= 2);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 3;
+    TN_CHECK(tn_gnn_gain(&m, &own, 48, 48, &go, &g) == TN_OK);
+    TN_CHECK(g == 1.0f);
+    go.embeddings = TN_GNN_EMBED_NONE;
+    TN_CHECK(tn_gnn_gain(&m, &own, 48, 48, &go, &ga) == TN_OK);
+    TN_CHECK(ga >= 0.0f && ga <= 1.0f);
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &autog) == TN_OK);
+    go.gain = ga > 0 ? ga : -1.0f;
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &fixg) == TN_OK);
+    TN_CHECK(autog.data && fixg.data && same_image(&autog, &fixg));
+    go.gain = 1.0f;
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &full) == TN_OK);
+    go.gain = -1.0f;
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &none) == TN_OK);
+    go.gain = 0.5f;
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &half) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&own, 48, 48, &mem) == TN_OK);
+    for (i = 0; i < n && full.data && none.data && half.data && mem.data; i++) {
+        lin &= fabsf(none.data[i] - mem.data[i]) <= 1e-3f * (1.0f + fabsf(mem.data[i]));
+        lin &= fabsf(half.data[i] - 0.5f * (full.data[i] + none.data[i])) <= 1e-3f * (1.0f + fabsf(full.data[i]));
+    }
+    TN_CHECK(lin);
+    go.gain = NAN;
+    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &fixg) == TN_ERR_INVALID_ARG);
+    tn_image_free(&full);
+    tn_image_free(&none);
+    tn_image_free(&half);
+    tn_image_free(&autog);
+    tn_image_free(&fixg);
+    tn_image_free(&mem);
+    tn_contour_set_free(&own);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 TN_TEST(ordering_share)
 {
     /* a horizontal ridge on a tent-shaped terrain obeys the ordering everywhere; on the inverted
@@ -384,11 +490,13 @@ int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
     TN_RUN(training_lowers_the_loss_and_generates_metres);
+    TN_RUN(shape_losses);
     TN_RUN(save_load_round_trip);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);
+    TN_RUN(residual_gain);
     TN_RUN(ordering_share);
     return tn_test_summary("test_gnn");
 }

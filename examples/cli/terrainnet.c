@@ -1653,6 +1653,11 @@ static const cli_opt gnn_train_opts[] = {
     {"threshold", 0, ARG_INT, 0, &gnn_train_arg.o.extract.threshold, NULL, 1, NO_MAX, "CELLS",
      "extraction threshold of the example's network (extract --threshold)", "0.1 % of the window, at least 8"},
     {"radius", 0, ARG_FLOAT, ABOVE, &gnn_train_arg.o.radius, NULL, 0, 4096, "PX", "a pixel's neighbour parts lie within this distance", "24"},
+    {"sketch-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.sketch_weight, NULL, 0, 1e6, "W",
+     "paper 6.1's sketch loss: terrain beside a ridge below it, beside a valley above it", "0 = off"},
+    {"smooth-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.smooth_weight, NULL, -1, 1e6, "W", "paper 6.1's smoothness loss (-1 = off)", "0.1"},
+    {"further-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.further_weight, NULL, 0, 1e6, "W",
+     "paper 6.1's distance loss: terrain next to a line keeps near its height", "0 = off"},
 };
 
 static int run_gnn_train(void)
@@ -1732,6 +1737,9 @@ static const cli_opt gnn_generate_opts[] = {
      "a DEM SKETCH without a recorded range: the metres its codes 0..max stand for", NULL},
     {"order-weight", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.order_weight, NULL, -1, 1e6, "W",
      "with --finetune: weight of keeping ridges above and valleys below the terrain beside them (-1 = off)", "1"},
+    {"gain", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.gain, NULL, -1, 1e6, "G",
+     "share of the network's relief added to the membrane of the sketch heights (1 = the network as trained, -1 = none)",
+     "0 = tested on the sketch: held-out lines"},
     {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "SINGAN.tnw",
      "add the example's fine detail with a singan-train model of the same example (singan-refine)", NULL},
     {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
@@ -1804,7 +1812,12 @@ static int run_gnn_generate(void)
     a->o.heights = a->heights == 1 ? TN_GNN_HEIGHTS_EXAMPLE : a->heights == 2 ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_AUTO;
     a->o.embeddings = a->embeddings == 1 ? TN_GNN_EMBED_ALIGNED : a->embeddings == 2 ? TN_GNN_EMBED_NONE : TN_GNN_EMBED_AUTO;
     t0 = tn_time_seconds();
-    st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
+    if (a->o.gain == 0) { /* tested once here and then fixed, so it can be printed */
+        float g = 1.0f;
+        if (!(st = tn_gnn_gain(&model, &sk, a->w, a->h, &a->o, &g))) a->o.gain = g > 0 ? g : -1.0f;
+    } else
+        st = TN_OK;
+    if (!st) st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
     if (!st && a->detail) { /* SinGAN adds the fine detail the graph network cannot rebuild (paper 000) */
         tn_image refined = {0, 0, 0, NULL};
         a->detail_opts.seed = a->o.seed;
@@ -1828,8 +1841,8 @@ static int run_gnn_generate(void)
             if (terrain.data[i] < lo) lo = terrain.data[i];
             if (terrain.data[i] > hi) hi = terrain.data[i];
         }
-        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n", kind, sk.count,
-               sk.width, sk.height, a->w, a->h, tn_time_seconds() - t0, lo, hi, a->out);
+        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nresidual_gain: %.3f\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n",
+               kind, sk.count, sk.width, sk.height, a->w, a->h, a->o.gain > 0 ? a->o.gain : 0.0, tn_time_seconds() - t0, lo, hi, a->out);
     }
     tn_image_free(&terrain);
     tn_contour_set_free(&sk);
