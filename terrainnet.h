@@ -1503,8 +1503,9 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    baseline height), parts from N(0, s^2) or zero (A.3). T rounds of gather (pixels -> parts)
    and scatter (parts -> pixels) update both sides residually; each is a graph attention over
    two-layer MLP encodings of [receiver, sender, edge, mean of the sender's neighbours] (A.5); a
-   readout MLP gives the height. Losses: MSE + SSIM + gradient difference on the normalised
-   heights (6.1's l_gt, l_ssim, l_gradient; weights in tn_gnn_defaults).
+   readout MLP gives the height. Losses: MSE + SSIM + gradient difference + smoothness on the
+   normalised heights (6.1's l_gt, l_ssim, l_gradient, l_smooth; 6.1's sketch and distance terms
+   are options; weights in tn_gnn_defaults).
    Baseline: the network predicts a RESIDUAL over the membrane (Laplace) interpolation of the
    sketch pixels' heights, the strong baseline the neighbour test rewards (issue 14: SSIM 0.937
    on alps_montblanc 128), so the model starts at it and learns what the example adds;
@@ -1519,7 +1520,9 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    of an identical example part (its own network: reconstruction) and none otherwise by default;
    the paper's alignment is TN_GNN_EMBED_ALIGNED. An optional fine-tune (5.4) then adjusts only
    the sketch parts' embeddings (loss on the sketch pixels + smoothness, optionally a
-   ridge-above / valley-below hinge). Output in the example's height units.
+   ridge-above / valley-below hinge). The residual is scaled by a gain tested on the sketch
+   itself (tn_gnn_gain: some of its lines held out and predicted from the rest), so a sketch
+   unlike the example gets less of the example's detail. Output in the example's height units.
    Seamless tiles: a pixel's neighbour parts lie within `radius` px and the membrane is solved on
    overlapping blocks, so a pixel depends only on the sketch within a fixed distance; any window
    computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
@@ -1666,8 +1669,9 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
    (sum r (t - m) / sum r^2 over them) is pooled and clamped to [0, 1]. Maps over 512 px a side
    are tested on their central 512 x 512 window, so any window of one map gets the same gain.
    1 when the network cannot be tested: every part is one of the example's own (its network:
-   the reconstruction), fewer than 2 user lines, a model without membrane, or opts->gain != 0
-   (then that setting, clamped at 0). */
+   the reconstruction), fewer than 8 user lines (a drawing of a few strokes: a held-out stroke
+   says little about the rest), a model without membrane, or opts->gain != 0 (then that
+   setting, clamped at 0). */
 TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                              float *gain);
 
@@ -22127,6 +22131,11 @@ done:
 static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
                                  const char *stage);
 
+/* Fewer user lines than this keep gain 1: Himalaya's model tested on the 4 strokes of the
+   Figure 10 sketch got gain 0 (the membrane: 30.5 % ordering); the bench's extracted sketches
+   have 16-138 lines. */
+#define TN__GNN_GAIN_MIN_LINES 8
+
 /* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
                                        const tn_gnn_generate_opts *opts, float *gain)
@@ -22145,7 +22154,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
     drop.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
     if (!pred || !base || !ctx || !keep.items || !drop.items) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
     tn_rng_seed(&rng, opts->seed, 0x6761696eULL);
-    for (round = 0; !st && n_user >= 2 && round < 3; round++) {
+    for (round = 0; !st && n_user >= TN__GNN_GAIN_MIN_LINES && round < 3; round++) {
         tn__gnn_gen T;
         tn_image hr = {0, 0, 0, NULL};
         int known;

@@ -416,7 +416,7 @@ TN_TEST(residual_gain)
     size_t i, n = (size_t)48 * 48;
     int lin = 1;
     tiny_opts(&o, 20);
-    TN_CHECK(own.count >= 2);
+    TN_CHECK(own.count >= 8); /* enough lines for the test (fewer keep gain 1) */
     TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
     memset(&go, 0, sizeof go);
     go.seed = 3;
@@ -425,6 +425,12 @@ TN_TEST(residual_gain)
     go.embeddings = TN_GNN_EMBED_NONE;
     TN_CHECK(tn_gnn_gain(&m, &own, 48, 48, &go, &ga) == TN_OK);
     TN_CHECK(ga >= 0.0f && ga <= 1.0f);
+    {
+        tn_contour_set few = own;
+        float gf = -1;
+        few.count = 4; /* a few strokes: not tested */
+        TN_CHECK(tn_gnn_gain(&m, &few, 48, 48, &go, &gf) == TN_OK && gf == 1.0f);
+    }
     TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &autog) == TN_OK);
     go.gain = ga > 0 ? ga : -1.0f;
     TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &fixg) == TN_OK);
