@@ -331,6 +331,7 @@ int main(int argc, char **argv)
                     float gn = 1.0f;
                     go.gain = gain;
                     if (!tn_gnn_gain(&model, &sk, SIDE, SIDE, &go, &gn)) gains += gn;
+                    if (gain == 0.0f) go.gain = gn > 0 ? gn : -1.0f; /* tested once, not again inside generate */
                 }
                 if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&g, &nb, &out);
                 else fprintf(stderr, "  neighbour (%d, %d): %s\n", dx, dy, tn_last_error());
