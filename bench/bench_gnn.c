@@ -17,8 +17,11 @@
    Usage: bench_gnn [region] [minutes] [threads] [key=value ...]   (defaults alps_montblanc 3 2)
    Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
    instead of a time budget (the same model on any machine and load), seed=S (training seed,
-   default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), gain=G (the generation's
-   residual gain for the GNN figures; default 0 = tested on each sketch).
+   default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), phase=P (embed_phase, the
+   share of the budget that trains only the example's embeddings; -1 = none), gain=G (the generation's
+   residual gain for the GNN figures; default 0 = tested on each sketch), pictures=1 (writes
+   gnn_fig10_<region>.png: the example crop, then the Figure 10 sketch as membrane, GNN and GNN
+   with 48 random nodes, hillshaded).
    Prints `name: value unit` lines. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -44,8 +47,8 @@ static const char *data_dir(void)
     return d && d[0] ? d : "../shared/data";
 }
 
-/* h_at_0 and h_at_65535 of <region>_full.png from dem_index.csv. */
-static int height_mapping(const char *region, double *h0, double *h1)
+/* dx_m, dy_m, h_at_0 and h_at_65535 of <region>_full.png from dem_index.csv. */
+static int height_mapping(const char *region, double *dxy, double *h0, double *h1)
 {
     char path[512], line[1024], want[256];
     FILE *f;
@@ -56,8 +59,8 @@ static int height_mapping(const char *region, double *h0, double *h1)
         char *p = line;
         int col;
         if (strncmp(line, want, strlen(want)) != 0) continue;
-        for (col = 0; col < 7 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
-        if (p && sscanf(p, "%lf,%lf", h0, h1) == 2) {
+        for (col = 0; col < 5 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+        if (p && sscanf(p, "%lf,%lf,%lf,%lf", dxy, dxy + 1, h0, h1) == 4) {
             fclose(f);
             return 1;
         }
@@ -164,6 +167,30 @@ static int a_in_circle(int side, int rot, tn_contour_set *s)
     return 1;
 }
 
+/* Hillshaded colour panels side by side (heights on the example's lo..hi, its pixel spacing),
+   each scaled to `side` px (nearest), 4 px apart: the picture of a figure. */
+static void save_panels(const char *path, const tn_image *const *dem, int n, int side, float lo, float hi, const double *dxy)
+{
+    tn_render_opts ro;
+    tn_image strip = {0, 0, 0, NULL}, pv = {0, 0, 0, NULL};
+    int i, x, y, c;
+    memset(&ro, 0, sizeof ro);
+    ro.lo = lo;
+    ro.hi = hi;
+    ro.shade.dx = (float)dxy[0];
+    ro.shade.dy = (float)dxy[1];
+    if (tn_image_create(&strip, n * side + (n - 1) * 4, side, 3)) return;
+    for (i = 0; i < n; i++) {
+        if (tn_render_preview(dem[i], &ro, &pv)) continue;
+        for (y = 0; y < side; y++)
+            for (x = 0; x < side; x++)
+                for (c = 0; c < 3; c++) TN_PIXEL(&strip, i * (side + 4) + x, y, c) = TN_PIXEL(&pv, x * pv.width / side, y * pv.height / side, c);
+        tn_image_free(&pv);
+    }
+    if (!tn_image_save(path, &strip, NULL)) printf("picture: %s\n", path);
+    tn_image_free(&strip);
+}
+
 /* Ordering share and realism distance to the example of one user-sketch output. */
 static void user_scores(const char *name, const tn_contour_set *sk, const tn_image *ex, const tn_image *img)
 {
@@ -190,7 +217,7 @@ static int progress(void *user, const char *stage, double f)
 int main(int argc, char **argv)
 {
     const char *region = argc > 1 ? argv[1] : "alps_montblanc";
-    double minutes = argc > 2 ? atof(argv[2]) : 3.0, h0, h1, t0;
+    double minutes = argc > 2 ? atof(argv[2]) : 3.0, h0, h1, t0, dxy[2];
     int threads = argc > 3 ? atoi(argv[3]) : 2, thr[3] = {0, 200, 500}, cx, cy, d, ti, dx, dy;
     tn_image full = {0, 0, 0, NULL}, c128 = {0, 0, 0, NULL}, crop = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
     tn_gnn model;
@@ -201,9 +228,10 @@ int main(int argc, char **argv)
     double cover;
     scores rec = {0, 0, 0, 0};
     double t95 = -1, t97 = -1;
-    float gain = 0.0f;
-    long iters = 0;
-    int seg, a;
+    float gain = 0.0f, phase = 0.25f; /* tn_gnn_defaults' embed_phase */
+    double done = 0;
+    long iters = 0, phase_from = -1;
+    int seg, a, pictures = 0;
     char ckpt[256];
     memset(&o, 0, sizeof o);
     o.train.seed = 1;
@@ -217,8 +245,10 @@ int main(int argc, char **argv)
         else if (kl == 6 && !strncmp(argv[a], "sketch", kl)) o.sketch_weight = (float)v;
         else if (kl == 7 && !strncmp(argv[a], "further", kl)) o.further_weight = (float)v;
         else if (kl == 4 && !strncmp(argv[a], "gain", kl)) gain = (float)v;
+        else if (kl == 5 && !strncmp(argv[a], "phase", kl)) phase = (float)v;
+        else if (kl == 8 && !strncmp(argv[a], "pictures", kl)) pictures = v != 0;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= gain=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= gain= pictures=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -227,7 +257,7 @@ int main(int argc, char **argv)
     if (!(minutes > 0)) minutes = 3.0;
     tn_set_threads(threads);
     snprintf(ckpt, sizeof ckpt, "/tmp/bench_gnn_%s_%ld.ckpt", region, (long)getpid());
-    if (!height_mapping(region, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &c128)) {
+    if (!height_mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &c128)) {
         fprintf(stderr, "bench_gnn: cannot read %s from %s (set TN_DATA)\n", region, data_dir());
         return 1;
     }
@@ -257,10 +287,15 @@ int main(int argc, char **argv)
         tn_metrics mt;
         o.train.max_iters = iters > 0 && iters < 150L * seg ? iters : 150L * seg;
         o.train.resume = seg > 1;
+        /* the segments' iteration caps are not the budget: the embedding phase follows the whole
+           run's, switched on from the first segment that starts in its last `phase` share */
+        o.embed_phase = seg > 1 && phase > 0 && done >= 1.0 - phase ? 0.9999f : -1.0f;
+        if (o.embed_phase > 0 && phase_from < 0) phase_from = st.iterations;
         if (tn_gnn_train(&crop, &o, &model, &st)) {
             fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
             return 1;
         }
+        done = iters > 0 ? (double)st.iterations / (double)iters : st.seconds / (minutes * 60.0);
         if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out) && !tn_compare(&crop, &out, 0, &mt)) {
             if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
             if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
@@ -281,7 +316,8 @@ int main(int argc, char **argv)
     printf("train_parts: %d\n", st.parts);
     printf("train_edges: %d (fixed)\n", st.edges);
     printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
-    printf("train_loss_ssim: %.4f (1 - SSIM)\n", st.loss_ssim);
+    printf("train_loss_ssim: %.4f (1 - SSIM; in the embedding phase at the end)\n", st.loss_ssim);
+    printf("train_embed_phase_from: %ld iterations\n", phase_from);
 
     /* reconstruction from the crop's own network */
     t0 = tn_time_seconds();
@@ -391,11 +427,21 @@ int main(int argc, char **argv)
             if (!tn_compare(&g, &back, 0, &mt)) printf("user_rotation_90_ssim: %.4f (output of the rotated sketch vs the rotated output)\n", mt.ssim);
             tn_image_free(&back);
         }
-        tn_image_free(&g);
         tn_image_free(&gr);
         go.random_nodes = 48;
-        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) user_scores("gnn_random48", &a, &crop, &g);
+        if (!tn_gnn_generate(&model, &a, U, U, &go, &gr)) user_scores("gnn_random48", &a, &crop, &gr);
+        if (pictures && g.data && gr.data && mem.data) {
+            const tn_image *panel[4];
+            char path[300];
+            panel[0] = &crop;
+            panel[1] = &mem;
+            panel[2] = &g;
+            panel[3] = &gr;
+            snprintf(path, sizeof path, "gnn_fig10_%s.png", region);
+            save_panels(path, panel, 4, U, model.lo, model.hi, dxy);
+        }
         tn_image_free(&g);
+        tn_image_free(&gr);
         go.random_nodes = 0;
         go.finetune = 30;
         go.order_weight = 1;

@@ -337,8 +337,12 @@ expect_error "gnn-train missing DEM" "no_such_dem.png" $T gnn-train no_such_dem.
 expect_error "gnn-train flat DEM" "flat" $T gnn-train "$W/flat.pgm" -o "$W/g.tnw" --iters 1
 GT="--iters 2 --size 48"
 if $T --threads 2 gnn-train "$W/noise.png" -o "$W/g.tnw" $GT > "$W/gt.txt" 2>&1 && grep -q "^window: 48 x 48 at" "$W/gt.txt" &&
-    grep -q "highest relief" "$W/gt.txt" && grep -q "^iterations: 2" "$W/gt.txt" && $T info "$W/g.tnw" | grep -q "gnn"; then ok;
+    grep -q "highest relief" "$W/gt.txt" && grep -q "^iterations: 2" "$W/gt.txt" && grep -q "^embed_phase_from: -1" "$W/gt.txt" &&
+    $T info "$W/g.tnw" | grep -q "gnn"; then ok;
 else bad "gnn-train: $(head -c 400 "$W/gt.txt")"; fi
+expect_usage "gnn-train embed phase 1" "gnn-train: --embed-phase needs a number from -1 to 0.99, not 1" $T gnn-train "$W/noise.png" -o "$W/g2.tnw" --embed-phase 1
+if $T gnn-train "$W/noise.png" -o "$W/g2.tnw" --iters 4 --size 48 --embed-phase 0.5 > "$W/gt2.txt" 2>&1 && grep -q "^embed_phase_from: 2" "$W/gt2.txt"; then ok;
+else bad "gnn-train --embed-phase: $(head -c 400 "$W/gt2.txt")"; fi
 expect_usage "gnn-generate no -o" "gnn-generate: missing -o OUT" $T gnn-generate "$W/g.tnw" "$W/ex.tns"
 expect_usage "gnn-generate bad size" "gnn-generate: --size needs WxH" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --size 8x8
 expect_usage "gnn-generate bad choice" "must be one of auto|aligned|none" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --embeddings all

@@ -1658,6 +1658,9 @@ static const cli_opt gnn_train_opts[] = {
     {"smooth-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.smooth_weight, NULL, -1, 1e6, "W", "paper 6.1's smoothness loss (-1 = off)", "0.1"},
     {"further-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.further_weight, NULL, 0, 1e6, "W",
      "paper 6.1's distance loss: terrain next to a line keeps near its height", "0 = off"},
+    {"embed-phase", 0, ARG_FLOAT, 0, &gnn_train_arg.o.embed_phase, NULL, -1, 0.99, "S",
+     "share of the budget at the end that trains only the example's part embeddings (a sharper reconstruction, the network kept; -1 = none)",
+     "0.25"},
 };
 
 static int run_gnn_train(void)
@@ -1694,10 +1697,10 @@ static int run_gnn_train(void)
     if (st) return fail_status(st);
     st = tn_gnn_save(&model, a->out);
     if (!st)
-        printf("parts: %d\nsketch_levels: %d\niterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nsteps_per_second: %.2f\n"
-               "loss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
-               s.parts, s.levels, s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter > 0 ? 1.0 / s.seconds_per_iter : 0.0,
-               (double)s.loss_mse, (double)s.loss_ssim, s.checkpoints, a->ckpt, a->out);
+        printf("parts: %d\nsketch_levels: %d\niterations: %ld (resumed at %ld)\nembed_phase_from: %ld\ntrain_minutes: %.2f\n"
+               "steps_per_second: %.2f\nloss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
+               s.parts, s.levels, s.iterations, s.resumed_from, s.embed_phase_from, s.seconds / 60.0,
+               s.seconds_per_iter > 0 ? 1.0 / s.seconds_per_iter : 0.0, (double)s.loss_mse, (double)s.loss_ssim, s.checkpoints, a->ckpt, a->out);
     tn_gnn_free(&model);
     return st ? fail_status(st) : 0;
 }
