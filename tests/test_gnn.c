@@ -127,11 +127,44 @@ static int train_and_generate(const tn_image *dem, const tn_gnn_opts *o, const t
     return ok;
 }
 
+/* Share of the pixels 1-4 px from a sketch point (not on a line) that lie below the nearest
+   point's height if it is a ridge's, above if a valley's: what 6.1's sketch term asks for. */
+static double beside_share(const tn_contour_set *sk, const tn_image *img)
+{
+    tn_image r = {0, 0, 0, NULL};
+    long ok = 0, n = 0;
+    int x, y, c, j;
+    if (tn_sketch_rasterise(sk, img->width, img->height, &r)) return -1;
+    for (y = 0; y < img->height; y++)
+        for (x = 0; x < img->width; x++) {
+            const float *px = r.data + 3 * ((size_t)y * img->width + x);
+            float bd = 1e30f, bh = 0, bs = 0;
+            if (px[0] > 0 || px[1] > 0) continue;
+            for (c = 0; c < sk->count; c++)
+                for (j = 0; j < sk->items[c].npoints; j++) {
+                    const float *p = sk->items[c].points + 3 * j;
+                    float d = (p[0] - (float)x) * (p[0] - (float)x) + (p[1] - (float)y) * (p[1] - (float)y);
+                    if (d < bd) {
+                        bd = d;
+                        bh = p[2];
+                        bs = sk->items[c].type == TN_RIDGE ? 1.0f : -1.0f;
+                    }
+                }
+            if (bd < 0.49f || bd > 16.0f) continue;
+            n++;
+            ok += bs * (bh - TN_PIXEL(img, x, y, 0)) > 0;
+        }
+    tn_image_free(&r);
+    return n ? (double)ok / (double)n : -1;
+}
+
 TN_TEST(shape_losses)
 {
     /* 6.1's smooth, sketch and further terms: a heavy smoothness weight gives a smoother
-       reconstruction than none; the sketch term raises the ridge-above / valley-below share of
-       the example's own network; each term changes the model; negative weights are refused */
+       reconstruction than none; the sketch term puts more of the pixels beside the example's
+       lines on their side of the line's height (what it asks; the across-line ordering of the
+       line pixels themselves, which it does not constrain, can fall); each term changes the
+       model; negative weights are refused */
     tn_image dem = tn_test_dem(40, 5), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
     tn_gnn_opts o;
     tn_gnn m;
@@ -154,8 +187,9 @@ TN_TEST(shape_losses)
     o.smooth_weight = -1;
     o.sketch_weight = 20;
     TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
-    TN_CHECK(tn_gnn_ordering(&sk, &a, 2, &sh0, NULL) == TN_OK && tn_gnn_ordering(&sk, &b, 2, &sh1, NULL) == TN_OK);
-    TN_CHECK(sh1 >= sh0);
+    sh0 = beside_share(&sk, &a);
+    sh1 = beside_share(&sk, &b);
+    TN_CHECK(sh0 > 0 && sh1 > sh0);
     o.sketch_weight = 0;
     o.further_weight = 5;
     TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
