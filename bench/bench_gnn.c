@@ -10,11 +10,12 @@
    - spectrum distance (tn_realism_compare) of the neighbours to the truth, GNN vs membrane;
    - speed: training steps/s, the training time at which the reconstruction first reaches SSIM
      0.95 and 0.97 (the run is trained in segments of 150 iterations, checkpoint + resume, which
-     is bit-identical to one run), generation of 128 x 128 (with a 30-step fine-tune too) and of
+     is bit-identical to one run but for the embedding phase starting at a segment boundary), generation of 128 x 128 (with a 30-step fine-tune too) and of
      512 x 512 (the sketch of the map's top-left 512 crop; tiled internally), peak memory (RSS).
    The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
    8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
-   Usage: bench_gnn [region] [minutes] [threads] [key=value ...]   (defaults alps_montblanc 3 2)
+   Usage: bench_gnn [region] [minutes] [threads] [key=value ...]   (defaults alps_montblanc 3 2),
+   from the repository root (the drawn sketch is examples/data/sketch_a.tns).
    Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
    instead of a time budget (the same model on any machine and load), seed=S (training seed,
    default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), phase=P (embed_phase, the
@@ -60,7 +61,10 @@ static int height_mapping(const char *region, double *dxy, double *h0, double *h
         int col;
         if (strncmp(line, want, strlen(want)) != 0) continue;
         for (col = 0; col < 5 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
-        if (p && sscanf(p, "%lf,%lf,%lf,%lf", dxy, dxy + 1, h0, h1) == 4) {
+        dxy[0] = dxy[1] = 0; /* no spacing recorded (an 8-bit scan): the hillshade's relief-normalised default */
+        if (p && sscanf(p, "%lf,%lf", dxy, dxy + 1) != 2) dxy[0] = dxy[1] = 0;
+        for (col = 0; col < 2 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+        if (p && sscanf(p, "%lf,%lf", h0, h1) == 2) {
             fclose(f);
             return 1;
         }
