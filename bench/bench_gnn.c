@@ -10,7 +10,8 @@
    - spectrum distance (tn_realism_compare) of the neighbours to the truth, GNN vs membrane;
    - speed: training steps/s, the training time at which the reconstruction first reaches SSIM
      0.95 and 0.97 (the run is trained in segments of 150 iterations, checkpoint + resume, which
-     is bit-identical to one run but for the embedding phase starting at a segment boundary), generation of 128 x 128 (with a 30-step fine-tune too) and of
+     is bit-identical to one run but for the embedding phase starting at a segment boundary),
+     generation of 128 x 128 (with a 30-step fine-tune too) and of
      512 x 512 (the sketch of the map's top-left 512 crop; tiled internally), peak memory (RSS).
    The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
    8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
@@ -61,8 +62,7 @@ static int height_mapping(const char *region, double *dxy, double *h0, double *h
         int col;
         if (strncmp(line, want, strlen(want)) != 0) continue;
         for (col = 0; col < 5 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
-        dxy[0] = dxy[1] = 0; /* no spacing recorded (an 8-bit scan): the hillshade's relief-normalised default */
-        if (p && sscanf(p, "%lf,%lf", dxy, dxy + 1) != 2) dxy[0] = dxy[1] = 0;
+        if (!p || sscanf(p, "%lf,%lf", dxy, dxy + 1) != 2) dxy[0] = dxy[1] = 0; /* none recorded: the hillshade's own */
         for (col = 0; col < 2 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
         if (p && sscanf(p, "%lf,%lf", h0, h1) == 2) {
             fclose(f);
