@@ -176,8 +176,8 @@ static int a_in_circle(int side, int rot, tn_contour_set *s)
 static void save_panels(const char *path, const tn_image *const *dem, int n, int side, float lo, float hi, const double *dxy)
 {
     tn_render_opts ro;
-    tn_image strip = {0, 0, 0, NULL}, pv = {0, 0, 0, NULL};
-    int i, x, y, c;
+    tn_image strip = {0, 0, 0, NULL}, pv = {0, 0, 0, NULL}, sc = {0, 0, 0, NULL};
+    int i, y;
     memset(&ro, 0, sizeof ro);
     ro.lo = lo;
     ro.hi = hi;
@@ -185,11 +185,11 @@ static void save_panels(const char *path, const tn_image *const *dem, int n, int
     ro.shade.dy = (float)dxy[1];
     if (tn_image_create(&strip, n * side + (n - 1) * 4, side, 3)) return;
     for (i = 0; i < n; i++) {
-        if (tn_render_preview(dem[i], &ro, &pv)) continue;
-        for (y = 0; y < side; y++)
-            for (x = 0; x < side; x++)
-                for (c = 0; c < 3; c++) TN_PIXEL(&strip, i * (side + 4) + x, y, c) = TN_PIXEL(&pv, x * pv.width / side, y * pv.height / side, c);
+        if (!tn_render_preview(dem[i], &ro, &pv) && !tn_image_resize(&sc, &pv, side, side, TN_RESIZE_NEAREST))
+            for (y = 0; y < side; y++)
+                memcpy(&TN_PIXEL(&strip, i * (side + 4), y, 0), &TN_PIXEL(&sc, 0, y, 0), (size_t)side * 3 * sizeof(float));
         tn_image_free(&pv);
+        tn_image_free(&sc);
     }
     if (!tn_image_save(path, &strip, NULL)) printf("picture: %s\n", path);
     tn_image_free(&strip);
