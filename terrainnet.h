@@ -1500,9 +1500,10 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    The example's own network (@@extract) is cut into contour parts of 5-10 px (@@sketch); a
    bipartite graph joins every pixel to its k nearest parts (4.2) plus random pixel-part edges
    redrawn every step, with 5 % of the parts masked per step (A.2). An edge carries the
-   projection index of the pixel along the part, the distance to that projection (and a
-   closeness exp(-d/2)), the part's height there minus the pixel's baseline and, in training,
-   optional Gaussian noise (A.4); a part node carries its ridge/valley sign and a learned
+   projection index of the pixel along the part (for a part without an embedding, how far the
+   pixel lies beyond the part's end instead: there the index only says where a random cut fell),
+   the distance to that projection (and a closeness exp(-d/2)), the part's height there minus
+   the pixel's baseline and, in training, optional Gaussian noise (A.4); a part node carries its ridge/valley sign and a learned
    embedding (one per example part). Pixels start from an MLP of (+1 ridge, -1 valley, 0 other;
    baseline height), parts from N(0, s^2) or zero (A.3). T rounds of gather (pixels -> parts)
    and scatter (parts -> pixels) update both sides residually; each is a graph attention over
@@ -1559,6 +1560,11 @@ typedef struct tn_gnn_opts {
                               reconstruction sharpens while the network, and with it every sketch
                               of other terrain, stays as trained. A schedule like the budget, so a
                               resumed run takes this run's value; 0 = 0.25, < 0 = none */
+    int part_index;        /* edge feature of a part without an embedding (a dropped one, a sparse
+                              level's, any part of another sketch): 0 = how far the pixel lies
+                              beyond the part's end along it (0 beside it); -1 = the projection
+                              index along the part, as for parts with an embedding (A.4), which
+                              there only says where a random cut fell (docs/gnn.md) */
     int membrane;          /* 0 = predict a residual over the membrane of the sketch heights;
                               -1 = predict the height itself (the paper's form) */
     float lr;              /* Adam rate; 0 = 2e-3 */
@@ -19715,7 +19721,7 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
 
 #define TN__GNN_FORMAT 1
 #define TN__GNN_CONFIG 24
-#define TN__GNN_F 5          /* edge features: projection index, distance, closeness, height difference, noise */
+#define TN__GNN_F 5          /* edge features: projection index (or overhang), distance, closeness, height difference, noise */
 #define TN__GNN_MAXH 256
 #define TN__GNN_DIST 16.0f   /* distance scale of the edge features (px) */
 #define TN__GNN_MAX_LEVELS 4 /* sketch densities in training */
@@ -20149,6 +20155,25 @@ static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, f
     return best;
 }
 
+/* Edge feature 0 of a part without an embedding (A.overhang): how far (x, y) lies beyond the
+   part's end along its direction, 0 beside it. The projection index (f0, as computed) only says
+   where a random cut fell on such a part; this does not depend on the cut. */
+static float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
+{
+    int a = P->start[part], n = P->start[part + 1] - a, j, o;
+    float tx, ty, tl, v;
+    if (n < 2) return 0.0f;
+    j = (int)floorf((f0 + 1.0f) * 0.5f * (float)(n - 1) + 0.5f);
+    if (j > 0 && j < n - 1) return 0.0f;
+    o = j == 0 ? 1 : n - 2;
+    tx = P->pts[3 * (a + j)] - P->pts[3 * (a + o)];
+    ty = P->pts[3 * (a + j) + 1] - P->pts[3 * (a + o) + 1];
+    tl = sqrtf(tx * tx + ty * ty);
+    if (!(tl > 0)) return 0.0f;
+    v = ((x - P->pts[3 * (a + j)]) * tx + (y - P->pts[3 * (a + j) + 1]) * ty) / tl;
+    return v > 0 ? v / TN__GNN_DIST : 0.0f;
+}
+
 /* ---- k nearest parts of every pixel ---- */
 
 #define TN__GNN_CELL 8
@@ -20416,6 +20441,18 @@ static void tn__gnn_graph_finish(tn__gnn_graph *g)
                      g->pix_edges, I, I + c, I + 2 * c, g->feats, I + 6 * c);
     tn__gnn_dir_make(&g->p2g, g->nparts, g->npix, g->E, g->e_part, g->e_pix, g->feat, g->pix_start, g->pix_edges, g->part_start,
                      g->part_edges, I + 3 * c, I + 4 * c, I + 5 * c, g->feats + c * TN__GNN_F, I + 6 * c);
+}
+
+/* Feature 0 of the edges to parts without an embedding (known[part] == 0; known NULL: none has
+   one) becomes their overhang; P in the coordinates of the window at (ox, oy), W pixels wide. */
+static void tn__gnn_overhangs(tn__gnn_graph *g, const tn__gnn_parts *P, const uint8_t *known, int W, int ox, int oy)
+{
+    int e;
+    for (e = 0; e < g->E; e++) {
+        float *f = g->feat + (size_t)e * TN__GNN_F;
+        int r = g->e_part[e], p = g->e_pix[e];
+        if (!known || !known[r]) f[0] = tn__gnn_overhang(P, r, f[0], (float)(p % W + ox), (float)(p / W + oy));
+    }
 }
 
 /* ---- fused graph ops ---- */
@@ -20746,6 +20783,7 @@ static tn_tensor *tn__gnn_mean(tn_ctx *ctx, tn_tensor *x, const tn__gnn_dir *g)
 
 typedef struct tn__gnn_arch {
     int hidden, rounds, k, embed, membrane, parts, width, height, npts;
+    int overhang;              /* parts without an embedding: feature 0 = tn__gnn_overhang */
     float mean, std, lo, hi, part_noise, radius;
 } tn__gnn_arch;
 
@@ -20903,6 +20941,7 @@ static void tn__gnn_write_config(const tn__gnn_arch *A, float *c)
     c[14] = (float)A->npts;
     c[15] = TN__GNN_F;
     c[16] = A->radius;
+    c[17] = (float)A->overhang;
 }
 
 static int tn__gnn_whole(float v, float lo, float hi) { return v >= lo && v <= hi && v == floorf(v); }
@@ -20917,7 +20956,8 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
         !tn__gnn_whole(c[4], 1, 256) || !tn__gnn_whole(c[5], 0, 1) || !tn__gnn_whole(c[6], 1, 1 << 24) ||
         !tn__gnn_whole(c[7], 16, TN_SKETCH_MAX_SIDE) || !tn__gnn_whole(c[8], 16, TN_SKETCH_MAX_SIDE) || !isfinite(c[9]) ||
         !(c[10] > 0) || !isfinite(c[10]) || !isfinite(c[11]) || !isfinite(c[12]) || !(c[13] >= 0 && c[13] <= 100) ||
-        !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096))
+        !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096) ||
+        !tn__gnn_whole(c[17], 0, 1))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged gnn configuration", name);
     A->hidden = (int)c[1];
     A->rounds = (int)c[2];
@@ -20934,6 +20974,7 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
     A->part_noise = c[13];
     A->npts = (int)c[14];
     A->radius = c[16] > 0 ? c[16] : 24.0f; /* files written before the radius existed */
+    A->overhang = (int)c[17];              /* 0 in files written before it existed */
     return TN_OK;
 }
 
@@ -21072,7 +21113,7 @@ typedef struct tn__gnn_train {
     tn__gnn_level thinned;     /* this step's thinned sparse level */
     int nlevels, maxparts, npix;
     float *target;
-    uint8_t *masked;
+    uint8_t *masked, *known;   /* per part: masked this step; keeps its embedding this step */
     tn__gnn_graph g;
     float range;               /* normalised height range (SSIM data range) */
     long phase_from;           /* first iteration of the embedding phase, -1 before it */
@@ -21098,6 +21139,7 @@ static void tn__gnn_train_free(tn__gnn_train *s)
     tn__gnn_level_free(&s->thinned);
     TN_FREE(s->target);
     TN_FREE(s->masked);
+    TN_FREE(s->known);
     tn__gnn_graph_free(&s->g);
 }
 
@@ -21179,7 +21221,8 @@ static tn_status tn__gnn_level_thin(tn__gnn_train *s, const tn__gnn_level *L, tn
 }
 
 /* This step's graph on level L: the fixed edges of unmasked parts, then random pixel-part
-   edges, then the noise feature. */
+   edges, then the noise feature (finished by the caller, once it knows which parts keep their
+   embedding). */
 static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L)
 {
     tn__gnn_graph *g = &s->g;
@@ -21213,7 +21256,6 @@ static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L)
     }
     if (noise > 0)
         for (i = 0; i < g->E; i++) g->feat[(size_t)i * TN__GNN_F + 4] = noise * tn_rng_normal(&s->rng);
-    tn__gnn_graph_finish(g);
 }
 
 static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int nparts, tn_rng *rng)
@@ -21336,10 +21378,15 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
         tn_tensor *keep = tn_tensor_2d(ctx, L->P.n, 1);
         float drop = s->o.embed_drop > 0 && !phase ? s->o.embed_drop : 0.0f;
         if (!keep) return tn_ctx_status(ctx);
-        for (i = 0; i < L->P.n; i++) keep->data[i] = drop > 0 && tn_rng_uniform(&s->rng) < drop ? 0.0f : 1.0f;
+        for (i = 0; i < L->P.n; i++) {
+            keep->data[i] = drop > 0 && tn_rng_uniform(&s->rng) < drop ? 0.0f : 1.0f;
+            s->known[i] = keep->data[i] != 0;
+        }
         emb = tn_mul(ctx, tn_params_find(s->w, "gnn.emb"), keep);
     } else
         emb = tn_tensor_new(ctx, 2, shape);
+    if (s->A.overhang) tn__gnn_overhangs(&s->g, &L->P, lev == 0 ? s->known : NULL, s->A.width, 0, 0);
+    tn__gnn_graph_finish(&s->g);
     if ((st = tn__gnn_inputs(ctx, &s->g, L->type, s->A.membrane ? L->base : NULL, L->P.sign, emb, &in))) return st;
     in.E0 = tn__gnn_part_states(ctx, &s->A, L->P.n, &s->rng);
     {
@@ -21551,6 +21598,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         s.A.lo = lo;
         s.A.hi = hi;
         s.A.part_noise = s.o.part_noise > 0 ? s.o.part_noise : 0.0f;
+        s.A.overhang = s.o.part_index >= 0;
         s.A.parts = parts.count;
         s.A.npts = 0;
         for (i = 0; i < parts.count; i++) s.A.npts += parts.items[i].npoints;
@@ -21599,7 +21647,10 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         tn_extraction_free(&sx);
         if (st) goto done;
     }
-    if (!(s.masked = (uint8_t *)tn__alloc((size_t)s.maxparts))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!(s.masked = (uint8_t *)tn__alloc((size_t)s.maxparts)) || !(s.known = (uint8_t *)tn__alloc((size_t)s.maxparts))) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
     if ((st = tn__gnn_graph_alloc(&s.g, s.npix, s.maxparts, s.npix * s.A.k + (s.o.random_edges > 0 ? s.o.random_edges : 0)))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
     while (tn_train_next(s.run)) {
@@ -21809,6 +21860,7 @@ typedef struct tn__gnn_gen {
     float gain;                /* share of the residual over the membrane that is added */
     tn__gnn_parts P;           /* every part of the sketch, normalised heights */
     float *emb;                /* P.n x embed */
+    uint8_t *known;            /* P.n: the part has an example part's embedding */
     float *E0;                 /* P.n x hidden initial states; NULL = zero */
     float *type, *hgt;         /* W x H: +1 / -1 / 0; the sketch height (example units) or 0 */
     uint8_t *fixed;            /* W x H: sketch pixel */
@@ -21827,6 +21879,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
 {
     tn__gnn_parts_free(&G->P);
     TN_FREE(G->emb);
+    TN_FREE(G->known);
     TN_FREE(G->E0);
     TN_FREE(G->type);
     TN_FREE(G->hgt);
@@ -21905,6 +21958,13 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
                 memcpy(R->g.feat + (size_t)R->g.E * TN__GNN_F, nfeat + (i * G->A.k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
                 R->g.E++;
             }
+        if (G->A.overhang) {
+            uint8_t *kn = (uint8_t *)tn__alloc((size_t)n + 1);
+            for (j = 0; kn && j < n; j++) kn[j] = G->known[R->of[j]];
+            if (kn) tn__gnn_overhangs(&R->g, &R->P, kn, rw, rx, ry);
+            else st = TN_ERR_OUT_OF_MEMORY;
+            TN_FREE(kn);
+        }
         tn__gnn_graph_finish(&R->g);
     }
     TN_FREE(nbr);
@@ -22137,14 +22197,15 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
     }
     if ((st = tn__gnn_parts_make(&parts, G->A.mean, G->A.std, &G->P))) goto done;
     G->emb = (float *)tn__calloc((size_t)G->P.n * G->A.embed * sizeof(float));
+    G->known = (uint8_t *)tn__alloc((size_t)G->P.n + 1);
     G->type = (float *)tn__alloc(n * sizeof(float));
     G->hgt = (float *)tn__alloc(n * sizeof(float));
     G->fixed = (uint8_t *)tn__alloc(n);
-    if (!G->emb || !G->type || !G->hgt || !G->fixed) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!G->emb || !G->known || !G->type || !G->hgt || !G->fixed) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     {
         const tn_tensor *me = tn_params_find(model->weights, "gnn.emb");
         for (i = 0; i < G->P.n; i++)
-            if (match[i] >= 0) memcpy(G->emb + (size_t)i * G->A.embed, me->data + (size_t)match[i] * G->A.embed, (size_t)G->A.embed * sizeof(float));
+            if ((G->known[i] = (uint8_t)(match[i] >= 0))) memcpy(G->emb + (size_t)i * G->A.embed, me->data + (size_t)match[i] * G->A.embed, (size_t)G->A.embed * sizeof(float));
     }
     if (G->A.part_noise > 0) { /* each part's state from its own stream: the same in every window */
         if (!(G->E0 = (float *)tn__alloc((size_t)G->P.n * G->A.hidden * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }

@@ -20,7 +20,8 @@
    Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
    instead of a time budget (the same model on any machine and load), seed=S (training seed,
    default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), phase=P (embed_phase, the
-   share of the budget that trains only the example's embeddings; -1 = none), gain=G (the generation's
+   share of the budget that trains only the example's embeddings; -1 = none), index=-1 (part_index:
+   the projection index on parts without an embedding too), gain=G (the generation's
    residual gain for the GNN figures; default 0 = tested on each sketch), pictures=1 (writes
    gnn_fig10_<region>.png: the example crop, then the Figure 10 sketch as membrane, GNN and GNN
    with 48 random nodes, hillshaded).
@@ -195,6 +196,48 @@ static void save_panels(const char *path, const tn_image *const *dem, int n, int
     tn_image_free(&strip);
 }
 
+/* Relief along the sketch's lines: at every densified point, the terrain 3 px to each side
+   (normal from the points 2 before and after, nearest pixel) minus its mean over the 15 points
+   around it on the same line; RMS over the points, in the terrain's units. The membrane has
+   next to none; hatching across a line (a period of the 5-10 px parts) raises it. */
+static double along_relief(const tn_contour_set *sk, const tn_image *img)
+{
+    tn_contour_set dn;
+    double sum = 0;
+    long cnt = 0;
+    int c, i, side, q;
+    memset(&dn, 0, sizeof dn);
+    if (tn_sketch_densify(sk, &dn)) return -1;
+    for (c = 0; c < dn.count; c++) {
+        const tn_contour *L = &dn.items[c];
+        int n = L->npoints;
+        float *v;
+        if (n < 20 || !(v = (float *)malloc((size_t)n * sizeof(float)))) continue;
+        for (side = -1; side <= 1; side += 2) {
+            for (i = 0; i < n; i++) {
+                int a = i < 2 ? 0 : i - 2, b = i + 2 >= n ? n - 1 : i + 2, x, y;
+                float tx = L->points[3 * b] - L->points[3 * a], ty = L->points[3 * b + 1] - L->points[3 * a + 1], tl = sqrtf(tx * tx + ty * ty);
+                if (!(tl > 0)) tl = 1;
+                x = (int)floorf(L->points[3 * i] - 3.0f * side * ty / tl + 0.5f);
+                y = (int)floorf(L->points[3 * i + 1] + 3.0f * side * tx / tl + 0.5f);
+                x = x < 0 ? 0 : x >= img->width ? img->width - 1 : x;
+                y = y < 0 ? 0 : y >= img->height ? img->height - 1 : y;
+                v[i] = TN_PIXEL(img, x, y, 0);
+            }
+            for (i = 7; i < n - 7; i++) {
+                double m = 0;
+                for (q = i - 7; q <= i + 7; q++) m += v[q];
+                m = v[i] - m / 15.0;
+                sum += m * m;
+                cnt++;
+            }
+        }
+        free(v);
+    }
+    tn_contour_set_free(&dn);
+    return cnt ? sqrt(sum / (double)cnt) : -1;
+}
+
 /* Ordering share and realism distance to the example of one user-sketch output. */
 static void user_scores(const char *name, const tn_contour_set *sk, const tn_image *ex, const tn_image *img)
 {
@@ -204,6 +247,7 @@ static void user_scores(const char *name, const tn_contour_set *sk, const tn_ima
     tn_gnn_ordering(sk, img, 0, &share, &n);
     printf("user_%s_ordering: %.1f %% (%d points)\n", name, 100.0 * share, n);
     if (!tn_realism_compare(ex, img, NULL, &r)) printf("user_%s_realism_distance: %.4f\n", name, r.distance);
+    printf("user_%s_along_relief: %.2f (RMS beside the lines, example units)\n", name, along_relief(sk, img));
 }
 
 static int progress(void *user, const char *stage, double f)
@@ -251,8 +295,9 @@ int main(int argc, char **argv)
         else if (kl == 4 && !strncmp(argv[a], "gain", kl)) gain = (float)v;
         else if (kl == 5 && !strncmp(argv[a], "phase", kl)) phase = (float)v;
         else if (kl == 8 && !strncmp(argv[a], "pictures", kl)) pictures = v != 0;
+        else if (kl == 5 && !strncmp(argv[a], "index", kl)) o.part_index = (int)v;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= gain= pictures=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= pictures=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -341,6 +386,7 @@ int main(int argc, char **argv)
     add(&rec, &crop, &out);
     printf("recon_ssim: %.4f\n", rec.ssim);
     printf("recon_psnr: %.2f dB\n", rec.psnr);
+    printf("recon_along_relief: %.2f (truth %.2f; RMS beside the lines)\n", along_relief(&sk, &out), along_relief(&sk, &crop));
     tn_image_free(&out);
     rec.ssim = rec.psnr = rec.spec = 0;
     rec.n = 0;

@@ -234,6 +234,72 @@ TN_TEST(save_load_round_trip)
     tn_image_free(&dem);
 }
 
+TN_TEST(part_overhang)
+{
+    /* a part without an embedding tells a pixel how far it lies beyond the part's end, not
+       where along the part (a random cut) it projects */
+    const char *path = tn_test_tmp_path("gnn", "overhang.tnw");
+    tn__gnn_parts P;
+    tn_contour_set line;
+    tn_contour c;
+    float pts[30], d2;
+    int i, j;
+    tn_image dem = tn_test_dem(40, 4), other = tn_test_dem(40, 5), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_tensor *cfg;
+    tn_contour_set own = own_sketch(&dem), foreign = own_sketch(&other);
+    for (i = 0; i < 10; i++) { /* (10, 10) .. (19, 10) */
+        pts[3 * i] = 10.0f + (float)i;
+        pts[3 * i + 1] = 10.0f;
+        pts[3 * i + 2] = 5.0f;
+    }
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.npoints = 10;
+    c.points = pts;
+    line.count = 1;
+    line.items = &c;
+    TN_CHECK(tn__gnn_parts_make(&line, 0.0f, 1.0f, &P) == TN_OK);
+    j = tn__gnn_project(&P, 0, 25.0f, 13.0f, &d2);
+    TN_CHECK(j == 9 && fabsf(tn__gnn_overhang(&P, 0, 1.0f, 25.0f, 13.0f) - 6.0f / TN__GNN_DIST) < 1e-6f);
+    TN_CHECK(fabsf(tn__gnn_overhang(&P, 0, -1.0f, 4.0f, 7.0f) - 6.0f / TN__GNN_DIST) < 1e-6f);
+    TN_CHECK(tn__gnn_overhang(&P, 0, 2.0f * 5.0f / 9.0f - 1.0f, 15.0f, 4.0f) == 0.0f); /* beside the part */
+    TN_CHECK(tn__gnn_overhang(&P, 0, 1.0f, 19.0f, 2.0f) == 0.0f);                    /* beside its end */
+    tn__gnn_parts_free(&P);
+    /* the model records the choice; it changes what a sketch of other terrain gives and leaves
+       the example's own network (every part with an embedding) as it was */
+    tiny_opts(&o, 20);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    cfg = tn_params_find(m.weights, "gnn.config");
+    TN_CHECK(cfg && cfg->data[17] == 1.0f);
+    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_OK);
+    cfg->data[17] = 0.0f; /* a model written before the overhang: the index on every part */
+    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(same_image(&a, &b));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    TN_CHECK(tn_gnn_generate(&m, &foreign, 40, 40, NULL, &a) == TN_OK);
+    cfg->data[17] = 1.0f;
+    TN_CHECK(tn_gnn_generate(&m, &foreign, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(!same_image(&a, &b));
+    tn_image_free(&a);
+    cfg->data[17] = 2.0f; /* damaged */
+    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_ERR_CORRUPT && !a.data);
+    TN_CHECK(tn_gnn_save(&m, path) == TN_ERR_CORRUPT);
+    tn_gnn_free(&m);
+    o.part_index = -1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_params_find(m.weights, "gnn.config")->data[17] == 0.0f);
+    tn_gnn_free(&m);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_contour_set_free(&own);
+    tn_contour_set_free(&foreign);
+    tn_image_free(&dem);
+    tn_image_free(&other);
+}
+
 TN_TEST(embedding_phase)
 {
     /* the last quarter of the budget moves only the example's embeddings: every other tensor
@@ -579,6 +645,7 @@ int main(void)
     TN_RUN(training_lowers_the_loss_and_generates_metres);
     TN_RUN(shape_losses);
     TN_RUN(save_load_round_trip);
+    TN_RUN(part_overhang);
     TN_RUN(embedding_phase);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(same_results_for_1_and_2_threads);
