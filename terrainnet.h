@@ -8543,40 +8543,68 @@ static void tn__bin_rows(void *ctx, size_t rb, size_t re)
     }
 }
 
+typedef struct tn__bin_grad_job {
+    const float *go, *a, *b;
+    float *g;                  /* the gradient of operand `which` */
+    int os[4], op, which;
+    size_t sa[4], sb[4], sd[4]; /* sd: the strides of operand `which` */
+} tn__bin_grad_job;
+
+/* d out / d operand times the output gradient, added over output rows [rb, re). */
+static void tn__bin_grad_rows(void *vj, size_t rb, size_t re)
+{
+    const tn__bin_grad_job *j = (const tn__bin_grad_job *)vj;
+    size_t r, x, W = (size_t)j->os[3], ia = j->sa[3], ib = j->sb[3], id = j->sd[3];
+    for (r = rb; r < re; r++) {
+        size_t n = r / ((size_t)j->os[1] * j->os[2]), c = (r / j->os[2]) % j->os[1], h = r % j->os[2];
+        const float *pg = j->go + r * W;
+        const float *pa = j->a + n * j->sa[0] + c * j->sa[1] + h * j->sa[2];
+        const float *pb = j->b + n * j->sb[0] + c * j->sb[1] + h * j->sb[2];
+        float *pd = j->g + n * j->sd[0] + c * j->sd[1] + h * j->sd[2];
+#define TN__BIN_GRAD(expr) \
+    do { \
+        if (id == 1) for (x = 0; x < W; x++) pd[x] += (expr); \
+        else for (x = 0; x < W; x++) pd[x * id] += (expr); \
+    } while (0)
+        switch (j->op * 2 + j->which) {
+        case TN__BIN_ADD * 2: case TN__BIN_ADD * 2 + 1: case TN__BIN_SUB * 2: TN__BIN_GRAD(pg[x]); break;
+        case TN__BIN_SUB * 2 + 1: TN__BIN_GRAD(-pg[x]); break;
+        case TN__BIN_MUL * 2: TN__BIN_GRAD(pg[x] * pb[x * ib]); break;
+        case TN__BIN_MUL * 2 + 1: TN__BIN_GRAD(pg[x] * pa[x * ia]); break;
+        case TN__BIN_DIV * 2: TN__BIN_GRAD(pg[x] / pb[x * ib]); break;
+        default: TN__BIN_GRAD(-pg[x] * pa[x * ia] / (pb[x * ib] * pb[x * ib])); break;
+        }
+#undef TN__BIN_GRAD
+    }
+}
+
 /* Gradient of a binary op for one operand (which = 0: a, 1: b), summed over stretched dims.
-   Serial: the sums into stretched dims must keep a fixed order for determinism. */
+   An operand of the output's shape takes disjoint rows, in parallel; one stretched over rows
+   sums them serially, in a fixed order (determinism). */
 static void tn__bin_backward_one(const tn_tensor *out, int which)
 {
     tn_tensor *a = out->src[0], *b = out->src[1];
-    float *g = which ? b->grad : a->grad;
-    const float *go = out->grad;
-    int os[4], sa4[4], sb4[4], op = out->ip[0];
-    size_t sa[4], sb[4], n, c, h;
-    tn__shape4(out, os);
+    tn__bin_grad_job j;
+    int sa4[4], sb4[4], i, full = 1;
+    size_t rows;
+    tn__shape4(out, j.os);
     tn__shape4(a, sa4);
     tn__shape4(b, sb4);
-    tn__bstrides(sa4, os, sa);
-    tn__bstrides(sb4, os, sb);
-    for (n = 0; n < (size_t)os[0]; n++)
-        for (c = 0; c < (size_t)os[1]; c++)
-            for (h = 0; h < (size_t)os[2]; h++) {
-                size_t r = (n * os[1] + c) * os[2] + h, x;
-                const float *pg = go + r * os[3];
-                const float *pa = a->data + n * sa[0] + c * sa[1] + h * sa[2];
-                const float *pb = b->data + n * sb[0] + c * sb[1] + h * sb[2];
-                float *pd = g + (which ? n * sb[0] + c * sb[1] + h * sb[2] : n * sa[0] + c * sa[1] + h * sa[2]);
-                size_t sd = which ? sb[3] : sa[3];
-                for (x = 0; x < (size_t)os[3]; x++) {
-                    float gv = pg[x], av = pa[x * sa[3]], bv = pb[x * sb[3]], d;
-                    switch (op) {
-                    case TN__BIN_ADD: d = gv; break;
-                    case TN__BIN_SUB: d = which ? -gv : gv; break;
-                    case TN__BIN_MUL: d = which ? gv * av : gv * bv; break;
-                    default: d = which ? -gv * av / (bv * bv) : gv / bv; break;
-                    }
-                    pd[x * sd] += d;
-                }
-            }
+    tn__bstrides(sa4, j.os, j.sa);
+    tn__bstrides(sb4, j.os, j.sb);
+    for (i = 0; i < 4; i++) {
+        j.sd[i] = which ? j.sb[i] : j.sa[i];
+        full &= (which ? sb4[i] : sa4[i]) == j.os[i];
+    }
+    j.go = out->grad;
+    j.a = a->data;
+    j.b = b->data;
+    j.g = which ? b->grad : a->grad;
+    j.op = out->ip[0];
+    j.which = which;
+    rows = (size_t)j.os[0] * j.os[1] * j.os[2];
+    if (full) tn_parallel_for(rows, 1 + TN__PAR_GRAIN / (size_t)j.os[3], tn__bin_grad_rows, &j);
+    else tn__bin_grad_rows(&j, 0, rows);
 }
 
 static void tn__bin_backward(tn_ctx *ctx, tn_tensor *out)
