@@ -1501,16 +1501,17 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    bipartite graph joins every pixel to its k nearest parts (4.2) plus random pixel-part edges
    redrawn every step, with 5 % of the parts masked per step (A.2). An edge carries the
    projection index of the pixel along the part (for a part without an embedding, how far the
-   pixel lies beyond the part's end instead: there the index only says where a random cut fell),
-   the distance to that projection (and a closeness exp(-d/2)), the part's height there minus
-   the pixel's baseline and, in training, optional Gaussian noise (A.4); a part node carries its ridge/valley sign and a learned
-   embedding (one per example part). Pixels start from an MLP of (+1 ridge, -1 valley, 0 other;
-   baseline height), parts from N(0, s^2) or zero (A.3). T rounds of gather (pixels -> parts)
-   and scatter (parts -> pixels) update both sides residually; each is a graph attention over
-   two-layer MLP encodings of [receiver, sender, edge, mean of the sender's neighbours] (A.5); a
-   readout MLP gives the height. Losses: MSE + SSIM + gradient difference + smoothness on the
-   normalised heights (6.1's l_gt, l_ssim, l_gradient, l_smooth; 6.1's sketch and distance terms
-   are options; weights in tn_gnn_defaults).
+   pixel lies beyond the part's end instead: there the index only says where a random cut
+   fell), the distance to that projection (and a closeness exp(-d/2)), the part's height there
+   minus the pixel's baseline and, in training, optional Gaussian noise (A.4); a part node
+   carries its ridge/valley sign and a learned embedding (one per example part). Pixels start
+   from an MLP of (+1 ridge, -1 valley, 0 other; baseline height), parts from N(0, s^2) or zero
+   (A.3). T rounds of gather (pixels -> parts) and scatter (parts -> pixels) update both sides
+   residually; each is a graph attention over two-layer MLP encodings of [receiver, sender,
+   edge, mean of the sender's neighbours] (A.5); a readout MLP gives the height. Losses: MSE +
+   SSIM + gradient difference + smoothness on the normalised heights (6.1's l_gt, l_ssim,
+   l_gradient, l_smooth; 6.1's sketch and distance terms are options; weights in
+   tn_gnn_defaults).
    Baseline: the network predicts a RESIDUAL over the membrane (Laplace) interpolation of the
    sketch pixels' heights, the strong baseline the neighbour test rewards (issue 14: SSIM 0.937
    on alps_montblanc 128), so the model starts at it and learns what the example adds;
