@@ -20472,15 +20472,16 @@ static void tn__gnn_graph_finish(tn__gnn_graph *g)
                      g->part_edges, I + 3 * c, I + 4 * c, I + 5 * c, g->feats + c * TN__GNN_F, I + 6 * c);
 }
 
-/* Feature 0 of the edges to parts without an embedding (known[part] == 0; known NULL: none has
-   one) becomes their overhang; P in the coordinates of the window at (ox, oy), W pixels wide. */
-static void tn__gnn_overhangs(tn__gnn_graph *g, const tn__gnn_parts *P, const uint8_t *known, int W, int ox, int oy)
+/* Feature 0 of the edges to parts without an embedding (known[of[part]] == 0, of NULL: the
+   identity; known NULL: none has one) becomes their overhang; P in the coordinates of the window
+   at (ox, oy), W pixels wide. */
+static void tn__gnn_overhangs(tn__gnn_graph *g, const tn__gnn_parts *P, const uint8_t *known, const int *of, int W, int ox, int oy)
 {
     int e;
     for (e = 0; e < g->E; e++) {
         float *f = g->feat + (size_t)e * TN__GNN_F;
         int r = g->e_part[e], p = g->e_pix[e];
-        if (!known || !known[r]) f[0] = tn__gnn_overhang(P, r, f[0], (float)(p % W + ox), (float)(p / W + oy));
+        if (!known || !known[of ? of[r] : r]) f[0] = tn__gnn_overhang(P, r, f[0], (float)(p % W + ox), (float)(p / W + oy));
     }
 }
 
@@ -21414,7 +21415,7 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
         emb = tn_mul(ctx, tn_params_find(s->w, "gnn.emb"), keep);
     } else
         emb = tn_tensor_new(ctx, 2, shape);
-    if (s->A.overhang) tn__gnn_overhangs(&s->g, &L->P, lev == 0 ? s->known : NULL, s->A.width, 0, 0);
+    if (s->A.overhang) tn__gnn_overhangs(&s->g, &L->P, lev == 0 ? s->known : NULL, NULL, s->A.width, 0, 0);
     tn__gnn_graph_finish(&s->g);
     if ((st = tn__gnn_inputs(ctx, &s->g, L->type, s->A.membrane ? L->base : NULL, L->P.sign, emb, &in))) return st;
     in.E0 = tn__gnn_part_states(ctx, &s->A, L->P.n, &s->rng);
@@ -21987,13 +21988,7 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
                 memcpy(R->g.feat + (size_t)R->g.E * TN__GNN_F, nfeat + (i * G->A.k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
                 R->g.E++;
             }
-        if (G->A.overhang) {
-            uint8_t *kn = (uint8_t *)tn__alloc((size_t)n + 1);
-            for (j = 0; kn && j < n; j++) kn[j] = G->known[R->of[j]];
-            if (kn) tn__gnn_overhangs(&R->g, &R->P, kn, rw, rx, ry);
-            else st = TN_ERR_OUT_OF_MEMORY;
-            TN_FREE(kn);
-        }
+        if (G->A.overhang) tn__gnn_overhangs(&R->g, &R->P, G->known, R->of, rw, rx, ry);
         tn__gnn_graph_finish(&R->g);
     }
     TN_FREE(nbr);
