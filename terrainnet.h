@@ -1522,7 +1522,10 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    embeddings per step and spends half the steps on the example's own sparser networks (higher
    extraction thresholds, no embeddings, a random share of their parts dropped and the membrane
    rebuilt each step): the network also learns a geometry-only mode that fills what a dense or
-   sparse sketch leaves out. Generation gives a sketch part the embedding
+   sparse sketch leaves out. That mode wanders from step to step as training goes on, so
+   holdout windows of the user's DEM score it every 150 steps and the best check's weights are
+   kept as the early network, which every sketch but the example's own network runs on.
+   Generation gives a sketch part the embedding
    of an identical example part (its own network: reconstruction) and none otherwise by default;
    the paper's alignment is TN_GNN_EMBED_ALIGNED. An optional fine-tune (5.4) then adjusts only
    the sketch parts' embeddings (loss on the sketch pixels + smoothness, optionally a
@@ -1580,6 +1583,20 @@ typedef struct tn_gnn_opts {
                               (Manhattan); 0 = 0.1, < 0 = off */
     float further_weight;  /* 6.1's distance term, as read here: a pixel 1-6 px from its nearest part
                               keeps near the part's height there, weighted 1 / (10 d^2); 0 = off */
+    const tn_image *holdout; /* holdout_count terrains of the example's style (same units, at
+                              least 16 x 16) that training never sees, e.g. windows of the same DEM
+                              away from the example; NULL = none. Every holdout_every iterations
+                              before the embedding phase the network, without embeddings, rebuilds each one
+                              from its extracted network (the extraction threshold and 4 x it);
+                              the weights with the best mean SSIM are restored when the phase
+                              starts (or the run ends, without a phase): early stopping, since
+                              the network's fill of other terrain's sketches swings from check to
+                              check and falls as it trains on (docs/gnn.md) */
+    int holdout_count;
+    int holdout_every;     /* iterations between holdout checks; 0 = 150 */
+    int phase_network;     /* 1: with holdouts, the embedding phase trains the network too (at
+                              the base rate), as the trained network then serves only the
+                              example's own network; 0 = off */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
@@ -1598,7 +1615,9 @@ typedef struct tn_gnn {
     float part_noise;        /* std of the parts' initial states */
     long iterations;         /* training iterations done */
     double train_seconds;
-    tn_params *weights;      /* "gnn.config", "gnn.part_pts", "gnn.part_info", "gnn.emb", "gnn.*" */
+    tn_params *weights;      /* "gnn.config", "gnn.part_pts", "gnn.part_info", "gnn.emb", "gnn.*";
+                                "early.gnn.*": the early network (holdouts in training), which
+                                every sketch but the example's own network runs on */
 } tn_gnn;
 
 typedef struct tn_gnn_stats {
@@ -1611,6 +1630,10 @@ typedef struct tn_gnn_stats {
     int levels;               /* sketch densities trained on (1 + sparse levels found) */
     int checkpoints;          /* checkpoints written by this run */
     long embed_phase_from;    /* first iteration of the embedding phase in this run (-1 = none) */
+    int holdout_checks;       /* holdout checks so far (opts->holdout), resumed ones included */
+    long holdout_iteration;   /* iteration of the best check, whose network the model has (-1 = none) */
+    double holdout_ssim;      /* its mean SSIM over the holdouts' sketches */
+    double holdout_last_ssim; /* the last check's */
 } tn_gnn_stats;
 
 /* Sketch height units at generation. */
@@ -10894,6 +10917,7 @@ TN_API tn_status tn_params_load(tn_params *p, const char *path)
 
 struct tn_optim {
     tn_params *p;
+    int n;          /* tensors of p when created: tensors added later are not optimised */
     tn_optim_opts o;
     float **m, **v; /* per tensor state (Adam: both; SGD: m = velocity) */
     long step;
@@ -10942,6 +10966,8 @@ TN_API tn_optim *tn_optim_create(tn_params *p, const tn_optim_opts *opts)
     tn__optim_opts_defaults(&o->o);
     o->m = (float **)TN_MALLOC(2 * sizeof(float *) * (size_t)(p->n ? p->n : 1));
     if (!o->m) { TN_FREE(o); return NULL; }
+    memset(o->m, 0, 2 * sizeof(float *) * (size_t)(p->n ? p->n : 1));
+    o->n = p->n;
     o->v = o->m + p->n;
     for (i = 0; i < p->n; i++) {
         size_t n = p->t[i]->requires_grad ? p->t[i]->numel : 0;
@@ -10960,7 +10986,7 @@ TN_API void tn_optim_free(tn_optim *o)
 {
     int i;
     if (!o) return;
-    for (i = 0; i < o->p->n; i++) {
+    for (i = 0; i < o->n; i++) {
         TN_FREE(o->m[i]);
         TN_FREE(o->v[i]);
     }
@@ -10989,7 +11015,7 @@ TN_API void tn_optim_step(tn_optim *o)
     o->step++;
     c1 = 1.0f - powf(b1, (float)o->step);
     c2 = 1.0f - powf(b2, (float)o->step);
-    for (i = 0; i < o->p->n; i++) {
+    for (i = 0; i < o->n; i++) {
         tn_tensor *t = o->p->t[i];
         float *m = o->m[i], *v = o->v[i];
         if (!t->requires_grad || !t->grad) continue;
@@ -19792,6 +19818,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
        +0.012); the sketch term cost 0.01-0.03 everywhere and the distance term the drawn
        sketch's ordering on Grand Canyon (99.7 -> 80.4 %), so both stay off (docs/gnn.md) */
     if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
+    if (o->holdout_every <= 0) o->holdout_every = 150;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -21147,6 +21174,10 @@ typedef struct tn__gnn_train {
     tn__gnn_graph g;
     float range;               /* normalised height range (SSIM data range) */
     long phase_from;           /* first iteration of the embedding phase, -1 before it */
+    tn_contour_set *hsk;       /* holdout i's sketches at [2 i] (the threshold) and [2 i + 1] (4 x) */
+    tn_params *best;           /* holdouts given: the best check's weights and "holdout" = {mean SSIM,
+                                  iteration (-1 = none yet), checks, last check's SSIM, its iteration,
+                                  the embedding phase's first iteration (-1 = not begun)} */
 } tn__gnn_train;
 
 static void tn__gnn_level_free(tn__gnn_level *L)
@@ -21171,6 +21202,9 @@ static void tn__gnn_train_free(tn__gnn_train *s)
     TN_FREE(s->masked);
     TN_FREE(s->known);
     tn__gnn_graph_free(&s->g);
+    for (i = 0; s->hsk && i < 2 * s->o.holdout_count; i++) tn_contour_set_free(&s->hsk[i]);
+    TN_FREE(s->hsk);
+    tn_params_free(s->best);
 }
 
 /* A level from the example's polylines and their parts. */
@@ -21459,39 +21493,23 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
     return TN_OK;
 }
 
-/* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
-   so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate. */
-static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
-{
-    int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w);
-    tn_tensor *emb = tn_params_find(s->w, "gnn.emb");
-    tn_status st;
-    if (!phase) return tn__gnn_step(s, ctx, 0, l);
-    if (s->phase_from < 0) s->phase_from = tn_train_iteration(s->run);
-    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
-    tn_optim_set_lr(s->opt, 5.0f * s->o.lr);
-    st = tn__gnn_step(s, ctx, 1, l);
-    tn_optim_set_lr(s->opt, s->o.lr);
-    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i)->grad != NULL; /* learned, not buffers */
-    return st;
-}
-
-static tn_status tn__gnn_check_dem(const tn_image *dem, float *lo, float *hi, double *mean, double *std)
+/* what: "the DEM" or a holdout's name, for the messages */
+static tn_status tn__gnn_check_dem(const tn_image *dem, const char *what, float *lo, float *hi, double *mean, double *std)
 {
     size_t i, n;
     double s = 0, s2 = 0;
-    if (!dem) return tn__fail(TN_ERR_INVALID_ARG, "gnn: no DEM");
-    if (!dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0) return tn__fail(TN_ERR_EMPTY, "gnn: the DEM is empty");
+    if (!dem) return tn__fail(TN_ERR_INVALID_ARG, "gnn: no %s", what);
+    if (!dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0) return tn__fail(TN_ERR_EMPTY, "gnn: %s is empty", what);
     if (dem->width < 16 || dem->height < 16)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn: the DEM is %d x %d; at least 16 x 16 is needed", dem->width, dem->height);
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: %s is %d x %d; at least 16 x 16 is needed", what, dem->width, dem->height);
     if ((size_t)dem->width * dem->height > ((size_t)1 << 24))
-        return tn__fail(TN_ERR_TOO_LARGE, "gnn: the DEM is %d x %d; train on a crop of at most 16 M pixels", dem->width, dem->height);
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn: %s is %d x %d; train on a crop of at most 16 M pixels", what, dem->width, dem->height);
     n = (size_t)dem->width * dem->height;
     *lo = FLT_MAX;
     *hi = -FLT_MAX;
     for (i = 0; i < n; i++) {
         float v = dem->data[i * dem->channels];
-        if (!isfinite(v)) return tn__fail(TN_ERR_NUMERIC, "gnn: the DEM has a NaN/Inf height at pixel (%d, %d)", (int)(i % dem->width), (int)(i / dem->width));
+        if (!isfinite(v)) return tn__fail(TN_ERR_NUMERIC, "gnn: %s has a NaN/Inf height at pixel (%d, %d)", what, (int)(i % dem->width), (int)(i / dem->width));
         if (v < *lo) *lo = v;
         if (v > *hi) *hi = v;
         s += v;
@@ -21499,8 +21517,161 @@ static tn_status tn__gnn_check_dem(const tn_image *dem, float *lo, float *hi, do
     }
     *mean = s / (double)n;
     *std = sqrt(fmax(s2 / (double)n - *mean * *mean, 0.0));
-    if (!(*hi > *lo)) return tn__fail(TN_ERR_EMPTY, "gnn: the DEM is flat (no ridges or valleys to learn)");
+    if (!(*hi > *lo)) return tn__fail(TN_ERR_EMPTY, "gnn: %s is flat (no ridges or valleys)", what);
     return TN_OK;
+}
+
+/* ---- holdout checks (early stopping) ---- */
+
+/* The holdouts' networks at the example's extraction threshold and 4 x it (the first sparse
+   level's), and the best-weights set, a copy of every tensor of s->w. */
+static tn_status tn__gnn_holdout_make(tn__gnn_train *s)
+{
+    int i, d, n = s->o.holdout_count, base = s->o.extract.threshold > 0 ? s->o.extract.threshold : tn_extract_default_threshold(s->A.width, s->A.height);
+    tn_tensor *info;
+    tn_status st;
+    if (n <= 0) return TN_OK;
+    if (!(s->hsk = (tn_contour_set *)tn__alloc(2 * (size_t)n * sizeof *s->hsk))) return TN_ERR_OUT_OF_MEMORY;
+    memset(s->hsk, 0, 2 * (size_t)n * sizeof *s->hsk);
+    for (i = 0; i < n; i++) {
+        const tn_image *h = &s->o.holdout[i];
+        float lo, hi;
+        double mean, std;
+        char what[32];
+        if (h->data && h->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "gnn: holdout %d has %d channels (one: heights)", i, h->channels);
+        snprintf(what, sizeof what, "holdout %d", i);
+        st = tn__gnn_check_dem(h, what, &lo, &hi, &mean, &std);
+        if (st == TN_ERR_EMPTY && h->data && h->width > 0 && h->height > 0) continue; /* flat: no sketch to check on */
+        if (st) return st;
+        for (d = 0; d < 2; d++) {
+            tn_extract_opts eo = s->o.extract;
+            tn_extraction ex;
+            eo.threshold = base * (d ? 4 : 1);
+            if ((st = tn_extract(h, &eo, &ex))) return st;
+            s->hsk[2 * i + d] = ex.contours;
+            memset(&ex.contours, 0, sizeof ex.contours);
+            tn_extraction_free(&ex);
+        }
+    }
+    if (!(s->best = tn_params_create())) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < tn_params_count(s->w); i++) {
+        const tn_tensor *t = tn_params_get(s->w, i);
+        if (!tn_params_add_buffer(s->best, t->name, t->ndim, t->shape)) return TN_ERR_OUT_OF_MEMORY;
+    }
+    d = 6;
+    if (!(info = tn_params_add_buffer(s->best, "holdout", 1, &d))) return TN_ERR_OUT_OF_MEMORY;
+    info->data[1] = info->data[4] = info->data[5] = -1.0f;
+    return TN_OK;
+}
+
+/* Rebuilds the holdouts from their sketches with the network as it is (no embeddings, the
+   residual as trained) and keeps its weights when the mean SSIM is the best so far. */
+static tn_status tn__gnn_holdout_check(tn__gnn_train *s)
+{
+    tn_tensor *info = tn_params_find(s->best, "holdout");
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    double sum = 0;
+    int i, n = 0;
+    tn_status st;
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &s->A);
+    m.weights = s->w;
+    memset(&go, 0, sizeof go);
+    go.embeddings = TN_GNN_EMBED_NONE;
+    go.gain = 1.0f;
+    for (i = 0; i < 2 * s->o.holdout_count; i++) {
+        const tn_image *h = &s->o.holdout[i / 2];
+        tn_image out = {0, 0, 0, NULL};
+        tn_metrics mt;
+        if (!s->hsk[i].count) continue;
+        st = tn_gnn_generate(&m, &s->hsk[i], h->width, h->height, &go, &out);
+        if (st == TN_ERR_EMPTY) continue; /* no part of 5 px */
+        if (!st) st = tn_compare(h, &out, 0, &mt);
+        tn_image_free(&out);
+        if (st) return st;
+        sum += mt.ssim;
+        n++;
+    }
+    info->data[4] = (float)tn_train_iteration(s->run);
+    if (!n) return TN_OK;
+    info->data[2] += 1.0f;
+    info->data[3] = (float)(sum / n);
+    if (info->data[1] < 0 || info->data[3] > info->data[0]) {
+        for (i = 0; i < tn_params_count(s->w); i++) {
+            const tn_tensor *t = tn_params_get(s->w, i);
+            memcpy(tn_params_find(s->best, t->name)->data, t->data, t->numel * sizeof(float));
+        }
+        info->data[0] = info->data[3];
+        info->data[1] = (float)tn_train_iteration(s->run);
+    }
+    return TN_OK;
+}
+
+/* The early network: an "early.<name>" buffer beside every learned tensor of w (the network
+   and the embeddings). */
+static tn_status tn__gnn_early_add(tn_params *w)
+{
+    int i, n = tn_params_count(w);
+    for (i = 0; i < n; i++) {
+        const tn_tensor *t = tn_params_get(w, i);
+        char name[48];
+        if (!t->requires_grad) continue;
+        snprintf(name, sizeof name, "early.%s", t->name);
+        if (!tn_params_add_buffer(w, name, t->ndim, t->shape)) return TN_ERR_OUT_OF_MEMORY;
+    }
+    return TN_OK;
+}
+
+/* The run's end: a check of the final network unless it had one (at the embedding phase's start
+   or at this iteration); the best check's weights become the model's early network, unless
+   that check was of the final network. */
+static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
+{
+    tn_tensor *info;
+    long it = tn_train_iteration(s->run), final_it;
+    int i;
+    tn_status st;
+    if (!s->best) return TN_OK;
+    info = tn_params_find(s->best, "holdout");
+    final_it = s->o.phase_network > 0 && info->data[5] >= 0 ? -1 : info->data[5] >= 0 ? (long)info->data[5] : it;
+    if (info->data[5] < 0 && info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
+    if (info->data[1] < 0 || (long)info->data[1] == final_it) return TN_OK;
+    if ((st = tn__gnn_early_add(s->w))) return st;
+    for (i = 0; i < tn_params_count(s->w); i++) {
+        tn_tensor *t = tn_params_get(s->w, i);
+        if (!strncmp(t->name, "early.", 6)) memcpy(t->data, tn_params_find(s->best, t->name + 6)->data, t->numel * sizeof(float));
+    }
+    return TN_OK;
+}
+
+/* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
+   so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate.
+   Holdout checks come every holdout_every iterations before the phase and once as it starts
+   (the network is frozen from there on). */
+static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
+{
+    int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w);
+    long it = tn_train_iteration(s->run);
+    tn_tensor *emb = tn_params_find(s->w, "gnn.emb");
+    tn_status st;
+    if (!phase && s->best && it > 0 && it % s->o.holdout_every == 0 && (st = tn__gnn_holdout_check(s))) return st;
+    if (!phase) return tn__gnn_step(s, ctx, 0, l);
+    if (s->phase_from < 0) {
+        tn_tensor *info = s->best ? tn_params_find(s->best, "holdout") : NULL;
+        s->phase_from = it;
+        if (info && info->data[5] < 0) {
+            info->data[5] = (float)it;
+            if (info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
+        }
+    }
+    if (s->o.phase_network > 0 && s->best) return tn__gnn_step(s, ctx, 1, l);
+    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
+    tn_optim_set_lr(s->opt, 5.0f * s->o.lr);
+    st = tn__gnn_step(s, ctx, 1, l);
+    tn_optim_set_lr(s->opt, s->o.lr);
+    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i)->grad != NULL; /* learned, not buffers */
+    return st;
 }
 
 /* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
@@ -21559,6 +21730,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     size_t n;
     uint64_t digest, seed;
     const char *sd;
+    int ck_best = 0;
     tn_status st;
     TN_ASSERT(model);
     memset(&s, 0, sizeof s);
@@ -21567,14 +21739,15 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     s.phase_from = -1;
     if (opts_in) s.o = *opts_in;
     tn_gnn_defaults(&s.o);
-    if ((st = tn__gnn_check_dem(dem, &lo, &hi, &mean, &std))) return st;
+    if ((st = tn__gnn_check_dem(dem, "the DEM", &lo, &hi, &mean, &std))) return st;
     if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
         s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.embed_phase < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
         !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24) || !(s.o.sketch_weight >= 0 && s.o.sketch_weight <= 1e6) ||
-        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6))
+        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6) || s.o.holdout_count < 0 || s.o.holdout_count > 64 ||
+        (s.o.holdout_count > 0 && !s.o.holdout))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
-                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24)", s.o.hidden, TN__GNN_MAXH, s.o.rounds, s.o.k,
-                        s.o.embed, (double)s.o.mask, s.o.random_edges);
+                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24, 0 .. 64 holdouts)", s.o.hidden,
+                        TN__GNN_MAXH, s.o.rounds, s.o.k, s.o.embed, (double)s.o.mask, s.o.random_edges);
     if ((size_t)dem->width * dem->height * (size_t)s.o.k + (size_t)(s.o.random_edges > 0 ? s.o.random_edges : 0) > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn: %d x %d pixels with %d edges each exceed %d edges; train on a crop", dem->width, dem->height,
                         s.o.k, TN__GNN_MAX_EDGES);
@@ -21596,6 +21769,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         }
         if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
         if ((st = tn__gnn_get_meta(&s, digest))) goto done;
+        ck_best = tn_params_find(ck, "best.holdout") != NULL;
         sd = tn_params_meta(ck, "seed");
         if (!sd || !tn__parse_hex64(sd, strlen(sd), &seed)) {
             st = tn__fail(TN_ERR_CORRUPT, "%s: the checkpoint names no seed", s.o.train.checkpoint);
@@ -21649,8 +21823,11 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         if (!(s.opt = tn_optim_create(s.w, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
     }
     if ((st = tn_train_add_net(s.run, "gnn", s.w, s.opt)) || (st = tn_train_add_rng(s.run, "main", &s.rng))) goto done;
-    if ((st = tn__gnn_set_meta(&s, digest))) goto done;
+    if ((st = tn__gnn_set_meta(&s, digest)) || (st = tn__gnn_holdout_make(&s))) goto done;
+    /* the best weights travel with the checkpoint (one written without holdouts starts the checks afresh) */
+    if (s.best && (!s.o.train.resume || ck_best) && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     if (s.o.train.resume && (st = tn_train_restore(s.run))) goto done;
+    if (s.best && s.o.train.resume && !ck_best && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     /* the levels: the example's own network, then its sparser networks */
     s.npix = s.A.width * s.A.height;
     if (!(s.target = (float *)tn__alloc((size_t)s.npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
@@ -21694,6 +21871,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         nh++;
     }
     st = tn_train_finish(s.run);
+    if (!st) st = tn__gnn_holdout_end(&s);
     if (stats) {
         int k, m = nh < 50 ? nh : 50;
         long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
@@ -21713,6 +21891,14 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         stats->levels = s.nlevels;
         stats->checkpoints = tn_train_checkpoints(s.run);
         stats->embed_phase_from = s.phase_from;
+        stats->holdout_iteration = -1;
+        if (s.best) {
+            const tn_tensor *info = tn_params_find(s.best, "holdout");
+            stats->holdout_ssim = info->data[0];
+            stats->holdout_iteration = (long)info->data[1];
+            stats->holdout_checks = (int)info->data[2];
+            stats->holdout_last_ssim = info->data[3];
+        }
     }
     if (!st) {
         tn_model_provenance pv;
@@ -21783,13 +21969,14 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
     if (!st) st = tn__gnn_model_params(&A, NULL, &w);
+    if (!st && tn_params_find(f, "early.gnn.emb")) st = tn__gnn_early_add(w);
     if (!st) st = tn__params_assign(w, f, path);
     if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
     if (!st) {
-        const tn_tensor *e = tn_params_find(w, "gnn.emb");
+        const tn_tensor *e = tn_params_find(w, "gnn.emb"), *e2 = tn_params_find(w, "early.gnn.emb");
         size_t i;
         for (i = 0; i < e->numel; i++)
-            if (!isfinite(e->data[i])) {
+            if (!isfinite(e->data[i]) || (e2 && !isfinite(e2->data[i]))) {
                 st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf embedding", path);
                 break;
             }
@@ -21894,6 +22081,8 @@ typedef struct tn__gnn_gen {
     float *E0;                 /* P.n x hidden initial states; NULL = zero */
     float *type, *hgt;         /* W x H: +1 / -1 / 0; the sketch height (example units) or 0 */
     uint8_t *fixed;            /* W x H: sketch pixel */
+    const tn_params *w;        /* the network it runs on (tn__gnn_pick_net) */
+    tn_params *own_w;          /* w when it is the model's early network */
 } tn__gnn_gen;
 
 /* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
@@ -21914,6 +22103,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->type);
     TN_FREE(G->hgt);
     TN_FREE(G->fixed);
+    tn_params_free(G->own_w);
     memset(G, 0, sizeof *G);
 }
 
@@ -22070,7 +22260,7 @@ static tn_status tn__gnn_region_predict(tn_ctx *ctx, const tn__gnn_gen *G, const
 
 /* 5.4: only the sketch parts' embeddings move, loss on the sketch pixels + smoothness, on the
    whole map (its memory is the whole map's graph; the tiles then share the tuned embeddings). */
-static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_gnn_generate_opts *o)
+static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
 {
     tn__gnn_region R;
     tn_ctx *ctx = NULL;
@@ -22097,8 +22287,8 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn *model, const tn_
     oo.lr = o->finetune_lr > 0 ? o->finetune_lr : 1e-2f;
     if (!(fopt = tn_optim_create(ft, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
     /* a frozen copy of the network (buffers: no gradient), so the model is only read */
-    for (i = 0; i < tn_params_count(model->weights); i++) {
-        const tn_tensor *t = tn_params_get(model->weights, i);
+    for (i = 0; i < tn_params_count(G->w); i++) {
+        const tn_tensor *t = tn_params_get(G->w, i);
         tn_tensor *c = tn_params_add_buffer(frozen, t->name, t->ndim, t->shape);
         if (!c) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
         memcpy(c->data, t->data, t->numel * sizeof(float));
@@ -22167,6 +22357,29 @@ done:
     return st;
 }
 
+/* The network a sketch runs on: the trained one for the example's own network (every part
+   known: the reconstruction), the early one (the best holdout check's, opts->holdout in
+   training) for any other sketch, when the model has one. */
+static tn_status tn__gnn_pick_net(const tn_gnn *model, int known, tn__gnn_gen *G)
+{
+    int i;
+    G->w = model->weights;
+    if (known || !tn_params_find(model->weights, "early.gnn.emb")) return TN_OK;
+    if (!(G->own_w = tn_params_create())) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < tn_params_count(model->weights); i++) {
+        const tn_tensor *t = tn_params_get(model->weights, i), *e;
+        tn_tensor *c;
+        char name[48];
+        if (!strncmp(t->name, "early.", 6)) continue;
+        snprintf(name, sizeof name, "early.%s", t->name);
+        e = tn_params_find(model->weights, name);
+        if (!(c = tn_params_add_buffer(G->own_w, t->name, t->ndim, t->shape))) return TN_ERR_OUT_OF_MEMORY;
+        memcpy(c->data, (e ? e : t)->data, t->numel * sizeof(float));
+    }
+    G->w = G->own_w;
+    return TN_OK;
+}
+
 /* Everything of a generation but the network passes: sketch in the output's pixels and the
    example's units, random sketches, parts, embeddings (matched or aligned, then fine-tuned),
    part states, raster. */
@@ -22219,6 +22432,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
         tn__gnn_same_parts(&parts, &ex_parts, opts->embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
         for (i = 0, *known = opts->embeddings == TN_GNN_EMBED_AUTO; i < parts.count; i++) *known &= match[i] >= 0;
     }
+    if ((st = tn__gnn_pick_net(model, *known, G))) goto done;
     if ((st = tn__gnn_parts_make(&parts, G->A.mean, G->A.std, &G->P))) goto done;
     G->emb = (float *)tn__calloc((size_t)G->P.n * G->A.embed * sizeof(float));
     G->known = (uint8_t *)tn__alloc((size_t)G->P.n + 1);
@@ -22227,7 +22441,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
     G->fixed = (uint8_t *)tn__alloc(n);
     if (!G->emb || !G->known || !G->type || !G->hgt || !G->fixed) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     {
-        const tn_tensor *me = tn_params_find(model->weights, "gnn.emb");
+        const tn_tensor *me = tn_params_find(G->w, "gnn.emb");
         for (i = 0; i < G->P.n; i++)
             if ((G->known[i] = (uint8_t)(match[i] >= 0))) memcpy(G->emb + (size_t)i * G->A.embed, me->data + (size_t)match[i] * G->A.embed, (size_t)G->A.embed * sizeof(float));
     }
@@ -22302,7 +22516,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             st = TN_OK;
             continue;
         }
-        if (!st) st = tn__gnn_gen_run(&T, model->weights, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
+        if (!st) st = tn__gnn_gen_run(&T, G->w, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
         if (!st) st = tn_sketch_rasterise(&drop, G->W, G->H, &hr);
         for (q = 0; !st && q < nv; q++) {
             size_t m = (size_t)(vy + (int)(q / vw)) * G->W + vx + (int)(q % vw);
@@ -22367,7 +22581,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
     else if (G->A.membrane && !known) st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain);
-    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, model, &o);
+    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
 done:
     tn_contour_set_free(&sk);
     tn_contour_set_free(&rnd);
@@ -22442,7 +22656,7 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
     if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
     if ((st = tn_image_create(&res, w, h, 1))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    st = tn__gnn_gen_run(&G, model->weights, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
+    st = tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
     if (!st) {
         *out = res;
         res.data = NULL;

@@ -262,6 +262,71 @@ static int progress(void *user, const char *stage, double f)
     return 0;
 }
 
+/* The holdouts, as gnn-train picks them: up to 4 of the side x side windows two windows away
+   from the trained one (not the neighbours the bench scores), spread around it. */
+static int holdouts(const tn_image *full, int cx, int cy, tn_image *out)
+{
+    int dx, dy, n = 0, k, m = 0, x[16], y[16];
+    for (dy = -2; dy <= 2; dy++)
+        for (dx = -2; dx <= 2; dx++)
+            if ((abs(dx) == 2 || abs(dy) == 2) && cx + dx * SIDE >= 0 && cy + dy * SIDE >= 0 && cx + (dx + 1) * SIDE <= full->width &&
+                cy + (dy + 1) * SIDE <= full->height) {
+                x[n] = cx + dx * SIDE;
+                y[n++] = cy + dy * SIDE;
+            }
+    for (k = 0; k < 4 && k < n; k++, m++) tn_image_crop(&out[m], full, x[k * n / (n < 4 ? n : 4)], y[k * n / (n < 4 ? n : 4)], SIDE, SIDE);
+    return m;
+}
+
+/* trace=1: after every segment, the model's output (gain 1) on windows of the full map, mean SSIM
+   per density: ring 1 = the 8 neighbours, ring 2 = the windows two crops away (those inside the
+   map). With holdout=0 that is the network as it trains; with holdouts, the early network so far. */
+typedef struct trace_set { tn_image win[24]; tn_contour_set sk[3][24]; int ok[3][24], n, ring[24]; } trace_set;
+
+static void trace_prepare(trace_set *t, const tn_image *full, int cx, int cy, const int *thr)
+{
+    int dx, dy, ti;
+    double cover;
+    memset(t, 0, sizeof *t);
+    for (dy = -2; dy <= 2; dy++)
+        for (dx = -2; dx <= 2; dx++) {
+            int x = cx + dx * SIDE, y = cy + dy * SIDE, r = abs(dx) > abs(dy) ? abs(dx) : abs(dy);
+            if (!r || x < 0 || y < 0 || x + SIDE > full->width || y + SIDE > full->height) continue;
+            tn_image_crop(&t->win[t->n], full, x, y, SIDE, SIDE);
+            t->ring[t->n] = r;
+            for (ti = 0; ti < 3; ti++) t->ok[ti][t->n] = sketch_of(&t->win[t->n], thr[ti], &t->sk[ti][t->n], &cover);
+            t->n++;
+        }
+}
+
+static void trace_print(const trace_set *t, const tn_gnn *model, long iters, double recon)
+{
+    tn_gnn_generate_opts go;
+    int ti, i, ring;
+    memset(&go, 0, sizeof go);
+    go.gain = 1.0f;
+    printf("trace: %ld iterations recon %.4f", iters, recon);
+    for (ring = 1; ring <= 2; ring++) {
+        printf(" ring%d", ring);
+        for (ti = 0; ti < 3; ti++) {
+            scores s = {0, 0, 0, 0};
+            for (i = 0; i < t->n; i++) {
+                tn_image out = {0, 0, 0, NULL};
+                tn_metrics m;
+                if (t->ring[i] != ring || !t->ok[ti][i]) continue;
+                if (!tn_gnn_generate(model, &t->sk[ti][i], SIDE, SIDE, &go, &out) && !tn_compare(&t->win[i], &out, 0, &m)) {
+                    s.ssim += m.ssim;
+                    s.n++;
+                }
+                tn_image_free(&out);
+            }
+            printf(" %.4f", s.n ? s.ssim / s.n : 0.0);
+        }
+    }
+    printf("\n");
+    fflush(stdout);
+}
+
 int main(int argc, char **argv)
 {
     const char *region = argc > 1 ? argv[1] : "alps_montblanc";
@@ -279,7 +344,9 @@ int main(int argc, char **argv)
     float gain = 0.0f, phase = 0.25f; /* tn_gnn_defaults' embed_phase */
     double done = 0;
     long iters = 0, phase_from = -1;
-    int seg, a, pictures = 0;
+    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0;
+    tn_image hw[4];
+    trace_set ts;
     char ckpt[256];
     memset(&o, 0, sizeof o);
     o.train.seed = 1;
@@ -296,8 +363,11 @@ int main(int argc, char **argv)
         else if (kl == 5 && !strncmp(argv[a], "phase", kl)) phase = (float)v;
         else if (kl == 8 && !strncmp(argv[a], "pictures", kl)) pictures = v != 0;
         else if (kl == 5 && !strncmp(argv[a], "index", kl)) o.part_index = (int)v;
+        else if (kl == 5 && !strncmp(argv[a], "trace", kl)) trace = v != 0;
+        else if (kl == 7 && !strncmp(argv[a], "holdout", kl)) hold = v != 0;
+        else if (kl == 8 && !strncmp(argv[a], "phasenet", kl)) o.phase_network = (int)v;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= pictures=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= holdout= phasenet= pictures= trace=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -325,12 +395,18 @@ int main(int argc, char **argv)
 
     o.train.minutes = minutes;
     o.train.checkpoint = ckpt;
+    if (hold && (nhold = holdouts(&full, cx, cy, hw)) > 0) {
+        o.holdout = hw;
+        o.holdout_count = nhold;
+    }
+    printf("holdout_windows: %d\n", nhold);
     tn_set_progress(progress, NULL);
     if (!sketch_of(&crop, 0, &sk, &cover)) {
         fprintf(stderr, "bench_gnn: no network in the crop\n");
         return 1;
     }
     memset(&go, 0, sizeof go);
+    if (trace) trace_prepare(&ts, &full, cx, cy, thr);
     t0 = tn_time_seconds();
     for (seg = 1;; seg++) {
         tn_metrics mt;
@@ -349,6 +425,7 @@ int main(int argc, char **argv)
             if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
             if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
             fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
+            if (trace) trace_print(&ts, &model, st.iterations, mt.ssim);
         }
         tn_image_free(&out);
         if (st.iterations < 150L * seg) break; /* the budget ended the run */
@@ -367,6 +444,11 @@ int main(int argc, char **argv)
     printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
     printf("train_loss_ssim: %.4f (1 - SSIM; in the embedding phase at the end)\n", st.loss_ssim);
     printf("train_embed_phase_from: %ld iterations\n", phase_from);
+    if (nhold) {
+        printf("train_holdout_checks: %d\n", st.holdout_checks);
+        printf("train_holdout_best_iteration: %ld\n", st.holdout_iteration);
+        printf("train_holdout_best_ssim: %.4f (last check %.4f)\n", st.holdout_ssim, st.holdout_last_ssim);
+    }
 
     /* reconstruction from the crop's own network */
     t0 = tn_time_seconds();

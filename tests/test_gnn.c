@@ -1,6 +1,6 @@
 /* test_gnn.c - @@gnn: the sketch-to-terrain graph network on a small synthetic example (Perlin
    terrain in metres): training lowers the loss, the membrane baseline, save/load, bit-identical
-   resume, same results for 1 and 2 threads, and bad inputs (empty sketch, no part of 5 px, NaN
+   resume, early stopping on holdouts, same results for 1 and 2 threads, and bad inputs (empty sketch, no part of 5 px, NaN
    DEM, flat DEM, another method's model, a checkpoint as a model, damaged files). */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -639,6 +639,112 @@ TN_TEST(ordering_share)
     tn_image_free(&t);
 }
 
+/* the learned tensors of a (or its "early.*" copies, if early) are the same bits as b's */
+static int same_learned(const tn_gnn *a, int early, const tn_gnn *b)
+{
+    int i, n = 0;
+    for (i = 0; i < tn_params_count(b->weights); i++) {
+        const tn_tensor *y = tn_params_get(b->weights, i), *x;
+        char name[64];
+        if (!y->requires_grad) continue;
+        snprintf(name, sizeof name, "%s%s", early ? "early." : "", y->name);
+        if (!(x = tn_params_find(a->weights, name)) || x->numel != y->numel || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
+        n++;
+    }
+    return n > 0;
+}
+
+static void holdout_opts(tn_gnn_opts *o, long iters, tn_image *hold)
+{
+    tiny_opts(o, iters);
+    o->lr = 5e-3f;
+    o->embed_phase = -1;
+    o->holdout = hold;
+    o->holdout_count = 2;
+    o->holdout_every = 2;
+}
+
+TN_TEST(holdout_early_stopping)
+{
+    /* checks every 2 iterations on two other terrains. The model keeps the fully trained
+       network (checks change nothing in training) and, as its early network, the best check's,
+       bit for bit a run stopped there: other terrain's sketches run on it, the example's own
+       network on the trained one; through save/load and a resume too */
+    const char *ck = tn_test_tmp_path("gnn", "hold.ckpt"), *mp = tn_test_tmp_path("gnn", "hold.tnw");
+    tn_image dem = tn_test_dem(40, 4), hold[2], bad = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_contour_set own = own_sketch(&dem), other;
+    tn_gnn_opts o;
+    tn_gnn m, full, stop, res, ld;
+    tn_gnn_stats st, st2;
+    hold[0] = tn_test_dem(40, 8);
+    hold[1] = tn_test_dem(40, 9);
+    other = own_sketch(&hold[1]);
+    holdout_opts(&o, 12, hold);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, &st) == TN_OK);
+    TN_CHECK(st.holdout_checks == 6); /* 2, 4, ..., 10 and the end */
+    TN_CHECK(st.holdout_ssim > -1 && st.holdout_ssim <= 1 && st.holdout_ssim >= st.holdout_last_ssim);
+    TN_CHECK(st.holdout_iteration >= 2 && st.holdout_iteration < 12 && st.holdout_iteration % 2 == 0); /* this seed: not the last */
+    holdout_opts(&o, 12, NULL);
+    o.holdout_count = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &full, &st2) == TN_OK && st2.holdout_iteration == -1);
+    TN_CHECK(same_learned(&m, 0, &full) && !tn_params_find(full.weights, "early.gnn.emb"));
+    holdout_opts(&o, st.holdout_iteration, NULL);
+    o.holdout_count = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
+    TN_CHECK(same_learned(&m, 1, &stop));
+    TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(same_image(&a, &b));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&full, &own, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(same_image(&a, &b));
+    tn_image_free(&b);
+    TN_CHECK(tn_gnn_save(&m, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_OK);
+    TN_CHECK(same_learned(&ld, 1, &stop) && same_learned(&ld, 0, &full));
+    TN_CHECK(tn_gnn_generate(&ld, &own, 40, 40, NULL, &b) == TN_OK && same_image(&a, &b));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    /* stopped at 6 and resumed to 12: the same model and checks */
+    holdout_opts(&o, 6, hold);
+    o.train.checkpoint = ck;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_OK);
+    tn_gnn_free(&res);
+    o.train.max_iters = 12;
+    o.train.resume = 1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK);
+    TN_CHECK(st2.holdout_iteration == st.holdout_iteration && st2.holdout_checks == st.holdout_checks);
+    TN_CHECK(same_learned(&res, 0, &full) && same_learned(&res, 1, &stop));
+    tn_gnn_free(&res);
+    /* with the embedding phase (from 9): checks at 2, 4, 6, 8 and 9, then the network is frozen */
+    holdout_opts(&o, 12, hold);
+    o.embed_phase = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
+    TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 9);
+    tn_gnn_free(&res);
+    /* bad holdouts */
+    tiny_opts(&o, 2);
+    o.holdout_count = 1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_INVALID_ARG); /* none given */
+    TN_CHECK(tn_image_create(&bad, 40, 40, 1) == TN_OK);
+    memcpy(bad.data, hold[0].data, 40 * 40 * sizeof(float));
+    bad.data[77] = NAN;
+    o.holdout = &bad;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_NUMERIC);
+    tn_image_free(&bad);
+    TN_CHECK(tn_image_create(&bad, 40, 40, 3) == TN_OK);
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_INVALID_ARG); /* three channels */
+    tn_image_free(&bad);
+    tn_gnn_free(&m);
+    tn_gnn_free(&full);
+    tn_gnn_free(&stop);
+    tn_gnn_free(&ld);
+    tn_contour_set_free(&own);
+    tn_contour_set_free(&other);
+    tn_image_free(&hold[0]);
+    tn_image_free(&hold[1]);
+    tn_image_free(&dem);
+}
+
 int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
@@ -648,6 +754,7 @@ int main(void)
     TN_RUN(part_overhang);
     TN_RUN(embedding_phase);
     TN_RUN(resume_is_bit_identical);
+    TN_RUN(holdout_early_stopping);
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);

@@ -1632,10 +1632,10 @@ static tn_status load_dem_metres(const char *path, double lo, double hi, tn_imag
 
 static struct gnn_train_args {
     const char *in, *out, *ckpt;
-    int crop[2], size;
+    int crop[2], size, holdout;
     double range[2];
     tn_gnn_opts o;
-} gnn_train_arg = {.crop = {-1, -1}}; /* -1: not given */
+} gnn_train_arg = {.crop = {-1, -1}, .holdout = 4}; /* -1: not given */
 static const cli_opt gnn_train_opts[] = {
     {"DEM", 0, ARG_POS, 0, &gnn_train_arg.in, NULL, 0, 0, NULL, "the example heightmap (its style is learnt)", NULL},
     {"output", 'o', ARG_STR, REQ, &gnn_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the model: network, the example's parts and heights", NULL},
@@ -1644,6 +1644,10 @@ static const cli_opt gnn_train_opts[] = {
     {"crop", 0, ARG_INT, PAIR, &gnn_train_arg.crop[0], &gnn_train_arg.crop[1], 0, 1 << 20, "X Y", "top-left corner of the training window",
      "the window of highest relief"},
     {"size", 0, ARG_INT, 0, &gnn_train_arg.size, NULL, 16, 4096, "N", "side of the training window (whole DEM if smaller)", "128"},
+    {"holdout", 0, ARG_INT, 0, &gnn_train_arg.holdout, NULL, 0, 16, "N",
+     "early stopping: every 150 iterations the network rebuilds up to N windows of the DEM two windows away from the training "
+     "window (adjacent ones when none fits) from their ridges and valleys; the best becomes the model's early network, on "
+     "which every sketch but the example's own runs", "4; 0 = none"},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_train_arg.range[0], &gnn_train_arg.range[1], 0, 0, "LO HI",
      "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for", "the file's range, else its [0, 1] codes"},
     {"resume", 0, ARG_FLAG, 0, &gnn_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
@@ -1663,15 +1667,42 @@ static const cli_opt gnn_train_opts[] = {
      "0.25"},
 };
 
+/* Up to n windows of w x h for the holdout checks: those two windows away from the training
+   window (x, y), spread around it; the adjacent ones when none of those fits. Windows with a
+   NaN (no data) are left out. */
+static int gnn_holdouts(const tn_image *dem, int x, int y, int w, int h, int n, tn_image *out)
+{
+    int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
+    for (ring = 2; ring >= 1 && !m; ring--) {
+        c = 0;
+        for (dy = -ring; dy <= ring; dy++)
+            for (dx = -ring; dx <= ring; dx++)
+                if ((abs(dx) == ring || abs(dy) == ring) && x + dx * w >= 0 && y + dy * h >= 0 && x + (dx + 1) * w <= dem->width &&
+                    y + (dy + 1) * h <= dem->height) {
+                    cx[c] = x + dx * w;
+                    cy[c++] = y + dy * h;
+                }
+        for (k = 0; k < n && k < c; k++) { /* channel 0, as the training window */
+            int u, v, bad = 0, x0 = cx[k * c / (c < n ? c : n)], y0 = cy[k * c / (c < n ? c : n)];
+            if (tn_image_create(&out[m], w, h, 1)) continue;
+            for (v = 0; v < h; v++)
+                for (u = 0; u < w; u++) bad += !isfinite(TN_PIXEL(&out[m], u, v, 0) = TN_PIXEL(dem, x0 + u, y0 + v, 0));
+            if (bad) tn_image_free(&out[m]);
+            else m++;
+        }
+    }
+    return m;
+}
+
 static int run_gnn_train(void)
 {
     struct gnn_train_args *a = &gnn_train_arg;
-    tn_image dem = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
+    tn_image dem = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, hold[16];
     tn_gnn model;
     tn_gnn_stats s;
     tn_status st;
     char ckbuf[1024];
-    int side = a->size ? a->size : 128, x = a->crop[0], y = a->crop[1], w, h, metres, given = a->crop[0] >= 0;
+    int side = a->size ? a->size : 128, x = a->crop[0], y = a->crop[1], w, h, metres, given = a->crop[0] >= 0, nhold = 0, i;
     if (!a->ckpt) {
         snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
         a->ckpt = ckbuf;
@@ -1686,13 +1717,17 @@ static int run_gnn_train(void)
         return usage_error("gnn-train", "the %d x %d window at (%d, %d) does not fit in the %d x %d DEM", w, h, x, y, dem.width, dem.height);
     }
     st = tn_image_crop(&win, &dem, x, y, w, h);
+    if (!st) nhold = gnn_holdouts(&dem, x, y, w, h, a->holdout, hold);
     tn_image_free(&dem);
     if (st) return fail_status(st);
-    printf("window: %d x %d at (%d, %d)%s\nunits: %s\n", w, h, x, y, given ? "" : " (highest relief)",
-           metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)");
+    printf("window: %d x %d at (%d, %d)%s\nunits: %s\nholdout_windows: %d\n", w, h, x, y, given ? "" : " (highest relief)",
+           metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)", nhold);
     fflush(stdout);
+    a->o.holdout = nhold ? hold : NULL;
+    a->o.holdout_count = nhold;
     st = tn_gnn_train(&win, &a->o, &model, &s);
     tn_image_free(&win);
+    for (i = 0; i < nhold; i++) tn_image_free(&hold[i]);
     if (st == TN_ERR_CANCELLED) return train_interrupted("gnn-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
     st = tn_gnn_save(&model, a->out);
@@ -1701,6 +1736,10 @@ static int run_gnn_train(void)
                "steps_per_second: %.2f\nloss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
                s.parts, s.levels, s.iterations, s.resumed_from, s.embed_phase_from, s.seconds / 60.0,
                s.seconds_per_iter > 0 ? 1.0 / s.seconds_per_iter : 0.0, (double)s.loss_mse, (double)s.loss_ssim, s.checkpoints, a->ckpt, a->out);
+    if (!st && nhold)
+        printf("holdout_ssim: %.4f (iteration %ld, the best of %d checks; the trained network's %.4f)\nearly_network: %s\n", s.holdout_ssim,
+               s.holdout_iteration, s.holdout_checks, s.holdout_last_ssim,
+               tn_params_find(model.weights, "early.gnn.emb") ? "kept, for every sketch but the example's own network" : "none (the trained network was the best)");
     tn_gnn_free(&model);
     return st ? fail_status(st) : 0;
 }
@@ -1708,7 +1747,8 @@ static int run_gnn_train(void)
 static const cli_command gnn_train_cmd = {"gnn-train", CLI_CMD(gnn_train), "learn one DEM for sketch-to-terrain generation (graph network)",
     "Learns one example DEM (paper 000): its ridge and valley network is cut into 5-10 px parts and a graph network learns "
     "to turn such a network, and sparser ones, into the example's terrain. Trains on a window of the DEM (default the "
-    "128 x 128 window of highest relief). The model records the example's parts and heights, so gnn-generate needs only "
+    "128 x 128 window of highest relief); windows of the DEM away from it check the network as it trains, and the best "
+    "check's network is kept for sketches of other terrain (--holdout). The model records the example's parts and heights, so gnn-generate needs only "
     "it and a sketch. The full training state is saved atomically to the checkpoint every interval and on Ctrl-C; "
     "--resume continues it identically."};
 
