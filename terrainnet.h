@@ -1583,20 +1583,22 @@ typedef struct tn_gnn_opts {
                               (Manhattan); 0 = 0.1, < 0 = off */
     float further_weight;  /* 6.1's distance term, as read here: a pixel 1-6 px from its nearest part
                               keeps near the part's height there, weighted 1 / (10 d^2); 0 = off */
-    const tn_image *holdout; /* holdout_count terrains of the example's style (same units, at
-                              least 16 x 16) that training never sees, e.g. windows of the same DEM
-                              away from the example; NULL = none. Every holdout_every iterations
-                              before the embedding phase the network, without embeddings, rebuilds each one
-                              from its extracted network (the extraction threshold and 4 x it);
-                              the weights with the best mean SSIM are restored when the phase
-                              starts (or the run ends, without a phase): early stopping, since
-                              the network's fill of other terrain's sketches swings from check to
-                              check and falls as it trains on (docs/gnn.md) */
+    const tn_image *holdout; /* holdout_count terrains of the example's style and units (one
+                              channel, at least 16 x 16) that training never sees, e.g. windows of
+                              the same DEM away from the example (tn_gnn_holdout_windows); NULL =
+                              none. Every holdout_every iterations before the embedding phase, and
+                              as it starts, the network without embeddings rebuilds each one from
+                              its extracted network (the extraction threshold and 4 x it); the
+                              weights of the best mean SSIM become the model's early network,
+                              which every sketch but the example's own network runs on: early
+                              stopping, as the network's fill of other terrain swings from check
+                              to check and falls as it trains on (docs/gnn.md) */
     int holdout_count;
     int holdout_every;     /* iterations between holdout checks; 0 = 150 */
-    int phase_network;     /* 1: with holdouts, the embedding phase trains the network too (at
-                              the base rate), as the trained network then serves only the
-                              example's own network; 0 = off */
+    int phase_network;     /* with holdouts (an early network): the embedding phase trains the
+                              network too, at the base rate, since the trained network then
+                              serves only the example's own network; 0 = on, -1 = off (without
+                              holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
@@ -1675,6 +1677,11 @@ typedef struct tn_gnn_generate_opts {
 
 /* Fills *o with the defaults (what zero fields mean). */
 TN_API void tn_gnn_defaults(tn_gnn_opts *o);
+/* Windows for opts->holdout, as gnn-train takes them: up to max of the w x h windows of dem
+   (channel 0) two windows away from the training window at (x, y), spread around it; the
+   adjacent ones when none of those fits; windows with a NaN/Inf left out. Writes them to out[]
+   (free each with tn_image_free) and returns how many (0 when none fits or max <= 0). */
+TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out);
 /* Trains on channel 0 of dem (at least 16 x 16, finite). Reports progress as "gnn-train".
    *model is allocated here (free with tn_gnn_free); stats may be NULL. A DEM without any
    extracted contour or contour part fails with TN_ERR_EMPTY. */
@@ -19822,6 +19829,31 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     tn_train_defaults(&o->train, 10.0);
 }
 
+TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out)
+{
+    int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
+    if (!dem || !dem->data || !out || w <= 0 || h <= 0) return 0;
+    for (ring = 2; ring >= 1 && !m; ring--) {
+        c = 0;
+        for (dy = -ring; dy <= ring; dy++)
+            for (dx = -ring; dx <= ring; dx++)
+                if ((abs(dx) == ring || abs(dy) == ring) && x + dx * w >= 0 && y + dy * h >= 0 && x + (dx + 1) * w <= dem->width &&
+                    y + (dy + 1) * h <= dem->height) {
+                    cx[c] = x + dx * w;
+                    cy[c++] = y + dy * h;
+                }
+        for (k = 0; k < max && k < c; k++) {
+            int u, v, bad = 0, x0 = cx[k * c / (c < max ? c : max)], y0 = cy[k * c / (c < max ? c : max)];
+            if (tn_image_create(&out[m], w, h, 1)) return m;
+            for (v = 0; v < h && !bad; v++)
+                for (u = 0; u < w; u++) bad += !isfinite(TN_PIXEL(&out[m], u, v, 0) = TN_PIXEL(dem, x0 + u, y0 + v, 0));
+            if (bad) tn_image_free(&out[m]);
+            else m++;
+        }
+    }
+    return m;
+}
+
 /* ---- membrane (Laplace) interpolation ---- */
 
 /* out = val on fixed pixels; sum over 4-neighbours inside the map of (out_q - out_p) = 0 on the
@@ -21623,9 +21655,10 @@ static tn_status tn__gnn_early_add(tn_params *w)
     return TN_OK;
 }
 
-/* The run's end: a check of the final network unless it had one (at the embedding phase's start
-   or at this iteration); the best check's weights become the model's early network, unless
-   that check was of the final network. */
+/* The run's end: a check of the network unless it had one (at the embedding phase's start or at
+   this iteration); the best check's weights become the model's early network, unless that
+   check was of the final network (the run's end, or the phase's start when the phase freezes
+   the network). */
 static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 {
     tn_tensor *info;
@@ -21634,7 +21667,7 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
     tn_status st;
     if (!s->best) return TN_OK;
     info = tn_params_find(s->best, "holdout");
-    final_it = s->o.phase_network > 0 && info->data[5] >= 0 ? -1 : info->data[5] >= 0 ? (long)info->data[5] : it;
+    final_it = info->data[5] < 0 ? it : s->o.phase_network < 0 ? (long)info->data[5] : -1;
     if (info->data[5] < 0 && info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
     if (info->data[1] < 0 || (long)info->data[1] == final_it) return TN_OK;
     if ((st = tn__gnn_early_add(s->w))) return st;
@@ -21646,7 +21679,8 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 }
 
 /* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
-   so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate.
+   so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
+   unless an early network serves other terrain (phase_network): then everything trains on.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
    (the network is frozen from there on). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
@@ -21665,7 +21699,7 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
             if (info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
         }
     }
-    if (s->o.phase_network > 0 && s->best) return tn__gnn_step(s, ctx, 1, l);
+    if (s->o.phase_network >= 0 && s->best) return tn__gnn_step(s, ctx, 1, l);
     for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
     tn_optim_set_lr(s->opt, 5.0f * s->o.lr);
     st = tn__gnn_step(s, ctx, 1, l);

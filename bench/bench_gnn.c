@@ -262,22 +262,6 @@ static int progress(void *user, const char *stage, double f)
     return 0;
 }
 
-/* The holdouts, as gnn-train picks them: up to 4 of the side x side windows two windows away
-   from the trained one (not the neighbours the bench scores), spread around it. */
-static int holdouts(const tn_image *full, int cx, int cy, tn_image *out)
-{
-    int dx, dy, n = 0, k, m = 0, x[16], y[16];
-    for (dy = -2; dy <= 2; dy++)
-        for (dx = -2; dx <= 2; dx++)
-            if ((abs(dx) == 2 || abs(dy) == 2) && cx + dx * SIDE >= 0 && cy + dy * SIDE >= 0 && cx + (dx + 1) * SIDE <= full->width &&
-                cy + (dy + 1) * SIDE <= full->height) {
-                x[n] = cx + dx * SIDE;
-                y[n++] = cy + dy * SIDE;
-            }
-    for (k = 0; k < 4 && k < n; k++, m++) tn_image_crop(&out[m], full, x[k * n / (n < 4 ? n : 4)], y[k * n / (n < 4 ? n : 4)], SIDE, SIDE);
-    return m;
-}
-
 /* trace=1: after every segment, the model's output (gain 1) on windows of the full map, mean SSIM
    per density: ring 1 = the 8 neighbours, ring 2 = the windows two crops away (those inside the
    map). With holdout=0 that is the network as it trains; with holdouts, the early network so far. */
@@ -395,7 +379,10 @@ int main(int argc, char **argv)
 
     o.train.minutes = minutes;
     o.train.checkpoint = ckpt;
-    if (hold && (nhold = holdouts(&full, cx, cy, hw)) > 0) {
+    /* the windows gnn-train would take, as long as they are two windows away: never the
+       neighbours scored below (every region of ../shared/data has room) */
+    if (hold && (cx >= 2 * SIDE || cy >= 2 * SIDE || cx + 3 * SIDE <= full.width || cy + 3 * SIDE <= full.height) &&
+        (nhold = tn_gnn_holdout_windows(&full, cx, cy, SIDE, SIDE, 4, hw)) > 0) {
         o.holdout = hw;
         o.holdout_count = nhold;
     }

@@ -639,14 +639,15 @@ TN_TEST(ordering_share)
     tn_image_free(&t);
 }
 
-/* the learned tensors of a (or its "early.*" copies, if early) are the same bits as b's */
-static int same_learned(const tn_gnn *a, int early, const tn_gnn *b)
+/* the learned tensors of a (or its "early.*" copies, if early) are the same bits as b's (the
+   embeddings left out if no_emb) */
+static int same_learned(const tn_gnn *a, int early, const tn_gnn *b, int no_emb)
 {
     int i, n = 0;
     for (i = 0; i < tn_params_count(b->weights); i++) {
         const tn_tensor *y = tn_params_get(b->weights, i), *x;
         char name[64];
-        if (!y->requires_grad) continue;
+        if (!y->requires_grad || (no_emb && !strcmp(y->name, "gnn.emb"))) continue;
         snprintf(name, sizeof name, "%s%s", early ? "early." : "", y->name);
         if (!(x = tn_params_find(a->weights, name)) || x->numel != y->numel || memcmp(x->data, y->data, x->numel * sizeof(float))) return 0;
         n++;
@@ -687,11 +688,11 @@ TN_TEST(holdout_early_stopping)
     holdout_opts(&o, 12, NULL);
     o.holdout_count = 0;
     TN_CHECK(tn_gnn_train(&dem, &o, &full, &st2) == TN_OK && st2.holdout_iteration == -1);
-    TN_CHECK(same_learned(&m, 0, &full) && !tn_params_find(full.weights, "early.gnn.emb"));
+    TN_CHECK(same_learned(&m, 0, &full, 0) && !tn_params_find(full.weights, "early.gnn.emb"));
     holdout_opts(&o, st.holdout_iteration, NULL);
     o.holdout_count = 0;
     TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
-    TN_CHECK(same_learned(&m, 1, &stop));
+    TN_CHECK(same_learned(&m, 1, &stop, 0));
     TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, NULL, &b) == TN_OK);
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&a);
@@ -700,7 +701,7 @@ TN_TEST(holdout_early_stopping)
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&b);
     TN_CHECK(tn_gnn_save(&m, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_OK);
-    TN_CHECK(same_learned(&ld, 1, &stop) && same_learned(&ld, 0, &full));
+    TN_CHECK(same_learned(&ld, 1, &stop, 0) && same_learned(&ld, 0, &full, 0));
     TN_CHECK(tn_gnn_generate(&ld, &own, 40, 40, NULL, &b) == TN_OK && same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);
@@ -713,13 +714,25 @@ TN_TEST(holdout_early_stopping)
     o.train.resume = 1;
     TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK);
     TN_CHECK(st2.holdout_iteration == st.holdout_iteration && st2.holdout_checks == st.holdout_checks);
-    TN_CHECK(same_learned(&res, 0, &full) && same_learned(&res, 1, &stop));
+    TN_CHECK(same_learned(&res, 0, &full, 0) && same_learned(&res, 1, &stop, 0));
     tn_gnn_free(&res);
-    /* with the embedding phase (from 9): checks at 2, 4, 6, 8 and 9, then the network is frozen */
+    /* with the embedding phase (from 9): checks at 2, 4, 6, 8 and 9; the phase trains the network
+       on (it serves only the example's own network now), unless phase_network = -1 */
     holdout_opts(&o, 12, hold);
     o.embed_phase = 0;
     TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
-    TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 9);
+    TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 9 && tn_params_find(res.weights, "early.gnn.emb"));
+    tn_gnn_free(&stop);
+    holdout_opts(&o, 9, NULL);
+    o.holdout_count = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
+    TN_CHECK(!same_learned(&res, 0, &stop, 1));
+    tn_gnn_free(&res);
+    holdout_opts(&o, 12, hold);
+    o.embed_phase = 0;
+    o.phase_network = -1;
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.holdout_checks == 5);
+    TN_CHECK(same_learned(&res, 0, &stop, 1) && !same_learned(&res, 0, &stop, 0));
     tn_gnn_free(&res);
     /* bad holdouts */
     tiny_opts(&o, 2);
@@ -745,6 +758,30 @@ TN_TEST(holdout_early_stopping)
     tn_image_free(&dem);
 }
 
+TN_TEST(holdout_windows)
+{
+    /* two windows away, spread (4 of the 11 that fit), else adjacent; NaN windows left out */
+    tn_image dem = tn_test_dem(200, 3), out[6], small = tn_test_dem(100, 3);
+    int n, u, v, same = 1;
+    n = tn_gnn_holdout_windows(&dem, 80, 55, 40, 40, 4, out); /* 200 x 200: ring 2 at x 0 and 160, y 135 (not -25) */
+    TN_CHECK(n == 4);
+    for (v = 0; v < 40; v++)
+        for (u = 0; u < 40; u++) same &= TN_PIXEL(&out[0], u, v, 0) == TN_PIXEL(&dem, 0 + u, 15 + v, 0);
+    TN_CHECK(same && out[0].width == 40 && out[0].height == 40 && out[0].channels == 1);
+    while (n > 0) tn_image_free(&out[--n]);
+    TN_CHECK(tn_gnn_holdout_windows(&small, 30, 30, 40, 40, 4, out) == 0); /* no window fits */
+    n = tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 4, out);              /* the adjacent three */
+    TN_CHECK(n == 3);
+    while (n > 0) tn_image_free(&out[--n]);
+    TN_PIXEL(&small, 45, 5, 0) = NAN; /* inside the window at (40, 0) */
+    n = tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 4, out);
+    TN_CHECK(n == 2);
+    while (n > 0) tn_image_free(&out[--n]);
+    TN_CHECK(tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 0, out) == 0);
+    tn_image_free(&dem);
+    tn_image_free(&small);
+}
+
 int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
@@ -755,6 +792,7 @@ int main(void)
     TN_RUN(embedding_phase);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(holdout_early_stopping);
+    TN_RUN(holdout_windows);
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);

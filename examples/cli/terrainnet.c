@@ -1667,33 +1667,6 @@ static const cli_opt gnn_train_opts[] = {
      "0.25"},
 };
 
-/* Up to n windows of w x h for the holdout checks: those two windows away from the training
-   window (x, y), spread around it; the adjacent ones when none of those fits. Windows with a
-   NaN (no data) are left out. */
-static int gnn_holdouts(const tn_image *dem, int x, int y, int w, int h, int n, tn_image *out)
-{
-    int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
-    for (ring = 2; ring >= 1 && !m; ring--) {
-        c = 0;
-        for (dy = -ring; dy <= ring; dy++)
-            for (dx = -ring; dx <= ring; dx++)
-                if ((abs(dx) == ring || abs(dy) == ring) && x + dx * w >= 0 && y + dy * h >= 0 && x + (dx + 1) * w <= dem->width &&
-                    y + (dy + 1) * h <= dem->height) {
-                    cx[c] = x + dx * w;
-                    cy[c++] = y + dy * h;
-                }
-        for (k = 0; k < n && k < c; k++) { /* channel 0, as the training window */
-            int u, v, bad = 0, x0 = cx[k * c / (c < n ? c : n)], y0 = cy[k * c / (c < n ? c : n)];
-            if (tn_image_create(&out[m], w, h, 1)) continue;
-            for (v = 0; v < h; v++)
-                for (u = 0; u < w; u++) bad += !isfinite(TN_PIXEL(&out[m], u, v, 0) = TN_PIXEL(dem, x0 + u, y0 + v, 0));
-            if (bad) tn_image_free(&out[m]);
-            else m++;
-        }
-    }
-    return m;
-}
-
 static int run_gnn_train(void)
 {
     struct gnn_train_args *a = &gnn_train_arg;
@@ -1717,7 +1690,7 @@ static int run_gnn_train(void)
         return usage_error("gnn-train", "the %d x %d window at (%d, %d) does not fit in the %d x %d DEM", w, h, x, y, dem.width, dem.height);
     }
     st = tn_image_crop(&win, &dem, x, y, w, h);
-    if (!st) nhold = gnn_holdouts(&dem, x, y, w, h, a->holdout, hold);
+    if (!st) nhold = tn_gnn_holdout_windows(&dem, x, y, w, h, a->holdout, hold);
     tn_image_free(&dem);
     if (st) return fail_status(st);
     printf("window: %d x %d at (%d, %d)%s\nunits: %s\nholdout_windows: %d\n", w, h, x, y, given ? "" : " (highest relief)",
