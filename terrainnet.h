@@ -21682,7 +21682,7 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
    so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
    unless an early network serves other terrain (phase_network): then everything trains on.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
-   (the network is frozen from there on). */
+   (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
 {
     int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w);
