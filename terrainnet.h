@@ -1562,8 +1562,10 @@ typedef struct tn_gnn_opts {
     float embed_phase;     /* the last share of this run's budget trains only the example's part
                               embeddings (rate x 5), on its own network with every part present: the
                               reconstruction sharpens while the network, and with it every sketch
-                              of other terrain, stays as trained. A schedule like the budget, so a
-                              resumed run takes this run's value; 0 = 0.25, < 0 = none */
+                              of other terrain, stays as trained (with an early network, see
+                              phase_network, everything trains). A schedule like the budget, so a
+                              resumed run takes this run's value; 0 = 0.5 with an early network,
+                              else 0.25; < 0 = none */
     int part_index;        /* edge feature of a part without an embedding (a dropped one, a sparse
                               level's, any part of another sketch): 0 = how far the pixel lies
                               beyond the part's end along it (0 beside it); -1 = the projection
@@ -1596,9 +1598,10 @@ typedef struct tn_gnn_opts {
     int holdout_count;
     int holdout_every;     /* iterations between holdout checks; 0 = 150 */
     int phase_network;     /* with holdouts (an early network): the embedding phase trains the
-                              network too, at the base rate, since the trained network then
-                              serves only the example's own network; 0 = on, -1 = off (without
-                              holdouts the phase always leaves the network as it is) */
+                              network too, everything at 2.5 x the rate on the whole graph (no
+                              masked parts, no random edges), since the trained network then
+                              serves only the example's own network; 0 = on, -1 = off
+                              (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
@@ -19814,8 +19817,10 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->thin == 0) o->thin = 0.5f;
     /* a quarter: the embeddings catch up on what dropout and the sparse levels kept from them,
        while the network keeps most of its training (Sahara, 10 minutes: reconstruction +0.035
-       SSIM, neighbours unchanged; docs/gnn.md) */
-    if (o->embed_phase == 0) o->embed_phase = 0.25f;
+       SSIM, neighbours unchanged). With an early network for other terrain the phase trains
+       everything for the example alone, so it gets half (Moon 0.928 -> 0.955 with its rate;
+       every holdout's best check came before half; docs/gnn.md) */
+    if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
     if (o->lr <= 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
     if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
@@ -21318,12 +21323,12 @@ static tn_status tn__gnn_level_thin(tn__gnn_train *s, const tn__gnn_level *L, tn
 
 /* This step's graph on level L: the fixed edges of unmasked parts, then random pixel-part
    edges, then the noise feature (finished by the caller, once it knows which parts keep their
-   embedding). */
-static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L)
+   embedding). whole: every part, no random edges (the graph generation uses). */
+static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L, int whole)
 {
     tn__gnn_graph *g = &s->g;
-    int p, j, i, k = s->A.k, nparts = L->P.n, nm = 0;
-    float mask = s->o.mask > 0 ? s->o.mask : 0.0f, noise = s->o.edge_noise > 0 ? s->o.edge_noise : 0.0f;
+    int p, j, i, k = s->A.k, nparts = L->P.n, nm = 0, nrand = s->o.random_edges > 0 && !whole ? s->o.random_edges : 0;
+    float mask = s->o.mask > 0 && !whole ? s->o.mask : 0.0f, noise = s->o.edge_noise > 0 ? s->o.edge_noise : 0.0f;
     for (i = 0; i < nparts; i++) {
         s->masked[i] = (uint8_t)(mask > 0 && tn_rng_uniform(&s->rng) < mask);
         nm += s->masked[i];
@@ -21340,7 +21345,7 @@ static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L)
             memcpy(g->feat + (size_t)g->E * TN__GNN_F, L->nfeat + ((size_t)p * k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
             g->E++;
         }
-    for (i = 0; i < (s->o.random_edges > 0 ? s->o.random_edges : 0); i++) {
+    for (i = 0; i < nrand; i++) {
         int pix = (int)tn_rng_below(&s->rng, (uint32_t)s->npix), r = (int)tn_rng_below(&s->rng, (uint32_t)nparts), jj;
         float d2;
         if (s->masked[r]) continue;
@@ -21450,7 +21455,9 @@ static tn_status tn__gnn_shape_losses(tn__gnn_train *s, tn_ctx *ctx, const tn__g
     return *loss ? TN_OK : tn_ctx_status(ctx);
 }
 
-/* One step; the unweighted loss terms go to l[0..2], the total to l[3]. */
+/* One step; the unweighted loss terms go to l[0..2], the total to l[3]. phase: 0 = a training
+   step; 1 = the embedding phase's (the example's own network, every embedding); 2 = the same on
+   the whole graph (no masked parts, no random edges: the example alone). */
 static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l)
 {
     tn__gnn_in in;
@@ -21467,7 +21474,7 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
         if ((st = tn__gnn_level_thin(s, L, &s->thinned))) return st;
         L = &s->thinned;
     }
-    tn__gnn_step_graph(s, L);
+    tn__gnn_step_graph(s, L, phase == 2);
     shape[0] = L->P.n;
     shape[1] = s->A.embed;
     if (lev == 0) { /* embedding dropout: a dropped part is seen as a part of an unknown sketch */
@@ -21680,7 +21687,8 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 
 /* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
    so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
-   unless an early network serves other terrain (phase_network): then everything trains on.
+   unless an early network serves other terrain (phase_network): then everything trains, at 2.5 x,
+   on the whole graph.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
    (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
@@ -21699,7 +21707,12 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
             if (info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
         }
     }
-    if (s->o.phase_network >= 0 && s->best) return tn__gnn_step(s, ctx, 1, l);
+    if (s->o.phase_network >= 0 && s->best) { /* the example alone: everything, whole graph, faster (docs/gnn.md) */
+        tn_optim_set_lr(s->opt, 2.5f * s->o.lr);
+        st = tn__gnn_step(s, ctx, 2, l);
+        tn_optim_set_lr(s->opt, s->o.lr);
+        return st;
+    }
     for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
     tn_optim_set_lr(s->opt, 5.0f * s->o.lr);
     st = tn__gnn_step(s, ctx, 1, l);

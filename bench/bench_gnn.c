@@ -20,11 +20,14 @@
    Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
    instead of a time budget (the same model on any machine and load), seed=S (training seed,
    default 1), smooth=W sketch=W further=W (tn_gnn_opts' loss weights), phase=P (embed_phase, the
-   share of the budget that trains only the example's embeddings; -1 = none), index=-1 (part_index:
+   share of the budget at the end that trains for the example alone; default the library's,
+   -1 = none), index=-1 (part_index:
    the projection index on parts without an embedding too), gain=G (the generation's
    residual gain for the GNN figures; default 0 = tested on each sketch), pictures=1 (writes
    gnn_fig10_<region>.png: the example crop, then the Figure 10 sketch as membrane, GNN and GNN
-   with 48 random nodes, hillshaded).
+   with 48 random nodes, hillshaded), finetune=N (fine-tune steps of the neighbours' GNN figures,
+   the drawn sketch's and the 512 map's; default 0), model=PATH (load the model from PATH and
+   skip training when it exists, else train and save it there).
    Prints `name: value unit` lines. */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
@@ -325,10 +328,11 @@ int main(int argc, char **argv)
     double cover;
     scores rec = {0, 0, 0, 0};
     double t95 = -1, t97 = -1;
-    float gain = 0.0f, phase = 0.25f; /* tn_gnn_defaults' embed_phase */
+    float gain = 0.0f, phase = 0.0f; /* 0: tn_gnn_defaults' embed_phase */
     double done = 0;
     long iters = 0, phase_from = -1;
-    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0;
+    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0, finetune = 0;
+    const char *model_path = NULL;
     tn_image hw[4];
     trace_set ts;
     char ckpt[256];
@@ -350,8 +354,10 @@ int main(int argc, char **argv)
         else if (kl == 5 && !strncmp(argv[a], "trace", kl)) trace = v != 0;
         else if (kl == 7 && !strncmp(argv[a], "holdout", kl)) hold = v != 0;
         else if (kl == 8 && !strncmp(argv[a], "phasenet", kl)) o.phase_network = (int)v;
+        else if (kl == 8 && !strncmp(argv[a], "finetune", kl)) finetune = (int)v;
+        else if (kl == 5 && !strncmp(argv[a], "model", kl)) model_path = eq + 1;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= holdout= phasenet= pictures= trace=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= holdout= phasenet= finetune= model= pictures= trace=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -387,6 +393,11 @@ int main(int argc, char **argv)
         o.holdout_count = nhold;
     }
     printf("holdout_windows: %d\n", nhold);
+    if (phase == 0) {
+        tn_gnn_opts d = o;
+        tn_gnn_defaults(&d);
+        phase = d.embed_phase;
+    }
     tn_set_progress(progress, NULL);
     if (!sketch_of(&crop, 0, &sk, &cover)) {
         fprintf(stderr, "bench_gnn: no network in the crop\n");
@@ -394,47 +405,56 @@ int main(int argc, char **argv)
     }
     memset(&go, 0, sizeof go);
     if (trace) trace_prepare(&ts, &full, cx, cy, thr);
-    t0 = tn_time_seconds();
-    for (seg = 1;; seg++) {
-        tn_metrics mt;
-        o.train.max_iters = iters > 0 && iters < 150L * seg ? iters : 150L * seg;
-        o.train.resume = seg > 1;
-        /* the segments' iteration caps are not the budget: the embedding phase follows the whole
-           run's, switched on from the first segment that starts in its last `phase` share */
-        o.embed_phase = seg > 1 && phase > 0 && done >= 1.0 - phase ? 0.9999f : -1.0f;
-        if (o.embed_phase > 0 && phase_from < 0) phase_from = st.iterations;
-        if (tn_gnn_train(&crop, &o, &model, &st)) {
-            fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
+    if (model_path && !access(model_path, F_OK)) { /* model=PATH: a model trained before */
+        if (tn_gnn_load(model_path, &model)) {
+            fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
             return 1;
         }
-        done = iters > 0 ? (double)st.iterations / (double)iters : st.seconds / (minutes * 60.0);
-        if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out) && !tn_compare(&crop, &out, 0, &mt)) {
-            if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
-            if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
-            fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
-            if (trace) trace_print(&ts, &model, st.iterations, mt.ssim);
+        printf("model: %s (loaded, %ld iterations)\n", model_path, model.iterations);
+    } else {
+        t0 = tn_time_seconds();
+        for (seg = 1;; seg++) {
+            tn_metrics mt;
+            o.train.max_iters = iters > 0 && iters < 150L * seg ? iters : 150L * seg;
+            o.train.resume = seg > 1;
+            /* the segments' iteration caps are not the budget: the embedding phase follows the whole
+               run's, switched on from the first segment that starts in its last `phase` share */
+            o.embed_phase = seg > 1 && phase > 0 && done >= 1.0 - phase ? 0.9999f : -1.0f;
+            if (o.embed_phase > 0 && phase_from < 0) phase_from = st.iterations;
+            if (tn_gnn_train(&crop, &o, &model, &st)) {
+                fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
+                return 1;
+            }
+            done = iters > 0 ? (double)st.iterations / (double)iters : st.seconds / (minutes * 60.0);
+            if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out) && !tn_compare(&crop, &out, 0, &mt)) {
+                if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
+                if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
+                fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
+                if (trace) trace_print(&ts, &model, st.iterations, mt.ssim);
+            }
+            tn_image_free(&out);
+            if (st.iterations < 150L * seg) break; /* the budget ended the run */
+            tn_gnn_free(&model);
         }
-        tn_image_free(&out);
-        if (st.iterations < 150L * seg) break; /* the budget ended the run */
-        tn_gnn_free(&model);
-    }
-    remove(ckpt);
-    printf("train_minutes: %.2f min\n", (tn_time_seconds() - t0) / 60.0);
-    printf("train_iterations: %ld\n", st.iterations);
-    printf("train_steps_per_s: %.2f steps/s\n", st.seconds > 0 ? st.iterations / st.seconds : 0.0);
-    if (t95 >= 0) printf("train_seconds_to_ssim_0.95: %.0f s\n", t95);
-    else printf("train_seconds_to_ssim_0.95: not reached\n");
-    if (t97 >= 0) printf("train_seconds_to_ssim_0.97: %.0f s\n", t97);
-    else printf("train_seconds_to_ssim_0.97: not reached\n");
-    printf("train_parts: %d\n", st.parts);
-    printf("train_edges: %d (fixed)\n", st.edges);
-    printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
-    printf("train_loss_ssim: %.4f (1 - SSIM; in the embedding phase at the end)\n", st.loss_ssim);
-    printf("train_embed_phase_from: %ld iterations\n", phase_from);
-    if (nhold) {
-        printf("train_holdout_checks: %d\n", st.holdout_checks);
-        printf("train_holdout_best_iteration: %ld\n", st.holdout_iteration);
-        printf("train_holdout_best_ssim: %.4f (last check %.4f)\n", st.holdout_ssim, st.holdout_last_ssim);
+        remove(ckpt);
+        printf("train_minutes: %.2f min\n", (tn_time_seconds() - t0) / 60.0);
+        printf("train_iterations: %ld\n", st.iterations);
+        printf("train_steps_per_s: %.2f steps/s\n", st.seconds > 0 ? st.iterations / st.seconds : 0.0);
+        if (t95 >= 0) printf("train_seconds_to_ssim_0.95: %.0f s\n", t95);
+        else printf("train_seconds_to_ssim_0.95: not reached\n");
+        if (t97 >= 0) printf("train_seconds_to_ssim_0.97: %.0f s\n", t97);
+        else printf("train_seconds_to_ssim_0.97: not reached\n");
+        printf("train_parts: %d\n", st.parts);
+        printf("train_edges: %d (fixed)\n", st.edges);
+        printf("train_loss_mse: %.5f (normalised heights^2)\n", st.loss_mse);
+        printf("train_loss_ssim: %.4f (1 - SSIM; in the embedding phase at the end)\n", st.loss_ssim);
+        printf("train_embed_phase_from: %ld iterations\n", phase_from);
+        if (nhold) {
+            printf("train_holdout_checks: %d\n", st.holdout_checks);
+            printf("train_holdout_best_iteration: %ld\n", st.holdout_iteration);
+            printf("train_holdout_best_ssim: %.4f (last check %.4f)\n", st.holdout_ssim, st.holdout_last_ssim);
+        }
+        if (model_path && tn_gnn_save(&model, model_path)) fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
     }
 
     /* reconstruction from the crop's own network */
@@ -488,8 +508,10 @@ int main(int argc, char **argv)
                     if (!tn_gnn_gain(&model, &sk, SIDE, SIDE, &go, &gn)) gains += gn;
                     if (gain == 0.0f) go.gain = gn > 0 ? gn : -1.0f; /* tested once, not again inside generate */
                 }
+                go.finetune = finetune;
                 if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&g, &nb, &out);
                 else fprintf(stderr, "  neighbour (%d, %d): %s\n", dx, dy, tn_last_error());
+                go.finetune = 0;
                 tn_image_free(&out);
                 go.gain = 1.0f; /* the network as trained, without the gain tested on the sketch */
                 if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&raw, &nb, &out);
@@ -534,6 +556,7 @@ int main(int argc, char **argv)
         go.seed = 1;
         if (!tn_gnn_membrane(&units, U, U, &mem)) user_scores("membrane", &a, &crop, &mem);
         t0 = tn_time_seconds();
+        go.finetune = finetune;
         if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) {
             printf("user_generate_256_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
             user_scores("gnn", &a, &crop, &g);
@@ -547,6 +570,7 @@ int main(int argc, char **argv)
             tn_image_free(&back);
         }
         tn_image_free(&gr);
+        go.finetune = 0;
         go.random_nodes = 48;
         if (!tn_gnn_generate(&model, &a, U, U, &go, &gr)) user_scores("gnn_random48", &a, &crop, &gr);
         if (pictures && g.data && gr.data && mem.data) {
@@ -578,6 +602,7 @@ int main(int argc, char **argv)
         scores b = {0, 0, 0, 0}, bm = {0, 0, 0, 0};
         tn_image_crop(&big, &full, 0, 0, 512, 512);
         if (sketch_of(&big, 0, &sk, &cover)) {
+            go.finetune = finetune;
             t0 = tn_time_seconds();
             if (!tn_gnn_generate(&model, &sk, 512, 512, &go, &out)) {
                 printf("generate_512_s: %.2f s\n", tn_time_seconds() - t0);

@@ -716,22 +716,28 @@ TN_TEST(holdout_early_stopping)
     TN_CHECK(st2.holdout_iteration == st.holdout_iteration && st2.holdout_checks == st.holdout_checks);
     TN_CHECK(same_learned(&res, 0, &full, 0) && same_learned(&res, 1, &stop, 0));
     tn_gnn_free(&res);
-    /* with the embedding phase (from 9): checks at 2, 4, 6, 8 and 9; the phase trains the network
-       on (it serves only the example's own network now), unless phase_network = -1 */
+    /* the default embedding phase with an early network: the second half (from 6), checks at 2, 4
+       and 6; it trains the network on (it serves only the example's own network now) */
     holdout_opts(&o, 12, hold);
     o.embed_phase = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
-    TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 9 && tn_params_find(res.weights, "early.gnn.emb"));
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 3);
+    TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 6 && tn_params_find(res.weights, "early.gnn.emb"));
     tn_gnn_free(&stop);
-    holdout_opts(&o, 9, NULL);
+    holdout_opts(&o, 6, NULL);
     o.holdout_count = 0;
     TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
     TN_CHECK(!same_learned(&res, 0, &stop, 1));
     tn_gnn_free(&res);
+    /* phase_network = -1: the last quarter (from 9), checks at 2, 4, 6, 8 and 9; only the
+       embeddings move in it */
     holdout_opts(&o, 12, hold);
     o.embed_phase = 0;
     o.phase_network = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.holdout_checks == 5);
+    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
+    tn_gnn_free(&stop);
+    holdout_opts(&o, 9, NULL);
+    o.holdout_count = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
     TN_CHECK(same_learned(&res, 0, &stop, 1) && !same_learned(&res, 0, &stop, 0));
     tn_gnn_free(&res);
     /* bad holdouts */

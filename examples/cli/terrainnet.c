@@ -1663,8 +1663,9 @@ static const cli_opt gnn_train_opts[] = {
     {"further-weight", 0, ARG_FLOAT, 0, &gnn_train_arg.o.further_weight, NULL, 0, 1e6, "W",
      "paper 6.1's distance loss: terrain next to a line keeps near its height", "0 = off"},
     {"embed-phase", 0, ARG_FLOAT, 0, &gnn_train_arg.o.embed_phase, NULL, -1, 0.99, "S",
-     "share of the budget at the end that trains only the example's part embeddings (a sharper reconstruction, the network kept; -1 = none)",
-     "0.25"},
+     "share of the budget at the end that trains for the example alone (a sharper reconstruction): everything with --holdout, "
+     "else only the part embeddings (-1 = none)",
+     "0.5 with --holdout, else 0.25"},
 };
 
 static int run_gnn_train(void)
