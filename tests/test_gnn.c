@@ -665,6 +665,15 @@ static void holdout_opts(tn_gnn_opts *o, long iters, tn_image *hold)
     o->holdout_every = 2;
 }
 
+/* the model of a run without holdouts stopped at iteration iters (settings of holdout_opts) */
+static int stopped_run(const tn_image *dem, long iters, tn_gnn *out)
+{
+    tn_gnn_opts o;
+    holdout_opts(&o, iters, NULL);
+    o.holdout_count = 0;
+    return tn_gnn_train(dem, &o, out, NULL) == TN_OK;
+}
+
 TN_TEST(holdout_early_stopping)
 {
     /* checks every 2 iterations on two other terrains. The model keeps the fully trained
@@ -689,9 +698,7 @@ TN_TEST(holdout_early_stopping)
     o.holdout_count = 0;
     TN_CHECK(tn_gnn_train(&dem, &o, &full, &st2) == TN_OK && st2.holdout_iteration == -1);
     TN_CHECK(same_learned(&m, 0, &full, 0) && !tn_params_find(full.weights, "early.gnn.emb"));
-    holdout_opts(&o, st.holdout_iteration, NULL);
-    o.holdout_count = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
+    TN_CHECK(stopped_run(&dem, st.holdout_iteration, &stop));
     TN_CHECK(same_learned(&m, 1, &stop, 0));
     TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, NULL, &b) == TN_OK);
     TN_CHECK(same_image(&a, &b));
@@ -723,9 +730,7 @@ TN_TEST(holdout_early_stopping)
     TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 3);
     TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 6 && tn_params_find(res.weights, "early.gnn.emb"));
     tn_gnn_free(&stop);
-    holdout_opts(&o, 6, NULL);
-    o.holdout_count = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
+    TN_CHECK(stopped_run(&dem, 6, &stop));
     TN_CHECK(!same_learned(&res, 0, &stop, 1));
     tn_gnn_free(&res);
     /* phase_network = -1: the last quarter (from 9), checks at 2, 4, 6, 8 and 9; only the
@@ -735,11 +740,30 @@ TN_TEST(holdout_early_stopping)
     o.phase_network = -1;
     TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
     tn_gnn_free(&stop);
-    holdout_opts(&o, 9, NULL);
-    o.holdout_count = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &stop, NULL) == TN_OK);
+    TN_CHECK(stopped_run(&dem, 9, &stop));
     TN_CHECK(same_learned(&res, 0, &stop, 1) && !same_learned(&res, 0, &stop, 0));
     tn_gnn_free(&res);
+    /* holdouts without a network (flat): no check, no early network, so the phase (half, as
+       holdouts were given) moves only the embeddings */
+    {
+        tn_image flat[2];
+        int i;
+        for (i = 0; i < 2; i++) {
+            size_t q;
+            TN_CHECK(tn_image_create(&flat[i], 40, 40, 1) == TN_OK);
+            for (q = 0; q < 40 * 40; q++) flat[i].data[q] = 100.0f;
+        }
+        holdout_opts(&o, 12, flat);
+        o.embed_phase = 0;
+        TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 0);
+        TN_CHECK(st2.holdout_iteration == -1 && !tn_params_find(res.weights, "early.gnn.emb"));
+        tn_gnn_free(&stop);
+        TN_CHECK(stopped_run(&dem, 6, &stop));
+        TN_CHECK(same_learned(&res, 0, &stop, 1) && !same_learned(&res, 0, &stop, 0));
+        tn_gnn_free(&res);
+        tn_image_free(&flat[0]);
+        tn_image_free(&flat[1]);
+    }
     /* bad holdouts */
     tiny_opts(&o, 2);
     o.holdout_count = 1;
