@@ -21693,7 +21693,7 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
    (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
 {
-    int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w);
+    int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w), alone;
     long it = tn_train_iteration(s->run);
     tn_tensor *emb = tn_params_find(s->w, "gnn.emb");
     tn_status st;
@@ -21707,18 +21707,15 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
             if (info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
         }
     }
-    if (s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0) {
-        /* an early network serves other terrain: the example alone, everything, whole graph, faster (docs/gnn.md) */
-        tn_optim_set_lr(s->opt, 2.5f * s->o.lr);
-        st = tn__gnn_step(s, ctx, 2, l);
-        tn_optim_set_lr(s->opt, s->o.lr);
-        return st;
-    }
-    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
-    tn_optim_set_lr(s->opt, 5.0f * s->o.lr);
-    st = tn__gnn_step(s, ctx, 1, l);
+    /* an early network serves other terrain: the example alone, everything, whole graph, faster (docs/gnn.md) */
+    alone = s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0;
+    if (!alone)
+        for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
+    tn_optim_set_lr(s->opt, (alone ? 2.5f : 5.0f) * s->o.lr);
+    st = tn__gnn_step(s, ctx, alone ? 2 : 1, l);
     tn_optim_set_lr(s->opt, s->o.lr);
-    for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i)->grad != NULL; /* learned, not buffers */
+    if (!alone)
+        for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i)->grad != NULL; /* learned, not buffers */
     return st;
 }
 
