@@ -1598,7 +1598,7 @@ typedef struct tn_gnn_opts {
     int holdout_count;
     int holdout_every;     /* iterations between holdout checks; 0 = 150 */
     int phase_network;     /* with holdouts (an early network): the embedding phase trains the
-                              network too, everything at 2.5 x the rate on the whole graph (no
+                              network too, everything at 4 x the rate on the whole graph (no
                               masked parts, no random edges), since the trained network then
                               serves only the example's own network; 0 = on, -1 = off
                               (without holdouts the phase always leaves the network as it is) */
@@ -1708,7 +1708,7 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
    the network plus the membrane's blocks (see >>gnn), so the window is computed on itself grown
    by that halo. Large maps and windows run in tiles of 256 px (+ halo) internally, so memory
-   follows the tile, not the map (except a fine-tune, which works on the whole map first). */
+   follows the tile, not the map (the fine-tune's too: it works on windows of maps over 256^2). */
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
                                         int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
 
@@ -19818,8 +19818,8 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     /* a quarter: the embeddings catch up on what dropout and the sparse levels kept from them,
        while the network keeps most of its training (Sahara, 10 minutes: reconstruction +0.035
        SSIM, neighbours unchanged). With an early network for other terrain the phase trains
-       everything for the example alone, so it gets half (Sahara 0.929 -> 0.959, Moon 0.928 ->
-       0.961; every holdout's best check came before half; docs/gnn.md) */
+       everything for the example alone, so it gets half (Sahara 0.929 -> 0.964, Moon 0.928 ->
+       0.971 with the rest of that phase; every holdout's best check came before half; docs/gnn.md) */
     if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
     if (o->lr <= 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
@@ -21688,7 +21688,7 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 /* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
    so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
    unless an early network serves other terrain (phase_network, and a holdout check found one):
-   then everything trains, at 2.5 x, on the whole graph.
+   then everything trains, at 4 x, on the whole graph.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
    (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
@@ -21711,7 +21711,7 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
     alone = s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0;
     if (!alone)
         for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
-    tn_optim_set_lr(s->opt, (alone ? 2.5f : 5.0f) * s->o.lr);
+    tn_optim_set_lr(s->opt, (alone ? 4.0f : 5.0f) * s->o.lr);
     st = tn__gnn_step(s, ctx, alone ? 2 : 1, l);
     tn_optim_set_lr(s->opt, s->o.lr);
     if (!alone)
@@ -22163,8 +22163,9 @@ static void tn__gnn_region_free(tn__gnn_region *R)
 }
 
 /* The graph of the region: its pixels' k nearest parts within the radius, from the parts with a
-   point less than radius + 1 px from the region (every part a region pixel can reach). */
-static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int rw, int rh, tn__gnn_region *R)
+   point less than radius + 1 px from the region (every part a region pixel can reach). base_map:
+   the whole map's membrane (example units) to take the region's from, or NULL to solve it. */
+static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int rw, int rh, const float *base_map, tn__gnn_region *R)
 {
     const tn__gnn_parts *S = &G->P;
     size_t npix = (size_t)rw * rh, i;
@@ -22187,7 +22188,10 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
     if (!R->type || !R->base || !R->of || !R->P.start || !R->P.of || !R->P.pts || !R->P.sign) st = TN_ERR_OUT_OF_MEMORY;
     for (y = 0; !st && y < rh; y++) memcpy(R->type + (size_t)y * rw, G->type + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
     if (!st && G->A.membrane) {
-        st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
+        if (base_map)
+            for (y = 0; y < rh; y++) memcpy(R->base + (size_t)y * rw, base_map + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
+        else
+            st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
         for (i = 0; !st && i < npix; i++) R->base[i] = (R->base[i] - G->A.mean) / G->A.std;
     } else if (!st)
         memset(R->base, 0, npix * sizeof(float));
@@ -22231,14 +22235,14 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
     return st;
 }
 
-/* The region's node inputs. emb: the sketch's embeddings as a tensor (the fine-tune's, which
-   must then cover every part) or NULL for G's. */
+/* The region's node inputs. emb: the region's parts' embeddings as a tensor (the fine-tune's,
+   R->P.n rows) or NULL for G's. */
 static tn_status tn__gnn_region_inputs(tn_ctx *ctx, const tn__gnn_gen *G, const tn__gnn_region *R, tn_tensor *emb, tn__gnn_in *in)
 {
     tn_tensor *E0;
     int i, D = G->A.embed, Hd = G->A.hidden;
     tn_status st;
-    if (!emb || R->P.n != G->P.n) {
+    if (!emb) {
         if (!(emb = tn_tensor_2d(ctx, R->P.n, D))) return tn_ctx_status(ctx);
         for (i = 0; i < R->P.n; i++) memcpy(emb->data + (size_t)i * D, G->emb + (size_t)R->of[i] * D, (size_t)D * sizeof(float));
     }
@@ -22303,8 +22307,72 @@ static tn_status tn__gnn_region_predict(tn_ctx *ctx, const tn__gnn_gen *G, const
     return st;
 }
 
-/* 5.4: only the sketch parts' embeddings move, loss on the sketch pixels + smoothness, on the
-   whole map (its memory is the whole map's graph; the tiles then share the tuned embeddings). */
+#define TN__GNN_FT_ONE (256 * 256) /* maps up to this many pixels fine-tune as one region (exact) */
+#define TN__GNN_FT_TILE 192        /* else: windows of this core ... */
+#define TN__GNN_FT_MARGIN 16       /* ... grown by this much context (>= 4: a loss pair's far pixel) */
+
+/* The fine-tune's losses on the pixels a window owns (its core), each term divided by its count
+   over the whole map, so the windows' losses add up to the whole map's. */
+typedef struct tn__gnn_ft {
+    int nsk, npairs, *ip, *iq, *ix; /* ix: two index lists of cap each */
+    float *psign, *tg, sw, ow;      /* tg: cap floats */
+    size_t cap;
+} tn__gnn_ft;
+
+static tn_tensor *tn__gnn_ft_loss(tn_ctx *ctx, const tn__gnn_gen *G, const tn__gnn_ft *F, const tn__gnn_region *R, tn_tensor *pred, int cx, int cy,
+                                  int cw, int ch)
+{
+    int *a = F->ix, *b = F->ix + F->cap, n = 0, i, x, y;
+    tn_tensor *loss = NULL, *t;
+#define TN__GNN_LOC(px, py) (((py) - R->ry) * R->rw + (px) - R->rx)
+    for (y = cy; y < cy + ch; y++) /* sketch pixels: their heights */
+        for (x = cx; x < cx + cw; x++)
+            if (G->type[(size_t)y * G->W + x] != 0) {
+                a[n] = TN__GNN_LOC(x, y);
+                F->tg[n++] = (G->hgt[(size_t)y * G->W + x] - G->A.mean) / G->A.std;
+            }
+    if (n > 0 && (t = tn_tensor_2d(ctx, n, 1))) {
+        memcpy(t->data, F->tg, (size_t)n * sizeof(float));
+        loss = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, a, n), t))), 1.0f / (float)F->nsk, 0.0f);
+    }
+    if (F->sw > 0) { /* smoothness: squared differences to the right and lower neighbours (tn_tv_loss) */
+        n = 0;
+        for (y = cy; y < cy + ch; y++)
+            for (x = cx; x < cx + cw; x++) {
+                if (x + 1 < G->W) a[n] = TN__GNN_LOC(x, y), b[n++] = TN__GNN_LOC(x + 1, y);
+                if (y + 1 < G->H) a[n] = TN__GNN_LOC(x, y), b[n++] = TN__GNN_LOC(x, y + 1);
+            }
+        if (n > 0) {
+            t = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, a, n), tn_gather_rows(ctx, pred, b, n)))),
+                               F->sw / (float)(G->W * G->H), 0.0f);
+            loss = loss ? tn_add(ctx, loss, t) : t;
+        }
+    }
+    if (F->npairs > 0) { /* relu(sign * (h_q - h_p)): ridges above, valleys below their across pixels */
+        tn_tensor *sg;
+        n = 0;
+        for (i = 0; i < F->npairs; i++) {
+            int px = F->ip[i] % G->W, py = F->ip[i] / G->W;
+            if (px < cx || px >= cx + cw || py < cy || py >= cy + ch) continue;
+            a[n] = TN__GNN_LOC(px, py);
+            b[n] = TN__GNN_LOC(F->iq[i] % G->W, F->iq[i] / G->W);
+            F->tg[n++] = F->psign[i];
+        }
+        if (n > 0 && (sg = tn_tensor_2d(ctx, n, 1))) {
+            memcpy(sg->data, F->tg, (size_t)n * sizeof(float));
+            t = tn_mul(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, b, n), tn_gather_rows(ctx, pred, a, n)), sg);
+            t = tn_scale_shift(ctx, tn_sum(ctx, tn_relu(ctx, t)), F->ow / (float)F->npairs, 0.0f);
+            loss = loss ? tn_add(ctx, loss, t) : t;
+        }
+    }
+#undef TN__GNN_LOC
+    return loss;
+}
+
+/* 5.4: only the sketch parts' embeddings move, loss on the sketch pixels + smoothness + the
+   ridges' ordering. A small map is one region (exact); a larger one runs window by window,
+   each with a margin of context, adding every window's gradient before the step, so memory
+   follows the window, not the map (the generation after it is exact for any split). */
 static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
 {
     tn__gnn_region R;
@@ -22313,19 +22381,34 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
     tn_optim *fopt = NULL;
     tn_optim_opts oo;
     tn_tensor *emb;
-    int step, shape[4], s[2], i, nsk = 0, npix = G->W * G->H, npairs = 0, *ip = NULL, *iq = NULL;
-    float *psign = NULL;
+    tn__gnn_ft F;
+    int one = (size_t)G->W * G->H <= TN__GNN_FT_ONE, tile = one ? (G->W > G->H ? G->W : G->H) : TN__GNN_FT_TILE;
+    int margin = one ? 0 : TN__GNN_FT_MARGIN, nwx = (G->W + tile - 1) / tile, nwy = (G->H + tile - 1) / tile;
+    int step, s[2], i, npix = G->W * G->H, wi, made = 0;
+    float *base = NULL; /* the whole map's membrane, solved once: the windows' graphs are made again each step */
+    size_t maxpix = (size_t)(tile + 2 * margin) * (tile + 2 * margin);
+    tn_status st = TN_OK;
+    memset(&R, 0, sizeof R);
+    memset(&F, 0, sizeof F);
     /* ordering on by default: on the A sketch it took a 180-step alps model from 89.0 to 97.8 %
        and left one already at 94.3 % there (docs/gnn.md) */
-    float sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
-    float ow = o->order_weight == 0 ? 1.0f : o->order_weight > 0 ? o->order_weight : 0.0f;
-    tn_status st;
-    if ((st = tn__gnn_region_make(G, 0, 0, G->W, G->H, &R))) goto done;
+    F.sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
+    F.ow = o->order_weight == 0 ? 1.0f : o->order_weight > 0 ? o->order_weight : 0.0f;
+    for (i = 0; i < npix; i++) F.nsk += G->type[i] != 0;
+    if (maxpix > (size_t)npix) maxpix = (size_t)npix;
+    F.cap = 2 * (maxpix > (size_t)G->P.npts ? maxpix : (size_t)G->P.npts) + 1; /* 2 smoothness pairs a pixel, 2 ordering pairs a point */
     s[0] = G->P.n;
     s[1] = G->A.embed;
-    if (!(ctx = tn_ctx_create()) || !(ft = tn_params_create()) || !(emb = tn_params_add(ft, "emb", 2, s)) || !(frozen = tn_params_create())) {
+    if (!(ctx = tn_ctx_create()) || !(ft = tn_params_create()) || !(emb = tn_params_add(ft, "emb", 2, s)) || !(frozen = tn_params_create()) ||
+        !(F.ip = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) || !(F.iq = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) ||
+        !(F.psign = (float *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(float))) ||
+        !(F.ix = (int *)tn__alloc(2 * F.cap * sizeof(int))) || !(F.tg = (float *)tn__alloc(F.cap * sizeof(float)))) {
         st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
         goto done;
+    }
+    if (!one && G->A.membrane) {
+        if (!(base = (float *)tn__alloc((size_t)npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        if ((st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, 0, 0, G->W, G->H, base))) goto done;
     }
     memcpy(emb->data, G->emb, (size_t)G->P.n * G->A.embed * sizeof(float));
     memset(&oo, 0, sizeof oo);
@@ -22338,14 +22421,8 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
         if (!c) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
         memcpy(c->data, t->data, t->numel * sizeof(float));
     }
-    for (i = 0; i < npix; i++) nsk += G->type[i] != 0;
-    if (ow > 0) { /* across-line pairs of every part point: (p, q) and the sign */
+    if (F.ow > 0) { /* across-line pairs of every part point: (p, q) and the sign */
         int p, j, a, b, c;
-        if (!(ip = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) || !(iq = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) ||
-            !(psign = (float *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(float)))) {
-            st = TN_ERR_OUT_OF_MEMORY;
-            goto done;
-        }
         for (p = 0; p < G->P.n; p++) {
             tn_contour c0;
             memset(&c0, 0, sizeof c0);
@@ -22354,38 +22431,33 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
             for (j = 0; j < c0.npoints; j++) {
                 tn__gnn_across(&c0, j, G->W, G->H, 3.0f, &a, &b, &c);
                 if (a < 0) continue;
-                if (b >= 0) { ip[npairs] = a; iq[npairs] = b; psign[npairs++] = G->P.sign[p]; }
-                if (c >= 0) { ip[npairs] = a; iq[npairs] = c; psign[npairs++] = G->P.sign[p]; }
+                if (b >= 0) { F.ip[F.npairs] = a; F.iq[F.npairs] = b; F.psign[F.npairs++] = G->P.sign[p]; }
+                if (c >= 0) { F.ip[F.npairs] = a; F.iq[F.npairs] = c; F.psign[F.npairs++] = G->P.sign[p]; }
             }
         }
     }
-    shape[0] = shape[1] = 1;
-    shape[2] = G->H;
-    shape[3] = G->W;
     for (step = 0; step < o->finetune && !st; step++) {
-        tn_tensor *p4, *mask, *tg, *loss, *pred;
-        tn_ctx_reset(ctx);
-        pred = tn__gnn_region_forward(ctx, G, frozen, &R, emb);
-        p4 = tn_reshape(ctx, pred, 4, shape);
-        mask = tn_tensor_4d(ctx, 1, 1, G->H, G->W);
-        tg = tn_tensor_4d(ctx, 1, 1, G->H, G->W);
-        if (!p4 || !mask || !tg) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
-        for (i = 0; i < npix; i++) {
-            mask->data[i] = G->type[i] != 0 ? 1.0f : 0.0f;
-            tg->data[i] = G->type[i] != 0 ? (G->hgt[i] - G->A.mean) / G->A.std : 0.0f;
-        }
-        loss = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_mul(ctx, tn_sub(ctx, p4, tg), mask))), 1.0f / (float)(nsk ? nsk : 1), 0.0f);
-        if (sw > 0) loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_tv_loss(ctx, p4, 2.0f), sw / (float)npix, 0.0f));
-        if (npairs > 0) { /* relu(sign * (h_q - h_p)): ridges above, valleys below their across pixels */
-            tn_tensor *sg = tn_tensor_2d(ctx, npairs, 1), *d;
-            if (!sg) { st = tn_ctx_status(ctx); break; }
-            memcpy(sg->data, psign, (size_t)npairs * sizeof(float));
-            d = tn_mul(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, iq, npairs), tn_gather_rows(ctx, pred, ip, npairs)), sg);
-            loss = tn_add(ctx, loss, tn_scale_shift(ctx, tn_mean(ctx, tn_relu(ctx, d)), ow, 0.0f));
-        }
-        if (!loss) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
         tn_params_zero_grad(ft);
-        if ((st = tn_backward(ctx, loss))) break;
+        for (wi = 0; wi < nwx * nwy && !st; wi++) {
+            int cx = (wi % nwx) * tile, cy = (wi / nwx) * tile, cw = G->W - cx < tile ? G->W - cx : tile, ch = G->H - cy < tile ? G->H - cy : tile;
+            int rx = cx - margin > 0 ? cx - margin : 0, ry = cy - margin > 0 ? cy - margin : 0;
+            int rx1 = cx + cw + margin < G->W ? cx + cw + margin : G->W, ry1 = cy + ch + margin < G->H ? cy + ch + margin : G->H;
+            tn_tensor *pred, *loss;
+            if (!made || nwx * nwy > 1) { /* one window keeps its graph; more are made again each step (memory) */
+                tn__gnn_region_free(&R);
+                if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, base, &R))) break;
+                made = 1;
+            }
+            tn_ctx_reset(ctx);
+            pred = tn__gnn_region_forward(ctx, G, frozen, &R, tn_gather_rows(ctx, emb, R.of, R.P.n));
+            if (!pred) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
+            if (!(loss = tn__gnn_ft_loss(ctx, G, &F, &R, pred, cx, cy, cw, ch))) {
+                if ((st = tn_ctx_status(ctx))) break;
+                continue; /* nothing to fit in this window */
+            }
+            st = tn_backward(ctx, loss);
+        }
+        if (st) break;
         tn_optim_step(fopt);
         if ((st = tn__progress("gnn-finetune", (double)(step + 1) / o->finetune))) break;
     }
@@ -22396,9 +22468,12 @@ done:
     tn_optim_free(fopt);
     tn_params_free(ft);
     tn_params_free(frozen);
-    TN_FREE(ip);
-    TN_FREE(iq);
-    TN_FREE(psign);
+    TN_FREE(F.ip);
+    TN_FREE(F.iq);
+    TN_FREE(F.psign);
+    TN_FREE(F.ix);
+    TN_FREE(F.tg);
+    TN_FREE(base);
     return st;
 }
 
@@ -22606,8 +22681,6 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
                         "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
-    if (o.finetune > 0 && (size_t)width * height * G->A.k > TN__GNN_MAX_EDGES)
-        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: the fine-tune works on the whole map; %d x %d is too large for it", width, height);
     if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
     if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
         tn_sketch_random_opts ro;
@@ -22647,7 +22720,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     tn_status st;
     if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
-    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, &R))) return st;
+    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
     if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
     for (v = 0; !st && v < wh; v++)

@@ -548,6 +548,50 @@ TN_TEST(window_equals_whole_map)
     tn_image_free(&dem);
 }
 
+TN_TEST(finetune_in_windows)
+{
+    /* a map over 256^2 fine-tunes window by window: it lifts the ridges above (valleys below)
+       the land beside them, gives the same bits on 1 and 2 threads, and a window of the map
+       still equals the whole map's pixels */
+    tn_image dem = tn_test_dem(40, 12), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, c = {0, 0, 0, NULL};
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_sketch_random_opts ro;
+    tn_contour_set sk;
+    double s0 = 0, s1 = 0;
+    int x, y, same = 1, before = tn_get_threads();
+    tiny_opts(&o, 3);
+    o.radius = 6;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    memset(&ro, 0, sizeof ro);
+    ro.seed = 4;
+    ro.nodes = 30;
+    TN_CHECK(tn_sketch_random(NULL, 300, 270, &ro, &sk) == TN_OK);
+    memset(&go, 0, sizeof go);
+    go.seed = 5;
+    go.gain = 1;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 300, 270, &go, &a) == TN_OK);
+    go.finetune = 6;
+    go.finetune_lr = 0.05f;
+    TN_CHECK(tn_gnn_generate(&m, &sk, 300, 270, &go, &b) == TN_OK);
+    TN_CHECK(tn_gnn_ordering(&sk, &a, 0, &s0, NULL) == TN_OK && tn_gnn_ordering(&sk, &b, 0, &s1, NULL) == TN_OK);
+    printf("  ordering without / with the fine-tune: %.3f / %.3f\n", s0, s1);
+    TN_CHECK(s1 > s0 + 0.02);
+    tn_set_threads(1 + (before == 1));
+    TN_CHECK(tn_gnn_generate_window(&m, &sk, 300, 270, 180, 150, 100, 80, &go, &c) == TN_OK);
+    tn_set_threads(before);
+    for (y = 0; y < 80 && c.data && b.data; y++)
+        for (x = 0; x < 100; x++) same &= TN_PIXEL(&c, x, y, 0) == TN_PIXEL(&b, 180 + x, 150 + y, 0);
+    TN_CHECK(c.data && same);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&c);
+    tn_contour_set_free(&sk);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 TN_TEST(residual_gain)
 {
     /* the gain validated on the sketch: 1 for the example's own network (the reconstruction),
@@ -826,6 +870,7 @@ int main(void)
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);
+    TN_RUN(finetune_in_windows);
     TN_RUN(residual_gain);
     TN_RUN(ordering_share);
     return tn_test_summary("test_gnn");

@@ -1732,7 +1732,7 @@ static struct gnn_generate_args {
     double range[2];
     tn_gnn_generate_opts o;
     tn_singan_gen_opts detail_opts;
-} gnn_generate_arg;
+} gnn_generate_arg = {.o = {.finetune = -1}}; /* -1: not given */
 static const cli_opt gnn_generate_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &gnn_generate_arg.model, NULL, 0, 0, NULL, "a model from gnn-train", NULL},
     {"SKETCH", 0, ARG_POS, 0, &gnn_generate_arg.sketch, NULL, 0, 0, NULL,
@@ -1745,7 +1745,8 @@ static const cli_opt gnn_generate_opts[] = {
     {"random", 0, ARG_INT, 0, &gnn_generate_arg.o.random_nodes, NULL, 0, 8192, "N",
      "densify the sketch with random ridges and valleys from N random nodes (paper 5.2)", "0 = none"},
     {"finetune", 0, ARG_INT, 0, &gnn_generate_arg.o.finetune, NULL, 0, 100000, "STEPS",
-     "tune the sketch parts' embeddings to the sketch heights first (paper 5.4)", "0 = none"},
+     "tune the sketch parts' embeddings to the sketch's heights and ridge/valley ordering first (paper 5.4)",
+     "30 for a drawn sketch (an image, or a .tns in heights 0..1), else 0 = none"},
     {"embeddings", 0, ARG_CHOICE, 0, &gnn_generate_arg.embeddings, NULL, 0, 0, "auto|aligned|none",
      "which sketch parts take an example part's embedding: identical ones, every one by alignment, none", "auto"},
     {"heights", 0, ARG_CHOICE, 0, &gnn_generate_arg.heights, NULL, 0, 0, "auto|example|unit",
@@ -1799,6 +1800,16 @@ static tn_status load_gnn_sketch(const char *path, double lo, double hi, tn_cont
     return st;
 }
 
+/* Every height in 0..1: a drawing's relative heights (as TN_GNN_HEIGHTS_AUTO reads them). */
+static int relative_heights(const tn_contour_set *sk)
+{
+    int i, j;
+    for (i = 0; i < sk->count; i++)
+        for (j = 0; j < sk->items[i].npoints; j++)
+            if (!(sk->items[i].points[3 * j + 2] >= 0 && sk->items[i].points[3 * j + 2] <= 1)) return 0;
+    return 1;
+}
+
 static int run_gnn_generate(void)
 {
     struct gnn_generate_args *a = &gnn_generate_arg;
@@ -1828,6 +1839,8 @@ static int run_gnn_generate(void)
     }
     a->o.heights = a->heights == 1 ? TN_GNN_HEIGHTS_EXAMPLE : a->heights == 2 ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_AUTO;
     a->o.embeddings = a->embeddings == 1 ? TN_GNN_EMBED_ALIGNED : a->embeddings == 2 ? TN_GNN_EMBED_NONE : TN_GNN_EMBED_AUTO;
+    if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md) */
+        a->o.finetune = relative_heights(&sk) ? 30 : 0;
     t0 = tn_time_seconds();
     if (a->o.gain == 0) { /* tested once here and then fixed, so it can be printed */
         float g = 1.0f;
@@ -1858,8 +1871,9 @@ static int run_gnn_generate(void)
             if (terrain.data[i] < lo) lo = terrain.data[i];
             if (terrain.data[i] > hi) hi = terrain.data[i];
         }
-        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nresidual_gain: %.3f\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n",
-               kind, sk.count, sk.width, sk.height, a->w, a->h, a->o.gain > 0 ? a->o.gain : 0.0, tn_time_seconds() - t0, lo, hi, a->out);
+        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nresidual_gain: %.3f\nfinetune_steps: %d\nseconds: %.2f\nheight_range: %.6g %.6g\n"
+               "output: %s\n", kind, sk.count, sk.width, sk.height, a->w, a->h, a->o.gain > 0 ? a->o.gain : 0.0, a->o.finetune, tn_time_seconds() - t0,
+               lo, hi, a->out);
     }
     tn_image_free(&terrain);
     tn_contour_set_free(&sk);
