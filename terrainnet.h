@@ -1598,9 +1598,10 @@ typedef struct tn_gnn_opts {
     int holdout_count;
     int holdout_every;     /* iterations between holdout checks; 0 = 150 */
     int phase_network;     /* with holdouts (an early network): the embedding phase trains the
-                              network too, everything at 4 x the rate on the whole graph (no
-                              masked parts, no random edges), since the trained network then
-                              serves only the example's own network; 0 = on, -1 = off
+                              network too, everything at 4 x the rate and 10 x the SSIM weight
+                              on the whole graph (no masked parts, no random edges), since the
+                              trained network then serves only the example's own network;
+                              0 = on, -1 = off
                               (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
@@ -19818,8 +19819,8 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     /* a quarter: the embeddings catch up on what dropout and the sparse levels kept from them,
        while the network keeps most of its training (Sahara, 10 minutes: reconstruction +0.035
        SSIM, neighbours unchanged). With an early network for other terrain the phase trains
-       everything for the example alone, so it gets half (Sahara 0.929 -> 0.964, Moon 0.928 ->
-       0.971 with the rest of that phase; every holdout's best check came before half; docs/gnn.md) */
+       everything for the example alone, so it gets half (Sahara 0.929 -> 0.939 at the base rate;
+       every holdout's best check came before half; docs/gnn.md) */
     if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
     if (o->lr <= 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
@@ -21369,6 +21370,8 @@ static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int np
 }
 
 #define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
+#define TN__GNN_ALONE_RATE 4.0f  /* the phase for the example alone: rate and SSIM weight factors */
+#define TN__GNN_ALONE_SSIM 10.0f /* (Sahara 10 minutes: 0.959 at 2.5 x, 0.964 at 4 x, 0.973 with SSIM x 10; docs/gnn.md) */
 #define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */
 
 /* 6.1's sketch term: pixels 1-4 px from a part and not on a line lie below a ridge's (above a
@@ -21509,7 +21512,7 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
     }
     if (s->o.ssim_weight > 0 && (t = tn_ssim_loss(ctx, pred, tgt, s->range))) {
         l[1] = t->data[0];
-        t = tn_scale_shift(ctx, t, s->o.ssim_weight, 0.0f);
+        t = tn_scale_shift(ctx, t, s->o.ssim_weight * (phase == 2 ? TN__GNN_ALONE_SSIM : 1.0f), 0.0f);
         loss = loss ? tn_add(ctx, loss, t) : t;
     }
     if (s->o.grad_weight > 0 && (t = tn_gdl_loss(ctx, pred, tgt))) {
@@ -21688,7 +21691,7 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 /* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
    so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
    unless an early network serves other terrain (phase_network, and a holdout check found one):
-   then everything trains, at 4 x, on the whole graph.
+   then everything trains, at 4 x with SSIM weighted 10 x, on the whole graph.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
    (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
@@ -21711,7 +21714,7 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
     alone = s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0;
     if (!alone)
         for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
-    tn_optim_set_lr(s->opt, (alone ? 4.0f : 5.0f) * s->o.lr);
+    tn_optim_set_lr(s->opt, (alone ? TN__GNN_ALONE_RATE : 5.0f) * s->o.lr);
     st = tn__gnn_step(s, ctx, alone ? 2 : 1, l);
     tn_optim_set_lr(s->opt, s->o.lr);
     if (!alone)
@@ -22442,24 +22445,22 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
             int cx = (wi % nwx) * tile, cy = (wi / nwx) * tile, cw = G->W - cx < tile ? G->W - cx : tile, ch = G->H - cy < tile ? G->H - cy : tile;
             int rx = cx - margin > 0 ? cx - margin : 0, ry = cy - margin > 0 ? cy - margin : 0;
             int rx1 = cx + cw + margin < G->W ? cx + cw + margin : G->W, ry1 = cy + ch + margin < G->H ? cy + ch + margin : G->H;
-            tn_tensor *pred, *loss;
+            tn_tensor *pred, *loss, *ew;
             if (!made || nwx * nwy > 1) { /* one window keeps its graph; more are made again each step (memory) */
                 tn__gnn_region_free(&R);
                 if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, base, &R))) break;
                 made = 1;
             }
             tn_ctx_reset(ctx);
-            pred = tn__gnn_region_forward(ctx, G, frozen, &R, tn_gather_rows(ctx, emb, R.of, R.P.n));
-            if (!pred) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
+            ew = tn_gather_rows(ctx, emb, R.of, R.P.n);
+            if (!ew || !(pred = tn__gnn_region_forward(ctx, G, frozen, &R, ew))) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
             if (!(loss = tn__gnn_ft_loss(ctx, G, &F, &R, pred, cx, cy, cw, ch))) {
                 if ((st = tn_ctx_status(ctx))) break;
                 continue; /* nothing to fit in this window */
             }
-            st = tn_backward(ctx, loss);
+            if (!(st = tn_backward(ctx, loss))) st = tn__progress("gnn-finetune", (double)(step * nwx * nwy + wi + 1) / ((double)o->finetune * nwx * nwy));
         }
-        if (st) break;
-        tn_optim_step(fopt);
-        if ((st = tn__progress("gnn-finetune", (double)(step + 1) / o->finetune))) break;
+        if (!st) tn_optim_step(fopt);
     }
     if (!st) memcpy(G->emb, emb->data, (size_t)G->P.n * G->A.embed * sizeof(float));
 done:
