@@ -22314,14 +22314,17 @@ static tn_status tn__gnn_region_predict(tn_ctx *ctx, const tn__gnn_gen *G, const
 #define TN__GNN_FT_TILE 192        /* else: windows of this core ... */
 #define TN__GNN_FT_MARGIN 16       /* ... grown by this much context (>= 4: a loss pair's far pixel) */
 
-/* The fine-tune's losses on the pixels a window owns (its core), each term divided by its count
-   over the whole map, so the windows' losses add up to the whole map's. */
+/* What every window of the fine-tune shares: the whole map's counts, the across-line pairs
+   (global pixels), the weights, and scratch for a window's index lists. */
 typedef struct tn__gnn_ft {
     int nsk, npairs, *ip, *iq, *ix; /* ix: two index lists of cap each */
     float *psign, *tg, sw, ow;      /* tg: cap floats */
     size_t cap;
 } tn__gnn_ft;
 
+/* The fine-tune's loss on the pixels window R owns (its core cx, cy, cw, ch), each term divided
+   by its count over the whole map, so the windows' losses add up to the whole map's. NULL if
+   the core has nothing to fit. */
 static tn_tensor *tn__gnn_ft_loss(tn_ctx *ctx, const tn__gnn_gen *G, const tn__gnn_ft *F, const tn__gnn_region *R, tn_tensor *pred, int cx, int cy,
                                   int cw, int ch)
 {
