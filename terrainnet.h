@@ -1594,7 +1594,8 @@ typedef struct tn_gnn_opts {
                               weights of the best mean SSIM become the model's early network,
                               which every sketch but the example's own network runs on: early
                               stopping, as the network's fill of other terrain swings from check
-                              to check and falls as it trains on (docs/gnn.md) */
+                              to check and falls as it trains on (docs/gnn.md). At the end they
+                              also calibrate the scale of the gain test (tn_gnn_gain) */
     int holdout_count;
     int holdout_every;     /* iterations between holdout checks; 0 = 150 */
     int phase_network;     /* with holdouts (an early network): the embedding phase trains the
@@ -1640,6 +1641,8 @@ typedef struct tn_gnn_stats {
     long holdout_iteration;   /* iteration of the best check, whose network the model has (-1 = none) */
     double holdout_ssim;      /* its mean SSIM over the holdouts' sketches */
     double holdout_last_ssim; /* the last check's */
+    float gain_scale;         /* the scale of the residual gain's test (tn_gnn_gain), calibrated on
+                                 the holdouts' sketches; 1 without holdouts */
 } tn_gnn_stats;
 
 /* Sketch height units at generation. */
@@ -1717,7 +1720,8 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
    to be trusted on this sketch, tested on the sketch itself. Three times, 30 % of the user's
    lines (not random ones) are held out; the rest is generated (without fine-tune) and the
    least-squares factor a of the residual r against the held-out pixels' true offsets t - m
-   (sum r (t - m) / sum r^2 over them) is pooled and clamped to [0, 1]. Maps over 512 px a side
+   (sum r (t - m) / sum r^2 over them) is pooled, times the model's scale (calibrated on the
+   holdouts in training, tn_gnn_stats.gain_scale; 1 without) and clamped to [0, 1]. Maps over 512 px a side
    are tested on their central 512 x 512 window, so any window of one map gets the same gain.
    1 when the network cannot be tested: every part is one of the example's own (its network:
    the reconstruction), fewer than 8 user lines (a drawing of a few strokes: a held-out stroke
@@ -21212,6 +21216,7 @@ typedef struct tn__gnn_train {
     tn__gnn_graph g;
     float range;               /* normalised height range (SSIM data range) */
     long phase_from;           /* first iteration of the embedding phase, -1 before it */
+    float alone_ramp;          /* the phase for the example alone: how far its rate and SSIM weight have risen (0 .. 1) */
     tn_contour_set *hsk;       /* holdout i's sketches at [2 i] (the threshold) and [2 i + 1] (4 x) */
     tn_params *best;           /* holdouts given: the best check's weights and "holdout" = {mean SSIM,
                                   iteration (-1 = none yet), checks, last check's SSIM, its iteration,
@@ -21372,6 +21377,8 @@ static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int np
 #define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
 #define TN__GNN_ALONE_RATE 4.0f  /* the phase for the example alone: rate and SSIM weight factors */
 #define TN__GNN_ALONE_SSIM 10.0f /* (Sahara 10 minutes: 0.959 at 2.5 x, 0.964 at 4 x, 0.973 with SSIM x 10; docs/gnn.md) */
+#define TN__GNN_ALONE_RAMP 100.0f /* iterations over which both rise from 1 x: a jump let Adam, whose second
+                                     moments lag, take steps that left Grand Canyon's network dead (docs/gnn.md) */
 #define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */
 
 /* 6.1's sketch term: pixels 1-4 px from a part and not on a line lie below a ridge's (above a
@@ -21512,7 +21519,7 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
     }
     if (s->o.ssim_weight > 0 && (t = tn_ssim_loss(ctx, pred, tgt, s->range))) {
         l[1] = t->data[0];
-        t = tn_scale_shift(ctx, t, s->o.ssim_weight * (phase == 2 ? TN__GNN_ALONE_SSIM : 1.0f), 0.0f);
+        t = tn_scale_shift(ctx, t, s->o.ssim_weight * (phase == 2 ? 1.0f + (TN__GNN_ALONE_SSIM - 1.0f) * s->alone_ramp : 1.0f), 0.0f);
         loss = loss ? tn_add(ctx, loss, t) : t;
     }
     if (s->o.grad_weight > 0 && (t = tn_gdl_loss(ctx, pred, tgt))) {
@@ -21564,6 +21571,15 @@ static tn_status tn__gnn_check_dem(const tn_image *dem, const char *what, float 
 }
 
 /* ---- holdout checks (early stopping) ---- */
+
+/* The scale of the held-out lines' gain estimate, calibrated on the holdouts in training
+   (tn__gnn_gain_calibrate, "gain.scale"); 1 for a model without one. Scales run 0 .. 2 in steps of 0.05. */
+#define TN__GNN_GAIN_SCALES 41
+static double tn__gnn_gain_scale(const tn_params *w)
+{
+    const tn_tensor *t = tn_params_find(w, "gain.scale");
+    return t ? t->data[0] : 1.0;
+}
 
 /* The holdouts' networks at the example's extraction threshold and 4 x it (the first sparse
    level's), and the best-weights set, a copy of every tensor of s->w. */
@@ -21691,7 +21707,8 @@ static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
 /* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
    so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
    unless an early network serves other terrain (phase_network, and a holdout check found one):
-   then everything trains, at 4 x with SSIM weighted 10 x, on the whole graph.
+   then everything trains, at up to 4 x with SSIM weighted up to 10 x (both rising over its first
+   TN__GNN_ALONE_RAMP iterations), on the whole graph.
    Holdout checks come every holdout_every iterations before the phase and once as it starts
    (the early network is chosen from those). */
 static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
@@ -21714,7 +21731,11 @@ static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
     alone = s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0;
     if (!alone)
         for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
-    tn_optim_set_lr(s->opt, (alone ? TN__GNN_ALONE_RATE : 5.0f) * s->o.lr);
+    if (alone) { /* iterations since the phase began (the checks' record, so a resumed run agrees) */
+        float since = (float)it - tn_params_find(s->best, "holdout")->data[5] + 1.0f;
+        s->alone_ramp = since < TN__GNN_ALONE_RAMP ? since / TN__GNN_ALONE_RAMP : 1.0f;
+    }
+    tn_optim_set_lr(s->opt, (alone ? 1.0f + (TN__GNN_ALONE_RATE - 1.0f) * s->alone_ramp : 5.0f) * s->o.lr);
     st = tn__gnn_step(s, ctx, alone ? 2 : 1, l);
     tn_optim_set_lr(s->opt, s->o.lr);
     if (!alone)
@@ -21763,6 +21784,8 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 }
 #undef TN__GNN_SETTINGS
 #undef TN__GNN_LATER_SETTINGS
+
+static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
 
 TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
 {
@@ -21920,6 +21943,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     }
     st = tn_train_finish(s.run);
     if (!st) st = tn__gnn_holdout_end(&s);
+    if (!st) st = tn__gnn_gain_calibrate(&s);
     if (stats) {
         int k, m = nh < 50 ? nh : 50;
         long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
@@ -21940,6 +21964,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         stats->checkpoints = tn_train_checkpoints(s.run);
         stats->embed_phase_from = s.phase_from;
         stats->holdout_iteration = -1;
+        stats->gain_scale = (float)tn__gnn_gain_scale(s.w);
         if (s.best) {
             const tn_tensor *info = tn_params_find(s.best, "holdout");
             stats->holdout_ssim = info->data[0];
@@ -22018,7 +22043,13 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
     if (!st) st = tn__gnn_model_params(&A, NULL, &w);
     if (!st && tn_params_find(f, "early.gnn.emb")) st = tn__gnn_early_add(w);
+    if (!st && tn_params_find(f, "gain.scale")) {
+        int one = 1;
+        if (!tn_params_add_buffer(w, "gain.scale", 1, &one)) st = TN_ERR_OUT_OF_MEMORY;
+    }
     if (!st) st = tn__params_assign(w, f, path);
+    if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1)))
+        st = tn__fail(TN_ERR_CORRUPT, "%s: gain.scale %g is not in 0 .. 2", path, tn__gnn_gain_scale(w));
     if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
     if (!st) {
         const tn_tensor *e = tn_params_find(w, "gnn.emb"), *e2 = tn_params_find(w, "early.gnn.emb");
@@ -22123,6 +22154,8 @@ typedef struct tn__gnn_gen {
     tn__gnn_arch A;
     int W, H, halo;
     float gain;                /* share of the residual over the membrane that is added */
+    double gain_raw;           /* the held-out lines' least-squares gain before scale and clamp
+                                  (tn__gnn_gain_validate); NAN = not tested */
     tn__gnn_parts P;           /* every part of the sketch, normalised heights */
     float *emb;                /* P.n x embed */
     uint8_t *known;            /* P.n: the part has an example part's embedding */
@@ -22538,6 +22571,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
     G->H = height;
     G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
     G->gain = 1.0f;
+    G->gain_raw = NAN;
     if ((st = tn_sketch_densify(sk, &dense))) goto done;
     if ((st = tn_contour_parts_make(&dense, tn__gnn_cut_seed(model, opts), &parts))) goto done;
     if (!parts.count) {
@@ -22606,7 +22640,7 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
 
 /* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
-                                       const tn_gnn_generate_opts *opts, float *gain)
+                                       const tn_gnn_generate_opts *opts, float *gain, double *raw)
 {
     int vw = G->W < 512 ? G->W : 512, vh = G->H < 512 ? G->H : 512, vx = (G->W - vw) / 2, vy = (G->H - vh) / 2, round, i;
     size_t nv = (size_t)vw * vh, q, held = 0;
@@ -22617,6 +22651,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
     tn_rng rng;
     tn_status st = TN_OK;
     *gain = 1.0f;
+    *raw = NAN;
     keep = drop = *sk;
     keep.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
     drop.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
@@ -22654,7 +22689,11 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
         tn_image_free(&hr);
         tn__gnn_gen_free(&T);
     }
-    if (!st && held >= 16 && den > 0) *gain = (float)(num / den < 0 ? 0 : num / den > 1 ? 1 : num / den);
+    if (!st && held >= 16 && den > 0) {
+        double a = tn__gnn_gain_scale(G->w) * num / den;
+        *raw = num / den;
+        *gain = (float)(a < 0 ? 0 : a > 1 ? 1 : a);
+    }
     TN_FREE(pred);
     TN_FREE(base);
     TN_FREE(keep.items);
@@ -22702,7 +22741,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     }
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
-    else if (G->A.membrane && !known) st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain);
+    else if (G->A.membrane && !known) st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain, &G->gain_raw);
     if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
 done:
     tn_contour_set_free(&sk);
@@ -22788,6 +22827,72 @@ done:
     tn_ctx_free(ctx);
     tn__gnn_gen_free(&G);
     return st;
+}
+
+/* The gain test's scale, "gain.scale" of s->w, from the holdouts: each holdout sketch of
+   TN__GNN_GAIN_MIN_LINES lines or more is generated as any other sketch (the network other terrain
+   runs on, its gain tested on its lines) and the scale, 0 .. 2 in steps of 0.05, is the smallest
+   with the best mean SSIM over them of the membrane plus min(1, scale x its raw estimate) times
+   the residual. The held-out lines are where the membrane errs most, and SSIM wants less
+   residual than least squares, so the raw estimate runs high where the style fits loosely. */
+static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
+{
+    double ssim[TN__GNN_GAIN_SCALES] = {0}, best = -2;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_tensor *sc;
+    tn_ctx *ctx = NULL;
+    int i, k, n = 0, one = 1;
+    tn_status st = TN_OK;
+    if (!s->best) return TN_OK;
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &s->A);
+    m.weights = s->w;
+    memset(&go, 0, sizeof go);
+    if (!(ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    for (i = 0; !st && i < 2 * s->o.holdout_count; i++) {
+        const tn_image *h = &s->o.holdout[i / 2];
+        tn_image out = {0, 0, 0, NULL};
+        tn__gnn_gen G;
+        float *pred = NULL, *base = NULL;
+        size_t q, np = (size_t)h->width * h->height;
+        if (s->hsk[i].count < TN__GNN_GAIN_MIN_LINES) continue;
+        st = tn__gnn_gen_make(&m, &s->hsk[i], h->width, h->height, &go, &G);
+        if (st == TN_ERR_EMPTY) { /* no part of 5 px */
+            st = TN_OK;
+            continue;
+        }
+        if (st) break;
+        if (isfinite(G.gain_raw)) {
+            pred = (float *)tn__alloc(np * sizeof(float));
+            base = (float *)tn__alloc(np * sizeof(float));
+            G.gain = 1.0f;
+            if (!pred || !base) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_gen_run(&G, G.w, ctx, 0, 0, h->width, h->height, pred, base, "gnn-gain-scale");
+            if (!st) st = tn_image_create(&out, h->width, h->height, 1);
+            for (k = 0; !st && k < TN__GNN_GAIN_SCALES; k++) {
+                double a = 0.05 * k * G.gain_raw;
+                float g = (float)(a < 0 ? 0 : a > 1 ? 1 : a);
+                tn_metrics mt;
+                for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
+                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
+            }
+            n += !st;
+        }
+        tn_image_free(&out);
+        TN_FREE(pred);
+        TN_FREE(base);
+        tn__gnn_gen_free(&G);
+    }
+    tn_ctx_free(ctx);
+    if (st || !n) return st;
+    if (!(sc = tn_params_find(s->w, "gain.scale")) && !(sc = tn_params_add_buffer(s->w, "gain.scale", 1, &one))) return TN_ERR_OUT_OF_MEMORY;
+    for (k = 0; k < TN__GNN_GAIN_SCALES; k++)
+        if (ssim[k] > best) {
+            best = ssim[k];
+            sc->data[0] = 0.05f * (float)k;
+        }
+    return TN_OK;
 }
 
 TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,

@@ -456,6 +456,10 @@ int main(int argc, char **argv)
         }
         if (model_path && tn_gnn_save(&model, model_path)) fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
     }
+    {
+        const tn_tensor *gs = tn_params_find(model.weights, "gain.scale");
+        printf("gain_scale: %.2f (the gain test's, calibrated on the holdouts; 1 = none)\n", gs ? (double)gs->data[0] : 1.0);
+    }
 
     /* reconstruction from the crop's own network */
     t0 = tn_time_seconds();

@@ -347,9 +347,10 @@ else bad "gnn-train --embed-phase: $(head -c 400 "$W/gt2.txt")"; fi
 # (once, as the embedding phase starts); --holdout 0: none
 if $T gnn-train "$W/noise.png" -o "$W/g5.tnw" --iters 4 --size 48 --crop 0 0 --embed-phase 0.5 > "$W/gt5.txt" 2>&1 &&
     grep -q "^holdout_windows: 1$" "$W/gt5.txt" && grep -Eq "^holdout_ssim: [0-9.-]+ \(iteration 2, the best of 1 checks" "$W/gt5.txt" &&
+    grep -Eq "^gain_scale: [0-2]\.[0-9]{2} " "$W/gt5.txt" &&
     $T gnn-train "$W/noise.png" -o "$W/g6.tnw" --iters 2 --size 48 --crop 0 0 --holdout 0 > "$W/gt6.txt" 2>&1 &&
-    grep -q "^holdout_windows: 0$" "$W/gt6.txt" && ! grep -q "^holdout_ssim" "$W/gt6.txt"; then ok;
-else bad "gnn-train --holdout: $(grep holdout "$W/gt5.txt" "$W/gt6.txt")"; fi
+    grep -q "^holdout_windows: 0$" "$W/gt6.txt" && ! grep -q "^holdout_ssim" "$W/gt6.txt" && grep -q "^gain_scale: 1.00 " "$W/gt6.txt"; then ok;
+else bad "gnn-train --holdout: $(grep -E "holdout|gain_scale" "$W/gt5.txt" "$W/gt6.txt")"; fi
 expect_usage "gnn-generate no -o" "gnn-generate: missing -o OUT" $T gnn-generate "$W/g.tnw" "$W/ex.tns"
 expect_usage "gnn-generate bad size" "gnn-generate: --size needs WxH" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --size 8x8
 expect_usage "gnn-generate bad choice" "must be one of auto|aligned|none" $T gnn-generate "$W/g.tnw" "$W/ex.tns" -o "$W/x.png" --embeddings all

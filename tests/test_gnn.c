@@ -734,6 +734,7 @@ TN_TEST(holdout_early_stopping)
     tn_gnn_opts o;
     tn_gnn m, full, stop, res, ld;
     tn_gnn_stats st, st2;
+    tn_gnn_generate_opts g1;
     hold[0] = tn_test_dem(40, 8);
     hold[1] = tn_test_dem(40, 9);
     other = own_sketch(&hold[1]);
@@ -748,7 +749,9 @@ TN_TEST(holdout_early_stopping)
     TN_CHECK(same_learned(&m, 0, &full, 0) && !tn_params_find(full.weights, "early.gnn.emb"));
     TN_CHECK(stopped_run(&dem, st.holdout_iteration, &stop));
     TN_CHECK(same_learned(&m, 1, &stop, 0));
-    TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, NULL, &b) == TN_OK);
+    memset(&g1, 0, sizeof g1);
+    g1.gain = 1.0f; /* the networks alone: m's gain test also has a scale from the holdouts */
+    TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, &g1, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, &g1, &b) == TN_OK);
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);
@@ -836,6 +839,88 @@ TN_TEST(holdout_early_stopping)
     tn_image_free(&dem);
 }
 
+/* Mean SSIM over the holdouts' networks at the default threshold and 4 x it (those of 8 lines or
+   more, as the gain's calibration takes them), generated with m's scale set to `scale`. */
+static double holdout_mean_ssim(tn_gnn *m, const tn_image *hold, int n, float scale)
+{
+    double sum = 0;
+    int i, d, k = 0;
+    tn_params_find(m->weights, "gain.scale")->data[0] = scale;
+    for (i = 0; i < n; i++)
+        for (d = 0; d < 2; d++) {
+            tn_extract_opts eo;
+            tn_extraction ex;
+            tn_image out = {0, 0, 0, NULL};
+            tn_metrics mt;
+            memset(&eo, 0, sizeof eo);
+            eo.threshold = tn_extract_default_threshold(hold[i].width, hold[i].height) * (d ? 4 : 1);
+            if (tn_extract(&hold[i], &eo, &ex)) return -2;
+            if (ex.contours.count >= 8 && !tn_gnn_generate(m, &ex.contours, hold[i].width, hold[i].height, NULL, &out) &&
+                !tn_compare(&hold[i], &out, 0, &mt)) {
+                sum += mt.ssim;
+                k++;
+            }
+            tn_image_free(&out);
+            tn_extraction_free(&ex);
+        }
+    return k ? sum / k : -2;
+}
+
+TN_TEST(gain_scale_from_holdouts)
+{
+    /* training with holdouts calibrates the gain test's scale on them: a multiple of 0.05 in
+       0 .. 2 whose mean SSIM over the holdouts' sketches is at least that of 0 (the membrane),
+       1 (the raw test) and 2; the gain is min(1, scale x the raw estimate); the scale travels in
+       the model file, and a file with a scale out of range is refused */
+    const char *mp = tn_test_tmp_path("gnn", "scale.tnw");
+    tn_image dem = tn_test_dem(48, 13), hold[2];
+    tn_gnn_opts o;
+    tn_gnn m, ld, plain;
+    tn_gnn_stats st;
+    tn_contour_set sk;
+    float s, g1 = -1, gh = -1;
+    double best, s0, s1;
+    hold[0] = tn_test_dem(48, 21);
+    hold[1] = tn_test_dem(48, 22);
+    sk = own_sketch(&hold[0]);
+    TN_CHECK(sk.count >= 8);
+    tiny_opts(&o, 20);
+    o.holdout = hold;
+    o.holdout_count = 2;
+    o.holdout_every = 4;
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, &st) == TN_OK && tn_params_find(m.weights, "gain.scale"));
+    s = tn_params_find(m.weights, "gain.scale")->data[0];
+    TN_CHECK(st.gain_scale == s && s >= 0 && s <= 2 && fabsf(s * 20 - floorf(s * 20 + 0.5f)) < 1e-4f);
+    best = holdout_mean_ssim(&m, hold, 2, s);
+    TN_CHECK(best > -1);
+    s0 = holdout_mean_ssim(&m, hold, 2, 0.0f);
+    s1 = holdout_mean_ssim(&m, hold, 2, 1.0f);
+    TN_CHECK(best >= s0 - 1e-4 && best >= s1 - 1e-4 && best >= holdout_mean_ssim(&m, hold, 2, 2.0f) - 1e-4);
+    TN_CHECK(s0 != s1); /* the scale reaches the generation */
+    tn_params_find(m.weights, "gain.scale")->data[0] = 1.0f;
+    TN_CHECK(tn_gnn_gain(&m, &sk, 48, 48, NULL, &g1) == TN_OK && g1 >= 0 && g1 <= 1);
+    tn_params_find(m.weights, "gain.scale")->data[0] = 0.5f;
+    TN_CHECK(tn_gnn_gain(&m, &sk, 48, 48, NULL, &gh) == TN_OK);
+    TN_CHECK(g1 < 1 ? fabsf(gh - 0.5f * g1) < 1e-6f : gh >= 0.5f);
+    tn_params_find(m.weights, "gain.scale")->data[0] = s;
+    TN_CHECK(tn_gnn_save(&m, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_OK);
+    TN_CHECK(tn_params_find(ld.weights, "gain.scale") && tn_params_find(ld.weights, "gain.scale")->data[0] == s);
+    tn_gnn_free(&ld);
+    tn_params_find(m.weights, "gain.scale")->data[0] = 3.0f;
+    TN_CHECK(tn_params_save(m.weights, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_ERR_CORRUPT);
+    /* without holdouts: no scale (1) */
+    o.holdout = NULL;
+    o.holdout_count = 0;
+    TN_CHECK(tn_gnn_train(&dem, &o, &plain, &st) == TN_OK && !tn_params_find(plain.weights, "gain.scale") && st.gain_scale == 1.0f);
+    remove(mp);
+    tn_gnn_free(&plain);
+    tn_gnn_free(&m);
+    tn_contour_set_free(&sk);
+    tn_image_free(&hold[0]);
+    tn_image_free(&hold[1]);
+    tn_image_free(&dem);
+}
+
 TN_TEST(holdout_windows)
 {
     /* two windows away, spread (4 of the 11 that fit), else adjacent; NaN windows left out */
@@ -871,6 +956,7 @@ int main(void)
     TN_RUN(resume_is_bit_identical);
     TN_RUN(holdout_early_stopping);
     TN_RUN(holdout_windows);
+    TN_RUN(gain_scale_from_holdouts);
     TN_RUN(same_results_for_1_and_2_threads);
     TN_RUN(bad_inputs_fail_cleanly);
     TN_RUN(window_equals_whole_map);

@@ -1714,6 +1714,7 @@ static int run_gnn_train(void)
         printf("holdout_ssim: %.4f (iteration %ld, the best of %d checks; the trained network's %.4f)\nearly_network: %s\n", s.holdout_ssim,
                s.holdout_iteration, s.holdout_checks, s.holdout_last_ssim,
                tn_params_find(model.weights, "early.gnn.emb") ? "kept, for every sketch but the example's own network" : "none (the trained network was the best)");
+    if (!st) printf("gain_scale: %.2f (of the residual gain's test, calibrated on the holdouts; 1 = none)\n", (double)s.gain_scale);
     tn_gnn_free(&model);
     return st ? fail_status(st) : 0;
 }
