@@ -1647,7 +1647,8 @@ static const cli_opt gnn_train_opts[] = {
     {"holdout", 0, ARG_INT, 0, &gnn_train_arg.holdout, NULL, 0, 16, "N",
      "early stopping: every 150 iterations the network rebuilds up to N windows of the DEM two windows away from the training "
      "window (adjacent ones when none fits) from their ridges and valleys; the best becomes the model's early network, on "
-     "which every sketch but the example's own runs", "4; 0 = none"},
+     "which every sketch but the example's own runs; at the end they calibrate gnn-generate's residual gain test "
+     "(gain_scale:)", "4; 0 = none"},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_train_arg.range[0], &gnn_train_arg.range[1], 0, 0, "LO HI",
      "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for", "the file's range, else its [0, 1] codes"},
     {"resume", 0, ARG_FLAG, 0, &gnn_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
@@ -1758,7 +1759,7 @@ static const cli_opt gnn_generate_opts[] = {
      "with --finetune: weight of keeping ridges above and valleys below the terrain beside them (-1 = off)", "1"},
     {"gain", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.gain, NULL, -1, 1e6, "G",
      "share of the network's relief added to the membrane of the sketch heights (1 = the network as trained, -1 = none)",
-     "0 = tested on the sketch: held-out lines"},
+     "0 = tested on the sketch: held-out lines, scaled as the model's holdouts showed"},
     {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "SINGAN.tnw",
      "add the example's fine detail with a singan-train model of the same example (singan-refine)", NULL},
     {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
