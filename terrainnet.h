@@ -21581,6 +21581,12 @@ static double tn__gnn_gain_scale(const tn_params *w)
     return t ? t->data[0] : 1.0;
 }
 
+/* The residual gain of a tested sketch: its raw estimate times the scale, within [0, 1]. */
+static float tn__gnn_gain_of(double scale, double raw)
+{
+    return tn__clampf((float)(scale * raw), 0.0f, 1.0f);
+}
+
 /* The holdouts' networks at the example's extraction threshold and 4 x it (the first sparse
    level's), and the best-weights set, a copy of every tensor of s->w. */
 static tn_status tn__gnn_holdout_make(tn__gnn_train *s)
@@ -22048,7 +22054,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
         if (!tn_params_add_buffer(w, "gain.scale", 1, &one)) st = TN_ERR_OUT_OF_MEMORY;
     }
     if (!st) st = tn__params_assign(w, f, path);
-    if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1)))
+    if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1))) /* NaN too */
         st = tn__fail(TN_ERR_CORRUPT, "%s: gain.scale %g is not in 0 .. 2", path, tn__gnn_gain_scale(w));
     if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
     if (!st) {
@@ -22638,9 +22644,10 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
    have 16-138 lines. */
 #define TN__GNN_GAIN_MIN_LINES 8
 
-/* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's. */
+/* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's.
+   *raw = the held-out lines' pooled least-squares gain, before scale and clamp; NAN = untested. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
-                                       const tn_gnn_generate_opts *opts, float *gain, double *raw)
+                                       const tn_gnn_generate_opts *opts, double *raw)
 {
     int vw = G->W < 512 ? G->W : 512, vh = G->H < 512 ? G->H : 512, vx = (G->W - vw) / 2, vy = (G->H - vh) / 2, round, i;
     size_t nv = (size_t)vw * vh, q, held = 0;
@@ -22650,7 +22657,6 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
     tn_ctx *ctx = tn_ctx_create();
     tn_rng rng;
     tn_status st = TN_OK;
-    *gain = 1.0f;
     *raw = NAN;
     keep = drop = *sk;
     keep.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
@@ -22689,11 +22695,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
         tn_image_free(&hr);
         tn__gnn_gen_free(&T);
     }
-    if (!st && held >= 16 && den > 0) {
-        double a = tn__gnn_gain_scale(G->w) * num / den;
-        *raw = num / den;
-        *gain = (float)(a < 0 ? 0 : a > 1 ? 1 : a);
-    }
+    if (!st && held >= 16 && den > 0) *raw = num / den;
     TN_FREE(pred);
     TN_FREE(base);
     TN_FREE(keep.items);
@@ -22741,7 +22743,8 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     }
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
-    else if (G->A.membrane && !known) st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain, &G->gain_raw);
+    else if (G->A.membrane && !known && !(st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain_raw)) && isfinite(G->gain_raw))
+        G->gain = tn__gnn_gain_of(tn__gnn_gain_scale(G->w), G->gain_raw);
     if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
 done:
     tn_contour_set_free(&sk);
@@ -22871,8 +22874,7 @@ static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
             if (!st) st = tn__gnn_gen_run(&G, G.w, ctx, 0, 0, h->width, h->height, pred, base, "gnn-gain-scale");
             if (!st) st = tn_image_create(&out, h->width, h->height, 1);
             for (k = 0; !st && k < TN__GNN_GAIN_SCALES; k++) {
-                double a = 0.05 * k * G.gain_raw;
-                float g = (float)(a < 0 ? 0 : a > 1 ? 1 : a);
+                float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
                 tn_metrics mt;
                 for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
                 if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
