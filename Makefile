@@ -8,30 +8,59 @@ CFLAGS  ?=
 LDLIBS   = -lm -pthread
 SAN      = -fsanitize=address,undefined,float-cast-overflow -fno-omit-frame-pointer -fno-sanitize-recover=undefined,float-cast-overflow
 
+# terrainnet.h is generated from src/ (src/amalgamate.sh); edit src/, then `make header`.
+FRAGMENTS := src/amalgamate.sh src/manual.h src/impl_begin.h src/impl_end.h $(filter-out src/terrainnet.c,$(wildcard src/*.c))
+# The implementation is compiled once per configuration and linked; a program that defines
+# TERRAINNET_IMPLEMENTATION itself (white-box tests, which reach private tn__ code) builds alone.
+LIB      = build/terrainnet.o
+LIB_SAN  = build/terrainnet_san.o
+SELF     = $(shell grep -l '^\#define TERRAINNET_IMPLEMENTATION' $(1))
+
 # world_mpi.c needs MPI: built by `make mpi` only
 EXAMPLES := $(filter-out bin/world_mpi,$(patsubst examples/%.c,bin/%,$(wildcard examples/*.c)))
 BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
-.PHONY: all test check-compile check-layout demo demo-check bench fuzz clean mpi
+.PHONY: all header check-header check-single-header test check-compile check-layout demo demo-check bench fuzz clean mpi
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
 
-bin/terrainnet: examples/cli/terrainnet.c terrainnet.h | bin
-	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< -o $@ $(LDLIBS)
+header: terrainnet.h
+terrainnet.h: $(FRAGMENTS)
+	sh src/amalgamate.sh > $@.tmp && mv $@.tmp $@
 
-bin/%: examples/%.c terrainnet.h | bin
-	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< -o $@ $(LDLIBS)
+# The committed header is exactly what src/ generates.
+check-header:
+	@sh src/amalgamate.sh | cmp -s - terrainnet.h && echo "check_header: 1 passed, 0 failed, 0 skipped" || \
+	  { echo "FAIL check_header: terrainnet.h differs from src/ (run make header)"; echo "check_header: 0 passed, 1 failed, 0 skipped"; exit 1; }
 
-bin/%: bench/%.c terrainnet.h | bin
-	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< -o $@ $(LDLIBS)
+$(LIB): src/terrainnet.c terrainnet.h | build
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -c $< -o $@
 
-bin build/test build/fuzz build/check:
+# Examples keep their own #define TERRAINNET_IMPLEMENTATION (each is a standalone program for
+# `cc app.c -lm -pthread`); here they link the shared object instead.
+bin/terrainnet: examples/cli/terrainnet.c $(LIB) | bin
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -DTN_IMPLEMENTATION_LINKED -I. $< $(LIB) -o $@ $(LDLIBS)
+
+bin/%: examples/%.c $(LIB) | bin
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -DTN_IMPLEMENTATION_LINKED -I. $< $(LIB) -o $@ $(LDLIBS)
+
+bin/%: bench/%.c $(LIB) | bin
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB)) -o $@ $(LDLIBS)
+
+# CI builds one example the single-header way, as a user would.
+check-single-header: | build/check
+	$(CC) $(WARN) $(OPT) -I. examples/render_terrain.c -o build/check/render_terrain_single -lm -pthread
+
+bin build build/test build/fuzz build/check:
 	mkdir -p $@
 
 # Tests run under AddressSanitizer + UndefinedBehaviorSanitizer.
-build/test/%: tests/%.c terrainnet.h tests/tn_test.h | build/test
-	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< -o $@ $(LDLIBS)
+$(LIB_SAN): src/terrainnet.c terrainnet.h | build
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -c $< -o $@
+
+build/test/%: tests/%.c $(LIB_SAN) tests/tn_test.h | build/test
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB_SAN)) -o $@ $(LDLIBS)
 
 # The header must compile warning-free as C99 with gcc and clang, as C++, and without threads.
 check-compile: | build/check

@@ -6,7 +6,9 @@ RECIPE
         #define TERRAINNET_IMPLEMENTATION
         #include "terrainnet.h"
     Everywhere else just #include "terrainnet.h". Link with -lm and -pthread
-    (or define TN_NO_THREADS to build without pthreads).
+    (or define TN_NO_THREADS to build without pthreads). A project with many programs compiles
+    those two lines once as their own file (as the repository's src/terrainnet.c) and links the
+    object into every program.
 
 USAGE
     tn_image dem = {0};
@@ -28,6 +30,8 @@ CONFIGURATION (define before including the implementation)
     TN_NO_TLS           keep the per-thread error detail under a pthread key instead of in
                         thread-local storage (for toolchains whose thread-locals misbehave)
     TN_API              linkage of every public function (default extern; `static` for private use)
+    TN_IMPLEMENTATION_LINKED  ignore TERRAINNET_IMPLEMENTATION in this file: the program links a
+                        separately compiled implementation (how the repository builds its examples)
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
 
@@ -2143,7 +2147,7 @@ TN_API const char *tn_world_method_help(int i);
 
 /* //// end header file ////////////////////////////////////////////////////////////////////// */
 
-#ifdef TERRAINNET_IMPLEMENTATION
+#if defined(TERRAINNET_IMPLEMENTATION) && !defined(TN_IMPLEMENTATION_LINKED)
 #ifndef TERRAINNET_IMPLEMENTATION_DONE
 #define TERRAINNET_IMPLEMENTATION_DONE
 

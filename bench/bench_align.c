@@ -4,8 +4,8 @@
    No peer implementation exists; the target is "well under a second".
    Prints `align_200x2000_t<N>: X ms` (median), `align_200x2000: X ms` (best thread count),
    `sketch_random_1024: X ms` and `contour_parts: X ms`. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
+#include <string.h>
 #include <stdio.h>
 #include <stdlib.h>
 

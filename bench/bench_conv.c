@@ -3,7 +3,6 @@
    Usage: bin/bench_conv [--threads N] [--runs R]   (no --threads: 1 and 2)
    Prints: conv_fwd_<shape>_t<N>: X ms and conv_fwdbwd_<shape>_t<N>: X ms (medians). */
 #ifndef TN_BENCH_TU
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #else
 #include TN_BENCH_TU

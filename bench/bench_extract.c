@@ -7,8 +7,8 @@
    TN_BENCH_GRASS=0 skips GRASS; TN_BENCH_SIZE=N changes the size; TN_BENCH_RUNS=N takes the
    median of N runs (3, at most 15); TN_BENCH_THREADS=T times only T threads; TN_BENCH_PIPELINE=0
    skips the whole-pipeline runs (for quick interleaved comparisons on a shared machine). */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
+#include <string.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>

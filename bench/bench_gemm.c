@@ -3,8 +3,10 @@
    the call until >= 0.2 s.
    Usage: bin/bench_gemm [--threads N]   (without --threads: 1 and 2 threads)
    Prints: sgemm_<case>_t<N>: X GFLOP/s (min a max b, runs r) */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
+#include <string.h>
+#include <stdlib.h>
+#include <stdio.h>
 
 #define BENCH_RUNS 7
 

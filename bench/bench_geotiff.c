@@ -6,7 +6,6 @@
      geotiff_read_<who wrote>_ms   tn_image_load of the file (all threads, chunks in parallel)
      gdal_translate_raw_ms         gdal_translate -of ENVI of GDAL's file (decode + raw write)
      geotiff_write_int16_ms / geotiff_write_float32_ms, and the file sizes. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

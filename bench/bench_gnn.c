@@ -29,7 +29,6 @@
    the drawn sketch's and the 512 map's; default 0), model=PATH (load the model from PATH and
    skip training when it exists, else train and save it there).
    Prints `name: value unit` lines. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

@@ -2,7 +2,6 @@
    (gaussian_blur.py: scipy sigma 8 on 4096x4096x3 HWC; ssim_bench.py: skimage 1024x1024).
    Prints `name_t<N>: median ms (min a max b, runs r)` for N = 1 and 2 threads.
    Build: cc -std=c99 -O2 -march=native -I.. bench_image.c <tu with TERRAINNET_IMPLEMENTATION> -lm -pthread */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

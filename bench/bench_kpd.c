@@ -13,7 +13,6 @@
           half-way between months.
    speed: texturing a 4096 x 4096 heightfield (one month, and between two months).
    Prints `name: value unit` lines. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

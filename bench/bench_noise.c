@@ -1,8 +1,8 @@
 /* bench_noise: Perlin fBm (8 octaves) and explicit noise on a 2048 x 2048 map, 1 and 2 threads.
    Compare with ../shared/peers/run_perlin.sh (stb_perlin_fbm_noise3, libnoise) in the same run.
    Prints `noise_perlin_fbm8_2048_t<N>: X ms` (median) and `..._msamples_t<N>: X Msamples/s`. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
+#include <string.h>
 #include <stdio.h>
 #include <stdlib.h>
 

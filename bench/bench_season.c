@@ -15,8 +15,8 @@
      same-month-of-2017 baseline (mean NDVI of 2017's frames in that calendar month).
    GRASS r.sun comparison: bench/compare_rsun.sh (needs grass). Prints `name: value unit` lines.
    Usage: bench_season [threads] [ndvi]   (default 2; `ndvi` runs only the real-data part) */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>

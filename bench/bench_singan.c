@@ -12,7 +12,6 @@
    Usage: bench_singan [--minutes M] [--threads N] [--patch P] [--no-peer] [name ...]
    (--patch -1: train whole scales, the work per iteration the PyTorch step does at 256 px)
    (names: mountain canyon dunes moon volcano; default all, M = 10) */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

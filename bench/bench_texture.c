@@ -6,7 +6,6 @@
    far-view repetition (normalised autocorrelation at the tiling period after a Gaussian blur of
    sigma = period / 16), high-frequency energy, mean colour, seams on tile borders, a texture-
    statistics distance, and the time to synthesise N x N (default 8192). Prints name: value lines. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

@@ -6,7 +6,7 @@
      world_big_<side>_*: wall time, tiles/s, peak RSS of a process, tile bytes, gdalinfo -stats time
      world_arith_65536_*: ARITHMETIC from the measured per-process rate, not a measurement.
    Each run's tiles are checked against the 1-process run (manifest digests). */
-#define TERRAINNET_IMPLEMENTATION
+#define _POSIX_C_SOURCE 200809L /* popen, fork */
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

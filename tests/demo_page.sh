@@ -16,7 +16,7 @@ done
 if [ -z "$CHROME" ]; then echo "skipped demo_page: no chromium (apt-get install chromium)"; skip=1; say; exit; fi
 if [ ! -f "$DIR/index.html" ]; then echo "skipped demo_page: no $DIR/index.html (make demo)"; skip=1; say; exit; fi
 rm -rf "$W"; mkdir -p "$W"
-${CC:-cc} -std=c99 -O0 -I. tests/check_demo_page.c -o "$W/check_demo_page" -lm -pthread || { echo "FAIL demo_page: build"; fail=1; say; exit; }
+${CC:-cc} -std=c99 -O0 -DTN_IMPLEMENTATION_LINKED -I. tests/check_demo_page.c build/terrainnet.o -o "$W/check_demo_page" -lm -pthread || { echo "FAIL demo_page: build"; fail=1; say; exit; }
 
 # chrome PAGE_DIR OUT_PREFIX: the DOM after load (OUT.dom) and a screenshot (OUT.png)
 chrome() {

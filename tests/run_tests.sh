@@ -15,6 +15,9 @@ tally() { # reads the summary line of one program's output
     P=$((P + p)); F=$((F + f)); S=$((S + s))
 }
 out=build/test/out.txt
+make --no-print-directory check-header > "$out" 2>&1
+cat "$out" >> "$log"; grep '^FAIL' "$out" || true
+tally "$out" check_header
 sh tests/check_compile.sh > "$out" 2>&1; rc=$?
 cat "$out" >> "$log"; grep -v '^check_compile:' "$out" | grep -v ': ok$' || true
 tally "$out" check_compile

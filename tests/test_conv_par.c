@@ -2,7 +2,6 @@
    direct loops (kernel 1/3/5, stride 1/2, dilation 2, zero and reflect padding, Cin < 8 and >= 8,
    batch 2, odd sizes; both the flipped-kernel and the col2im input-gradient paths), and bit
    identity of every result between 1 and 2 threads. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

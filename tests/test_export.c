@@ -4,7 +4,6 @@
    RAW (size rule, full code range), splat maps (weights sum to 1, rock on steep slopes, snow
    high, vegetation low, masks replace the height rules, bad input). Validity by the Khronos glTF validator is
    checked in test_cli.sh when the validator is installed. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

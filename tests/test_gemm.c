@@ -1,7 +1,6 @@
 /* Tests of @@gemm: tn_sgemm against a double-accumulating reference over many shapes (tiny,
    primes, tile and block edges), all four transpose combinations, alpha/beta variants, padded
    leading dimensions, and bit-identical results for 1 and 2 threads. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

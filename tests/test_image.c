@@ -1,7 +1,6 @@
 /* test_image.c - @@image operations: crop, pad, resize, blur, gradient, slope, normals,
    hillshade, colour ramp.
    Build (repo): cc -std=c99 -O2 -I.. -I. test_image.c <tu with TERRAINNET_IMPLEMENTATION> -lm -pthread */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <limits.h>

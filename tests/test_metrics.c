@@ -1,6 +1,5 @@
 /* test_metrics.c - @@metrics: SSIM / PSNR / RMSE / MAE against scikit-image and numpy.
    Build (repo): cc -std=c99 -O2 -I.. -I. test_metrics.c <tu with TERRAINNET_IMPLEMENTATION> -lm -pthread */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

@@ -1,6 +1,5 @@
 /* Tests of @@noise: range, determinism (seed and thread count), periodic tiling, octave
    structure, explicit noise, drawn-map blending and bad arguments. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

@@ -1,7 +1,6 @@
 /* test_progress.c - @@core progress output: tn_progress_line fits the given width exactly, fills
    the bar in proportion, formats durations (seconds, minutes, hours, unknown) and survives odd
    input (NaN or out-of-range fractions, a NULL stage, tiny buffers). */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

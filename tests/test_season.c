@@ -1,7 +1,6 @@
 /* @@season: insolation against the closed forms (flat plane, tilted planes), terrain shadows,
    thread-count independence, the climate CSV and presets, the seasonal texturer's snow and
    vegetation, and bad input. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

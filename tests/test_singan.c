@@ -3,7 +3,6 @@
    loss, save/load, bit-identical resume, a tile equals the same pixels of a whole-map sample,
    two seeds differ, refine and upscale keep sizes and units, and bad inputs (a DEM smaller than
    the coarsest scale, a constant DEM, NaN, another method's model, a checkpoint as a model). */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

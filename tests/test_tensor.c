@@ -1,7 +1,6 @@
 /* Tests of @@tensor, @@ops, @@loss and @@optim: finite-difference gradient checks for every op
    and loss, toy problems that must be learned, .tnw files, determinism across thread counts. */
 #ifndef TN_TEST_TU
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #else
 #include TN_TEST_TU

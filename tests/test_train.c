@@ -2,7 +2,6 @@
    SIGKILL), cancel, .tnw metadata and model checks, and the shared building blocks (MLP, conv
    block, patch discriminator, EMA, best-k, GAN losses); texgan files written before @@train. */
 #define _POSIX_C_SOURCE 200809L /* fork, kill, waitpid, nanosleep */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <signal.h>

@@ -1,6 +1,5 @@
 /* test_world.c - @@world: every local method's tiles equal a whole-map run (at 1 and 2
    threads), non-local methods are refused, and tiles on disk resume, index and read back. */
-#define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
 

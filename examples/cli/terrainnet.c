@@ -6,6 +6,7 @@
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 
+#include <assert.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -293,10 +294,10 @@ static int cli_parse(const cli_command *c, int argc, char **argv)
     char list[512];
     unsigned char given[64] = {0};
     int a, i, k, npos = 0, used;
-    TN_ASSERT(c->nopts <= (int)sizeof given);
+    assert(c->nopts <= (int)sizeof given);
     for (i = 0; i < c->nopts; i++) {
         char *def = (char *)c->opts[i].def;
-        if ((c->opts[i].flags & SET) && cli_value(c, &c->opts[i], 1, &def) != 1) TN_ASSERT(!"a SET default must parse");
+        if ((c->opts[i].flags & SET) && cli_value(c, &c->opts[i], 1, &def) != 1) assert(!"a SET default must parse");
     }
     for (a = 0; a < argc; a++) {
         const char *s = argv[a];

@@ -1,0 +1,303 @@
+/* ============================================================================================
+   @@core  status codes, errors, allocation, RNG, progress, timing
+   ============================================================================================ */
+
+typedef enum tn_status {
+    TN_OK = 0,
+    TN_ERR_INVALID_ARG,     /* a bad argument value (negative size, unknown option, ...) */
+    TN_ERR_OUT_OF_MEMORY,   /* an allocation failed */
+    TN_ERR_TOO_LARGE,       /* sizes overflow or exceed TN_MAX_ALLOC */
+    TN_ERR_IO,              /* open/read/write failed */
+    TN_ERR_FORMAT,          /* unknown or unsupported file format or variant */
+    TN_ERR_CORRUPT,         /* the data is damaged: bad CRC, bad zlib stream, truncated */
+    TN_ERR_NUMERIC,         /* NaN/Inf in input, or a computation diverged */
+    TN_ERR_SHAPE,           /* mismatched sizes/shapes between arguments or with a file */
+    TN_ERR_EMPTY,           /* nothing to work on (empty image, empty sketch) */
+    TN_ERR_CANCELLED,       /* the progress callback asked to stop */
+    TN_STATUS_COUNT
+} tn_status;
+
+/* Name of a status code, e.g. "corrupt data". Never NULL. */
+TN_API const char *tn_status_string(tn_status s);
+/* Detail of the calling thread's most recent failure ("alps.png: CRC mismatch in IDAT chunk");
+   "" if none. Each thread has its own buffer, owned by the library and overwritten by that
+   thread's next failure: read it right after a failure. */
+TN_API const char *tn_last_error(void);
+/* Clears the calling thread's last error message. */
+TN_API void tn_clear_error(void);
+
+/* Deterministic RNG: PCG32 (O'Neill). The same seed/stream gives the same sequence everywhere. */
+typedef struct tn_rng { uint64_t state, inc; } tn_rng;
+TN_API void     tn_rng_seed(tn_rng *r, uint64_t seed, uint64_t stream);
+TN_API uint32_t tn_rng_u32(tn_rng *r);
+TN_API uint32_t tn_rng_below(tn_rng *r, uint32_t n);  /* uniform in [0, n), unbiased; n > 0 */
+TN_API float    tn_rng_uniform(tn_rng *r);            /* uniform in [0, 1), 24 random bits */
+TN_API float    tn_rng_normal(tn_rng *r);             /* standard normal (Box-Muller) */
+
+/* Progress: long operations call the hook with a stage name and a fraction in [0, 1].
+   Return non-zero from the hook to cancel; the operation then fails with TN_ERR_CANCELLED. */
+typedef int (*tn_progress_fn)(void *user, const char *stage, double fraction);
+TN_API void tn_set_progress(tn_progress_fn fn, void *user);
+
+/* Monotonic wall-clock seconds (for benches and ETA). */
+TN_API double tn_time_seconds(void);
+
+/* One terminal line for a progress hook to redraw with '\r':
+   "style              [##########..........]  50.0%   12.3s  ETA   12.3s", durations as 12.3s,
+   4m05s or 2h07m ("--" when < 0: unknown), the bar as wide as fits in size - 1 characters
+   (none below 57). buf gets at most size bytes, NUL included (size >= 1). Returns buf. */
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s);
+
+/* --------------------------------------------------------------------------------------------
+   >>core  (@@core implementation)
+   -------------------------------------------------------------------------------------------- */
+
+/* Error detail, one per thread, so pool workers and the caller's other threads never overwrite
+   each other's message. `fails` counts the failures recorded on this thread; the pool compares it
+   around a task to see whether a worker failed (>>thread forwards that message to the caller).
+   Thread-local storage where the compiler has it (C++11, C11, MSVC, gcc/clang's __thread, which
+   -std=c99 -pedantic accepts); otherwise, or with TN_NO_TLS, a pthread key; without threads a
+   plain static. */
+typedef struct tn__error_state { char msg[1024]; unsigned long fails; } tn__error_state;
+
+#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
+#if defined(_MSC_VER)
+#define TN__TLS __declspec(thread)
+#elif defined(__cplusplus) && __cplusplus >= 201103L
+#define TN__TLS thread_local
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TN__TLS _Thread_local
+#elif defined(__GNUC__) || defined(__clang__)
+#define TN__TLS __thread
+#endif
+#endif
+
+#if defined(TN_NO_THREADS)
+static tn__error_state tn__error_static;
+static tn__error_state *tn__err(void) { return &tn__error_static; }
+#elif defined(TN__TLS)
+static TN__TLS tn__error_state tn__error_tls;
+static tn__error_state *tn__err(void) { return &tn__error_tls; }
+#else
+/* pthread key: each thread's state is allocated on its first use and freed when it exits;
+   if that allocation fails the thread falls back to one shared state. */
+static pthread_key_t tn__error_key;
+static pthread_once_t tn__error_once = PTHREAD_ONCE_INIT;
+static int tn__error_key_ok;
+static tn__error_state tn__error_shared;
+static void tn__error_state_free(void *e) { TN_FREE(e); }
+static void tn__error_key_create(void) { tn__error_key_ok = pthread_key_create(&tn__error_key, tn__error_state_free) == 0; }
+static tn__error_state *tn__err(void)
+{
+    tn__error_state *e;
+    pthread_once(&tn__error_once, tn__error_key_create);
+    if (!tn__error_key_ok) return &tn__error_shared;
+    e = (tn__error_state *)pthread_getspecific(tn__error_key);
+    if (!e && (e = (tn__error_state *)TN_MALLOC(sizeof *e)) != NULL) {
+        memset(e, 0, sizeof *e);
+        if (pthread_setspecific(tn__error_key, e) != 0) {
+            TN_FREE(e);
+            e = NULL;
+        }
+    }
+    return e ? e : &tn__error_shared;
+}
+#endif
+
+TN_API const char *tn_status_string(tn_status s)
+{
+    static const char *const names[TN_STATUS_COUNT] = {
+        "ok", "invalid argument", "out of memory", "too large", "i/o error",
+        "unknown or unsupported format", "corrupt data", "numeric error (NaN/Inf or divergence)",
+        "shape mismatch", "empty input", "cancelled"};
+    if ((int)s < 0 || (int)s >= TN_STATUS_COUNT) return "unknown status";
+    return names[s];
+}
+
+TN_API const char *tn_last_error(void) { return tn__err()->msg; }
+TN_API void tn_clear_error(void) { tn__err()->msg[0] = 0; }
+
+/* Records a failure message (printf-style) and returns the status, so callers can write
+   `return tn__fail(TN_ERR_IO, "%s: cannot open", path);`. */
+static tn_status tn__fail(tn_status s, const char *fmt, ...)
+{
+    tn__error_state *e = tn__err();
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(e->msg, sizeof e->msg, fmt, ap);
+    va_end(ap);
+    e->fails++;
+    return s;
+}
+
+/* Prefixes the current message with a context string ("alps.png: " ...), keeping the status. */
+static tn_status tn__fail_context(tn_status s, const char *context)
+{
+    char *msg = tn__err()->msg;
+    const size_t cap = sizeof tn__err()->msg;
+    size_t lc, lm;
+    if (!context || !context[0]) return s;
+    lc = strlen(context);
+    lm = strlen(msg);
+    if (lc + 3 >= cap) return s;
+    if (lc + 2 + lm >= cap) lm = cap - lc - 3;
+    memmove(msg + lc + 2, msg, lm);
+    msg[lc + 2 + lm] = 0;
+    memcpy(msg, context, lc);
+    msg[lc] = ':';
+    msg[lc + 1] = ' ';
+    return s;
+}
+
+/* a * b with overflow check; returns 0 on overflow. */
+static int tn__mul_size(size_t a, size_t b, size_t *out)
+{
+    if (a != 0 && b > SIZE_MAX / a) return 0;
+    *out = a * b;
+    return 1;
+}
+
+/* a * b * c * d bytes, checked against overflow and TN_MAX_ALLOC. */
+static tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out)
+{
+    size_t t;
+    if (!tn__mul_size(a, b, &t) || !tn__mul_size(t, c, &t) || !tn__mul_size(t, d, &t) || t > TN_MAX_ALLOC)
+        return tn__fail(TN_ERR_TOO_LARGE, "size %zu x %zu x %zu x %zu exceeds the allocation limit", a, b, c, d);
+    *out = t;
+    return TN_OK;
+}
+
+/* Allocation that records an error message on failure. */
+static void *tn__alloc(size_t bytes)
+{
+    void *p;
+    if (bytes > TN_MAX_ALLOC) {
+        tn__fail(TN_ERR_TOO_LARGE, "allocation of %zu bytes exceeds the limit", bytes);
+        return NULL;
+    }
+    p = TN_MALLOC(bytes ? bytes : 1);
+    if (!p) tn__fail(TN_ERR_OUT_OF_MEMORY, "out of memory allocating %zu bytes", bytes);
+    return p;
+}
+
+static void *tn__calloc(size_t bytes)
+{
+    void *p = tn__alloc(bytes);
+    if (p) memset(p, 0, bytes ? bytes : 1);
+    return p;
+}
+
+/* Grows *buf (capacity *cap bytes) to hold at least `need` bytes, doubling. */
+static tn_status tn__reserve(void **buf, size_t *cap, size_t need)
+{
+    size_t ncap;
+    void *p;
+    if (need <= *cap) return TN_OK;
+    if (need > TN_MAX_ALLOC) return tn__fail(TN_ERR_TOO_LARGE, "buffer of %zu bytes exceeds the limit", need);
+    ncap = *cap ? *cap : 256;
+    while (ncap < need) ncap = ncap > TN_MAX_ALLOC / 2 ? TN_MAX_ALLOC : ncap * 2;
+    p = TN_REALLOC(*buf, ncap);
+    if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "out of memory growing a buffer to %zu bytes", ncap);
+    *buf = p;
+    *cap = ncap;
+    return TN_OK;
+}
+
+TN_API void tn_rng_seed(tn_rng *r, uint64_t seed, uint64_t stream)
+{
+    r->state = 0;
+    r->inc = (stream << 1) | 1u;
+    (void)tn_rng_u32(r);
+    r->state += seed;
+    (void)tn_rng_u32(r);
+}
+
+TN_API uint32_t tn_rng_u32(tn_rng *r)
+{
+    uint64_t old = r->state;
+    uint32_t xorshifted, rot;
+    r->state = old * 6364136223846793005ULL + r->inc;
+    xorshifted = (uint32_t)(((old >> 18) ^ old) >> 27);
+    rot = (uint32_t)(old >> 59);
+    return (xorshifted >> rot) | (xorshifted << ((32u - rot) & 31u));
+}
+
+TN_API uint32_t tn_rng_below(tn_rng *r, uint32_t n)
+{
+    uint32_t threshold, x;
+    TN_ASSERT(n > 0);
+    threshold = (uint32_t)(0u - n) % n; /* rejection keeps it unbiased */
+    do x = tn_rng_u32(r); while (x < threshold);
+    return x % n;
+}
+
+TN_API float tn_rng_uniform(tn_rng *r) { return (float)(tn_rng_u32(r) >> 8) * (1.0f / 16777216.0f); }
+
+TN_API float tn_rng_normal(tn_rng *r)
+{
+    double u1 = ((double)(tn_rng_u32(r) >> 8) + 0.5) / 16777216.0;
+    double u2 = (double)(tn_rng_u32(r) >> 8) / 16777216.0;
+    return (float)(sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2));
+}
+
+static tn_progress_fn tn__progress_fn;
+static void *tn__progress_user;
+
+TN_API void tn_set_progress(tn_progress_fn fn, void *user)
+{
+    tn__progress_fn = fn;
+    tn__progress_user = user;
+}
+
+/* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
+static tn_status tn__progress(const char *stage, double fraction)
+{
+    if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
+        return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
+    return TN_OK;
+}
+
+TN_API double tn_time_seconds(void)
+{
+#if defined(CLOCK_MONOTONIC) && !defined(_WIN32)
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+#else
+    return (double)clock() / (double)CLOCKS_PER_SEC;
+#endif
+}
+
+static float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
+static void tn__duration_text(char out[8], double s)
+{
+    if (!(s >= 0)) snprintf(out, 8, "--");
+    else if (s < 99.95) snprintf(out, 8, "%.1fs", s);
+    else if (s < 3600.0) snprintf(out, 8, "%dm%02ds", (int)(s / 60.0), (int)fmod(s, 60.0));
+    else if (s < 999.0 * 3600.0) snprintf(out, 8, "%dh%02dm", (int)(s / 3600.0), (int)fmod(s / 60.0, 60.0));
+    else snprintf(out, 8, "999h+");
+}
+
+TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double fraction, double elapsed_s, double eta_s)
+{
+    char el[8], eta[8], bar[64];
+    double f = fraction >= 0 ? (fraction <= 1 ? fraction : 1.0) : 0.0; /* NaN -> 0 */
+    int w = (int)(size > 1000 ? 1000 : size) - 1 - 48, i, fill; /* 48: stage, brackets, percent, times */
+    TN_ASSERT(buf && size >= 1);
+    w = w > (int)sizeof bar - 1 ? (int)sizeof bar - 1 : w;
+    tn__duration_text(el, elapsed_s);
+    tn__duration_text(eta, eta_s);
+    if (w >= 8) {
+        fill = (int)(f * w + 0.5);
+        for (i = 0; i < w; i++) bar[i] = i < fill ? '#' : '.';
+        bar[w] = 0;
+        snprintf(buf, size, "%-18.18s [%s] %5.1f%%  %6s  ETA %6s", stage ? stage : "", bar, 100.0 * f, el, eta);
+    } else {
+        snprintf(buf, size, "%-18.18s %5.1f%%  %6s  ETA %6s", stage ? stage : "", 100.0 * f, el, eta);
+    }
+    return buf;
+}
+

@@ -1,0 +1,3435 @@
+/* ============================================================================================
+   @@gnn  sketch-to-terrain graph network (paper 000, sections 4.2-5.4)
+   Learns ONE example DEM so that a sketch of ridges and valleys becomes terrain in its style.
+   The example's own network (@@extract) is cut into contour parts of 5-10 px (@@sketch); a
+   bipartite graph joins every pixel to its k nearest parts (4.2) plus random pixel-part edges
+   redrawn every step, with 5 % of the parts masked per step (A.2). An edge carries the
+   projection index of the pixel along the part (for a part without an embedding, how far the
+   pixel lies beyond the part's end instead: there the index only says where a random cut
+   fell), the distance to that projection (and a closeness exp(-d/2)), the part's height there
+   minus the pixel's baseline and, in training, optional Gaussian noise (A.4); a part node
+   carries its ridge/valley sign and a learned embedding (one per example part). Pixels start
+   from an MLP of (+1 ridge, -1 valley, 0 other; baseline height), parts from N(0, s^2) or zero
+   (A.3). T rounds of gather (pixels -> parts) and scatter (parts -> pixels) update both sides
+   residually; each is a graph attention over two-layer MLP encodings of [receiver, sender,
+   edge, mean of the sender's neighbours] (A.5); a readout MLP gives the height. Losses: MSE +
+   SSIM + gradient difference + smoothness on the normalised heights (6.1's l_gt, l_ssim,
+   l_gradient, l_smooth; 6.1's sketch and distance terms are options; weights in
+   tn_gnn_defaults).
+   Baseline: the network predicts a RESIDUAL over the membrane (Laplace) interpolation of the
+   sketch pixels' heights, the strong baseline the neighbour test rewards (issue 14: SSIM 0.937
+   on alps_montblanc 128), so the model starts at it and learns what the example adds;
+   `membrane = -1` trains the paper's direct form instead.
+   Generalising from one example: embeddings let the network memorise the example (the
+   reconstruction), but a part of another terrain given an aligned part's embedding (5.3) gets
+   that part's memorised residual, which measured worse than none. So training drops half the
+   embeddings per step and spends half the steps on the example's own sparser networks (higher
+   extraction thresholds, no embeddings, a random share of their parts dropped and the membrane
+   rebuilt each step): the network also learns a geometry-only mode that fills what a dense or
+   sparse sketch leaves out. That mode wanders from step to step as training goes on, so
+   holdout windows of the user's DEM score it every 150 steps and the best check's weights are
+   kept as the early network, which every sketch but the example's own network runs on.
+   Generation gives a sketch part the embedding
+   of an identical example part (its own network: reconstruction) and none otherwise by default;
+   the paper's alignment is TN_GNN_EMBED_ALIGNED. An optional fine-tune (5.4) then adjusts only
+   the sketch parts' embeddings (loss on the sketch pixels + smoothness, optionally a
+   ridge-above / valley-below hinge). The residual is scaled by a gain tested on the sketch
+   itself (tn_gnn_gain: some of its lines held out and predicted from the rest), so a sketch
+   unlike the example gets less of the example's detail. Output in the example's height units.
+   Seamless tiles: a pixel's neighbour parts lie within `radius` px and the membrane is solved on
+   overlapping blocks, so a pixel depends only on the sketch within a fixed distance; any window
+   computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
+   tiles with memory of one tile. Random sketches (5.2) can densify a sparse user sketch.
+   ============================================================================================ */
+
+/* Zero = default (tn_gnn_defaults gives the values and the reasons). */
+typedef struct tn_gnn_opts {
+    int hidden;            /* node state and MLP hidden width; 0 = 32 (A.5) */
+    int rounds;            /* T gather/scatter rounds; 0 = 2 */
+    int k;                 /* fixed edges per pixel (its k nearest parts); 0 = 10 (4.2) */
+    float radius;          /* only parts closer than this many pixels are a pixel's neighbours, so a
+                              pixel depends on the sketch within a fixed distance (seamless tiles);
+                              0 = 24 */
+    int embed;             /* part embedding dims; 0 = 16 */
+    int random_edges;      /* random pixel-part edges per step; 0 = 10000 (4.2), < 0 = none */
+    float mask;            /* share of parts masked per step; 0 = 0.05 (A.2), < 0 = none */
+    float edge_noise;      /* std of the Gaussian edge feature in training (A.4 uses 1); 0 = none */
+    float part_noise;      /* std of the parts' random initial states (A.3 uses 1); 0 = zero states */
+    float embed_drop;      /* share of the example's parts trained without their embedding per
+                              step (what a part of another sketch gets); 0 = 0.5, < 0 = none */
+    int sparse_levels;     /* also train on the example's networks at 4, 12 and 36 times the
+                              extraction threshold (sparse sketches, no embeddings), half the
+                              steps; 0 = 3, < 0 = none */
+    float thin;            /* on a sparse level, drop up to this share of its parts per step
+                              (a random share, membrane and edges rebuilt): many sparse sketches
+                              from one example; 0 = 0.5, < 0 = none */
+    float embed_phase;     /* the last share of this run's budget trains only the example's part
+                              embeddings (rate x 5), on its own network with every part present: the
+                              reconstruction sharpens while the network, and with it every sketch
+                              of other terrain, stays as trained (with an early network, see
+                              phase_network, everything trains). A schedule like the budget, so a
+                              resumed run takes this run's value; 0 = 0.5 with an early network,
+                              else 0.25; < 0 = none */
+    int part_index;        /* edge feature of a part without an embedding (a dropped one, a sparse
+                              level's, any part of another sketch): 0 = how far the pixel lies
+                              beyond the part's end along it (0 beside it); -1 = the projection
+                              index along the part, as for parts with an embedding (A.4), which
+                              there only says where a random cut fell (docs/gnn.md) */
+    int membrane;          /* 0 = predict a residual over the membrane of the sketch heights;
+                              -1 = predict the height itself (the paper's form) */
+    float lr;              /* Adam rate; 0 = 2e-3 */
+    float mse_weight;      /* l_gt (MSE of the normalised heights); 0 = 1, < 0 = off */
+    float ssim_weight;     /* 1 - SSIM; 0 = 0.1, < 0 = off */
+    float grad_weight;     /* gradient-difference loss; 0 = 0.1, < 0 = off */
+    float sketch_weight;   /* 6.1's sketch loss: pixels 1-4 px from a part lie below a ridge's and above a
+                              valley's height at their projection (cross-entropy of a Gumbel-softmax
+                              of the two heights, temperature 0.05 std); 0 = off (docs/gnn.md: it cost
+                              neighbour SSIM) */
+    float smooth_weight;   /* 6.1's smoothness: |y_p - y_q| of random pixel pairs under 5 px apart
+                              (Manhattan); 0 = 0.1, < 0 = off */
+    float further_weight;  /* 6.1's distance term, as read here: a pixel 1-6 px from its nearest part
+                              keeps near the part's height there, weighted 1 / (10 d^2); 0 = off */
+    const tn_image *holdout; /* holdout_count terrains of the example's style and units (one
+                              channel, at least 16 x 16) that training never sees, e.g. windows of
+                              the same DEM away from the example (tn_gnn_holdout_windows); NULL =
+                              none. Every holdout_every iterations before the embedding phase, and
+                              as it starts, the network without embeddings rebuilds each one from
+                              its extracted network (the extraction threshold and 4 x it); the
+                              weights of the best mean SSIM become the model's early network,
+                              which every sketch but the example's own network runs on: early
+                              stopping, as the network's fill of other terrain swings from check
+                              to check and falls as it trains on (docs/gnn.md). At the end they
+                              also calibrate the scale of the gain test (tn_gnn_gain) */
+    int holdout_count;
+    int holdout_every;     /* iterations between holdout checks; 0 = 150 */
+    int phase_network;     /* with holdouts (an early network): the embedding phase trains the
+                              network too, everything at 4 x the rate and 10 x the SSIM weight
+                              on the whole graph (no masked parts, no random edges), since the
+                              trained network then serves only the example's own network;
+                              0 = on, -1 = off
+                              (without holdouts the phase always leaves the network as it is) */
+    tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
+    tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
+                              architecture wins; the example must be the same), seed */
+} tn_gnn_opts;
+
+/* A trained model: the network, the example's contour parts (with heights, so generation needs
+   nothing else) and the example's height normalisation. Free with tn_gnn_free. */
+typedef struct tn_gnn {
+    int hidden, rounds, k, embed;
+    float radius;            /* neighbour radius in pixels */
+    int membrane;            /* 1: output = membrane of the sketch heights + learned residual */
+    int parts;               /* example parts (one embedding each) */
+    int width, height;       /* example size */
+    float mean, std;         /* example heights = mean + std * network units */
+    float lo, hi;            /* example height range */
+    float part_noise;        /* std of the parts' initial states */
+    long iterations;         /* training iterations done */
+    double train_seconds;
+    tn_params *weights;      /* "gnn.config", "gnn.part_pts", "gnn.part_info", "gnn.emb", "gnn.*";
+                                "early.gnn.*": the early network (holdouts in training), which
+                                every sketch but the example's own network runs on */
+} tn_gnn;
+
+typedef struct tn_gnn_stats {
+    long iterations;          /* total, including resumed ones */
+    long resumed_from;        /* iteration the run resumed at (0 = fresh) */
+    double seconds;           /* total training seconds, including resumed time */
+    double seconds_per_iter;  /* this run's average */
+    float loss, loss_mse, loss_ssim, loss_grad; /* averages over the last 50 iterations (unweighted terms) */
+    int parts, edges;         /* example parts; fixed edges of the example graph */
+    int levels;               /* sketch densities trained on (1 + sparse levels found) */
+    int checkpoints;          /* checkpoints written by this run */
+    long embed_phase_from;    /* first iteration of the embedding phase in this run (-1 = none) */
+    int holdout_checks;       /* holdout checks so far (opts->holdout), resumed ones included */
+    long holdout_iteration;   /* iteration of the best check, whose network the model has (-1 = none) */
+    double holdout_ssim;      /* its mean SSIM over the holdouts' sketches */
+    double holdout_last_ssim; /* the last check's */
+    float gain_scale;         /* the scale of the residual gain's test (tn_gnn_gain), calibrated on
+                                 the holdouts' sketches; 1 without holdouts */
+} tn_gnn_stats;
+
+/* Sketch height units at generation. */
+enum { TN_GNN_HEIGHTS_AUTO = 0,   /* UNIT if every sketch height lies in [0, 1] and the example's
+                                     range does not, else EXAMPLE */
+       TN_GNN_HEIGHTS_EXAMPLE,    /* the example's units (an extracted network of a similar DEM) */
+       TN_GNN_HEIGHTS_UNIT };     /* [0, 1] mapped linearly to the example's lo..hi (drawn sketches) */
+
+/* Which sketch parts take an example part's embedding at generation. */
+enum { TN_GNN_EMBED_AUTO = 0,     /* a part identical to an example part (same pixels and heights,
+                                     e.g. the example's own network) takes its embedding, every
+                                     other part none: the network's geometry-only mode, trained by
+                                     embedding dropout and the sparse levels */
+       TN_GNN_EMBED_ALIGNED,      /* every part takes its aligned example part's (paper 5.3) */
+       TN_GNN_EMBED_NONE };       /* no part does */
+
+typedef struct tn_gnn_generate_opts {
+    uint64_t seed;           /* random sketches, alignment pick, parts' initial states, the gain's held-out
+                                lines; part cutting too except under EMBED_AUTO, which cuts with the
+                                model's training seed (the example's own network then gives the
+                                example's own parts) */
+    int heights;             /* TN_GNN_HEIGHTS_* */
+    int embeddings;          /* TN_GNN_EMBED_* */
+    int align_choices;       /* EMBED_ALIGNED: pick at random among the best this many aligned
+                                example parts; 0 = 1 (the best), the paper uses 5 (variety) */
+    int random_nodes;        /* random sketches (5.2) densify the sketch: this many random ridge nodes
+                                (tn_sketch_random; their ridges and valleys avoid the sketch's
+                                lines, heights in the example's range); 0 = none, at most 8192 */
+    int finetune;            /* embedding fine-tune steps (5.4); 0 = none */
+    float finetune_lr;       /* Adam rate of the fine-tune; 0 = 1e-2 */
+    float smooth_weight;     /* fine-tune smoothness weight; 0 = 0.1, < 0 = off */
+    float order_weight;      /* fine-tune sketch-ordering weight (6.1's sketch loss as a hinge): a ridge
+                                pixel below, or a valley pixel above, a pixel 3 px across its line is
+                                penalised by the difference; 0 = 1, < 0 = off */
+    float gain;              /* how much of the network's residual over the membrane is added:
+                                0 = validated on the sketch (tn_gnn_gain), > 0 = this factor
+                                (1 = the network as trained), < 0 = none (the membrane) */
+} tn_gnn_generate_opts;
+
+/* Fills *o with the defaults (what zero fields mean). */
+TN_API void tn_gnn_defaults(tn_gnn_opts *o);
+/* Windows for opts->holdout, as gnn-train takes them: up to max of the w x h windows of dem
+   (channel 0) two windows away from the training window at (x, y), spread around it; the
+   adjacent ones when none of those fits; windows with a NaN/Inf left out. Writes them to out[]
+   (free each with tn_image_free) and returns how many (0 when none fits or max <= 0). */
+TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out);
+/* Trains on channel 0 of dem (at least 16 x 16, finite). Reports progress as "gnn-train".
+   *model is allocated here (free with tn_gnn_free); stats may be NULL. A DEM without any
+   extracted contour or contour part fails with TN_ERR_EMPTY. */
+TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts, tn_gnn *model, tn_gnn_stats *stats);
+TN_API void tn_gnn_free(tn_gnn *model);
+/* .tnw model files stamped with method "gnn"; load refuses other methods' files and
+   checkpoints with TN_ERR_FORMAT, and damaged configurations with TN_ERR_CORRUPT. */
+TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path);
+TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model);
+/* The example's contour parts as the model stores them (example units). *out allocated here. */
+TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out);
+
+/* Terrain of width x height following `sketch` (polylines; coordinates scale from its canvas),
+   in the example's height units. *out (one channel) is allocated here. opts may be NULL.
+   Same inputs and seed, same output, for any thread count. An empty sketch or one without a
+   part of 5 px fails with TN_ERR_EMPTY, NaN/Inf points with TN_ERR_NUMERIC. */
+TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                 const tn_gnn_generate_opts *opts, tn_image *out);
+/* Pixels (x, y) .. (x + w - 1, y + h - 1) of the width x height map tn_gnn_generate would give,
+   computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
+   pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
+   the network plus the membrane's blocks (see >>gnn), so the window is computed on itself grown
+   by that halo. Large maps and windows run in tiles of 256 px (+ halo) internally, so memory
+   follows the tile, not the map (the fine-tune's too: it works on windows of maps over 256^2). */
+TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
+                                        int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
+
+/* The residual gain that opts->gain = 0 uses: how far the network's residual over the membrane is
+   to be trusted on this sketch, tested on the sketch itself. Three times, 30 % of the user's
+   lines (not random ones) are held out; the rest is generated (without fine-tune) and the
+   least-squares factor a of the residual r against the held-out pixels' true offsets t - m
+   (sum r (t - m) / sum r^2 over them) is pooled, times the model's scale (calibrated on the
+   holdouts in training, tn_gnn_stats.gain_scale; 1 without) and clamped to [0, 1]. Maps over 512 px a side
+   are tested on their central 512 x 512 window, so any window of one map gets the same gain.
+   1 when the network cannot be tested: every part is one of the example's own (its network:
+   the reconstruction), fewer than 8 user lines (a drawing of a few strokes: a held-out stroke
+   says little about the rest), a model without membrane, or opts->gain != 0 (then that
+   setting, clamped at 0). */
+TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                             float *gain);
+
+/* Does a terrain obey its sketch's ordering? Along every densified sketch line (coordinates
+   scaled from the sketch canvas to the terrain), each point is compared with the two pixels
+   `distance` px away across the line (normal from the points 2 before and after; 0 = 3 px):
+   *share = the fraction of ridge points above both and valley points below both (points whose
+   across pixels leave the map are skipped; *count, may be NULL, = the points compared). */
+TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count);
+
+/* The membrane baseline: heights fixed on the sketch's rasterised ridge and valley pixels
+   (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
+   the border), in the sketch's height units. *out (one channel) allocated here. */
+TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+
+/* --------------------------------------------------------------------------------------------
+   >>gnn  (@@gnn implementation)
+   Layout: membrane solve; the parts as flat arrays; the k-nearest-parts search (a bucket grid,
+   rings searched outwards until the k-th distance is certain); a step's graph (fixed edges
+   minus masked parts plus random edges, both edge lists in CSR order); two fused graph ops
+   (attention aggregation and mean aggregation) that never materialise an edges x hidden
+   tensor except the gradient scratch of training; the network; training on @@train; model
+   files; generation.
+   Why fused ops: with k = 10 a 128^2 example has 164k edges; gather/linear/scatter through the
+   generic ops would hold ~10 edges x 32 tensors per round. The attention op takes the per-node
+   terms of the first MLP layer (receiver and sender rows, computed once per node by GEMM) and
+   only the 5 edge features per edge, so a round costs a few hundred flops per edge; the
+   second MLP layer is applied after the attention-weighted sum (it is linear and the weights
+   sum to 1, so that equals summing the encodings).
+   Determinism: every reduction runs in a fixed order per destination or per source (CSR lists
+   built by stable counting sorts), parameter gradients by GEMM or a serial sum.
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__GNN_FORMAT 1
+#define TN__GNN_CONFIG 24
+#define TN__GNN_F 5          /* edge features: projection index (or overhang), distance, closeness, height difference, noise */
+#define TN__GNN_MAXH 256
+#define TN__GNN_DIST 16.0f   /* distance scale of the edge features (px) */
+#define TN__GNN_MAX_LEVELS 4 /* sketch densities in training */
+#define TN__GNN_MAX_EDGES (1 << 25) /* ~1800^2 pixels at k = 10: ~2.5 GB of graph in training */
+
+TN_API void tn_gnn_defaults(tn_gnn_opts *o)
+{
+    TN_ASSERT(o);
+    /* H = 32, two-layer MLPs and k = 10 are the paper's (A.5, 4.2); T = 2 the issue's prototype.
+       The embedding (16) gives each 5-10 px part room to memorise its neighbourhood. Noise:
+       with the paper's N(0, 1) edge noise and part states, alps_montblanc 128 (600 steps)
+       reconstructed at SSIM 0.959 and its neighbours at 0.901; without, 0.962 and 0.906
+       (membrane 0.898), so both are off unless asked for. Loss weights: MSE 1, SSIM 0.1,
+       gradient 0.1 on normalised heights (std 1); SSIM weight 1 (with the noise on) gave
+       0.956 / 0.899 instead of 0.959 / 0.901. */
+    if (o->hidden <= 0) o->hidden = 32;
+    if (o->rounds <= 0) o->rounds = 2;
+    if (o->k <= 0) o->k = 10;
+    if (!(o->radius > 0)) o->radius = 24.0f;
+    if (o->embed <= 0) o->embed = 16;
+    if (o->random_edges == 0) o->random_edges = 10000;
+    if (o->mask == 0) o->mask = 0.05f;
+    if (o->edge_noise < 0) o->edge_noise = 0;
+    if (o->part_noise < 0) o->part_noise = 0;
+    if (o->embed_drop == 0) o->embed_drop = 0.5f;
+    if (o->sparse_levels == 0) o->sparse_levels = 3;
+    if (o->sparse_levels > TN__GNN_MAX_LEVELS - 1) o->sparse_levels = TN__GNN_MAX_LEVELS - 1;
+    if (o->thin == 0) o->thin = 0.5f;
+    /* a quarter: the embeddings catch up on what dropout and the sparse levels kept from them,
+       while the network keeps most of its training (Sahara, 10 minutes: reconstruction +0.035
+       SSIM, neighbours unchanged). With an early network for other terrain the phase trains
+       everything for the example alone, so it gets half (Sahara 0.929 -> 0.939 at the base rate;
+       every holdout's best check came before half; docs/gnn.md) */
+    if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
+    if (o->lr <= 0) o->lr = 2e-3f;
+    if (o->mse_weight == 0) o->mse_weight = 1.0f;
+    if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
+    if (o->grad_weight == 0) o->grad_weight = 0.1f;
+    /* smoothness 0.1: 1000-step runs on Alps, Grand Canyon and Sahara kept the reconstruction
+       (+-0.002 SSIM) and lifted the neighbours' SSIM in 7 of 9 region x density cells (up to
+       +0.012); the sketch term cost 0.01-0.03 everywhere and the distance term the drawn
+       sketch's ordering on Grand Canyon (99.7 -> 80.4 %), so both stay off (docs/gnn.md) */
+    if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
+    if (o->holdout_every <= 0) o->holdout_every = 150;
+    tn_train_defaults(&o->train, 10.0);
+}
+
+TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out)
+{
+    int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
+    if (!dem || !dem->data || !out || w <= 0 || h <= 0) return 0;
+    for (ring = 2; ring >= 1 && !m; ring--) {
+        c = 0;
+        for (dy = -ring; dy <= ring; dy++)
+            for (dx = -ring; dx <= ring; dx++)
+                if ((abs(dx) == ring || abs(dy) == ring) && x + dx * w >= 0 && y + dy * h >= 0 && x + (dx + 1) * w <= dem->width &&
+                    y + (dy + 1) * h <= dem->height) {
+                    cx[c] = x + dx * w;
+                    cy[c++] = y + dy * h;
+                }
+        for (k = 0; k < max && k < c; k++) {
+            int u, v, bad = 0, x0 = cx[k * c / (c < max ? c : max)], y0 = cy[k * c / (c < max ? c : max)];
+            if (tn_image_create(&out[m], w, h, 1)) return m;
+            for (v = 0; v < h && !bad; v++)
+                for (u = 0; u < w; u++) bad += !isfinite(TN_PIXEL(&out[m], u, v, 0) = TN_PIXEL(dem, x0 + u, y0 + v, 0));
+            if (bad) tn_image_free(&out[m]);
+            else m++;
+        }
+    }
+    return m;
+}
+
+/* ---- membrane (Laplace) interpolation ---- */
+
+/* out = val on fixed pixels; sum over 4-neighbours inside the map of (out_q - out_p) = 0 on the
+   others (Neumann border). Jacobi-preconditioned conjugate gradients, started from the same
+   problem solved at half resolution and upsampled, so a 512^2 map needs ~100s of iterations,
+   not ~1000s. Needs at least one fixed pixel. Serial and in double: same result everywhere. */
+static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out)
+{
+    size_t n = (size_t)W * H, i;
+    double *x = NULL, *r = NULL, *d = NULL, *q = NULL, rz, scale = 0, tol;
+    int it, maxit = 4 * (W + H) + 200, x0, y0;
+    tn_status st = TN_OK;
+    for (i = 0; i < n; i++)
+        if (fixed[i] && fabs((double)val[i]) > scale) scale = fabs((double)val[i]);
+    /* initial guess: the coarse solution upsampled (nearest), or the mean of the fixed values */
+    if (W >= 32 && H >= 32) {
+        int cw = (W + 1) / 2, ch = (H + 1) / 2;
+        float *cv = (float *)tn__alloc((size_t)cw * ch * sizeof(float) * 2);
+        uint8_t *cf = (uint8_t *)tn__calloc((size_t)cw * ch);
+        int *cnt = (int *)tn__calloc((size_t)cw * ch * sizeof(int));
+        if (!cv || !cf || !cnt) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st) {
+            memset(cv, 0, (size_t)cw * ch * sizeof(float));
+            for (y0 = 0; y0 < H; y0++)
+                for (x0 = 0; x0 < W; x0++) {
+                    size_t c = (size_t)(y0 / 2) * cw + x0 / 2, f = (size_t)y0 * W + x0;
+                    if (!fixed[f]) continue;
+                    cv[c] += val[f];
+                    cnt[c]++;
+                    cf[c] = 1;
+                }
+            for (i = 0; i < (size_t)cw * ch; i++)
+                if (cnt[i]) cv[i] /= (float)cnt[i];
+            st = tn__gnn_membrane_solve(cv, cf, cw, ch, cv + (size_t)cw * ch);
+        }
+        if (!st)
+            for (y0 = 0; y0 < H; y0++)
+                for (x0 = 0; x0 < W; x0++) out[(size_t)y0 * W + x0] = cv[(size_t)cw * ch + (size_t)(y0 / 2) * cw + x0 / 2];
+        TN_FREE(cv);
+        TN_FREE(cf);
+        TN_FREE(cnt);
+        if (st) return st;
+    } else {
+        double s = 0;
+        size_t nf = 0;
+        for (i = 0; i < n; i++)
+            if (fixed[i]) { s += val[i]; nf++; }
+        for (i = 0; i < n; i++) out[i] = (float)(nf ? s / (double)nf : 0.0);
+    }
+    x = (double *)tn__alloc(n * sizeof(double));
+    r = (double *)tn__alloc(n * sizeof(double));
+    d = (double *)tn__alloc(n * sizeof(double));
+    q = (double *)tn__alloc(n * sizeof(double));
+    if (!x || !r || !d || !q) {
+        TN_FREE(x); TN_FREE(r); TN_FREE(d); TN_FREE(q);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < n; i++) x[i] = fixed[i] ? (double)val[i] : (double)out[i];
+#define TN__GNN_DEG(X, Y) (((X) > 0) + ((X) < W - 1) + ((Y) > 0) + ((Y) < H - 1))
+    /* r = -(L x) on free pixels (the residual of the Laplace equation), 0 on fixed ones */
+    rz = 0;
+    for (y0 = 0; y0 < H; y0++)
+        for (x0 = 0; x0 < W; x0++) {
+            size_t p = (size_t)y0 * W + x0;
+            double s = 0;
+            if (fixed[p]) { r[p] = d[p] = 0; continue; }
+            if (x0 > 0) s += x[p - 1] - x[p];
+            if (x0 < W - 1) s += x[p + 1] - x[p];
+            if (y0 > 0) s += x[p - W] - x[p];
+            if (y0 < H - 1) s += x[p + W] - x[p];
+            r[p] = s;
+            d[p] = s / TN__GNN_DEG(x0, y0);
+            rz += r[p] * d[p];
+        }
+    tol = 1e-7 * (scale > 1e-30 ? scale : 1.0);
+    tol = tol * tol * (double)n;
+    for (it = 0; it < maxit && rz > tol; it++) {
+        double dq = 0, alpha, rz2 = 0, beta;
+        for (y0 = 0; y0 < H; y0++)
+            for (x0 = 0; x0 < W; x0++) {
+                size_t p = (size_t)y0 * W + x0;
+                double s = 0;
+                if (fixed[p]) { q[p] = 0; continue; }
+                s = TN__GNN_DEG(x0, y0) * d[p];
+                if (x0 > 0) s -= d[p - 1];
+                if (x0 < W - 1) s -= d[p + 1];
+                if (y0 > 0) s -= d[p - W];
+                if (y0 < H - 1) s -= d[p + W];
+                q[p] = s;
+                dq += d[p] * s;
+            }
+        if (!(dq > 0)) break;
+        alpha = rz / dq;
+        for (i = 0; i < n; i++) {
+            x[i] += alpha * d[i];
+            r[i] -= alpha * q[i];
+        }
+        for (y0 = 0; y0 < H; y0++)
+            for (x0 = 0; x0 < W; x0++) {
+                size_t p = (size_t)y0 * W + x0;
+                if (!fixed[p]) rz2 += r[p] * r[p] / TN__GNN_DEG(x0, y0);
+            }
+        beta = rz2 / rz;
+        rz = rz2;
+        for (y0 = 0; y0 < H; y0++)
+            for (x0 = 0; x0 < W; x0++) {
+                size_t p = (size_t)y0 * W + x0;
+                if (!fixed[p]) d[p] = r[p] / TN__GNN_DEG(x0, y0) + beta * d[p];
+            }
+    }
+#undef TN__GNN_DEG
+    for (i = 0; i < n; i++) out[i] = (float)x[i];
+    TN_FREE(x); TN_FREE(r); TN_FREE(d); TN_FREE(q);
+    return TN_OK;
+}
+
+/* The membrane with bounded influence, so that a window of a map can be computed alone (tiled
+   generation): the map is cut into blocks of B = 128 px; each block's membrane is solved on the
+   block grown by a halo of 64 px (clipped to the map; grown further, step by step, while it holds
+   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it bilinearly by its
+   distance to their centres. A pixel therefore depends only on sketch pixels within ~256 px, on
+   any map size, and the result is continuous. Maps whose every block would see the whole map
+   (up to 128 + 64 px a side, the training crops) take one plain solve: the global membrane. */
+#define TN__GNN_MB 128
+#define TN__GNN_MHALO 64
+
+typedef struct tn__gnn_mblock {
+    int x0, y0, w, h;         /* solved domain */
+    float *sol;               /* w x h */
+    tn_status st;
+} tn__gnn_mblock;
+
+typedef struct tn__gnn_mjob {
+    const float *val;
+    const uint8_t *fixed;
+    int W, H;
+    tn__gnn_mblock *b;
+} tn__gnn_mjob;
+
+static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
+{
+    tn__gnn_mjob *J = (tn__gnn_mjob *)vj;
+    size_t bi;
+    for (bi = b0; bi < b1; bi++) {
+        tn__gnn_mblock *B = &J->b[bi];
+        int bx = B->x0, by = B->y0, halo = TN__GNN_MHALO, x, y, any = 0;
+        float *v = NULL;
+        uint8_t *f = NULL;
+        for (;;) { /* the domain: block + halo, grown until it holds a fixed pixel */
+            B->x0 = bx - halo > 0 ? bx - halo : 0;
+            B->y0 = by - halo > 0 ? by - halo : 0;
+            B->w = (bx + TN__GNN_MB + halo < J->W ? bx + TN__GNN_MB + halo : J->W) - B->x0;
+            B->h = (by + TN__GNN_MB + halo < J->H ? by + TN__GNN_MB + halo : J->H) - B->y0;
+            for (y = 0; y < B->h && !any; y++)
+                for (x = 0; x < B->w && !any; x++) any = J->fixed[(size_t)(B->y0 + y) * J->W + B->x0 + x];
+            if (any || (B->w == J->W && B->h == J->H)) break;
+            halo *= 2;
+        }
+        v = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
+        f = (uint8_t *)tn__alloc((size_t)B->w * B->h);
+        B->sol = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
+        if (!v || !f || !B->sol) B->st = TN_ERR_OUT_OF_MEMORY;
+        else {
+            for (y = 0; y < B->h; y++) {
+                memcpy(v + (size_t)y * B->w, J->val + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w * sizeof(float));
+                memcpy(f + (size_t)y * B->w, J->fixed + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w);
+            }
+            B->st = tn__gnn_membrane_solve(v, f, B->w, B->h, B->sol);
+        }
+        TN_FREE(v);
+        TN_FREE(f);
+    }
+}
+
+/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t. */
+static void tn__gnn_mblend(int x, int n, int *a, int *b, float *t)
+{
+    float u = ((float)x + 0.5f) / (float)TN__GNN_MB - 0.5f, fl = floorf(u);
+    *a = (int)fl;
+    *t = u - fl;
+    *b = *a + 1;
+    if (*a < 0) *a = 0;
+    if (*b < 0) *b = 0;
+    if (*a > n - 1) *a = n - 1;
+    if (*b > n - 1) *b = n - 1;
+}
+
+/* out (rw x rh) = the bounded-influence membrane on the rectangle (rx, ry, rw, rh) of the W x H
+   map given by val / fixed (W x H). Needs at least one fixed pixel in the map. */
+static tn_status tn__gnn_membrane_rect(const float *val, const uint8_t *fixed, int W, int H, int rx, int ry, int rw, int rh, float *out)
+{
+    int nbx = (W + TN__GNN_MB - 1) / TN__GNN_MB, nby = (H + TN__GNN_MB - 1) / TN__GNN_MB, bxa, bxb, bya, byb, x, y, i, nb;
+    float t;
+    tn__gnn_mjob J;
+    tn_status st = TN_OK;
+    if ((nbx - 1) * TN__GNN_MB <= TN__GNN_MHALO && TN__GNN_MB + TN__GNN_MHALO >= W && (nby - 1) * TN__GNN_MB <= TN__GNN_MHALO &&
+        TN__GNN_MB + TN__GNN_MHALO >= H) {
+        float *all = out;
+        if ((rw != W || rh != H) && !(all = (float *)tn__alloc((size_t)W * H * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+        st = tn__gnn_membrane_solve(val, fixed, W, H, all);
+        if (all != out) {
+            for (y = 0; !st && y < rh; y++) memcpy(out + (size_t)y * rw, all + (size_t)(ry + y) * W + rx, (size_t)rw * sizeof(float));
+            TN_FREE(all);
+        }
+        return st;
+    }
+    tn__gnn_mblend(rx, nbx, &bxa, &i, &t);
+    tn__gnn_mblend(rx + rw - 1, nbx, &i, &bxb, &t);
+    tn__gnn_mblend(ry, nby, &bya, &i, &t);
+    tn__gnn_mblend(ry + rh - 1, nby, &i, &byb, &t);
+    nb = (bxb - bxa + 1) * (byb - bya + 1);
+    memset(&J, 0, sizeof J);
+    J.val = val;
+    J.fixed = fixed;
+    J.W = W;
+    J.H = H;
+    if (!(J.b = (tn__gnn_mblock *)tn__calloc((size_t)nb * sizeof(tn__gnn_mblock)))) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < nb; i++) {
+        J.b[i].x0 = (bxa + i % (bxb - bxa + 1)) * TN__GNN_MB;
+        J.b[i].y0 = (bya + i / (bxb - bxa + 1)) * TN__GNN_MB;
+    }
+    tn_parallel_for((size_t)nb, 1, tn__gnn_mblock_task, &J);
+    for (i = 0; i < nb; i++)
+        if (J.b[i].st && !st) st = J.b[i].st;
+    for (y = 0; !st && y < rh; y++)
+        for (x = 0; x < rw; x++) {
+            int gx = rx + x, gy = ry + y, xa, xb, ya, yb, q;
+            float tx, ty, v = 0, w[4];
+            const tn__gnn_mblock *bl[4];
+            tn__gnn_mblend(gx, nbx, &xa, &xb, &tx);
+            tn__gnn_mblend(gy, nby, &ya, &yb, &ty);
+            bl[0] = &J.b[(ya - bya) * (bxb - bxa + 1) + xa - bxa];
+            bl[1] = &J.b[(ya - bya) * (bxb - bxa + 1) + xb - bxa];
+            bl[2] = &J.b[(yb - bya) * (bxb - bxa + 1) + xa - bxa];
+            bl[3] = &J.b[(yb - bya) * (bxb - bxa + 1) + xb - bxa];
+            w[0] = (1 - tx) * (1 - ty);
+            w[1] = tx * (1 - ty);
+            w[2] = (1 - tx) * ty;
+            w[3] = tx * ty;
+            for (q = 0; q < 4; q++) v += w[q] * bl[q]->sol[(size_t)(gy - bl[q]->y0) * bl[q]->w + gx - bl[q]->x0];
+            out[(size_t)y * rw + x] = v;
+        }
+    for (i = 0; i < nb; i++) TN_FREE(J.b[i].sol);
+    TN_FREE(J.b);
+    return st;
+}
+
+/* Rasterised sketch -> pixel type (+1 ridge, -1 valley, 0 none), fixed heights, membrane. */
+static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, float *type, float *height, float *membrane)
+{
+    tn_image r = {0, 0, 0, NULL};
+    uint8_t *fixed;
+    size_t i, n = (size_t)W * H, nf = 0;
+    tn_status st;
+    if ((st = tn_sketch_rasterise(set, W, H, &r))) return st;
+    if (!(fixed = (uint8_t *)tn__alloc(n))) {
+        tn_image_free(&r);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < n; i++) {
+        const float *p = r.data + 3 * i;
+        fixed[i] = (uint8_t)(p[0] > 0 || p[1] > 0);
+        nf += fixed[i];
+        if (type) type[i] = p[0] > 0 ? 1.0f : p[1] > 0 ? -1.0f : 0.0f;
+        height[i] = fixed[i] ? p[2] : 0.0f;
+    }
+    if (!nf) st = tn__fail(TN_ERR_EMPTY, "gnn: the sketch covers no pixel of the %d x %d map", W, H);
+    if (!st && membrane) st = tn__gnn_membrane_rect(height, fixed, W, H, 0, 0, W, H, membrane);
+    TN_FREE(fixed);
+    tn_image_free(&r);
+    return st;
+}
+
+TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out)
+{
+    tn_image m = {0, 0, 0, NULL};
+    float *h;
+    tn_status st;
+    TN_ASSERT(out);
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "membrane: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "membrane"))) return st;
+    if ((st = tn_image_create(&m, width, height, 1))) return st;
+    if (!(h = (float *)tn__alloc((size_t)width * height * sizeof(float)))) {
+        tn_image_free(&m);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    st = tn__gnn_sketch_pixels(sketch, width, height, NULL, h, m.data);
+    TN_FREE(h);
+    if (st) {
+        tn_image_free(&m);
+        return st;
+    }
+    *out = m;
+    return TN_OK;
+}
+
+/* Across-line pixel pairs of a densified sketch already in the map's pixels: for point i, the
+   pixel p and the pixels q1, q2 at +-d along the normal (-1 when outside). sign: +1 ridge. */
+static void tn__gnn_across(const tn_contour *c, int i, int W, int H, float d, int *p, int *q1, int *q2)
+{
+    int a = i - 2 > 0 ? i - 2 : 0, b = i + 2 < c->npoints - 1 ? i + 2 : c->npoints - 1;
+    float tx = c->points[3 * b] - c->points[3 * a], ty = c->points[3 * b + 1] - c->points[3 * a + 1], n = sqrtf(tx * tx + ty * ty);
+    float x = c->points[3 * i], y = c->points[3 * i + 1];
+    int px = (int)floorf(x + 0.5f), py = (int)floorf(y + 0.5f), k;
+    *p = *q1 = *q2 = -1;
+    if (!(n > 0) || px < 0 || py < 0 || px >= W || py >= H) return;
+    *p = py * W + px;
+    for (k = 0; k < 2; k++) {
+        float s = k ? -d : d;
+        int qx = (int)floorf(x - s * ty / n + 0.5f), qy = (int)floorf(y + s * tx / n + 0.5f);
+        if (qx >= 0 && qy >= 0 && qx < W && qy < H) *(k ? q2 : q1) = qy * W + qx;
+    }
+}
+
+/* ---- parts as flat arrays ---- */
+
+typedef struct tn__gnn_parts {
+    int n, npts;
+    int *start;        /* n + 1 offsets into pts */
+    int *of;           /* npts: part of each point */
+    float *pts;        /* npts x 3: x, y, normalised height */
+    float *sign;       /* n: +1 ridge, -1 valley */
+} tn__gnn_parts;
+
+static void tn__gnn_parts_free(tn__gnn_parts *p)
+{
+    TN_FREE(p->start);
+    TN_FREE(p->of);
+    TN_FREE(p->pts);
+    TN_FREE(p->sign);
+    memset(p, 0, sizeof *p);
+}
+
+/* Heights become (h - mean) / std. */
+static tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p)
+{
+    int i, j, k = 0;
+    memset(p, 0, sizeof *p);
+    p->n = set->count;
+    for (i = 0; i < set->count; i++) p->npts += set->items[i].npoints;
+    p->start = (int *)tn__alloc(((size_t)p->n + 1) * sizeof(int));
+    p->of = (int *)tn__alloc(((size_t)p->npts + 1) * sizeof(int));
+    p->pts = (float *)tn__alloc(((size_t)p->npts + 1) * 3 * sizeof(float));
+    p->sign = (float *)tn__alloc(((size_t)p->n + 1) * sizeof(float));
+    if (!p->start || !p->of || !p->pts || !p->sign) {
+        tn__gnn_parts_free(p);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (i = 0; i < set->count; i++) {
+        const tn_contour *c = &set->items[i];
+        p->start[i] = k;
+        p->sign[i] = c->type == TN_RIDGE ? 1.0f : -1.0f;
+        for (j = 0; j < c->npoints; j++, k++) {
+            p->of[k] = i;
+            p->pts[3 * k] = c->points[3 * j];
+            p->pts[3 * k + 1] = c->points[3 * j + 1];
+            p->pts[3 * k + 2] = (c->points[3 * j + 2] - mean) / std;
+        }
+    }
+    p->start[p->n] = k;
+    return TN_OK;
+}
+
+/* Edge features of pixel (x, y) against one part, given its nearest point (index j of the
+   part) and squared distance; base = the pixel's baseline height (0 without membrane). */
+static void tn__gnn_edge_features(const tn__gnn_parts *P, int part, int j, float d2, float base, float *f)
+{
+    int n = P->start[part + 1] - P->start[part];
+    float d = sqrtf(d2);
+    f[0] = n > 1 ? 2.0f * (float)j / (float)(n - 1) - 1.0f : 0.0f;
+    f[1] = d / TN__GNN_DIST;
+    f[2] = expf(-0.5f * d);
+    f[3] = P->pts[3 * (P->start[part] + j) + 2] - base;
+    f[4] = 0.0f;
+}
+
+/* Nearest point of a part to (x, y): index within the part (lowest on ties) and squared distance. */
+static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2)
+{
+    int a = P->start[part], b = P->start[part + 1], j, best = 0;
+    float bd = FLT_MAX;
+    for (j = a; j < b; j++) {
+        float dx = P->pts[3 * j] - x, dy = P->pts[3 * j + 1] - y, e = dx * dx + dy * dy;
+        if (e < bd) { bd = e; best = j - a; }
+    }
+    *d2 = bd;
+    return best;
+}
+
+/* Edge feature 0 of a part without an embedding (A.overhang): how far (x, y) lies beyond the
+   part's end along its direction, 0 beside it. The projection index (f0, as computed) only says
+   where a random cut fell on such a part; this does not depend on the cut. */
+static float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
+{
+    int a = P->start[part], n = P->start[part + 1] - a, j, o;
+    float tx, ty, tl, v;
+    if (n < 2) return 0.0f;
+    j = (int)floorf((f0 + 1.0f) * 0.5f * (float)(n - 1) + 0.5f);
+    if (j > 0 && j < n - 1) return 0.0f;
+    o = j == 0 ? 1 : n - 2;
+    tx = P->pts[3 * (a + j)] - P->pts[3 * (a + o)];
+    ty = P->pts[3 * (a + j) + 1] - P->pts[3 * (a + o) + 1];
+    tl = sqrtf(tx * tx + ty * ty);
+    if (!(tl > 0)) return 0.0f;
+    v = ((x - P->pts[3 * (a + j)]) * tx + (y - P->pts[3 * (a + j) + 1]) * ty) / tl;
+    return v > 0 ? v / TN__GNN_DIST : 0.0f;
+}
+
+/* ---- k nearest parts of every pixel ---- */
+
+#define TN__GNN_CELL 8
+
+typedef struct tn__gnn_cand { int part, pt; float d2; } tn__gnn_cand;
+
+typedef struct tn__gnn_knn_job {
+    const tn__gnn_parts *P;
+    int W, H, ox, oy, k, gw, gh, rcap;  /* window W x H at (ox, oy) of the map; rcap: last ring searched */
+    float r2;                           /* squared search radius; 0 = none */
+    const int *cell_start, *cell_pts;   /* bucket grid of point indices */
+    const float *base;                  /* per pixel baseline (normalised) or NULL */
+    int *nbr;                           /* npix x k parts (-1 = none) */
+    float *feat;                        /* npix x k x F */
+    tn_status st[TN__MAX_THREADS];
+} tn__gnn_knn_job;
+
+static int tn__gnn_cand_cmp(const void *a, const void *b)
+{
+    const tn__gnn_cand *x = (const tn__gnn_cand *)a, *y = (const tn__gnn_cand *)b;
+    if (x->d2 != y->d2) return x->d2 < y->d2 ? -1 : 1;
+    return (x->part > y->part) - (x->part < y->part);
+}
+
+static void tn__gnn_knn_task(void *vjob, int ith, int nth)
+{
+    tn__gnn_knn_job *J = (tn__gnn_knn_job *)vjob;
+    const tn__gnn_parts *P = J->P;
+    int *stamp = (int *)tn__alloc((size_t)P->n * sizeof(int)), *slot = (int *)tn__alloc((size_t)P->n * sizeof(int));
+    tn__gnn_cand *cand = (tn__gnn_cand *)tn__alloc((size_t)P->n * sizeof(tn__gnn_cand));
+    int y0 = (int)((long)J->H * ith / nth), y1 = (int)((long)J->H * (ith + 1) / nth), x, y, i, k = J->k;
+    if (!stamp || !slot || !cand) {
+        J->st[ith] = TN_ERR_OUT_OF_MEMORY;
+        TN_FREE(stamp); TN_FREE(slot); TN_FREE(cand);
+        return;
+    }
+    for (i = 0; i < P->n; i++) stamp[i] = -1;
+    for (y = y0; y < y1; y++)
+        for (x = 0; x < J->W; x++) {
+            int pix = y * J->W + x, bx = x / TN__GNN_CELL, by = y / TN__GNN_CELL, r, nc = 0, rmax = J->gw > J->gh ? J->gw : J->gh;
+            float gx = (float)(x + J->ox), gy = (float)(y + J->oy);
+            size_t o = (size_t)pix * k;
+            if (J->rcap < rmax) rmax = J->rcap;
+            for (r = 0; r <= rmax; r++) {
+                int cx, cy;
+                for (cy = by - r; cy <= by + r; cy++) {
+                    if (cy < 0 || cy >= J->gh) continue;
+                    for (cx = bx - r; cx <= bx + r; cx++) {
+                        int c, q;
+                        if (cx < 0 || cx >= J->gw || (abs(cx - bx) != r && abs(cy - by) != r)) continue;
+                        c = cy * J->gw + cx;
+                        for (q = J->cell_start[c]; q < J->cell_start[c + 1]; q++) {
+                            int pt = J->cell_pts[q], part = P->of[pt];
+                            float dx = P->pts[3 * pt] - gx, dy = P->pts[3 * pt + 1] - gy, d2 = dx * dx + dy * dy;
+                            if (J->r2 > 0 && !(d2 < J->r2)) continue;
+                            if (stamp[part] != pix) {
+                                stamp[part] = pix;
+                                slot[part] = nc;
+                                cand[nc].part = part;
+                                cand[nc].pt = pt;
+                                cand[nc++].d2 = d2;
+                            } else {
+                                tn__gnn_cand *cd = &cand[slot[part]];
+                                if (d2 < cd->d2 || (d2 == cd->d2 && pt < cd->pt)) { cd->d2 = d2; cd->pt = pt; }
+                            }
+                        }
+                    }
+                }
+                /* every point beyond ring r is farther than r cells */
+                if (nc >= k) {
+                    float bound = (float)(r * TN__GNN_CELL), b2 = bound * bound;
+                    int below = 0;
+                    for (i = 0; i < nc; i++) below += cand[i].d2 <= b2;
+                    if (below >= k) break;
+                }
+            }
+            /* candidates found in different rings: order them fully (ties: lower part index) */
+            qsort(cand, (size_t)nc, sizeof *cand, tn__gnn_cand_cmp);
+            for (i = 0; i < nc; i++) slot[cand[i].part] = i;
+            for (i = 0; i < k; i++) {
+                float *f = J->feat + (o + (size_t)i) * TN__GNN_F;
+                if (i >= nc) {
+                    J->nbr[o + (size_t)i] = -1;
+                    memset(f, 0, TN__GNN_F * sizeof(float));
+                    continue;
+                }
+                J->nbr[o + (size_t)i] = cand[i].part;
+                tn__gnn_edge_features(P, cand[i].part, cand[i].pt - P->start[cand[i].part], cand[i].d2, J->base ? J->base[pix] : 0.0f, f);
+            }
+        }
+    TN_FREE(stamp);
+    TN_FREE(slot);
+    TN_FREE(cand);
+}
+
+/* The k nearest parts (closer than `radius` px when radius > 0) of every pixel of the W x H
+   window at (ox, oy) of the map (parts in map coordinates); base: the window's baselines.
+   nbr (npix x k) and feat (npix x k x F) allocated here. Points outside the window sit in the
+   grid's border cells, nearer than they are, so the ring search stays exact. */
+static tn_status tn__gnn_knn(const tn__gnn_parts *P, int W, int H, int ox, int oy, int k, float radius, const float *base, int **nbr,
+                             float **feat)
+{
+    tn__gnn_knn_job J;
+    int *cnt = NULL, i, ncell;
+    size_t npix = (size_t)W * H;
+    tn_status st = TN_OK;
+    memset(&J, 0, sizeof J);
+    J.P = P;
+    J.W = W;
+    J.H = H;
+    J.k = k;
+    J.ox = ox;
+    J.oy = oy;
+    J.base = base;
+    J.gw = (W + TN__GNN_CELL - 1) / TN__GNN_CELL;
+    J.gh = (H + TN__GNN_CELL - 1) / TN__GNN_CELL;
+    J.r2 = radius > 0 ? radius * radius : 0.0f;
+    J.rcap = radius > 0 ? (int)ceilf(radius / TN__GNN_CELL) + 1 : INT_MAX;
+    ncell = J.gw * J.gh;
+    cnt = (int *)tn__calloc(((size_t)ncell + 1) * sizeof(int));
+    J.cell_pts = (int *)tn__alloc(((size_t)P->npts + 1) * sizeof(int));
+    *nbr = (int *)tn__alloc(npix * k * sizeof(int));
+    *feat = (float *)tn__alloc(npix * k * TN__GNN_F * sizeof(float));
+    if (!cnt || !J.cell_pts || !*nbr || !*feat) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) {
+        int *cp = (int *)J.cell_pts, *fill;
+#define TN__GNN_CELLOF(pt) \
+    ((P->pts[3 * (pt) + 1] - oy < 0 ? 0 : (int)(P->pts[3 * (pt) + 1] - oy) / TN__GNN_CELL >= J.gh ? J.gh - 1 : (int)(P->pts[3 * (pt) + 1] - oy) / TN__GNN_CELL) * J.gw + \
+     (P->pts[3 * (pt)] - ox < 0 ? 0 : (int)(P->pts[3 * (pt)] - ox) / TN__GNN_CELL >= J.gw ? J.gw - 1 : (int)(P->pts[3 * (pt)] - ox) / TN__GNN_CELL))
+        for (i = 0; i < P->npts; i++) cnt[TN__GNN_CELLOF(i) + 1]++;
+        for (i = 0; i < ncell; i++) cnt[i + 1] += cnt[i];
+        if (!(fill = (int *)tn__alloc(((size_t)ncell + 1) * sizeof(int)))) st = TN_ERR_OUT_OF_MEMORY;
+        else {
+            memcpy(fill, cnt, (size_t)ncell * sizeof(int));
+            for (i = 0; i < P->npts; i++) cp[fill[TN__GNN_CELLOF(i)]++] = i;
+            TN_FREE(fill);
+        }
+#undef TN__GNN_CELLOF
+    }
+    if (!st) {
+        J.cell_start = cnt;
+        J.nbr = *nbr;
+        J.feat = *feat;
+        tn_parallel_run(tn__gnn_knn_task, &J);
+        for (i = 0; i < TN__MAX_THREADS; i++)
+            if (J.st[i]) st = tn__fail(J.st[i], "gnn: out of memory searching nearest parts");
+    }
+    TN_FREE(cnt);
+    TN_FREE((void *)J.cell_pts);
+    if (st) {
+        TN_FREE(*nbr);
+        TN_FREE(*feat);
+        *nbr = NULL;
+        *feat = NULL;
+    }
+    return st;
+}
+
+/* ---- a graph: edges with features, laid out per direction in destination order ---- */
+
+/* One direction of the bipartite graph. Its edges are numbered by position in destination
+   order (destination d owns positions dst_start[d] .. dst_start[d + 1] - 1), so the per-edge
+   arrays the ops stream (features, attention weights, gradient rows) are read sequentially;
+   only the per-source pass jumps, through src_pos. */
+typedef struct tn__gnn_dir {
+    int nsrc, ndst, E;
+    const int *dst_start;              /* ndst + 1 */
+    const int *src_of, *dst_of;        /* per position */
+    const float *feat;                 /* per position, F features */
+    const int *src_start, *src_pos;    /* positions of each source's edges */
+} tn__gnn_dir;
+
+typedef struct tn__gnn_graph {
+    int npix, nparts, E, cap;
+    int *e_pix, *e_part;               /* edges as built */
+    float *feat;                       /* E x F as built */
+    int *pix_start, *pix_edges, *part_start, *part_edges;  /* CSR by pixel / by part (edge ids) */
+    int *ints;                         /* 7 x cap: per-direction position arrays + scratch */
+    float *feats;                      /* 2 x cap x F: features in each direction's order */
+    tn__gnn_dir g2p, p2g;              /* pixels -> parts (gather), parts -> pixels (scatter) */
+} tn__gnn_graph;
+
+static void tn__gnn_graph_free(tn__gnn_graph *g)
+{
+    TN_FREE(g->e_pix);
+    TN_FREE(g->e_part);
+    TN_FREE(g->feat);
+    TN_FREE(g->pix_start);
+    TN_FREE(g->pix_edges);
+    TN_FREE(g->part_start);
+    TN_FREE(g->part_edges);
+    TN_FREE(g->ints);
+    TN_FREE(g->feats);
+    memset(g, 0, sizeof *g);
+}
+
+static tn_status tn__gnn_graph_alloc(tn__gnn_graph *g, int npix, int nparts, int cap)
+{
+    memset(g, 0, sizeof *g);
+    g->npix = npix;
+    g->nparts = nparts;
+    g->cap = cap;
+    g->e_pix = (int *)tn__alloc((size_t)cap * sizeof(int));
+    g->e_part = (int *)tn__alloc((size_t)cap * sizeof(int));
+    g->feat = (float *)tn__alloc((size_t)cap * TN__GNN_F * sizeof(float));
+    g->pix_start = (int *)tn__alloc(((size_t)npix + 1) * sizeof(int));
+    g->pix_edges = (int *)tn__alloc((size_t)cap * sizeof(int));
+    g->part_start = (int *)tn__alloc(((size_t)nparts + 1) * sizeof(int));
+    g->part_edges = (int *)tn__alloc((size_t)cap * sizeof(int));
+    g->ints = (int *)tn__alloc((size_t)cap * 7 * sizeof(int));
+    g->feats = (float *)tn__alloc((size_t)cap * 2 * TN__GNN_F * sizeof(float));
+    if (!g->e_pix || !g->e_part || !g->feat || !g->pix_start || !g->pix_edges || !g->part_start || !g->part_edges || !g->ints ||
+        !g->feats) {
+        tn__gnn_graph_free(g);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    return TN_OK;
+}
+
+/* Stable counting sort of the edges by key: start (n + 1) and list (E). */
+static void tn__gnn_csr(const int *key, int E, int n, int *start, int *list)
+{
+    int i;
+    memset(start, 0, ((size_t)n + 1) * sizeof(int));
+    for (i = 0; i < E; i++) start[key[i] + 1]++;
+    for (i = 0; i < n; i++) start[i + 1] += start[i];
+    for (i = 0; i < E; i++) list[start[key[i]]++] = i;
+    for (i = n; i > 0; i--) start[i] = start[i - 1];
+    start[0] = 0;
+}
+
+/* One direction from the two CSR lists: dst_edges orders the positions, src_edges lists each
+   source's edges; inv (scratch, E) maps an edge id to its position. */
+static void tn__gnn_dir_make(tn__gnn_dir *D, int nsrc, int ndst, int E, const int *src, const int *dst, const float *feat,
+                             const int *dst_start, const int *dst_edges, const int *src_start, const int *src_edges, int *src_of,
+                             int *dst_of, int *src_pos, float *dfeat, int *inv)
+{
+    int k;
+    for (k = 0; k < E; k++) {
+        int e = dst_edges[k];
+        inv[e] = k;
+        src_of[k] = src[e];
+        dst_of[k] = dst[e];
+        memcpy(dfeat + (size_t)k * TN__GNN_F, feat + (size_t)e * TN__GNN_F, TN__GNN_F * sizeof(float));
+    }
+    for (k = 0; k < E; k++) src_pos[k] = inv[src_edges[k]];
+    D->nsrc = nsrc;
+    D->ndst = ndst;
+    D->E = E;
+    D->dst_start = dst_start;
+    D->src_of = src_of;
+    D->dst_of = dst_of;
+    D->feat = dfeat;
+    D->src_start = src_start;
+    D->src_pos = src_pos;
+}
+
+static void tn__gnn_graph_finish(tn__gnn_graph *g)
+{
+    int *I = g->ints;
+    size_t c = (size_t)g->cap;
+    tn__gnn_csr(g->e_pix, g->E, g->npix, g->pix_start, g->pix_edges);
+    tn__gnn_csr(g->e_part, g->E, g->nparts, g->part_start, g->part_edges);
+    tn__gnn_dir_make(&g->g2p, g->npix, g->nparts, g->E, g->e_pix, g->e_part, g->feat, g->part_start, g->part_edges, g->pix_start,
+                     g->pix_edges, I, I + c, I + 2 * c, g->feats, I + 6 * c);
+    tn__gnn_dir_make(&g->p2g, g->nparts, g->npix, g->E, g->e_part, g->e_pix, g->feat, g->pix_start, g->pix_edges, g->part_start,
+                     g->part_edges, I + 3 * c, I + 4 * c, I + 5 * c, g->feats + c * TN__GNN_F, I + 6 * c);
+}
+
+/* Feature 0 of the edges to parts without an embedding (known[of[part]] == 0, of NULL: the
+   identity; known NULL: none has one) becomes their overhang; P in the coordinates of the window
+   at (ox, oy), W pixels wide. */
+static void tn__gnn_overhangs(tn__gnn_graph *g, const tn__gnn_parts *P, const uint8_t *known, const int *of, int W, int ox, int oy)
+{
+    int e;
+    for (e = 0; e < g->E; e++) {
+        float *f = g->feat + (size_t)e * TN__GNN_F;
+        int r = g->e_part[e], p = g->e_pix[e];
+        if (!known || !known[of ? of[r] : r]) f[0] = tn__gnn_overhang(P, r, f[0], (float)(p % W + ox), (float)(p / W + oy));
+    }
+}
+
+/* ---- fused graph ops ---- */
+
+/* Attention aggregation: for every destination d,
+       h_e = relu(U[src_e] + V[d] + Wc feat_e),  s_e = a . h_e,  alpha = softmax over d's edges,
+       Y[d] = sum_e alpha_e h_e  (0 for a destination without edges).
+   U: nsrc x H, V: ndst x H, Wc: H x F, a: H. The forward keeps only alpha (E floats); the
+   backward recomputes h_e. */
+/* SIMD over the hidden axis (the tn__vf layer of >>imageops plus max and mask); a scalar tail
+   handles widths that are not a multiple of the vector. */
+#if TN__VF_N == 16
+#define tn__gnn_relu_v(z) _mm512_max_ps((z), _mm512_setzero_ps())
+#define tn__gnn_ifpos_v(h, v) _mm512_maskz_mov_ps(_mm512_cmp_ps_mask((h), _mm512_setzero_ps(), _CMP_GT_OQ), (v))
+#elif TN__VF_N == 8
+#define tn__gnn_relu_v(z) _mm256_max_ps((z), _mm256_setzero_ps())
+#define tn__gnn_ifpos_v(h, v) _mm256_and_ps(_mm256_cmp_ps((h), _mm256_setzero_ps(), _CMP_GT_OQ), (v))
+#else
+#define tn__gnn_relu_v(z) ((z) > 0 ? (z) : 0.0f)
+#define tn__gnn_ifpos_v(h, v) ((h) > 0 ? (v) : 0.0f)
+#endif
+
+/* sum of the lanes, in a fixed order */
+static inline float tn__gnn_hsum(tn__vf v)
+{
+    float lanes[TN__VF_N], s = 0;
+    int l;
+    tn__vf_store(lanes, v);
+    for (l = 0; l < TN__VF_N; l++) s += lanes[l];
+    return s;
+}
+
+/* y[i] = a * x[i] + y[i] */
+static inline void tn__gnn_axpy(float a, const float *x, float *y, int n)
+{
+    tn__vf va = tn__vf_set1(a);
+    int i = 0;
+    for (; i + TN__VF_N <= n; i += TN__VF_N) tn__vf_store(y + i, tn__vf_madd(va, tn__vf_load(x + i), tn__vf_load(y + i)));
+    for (; i < n; i++) y[i] += a * x[i];
+}
+
+typedef struct tn__gnn_att {
+    const tn__gnn_dir *g;
+    const float *U, *V, *WcT, *a, *dY;   /* WcT: F x H, so the per-edge loop runs along H */
+    float *Y, *alpha, *dots, *dz, *dU, *dV, *da_rows, *dw_rows;
+    int H;
+} tn__gnn_att;
+
+/* h = relu(U[src] + V[d] + Wc f) of the edge at position k into h; returns dot(w_dot, h). */
+static inline float tn__gnn_att_h(const tn__gnn_att *J, int k, int d, const float *w_dot, float *h)
+{
+    const float *u = J->U + (size_t)J->g->src_of[k] * J->H, *v = J->V + (size_t)d * J->H, *f = J->g->feat + (size_t)k * TN__GNN_F;
+    const float *w = J->WcT;
+    int i = 0, H = J->H;
+    float s;
+    tn__vf f0 = tn__vf_set1(f[0]), f1 = tn__vf_set1(f[1]), f2 = tn__vf_set1(f[2]), f3 = tn__vf_set1(f[3]), f4 = tn__vf_set1(f[4]);
+    tn__vf acc = tn__vf_set1(0.0f);
+    for (; i + TN__VF_N <= H; i += TN__VF_N) {
+        tn__vf z = tn__vf_add(tn__vf_load(u + i), tn__vf_load(v + i));
+        z = tn__vf_madd(f0, tn__vf_load(w + i), z);
+        z = tn__vf_madd(f1, tn__vf_load(w + H + i), z);
+        z = tn__vf_madd(f2, tn__vf_load(w + 2 * H + i), z);
+        z = tn__vf_madd(f3, tn__vf_load(w + 3 * H + i), z);
+        z = tn__vf_madd(f4, tn__vf_load(w + 4 * H + i), z);
+        z = tn__gnn_relu_v(z);
+        tn__vf_store(h + i, z);
+        acc = tn__vf_madd(z, tn__vf_load(w_dot + i), acc);
+    }
+    s = tn__gnn_hsum(acc);
+    for (; i < H; i++) {
+        float z = u[i] + v[i] + f[0] * w[i] + f[1] * w[H + i] + f[2] * w[2 * H + i] + f[3] * w[3 * H + i] + f[4] * w[4 * H + i];
+        h[i] = z > 0 ? z : 0.0f;
+        s += h[i] * w_dot[i];
+    }
+    return s;
+}
+
+static void tn__gnn_att_fwd(void *vj, size_t b, size_t end)
+{
+    const tn__gnn_att *J = (const tn__gnn_att *)vj;
+    float h[TN__GNN_MAXH], acc[TN__GNN_MAXH];
+    int H = J->H, i;
+    size_t d;
+    for (d = b; d < end; d++) {
+        int k0 = J->g->dst_start[d], k1 = J->g->dst_start[d + 1], k;
+        float m = -FLT_MAX, sum = 0, *y = J->Y + d * H;
+        for (i = 0; i < H; i++) acc[i] = 0;
+        for (k = k0; k < k1; k++) {
+            float s = tn__gnn_att_h(J, k, (int)d, J->a, h), w;
+            if (J->alpha) J->alpha[k] = s;
+            if (s > m) { /* online softmax: rescale what was summed so far */
+                float r = k == k0 ? 0.0f : expf(m - s);
+                for (i = 0; i < H; i++) acc[i] *= r;
+                sum *= r;
+                m = s;
+            }
+            w = expf(s - m);
+            sum += w;
+            tn__gnn_axpy(w, h, acc, H);
+        }
+        for (i = 0; i < H; i++) y[i] = k1 > k0 ? acc[i] / sum : 0.0f;
+        if (J->alpha)
+            for (k = k0; k < k1; k++) J->alpha[k] = expf(J->alpha[k] - m) / sum;
+    }
+}
+
+/* Per destination: h recomputed into the dz rows, then turned into dz in place; the
+   destination's shares of da and dWc go to its own rows (summed serially afterwards). */
+static void tn__gnn_att_bwd_dst(void *vj, size_t b, size_t end)
+{
+    const tn__gnn_att *J = (const tn__gnn_att *)vj;
+    int H = J->H, i, j;
+    size_t d;
+    for (d = b; d < end; d++) {
+        int k0 = J->g->dst_start[d], k1 = J->g->dst_start[d + 1], k;
+        const float *g = J->dY + d * H, *a = J->a;
+        float *dv = J->dV ? J->dV + d * H : J->da_rows + d * H, *dar = J->da_rows + d * H, *dwr = J->dw_rows + d * H * TN__GNN_F, mean = 0;
+        for (i = 0; i < H; i++) dar[i] = 0;
+        for (i = 0; i < H * TN__GNN_F; i++) dwr[i] = 0;
+        for (k = k0; k < k1; k++) {
+            J->dots[k] = tn__gnn_att_h(J, k, (int)d, g, J->dz + (size_t)k * H);
+            mean += J->alpha[k] * J->dots[k];
+        }
+        for (k = k0; k < k1; k++) {
+            float al = J->alpha[k], ds = al * (J->dots[k] - mean), *dz = J->dz + (size_t)k * H;
+            const float *f = J->g->feat + (size_t)k * TN__GNN_F;
+            tn__vf val = tn__vf_set1(al), vds = tn__vf_set1(ds), f0 = tn__vf_set1(f[0]), f1 = tn__vf_set1(f[1]), f2 = tn__vf_set1(f[2]);
+            tn__vf f3 = tn__vf_set1(f[3]), f4 = tn__vf_set1(f[4]);
+            for (i = 0; i + TN__VF_N <= H; i += TN__VF_N) {
+                tn__vf hv = tn__vf_load(dz + i), z;
+                tn__vf_store(dar + i, tn__vf_madd(vds, hv, tn__vf_load(dar + i)));
+                z = tn__gnn_ifpos_v(hv, tn__vf_madd(val, tn__vf_load(g + i), tn__vf_mul(vds, tn__vf_load(a + i))));
+                tn__vf_store(dz + i, z);
+                if (J->dV) tn__vf_store(dv + i, tn__vf_add(tn__vf_load(dv + i), z));
+                tn__vf_store(dwr + i, tn__vf_madd(f0, z, tn__vf_load(dwr + i)));
+                tn__vf_store(dwr + H + i, tn__vf_madd(f1, z, tn__vf_load(dwr + H + i)));
+                tn__vf_store(dwr + 2 * H + i, tn__vf_madd(f2, z, tn__vf_load(dwr + 2 * H + i)));
+                tn__vf_store(dwr + 3 * H + i, tn__vf_madd(f3, z, tn__vf_load(dwr + 3 * H + i)));
+                tn__vf_store(dwr + 4 * H + i, tn__vf_madd(f4, z, tn__vf_load(dwr + 4 * H + i)));
+            }
+            for (; i < H; i++) {
+                float hv = dz[i];
+                dar[i] += ds * hv;
+                dz[i] = hv > 0 ? al * g[i] + ds * a[i] : 0.0f;
+                if (J->dV) dv[i] += dz[i];
+                for (j = 0; j < TN__GNN_F; j++) dwr[(size_t)j * H + i] += f[j] * dz[i];
+            }
+        }
+    }
+}
+
+static void tn__gnn_att_bwd_src(void *vj, size_t b, size_t end)
+{
+    const tn__gnn_att *J = (const tn__gnn_att *)vj;
+    size_t s;
+    for (s = b; s < end; s++) {
+        int k;
+        float *du = J->dU + s * J->H;
+        for (k = J->g->src_start[s]; k < J->g->src_start[s + 1]; k++) tn__gnn_axpy(1.0f, J->dz + (size_t)J->g->src_pos[k] * J->H, du, J->H);
+    }
+}
+
+static float *tn__gnn_transpose_wc(tn_ctx *ctx, const tn_tensor *Wc)
+{
+    int H = Wc->shape[0], i, j;
+    float *t = tn__ctx_floats(ctx, (size_t)H * TN__GNN_F, 0);
+    if (t)
+        for (i = 0; i < H; i++)
+            for (j = 0; j < TN__GNN_F; j++) t[(size_t)j * H + i] = Wc->data[(size_t)i * TN__GNN_F + j];
+    return t;
+}
+
+static void tn__gnn_attend_backward(tn_ctx *ctx, tn_tensor *out)
+{
+    tn_tensor *U = out->src[0], *V = out->src[1], *Wc = out->src[2], *a = out->src[3];
+    tn__gnn_att J;
+    const tn__gnn_dir *g = (const tn__gnn_dir *)out->aux;
+    int H = out->shape[1], E = g->E, i, j;
+    size_t d;
+    memset(&J, 0, sizeof J);
+    J.g = g;
+    J.H = H;
+    J.U = U->data;
+    J.V = V->data;
+    J.WcT = tn__gnn_transpose_wc(ctx, Wc);
+    J.a = a->data;
+    J.dY = out->grad;
+    memcpy(&J.alpha, (char *)out->aux + sizeof(tn__gnn_dir), sizeof(float *));
+    J.dz = tn__ctx_floats(ctx, (size_t)(E > 0 ? E : 1) * H, 0);
+    J.dots = tn__ctx_floats(ctx, (size_t)(E > 0 ? E : 1), 0);
+    J.da_rows = tn__ctx_floats(ctx, (size_t)g->ndst * H, 0);
+    J.dw_rows = tn__ctx_floats(ctx, (size_t)g->ndst * H * TN__GNN_F, 0);
+    J.dV = V->requires_grad ? tn__grad(ctx, V) : NULL;
+    J.dU = U->requires_grad ? tn__grad(ctx, U) : NULL;
+    if (!J.WcT || !J.dz || !J.dots || !J.da_rows || !J.dw_rows || (a->requires_grad && !tn__grad(ctx, a)) ||
+        (Wc->requires_grad && !tn__grad(ctx, Wc)))
+        return;
+    if ((V->requires_grad && !J.dV) || (U->requires_grad && !J.dU)) return;
+    tn_parallel_for((size_t)g->ndst, 64, tn__gnn_att_bwd_dst, &J);
+    if (J.dU) tn_parallel_for((size_t)g->nsrc, 64, tn__gnn_att_bwd_src, &J);
+    for (d = 0; d < (size_t)g->ndst; d++) {
+        if (a->requires_grad) tn__gnn_axpy(1.0f, J.da_rows + d * H, a->grad, H);
+        if (Wc->requires_grad) /* dWc is H x F; the rows hold F x H */
+            for (j = 0; j < TN__GNN_F; j++)
+                for (i = 0; i < H; i++) Wc->grad[(size_t)i * TN__GNN_F + j] += J.dw_rows[(d * TN__GNN_F + j) * H + i];
+    }
+}
+
+static tn_tensor *tn__gnn_attend(tn_ctx *ctx, tn_tensor *U, tn_tensor *V, tn_tensor *Wc, tn_tensor *a, const tn__gnn_dir *g)
+{
+    tn__gnn_att J;
+    tn_tensor *o;
+    int shape[2], H, E;
+    void *aux;
+    if (!U || !V || !Wc || !a) return NULL;
+    H = U->shape[1];
+    TN_ASSERT(H <= TN__GNN_MAXH && V->shape[1] == H && U->shape[0] == g->nsrc && V->shape[0] == g->ndst);
+    TN_ASSERT(Wc->shape[0] == H && Wc->shape[1] == TN__GNN_F && (int)a->numel == H);
+    E = g->E;
+    shape[0] = g->ndst;
+    shape[1] = H;
+    /* a is a parameter of the same set as Wc: it needs a gradient only when Wc does */
+    o = tn__op_make(ctx, 2, shape, tn__gnn_attend_backward, U, V, Wc, 0);
+    if (!o) return NULL;
+    o->src[3] = a;
+    memset(&J, 0, sizeof J);
+    J.g = g;
+    J.H = H;
+    J.U = U->data;
+    J.V = V->data;
+    J.WcT = tn__gnn_transpose_wc(ctx, Wc);
+    J.a = a->data;
+    J.Y = o->data;
+    if (!J.WcT) return NULL;
+    if (o->backward) { /* the backward needs the directions and the attention weights */
+        aux = tn_ctx_alloc(ctx, sizeof(tn__gnn_dir) + sizeof(float *));
+        J.alpha = tn__ctx_floats(ctx, (size_t)(E > 0 ? E : 1), 0);
+        if (!aux || !J.alpha) return NULL;
+        memcpy(aux, g, sizeof *g);
+        memcpy((char *)aux + sizeof(tn__gnn_dir), &J.alpha, sizeof(float *));
+        o->aux = aux;
+    }
+    tn_parallel_for((size_t)g->ndst, 64, tn__gnn_att_fwd, &J);
+    return o;
+}
+
+/* Mean aggregation: Y[d] = mean of X[src_e] over d's edges (0 without edges). */
+typedef struct tn__gnn_mean_job {
+    const tn__gnn_dir *g;
+    const float *X, *dY;
+    float *Y, *dX;
+    int H;
+} tn__gnn_mean_job;
+
+static void tn__gnn_mean_fwd(void *vj, size_t b, size_t end)
+{
+    const tn__gnn_mean_job *J = (const tn__gnn_mean_job *)vj;
+    size_t d;
+    int i;
+    for (d = b; d < end; d++) {
+        int k0 = J->g->dst_start[d], k1 = J->g->dst_start[d + 1], k;
+        float *y = J->Y + d * J->H, inv = k1 > k0 ? 1.0f / (float)(k1 - k0) : 0.0f;
+        for (i = 0; i < J->H; i++) y[i] = 0;
+        for (k = k0; k < k1; k++) {
+            const float *x = J->X + (size_t)J->g->src_of[k] * J->H;
+            for (i = 0; i < J->H; i++) y[i] += x[i];
+        }
+        for (i = 0; i < J->H; i++) y[i] *= inv;
+    }
+}
+
+static void tn__gnn_mean_bwd(void *vj, size_t b, size_t end)
+{
+    const tn__gnn_mean_job *J = (const tn__gnn_mean_job *)vj;
+    size_t s;
+    int i;
+    for (s = b; s < end; s++) {
+        int k;
+        float *dx = J->dX + s * J->H;
+        for (k = J->g->src_start[s]; k < J->g->src_start[s + 1]; k++) {
+            int d = J->g->dst_of[J->g->src_pos[k]];
+            float inv = 1.0f / (float)(J->g->dst_start[d + 1] - J->g->dst_start[d]);
+            const float *dy = J->dY + (size_t)d * J->H;
+            for (i = 0; i < J->H; i++) dx[i] += inv * dy[i];
+        }
+    }
+}
+
+static void tn__gnn_mean_backward(tn_ctx *ctx, tn_tensor *out)
+{
+    tn_tensor *x = out->src[0];
+    tn__gnn_mean_job J;
+    memset(&J, 0, sizeof J);
+    J.g = (const tn__gnn_dir *)out->aux;
+    J.H = out->shape[1];
+    J.dY = out->grad;
+    if (!(J.dX = tn__grad(ctx, x))) return;
+    tn_parallel_for((size_t)J.g->nsrc, 64, tn__gnn_mean_bwd, &J);
+}
+
+static tn_tensor *tn__gnn_mean(tn_ctx *ctx, tn_tensor *x, const tn__gnn_dir *g)
+{
+    tn__gnn_mean_job J;
+    tn_tensor *o;
+    int shape[2];
+    if (!x) return NULL;
+    TN_ASSERT(x->ndim == 2 && x->shape[0] == g->nsrc);
+    shape[0] = g->ndst;
+    shape[1] = x->shape[1];
+    o = tn__op_make(ctx, 2, shape, tn__gnn_mean_backward, x, NULL, NULL, 0);
+    if (!o) return NULL;
+    if (o->backward) {
+        void *aux = tn_ctx_alloc(ctx, sizeof *g);
+        if (!aux) return NULL;
+        memcpy(aux, g, sizeof *g);
+        o->aux = aux;
+    }
+    memset(&J, 0, sizeof J);
+    J.g = g;
+    J.X = x->data;
+    J.Y = o->data;
+    J.H = x->shape[1];
+    tn_parallel_for((size_t)g->ndst, 64, tn__gnn_mean_fwd, &J);
+    return o;
+}
+
+/* ---- the network ---- */
+
+typedef struct tn__gnn_arch {
+    int hidden, rounds, k, embed, membrane, parts, width, height, npts;
+    int overhang;              /* parts without an embedding: feature 0 = tn__gnn_overhang */
+    float mean, std, lo, hi, part_noise, radius;
+} tn__gnn_arch;
+
+static tn_status tn__gnn_linear_add(tn_params *p, const char *name, int in, int out, tn_rng *rng)
+{
+    int w[2];
+    w[0] = in;
+    w[1] = out;
+    return tn_mlp_add(p, name, w, 1, rng);
+}
+
+/* Every learned tensor of the network (not the embeddings). */
+static tn_status tn__gnn_add_net(tn_params *p, const tn__gnn_arch *A, tn_rng *rng)
+{
+    int H = A->hidden, D = A->embed, t, wi[3], wc[2];
+    char name[40];
+    tn_status st;
+    tn_tensor *x;
+    wi[0] = 2; wi[1] = H; wi[2] = H;
+    if ((st = tn_mlp_add(p, "gnn.init.", wi, 2, rng))) return st;
+    wc[0] = H;
+    wc[1] = TN__GNN_F;
+    for (t = 0; t < A->rounds; t++) {
+        int side;
+        for (side = 0; side < 2; side++) {
+            char c = side ? 's' : 'g';
+            /* u: the sender's row, v: the receiver's; gather senders are pixels [f, mean E],
+               receivers parts [E, sign, emb]; scatter senders are parts [E, sign, emb, mean f],
+               receivers pixels [f] */
+            snprintf(name, sizeof name, "gnn.%d%c.u.", t, c);
+            if ((st = tn__gnn_linear_add(p, name, side ? 2 * H + 1 + D : 2 * H, H, rng))) return st;
+            snprintf(name, sizeof name, "gnn.%d%c.v.", t, c);
+            if ((st = tn__gnn_linear_add(p, name, side ? H : H + 1 + D, H, rng))) return st;
+            snprintf(name, sizeof name, "gnn.%d%c.cw", t, c);
+            if (!(x = tn_params_add(p, name, 2, wc))) return TN_ERR_OUT_OF_MEMORY;
+            if (rng) tn_init_kaiming(x, rng, 1.41f);
+            snprintf(name, sizeof name, "gnn.%d%c.a", t, c);
+            if (!(x = tn_params_add(p, name, 1, &H))) return TN_ERR_OUT_OF_MEMORY;
+            if (rng) tn_init_normal(x, rng, 0.0f, 0.1f);
+            snprintf(name, sizeof name, "gnn.%d%c.o.", t, c);
+            if ((st = tn__gnn_linear_add(p, name, H, H, rng))) return st;
+            /* residual branches start small so the first steps do not scramble the states */
+            snprintf(name, sizeof name, "gnn.%d%c.o.w0", t, c);
+            if (rng && (x = tn_params_find(p, name))) {
+                size_t i;
+                for (i = 0; i < x->numel; i++) x->data[i] *= 0.3f;
+            }
+        }
+    }
+    wi[0] = H; wi[1] = H; wi[2] = 1;
+    if ((st = tn_mlp_add(p, "gnn.out.", wi, 2, rng))) return st;
+    if (rng && (x = tn_params_find(p, "gnn.out.w1"))) { /* start at the baseline */
+        size_t i;
+        for (i = 0; i < x->numel; i++) x->data[i] *= 0.1f;
+    }
+    return TN_OK;
+}
+
+static tn_tensor *tn__gnn_param(const tn_params *p, const char *fmt, int t, char c)
+{
+    char name[40];
+    snprintf(name, sizeof name, fmt, t, c);
+    return tn_params_find(p, name);
+}
+
+static tn_tensor *tn__gnn_lin(tn_ctx *ctx, const tn_params *p, int t, char c, const char *which, tn_tensor *x)
+{
+    char name[40];
+    snprintf(name, sizeof name, "gnn.%d%c.%s.", t, c, which);
+    return tn_mlp(ctx, p, name, 1, x, TN_ACT_NONE);
+}
+
+/* Inputs of one forward pass. */
+typedef struct tn__gnn_in {
+    const tn__gnn_graph *g;
+    tn_tensor *pix_in;    /* npix x 2: type, baseline height */
+    tn_tensor *part_in;   /* nparts x (1 + D): sign, embedding */
+    tn_tensor *E0;        /* nparts x H */
+    tn_tensor *base;      /* npix x 1 baseline (zeros without membrane) */
+} tn__gnn_in;
+
+/* Round t of gather (pixels -> parts) and scatter (parts -> pixels): *f (npix x H) and *E
+   (nparts x H) updated, NULL on failure. */
+static void tn__gnn_round(tn_ctx *ctx, const tn_params *w, int t, const tn__gnn_in *in, tn_tensor **fp, tn_tensor **Ep)
+{
+    const tn__gnn_graph *g = in->g;
+    tn_tensor *f = *fp, *E = *Ep, *pn, *U, *V, *Y;
+    /* gather: pixels -> parts */
+    U = tn__gnn_lin(ctx, w, t, 'g', "u", tn_concat(ctx, f, tn__gnn_mean(ctx, E, &g->p2g), 1));
+    pn = tn_concat(ctx, E, in->part_in, 1);
+    V = tn__gnn_lin(ctx, w, t, 'g', "v", pn);
+    Y = tn__gnn_attend(ctx, U, V, tn__gnn_param(w, "gnn.%d%c.cw", t, 'g'), tn__gnn_param(w, "gnn.%d%c.a", t, 'g'), &g->g2p);
+    E = tn_add(ctx, E, tn__gnn_lin(ctx, w, t, 'g', "o", Y));
+    /* scatter: parts -> pixels */
+    pn = tn_concat(ctx, tn_concat(ctx, E, in->part_in, 1), tn__gnn_mean(ctx, f, &g->g2p), 1);
+    U = tn__gnn_lin(ctx, w, t, 's', "u", pn);
+    V = tn__gnn_lin(ctx, w, t, 's', "v", f);
+    Y = tn__gnn_attend(ctx, U, V, tn__gnn_param(w, "gnn.%d%c.cw", t, 's'), tn__gnn_param(w, "gnn.%d%c.a", t, 's'), &g->p2g);
+    *fp = tn_add(ctx, f, tn__gnn_lin(ctx, w, t, 's', "o", Y));
+    *Ep = E;
+}
+
+/* The prediction (npix x 1, normalised heights). */
+static tn_tensor *tn__gnn_forward(tn_ctx *ctx, const tn_params *w, const tn__gnn_arch *A, const tn__gnn_in *in)
+{
+    tn_tensor *f = tn_mlp(ctx, w, "gnn.init.", 2, in->pix_in, TN_ACT_RELU), *E = in->E0, *r;
+    int t;
+    for (t = 0; t < A->rounds && f && E; t++) tn__gnn_round(ctx, w, t, in, &f, &E);
+    r = tn_mlp(ctx, w, "gnn.out.", 2, f, TN_ACT_RELU);
+    return tn_add(ctx, r, in->base);
+}
+
+/* Node inputs shared by training and generation: pixel (type, baseline) rows, baseline column,
+   part (sign, embedding) rows. emb: nparts x D. */
+static tn_status tn__gnn_inputs(tn_ctx *ctx, const tn__gnn_graph *g, const float *type, const float *base, const float *sign,
+                                tn_tensor *emb, tn__gnn_in *in)
+{
+    tn_tensor *s;
+    int i;
+    memset(in, 0, sizeof *in);
+    in->g = g;
+    in->pix_in = tn_tensor_2d(ctx, g->npix, 2);
+    in->base = tn_tensor_2d(ctx, g->npix, 1);
+    s = tn_tensor_2d(ctx, g->nparts, 1);
+    if (!in->pix_in || !in->base || !s) return tn_ctx_status(ctx);
+    for (i = 0; i < g->npix; i++) {
+        in->pix_in->data[2 * i] = type[i];
+        in->pix_in->data[2 * i + 1] = base ? base[i] : 0.0f;
+        in->base->data[i] = base ? base[i] : 0.0f;
+    }
+    for (i = 0; i < g->nparts; i++) s->data[i] = sign[i];
+    in->part_in = tn_concat(ctx, s, emb, 1);
+    return in->part_in ? TN_OK : tn_ctx_status(ctx);
+}
+
+/* ---- configuration tensor ---- */
+
+static void tn__gnn_write_config(const tn__gnn_arch *A, float *c)
+{
+    memset(c, 0, TN__GNN_CONFIG * sizeof(float));
+    c[0] = TN__GNN_FORMAT;
+    c[1] = (float)A->hidden;
+    c[2] = (float)A->rounds;
+    c[3] = (float)A->k;
+    c[4] = (float)A->embed;
+    c[5] = (float)A->membrane;
+    c[6] = (float)A->parts;
+    c[7] = (float)A->width;
+    c[8] = (float)A->height;
+    c[9] = A->mean;
+    c[10] = A->std;
+    c[11] = A->lo;
+    c[12] = A->hi;
+    c[13] = A->part_noise;
+    c[14] = (float)A->npts;
+    c[15] = TN__GNN_F;
+    c[16] = A->radius;
+    c[17] = (float)A->overhang;
+}
+
+static int tn__gnn_whole(float v, float lo, float hi) { return v >= lo && v <= hi && v == floorf(v); }
+
+/* Every field range-checked: a damaged file fails here, not in an allocation or an index. */
+static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char *name)
+{
+    memset(A, 0, sizeof *A);
+    if (!tn__gnn_whole(c[0], 1, 1e6) || c[0] > TN__GNN_FORMAT)
+        return tn__fail(TN_ERR_FORMAT, "%s: gnn configuration format %g is not supported", name, (double)c[0]);
+    if (!tn__gnn_whole(c[1], 1, TN__GNN_MAXH) || !tn__gnn_whole(c[2], 1, 16) || !tn__gnn_whole(c[3], 1, 64) ||
+        !tn__gnn_whole(c[4], 1, 256) || !tn__gnn_whole(c[5], 0, 1) || !tn__gnn_whole(c[6], 1, 1 << 24) ||
+        !tn__gnn_whole(c[7], 16, TN_SKETCH_MAX_SIDE) || !tn__gnn_whole(c[8], 16, TN_SKETCH_MAX_SIDE) || !isfinite(c[9]) ||
+        !(c[10] > 0) || !isfinite(c[10]) || !isfinite(c[11]) || !isfinite(c[12]) || !(c[13] >= 0 && c[13] <= 100) ||
+        !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096) ||
+        !tn__gnn_whole(c[17], 0, 1))
+        return tn__fail(TN_ERR_CORRUPT, "%s: damaged gnn configuration", name);
+    A->hidden = (int)c[1];
+    A->rounds = (int)c[2];
+    A->k = (int)c[3];
+    A->embed = (int)c[4];
+    A->membrane = (int)c[5];
+    A->parts = (int)c[6];
+    A->width = (int)c[7];
+    A->height = (int)c[8];
+    A->mean = c[9];
+    A->std = c[10];
+    A->lo = c[11];
+    A->hi = c[12];
+    A->part_noise = c[13];
+    A->npts = (int)c[14];
+    A->radius = c[16] > 0 ? c[16] : 24.0f; /* files written before the radius existed */
+    A->overhang = (int)c[17];              /* 0 in files written before it existed */
+    return TN_OK;
+}
+
+/* The model's tensors: config, parts (buffers), embeddings and the network. */
+static tn_status tn__gnn_model_params(const tn__gnn_arch *A, tn_rng *rng, tn_params **out)
+{
+    tn_params *p = tn_params_create();
+    int s[2], nc = TN__GNN_CONFIG;
+    tn_tensor *t;
+    tn_status st = TN_OK;
+    *out = NULL;
+    if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    if (!(t = tn_params_add_buffer(p, "gnn.config", 1, &nc))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) tn__gnn_write_config(A, t->data);
+    s[0] = A->npts;
+    s[1] = 3;
+    if (!st && !tn_params_add_buffer(p, "gnn.part_pts", 2, s)) st = TN_ERR_OUT_OF_MEMORY;
+    s[0] = A->parts;
+    s[1] = 4;
+    if (!st && !tn_params_add_buffer(p, "gnn.part_info", 2, s)) st = TN_ERR_OUT_OF_MEMORY;
+    s[1] = A->embed;
+    if (!st && !(t = tn_params_add(p, "gnn.emb", 2, s))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && rng) tn_init_normal(t, rng, 0.0f, 1.0f);
+    if (!st) st = tn__gnn_add_net(p, A, rng);
+    if (st) {
+        tn_params_free(p);
+        return tn__fail(st, "gnn: cannot build the network (%s)", tn_status_string(st));
+    }
+    *out = p;
+    return TN_OK;
+}
+
+/* Stored parts (example units) -> contour set. */
+static tn_status tn__gnn_stored_parts(const tn_params *w, const tn__gnn_arch *A, const char *name, tn_contour_set *out)
+{
+    const tn_tensor *pts = tn_params_find(w, "gnn.part_pts"), *info = tn_params_find(w, "gnn.part_info");
+    tn_contour_set set;
+    int i, off = 0;
+    memset(&set, 0, sizeof set);
+    if (!pts || !info || (int)pts->numel != 3 * A->npts || (int)info->numel != 4 * A->parts)
+        return tn__fail(TN_ERR_CORRUPT, "%s: gnn parts missing or of the wrong size", name);
+    for (i = 0; i < A->parts; i++) {
+        float ty = info->data[4 * i], np = info->data[4 * i + 1];
+        if ((ty != 0 && ty != 1) || !tn__gnn_whole(np, 1, (float)(A->npts - off)) || !tn__gnn_whole(info->data[4 * i + 2], 0, 1000) ||
+            !isfinite(info->data[4 * i + 3]))
+            return tn__fail(TN_ERR_CORRUPT, "%s: gnn part %d is damaged", name, i);
+        off += (int)np;
+    }
+    if (off != A->npts) return tn__fail(TN_ERR_CORRUPT, "%s: gnn parts hold %d points, the configuration says %d", name, off, A->npts);
+    for (i = 0; i < 3 * A->npts; i++)
+        if (!isfinite(pts->data[i]) || (i % 3 != 2 && fabsf(pts->data[i]) > (float)(2 * TN_SKETCH_MAX_SIDE)))
+            return tn__fail(TN_ERR_CORRUPT, "%s: gnn part point %d is damaged", name, i / 3);
+    set.width = A->width;
+    set.height = A->height;
+    set.count = A->parts;
+    if (!(set.items = (tn_contour *)tn__calloc((size_t)A->parts * sizeof(tn_contour)))) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0, off = 0; i < A->parts; i++) {
+        tn_contour *c = &set.items[i];
+        c->type = info->data[4 * i] == 1 ? TN_RIDGE : TN_VALLEY;
+        c->npoints = (int)info->data[4 * i + 1];
+        c->order = (int)info->data[4 * i + 2];
+        c->mean_gradient = info->data[4 * i + 3];
+        if (!(c->points = (float *)tn__alloc((size_t)c->npoints * 3 * sizeof(float)))) {
+            tn_contour_set_free(&set);
+            return TN_ERR_OUT_OF_MEMORY;
+        }
+        memcpy(c->points, pts->data + (size_t)off * 3, (size_t)c->npoints * 3 * sizeof(float));
+        off += c->npoints;
+    }
+    *out = set;
+    return TN_OK;
+}
+
+static void tn__gnn_store_parts(tn_params *w, const tn_contour_set *parts)
+{
+    float *pts = tn_params_find(w, "gnn.part_pts")->data, *info = tn_params_find(w, "gnn.part_info")->data;
+    int i, off = 0;
+    for (i = 0; i < parts->count; i++) {
+        const tn_contour *c = &parts->items[i];
+        info[4 * i] = c->type == TN_RIDGE ? 1.0f : 0.0f;
+        info[4 * i + 1] = (float)c->npoints;
+        info[4 * i + 2] = (float)c->order;
+        info[4 * i + 3] = c->mean_gradient;
+        memcpy(pts + (size_t)off * 3, c->points, (size_t)c->npoints * 3 * sizeof(float));
+        off += c->npoints;
+    }
+}
+
+static void tn__gnn_model_fields(tn_gnn *m, const tn__gnn_arch *A)
+{
+    m->hidden = A->hidden;
+    m->rounds = A->rounds;
+    m->k = A->k;
+    m->radius = A->radius;
+    m->embed = A->embed;
+    m->membrane = A->membrane;
+    m->parts = A->parts;
+    m->width = A->width;
+    m->height = A->height;
+    m->mean = A->mean;
+    m->std = A->std;
+    m->lo = A->lo;
+    m->hi = A->hi;
+    m->part_noise = A->part_noise;
+}
+
+static tn_status tn__gnn_arch_of(const tn_gnn *m, tn__gnn_arch *A)
+{
+    const tn_tensor *c;
+    if (!m || !m->weights || !(c = tn_params_find(m->weights, "gnn.config")) || c->numel != TN__GNN_CONFIG)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: no model");
+    return tn__gnn_read_config(c->data, A, "gnn model");
+}
+
+/* ---- training ---- */
+
+/* One sketch density of the example: its network's parts, pixel types, baseline and fixed
+   edges. Level 0 is the example's own network (its parts own the embeddings); the sparser
+   levels are the example's networks at higher extraction thresholds, trained without
+   embeddings, so the network also learns to fill what a sparse sketch leaves out. */
+typedef struct tn__gnn_level {
+    tn__gnn_parts P;
+    int *nbr;                  /* npix x k parts */
+    float *nfeat;              /* their features */
+    float *type, *base;        /* per pixel: +1 / -1 / 0, baseline (normalised) */
+} tn__gnn_level;
+
+typedef struct tn__gnn_train {
+    tn__gnn_arch A;
+    tn_gnn_opts o;
+    tn_params *w;
+    tn_optim *opt;
+    tn_train *run;
+    tn_rng rng;
+    tn__gnn_level lv[TN__GNN_MAX_LEVELS];
+    tn__gnn_level thinned;     /* this step's thinned sparse level */
+    int nlevels, maxparts, npix;
+    float *target;
+    uint8_t *masked, *known;   /* per part: masked this step; keeps its embedding this step */
+    tn__gnn_graph g;
+    float range;               /* normalised height range (SSIM data range) */
+    long phase_from;           /* first iteration of the embedding phase, -1 before it */
+    float alone_ramp;          /* the phase for the example alone: how far its rate and SSIM weight have risen (0 .. 1) */
+    tn_contour_set *hsk;       /* holdout i's sketches at [2 i] (the threshold) and [2 i + 1] (4 x) */
+    tn_params *best;           /* holdouts given: the best check's weights and "holdout" = {mean SSIM,
+                                  iteration (-1 = none yet), checks, last check's SSIM, its iteration,
+                                  the embedding phase's first iteration (-1 = not begun)} */
+} tn__gnn_train;
+
+static void tn__gnn_level_free(tn__gnn_level *L)
+{
+    tn__gnn_parts_free(&L->P);
+    TN_FREE(L->nbr);
+    TN_FREE(L->nfeat);
+    TN_FREE(L->type);
+    TN_FREE(L->base);
+    memset(L, 0, sizeof *L);
+}
+
+static void tn__gnn_train_free(tn__gnn_train *s)
+{
+    int i;
+    tn_train_free(s->run);
+    tn_optim_free(s->opt);
+    tn_params_free(s->w);
+    for (i = 0; i < TN__GNN_MAX_LEVELS; i++) tn__gnn_level_free(&s->lv[i]);
+    tn__gnn_level_free(&s->thinned);
+    TN_FREE(s->target);
+    TN_FREE(s->masked);
+    TN_FREE(s->known);
+    tn__gnn_graph_free(&s->g);
+    for (i = 0; s->hsk && i < 2 * s->o.holdout_count; i++) tn_contour_set_free(&s->hsk[i]);
+    TN_FREE(s->hsk);
+    tn_params_free(s->best);
+}
+
+/* A level from the example's polylines and their parts. */
+static tn_status tn__gnn_level_make(const tn__gnn_arch *A, const tn_contour_set *lines, const tn_contour_set *parts, tn__gnn_level *L)
+{
+    size_t n = (size_t)A->width * A->height, i;
+    float *hgt;
+    tn_status st;
+    memset(L, 0, sizeof *L);
+    L->type = (float *)tn__alloc(n * sizeof(float));
+    L->base = (float *)tn__alloc(n * sizeof(float));
+    hgt = (float *)tn__alloc(n * sizeof(float));
+    if (!L->type || !L->base || !hgt) {
+        TN_FREE(hgt);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    st = tn__gnn_sketch_pixels(lines, A->width, A->height, L->type, hgt, L->base);
+    TN_FREE(hgt);
+    if (st) return st;
+    for (i = 0; i < n; i++) L->base[i] = A->membrane ? (L->base[i] - A->mean) / A->std : 0.0f;
+    if ((st = tn__gnn_parts_make(parts, A->mean, A->std, &L->P))) return st;
+    return tn__gnn_knn(&L->P, A->width, A->height, 0, 0, A->k, A->radius, L->base, &L->nbr, &L->nfeat);
+}
+
+/* A random thinning of sparse level L into T: each part kept with probability 1 - q, q uniform
+   in [0, thin); the sketch pixels are the kept parts' points, so the membrane and the nearest
+   parts are rebuilt (700-step runs at 128^2 took 6 % longer with it). */
+static tn_status tn__gnn_level_thin(tn__gnn_train *s, const tn__gnn_level *L, tn__gnn_level *T)
+{
+    const tn__gnn_parts *P = &L->P;
+    int W = s->A.width, H = s->A.height, i, j, n = 0, m = 0, kept = 0;
+    float q = s->o.thin * tn_rng_uniform(&s->rng);
+    size_t npix = (size_t)W * H;
+    uint8_t *fixed;
+    float *hgt;
+    tn_status st = TN_OK;
+    tn__gnn_level_free(T);
+    for (i = 0; i < P->n; i++) {
+        s->masked[i] = (uint8_t)(tn_rng_uniform(&s->rng) < q);
+        kept += !s->masked[i];
+    }
+    if (!kept) s->masked[0] = 0;
+    T->type = (float *)tn__calloc(npix * sizeof(float));
+    T->base = (float *)tn__alloc(npix * sizeof(float));
+    T->P.start = (int *)tn__alloc(((size_t)P->n + 1) * sizeof(int));
+    T->P.of = (int *)tn__alloc(((size_t)P->npts + 1) * sizeof(int));
+    T->P.pts = (float *)tn__alloc(((size_t)P->npts + 1) * 3 * sizeof(float));
+    T->P.sign = (float *)tn__alloc(((size_t)P->n + 1) * sizeof(float));
+    fixed = (uint8_t *)tn__calloc(npix);
+    hgt = (float *)tn__calloc(npix * sizeof(float));
+    if (!T->type || !T->base || !T->P.start || !T->P.of || !T->P.pts || !T->P.sign || !fixed || !hgt) st = TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; !st && i < P->n; i++) {
+        if (s->masked[i]) continue;
+        T->P.start[n] = m;
+        T->P.sign[n] = P->sign[i];
+        for (j = P->start[i]; j < P->start[i + 1]; j++, m++) {
+            int x = (int)floorf(P->pts[3 * j] + 0.5f), y = (int)floorf(P->pts[3 * j + 1] + 0.5f);
+            memcpy(T->P.pts + 3 * (size_t)m, P->pts + 3 * (size_t)j, 3 * sizeof(float));
+            T->P.of[m] = n;
+            if (x < 0 || y < 0 || x >= W || y >= H) continue;
+            fixed[(size_t)y * W + x] = 1;
+            T->type[(size_t)y * W + x] = P->sign[i];
+            hgt[(size_t)y * W + x] = P->pts[3 * j + 2];
+        }
+        n++;
+    }
+    if (!st) {
+        T->P.n = n;
+        T->P.npts = m;
+        T->P.start[n] = m;
+        if (s->A.membrane) st = tn__gnn_membrane_rect(hgt, fixed, W, H, 0, 0, W, H, T->base);
+        else memset(T->base, 0, npix * sizeof(float));
+    }
+    if (!st) st = tn__gnn_knn(&T->P, W, H, 0, 0, s->A.k, s->A.radius, T->base, &T->nbr, &T->nfeat);
+    TN_FREE(fixed);
+    TN_FREE(hgt);
+    return st;
+}
+
+/* This step's graph on level L: the fixed edges of unmasked parts, then random pixel-part
+   edges, then the noise feature (finished by the caller, once it knows which parts keep their
+   embedding). whole: every part, no random edges (the graph generation uses). */
+static void tn__gnn_step_graph(tn__gnn_train *s, const tn__gnn_level *L, int whole)
+{
+    tn__gnn_graph *g = &s->g;
+    int p, j, i, k = s->A.k, nparts = L->P.n, nm = 0, nrand = s->o.random_edges > 0 && !whole ? s->o.random_edges : 0;
+    float mask = s->o.mask > 0 && !whole ? s->o.mask : 0.0f, noise = s->o.edge_noise > 0 ? s->o.edge_noise : 0.0f;
+    for (i = 0; i < nparts; i++) {
+        s->masked[i] = (uint8_t)(mask > 0 && tn_rng_uniform(&s->rng) < mask);
+        nm += s->masked[i];
+    }
+    if (nm == nparts) memset(s->masked, 0, (size_t)nparts); /* keep something to learn from */
+    g->nparts = nparts;
+    g->E = 0;
+    for (p = 0; p < s->npix; p++)
+        for (j = 0; j < k; j++) {
+            int r = L->nbr[(size_t)p * k + j];
+            if (r < 0 || s->masked[r]) continue;
+            g->e_pix[g->E] = p;
+            g->e_part[g->E] = r;
+            memcpy(g->feat + (size_t)g->E * TN__GNN_F, L->nfeat + ((size_t)p * k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
+            g->E++;
+        }
+    for (i = 0; i < nrand; i++) {
+        int pix = (int)tn_rng_below(&s->rng, (uint32_t)s->npix), r = (int)tn_rng_below(&s->rng, (uint32_t)nparts), jj;
+        float d2;
+        if (s->masked[r]) continue;
+        jj = tn__gnn_project(&L->P, r, (float)(pix % s->A.width), (float)(pix / s->A.width), &d2);
+        g->e_pix[g->E] = pix;
+        g->e_part[g->E] = r;
+        tn__gnn_edge_features(&L->P, r, jj, d2, L->base[pix], g->feat + (size_t)g->E * TN__GNN_F);
+        g->E++;
+    }
+    if (noise > 0)
+        for (i = 0; i < g->E; i++) g->feat[(size_t)i * TN__GNN_F + 4] = noise * tn_rng_normal(&s->rng);
+}
+
+static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int nparts, tn_rng *rng)
+{
+    tn_tensor *E0 = tn_tensor_2d(ctx, nparts, A->hidden);
+    size_t i;
+    if (E0 && A->part_noise > 0)
+        for (i = 0; i < E0->numel; i++) E0->data[i] = A->part_noise * tn_rng_normal(rng);
+    return E0;
+}
+
+#define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
+#define TN__GNN_ALONE_RATE 4.0f  /* the phase for the example alone: rate and SSIM weight factors */
+#define TN__GNN_ALONE_SSIM 10.0f /* (Sahara 10 minutes: 0.959 at 2.5 x, 0.964 at 4 x, 0.973 with SSIM x 10; docs/gnn.md) */
+#define TN__GNN_ALONE_RAMP 100.0f /* iterations over which both rise from 1 x: a jump let Adam, whose second
+                                     moments lag, take steps that left Grand Canyon's network dead (docs/gnn.md) */
+#define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */
+
+/* 6.1's sketch term: pixels 1-4 px from a part and not on a line lie below a ridge's (above a
+   valley's) height at their projection. For a pair of logits the Gumbel-softmax's cross-entropy
+   is softplus(-z), z = sign (h_proj - y) / tau + logistic noise: a BCE on z. NULL if nothing
+   was sampled. */
+static tn_tensor *tn__gnn_sketch_loss(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, int *idx, tn_tensor *a, tn_tensor *b)
+{
+    const tn__gnn_graph *g = &s->g;
+    int n = 0, tries;
+    tn_tensor *one;
+    for (tries = 0; g->E > 0 && tries < 4 * TN__GNN_SAMPLES && n < TN__GNN_SAMPLES; tries++) {
+        int e = (int)tn_rng_below(&s->rng, (uint32_t)g->E);
+        const float *f = g->feat + (size_t)e * TN__GNN_F;
+        float d = f[1] * TN__GNN_DIST, sg = L->P.sign[g->e_part[e]], u;
+        if (d < 0.7f || d > 4.0f || L->type[g->e_pix[e]] != 0) continue; /* a line pixel would be pushed off its own line */
+        u = 1e-6f + 0.999998f * tn_rng_uniform(&s->rng);
+        idx[n] = g->e_pix[e];
+        a->data[n] = -sg / TN__GNN_TAU;
+        b->data[n] = sg * (f[3] + L->base[g->e_pix[e]]) / TN__GNN_TAU + logf(u / (1.0f - u));
+        n++;
+    }
+    if (!n || !(one = tn_tensor_2d(ctx, n, 1))) return NULL;
+    tn_tensor_fill(one, 1.0f);
+    return tn_bce_logits_loss(ctx, tn_add(ctx, tn_mul(ctx, tn_gather_rows(ctx, y, idx, n), tn_slice(ctx, a, 0, 0, n)), tn_slice(ctx, b, 0, 0, n)),
+                              one);
+}
+
+/* 6.1's smoothness: mean |y_p - y_q| over random pixel pairs under 5 px apart (Manhattan). */
+static tn_tensor *tn__gnn_smooth_loss(tn__gnn_train *s, tn_ctx *ctx, tn_tensor *y, int *idx)
+{
+    int n = 0, W = s->A.width, H = s->A.height, cap = TN__GNN_SAMPLES;
+    while (n < cap) {
+        int x = (int)tn_rng_below(&s->rng, (uint32_t)W), yy = (int)tn_rng_below(&s->rng, (uint32_t)H);
+        int dx = (int)tn_rng_below(&s->rng, 9) - 4, dy = (int)tn_rng_below(&s->rng, 9) - 4;
+        if (abs(dx) + abs(dy) >= 5 || (!dx && !dy) || x + dx < 0 || x + dx >= W || yy + dy < 0 || yy + dy >= H) continue;
+        idx[n] = yy * W + x;
+        idx[cap + n] = (yy + dy) * W + x + dx;
+        n++;
+    }
+    return tn_mean(ctx, tn_abs(ctx, tn_sub(ctx, tn_gather_rows(ctx, y, idx, cap), tn_gather_rows(ctx, y, idx + cap, cap))));
+}
+
+/* 6.1's distance term as read here: a pixel 1-6 px from its nearest part keeps near the part's
+   height there, weighted 1 / (10 d^2) (weights normalised to sum 1). NULL if nothing sampled. */
+static tn_tensor *tn__gnn_further_loss(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, int *idx, tn_tensor *a, tn_tensor *b)
+{
+    int n = 0, tries, k = s->A.k;
+    double wsum = 0;
+    for (tries = 0; tries < 4 * TN__GNN_SAMPLES && n < TN__GNN_SAMPLES; tries++) {
+        int p = (int)tn_rng_below(&s->rng, (uint32_t)s->npix), j;
+        float bd = FLT_MAX, bh = 0;
+        for (j = 0; j < k; j++) {
+            const float *f = L->nfeat + ((size_t)p * k + j) * TN__GNN_F;
+            if (L->nbr[(size_t)p * k + j] >= 0 && f[1] * TN__GNN_DIST < bd) {
+                bd = f[1] * TN__GNN_DIST;
+                bh = f[3] + L->base[p];
+            }
+        }
+        if (bd < 0.7f || bd > 6.0f) continue;
+        idx[n] = p;
+        b->data[n] = bh;
+        a->data[n] = 1.0f / (10.0f * bd * bd);
+        wsum += a->data[n++];
+    }
+    if (!n) return NULL;
+    return tn_scale_shift(ctx, tn_sum(ctx, tn_mul(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, y, idx, n), tn_slice(ctx, b, 0, 0, n))),
+                                                 tn_slice(ctx, a, 0, 0, n))), (float)(1.0 / wsum), 0.0f);
+}
+
+/* The weighted sketch, smooth and further terms on this step's prediction y (npix x 1) over
+   level L, added to *loss (zero weights cost nothing). */
+static tn_status tn__gnn_shape_losses(tn__gnn_train *s, tn_ctx *ctx, const tn__gnn_level *L, tn_tensor *y, tn_tensor **loss)
+{
+    int *idx = (int *)tn_ctx_alloc(ctx, 2 * (size_t)TN__GNN_SAMPLES * sizeof(int));
+    tn_tensor *a = tn_tensor_2d(ctx, TN__GNN_SAMPLES, 1), *b = tn_tensor_2d(ctx, TN__GNN_SAMPLES, 1), *t;
+    if (!idx || !a || !b) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    if (s->o.sketch_weight > 0 && (t = tn__gnn_sketch_loss(s, ctx, L, y, idx, a, b)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.sketch_weight, 0.0f));
+    if (s->o.smooth_weight > 0 && (t = tn__gnn_smooth_loss(s, ctx, y, idx)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.smooth_weight, 0.0f));
+    if (s->o.further_weight > 0 && (t = tn__gnn_further_loss(s, ctx, L, y, idx, a, b)))
+        *loss = tn_add(ctx, *loss, tn_scale_shift(ctx, t, s->o.further_weight, 0.0f));
+    return *loss ? TN_OK : tn_ctx_status(ctx);
+}
+
+/* One step; the unweighted loss terms go to l[0..2], the total to l[3]. phase: 0 = a training
+   step; 1 = the embedding phase's (the example's own network, every embedding); 2 = the same on
+   the whole graph (no masked parts, no random edges: the example alone). */
+static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l)
+{
+    tn__gnn_in in;
+    tn_tensor *pred, *tgt, *loss = NULL, *t, *emb;
+    int shape[2], lev = 0, i;
+    const tn__gnn_level *L;
+    tn_status st;
+    tn_ctx_reset(ctx);
+    /* half the steps on the example's own network, half on a sparser one */
+    if (s->nlevels > 1 && tn_rng_uniform(&s->rng) >= 0.5f) lev = 1 + (int)tn_rng_below(&s->rng, (uint32_t)(s->nlevels - 1));
+    if (phase) lev = 0;
+    L = &s->lv[lev];
+    if (lev > 0 && s->o.thin > 0) {
+        if ((st = tn__gnn_level_thin(s, L, &s->thinned))) return st;
+        L = &s->thinned;
+    }
+    tn__gnn_step_graph(s, L, phase == 2);
+    shape[0] = L->P.n;
+    shape[1] = s->A.embed;
+    if (lev == 0) { /* embedding dropout: a dropped part is seen as a part of an unknown sketch */
+        tn_tensor *keep = tn_tensor_2d(ctx, L->P.n, 1);
+        float drop = s->o.embed_drop > 0 && !phase ? s->o.embed_drop : 0.0f;
+        if (!keep) return tn_ctx_status(ctx);
+        for (i = 0; i < L->P.n; i++) {
+            keep->data[i] = drop > 0 && tn_rng_uniform(&s->rng) < drop ? 0.0f : 1.0f;
+            s->known[i] = keep->data[i] != 0;
+        }
+        emb = tn_mul(ctx, tn_params_find(s->w, "gnn.emb"), keep);
+    } else
+        emb = tn_tensor_new(ctx, 2, shape);
+    if (s->A.overhang) tn__gnn_overhangs(&s->g, &L->P, lev == 0 ? s->known : NULL, NULL, s->A.width, 0, 0);
+    tn__gnn_graph_finish(&s->g);
+    if ((st = tn__gnn_inputs(ctx, &s->g, L->type, s->A.membrane ? L->base : NULL, L->P.sign, emb, &in))) return st;
+    in.E0 = tn__gnn_part_states(ctx, &s->A, L->P.n, &s->rng);
+    {
+        int s4[4];
+        s4[0] = s4[1] = 1;
+        s4[2] = s->A.height;
+        s4[3] = s->A.width;
+        pred = tn_reshape(ctx, tn__gnn_forward(ctx, s->w, &s->A, &in), 4, s4);
+    }
+    tgt = tn_tensor_4d(ctx, 1, 1, s->A.height, s->A.width);
+    if (!pred || !tgt) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+    memcpy(tgt->data, s->target, (size_t)s->npix * sizeof(float));
+    l[0] = l[1] = l[2] = 0;
+    if (s->o.mse_weight > 0 && (t = tn_mse_loss(ctx, pred, tgt))) {
+        l[0] = t->data[0];
+        loss = tn_scale_shift(ctx, t, s->o.mse_weight, 0.0f);
+    }
+    if (s->o.ssim_weight > 0 && (t = tn_ssim_loss(ctx, pred, tgt, s->range))) {
+        l[1] = t->data[0];
+        t = tn_scale_shift(ctx, t, s->o.ssim_weight * (phase == 2 ? 1.0f + (TN__GNN_ALONE_SSIM - 1.0f) * s->alone_ramp : 1.0f), 0.0f);
+        loss = loss ? tn_add(ctx, loss, t) : t;
+    }
+    if (s->o.grad_weight > 0 && (t = tn_gdl_loss(ctx, pred, tgt))) {
+        l[2] = t->data[0];
+        t = tn_scale_shift(ctx, t, s->o.grad_weight, 0.0f);
+        loss = loss ? tn_add(ctx, loss, t) : t;
+    }
+    if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_INVALID_ARG, "gnn: every loss term is off");
+    if (s->o.sketch_weight > 0 || s->o.smooth_weight > 0 || s->o.further_weight > 0) {
+        int s2[2];
+        s2[0] = s->npix;
+        s2[1] = 1;
+        if ((st = tn__gnn_shape_losses(s, ctx, L, tn_reshape(ctx, pred, 2, s2), &loss))) return st;
+    }
+    l[3] = loss->data[0];
+    if (!isfinite(l[3])) return tn__fail(TN_ERR_NUMERIC, "gnn: the loss diverged at iteration %ld (lower the learning rate)", tn_train_iteration(s->run));
+    tn_params_zero_grad(s->w);
+    if ((st = tn_backward(ctx, loss))) return st;
+    tn_optim_step(s->opt);
+    return TN_OK;
+}
+
+/* what: "the DEM" or a holdout's name, for the messages */
+static tn_status tn__gnn_check_dem(const tn_image *dem, const char *what, float *lo, float *hi, double *mean, double *std)
+{
+    size_t i, n;
+    double s = 0, s2 = 0;
+    if (!dem) return tn__fail(TN_ERR_INVALID_ARG, "gnn: no %s", what);
+    if (!dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0) return tn__fail(TN_ERR_EMPTY, "gnn: %s is empty", what);
+    if (dem->width < 16 || dem->height < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: %s is %d x %d; at least 16 x 16 is needed", what, dem->width, dem->height);
+    if ((size_t)dem->width * dem->height > ((size_t)1 << 24))
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn: %s is %d x %d; train on a crop of at most 16 M pixels", what, dem->width, dem->height);
+    n = (size_t)dem->width * dem->height;
+    *lo = FLT_MAX;
+    *hi = -FLT_MAX;
+    for (i = 0; i < n; i++) {
+        float v = dem->data[i * dem->channels];
+        if (!isfinite(v)) return tn__fail(TN_ERR_NUMERIC, "gnn: %s has a NaN/Inf height at pixel (%d, %d)", what, (int)(i % dem->width), (int)(i / dem->width));
+        if (v < *lo) *lo = v;
+        if (v > *hi) *hi = v;
+        s += v;
+        s2 += (double)v * v;
+    }
+    *mean = s / (double)n;
+    *std = sqrt(fmax(s2 / (double)n - *mean * *mean, 0.0));
+    if (!(*hi > *lo)) return tn__fail(TN_ERR_EMPTY, "gnn: %s is flat (no ridges or valleys)", what);
+    return TN_OK;
+}
+
+/* ---- holdout checks (early stopping) ---- */
+
+/* The scale of the held-out lines' gain estimate, calibrated on the holdouts in training
+   (tn__gnn_gain_calibrate, "gain.scale"); 1 for a model without one. Scales run 0 .. 2 in steps of 0.05. */
+#define TN__GNN_GAIN_SCALES 41
+static double tn__gnn_gain_scale(const tn_params *w)
+{
+    const tn_tensor *t = tn_params_find(w, "gain.scale");
+    return t ? t->data[0] : 1.0;
+}
+
+/* The residual gain of a tested sketch: its raw estimate times the scale, within [0, 1]. */
+static float tn__gnn_gain_of(double scale, double raw)
+{
+    return tn__clampf((float)(scale * raw), 0.0f, 1.0f);
+}
+
+/* The holdouts' networks at the example's extraction threshold and 4 x it (the first sparse
+   level's), and the best-weights set, a copy of every tensor of s->w. */
+static tn_status tn__gnn_holdout_make(tn__gnn_train *s)
+{
+    int i, d, n = s->o.holdout_count, base = s->o.extract.threshold > 0 ? s->o.extract.threshold : tn_extract_default_threshold(s->A.width, s->A.height);
+    tn_tensor *info;
+    tn_status st;
+    if (n <= 0) return TN_OK;
+    if (!(s->hsk = (tn_contour_set *)tn__alloc(2 * (size_t)n * sizeof *s->hsk))) return TN_ERR_OUT_OF_MEMORY;
+    memset(s->hsk, 0, 2 * (size_t)n * sizeof *s->hsk);
+    for (i = 0; i < n; i++) {
+        const tn_image *h = &s->o.holdout[i];
+        float lo, hi;
+        double mean, std;
+        char what[32];
+        if (h->data && h->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "gnn: holdout %d has %d channels (one: heights)", i, h->channels);
+        snprintf(what, sizeof what, "holdout %d", i);
+        st = tn__gnn_check_dem(h, what, &lo, &hi, &mean, &std);
+        if (st == TN_ERR_EMPTY && h->data && h->width > 0 && h->height > 0) continue; /* flat: no sketch to check on */
+        if (st) return st;
+        for (d = 0; d < 2; d++) {
+            tn_extract_opts eo = s->o.extract;
+            tn_extraction ex;
+            eo.threshold = base * (d ? 4 : 1);
+            if ((st = tn_extract(h, &eo, &ex))) return st;
+            s->hsk[2 * i + d] = ex.contours;
+            memset(&ex.contours, 0, sizeof ex.contours);
+            tn_extraction_free(&ex);
+        }
+    }
+    if (!(s->best = tn_params_create())) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < tn_params_count(s->w); i++) {
+        const tn_tensor *t = tn_params_get(s->w, i);
+        if (!tn_params_add_buffer(s->best, t->name, t->ndim, t->shape)) return TN_ERR_OUT_OF_MEMORY;
+    }
+    d = 6;
+    if (!(info = tn_params_add_buffer(s->best, "holdout", 1, &d))) return TN_ERR_OUT_OF_MEMORY;
+    info->data[1] = info->data[4] = info->data[5] = -1.0f;
+    return TN_OK;
+}
+
+/* Rebuilds the holdouts from their sketches with the network as it is (no embeddings, the
+   residual as trained) and keeps its weights when the mean SSIM is the best so far. */
+static tn_status tn__gnn_holdout_check(tn__gnn_train *s)
+{
+    tn_tensor *info = tn_params_find(s->best, "holdout");
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    double sum = 0;
+    int i, n = 0;
+    tn_status st;
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &s->A);
+    m.weights = s->w;
+    memset(&go, 0, sizeof go);
+    go.embeddings = TN_GNN_EMBED_NONE;
+    go.gain = 1.0f;
+    for (i = 0; i < 2 * s->o.holdout_count; i++) {
+        const tn_image *h = &s->o.holdout[i / 2];
+        tn_image out = {0, 0, 0, NULL};
+        tn_metrics mt;
+        if (!s->hsk[i].count) continue;
+        st = tn_gnn_generate(&m, &s->hsk[i], h->width, h->height, &go, &out);
+        if (st == TN_ERR_EMPTY) continue; /* no part of 5 px */
+        if (!st) st = tn_compare(h, &out, 0, &mt);
+        tn_image_free(&out);
+        if (st) return st;
+        sum += mt.ssim;
+        n++;
+    }
+    info->data[4] = (float)tn_train_iteration(s->run);
+    if (!n) return TN_OK;
+    info->data[2] += 1.0f;
+    info->data[3] = (float)(sum / n);
+    if (info->data[1] < 0 || info->data[3] > info->data[0]) {
+        for (i = 0; i < tn_params_count(s->w); i++) {
+            const tn_tensor *t = tn_params_get(s->w, i);
+            memcpy(tn_params_find(s->best, t->name)->data, t->data, t->numel * sizeof(float));
+        }
+        info->data[0] = info->data[3];
+        info->data[1] = (float)tn_train_iteration(s->run);
+    }
+    return TN_OK;
+}
+
+/* The early network: an "early.<name>" buffer beside every learned tensor of w (the network
+   and the embeddings). */
+static tn_status tn__gnn_early_add(tn_params *w)
+{
+    int i, n = tn_params_count(w);
+    for (i = 0; i < n; i++) {
+        const tn_tensor *t = tn_params_get(w, i);
+        char name[48];
+        if (!t->requires_grad) continue;
+        snprintf(name, sizeof name, "early.%s", t->name);
+        if (!tn_params_add_buffer(w, name, t->ndim, t->shape)) return TN_ERR_OUT_OF_MEMORY;
+    }
+    return TN_OK;
+}
+
+/* The run's end: a check of the network unless it had one (at the embedding phase's start or at
+   this iteration); the best check's weights become the model's early network, unless that
+   check was of the final network (the run's end, or the phase's start when the phase freezes
+   the network). */
+static tn_status tn__gnn_holdout_end(tn__gnn_train *s)
+{
+    tn_tensor *info;
+    long it = tn_train_iteration(s->run), final_it;
+    int i;
+    tn_status st;
+    if (!s->best) return TN_OK;
+    info = tn_params_find(s->best, "holdout");
+    final_it = info->data[5] < 0 ? it : s->o.phase_network < 0 ? (long)info->data[5] : -1;
+    if (info->data[5] < 0 && info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
+    if (info->data[1] < 0 || (long)info->data[1] == final_it) return TN_OK;
+    if ((st = tn__gnn_early_add(s->w))) return st;
+    for (i = 0; i < tn_params_count(s->w); i++) {
+        tn_tensor *t = tn_params_get(s->w, i);
+        if (!strncmp(t->name, "early.", 6)) memcpy(t->data, tn_params_find(s->best, t->name + 6)->data, t->numel * sizeof(float));
+    }
+    return TN_OK;
+}
+
+/* One iteration; in the embedding phase every tensor but the embeddings is frozen (no gradient,
+   so the optimiser leaves it and its moments alone) and the embeddings move at 5 x the rate,
+   unless an early network serves other terrain (phase_network, and a holdout check found one):
+   then everything trains, at up to 4 x with SSIM weighted up to 10 x (both rising over its first
+   TN__GNN_ALONE_RAMP iterations), on the whole graph.
+   Holdout checks come every holdout_every iterations before the phase and once as it starts
+   (the early network is chosen from those). */
+static tn_status tn__gnn_iteration(tn__gnn_train *s, tn_ctx *ctx, float *l)
+{
+    int phase = s->o.embed_phase > 0 && tn_train_fraction(s->run) >= 1.0 - s->o.embed_phase, i, n = tn_params_count(s->w), alone;
+    long it = tn_train_iteration(s->run);
+    tn_tensor *emb = tn_params_find(s->w, "gnn.emb");
+    tn_status st;
+    if (!phase && s->best && it > 0 && it % s->o.holdout_every == 0 && (st = tn__gnn_holdout_check(s))) return st;
+    if (!phase) return tn__gnn_step(s, ctx, 0, l);
+    if (s->phase_from < 0) {
+        tn_tensor *info = s->best ? tn_params_find(s->best, "holdout") : NULL;
+        s->phase_from = it;
+        if (info && info->data[5] < 0) {
+            info->data[5] = (float)it;
+            if (info->data[4] != (float)it && (st = tn__gnn_holdout_check(s))) return st;
+        }
+    }
+    /* an early network serves other terrain: the example alone, everything, whole graph, faster (docs/gnn.md) */
+    alone = s->o.phase_network >= 0 && s->best && tn_params_find(s->best, "holdout")->data[1] >= 0;
+    if (!alone)
+        for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i) == emb;
+    if (alone) { /* iterations since the phase began (the checks' record, so a resumed run agrees) */
+        float since = (float)it - tn_params_find(s->best, "holdout")->data[5] + 1.0f;
+        s->alone_ramp = since < TN__GNN_ALONE_RAMP ? since / TN__GNN_ALONE_RAMP : 1.0f;
+    }
+    tn_optim_set_lr(s->opt, (alone ? 1.0f + (TN__GNN_ALONE_RATE - 1.0f) * s->alone_ramp : 5.0f) * s->o.lr);
+    st = tn__gnn_step(s, ctx, alone ? 2 : 1, l);
+    tn_optim_set_lr(s->opt, s->o.lr);
+    if (!alone)
+        for (i = 0; i < n; i++) tn_params_get(s->w, i)->requires_grad = tn_params_get(s->w, i)->grad != NULL; /* learned, not buffers */
+    return st;
+}
+
+/* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
+#define TN__GNN_SETTINGS(X)                                                                                        \
+    X("random_edges", random_edges, int, -1e9, 1e9) X("mask", mask, float, -1, 1) X("embed_drop", embed_drop, float, -1, 1) \
+    X("sparse_levels", sparse_levels, int, -1, TN__GNN_MAX_LEVELS - 1) X("thin", thin, float, -1, 1)               \
+    X("threshold", extract.threshold, int, -1, 1e9) X("edge_noise", edge_noise, float, -1, 100) X("lr", lr, float, 0, 10) \
+    X("mse_weight", mse_weight, float, -1e6, 1e6) X("ssim_weight", ssim_weight, float, -1e6, 1e6)                     \
+    X("grad_weight", grad_weight, float, -1e6, 1e6)
+/* settings added later: a checkpoint without them trained without them */
+#define TN__GNN_LATER_SETTINGS(X) \
+    X("sketch_weight", sketch_weight, float, 0, 1e6) X("smooth_weight", smooth_weight, float, -1, 1e6) X("further_weight", further_weight, float, 0, 1e6)
+
+static tn_status tn__gnn_set_meta(tn__gnn_train *s, uint64_t digest)
+{
+    tn_status st = tn_train_set_example(s->run, digest);
+#define TN__GNN_PUT(key, field, type, lo, hi) \
+    if (!st) st = tn_train_set_meta_number(s->run, key, (double)s->o.field);
+    TN__GNN_SETTINGS(TN__GNN_PUT)
+    TN__GNN_LATER_SETTINGS(TN__GNN_PUT)
+#undef TN__GNN_PUT
+    return st;
+}
+
+static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
+{
+    double d = 0;
+    tn_status st = tn_train_check_example(s->run, digest);
+#define TN__GNN_GET(key, field, type, lo, hi) \
+    if (!st && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d;
+    TN__GNN_SETTINGS(TN__GNN_GET)
+#undef TN__GNN_GET
+#define TN__GNN_GET_LATER(key, field, type, lo, hi) \
+    if (!st) { \
+        s->o.field = 0; \
+        if (tn_train_meta(s->run, key) && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d; \
+    }
+    TN__GNN_LATER_SETTINGS(TN__GNN_GET_LATER)
+#undef TN__GNN_GET_LATER
+    return st;
+}
+#undef TN__GNN_SETTINGS
+#undef TN__GNN_LATER_SETTINGS
+
+static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
+
+TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
+{
+    tn__gnn_train s;
+    tn_extraction ex;
+    tn_contour_set parts;
+    tn_ctx *ctx = NULL;
+    tn_image one = {0, 0, 0, NULL};
+    const tn_image *d1 = dem;
+    float lo = 0, hi = 0, hist[50][4];
+    double mean = 0, std = 0;
+    int nh = 0, i;
+    size_t n;
+    uint64_t digest, seed;
+    const char *sd;
+    int ck_best = 0;
+    tn_status st;
+    TN_ASSERT(model);
+    memset(&s, 0, sizeof s);
+    memset(&ex, 0, sizeof ex);
+    memset(&parts, 0, sizeof parts);
+    s.phase_from = -1;
+    if (opts_in) s.o = *opts_in;
+    tn_gnn_defaults(&s.o);
+    if ((st = tn__gnn_check_dem(dem, "the DEM", &lo, &hi, &mean, &std))) return st;
+    if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
+        s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.embed_phase < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
+        !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24) || !(s.o.sketch_weight >= 0 && s.o.sketch_weight <= 1e6) ||
+        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6) || s.o.holdout_count < 0 || s.o.holdout_count > 64 ||
+        (s.o.holdout_count > 0 && !s.o.holdout))
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
+                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24, 0 .. 64 holdouts)", s.o.hidden,
+                        TN__GNN_MAXH, s.o.rounds, s.o.k, s.o.embed, (double)s.o.mask, s.o.random_edges);
+    if ((size_t)dem->width * dem->height * (size_t)s.o.k + (size_t)(s.o.random_edges > 0 ? s.o.random_edges : 0) > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn: %d x %d pixels with %d edges each exceed %d edges; train on a crop", dem->width, dem->height,
+                        s.o.k, TN__GNN_MAX_EDGES);
+    if (dem->channels > 1) { /* channel 0 only, as every DEM function */
+        if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
+        for (n = 0; n < (size_t)dem->width * dem->height; n++) one.data[n] = dem->data[n * dem->channels];
+        d1 = &one;
+    }
+    digest = tn_image_digest(d1);
+    seed = s.o.train.seed;
+    if ((st = tn_train_create("gnn", "gnn-train", &s.o.train, &s.run))) goto done;
+    if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
+        tn_params *ck;
+        tn_tensor *cfg;
+        if ((st = tn_train_open_checkpoint(s.run, &ck))) goto done;
+        if (!(cfg = tn_params_find(ck, "gnn.config")) || cfg->numel != TN__GNN_CONFIG) {
+            st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn checkpoint", s.o.train.checkpoint);
+            goto done;
+        }
+        if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__gnn_get_meta(&s, digest))) goto done;
+        ck_best = tn_params_find(ck, "best.holdout") != NULL;
+        sd = tn_params_meta(ck, "seed");
+        if (!sd || !tn__parse_hex64(sd, strlen(sd), &seed)) {
+            st = tn__fail(TN_ERR_CORRUPT, "%s: the checkpoint names no seed", s.o.train.checkpoint);
+            goto done;
+        }
+    }
+    /* the example's network and parts: deterministic in the DEM, the extraction options and
+       the seed, so a resumed run rebuilds the same graph */
+    if ((st = tn_extract(d1, &s.o.extract, &ex))) goto done;
+    if (!ex.contours.count) {
+        st = tn__fail(TN_ERR_EMPTY, "gnn: no ridge or valley was extracted from the DEM (try a lower extraction threshold)");
+        goto done;
+    }
+    if ((st = tn_contour_parts_make(&ex.contours, seed, &parts))) goto done;
+    if (!parts.count) {
+        st = tn__fail(TN_ERR_EMPTY, "gnn: the DEM's ridges and valleys give no contour part of 5 px");
+        goto done;
+    }
+    if (!s.o.train.resume) {
+        s.A.hidden = s.o.hidden;
+        s.A.rounds = s.o.rounds;
+        s.A.k = s.o.k;
+        s.A.radius = s.o.radius;
+        s.A.embed = s.o.embed;
+        s.A.membrane = s.o.membrane >= 0;
+        s.A.width = d1->width;
+        s.A.height = d1->height;
+        s.A.mean = (float)mean;
+        s.A.std = (float)(std > 1e-30 ? std : 1.0);
+        s.A.lo = lo;
+        s.A.hi = hi;
+        s.A.part_noise = s.o.part_noise > 0 ? s.o.part_noise : 0.0f;
+        s.A.overhang = s.o.part_index >= 0;
+        s.A.parts = parts.count;
+        s.A.npts = 0;
+        for (i = 0; i < parts.count; i++) s.A.npts += parts.items[i].npoints;
+    } else if (s.A.parts != parts.count || s.A.width != d1->width || s.A.height != d1->height) {
+        st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example has %d parts at %d x %d, this one %d at %d x %d", s.o.train.checkpoint,
+                      s.A.parts, s.A.width, s.A.height, parts.count, d1->width, d1->height);
+        goto done;
+    }
+    tn_rng_seed(&s.rng, seed, 0x676e6eULL);
+    if ((st = tn__gnn_model_params(&s.A, &s.rng, &s.w))) goto done;
+    tn__gnn_store_parts(s.w, &parts);
+    {
+        tn_optim_opts oo;
+        memset(&oo, 0, sizeof oo);
+        oo.lr = s.o.lr;
+        oo.beta1 = 0.9f;
+        oo.beta2 = 0.999f;
+        if (!(s.opt = tn_optim_create(s.w, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
+    }
+    if ((st = tn_train_add_net(s.run, "gnn", s.w, s.opt)) || (st = tn_train_add_rng(s.run, "main", &s.rng))) goto done;
+    if ((st = tn__gnn_set_meta(&s, digest)) || (st = tn__gnn_holdout_make(&s))) goto done;
+    /* the best weights travel with the checkpoint (one written without holdouts starts the checks afresh) */
+    if (s.best && (!s.o.train.resume || ck_best) && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
+    if (s.o.train.resume && (st = tn_train_restore(s.run))) goto done;
+    if (s.best && s.o.train.resume && !ck_best && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
+    /* the levels: the example's own network, then its sparser networks */
+    s.npix = s.A.width * s.A.height;
+    if (!(s.target = (float *)tn__alloc((size_t)s.npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    for (i = 0; i < s.npix; i++) s.target[i] = (d1->data[i] - s.A.mean) / s.A.std;
+    s.range = (s.A.hi - s.A.lo) / s.A.std;
+    if ((st = tn__gnn_level_make(&s.A, &ex.contours, &parts, &s.lv[0]))) goto done;
+    s.nlevels = 1;
+    s.maxparts = parts.count;
+    for (i = 1; i <= (s.o.sparse_levels > 0 ? s.o.sparse_levels : 0); i++) {
+        static const int factor[TN__GNN_MAX_LEVELS] = {1, 4, 12, 36};
+        tn_extract_opts eo = s.o.extract;
+        tn_extraction sx;
+        tn_contour_set sp;
+        int base_thr = eo.threshold > 0 ? eo.threshold : tn_extract_default_threshold(d1->width, d1->height);
+        eo.threshold = base_thr * factor[i];
+        memset(&sp, 0, sizeof sp);
+        if ((st = tn_extract(d1, &eo, &sx))) goto done;
+        if (sx.contours.count && !(st = tn_contour_parts_make(&sx.contours, seed + (uint64_t)i, &sp)) && sp.count) {
+            st = tn__gnn_level_make(&s.A, &sx.contours, &sp, &s.lv[s.nlevels]);
+            if (sp.count > s.maxparts) s.maxparts = sp.count;
+            s.nlevels++;
+        }
+        tn_contour_set_free(&sp);
+        tn_extraction_free(&sx);
+        if (st) goto done;
+    }
+    if (!(s.masked = (uint8_t *)tn__alloc((size_t)s.maxparts)) || !(s.known = (uint8_t *)tn__alloc((size_t)s.maxparts))) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    if ((st = tn__gnn_graph_alloc(&s.g, s.npix, s.maxparts, s.npix * s.A.k + (s.o.random_edges > 0 ? s.o.random_edges : 0)))) goto done;
+    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
+    while (tn_train_next(s.run)) {
+        float l[4];
+        tn_status e = tn__gnn_iteration(&s, ctx, l);
+        if (e) {
+            tn_train_fail(s.run, e);
+            break;
+        }
+        memcpy(hist[nh % 50], l, sizeof l);
+        nh++;
+    }
+    st = tn_train_finish(s.run);
+    if (!st) st = tn__gnn_holdout_end(&s);
+    if (!st) st = tn__gnn_gain_calibrate(&s);
+    if (stats) {
+        int k, m = nh < 50 ? nh : 50;
+        long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
+        memset(stats, 0, sizeof *stats);
+        stats->iterations = it;
+        stats->resumed_from = s.o.train.resume ? it0 : 0;
+        stats->seconds = tn_train_seconds(s.run);
+        stats->seconds_per_iter = it > it0 ? (tn_train_seconds(s.run) - tn_train_start_seconds(s.run)) / (double)(it - it0) : 0.0;
+        for (k = 0; k < m; k++) {
+            stats->loss_mse += hist[k][0] / (float)m;
+            stats->loss_ssim += hist[k][1] / (float)m;
+            stats->loss_grad += hist[k][2] / (float)m;
+            stats->loss += hist[k][3] / (float)m;
+        }
+        stats->parts = s.A.parts;
+        for (i = 0; i < s.npix * s.A.k; i++) stats->edges += s.lv[0].nbr[i] >= 0;
+        stats->levels = s.nlevels;
+        stats->checkpoints = tn_train_checkpoints(s.run);
+        stats->embed_phase_from = s.phase_from;
+        stats->holdout_iteration = -1;
+        stats->gain_scale = (float)tn__gnn_gain_scale(s.w);
+        if (s.best) {
+            const tn_tensor *info = tn_params_find(s.best, "holdout");
+            stats->holdout_ssim = info->data[0];
+            stats->holdout_iteration = (long)info->data[1];
+            stats->holdout_checks = (int)info->data[2];
+            stats->holdout_last_ssim = info->data[3];
+        }
+    }
+    if (!st) {
+        tn_model_provenance pv;
+        memset(&pv, 0, sizeof pv);
+        pv.seed = tn_train_seed(s.run);
+        pv.iterations = tn_train_iteration(s.run);
+        pv.seconds = tn_train_seconds(s.run);
+        pv.example_digest = digest;
+        pv.example_width = d1->width;
+        pv.example_height = d1->height;
+        pv.example_channels = 1;
+        st = tn_model_stamp(s.w, "gnn", TN__GNN_FORMAT, &pv);
+    }
+    if (!st) {
+        memset(model, 0, sizeof *model);
+        tn__gnn_model_fields(model, &s.A);
+        model->iterations = tn_train_iteration(s.run);
+        model->train_seconds = tn_train_seconds(s.run);
+        model->weights = s.w;
+        s.w = NULL; /* handed over */
+    }
+done:
+    tn_ctx_free(ctx);
+    tn_image_free(&one);
+    tn_extraction_free(&ex);
+    tn_contour_set_free(&parts);
+    tn__gnn_train_free(&s);
+    return st;
+}
+
+/* ---- model files ---- */
+
+TN_API void tn_gnn_free(tn_gnn *model)
+{
+    if (!model) return;
+    tn_params_free(model->weights);
+    memset(model, 0, sizeof *model);
+}
+
+static tn_status tn__gnn_check_model(const tn_gnn *m)
+{
+    tn__gnn_arch A;
+    return tn__gnn_arch_of(m, &A);
+}
+
+TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
+{
+    tn_status st;
+    if ((st = tn__gnn_check_model(model))) return st;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn save: empty path");
+    return tn_params_save(model->weights, path);
+}
+
+TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
+{
+    tn_params *f = NULL, *w = NULL;
+    tn_tensor *cfg;
+    tn__gnn_arch A;
+    tn_contour_set parts;
+    tn_gnn m;
+    tn_status st;
+    TN_ASSERT(model);
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
+    if ((st = tn_params_open(path, &f))) return st;
+    memset(&parts, 0, sizeof parts);
+    st = tn_model_check(f, "gnn", TN__GNN_FORMAT, NULL, path);
+    if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
+        st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
+    if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
+    if (!st) st = tn__gnn_model_params(&A, NULL, &w);
+    if (!st && tn_params_find(f, "early.gnn.emb")) st = tn__gnn_early_add(w);
+    if (!st && tn_params_find(f, "gain.scale")) {
+        int one = 1;
+        if (!tn_params_add_buffer(w, "gain.scale", 1, &one)) st = TN_ERR_OUT_OF_MEMORY;
+    }
+    if (!st) st = tn__params_assign(w, f, path);
+    if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1))) /* NaN too */
+        st = tn__fail(TN_ERR_CORRUPT, "%s: gain.scale %g is not in 0 .. 2", path, tn__gnn_gain_scale(w));
+    if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
+    if (!st) {
+        const tn_tensor *e = tn_params_find(w, "gnn.emb"), *e2 = tn_params_find(w, "early.gnn.emb");
+        size_t i;
+        for (i = 0; i < e->numel; i++)
+            if (!isfinite(e->data[i]) || (e2 && !isfinite(e2->data[i]))) {
+                st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf embedding", path);
+                break;
+            }
+    }
+    tn_contour_set_free(&parts);
+    if (st) {
+        tn_params_free(f);
+        tn_params_free(w);
+        return st;
+    }
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &A);
+    tn__model_training(f, path, &m.iterations, &m.train_seconds);
+    tn_params_free(f);
+    m.weights = w;
+    *model = m;
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out)
+{
+    tn__gnn_arch A;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__gnn_arch_of(model, &A))) return st;
+    return tn__gnn_stored_parts(model->weights, &A, "gnn", out);
+}
+
+/* ---- generation ---- */
+
+/* The sketch in the output's pixels and the example's height units. */
+static tn_status tn__gnn_sketch_units(const tn__gnn_arch *A, const tn_contour_set *sk, int W, int H, int heights, tn_contour_set *out)
+{
+    tn_contour_set s;
+    float sx = (float)W / (float)sk->width, sy = (float)H / (float)sk->height, hmin = FLT_MAX, hmax = -FLT_MAX, a = 1, b = 0;
+    int i, j;
+    for (i = 0; i < sk->count; i++)
+        for (j = 0; j < sk->items[i].npoints; j++) {
+            float h = sk->items[i].points[3 * j + 2];
+            if (h < hmin) hmin = h;
+            if (h > hmax) hmax = h;
+        }
+    if (heights == TN_GNN_HEIGHTS_AUTO)
+        heights = hmin >= 0 && hmax <= 1 && !(A->lo >= 0 && A->hi <= 1) ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_EXAMPLE;
+    if (heights == TN_GNN_HEIGHTS_UNIT) {
+        a = A->hi - A->lo;
+        b = A->lo;
+    }
+    memset(&s, 0, sizeof s);
+    s.width = W;
+    s.height = H;
+    s.count = sk->count;
+    if (!(s.items = (tn_contour *)tn__calloc((size_t)sk->count * sizeof(tn_contour)))) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < sk->count; i++) {
+        const tn_contour *c = &sk->items[i];
+        tn_contour *d = &s.items[i];
+        *d = *c;
+        if (!(d->points = (float *)tn__alloc((size_t)c->npoints * 3 * sizeof(float)))) {
+            tn_contour_set_free(&s);
+            return TN_ERR_OUT_OF_MEMORY;
+        }
+        for (j = 0; j < c->npoints; j++) { /* pixel centres map to pixel centres */
+            d->points[3 * j] = (c->points[3 * j] + 0.5f) * sx - 0.5f;
+            d->points[3 * j + 1] = (c->points[3 * j + 1] + 0.5f) * sy - 0.5f;
+            d->points[3 * j + 2] = a * c->points[3 * j + 2] + b;
+        }
+    }
+    *out = s;
+    return TN_OK;
+}
+
+/* match[i] = the example part identical to sketch part i (same points within 1e-3 px, heights
+   within htol), else -1; htol < 0: -1 for all. Parts are few (hundreds to thousands) and most
+   pairs fail on the point count or the first point, so a plain double loop is enough. */
+static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *ex, float htol, int *match)
+{
+    int i, j, q;
+    for (i = 0; i < sk->count; i++) {
+        const tn_contour *a = &sk->items[i];
+        match[i] = -1;
+        for (j = 0; htol >= 0 && j < ex->count && match[i] < 0; j++) {
+            const tn_contour *b = &ex->items[j];
+            int same = a->npoints == b->npoints && a->type == b->type;
+            for (q = 0; same && q < a->npoints; q++)
+                same = fabsf(a->points[3 * q] - b->points[3 * q]) <= 1e-3f && fabsf(a->points[3 * q + 1] - b->points[3 * q + 1]) <= 1e-3f &&
+                       fabsf(a->points[3 * q + 2] - b->points[3 * q + 2]) <= htol;
+            if (same) match[i] = j;
+        }
+    }
+}
+
+/* What every window of one generation shares: the sketch's parts, cut once from the whole
+   sketch so that every window sees the same parts in the same order, their embeddings and
+   initial states, and the rasterised sketch. */
+typedef struct tn__gnn_gen {
+    tn__gnn_arch A;
+    int W, H, halo;
+    float gain;                /* share of the residual over the membrane that is added */
+    double gain_raw;           /* the held-out lines' least-squares gain before scale and clamp
+                                  (tn__gnn_gain_validate); NAN = not tested */
+    tn__gnn_parts P;           /* every part of the sketch, normalised heights */
+    float *emb;                /* P.n x embed */
+    uint8_t *known;            /* P.n: the part has an example part's embedding */
+    float *E0;                 /* P.n x hidden initial states; NULL = zero */
+    float *type, *hgt;         /* W x H: +1 / -1 / 0; the sketch height (example units) or 0 */
+    uint8_t *fixed;            /* W x H: sketch pixel */
+    const tn_params *w;        /* the network it runs on (tn__gnn_pick_net) */
+    tn_params *own_w;          /* w when it is the model's early network */
+} tn__gnn_gen;
+
+/* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
+typedef struct tn__gnn_region {
+    int rx, ry, rw, rh;
+    tn__gnn_parts P;
+    int *of;                   /* region part -> sketch part */
+    float *type, *base;        /* rw x rh; base normalised (0 without membrane) */
+    tn__gnn_graph g;
+} tn__gnn_region;
+
+static void tn__gnn_gen_free(tn__gnn_gen *G)
+{
+    tn__gnn_parts_free(&G->P);
+    TN_FREE(G->emb);
+    TN_FREE(G->known);
+    TN_FREE(G->E0);
+    TN_FREE(G->type);
+    TN_FREE(G->hgt);
+    TN_FREE(G->fixed);
+    tn_params_free(G->own_w);
+    memset(G, 0, sizeof *G);
+}
+
+static void tn__gnn_region_free(tn__gnn_region *R)
+{
+    tn__gnn_parts_free(&R->P);
+    TN_FREE(R->of);
+    TN_FREE(R->type);
+    TN_FREE(R->base);
+    tn__gnn_graph_free(&R->g);
+    memset(R, 0, sizeof *R);
+}
+
+/* The graph of the region: its pixels' k nearest parts within the radius, from the parts with a
+   point less than radius + 1 px from the region (every part a region pixel can reach). base_map:
+   the whole map's membrane (example units) to take the region's from, or NULL to solve it. */
+static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int rw, int rh, const float *base_map, tn__gnn_region *R)
+{
+    const tn__gnn_parts *S = &G->P;
+    size_t npix = (size_t)rw * rh, i;
+    float m = G->A.radius + 1.0f;
+    int *nbr = NULL, j, p, n = 0, q = 0, y;
+    float *nfeat = NULL;
+    tn_status st = TN_OK;
+    memset(R, 0, sizeof *R);
+    R->rx = rx;
+    R->ry = ry;
+    R->rw = rw;
+    R->rh = rh;
+    R->type = (float *)tn__alloc(npix * sizeof(float));
+    R->base = (float *)tn__alloc(npix * sizeof(float));
+    R->of = (int *)tn__alloc(((size_t)S->n + 1) * sizeof(int));
+    R->P.start = (int *)tn__alloc(((size_t)S->n + 1) * sizeof(int));
+    R->P.of = (int *)tn__alloc(((size_t)S->npts + 1) * sizeof(int));
+    R->P.pts = (float *)tn__alloc(((size_t)S->npts + 1) * 3 * sizeof(float));
+    R->P.sign = (float *)tn__alloc(((size_t)S->n + 1) * sizeof(float));
+    if (!R->type || !R->base || !R->of || !R->P.start || !R->P.of || !R->P.pts || !R->P.sign) st = TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; !st && y < rh; y++) memcpy(R->type + (size_t)y * rw, G->type + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
+    if (!st && G->A.membrane) {
+        if (base_map)
+            for (y = 0; y < rh; y++) memcpy(R->base + (size_t)y * rw, base_map + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
+        else
+            st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
+        for (i = 0; !st && i < npix; i++) R->base[i] = (R->base[i] - G->A.mean) / G->A.std;
+    } else if (!st)
+        memset(R->base, 0, npix * sizeof(float));
+    for (p = 0; !st && p < S->n; p++) {
+        int near = 0;
+        for (j = S->start[p]; j < S->start[p + 1] && !near; j++) {
+            float x = S->pts[3 * j], yy = S->pts[3 * j + 1];
+            near = x > (float)rx - m && x < (float)(rx + rw - 1) + m && yy > (float)ry - m && yy < (float)(ry + rh - 1) + m;
+        }
+        if (!near && (n > 0 || p < S->n - 1)) continue; /* none near: the last part stays, without edges (no empty tensor) */
+        R->of[n] = p;
+        R->P.start[n] = q;
+        R->P.sign[n] = S->sign[p];
+        for (j = S->start[p]; j < S->start[p + 1]; j++, q++) {
+            memcpy(R->P.pts + 3 * (size_t)q, S->pts + 3 * (size_t)j, 3 * sizeof(float));
+            R->P.of[q] = n;
+        }
+        n++;
+    }
+    if (st) return st;
+    R->P.n = n;
+    R->P.npts = q;
+    R->P.start[n] = q;
+    if ((st = tn__gnn_knn(&R->P, rw, rh, rx, ry, G->A.k, G->A.radius, R->base, &nbr, &nfeat))) return st;
+    if (!(st = tn__gnn_graph_alloc(&R->g, (int)npix, n > 0 ? n : 1, (int)npix * G->A.k))) {
+        R->g.nparts = n;
+        for (i = 0; i < npix; i++)
+            for (j = 0; j < G->A.k; j++) {
+                int r = nbr[i * G->A.k + j];
+                if (r < 0) continue;
+                R->g.e_pix[R->g.E] = (int)i;
+                R->g.e_part[R->g.E] = r;
+                memcpy(R->g.feat + (size_t)R->g.E * TN__GNN_F, nfeat + (i * G->A.k + j) * TN__GNN_F, TN__GNN_F * sizeof(float));
+                R->g.E++;
+            }
+        if (G->A.overhang) tn__gnn_overhangs(&R->g, &R->P, G->known, R->of, rw, rx, ry);
+        tn__gnn_graph_finish(&R->g);
+    }
+    TN_FREE(nbr);
+    TN_FREE(nfeat);
+    return st;
+}
+
+/* The region's node inputs. emb: the region's parts' embeddings as a tensor (the fine-tune's,
+   R->P.n rows) or NULL for G's. */
+static tn_status tn__gnn_region_inputs(tn_ctx *ctx, const tn__gnn_gen *G, const tn__gnn_region *R, tn_tensor *emb, tn__gnn_in *in)
+{
+    tn_tensor *E0;
+    int i, D = G->A.embed, Hd = G->A.hidden;
+    tn_status st;
+    if (!emb) {
+        if (!(emb = tn_tensor_2d(ctx, R->P.n, D))) return tn_ctx_status(ctx);
+        for (i = 0; i < R->P.n; i++) memcpy(emb->data + (size_t)i * D, G->emb + (size_t)R->of[i] * D, (size_t)D * sizeof(float));
+    }
+    if ((st = tn__gnn_inputs(ctx, &R->g, R->type, G->A.membrane ? R->base : NULL, R->P.sign, emb, in))) return st;
+    if (!(E0 = tn_tensor_2d(ctx, R->P.n, Hd))) return tn_ctx_status(ctx);
+    if (G->E0)
+        for (i = 0; i < R->P.n; i++) memcpy(E0->data + (size_t)i * Hd, G->E0 + (size_t)R->of[i] * Hd, (size_t)Hd * sizeof(float));
+    in->E0 = E0;
+    return TN_OK;
+}
+
+/* The region's prediction (npix x 1, normalised), with gradients (the fine-tune). */
+static tn_tensor *tn__gnn_region_forward(tn_ctx *ctx, const tn__gnn_gen *G, const tn_params *w, const tn__gnn_region *R, tn_tensor *emb)
+{
+    tn__gnn_in in;
+    if (tn__gnn_region_inputs(ctx, G, R, emb, &in)) return NULL;
+    return tn__gnn_forward(ctx, w, &G->A, &in);
+}
+
+/* The same prediction without gradients, one stage at a time with the context reset in between,
+   so memory holds the graph and one round's intermediates, not every round's (the same ops on
+   the same values: the same floats). pred: npix floats (normalised). */
+static tn_status tn__gnn_region_predict(tn_ctx *ctx, const tn__gnn_gen *G, const tn_params *w, const tn__gnn_region *R, float *pred)
+{
+    tn__gnn_in in;
+    tn_tensor *f = NULL, *E = NULL, *r = NULL;
+    size_t nf = (size_t)R->rw * R->rh * G->A.hidden, ne = (size_t)R->P.n * G->A.hidden;
+    float *fb = (float *)tn__alloc(nf * sizeof(float)), *eb = (float *)tn__alloc(ne * sizeof(float));
+    int t;
+    tn_status st = TN_OK;
+    if (!fb || !eb) st = TN_ERR_OUT_OF_MEMORY;
+    for (t = -1; !st && t <= G->A.rounds; t++) {
+        tn_ctx_reset(ctx);
+        tn_ctx_set_grad(ctx, 0);
+        if ((st = tn__gnn_region_inputs(ctx, G, R, NULL, &in))) break;
+        if (t < 0) { /* initial states */
+            f = tn_mlp(ctx, w, "gnn.init.", 2, in.pix_in, TN_ACT_RELU);
+            E = in.E0;
+        } else {
+            f = tn_tensor_2d(ctx, R->rw * R->rh, G->A.hidden);
+            E = tn_tensor_2d(ctx, R->P.n, G->A.hidden);
+            if (f && E) {
+                memcpy(f->data, fb, nf * sizeof(float));
+                memcpy(E->data, eb, ne * sizeof(float));
+            }
+            if (f && E && t < G->A.rounds) tn__gnn_round(ctx, w, t, &in, &f, &E);
+            else if (f && E) r = tn_add(ctx, tn_mlp(ctx, w, "gnn.out.", 2, f, TN_ACT_RELU), in.base);
+        }
+        if (!f || !E || (t == G->A.rounds && !r)) {
+            st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY;
+            break;
+        }
+        if (t == G->A.rounds) memcpy(pred, r->data, (size_t)R->rw * R->rh * sizeof(float));
+        else {
+            memcpy(fb, f->data, nf * sizeof(float));
+            memcpy(eb, E->data, ne * sizeof(float));
+        }
+    }
+    TN_FREE(fb);
+    TN_FREE(eb);
+    tn_ctx_reset(ctx);
+    return st;
+}
+
+#define TN__GNN_FT_ONE (256 * 256) /* maps up to this many pixels fine-tune as one region (exact) */
+#define TN__GNN_FT_TILE 192        /* else: windows of this core ... */
+#define TN__GNN_FT_MARGIN 16       /* ... grown by this much context (>= 4: a loss pair's far pixel) */
+
+/* What every window of the fine-tune shares: the whole map's counts, the across-line pairs
+   (global pixels), the weights, and scratch for a window's index lists. */
+typedef struct tn__gnn_ft {
+    int nsk, npairs, *ip, *iq, *ix; /* ix: two index lists of cap each */
+    float *psign, *tg, sw, ow;      /* tg: cap floats */
+    size_t cap;
+} tn__gnn_ft;
+
+/* The fine-tune's loss on the pixels window R owns (its core cx, cy, cw, ch), each term divided
+   by its count over the whole map, so the windows' losses add up to the whole map's. NULL if
+   the core has nothing to fit. */
+static tn_tensor *tn__gnn_ft_loss(tn_ctx *ctx, const tn__gnn_gen *G, const tn__gnn_ft *F, const tn__gnn_region *R, tn_tensor *pred, int cx, int cy,
+                                  int cw, int ch)
+{
+    int *a = F->ix, *b = F->ix + F->cap, n = 0, i, x, y;
+    tn_tensor *loss = NULL, *t;
+#define TN__GNN_LOC(px, py) (((py) - R->ry) * R->rw + (px) - R->rx)
+    for (y = cy; y < cy + ch; y++) /* sketch pixels: their heights */
+        for (x = cx; x < cx + cw; x++)
+            if (G->type[(size_t)y * G->W + x] != 0) {
+                a[n] = TN__GNN_LOC(x, y);
+                F->tg[n++] = (G->hgt[(size_t)y * G->W + x] - G->A.mean) / G->A.std;
+            }
+    if (n > 0 && (t = tn_tensor_2d(ctx, n, 1))) {
+        memcpy(t->data, F->tg, (size_t)n * sizeof(float));
+        loss = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, a, n), t))), 1.0f / (float)F->nsk, 0.0f);
+    }
+    if (F->sw > 0) { /* smoothness: squared differences to the right and lower neighbours (tn_tv_loss) */
+        n = 0;
+        for (y = cy; y < cy + ch; y++)
+            for (x = cx; x < cx + cw; x++) {
+                if (x + 1 < G->W) a[n] = TN__GNN_LOC(x, y), b[n++] = TN__GNN_LOC(x + 1, y);
+                if (y + 1 < G->H) a[n] = TN__GNN_LOC(x, y), b[n++] = TN__GNN_LOC(x, y + 1);
+            }
+        if (n > 0) {
+            t = tn_scale_shift(ctx, tn_sum(ctx, tn_square(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, a, n), tn_gather_rows(ctx, pred, b, n)))),
+                               F->sw / (float)(G->W * G->H), 0.0f);
+            loss = loss ? tn_add(ctx, loss, t) : t;
+        }
+    }
+    if (F->npairs > 0) { /* relu(sign * (h_q - h_p)): ridges above, valleys below their across pixels */
+        tn_tensor *sg;
+        n = 0;
+        for (i = 0; i < F->npairs; i++) {
+            int px = F->ip[i] % G->W, py = F->ip[i] / G->W;
+            if (px < cx || px >= cx + cw || py < cy || py >= cy + ch) continue;
+            a[n] = TN__GNN_LOC(px, py);
+            b[n] = TN__GNN_LOC(F->iq[i] % G->W, F->iq[i] / G->W);
+            F->tg[n++] = F->psign[i];
+        }
+        if (n > 0 && (sg = tn_tensor_2d(ctx, n, 1))) {
+            memcpy(sg->data, F->tg, (size_t)n * sizeof(float));
+            t = tn_mul(ctx, tn_sub(ctx, tn_gather_rows(ctx, pred, b, n), tn_gather_rows(ctx, pred, a, n)), sg);
+            t = tn_scale_shift(ctx, tn_sum(ctx, tn_relu(ctx, t)), F->ow / (float)F->npairs, 0.0f);
+            loss = loss ? tn_add(ctx, loss, t) : t;
+        }
+    }
+#undef TN__GNN_LOC
+    return loss;
+}
+
+/* 5.4: only the sketch parts' embeddings move, loss on the sketch pixels + smoothness + the
+   ridges' ordering. A small map is one region (exact); a larger one runs window by window,
+   each with a margin of context, adding every window's gradient before the step, so memory
+   follows the window, not the map (the generation after it is exact for any split). */
+static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
+{
+    tn__gnn_region R;
+    tn_ctx *ctx = NULL;
+    tn_params *ft = NULL, *frozen = NULL;
+    tn_optim *fopt = NULL;
+    tn_optim_opts oo;
+    tn_tensor *emb;
+    tn__gnn_ft F;
+    int one = (size_t)G->W * G->H <= TN__GNN_FT_ONE, tile = one ? (G->W > G->H ? G->W : G->H) : TN__GNN_FT_TILE;
+    int margin = one ? 0 : TN__GNN_FT_MARGIN, nwx = (G->W + tile - 1) / tile, nwy = (G->H + tile - 1) / tile;
+    int step, s[2], i, npix = G->W * G->H, wi, made = 0;
+    float *base = NULL; /* the whole map's membrane, solved once: the windows' graphs are made again each step */
+    size_t maxpix = (size_t)(tile + 2 * margin) * (tile + 2 * margin);
+    tn_status st = TN_OK;
+    memset(&R, 0, sizeof R);
+    memset(&F, 0, sizeof F);
+    /* ordering on by default: on the A sketch it took a 180-step alps model from 89.0 to 97.8 %
+       and left one already at 94.3 % there (docs/gnn.md) */
+    F.sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
+    F.ow = o->order_weight == 0 ? 1.0f : o->order_weight > 0 ? o->order_weight : 0.0f;
+    for (i = 0; i < npix; i++) F.nsk += G->type[i] != 0;
+    if (maxpix > (size_t)npix) maxpix = (size_t)npix;
+    F.cap = 2 * (maxpix > (size_t)G->P.npts ? maxpix : (size_t)G->P.npts) + 1; /* 2 smoothness pairs a pixel, 2 ordering pairs a point */
+    s[0] = G->P.n;
+    s[1] = G->A.embed;
+    if (!(ctx = tn_ctx_create()) || !(ft = tn_params_create()) || !(emb = tn_params_add(ft, "emb", 2, s)) || !(frozen = tn_params_create()) ||
+        !(F.ip = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) || !(F.iq = (int *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(int))) ||
+        !(F.psign = (float *)tn__alloc(((size_t)G->P.npts * 2 + 1) * sizeof(float))) ||
+        !(F.ix = (int *)tn__alloc(2 * F.cap * sizeof(int))) || !(F.tg = (float *)tn__alloc(F.cap * sizeof(float)))) {
+        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+        goto done;
+    }
+    if (!one && G->A.membrane) {
+        if (!(base = (float *)tn__alloc((size_t)npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        if ((st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, 0, 0, G->W, G->H, base))) goto done;
+    }
+    memcpy(emb->data, G->emb, (size_t)G->P.n * G->A.embed * sizeof(float));
+    memset(&oo, 0, sizeof oo);
+    oo.lr = o->finetune_lr > 0 ? o->finetune_lr : 1e-2f;
+    if (!(fopt = tn_optim_create(ft, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
+    /* a frozen copy of the network (buffers: no gradient), so the model is only read */
+    for (i = 0; i < tn_params_count(G->w); i++) {
+        const tn_tensor *t = tn_params_get(G->w, i);
+        tn_tensor *c = tn_params_add_buffer(frozen, t->name, t->ndim, t->shape);
+        if (!c) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        memcpy(c->data, t->data, t->numel * sizeof(float));
+    }
+    if (F.ow > 0) { /* across-line pairs of every part point: (p, q) and the sign */
+        int p, j, a, b, c;
+        for (p = 0; p < G->P.n; p++) {
+            tn_contour c0;
+            memset(&c0, 0, sizeof c0);
+            c0.npoints = G->P.start[p + 1] - G->P.start[p];
+            c0.points = G->P.pts + 3 * (size_t)G->P.start[p];
+            for (j = 0; j < c0.npoints; j++) {
+                tn__gnn_across(&c0, j, G->W, G->H, 3.0f, &a, &b, &c);
+                if (a < 0) continue;
+                if (b >= 0) { F.ip[F.npairs] = a; F.iq[F.npairs] = b; F.psign[F.npairs++] = G->P.sign[p]; }
+                if (c >= 0) { F.ip[F.npairs] = a; F.iq[F.npairs] = c; F.psign[F.npairs++] = G->P.sign[p]; }
+            }
+        }
+    }
+    for (step = 0; step < o->finetune && !st; step++) {
+        tn_params_zero_grad(ft);
+        for (wi = 0; wi < nwx * nwy && !st; wi++) {
+            int cx = (wi % nwx) * tile, cy = (wi / nwx) * tile, cw = G->W - cx < tile ? G->W - cx : tile, ch = G->H - cy < tile ? G->H - cy : tile;
+            int rx = cx - margin > 0 ? cx - margin : 0, ry = cy - margin > 0 ? cy - margin : 0;
+            int rx1 = cx + cw + margin < G->W ? cx + cw + margin : G->W, ry1 = cy + ch + margin < G->H ? cy + ch + margin : G->H;
+            tn_tensor *pred, *loss, *ew;
+            if (!made || nwx * nwy > 1) { /* one window keeps its graph; more are made again each step (memory) */
+                tn__gnn_region_free(&R);
+                if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, base, &R))) break;
+                made = 1;
+            }
+            tn_ctx_reset(ctx);
+            ew = tn_gather_rows(ctx, emb, R.of, R.P.n);
+            if (!ew || !(pred = tn__gnn_region_forward(ctx, G, frozen, &R, ew))) { st = tn_ctx_status(ctx) ? tn_ctx_status(ctx) : TN_ERR_OUT_OF_MEMORY; break; }
+            if (!(loss = tn__gnn_ft_loss(ctx, G, &F, &R, pred, cx, cy, cw, ch))) {
+                if ((st = tn_ctx_status(ctx))) break;
+                continue; /* nothing to fit in this window */
+            }
+            if (!(st = tn_backward(ctx, loss))) st = tn__progress("gnn-finetune", (double)(step * nwx * nwy + wi + 1) / ((double)o->finetune * nwx * nwy));
+        }
+        if (!st) tn_optim_step(fopt);
+    }
+    if (!st) memcpy(G->emb, emb->data, (size_t)G->P.n * G->A.embed * sizeof(float));
+done:
+    tn__gnn_region_free(&R);
+    tn_ctx_free(ctx);
+    tn_optim_free(fopt);
+    tn_params_free(ft);
+    tn_params_free(frozen);
+    TN_FREE(F.ip);
+    TN_FREE(F.iq);
+    TN_FREE(F.psign);
+    TN_FREE(F.ix);
+    TN_FREE(F.tg);
+    TN_FREE(base);
+    return st;
+}
+
+/* The network a sketch runs on: the trained one for the example's own network (every part
+   known: the reconstruction), the early one (the best holdout check's, opts->holdout in
+   training) for any other sketch, when the model has one. */
+static tn_status tn__gnn_pick_net(const tn_gnn *model, int known, tn__gnn_gen *G)
+{
+    int i;
+    G->w = model->weights;
+    if (known || !tn_params_find(model->weights, "early.gnn.emb")) return TN_OK;
+    if (!(G->own_w = tn_params_create())) return TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; i < tn_params_count(model->weights); i++) {
+        const tn_tensor *t = tn_params_get(model->weights, i), *e;
+        tn_tensor *c;
+        char name[48];
+        if (!strncmp(t->name, "early.", 6)) continue;
+        snprintf(name, sizeof name, "early.%s", t->name);
+        e = tn_params_find(model->weights, name);
+        if (!(c = tn_params_add_buffer(G->own_w, t->name, t->ndim, t->shape))) return TN_ERR_OUT_OF_MEMORY;
+        memcpy(c->data, (e ? e : t)->data, t->numel * sizeof(float));
+    }
+    G->w = G->own_w;
+    return TN_OK;
+}
+
+/* Everything of a generation but the network passes: sketch in the output's pixels and the
+   example's units, random sketches, parts, embeddings (matched or aligned, then fine-tuned),
+   part states, raster. */
+/* The seed the sketch's lines are cut into parts with: under EMBED_AUTO the model's training
+   seed, so the example's own network is cut exactly as in training and every part keeps its
+   embedding (the reconstruction); otherwise opts->seed. */
+static uint64_t tn__gnn_cut_seed(const tn_gnn *model, const tn_gnn_generate_opts *opts)
+{
+    const char *sd = tn_params_meta(model->weights, "seed");
+    uint64_t v;
+    if (opts->embeddings == TN_GNN_EMBED_AUTO && sd && tn__parse_hex64(sd, strlen(sd), &v)) return v;
+    return opts->seed;
+}
+
+/* G from a sketch already in the example's units on the width x height canvas (random lines
+   included): parts, their embeddings and initial states, the rasterised sketch. *known = 1 when
+   every part is one of the example's own (EMBED_AUTO matched them all). */
+static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk, int width, int height, const tn_gnn_generate_opts *opts,
+                                   tn__gnn_gen *G, int *known)
+{
+    tn_contour_set dense, parts, ex_parts;
+    tn_image r = {0, 0, 0, NULL};
+    tn_align_opts ao;
+    int *match = NULL, i, nf = 0;
+    size_t n = (size_t)width * height, q;
+    tn_status st;
+    memset(&dense, 0, sizeof dense);
+    memset(&parts, 0, sizeof parts);
+    memset(&ex_parts, 0, sizeof ex_parts);
+    *known = 0;
+    G->W = width;
+    G->H = height;
+    G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
+    G->gain = 1.0f;
+    G->gain_raw = NAN;
+    if ((st = tn_sketch_densify(sk, &dense))) goto done;
+    if ((st = tn_contour_parts_make(&dense, tn__gnn_cut_seed(model, opts), &parts))) goto done;
+    if (!parts.count) {
+        st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch has no part of 5 px (draw longer lines)");
+        goto done;
+    }
+    /* the example part whose embedding each sketch part takes (-1: none) */
+    if ((st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex_parts))) goto done;
+    if (!(match = (int *)tn__alloc((size_t)parts.count * sizeof(int)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (opts->embeddings == TN_GNN_EMBED_ALIGNED) { /* 5.3: shape (LCS of chain codes) and heights */
+        memset(&ao, 0, sizeof ao);
+        ao.seed = opts->seed;
+        ao.choices = opts->align_choices > 0 ? opts->align_choices : 1;
+        if ((st = tn_sketch_align(&parts, &ex_parts, &ao, match))) goto done;
+    } else {
+        tn__gnn_same_parts(&parts, &ex_parts, opts->embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
+        for (i = 0, *known = opts->embeddings == TN_GNN_EMBED_AUTO; i < parts.count; i++) *known &= match[i] >= 0;
+    }
+    if ((st = tn__gnn_pick_net(model, *known, G))) goto done;
+    if ((st = tn__gnn_parts_make(&parts, G->A.mean, G->A.std, &G->P))) goto done;
+    G->emb = (float *)tn__calloc((size_t)G->P.n * G->A.embed * sizeof(float));
+    G->known = (uint8_t *)tn__alloc((size_t)G->P.n + 1);
+    G->type = (float *)tn__alloc(n * sizeof(float));
+    G->hgt = (float *)tn__alloc(n * sizeof(float));
+    G->fixed = (uint8_t *)tn__alloc(n);
+    if (!G->emb || !G->known || !G->type || !G->hgt || !G->fixed) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    {
+        const tn_tensor *me = tn_params_find(G->w, "gnn.emb");
+        for (i = 0; i < G->P.n; i++)
+            if ((G->known[i] = (uint8_t)(match[i] >= 0))) memcpy(G->emb + (size_t)i * G->A.embed, me->data + (size_t)match[i] * G->A.embed, (size_t)G->A.embed * sizeof(float));
+    }
+    if (G->A.part_noise > 0) { /* each part's state from its own stream: the same in every window */
+        if (!(G->E0 = (float *)tn__alloc((size_t)G->P.n * G->A.hidden * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        for (i = 0; i < G->P.n; i++) {
+            tn_rng pr;
+            int h;
+            tn_rng_seed(&pr, opts->seed ^ 0x67656eULL, (uint64_t)i);
+            for (h = 0; h < G->A.hidden; h++) G->E0[(size_t)i * G->A.hidden + h] = G->A.part_noise * tn_rng_normal(&pr);
+        }
+    }
+    if ((st = tn_sketch_rasterise(sk, width, height, &r))) goto done;
+    for (q = 0; q < n; q++) {
+        const float *px = r.data + 3 * q;
+        G->fixed[q] = (uint8_t)(px[0] > 0 || px[1] > 0);
+        nf += G->fixed[q];
+        G->type[q] = px[0] > 0 ? 1.0f : px[1] > 0 ? -1.0f : 0.0f;
+        G->hgt[q] = G->fixed[q] ? px[2] : 0.0f;
+    }
+    if (!nf) st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch covers no pixel of the %d x %d map", width, height);
+done:
+    tn_image_free(&r);
+    tn_contour_set_free(&dense);
+    tn_contour_set_free(&parts);
+    tn_contour_set_free(&ex_parts);
+    TN_FREE(match);
+    return st;
+}
+
+static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                 const char *stage);
+
+/* Fewer user lines than this keep gain 1: Himalaya's model tested on the 4 strokes of the
+   Figure 10 sketch got gain 0 (the membrane: 30.5 % ordering); the bench's extracted sketches
+   have 16-138 lines. */
+#define TN__GNN_GAIN_MIN_LINES 8
+
+/* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's.
+   *raw = the held-out lines' pooled least-squares gain, before scale and clamp; NAN = untested. */
+static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
+                                       const tn_gnn_generate_opts *opts, double *raw)
+{
+    int vw = G->W < 512 ? G->W : 512, vh = G->H < 512 ? G->H : 512, vx = (G->W - vw) / 2, vy = (G->H - vh) / 2, round, i;
+    size_t nv = (size_t)vw * vh, q, held = 0;
+    double num = 0, den = 0;
+    tn_contour_set keep, drop;
+    float *pred = (float *)tn__alloc(nv * sizeof(float)), *base = (float *)tn__alloc(nv * sizeof(float));
+    tn_ctx *ctx = tn_ctx_create();
+    tn_rng rng;
+    tn_status st = TN_OK;
+    *raw = NAN;
+    keep = drop = *sk;
+    keep.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
+    drop.items = (tn_contour *)tn__alloc(((size_t)sk->count + 1) * sizeof(tn_contour));
+    if (!pred || !base || !ctx || !keep.items || !drop.items) st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    tn_rng_seed(&rng, opts->seed, 0x6761696eULL);
+    for (round = 0; !st && n_user >= TN__GNN_GAIN_MIN_LINES && round < 3; round++) {
+        tn__gnn_gen T;
+        tn_image hr = {0, 0, 0, NULL};
+        int known;
+        keep.count = drop.count = 0;
+        for (i = 0; i < sk->count; i++) {
+            if (i < n_user && tn_rng_uniform(&rng) < 0.3f) drop.items[drop.count++] = sk->items[i];
+            else keep.items[keep.count++] = sk->items[i];
+        }
+        if (!drop.count || keep.count == sk->count - n_user) continue; /* nothing held out, or no user line left */
+        memset(&T, 0, sizeof T);
+        T.A = G->A;
+        st = tn__gnn_gen_build(model, &keep, G->W, G->H, opts, &T, &known);
+        if (st == TN_ERR_EMPTY) { /* the kept lines are too short to test with: not a failure */
+            tn__gnn_gen_free(&T);
+            st = TN_OK;
+            continue;
+        }
+        if (!st) st = tn__gnn_gen_run(&T, G->w, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
+        if (!st) st = tn_sketch_rasterise(&drop, G->W, G->H, &hr);
+        for (q = 0; !st && q < nv; q++) {
+            size_t m = (size_t)(vy + (int)(q / vw)) * G->W + vx + (int)(q % vw);
+            const float *px = hr.data + 3 * m;
+            double r = (double)pred[q] - base[q];
+            if (!(px[0] > 0 || px[1] > 0) || T.fixed[m]) continue;
+            num += r * ((double)px[2] - base[q]);
+            den += r * r;
+            held++;
+        }
+        tn_image_free(&hr);
+        tn__gnn_gen_free(&T);
+    }
+    if (!st && held >= 16 && den > 0) *raw = num / den;
+    TN_FREE(pred);
+    TN_FREE(base);
+    TN_FREE(keep.items);
+    TN_FREE(drop.items);
+    tn_ctx_free(ctx);
+    return st;
+}
+
+static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                  tn__gnn_gen *G)
+{
+    tn_gnn_generate_opts o;
+    tn_contour_set sk, rnd;
+    int i, known = 0;
+    tn_status st;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    memset(G, 0, sizeof *G);
+    memset(&sk, 0, sizeof sk);
+    memset(&rnd, 0, sizeof rnd);
+    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
+    if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
+    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
+        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
+                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
+    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
+        tn_sketch_random_opts ro;
+        memset(&ro, 0, sizeof ro);
+        ro.seed = o.seed;
+        ro.nodes = o.random_nodes;
+        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        for (i = sk.count; i < rnd.count; i++) {
+            int j;
+            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
+        }
+        tn_contour_set_free(&sk);
+        sk = rnd;
+        memset(&rnd, 0, sizeof rnd);
+    }
+    if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
+    if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
+    else if (G->A.membrane && !known && !(st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain_raw)) && isfinite(G->gain_raw))
+        G->gain = tn__gnn_gain_of(tn__gnn_gain_scale(G->w), G->gain_raw);
+    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
+done:
+    tn_contour_set_free(&sk);
+    tn_contour_set_free(&rnd);
+    if (st) tn__gnn_gen_free(G);
+    return st;
+}
+
+/* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
+   grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
+   the network's residual. base_dst (may be NULL): the membrane there. */
+static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                    size_t stride)
+{
+    tn__gnn_region R;
+    float *pred = NULL;
+    int rx = x - G->halo > 0 ? x - G->halo : 0, ry = y - G->halo > 0 ? y - G->halo : 0, u, v;
+    int rx1 = x + ww + G->halo < G->W ? x + ww + G->halo : G->W, ry1 = y + wh + G->halo < G->H ? y + wh + G->halo : G->H;
+    tn_status st;
+    if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
+    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
+    if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
+    for (v = 0; !st && v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
+            float p = G->gain == 1.0f ? pred[i] : R.base[i] + G->gain * (pred[i] - R.base[i]), h = G->A.mean + G->A.std * p;
+            if (!isfinite(h)) {
+                st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
+                break;
+            }
+            dst[(size_t)v * stride + u] = h;
+            if (base_dst) base_dst[(size_t)v * stride + u] = G->A.mean + G->A.std * R.base[i];
+        }
+    tn__gnn_region_free(&R);
+    TN_FREE(pred);
+    return st;
+}
+
+#define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
+/* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
+   floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
+   gives the same pixels. */
+static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                 const char *stage)
+{
+    int tile = (size_t)ww * wh <= TN__GNN_ONE_PASS ? (ww > wh ? ww : wh) : TN__GNN_TILE, tx, ty, done_t = 0;
+    int nt = ((ww + tile - 1) / tile) * ((wh + tile - 1) / tile);
+    tn_status st = TN_OK;
+    for (ty = 0; !st && ty < wh; ty += tile)
+        for (tx = 0; !st && tx < ww; tx += tile) {
+            int tw = ww - tx < tile ? ww - tx : tile, th = wh - ty < tile ? wh - ty : tile;
+            size_t o = (size_t)ty * ww + tx;
+            st = tn__gnn_gen_window(G, w, ctx, x + tx, y + ty, tw, th, dst + o, base_dst ? base_dst + o : NULL, (size_t)ww);
+            if (!st && nt > 1) st = tn__progress(stage, (double)++done_t / nt);
+        }
+    return st;
+}
+
+TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
+                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    tn__gnn_gen G;
+    tn_image res = {0, 0, 0, NULL};
+    tn_ctx *ctx = NULL;
+    tn_status st;
+    TN_ASSERT(out);
+    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
+    if ((st = tn_image_create(&res, w, h, 1))) goto done;
+    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
+    st = tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
+    if (!st) {
+        *out = res;
+        res.data = NULL;
+    }
+done:
+    tn_image_free(&res);
+    tn_ctx_free(ctx);
+    tn__gnn_gen_free(&G);
+    return st;
+}
+
+/* The gain test's scale, "gain.scale" of s->w, from the holdouts: each holdout sketch of
+   TN__GNN_GAIN_MIN_LINES lines or more is generated as any other sketch (the network other terrain
+   runs on, its gain tested on its lines) and the scale, 0 .. 2 in steps of 0.05, is the smallest
+   with the best mean SSIM over them of the membrane plus min(1, scale x its raw estimate) times
+   the residual. The held-out lines are where the membrane errs most, and SSIM wants less
+   residual than least squares, so the raw estimate runs high where the style fits loosely. */
+static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
+{
+    double ssim[TN__GNN_GAIN_SCALES] = {0}, best = -2;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_tensor *sc;
+    tn_ctx *ctx = NULL;
+    int i, k, n = 0, one = 1;
+    tn_status st = TN_OK;
+    if (!s->best) return TN_OK;
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &s->A);
+    m.weights = s->w;
+    memset(&go, 0, sizeof go);
+    if (!(ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    for (i = 0; !st && i < 2 * s->o.holdout_count; i++) {
+        const tn_image *h = &s->o.holdout[i / 2];
+        tn_image out = {0, 0, 0, NULL};
+        tn__gnn_gen G;
+        float *pred = NULL, *base = NULL;
+        size_t q, np = (size_t)h->width * h->height;
+        if (s->hsk[i].count < TN__GNN_GAIN_MIN_LINES) continue;
+        st = tn__gnn_gen_make(&m, &s->hsk[i], h->width, h->height, &go, &G);
+        if (st == TN_ERR_EMPTY) { /* no part of 5 px */
+            st = TN_OK;
+            continue;
+        }
+        if (st) break;
+        if (isfinite(G.gain_raw)) {
+            pred = (float *)tn__alloc(np * sizeof(float));
+            base = (float *)tn__alloc(np * sizeof(float));
+            G.gain = 1.0f;
+            if (!pred || !base) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_gen_run(&G, G.w, ctx, 0, 0, h->width, h->height, pred, base, "gnn-gain-scale");
+            if (!st) st = tn_image_create(&out, h->width, h->height, 1);
+            for (k = 0; !st && k < TN__GNN_GAIN_SCALES; k++) {
+                float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
+                tn_metrics mt;
+                for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
+                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
+            }
+            n += !st;
+        }
+        tn_image_free(&out);
+        TN_FREE(pred);
+        TN_FREE(base);
+        tn__gnn_gen_free(&G);
+    }
+    tn_ctx_free(ctx);
+    if (st || !n) return st;
+    if (!(sc = tn_params_find(s->w, "gain.scale")) && !(sc = tn_params_add_buffer(s->w, "gain.scale", 1, &one))) return TN_ERR_OUT_OF_MEMORY;
+    for (k = 0; k < TN__GNN_GAIN_SCALES; k++)
+        if (ssim[k] > best) {
+            best = ssim[k];
+            sc->data[0] = 0.05f * (float)k;
+        }
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                             float *gain)
+{
+    tn__gnn_gen G;
+    tn_gnn_generate_opts o;
+    tn_status st;
+    TN_ASSERT(gain);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    o.finetune = 0; /* the test never fine-tunes */
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    *gain = G.gain;
+    tn__gnn_gen_free(&G);
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                 const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
+}
+
+TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count)
+{
+    tn_contour_set sk, dense;
+    int i, j, n = 0, good = 0, W, H;
+    float d = distance > 0 ? distance : 3.0f;
+    tn__gnn_arch A;
+    tn_status st;
+    TN_ASSERT(share);
+    *share = 0;
+    if (count) *count = 0;
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "gnn ordering"))) return st;
+    if (!terrain || !terrain->data || terrain->width <= 0 || terrain->height <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: no terrain");
+    if (!(distance >= 0 && distance < 4096)) return tn__fail(TN_ERR_INVALID_ARG, "gnn ordering: distance %g", (double)distance);
+    W = terrain->width;
+    H = terrain->height;
+    memset(&A, 0, sizeof A);
+    if ((st = tn__gnn_sketch_units(&A, sketch, W, H, TN_GNN_HEIGHTS_EXAMPLE, &sk))) return st; /* in the terrain's pixels */
+    st = tn_sketch_densify(&sk, &dense);
+    tn_contour_set_free(&sk);
+    if (st) return st;
+    for (i = 0; i < dense.count; i++)
+        for (j = 0; j < dense.items[i].npoints; j++) {
+            int p, q1, q2;
+            float hp, h1, h2;
+            tn__gnn_across(&dense.items[i], j, W, H, d, &p, &q1, &q2);
+            if (p < 0 || q1 < 0 || q2 < 0) continue;
+            hp = terrain->data[(size_t)p * terrain->channels];
+            h1 = terrain->data[(size_t)q1 * terrain->channels];
+            h2 = terrain->data[(size_t)q2 * terrain->channels];
+            n++;
+            good += dense.items[i].type == TN_RIDGE ? hp > h1 && hp > h2 : hp < h1 && hp < h2;
+        }
+    tn_contour_set_free(&dense);
+    *share = n ? (double)good / n : 0.0;
+    if (count) *count = n;
+    return TN_OK;
+}
+

@@ -1,0 +1,53 @@
+#ifdef __cplusplus
+}
+#endif
+#endif /* TERRAINNET_H */
+
+/* //// end header file ////////////////////////////////////////////////////////////////////// */
+
+#if defined(TERRAINNET_IMPLEMENTATION) && !defined(TN_IMPLEMENTATION_LINKED)
+#ifndef TERRAINNET_IMPLEMENTATION_DONE
+#define TERRAINNET_IMPLEMENTATION_DONE
+
+#include <stdlib.h>
+#include <stdio.h>
+#include <string.h>
+#include <math.h>
+#include <stdarg.h>
+#include <limits.h>
+#include <float.h>
+#include <time.h>
+
+#if defined(TN_MALLOC) && defined(TN_FREE) && defined(TN_REALLOC)
+/* all three given */
+#elif !defined(TN_MALLOC) && !defined(TN_FREE) && !defined(TN_REALLOC)
+#define TN_MALLOC(sz) malloc(sz)
+#define TN_REALLOC(p, sz) realloc(p, sz)
+#define TN_FREE(p) free(p)
+#else
+#error "terrainnet: define all of TN_MALLOC, TN_REALLOC and TN_FREE, or none of them"
+#endif
+
+#ifndef TN_ASSERT
+#include <assert.h>
+#define TN_ASSERT(x) assert(x)
+#endif
+
+#ifndef TN_MAX_ALLOC
+#define TN_MAX_ALLOC ((size_t)8 << 30)
+#endif
+
+#if !defined(TN_NO_THREADS)
+#include <pthread.h>
+#include <unistd.h>
+#endif
+
+/* SIMD kernels (blur, SSIM, GEMM) when the compiler targets AVX-512 or AVX2+FMA; portable C otherwise. */
+#if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
+#include <immintrin.h>
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+

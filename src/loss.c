@@ -1,0 +1,176 @@
+/* ============================================================================================
+   @@loss  losses (each returns a one-element tensor)
+   ============================================================================================ */
+TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
+TN_API tn_tensor *tn_l1_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
+/* mean of softplus(x) - x * t: binary cross-entropy on logits, stable for any x. */
+TN_API tn_tensor *tn_bce_logits_loss(tn_ctx *ctx, tn_tensor *logits, tn_tensor *target);
+/* Hinge GAN: discriminator mean(relu(1 - real)) + mean(relu(1 + fake)); generator -mean(fake). */
+TN_API tn_tensor *tn_hinge_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores);
+TN_API tn_tensor *tn_hinge_g_loss(tn_ctx *ctx, tn_tensor *fake_scores);
+/* Non-saturating GAN: discriminator mean(softplus(-real)) + mean(softplus(fake)); generator
+   mean(softplus(-fake)). */
+TN_API tn_tensor *tn_nonsat_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores);
+TN_API tn_tensor *tn_nonsat_g_loss(tn_ctx *ctx, tn_tensor *fake_scores);
+/* Gram matrices of N x C x H x W features: N x C x C... returned as (N*C) x C, scaled by `scale`
+   (e.g. 1 / (C*H*W)). */
+TN_API tn_tensor *tn_gram(tn_ctx *ctx, tn_tensor *x, float scale);
+/* Total variation sum over pixels of (dx^2 + dy^2)^(beta/2) (beta 2: the plain squared TV). */
+TN_API tn_tensor *tn_tv_loss(tn_ctx *ctx, tn_tensor *x, float beta);
+/* 1 - SSIM (Gaussian 11 x 11, sigma 1.5, valid region), differentiable; data range R. */
+TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float data_range);
+/* Gradient-difference loss: mean | |dx(a)| - |dx(b)| | + mean | |dy(a)| - |dy(b)| |. */
+TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
+
+
+/* --------------------------------------------------------------------------------------------
+   >>loss  (@@loss implementation) - mostly compositions of the ops above, so their gradients
+   come for free and are checked by the same finite-difference tests.
+   -------------------------------------------------------------------------------------------- */
+
+TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target)
+{
+    return tn_mean(ctx, tn_square(ctx, tn_sub(ctx, pred, target)));
+}
+
+TN_API tn_tensor *tn_l1_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target)
+{
+    return tn_mean(ctx, tn_abs(ctx, tn_sub(ctx, pred, target)));
+}
+
+TN_API tn_tensor *tn_bce_logits_loss(tn_ctx *ctx, tn_tensor *logits, tn_tensor *target)
+{
+    return tn_mean(ctx, tn_sub(ctx, tn_softplus(ctx, logits), tn_mul(ctx, logits, target)));
+}
+
+TN_API tn_tensor *tn_hinge_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores)
+{
+    tn_tensor *r = tn_mean(ctx, tn_relu(ctx, tn_scale_shift(ctx, real_scores, -1.0f, 1.0f)));
+    tn_tensor *f = tn_mean(ctx, tn_relu(ctx, tn_scale_shift(ctx, fake_scores, 1.0f, 1.0f)));
+    return tn_add(ctx, r, f);
+}
+
+TN_API tn_tensor *tn_hinge_g_loss(tn_ctx *ctx, tn_tensor *fake_scores)
+{
+    return tn_scale_shift(ctx, tn_mean(ctx, fake_scores), -1.0f, 0.0f);
+}
+
+TN_API tn_tensor *tn_nonsat_d_loss(tn_ctx *ctx, tn_tensor *real_scores, tn_tensor *fake_scores)
+{
+    tn_tensor *r = tn_mean(ctx, tn_softplus(ctx, tn_scale_shift(ctx, real_scores, -1.0f, 0.0f)));
+    return tn_add(ctx, r, tn_mean(ctx, tn_softplus(ctx, fake_scores)));
+}
+
+TN_API tn_tensor *tn_nonsat_g_loss(tn_ctx *ctx, tn_tensor *fake_scores)
+{
+    return tn_mean(ctx, tn_softplus(ctx, tn_scale_shift(ctx, fake_scores, -1.0f, 0.0f)));
+}
+
+static void tn__gram_backward(tn_ctx *ctx, tn_tensor *out)
+{
+    tn_tensor *x = out->src[0];
+    int N = x->shape[0], C = x->shape[1], n, i, j;
+    int hw = x->shape[2] * x->shape[3];
+    float *gs = tn__ctx_floats(ctx, (size_t)C * C, 0);
+    if (!gs || !tn__grad(ctx, x)) return;
+    for (n = 0; n < N; n++) {
+        const float *g = out->grad + (size_t)n * C * C;
+        for (i = 0; i < C; i++) /* dG + dG^T, scaled */
+            for (j = 0; j < C; j++) gs[i * C + j] = (g[i * C + j] + g[j * C + i]) * out->fp[0];
+        tn_sgemm(0, 0, C, hw, C, 1.0f, gs, C, x->data + (size_t)n * C * hw, hw, 1.0f, x->grad + (size_t)n * C * hw, hw);
+    }
+}
+
+TN_API tn_tensor *tn_gram(tn_ctx *ctx, tn_tensor *x, float scale)
+{
+    int shape[2], N, C, hw, n;
+    tn_tensor *o;
+    if (!x) return NULL;
+    TN_ASSERT(x->ndim == 4);
+    N = x->shape[0];
+    C = x->shape[1];
+    hw = x->shape[2] * x->shape[3];
+    shape[0] = N * C;
+    shape[1] = C;
+    o = tn__op(ctx, 2, shape, tn__gram_backward, x, NULL, NULL);
+    if (!o) return NULL;
+    o->fp[0] = scale;
+    for (n = 0; n < N; n++) {
+        const float *f = x->data + (size_t)n * C * hw;
+        tn_sgemm(0, 1, C, C, hw, scale, f, hw, f, hw, 0.0f, o->data + (size_t)n * C * C, C);
+    }
+    return o;
+}
+
+/* Forward differences along x and y, both cropped to (H-1) x (W-1). */
+static void tn__diffs(tn_ctx *ctx, tn_tensor *x, tn_tensor **dx, tn_tensor **dy)
+{
+    int H = x->shape[2], W = x->shape[3];
+    tn_tensor *top = tn_slice(ctx, x, 2, 0, H - 1), *bot = tn_slice(ctx, x, 2, 1, H - 1);
+    tn_tensor *left = tn_slice(ctx, x, 3, 0, W - 1), *right = tn_slice(ctx, x, 3, 1, W - 1);
+    *dx = tn_slice(ctx, tn_sub(ctx, right, left), 2, 0, H - 1);
+    *dy = tn_slice(ctx, tn_sub(ctx, bot, top), 3, 0, W - 1);
+}
+
+TN_API tn_tensor *tn_tv_loss(tn_ctx *ctx, tn_tensor *x, float beta)
+{
+    tn_tensor *dx, *dy, *s;
+    if (!x) return NULL;
+    TN_ASSERT(x->ndim == 4 && x->shape[2] >= 2 && x->shape[3] >= 2);
+    tn__diffs(ctx, x, &dx, &dy);
+    s = tn_add(ctx, tn_square(ctx, dx), tn_square(ctx, dy));
+    return tn_sum(ctx, beta == 2.0f ? s : tn_pow_abs(ctx, s, 0.5f * beta));
+}
+
+TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b)
+{
+    tn_tensor *ax, *ay, *bx, *by;
+    if (!a || !b) return NULL;
+    TN_ASSERT(a->ndim == 4 && a->shape[2] >= 2 && a->shape[3] >= 2);
+    tn__diffs(ctx, a, &ax, &ay);
+    tn__diffs(ctx, b, &bx, &by);
+    return tn_add(ctx, tn_l1_loss(ctx, tn_abs(ctx, ax), tn_abs(ctx, bx)), tn_l1_loss(ctx, tn_abs(ctx, ay), tn_abs(ctx, by)));
+}
+
+/* Separable 11-tap Gaussian (sigma 1.5, like skimage), valid region, on every plane. */
+static tn_tensor *tn__ssim_blur(tn_ctx *ctx, tn_tensor *x, tn_tensor *kh, tn_tensor *kv)
+{
+    int shape[4];
+    tn_tensor *p;
+    shape[0] = x->shape[0] * x->shape[1];
+    shape[1] = 1;
+    shape[2] = x->shape[2];
+    shape[3] = x->shape[3];
+    p = tn_reshape(ctx, x, 4, shape);
+    return tn_conv2d(ctx, tn_conv2d(ctx, p, kh, NULL, NULL), kv, NULL, NULL);
+}
+
+TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float data_range)
+{
+    tn_tensor *kh, *kv, *mx, *my, *sxx, *syy, *sxy, *num, *den, *vx, *vy, *cxy, *mxy, *m2;
+    float c1 = (0.01f * data_range) * (0.01f * data_range), c2 = (0.03f * data_range) * (0.03f * data_range);
+    double g[11], s = 0;
+    int i;
+    if (!x || !y) return NULL;
+    TN_ASSERT(tn_tensor_same_shape(x, y) && x->ndim == 4 && x->shape[2] >= 11 && x->shape[3] >= 11);
+    kh = tn_tensor_4d(ctx, 1, 1, 1, 11);
+    kv = tn_tensor_4d(ctx, 1, 1, 11, 1);
+    if (!kh || !kv) return NULL;
+    for (i = 0; i < 11; i++) s += g[i] = exp(-0.5 * (i - 5) * (i - 5) / 2.25);
+    for (i = 0; i < 11; i++) kh->data[i] = kv->data[i] = (float)(g[i] / s);
+    mx = tn__ssim_blur(ctx, x, kh, kv);
+    my = tn__ssim_blur(ctx, y, kh, kv);
+    sxx = tn__ssim_blur(ctx, tn_square(ctx, x), kh, kv);
+    syy = tn__ssim_blur(ctx, tn_square(ctx, y), kh, kv);
+    sxy = tn__ssim_blur(ctx, tn_mul(ctx, x, y), kh, kv);
+    mxy = tn_mul(ctx, mx, my);
+    vx = tn_sub(ctx, sxx, tn_square(ctx, mx));
+    vy = tn_sub(ctx, syy, tn_square(ctx, my));
+    cxy = tn_sub(ctx, sxy, mxy);
+    num = tn_mul(ctx, tn_scale_shift(ctx, mxy, 2.0f, c1), tn_scale_shift(ctx, cxy, 2.0f, c2));
+    m2 = tn_add(ctx, tn_square(ctx, mx), tn_square(ctx, my));
+    den = tn_mul(ctx, tn_scale_shift(ctx, m2, 1.0f, c1), tn_scale_shift(ctx, tn_add(ctx, vx, vy), 1.0f, c2));
+    return tn_scale_shift(ctx, tn_mean(ctx, tn_div(ctx, num, den)), -1.0f, 1.0f);
+}
+
+

@@ -1,0 +1,1214 @@
+/* ============================================================================================
+   @@singan  multi-scale single-image GAN on heightmaps (paper 000's detail step, after Shaham et
+   al. 2019, SinGAN)
+   A pyramid of the example DEM from a coarsest side of about 25 px, each scale `factor` (0.75)
+   times the next finer one; per scale a generator of 5 valid 3 x 3 convolutions (conv, batch
+   norm, leaky ReLU 0.2; tanh last) that adds a residual to the upsampled coarser output, fed
+   that output plus noise of amplitude 0.1 x the RMSE of the coarser reconstruction (1 at the
+   coarsest scale). Scales train one after another, coarse to fine, each against its own
+   spectral-normalised patch discriminator with the hinge loss (the engine has no double
+   backward for SinGAN's WGAN-GP) plus 10 x the MSE of the reconstruction: the image the
+   generators make from one fixed noise map at the coarsest scale and no noise above it.
+   Adam 5e-4 (0.5, 0.999), reset at every scale; a scale starts from the coarser one's weights
+   when the widths match. Scales larger than 128 px train on random 128 px windows (the cost of
+   a 256 px example's finest scales / 4). The time budget gives the scales equal iteration counts,
+   estimated from each scale's measured speed.
+   Everything is defined on the infinite integer grid of each scale: noise is a hash of the seed,
+   the scale and the GLOBAL pixel position, upsampling is bilinear between global positions, the
+   convolutions are valid and the norms use their running statistics when sampling. So any
+   window (x0, y0, w, h) of a sample equals those pixels of any larger window, tiles need no
+   seams, and large samples run tile by tile in bounded memory.
+   Heights: the network works on [-1, 1] (the example's range); the model stores the mapping and
+   every call takes and returns heights in the example's units (metres for metre DEMs).
+   ============================================================================================ */
+
+#define TN_SINGAN_MAX_SCALES 16
+
+/* Zero = default (tn_singan_defaults gives the values and the reasons). */
+typedef struct tn_singan_opts {
+    int coarsest;          /* side (the smaller one) of the coarsest scale in px; 0 = 25 */
+    float factor;          /* size ratio of a scale to the next finer one, 0.5..0.9; 0 = 0.75 */
+    int channels;          /* generator and discriminator width at the coarsest scale; 0 = 32 */
+    int max_channels;      /* the width doubles every 4 scales up to this; 0 = 32 (2 cores) */
+    int iters;             /* iterations per scale at most; 0 = 2000, or train.max_iters / scales.
+                              The time budget gives every scale the same count (measured: the
+                              count the remaining budget allows at each scale's speed) */
+    int disc_layers;       /* stride-2 layers of the patch discriminator; 0 = 2 (15 px patches) */
+    int patch;             /* scales larger than this train on random patch x patch windows (the
+                              networks are fully convolutional); 0 = 128, < 0 = whole scales */
+    float lr;              /* Adam rate of G and D; 0 = 5e-4 */
+    float rec_weight;      /* weight of the reconstruction MSE; 0 = 10 */
+    float noise_amp;       /* noise amplitude / RMSE of the coarser reconstruction; 0 = 0.1 */
+    tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
+                              architecture wins; the example must be the same), seed */
+} tn_singan_opts;
+
+/* A trained model (the generators). Free with tn_singan_free. */
+typedef struct tn_singan {
+    int scales;              /* pyramid scales (0 = coarsest) */
+    int trained;             /* scales trained; finer ones (a run stopped early) pass their input on */
+    int width, height;       /* the example's size (the finest scale) */
+    float factor;            /* size ratio between consecutive scales */
+    float offset, range;     /* example heights = offset + range * network units */
+    float amp[TN_SINGAN_MAX_SCALES];  /* noise amplitude per scale (network units) */
+    int channels[TN_SINGAN_MAX_SCALES];
+    long iterations;         /* training iterations done */
+    double train_seconds;
+    tn_params *weights;      /* "singan.config", "g<s>.w<l>" / "b<l>" / "n<l>" / "o<l>", buffers "g<s>.m<l>" / "v<l>" */
+} tn_singan;
+
+typedef struct tn_singan_stats {
+    long iterations;          /* total, including resumed ones */
+    long resumed_from;        /* iteration the run resumed at (0 = fresh) */
+    double seconds;           /* total training seconds, including resumed time */
+    double seconds_per_iter;  /* this run's average over all scales */
+    double seconds_per_iter_finest; /* this run's average at the finest scale (0 if it did not get there) */
+    int scales, trained;      /* pyramid scales; scales trained */
+    long scale_iters[TN_SINGAN_MAX_SCALES]; /* iterations each scale got */
+    float loss_d, loss_g, loss_rec; /* last scale trained, averages over its last 50 iterations
+                                       (loss_rec: unweighted MSE in network units) */
+    float loss_rec_first;     /* loss_rec of the first iteration of that scale in this run (NaN if none) */
+    int checkpoints;          /* checkpoints written by this run */
+} tn_singan_stats;
+
+/* Options of sampling, refinement and upscaling (zero = defaults, resolved by tn_singan_gen_defaults). */
+typedef struct tn_singan_gen_opts {
+    uint64_t seed;         /* noise seed: the same seed gives the same terrain */
+    int from_scale;        /* refine: the first scale whose generator runs on the injected map
+                              (1..scales-1; 0 = scales - 3); upscale: the scale the input stands
+                              for + 1 (1..scales; 0 = the output at the example's pixel size) */
+    float noise;           /* multiplier of the trained noise amplitudes; 0 = 1, < 0 = no noise */
+    int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
+} tn_singan_gen_opts;
+
+/* Fills *o with the defaults (what zero fields mean). */
+TN_API void tn_singan_defaults(tn_singan_opts *o);
+/* Resolves the zero fields of generation options (from_scale is resolved per call, by the model). */
+TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
+/* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
+   Reports progress as "singan-train scale S/N". *model is allocated here (free with
+   tn_singan_free); stats may be NULL. */
+TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts, tn_singan *model, tn_singan_stats *stats);
+TN_API void tn_singan_free(tn_singan *model);
+/* .tnw model files stamped with method "singan"; load refuses other methods' files and
+   checkpoints with TN_ERR_FORMAT and damaged ones with TN_ERR_CORRUPT. */
+TN_API tn_status tn_singan_save(const tn_singan *model, const char *path);
+TN_API tn_status tn_singan_load(const char *path, tn_singan *model);
+
+/* The window (x0, y0, w, h) of the infinite random terrain of opts->seed at the example's pixel
+   size, in the example's units: any window equals the same pixels of a larger one exactly (a
+   whole map and its tiles agree). *out (one channel) is allocated here. */
+TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts,
+                                  tn_image *out);
+/* Adds the example's detail to `in` (a smooth map in the example's units and pixel size, e.g.
+   a GNN output or a membrane): `in` resized to scale opts->from_scale replaces the upsampled
+   coarser output there and the generators of that scale and the finer ones run. *out has in's
+   size. */
+TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out);
+/* Super-resolution by `factor` (1 < factor <= 64): `in` stands for the scale round(log factor /
+   log(1/model->factor)) scales coarser than the output; the generators above it add detail
+   (beyond the finest scale the finest generator repeats, SinGAN's SR mode). *out is
+   round(factor * in's size). */
+TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
+                                   tn_image *out);
+
+/* --------------------------------------------------------------------------------------------
+   >>singan  (@@singan implementation)
+   Layout: sizes and the config tensor; networks (generator, discriminators); the windowed
+   generation every caller shares (one level computes its window from the coarser level's
+   window grown by the convolutions' 5 px context, or from an injected map); training on
+   tn_train runs (one G set and one D set holding every scale, so the run registers two nets; a scale
+   switch zeroes both optimisers' moments and steps, so the earlier scales, whose gradients stay
+   zero, do not move: a fresh Adam per scale as in SinGAN); model files; sample, refine, upscale.
+   -------------------------------------------------------------------------------------------- */
+
+#define TN__SG_FORMAT 1
+#define TN__SG_CONFIG (8 + 2 * TN_SINGAN_MAX_SCALES)
+#define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
+#define TN__SG_M 5 /* context of 5 valid 3 x 3 convolutions */
+
+TN_API void tn_singan_defaults(tn_singan_opts *o)
+{
+    TN_ASSERT(o);
+    /* SinGAN's recipe: coarsest ~25 px, factor 0.75, 32 channels doubling every 4 scales,
+       Adam 5e-4 (0.5, 0.999), reconstruction weight 10, noise 0.1 x RMSE. The width cap is 32:
+       at 64 channels the finest scales of a 256 x 256 example cost 4x as much and the default
+       10-minute budget on 2 cores leaves too few iterations per scale (docs/singan.md). */
+    if (o->coarsest <= 0) o->coarsest = 25;
+    if (o->factor == 0) o->factor = 0.75f;
+    if (o->channels <= 0) o->channels = 32;
+    if (o->max_channels <= 0) o->max_channels = 32;
+    if (o->max_channels < o->channels) o->max_channels = o->channels;
+    if (o->disc_layers <= 0) o->disc_layers = 2;
+    if (o->patch == 0) o->patch = 128;
+    if (o->lr <= 0) o->lr = 5e-4f;
+    if (o->rec_weight == 0) o->rec_weight = 10.0f;
+    if (o->noise_amp == 0) o->noise_amp = 0.1f;
+    tn_train_defaults(&o->train, 10.0);
+}
+
+TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
+{
+    TN_ASSERT(o);
+    if (o->noise == 0) o->noise = 1.0f;
+    if (o->noise < 0) o->noise = 0.0f;
+    if (o->tile <= 0) o->tile = 256;
+}
+
+/* ---- sizes and config ---- */
+
+typedef struct tn__sg_arch {
+    int scales, width, height, trained, disc_layers;
+    float factor, offset, range;
+    float amp[TN_SINGAN_MAX_SCALES];
+    int ch[TN_SINGAN_MAX_SCALES];
+} tn__sg_arch;
+
+/* Size of scale s of an output whose finest scale (level scales - 1) is n px. */
+static int tn__sg_size(int n, float factor, int levels_down)
+{
+    double v = (double)n * pow((double)factor, (double)levels_down);
+    int r = (int)floor(v + 0.5);
+    return r < 1 ? 1 : r;
+}
+
+static void tn__sg_write_config(const tn__sg_arch *A, float *c)
+{
+    int s;
+    memset(c, 0, TN__SG_CONFIG * sizeof(float));
+    c[0] = (float)A->scales;
+    c[1] = (float)A->width;
+    c[2] = (float)A->height;
+    c[3] = A->factor;
+    c[4] = A->offset;
+    c[5] = A->range;
+    c[6] = (float)A->trained;
+    c[7] = (float)A->disc_layers;
+    for (s = 0; s < A->scales; s++) {
+        c[8 + s] = A->amp[s];
+        c[8 + TN_SINGAN_MAX_SCALES + s] = (float)A->ch[s];
+    }
+}
+
+static tn_status tn__sg_read_config(const float *c, tn__sg_arch *A, const char *name)
+{
+    int s;
+    memset(A, 0, sizeof *A);
+    if (!(c[0] >= 1 && c[0] <= TN_SINGAN_MAX_SCALES && c[0] == floorf(c[0])) || !(c[1] >= 1 && c[1] <= 1e6f && c[1] == floorf(c[1])) ||
+        !(c[2] >= 1 && c[2] <= 1e6f && c[2] == floorf(c[2])) || !(c[3] >= 0.5f && c[3] <= 0.9f) || !isfinite(c[4]) ||
+        !(c[5] > 0 && c[5] <= FLT_MAX) || !(c[6] >= 0 && c[6] <= c[0] && c[6] == floorf(c[6])) ||
+        !(c[7] >= 1 && c[7] <= TN_DISC_MAX_LAYERS && c[7] == floorf(c[7])))
+        return tn__fail(TN_ERR_CORRUPT, "%s: damaged singan configuration", name);
+    A->scales = (int)c[0];
+    A->width = (int)c[1];
+    A->height = (int)c[2];
+    A->factor = c[3];
+    A->offset = c[4];
+    A->range = c[5];
+    A->trained = (int)c[6];
+    A->disc_layers = (int)c[7];
+    for (s = 0; s < A->scales; s++) {
+        float a = c[8 + s], w = c[8 + TN_SINGAN_MAX_SCALES + s];
+        if (!(a >= 0 && a <= 100) || !(w >= 1 && w <= 512 && w == floorf(w)))
+            return tn__fail(TN_ERR_CORRUPT, "%s: damaged singan configuration (scale %d)", name, s);
+        A->amp[s] = a;
+        A->ch[s] = (int)w;
+    }
+    return TN_OK;
+}
+
+/* ---- networks ---- */
+
+/* Generator of scale s: "g<s>.w<l>" (Cout x Cin x 3 x 3), "b<l>", batch norm gain "n<l>",
+   offset "o<l>", running mean / variance buffers "m<l>" / "v<l>" for l < 4. SinGAN's init
+   (conv weights N(0, 0.02), norm gains N(1, 0.02)) except the tail conv, which starts at zero. */
+static tn_status tn__sg_gen_add(tn_params *p, int s, int ch, tn_rng *rng)
+{
+    int l;
+    for (l = 0; l < 5; l++) {
+        int cin = l == 0 ? 1 : ch, cout = l == 4 ? 1 : ch, ws[4];
+        char pre[16];
+        tn_tensor *w, *b;
+        ws[0] = cout;
+        ws[1] = cin;
+        ws[2] = ws[3] = 3;
+        snprintf(pre, sizeof pre, "g%d.", s);
+        if (!(w = tn__param_new(p, pre, "w", l, 4, ws, 1)) || !(b = tn__param_new(p, pre, "b", l, 1, &cout, 1))) return TN_ERR_OUT_OF_MEMORY;
+        if (rng) tn_init_normal(w, rng, 0.0f, 0.02f);
+        if (l == 4) tn_tensor_fill(w, 0.0f); /* a scale starts as the identity on its input, so a
+                                                short run's little-trained scales add no noise */
+        if (l < 4) {
+            tn_tensor *g, *o, *m, *v;
+            if (!(g = tn__param_new(p, pre, "n", l, 1, &cout, 1)) || !(o = tn__param_new(p, pre, "o", l, 1, &cout, 1)) ||
+                !(m = tn__param_new(p, pre, "m", l, 1, &cout, 0)) || !(v = tn__param_new(p, pre, "v", l, 1, &cout, 0)))
+                return TN_ERR_OUT_OF_MEMORY;
+            if (rng) tn_init_normal(g, rng, 1.0f, 0.02f);
+            else tn_tensor_fill(g, 1.0f);
+            tn_tensor_fill(v, 1.0f);
+        }
+    }
+    return TN_OK;
+}
+
+static tn_status tn__sg_model_params(const tn__sg_arch *A, tn_rng *rng, tn_params **out)
+{
+    tn_params *p = tn_params_create();
+    tn_tensor *cfg;
+    int n = TN__SG_CONFIG, s;
+    tn_status st = TN_OK;
+    *out = NULL;
+    if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    if (!(cfg = tn_params_add_buffer(p, "singan.config", 1, &n))) st = TN_ERR_OUT_OF_MEMORY;
+    else tn__sg_write_config(A, cfg->data);
+    for (s = 0; s < A->scales && !st; s++) st = tn__sg_gen_add(p, s, A->ch[s], rng);
+    if (st) {
+        tn_params_free(p);
+        return st;
+    }
+    *out = p;
+    return TN_OK;
+}
+
+/* 5 valid 3 x 3 convolutions: (h + 10) x (w + 10) in, h x w out. training: batch statistics
+   (and running averages updated); else the running statistics, so every pixel depends only on
+   its 11 x 11 input neighbourhood. */
+static tn_tensor *tn__sg_gen(tn_ctx *ctx, const tn_params *p, int s, tn_tensor *x, int training)
+{
+    char pre[16];
+    int l;
+    snprintf(pre, sizeof pre, "g%d.", s);
+    for (l = 0; l < 5 && x; l++) {
+        x = tn_conv2d(ctx, x, tn__param_named(p, pre, "w", l), tn__param_named(p, pre, "b", l), NULL);
+        if (l < 4) {
+            x = tn_batch_norm(ctx, x, tn__param_named(p, pre, "n", l), tn__param_named(p, pre, "o", l), tn__param_named(p, pre, "m", l),
+                              tn__param_named(p, pre, "v", l), training, 1e-5f);
+            x = tn_leaky_relu(ctx, x, 0.2f);
+        } else
+            x = tn_tanh(ctx, x);
+    }
+    return x;
+}
+
+/* ---- noise ---- */
+
+static uint64_t tn__sg_level_key(uint64_t seed, int level) { return tn__splitmix64(seed ^ (0x73696e67ULL + 0x9E3779B97F4A7C15ULL * (uint64_t)(level + 1))); }
+/* The reconstruction's fixed noise map (coarsest scale only): a key no seed's level key equals in practice. */
+#define TN__SG_REC_KEY 0x5245434f4e535452ULL
+
+/* Approximately standard normal noise at global pixel (gx, gy): the sum of four 16-bit uniforms
+   of one hash, centred and scaled to unit variance (no libm call, same bits everywhere). */
+static float tn__sg_noise(uint64_t key, long gx, long gy)
+{
+    uint64_t v = tn__splitmix64(key ^ (((uint64_t)(uint32_t)gy << 32) | (uint32_t)gx));
+    float s = (float)(v & 0xffffu) + (float)((v >> 16) & 0xffffu) + (float)((v >> 32) & 0xffffu) + (float)(v >> 48);
+    return (s * (1.0f / 65536.0f) - 2.0f + 2.0f / 65536.0f) * 1.7320508f;
+}
+
+/* ---- windowed generation ---- */
+
+typedef struct tn__sg_gen_run {
+    const tn__sg_arch *A;
+    const tn_params *g;
+    tn_ctx *ctx;
+    uint64_t seed;
+    int rec;              /* the reconstruction: fixed noise at level 0, none above */
+    float noise;          /* multiplier of the amplitudes */
+    const float *map;     /* injected map on level map_level's grid (origin 0), or NULL */
+    int mw, mh, map_level;
+    int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
+                              mstride apart (0 = mw: the whole map); @@world's refine tiles */
+    int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
+} tn__sg_gen_run;
+
+static int tn__sg_net(const tn__sg_arch *A, int level) { return level < A->scales ? level : A->scales - 1; }
+
+static tn_status tn__sg_window(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *out);
+
+/* Coarse pixel index and weight of the bilinear sample at fine global position x. */
+static void tn__sg_coord(long x, double f, long *i, float *t)
+{
+    double c = ((double)x + 0.5) * f - 0.5, fl = floor(c);
+    *i = (long)fl;
+    *t = (float)(c - fl);
+}
+
+/* The base of `level` (the upsampled coarser output, the injected map, or 0) on a window. */
+static tn_status tn__sg_base(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *base)
+{
+    long cx0, cy0, cx1, cy1, *ix = NULL, *iy = NULL;
+    float *tx = NULL, *ty = NULL, *coarse = NULL, tt;
+    int x, y, cw, chh;
+    size_t n = (size_t)w * h;
+    tn_status st = TN_OK;
+    if (r->map && level == r->map_level) { /* clamped at the map's border */
+        size_t stride = (size_t)(r->mstride ? r->mstride : r->mw);
+        for (y = 0; y < h; y++) {
+            long yy = y0 + y;
+            yy = yy < 0 ? 0 : yy >= r->mh ? r->mh - 1 : yy;
+            for (x = 0; x < w; x++) {
+                long xx = x0 + x;
+                xx = xx < 0 ? 0 : xx >= r->mw ? r->mw - 1 : xx;
+                base[(size_t)y * w + x] = r->map[(size_t)(yy - r->my0) * stride + (size_t)(xx - r->mx0)];
+            }
+        }
+        return TN_OK;
+    }
+    if (level == 0 || (r->map && level < r->map_level)) {
+        memset(base, 0, n * sizeof(float));
+        return TN_OK;
+    }
+    tn__sg_coord(x0, r->A->factor, &cx0, &tt);
+    tn__sg_coord(x0 + w - 1, r->A->factor, &cx1, &tt);
+    tn__sg_coord(y0, r->A->factor, &cy0, &tt);
+    tn__sg_coord(y0 + h - 1, r->A->factor, &cy1, &tt);
+    cw = (int)(cx1 + 2 - cx0);
+    chh = (int)(cy1 + 2 - cy0);
+    coarse = (float *)tn__alloc((size_t)cw * chh * sizeof(float));
+    ix = (long *)tn__alloc((size_t)(w + h) * sizeof(long));
+    tx = (float *)tn__alloc((size_t)(w + h) * sizeof(float));
+    if (!coarse || !ix || !tx) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    iy = ix + w;
+    ty = tx + w;
+    if ((st = tn__sg_window(r, level - 1, cx0, cy0, cw, chh, coarse))) goto done;
+    for (x = 0; x < w; x++) {
+        tn__sg_coord(x0 + x, r->A->factor, &ix[x], &tx[x]);
+        ix[x] -= cx0;
+    }
+    for (y = 0; y < h; y++) {
+        tn__sg_coord(y0 + y, r->A->factor, &iy[y], &ty[y]);
+        iy[y] -= cy0;
+    }
+    for (y = 0; y < h; y++) {
+        const float *c0 = coarse + (size_t)iy[y] * cw, *c1 = c0 + cw;
+        float b = ty[y];
+        for (x = 0; x < w; x++) {
+            float a = tx[x], u = (1 - a) * c0[ix[x]] + a * c0[ix[x] + 1], v = (1 - a) * c1[ix[x]] + a * c1[ix[x] + 1];
+            base[(size_t)y * w + x] = (1 - b) * u + b * v;
+        }
+    }
+done:
+    TN_FREE(coarse);
+    TN_FREE(ix);
+    TN_FREE(tx);
+    return st;
+}
+
+/* Generator input of `level` on the window grown by the context: base + amplitude x noise. */
+static void tn__sg_add_noise(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *x)
+{
+    float amp = r->rec ? (level == 0 ? 1.0f : 0.0f) : r->A->amp[tn__sg_net(r->A, level)] * r->noise;
+    uint64_t key = r->rec ? TN__SG_REC_KEY : tn__sg_level_key(r->seed, level);
+    int i, j;
+    if (amp == 0) return;
+    for (j = 0; j < h; j++)
+        for (i = 0; i < w; i++) x[(size_t)j * w + i] += amp * tn__sg_noise(key, x0 + i, y0 + j);
+}
+
+/* Output of `level` on the window (x0, y0, w, h) into out (w * h). */
+static tn_status tn__sg_window(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *out)
+{
+    const int M = TN__SG_M;
+    int ew = w + 2 * M, eh = h + 2 * M, net = tn__sg_net(r->A, level), y;
+    float *base;
+    tn_tensor *xin, *g;
+    tn_status st;
+    if (r->map && r->map_is_output && level == r->map_level) return tn__sg_base(r, level, x0, y0, w, h, out);
+    if (net >= r->A->trained) { /* an untrained scale passes its input on */
+        return tn__sg_base(r, level, x0, y0, w, h, out);
+    }
+    if (!(base = (float *)tn__alloc((size_t)ew * eh * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+    if ((st = tn__sg_base(r, level, x0 - M, y0 - M, ew, eh, base))) {
+        TN_FREE(base);
+        return st;
+    }
+    tn_ctx_reset(r->ctx);
+    tn_ctx_set_grad(r->ctx, 0);
+    xin = tn_tensor_4d(r->ctx, 1, 1, eh, ew);
+    if (xin) {
+        memcpy(xin->data, base, (size_t)ew * eh * sizeof(float));
+        tn__sg_add_noise(r, level, x0 - M, y0 - M, ew, eh, xin->data);
+    }
+    g = tn__sg_gen(r->ctx, r->g, net, xin, 0);
+    if (!g) {
+        TN_FREE(base);
+        return tn_ctx_status(r->ctx) ? tn_ctx_status(r->ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    }
+    for (y = 0; y < h; y++) {
+        const float *b = base + (size_t)(y + M) * ew + M, *gg = g->data + (size_t)y * w;
+        float *o = out + (size_t)y * w;
+        int x;
+        for (x = 0; x < w; x++) o[x] = gg[x] + b[x];
+    }
+    TN_FREE(base);
+    return TN_OK;
+}
+
+/* The top level's window (x0, y0, w, h) tile by tile into *out, in the example's units. */
+static tn_status tn__sg_generate(const tn_singan *m, tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, int tile, tn_image *out)
+{
+    tn_image img = {0, 0, 0, NULL};
+    float *buf = NULL;
+    int tx, ty;
+    tn_status st;
+    long done = 0, total = (long)((w + tile - 1) / tile) * ((h + tile - 1) / tile);
+    if ((st = tn_image_create(&img, w, h, 1))) return st;
+    if (!(r->ctx = tn_ctx_create()) || !(buf = (float *)tn__alloc((size_t)tile * tile * sizeof(float)))) {
+        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+        goto done;
+    }
+    for (ty = 0; ty < h && !st; ty += tile)
+        for (tx = 0; tx < w && !st; tx += tile) {
+            int tw = w - tx < tile ? w - tx : tile, th = h - ty < tile ? h - ty : tile, y, x;
+            if ((st = tn__sg_window(r, level, x0 + tx, y0 + ty, tw, th, buf))) break;
+            for (y = 0; y < th; y++)
+                for (x = 0; x < tw; x++) img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * buf[(size_t)y * tw + x];
+            if (total > 1) st = tn__progress("singan-generate", (double)++done / (double)total);
+        }
+done:
+    TN_FREE(buf);
+    tn_ctx_free(r->ctx);
+    r->ctx = NULL;
+    if (st) tn_image_free(&img);
+    else *out = img;
+    return st;
+}
+
+/* ---- training (a tn_train run) ---- */
+
+typedef struct tn__sg_train {
+    tn_singan_opts o;
+    tn__sg_arch A;
+    tn_train *run;
+    tn_params *g, *d, *sched;  /* generators (the model's layout), discriminators, schedule */
+    tn_optim *og, *od;
+    tn_patch_disc disc[TN_SINGAN_MAX_SCALES];
+    tn_rng rng;
+    tn_image real[TN_SINGAN_MAX_SCALES]; /* the example pyramid in network units */
+    float *recbase;            /* the reconstruction's base at the current scale (grown window) */
+    float *xrec;               /* the reconstruction's generator input at the current scale */
+    float *base, *xin;         /* this iteration's random base and generator input (patch window) */
+    float *fake;               /* this iteration's fake patch (for the D step) */
+    double budget;             /* seconds */
+} tn__sg_train;
+
+static void tn__sg_train_free(tn__sg_train *s)
+{
+    int i;
+    tn_train_free(s->run);
+    tn_optim_free(s->og);
+    tn_optim_free(s->od);
+    tn_params_free(s->g);
+    tn_params_free(s->d);
+    tn_params_free(s->sched);
+    for (i = 0; i < TN_SINGAN_MAX_SCALES; i++) tn_image_free(&s->real[i]);
+    TN_FREE(s->recbase);
+    TN_FREE(s->xrec);
+    TN_FREE(s->base);
+    TN_FREE(s->xin);
+    TN_FREE(s->fake);
+}
+
+/* The training window of scale sc: the whole scale or a patch. */
+static void tn__sg_patch_size(const tn__sg_train *s, int sc, int *pw, int *ph)
+{
+    int P = s->o.patch;
+    *pw = P > 0 && s->real[sc].width > P ? P : s->real[sc].width;
+    *ph = P > 0 && s->real[sc].height > P ? P : s->real[sc].height;
+}
+
+/* Iterations of scale k relative to the finest: equal counts as in SinGAN, but a scale that
+   costs less gets up to 4 times as many (they are cheap and lay out the terrain). */
+static double tn__sg_cost(const tn__sg_train *s, int sc);
+static double tn__sg_weight(const tn__sg_train *s, int k)
+{
+    double w = tn__sg_cost(s, s->A.scales - 1) / tn__sg_cost(s, k);
+    return w < 1 ? 1 : w > 4 ? 4 : w;
+}
+
+/* Relative cost of one iteration at scale sc: G forward + backward on the fake and the
+   reconstruction, and the forward passes of the coarser scales that make the random base. */
+static double tn__sg_cost(const tn__sg_train *s, int sc)
+{
+    double c = 0, f = 1;
+    int k, pw, ph;
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    for (k = sc; k >= 0; k--, f *= s->A.factor) {
+        double w = pw * f < s->real[k].width ? pw * f : s->real[k].width, hh = ph * f < s->real[k].height ? ph * f : s->real[k].height;
+        double px = (w + 2 * TN__SG_M) * (hh + 2 * TN__SG_M) * ((double)s->A.ch[k] * s->A.ch[k] + 1);
+        c += k == sc ? 6.0 * px : px;
+    }
+    return c;
+}
+
+static tn__sg_gen_run tn__sg_train_gen(tn__sg_train *s, tn_ctx *ctx, int rec, uint64_t seed)
+{
+    tn__sg_gen_run r;
+    memset(&r, 0, sizeof r);
+    r.A = &s->A;
+    r.g = s->g;
+    r.ctx = ctx;
+    r.seed = seed;
+    r.rec = rec;
+    r.noise = 1.0f;
+    return r;
+}
+
+/* Enters scale sc: progress name, the reconstruction's base and noise amplitude, the starting
+   weights (the coarser scale's when the widths match), fresh optimiser state, its deadline.
+   resumed: the schedule and weights come from the checkpoint; only derived data is rebuilt. */
+static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int resumed)
+{
+    float *sch = tn_params_find(s->sched, "singan.sched")->data;
+    int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * TN__SG_M, eh = H + 2 * TN__SG_M, i, pw, ph;
+    tn__sg_gen_run r;
+    tn_status st;
+    {
+        char stage[48];
+        snprintf(stage, sizeof stage, "singan-train scale %d/%d", sc + 1, s->A.scales);
+        tn_train_set_stage(s->run, stage);
+    }
+    s->A.trained = sc; /* the coarser scales are done; the window recursion uses them */
+    TN_FREE(s->recbase);
+    TN_FREE(s->xrec);
+    TN_FREE(s->base);
+    TN_FREE(s->xin);
+    s->recbase = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
+    s->xrec = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
+    TN_FREE(s->fake);
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    s->base = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
+    s->xin = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
+    s->fake = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+    if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake) return TN_ERR_OUT_OF_MEMORY;
+    r = tn__sg_train_gen(s, ctx, 1, 0);
+    if ((st = tn__sg_base(&r, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->recbase))) return st;
+    memcpy(s->xrec, s->recbase, (size_t)ew * eh * sizeof(float));
+    tn__sg_add_noise(&r, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->xrec);
+    if (!resumed) {
+        if (sc == 0) s->A.amp[0] = 1.0f;
+        else {
+            double se = 0;
+            int y, x;
+            for (y = 0; y < H; y++)
+                for (x = 0; x < W; x++) {
+                    double d = (double)s->real[sc].data[(size_t)y * W + x] - s->recbase[(size_t)(y + TN__SG_M) * ew + x + TN__SG_M];
+                    se += d * d;
+                }
+            s->A.amp[sc] = (float)(s->o.noise_amp * sqrt(se / ((double)W * H)));
+        }
+        if (sc > 0 && s->A.ch[sc] == s->A.ch[sc - 1]) { /* start from the coarser scale's weights */
+            char a[16], b[16];
+            int l;
+            snprintf(a, sizeof a, "g%d.", sc - 1);
+            snprintf(b, sizeof b, "g%d.", sc);
+            for (i = 0; i < tn_params_count(s->g); i++) {
+                tn_tensor *t = tn_params_get(s->g, i), *u;
+                char nm[64];
+                if (strncmp(t->name, a, strlen(a)) != 0) continue;
+                snprintf(nm, sizeof nm, "%s%s", b, t->name + strlen(a));
+                if ((u = tn_params_find(s->g, nm))) memcpy(u->data, t->data, t->numel * sizeof(float));
+            }
+            snprintf(a, sizeof a, "d%d.", sc - 1);
+            snprintf(b, sizeof b, "d%d.", sc);
+            for (l = 0; l < tn_params_count(s->d); l++) {
+                tn_tensor *t = tn_params_get(s->d, l), *u;
+                char nm[64];
+                if (strncmp(t->name, a, strlen(a)) != 0) continue;
+                snprintf(nm, sizeof nm, "%s%s", b, t->name + strlen(a));
+                if ((u = tn_params_find(s->d, nm))) memcpy(u->data, t->data, t->numel * sizeof(float));
+            }
+        }
+        { /* a fresh Adam: zero moments keep the other scales still (their gradients are zero) */
+            tn_optim *os[2];
+            int j;
+            os[0] = s->og;
+            os[1] = s->od;
+            for (j = 0; j < 2; j++) {
+                for (i = 0; i < os[j]->p->n; i++) {
+                    size_t n = os[j]->p->t[i]->numel;
+                    if (os[j]->m[i]) memset(os[j]->m[i], 0, n * sizeof(float));
+                    if (os[j]->v[i]) memset(os[j]->v[i], 0, n * sizeof(float));
+                }
+                os[j]->step = 0;
+            }
+        }
+        sch[0] = (float)sc;
+        sch[1] = (float)tn_train_iteration(s->run);
+        sch[2] = 0; /* this scale's iteration count: set once its speed is measured */
+        tn__sg_write_config(&s->A, tn_params_find(s->g, "singan.config")->data);
+    }
+    return TN_OK;
+}
+
+/* A 1 x 1 x h x w tensor holding the window (x0, y0, w, h) of a buffer of width bw. */
+static tn_tensor *tn__sg_tensor(tn_ctx *ctx, const float *buf, int bw, int x0, int y0, int w, int h)
+{
+    tn_tensor *t = tn_tensor_4d(ctx, 1, 1, h, w);
+    int y;
+    if (t)
+        for (y = 0; y < h; y++) memcpy(t->data + (size_t)y * w, buf + (size_t)(y + y0) * bw + x0, (size_t)w * sizeof(float));
+    return t;
+}
+
+/* Sampling uses the norms' running statistics, and a short run leaves them lagging behind the
+   batch statistics of the final weights (momentum 0.1). So when a scale ends its running
+   statistics are refreshed by 20 training-mode passes without gradients on random windows of
+   the reconstruction's input, every other one with the scale's noise added (the two kinds of
+   input of training; no coarser passes needed), from an RNG of their own. */
+#define TN__SG_CALIB 20
+static tn_status tn__sg_calibrate(tn__sg_train *s, tn_ctx *ctx, int sc)
+{
+    const int M = TN__SG_M;
+    int W = s->real[sc].width, ew = W + 2 * M, pw, ph, pew, peh, k, j;
+    tn_rng rng;
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    pew = pw + 2 * M;
+    peh = ph + 2 * M;
+    tn_rng_seed(&rng, tn_train_seed(s->run), 0x63616c00ULL + (uint64_t)sc);
+    for (k = 0; k < TN__SG_CALIB; k++) {
+        int ox = (int)tn_rng_below(&rng, (uint32_t)(W - pw + 1)), oy = (int)tn_rng_below(&rng, (uint32_t)(s->real[sc].height - ph + 1));
+        tn_tensor *x;
+        tn_ctx_reset(ctx);
+        tn_ctx_set_grad(ctx, 0);
+        x = tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh);
+        if (x && (k & 1)) {
+            tn__sg_gen_run r = tn__sg_train_gen(s, ctx, 0, ((uint64_t)tn_rng_u32(&rng) << 32) | tn_rng_u32(&rng));
+            for (j = 0; j < pew * peh; j++) x->data[j] -= sc == 0 ? x->data[j] : 0.0f; /* scale 0: noise only */
+            tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, x->data);
+        }
+        if (!tn__sg_gen(ctx, s->g, sc, x, 1)) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    }
+    tn_ctx_set_grad(ctx, 1);
+    return TN_OK;
+}
+
+/* One G step and one D step at scale sc on a random window (the whole scale or a patch): the G
+   step first, and the D step on its fake (one generator pass fewer than D first).
+   l: D loss, G adversarial loss, reconstruction MSE. */
+static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
+{
+    const int M = TN__SG_M;
+    int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * M, pw, ph, pew, peh, ox, oy, rx, ry;
+    uint64_t seed;
+    tn__sg_gen_run r;
+    tn_tensor *real, *fake, *rec, *loss, *lg, *lr;
+    tn_status st;
+    long it = tn_train_iteration(s->run);
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    pew = pw + 2 * M;
+    peh = ph + 2 * M;
+    seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
+    ox = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1)); /* the fake's and reconstruction's window */
+    oy = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+    rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1)); /* the D step's real patch */
+    ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+    r = tn__sg_train_gen(s, ctx, 0, seed);
+    if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
+    memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
+    tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
+    /* G step: adversarial + reconstruction on the same window */
+    tn_ctx_reset(ctx);
+    tn_ctx_set_grad(ctx, 1);
+    tn_patch_disc_begin(ctx, &s->disc[sc]);
+    fake = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1), tn__sg_tensor(ctx, s->base, pew, M, M, pw, ph));
+    lg = tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], fake));
+    rec = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh), 1),
+                 tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
+    lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
+    loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight, 0.0f));
+    if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    tn_params_zero_grad(s->g);
+    if ((st = tn_backward(ctx, loss))) return st;
+    tn_optim_step(s->og);
+    l[1] = lg->data[0];
+    l[2] = lr->data[0];
+    memcpy(s->fake, fake->data, (size_t)pw * ph * sizeof(float));
+    /* D step: that fake is a constant */
+    tn_ctx_reset(ctx);
+    fake = tn__sg_tensor(ctx, s->fake, pw, 0, 0, pw, ph);
+    real = tn__sg_tensor(ctx, s->real[sc].data, W, rx, ry, pw, ph);
+    tn_patch_disc_begin(ctx, &s->disc[sc]);
+    loss = tn_hinge_d_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], real), tn_patch_disc_score(ctx, &s->disc[sc], fake));
+    if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    tn_params_zero_grad(s->d);
+    if ((st = tn_backward(ctx, loss))) return st;
+    tn_optim_step(s->od);
+    l[0] = loss->data[0];
+    if (!isfinite(l[0]) || !isfinite(l[1]) || !isfinite(l[2]) || fabsf(l[0]) > 1e6f || fabsf(l[1]) > 1e6f)
+        return tn__fail(TN_ERR_NUMERIC, "singan: training diverged at iteration %ld, scale %d (D loss %g, G loss %g, reconstruction %g)", it,
+                        sc, (double)l[0], (double)l[1], (double)l[2]);
+    return TN_OK;
+}
+
+/* The example in network units, channel 0; its range. */
+static tn_status tn__sg_check_dem(const tn_image *dem, int coarsest, float *lo, float *hi)
+{
+    size_t i, n;
+    if (!dem || !dem->data || dem->width < 1 || dem->height < 1 || dem->channels < 1) return tn__fail(TN_ERR_EMPTY, "singan: empty DEM");
+    n = (size_t)dem->width * dem->height;
+    *lo = FLT_MAX;
+    *hi = -FLT_MAX;
+    for (i = 0; i < n; i++) {
+        float v = dem->data[i * dem->channels];
+        if (!isfinite(v)) return tn__fail(TN_ERR_NUMERIC, "singan: the DEM has NaN/Inf heights (pixel %zu, %zu)", i % dem->width, i / dem->width);
+        if (v < *lo) *lo = v;
+        if (v > *hi) *hi = v;
+    }
+    if (dem->width < coarsest || dem->height < coarsest)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: the DEM (%d x %d) is smaller than the coarsest scale (%d px); give a larger DEM or a smaller coarsest side",
+                        dem->width, dem->height, coarsest);
+    if (!(*hi - *lo > 1e-6f * (fabsf(*lo) + fabsf(*hi))) || !(*hi - *lo > 0))
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: the DEM is constant (all heights %g): nothing to learn", (double)*lo);
+    return TN_OK;
+}
+
+/* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
+#define TN__SG_SETTINGS(X)                                                                                          \
+    X("iters", iters, int, 1, 1e9) X("patch", patch, int, -1, 1e9) X("lr", lr, float, 1e-9, 10)                     \
+    X("rec_weight", rec_weight, float, -1e6, 1e6) X("noise_amp", noise_amp, float, 0, 100)
+
+static tn_status tn__sg_set_meta(tn__sg_train *s, uint64_t digest)
+{
+    tn_status st = tn_train_set_example(s->run, digest);
+#define TN__SG_PUT(key, field, type, lo, hi) \
+    if (!st) st = tn_train_set_meta_number(s->run, key, (double)s->o.field);
+    TN__SG_SETTINGS(TN__SG_PUT)
+#undef TN__SG_PUT
+    return st;
+}
+
+static tn_status tn__sg_get_meta(tn__sg_train *s, uint64_t digest)
+{
+    double d = 0;
+    tn_status st = tn_train_check_example(s->run, digest);
+#define TN__SG_GET(key, field, type, lo, hi) \
+    if (!st && !(st = tn_train_meta_number(s->run, key, lo, hi, &d))) s->o.field = (type)d;
+    TN__SG_SETTINGS(TN__SG_GET)
+#undef TN__SG_GET
+    return st;
+}
+#undef TN__SG_SETTINGS
+
+/* The networks of a run: G (the model's layout), one discriminator per scale, the schedule. */
+static tn_status tn__sg_train_nets(tn__sg_train *s)
+{
+    tn_optim_opts oo;
+    int s_, n = TN__SG_SCHED;
+    tn_status st;
+    if ((st = tn__sg_model_params(&s->A, &s->rng, &s->g))) return st;
+    if (!(s->d = tn_params_create()) || !(s->sched = tn_params_create())) return TN_ERR_OUT_OF_MEMORY;
+    for (s_ = 0; s_ < s->A.scales; s_++) {
+        char pre[16];
+        snprintf(pre, sizeof pre, "d%d.", s_);
+        if ((st = tn_patch_disc_add(s->d, pre, 1, s->A.ch[s_], s->A.disc_layers, 3, &s->rng, &s->disc[s_]))) return st;
+    }
+    if (!tn_params_add_buffer(s->sched, "singan.sched", 1, &n)) return TN_ERR_OUT_OF_MEMORY;
+    memset(&oo, 0, sizeof oo);
+    oo.lr = s->o.lr;
+    oo.beta1 = 0.5f;
+    oo.beta2 = 0.999f;
+    if (!(s->og = tn_optim_create(s->g, &oo)) || !(s->od = tn_optim_create(s->d, &oo))) return TN_ERR_INVALID_ARG;
+    return TN_OK;
+}
+
+TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
+{
+    tn__sg_train s;
+    tn_ctx *ctx = NULL;
+    tn_image one = {0, 0, 0, NULL};
+    const tn_image *d1 = dem;
+    float lo = 0, hi = 0, hist[50][3], rec_first = NAN;
+    float *sch;
+    double fin_sec = 0;
+    long fin_it = 0;
+    int nh = 0, sc = 0, i, done_all = 0;
+    size_t n;
+    uint64_t digest, seed;
+    tn_status st;
+    TN_ASSERT(model);
+    memset(&s, 0, sizeof s);
+    if (opts_in) s.o = *opts_in;
+    tn_singan_defaults(&s.o);
+    if (!(s.o.factor >= 0.5f && s.o.factor <= 0.9f) || s.o.coarsest < 4 || s.o.channels > 256 || s.o.max_channels > 256 ||
+        s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad option (factor %g in 0.5..0.9, coarsest %d >= 4, channels %d and %d <= 256, "
+                        "discriminator layers %d <= 4, patch >= 16, lr %g < 10, finite weights, noise amplitude %g in 0..100, iterations >= 0)",
+                        (double)s.o.factor, s.o.coarsest, s.o.channels, s.o.max_channels, s.o.disc_layers, (double)s.o.lr, (double)s.o.noise_amp);
+    if ((st = tn__sg_check_dem(dem, s.o.coarsest, &lo, &hi))) return st;
+    if (dem->channels > 1) { /* channel 0 only, as every DEM function */
+        if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
+        for (n = 0; n < (size_t)dem->width * dem->height; n++) one.data[n] = dem->data[n * dem->channels];
+        d1 = &one;
+    }
+    digest = tn_image_digest(d1);
+    seed = s.o.train.seed;
+    if ((st = tn_train_create("singan", "singan-train", &s.o.train, &s.run))) goto done;
+    if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
+        tn_params *ck;
+        tn_tensor *cfg;
+        const char *sd;
+        if ((st = tn_train_open_checkpoint(s.run, &ck))) goto done;
+        if (!(cfg = tn_params_find(ck, "singan.config")) || cfg->numel != TN__SG_CONFIG) {
+            st = tn__fail(TN_ERR_FORMAT, "%s: not a singan checkpoint", s.o.train.checkpoint);
+            goto done;
+        }
+        if ((st = tn__sg_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__sg_get_meta(&s, digest))) goto done;
+        if (s.A.width != d1->width || s.A.height != d1->height) {
+            st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example is %d x %d, this one %d x %d", s.o.train.checkpoint, s.A.width, s.A.height,
+                          d1->width, d1->height);
+            goto done;
+        }
+        sd = tn_params_meta(ck, "seed");
+        if (!sd || !tn__parse_hex64(sd, strlen(sd), &seed)) {
+            st = tn__fail(TN_ERR_CORRUPT, "%s: the checkpoint names no seed", s.o.train.checkpoint);
+            goto done;
+        }
+    } else {
+        int mn = d1->width < d1->height ? d1->width : d1->height;
+        s.A.scales = 1 + (int)floor(log((double)mn / s.o.coarsest) / log(1.0 / s.o.factor) + 0.5);
+        if (s.A.scales > TN_SINGAN_MAX_SCALES) s.A.scales = TN_SINGAN_MAX_SCALES;
+        if (s.A.scales < 1) s.A.scales = 1;
+        s.A.width = d1->width;
+        s.A.height = d1->height;
+        s.A.factor = s.o.factor;
+        s.A.offset = 0.5f * (lo + hi);
+        s.A.range = 0.5f * (hi - lo);
+        s.A.trained = 0;
+        s.A.disc_layers = s.o.disc_layers;
+        for (i = 0; i < s.A.scales; i++) {
+            long c = (long)s.o.channels << (i / 4);
+            s.A.ch[i] = (int)(c < s.o.max_channels ? c : s.o.max_channels);
+        }
+        if (s.o.iters == 0) s.o.iters = s.o.train.max_iters > 0 ? (int)((s.o.train.max_iters + s.A.scales - 1) / s.A.scales) : 2000;
+    }
+    s.budget = s.o.train.minutes * 60.0;
+    for (i = 0; i < s.A.scales; i++) { /* the example pyramid in network units */
+        tn_image t = {0, 0, 0, NULL};
+        int w = tn__sg_size(s.A.width, s.A.factor, s.A.scales - 1 - i), h = tn__sg_size(s.A.height, s.A.factor, s.A.scales - 1 - i);
+        size_t k;
+        if (w == s.A.width && h == s.A.height) st = tn_image_copy(&t, d1);
+        else st = tn_image_resize(&t, d1, w, h, TN_RESIZE_AREA);
+        if (st) goto done;
+        for (k = 0; k < (size_t)w * h; k++) t.data[k] = (t.data[k] - s.A.offset) / s.A.range;
+        s.real[i] = t;
+    }
+    tn_rng_seed(&s.rng, seed, 0x73696e67ULL);
+    if ((st = tn__sg_train_nets(&s))) goto done;
+    if ((st = tn_train_add_net(s.run, "g", s.g, s.og)) || (st = tn_train_add_net(s.run, "d", s.d, s.od)) ||
+        (st = tn_train_add_params(s.run, "", s.sched)) || (st = tn_train_add_rng(s.run, "main", &s.rng)))
+        goto done;
+    if ((st = tn__sg_set_meta(&s, digest))) goto done;
+    if (s.o.train.resume && (st = tn_train_restore(s.run))) goto done;
+    if (!(ctx = tn_ctx_create())) {
+        st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+        goto done;
+    }
+    sch = tn_params_find(s.sched, "singan.sched")->data;
+    if (s.o.train.resume) {
+        sc = (int)sch[0];
+        if (!(sch[0] >= 0 && sch[0] < s.A.scales && (sc == s.A.trained || sc + 1 == s.A.trained))) {
+            st = tn__fail(TN_ERR_CORRUPT, "%s: damaged singan schedule", s.o.train.checkpoint);
+            goto done;
+        }
+        st = tn__sg_enter_scale(&s, ctx, sc, 1);
+    } else
+        st = tn__sg_enter_scale(&s, ctx, 0, 0);
+    if (st) goto done;
+    while (tn_train_next(s.run)) {
+        float l[3];
+        long it = tn_train_iteration(s.run);
+        tn_status e;
+        if (sch[2] == 0 && it - (long)sch[1] == 1) sch[3] = (float)tn_train_seconds(s.run); /* after the warm-up iteration */
+        if (sch[2] == 0 && it - (long)sch[1] == 3) {
+            /* equal counts (x weights) for this and the finer scales at this speed, after the
+               fixed cost of each scale change (~5 iterations: calibration, reconstruction);
+               and a deadline at 1.25 x this scale's share, so a slow spell here cannot starve
+               the finer scales */
+            double per = (tn_train_seconds(s.run) - sch[3]) / 2.0, need = 0, fixed = 0, nit, rem = s.budget - tn_train_seconds(s.run);
+            int k;
+            for (k = sc; k < s.A.scales; k++) {
+                double pk = per * tn__sg_cost(&s, k) / tn__sg_cost(&s, sc);
+                need += pk * tn__sg_weight(&s, k);
+                fixed += 5.0 * pk;
+            }
+            nit = (rem - fixed) / need * tn__sg_weight(&s, sc) + 3;
+            sch[2] = (float)(nit < 3 ? 3 : nit > s.o.iters ? s.o.iters : floor(nit));
+            sch[4] = (float)(tn_train_seconds(s.run) + 1.25 * (nit - 3) * per);
+        }
+        if (it - (long)sch[1] >= s.o.iters || (sch[2] > 0 && it - (long)sch[1] >= (long)sch[2]) ||
+            (sch[2] > 0 && it - (long)sch[1] > 3 && tn_train_seconds(s.run) > sch[4])) { /* this scale is done */
+            sch[5 + sc] = (float)(it - (long)sch[1]);
+            if (sc == s.A.scales - 1) {
+                done_all = 1;
+                break;
+            }
+            nh = 0;
+            rec_first = NAN;
+            if ((e = tn__sg_calibrate(&s, ctx, sc)) || (e = tn__sg_enter_scale(&s, ctx, ++sc, 0))) {
+                tn_train_fail(s.run, e);
+                break;
+            }
+        }
+        if (sc == s.A.scales - 1 && !fin_it) fin_sec = tn_train_seconds(s.run);
+        if ((e = tn__sg_step(&s, ctx, sc, l))) {
+            tn_train_fail(s.run, e);
+            break;
+        }
+        if (sc == s.A.scales - 1) fin_it++;
+        if (nh == 0) rec_first = l[2];
+        memcpy(hist[nh % 50], l, sizeof l);
+        nh++;
+    }
+    if (!done_all) sch[5 + sc] = (float)(tn_train_iteration(s.run) - (long)sch[1]);
+    s.A.trained = sc + 1;
+    tn__sg_write_config(&s.A, tn_params_find(s.g, "singan.config")->data);
+    st = tn_train_finish(s.run);
+    if (!st) st = tn__sg_calibrate(&s, ctx, sc); /* after the final checkpoint: a resumed run calibrates again */
+    if (stats) {
+        int k, m = nh < 50 ? nh : 50;
+        long it = tn_train_iteration(s.run), it0 = tn_train_start_iteration(s.run);
+        memset(stats, 0, sizeof *stats);
+        stats->iterations = it;
+        stats->resumed_from = s.o.train.resume ? it0 : 0;
+        stats->seconds = tn_train_seconds(s.run);
+        stats->seconds_per_iter = it > it0 ? (tn_train_seconds(s.run) - tn_train_start_seconds(s.run)) / (double)(it - it0) : 0.0;
+        stats->seconds_per_iter_finest = fin_it ? (tn_train_seconds(s.run) - fin_sec) / (double)fin_it : 0.0;
+        stats->scales = s.A.scales;
+        stats->trained = s.A.trained;
+        for (k = 0; k < s.A.scales; k++) stats->scale_iters[k] = (long)sch[5 + k];
+        for (k = 0; k < m; k++) {
+            stats->loss_d += hist[k][0] / (float)m;
+            stats->loss_g += hist[k][1] / (float)m;
+            stats->loss_rec += hist[k][2] / (float)m;
+        }
+        stats->loss_rec_first = rec_first;
+        stats->checkpoints = tn_train_checkpoints(s.run);
+    }
+    if (!st) {
+        tn_model_provenance pv;
+        memset(&pv, 0, sizeof pv);
+        pv.seed = tn_train_seed(s.run);
+        pv.iterations = tn_train_iteration(s.run);
+        pv.seconds = tn_train_seconds(s.run);
+        pv.example_digest = digest;
+        pv.example_width = d1->width;
+        pv.example_height = d1->height;
+        pv.example_channels = 1;
+        st = tn_model_stamp(s.g, "singan", TN__SG_FORMAT, &pv);
+    }
+    if (!st) {
+        memset(model, 0, sizeof *model);
+        model->scales = s.A.scales;
+        model->trained = s.A.trained;
+        model->width = s.A.width;
+        model->height = s.A.height;
+        model->factor = s.A.factor;
+        model->offset = s.A.offset;
+        model->range = s.A.range;
+        memcpy(model->amp, s.A.amp, sizeof model->amp);
+        memcpy(model->channels, s.A.ch, sizeof model->channels);
+        model->iterations = tn_train_iteration(s.run);
+        model->train_seconds = tn_train_seconds(s.run);
+        model->weights = s.g;
+        s.g = NULL; /* handed over; the optimiser still points at it but is only freed */
+    }
+done:
+    tn_ctx_free(ctx);
+    tn_image_free(&one);
+    tn__sg_train_free(&s);
+    return st;
+}
+
+/* ---- model files ---- */
+
+TN_API void tn_singan_free(tn_singan *model)
+{
+    if (!model) return;
+    tn_params_free(model->weights);
+    memset(model, 0, sizeof *model);
+}
+
+/* The model's fields as an arch (and a check that they match its weights' config). */
+static tn_status tn__sg_arch_of(const tn_singan *m, tn__sg_arch *A)
+{
+    const tn_tensor *cfg;
+    if (!m || !m->weights || !(cfg = tn_params_find(m->weights, "singan.config")) || cfg->numel != TN__SG_CONFIG)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: not a trained or loaded model");
+    return tn__sg_read_config(cfg->data, A, "singan model");
+}
+
+TN_API tn_status tn_singan_save(const tn_singan *model, const char *path)
+{
+    tn__sg_arch A;
+    tn_status st;
+    if ((st = tn__sg_arch_of(model, &A))) return st;
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan save: empty path");
+    return tn_params_save(model->weights, path);
+}
+
+TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
+{
+    tn_params *f = NULL, *w = NULL;
+    tn_tensor *cfg = NULL;
+    tn__sg_arch A;
+    tn_singan m;
+    tn_status st;
+    TN_ASSERT(model);
+    if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
+    if ((st = tn_params_open(path, &f))) return st;
+    st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
+    if (!st && (!(cfg = tn_params_find(f, "singan.config")) || cfg->numel != TN__SG_CONFIG))
+        st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
+    if (!st) st = tn__sg_read_config(cfg->data, &A, path);
+    if (!st) st = tn__sg_model_params(&A, NULL, &w);
+    if (!st) st = tn__params_assign(w, f, path);
+    if (!st) st = tn__model_check_finite(w, path);
+    if (st) {
+        tn_params_free(f);
+        tn_params_free(w);
+        return st;
+    }
+    memset(&m, 0, sizeof m);
+    m.scales = A.scales;
+    m.trained = A.trained;
+    m.width = A.width;
+    m.height = A.height;
+    m.factor = A.factor;
+    m.offset = A.offset;
+    m.range = A.range;
+    memcpy(m.amp, A.amp, sizeof m.amp);
+    memcpy(m.channels, A.ch, sizeof m.channels);
+    tn__model_training(f, path, &m.iterations, &m.train_seconds);
+    tn_params_free(f);
+    m.weights = w;
+    *model = m;
+    return TN_OK;
+}
+
+/* ---- sampling, refinement, upscaling ---- */
+
+static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_opts *opts, tn__sg_arch *A, tn_singan_gen_opts *o,
+                                    tn__sg_gen_run *r)
+{
+    tn_status st;
+    memset(o, 0, sizeof *o);
+    if (opts) *o = *opts;
+    tn_singan_gen_defaults(o);
+    if ((st = tn__sg_arch_of(model, A))) return st;
+    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096)", (double)o->noise, o->tile);
+    memset(r, 0, sizeof *r);
+    r->A = A;
+    r->g = model->weights;
+    r->seed = o->seed;
+    r->noise = o->noise;
+    return TN_OK;
+}
+
+TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts, tn_image *out)
+{
+    tn__sg_arch A;
+    tn_singan_gen_opts o;
+    tn__sg_gen_run r;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
+    return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
+}
+
+/* in (channel 0, finite) in network units, resized to w x h. */
+static tn_status tn__sg_input(const tn_singan *model, const tn_image *in, int w, int h, const char *what, float **out)
+{
+    tn_image one = {0, 0, 0, NULL}, rs = {0, 0, 0, NULL};
+    size_t i;
+    tn_status st;
+    *out = NULL;
+    if (!in || !in->data || in->width < 1 || in->height < 1 || in->channels < 1) return tn__fail(TN_ERR_EMPTY, "singan %s: empty input map", what);
+    if ((st = tn_image_create(&one, in->width, in->height, 1))) return st;
+    for (i = 0; i < (size_t)in->width * in->height; i++) {
+        float v = in->data[i * in->channels];
+        if (!isfinite(v)) {
+            tn_image_free(&one);
+            return tn__fail(TN_ERR_NUMERIC, "singan %s: the input map has NaN/Inf heights", what);
+        }
+        one.data[i] = (v - model->offset) / model->range;
+    }
+    if (w == in->width && h == in->height) rs = one;
+    else {
+        st = tn_image_resize(&rs, &one, w, h, w < in->width && h < in->height ? TN_RESIZE_AREA : TN_RESIZE_BICUBIC);
+        tn_image_free(&one);
+        if (st) return st;
+    }
+    *out = rs.data;
+    return TN_OK;
+}
+
+TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out)
+{
+    tn__sg_arch A;
+    tn_singan_gen_opts o;
+    tn__sg_gen_run r;
+    float *map = NULL;
+    int K, mw, mh;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "singan refine: the model has one scale only");
+    K = o.from_scale ? o.from_scale : A.scales - 3;
+    if (K < 1) K = 1;
+    if (o.from_scale < 0 || K > A.scales - 1)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan refine: from_scale %d outside 1..%d", o.from_scale, A.scales - 1);
+    if (in && (in->width > (1 << 20) || in->height > (1 << 20))) return tn__fail(TN_ERR_TOO_LARGE, "singan refine: input larger than 2^20");
+    mw = in ? tn__sg_size(in->width, A.factor, A.scales - 1 - K) : 1;
+    mh = in ? tn__sg_size(in->height, A.factor, A.scales - 1 - K) : 1;
+    if ((st = tn__sg_input(model, in, mw, mh, "refine", &map))) return st;
+    r.map = map;
+    r.mw = mw;
+    r.mh = mh;
+    r.map_level = K;
+    st = tn__sg_generate(model, &r, A.scales - 1, 0, 0, in->width, in->height, o.tile, out);
+    TN_FREE(map);
+    return st;
+}
+
+TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts, tn_image *out)
+{
+    tn__sg_arch A;
+    tn_singan_gen_opts o;
+    tn__sg_gen_run r;
+    float *map = NULL;
+    int m, L, W, H, mw, mh;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if (!(factor > 1.0f && factor <= 64.0f)) return tn__fail(TN_ERR_INVALID_ARG, "singan upscale: factor %g outside (1, 64]", (double)factor);
+    if (!in || !in->data || in->width < 1 || in->height < 1) return tn__fail(TN_ERR_EMPTY, "singan upscale: empty input map");
+    W = (int)floor((double)in->width * factor + 0.5);
+    H = (int)floor((double)in->height * factor + 0.5);
+    if (W > (1 << 20) || H > (1 << 20)) return tn__fail(TN_ERR_TOO_LARGE, "singan upscale: output %d x %d larger than 2^20", W, H);
+    m = (int)floor(log((double)factor) / log(1.0 / A.factor) + 0.5);
+    if (m < 1) m = 1;
+    /* the input's level L (its output is injected), the output level L + m */
+    L = o.from_scale ? o.from_scale - 1 : A.scales - 1 - m;
+    if (o.from_scale < 0 || o.from_scale > A.scales || L < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan upscale: from_scale %d outside 1..%d (or the factor spans more than the %d scales: set from_scale)",
+                        o.from_scale, A.scales, A.scales);
+    mw = tn__sg_size(W, A.factor, m); /* the input resized to exactly the output's grid m levels down */
+    mh = tn__sg_size(H, A.factor, m);
+    if ((st = tn__sg_input(model, in, mw, mh, "upscale", &map))) return st;
+    r.map = map;
+    r.mw = mw;
+    r.mh = mh;
+    r.map_level = L;
+    r.map_is_output = 1;
+    st = tn__sg_generate(model, &r, L + m, 0, 0, W, H, o.tile, out);
+    TN_FREE(map);
+    return st;
+}
+
