@@ -15,6 +15,8 @@ FRAGMENTS := src/amalgamate.sh src/manual.h src/impl_begin.h src/impl_end.h $(fi
 LIB      = build/terrainnet.o
 LIB_SAN  = build/terrainnet_san.o
 SELF     = $(shell grep -l '^\#define TERRAINNET_IMPLEMENTATION' $(1))
+# An example that compiles parts out (TN_NO_...) builds alone with its own configuration.
+LINK_EX  = $(if $(shell grep -l '^\#define TN_NO_' $(1)),,-DTN_IMPLEMENTATION_LINKED $(LIB))
 
 # world_mpi.c needs MPI: built by `make mpi` only
 EXAMPLES := $(filter-out bin/world_mpi,$(patsubst examples/%.c,bin/%,$(wildcard examples/*.c)))
@@ -43,7 +45,7 @@ bin/terrainnet: examples/cli/terrainnet.c $(LIB) | bin
 	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -DTN_IMPLEMENTATION_LINKED -I. $< $(LIB) -o $@ $(LDLIBS)
 
 bin/%: examples/%.c $(LIB) | bin
-	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -DTN_IMPLEMENTATION_LINKED -I. $< $(LIB) -o $@ $(LDLIBS)
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< $(call LINK_EX,$<) -o $@ $(LDLIBS)
 
 bin/%: bench/%.c $(LIB) | bin
 	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB)) -o $@ $(LDLIBS)

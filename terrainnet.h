@@ -32,6 +32,16 @@ CONFIGURATION (define before including the implementation)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_IMPLEMENTATION_LINKED  ignore TERRAINNET_IMPLEMENTATION in this file: the program links a
                         separately compiled implementation (how the repository builds its examples)
+    TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
+                        TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
+                        TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,
+                        TN_NO_NOISE, and TN_NO_ENGINE (the tensor engine, @@gemm ... @@train).
+                        A part that needs one compiled out stops the build with #error naming
+                        it: @@world needs every generator and @@export; @@style, @@texgan,
+                        @@singan, @@gnn and @@season need the engine; @@style, @@texgan and
+                        @@season need @@noise; @@style and @@gnn need @@extract, which needs
+                        @@sketch. @@core, @@thread, @@image, @@io and @@metrics are always in.
+                        All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
 
@@ -387,6 +397,7 @@ TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_r
 /* ============================================================================================
    @@gemm  single-precision matrix multiply (the engine under tensors and convolutions)
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* C = alpha * op(A) * op(B) + beta * C, all row-major. op(X) = X, or X^T when trans_x != 0.
    op(A) is M x K, op(B) is K x N, C is M x N; lda/ldb/ldc are row strides in floats (of A and B
@@ -397,6 +408,7 @@ TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_r
    be allocated it falls back to a slow unpacked loop. */
 TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A, int lda,
                      const float *B, int ldb, float beta, float *C, int ldc);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@tensor  tensors, arenas and the autograd tape
@@ -410,6 +422,7 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
    context as failed: the op returns NULL, later ops given NULL return NULL, and tn_backward /
    tn_ctx_status report TN_ERR_OUT_OF_MEMORY.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 #define TN_MAX_DIMS 4
 
@@ -465,6 +478,7 @@ TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img);
 /* Runs the tape backwards from `loss` (a one-element tensor, gradient 1). Gradients accumulate:
    zero parameter gradients between steps (tn_params_zero_grad). */
 TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@ops  differentiable operations
@@ -473,6 +487,7 @@ TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss);
    Shapes follow PyTorch: images N x C x H x W, conv weights Cout x Cin x KH x KW, transposed
    conv weights Cin x Cout x KH x KW, linear weights out x in.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* Elementwise with NumPy broadcasting (shapes aligned at the right, size-1 dims stretch). */
 TN_API tn_tensor *tn_add(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
@@ -556,10 +571,12 @@ TN_API tn_tensor *tn_segment_softmax(tn_ctx *ctx, tn_tensor *scores, const int *
 TN_API tn_tensor *tn_gumbel_softmax(tn_ctx *ctx, tn_tensor *logits, float tau, tn_rng *rng);
 /* Inverted dropout with probability p when training; identity otherwise. */
 TN_API tn_tensor *tn_dropout(tn_ctx *ctx, tn_tensor *x, float p, int training, tn_rng *rng);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@loss  losses (each returns a one-element tensor)
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
 TN_API tn_tensor *tn_l1_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
 /* mean of softplus(x) - x * t: binary cross-entropy on logits, stable for any x. */
@@ -580,7 +597,7 @@ TN_API tn_tensor *tn_tv_loss(tn_ctx *ctx, tn_tensor *x, float beta);
 TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float data_range);
 /* Gradient-difference loss: mean | |dx(a)| - |dx(b)| | + mean | |dy(a)| - |dy(b)| |. */
 TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
-
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@optim  parameters, initialisation, optimisers, .tnw files
@@ -591,6 +608,7 @@ TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
    u8 ndim, u8 flags (1 = buffer), u32 dims[ndim], float32 data[numel]; finally u32 CRC-32 of
    every byte before it. Version 1 (no metadata) is written when a set has no metadata.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 typedef struct tn_params tn_params;
 TN_API tn_params *tn_params_create(void);
@@ -663,6 +681,7 @@ TN_API void tn_optim_set_lr(tn_optim *o, float lr);
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@train  training runs: budget, progress, checkpoints, resume; shared building blocks; models
@@ -678,6 +697,7 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
    A model file carries metadata too (tn_model_stamp): method, format, library version, seed,
    iterations, training seconds, and a digest of the example it learned from.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* What zero means is resolved by tn_train_defaults; methods embed this in their options. */
 typedef struct tn_train_opts {
@@ -822,6 +842,7 @@ TN_API int tn_best_k_offer(tn_best_k *b, const tn_params *p, double score, long 
 TN_API int tn_best_k_count(const tn_best_k *b);
 /* The i-th best (0 = best); score and iteration may be NULL. */
 TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, long *iteration);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@noise  procedural maps (paper 002, section 2.1)
@@ -831,6 +852,7 @@ TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, 
    one-channel images normalised to [0, 1]; the same seed gives the same map everywhere, for any
    thread count.
    ============================================================================================ */
+#ifndef TN_NO_NOISE
 
 typedef struct tn_perlin_opts {
     uint64_t seed;
@@ -857,6 +879,7 @@ TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const t
    (1 - weight) * noise, with drawn (channel 0) resampled to the noise size and normalised to
    [0, 1]; weight in [0, 1]. */
 TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight);
+#endif /* TN_NO_NOISE */
 
 /* ============================================================================================
    @@sketch  contour sets: ridge and valley polylines (paper 000, sections 4.1 and 5)
@@ -868,6 +891,7 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
    into 5-10 point contour parts (4.1) and aligning sketch parts to DEM parts (5.3, A1/A2:
    chain codes, rotation by k pi/4, longest common substring, height mean/std, seeded pick).
    ============================================================================================ */
+#ifndef TN_NO_SKETCH
 
 typedef enum tn_contour_type { TN_VALLEY = 0, TN_RIDGE = 1 } tn_contour_type;
 
@@ -1015,6 +1039,7 @@ typedef struct tn_align_opts {
    Reports progress as stage "align" every 1024 sketch parts (cancellable). */
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
                                  const tn_align_opts *opts, int *match);
+#endif /* TN_NO_SKETCH */
 
 /* ============================================================================================
    @@extract  ridge and valley networks from a DEM (paper 000, section 4.1); realism report
@@ -1028,6 +1053,10 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
    are 8-connected pixel chains, so tn_contour_parts_make (@@sketch) cuts them into parts directly
    and tn_sketch_preview draws them over the DEM (the paper's Figure 6).
    ============================================================================================ */
+#ifndef TN_NO_EXTRACT
+#if defined(TN_NO_SKETCH)
+#error "terrainnet: @@extract needs @@sketch; define TN_NO_EXTRACT too, or none of them"
+#endif
 
 #define TN_FLOW_OUTLET 255   /* direction code of a cell that drains off the map (no lower neighbour) */
 
@@ -1125,6 +1154,7 @@ typedef struct tn_realism {
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
 TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
                                     tn_realism *out);
+#endif /* TN_NO_EXTRACT */
 
 /* ============================================================================================
    @@style  terrain style transfer (paper 002, sections 2.2, 3, 4)
@@ -1173,6 +1203,10 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    has Cin 3), exactly these 32 tensors. examples/vgg19_to_tnw.py converts a torchvision
    state dict (torchvision.models.vgg19 features.N.weight/bias).
    ============================================================================================ */
+#ifndef TN_NO_STYLE
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE) || defined(TN_NO_EXTRACT)
+#error "terrainnet: @@style needs the tensor engine, @@noise, @@extract; define TN_NO_STYLE too, or none of them"
+#endif
 
 typedef enum tn_style_optimizer { TN_STYLE_LBFGS = 0, TN_STYLE_SGD, TN_STYLE_ADAM } tn_style_optimizer;
 
@@ -1225,6 +1259,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
    *gain_out (may be NULL) gets the gain. Costs ten noise maps and ten comparisons. */
 TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, const tn_image *source,
                                         const tn_perlin_opts *opts, float *gain_out);
+#endif /* TN_NO_STYLE */
 
 /* ============================================================================================
    @@texgan  single-texture spatial GAN, huge textures and detail maps (paper 004, section III)
@@ -1248,6 +1283,10 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    (energy-preserving weights), stored as value / 2 + 0.5; a renderer adds upsampled low + 2 (high - 0.5)
    tiled `tiling` times.
    ============================================================================================ */
+#ifndef TN_NO_TEXGAN
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE)
+#error "terrainnet: @@texgan needs the tensor engine, @@noise; define TN_NO_TEXGAN too, or none of them"
+#endif
 
 #define TN_TEXGAN_MAX_CHANNELS 8
 
@@ -1383,6 +1422,7 @@ TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix);
    the detail-mapped texture; all shaded by the hillshade of dem (NULL = a Perlin terrain). */
 TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *exemplar, const tn_image *dem,
                                    int panel, tn_image *out);
+#endif /* TN_NO_TEXGAN */
 
 /* ============================================================================================
    @@singan  multi-scale single-image GAN on heightmaps (paper 000's detail step, after Shaham et
@@ -1407,6 +1447,10 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
    Heights: the network works on [-1, 1] (the example's range); the model stores the mapping and
    every call takes and returns heights in the example's units (metres for metre DEMs).
    ============================================================================================ */
+#ifndef TN_NO_SINGAN
+#if defined(TN_NO_ENGINE)
+#error "terrainnet: @@singan needs the tensor engine; define TN_NO_SINGAN too, or none of them"
+#endif
 
 #define TN_SINGAN_MAX_SCALES 16
 
@@ -1497,6 +1541,7 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
    round(factor * in's size). */
 TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
                                    tn_image *out);
+#endif /* TN_NO_SINGAN */
 
 /* ============================================================================================
    @@gnn  sketch-to-terrain graph network (paper 000, sections 4.2-5.4)
@@ -1541,6 +1586,10 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
    tiles with memory of one tile. Random sketches (5.2) can densify a sparse user sketch.
    ============================================================================================ */
+#ifndef TN_NO_GNN
+#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT)
+#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract; define TN_NO_GNN too, or none of them"
+#endif
 
 /* Zero = default (tn_gnn_defaults gives the values and the reasons). */
 typedef struct tn_gnn_opts {
@@ -1745,6 +1794,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+#endif /* TN_NO_GNN */
 
 /* ============================================================================================
    @@season  seasonal terrain: insolation, climate, seasonal textures (paper 003)
@@ -1770,6 +1820,10 @@ TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int he
    textures of ../shared/data/textures. Its state can be read at any time of the year, so frames
    between months follow the snow and vegetation, not a cross-fade of two pictures.
    ============================================================================================ */
+#ifndef TN_NO_SEASON
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE)
+#error "terrainnet: @@season needs the tensor engine, @@noise; define TN_NO_SEASON too, or none of them"
+#endif
 
 /* Zero = default. */
 typedef struct tn_insolation_opts {
@@ -1967,10 +2021,12 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out);
 TN_API void tn_season_data_free(tn_season_data *d);
 /* Months from mid-January of a date "YYYY-MM-DD" (or a plain number of months); -1 if malformed. */
 TN_API float tn_season_time_of(const char *when);
+#endif /* TN_NO_SEASON */
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
    ============================================================================================ */
+#ifndef TN_NO_RENDER
 
 typedef struct tn_render_opts {
     float lo, hi;              /* height range for the colour ramp; lo == hi: the DEM's own range */
@@ -1995,6 +2051,7 @@ typedef struct tn_view_opts {
 /* 3D perspective view of the DEM (ray-marched height field, front-to-back with a per-column
    occlusion buffer, distance haze, sky). RGB in [0, 1]. opts may be NULL. Caller frees *out. */
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out);
+#endif /* TN_NO_RENDER */
 
 /* ============================================================================================
    @@export  heightfields for engines and 3D tools: glTF 2.0 binary (.glb) and OBJ meshes,
@@ -2005,6 +2062,7 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
    UV (0, 0) at the north-west corner. step > 1 keeps every step-th sample, and always the last
    row and column, so the mesh covers the whole DEM.
    ============================================================================================ */
+#ifndef TN_NO_EXPORT
 
 typedef struct tn_mesh_opts {
     float dx, dy;              /* pixel spacing in metres; <= 0 = 1 (dy <= 0: = dx) */
@@ -2060,6 +2118,7 @@ typedef struct tn_splat_opts {
    mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
    2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
 TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
+#endif /* TN_NO_EXPORT */
 
 /* ============================================================================================
    @@world  worlds in tiles: a generator and local operations, computed tile by tile
@@ -2080,6 +2139,10 @@ TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts,
        perlin frequency=16 octaves=10
        hillshade azimuth=315
    ============================================================================================ */
+#ifndef TN_NO_WORLD
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE) || defined(TN_NO_SKETCH) || defined(TN_NO_TEXGAN) || defined(TN_NO_SINGAN) || defined(TN_NO_GNN) || defined(TN_NO_SEASON) || defined(TN_NO_EXPORT)
+#error "terrainnet: @@world needs the tensor engine, @@noise, @@sketch, @@texgan, @@singan, @@gnn, @@season, @@export; define TN_NO_WORLD too, or none of them"
+#endif
 
 typedef struct tn_world {
     int width, height;         /* the generator's raster in pixels */
@@ -2139,6 +2202,7 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
 TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
+#endif /* TN_NO_WORLD */
 
 #ifdef __cplusplus
 }
@@ -2187,6 +2251,14 @@ TN_API const char *tn_world_method_help(int i);
 /* SIMD kernels (blur, SSIM, GEMM) when the compiler targets AVX-512 or AVX2+FMA; portable C otherwise. */
 #if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
 #include <immintrin.h>
+#endif
+
+/* Static helpers that several sections share: with some sections compiled out (TN_NO_...), some
+   go unused, which is not worth a warning. */
+#if defined(__GNUC__) || defined(__clang__)
+#define TN__SHARED static __attribute__((unused))
+#else
+#define TN__SHARED static
 #endif
 
 #ifdef __cplusplus
@@ -2385,6 +2457,24 @@ TN_API float tn_rng_normal(tn_rng *r)
     return (float)(sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2));
 }
 
+/* SplitMix64 (Steele et al.): one 64-bit key to a well-mixed seed, for per-tile and per-stage RNGs. */
+TN__SHARED uint64_t tn__splitmix64(uint64_t x)
+{
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+
+TN__SHARED char *tn__strndup(const char *s, size_t n)
+{
+    char *d = (char *)TN_MALLOC(n + 1);
+    if (!d) return NULL;
+    memcpy(d, s, n);
+    d[n] = 0;
+    return d;
+}
+
 static tn_progress_fn tn__progress_fn;
 static void *tn__progress_user;
 
@@ -2395,7 +2485,7 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
 }
 
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
-static tn_status tn__progress(const char *stage, double fraction)
+TN__SHARED tn_status tn__progress(const char *stage, double fraction)
 {
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
@@ -2413,7 +2503,7 @@ TN_API double tn_time_seconds(void)
 #endif
 }
 
-static float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
@@ -3467,6 +3557,50 @@ static void tn__terrain_rows(void *ctx, size_t b, size_t e)
 }
 
 static size_t tn__row_grain(int width) { return (size_t)(width >= 16384 ? 1 : 16384 / width); }
+
+typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
+
+/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
+static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__finite_job *j = (const tn__finite_job *)ctx;
+    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *r = j->dem->data + y * w * C;
+        int ok = 1;
+        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
+        j->bad[y] = (uint8_t)!ok;
+    }
+}
+
+/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
+   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
+static tn_status tn__dem_finite(const tn_image *dem, const char *what)
+{
+    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
+    tn__finite_job j;
+    size_t x, y;
+    j.dem = dem;
+    j.bad = (uint8_t *)tn__alloc(h);
+    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
+    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
+    for (y = 0; y < h && !j.bad[y]; y++) {}
+    TN_FREE(j.bad);
+    if (y == h) return TN_OK;
+    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
+    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
+}
+
+/* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
+TN__SHARED tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
+{
+    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
+        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
+    if (dem->width < min_side || dem->height < min_side)
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
+    return tn__dem_finite(dem, what);
+}
 
 /* Pixel spacing: <= 0 means 1; returns 1 / spacing. */
 /* 1 / spacing for dx and dy (<= 0 means 1). NaN/Inf, or a spacing so small that its inverse
@@ -5294,6 +5428,17 @@ done:
    their rim (a plane is reproduced). info->voids_filled counts the cells; a grid with no
    valid cell fails with TN_ERR_EMPTY. Single-threaded and deterministic.
    -------------------------------------------------------------------------------------------- */
+
+/* Little-endian words for the binary formats (.tnw, .glb). */
+TN__SHARED void tn__put_u32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
+TN__SHARED uint32_t tn__get_u32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
+
+TN__SHARED void tn__put_f32(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    tn__put_u32(p, u);
+}
 
 TN_API const char *tn_format_name(tn_format f)
 {
@@ -7770,6 +7915,7 @@ TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double dat
    a small temporary tile. Threads split N (or M when N is narrow) in whole tiles; K blocks are
    always summed in the same order, so results do not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #if defined(__AVX512F__)
 #define TN__GEMM_MR 8
@@ -8244,6 +8390,7 @@ static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__ge
     g.pack_ctx = pack_ctx;
     if (M > 0 && N > 0 && K > 0) tn__gemm_blocked(&g, 0, M, 0, N, buf, buf + (rows * TN__GEMM_KC + 15) / 16 * 16);
 }
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>tensor  (@@tensor implementation)
@@ -8251,6 +8398,7 @@ static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__ge
    the reset merges them into one, so the next identical step fits without calling malloc.
    The tape is an array of tensor pointers in creation order, stored in the arena as well.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 typedef struct tn__block {
     struct tn__block *next;
@@ -8513,6 +8661,7 @@ TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss)
     }
     return TN_OK;
 }
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>ops  (@@ops implementation)
@@ -8520,6 +8669,7 @@ TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss)
    the backward pass runs the same walk and sums into the stretched operand. Large elementwise
    loops run on the pool; a split never changes any element's value.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #define TN__PAR_GRAIN 16384
 
@@ -10290,11 +10440,13 @@ TN_API tn_tensor *tn_dropout(tn_ctx *ctx, tn_tensor *x, float p, int training, t
     o->aux = m;
     return o;
 }
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>loss  (@@loss implementation) - mostly compositions of the ops above, so their gradients
    come for free and are checked by the same finite-difference tests.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target)
 {
@@ -10440,11 +10592,13 @@ TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float da
     den = tn_mul(ctx, tn_scale_shift(ctx, m2, 1.0f, c1), tn_scale_shift(ctx, tn_add(ctx, vx, vy), 1.0f, c2));
     return tn_scale_shift(ctx, tn_mean(ctx, tn_div(ctx, num, den)), -1.0f, 1.0f);
 }
+#endif /* TN_NO_ENGINE */
 
 
 /* --------------------------------------------------------------------------------------------
    >>optim  (@@optim implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 struct tn_params {
     tn_ctx *ctx;
@@ -10600,16 +10754,6 @@ TN_API void tn_init_kaiming(tn_tensor *t, tn_rng *rng, float gain)
 
 /* ---- .tnw files ---- */
 
-static void tn__put_u32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
-static uint32_t tn__get_u32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
-
-static void tn__put_f32(uint8_t *p, float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    tn__put_u32(p, u);
-}
-
 static float tn__get_f32(const uint8_t *p)
 {
     uint32_t u = tn__get_u32(p);
@@ -10698,15 +10842,6 @@ static int tn__meta_value_ok(const char *v, size_t n)
     for (i = 0; i < n; i++)
         if ((unsigned char)v[i] < 0x20 || v[i] == 0x7f) return 0;
     return 1;
-}
-
-static char *tn__strndup(const char *s, size_t n)
-{
-    char *d = (char *)TN_MALLOC(n + 1);
-    if (!d) return NULL;
-    memcpy(d, s, n);
-    d[n] = 0;
-    return d;
 }
 
 static tn_status tn__meta_set(tn_params *p, const char *key, size_t kn, const char *value, size_t vn)
@@ -11167,10 +11302,12 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     TN_FREE(rho);
     return st;
 }
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>train  (@@train implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #define TN__TRAIN_MAX 8
 
@@ -11703,7 +11840,7 @@ TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_
 }
 
 /* Every value of a loaded model's weights is finite, else TN_ERR_CORRUPT naming the tensor. */
-static tn_status tn__model_check_finite(const tn_params *p, const char *name)
+TN__SHARED tn_status tn__model_check_finite(const tn_params *p, const char *name)
 {
     int i;
     for (i = 0; i < tn_params_count(p); i++) {
@@ -11716,7 +11853,7 @@ static tn_status tn__model_check_finite(const tn_params *p, const char *name)
 }
 
 /* The training iterations and seconds a model file records (0 where it records none). */
-static void tn__model_training(const tn_params *f, const char *name, long *iterations, double *seconds)
+TN__SHARED void tn__model_training(const tn_params *f, const char *name, long *iterations, double *seconds)
 {
     double v;
     const char *s = tn_params_meta(f, "train_seconds");
@@ -11976,6 +12113,7 @@ TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, 
     if (iteration) *iteration = b->iter[i];
     return b->snap[i];
 }
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>noise  (@@noise implementation)
@@ -11983,6 +12121,7 @@ TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, 
    directions. Rows are independent, so the map is computed row-parallel and is identical for any
    thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_NOISE
 
 typedef struct tn__perlin_job {
     uint8_t perm[512];
@@ -12242,10 +12381,12 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
     *out = r;
     return TN_OK;
 }
+#endif /* TN_NO_NOISE */
 
 /* --------------------------------------------------------------------------------------------
    >>sketch  (@@sketch implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SKETCH
 
 TN_API void tn_contour_set_free(tn_contour_set *set) {
     int i;
@@ -13930,6 +14071,7 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
     tn__chains_free(&dem);
     return st;
 }
+#endif /* TN_NO_SKETCH */
 
 /* --------------------------------------------------------------------------------------------
    >>extract  (@@extract implementation)
@@ -13940,6 +14082,7 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
    once it has heard from all of them (Kahn's order without a queue); accumulation runs one
    strip of rows per thread and then finishes the flow that crossed strips in strip order.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_EXTRACT
 
 /* Order-preserving map float -> uint32 (-0 and +0 share a key). */
 static uint32_t tn__fkey(float f)
@@ -14062,50 +14205,6 @@ static void tn__rheap_free(tn__rheap *h)
     int l, v;
     for (l = 0; l < 4; l++)
         for (v = 0; v < 256; v++) TN_FREE(h->b[l][v]);
-}
-
-typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
-
-/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
-static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
-{
-    const tn__finite_job *j = (const tn__finite_job *)ctx;
-    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
-    size_t x, y;
-    for (y = y0; y < y1; y++) {
-        const float *r = j->dem->data + y * w * C;
-        int ok = 1;
-        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
-        j->bad[y] = (uint8_t)!ok;
-    }
-}
-
-/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
-   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
-static tn_status tn__dem_finite(const tn_image *dem, const char *what)
-{
-    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
-    tn__finite_job j;
-    size_t x, y;
-    j.dem = dem;
-    j.bad = (uint8_t *)tn__alloc(h);
-    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
-    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
-    for (y = 0; y < h && !j.bad[y]; y++) {}
-    TN_FREE(j.bad);
-    if (y == h) return TN_OK;
-    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
-    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
-}
-
-/* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
-static tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
-{
-    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
-        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
-    if (dem->width < min_side || dem->height < min_side)
-        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
-    return tn__dem_finite(dem, what);
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
@@ -15438,6 +15537,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
     if (!st) *out = r;
     return st;
 }
+#endif /* TN_NO_EXTRACT */
 
 /* --------------------------------------------------------------------------------------------
    >>style  (@@style implementation)
@@ -15446,6 +15546,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    Targets (source Grams, sorted source projections, sorted heights and slopes, content
    features) are computed once per pyramid level and kept outside the arena.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_STYLE
 
 /* Order-preserving map of a float to an unsigned key (negative floats reversed). */
 static uint32_t tn__float_key(float f)
@@ -16731,6 +16832,7 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
     if (gain_out) *gain_out = best_g;
     return TN_OK;
 }
+#endif /* TN_NO_STYLE */
 
 /* --------------------------------------------------------------------------------------------
    >>texgan  (@@texgan implementation)
@@ -16743,6 +16845,7 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    bought only 630-1900 iterations at this size (on a loaded machine, README). The GAN output only feeds the low-frequency map, whose content is
    at scales >= 5 px, so a small generator is enough; the exemplar supplies the fine detail.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_TEXGAN
 
 #define TN__TG_CONFIG 40
 #define TN__TG_STATE 24
@@ -16765,14 +16868,6 @@ TN_API void tn_texgan_defaults(tn_texgan_opts *o)
     if (o->ema <= 0) o->ema = 0.995f;
     if (o->feat_weight == 0) o->feat_weight = 1.0f;
     tn_train_defaults(&o->train, 15.0);
-}
-
-static uint64_t tn__splitmix64(uint64_t x)
-{
-    x += 0x9E3779B97F4A7C15ULL;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-    return x ^ (x >> 31);
 }
 
 static int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
@@ -18674,6 +18769,7 @@ done:
     tn_image_free(&his);
     return st;
 }
+#endif /* TN_NO_TEXGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>singan  (@@singan implementation)
@@ -18684,6 +18780,7 @@ done:
    switch zeroes both optimisers' moments and steps, so the earlier scales, whose gradients stay
    zero, do not move: a fresh Adam per scale as in SinGAN); model files; sample, refine, upscale.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SINGAN
 
 #define TN__SG_FORMAT 1
 #define TN__SG_CONFIG (8 + 2 * TN_SINGAN_MAX_SCALES)
@@ -19774,6 +19871,7 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
     TN_FREE(map);
     return st;
 }
+#endif /* TN_NO_SINGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)
@@ -19792,6 +19890,7 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    Determinism: every reduction runs in a fixed order per destination or per source (CSR lists
    built by stable counting sorts), parameter gradients by GEMM or a serial sum.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_GNN
 
 #define TN__GNN_FORMAT 1
 #define TN__GNN_CONFIG 24
@@ -22961,6 +23060,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
     if (count) *count = n;
     return TN_OK;
 }
+#endif /* TN_NO_GNN */
 
 /* --------------------------------------------------------------------------------------------
    >>season  (@@season implementation)
@@ -22970,6 +23070,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    sin/cos are shared by all pixels of a month; a pixel only adds its normal's three
    coefficients.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SEASON
 
 #define TN__SEASON_PI 3.14159265358979323846
 #define TN__HORIZON_GROWTH 1.15 /* distance ratio of successive far horizon samples */
@@ -24989,6 +25090,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
     *out = d;
     return TN_OK;
 }
+#endif /* TN_NO_SEASON */
 
 /* --------------------------------------------------------------------------------------------
    >>render  (@@render implementation)
@@ -24997,6 +25099,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
    whose projected top lies above everything drawn so far in that column fills the gap. Columns
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_RENDER
 
 /* The zero rule of tn_render_opts: shade strength 0.7. lo == hi (the DEM's own range) is the
    colour ramp's rule, and shade is resolved by tn_image_hillshade. */
@@ -25169,10 +25272,12 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     *out = img;
     return TN_OK;
 }
+#endif /* TN_NO_RENDER */
 
 /* --------------------------------------------------------------------------------------------
    >>export  (@@export implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_EXPORT
 
 typedef struct tn__mesh {
     int nx, ny;                /* vertices per row and per column */
@@ -25656,6 +25761,7 @@ done:
     tn_image_free(&one);
     return st;
 }
+#endif /* TN_NO_EXPORT */
 
 /* --------------------------------------------------------------------------------------------
    >>world  (@@world implementation)
@@ -25666,6 +25772,7 @@ done:
    A new method is one row of tn__world_methods: setup (parameters -> halo, factor, output
    raster) and run (rectangle + grown input -> rectangle).
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_WORLD
 
 #define TN__WORLD_MAX_KV 8
 #define TN__WORLD_MAX_STAGES 16
@@ -27074,6 +27181,7 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     if (!st && present) *present = count;
     return st;
 }
+#endif /* TN_NO_WORLD */
 
 #ifdef __cplusplus
 }

@@ -3,6 +3,19 @@
    decoded pixel data, i.e. width * height * channels * bit_depth / 8) and the encoded size
    relative to the input file. Built with -DTN_BENCH_ZLIB -lz it also compresses the very same
    filtered rows with zlib at level 6 and prints both sizes. */
+/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
+#define TN_NO_ENGINE
+#define TN_NO_NOISE
+#define TN_NO_SKETCH
+#define TN_NO_EXTRACT
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>

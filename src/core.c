@@ -240,6 +240,24 @@ TN_API float tn_rng_normal(tn_rng *r)
     return (float)(sqrt(-2.0 * log(u1)) * cos(6.283185307179586 * u2));
 }
 
+/* SplitMix64 (Steele et al.): one 64-bit key to a well-mixed seed, for per-tile and per-stage RNGs. */
+TN__SHARED uint64_t tn__splitmix64(uint64_t x)
+{
+    x += 0x9E3779B97F4A7C15ULL;
+    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
+    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
+    return x ^ (x >> 31);
+}
+
+TN__SHARED char *tn__strndup(const char *s, size_t n)
+{
+    char *d = (char *)TN_MALLOC(n + 1);
+    if (!d) return NULL;
+    memcpy(d, s, n);
+    d[n] = 0;
+    return d;
+}
+
 static tn_progress_fn tn__progress_fn;
 static void *tn__progress_user;
 
@@ -250,7 +268,7 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
 }
 
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
-static tn_status tn__progress(const char *stage, double fraction)
+TN__SHARED tn_status tn__progress(const char *stage, double fraction)
 {
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
@@ -268,7 +286,7 @@ TN_API double tn_time_seconds(void)
 #endif
 }
 
-static float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */

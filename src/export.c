@@ -7,6 +7,7 @@
    UV (0, 0) at the north-west corner. step > 1 keeps every step-th sample, and always the last
    row and column, so the mesh covers the whole DEM.
    ============================================================================================ */
+#ifndef TN_NO_EXPORT
 
 typedef struct tn_mesh_opts {
     float dx, dy;              /* pixel spacing in metres; <= 0 = 1 (dy <= 0: = dx) */
@@ -62,10 +63,12 @@ typedef struct tn_splat_opts {
    mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
    2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
 TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
+#endif /* TN_NO_EXPORT */
 
 /* --------------------------------------------------------------------------------------------
    >>export  (@@export implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_EXPORT
 
 typedef struct tn__mesh {
     int nx, ny;                /* vertices per row and per column */
@@ -549,4 +552,5 @@ done:
     tn_image_free(&one);
     return st;
 }
+#endif /* TN_NO_EXPORT */
 

@@ -10,6 +10,10 @@
    are 8-connected pixel chains, so tn_contour_parts_make (@@sketch) cuts them into parts directly
    and tn_sketch_preview draws them over the DEM (the paper's Figure 6).
    ============================================================================================ */
+#ifndef TN_NO_EXTRACT
+#if defined(TN_NO_SKETCH)
+#error "terrainnet: @@extract needs @@sketch; define TN_NO_EXTRACT too, or none of them"
+#endif
 
 #define TN_FLOW_OUTLET 255   /* direction code of a cell that drains off the map (no lower neighbour) */
 
@@ -107,6 +111,7 @@ typedef struct tn_realism {
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
 TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
                                     tn_realism *out);
+#endif /* TN_NO_EXTRACT */
 
 /* --------------------------------------------------------------------------------------------
    >>extract  (@@extract implementation)
@@ -117,6 +122,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
    once it has heard from all of them (Kahn's order without a queue); accumulation runs one
    strip of rows per thread and then finishes the flow that crossed strips in strip order.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_EXTRACT
 
 /* Order-preserving map float -> uint32 (-0 and +0 share a key). */
 static uint32_t tn__fkey(float f)
@@ -239,50 +245,6 @@ static void tn__rheap_free(tn__rheap *h)
     int l, v;
     for (l = 0; l < 4; l++)
         for (v = 0; v < 256; v++) TN_FREE(h->b[l][v]);
-}
-
-typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
-
-/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
-static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
-{
-    const tn__finite_job *j = (const tn__finite_job *)ctx;
-    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
-    size_t x, y;
-    for (y = y0; y < y1; y++) {
-        const float *r = j->dem->data + y * w * C;
-        int ok = 1;
-        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
-        j->bad[y] = (uint8_t)!ok;
-    }
-}
-
-/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
-   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
-static tn_status tn__dem_finite(const tn_image *dem, const char *what)
-{
-    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
-    tn__finite_job j;
-    size_t x, y;
-    j.dem = dem;
-    j.bad = (uint8_t *)tn__alloc(h);
-    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
-    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
-    for (y = 0; y < h && !j.bad[y]; y++) {}
-    TN_FREE(j.bad);
-    if (y == h) return TN_OK;
-    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
-    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
-}
-
-/* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
-static tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
-{
-    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
-        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
-    if (dem->width < min_side || dem->height < min_side)
-        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
-    return tn__dem_finite(dem, what);
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
@@ -1615,4 +1577,5 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
     if (!st) *out = r;
     return st;
 }
+#endif /* TN_NO_EXTRACT */
 

@@ -1,6 +1,7 @@
 /* ============================================================================================
    @@gemm  single-precision matrix multiply (the engine under tensors and convolutions)
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* C = alpha * op(A) * op(B) + beta * C, all row-major. op(X) = X, or X^T when trans_x != 0.
    op(A) is M x K, op(B) is K x N, C is M x N; lda/ldb/ldc are row strides in floats (of A and B
@@ -11,6 +12,7 @@
    be allocated it falls back to a slow unpacked loop. */
 TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A, int lda,
                      const float *B, int ldb, float beta, float *C, int ldc);
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>gemm  (@@gemm implementation)
@@ -23,6 +25,7 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
    a small temporary tile. Threads split N (or M when N is narrow) in whole tiles; K blocks are
    always summed in the same order, so results do not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #if defined(__AVX512F__)
 #define TN__GEMM_MR 8
@@ -497,4 +500,5 @@ static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__ge
     g.pack_ctx = pack_ctx;
     if (M > 0 && N > 0 && K > 0) tn__gemm_blocked(&g, 0, M, 0, N, buf, buf + (rows * TN__GEMM_KC + 15) / 16 * 16);
 }
+#endif /* TN_NO_ENGINE */
 

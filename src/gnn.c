@@ -41,6 +41,10 @@
    computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
    tiles with memory of one tile. Random sketches (5.2) can densify a sparse user sketch.
    ============================================================================================ */
+#ifndef TN_NO_GNN
+#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT)
+#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract; define TN_NO_GNN too, or none of them"
+#endif
 
 /* Zero = default (tn_gnn_defaults gives the values and the reasons). */
 typedef struct tn_gnn_opts {
@@ -245,6 +249,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+#endif /* TN_NO_GNN */
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)
@@ -263,6 +268,7 @@ TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int he
    Determinism: every reduction runs in a fixed order per destination or per source (CSR lists
    built by stable counting sorts), parameter gradients by GEMM or a serial sum.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_GNN
 
 #define TN__GNN_FORMAT 1
 #define TN__GNN_CONFIG 24
@@ -3432,4 +3438,5 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
     if (count) *count = n;
     return TN_OK;
 }
+#endif /* TN_NO_GNN */
 

@@ -833,6 +833,50 @@ static void tn__terrain_rows(void *ctx, size_t b, size_t e)
 
 static size_t tn__row_grain(int width) { return (size_t)(width >= 16384 ? 1 : 16384 / width); }
 
+typedef struct tn__finite_job { const tn_image *dem; uint8_t *bad; } tn__finite_job;
+
+/* bad[y] = 1 where row y of channel 0 holds a NaN/Inf. */
+static void tn__finite_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__finite_job *j = (const tn__finite_job *)ctx;
+    const size_t w = (size_t)j->dem->width, C = (size_t)j->dem->channels;
+    size_t x, y;
+    for (y = y0; y < y1; y++) {
+        const float *r = j->dem->data + y * w * C;
+        int ok = 1;
+        for (x = 0; x < w; x++) ok &= r[x * C] >= -FLT_MAX && r[x * C] <= FLT_MAX;
+        j->bad[y] = (uint8_t)!ok;
+    }
+}
+
+/* Fails with TN_ERR_NUMERIC naming the first NaN/Inf of channel 0 in raster order (rows are
+   scanned in parallel: a 4096 x 4096 DEM takes a while on one core). */
+static tn_status tn__dem_finite(const tn_image *dem, const char *what)
+{
+    const size_t w = (size_t)dem->width, h = (size_t)dem->height, C = (size_t)dem->channels;
+    tn__finite_job j;
+    size_t x, y;
+    j.dem = dem;
+    j.bad = (uint8_t *)tn__alloc(h);
+    if (!j.bad) return TN_ERR_OUT_OF_MEMORY;
+    tn_parallel_for(h, tn__row_grain(dem->width), tn__finite_rows, &j);
+    for (y = 0; y < h && !j.bad[y]; y++) {}
+    TN_FREE(j.bad);
+    if (y == h) return TN_OK;
+    for (x = 0; x + 1 < w && dem->data[(y * w + x) * C] >= -FLT_MAX && dem->data[(y * w + x) * C] <= FLT_MAX; x++) {}
+    return tn__fail(TN_ERR_NUMERIC, "%s: NaN/Inf height at pixel (%d, %d)", what, (int)x, (int)y);
+}
+
+/* Checks a DEM for extraction and rendering: non-empty, at least min_side pixels a side, channel 0 finite. */
+TN__SHARED tn_status tn__dem_check(const tn_image *dem, int min_side, const char *what)
+{
+    if (!dem || !dem->data || dem->width <= 0 || dem->height <= 0 || dem->channels <= 0)
+        return tn__fail(TN_ERR_EMPTY, "%s: the DEM is empty", what);
+    if (dem->width < min_side || dem->height < min_side)
+        return tn__fail(TN_ERR_INVALID_ARG, "%s: the DEM must be at least %d x %d pixels", what, min_side, min_side);
+    return tn__dem_finite(dem, what);
+}
+
 /* Pixel spacing: <= 0 means 1; returns 1 / spacing. */
 /* 1 / spacing for dx and dy (<= 0 means 1). NaN/Inf, or a spacing so small that its inverse
    (times scale) overflows, would give NaN/Inf or all-zero gradients: refused instead. */

@@ -47,6 +47,14 @@
 #include <immintrin.h>
 #endif
 
+/* Static helpers that several sections share: with some sections compiled out (TN_NO_...), some
+   go unused, which is not worth a warning. */
+#if defined(__GNUC__) || defined(__clang__)
+#define TN__SHARED static __attribute__((unused))
+#else
+#define TN__SHARED static
+#endif
+
 #ifdef __cplusplus
 extern "C" {
 #endif

@@ -18,6 +18,17 @@
    valid cell fails with TN_ERR_EMPTY. Single-threaded and deterministic.
    -------------------------------------------------------------------------------------------- */
 
+/* Little-endian words for the binary formats (.tnw, .glb). */
+TN__SHARED void tn__put_u32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
+TN__SHARED uint32_t tn__get_u32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
+
+TN__SHARED void tn__put_f32(uint8_t *p, float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, 4);
+    tn__put_u32(p, u);
+}
+
 TN_API const char *tn_format_name(tn_format f)
 {
     switch (f) {

@@ -1,6 +1,7 @@
 /* ============================================================================================
    @@loss  losses (each returns a one-element tensor)
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
 TN_API tn_tensor *tn_l1_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target);
 /* mean of softplus(x) - x * t: binary cross-entropy on logits, stable for any x. */
@@ -21,12 +22,13 @@ TN_API tn_tensor *tn_tv_loss(tn_ctx *ctx, tn_tensor *x, float beta);
 TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float data_range);
 /* Gradient-difference loss: mean | |dx(a)| - |dx(b)| | + mean | |dy(a)| - |dy(b)| |. */
 TN_API tn_tensor *tn_gdl_loss(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
-
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>loss  (@@loss implementation) - mostly compositions of the ops above, so their gradients
    come for free and are checked by the same finite-difference tests.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 TN_API tn_tensor *tn_mse_loss(tn_ctx *ctx, tn_tensor *pred, tn_tensor *target)
 {
@@ -172,5 +174,6 @@ TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float da
     den = tn_mul(ctx, tn_scale_shift(ctx, m2, 1.0f, c1), tn_scale_shift(ctx, tn_add(ctx, vx, vy), 1.0f, c2));
     return tn_scale_shift(ctx, tn_mean(ctx, tn_div(ctx, num, den)), -1.0f, 1.0f);
 }
+#endif /* TN_NO_ENGINE */
 
 

@@ -32,6 +32,16 @@ CONFIGURATION (define before including the implementation)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_IMPLEMENTATION_LINKED  ignore TERRAINNET_IMPLEMENTATION in this file: the program links a
                         separately compiled implementation (how the repository builds its examples)
+    TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
+                        TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
+                        TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,
+                        TN_NO_NOISE, and TN_NO_ENGINE (the tensor engine, @@gemm ... @@train).
+                        A part that needs one compiled out stops the build with #error naming
+                        it: @@world needs every generator and @@export; @@style, @@texgan,
+                        @@singan, @@gnn and @@season need the engine; @@style, @@texgan and
+                        @@season need @@noise; @@style and @@gnn need @@extract, which needs
+                        @@sketch. @@core, @@thread, @@image, @@io and @@metrics are always in.
+                        All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
 

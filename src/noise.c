@@ -6,6 +6,7 @@
    one-channel images normalised to [0, 1]; the same seed gives the same map everywhere, for any
    thread count.
    ============================================================================================ */
+#ifndef TN_NO_NOISE
 
 typedef struct tn_perlin_opts {
     uint64_t seed;
@@ -32,6 +33,7 @@ TN_API tn_status tn_noise_explicit(tn_image *out, int width, int height, const t
    (1 - weight) * noise, with drawn (channel 0) resampled to the noise size and normalised to
    [0, 1]; weight in [0, 1]. */
 TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_image *drawn, float weight);
+#endif /* TN_NO_NOISE */
 
 /* --------------------------------------------------------------------------------------------
    >>noise  (@@noise implementation)
@@ -39,6 +41,7 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
    directions. Rows are independent, so the map is computed row-parallel and is identical for any
    thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_NOISE
 
 typedef struct tn__perlin_job {
     uint8_t perm[512];
@@ -298,4 +301,5 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
     *out = r;
     return TN_OK;
 }
+#endif /* TN_NO_NOISE */
 

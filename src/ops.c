@@ -5,6 +5,7 @@
    Shapes follow PyTorch: images N x C x H x W, conv weights Cout x Cin x KH x KW, transposed
    conv weights Cin x Cout x KH x KW, linear weights out x in.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* Elementwise with NumPy broadcasting (shapes aligned at the right, size-1 dims stretch). */
 TN_API tn_tensor *tn_add(tn_ctx *ctx, tn_tensor *a, tn_tensor *b);
@@ -88,6 +89,7 @@ TN_API tn_tensor *tn_segment_softmax(tn_ctx *ctx, tn_tensor *scores, const int *
 TN_API tn_tensor *tn_gumbel_softmax(tn_ctx *ctx, tn_tensor *logits, float tau, tn_rng *rng);
 /* Inverted dropout with probability p when training; identity otherwise. */
 TN_API tn_tensor *tn_dropout(tn_ctx *ctx, tn_tensor *x, float p, int training, tn_rng *rng);
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>ops  (@@ops implementation)
@@ -95,6 +97,7 @@ TN_API tn_tensor *tn_dropout(tn_ctx *ctx, tn_tensor *x, float p, int training, t
    the backward pass runs the same walk and sums into the stretched operand. Large elementwise
    loops run on the pool; a split never changes any element's value.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #define TN__PAR_GRAIN 16384
 
@@ -1865,4 +1868,5 @@ TN_API tn_tensor *tn_dropout(tn_ctx *ctx, tn_tensor *x, float p, int training, t
     o->aux = m;
     return o;
 }
+#endif /* TN_NO_ENGINE */
 

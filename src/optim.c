@@ -7,6 +7,7 @@
    u8 ndim, u8 flags (1 = buffer), u32 dims[ndim], float32 data[numel]; finally u32 CRC-32 of
    every byte before it. Version 1 (no metadata) is written when a set has no metadata.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 typedef struct tn_params tn_params;
 TN_API tn_params *tn_params_create(void);
@@ -79,10 +80,12 @@ TN_API void tn_optim_set_lr(tn_optim *o, float lr);
 typedef float (*tn_lbfgs_fn)(void *user, const float *x, float *grad);
 typedef struct tn_lbfgs_opts { int max_iter; int history; float tol; float first_step; } tn_lbfgs_opts;
 TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const tn_lbfgs_opts *opts, float *final_f);
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>optim  (@@optim implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 struct tn_params {
     tn_ctx *ctx;
@@ -238,16 +241,6 @@ TN_API void tn_init_kaiming(tn_tensor *t, tn_rng *rng, float gain)
 
 /* ---- .tnw files ---- */
 
-static void tn__put_u32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
-static uint32_t tn__get_u32(const uint8_t *p) { return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24); }
-
-static void tn__put_f32(uint8_t *p, float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, 4);
-    tn__put_u32(p, u);
-}
-
 static float tn__get_f32(const uint8_t *p)
 {
     uint32_t u = tn__get_u32(p);
@@ -336,15 +329,6 @@ static int tn__meta_value_ok(const char *v, size_t n)
     for (i = 0; i < n; i++)
         if ((unsigned char)v[i] < 0x20 || v[i] == 0x7f) return 0;
     return 1;
-}
-
-static char *tn__strndup(const char *s, size_t n)
-{
-    char *d = (char *)TN_MALLOC(n + 1);
-    if (!d) return NULL;
-    memcpy(d, s, n);
-    d[n] = 0;
-    return d;
 }
 
 static tn_status tn__meta_set(tn_params *p, const char *key, size_t kn, const char *value, size_t vn)
@@ -805,4 +789,5 @@ TN_API tn_status tn_lbfgs(float *x, size_t n, tn_lbfgs_fn fn, void *user, const 
     TN_FREE(rho);
     return st;
 }
+#endif /* TN_NO_ENGINE */
 

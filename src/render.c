@@ -1,6 +1,7 @@
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
    ============================================================================================ */
+#ifndef TN_NO_RENDER
 
 typedef struct tn_render_opts {
     float lo, hi;              /* height range for the colour ramp; lo == hi: the DEM's own range */
@@ -25,6 +26,7 @@ typedef struct tn_view_opts {
 /* 3D perspective view of the DEM (ray-marched height field, front-to-back with a per-column
    occlusion buffer, distance haze, sky). RGB in [0, 1]. opts may be NULL. Caller frees *out. */
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out);
+#endif /* TN_NO_RENDER */
 
 /* --------------------------------------------------------------------------------------------
    >>render  (@@render implementation)
@@ -33,6 +35,7 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
    whose projected top lies above everything drawn so far in that column fills the gap. Columns
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_RENDER
 
 /* The zero rule of tn_render_opts: shade strength 0.7. lo == hi (the DEM's own range) is the
    colour ramp's rule, and shade is resolved by tn_image_hillshade. */
@@ -205,4 +208,5 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     *out = img;
     return TN_OK;
 }
+#endif /* TN_NO_RENDER */
 

@@ -22,6 +22,10 @@
    textures of ../shared/data/textures. Its state can be read at any time of the year, so frames
    between months follow the snow and vegetation, not a cross-fade of two pictures.
    ============================================================================================ */
+#ifndef TN_NO_SEASON
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE)
+#error "terrainnet: @@season needs the tensor engine, @@noise; define TN_NO_SEASON too, or none of them"
+#endif
 
 /* Zero = default. */
 typedef struct tn_insolation_opts {
@@ -219,6 +223,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out);
 TN_API void tn_season_data_free(tn_season_data *d);
 /* Months from mid-January of a date "YYYY-MM-DD" (or a plain number of months); -1 if malformed. */
 TN_API float tn_season_time_of(const char *when);
+#endif /* TN_NO_SEASON */
 
 /* --------------------------------------------------------------------------------------------
    >>season  (@@season implementation)
@@ -228,6 +233,7 @@ TN_API float tn_season_time_of(const char *when);
    sin/cos are shared by all pixels of a month; a pixel only adds its normal's three
    coefficients.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SEASON
 
 #define TN__SEASON_PI 3.14159265358979323846
 #define TN__HORIZON_GROWTH 1.15 /* distance ratio of successive far horizon samples */
@@ -2247,4 +2253,5 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
     *out = d;
     return TN_OK;
 }
+#endif /* TN_NO_SEASON */
 

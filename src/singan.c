@@ -21,6 +21,10 @@
    Heights: the network works on [-1, 1] (the example's range); the model stores the mapping and
    every call takes and returns heights in the example's units (metres for metre DEMs).
    ============================================================================================ */
+#ifndef TN_NO_SINGAN
+#if defined(TN_NO_ENGINE)
+#error "terrainnet: @@singan needs the tensor engine; define TN_NO_SINGAN too, or none of them"
+#endif
 
 #define TN_SINGAN_MAX_SCALES 16
 
@@ -111,6 +115,7 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
    round(factor * in's size). */
 TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
                                    tn_image *out);
+#endif /* TN_NO_SINGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>singan  (@@singan implementation)
@@ -121,6 +126,7 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
    switch zeroes both optimisers' moments and steps, so the earlier scales, whose gradients stay
    zero, do not move: a fresh Adam per scale as in SinGAN); model files; sample, refine, upscale.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SINGAN
 
 #define TN__SG_FORMAT 1
 #define TN__SG_CONFIG (8 + 2 * TN_SINGAN_MAX_SCALES)
@@ -1211,4 +1217,5 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
     TN_FREE(map);
     return st;
 }
+#endif /* TN_NO_SINGAN */
 

@@ -8,6 +8,7 @@
    into 5-10 point contour parts (4.1) and aligning sketch parts to DEM parts (5.3, A1/A2:
    chain codes, rotation by k pi/4, longest common substring, height mean/std, seeded pick).
    ============================================================================================ */
+#ifndef TN_NO_SKETCH
 
 typedef enum tn_contour_type { TN_VALLEY = 0, TN_RIDGE = 1 } tn_contour_type;
 
@@ -155,10 +156,12 @@ typedef struct tn_align_opts {
    Reports progress as stage "align" every 1024 sketch parts (cancellable). */
 TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
                                  const tn_align_opts *opts, int *match);
+#endif /* TN_NO_SKETCH */
 
 /* --------------------------------------------------------------------------------------------
    >>sketch  (@@sketch implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_SKETCH
 
 TN_API void tn_contour_set_free(tn_contour_set *set) {
     int i;
@@ -1843,4 +1846,5 @@ TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_co
     tn__chains_free(&dem);
     return st;
 }
+#endif /* TN_NO_SKETCH */
 

@@ -45,6 +45,10 @@
    has Cin 3), exactly these 32 tensors. examples/vgg19_to_tnw.py converts a torchvision
    state dict (torchvision.models.vgg19 features.N.weight/bias).
    ============================================================================================ */
+#ifndef TN_NO_STYLE
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE) || defined(TN_NO_EXTRACT)
+#error "terrainnet: @@style needs the tensor engine, @@noise, @@extract; define TN_NO_STYLE too, or none of them"
+#endif
 
 typedef enum tn_style_optimizer { TN_STYLE_LBFGS = 0, TN_STYLE_SGD, TN_STYLE_ADAM } tn_style_optimizer;
 
@@ -97,6 +101,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
    *gain_out (may be NULL) gets the gain. Costs ten noise maps and ten comparisons. */
 TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, const tn_image *source,
                                         const tn_perlin_opts *opts, float *gain_out);
+#endif /* TN_NO_STYLE */
 
 /* --------------------------------------------------------------------------------------------
    >>style  (@@style implementation)
@@ -105,6 +110,7 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    Targets (source Grams, sorted source projections, sorted heights and slopes, content
    features) are computed once per pyramid level and kept outside the arena.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_STYLE
 
 /* Order-preserving map of a float to an unsigned key (negative floats reversed). */
 static uint32_t tn__float_key(float f)
@@ -1390,4 +1396,5 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
     if (gain_out) *gain_out = best_g;
     return TN_OK;
 }
+#endif /* TN_NO_STYLE */
 

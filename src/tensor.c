@@ -10,6 +10,7 @@
    context as failed: the op returns NULL, later ops given NULL return NULL, and tn_backward /
    tn_ctx_status report TN_ERR_OUT_OF_MEMORY.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 #define TN_MAX_DIMS 4
 
@@ -65,6 +66,7 @@ TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img);
 /* Runs the tape backwards from `loss` (a one-element tensor, gradient 1). Gradients accumulate:
    zero parameter gradients between steps (tn_params_zero_grad). */
 TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss);
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>tensor  (@@tensor implementation)
@@ -72,6 +74,7 @@ TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss);
    the reset merges them into one, so the next identical step fits without calling malloc.
    The tape is an array of tensor pointers in creation order, stored in the arena as well.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 typedef struct tn__block {
     struct tn__block *next;
@@ -334,4 +337,5 @@ TN_API tn_status tn_backward(tn_ctx *ctx, tn_tensor *loss)
     }
     return TN_OK;
 }
+#endif /* TN_NO_ENGINE */
 

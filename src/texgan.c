@@ -20,6 +20,10 @@
    (energy-preserving weights), stored as value / 2 + 0.5; a renderer adds upsampled low + 2 (high - 0.5)
    tiled `tiling` times.
    ============================================================================================ */
+#ifndef TN_NO_TEXGAN
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE)
+#error "terrainnet: @@texgan needs the tensor engine, @@noise; define TN_NO_TEXGAN too, or none of them"
+#endif
 
 #define TN_TEXGAN_MAX_CHANNELS 8
 
@@ -155,6 +159,7 @@ TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix);
    the detail-mapped texture; all shaded by the hillshade of dem (NULL = a Perlin terrain). */
 TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *exemplar, const tn_image *dem,
                                    int panel, tn_image *out);
+#endif /* TN_NO_TEXGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>texgan  (@@texgan implementation)
@@ -167,6 +172,7 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
    bought only 630-1900 iterations at this size (on a loaded machine, README). The GAN output only feeds the low-frequency map, whose content is
    at scales >= 5 px, so a small generator is enough; the exemplar supplies the fine detail.
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_TEXGAN
 
 #define TN__TG_CONFIG 40
 #define TN__TG_STATE 24
@@ -189,14 +195,6 @@ TN_API void tn_texgan_defaults(tn_texgan_opts *o)
     if (o->ema <= 0) o->ema = 0.995f;
     if (o->feat_weight == 0) o->feat_weight = 1.0f;
     tn_train_defaults(&o->train, 15.0);
-}
-
-static uint64_t tn__splitmix64(uint64_t x)
-{
-    x += 0x9E3779B97F4A7C15ULL;
-    x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ULL;
-    x = (x ^ (x >> 27)) * 0x94D049BB133111EBULL;
-    return x ^ (x >> 31);
 }
 
 static int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
@@ -2098,4 +2096,5 @@ done:
     tn_image_free(&his);
     return st;
 }
+#endif /* TN_NO_TEXGAN */
 

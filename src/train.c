@@ -12,6 +12,7 @@
    A model file carries metadata too (tn_model_stamp): method, format, library version, seed,
    iterations, training seconds, and a digest of the example it learned from.
    ============================================================================================ */
+#ifndef TN_NO_ENGINE
 
 /* What zero means is resolved by tn_train_defaults; methods embed this in their options. */
 typedef struct tn_train_opts {
@@ -156,10 +157,12 @@ TN_API int tn_best_k_offer(tn_best_k *b, const tn_params *p, double score, long 
 TN_API int tn_best_k_count(const tn_best_k *b);
 /* The i-th best (0 = best); score and iteration may be NULL. */
 TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, long *iteration);
+#endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
    >>train  (@@train implementation)
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
 
 #define TN__TRAIN_MAX 8
 
@@ -692,7 +695,7 @@ TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_
 }
 
 /* Every value of a loaded model's weights is finite, else TN_ERR_CORRUPT naming the tensor. */
-static tn_status tn__model_check_finite(const tn_params *p, const char *name)
+TN__SHARED tn_status tn__model_check_finite(const tn_params *p, const char *name)
 {
     int i;
     for (i = 0; i < tn_params_count(p); i++) {
@@ -705,7 +708,7 @@ static tn_status tn__model_check_finite(const tn_params *p, const char *name)
 }
 
 /* The training iterations and seconds a model file records (0 where it records none). */
-static void tn__model_training(const tn_params *f, const char *name, long *iterations, double *seconds)
+TN__SHARED void tn__model_training(const tn_params *f, const char *name, long *iterations, double *seconds)
 {
     double v;
     const char *s = tn_params_meta(f, "train_seconds");
@@ -965,4 +968,5 @@ TN_API const tn_params *tn_best_k_get(const tn_best_k *b, int i, double *score, 
     if (iteration) *iteration = b->iter[i];
     return b->snap[i];
 }
+#endif /* TN_NO_ENGINE */
 

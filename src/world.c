@@ -17,6 +17,10 @@
        perlin frequency=16 octaves=10
        hillshade azimuth=315
    ============================================================================================ */
+#ifndef TN_NO_WORLD
+#if defined(TN_NO_ENGINE) || defined(TN_NO_NOISE) || defined(TN_NO_SKETCH) || defined(TN_NO_TEXGAN) || defined(TN_NO_SINGAN) || defined(TN_NO_GNN) || defined(TN_NO_SEASON) || defined(TN_NO_EXPORT)
+#error "terrainnet: @@world needs the tensor engine, @@noise, @@sketch, @@texgan, @@singan, @@gnn, @@season, @@export; define TN_NO_WORLD too, or none of them"
+#endif
 
 typedef struct tn_world {
     int width, height;         /* the generator's raster in pixels */
@@ -76,6 +80,7 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
 TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
+#endif /* TN_NO_WORLD */
 
 /* --------------------------------------------------------------------------------------------
    >>world  (@@world implementation)
@@ -86,6 +91,7 @@ TN_API const char *tn_world_method_help(int i);
    A new method is one row of tn__world_methods: setup (parameters -> halo, factor, output
    raster) and run (rectangle + grown input -> rectangle).
    -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_WORLD
 
 #define TN__WORLD_MAX_KV 8
 #define TN__WORLD_MAX_STAGES 16
@@ -1494,4 +1500,5 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     if (!st && present) *present = count;
     return st;
 }
+#endif /* TN_NO_WORLD */
 

@@ -32,6 +32,16 @@ run gxx_cxx     g++   -x c++ -Wall -Wextra -pedantic -fsyntax-only -I. "$tu"
 run no_threads  gcc   -std=c99 -Wall -Wextra -pedantic -fsyntax-only -DTN_NO_THREADS -I. "$tu"
 run no_tls      gcc   -std=c99 -Wall -Wextra -pedantic -fsyntax-only -DTN_NO_TLS -I. "$tu"
 run portable    gcc   -std=c99 -Wall -Wextra -pedantic -O2 -march=x86-64 -I. -c "$tu" -o build/check/portable.o
+# Compile-out switches: the learned methods out; everything but I/O and rendering out.
+methods="-DTN_NO_STYLE -DTN_NO_TEXGAN -DTN_NO_SINGAN -DTN_NO_GNN -DTN_NO_SEASON -DTN_NO_WORLD"
+base="$methods -DTN_NO_ENGINE -DTN_NO_NOISE -DTN_NO_SKETCH -DTN_NO_EXTRACT -DTN_NO_EXPORT"
+run no_methods  gcc   -std=c99 -Wall -Wextra -pedantic -O2 $methods -I. -c "$tu" -o build/check/nomethods.o
+run io_render   gcc   -std=c99 -Wall -Wextra -pedantic -O2 $base -I. -c "$tu" -o build/check/iorender.o
 report
+# A part whose dependency is compiled out stops with an #error that names the switch to add.
+if out=$(gcc -std=c99 -DTN_NO_ENGINE -DTN_NO_STYLE -DTN_NO_TEXGAN -DTN_NO_SINGAN -DTN_NO_SEASON -DTN_NO_WORLD -I. \
+        -fsyntax-only "$tu" 2>&1); then echo "compile_switch_error: FAIL (TN_NO_ENGINE without TN_NO_GNN compiled)"; fail=$((fail + 1))
+elif echo "$out" | grep -q '@@gnn needs the tensor engine.*define TN_NO_GNN'; then echo "compile_switch_error: ok"; pass=$((pass + 1))
+else echo "compile_switch_error: FAIL"; echo "$out" | head -n 5; fail=$((fail + 1)); fi
 echo "check_compile: $pass passed, $fail failed, 0 skipped"
 [ "$fail" -eq 0 ]

@@ -1,5 +1,18 @@
 /* Tests of @@core and @@thread: status strings, errors (per thread, forwarded from pool workers),
    size checks, RNG, pool, progress. */
+/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
+#define TN_NO_ENGINE
+#define TN_NO_NOISE
+#define TN_NO_SKETCH
+#define TN_NO_EXTRACT
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"

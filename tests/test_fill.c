@@ -2,6 +2,17 @@
    threads, and drainage (every interior cell reaches the border along D8 pointers through
    strictly lower filled heights, with no cycles and no sinks) on a synthetic DEM full of
    depressions and flats and on real DEM crops (skipped when ../shared/data is absent). */
+/* Its own implementation (private tn__ code), with only @@core ... @@metrics, @@noise, @@sketch
+   and @@extract compiled in. */
+#define TN_NO_ENGINE
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"

@@ -12,6 +12,19 @@ static void *tn_io_test_realloc(void *p, size_t n) { tn_io_test_allocs++; return
 #ifdef TN_TEST_TU /* scratch build: the library plus the sections not yet in terrainnet.h */
 #include TN_TEST_TU
 #else
+/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
+#define TN_NO_ENGINE
+#define TN_NO_NOISE
+#define TN_NO_SKETCH
+#define TN_NO_EXTRACT
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #endif

@@ -31,6 +31,19 @@ static void *tn_test_realloc(void *p, size_t n)
 #define TN_MALLOC(sz) tn_test_malloc(sz)
 #define TN_REALLOC(p, sz) tn_test_realloc(p, sz)
 #define TN_FREE(p) free(p)
+/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
+#define TN_NO_ENGINE
+#define TN_NO_NOISE
+#define TN_NO_SKETCH
+#define TN_NO_EXTRACT
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"

@@ -53,8 +53,12 @@ static const char *tn_test_ref(const char *rel);
 static unsigned char *tn_test_read_file(const char *path, size_t *n);
 #ifdef TERRAINNET_H
 static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
+#ifndef TN_NO_ENGINE
 static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip);
+#endif
+#ifndef TN_NO_NOISE
 static tn_image tn_test_dem(int n, uint64_t seed);
+#endif
 #endif
 
 /* A scratch file path $TMPDIR/tn_test_<tag>_<leaf> (or /tmp); four buffers rotate, so up to
@@ -77,8 +81,12 @@ static int tn_test_summary(const char *file)
     (void)tn_test_read_file;
 #ifdef TERRAINNET_H
     (void)tn_test_exemplar;
+#ifndef TN_NO_ENGINE
     (void)tn_test_same_params;
+#endif
+#ifndef TN_NO_NOISE
     (void)tn_test_dem;
+#endif
 #endif
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
     return tn_test_failed ? 1 : 0;
@@ -141,6 +149,7 @@ static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed)
 
 /* An n x n Perlin terrain (4 octaves, 3 cells across) from 1000 to 2000 m: a small DEM with
    ridges and valleys for the learned methods' tests. */
+#ifndef TN_NO_NOISE
 static tn_image tn_test_dem(int n, uint64_t seed)
 {
     tn_image d = {0, 0, 0, NULL};
@@ -154,9 +163,11 @@ static tn_image tn_test_dem(int n, uint64_t seed)
     for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
     return d;
 }
+#endif
 
 /* 1 when two parameter sets hold the same tensors bit for bit (names, sizes, values), from the
    skip-th tensor on (texgan's first tensor is its configuration). */
+#ifndef TN_NO_ENGINE
 static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip)
 {
     int i;
@@ -167,5 +178,6 @@ static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip)
     }
     return 1;
 }
+#endif
 #endif
 #endif
