@@ -1,7 +1,10 @@
 /* bench_conv: conv2d 3x3 (padding 1, batch 1, with bias) forward and forward+backward (input,
    weight and bias gradients) in milliseconds, the shapes of ../shared/peers/torch_conv2d.py.
-   Usage: bin/bench_conv [--threads N] [--runs R]   (no --threads: 1 and 2)
-   Prints: conv_fwd_<shape>_t<N>: X ms and conv_fwdbwd_<shape>_t<N>: X ms (medians). */
+   Each in float32, then with bf16 GEMM operands (tn_set_precision(TN_PRECISION_BF16)) in the same
+   run, with the float32 time over the bf16 time.
+   Usage: bin/bench_conv [--threads N] [--runs R] [--fp32]   (no --threads: 1 and 2; --fp32: no bf16)
+   Prints: conv_fwd_<shape>_t<N>: X ms and conv_fwdbwd_<shape>_t<N>: X ms (medians), and
+           conv_bf16_fwd_<shape>_t<N>: X ms (...; kernel, fp32/bf16 = Y x) likewise. */
 #ifndef TN_BENCH_TU
 #include "terrainnet.h"
 #else
@@ -40,11 +43,12 @@ int main(int argc, char **argv)
 {
     static const struct { const char *name; int ci, co, hw; } shapes[3] = {
         {"c32to32_3x3_128", 32, 32, 128}, {"c64to64_3x3_256", 64, 64, 256}, {"c3to64_3x3_512", 3, 64, 512}};
-    int threads[2] = {1, 2}, nthreads = 2, runs = 11, a, s, t, r, bw;
+    int threads[2] = {1, 2}, nthreads = 2, runs = 11, nprec = 2, a, s, t, r, bw, pr;
     for (a = 1; a < argc; a++) {
         if (!strcmp(argv[a], "--threads") && a + 1 < argc) { threads[0] = atoi(argv[++a]); nthreads = 1; }
         else if (!strcmp(argv[a], "--runs") && a + 1 < argc) runs = atoi(argv[++a]);
-        else { fprintf(stderr, "usage: bench_conv [--threads N] [--runs R]\n"); return 2; }
+        else if (!strcmp(argv[a], "--fp32")) nprec = 1;
+        else { fprintf(stderr, "usage: bench_conv [--threads N] [--runs R] [--fp32]\n"); return 2; }
     }
     if (runs < 1 || runs > 1000 || threads[0] < 1) { fprintf(stderr, "bench_conv: bad arguments\n"); return 2; }
     for (t = 0; t < nthreads; t++) {
@@ -60,13 +64,21 @@ int main(int argc, char **argv)
             tn_init_uniform(x, &rng, -1, 1);
             tn_init_kaiming(w, &rng, 1.0f);
             for (bw = 0; bw < 2; bw++) {
-                run_once(ctx, x, w, b, bw); /* warm-up: sizes the arena */
-                run_once(ctx, x, w, b, bw);
-                for (r = 0; r < runs; r++) ms[r] = run_once(ctx, x, w, b, bw);
-                qsort(ms, (size_t)runs, sizeof(double), cmp_double);
-                printf("conv_%s_%s_t%d: %.3f ms (min %.3f max %.3f, runs %d)\n", bw ? "fwdbwd" : "fwd", shapes[s].name,
-                       threads[t], ms[runs / 2], ms[0], ms[runs - 1], runs);
-                fflush(stdout);
+                double fp32_ms = 0;
+                for (pr = 0; pr < nprec; pr++) {
+                    tn_set_precision(pr ? TN_PRECISION_BF16 : TN_PRECISION_FP32);
+                    run_once(ctx, x, w, b, bw); /* warm-up: sizes the arena */
+                    run_once(ctx, x, w, b, bw);
+                    for (r = 0; r < runs; r++) ms[r] = run_once(ctx, x, w, b, bw);
+                    qsort(ms, (size_t)runs, sizeof(double), cmp_double);
+                    printf("conv_%s%s_%s_t%d: %.3f ms (min %.3f max %.3f, runs %d", pr ? "bf16_" : "", bw ? "fwdbwd" : "fwd",
+                           shapes[s].name, threads[t], ms[runs / 2], ms[0], ms[runs - 1], runs);
+                    if (pr) printf("; %s, fp32/bf16 = %.2f x", tn_gemm_bf16_kernel(), fp32_ms / ms[runs / 2]);
+                    printf(")\n");
+                    fflush(stdout);
+                    fp32_ms = ms[runs / 2];
+                }
+                tn_set_precision(TN_PRECISION_AUTO);
             }
             free(ms);
             tn_ctx_free(ctx);

@@ -12,6 +12,42 @@
    be allocated it falls back to a slow unpacked loop. */
 TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A, int lda,
                      const float *B, int ldb, float beta, float *C, int ldc);
+
+/* Precision of the products under convolutions and dense layers (mixed precision: weights,
+   gradients and optimiser state stay float32; only the GEMM operands become bfloat16).
+   TN_PRECISION_FP32: tn_sgemm as above, the reference; forcing it gives exactly the bytes of
+   terrainnet before bf16 existed. TN_PRECISION_BF16: A and B are rounded to bfloat16 (round to
+   nearest even, bf16 subnormals flushed to zero) when packed, products are accumulated in
+   float32 and C is float32. Run on AMX tiles (TDPBF16PS) when the CPU and OS allow them,
+   else on AVX512-BF16 (VDPBF16PS), else emulated with float32 FMAs in VDPBF16PS's order (odd k
+   of each pair first), so the emulation and AVX512-BF16 give the same bytes; AMX sums each
+   pair in the other order, so its bytes differ (in the last bits). For a given CPU the bytes
+   do not depend on the thread count. TN_PRECISION_AUTO (the zero value, the default) is FP32
+   for now; compile with TN_AUTO_BF16=1 to make it BF16 on CPUs with AMX-BF16 or AVX512-BF16.
+   The setting is process-wide; change it between steps, not while a product runs. */
+typedef enum { TN_PRECISION_AUTO = 0, TN_PRECISION_BF16, TN_PRECISION_FP32 } tn_precision;
+TN_API void tn_set_precision(tn_precision p);
+/* The setting as given (AUTO stays AUTO). */
+TN_API tn_precision tn_get_precision(void);
+/* What a setting means on this CPU: TN_PRECISION_BF16 or TN_PRECISION_FP32 (AUTO resolved;
+   AUTO passed here means the process-wide setting). */
+TN_API tn_precision tn_precision_resolve(tn_precision p);
+/* "auto" / "bf16" / "fp32" <-> tn_precision; parse returns TN_ERR_INVALID_ARG for anything else. */
+TN_API const char *tn_precision_name(tn_precision p);
+TN_API tn_status tn_precision_parse(const char *s, tn_precision *p);
+
+/* CPU features found at run time (cpuid, and the OS's consent for AVX-512 / AMX state). */
+#define TN_CPU_AVX2 1u
+#define TN_CPU_AVX512F 2u
+#define TN_CPU_AVX512_BF16 4u
+#define TN_CPU_AMX_BF16 8u /* tiles usable: cpuid AMX-TILE + AMX-BF16 and, on Linux, arch_prctl permission */
+TN_API unsigned tn_cpu_features(void);
+/* The kernel TN_PRECISION_BF16 runs on here: "amx-bf16", "avx512-bf16" or "emulated". */
+TN_API const char *tn_gemm_bf16_kernel(void);
+
+/* tn_sgemm in a given precision (AUTO: the process-wide setting). Same arguments and guarantees. */
+TN_API void tn_gemm(tn_precision precision, int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A,
+                    int lda, const float *B, int ldb, float beta, float *C, int ldc);
 #endif /* TN_NO_ENGINE */
 
 /* --------------------------------------------------------------------------------------------
@@ -260,7 +296,27 @@ typedef struct tn__gemm_job {
     int max_parts; /* at most this many threads get work */
     tn__gemm_pack_fn pack_b; /* if set, produces the packed B blocks (B is unused) */
     void *pack_ctx;
+    int kern;      /* TN__KERN_*: float32, or which bf16 kernel */
 } tn__gemm_job;
+
+/* The product's kernels: float32, and the bf16 ones of >>gemm_bf16 (below), which the driver
+   reaches through these few functions. */
+enum { TN__KERN_FP32 = 0, TN__KERN_EMU, TN__KERN_AVX512BF16, TN__KERN_AMX };
+typedef void (*tn__gemm_kernel_fn)(int kc, const float *pa, const float *pb, float *c, int ldc, float alpha, float beta);
+static int tn__gemm_kern(tn_precision p);
+static float tn__bf16_round(float f);
+static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+static tn__gemm_kernel_fn tn__gemm_bf16_kernel_fn(int kern);
+#ifdef TN__BF16_HW
+/* AMX scratch per slot, in bf16 halves: the A block as rows of KP, then the B block */
+#define TN__AMX_KP ((TN__GEMM_KC + 31) / 32 * 32)
+#define TN__AMX_A_HALVES ((size_t)((TN__GEMM_MC + 31) / 32 * 32) * TN__AMX_KP)
+#define TN__AMX_B_HALVES ((size_t)((TN__GEMM_NC + 31) / 32 * 32) * TN__AMX_KP)
+static uint16_t *tn__gemm_amx_scratch(int *slot);
+static void tn__gemm_amx_pack_a(const float *pa, int mc, int kc, uint16_t *ta);
+static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, int nc, int kc, const uint16_t *ta,
+                               const float *pb, uint16_t *tb, float beta);
+#endif
 
 static float tn__gemm_get(const float *X, int ld, int trans, int r, int c)
 {
@@ -272,21 +328,31 @@ static float tn__gemm_get(const float *X, int ld, int trans, int r, int c)
    (vectorisable); otherwise it takes dot products. */
 static void tn__gemm_simple(const tn__gemm_job *g, int m0, int m1, int n0, int n1)
 {
-    int i, j, k;
+    int i, j, k, bf = g->kern != TN__KERN_FP32; /* bf16: operands rounded as they are read */
     for (i = m0; i < m1; i++) {
         float *crow = g->C + (size_t)i * g->ldc;
         if (!g->trans_b) {
             for (j = n0; j < n1; j++) crow[j] = g->beta == 0.0f ? 0.0f : g->beta * crow[j];
             for (k = 0; k < g->K; k++) {
-                float a = g->alpha * tn__gemm_get(g->A, g->lda, g->trans_a, i, k);
+                float a = tn__gemm_get(g->A, g->lda, g->trans_a, i, k);
                 const float *brow = g->B + (size_t)k * g->ldb;
+                if (bf) {
+                    a = g->alpha * tn__bf16_round(a);
+                    for (j = n0; j < n1; j++) crow[j] += a * tn__bf16_round(brow[j]);
+                    continue;
+                }
+                a *= g->alpha;
                 for (j = n0; j < n1; j++) crow[j] += a * brow[j];
             }
         } else {
             for (j = n0; j < n1; j++) {
                 const float *bcol = g->B + (size_t)j * g->ldb; /* op(B)(k, j) = bcol[k] */
                 float s = 0.0f;
-                for (k = 0; k < g->K; k++) s += tn__gemm_get(g->A, g->lda, g->trans_a, i, k) * bcol[k];
+                if (bf)
+                    for (k = 0; k < g->K; k++)
+                        s += tn__bf16_round(tn__gemm_get(g->A, g->lda, g->trans_a, i, k)) * tn__bf16_round(bcol[k]);
+                else
+                    for (k = 0; k < g->K; k++) s += tn__gemm_get(g->A, g->lda, g->trans_a, i, k) * bcol[k];
                 crow[j] = g->beta == 0.0f ? g->alpha * s : g->alpha * s + g->beta * crow[j];
             }
         }
@@ -339,12 +405,33 @@ static float *tn__gemm_slot_buffer(int s)
 }
 
 /* C[ic.., jc..] (+)= op(A) block x op(B) block from the packed buffers; beta applies to this
-   K block. */
-static void tn__gemm_macro(const tn__gemm_job *g, int ic, int mc, int jc, int nc, int kc, const float *pa,
+   K block. kern: TN__KERN_FP32, or a bf16 kernel that reads the same panels (converted). */
+static void tn__gemm_macro(const tn__gemm_job *g, int kern, int ic, int mc, int jc, int nc, int kc, const float *pa,
                            const float *pb, float beta)
 {
     float tile[TN__GEMM_MR * TN__GEMM_NR];
     int p, q, i, j;
+    if (kern != TN__KERN_FP32 && kern != TN__KERN_EMU) { /* the emulation is the float32 kernel */
+        tn__gemm_kernel_fn kernel = tn__gemm_bf16_kernel_fn(kern);
+        for (p = 0; p < mc; p += TN__GEMM_MR)
+            for (q = 0; q < nc; q += TN__GEMM_NR) {
+                int mr = mc - p < TN__GEMM_MR ? mc - p : TN__GEMM_MR, nr = nc - q < TN__GEMM_NR ? nc - q : TN__GEMM_NR;
+                const float *ap = pa + (size_t)p * kc, *bp = pb + (size_t)(q / TN__GEMM_NR) * tn__gemm_b_stride(kc);
+                float *c = g->C + (size_t)(ic + p) * g->ldc + jc + q;
+                if (mr == TN__GEMM_MR && nr == TN__GEMM_NR) {
+                    kernel(kc, ap, bp, c, g->ldc, g->alpha, beta);
+                    continue;
+                }
+                kernel(kc, ap, bp, tile, TN__GEMM_NR, 1.0f, 0.0f);
+                for (i = 0; i < mr; i++)
+                    for (j = 0; j < nr; j++) {
+                        float *cij = c + (size_t)i * g->ldc + j;
+                        float t = g->alpha * tile[i * TN__GEMM_NR + j];
+                        *cij = beta == 0.0f ? t : t + beta * *cij;
+                    }
+            }
+        return;
+    }
     for (p = 0; p < mc; p += TN__GEMM_MR) {
         int mr = mc - p < TN__GEMM_MR ? mc - p : TN__GEMM_MR;
         const float *ap = pa + (size_t)p * kc;
@@ -372,21 +459,40 @@ static void tn__gemm_macro(const tn__gemm_job *g, int ic, int mc, int jc, int nc
 static void tn__gemm_blocked(const tn__gemm_job *g, int m0, int m1, int n0, int n1, float *pa, float *pb)
 {
     int kblocks = (g->K + TN__GEMM_KC - 1) / TN__GEMM_KC, kcb = (g->K + kblocks - 1) / kblocks;
-    int ic, pc, jc;
+    int ic, pc, jc, kern = g->kern, slot = -1;
+#ifdef TN__BF16_HW
+    uint16_t *ta = NULL; /* AMX: its own copies of the blocks (A, then B) */
+    if (kern == TN__KERN_AMX && !(ta = tn__gemm_amx_scratch(&slot))) kern = TN__KERN_EMU; /* out of memory */
+#endif
     for (ic = m0; ic < m1; ic += TN__GEMM_MC) {
         int mc = m1 - ic < TN__GEMM_MC ? m1 - ic : TN__GEMM_MC;
         for (pc = 0; pc < g->K; pc += kcb) {
             int kc = g->K - pc < kcb ? g->K - pc : kcb;
             float beta = pc == 0 ? g->beta : 1.0f; /* later K blocks accumulate into C */
             tn__gemm_pack_a(g->trans_a, g->A, g->lda, ic, mc, pc, kc, pa);
+#ifdef TN__BF16_HW
+            if (kern == TN__KERN_AMX) tn__gemm_amx_pack_a(pa, mc, kc, ta);
+            else
+#endif
+            if (kern != TN__KERN_FP32)
+                tn__gemm_bf16_prep(kern, pa, (mc + TN__GEMM_MR - 1) / TN__GEMM_MR, (size_t)kc * TN__GEMM_MR, kc, TN__GEMM_MR);
             for (jc = n0; jc < n1; jc += TN__GEMM_NC) {
                 int nc = n1 - jc < TN__GEMM_NC ? n1 - jc : TN__GEMM_NC;
                 if (g->pack_b) g->pack_b(g->pack_ctx, pc, kc, jc, nc, pb);
                 else tn__gemm_pack_b(g->trans_b, g->B, g->ldb, pc, kc, jc, nc, pb);
-                tn__gemm_macro(g, ic, mc, jc, nc, kc, pa, pb, beta);
+#ifdef TN__BF16_HW
+                if (kern == TN__KERN_AMX) {
+                    tn__gemm_amx_block(g, ic, mc, jc, nc, kc, ta, pb, ta + TN__AMX_A_HALVES, beta);
+                    continue;
+                }
+#endif
+                if (kern != TN__KERN_FP32)
+                    tn__gemm_bf16_prep(kern, pb, (nc + TN__GEMM_NR - 1) / TN__GEMM_NR, tn__gemm_b_stride(kc), kc, TN__GEMM_NR);
+                tn__gemm_macro(g, kern, ic, mc, jc, nc, kc, pa, pb, beta);
             }
         }
     }
+    if (slot >= 0) tn__gemm_release_slot(slot);
 }
 
 /* One thread's share: a contiguous range of whole tiles along the split dimension. */
@@ -426,8 +532,8 @@ static void tn__gemm_scale_c(float *C, int ldc, int M, int N, float beta)
     }
 }
 
-TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A, int lda,
-                     const float *B, int ldb, float beta, float *C, int ldc)
+TN_API void tn_gemm(tn_precision precision, int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A,
+                    int lda, const float *B, int ldb, float beta, float *C, int ldc)
 {
     tn__gemm_job g;
     double macs = (double)M * N * K;
@@ -455,6 +561,7 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
     g.C = C;
     g.pack_b = NULL;
     g.pack_ctx = NULL;
+    g.kern = tn__gemm_kern(precision);
     if (macs <= TN__GEMM_SMALL) {
         tn__gemm_simple(&g, 0, M, 0, N);
         return;
@@ -465,6 +572,12 @@ TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha,
     g.max_parts = g.split_n ? (N + TN__GEMM_NR - 1) / TN__GEMM_NR : (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
     if (macs < TN__GEMM_PAR_MIN) tn__gemm_task(&g, 0, 1);
     else tn_parallel_run(tn__gemm_task, &g);
+}
+
+TN_API void tn_sgemm(int trans_a, int trans_b, int M, int N, int K, float alpha, const float *A, int lda,
+                     const float *B, int ldb, float beta, float *C, int ldc)
+{
+    tn_gemm(TN_PRECISION_FP32, trans_a, trans_b, M, N, K, alpha, A, lda, B, ldb, beta, C, ldc);
 }
 
 /* Floats of packing space tn__sgemm_gen_b needs for M rows: an A block, then (64-byte aligned)
@@ -478,7 +591,7 @@ static size_t tn__sgemm_gen_b_floats(int M)
 
 /* C = A B + beta C (A M x K, row-major) on the calling thread, B packed block by block by `pack`,
    using `buf` (64-byte aligned, tn__sgemm_gen_b_floats(M) floats). For use inside a parallel
-   region; results are the same as tn_sgemm's for the same B. */
+   region; results are the same as tn_gemm(TN_PRECISION_AUTO, ...)'s for the same B. */
 static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__gemm_pack_fn pack, void *pack_ctx,
                             float beta, float *C, int ldc, float *buf)
 {
@@ -498,7 +611,382 @@ static void tn__sgemm_gen_b(int M, int N, int K, const float *A, int lda, tn__ge
     g.C = C;
     g.pack_b = pack;
     g.pack_ctx = pack_ctx;
+    g.kern = tn__gemm_kern(TN_PRECISION_AUTO);
     if (M > 0 && N > 0 && K > 0) tn__gemm_blocked(&g, 0, M, 0, N, buf, buf + (rows * TN__GEMM_KC + 15) / 16 * 16);
 }
-#endif /* TN_NO_ENGINE */
 
+/* --------------------------------------------------------------------------------------------
+   >>gemm_bf16  (part of @@gemm implementation: bfloat16 operands, float32 accumulation)
+   The driver above packs A and B in float32 whatever the precision (so the transposes and the
+   convolution's own packing serve both); a bf16 product then converts each packed block once, in
+   the layout its kernel reads. Operands are rounded to nearest even, bf16 subnormals to zero.
+   - emulated (any CPU): in place, values rounded and the rows of each k pair swapped, so the
+     float32 kernel's sequential FMAs take k = 1, 0, 3, 2, ...: the order of VDPBF16PS (Intel SDM:
+     the odd product of a pair is added first). A product of two bf16 is exact in float32, so each
+     FMA rounds exactly as VDPBF16PS's additions do; the two agree bit for bit except for float32
+     subnormal sums (VDPBF16PS flushes them) and the sign of a zero.
+   - AVX512-BF16: in place, each k pair of bf16 in one 32-bit word (k even in the low half), the
+     float32 kernel's MR x NR tiles with VDPBF16PS.
+   - AMX: A rows and B pair rows copied into 16 x 32 bf16 tiles, 32 x 32 blocks of C in four
+     16 x 16 float32 tiles with TDPBF16PS (which adds a pair's even product first).
+   The AVX512-BF16 and AMX kernels carry target attributes and are chosen by cpuid at run time.
+   Every kernel sums each C element over k in an order fixed by K alone, as the float32 path does.
+   -------------------------------------------------------------------------------------------- */
+
+static int tn__precision_setting = TN_PRECISION_AUTO;
+static unsigned tn__cpu_flags;
+static int tn__cpu_probed;
+/* Tests: run bf16 products on this kernel (TN__KERN_EMU ...) instead of the best one, when the
+   CPU has it; 0 = the best. */
+static int tn__gemm_bf16_force;
+
+#ifdef TN__X86_CPUID
+static unsigned long long tn__xgetbv0(void)
+{
+    unsigned lo, hi;
+    __asm__ __volatile__("xgetbv" : "=a"(lo), "=d"(hi) : "c"(0));
+    return ((unsigned long long)hi << 32) | lo;
+}
+#endif
+
+#if defined(TN__BF16_HW) && defined(__linux__)
+/* arch_prctl(ARCH_REQ_XCOMP_PERM, XFEATURE_XTILEDATA): Linux (>= 5.16) gives a process the AMX
+   tile state only when asked. A raw syscall (158): glibc has no wrapper. 0 when granted. */
+static long tn__amx_request(void)
+{
+    long ret;
+    __asm__ __volatile__("syscall" : "=a"(ret) : "0"(158L), "D"(0x1023L), "S"(18L) : "rcx", "r11", "memory");
+    return ret;
+}
+#endif
+
+TN_API unsigned tn_cpu_features(void)
+{
+    if (!tn__cpu_probed) {
+        unsigned f = 0;
+#ifdef TN__X86_CPUID
+        unsigned a, b, c, d;
+        if (__get_cpuid_max(0, NULL) >= 7 && __get_cpuid(1, &a, &b, &c, &d) && (c >> 27 & 1u)) { /* OSXSAVE */
+            unsigned long long xcr0 = tn__xgetbv0();
+            __cpuid_count(7, 0, a, b, c, d);
+            if ((xcr0 & 6u) == 6u && (b >> 5 & 1u)) f |= TN_CPU_AVX2;
+            if ((xcr0 & 0xe6u) == 0xe6u && (b >> 16 & 1u)) { /* ZMM and opmask state enabled */
+                unsigned a1, b1, c1, d1;
+                f |= TN_CPU_AVX512F;
+                __cpuid_count(7, 1, a1, b1, c1, d1);
+                if (a1 >> 5 & 1u) f |= TN_CPU_AVX512_BF16;
+                (void)b1;
+                (void)c1;
+                (void)d1;
+            }
+#if defined(TN__BF16_HW) && defined(__linux__)
+            /* AMX-BF16 (edx 22), AMX-TILE (edx 24), XTILECFG + XTILEDATA in XCR0, and permission */
+            if ((d >> 22 & 1u) && (d >> 24 & 1u) && (xcr0 & 0x60000u) == 0x60000u && tn__amx_request() == 0)
+                f |= TN_CPU_AMX_BF16;
+#endif
+        }
+#endif
+        tn__cpu_flags = f;
+        tn__cpu_probed = 1;
+    }
+    return tn__cpu_flags;
+}
+
+/* The best bf16 kernel this CPU (and this compiler) has. */
+static int tn__gemm_bf16_best(void)
+{
+    int k = TN__KERN_EMU, force = tn__gemm_bf16_force;
+#ifdef TN__BF16_HW
+    unsigned f = tn_cpu_features();
+    if (f & TN_CPU_AMX_BF16) k = TN__KERN_AMX;
+    else if (f & TN_CPU_AVX512_BF16) k = TN__KERN_AVX512BF16;
+    if (force == TN__KERN_EMU || (force == TN__KERN_AVX512BF16 && (f & TN_CPU_AVX512_BF16))) k = force;
+#else
+    (void)force; /* the emulation is the only kernel */
+#endif
+    return k;
+}
+
+TN_API const char *tn_gemm_bf16_kernel(void)
+{
+    int k = tn__gemm_bf16_best();
+    return k == TN__KERN_AMX ? "amx-bf16" : k == TN__KERN_AVX512BF16 ? "avx512-bf16" : "emulated";
+}
+
+TN_API void tn_set_precision(tn_precision p)
+{
+    TN_ASSERT(p == TN_PRECISION_AUTO || p == TN_PRECISION_BF16 || p == TN_PRECISION_FP32);
+    tn__precision_setting = (int)p;
+}
+
+TN_API tn_precision tn_get_precision(void) { return (tn_precision)tn__precision_setting; }
+
+TN_API tn_precision tn_precision_resolve(tn_precision p)
+{
+    if (p == TN_PRECISION_AUTO) p = (tn_precision)tn__precision_setting;
+    if (p == TN_PRECISION_AUTO) {
+#if defined(TN_AUTO_BF16) && TN_AUTO_BF16
+        p = tn_cpu_features() & (TN_CPU_AVX512_BF16 | TN_CPU_AMX_BF16) ? TN_PRECISION_BF16 : TN_PRECISION_FP32;
+#else
+        p = TN_PRECISION_FP32; /* until bf16 training is validated on the matrix units */
+#endif
+    }
+    return p;
+}
+
+TN_API const char *tn_precision_name(tn_precision p)
+{
+    return p == TN_PRECISION_BF16 ? "bf16" : p == TN_PRECISION_FP32 ? "fp32" : "auto";
+}
+
+TN_API tn_status tn_precision_parse(const char *s, tn_precision *p)
+{
+    if (s && !strcmp(s, "auto")) *p = TN_PRECISION_AUTO;
+    else if (s && !strcmp(s, "bf16")) *p = TN_PRECISION_BF16;
+    else if (s && !strcmp(s, "fp32")) *p = TN_PRECISION_FP32;
+    else return tn__fail(TN_ERR_INVALID_ARG, "precision '%s': expected auto, bf16 or fp32", s ? s : "(null)");
+    return TN_OK;
+}
+
+static int tn__gemm_kern(tn_precision p)
+{
+    return tn_precision_resolve(p) == TN_PRECISION_BF16 ? tn__gemm_bf16_best() : TN__KERN_FP32;
+}
+
+/* The bf16 nearest to f (ties to even), as the upper half of float32 bits; subnormals become
+   zeros of their sign (the matrix units treat bf16 subnormals as zero), NaN stays a quiet NaN. */
+static uint32_t tn__bf16_bits(float f)
+{
+    uint32_t u, r;
+    memcpy(&u, &f, sizeof u);
+    r = (u + 0x7fffu + (u >> 16 & 1u)) & 0xffff0000u; /* carries into the exponent, up to infinity */
+    r = u & 0x7f800000u ? r : u & 0x80000000u;
+    return (u & 0x7fffffffu) > 0x7f800000u ? (u | 0x00400000u) & 0xffff0000u : r; /* selects: vectorises */
+}
+
+static float tn__bf16_round(float f)
+{
+    uint32_t u = tn__bf16_bits(f);
+    memcpy(&f, &u, sizeof f);
+    return f;
+}
+
+#ifdef __AVX2__
+/* tn__bf16_bits of 8 floats: the same selects, in integer lanes. */
+static __m256i tn__bf16_bits8(__m256 x)
+{
+    __m256i u = _mm256_castps_si256(x), hi = _mm256_set1_epi32((int)0xffff0000u);
+    __m256i lsb = _mm256_and_si256(_mm256_srli_epi32(u, 16), _mm256_set1_epi32(1));
+    __m256i r = _mm256_and_si256(_mm256_add_epi32(u, _mm256_add_epi32(lsb, _mm256_set1_epi32(0x7fff))), hi);
+    __m256i sub = _mm256_cmpeq_epi32(_mm256_and_si256(u, _mm256_set1_epi32(0x7f800000)), _mm256_setzero_si256());
+    __m256i nan = _mm256_cmpgt_epi32(_mm256_and_si256(u, _mm256_set1_epi32(0x7fffffff)), _mm256_set1_epi32(0x7f800000));
+    r = _mm256_blendv_epi8(r, _mm256_and_si256(u, _mm256_set1_epi32((int)0x80000000u)), sub);
+    return _mm256_blendv_epi8(r, _mm256_and_si256(_mm256_or_si256(u, _mm256_set1_epi32(0x00400000)), hi), nan);
+}
+#endif
+
+/* x[0 .. n) rounded to bf16 in place. */
+static void tn__bf16_round_n(float *x, size_t n)
+{
+    size_t i = 0;
+#ifdef __AVX2__
+    for (; i + 8 <= n; i += 8) _mm256_storeu_ps(x + i, _mm256_castsi256_ps(tn__bf16_bits8(_mm256_loadu_ps(x + i))));
+#endif
+    for (; i < n; i++) x[i] = tn__bf16_round(x[i]);
+}
+
+/* out[j] = bf16(r0[j]) | bf16(r1[j]) << 16 for j < w (r1 NULL: zeros). out may be r0 itself (each
+   group is read before it is written) but not r1. */
+static void tn__bf16_pair_words(const float *r0, const float *r1, void *out, int w)
+{
+    int j = 0;
+#ifdef __AVX2__
+    for (; j + 8 <= w; j += 8) {
+        __m256i lo = _mm256_srli_epi32(tn__bf16_bits8(_mm256_loadu_ps(r0 + j)), 16);
+        __m256i up = r1 ? tn__bf16_bits8(_mm256_loadu_ps(r1 + j)) : _mm256_setzero_si256();
+        _mm256_storeu_si256((__m256i *)(void *)((uint32_t *)out + j), _mm256_or_si256(lo, up));
+    }
+#endif
+    for (; j < w; j++) {
+        uint32_t word = tn__bf16_bits(r0[j]) >> 16 | (r1 ? tn__bf16_bits(r1[j]) : 0u);
+        memcpy((uint32_t *)out + j, &word, sizeof word);
+    }
+}
+
+/* Converts `panels` packed panels (stride floats apart, kc rows of w values each) in place:
+   emulated, rows rounded and each k pair swapped; AVX512-BF16, k pairs as 32-bit words (row
+   k/2 of w words at the panel's start; a pair is read before its words are written, and later
+   pairs lie further on). */
+static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w)
+{
+    int q, k, j;
+    TN_ASSERT(w == TN__GEMM_MR || w == TN__GEMM_NR);
+    for (q = 0; q < panels; q++, p += stride) {
+        if (kern == TN__KERN_EMU) {
+            tn__bf16_round_n(p, (size_t)kc * w); /* a panel's rows are contiguous */
+            for (k = 0; k + 1 < kc; k += 2) { /* swaps with fixed trip counts: unrolled, vectorised */
+                float *r0 = p + (size_t)k * w, *r1 = r0 + w, t;
+                if (w == TN__GEMM_NR)
+                    for (j = 0; j < TN__GEMM_NR; j++) t = r0[j], r0[j] = r1[j], r1[j] = t;
+                else
+                    for (j = 0; j < TN__GEMM_MR; j++) t = r0[j], r0[j] = r1[j], r1[j] = t;
+            }
+            continue;
+        }
+        for (k = 0; k < kc; k += 2) /* pair 0's words land on its row k = 0 (allowed) */
+            tn__bf16_pair_words(p + (size_t)k * w, k + 1 < kc ? p + (size_t)(k + 1) * w : NULL, p + (size_t)(k / 2) * w, w);
+    }
+}
+
+#ifdef TN__BF16_HW
+/* MR x NR tile from pair-packed panels (see tn__gemm_bf16_prep), same contract as tn__gemm_kernel
+   (kc counts k, not pairs). */
+__attribute__((target("avx512f,avx512bw,avx512bf16"))) static void
+tn__gemm_kernel_avx512bf16(int kc, const float *pa_, const float *pb_, float *c, int ldc, float alpha, float beta)
+{
+    const uint32_t *pa = (const uint32_t *)(const void *)pa_, *pb = (const uint32_t *)(const void *)pb_;
+    __m512 acc[TN__GEMM_MR][TN__GEMM_NR / 16], va = _mm512_set1_ps(alpha), vb = _mm512_set1_ps(beta);
+    __m512i bv[TN__GEMM_NR / 16];
+    int pairs = (kc + 1) / 2, p, i, v;
+    for (i = 0; i < TN__GEMM_MR; i++)
+        for (v = 0; v < TN__GEMM_NR / 16; v++) acc[i][v] = _mm512_setzero_ps();
+    for (p = 0; p < pairs; p++, pa += TN__GEMM_MR, pb += TN__GEMM_NR) {
+        for (v = 0; v < TN__GEMM_NR / 16; v++) bv[v] = _mm512_loadu_si512((const void *)(pb + 16 * v));
+        for (i = 0; i < TN__GEMM_MR; i++) {
+            __m512i a = _mm512_set1_epi32((int)pa[i]);
+            for (v = 0; v < TN__GEMM_NR / 16; v++) acc[i][v] = _mm512_dpbf16_ps(acc[i][v], (__m512bh)a, (__m512bh)bv[v]);
+        }
+    }
+    for (i = 0; i < TN__GEMM_MR; i++)
+        for (v = 0; v < TN__GEMM_NR / 16; v++) {
+            float *ci = c + (size_t)i * ldc + 16 * v;
+            if (beta == 0.0f) _mm512_storeu_ps(ci, _mm512_mul_ps(acc[i][v], va));
+            else _mm512_storeu_ps(ci, _mm512_fmadd_ps(acc[i][v], va, _mm512_mul_ps(vb, _mm512_loadu_ps(ci))));
+        }
+}
+#endif
+
+static tn__gemm_kernel_fn tn__gemm_bf16_kernel_fn(int kern)
+{
+#ifdef TN__BF16_HW
+    if (kern == TN__KERN_AVX512BF16) return tn__gemm_kernel_avx512bf16;
+#endif
+    (void)kern;
+    return tn__gemm_kernel;
+}
+
+#ifdef TN__BF16_HW
+static void *tn__gemm_amx_raw[TN__GEMM_SLOTS];
+
+/* A slot's AMX copies (TN__AMX_A_HALVES + TN__AMX_B_HALVES, 64-byte aligned), allocated on first
+   use and kept; NULL (and no slot held) when out of slots or memory. */
+static uint16_t *tn__gemm_amx_scratch(int *slot)
+{
+    int s = tn__gemm_claim_slot();
+    *slot = -1;
+    if (s < 0) return NULL;
+    if (!tn__gemm_amx_raw[s]) tn__gemm_amx_raw[s] = TN_MALLOC((TN__AMX_A_HALVES + TN__AMX_B_HALVES) * 2 + 64);
+    if (!tn__gemm_amx_raw[s]) {
+        tn__gemm_release_slot(s);
+        return NULL;
+    }
+    *slot = s;
+    return (uint16_t *)(((uintptr_t)tn__gemm_amx_raw[s] + 63) & ~(uintptr_t)63);
+}
+
+/* The packed A block (MR-row panels) as bf16 rows of kp = kc rounded up to 32, rows up to a
+   multiple of 32; the padding is zero. */
+static void tn__gemm_amx_pack_a(const float *pa, int mc, int kc, uint16_t *ta)
+{
+    int kp = (kc + 31) / 32 * 32, mp = (mc + 31) / 32 * 32, i, k;
+    for (i = 0; i < mp; i++) {
+        uint16_t *row = ta + (size_t)i * kp;
+        const float *src = pa + (size_t)(i / TN__GEMM_MR) * kc * TN__GEMM_MR + i % TN__GEMM_MR;
+        for (k = 0; k < kp; k++) row[k] = i < mc && k < kc ? (uint16_t)(tn__bf16_bits(src[(size_t)k * TN__GEMM_MR]) >> 16) : 0;
+    }
+}
+
+/* The packed B block (NR-column panels) as 16-column groups of kp/2 rows of 16 (k even, k odd)
+   bf16 pairs: 64-byte tile rows. Columns up to a multiple of 32; the padding is zero. */
+static void tn__gemm_amx_pack_b(const float *pb, int nc, int kc, uint16_t *tb)
+{
+    int kp = (kc + 31) / 32 * 32, groups = (nc + 31) / 32 * 2, panels = (nc + TN__GEMM_NR - 1) / TN__GEMM_NR, g, k;
+    size_t panel = tn__gemm_b_stride(kc);
+    for (g = 0; g < groups; g++) { /* columns [16 g, 16 g + 16): in panel 16 g / NR unless past the last */
+        const float *src = pb + (size_t)(g * 16 / TN__GEMM_NR) * panel + g * 16 % TN__GEMM_NR;
+        int live = g * 16 < panels * TN__GEMM_NR; /* packed columns past nc are zero already */
+        for (k = 0; k < kp; k += 2) { /* one 64-byte tile row per k pair */
+            uint16_t *d = tb + (size_t)g * kp * 16 + (size_t)k * 16;
+            if (live && k < kc)
+                tn__bf16_pair_words(src + (size_t)k * TN__GEMM_NR, k + 1 < kc ? src + (size_t)(k + 1) * TN__GEMM_NR : NULL, d, 16);
+            else
+                memset(d, 0, 64);
+        }
+    }
+}
+
+/* The LDTILECFG block: palette 1, then bytes per row and rows of each of the 8 tiles. */
+typedef struct tn__amx_cfg {
+    unsigned char palette, start_row, reserved[14];
+    unsigned short colsb[16];
+    unsigned char rows[16];
+} tn__amx_cfg;
+
+/* C[ic.., jc..] (+)= A block x B block on the tiles: tmm0-3 the 2 x 2 C tiles of a 32 x 32 block,
+   tmm4-5 two A tiles (16 rows x 32 k), tmm6-7 two B tiles (16 pair rows x 16 columns). */
+__attribute__((target("amx-tile,amx-bf16"))) static void tn__gemm_amx_tiles(const tn__gemm_job *g, int ic, int mc, int jc,
+                                                                               int nc, int kc, const uint16_t *ta,
+                                                                               const uint16_t *tb, float beta)
+{
+    tn__amx_cfg cfg;
+    float tile[32 * 32];
+    int kp = (kc + 31) / 32 * 32, i, j, k, r, t;
+    memset(&cfg, 0, sizeof cfg);
+    cfg.palette = 1;
+    for (t = 0; t < 8; t++) {
+        cfg.rows[t] = 16;
+        cfg.colsb[t] = 64;
+    }
+    _tile_loadconfig(&cfg);
+    for (i = 0; i < mc; i += 32)
+        for (j = 0; j < nc; j += 32) {
+            const uint16_t *a0 = ta + (size_t)i * kp, *a1 = a0 + (size_t)16 * kp;
+            const uint16_t *b0 = tb + (size_t)(j / 16) * kp * 16, *b1 = b0 + (size_t)kp * 16;
+            int rows = mc - i < 32 ? mc - i : 32, cols = nc - j < 32 ? nc - j : 32;
+            _tile_zero(0);
+            _tile_zero(1);
+            _tile_zero(2);
+            _tile_zero(3);
+            for (k = 0; k < kp; k += 32) {
+                _tile_loadd(4, a0 + k, kp * 2);
+                _tile_loadd(5, a1 + k, kp * 2);
+                _tile_loadd(6, b0 + (size_t)k * 16, 64);
+                _tile_loadd(7, b1 + (size_t)k * 16, 64);
+                _tile_dpbf16ps(0, 4, 6);
+                _tile_dpbf16ps(1, 4, 7);
+                _tile_dpbf16ps(2, 5, 6);
+                _tile_dpbf16ps(3, 5, 7);
+            }
+            _tile_stored(0, tile, 128);
+            _tile_stored(1, tile + 16, 128);
+            _tile_stored(2, tile + 16 * 32, 128);
+            _tile_stored(3, tile + 16 * 32 + 16, 128);
+            for (r = 0; r < rows; r++) {
+                float *crow = g->C + (size_t)(ic + i + r) * g->ldc + jc + j;
+                for (t = 0; t < cols; t++) {
+                    float v = g->alpha * tile[r * 32 + t];
+                    crow[t] = beta == 0.0f ? v : v + beta * crow[t];
+                }
+            }
+        }
+    _tile_release();
+}
+
+static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, int nc, int kc, const uint16_t *ta,
+                               const float *pb, uint16_t *tb, float beta)
+{
+    tn__gemm_amx_pack_b(pb, nc, kc, tb);
+    tn__gemm_amx_tiles(g, ic, mc, jc, nc, kc, ta, tb, beta);
+}
+#endif
+#endif /* TN_NO_ENGINE */

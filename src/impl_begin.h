@@ -46,6 +46,16 @@
 #if defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))
 #include <immintrin.h>
 #endif
+/* >>gemm_bf16: cpuid at run time on x86 with GCC/clang; its AVX512-BF16 and AMX kernels carry
+   target attributes (GCC >= 11, clang >= 12, x86-64), so they need the intrinsics whatever -m flags. */
+#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
+#include <cpuid.h>
+#define TN__X86_CPUID 1
+#if defined(__x86_64__) && ((defined(__clang__) && __clang_major__ >= 12) || (!defined(__clang__) && __GNUC__ >= 11))
+#define TN__BF16_HW 1
+#include <immintrin.h>
+#endif
+#endif
 
 /* Static helpers that several sections share: with some sections compiled out (TN_NO_...), some
    go unused, which is not worth a warning. */

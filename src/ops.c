@@ -363,12 +363,12 @@ static void tn__matmul_backward(tn_ctx *ctx, tn_tensor *out)
     int M = out->shape[0], N = out->shape[1], K = ta ? a->shape[0] : a->shape[1];
     /* C = op(A) op(B): dA = dC op(B)^T (stored transposed when ta), dB likewise */
     if (a->requires_grad && tn__grad(ctx, a)) {
-        if (!ta) tn_sgemm(0, !tb, M, K, N, 1.0f, out->grad, N, b->data, b->shape[1], 1.0f, a->grad, a->shape[1]);
-        else tn_sgemm(tb, 1, K, M, N, 1.0f, b->data, b->shape[1], out->grad, N, 1.0f, a->grad, a->shape[1]);
+        if (!ta) tn_gemm(TN_PRECISION_AUTO, 0, !tb, M, K, N, 1.0f, out->grad, N, b->data, b->shape[1], 1.0f, a->grad, a->shape[1]);
+        else tn_gemm(TN_PRECISION_AUTO, tb, 1, K, M, N, 1.0f, b->data, b->shape[1], out->grad, N, 1.0f, a->grad, a->shape[1]);
     }
     if (b->requires_grad && tn__grad(ctx, b)) {
-        if (!tb) tn_sgemm(!ta, 0, K, N, M, 1.0f, a->data, a->shape[1], out->grad, N, 1.0f, b->grad, b->shape[1]);
-        else tn_sgemm(1, ta, N, K, M, 1.0f, out->grad, N, a->data, a->shape[1], 1.0f, b->grad, b->shape[1]);
+        if (!tb) tn_gemm(TN_PRECISION_AUTO, !ta, 0, K, N, M, 1.0f, a->data, a->shape[1], out->grad, N, 1.0f, b->grad, b->shape[1]);
+        else tn_gemm(TN_PRECISION_AUTO, 1, ta, N, K, M, 1.0f, out->grad, N, a->data, a->shape[1], 1.0f, b->grad, b->shape[1]);
     }
 }
 
@@ -390,7 +390,7 @@ TN_API tn_tensor *tn_matmul(tn_ctx *ctx, tn_tensor *a, tn_tensor *b, int trans_a
     if (!o) return NULL;
     o->ip[0] = trans_a != 0;
     o->ip[1] = trans_b != 0;
-    tn_sgemm(trans_a, trans_b, M, N, K, 1.0f, a->data, a->shape[1], b->data, b->shape[1], 0.0f, o->data, N);
+    tn_gemm(TN_PRECISION_AUTO, trans_a, trans_b, M, N, K, 1.0f, a->data, a->shape[1], b->data, b->shape[1], 0.0f, o->data, N);
     return o;
 }
 
@@ -906,7 +906,7 @@ static void tn__conv_fwd_task(void *ctx, int ith, int nth)
             float *yb = yn + (size_t)m0 * ohw + (size_t)oy * g->OW;
             if ((double)j->M * band * j->K <= TN__CONV_TINY) {
                 tn__im2col_band(g, xn, col, oy, oy1);
-                tn_sgemm(0, 0, m1 - m0, band, j->K, 1.0f, wm, j->K, col, band, j->beta, yb, (int)ohw);
+                tn_gemm(TN_PRECISION_AUTO, 0, 0, m1 - m0, band, j->K, 1.0f, wm, j->K, col, band, j->beta, yb, (int)ohw);
             } else { /* the bias is folded in as weight column K against a row of ones */
                 tn__conv_pack pk;
                 int kb = j->K + (j->bias != NULL);
@@ -951,9 +951,9 @@ static void tn__conv_dw_task(void *ctx, int ith, int nth)
                         for (i = 0; i < band; i++) col[(size_t)j->K * band + i] = 1.0f;
                 }
                 if (j->phase) /* transposed partial: kd x M = col dy^T */
-                    tn_sgemm(0, 1, j->kd, j->M, band, 1.0f, cb, ldc, dyb, (int)ohw, beta, part, j->M);
+                    tn_gemm(TN_PRECISION_AUTO, 0, 1, j->kd, j->M, band, 1.0f, cb, ldc, dyb, (int)ohw, beta, part, j->M);
                 else
-                    tn_sgemm(0, 1, j->M, j->kd, band, 1.0f, dyb, (int)ohw, cb, ldc, beta, part, j->kd);
+                    tn_gemm(TN_PRECISION_AUTO, 0, 1, j->M, j->kd, band, 1.0f, dyb, (int)ohw, cb, ldc, beta, part, j->kd);
                 beta = 1.0f; /* the first product of a group initialises its partial */
             }
     }
@@ -972,7 +972,7 @@ static void tn__conv_dx_task(void *ctx, int ith, int nth)
         tn__conv_group_rows(j, 2 * (it % per) + j->phase, &r0, &r1);
         for (oy = r0; oy < r1; oy += j->sub) {
             int oy1 = oy + j->sub < r1 ? oy + j->sub : r1, band = (oy1 - oy) * g->OW;
-            tn_sgemm(1, 0, j->K, band, j->M, 1.0f, j->w, j->K, j->dy + (size_t)n * j->M * ohw + (size_t)oy * g->OW,
+            tn_gemm(TN_PRECISION_AUTO, 1, 0, j->K, band, j->M, 1.0f, j->w, j->K, j->dy + (size_t)n * j->M * ohw + (size_t)oy * g->OW,
                      (int)ohw, 0.0f, col, band);
             tn__col2im_band(g, col, j->dx + (size_t)n * chw, oy, oy1);
         }

@@ -2198,8 +2198,10 @@ static void print_usage(FILE *f)
 {
     size_t i;
     fprintf(f, "terrainnet %s - learn terrain from one example; synthesise terrain and textures\n\n"
-               "usage: terrainnet [--threads N] COMMAND [ARGS]   (`terrainnet COMMAND --help` or\n"
-               "       `terrainnet help COMMAND` for its arguments)\n\ncommands:\n",
+               "usage: terrainnet [--threads N] [--precision auto|bf16|fp32] COMMAND [ARGS]\n"
+               "       (`terrainnet COMMAND --help` or `terrainnet help COMMAND` for its arguments;\n"
+               "       --precision: of the products under convolutions and dense layers, bf16 with\n"
+               "       float32 sums and weights, or float32; auto = fp32 for now)\n\ncommands:\n",
             TN_VERSION_STRING);
     for (i = 0; i < NCOMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i]->name, commands[i]->summary);
 }
@@ -2223,6 +2225,14 @@ int main(int argc, char **argv)
                 return 2;
             }
             tn_set_threads((int)n);
+            a += 2;
+        } else if (!strcmp(argv[a], "--precision") && a + 1 < argc) {
+            tn_precision p;
+            if (tn_precision_parse(argv[a + 1], &p) != TN_OK) {
+                fprintf(stderr, "terrainnet: --precision needs auto, bf16 or fp32\n");
+                return 2;
+            }
+            tn_set_precision(p);
             a += 2;
         } else {
             fprintf(stderr, "terrainnet: unknown option %s\n", argv[a]);
