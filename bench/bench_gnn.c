@@ -27,7 +27,8 @@
    gnn_fig10_<region>.png: the example crop, then the Figure 10 sketch as membrane, GNN and GNN
    with 48 random nodes, hillshaded), finetune=N (fine-tune steps of the neighbours' GNN figures,
    the drawn sketch's and the 512 map's; default 0), model=PATH (load the model from PATH and
-   skip training when it exists, else train and save it there).
+   skip training when it exists, else train and save it there), grow=G (tn_gnn_generate_opts.grow of
+   every generation: 0 = auto, the default; -1 = never densify by example, the form before it).
    Prints `name: value unit` lines. */
 #include "terrainnet.h"
 #include <stdio.h>
@@ -330,7 +331,7 @@ int main(int argc, char **argv)
     float gain = 0.0f, phase = 0.0f; /* 0: tn_gnn_defaults' embed_phase */
     double done = 0;
     long iters = 0, phase_from = -1;
-    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0, finetune = 0;
+    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0, finetune = 0, grow = 0;
     const char *model_path = NULL;
     tn_image hw[4];
     trace_set ts;
@@ -347,6 +348,7 @@ int main(int argc, char **argv)
         else if (kl == 6 && !strncmp(argv[a], "sketch", kl)) o.sketch_weight = (float)v;
         else if (kl == 7 && !strncmp(argv[a], "further", kl)) o.further_weight = (float)v;
         else if (kl == 4 && !strncmp(argv[a], "gain", kl)) gain = (float)v;
+        else if (kl == 4 && !strncmp(argv[a], "grow", kl)) grow = (int)v;
         else if (kl == 5 && !strncmp(argv[a], "phase", kl)) phase = (float)v;
         else if (kl == 8 && !strncmp(argv[a], "pictures", kl)) pictures = v != 0;
         else if (kl == 5 && !strncmp(argv[a], "index", kl)) o.part_index = (int)v;
@@ -356,7 +358,7 @@ int main(int argc, char **argv)
         else if (kl == 8 && !strncmp(argv[a], "finetune", kl)) finetune = (int)v;
         else if (kl == 5 && !strncmp(argv[a], "model", kl)) model_path = eq + 1;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= holdout= phasenet= finetune= model= pictures= trace=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= grow= holdout= phasenet= finetune= model= pictures= trace=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -403,6 +405,7 @@ int main(int argc, char **argv)
         return 1;
     }
     memset(&go, 0, sizeof go);
+    go.grow = grow;
     if (trace) trace_prepare(&ts, &full, cx, cy, thr);
     if (model_path && !access(model_path, F_OK)) { /* model=PATH: a model trained before */
         if (tn_gnn_load(model_path, &model)) {
@@ -556,6 +559,7 @@ int main(int argc, char **argv)
         for (c = 0; c < units.count; c++)
             for (j = 0; j < units.items[c].npoints; j++) units.items[c].points[3 * j + 2] = model.lo + (model.hi - model.lo) * units.items[c].points[3 * j + 2];
         memset(&go, 0, sizeof go);
+        go.grow = grow;
         go.seed = 1;
         if (!tn_gnn_membrane(&units, U, U, &mem)) user_scores("membrane", &a, &crop, &mem);
         t0 = tn_time_seconds();
@@ -594,6 +598,7 @@ int main(int argc, char **argv)
         if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) user_scores("gnn_finetune30_order", &a, &crop, &g);
         tn_image_free(&g);
         memset(&go, 0, sizeof go);
+        go.grow = grow;
         tn_image_free(&mem);
         tn_contour_set_free(&a);
         tn_contour_set_free(&ar);

@@ -39,7 +39,9 @@
    Seamless tiles: a pixel's neighbour parts lie within `radius` px and the membrane is solved on
    overlapping blocks, so a pixel depends only on the sketch within a fixed distance; any window
    computed alone (tn_gnn_generate_window) equals the whole map's pixels, and large maps run in
-   tiles with memory of one tile. Random sketches (5.2) can densify a sparse user sketch.
+   tiles with memory of one tile. A drawing of a few strokes is densified by example first
+   (tn_gnn_grow: blocks of the example's own network quilted between the strokes, never
+   crossing them), or on request by random sketches (5.2).
    ============================================================================================ */
 #ifndef TN_NO_GNN
 #if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT)
@@ -188,6 +190,11 @@ typedef struct tn_gnn_generate_opts {
     float gain;              /* how much of the network's residual over the membrane is added:
                                 0 = validated on the sketch (tn_gnn_gain), > 0 = this factor
                                 (1 = the network as trained), < 0 = none (the membrane) */
+    int grow;                /* densify by example (tn_gnn_grow) before the network runs: 0 = when
+                                the sketch's line pixels per map pixel are under a sixth of the
+                                example network's (a drawing of a few strokes: 6-10 % of it; an
+                                extracted network at 500 cells, 30 %, is not grown) and random_nodes
+                                is 0; 1 = always; -1 = never */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -250,6 +257,50 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
 #endif /* TN_NO_GNN */
+
+/* Densify by example (issue 30): a drawing of a few strokes leaves most of the map to the
+   membrane, smooth slopes between the strokes. tn_gnn_grow fills the space between the user's
+   lines with the example's own network, the network the model rebuilds best: the map is cut
+   into blocks, and each copies the example's network from a window of the example under one of
+   the 8 rotations and mirrors, the best of `candidates` random placements by how well its lines
+   lie on the user's lines nearby (ridge on ridge, valley on valley) and continue the blocks
+   placed before it across their overlap (image quilting, on the network). So line spacing,
+   branch angles, segment lengths and ridge/valley alternation are the example's. Added lines keep
+   `gap` px from every user line, so none crosses or touches one; they are thinned and traced
+   into polylines of 5+ px. Their heights: the membrane of the user's lines plus the example
+   line's own height above the mean of the example's lines within 48 px (its local relief; the
+   quilting also matches these heights across the overlap),
+   then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
+   user valley (the nearest user line) by the example's mean local relief / 16 px per px. */
+typedef struct tn_gnn_grow_opts {
+    uint64_t seed;
+    float gap;            /* px between an added line and every user line; 0 = 4 */
+    int block;            /* side of the copied blocks (px); 0 = 48 (2/3 of the example's side when that is smaller) */
+    int candidates;       /* random placements scored per block; 0 = 48 */
+} tn_gnn_grow_opts;
+/* *out = the user's polylines (unchanged, first) followed by the added ones. user: on a width x
+   height canvas (else TN_ERR_SHAPE), heights in the example's units; example: a network with
+   heights (tn_gnn_parts of a model, or an extraction's contours), same pixel size, at least
+   16 x 16. Same inputs and seed, same output. opts may be NULL. *added (may be NULL) = the
+   number of added polylines. */
+TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added);
+
+/* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
+typedef struct tn_gnn_plan {
+    int user_lines;       /* the sketch's polylines */
+    int grown_lines;      /* polylines tn_gnn_grow added (0: not grown) */
+    double user_density;  /* the sketch's line pixels per map pixel */
+    double example_density; /* the example network's, per example pixel */
+    float gain;           /* the residual gain generation uses (tn_gnn_gain) */
+    double gain_raw;      /* the held-out lines' estimate before scale and clamp; NAN = untested */
+    double gain_scale;    /* the model's scale of the test (1 without holdouts) */
+    const char *gain_why; /* one line: why the gain is what it is (static text) */
+} tn_gnn_plan;
+/* Fills *plan for tn_gnn_generate with the same arguments (without running the network
+   beyond the gain test). */
+TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                tn_gnn_plan *plan);
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)
@@ -2640,6 +2691,11 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 typedef struct tn__gnn_gen {
     tn__gnn_arch A;
     int W, H, halo;
+    int grown;                 /* polylines tn_gnn_grow added (0: not grown) */
+    uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
+                                  valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
+    float *pin_d;              /* W x H: chamfer distance to them */
+    double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
     double gain_raw;           /* the held-out lines' least-squares gain before scale and clamp
                                   (tn__gnn_gain_validate); NAN = not tested */
@@ -2671,6 +2727,8 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->type);
     TN_FREE(G->hgt);
     TN_FREE(G->fixed);
+    TN_FREE(G->pin);
+    TN_FREE(G->pin_d);
     tn_params_free(G->own_w);
     memset(G, 0, sizeof *G);
 }
@@ -3185,6 +3243,277 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
     return st;
 }
 
+/* ---- densify by example (tn_gnn_grow; issue 30) ---- */
+
+/* Chamfer distance (1, sqrt 2) to the nearest set pixel of src, and that pixel's index (-1 and
+   FLT_MAX when src has none): two raster passes. */
+static void tn__gnn_chamfer(const uint8_t *src, int W, int H, float *d, int *near)
+{
+    static const int dx[4] = {-1, 0, 1, -1}, dy[4] = {-1, -1, -1, 0};
+    static const float dw[4] = {1.41421356f, 1.0f, 1.41421356f, 1.0f};
+    int x, y, k, pass;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            size_t i = (size_t)y * W + x;
+            d[i] = src[i] ? 0.0f : FLT_MAX;
+            near[i] = src[i] ? (int)i : -1;
+        }
+    for (pass = 0; pass < 2; pass++) {
+        int s = pass ? -1 : 1;
+        for (y = pass ? H - 1 : 0; pass ? y >= 0 : y < H; y += s)
+            for (x = pass ? W - 1 : 0; pass ? x >= 0 : x < W; x += s) {
+                size_t i = (size_t)y * W + x;
+                for (k = 0; k < 4; k++) {
+                    int qx = x + s * dx[k], qy = y + s * dy[k];
+                    size_t q;
+                    if (qx < 0 || qy < 0 || qx >= W || qy >= H) continue;
+                    q = (size_t)qy * W + qx;
+                    if (near[q] >= 0 && d[q] + dw[k] < d[i]) {
+                        d[i] = d[q] + dw[k];
+                        near[i] = near[q];
+                    }
+                }
+            }
+    }
+}
+
+/* Position in the example of pixel (i, j) of an S x S window at (ox, oy) under dihedral t. */
+static size_t tn__gnn_grow_at(int i, int j, int S, int t, int ox, int oy, int Wx)
+{
+    int a = i, b = j;
+    if (t & 1) a = j, b = i;
+    if (t & 2) a = S - 1 - a;
+    if (t & 4) b = S - 1 - b;
+    return (size_t)(oy + b) * Wx + ox + a;
+}
+
+TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
+{
+    tn_gnn_grow_opts o;
+    tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
+    tn_contour_set set;
+    tn__pts pts = {NULL, 0, 0};
+    size_t n = (size_t)width * height, nx, i, cap = 0, nl = 0;
+    int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
+    int8_t *etype = NULL, *ptype = NULL;
+    uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
+    float *D = NULL, *erel = NULL, *prel = NULL, fall, relief;
+    double *sum = NULL, *cnt = NULL, rel_sum = 0;
+    tn_rng rng;
+    tn_status st;
+    TN_ASSERT(out);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (added) *added = 0;
+    if (!user || user->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn grow: the sketch is empty");
+    if ((st = tn__cset_check(user, "gnn grow"))) return st;
+    if ((st = tn__cset_check(example, "gnn grow (example)"))) return st;
+    if (user->width != width || user->height != height)
+        return tn__fail(TN_ERR_SHAPE, "gnn grow: the sketch's canvas %d x %d is not the map's %d x %d", user->width, user->height, width, height);
+    if (example->count <= 0 || example->width < 16 || example->height < 16)
+        return tn__fail(TN_ERR_EMPTY, "gnn grow: the example network is empty or under 16 x 16");
+    if (!(o.gap >= 0 && o.gap <= 1e4f) || o.block < 0 || o.candidates < 0 || o.candidates > 100000)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn grow: bad option (gap %g, block %d, candidates %d)", (double)o.gap, o.block, o.candidates);
+    if (o.gap == 0) o.gap = 4;
+    if (!o.block) o.block = 48;
+    if (!o.candidates) o.candidates = 48;
+    Wx = example->width;
+    Hx = example->height;
+    B = o.block;
+    if (B + B / 2 > (Wx < Hx ? Wx : Hx)) B = (Wx < Hx ? Wx : Hx) * 2 / 3;
+    mg = B / 4;
+    S = B + 2 * mg;
+    nx = (size_t)Wx * Hx;
+    memset(&set, 0, sizeof set);
+    set.width = width;
+    set.height = height;
+    if ((st = tn_sketch_rasterise(user, width, height, &ur)) || (st = tn_sketch_rasterise(example, Wx, Hx, &er)) ||
+        (st = tn_gnn_membrane(user, width, height, &mem)))
+        goto done;
+    umask = (uint8_t *)tn__alloc(n);
+    placed = (uint8_t *)tn__calloc(n);
+    mask = (uint8_t *)tn__alloc(n);
+    ptype = (int8_t *)tn__calloc(n);
+    prel = (float *)tn__calloc(n * sizeof(float));
+    D = (float *)tn__alloc(n * sizeof(float));
+    near = (int *)tn__alloc(n * sizeof(int));
+    etype = (int8_t *)tn__alloc(nx);
+    emask = (uint8_t *)tn__alloc(nx);
+    erel = (float *)tn__alloc(nx * sizeof(float));
+    sum = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
+    cnt = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
+    if (!umask || !placed || !mask || !ptype || !prel || !D || !near || !etype || !emask || !erel || !sum || !cnt) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
+    tn__gnn_chamfer(umask, width, height, D, near);
+    /* the example: line types, each line pixel's height above the mean of the lines within R px
+       (integral images of (Wx + 1) x (Hx + 1)) */
+    {
+        int x, y, R = 48, W1 = Wx + 1;
+        size_t nline = 0;
+        for (i = 0; i < nx; i++) {
+            etype[i] = (int8_t)(er.data[3 * i] > 0 ? 1 : er.data[3 * i + 1] > 0 ? -1 : 0);
+            emask[i] = (uint8_t)(etype[i] != 0);
+        }
+        for (y = 0; y < Hx; y++)
+            for (x = 0; x < Wx; x++) {
+                size_t q = (size_t)(y + 1) * W1 + x + 1, p = (size_t)y * Wx + x;
+                sum[q] = (emask[p] ? er.data[3 * p + 2] : 0.0) + sum[q - 1] + sum[q - W1] - sum[q - W1 - 1];
+                cnt[q] = (double)emask[p] + cnt[q - 1] + cnt[q - W1] - cnt[q - W1 - 1];
+            }
+        for (y = 0; y < Hx; y++)
+            for (x = 0; x < Wx; x++) {
+                size_t p = (size_t)y * Wx + x;
+                int x0 = x - R < 0 ? 0 : x - R, y0 = y - R < 0 ? 0 : y - R, x1 = x + R + 1 > Wx ? Wx : x + R + 1, y1 = y + R + 1 > Hx ? Hx : y + R + 1;
+                double s = sum[(size_t)y1 * W1 + x1] - sum[(size_t)y0 * W1 + x1] - sum[(size_t)y1 * W1 + x0] + sum[(size_t)y0 * W1 + x0];
+                double k = cnt[(size_t)y1 * W1 + x1] - cnt[(size_t)y0 * W1 + x1] - cnt[(size_t)y1 * W1 + x0] + cnt[(size_t)y0 * W1 + x0];
+                erel[p] = emask[p] && k > 0 ? (float)(er.data[3 * p + 2] - s / k) : 0.0f;
+                if (emask[p]) rel_sum += fabsf(erel[p]), nline++;
+            }
+        if (!nline) {
+            st = tn__fail(TN_ERR_EMPTY, "gnn grow: the example network covers no pixel");
+            goto done;
+        }
+        relief = (float)(rel_sum / (double)nline) + 1e-6f;
+        fall = relief / 16; /* a third of the relief over the radius it is measured on: steeper ruled the moat (docs/gnn.md) */
+    }
+    /* quilting: blocks in raster order, each the best of the candidates */
+    tn_rng_seed(&rng, o.seed, 0x67726f77ULL);
+    for (by = 0; by * B < height; by++)
+        for (bx = 0; bx * B < width; bx++) {
+            int x0 = bx * B, y0 = by * B, bt = 0, box = 0, boy = 0, u, v;
+            double best = -DBL_MAX;
+            for (c = 0; c < o.candidates; c++) {
+                int t = (int)(tn_rng_u32(&rng) % 8u), ox = (int)(tn_rng_u32(&rng) % (uint32_t)(Wx - S + 1)),
+                    oy = (int)(tn_rng_u32(&rng) % (uint32_t)(Hx - S + 1));
+                double score = 0;
+                for (v = -mg; v < B + mg; v++)
+                    for (u = -mg; u < B + mg; u++) {
+                        int X = x0 + u, Y = y0 + v, e;
+                        size_t p, q;
+                        if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
+                        p = (size_t)Y * width + X;
+                        q = tn__gnn_grow_at(u + mg, v + mg, S, t, ox, oy, Wx);
+                        e = etype[q];
+                        if (D[p] <= o.gap && near[p] >= 0) { /* lie on the user's lines: same type near them */
+                            int ut = ur.data[3 * (size_t)near[p]] > 0 ? 1 : -1;
+                            score += e * ut;
+                        }
+                        if (placed[p] && (e || ptype[p])) { /* continue the earlier blocks: lines and their heights */
+                            score += e == ptype[p] ? 1.0 : -0.5;
+                            if (e && e == ptype[p]) score -= fabsf(erel[q] - prel[p]) / relief;
+                        }
+                    }
+                if (score > best) best = score, bt = t, box = ox, boy = oy;
+            }
+            for (v = 0; v < B; v++)
+                for (u = 0; u < B; u++) {
+                    int X = x0 + u, Y = y0 + v;
+                    size_t p, q;
+                    if (X >= width || Y >= height) continue;
+                    p = (size_t)Y * width + X;
+                    q = tn__gnn_grow_at(u + mg, v + mg, S, bt, box, boy, Wx);
+                    placed[p] = 1;
+                    ptype[p] = etype[q];
+                    prel[p] = erel[q];
+                }
+        }
+    /* the user's lines first, then each type's added pixels away from them, thinned and traced */
+    for (c = 0; c < user->count; c++) {
+        const tn_contour *u = &user->items[c];
+        if ((st = tn__cset_add(&set, &cap, u->type, u->order, u->mean_gradient, u->points, u->npoints))) goto done;
+    }
+    for (type = 0; type < 2; type++) {
+        int want = type == TN_RIDGE ? 1 : -1, x, y, k;
+        tn__trace t;
+        size_t l;
+        for (i = 0; i < n; i++) mask[i] = (uint8_t)(ptype[i] == want && D[i] >= o.gap);
+        if ((st = tn_skeletonize(mask, width, height))) goto done;
+        if (type == TN_RIDGE) /* the valleys give way where a block's seam put them next to a ridge */
+            for (y = 0; y < height; y++)
+                for (x = 0; x < width; x++) {
+                    size_t p = (size_t)y * width + x;
+                    if (!mask[p]) ptype[p] = (int8_t)(ptype[p] == 1 ? 0 : ptype[p]);
+                    else
+                        for (k = 0; k < 8; k++) {
+                            int qx = x + tn__d8x[k], qy = y + tn__d8y[k];
+                            if (qx >= 0 && qy >= 0 && qx < width && qy < height && ptype[(size_t)qy * width + qx] == -1)
+                                ptype[(size_t)qy * width + qx] = 0;
+                        }
+                }
+        if ((st = tn__trace_skeleton(mask, width, height, &t))) goto done;
+        for (l = 0; !st && l < t.nlines; l++) {
+            if (t.starts[l + 1] - t.starts[l] < 5) continue;
+            pts.n = 0;
+            for (k = 0; !st && (size_t)k < t.starts[l + 1] - t.starts[l]; k++) {
+                size_t p = t.cells[t.starts[l] + (size_t)k];
+                float h = mem.data[p] + prel[p], d = D[p];
+                if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
+                    float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
+                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - fall * d) : fmaxf(h, hs + fall * d);
+                    h = w * h + (1 - w) * b;
+                }
+                st = tn__pts_push(&pts, (float)(p % (size_t)width), (float)(p / (size_t)width), h);
+            }
+            if (!st) st = tn__cset_add(&set, &cap, (tn_contour_type)type, 0, 0.0f, pts.p, pts.n);
+            nl++;
+        }
+        tn__trace_free(&t);
+        if (st) goto done;
+    }
+done:
+    tn_image_free(&ur);
+    tn_image_free(&er);
+    tn_image_free(&mem);
+    TN_FREE(umask);
+    TN_FREE(placed);
+    TN_FREE(mask);
+    TN_FREE(ptype);
+    TN_FREE(prel);
+    TN_FREE(D);
+    TN_FREE(near);
+    TN_FREE(etype);
+    TN_FREE(emask);
+    TN_FREE(erel);
+    TN_FREE(sum);
+    TN_FREE(cnt);
+    TN_FREE(pts.p);
+    if (st) {
+        tn_contour_set_free(&set);
+        return st;
+    }
+    *out = set;
+    if (added) *added = (int)nl;
+    return TN_OK;
+}
+
+/* Some line of s runs 5 px or more (a contour part's length). */
+static int tn__gnn_has_part_length(const tn_contour_set *s)
+{
+    tn_contour_set d;
+    int i, yes = 0;
+    if (tn_sketch_densify(s, &d)) return 0;
+    for (i = 0; i < d.count && !yes; i++) yes = d.items[i].npoints >= 5;
+    tn_contour_set_free(&d);
+    return yes;
+}
+
+/* Line pixels of a set per canvas pixel. */
+static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
+{
+    tn_image r = {0, 0, 0, NULL};
+    size_t i, n = (size_t)s->width * s->height, k = 0;
+    tn_status st = tn_sketch_rasterise(s, s->width, s->height, &r);
+    if (st) return st;
+    for (i = 0; i < n; i++) k += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
+    tn_image_free(&r);
+    *density = (double)k / (double)n;
+    return TN_OK;
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -3203,7 +3532,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
     if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 ||
         !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
                         "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
@@ -3222,7 +3551,43 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         sk = rnd;
         memset(&rnd, 0, sizeof rnd);
     }
+    if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
+                                                            network between them (a sketch without a 5 px line fails below, ungrown) */
+        tn_contour_set ex;
+        memset(&ex, 0, sizeof ex);
+        if (!(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex)) && !(st = tn__gnn_line_density(&sk, &G->user_density)))
+            st = tn__gnn_line_density(&ex, &G->example_density);
+        if (!st && (o.grow == 1 || (o.random_nodes == 0 && G->user_density < G->example_density / 6))) {
+            tn_gnn_grow_opts go;
+            memset(&go, 0, sizeof go);
+            go.seed = o.seed;
+            if (!(st = tn_gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown))) {
+                tn_contour_set_free(&sk);
+                sk = rnd;
+                memset(&rnd, 0, sizeof rnd);
+            }
+        }
+        tn_contour_set_free(&ex);
+        if (st) goto done;
+    }
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
+    if (G->grown > 0) { /* the user's lines of a grown sketch keep their heights (tn__gnn_pin) */
+        tn_contour_set u = sk;
+        tn_image r = {0, 0, 0, NULL};
+        size_t q, n = (size_t)width * height;
+        int *near = (int *)tn__alloc(n * sizeof(int));
+        u.count = sketch->count;
+        G->pin = (uint8_t *)tn__alloc(n);
+        G->pin_d = (float *)tn__alloc(n * sizeof(float));
+        if (!near || !G->pin || !G->pin_d) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st && !(st = tn_sketch_rasterise(&u, width, height, &r))) {
+            for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
+            tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
+        }
+        tn_image_free(&r);
+        TN_FREE(near);
+        if (st) goto done;
+    }
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
     else if (G->A.membrane && !known && !(st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain_raw)) && isfinite(G->gain_raw))
         G->gain = tn__gnn_gain_of(tn__gnn_gain_scale(G->w), G->gain_raw);
@@ -3237,23 +3602,70 @@ done:
 /* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
    grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
    the network's residual. base_dst (may be NULL): the membrane there. */
+#define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
+
+/* A grown sketch's user lines keep their heights where the network moved them against their
+   kind: the residual near them, minus a smooth local mean of the residual on them that lowers a
+   ridge or raises a valley (min(r, 0) on ridge pixels, max(r, 0) on valley pixels; kernel
+   (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to
+   them. So a ridge is never below, a valley never above, its asked height by more than what is
+   left of that mean; a residual that deepens a valley or lifts a ridge stays (pinning it too made
+   the land beside a Sahara valley lower than the valley: 77 -> 44 % followed). The network alone
+   moved a stroke of a weak model by up to 19 % of the range (Sahara, docs/gnn.md). Reads pred (rw x rh
+   at (rx, ry), normalised) within L of the window (x, y, ww, wh), which the caller computed
+   exactly; writes the correction of each window pixel into corr (ww x wh). */
+static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const float *pred, int x, int y, int ww, int wh, float *corr)
+{
+    const int L = TN__GNN_PIN;
+    int u, v, a, b;
+    for (v = 0; v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            int X = x + u, Y = y + v;
+            float d = G->pin_d[(size_t)Y * G->W + X], phi;
+            double num = 0, den = 0;
+            corr[(size_t)v * ww + u] = 0;
+            if (!(d < (float)L)) continue;
+            for (b = Y - L + 1; b < Y + L; b++)
+                for (a = X - L + 1; a < X + L; a++) {
+                    float e, k;
+                    size_t i;
+                    if (a < 0 || b < 0 || a >= G->W || b >= G->H || !G->pin[(size_t)b * G->W + a]) continue;
+                    e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+                    if (e >= (float)L) continue;
+                    k = (1 - e / L) * (1 - e / L) / (e + 0.5f);
+                    i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
+                    e = pred[i] - R->base[i];
+                    num += k * (G->pin[(size_t)b * G->W + a] == 1 ? fminf(e, 0.0f) : fmaxf(e, 0.0f));
+                    den += k;
+                }
+            phi = 1 - d / L;
+            phi = phi * phi * (3 - 2 * phi);
+            if (den > 0) corr[(size_t)v * ww + u] = (float)(phi * num / den);
+        }
+}
+
 static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
                                     size_t stride)
 {
     tn__gnn_region R;
-    float *pred = NULL;
-    int rx = x - G->halo > 0 ? x - G->halo : 0, ry = y - G->halo > 0 ? y - G->halo : 0, u, v;
-    int rx1 = x + ww + G->halo < G->W ? x + ww + G->halo : G->W, ry1 = y + wh + G->halo < G->H ? y + wh + G->halo : G->H;
+    float *pred = NULL, *corr = NULL;
+    int L = G->pin ? TN__GNN_PIN : 0, gx = x - L > 0 ? x - L : 0, gy = y - L > 0 ? y - L : 0; /* pinning reads L px around the window */
+    int gx1 = x + ww + L < G->W ? x + ww + L : G->W, gy1 = y + wh + L < G->H ? y + wh + L : G->H;
+    int rx = gx - G->halo > 0 ? gx - G->halo : 0, ry = gy - G->halo > 0 ? gy - G->halo : 0, u, v;
+    int rx1 = gx1 + G->halo < G->W ? gx1 + G->halo : G->W, ry1 = gy1 + G->halo < G->H ? gy1 + G->halo : G->H;
     tn_status st;
     if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
     if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
     if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && G->pin && !(corr = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
+    if (!st && corr) tn__gnn_pin(G, &R, pred, x, y, ww, wh, corr);
     for (v = 0; !st && v < wh; v++)
         for (u = 0; u < ww; u++) {
             size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
-            float p = G->gain == 1.0f ? pred[i] : R.base[i] + G->gain * (pred[i] - R.base[i]), h = G->A.mean + G->A.std * p;
+            float r = pred[i] - (corr ? corr[(size_t)v * ww + u] : 0.0f);
+            float p = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]), h = G->A.mean + G->A.std * p;
             if (!isfinite(h)) {
                 st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
                 break;
@@ -3263,6 +3675,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
         }
     tn__gnn_region_free(&R);
     TN_FREE(pred);
+    TN_FREE(corr);
     return st;
 }
 
@@ -3390,6 +3803,39 @@ TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, 
     o.finetune = 0; /* the test never fine-tunes */
     if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
     *gain = G.gain;
+    tn__gnn_gen_free(&G);
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                tn_gnn_plan *plan)
+{
+    tn__gnn_gen G;
+    tn_gnn_generate_opts o;
+    tn_status st;
+    TN_ASSERT(plan);
+    memset(plan, 0, sizeof *plan);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    o.finetune = 0;
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    plan->user_lines = sketch->count;
+    plan->grown_lines = G.grown;
+    plan->user_density = G.user_density;
+    plan->example_density = G.example_density;
+    plan->gain = G.gain;
+    plan->gain_raw = G.gain_raw;
+    plan->gain_scale = tn__gnn_gain_scale(G.w);
+    if (o.gain > 0) plan->gain_why = "set by --gain";
+    else if (o.gain < 0) plan->gain_why = "set to none: the membrane of the sketch alone";
+    else if (!G.A.membrane) plan->gain_why = "the model predicts heights directly (no membrane): gain 1";
+    else if (isfinite(G.gain_raw))
+        plan->gain_why = G.gain <= 0 ? "tested on the sketch: the network's relief did not fit the held-out lines, so the output is the membrane "
+                                       "of the lines (smooth between them); --gain 1 forces the relief"
+                                     : "tested on the sketch: held-out lines predicted from the rest";
+    else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
+        plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
+    else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
     tn__gnn_gen_free(&G);
     return TN_OK;
 }

@@ -463,6 +463,9 @@ TN_TEST(bad_inputs_fail_cleanly)
         go.random_nodes = 9000;
         TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
         go.random_nodes = 0;
+        go.grow = 2;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        go.grow = 0;
         go.order_weight = NAN;
         TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
     }
@@ -945,6 +948,155 @@ TN_TEST(holdout_windows)
     tn_image_free(&small);
 }
 
+/* A ridge across a width x height canvas at y = h/3 and a valley at y = 2h/3 (heights in metres,
+   rising along them), the few strokes of a drawing. */
+static tn_contour_set two_strokes(int w, int h, float *rp, float *vp)
+{
+    tn_contour_set s;
+    static tn_contour c[2];
+    int i;
+    for (i = 0; i < 10; i++) {
+        rp[3 * i] = vp[3 * i] = 5.0f + (float)i * (float)(w - 10) / 9.0f;
+        rp[3 * i + 1] = (float)h / 3 + 6.0f * sinf((float)i);
+        vp[3 * i + 1] = 2.0f * (float)h / 3;
+        rp[3 * i + 2] = 1700.0f + 10.0f * (float)i;
+        vp[3 * i + 2] = 1200.0f + 5.0f * (float)i;
+    }
+    memset(c, 0, sizeof c);
+    c[0].type = TN_RIDGE;
+    c[1].type = TN_VALLEY;
+    c[0].npoints = c[1].npoints = 10;
+    c[0].points = rp;
+    c[1].points = vp;
+    memset(&s, 0, sizeof s);
+    s.width = w;
+    s.height = h;
+    s.count = 2;
+    s.items = c;
+    return s;
+}
+
+TN_TEST(grow_by_example)
+{
+    /* densify by example: the user's lines come first and unchanged; added lines are 8-connected
+       chains of 5+ px that keep the gap from every user pixel (so none crosses or touches one),
+       of both types; same seed same lines, another seed other lines; bad inputs fail */
+    tn_image dem = tn_test_dem(64, 21), ur = {0, 0, 0, NULL};
+    tn_contour_set ex = own_sketch(&dem), user, g1, g2, g3, bad;
+    tn_gnn_grow_opts go;
+    float rp[30], vp[30];
+    int added = 0, added2 = 0, i, j, types[2] = {0, 0}, x, y;
+    size_t q;
+    TN_CHECK(ex.count > 0);
+    user = two_strokes(120, 90, rp, vp);
+    memset(&go, 0, sizeof go);
+    go.seed = 3;
+    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g1, &added) == TN_OK);
+    TN_CHECK(added > 4 && g1.count == 2 + added);
+    for (i = 0; i < 2; i++)
+        TN_CHECK(g1.items[i].type == user.items[i].type && g1.items[i].npoints == 10 &&
+                 !memcmp(g1.items[i].points, user.items[i].points, 30 * sizeof(float)));
+    TN_CHECK(tn_sketch_rasterise(&user, 120, 90, &ur) == TN_OK);
+    for (i = 2; i < g1.count; i++) {
+        const tn_contour *c = &g1.items[i];
+        types[c->type == TN_RIDGE]++;
+        TN_CHECK(c->npoints >= 5);
+        for (j = 0; j < c->npoints; j++) {
+            float px = c->points[3 * j], py = c->points[3 * j + 1], d2 = 1e30f;
+            TN_CHECK(isfinite(c->points[3 * j + 2]));
+            if (j) TN_CHECK(fabsf(px - c->points[3 * j - 3]) <= 1 && fabsf(py - c->points[3 * j - 2]) <= 1);
+            for (y = 0; y < 90; y++)
+                for (x = 0; x < 120; x++) {
+                    q = (size_t)y * 120 + x;
+                    if (ur.data[3 * q] > 0 || ur.data[3 * q + 1] > 0) d2 = fminf(d2, (px - x) * (px - x) + (py - y) * (py - y));
+                }
+            TN_CHECK(d2 >= 4.0f * 4.0f * 0.99f); /* chamfer >= 4 px: Euclidean >= 4 / 1.082 would do; the default gap holds */
+        }
+    }
+    TN_CHECK(types[0] > 0 && types[1] > 0);
+    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g2, &added2) == TN_OK && added2 == added);
+    for (i = 0; i < g1.count; i++)
+        TN_CHECK(g2.items[i].npoints == g1.items[i].npoints && !memcmp(g2.items[i].points, g1.items[i].points, (size_t)g1.items[i].npoints * 3 * sizeof(float)));
+    go.seed = 4;
+    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_OK);
+    {
+        int differ = g3.count != g1.count;
+        for (i = 2; !differ && i < g1.count; i++)
+            differ = g3.items[i].npoints != g1.items[i].npoints || memcmp(g3.items[i].points, g1.items[i].points, (size_t)g1.items[i].npoints * 3 * sizeof(float));
+        TN_CHECK(differ);
+    }
+    tn_contour_set_free(&g3);
+    /* bad inputs */
+    TN_CHECK(tn_gnn_grow(&user, &ex, 100, 90, &go, &g3, NULL) == TN_ERR_SHAPE);
+    bad = user;
+    bad.count = 0;
+    TN_CHECK(tn_gnn_grow(&bad, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_EMPTY);
+    bad = ex;
+    bad.width = bad.height = 8;
+    TN_CHECK(tn_gnn_grow(&user, &bad, 120, 90, &go, &g3, NULL) != TN_OK);
+    go.gap = -1;
+    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_INVALID_ARG);
+    go.gap = 0;
+    rp[4] = NAN;
+    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_NUMERIC);
+    tn_contour_set_free(&g1);
+    tn_contour_set_free(&g2);
+    tn_contour_set_free(&ex);
+    tn_image_free(&ur);
+    tn_image_free(&dem);
+}
+
+TN_TEST(grown_generation)
+{
+    /* gnn generation of a drawing of two strokes: grown by default (the plan says how much and
+       why the gain is what it is), not with grow = -1; the strokes' pixels keep their heights
+       in the grown membrane; the same bytes on 1 and 2 threads */
+    tn_image dem = tn_test_dem(64, 22), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL}, ur = {0, 0, 0, NULL};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_gnn_plan plan;
+    tn_contour_set user, ex, grown;
+    float rp[30], vp[30];
+    int before = tn_get_threads();
+    size_t q, n = 0;
+    double err = 0;
+    tiny_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    user = two_strokes(240, 180, rp, vp);
+    memset(&go, 0, sizeof go);
+    go.seed = 2;
+    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK);
+    TN_CHECK(plan.grown_lines > 0 && plan.user_lines == 2 && plan.gain_why && strstr(plan.gain_why, "fewer than 8") && plan.gain == 1.0f);
+    TN_CHECK(plan.user_density > 0 && plan.user_density < plan.example_density / 6);
+    go.grow = -1;
+    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.grown_lines == 0);
+    go.grow = 0;
+    go.gain = -1;
+    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.gain == 0 && strstr(plan.gain_why, "membrane"));
+    go.gain = 0;
+    TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &a) == TN_OK);
+    tn_set_threads(1 + (before == 1));
+    TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &b) == TN_OK);
+    tn_set_threads(before);
+    TN_CHECK(same_image(&a, &b));
+    /* the grown sketch's membrane holds every stroke pixel at its asked height */
+    TN_CHECK(tn_gnn_parts(&m, &ex) == TN_OK);
+    TN_CHECK(tn_gnn_grow(&user, &ex, 240, 180, NULL, &grown, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&grown, 240, 180, &mem) == TN_OK && tn_sketch_rasterise(&user, 240, 180, &ur) == TN_OK);
+    for (q = 0; q < (size_t)240 * 180; q++)
+        if (ur.data[3 * q] > 0 || ur.data[3 * q + 1] > 0) err += fabs(mem.data[q] - ur.data[3 * q + 2]), n++;
+    TN_CHECK(n > 100 && err / n < 1e-3);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&mem);
+    tn_image_free(&ur);
+    tn_contour_set_free(&ex);
+    tn_contour_set_free(&grown);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 int main(void)
 {
     TN_RUN(membrane_interpolates_between_lines);
@@ -963,5 +1115,7 @@ int main(void)
     TN_RUN(finetune_in_windows);
     TN_RUN(residual_gain);
     TN_RUN(ordering_share);
+    TN_RUN(grow_by_example);
+    TN_RUN(grown_generation);
     return tn_test_summary("test_gnn");
 }

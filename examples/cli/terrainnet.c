@@ -1731,7 +1731,7 @@ static const cli_command gnn_train_cmd = {"gnn-train", CLI_CMD(gnn_train), "lear
 
 static struct gnn_generate_args {
     const char *model, *sketch, *out, *preview, *detail;
-    int w, h, heights, embeddings;
+    int w, h, heights, embeddings, grow;
     double range[2];
     tn_gnn_generate_opts o;
     tn_singan_gen_opts detail_opts;
@@ -1747,9 +1747,14 @@ static const cli_opt gnn_generate_opts[] = {
     {"seed", 0, ARG_U64, 0, &gnn_generate_arg.o.seed, NULL, 0, 0, "S", "random seed (part cutting, random sketches, alignment)", "0"},
     {"random", 0, ARG_INT, 0, &gnn_generate_arg.o.random_nodes, NULL, 0, 8192, "N",
      "densify the sketch with random ridges and valleys from N random nodes (paper 5.2)", "0 = none"},
+    {"grow", 0, ARG_CHOICE, 0, &gnn_generate_arg.grow, NULL, 0, 0, "auto|on|off",
+     "densify by example: fill the space between the sketch's lines with blocks of the example's own ridge/valley network, "
+     "placed to continue the lines (never crossing them; heights from the lines)",
+     "auto: on when the sketch's lines cover under a sixth of the example network's density (a drawing of a few strokes) "
+     "and --random is 0"},
     {"finetune", 0, ARG_INT, 0, &gnn_generate_arg.o.finetune, NULL, 0, 100000, "STEPS",
      "tune the sketch parts' embeddings to the sketch's heights and ridge/valley ordering first (paper 5.4)",
-     "30 for a drawn sketch (an image, or a .tns in heights 0..1), else 0 = none"},
+     "30 for a drawn sketch (an image, or a .tns in heights 0..1) that is not grown (--grow), else 0 = none"},
     {"embeddings", 0, ARG_CHOICE, 0, &gnn_generate_arg.embeddings, NULL, 0, 0, "auto|aligned|none",
      "which sketch parts take an example part's embedding: identical ones, every one by alignment, none", "auto"},
     {"heights", 0, ARG_CHOICE, 0, &gnn_generate_arg.heights, NULL, 0, 0, "auto|example|unit",
@@ -1817,6 +1822,7 @@ static int run_gnn_generate(void)
 {
     struct gnn_generate_args *a = &gnn_generate_arg;
     tn_gnn model;
+    tn_gnn_plan plan;
     tn_singan detail;
     tn_contour_set sk;
     tn_image terrain = {0, 0, 0, NULL};
@@ -1842,14 +1848,16 @@ static int run_gnn_generate(void)
     }
     a->o.heights = a->heights == 1 ? TN_GNN_HEIGHTS_EXAMPLE : a->heights == 2 ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_AUTO;
     a->o.embeddings = a->embeddings == 1 ? TN_GNN_EMBED_ALIGNED : a->embeddings == 2 ? TN_GNN_EMBED_NONE : TN_GNN_EMBED_AUTO;
-    if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md) */
-        a->o.finetune = relative_heights(&sk) ? 30 : 0;
+    a->o.grow = a->grow == 1 ? 1 : a->grow == 2 ? -1 : 0;
     t0 = tn_time_seconds();
-    if (a->o.gain == 0) { /* tested once here and then fixed, so it can be printed */
-        float g = 1.0f;
-        if (!(st = tn_gnn_gain(&model, &sk, a->w, a->h, &a->o, &g))) a->o.gain = g > 0 ? g : -1.0f;
-    } else
-        st = TN_OK;
+    memset(&plan, 0, sizeof plan);
+    /* the gain is tested once here and then fixed, so it can be printed with its reason */
+    if (!(st = tn_gnn_plan_of(&model, &sk, a->w, a->h, &a->o, &plan)) && a->o.gain == 0) a->o.gain = plan.gain > 0 ? plan.gain : -1.0f;
+    if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md); a grown
+                              one has the example's network around its strokes instead, and the fine-tune would cost 10 x */
+        a->o.finetune = relative_heights(&sk) && !plan.grown_lines ? 30 : 0;
+    if (!st && plan.gain <= 0)
+        fprintf(stderr, "terrainnet: gnn-generate: residual gain 0: %s\n", plan.gain_why);
     if (!st) st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
     if (!st && a->detail) { /* SinGAN adds the fine detail the graph network cannot rebuild (paper 000) */
         tn_image refined = {0, 0, 0, NULL};
@@ -1874,9 +1882,12 @@ static int run_gnn_generate(void)
             if (terrain.data[i] < lo) lo = terrain.data[i];
             if (terrain.data[i] > hi) hi = terrain.data[i];
         }
-        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\nresidual_gain: %.3f\nfinetune_steps: %d\nseconds: %.2f\nheight_range: %.6g %.6g\n"
-               "output: %s\n", kind, sk.count, sk.width, sk.height, a->w, a->h, a->o.gain > 0 ? a->o.gain : 0.0, a->o.finetune, tn_time_seconds() - t0,
-               lo, hi, a->out);
+        printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\n", kind, sk.count, sk.width, sk.height, a->w, a->h);
+        printf("line_density: %.4f (the example's network: %.4f)\ngrown_lines: %d%s\n", plan.user_density, plan.example_density,
+               plan.grown_lines, plan.grown_lines ? " (densified by example: blocks of the example's network between the lines)" : "");
+        printf("residual_gain: %.3f\nresidual_gain_why: %s", a->o.gain > 0 ? a->o.gain : 0.0, plan.gain_why);
+        if (isfinite(plan.gain_raw)) printf(" (estimate %.3f x scale %.2f, clamped to 0..1)", plan.gain_raw, plan.gain_scale);
+        printf("\nfinetune_steps: %d\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n", a->o.finetune, tn_time_seconds() - t0, lo, hi, a->out);
     }
     tn_image_free(&terrain);
     tn_contour_set_free(&sk);

@@ -1,0 +1,265 @@
+/* bench_sketch: a drawing of a few strokes becomes terrain (paper 000's user path, issue 30).
+   For one region and a trained gnn model of its 128 crop (gnn-train), each drawing of
+   examples/data (sketch_valley, sketch_summit, sketch_ring, sketch_cross: heights 0..1 over the
+   example's range) is generated at 256 x 256 four ways:
+   - membrane: the Laplace interpolation of the strokes' heights (no network);
+   - today: the network on the strokes alone (--grow off), the gain as tested;
+   - random48: the strokes with 48 random nodes' ridges and valleys (paper 5.2, --random 48);
+   - new: densified by example (tn_gnn_grow, the default for a drawing of few strokes);
+   - grown_membrane: the membrane of the densified sketch (gain -1), what the network adds to.
+   Figures per drawing and way (`name: value unit` lines):
+   - follow: the share of stroke points above (ridge) or below (valley) both terrain pixels 4 px
+     across the stroke (tn_gnn_ordering, distance 4);
+   - height_error: mean |terrain - asked height| over the strokes' pixels, % of the example's range;
+   - slope, curvature, spectrum: tn_realism_compare distances of the output to the example (the
+     128 crop, metres, its pixel spacing; nothing resized), each divided by the mean distance of
+     three real 256 crops of the same DEM (the corners of <region>_full.png farthest from the
+     example) to the example: <= 1.5 is the issue's target;
+   - seconds: generation time (gain test included).
+   Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...]
+   from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
+   128 px at their own size) | drawing | today | new, hillshaded on the example's range. */
+#include "terrainnet.h"
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <math.h>
+
+static const char *data_dir(void)
+{
+    const char *d = getenv("TN_DATA");
+    return d && d[0] ? d : "../shared/data";
+}
+
+/* dx, dy, h_at_0, h_at_65535 of <region>_full.png from dem_index.csv */
+static int mapping(const char *region, double *dxy, double *h0, double *h1)
+{
+    char path[512], line[1024], want[256];
+    FILE *f;
+    snprintf(path, sizeof path, "%s/dem_index.csv", data_dir());
+    snprintf(want, sizeof want, "dem/%s/%s_full.png,", region, region);
+    if (!(f = fopen(path, "r"))) return 0;
+    while (fgets(line, sizeof line, f)) {
+        char *p = line;
+        int col;
+        if (strncmp(line, want, strlen(want))) continue;
+        for (col = 0; col < 5 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+        if (!p || sscanf(p, "%lf,%lf", dxy, dxy + 1) != 2) dxy[0] = dxy[1] = 1;
+        for (col = 0; col < 2 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+        fclose(f);
+        return p && sscanf(p, "%lf,%lf", h0, h1) == 2;
+    }
+    fclose(f);
+    return 0;
+}
+
+static int load_metres(const char *region, const char *suffix, double h0, double h1, tn_image *img)
+{
+    char path[512];
+    size_t i;
+    snprintf(path, sizeof path, "%s/dem/%s/%s_%s.png", data_dir(), region, region, suffix);
+    if (tn_image_load(path, img, NULL)) return 0;
+    for (i = 0; i < (size_t)img->width * img->height * img->channels; i++) img->data[i] = (float)(h0 + img->data[i] * (h1 - h0));
+    return 1;
+}
+
+static int locate(const tn_image *full, const tn_image *crop, int *cx, int *cy)
+{
+    int x, y, u, v;
+    for (y = 0; y + crop->height <= full->height; y++)
+        for (x = 0; x + crop->width <= full->width; x++) {
+            int ok = 1;
+            for (v = 0; v < crop->height && ok; v++)
+                for (u = 0; u < crop->width && ok; u++) ok = TN_PIXEL(full, x + u, y + v, 0) == TN_PIXEL(crop, u, v, 0);
+            if (ok) return *cx = x, *cy = y, 1;
+        }
+    return 0;
+}
+
+static tn_realism_opts ropts;
+
+static void distances(const tn_image *ex, const tn_image *img, double *d)
+{
+    tn_realism r;
+    d[0] = d[1] = d[2] = NAN;
+    if (tn_realism_compare(ex, img, &ropts, &r)) return;
+    d[0] = r.slope_distance;
+    d[1] = r.curvature_distance;
+    d[2] = r.spectrum_distance;
+}
+
+/* Panels at their own pixel size (a 128 example stays 128 px), 4 px apart, hillshaded on lo..hi. */
+static void save_strip(const char *path, const tn_image *const *img, int n, float lo, float hi, const double *dxy)
+{
+    tn_render_opts ro;
+    tn_image strip = {0, 0, 0, NULL}, pv = {0, 0, 0, NULL};
+    int i, y, W = 0, Hm = 0, x0 = 0;
+    memset(&ro, 0, sizeof ro);
+    ro.lo = lo;
+    ro.hi = hi;
+    ro.shade.dx = (float)dxy[0];
+    ro.shade.dy = (float)dxy[1];
+    for (i = 0; i < n; i++) {
+        W += img[i]->width + (i ? 4 : 0);
+        if (img[i]->height > Hm) Hm = img[i]->height;
+    }
+    if (tn_image_create(&strip, W, Hm, 3)) return;
+    for (i = 0; i < n; i++) {
+        int rgb = img[i]->channels == 3;
+        if (rgb || !tn_render_preview(img[i], &ro, &pv))
+            for (y = 0; y < img[i]->height; y++)
+                memcpy(&TN_PIXEL(&strip, x0, y, 0), &TN_PIXEL(rgb ? img[i] : &pv, 0, y, 0), (size_t)img[i]->width * 3 * sizeof(float));
+        tn_image_free(&pv);
+        x0 += img[i]->width + 4;
+    }
+    {
+        tn_save_opts so;
+        memset(&so, 0, sizeof so);
+        so.bit_depth = 8;
+        if (!tn_image_save(path, &strip, &so)) printf("picture: %s\n", path);
+    }
+    tn_image_free(&strip);
+}
+
+int main(int argc, char **argv)
+{
+    static const char *all[] = {"valley", "summit", "ring", "cross"};
+    static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane"};
+    const char *region, *model_path, *pictures = NULL, *only = NULL;
+    double dxy[2], h0, h1, real[3] = {0, 0, 0};
+    tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
+    tn_gnn model;
+    int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k;
+    if (argc < 3) {
+        fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b]\n");
+        return 2;
+    }
+    region = argv[1];
+    model_path = argv[2];
+    for (a = 3; a < argc; a++) {
+        if (!strncmp(argv[a], "finetune=", 9)) finetune = atoi(argv[a] + 9);
+        else if (!strncmp(argv[a], "pictures=", 9)) pictures = argv[a] + 9;
+        else if (!strncmp(argv[a], "drawings=", 9)) only = argv[a] + 9;
+        else threads = atoi(argv[a]);
+    }
+    tn_set_threads(threads);
+    if (!mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &ex) ||
+        !locate(&full, &ex, &ex_x, &ex_y)) {
+        fprintf(stderr, "bench_sketch: %s: data not found under %s\n", region, data_dir());
+        return 1;
+    }
+    if (tn_gnn_load(model_path, &model)) {
+        fprintf(stderr, "bench_sketch: %s: %s\n", model_path, tn_last_error());
+        return 1;
+    }
+    memset(&ropts, 0, sizeof ropts);
+    ropts.dx_a = (float)dxy[0];
+    ropts.dy_a = (float)dxy[1];
+    printf("region: %s\nexample: 128 x 128 at (%d, %d), %.6g .. %.6g m\nmodel: %s (%ld iterations)\nthreads: %d\nfinetune: %d\n", region, ex_x, ex_y,
+           (double)model.lo, (double)model.hi, model_path, model.iterations, threads, finetune);
+    /* the three real 256 crops of the DEM's corners farthest from the example */
+    {
+        int cx[4] = {0, full.width - 256, 0, full.width - 256}, cy[4] = {0, 0, full.height - 256, full.height - 256}, used[4] = {0, 0, 0, 0};
+        for (k = 0; k < 3; k++) {
+            int best = -1, i;
+            double bd = -1;
+            for (i = 0; i < 4; i++) {
+                double dd = hypot(cx[i] + 128 - (ex_x + 64), cy[i] + 128 - (ex_y + 64));
+                if (!used[i] && dd > bd) bd = dd, best = i;
+            }
+            used[best] = 1;
+            {
+                tn_image c = {0, 0, 0, NULL};
+                double dist[3];
+                if (tn_image_crop(&c, &full, cx[best], cy[best], 256, 256)) continue;
+                distances(&ex, &c, dist);
+                printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f\n", k, cx[best], cy[best], dist[0], dist[1], dist[2]);
+                real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
+                tn_image_free(&c);
+            }
+        }
+        for (k = 0; k < 3; k++) real[k] /= nreal;
+        printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
+    }
+    for (d = 0; d < 4; d++) {
+        char path[512];
+        tn_contour_set sk, asked;
+        tn_image out[5], rast = {0, 0, 0, NULL}, drawing = {0, 0, 0, NULL};
+        if (only && !strstr(only, all[d])) continue;
+        snprintf(path, sizeof path, "examples/data/sketch_%s.tns", all[d]);
+        if (tn_sketch_load(path, &sk)) {
+            fprintf(stderr, "bench_sketch: %s\n", tn_last_error());
+            continue;
+        }
+        asked = sk; /* heights 0..1 -> the example's range, for the height error */
+        asked.items = (tn_contour *)calloc((size_t)sk.count, sizeof(tn_contour));
+        for (k = 0; k < sk.count; k++) {
+            int j;
+            asked.items[k] = sk.items[k];
+            asked.items[k].points = (float *)malloc((size_t)sk.items[k].npoints * 3 * sizeof(float));
+            for (j = 0; j < sk.items[k].npoints; j++) {
+                asked.items[k].points[3 * j] = sk.items[k].points[3 * j];
+                asked.items[k].points[3 * j + 1] = sk.items[k].points[3 * j + 1];
+                asked.items[k].points[3 * j + 2] = model.lo + (model.hi - model.lo) * sk.items[k].points[3 * j + 2];
+            }
+        }
+        tn_sketch_rasterise(&asked, 256, 256, &rast);
+        for (w = 0; w < 5; w++) {
+            tn_gnn_generate_opts o;
+            tn_gnn_plan plan;
+            double t0 = tn_time_seconds(), share = 0, err = 0, dist[3], secs;
+            size_t q, nq = 0;
+            int cnt = 0;
+            tn_status st;
+            memset(&out[w], 0, sizeof out[w]);
+            memset(&o, 0, sizeof o);
+            memset(&plan, 0, sizeof plan);
+            o.seed = 1;
+            o.finetune = w == 0 ? 0 : finetune;
+            o.grow = w >= 3 ? 0 : -1;
+            o.random_nodes = w == 2 ? 48 : 0;
+            if (w == 0) st = tn_gnn_membrane(&asked, 256, 256, &out[w]);
+            else {
+                st = tn_gnn_plan_of(&model, &sk, 256, 256, &o, &plan);
+                if (!st) {
+                    o.gain = w == 4 || plan.gain <= 0 ? -1.0f : plan.gain;
+                    st = tn_gnn_generate(&model, &sk, 256, 256, &o, &out[w]);
+                }
+            }
+            secs = tn_time_seconds() - t0;
+            if (st) {
+                printf("%s_%s: failed (%s)\n", all[d], way[w], tn_last_error());
+                continue;
+            }
+            tn_gnn_ordering(&sk, &out[w], 4, &share, &cnt);
+            for (q = 0; q < (size_t)256 * 256; q++)
+                if (rast.data[3 * q] > 0 || rast.data[3 * q + 1] > 0) err += fabs(out[w].data[q] - rast.data[3 * q + 2]), nq++;
+            distances(&ex, &out[w], dist);
+            printf("%s_%s_follow: %.1f %%\n", all[d], way[w], 100 * share);
+            printf("%s_%s_height_error: %.2f %% of range\n", all[d], way[w], 100 * err / (nq ? nq : 1) / (model.hi - model.lo));
+            printf("%s_%s_slope: %.4f (%.2f x real)\n", all[d], way[w], dist[0], dist[0] / real[0]);
+            printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
+            printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
+            if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, secs);
+            fflush(stdout);
+        }
+        if (pictures && out[1].data && out[3].data && !tn_sketch_preview(&asked, NULL, 256, 256, &drawing)) {
+            const tn_image *panel[4];
+            panel[0] = &ex;
+            panel[1] = &drawing;
+            panel[2] = &out[1];
+            panel[3] = &out[3];
+            snprintf(path, sizeof path, "%s/sketch_%s_%s.png", pictures, region, all[d]);
+            save_strip(path, panel, 4, model.lo, model.hi, dxy);
+        }
+        for (w = 0; w < 5; w++) tn_image_free(&out[w]);
+        tn_image_free(&rast);
+        tn_image_free(&drawing);
+        tn_contour_set_free(&asked);
+        tn_contour_set_free(&sk);
+    }
+    tn_gnn_free(&model);
+    tn_image_free(&full);
+    tn_image_free(&ex);
+    return 0;
+}
