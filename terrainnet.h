@@ -1471,10 +1471,15 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
    spectral-normalised patch discriminator with the hinge loss (the engine has no double
    backward for SinGAN's WGAN-GP) plus 10 x the MSE of the reconstruction: the image the
    generators make from one fixed noise map at the coarsest scale and no noise above it.
+   The discriminator judges a scale's DETAIL (the generator's residual; for the example, the
+   scale minus its coarser scale upsampled) in units of the example's detail RMS sigma at that
+   scale, and the adversarial loss is weighted by adv_weight x sigma: a spectral-normalised
+   critic of the heights themselves cannot tell the finest scales' detail (about 0.005 of the
+   range) apart, and its gradient alone taught the generators ripples (docs/singan.md).
    Adam 5e-4 (0.5, 0.999), reset at every scale; a scale starts from the coarser one's weights
-   when the widths match. Scales larger than 128 px train on random 128 px windows (the cost of
-   a 256 px example's finest scales / 4). The time budget gives the scales equal iteration counts,
-   estimated from each scale's measured speed.
+   when the widths match. Scales larger than 64 px train on random 64 px windows (7x the
+   iterations of whole scales in the same time on a 256 px example). The time budget gives the
+   scales equal iteration counts, estimated from each scale's measured speed.
    Everything is defined on the infinite integer grid of each scale: noise is a hash of the seed,
    the scale and the GLOBAL pixel position, upsampling is bilinear between global positions, the
    convolutions are valid and the norms use their running statistics when sampling. So any
@@ -1501,10 +1506,13 @@ typedef struct tn_singan_opts {
                               count the remaining budget allows at each scale's speed) */
     int disc_layers;       /* stride-2 layers of the patch discriminator; 0 = 2 (15 px patches) */
     int patch;             /* scales larger than this train on random patch x patch windows (the
-                              networks are fully convolutional); 0 = 128, < 0 = whole scales */
+                              networks are fully convolutional); 0 = 64, < 0 = whole scales */
     float lr;              /* Adam rate of G and D; 0 = 5e-4 */
     float rec_weight;      /* weight of the reconstruction MSE; 0 = 10 */
     float noise_amp;       /* noise amplitude / RMSE of the coarser reconstruction; 0 = 0.1 */
+    float adv_weight;      /* weight of the adversarial loss x the scale's detail RMS; 0 = 1, < 0 = none
+                              (reconstruction only: smooth samples, no ripples; docs/singan.md) */
+    int d_steps;           /* discriminator steps per iteration (SinGAN: 3); 0 = 1 */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -1563,7 +1571,9 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model);
 
 /* The window (x0, y0, w, h) of the infinite random terrain of opts->seed at the example's pixel
    size, in the example's units: any window equals the same pixels of a larger one exactly (a
-   whole map and its tiles agree). *out (one channel) is allocated here. */
+   whole map and its tiles agree). Heights beyond the example's range are compressed smoothly
+   into 10 % of the range on either side (upstream SinGAN clamps to the range). *out (one
+   channel) is allocated here. */
 TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts,
                                   tn_image *out);
 /* Adds the example's detail to `in` (a smooth map in the example's units and pixel size, e.g.
@@ -1578,6 +1588,33 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
 TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
                                    tn_image *out);
 #endif /* TN_NO_SINGAN */
+
+/* GPNN baseline (Granot et al. 2022, "Drop the GAN"): generation by patch nearest neighbours,
+   no training. A pyramid of the example (factor, down to `coarsest` px); the output's coarsest
+   scale is the example's plus Gaussian noise; at every scale each patch of the current image is
+   replaced by its nearest patch of the example at that scale (keys: the example's coarser scale
+   upsampled on the first pass, the example itself after it; the overlapping patches averaged),
+   `iters` passes, then upsampled to the next scale. Exact nearest neighbours where the search is
+   small (optionally with GPNN's completeness normalisation: score = distance / (alpha + the
+   key's best distance to any query)), PatchMatch (propagation + random search) above it.
+   Measured on the shared DEMs (docs/singan.md): GPNN's own noise (0.75) and normalisation give
+   back the example itself at the example's size; noise 5 x the std and plain nearest
+   neighbours are the defaults. */
+typedef struct tn_gpnn_opts {
+    uint64_t seed;         /* noise seed */
+    int patch;             /* patch side (odd, 3..15); 0 = 7 */
+    int coarsest;          /* smaller side of the coarsest scale in px (>= patch); 0 = 25 */
+    float factor;          /* size ratio between scales, 0.5..0.9; 0 = 0.75 */
+    int iters;             /* passes per scale; 0 = 10 */
+    float noise;           /* noise std at the coarsest scale / the example's std there; 0 = 5, < 0 = none */
+    float alpha;           /* > 0: GPNN's completeness normalisation, alpha in units of the distance of
+                              the example's patches to themselves shifted by 1 px (GPNN: 0.005);
+                              0 = none (plain nearest neighbours) */
+} tn_gpnn_opts;
+
+/* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
+   in its units. *out (one channel) is allocated here. opts may be NULL (defaults). */
+TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out);
 
 /* ============================================================================================
    @@gnn  sketch-to-terrain graph network (paper 000, sections 4.2-5.4)
@@ -19349,10 +19386,13 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->max_channels <= 0) o->max_channels = 32;
     if (o->max_channels < o->channels) o->max_channels = o->channels;
     if (o->disc_layers <= 0) o->disc_layers = 2;
-    if (o->patch == 0) o->patch = 128;
+    if (o->patch == 0) o->patch = 64;
     if (o->lr <= 0) o->lr = 5e-4f;
     if (o->rec_weight == 0) o->rec_weight = 10.0f;
     if (o->noise_amp == 0) o->noise_amp = 0.1f;
+    if (o->adv_weight == 0) o->adv_weight = 1.0f;
+    if (o->adv_weight < 0) o->adv_weight = 0.0f;
+    if (o->d_steps <= 0) o->d_steps = 1;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -19527,7 +19567,19 @@ typedef struct tn__sg_gen_run {
     int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
                               mstride apart (0 = mw: the whole map); @@world's refine tiles */
     int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
+    int limit;            /* 1: the output's heights softly limited to the example's range +- 10 % */
 } tn__sg_gen_run;
+
+/* Random terrain's heights beyond the example's range [-1, 1] are compressed into a 0.2 (10 %
+   of the range) band, smoothly (no plateaus): v -> 1 + 0.2 tanh((v - 1) / 0.2). Upstream
+   SinGAN clamps its samples to the example's range; an undertrained scale can push a few
+   pixels far out (the issue's trenches; docs/singan.md). */
+static float tn__sg_limit(float v)
+{
+    if (v > 1.0f) return 1.0f + 0.2f * tanhf((v - 1.0f) * 5.0f);
+    if (v < -1.0f) return -1.0f - 0.2f * tanhf((-1.0f - v) * 5.0f);
+    return v;
+}
 
 static int tn__sg_net(const tn__sg_arch *A, int level) { return level < A->scales ? level : A->scales - 1; }
 
@@ -19673,7 +19725,10 @@ static tn_status tn__sg_generate(const tn_singan *m, tn__sg_gen_run *r, int leve
             int tw = w - tx < tile ? w - tx : tile, th = h - ty < tile ? h - ty : tile, y, x;
             if ((st = tn__sg_window(r, level, x0 + tx, y0 + ty, tw, th, buf))) break;
             for (y = 0; y < th; y++)
-                for (x = 0; x < tw; x++) img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * buf[(size_t)y * tw + x];
+                for (x = 0; x < tw; x++) {
+                    float v = buf[(size_t)y * tw + x];
+                    img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * (r->limit ? tn__sg_limit(v) : v);
+                }
             if (total > 1) st = tn__progress("singan-generate", (double)++done / (double)total);
         }
 done:
@@ -19694,6 +19749,8 @@ typedef struct tn__sg_train {
     tn_params *g, *d, *sched;  /* generators (the model's layout), discriminators, schedule */
     tn_optim *og, *od;
     tn_patch_disc disc[TN_SINGAN_MAX_SCALES];
+    float sigma[TN_SINGAN_MAX_SCALES]; /* RMS of the example's detail per scale (the scale minus the coarser one upsampled) */
+    float *realbase;           /* the example's coarser scale upsampled to the current scale */
     tn_rng rng;
     tn_image real[TN_SINGAN_MAX_SCALES]; /* the example pyramid in network units */
     float *recbase;            /* the reconstruction's base at the current scale (grown window) */
@@ -19718,6 +19775,7 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->base);
     TN_FREE(s->xin);
     TN_FREE(s->fake);
+    TN_FREE(s->realbase);
 }
 
 /* The training window of scale sc: the whole scale or a patch. */
@@ -19765,6 +19823,34 @@ static tn__sg_gen_run tn__sg_train_gen(tn__sg_train *s, tn_ctx *ctx, int rec, ui
     return r;
 }
 
+/* The example's scale sc - 1 upsampled to scale sc's grid as generation upsamples (bilinear
+   between global positions, clamped at the border); zeros at scale 0. */
+static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
+{
+    const tn_image *c = sc > 0 ? &s->real[sc - 1] : NULL;
+    int W = s->real[sc].width, H = s->real[sc].height, x, y;
+    if (!c) {
+        memset(out, 0, (size_t)W * H * sizeof(float));
+        return;
+    }
+    for (y = 0; y < H; y++) {
+        long iy, y0, y1;
+        float ty;
+        tn__sg_coord(y, s->A.factor, &iy, &ty);
+        y0 = iy < 0 ? 0 : iy >= c->height ? c->height - 1 : iy;
+        y1 = iy + 1 < 0 ? 0 : iy + 1 >= c->height ? c->height - 1 : iy + 1;
+        for (x = 0; x < W; x++) {
+            long ix, x0, x1;
+            float tx;
+            const float *r0 = c->data + (size_t)y0 * c->width, *r1 = c->data + (size_t)y1 * c->width;
+            tn__sg_coord(x, s->A.factor, &ix, &tx);
+            x0 = ix < 0 ? 0 : ix >= c->width ? c->width - 1 : ix;
+            x1 = ix + 1 < 0 ? 0 : ix + 1 >= c->width ? c->width - 1 : ix + 1;
+            out[(size_t)y * W + x] = (1 - ty) * ((1 - tx) * r0[x0] + tx * r0[x1]) + ty * ((1 - tx) * r1[x0] + tx * r1[x1]);
+        }
+    }
+}
+
 /* Enters scale sc: progress name, the reconstruction's base and noise amplitude, the starting
    weights (the coarser scale's when the widths match), fresh optimiser state, its deadline.
    resumed: the schedule and weights come from the checkpoint; only derived data is rebuilt. */
@@ -19791,7 +19877,10 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     s->base = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
     s->xin = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
     s->fake = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
-    if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake) return TN_ERR_OUT_OF_MEMORY;
+    TN_FREE(s->realbase);
+    s->realbase = (float *)tn__alloc((size_t)W * H * sizeof(float));
+    if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake || !s->realbase) return TN_ERR_OUT_OF_MEMORY;
+    tn__sg_real_base(s, sc, s->realbase);
     r = tn__sg_train_gen(s, ctx, 1, 0);
     if ((st = tn__sg_base(&r, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->recbase))) return st;
     memcpy(s->xrec, s->recbase, (size_t)ew * eh * sizeof(float));
@@ -19903,7 +19992,8 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * M, pw, ph, pew, peh, ox, oy, rx, ry;
     uint64_t seed;
     tn__sg_gen_run r;
-    tn_tensor *real, *fake, *rec, *loss, *lg, *lr;
+    tn_tensor *real, *fake, *rec, *loss, *lg, *lr, *gres;
+    int ds;
     tn_status st;
     long it = tn_train_iteration(s->run);
     tn__sg_patch_size(s, sc, &pw, &ph);
@@ -19922,8 +20012,11 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     tn_ctx_reset(ctx);
     tn_ctx_set_grad(ctx, 1);
     tn_patch_disc_begin(ctx, &s->disc[sc]);
-    fake = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1), tn__sg_tensor(ctx, s->base, pew, M, M, pw, ph));
-    lg = tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], fake));
+    gres = tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1);
+    /* D judges the residual in units of the example's detail RMS; the weight x sigma keeps the
+       gradient G gets in network units as from a 1-Lipschitz critic of the heights */
+    lg = tn_scale_shift(ctx, tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], tn_scale_shift(ctx, gres, 1.0f / s->sigma[sc], 0.0f))),
+                        s->o.adv_weight * s->sigma[sc], 0.0f);
     rec = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh), 1),
                  tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
     lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
@@ -19934,18 +20027,47 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     tn_optim_step(s->og);
     l[1] = lg->data[0];
     l[2] = lr->data[0];
-    memcpy(s->fake, fake->data, (size_t)pw * ph * sizeof(float));
-    /* D step: that fake is a constant */
-    tn_ctx_reset(ctx);
-    fake = tn__sg_tensor(ctx, s->fake, pw, 0, 0, pw, ph);
-    real = tn__sg_tensor(ctx, s->real[sc].data, W, rx, ry, pw, ph);
-    tn_patch_disc_begin(ctx, &s->disc[sc]);
-    loss = tn_hinge_d_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], real), tn_patch_disc_score(ctx, &s->disc[sc], fake));
-    if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
-    tn_params_zero_grad(s->d);
-    if ((st = tn_backward(ctx, loss))) return st;
-    tn_optim_step(s->od);
-    l[0] = loss->data[0];
+    memcpy(s->fake, gres->data, (size_t)pw * ph * sizeof(float));
+    for (ds = 0; ds < s->o.d_steps; ds++) {
+        /* D steps: the first on the G step's fake (a constant), the others on new fakes (new noise
+           and windows) of the updated generator, each against a new real window */
+        if (ds > 0) {
+            seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
+            ox = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
+            oy = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+            rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
+            ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+            r = tn__sg_train_gen(s, ctx, 0, seed);
+            if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
+            memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
+            tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
+            tn_ctx_reset(ctx);
+            tn_ctx_set_grad(ctx, 0);
+            if (!(gres = tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1)))
+                return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+            memcpy(s->fake, gres->data, (size_t)pw * ph * sizeof(float));
+            tn_ctx_set_grad(ctx, 1);
+        }
+        tn_ctx_reset(ctx);
+        fake = tn__sg_tensor(ctx, s->fake, pw, 0, 0, pw, ph);
+        real = tn__sg_tensor(ctx, s->real[sc].data, W, rx, ry, pw, ph);
+        if (real && fake) { /* the detail, in units of its RMS */
+            int y, x;
+            for (y = 0; y < ph; y++)
+                for (x = 0; x < pw; x++) {
+                    size_t k = (size_t)y * pw + x;
+                    real->data[k] = (real->data[k] - s->realbase[(size_t)(y + ry) * W + x + rx]) / s->sigma[sc];
+                    fake->data[k] /= s->sigma[sc];
+                }
+        }
+        tn_patch_disc_begin(ctx, &s->disc[sc]);
+        loss = tn_hinge_d_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], real), tn_patch_disc_score(ctx, &s->disc[sc], fake));
+        if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+        tn_params_zero_grad(s->d);
+        if ((st = tn_backward(ctx, loss))) return st;
+        tn_optim_step(s->od);
+        l[0] = loss->data[0];
+    }
     if (!isfinite(l[0]) || !isfinite(l[1]) || !isfinite(l[2]) || fabsf(l[0]) > 1e6f || fabsf(l[1]) > 1e6f)
         return tn__fail(TN_ERR_NUMERIC, "singan: training diverged at iteration %ld, scale %d (D loss %g, G loss %g, reconstruction %g)", it,
                         sc, (double)l[0], (double)l[1], (double)l[2]);
@@ -19977,7 +20099,8 @@ static tn_status tn__sg_check_dem(const tn_image *dem, int coarsest, float *lo, 
 /* The settings a checkpoint keeps (a resumed run continues with the ones it started with). */
 #define TN__SG_SETTINGS(X)                                                                                          \
     X("iters", iters, int, 1, 1e9) X("patch", patch, int, -1, 1e9) X("lr", lr, float, 1e-9, 10)                     \
-    X("rec_weight", rec_weight, float, -1e6, 1e6) X("noise_amp", noise_amp, float, 0, 100)
+    X("rec_weight", rec_weight, float, -1e6, 1e6) X("noise_amp", noise_amp, float, 0, 100) X("adv_weight", adv_weight, float, 0, 1e6) \
+    X("d_steps", d_steps, int, 1, 100)
 
 static tn_status tn__sg_set_meta(tn__sg_train *s, uint64_t digest)
 {
@@ -20042,7 +20165,8 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
     if (opts_in) s.o = *opts_in;
     tn_singan_defaults(&s.o);
     if (!(s.o.factor >= 0.5f && s.o.factor <= 0.9f) || s.o.coarsest < 4 || s.o.channels > 256 || s.o.max_channels > 256 ||
-        s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0)
+        s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0 ||
+        !(s.o.adv_weight <= 1e6f) || s.o.d_steps > 100)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad option (factor %g in 0.5..0.9, coarsest %d >= 4, channels %d and %d <= 256, "
                         "discriminator layers %d <= 4, patch >= 16, lr %g < 10, finite weights, noise amplitude %g in 0..100, iterations >= 0)",
                         (double)s.o.factor, s.o.coarsest, s.o.channels, s.o.max_channels, s.o.disc_layers, (double)s.o.lr, (double)s.o.noise_amp);
@@ -20106,6 +20230,19 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         s.real[i] = t;
     }
     tn_rng_seed(&s.rng, seed, 0x73696e67ULL);
+    for (i = 0; i < s.A.scales; i++) { /* the detail each scale adds to the coarser one: its RMS */
+        size_t k, nn = (size_t)s.real[i].width * s.real[i].height;
+        float *b = (float *)tn__alloc(nn * sizeof(float));
+        double se = 0;
+        if (!b) {
+            st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+            goto done;
+        }
+        tn__sg_real_base(&s, i, b);
+        for (k = 0; k < nn; k++) se += (double)(s.real[i].data[k] - b[k]) * (s.real[i].data[k] - b[k]);
+        TN_FREE(b);
+        s.sigma[i] = (float)sqrt(se / (double)nn + 1e-12);
+    }
     if ((st = tn__sg_train_nets(&s))) goto done;
     if ((st = tn_train_add_net(s.run, "g", s.g, s.og)) || (st = tn_train_add_net(s.run, "d", s.d, s.od)) ||
         (st = tn_train_add_params(s.run, "", s.sched)) || (st = tn_train_add_rng(s.run, "main", &s.rng)))
@@ -20328,6 +20465,7 @@ TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w,
     if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
+    r.limit = 1;
     return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
 }
 
@@ -20421,6 +20559,292 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
     return st;
 }
 #endif /* TN_NO_SINGAN */
+
+/* ---- GPNN baseline (patch nearest neighbours, no training) ---- */
+
+/* Patch vectors (P x P, row-major) of every P x P window of a w x h image, window (x, y) at
+   index y * (w - P + 1) + x. */
+static float *tn__gp_patches(const float *img, int w, int h, int P)
+{
+    int nx = w - P + 1, ny = h - P + 1, x, y, i;
+    float *v = (float *)tn__alloc((size_t)nx * ny * P * P * sizeof(float)), *o = v;
+    if (!v) return NULL;
+    for (y = 0; y < ny; y++)
+        for (x = 0; x < nx; x++)
+            for (i = 0; i < P; i++, o += P) memcpy(o, img + (size_t)(y + i) * w + x, (size_t)P * sizeof(float));
+    return v;
+}
+
+static float tn__gp_ssd(const float *a, const float *b, int n)
+{
+    float s = 0;
+    int i;
+    for (i = 0; i < n; i++) s += (a[i] - b[i]) * (a[i] - b[i]);
+    return s;
+}
+
+typedef struct tn__gp_exact {
+    const float *q, *k;  /* query and key patch vectors */
+    size_t nq, nk;
+    int d;               /* patch length */
+    float *kbest;        /* per key: alpha + its best distance to any query (pass 1 writes) */
+    int *nn;             /* per query: its key (pass 2 writes) */
+} tn__gp_exact;
+
+static void tn__gp_key_pass(void *c, size_t b, size_t e)
+{
+    tn__gp_exact *x = (tn__gp_exact *)c;
+    size_t j, i;
+    for (j = b; j < e; j++) {
+        float best = FLT_MAX;
+        for (i = 0; i < x->nq; i++) {
+            float s = tn__gp_ssd(x->k + j * x->d, x->q + i * x->d, x->d);
+            if (s < best) best = s;
+        }
+        x->kbest[j] += best;
+    }
+}
+
+static void tn__gp_query_pass(void *c, size_t b, size_t e)
+{
+    tn__gp_exact *x = (tn__gp_exact *)c;
+    size_t i, j;
+    for (i = b; i < e; i++) {
+        float best = FLT_MAX;
+        int bj = 0;
+        for (j = 0; j < x->nk; j++) {
+            float s = tn__gp_ssd(x->q + i * x->d, x->k + j * x->d, x->d) / x->kbest[j];
+            if (s < best) {
+                best = s;
+                bj = (int)j;
+            }
+        }
+        x->nn[i] = bj;
+    }
+}
+
+/* PatchMatch: improves nnf (key window index per query window) by two sweeps of propagation
+   from the left / upper (then right / lower) neighbours and a random search around the match. */
+static void tn__gp_patchmatch(const float *q, int qnx, int qny, const float *k, int knx, int kny, int d, int *nnf, tn_rng *rng)
+{
+    int sweep, x, y;
+    for (sweep = 0; sweep < 2; sweep++) {
+        int dir = sweep ? -1 : 1;
+        for (y = sweep ? qny - 1 : 0; y >= 0 && y < qny; y += dir)
+            for (x = sweep ? qnx - 1 : 0; x >= 0 && x < qnx; x += dir) {
+                size_t i = (size_t)y * qnx + x;
+                const float *qi = q + i * d;
+                int b = nnf[i], bx = b % knx, by = b / knx, r, c;
+                float best = tn__gp_ssd(qi, k + (size_t)b * d, d);
+                for (c = 0; c < 2; c++) { /* the neighbour's match, shifted back by one */
+                    int nx = c ? x : x - dir, ny = c ? y - dir : y, m, mx, my;
+                    if (nx < 0 || nx >= qnx || ny < 0 || ny >= qny) continue;
+                    m = nnf[(size_t)ny * qnx + nx];
+                    mx = m % knx + (c ? 0 : dir);
+                    my = m / knx + (c ? dir : 0);
+                    if (mx < 0 || mx >= knx || my < 0 || my >= kny) continue;
+                    {
+                        float s = tn__gp_ssd(qi, k + ((size_t)my * knx + mx) * d, d);
+                        if (s < best) {
+                            best = s;
+                            bx = mx;
+                            by = my;
+                        }
+                    }
+                }
+                for (r = knx > kny ? knx : kny; r >= 1; r /= 2) { /* random search, radius halving */
+                    int mx = bx + (int)tn_rng_below(rng, (uint32_t)(2 * r + 1)) - r, my = by + (int)tn_rng_below(rng, (uint32_t)(2 * r + 1)) - r;
+                    float s;
+                    mx = mx < 0 ? 0 : mx >= knx ? knx - 1 : mx;
+                    my = my < 0 ? 0 : my >= kny ? kny - 1 : my;
+                    s = tn__gp_ssd(qi, k + ((size_t)my * knx + mx) * d, d);
+                    if (s < best) {
+                        best = s;
+                        bx = mx;
+                        by = my;
+                    }
+                }
+                nnf[i] = by * knx + bx;
+            }
+    }
+}
+
+/* img (w x h) = the average of the value windows nnf places over each pixel. */
+static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, int h, float *img, float *cnt)
+{
+    int qnx = w - P + 1, qny = h - P + 1, vnx = vw - P + 1, x, y, i, j;
+    size_t n = (size_t)w * h, p;
+    memset(img, 0, n * sizeof(float));
+    memset(cnt, 0, n * sizeof(float));
+    for (y = 0; y < qny; y++)
+        for (x = 0; x < qnx; x++) {
+            int m = nnf[(size_t)y * qnx + x], mx = m % vnx, my = m / vnx;
+            for (j = 0; j < P; j++)
+                for (i = 0; i < P; i++) {
+                    img[(size_t)(y + j) * w + x + i] += val[(size_t)(my + j) * vw + mx + i];
+                    cnt[(size_t)(y + j) * w + x + i] += 1;
+                }
+        }
+    for (p = 0; p < n; p++) img[p] /= cnt[p];
+}
+
+TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out)
+{
+    tn_gpnn_opts o;
+    tn_image ex[TN_SINGAN_MAX_SCALES], one = {0, 0, 0, NULL}, y = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, keys = {0, 0, 0, NULL};
+    float lo, hi, *cnt = NULL, *qv = NULL, *kv = NULL, *kbest = NULL;
+    int *nnf = NULL, *prev = NULL, levels, L, P, it, pqnx = 0, pqny = 0, pknx = 0;
+    double mean = 0, var = 0, dmean = 0;
+    size_t i, n;
+    tn_rng rng;
+    tn_status st;
+    TN_ASSERT(out);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if (o.patch == 0) o.patch = 7;
+    if (o.coarsest == 0) o.coarsest = 25;
+    if (o.factor == 0) o.factor = 0.75f;
+    if (o.iters == 0) o.iters = 10;
+    if (o.noise == 0) o.noise = 5.0f;
+    if (o.noise < 0) o.noise = 0;
+    P = o.patch;
+    if (P < 3 || P > 15 || !(P & 1) || o.coarsest < P || o.coarsest > 4096 || !(o.factor >= 0.5f && o.factor <= 0.9f) || o.iters < 1 ||
+        o.iters > 1000 || !(o.noise <= 100) || !(o.alpha >= 0 && o.alpha <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "gpnn: bad option (patch %d odd in 3..15, coarsest %d >= patch, factor %g in 0.5..0.9, iters %d in 1..1000, "
+                        "noise %g <= 100, alpha %g in 0..1e6)", o.patch, o.coarsest, (double)o.factor, o.iters, (double)o.noise, (double)o.alpha);
+    if ((st = tn__sg_check_dem(example, o.coarsest, &lo, &hi))) return st;
+    if (w < 1 || h < 1 || w > (1 << 14) || h > (1 << 14)) return tn__fail(TN_ERR_INVALID_ARG, "gpnn: output %d x %d (sides 1..16384)", w, h);
+    {
+        int mn = example->width < example->height ? example->width : example->height;
+        levels = 1 + (int)floor(log((double)mn / o.coarsest) / log(1.0 / o.factor) + 0.5);
+        if (levels > TN_SINGAN_MAX_SCALES) levels = TN_SINGAN_MAX_SCALES;
+        if (levels < 1) levels = 1;
+    }
+    if (tn__sg_size(w, o.factor, levels - 1) < P || tn__sg_size(h, o.factor, levels - 1) < P)
+        return tn__fail(TN_ERR_INVALID_ARG, "gpnn: output %d x %d is smaller than a %d px patch at the coarsest scale (%d scales of factor %g)", w, h, P,
+                        levels, (double)o.factor);
+    memset(ex, 0, sizeof ex);
+    if ((st = tn_image_create(&one, example->width, example->height, 1))) return st;
+    n = (size_t)example->width * example->height;
+    for (i = 0; i < n; i++) one.data[i] = example->data[i * example->channels];
+    tn_rng_seed(&rng, o.seed, 0x67706e6eULL);
+    for (L = 0; L < levels && !st; L++) { /* the example pyramid, level 0 coarsest */
+        int ew = tn__sg_size(one.width, o.factor, levels - 1 - L), eh = tn__sg_size(one.height, o.factor, levels - 1 - L);
+        st = L == levels - 1 ? tn_image_copy(&ex[L], &one) : tn_image_resize(&ex[L], &one, ew, eh, TN_RESIZE_AREA);
+    }
+    if (st) goto done;
+    n = (size_t)ex[0].width * ex[0].height; /* the noise's scale: the std of the coarsest example */
+    for (i = 0; i < n; i++) mean += ex[0].data[i] / (double)n;
+    for (i = 0; i < n; i++) var += (ex[0].data[i] - mean) * (ex[0].data[i] - mean) / (double)n;
+    {   /* alpha's unit: the mean squared difference of the example's patches one pixel apart */
+        const tn_image *e = &ex[levels - 1];
+        int xx, yy;
+        for (yy = 0; yy < e->height; yy++)
+            for (xx = 0; xx + 1 < e->width; xx++) {
+                double dd = e->data[(size_t)yy * e->width + xx + 1] - e->data[(size_t)yy * e->width + xx];
+                dmean += dd * dd;
+            }
+        dmean = dmean / ((double)e->height * (e->width - 1)) * P * P;
+    }
+    for (L = 0; L < levels && !st; L++) {
+        int ow = tn__sg_size(w, o.factor, levels - 1 - L), oh = tn__sg_size(h, o.factor, levels - 1 - L);
+        int kw = ex[L].width, kh = ex[L].height, qnx = ow - P + 1, qny = oh - P + 1, knx = kw - P + 1, kny = kh - P + 1, d = P * P;
+        size_t nq = (size_t)qnx * qny, nk = (size_t)knx * kny;
+        int exact = (double)nq * nk * d <= 3e8;
+        if (L == 0) { /* the example's coarsest scale at the output's size, plus noise */
+            if (ow == kw && oh == kh) st = tn_image_copy(&y, &ex[0]);
+            else st = tn_image_resize(&y, &ex[0], ow, oh, TN_RESIZE_BICUBIC);
+            for (i = 0; !st && i < (size_t)ow * oh; i++) y.data[i] += o.noise * (float)sqrt(var) * tn_rng_normal(&rng);
+            if (!st) st = tn_image_copy(&keys, &ex[0]);
+        } else {
+            if (!(st = tn_image_resize(&t, &y, ow, oh, TN_RESIZE_BICUBIC))) {
+                tn_image_free(&y);
+                y = t;
+                t.data = NULL;
+                tn_image_free(&keys);
+                st = tn_image_resize(&keys, &ex[L - 1], kw, kh, TN_RESIZE_BICUBIC);
+            }
+        }
+        if (st) break;
+        TN_FREE(cnt);
+        TN_FREE(nnf);
+        if (!(cnt = (float *)tn__alloc((size_t)ow * oh * sizeof(float))) || !(nnf = (int *)tn__alloc(nq * sizeof(int)))) {
+            st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+            break;
+        }
+        for (i = 0; i < nq; i++) { /* PatchMatch's start: the coarser scale's matches, scaled up */
+            int qx = (int)(i % qnx), qy = (int)(i / qnx), kx, ky;
+            if (prev) {
+                long cx, cy;
+                float tt;
+                int m;
+                tn__sg_coord(qx, o.factor, &cx, &tt);
+                tn__sg_coord(qy, o.factor, &cy, &tt);
+                cx = cx < 0 ? 0 : cx >= pqnx ? pqnx - 1 : cx;
+                cy = cy < 0 ? 0 : cy >= pqny ? pqny - 1 : cy;
+                m = prev[cy * pqnx + cx];
+                kx = (int)floor((m % pknx + 0.5) / o.factor - 0.5 + (qx - ((cx + 0.5) / o.factor - 0.5)) + 0.5);
+                ky = (int)floor((m / pknx + 0.5) / o.factor - 0.5 + (qy - ((cy + 0.5) / o.factor - 0.5)) + 0.5);
+            } else {
+                kx = (int)tn_rng_below(&rng, (uint32_t)knx);
+                ky = (int)tn_rng_below(&rng, (uint32_t)kny);
+            }
+            kx = kx < 0 ? 0 : kx >= knx ? knx - 1 : kx;
+            ky = ky < 0 ? 0 : ky >= kny ? kny - 1 : ky;
+            nnf[i] = ky * knx + kx;
+        }
+        for (it = 0; it < o.iters && !st; it++) {
+            TN_FREE(qv);
+            TN_FREE(kv);
+            if (!(qv = tn__gp_patches(y.data, ow, oh, P)) || !(kv = tn__gp_patches(it == 0 ? keys.data : ex[L].data, kw, kh, P))) {
+                st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+                break;
+            }
+            if (exact) {
+                tn__gp_exact x;
+                size_t j;
+                TN_FREE(kbest);
+                if (!(kbest = (float *)tn__alloc(nk * sizeof(float)))) {
+                    st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+                    break;
+                }
+                for (j = 0; j < nk; j++) kbest[j] = o.alpha > 0 ? (float)(o.alpha * dmean) + 1e-30f : 1.0f;
+                x.q = qv;
+                x.k = kv;
+                x.nq = nq;
+                x.nk = nk;
+                x.d = d;
+                x.kbest = kbest;
+                x.nn = nnf;
+                if (o.alpha > 0) tn_parallel_for(nk, 16, tn__gp_key_pass, &x);
+                tn_parallel_for(nq, 16, tn__gp_query_pass, &x);
+            } else
+                tn__gp_patchmatch(qv, qnx, qny, kv, knx, kny, d, nnf, &rng);
+            tn__gp_fold(ex[L].data, kw, P, nnf, ow, oh, y.data, cnt);
+            if ((st = tn__progress("gpnn", ((double)L + (it + 1.0) / o.iters) / levels))) break;
+        }
+        TN_FREE(prev);
+        prev = nnf;
+        nnf = NULL;
+        pqnx = qnx;
+        pqny = qny;
+        pknx = knx;
+    }
+done:
+    for (L = 0; L < TN_SINGAN_MAX_SCALES; L++) tn_image_free(&ex[L]);
+    tn_image_free(&one);
+    tn_image_free(&t);
+    tn_image_free(&keys);
+    TN_FREE(cnt);
+    TN_FREE(qv);
+    TN_FREE(kv);
+    TN_FREE(kbest);
+    TN_FREE(nnf);
+    TN_FREE(prev);
+    if (st) tn_image_free(&y);
+    else *out = y;
+    return st;
+}
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)

@@ -89,8 +89,16 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
     TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &other) == TN_OK);
     for (x = 0; x < 2000 && other.data && whole.data; x++) differ += fabsf(other.data[x] - whole.data[x]) > 1.0f;
     TN_CHECK(differ > 1000);
-    tn_image_range(&whole, &lo, &hi); /* metres, near the example's range */
-    TN_CHECK(lo > 500 && hi < 2500 && hi - lo > 100);
+    { /* metres, within the example's range +- 10 % of it (issue 31), for both seeds */
+        tn_image ex = tn_test_dem(24, 1);
+        float elo, ehi, lo2, hi2;
+        tn_image_range(&ex, &elo, &ehi);
+        tn_image_range(&whole, &lo, &hi);
+        tn_image_range(&other, &lo2, &hi2);
+        TN_CHECK(lo >= elo - 0.1f * (ehi - elo) && hi <= ehi + 0.1f * (ehi - elo) && hi - lo > 0.3f * (ehi - elo));
+        TN_CHECK(lo2 >= elo - 0.1f * (ehi - elo) && hi2 <= ehi + 0.1f * (ehi - elo));
+        tn_image_free(&ex);
+    }
     tn_image_free(&whole);
     tn_image_free(&tile);
     tn_image_free(&other);
@@ -177,6 +185,10 @@ TN_TEST(bad_inputs)
     dem.data[30] = 1000;
     o.factor = 0.95f;
     TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    o.factor = 0;
+    o.adv_weight = NAN;
+    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "bad option") != NULL);
     { /* a model of another method */
         tn_params *p = tn_params_create();
         tn_model_provenance pv;
@@ -205,6 +217,64 @@ TN_TEST(bad_inputs)
     tn_image_free(&dem);
 }
 
+/* GPNN (no training): shape and units, the example's range, seeds, and what its noise does:
+   without noise at the example's size it rebuilds the example, with the default noise it does
+   not copy it. */
+TN_TEST(gpnn_sample)
+{
+    tn_image ex = tn_test_dem(64, 4), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, c = {0, 0, 0, NULL};
+    tn_gpnn_opts o;
+    float elo, ehi, lo, hi;
+    double ssim = 0, differ = 0;
+    size_t k;
+    memset(&o, 0, sizeof o);
+    o.coarsest = 16;
+    o.seed = 1;
+    tn_image_range(&ex, &elo, &ehi);
+    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &a) == TN_OK);
+    TN_CHECK(a.width == 80 && a.height == 48 && a.channels == 1);
+    tn_image_range(&a, &lo, &hi); /* averages of the example's patches: inside its range */
+    TN_CHECK(lo >= elo && hi <= ehi && hi - lo > 0.3f * (ehi - elo));
+    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &b) == TN_OK);
+    TN_CHECK(a.data && b.data && !memcmp(a.data, b.data, 80 * 48 * sizeof(float))); /* same seed, same terrain */
+    tn_image_free(&b);
+    o.seed = 2;
+    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &b) == TN_OK);
+    for (k = 0; k < 80 * 48 && a.data && b.data; k++) differ += fabsf(a.data[k] - b.data[k]) / (80.0 * 48.0);
+    TN_CHECK(differ > 0.02 * (ehi - elo));
+    tn_image_free(&a);
+    tn_image_free(&b);
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_OK); /* at the example's size: not a copy */
+    TN_CHECK(tn_ssim(&ex, &a, ehi - elo, &ssim) == TN_OK);
+    TN_CHECK(ssim < 0.9);
+    o.noise = -1; /* no noise: the nearest patches of the example's own coarsest scale rebuild it */
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &c) == TN_OK);
+    TN_CHECK(tn_ssim(&ex, &c, ehi - elo, &ssim) == TN_OK);
+    TN_CHECK(ssim > 0.95);
+    tn_image_free(&a);
+    tn_image_free(&c);
+    /* bad inputs: errors with a message, no output */
+    o.noise = 0;
+    TN_CHECK(tn_gpnn_sample(NULL, 64, 64, &o, &a) == TN_ERR_EMPTY && a.data == NULL);
+    TN_CHECK(tn_gpnn_sample(&ex, 0, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gpnn_sample(&ex, 12, 64, &o, &a) == TN_ERR_INVALID_ARG); /* smaller than a patch at the coarsest scale */
+    TN_CHECK(strstr(tn_last_error(), "patch") != NULL);
+    o.patch = 4;
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    o.patch = 0;
+    o.coarsest = 100; /* larger than the example */
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "smaller than the coarsest") != NULL);
+    o.coarsest = 16;
+    o.alpha = NAN;
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    o.alpha = 0;
+    ex.data[100] = NAN;
+    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_NUMERIC);
+    TN_CHECK(a.data == NULL);
+    tn_image_free(&ex);
+}
+
 int main(void)
 {
     tn_set_threads(2);
@@ -214,6 +284,7 @@ int main(void)
     TN_RUN(refine_and_upscale);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);
+    TN_RUN(gpnn_sample);
     tn_singan_free(&trained);
     return tn_test_summary("test_singan");
 }
