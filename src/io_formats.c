@@ -211,7 +211,7 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
     if (nv == n) return tn__fail(TN_ERR_EMPTY, "%s: every cell is void / NODATA", name);
     if (tn__size4(nv, sizeof(size_t), 1, 1, &bytes)) return TN_ERR_TOO_LARGE;
     q = (size_t *)tn__alloc(bytes);
-    if (!q) return TN_ERR_OUT_OF_MEMORY;
+    if (!q) return tn__oom();
     /* mask: 0 known, 1 void not yet queued, 2 void queued; the first ring touches known cells */
     tail = 0;
     for (i = 0; i < n; i++) {
@@ -454,7 +454,7 @@ static tn_status tn__pnm_encode(const tn_image *img, int bits, double lo, double
     count = data / ((size_t)bits / 8);
     total = (size_t)len + data;
     buf = (uint8_t *)tn__alloc(total);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     d = buf + len;
     for (k = 0; k < count; k++) {
@@ -530,7 +530,7 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
     st = tn__size4(w, h, ch, 4, &data);
     if (st) return st;
     buf = (uint8_t *)tn__alloc((size_t)len + data);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     for (row = 0; row < h; row++) {
         uint8_t *dst = buf + len + row * w * ch * 4;
@@ -583,7 +583,7 @@ static tn_status tn__hgt_encode(const tn_image *img, uint8_t **out, size_t *out_
                         img->width, img->height, img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         double v = floor((double)img->data[k] + 0.5);
         int s = v < -32767.0 ? -32767 : (v > 32767.0 ? 32767 : (int)v);
@@ -769,7 +769,7 @@ static tn_status tn__r16_encode(const tn_image *img, double lo, double hi, uint8
     if (img->channels != 1) return tn__fail(TN_ERR_SHAPE, ".r16 stores 1 channel, not %d", img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         unsigned c = tn__io_code(img->data[k], lo, scale, 65535u);
         buf[2 * k] = (uint8_t)c;
@@ -1422,6 +1422,29 @@ static void tn__tif_georef(const tn__tif *t, tn_georef *g)
     }
 }
 
+/* Byte ranges of strips or tiles that overlap or repeat let a few KB of deflate decode again and
+   again into gigabytes (issue 33: a 17 KB file gave 6.26 GB); every chunk must own its bytes. The
+   (offset, count) pairs are sorted by offset and each must end before the next starts. */
+static tn_status tn__tif_disjoint(const tn__tif *t, const char *what)
+{
+    uint64_t *r;
+    size_t k;
+    tn_status st = TN_OK;
+    if (t->nchunks < 2) return TN_OK;
+    if (!(r = (uint64_t *)tn__alloc(t->nchunks * 2 * sizeof(uint64_t)))) return tn__fail_context(TN_ERR_OUT_OF_MEMORY, t->name);
+    for (k = 0; k < t->nchunks; k++) {
+        r[2 * k] = t->offs[k];
+        r[2 * k + 1] = t->cnts[k];
+    }
+    qsort(r, t->nchunks, 2 * sizeof(uint64_t), tn__z_cmp_u64); /* compares the offsets */
+    for (k = 0; k + 1 < t->nchunks && !st; k++)
+        if (r[2 * k] + r[2 * k + 1] > r[2 * k + 2])
+            st = tn__fail(TN_ERR_CORRUPT, "%s: TIFF %ss overlap or share bytes (%llu bytes at offset %llu reach into the %s at %llu)", t->name,
+                          what, (unsigned long long)r[2 * k + 1], (unsigned long long)r[2 * k], what, (unsigned long long)r[2 * k + 2]);
+    TN_FREE(r);
+    return st;
+}
+
 /* Checks the chosen image's tags and fills the layout fields of t. */
 static tn_status tn__tif_layout(tn__tif *t)
 {
@@ -1530,6 +1553,7 @@ static tn_status tn__tif_layout(tn__tif *t)
             t->offs[k] = o;
             t->cnts[k] = c;
         }
+        if ((st = tn__tif_disjoint(t, what))) return st;
     }
     return TN_OK;
 }
@@ -1840,7 +1864,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     j.z = (uint8_t **)tn__calloc(j.nstrips * sizeof(uint8_t *));
     j.zn = (size_t *)tn__calloc(j.nstrips * sizeof(size_t));
     j.st = (tn_status *)tn__calloc(j.nstrips * sizeof(tn_status));
-    if (!j.z || !j.zn || !j.st) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!j.z || !j.zn || !j.st) { st = tn__oom(); goto done; }
     tn_parallel_for(j.nstrips, 1, tn__tif_enc_range, &j);
     for (k = 0; k < j.nstrips; k++) {
         if (j.st[k] && !st) st = tn__fail(j.st[k], "TIFF: compressing strip %zu failed", k);
@@ -1863,7 +1887,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     size = data_at + total_z;
     o.buf = (uint8_t *)tn__calloc(size);
     tmp = (uint8_t *)tn__alloc(j.nstrips * 8 + 16 * 8 + (has_geo ? (size_t)geo->nkeys * 2 + (size_t)geo->ndoubles * 8 : 0));
-    if (!o.buf || !tmp) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!o.buf || !tmp) { st = tn__oom(); goto done; }
     memcpy(o.buf, "II", 2);
     if (big) {
         tn__tif_put(o.buf + 2, 43, 2);
@@ -2164,7 +2188,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
     unsigned long serial = ++tn__io_tmp_counter;
     FILE *f;
     int ok;
-    if (!tmp) return TN_ERR_OUT_OF_MEMORY;
+    if (!tmp) return tn__oom();
     serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
     snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
     f = fopen(tmp, "wb");
