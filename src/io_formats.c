@@ -2180,17 +2180,113 @@ static unsigned long tn__io_process_id(void)
 
 static unsigned long tn__io_tmp_counter;
 
-/* Writes buf to "<path>.tmp.<pid>.<n>" and renames it over path; removes the temporary on failure. */
+/* POSIX: saves go through open/write/fsync so the data is on disk before the rename, and the
+   directory is synced after it; stale temporaries are found with opendir. Elsewhere stdio. */
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+#include <fcntl.h>
+#include <dirent.h>
+#include <sys/stat.h>
+#define TN__IO_POSIX 1
+#endif
+
+/* Removes the "<path>.tmp.<pid>.<n>" files a killed save left next to path (issue 33: 20-126 MB
+   each, there for good): another process's, untouched for 2 minutes, whose process is gone
+   (where /proc tells; elsewhere untouched for an hour). Best effort, silent. */
+static void tn__io_remove_stale(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
+    size_t dl = slash ? (size_t)(slash - path) : 0, bl = strlen(base);
+    char dir[1024], full[1400], proc[48];
+    DIR *d;
+    struct dirent *e;
+    struct stat sb;
+    int have_proc = stat("/proc/self", &sb) == 0;
+    unsigned long me = tn__io_process_id();
+    if (dl >= sizeof dir || bl == 0 || bl > 255) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if (!(d = opendir(dir))) return;
+    while ((e = readdir(d)) != NULL) {
+        const char *nm = e->d_name, *q;
+        unsigned long pid = 0;
+        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp.", 5) != 0) continue;
+        for (q = nm + bl + 5; *q >= '0' && *q <= '9'; q++) pid = pid * 10 + (unsigned long)(*q - '0');
+        if (q == nm + bl + 5 || *q != '.' || pid == me) continue;
+        for (q++; *q >= '0' && *q <= '9'; q++) {}
+        if (*q || q[-1] == '.') continue;
+        snprintf(full, sizeof full, "%s/%s", dir, nm);
+        if (stat(full, &sb) != 0 || difftime(time(NULL), sb.st_mtime) < (have_proc ? 120.0 : 3600.0)) continue;
+        snprintf(proc, sizeof proc, "/proc/%lu", pid);
+        if (have_proc && stat(proc, &sb) == 0) continue; /* its process still runs */
+        remove(full);
+    }
+    closedir(d);
+#else
+    (void)path;
+#endif
+}
+
+/* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
+static void tn__io_sync_dir(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/');
+    char dir[1024];
+    int fd;
+    size_t dl = slash ? (size_t)(slash - path) : 0;
+    if (dl >= sizeof dir) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if ((fd = open(dir, O_RDONLY)) < 0) return;
+    (void)fsync(fd);
+    close(fd);
+#else
+    (void)path;
+#endif
+}
+
+/* Writes buf to "<path>.tmp.<pid>.<n>", flushes it to disk and renames it over path; removes the
+   temporary on failure, and stale ones of earlier saves of path first. */
 static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
 {
     size_t cap = strlen(path) + 64;
     char *tmp = (char *)tn__alloc(cap);
     unsigned long serial = ++tn__io_tmp_counter;
-    FILE *f;
     int ok;
+#if defined(TN__IO_POSIX)
+    int fd;
+    size_t off = 0;
+#else
+    FILE *f;
+#endif
     if (!tmp) return tn__oom();
+    tn__io_remove_stale(path);
     serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
     snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+#if defined(TN__IO_POSIX)
+    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
+    if (fd < 0) {
+        TN_FREE(tmp);
+        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
+    }
+    ok = 1;
+    while (ok && off < n) {
+        ssize_t w = write(fd, buf + off, n - off < ((size_t)1 << 30) ? n - off : ((size_t)1 << 30));
+        if (w <= 0) ok = 0; /* a signal mid-write counts as a failure: the save is refused, not torn */
+        else off += (size_t)w;
+    }
+    ok = fsync(fd) == 0 && ok;
+    ok = close(fd) == 0 && ok;
+#else
     f = fopen(tmp, "wb");
     if (!f) {
         TN_FREE(tmp);
@@ -2200,6 +2296,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
     ok = fflush(f) == 0 && ok;
     ok = !ferror(f) && ok;
     ok = fclose(f) == 0 && ok;
+#endif
     if (!ok) {
         remove(tmp);
         TN_FREE(tmp);
@@ -2213,6 +2310,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
         TN_FREE(tmp);
         return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
     }
+    tn__io_sync_dir(path);
     TN_FREE(tmp);
     return TN_OK;
 }

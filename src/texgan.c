@@ -261,7 +261,8 @@ static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_lay
     c[8] = m->hi;
     c[9] = (float)(m->iterations & 0xffffff);
     c[10] = (float)(m->iterations >> 24);
-    c[11] = (float)m->train_seconds;
+    c[11] = 0.0f; /* was the training seconds: provenance is in the metadata (train_seconds), so the
+                     tensors, and a digest of them, are the same on every run with the same seed */
     c[12] = (float)disc_width;
     c[13] = (float)disc_layers;
     c[14] = (float)m->scale;
@@ -384,6 +385,11 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
     if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
+    if (!st && m.train_seconds == 0 && tn_params_meta(f, "train_seconds")) { /* models since the config's field is 0 */
+        double v;
+        const char *t = tn_params_meta(f, "train_seconds");
+        if (tn__io_number(t, strlen(t), &v) && v >= 0 && v <= 1e15) m.train_seconds = v;
+    }
     if (!st) st = tn__tg_model_params(&m);
     if (!st) st = tn__params_assign(m.weights, f, path);
     tn_params_free(f);
@@ -1467,6 +1473,7 @@ TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed
         cap = w.final[g] ? strlen(w.final[g]) + 40 : 0;
         w.tmp[g] = cap ? (char *)tn__alloc(cap) : NULL;
         if (!w.final[g] || !w.tmp[g]) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        tn__io_remove_stale(w.final[g]);
         snprintf(w.tmp[g], cap, "%s.tmp.%lu.%lu", w.final[g], tn__io_process_id(), ++tn__io_tmp_counter);
         if (!(w.f[g] = fopen(w.tmp[g], "wb"))) {
             st = tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", w.final[g]);

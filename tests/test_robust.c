@@ -11,6 +11,9 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <float.h>
+#if defined(__unix__) || defined(__APPLE__)
+#include <utime.h>
+#endif
 
 /* ---- helpers ---- */
 
@@ -698,6 +701,40 @@ TN_TEST(test_season_frame_total)
     remove(list);
     tn_image_free(&dem);
     tn_image_free(&fr);
+}
+
+/* Issue 33 item 7: a save removes the temporaries a killed save of the same target left (another
+   process's, gone, untouched for long), and only those. */
+TN_TEST(test_stale_temporaries)
+{
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+    const char *out = tmp_path("stale.png");
+    char dead[600], fresh[600], mine[600], other[600];
+    const char *const names[4] = {dead, fresh, mine, other};
+    tn_image img = small_dem(8, 8);
+    struct utimbuf old;
+    int k;
+    snprintf(dead, sizeof dead, "%s.tmp.4194303.7", out);   /* beyond any pid_max: gone */
+    snprintf(fresh, sizeof fresh, "%s.tmp.4194303.8", out); /* gone, but written just now */
+    snprintf(mine, sizeof mine, "%s.tmp.%lu.9", out, (unsigned long)getpid());
+    snprintf(other, sizeof other, "%s.tmpx.4194303.7", out);
+    for (k = 0; k < 4; k++) TN_CHECK(write_file(names[k], "partial", 7));
+    old.actime = old.modtime = time(NULL) - 86400;
+    for (k = 0; k < 4; k++)
+        if (k != 1) TN_CHECK(utime(names[k], &old) == 0);
+    TN_CHECK(tn_image_save(out, &img, NULL) == TN_OK);
+    TN_CHECK(fopen(dead, "rb") == NULL);
+    for (k = 1; k < 4; k++) {
+        FILE *f = fopen(names[k], "rb");
+        TN_CHECK(f != NULL);
+        if (f) fclose(f);
+        remove(names[k]);
+    }
+    remove(out);
+    tn_image_free(&img);
+#else
+    TN_SKIP("POSIX only");
+#endif
 }
 
 TN_TEST(test_image_args)
@@ -1872,6 +1909,7 @@ int main(void)
     RUN(test_tiff_hostile);
     RUN(test_memory_limit);
     RUN(test_season_frame_total);
+    RUN(test_stale_temporaries);
     RUN(test_tiff_lzw_streams);
     return tn_test_summary("test_robust");
 }
