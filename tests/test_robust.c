@@ -1291,6 +1291,24 @@ TN_TEST(test_texgan_config)
             TN_CHECK(st != TN_OK && tn_last_error()[0] && m.weights == NULL);
             remove(path);
         }
+    { /* issue 33 item 1: a config naming a 6-stage, 2048-wide generator (about 280 MB) over no
+         generator tensors is refused on the file's shapes, before allocating (before: the 64 MB
+         budget stopped the allocation) */
+        const char *path = write_texgan_config(5, 6.0f);
+        tn_params *p = NULL;
+        tn_status st;
+        TN_CHECK(path && tn_params_open(path, &p) == TN_OK);
+        if (p) {
+            tn_params_find(p, "texgan.config")->data[6] = 2048.0f;
+            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            tn_params_free(p);
+            tn_set_memory_limit((size_t)64 << 20);
+            st = tn_texgan_load(&m, path);
+            tn_set_memory_limit(0);
+            TN_CHECK(st == TN_ERR_CORRUPT && strstr(tn_last_error(), "generator") && m.weights == NULL);
+            remove(path);
+        }
+    }
     TN_CHECK(tn_texgan_load(&m, tmp_path("nothing.tnw")) == TN_ERR_IO);
     TN_CHECK(tn_texgan_load(&m, "") == TN_ERR_INVALID_ARG);
     TN_CHECK(tn_texgan_load(&m, NULL) == TN_ERR_INVALID_ARG);
