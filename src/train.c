@@ -195,7 +195,12 @@ static tn_status tn__train_try_checkpoint(tn_train *run)
     tn_status st = tn_train_checkpoint(run, NULL);
     if (st != TN_ERR_IO) return st;
     run->ck_failures++;
-    snprintf(run->ck_warning, sizeof run->ck_warning, "%s", tn_last_error());
+    {
+        const char *m = tn_last_error();
+        size_t l = strlen(m) < sizeof run->ck_warning ? strlen(m) : sizeof run->ck_warning - 1;
+        memcpy(run->ck_warning, m, l);
+        run->ck_warning[l] = 0;
+    }
     return TN_OK;
 }
 
