@@ -2351,7 +2351,7 @@ static tn_status tn__fail_context(tn_status s, const char *context)
     return s;
 }
 
-/* >>memory  The memory budget. Every TN_MALLOC / TN_REALLOC / TN_FREE after this point (the
+/* The memory budget. Every TN_MALLOC / TN_REALLOC / TN_FREE after this point (the
    whole library below @@core) goes through the wrappers here: allocations of TN__MEM_TRACK_MIN
    bytes and more are recorded in a pointer -> size table (open addressing, linear probing), so
    frees need no size and buffers the caller frees keep their plain layout; small ones are not
