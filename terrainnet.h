@@ -153,6 +153,19 @@ TN_API float    tn_rng_normal(tn_rng *r);             /* standard normal (Box-Mu
 typedef int (*tn_progress_fn)(void *user, const char *stage, double fraction);
 TN_API void tn_set_progress(tn_progress_fn fn, void *user);
 
+/* Memory budget: the total of the library's live allocations (each of 64 KiB or more, made
+   through TN_MALLOC / TN_REALLOC inside the library: images, tensor arenas, decode buffers) may
+   not pass the limit. An allocation that would pass it fails and the call returns
+   TN_ERR_TOO_LARGE with a message naming the limit, so a hostile file (a decompression bomb, a
+   model config naming millions of parts) fails early instead of taking the machine's memory.
+   Default: half of the physical memory where the system tells it (sysconf), else TN_MAX_ALLOC;
+   TN_MEMORY_LIMIT (bytes) at compile time replaces that default. tn_set_memory_limit(0) restores
+   the default, SIZE_MAX removes the limit. Process-wide; safe to call from any thread. Memory the
+   library hands out counts until it is freed through the library (tn_free, tn_image_free, ...). */
+TN_API void tn_set_memory_limit(size_t bytes);
+TN_API size_t tn_get_memory_limit(void);
+TN_API size_t tn_memory_in_use(void);  /* the counted total now */
+
 /* Monotonic wall-clock seconds (for benches and ETA). */
 TN_API double tn_time_seconds(void);
 
@@ -804,6 +817,10 @@ TN_API double tn_train_fraction(const tn_train *run);
 /* The run's seed (a resumed run reports the seed of the run that wrote the checkpoint). */
 TN_API uint64_t tn_train_seed(const tn_train *run);
 TN_API int tn_train_checkpoints(const tn_train *run);
+/* Checkpoints that could not be written (TN_ERR_IO: a full disk, a missing directory): a warning,
+   not a failure, so training goes on and the model is still saved to its own path. Returns how
+   many failed; *message (may be NULL) gets the last failure's detail, "" if none. */
+TN_API int tn_train_checkpoint_failures(const tn_train *run, const char **message);
 /* Writes a checkpoint now (to opts->checkpoint, or to path if not NULL). */
 TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path);
 
@@ -1587,7 +1604,6 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
    round(factor * in's size). */
 TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
                                    tn_image *out);
-#endif /* TN_NO_SINGAN */
 
 /* GPNN baseline (Granot et al. 2022, "Drop the GAN"): generation by patch nearest neighbours,
    no training. A pyramid of the example (factor, down to `coarsest` px); the output's coarsest
@@ -1615,6 +1631,7 @@ typedef struct tn_gpnn_opts {
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
    in its units. *out (one channel) is allocated here. opts may be NULL (defaults). */
 TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out);
+#endif /* TN_NO_SINGAN */
 
 /* ============================================================================================
    @@gnn  sketch-to-terrain graph network (paper 000, sections 4.2-5.4)
@@ -1874,7 +1891,6 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
-#endif /* TN_NO_GNN */
 
 /* Densify by example (issue 30): a drawing of a few strokes leaves most of the map to the
    membrane, smooth slopes between the strokes. tn_gnn_grow fills the space between the user's
@@ -1919,6 +1935,7 @@ typedef struct tn_gnn_plan {
    beyond the gain test). */
 TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                 tn_gnn_plan *plan);
+#endif /* TN_NO_GNN */
 
 /* ============================================================================================
    @@season  seasonal terrain: insolation, climate, seasonal textures (paper 003)
@@ -2312,17 +2329,22 @@ typedef struct tn_world_run_opts {
 
 typedef struct tn_world_run_stats {
     int written, skipped;      /* tiles computed and written; tiles already in DIR */
+    int repaired;              /* of the written: files in DIR that did not match the manifest's size
+                                  and digest (or, unlisted, did not decode as this world's tile) */
     double seconds;
 } tn_world_run_stats;
 
 /* Writes the selected tiles as DIR/r{row}_c{col}.png (created atomically; a tile already there
-   is complete and skipped, so a run resumes). DIR must exist; DIR/world.spec is written on
+   is skipped, so a run resumes, when it matches DIR/manifest.txt's size and digest or, unlisted,
+   decodes as this tile; a damaged or foreign file is computed again). DIR must exist; DIR/world.spec is written on
    first use and a different world in DIR is refused. Progress stage "world". stats may be NULL. */
 TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts,
                                       tn_world_run_stats *stats);
 /* Writes DIR/world.vrt (a GDAL mosaic of the whole grid, heights in metres through the band's
-   offset and scale) and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's
-   FNV-1a 64 digest of its file bytes), both atomically. present (may be NULL) gets the count. */
+   offset and scale; above 64 x 64 tiles a mosaic of DIR/world_bI_J.vrt, each of 64 x 64 tiles)
+   and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's FNV-1a 64 digest of
+   its file bytes and its size; a file that fails the check above is not present), both
+   atomically. present (may be NULL) gets the count. */
 TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
@@ -2409,7 +2431,12 @@ extern "C" {
    Thread-local storage where the compiler has it (C++11, C11, MSVC, gcc/clang's __thread, which
    -std=c99 -pedantic accepts); otherwise, or with TN_NO_TLS, a pthread key; without threads a
    plain static. */
-typedef struct tn__error_state { char msg[1024]; unsigned long fails; } tn__error_state;
+typedef struct tn__error_state {
+    char msg[1024];
+    unsigned long fails;
+    int over_limit;      /* the memory budget refused an allocation; not yet reported */
+    int msg_over_limit;  /* msg is about the memory budget */
+} tn__error_state;
 
 #if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
 #if defined(_MSC_VER)
@@ -2466,7 +2493,12 @@ TN_API const char *tn_status_string(tn_status s)
 }
 
 TN_API const char *tn_last_error(void) { return tn__err()->msg; }
-TN_API void tn_clear_error(void) { tn__err()->msg[0] = 0; }
+TN_API void tn_clear_error(void)
+{
+    tn__error_state *e = tn__err();
+    e->msg[0] = 0;
+    e->over_limit = e->msg_over_limit = 0;
+}
 
 /* Records a failure message (printf-style) and returns the status, so callers can write
    `return tn__fail(TN_ERR_IO, "%s: cannot open", path);`. */
@@ -2474,12 +2506,36 @@ static tn_status tn__fail(tn_status s, const char *fmt, ...)
 {
     tn__error_state *e = tn__err();
     va_list ap;
+    char limit[256];
+    /* an allocation the memory budget refused reaches its caller as NULL; whoever reports that
+       as out of memory reports the budget instead */
+    int over = s == TN_ERR_OUT_OF_MEMORY && e->over_limit && e->msg_over_limit;
+    if (over) {
+        size_t l = strlen(e->msg) < sizeof limit ? strlen(e->msg) : sizeof limit - 1;
+        memcpy(limit, e->msg, l);
+        limit[l] = 0;
+    }
     va_start(ap, fmt);
     vsnprintf(e->msg, sizeof e->msg, fmt, ap);
     va_end(ap);
+    e->msg_over_limit = 0;
+    if (over) { /* the budget's message first; the caller's "out of memory ..." after it */
+        char caller[512];
+        size_t l = strlen(e->msg) < sizeof caller ? strlen(e->msg) : sizeof caller - 1;
+        memcpy(caller, e->msg, l);
+        caller[l] = 0;
+        snprintf(e->msg, sizeof e->msg, "%s; refused: %s", limit, caller);
+        s = TN_ERR_TOO_LARGE;
+        e->over_limit = 0;
+        e->msg_over_limit = 1;
+    }
     e->fails++;
     return s;
 }
+
+/* The status for an allocation that came back NULL where no message was written: the memory
+   budget's TN_ERR_TOO_LARGE when it refused (its message stands), else TN_ERR_OUT_OF_MEMORY. */
+static tn_status tn__oom(void) { return tn__err()->msg_over_limit ? TN_ERR_TOO_LARGE : TN_ERR_OUT_OF_MEMORY; }
 
 /* Prefixes the current message with a context string ("alps.png: " ...), keeping the status. */
 static tn_status tn__fail_context(tn_status s, const char *context)
@@ -2487,6 +2543,7 @@ static tn_status tn__fail_context(tn_status s, const char *context)
     char *msg = tn__err()->msg;
     const size_t cap = sizeof tn__err()->msg;
     size_t lc, lm;
+    if (s == TN_ERR_OUT_OF_MEMORY && tn__err()->msg_over_limit) s = TN_ERR_TOO_LARGE;
     if (!context || !context[0]) return s;
     lc = strlen(context);
     lm = strlen(msg);
@@ -2499,6 +2556,190 @@ static tn_status tn__fail_context(tn_status s, const char *context)
     msg[lc + 1] = ' ';
     return s;
 }
+
+/* The memory budget. Every TN_MALLOC / TN_REALLOC / TN_FREE after this point (the
+   whole library below @@core) goes through the wrappers here: allocations of TN__MEM_TRACK_MIN
+   bytes and more are recorded in a pointer -> size table (open addressing, linear probing), so
+   frees need no size and buffers the caller frees keep their plain layout; small ones are not
+   counted (their number is bounded by the work, their total by the big ones they index). */
+#define TN__MEM_TRACK_MIN ((size_t)64 << 10)
+static void *tn__raw_malloc(size_t n) { return TN_MALLOC(n); }
+static void *tn__raw_realloc(void *p, size_t n) { return TN_REALLOC(p, n); }
+static void tn__raw_free(void *p) { TN_FREE(p); }
+
+typedef struct tn__mem_entry { void *p; size_t n; } tn__mem_entry;
+static tn__mem_entry *tn__mem_slot; /* tn__mem_cap slots (a power of two), p == NULL: empty */
+static size_t tn__mem_cap, tn__mem_count, tn__mem_live, tn__mem_limit;
+#if !defined(TN_NO_THREADS)
+static pthread_mutex_t tn__mem_mutex = PTHREAD_MUTEX_INITIALIZER;
+#define TN__MEM_LOCK() pthread_mutex_lock(&tn__mem_mutex)
+#define TN__MEM_UNLOCK() pthread_mutex_unlock(&tn__mem_mutex)
+#else
+#define TN__MEM_LOCK() ((void)0)
+#define TN__MEM_UNLOCK() ((void)0)
+#endif
+
+static size_t tn__mem_default_limit(void)
+{
+#if defined(TN_MEMORY_LIMIT)
+    return (size_t)(TN_MEMORY_LIMIT);
+#else
+#if !defined(TN_NO_THREADS) && defined(_SC_PHYS_PAGES) && defined(_SC_PAGESIZE)
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+    if (pages > 0 && page > 0) {
+        double half = 0.5 * (double)pages * (double)page;
+        return half >= (double)SIZE_MAX ? SIZE_MAX : (size_t)half;
+    }
+#endif
+    return TN_MAX_ALLOC;
+#endif
+}
+
+static size_t tn__mem_hash(const void *p, size_t cap) { return (size_t)(((uint64_t)(uintptr_t)p >> 4) * 0x9E3779B97F4A7C15ULL >> 20) & (cap - 1); }
+
+/* Records p (n bytes); the lock is held. If the table cannot grow, p goes uncounted. */
+static void tn__mem_put(void *p, size_t n)
+{
+    size_t h;
+    if (2 * (tn__mem_count + 1) > tn__mem_cap) {
+        size_t cap = tn__mem_cap ? 2 * tn__mem_cap : 1024, i;
+        tn__mem_entry *slot = (tn__mem_entry *)tn__raw_malloc(cap * sizeof *slot);
+        if (!slot) return;
+        memset(slot, 0, cap * sizeof *slot);
+        for (i = 0; i < tn__mem_cap; i++)
+            if (tn__mem_slot[i].p) {
+                for (h = tn__mem_hash(tn__mem_slot[i].p, cap); slot[h].p; h = (h + 1) & (cap - 1)) {}
+                slot[h] = tn__mem_slot[i];
+            }
+        tn__raw_free(tn__mem_slot);
+        tn__mem_slot = slot;
+        tn__mem_cap = cap;
+    }
+    for (h = tn__mem_hash(p, tn__mem_cap); tn__mem_slot[h].p && tn__mem_slot[h].p != p; h = (h + 1) & (tn__mem_cap - 1)) {}
+    if (tn__mem_slot[h].p) tn__mem_live -= tn__mem_slot[h].n; /* freed behind our back, then reused */
+    else tn__mem_count++;
+    tn__mem_slot[h].p = p;
+    tn__mem_slot[h].n = n;
+    tn__mem_live += n;
+}
+
+/* Forgets p and returns its size (0 if it was not counted); the lock is held. Deletion shifts
+   the entries after it back, so probing never needs tombstones. */
+static size_t tn__mem_take(void *p)
+{
+    size_t h, j, k, n, m = tn__mem_cap - 1;
+    if (!p || !tn__mem_count) return 0;
+    for (h = tn__mem_hash(p, tn__mem_cap); tn__mem_slot[h].p != p; h = (h + 1) & m)
+        if (!tn__mem_slot[h].p) return 0;
+    n = tn__mem_slot[h].n;
+    tn__mem_live -= n;
+    tn__mem_count--;
+    for (j = h;;) {
+        tn__mem_slot[h].p = NULL;
+        for (;;) {
+            j = (j + 1) & m;
+            if (!tn__mem_slot[j].p) return n;
+            k = tn__mem_hash(tn__mem_slot[j].p, tn__mem_cap);
+            if (h <= j ? (h < k && k <= j) : (h < k || k <= j)) continue; /* k lies cyclically in (h, j]: stays */
+            break;
+        }
+        tn__mem_slot[h] = tn__mem_slot[j];
+        h = j;
+    }
+}
+
+/* Whether growing the total by (n - old) bytes stays within the limit; the lock is held. */
+static int tn__mem_admit(size_t old, size_t n)
+{
+    if (!tn__mem_limit) tn__mem_limit = tn__mem_default_limit();
+    return n <= old || (tn__mem_live <= tn__mem_limit && n - old <= tn__mem_limit - tn__mem_live);
+}
+
+static void tn__mem_refuse(size_t n, size_t live, size_t limit)
+{
+    tn__error_state *e;
+    tn__fail(TN_ERR_TOO_LARGE, "%.1f MB more would take terrainnet's memory from %.1f MB past its limit of %.1f MB (tn_set_memory_limit, --max-memory)",
+             (double)n / 1048576.0, (double)live / 1048576.0, (double)limit / 1048576.0);
+    e = tn__err();
+    e->over_limit = 1;
+    e->msg_over_limit = 1;
+}
+
+static void *tn__mem_malloc(size_t n)
+{
+    void *p = NULL;
+    size_t live = 0, limit = 0;
+    int ok;
+    if (n < TN__MEM_TRACK_MIN) return tn__raw_malloc(n);
+    TN__MEM_LOCK();
+    ok = tn__mem_admit(0, n);
+    if (ok && (p = tn__raw_malloc(n)) != NULL) tn__mem_put(p, n);
+    live = tn__mem_live;
+    limit = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    if (!ok) tn__mem_refuse(n, live, limit);
+    return p;
+}
+
+static void *tn__mem_realloc(void *p, size_t n)
+{
+    void *q = NULL;
+    size_t old, live, limit;
+    int ok;
+    TN__MEM_LOCK();
+    old = tn__mem_take(p); /* put back below if the realloc fails */
+    ok = n < TN__MEM_TRACK_MIN || tn__mem_admit(old, n);
+    if (ok) q = tn__raw_realloc(p, n);
+    if (q && n >= TN__MEM_TRACK_MIN) tn__mem_put(q, n);
+    else if (!q && old) tn__mem_put(p, old);
+    live = tn__mem_live;
+    limit = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    if (!ok) tn__mem_refuse(n - old, live, limit);
+    return q;
+}
+
+static void tn__mem_free(void *p)
+{
+    if (!p) return;
+    TN__MEM_LOCK();
+    (void)tn__mem_take(p);
+    TN__MEM_UNLOCK();
+    tn__raw_free(p);
+}
+
+TN_API void tn_set_memory_limit(size_t bytes)
+{
+    TN__MEM_LOCK();
+    tn__mem_limit = bytes ? bytes : tn__mem_default_limit();
+    TN__MEM_UNLOCK();
+}
+
+TN_API size_t tn_get_memory_limit(void)
+{
+    size_t l;
+    TN__MEM_LOCK();
+    if (!tn__mem_limit) tn__mem_limit = tn__mem_default_limit();
+    l = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    return l;
+}
+
+TN_API size_t tn_memory_in_use(void)
+{
+    size_t l;
+    TN__MEM_LOCK();
+    l = tn__mem_live;
+    TN__MEM_UNLOCK();
+    return l;
+}
+
+#undef TN_MALLOC
+#undef TN_REALLOC
+#undef TN_FREE
+#define TN_MALLOC(sz) tn__mem_malloc(sz)
+#define TN_REALLOC(p, sz) tn__mem_realloc(p, sz)
+#define TN_FREE(p) tn__mem_free(p)
 
 /* a * b with overflow check; returns 0 on overflow. */
 static int tn__mul_size(size_t a, size_t b, size_t *out)
@@ -4476,7 +4717,7 @@ TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, si
     *out_size = 0;
     if (max_out == 0 || max_out > TN_MAX_ALLOC) max_out = TN_MAX_ALLOC;
     s = (tn__inflate *)tn__alloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     s->what = "zlib";
     s->out = NULL;
     s->len = s->cap = 0;
@@ -4922,7 +5163,7 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     if (!src && n) return tn__fail(TN_ERR_INVALID_ARG, "deflate: NULL input");
     if (level <= 0) level = 6;
     s = (tn__deflate *)tn__calloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     s->src = src;
     s->n = n;
     tn__z_level_params(s, level);
@@ -4939,7 +5180,7 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     s->prev = (uint16_t *)tn__calloc(sizeof(uint16_t) * (n < TN__Z_WSIZE ? n + 1 : TN__Z_WSIZE)); /* p < n */
     s->sym_len = (uint16_t *)tn__alloc(sizeof(uint16_t) * TN__Z_BLOCK_SYMS);
     s->sym_dist = (uint16_t *)tn__alloc(sizeof(uint16_t) * TN__Z_BLOCK_SYMS);
-    if (!s->head || !s->prev || !s->sym_len || !s->sym_dist) st = TN_ERR_OUT_OF_MEMORY;
+    if (!s->head || !s->prev || !s->sym_len || !s->sym_dist) st = tn__oom();
     if (st == TN_OK) st = tn__reserve((void **)&s->out, &s->ocap, n / 2 + 1024);
     if (st == TN_OK) {
         s->out[0] = 0x78; /* deflate, 32K window; FLEVEL as zlib sets it */
@@ -5214,13 +5455,13 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
         return tn__fail(TN_ERR_CORRUPT, "%s: %zu bytes of IDAT cannot hold %zu bytes of pixel data", p->name, zn, raw_size);
 
     s = (tn__inflate *)tn__alloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     snprintf(what, sizeof what, "%s: IDAT", p->name);
     s->what = what;
     s->out = (uint8_t *)tn__alloc(raw_size + TN__Z_SLACK);
     s->len = 0;
     s->cap = s->max = raw_size;
-    if (!s->out) st = TN_ERR_OUT_OF_MEMORY;
+    if (!s->out) st = tn__oom();
     if (st == TN_OK) {
         st = tn__z_inflate_run(s, z, zn);
         if (st == TN_ERR_TOO_LARGE) st = tn__fail(TN_ERR_CORRUPT, "%s: IDAT holds more than the %zu bytes of pixel data", p->name, raw_size);
@@ -5229,7 +5470,7 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
     }
     if (st == TN_OK) {
         data = (float *)tn__alloc(fbytes);
-        if (!data) st = TN_ERR_OUT_OF_MEMORY;
+        if (!data) st = tn__oom();
     }
     for (i = 0; i < 256; i++) lut[i] = (float)i / (float)(i <= maxcode ? maxcode : 255u);
     if (p->ctype == 3) for (i = 0; i < 256; i++) lut[i] = (float)i / 255.0f;
@@ -5282,7 +5523,7 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
     if (!name) name = "png";
     if (n < 8 || memcmp(buf, tn__png_sig, 8) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a PNG file (bad signature)", name);
     p = (tn__png *)tn__calloc(sizeof *p);
-    if (!p) return TN_ERR_OUT_OF_MEMORY;
+    if (!p) return tn__oom();
     p->name = name;
     for (i = 0; i < 256; i++) p->pal[i][3] = 255;
 
@@ -5368,7 +5609,7 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
         } else {
             size_t q = first_idat, zo = 0;
             z = (uint8_t *)tn__alloc(idat_total);
-            if (!z) st = TN_ERR_OUT_OF_MEMORY;
+            if (!z) st = tn__oom();
             while (st == TN_OK && zo < idat_total) {
                 uint32_t len = tn__png_be32(buf + q);
                 memcpy(z + zo, buf + q + 8, len);
@@ -5479,7 +5720,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
     if ((st = tn__size4(h, rowbytes + 1, 1, 1, &fsize)) != TN_OK) return st;
     filt = (uint8_t *)tn__alloc(fsize);
     rows = (uint8_t *)tn__calloc(rowbytes * 8); /* current, previous, 5 candidates, zero row */
-    if (!filt || !rows) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!filt || !rows) { st = tn__oom(); goto done; }
     scale = maxcode / (hi - lo);
     for (y = 0; y < (uint32_t)h; y++) {
         uint8_t *cur = rows + (y & 1u) * rowbytes, *prev = y ? rows + ((y + 1) & 1u) * rowbytes : rows + 7 * rowbytes;
@@ -5513,7 +5754,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
     nchunks = zn ? (zn + TN__PNG_IDAT_MAX - 1) / TN__PNG_IDAT_MAX : 1;
     total = 8 + 25 + (tlen ? 12 + tlen : 0) + nchunks * 12 + zn + 12;
     buf = (uint8_t *)tn__alloc(total);
-    if (!buf) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!buf) { st = tn__oom(); goto done; }
     memcpy(buf, tn__png_sig, 8);
     tn__png_put_be32(ihdr, (uint32_t)w);
     tn__png_put_be32(ihdr + 4, (uint32_t)h);
@@ -5767,7 +6008,7 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
     if (nv == n) return tn__fail(TN_ERR_EMPTY, "%s: every cell is void / NODATA", name);
     if (tn__size4(nv, sizeof(size_t), 1, 1, &bytes)) return TN_ERR_TOO_LARGE;
     q = (size_t *)tn__alloc(bytes);
-    if (!q) return TN_ERR_OUT_OF_MEMORY;
+    if (!q) return tn__oom();
     /* mask: 0 known, 1 void not yet queued, 2 void queued; the first ring touches known cells */
     tail = 0;
     for (i = 0; i < n; i++) {
@@ -6010,7 +6251,7 @@ static tn_status tn__pnm_encode(const tn_image *img, int bits, double lo, double
     count = data / ((size_t)bits / 8);
     total = (size_t)len + data;
     buf = (uint8_t *)tn__alloc(total);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     d = buf + len;
     for (k = 0; k < count; k++) {
@@ -6086,7 +6327,7 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
     st = tn__size4(w, h, ch, 4, &data);
     if (st) return st;
     buf = (uint8_t *)tn__alloc((size_t)len + data);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     for (row = 0; row < h; row++) {
         uint8_t *dst = buf + len + row * w * ch * 4;
@@ -6139,7 +6380,7 @@ static tn_status tn__hgt_encode(const tn_image *img, uint8_t **out, size_t *out_
                         img->width, img->height, img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         double v = floor((double)img->data[k] + 0.5);
         int s = v < -32767.0 ? -32767 : (v > 32767.0 ? 32767 : (int)v);
@@ -6325,7 +6566,7 @@ static tn_status tn__r16_encode(const tn_image *img, double lo, double hi, uint8
     if (img->channels != 1) return tn__fail(TN_ERR_SHAPE, ".r16 stores 1 channel, not %d", img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         unsigned c = tn__io_code(img->data[k], lo, scale, 65535u);
         buf[2 * k] = (uint8_t)c;
@@ -6978,6 +7219,29 @@ static void tn__tif_georef(const tn__tif *t, tn_georef *g)
     }
 }
 
+/* Byte ranges of strips or tiles that overlap or repeat let a few KB of deflate decode again and
+   again into gigabytes (issue 33: a 17 KB file gave 6.26 GB); every chunk must own its bytes. The
+   (offset, count) pairs are sorted by offset and each must end before the next starts. */
+static tn_status tn__tif_disjoint(const tn__tif *t, const char *what)
+{
+    uint64_t *r;
+    size_t k;
+    tn_status st = TN_OK;
+    if (t->nchunks < 2) return TN_OK;
+    if (!(r = (uint64_t *)tn__alloc(t->nchunks * 2 * sizeof(uint64_t)))) return tn__fail_context(TN_ERR_OUT_OF_MEMORY, t->name);
+    for (k = 0; k < t->nchunks; k++) {
+        r[2 * k] = t->offs[k];
+        r[2 * k + 1] = t->cnts[k];
+    }
+    qsort(r, t->nchunks, 2 * sizeof(uint64_t), tn__z_cmp_u64); /* compares the offsets */
+    for (k = 0; k + 1 < t->nchunks && !st; k++)
+        if (r[2 * k] + r[2 * k + 1] > r[2 * k + 2])
+            st = tn__fail(TN_ERR_CORRUPT, "%s: TIFF %ss overlap or share bytes (%llu bytes at offset %llu reach into the %s at %llu)", t->name,
+                          what, (unsigned long long)r[2 * k + 1], (unsigned long long)r[2 * k], what, (unsigned long long)r[2 * k + 2]);
+    TN_FREE(r);
+    return st;
+}
+
 /* Checks the chosen image's tags and fills the layout fields of t. */
 static tn_status tn__tif_layout(tn__tif *t)
 {
@@ -7086,6 +7350,7 @@ static tn_status tn__tif_layout(tn__tif *t)
             t->offs[k] = o;
             t->cnts[k] = c;
         }
+        if ((st = tn__tif_disjoint(t, what))) return st;
     }
     return TN_OK;
 }
@@ -7396,7 +7661,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     j.z = (uint8_t **)tn__calloc(j.nstrips * sizeof(uint8_t *));
     j.zn = (size_t *)tn__calloc(j.nstrips * sizeof(size_t));
     j.st = (tn_status *)tn__calloc(j.nstrips * sizeof(tn_status));
-    if (!j.z || !j.zn || !j.st) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!j.z || !j.zn || !j.st) { st = tn__oom(); goto done; }
     tn_parallel_for(j.nstrips, 1, tn__tif_enc_range, &j);
     for (k = 0; k < j.nstrips; k++) {
         if (j.st[k] && !st) st = tn__fail(j.st[k], "TIFF: compressing strip %zu failed", k);
@@ -7419,7 +7684,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     size = data_at + total_z;
     o.buf = (uint8_t *)tn__calloc(size);
     tmp = (uint8_t *)tn__alloc(j.nstrips * 8 + 16 * 8 + (has_geo ? (size_t)geo->nkeys * 2 + (size_t)geo->ndoubles * 8 : 0));
-    if (!o.buf || !tmp) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!o.buf || !tmp) { st = tn__oom(); goto done; }
     memcpy(o.buf, "II", 2);
     if (big) {
         tn__tif_put(o.buf + 2, 43, 2);
@@ -7712,17 +7977,113 @@ static unsigned long tn__io_process_id(void)
 
 static unsigned long tn__io_tmp_counter;
 
-/* Writes buf to "<path>.tmp.<pid>.<n>" and renames it over path; removes the temporary on failure. */
+/* POSIX: saves go through open/write/fsync so the data is on disk before the rename, and the
+   directory is synced after it; stale temporaries are found with opendir. Elsewhere stdio. */
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+#include <fcntl.h>
+#include <dirent.h>
+#include <sys/stat.h>
+#define TN__IO_POSIX 1
+#endif
+
+/* Removes the "<path>.tmp.<pid>.<n>" files a killed save left next to path (issue 33: 20-126 MB
+   each, there for good): another process's, untouched for 2 minutes, whose process is gone
+   (where /proc tells; elsewhere untouched for an hour). Best effort, silent. */
+static void tn__io_remove_stale(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
+    size_t dl = slash ? (size_t)(slash - path) : 0, bl = strlen(base);
+    char dir[1024], full[1400], proc[48];
+    DIR *d;
+    struct dirent *e;
+    struct stat sb;
+    int have_proc = stat("/proc/self", &sb) == 0;
+    unsigned long me = tn__io_process_id();
+    if (dl >= sizeof dir || bl == 0 || bl > 255) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if (!(d = opendir(dir))) return;
+    while ((e = readdir(d)) != NULL) {
+        const char *nm = e->d_name, *q;
+        unsigned long pid = 0;
+        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp.", 5) != 0) continue;
+        for (q = nm + bl + 5; *q >= '0' && *q <= '9'; q++) pid = pid * 10 + (unsigned long)(*q - '0');
+        if (q == nm + bl + 5 || *q != '.' || pid == me) continue;
+        for (q++; *q >= '0' && *q <= '9'; q++) {}
+        if (*q || q[-1] == '.') continue;
+        snprintf(full, sizeof full, "%s/%s", dir, nm);
+        if (stat(full, &sb) != 0 || difftime(time(NULL), sb.st_mtime) < (have_proc ? 120.0 : 3600.0)) continue;
+        snprintf(proc, sizeof proc, "/proc/%lu", pid);
+        if (have_proc && stat(proc, &sb) == 0) continue; /* its process still runs */
+        remove(full);
+    }
+    closedir(d);
+#else
+    (void)path;
+#endif
+}
+
+/* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
+static void tn__io_sync_dir(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/');
+    char dir[1024];
+    int fd;
+    size_t dl = slash ? (size_t)(slash - path) : 0;
+    if (dl >= sizeof dir) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if ((fd = open(dir, O_RDONLY)) < 0) return;
+    (void)fsync(fd);
+    close(fd);
+#else
+    (void)path;
+#endif
+}
+
+/* Writes buf to "<path>.tmp.<pid>.<n>", flushes it to disk and renames it over path; removes the
+   temporary on failure, and stale ones of earlier saves of path first. */
 static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
 {
     size_t cap = strlen(path) + 64;
     char *tmp = (char *)tn__alloc(cap);
     unsigned long serial = ++tn__io_tmp_counter;
-    FILE *f;
     int ok;
-    if (!tmp) return TN_ERR_OUT_OF_MEMORY;
+#if defined(TN__IO_POSIX)
+    int fd;
+    size_t off = 0;
+#else
+    FILE *f;
+#endif
+    if (!tmp) return tn__oom();
+    tn__io_remove_stale(path);
     serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
     snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+#if defined(TN__IO_POSIX)
+    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
+    if (fd < 0) {
+        TN_FREE(tmp);
+        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
+    }
+    ok = 1;
+    while (ok && off < n) {
+        ssize_t w = write(fd, buf + off, n - off < ((size_t)1 << 30) ? n - off : ((size_t)1 << 30));
+        if (w <= 0) ok = 0; /* a signal mid-write counts as a failure: the save is refused, not torn */
+        else off += (size_t)w;
+    }
+    ok = fsync(fd) == 0 && ok;
+    ok = close(fd) == 0 && ok;
+#else
     f = fopen(tmp, "wb");
     if (!f) {
         TN_FREE(tmp);
@@ -7732,6 +8093,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
     ok = fflush(f) == 0 && ok;
     ok = !ferror(f) && ok;
     ok = fclose(f) == 0 && ok;
+#endif
     if (!ok) {
         remove(tmp);
         TN_FREE(tmp);
@@ -7745,6 +8107,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
         TN_FREE(tmp);
         return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
     }
+    tn__io_sync_dir(path);
     TN_FREE(tmp);
     return TN_OK;
 }
@@ -11192,6 +11555,9 @@ struct tn_params {
     int n, cap;
     char **meta;  /* 2 * nmeta strings: key, value, key, value, ... (each malloc'd) */
     int nmeta, metacap;
+    int *slot;    /* name hash table, hcap (a power of two) slots of tensor index + 1, 0 = empty:
+                     a linear search made loading n tensors O(n^2) (100k names took minutes) */
+    int hcap;
 };
 
 TN_API tn_params *tn_params_create(void)
@@ -11222,7 +11588,38 @@ TN_API void tn_params_free(tn_params *p)
     tn__meta_clear(p);
     tn_ctx_free(p->ctx);
     TN_FREE(p->t);
+    TN_FREE(p->slot);
     TN_FREE(p);
+}
+
+static uint32_t tn__name_hash(const char *s)
+{
+    uint32_t h = 2166136261u; /* FNV-1a */
+    while (*s) h = (h ^ (uint8_t)*s++) * 16777619u;
+    return h;
+}
+
+static void tn__params_slot_put(int *slot, int hcap, const char *name, int index)
+{
+    uint32_t m = (uint32_t)hcap - 1, h = tn__name_hash(name) & m;
+    while (slot[h]) h = (h + 1) & m;
+    slot[h] = index + 1;
+}
+
+/* Keeps the table at most half full: doubles it and reinserts every name. */
+static int tn__params_slot_grow(tn_params *p)
+{
+    int hcap = p->hcap ? p->hcap : 64, *slot, i;
+    while (hcap < 2 * (p->n + 1)) hcap *= 2;
+    if (hcap == p->hcap) return 1;
+    slot = (int *)TN_MALLOC((size_t)hcap * sizeof(int));
+    if (!slot) return 0;
+    memset(slot, 0, (size_t)hcap * sizeof(int));
+    for (i = 0; i < p->n; i++) tn__params_slot_put(slot, hcap, p->t[i]->name, i);
+    TN_FREE(p->slot);
+    p->slot = slot;
+    p->hcap = hcap;
+    return 1;
 }
 
 static tn_tensor *tn__params_new(tn_params *p, const char *name, int ndim, const int *shape, int learned)
@@ -11264,10 +11661,15 @@ static tn_tensor *tn__params_new(tn_params *p, const char *name, int ndim, const
         p->t = nt;
         p->cap = cap;
     }
+    if (!tn__params_slot_grow(p)) {
+        tn__fail(TN_ERR_OUT_OF_MEMORY, "parameters: out of memory");
+        return NULL;
+    }
     t = tn_tensor_new(p->ctx, ndim, shape);
     if (!t) return NULL;
     if (learned && !tn_tensor_requires_grad(p->ctx, t)) return NULL;
     strcpy(t->name, name);
+    tn__params_slot_put(p->slot, p->hcap, name, p->n);
     p->t[p->n++] = t;
     return t;
 }
@@ -11279,9 +11681,11 @@ TN_API tn_tensor *tn_params_get(const tn_params *p, int i) { return i >= 0 && i 
 
 TN_API tn_tensor *tn_params_find(const tn_params *p, const char *name)
 {
-    int i;
-    for (i = 0; i < p->n; i++)
-        if (!strcmp(p->t[i]->name, name)) return p->t[i];
+    uint32_t m, h;
+    if (!p->hcap) return NULL;
+    m = (uint32_t)p->hcap - 1;
+    for (h = tn__name_hash(name) & m; p->slot[h]; h = (h + 1) & m)
+        if (!strcmp(p->t[p->slot[h] - 1]->name, name)) return p->t[p->slot[h] - 1];
     return NULL;
 }
 
@@ -11411,6 +11815,9 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path)
 
 #define TN__TNW_VERSION 2
 #define TN__META_MAX 65536
+/* No model format needs more tensors (the largest, a GNN, has a few hundred): a file claiming
+   more is refused before anything is parsed. */
+#define TN__TNW_MAX_TENSORS 65536
 
 static int tn__meta_key_ok(const char *k)
 {
@@ -11531,6 +11938,8 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
     count = tn__get_u32(b + 8);
     if (count > (n - 16) / 9) return tn__fail(TN_ERR_CORRUPT, "%s: %u tensors cannot fit in %zu bytes", name, (unsigned)count, n);
+    if (count > TN__TNW_MAX_TENSORS)
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: %u tensors, more than any model has (at most %d)", name, (unsigned)count, TN__TNW_MAX_TENSORS);
     if (!(p = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", name);
     if (version >= 2) {
         size_t ml = tn__get_u32(b + 12);
@@ -11914,8 +12323,25 @@ struct tn_train {
     long it, it0, last_ck_it;
     double seconds, sec0, t0, last_ck;
     int started, stopped, ckpts;
+    int ck_failures;        /* checkpoints that could not be written (warnings) */
+    char ck_warning[256];
     tn_status st;
 };
+
+/* A checkpoint that could not be written is a warning (training goes on); other failures stop. */
+static tn_status tn__train_try_checkpoint(tn_train *run)
+{
+    tn_status st = tn_train_checkpoint(run, NULL);
+    if (st != TN_ERR_IO) return st;
+    run->ck_failures++;
+    {
+        const char *m = tn_last_error();
+        size_t l = strlen(m) < sizeof run->ck_warning ? strlen(m) : sizeof run->ck_warning - 1;
+        memcpy(run->ck_warning, m, l);
+        run->ck_warning[l] = 0;
+    }
+    return TN_OK;
+}
 
 static double tn__progress_eta_s = -1.0;
 
@@ -12063,6 +12489,11 @@ TN_API double tn_train_fraction(const tn_train *run)
 }
 TN_API uint64_t tn_train_seed(const tn_train *run) { return run->o.seed; }
 TN_API int tn_train_checkpoints(const tn_train *run) { return run->ckpts; }
+TN_API int tn_train_checkpoint_failures(const tn_train *run, const char **message)
+{
+    if (message) *message = run->ck_warning;
+    return run->ck_failures;
+}
 
 TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds)
 {
@@ -12319,7 +12750,7 @@ TN_API int tn_train_next(tn_train *run)
         run->seconds = run->sec0 + (now - run->t0);
         if (run->o.checkpoint && run->o.checkpoint[0] &&
             (now - run->last_ck >= run->o.checkpoint_seconds || (run->o.checkpoint_iters && run->it % run->o.checkpoint_iters == 0))) {
-            if ((run->st = tn_train_checkpoint(run, NULL))) {
+            if ((run->st = tn__train_try_checkpoint(run))) {
                 run->stopped = 1;
                 return 0;
             }
@@ -12351,7 +12782,7 @@ TN_API tn_status tn_train_finish(tn_train *run)
 {
     run->stopped = 1;
     if ((run->st == TN_OK || run->st == TN_ERR_CANCELLED) && run->o.checkpoint && run->o.checkpoint[0] && run->it != run->last_ck_it) {
-        tn_status st = tn_train_checkpoint(run, NULL); /* leaves the cancel message alone when it succeeds */
+        tn_status st = tn__train_try_checkpoint(run); /* leaves the cancel message alone when it succeeds */
         if (st) return st;
     }
     return run->st;
@@ -17518,7 +17949,8 @@ static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_lay
     c[8] = m->hi;
     c[9] = (float)(m->iterations & 0xffffff);
     c[10] = (float)(m->iterations >> 24);
-    c[11] = (float)m->train_seconds;
+    c[11] = 0.0f; /* was the training seconds: provenance is in the metadata (train_seconds), so the
+                     tensors, and a digest of them, are the same on every run with the same seed */
     c[12] = (float)disc_width;
     c[13] = (float)disc_layers;
     c[14] = (float)m->scale;
@@ -17591,6 +18023,31 @@ static tn_status tn__tg_add_gen(tn_params *p, const tn_texgan *m, const char *pr
     return TN_OK;
 }
 
+/* Whether a model file holds the generator its config names, shape for shape, checked on the
+   file's own tensors before the model is allocated: a config naming a wide, deep generator over
+   a few small tensors would otherwise allocate its size first (issue 33, item 1). */
+static tn_status tn__tg_file_matches(const tn_texgan *m, const tn_params *f, const char *name)
+{
+    int i, cin = tn__tg_zdim(m);
+    char tname[40];
+    for (i = 0; i < m->stages; i++) {
+        int cout = tn__tg_gen_out(m, i);
+        const tn_tensor *w, *b, *n;
+        snprintf(tname, sizeof tname, "g.w%d", i);
+        w = tn_params_find(f, tname);
+        snprintf(tname, sizeof tname, "g.b%d", i);
+        b = tn_params_find(f, tname);
+        snprintf(tname, sizeof tname, "g.n%d", i);
+        n = tn_params_find(f, tname);
+        if (!w || w->ndim != 4 || w->shape[0] != cout || w->shape[1] != cin || w->shape[2] != 5 || w->shape[3] != 5 || !b || b->ndim != 1 ||
+            b->shape[0] != cout || (m->stage_noise && (!n || n->ndim != 1 || n->shape[0] != cout)))
+            return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config names a generator whose stage %d is %d x %d x 5 x 5; the file's tensors differ", name, i,
+                            cout, cin);
+        cin = cout;
+    }
+    return TN_OK;
+}
+
 /* The model's params: config, wave vectors (periodic dims, at least one row), EMA generator. */
 static tn_status tn__tg_model_params(tn_texgan *m)
 {
@@ -17641,6 +18098,12 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
     if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
+    if (!st && m.train_seconds == 0 && tn_params_meta(f, "train_seconds")) { /* models since the config's field is 0 */
+        double v;
+        const char *t = tn_params_meta(f, "train_seconds");
+        if (tn__io_number(t, strlen(t), &v) && v >= 0 && v <= 1e15) m.train_seconds = v;
+    }
+    if (!st) st = tn__tg_file_matches(&m, f, path);
     if (!st) st = tn__tg_model_params(&m);
     if (!st) st = tn__params_assign(m.weights, f, path);
     tn_params_free(f);
@@ -18724,6 +19187,7 @@ TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed
         cap = w.final[g] ? strlen(w.final[g]) + 40 : 0;
         w.tmp[g] = cap ? (char *)tn__alloc(cap) : NULL;
         if (!w.final[g] || !w.tmp[g]) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        tn__io_remove_stale(w.final[g]);
         snprintf(w.tmp[g], cap, "%s.tmp.%lu.%lu", w.final[g], tn__io_process_id(), ++tn__io_tmp_counter);
         if (!(w.f[g] = fopen(w.tmp[g], "wb"))) {
             st = tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", w.final[g]);
@@ -20558,7 +21022,6 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
     TN_FREE(map);
     return st;
 }
-#endif /* TN_NO_SINGAN */
 
 /* ---- GPNN baseline (patch nearest neighbours, no training) ---- */
 
@@ -20845,6 +21308,7 @@ done:
     else *out = y;
     return st;
 }
+#endif /* TN_NO_SINGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)
@@ -24669,7 +25133,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
     for (mo = m0; mo < m0 + nm; mo++)
         if (o.day > mdays[mo]) return tn__fail(TN_ERR_INVALID_ARG, "insolation: day %d does not exist in month %d", o.day, mo + 1);
     n = (size_t)dem->width * dem->height;
-    if (!(h = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(h = (float *)tn__alloc(n * sizeof(float)))) return tn__oom();
     for (i = 0; i < n; i++) {
         h[i] = dem->data[i * dem->channels];
         if (!isfinite(h[i])) {
@@ -24709,7 +25173,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         if (!(fx = (float *)tn__alloc(tab * sizeof(float))) || !(fy = (float *)tn__alloc(tab * sizeof(float))) ||
             !(it = (float *)tn__alloc(tab * sizeof(float))) || !(ix = (int *)tn__alloc(tab * sizeof(int))) ||
             !(iy = (int *)tn__alloc(tab * sizeof(int))) || !(need = (unsigned char *)tn__calloc((size_t)j.dirs)) ||
-            !(hbuf = (float *)tn__alloc((size_t)nthr * j.dirs * j.w * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+            !(hbuf = (float *)tn__alloc((size_t)nthr * j.dirs * j.w * sizeof(float)))) { st = tn__oom(); goto done; }
     }
     for (k = 0; k < j.dirs; k++) {
         double az = 2.0 * TN__SEASON_PI * k / j.dirs, t = base;
@@ -24745,7 +25209,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         m->scale = o.solar_constant * ecc * 24.0 / (2.0 * TN__SEASON_PI);
         cw = -(j.sphi * m->sd) / (j.cphi * m->cd);
         ws = j.cphi < 1e-12 ? (j.sphi * m->sd > 0 ? TN__SEASON_PI : 0.0) : cw <= -1.0 ? TN__SEASON_PI : cw >= 1.0 ? 0.0 : acos(cw);
-        if (!(m->steps = (tn__sun_step *)tn__alloc((size_t)nst * sizeof(tn__sun_step)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        if (!(m->steps = (tn__sun_step *)tn__alloc((size_t)nst * sizeof(tn__sun_step)))) { st = tn__oom(); goto done; }
         m->ws = ws;
         m->dstep = dstep;
         m->first = -1;
@@ -25163,7 +25627,7 @@ TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climat
         return tn__fail(TN_ERR_SHAPE, "season: the insolation must be 12 channels of %d x %d (got %d channels of %d x %d)", dem->width,
                         dem->height, insolation->channels, insolation->width, insolation->height);
     n = (size_t)dem->width * dem->height;
-    if (!(j = (tn__season_job *)tn__calloc(sizeof *j))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(j = (tn__season_job *)tn__calloc(sizeof *j))) return tn__oom();
     if (opts) j->o = *opts;
     if (!isfinite(j->o.lapse_rate) || !isfinite(j->o.melt_factor) || !isfinite(j->o.radiation_factor) || !isfinite(j->o.snow_temp) ||
         !isfinite(j->o.rock_slope) || !isfinite(j->o.shade) || !isfinite(j->o.detail) || j->o.shade < 0.0f || j->o.shade > 1.0f ||
@@ -25464,7 +25928,7 @@ static tn_status tn__kpd_conv_add(tn_params *p, const char *name, int cin, int c
     ws[0] = cout;
     ws[1] = cin;
     ws[2] = ws[3] = k;
-    if (!(w = tn__param_new(p, name, "w", -1, 4, ws, 1)) || (bias && !tn__param_new(p, name, "b", -1, 1, &cout, 1))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(w = tn__param_new(p, name, "w", -1, 4, ws, 1)) || (bias && !tn__param_new(p, name, "b", -1, 1, &cout, 1))) return tn__oom();
     if (rng) tn_init_kaiming(w, rng, 1.0f);
     return TN_OK;
 }
@@ -25580,7 +26044,7 @@ static tn_status tn__kpd_model_params(const tn_kpd *A, tn_rng *rng, tn_params **
     *out = NULL;
     if (!p || !tn_params_add_buffer(p, "kpd.config", 1, &n)) {
         tn_params_free(p);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     if ((st = tn__kpd_conv_add(p, "in.", C, W, 3, 1, rng)) || (st = tn__kpd_resblk_add(p, "r0.", C, W, W, rng)) ||
         (st = tn__kpd_resblk_add(p, "r1.", C, W, W2, rng)) || (st = tn__kpd_resblk_add(p, "r2.", C, W2, W2, rng)) ||
@@ -25937,7 +26401,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     tn_rng_seed(&t.rng, tn_train_seed(t.run), 0x6b7064ULL);
     if ((st = tn__kpd_model_params(&t.A, &t.rng, &t.g))) goto done;
     if (!(t.d = tn_params_create())) {
-        st = TN_ERR_OUT_OF_MEMORY;
+        st = tn__oom();
         goto done;
     }
     if (t.o.gan_weight > 0 && (st = tn_patch_disc_add(t.d, "d.", t.A.cond_channels + t.A.out_channels, 32, 3, 3, &t.rng, &t.disc))) goto done;
@@ -26228,11 +26692,11 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
         int c = *cap_s ? *cap_s * 2 : 4;
         tn_image *a = (tn_image *)TN_REALLOC(d->dems, (size_t)c * sizeof *a), *b;
         tn_climate *cl;
-        if (!a) return TN_ERR_OUT_OF_MEMORY;
+        if (!a) return tn__oom();
         d->dems = a;
-        if (!(b = (tn_image *)TN_REALLOC(d->insolation, (size_t)c * sizeof *b))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(b = (tn_image *)TN_REALLOC(d->insolation, (size_t)c * sizeof *b))) return tn__oom();
         d->insolation = b;
-        if (!(cl = (tn_climate *)TN_REALLOC(d->climates, (size_t)c * sizeof *cl))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(cl = (tn_climate *)TN_REALLOC(d->climates, (size_t)c * sizeof *cl))) return tn__oom();
         d->climates = cl;
         *cap_s = c;
     }
@@ -26241,16 +26705,43 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
         tn_image *a = (tn_image *)TN_REALLOC(d->targets, (size_t)c * sizeof *a), *b;
         tn_season_sample *s;
         char(*lb)[32];
-        if (!a) return TN_ERR_OUT_OF_MEMORY;
+        if (!a) return tn__oom();
         d->targets = a;
-        if (!(b = (tn_image *)TN_REALLOC(d->masks, (size_t)c * sizeof *b))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(b = (tn_image *)TN_REALLOC(d->masks, (size_t)c * sizeof *b))) return tn__oom();
         d->masks = b;
-        if (!(s = (tn_season_sample *)TN_REALLOC(d->samples, (size_t)c * sizeof *s))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(s = (tn_season_sample *)TN_REALLOC(d->samples, (size_t)c * sizeof *s))) return tn__oom();
         d->samples = s;
-        if (!(lb = (char(*)[32])TN_REALLOC(d->labels, (size_t)c * sizeof *lb))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(lb = (char(*)[32])TN_REALLOC(d->labels, (size_t)c * sizeof *lb))) return tn__oom();
         d->labels = lb;
         *cap_f = c;
     }
+    return TN_OK;
+}
+
+/* Refuses up front a site whose frame rows cannot fit in memory (issue 33: 20,000 rows naming
+   one 512 x 512 frame wanted about 40 GB): each frame keeps a picture of at least one channel
+   and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the next dem
+   row must stay within what the memory budget has left. */
+static tn_status tn__season_frames_fit(const char *s, size_t from, size_t n, const tn_image *dem, const char *name)
+{
+    size_t i = from, rows = 0, left, limit = tn_get_memory_limit(), used = tn_memory_in_use();
+    double need;
+    while (i < n) {
+        size_t b = i, e, fl[1];
+        const char *fb[1];
+        while (i < n && s[i] != '\n') i++;
+        e = i++;
+        while (b < e && tn__io_space((unsigned char)s[b])) b++;
+        if (b == e || s[b] == '#') continue;
+        (void)tn__climate_fields(s + b, e - b, fb, fl, 1);
+        if (tn__io_token_is(fb[0], fl[0], "dem")) break;
+        if (tn__io_token_is(fb[0], fl[0], "frame")) rows++;
+    }
+    left = used < limit ? limit - used : 0;
+    need = (double)rows * (double)dem->width * (double)dem->height * 8.0;
+    if (need > (double)left)
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: %zu frame rows of %d x %d need at least %.0f MB, over the %.0f MB the memory limit leaves "
+                        "(tn_set_memory_limit, --max-memory)", name, rows, dem->width, dem->height, need / 1048576.0, (double)left / 1048576.0);
     return TN_OK;
 }
 
@@ -26355,11 +26846,12 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if ((st = tn_image_load(p, dm, NULL))) { st = tn__season_fail_at(st, name); break; }
             {
                 float *nd = (float *)TN_REALLOC(dx, (size_t)cap_s * sizeof(float));
-                if (!nd) { st = TN_ERR_OUT_OF_MEMORY; break; }
+                if (!nd) { st = tn__oom(); break; }
                 dx = nd;
                 dx[d.sites] = 1.0f;
             }
             d.sites++;
+            if ((st = tn__season_frames_fit(s, i, n, dm, name))) break;
             if (nf == 4) {
                 size_t q, np = (size_t)dm->width * dm->height * dm->channels;
                 if (!tn__io_number(fb[2], fl[2], &v[0]) || !tn__io_number(fb[3], fl[3], &v[1]) || !(v[1] > v[0]) || !isfinite(v[1] - v[0])) {
@@ -26408,7 +26900,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if ((st = tn__season_grow(&d, 0, d.count + 1, &cap_s, &cap_f))) break;
             {
                 int *so = (int *)TN_REALLOC(site_of, (size_t)cap_f * sizeof(int));
-                if (!so) { st = TN_ERR_OUT_OF_MEMORY; break; }
+                if (!so) { st = tn__oom(); break; }
                 site_of = so;
             }
             if ((st = tn__season_frame(&d, path, name, &d.dems[d.sites - 1], fb, fl, nf, &skip))) break;
@@ -27145,6 +27637,11 @@ done:
 #define TN__WORLD_MAX_KV 8
 #define TN__WORLD_MAX_STAGES 16
 #define TN__WORLD_MAX_SIDE (1 << 28)
+/* The grid's bound: the index lists every tile (a VRT source, a manifest check each), so a grid
+   of 2^48 tiles hung the index writer; 2^20 tiles keep it to seconds. Above TN__WORLD_VRT_BLOCK^2
+   tiles, world.vrt is a mosaic of block VRTs of that many tiles a side, each file a few MB. */
+#define TN__WORLD_MAX_TILES (1 << 20)
+#define TN__WORLD_VRT_BLOCK 64
 
 struct tn__world_method;
 
@@ -27421,7 +27918,7 @@ static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, c
     char *path;
     tn_status st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->model = (tn_texgan *)tn__calloc(sizeof *s->model);
     st = s->model ? tn_texgan_load(s->model, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -27480,7 +27977,7 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     char *path;
     tn_status st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
     st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -27546,8 +28043,8 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
     s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
     s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
-    if (!s->gnn || !s->sketch) return TN_ERR_OUT_OF_MEMORY;
-    if (!(path = tn__world_join(base_dir, s->val[km]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!s->gnn || !s->sketch) return tn__oom();
+    if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
     st = tn_gnn_load(path, s->gnn);
     TN_FREE(path);
     if (st) {
@@ -27555,7 +28052,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         s->gnn = NULL;
         return st;
     }
-    if (!(path = tn__world_join(base_dir, s->val[ks]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
     st = tn_sketch_load(path, s->sketch);
     TN_FREE(path);
     if (st) {
@@ -27608,7 +28105,7 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
     (void)w;
     if ((st = tn__world_need_heights(s))) return st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
     st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -27717,7 +28214,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
     /* the input in network units, as tn__sg_input makes it before resizing */
     if ((st = tn_image_create(&one, in->width, in->height, 1))) return st;
     for (i = 0; i < (size_t)in->width * in->height; i++) one.data[i] = (in->data[i * in->channels] - m->offset) / m->range;
-    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = tn__oom();
     if (!st && n == 0) { /* scale K is the finest: the input itself */
         long y;
         ok = ax >= in_r.x && bx <= (long)in_r.x + in_r.w && ay >= in_r.y && by <= (long)in_r.y + in_r.h;
@@ -27731,7 +28228,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
             sy.idx = (int *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(int));
             sy.wt = (float *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(float));
             tmp = (float *)tn__alloc((size_t)in->height * (bx - ax) * sizeof(float));
-            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = TN_ERR_OUT_OF_MEMORY;
+            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = tn__oom();
         }
         if (!st) ok = tn__world_sub_taps(&fx, ax, bx, in_r.x, in_r.w, &sx) && tn__world_sub_taps(&fy, ay, by, in_r.y, in_r.h, &sy);
         if (!st && ok) {
@@ -27790,7 +28287,7 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
     if (w->cellsize <= 0)
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
                         "are in metres", s->line);
-    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return tn__oom();
     if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
     else {
         char *path = tn__world_join(base_dir, s->val[kc]);
@@ -27980,7 +28477,7 @@ static tn_status tn__world_detail_run(const tn__world_stage *s, const tn_world *
     a.wl = (in->width + f - 1) / f;
     a.hl = (in->height + f - 1) / f;
     if ((st = tn__size4((size_t)a.wl, (size_t)a.hl, (size_t)a.channels, sizeof(double), &n))) return st;
-    if (!(a.sum = (double *)tn__calloc(n))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(a.sum = (double *)tn__calloc(n))) return tn__oom();
     tn__dm_acc_band(&a, 0, in);
     st = tn_image_create(&low, a.wl, a.hl, a.channels);
     for (y = 0; !st && y < a.hl; y++)
@@ -28232,6 +28729,9 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
     w->out_heights = im->st[im->n - 1].out_heights;
     w->cols = (w->out_width + w->tile - 1) / w->tile;
     w->rows = (w->out_height + w->tile - 1) / w->tile;
+    if ((long long)w->rows * w->cols > TN__WORLD_MAX_TILES)
+        return tn__fail(TN_ERR_TOO_LARGE, "world: a %d x %d raster in tiles of %d is a %d x %d grid, more than %d tiles; use a larger `tile` (up to 65536)",
+                        w->out_width, w->out_height, w->tile, w->rows, w->cols, TN__WORLD_MAX_TILES);
     return TN_OK;
 }
 
@@ -28253,7 +28753,7 @@ static tn_status tn__world_normalise(tn_world *w, const tn__world_impl *im)
     }
     if (t.failed) {
         TN_FREE(t.s);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     w->text = t.s;
     w->digest = tn__world_fnv(TN__WORLD_FNV0, (const uint8_t *)t.s, t.n);
@@ -28276,7 +28776,7 @@ static tn_status tn__world_parse_with(const char *text, const tn_world_opts *opt
     if (!im || !copy) {
         TN_FREE(im);
         TN_FREE(copy);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     memcpy(copy, text, n + 1);
     st = tn__world_parse(&w, im, copy, opts, base_dir);
@@ -28315,7 +28815,7 @@ TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_w
         TN_FREE(buf);
         TN_FREE(text);
         TN_FREE(dir);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     if (n) memcpy(text, buf, n);
     text[n] = 0;
@@ -28388,7 +28888,7 @@ static tn_status tn__world_claim_dir(const tn_world *w, const char *dir)
     uint8_t *buf = NULL;
     size_t n = 0, len = strlen(w->text);
     tn_status st = TN_OK;
-    if (!path) return TN_ERR_OUT_OF_MEMORY;
+    if (!path) return tn__oom();
     if (tn__world_exists(path)) {
         st = tn__io_read_file(path, &buf, &n);
         if (!st && (n != len || memcmp(buf, w->text, len) != 0))
@@ -28421,6 +28921,123 @@ static tn_status tn__world_save_tile(const tn_world *w, tn_image *img, const cha
     return tn_image_save(path, img, &o);
 }
 
+/* The tiles DIR/manifest.txt lists, by (row, col): digest and size of each file. A resumed run
+   trusts a tile on disk only when it matches its line (issue 33: a 0-byte r0_c0.png counted as
+   present and went into the manifest); an unlisted tile must decode as this world's tile. */
+typedef struct tn__world_listed { int row, col; uint64_t digest; long long size; } tn__world_listed;
+typedef struct tn__world_manifest { tn__world_listed *slot; size_t cap; } tn__world_manifest;
+
+static size_t tn__world_listed_hash(int row, int col, size_t cap)
+{
+    return (size_t)((((uint64_t)(uint32_t)row << 32) | (uint32_t)col) * 0x9E3779B97F4A7C15ULL >> 17) & (cap - 1);
+}
+
+static const tn__world_listed *tn__world_listed_find(const tn__world_manifest *m, int row, int col)
+{
+    size_t h;
+    if (!m->cap) return NULL;
+    for (h = tn__world_listed_hash(row, col, m->cap); m->slot[h].row >= 0; h = (h + 1) & (m->cap - 1))
+        if (m->slot[h].row == row && m->slot[h].col == col) return &m->slot[h];
+    return NULL;
+}
+
+/* Reads DIR/manifest.txt when there is one (none, or one this library cannot read: empty). */
+static tn_status tn__world_manifest_read(const tn_world *w, const char *dir, tn__world_manifest *m)
+{
+    char *path = tn__world_join(dir, "manifest.txt");
+    uint8_t *buf = NULL;
+    size_t n = 0, i = 0, lines = 0, k;
+    m->slot = NULL;
+    m->cap = 0;
+    if (!path) return tn__oom();
+    if (!tn__world_exists(path) || tn__io_read_file(path, &buf, &n)) {
+        TN_FREE(path);
+        tn_clear_error();
+        return TN_OK;
+    }
+    TN_FREE(path);
+    for (k = 0; k < n; k++) lines += buf[k] == '\n';
+    for (m->cap = 16; m->cap < 2 * lines + 2; m->cap *= 2) {}
+    if (!(m->slot = (tn__world_listed *)tn__alloc(m->cap * sizeof *m->slot))) {
+        TN_FREE(buf);
+        return tn__oom();
+    }
+    for (k = 0; k < m->cap; k++) m->slot[k].row = -1;
+    while (i < n) {
+        char line[128];
+        size_t b = i, len;
+        int row, col, used = 0;
+        unsigned long long size = 0;
+        char hex[17];
+        while (i < n && buf[i] != '\n') i++;
+        len = i - b < sizeof line - 1 ? i - b : sizeof line - 1;
+        memcpy(line, buf + b, len);
+        line[len] = 0;
+        i++;
+        if (sscanf(line, "r%d_c%d.png %16[0-9a-f]%n", &row, &col, hex, &used) == 3 && row >= 0 && col >= 0 && row < w->rows && col < w->cols &&
+            strlen(hex) == 16 && !tn__world_listed_find(m, row, col)) {
+            size_t h = tn__world_listed_hash(row, col, m->cap);
+            uint64_t d = 0;
+            for (k = 0; k < 16; k++) d = d << 4 | (uint64_t)(hex[k] <= '9' ? hex[k] - '0' : hex[k] - 'a' + 10);
+            while (m->slot[h].row >= 0) h = (h + 1) & (m->cap - 1);
+            m->slot[h].row = row;
+            m->slot[h].col = col;
+            m->slot[h].digest = d;
+            m->slot[h].size = sscanf(line + used, "%llu", &size) == 1 ? (long long)size : -1; /* older manifests: no size */
+        }
+    }
+    TN_FREE(buf);
+    return TN_OK;
+}
+
+/* Whether the file at path is this world's tile (row, col): its size and digest as listed, or,
+   unlisted, a PNG that decodes to the tile's size, channels, bit depth and range. *digest and
+   *size get the file's. */
+static int tn__world_tile_ok(const tn_world *w, const tn__world_manifest *m, int row, int col, const char *path, uint64_t *digest, size_t *size)
+{
+    const tn__world_listed *l = tn__world_listed_find(m, row, col);
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    int ok = 0;
+    if (tn__io_read_file(path, &buf, &n)) {
+        tn_clear_error();
+        return 0;
+    }
+    *digest = tn__world_fnv(TN__WORLD_FNV0, buf, n);
+    *size = n;
+    if (l) ok = *digest == l->digest && (l->size < 0 || (size_t)l->size == n);
+    else {
+        tn_image img = {0, 0, 0, NULL};
+        tn_image_info info;
+        tn_rect r = tn_world_tile_rect(w, row, col);
+        if (!tn_image_load_memory(buf, n, path, &img, &info, NULL))
+            ok = info.format == TN_FORMAT_PNG && img.width == r.w && img.height == r.h && img.channels == w->out_channels &&
+                 info.bit_depth == (w->out_heights ? 16 : 8) &&
+                 (!w->out_heights || (info.has_range && (float)info.range_lo == w->lo && (float)info.range_hi == w->hi));
+        tn_image_free(&img);
+        tn_clear_error();
+    }
+    TN_FREE(buf);
+    return ok;
+}
+
+/* Refuses, before DIR/world.spec is written, a tile that cannot be computed: the first stage
+   alone holds the tile grown by the halo in floats, which must fit TN_MAX_ALLOC and what the
+   memory budget leaves (a `tile 65536` failed only after claiming the directory). A lower bound,
+   so nothing that could succeed is refused. */
+static tn_status tn__world_tile_fits(const tn_world *w)
+{
+    tn_rect r = tn_world_tile_rect(w, 0, 0);
+    double one = ((double)r.w + 2.0 * w->halo) * ((double)r.h + 2.0 * w->halo) * sizeof(float);
+    double limit = (double)tn_get_memory_limit() - (double)tn_memory_in_use();
+    if (limit > (double)TN_MAX_ALLOC) limit = (double)TN_MAX_ALLOC;
+    if (one > limit)
+        return tn__fail(TN_ERR_TOO_LARGE, "world: a tile of %d x %d with its halo of %d needs at least %.0f MB, over the %.0f MB the allocation "
+                        "and memory limits allow (tn_set_memory_limit, --max-memory); use a smaller `tile`", r.w, r.h, w->halo,
+                        one / 1048576.0, limit / 1048576.0);
+    return TN_OK;
+}
+
 TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts, tn_world_run_stats *stats)
 {
     tn_world_run_opts o;
@@ -28428,6 +29045,9 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
     tn_status st;
     int row, col;
     long long k = 0, total, done = 0;
+    tn__world_manifest man;
+    uint64_t digest;
+    size_t size;
     TN_ASSERT(w);
     memset(&o, 0, sizeof o);
     memset(&s, 0, sizeof s);
@@ -28441,7 +29061,9 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
         return tn__fail(TN_ERR_INVALID_ARG, "world: tiles rows %d:%d, columns %d:%d are not inside the %d x %d grid", o.row0, o.row1,
                         o.col0, o.col1, w->rows, w->cols);
     if (o.parts < 1 || o.part < 0 || o.part >= o.parts) return tn__fail(TN_ERR_INVALID_ARG, "world: part %d of %d", o.part, o.parts);
+    if ((st = tn__world_tile_fits(w))) return st;
     if ((st = tn__world_claim_dir(w, dir))) return st;
+    if ((st = tn__world_manifest_read(w, dir, &man))) return st;
     s.seconds = tn_time_seconds();
     total = ((long long)(o.row1 - o.row0) * (o.col1 - o.col0) - o.part + o.parts - 1) / o.parts;
     for (row = o.row0; row < o.row1 && !st; row++)
@@ -28450,11 +29072,12 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             if (k % o.parts != o.part) continue;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
             if (!(path = tn__world_join(dir, leaf))) {
-                st = TN_ERR_OUT_OF_MEMORY;
+                st = tn__oom();
                 break;
             }
-            if (tn__world_exists(path)) s.skipped++;
+            if (tn__world_exists(path) && tn__world_tile_ok(w, &man, row, col, path, &digest, &size)) s.skipped++;
             else {
+                if (tn__world_exists(path)) s.repaired++; /* damaged or foreign: computed again */
                 tn_image img = {0, 0, 0, NULL};
                 st = tn_world_rect(w, tn_world_tile_rect(w, row, col), &img);
                 if (!st) st = tn__world_save_tile(w, &img, path);
@@ -28465,50 +29088,95 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             if (!st) st = tn__progress("world", (double)++done / (double)(total > 0 ? total : 1));
         }
     s.seconds = tn_time_seconds() - s.seconds;
+    TN_FREE(man.slot);
     if (stats) *stats = s;
     return st;
 }
 
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+/* GDAL mosaic of tiles rows [r0, r1) x columns [c0, c1), its pixels from that block's corner;
+   blocks: its sources are the block mosaics of TN__WORLD_VRT_BLOCK tiles a side instead. The
+   whole grid's (r0 = c0 = 0) carries the geotransform. */
+static void tn__world_vrt(tn__text *vrt, const tn_world *w, int r0, int r1, int c0, int c1, int blocks)
 {
-    tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
-    char num[3][40], hex[17], *path = NULL;
-    int row, col, c, count = 0;
-    tn_status st = TN_OK;
-    TN_ASSERT(w);
-    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
-    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
-    if ((st = tn__world_claim_dir(w, dir))) return st;
+    static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
+    char num[3][40];
+    int c, row, col, step = blocks ? TN__WORLD_VRT_BLOCK : 1;
+    tn_rect o = tn_world_tile_rect(w, r0, c0), e = tn_world_tile_rect(w, r1 - 1, c1 - 1);
     tn__io_format_number(num[0], sizeof num[0], w->lo, 1);
     tn__io_format_number(num[1], sizeof num[1], ((double)w->hi - w->lo) / 65535.0, 0);
-    tn__text_add(&vrt, "<VRTDataset rasterXSize=\"%d\" rasterYSize=\"%d\">\n", w->out_width, w->out_height);
-    if (w->cellsize > 0) {
+    tn__text_add(vrt, "<VRTDataset rasterXSize=\"%d\" rasterYSize=\"%d\">\n", e.x + e.w - o.x, e.y + e.h - o.y);
+    if (w->cellsize > 0 && r0 == 0 && c0 == 0) {
         tn__io_format_number(num[2], sizeof num[2], (double)w->cellsize * w->width / w->out_width, 0);
-        tn__text_add(&vrt, "  <GeoTransform>0, %s, 0, 0, 0, -%s</GeoTransform>\n", num[2], num[2]);
+        tn__text_add(vrt, "  <GeoTransform>0, %s, 0, 0, 0, -%s</GeoTransform>\n", num[2], num[2]);
     }
     for (c = 0; c < w->out_channels; c++) {
-        static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
         /* heights: Float32 metres, code * (hi - lo) / 65535 + lo per source, so every GDAL reader
            (gdalinfo -stats, QGIS, gdal_translate) sees metres without applying a band scale */
-        tn__text_add(&vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
-        if (!w->out_heights && w->out_channels >= 3) tn__text_add(&vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
-        for (row = 0; row < w->rows; row++)
-            for (col = 0; col < w->cols; col++) {
+        tn__text_add(vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
+        if (!w->out_heights && w->out_channels >= 3) tn__text_add(vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
+        for (row = r0; row < r1; row += step)
+            for (col = c0; col < c1; col += step) {
                 tn_rect r = tn_world_tile_rect(w, row, col);
-                tn__text_add(&vrt,
+                if (blocks) {
+                    tn_rect z = tn_world_tile_rect(w, row + step < r1 ? row + step - 1 : r1 - 1, col + step < c1 ? col + step - 1 : c1 - 1);
+                    int bw = z.x + z.w - r.x, bh = z.y + z.h - r.y;
+                    tn__text_add(vrt,
+                                 "    <SimpleSource>\n      <SourceFilename relativeToVRT=\"1\">world_b%d_%d.vrt</SourceFilename>\n"
+                                 "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
+                                 "DataType=\"%s\" BlockXSize=\"128\" BlockYSize=\"128\"/>\n"
+                                 "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
+                                 "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n    </SimpleSource>\n",
+                                 row / step, col / step, c + 1, bw, bh, w->out_heights ? "Float32" : "Byte", bw, bh, r.x - o.x, r.y - o.y, bw, bh);
+                    continue;
+                }
+                tn__text_add(vrt,
                              "    <%s>\n      <SourceFilename relativeToVRT=\"1\">r%d_c%d.png</SourceFilename>\n"
                              "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
                              "DataType=\"%s\" BlockXSize=\"%d\" BlockYSize=\"1\"/>\n"
                              "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
                              "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n",
                              w->out_heights ? "ComplexSource" : "SimpleSource", row, col, c + 1, r.w, r.h,
-                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x, r.y, r.w, r.h);
-                if (w->out_heights) tn__text_add(&vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
-                tn__text_add(&vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
+                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x - o.x, r.y - o.y, r.w, r.h);
+                if (w->out_heights) tn__text_add(vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
+                tn__text_add(vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
             }
-        tn__text_add(&vrt, "  </VRTRasterBand>\n");
+        tn__text_add(vrt, "  </VRTRasterBand>\n");
     }
-    tn__text_add(&vrt, "</VRTDataset>\n");
+    tn__text_add(vrt, "</VRTDataset>\n");
+}
+
+TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+{
+    tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
+    tn__world_manifest old;
+    char num[3][40], hex[17], *path = NULL;
+    int row, col, count = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(w);
+    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
+    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
+    if ((st = tn__world_claim_dir(w, dir))) return st;
+    if ((st = tn__world_manifest_read(w, dir, &old))) return st;
+    tn__io_format_number(num[0], sizeof num[0], w->lo, 1);
+    if ((long long)w->rows * w->cols <= (long long)TN__WORLD_VRT_BLOCK * TN__WORLD_VRT_BLOCK)
+        tn__world_vrt(&vrt, w, 0, w->rows, 0, w->cols, 0);
+    else { /* a mosaic of block mosaics: no file holds more than a block's sources */
+        int br, bc;
+        for (br = 0; br < w->rows && !st; br += TN__WORLD_VRT_BLOCK)
+            for (bc = 0; bc < w->cols && !st; bc += TN__WORLD_VRT_BLOCK) {
+                tn__text blk = {NULL, 0, 0, 0};
+                char leaf[48];
+                tn__world_vrt(&blk, w, br, br + TN__WORLD_VRT_BLOCK < w->rows ? br + TN__WORLD_VRT_BLOCK : w->rows, bc,
+                              bc + TN__WORLD_VRT_BLOCK < w->cols ? bc + TN__WORLD_VRT_BLOCK : w->cols, 0);
+                snprintf(leaf, sizeof leaf, "world_b%d_%d.vrt", br / TN__WORLD_VRT_BLOCK, bc / TN__WORLD_VRT_BLOCK);
+                if (blk.failed || !(path = tn__world_join(dir, leaf))) st = tn__oom();
+                if (!st) st = tn__io_write_atomic(path, (const uint8_t *)blk.s, blk.n);
+                TN_FREE(path);
+                path = NULL;
+                TN_FREE(blk.s);
+            }
+        tn__world_vrt(&vrt, w, 0, w->rows, 0, w->cols, 1);
+    }
     tn__hex64(hex, w->digest);
     tn__text_add(&man, "terrainnet world manifest\nversion %s\nspec_digest %s\nseed %llu\nsize %d %d\ntile %d\ngrid %d %d\n",
                   TN_VERSION_STRING, hex, (unsigned long long)w->seed, w->out_width, w->out_height, w->tile, w->rows, w->cols);
@@ -28519,29 +29187,29 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     for (row = 0; row < w->rows && !st; row++)
         for (col = 0; col < w->cols && !st; col++) {
             char leaf[48];
-            uint8_t *buf = NULL;
+            uint64_t digest;
             size_t n = 0;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
             if (!(path = tn__world_join(dir, leaf))) {
-                st = TN_ERR_OUT_OF_MEMORY;
+                st = tn__oom();
                 break;
             }
-            if (tn__world_exists(path) && !(st = tn__io_read_file(path, &buf, &n))) {
-                tn__hex64(hex, tn__world_fnv(TN__WORLD_FNV0, buf, n));
-                tn__text_add(&man, "%s %s\n", leaf, hex);
+            if (tn__world_exists(path) && tn__world_tile_ok(w, &old, row, col, path, &digest, &n)) { /* a damaged tile is not present */
+                tn__hex64(hex, digest);
+                tn__text_add(&man, "%s %s %zu\n", leaf, hex, n);
                 count++;
-                TN_FREE(buf);
             }
             TN_FREE(path);
             path = NULL;
         }
+    TN_FREE(old.slot);
     tn__text_add(&man, "tiles %d of %d\n", count, w->rows * w->cols);
-    if (!st && (vrt.failed || man.failed)) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && !(path = tn__world_join(dir, "world.vrt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && (vrt.failed || man.failed)) st = tn__oom();
+    if (!st && !(path = tn__world_join(dir, "world.vrt"))) st = tn__oom();
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)vrt.s, vrt.n);
     TN_FREE(path);
     path = NULL;
-    if (!st && !(path = tn__world_join(dir, "manifest.txt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(path = tn__world_join(dir, "manifest.txt"))) st = tn__oom();
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)man.s, man.n);
     TN_FREE(path);
     TN_FREE(vrt.s);

@@ -39,6 +39,19 @@ TN_API float    tn_rng_normal(tn_rng *r);             /* standard normal (Box-Mu
 typedef int (*tn_progress_fn)(void *user, const char *stage, double fraction);
 TN_API void tn_set_progress(tn_progress_fn fn, void *user);
 
+/* Memory budget: the total of the library's live allocations (each of 64 KiB or more, made
+   through TN_MALLOC / TN_REALLOC inside the library: images, tensor arenas, decode buffers) may
+   not pass the limit. An allocation that would pass it fails and the call returns
+   TN_ERR_TOO_LARGE with a message naming the limit, so a hostile file (a decompression bomb, a
+   model config naming millions of parts) fails early instead of taking the machine's memory.
+   Default: half of the physical memory where the system tells it (sysconf), else TN_MAX_ALLOC;
+   TN_MEMORY_LIMIT (bytes) at compile time replaces that default. tn_set_memory_limit(0) restores
+   the default, SIZE_MAX removes the limit. Process-wide; safe to call from any thread. Memory the
+   library hands out counts until it is freed through the library (tn_free, tn_image_free, ...). */
+TN_API void tn_set_memory_limit(size_t bytes);
+TN_API size_t tn_get_memory_limit(void);
+TN_API size_t tn_memory_in_use(void);  /* the counted total now */
+
 /* Monotonic wall-clock seconds (for benches and ETA). */
 TN_API double tn_time_seconds(void);
 
@@ -58,7 +71,12 @@ TN_API char *tn_progress_line(char *buf, size_t size, const char *stage, double 
    Thread-local storage where the compiler has it (C++11, C11, MSVC, gcc/clang's __thread, which
    -std=c99 -pedantic accepts); otherwise, or with TN_NO_TLS, a pthread key; without threads a
    plain static. */
-typedef struct tn__error_state { char msg[1024]; unsigned long fails; } tn__error_state;
+typedef struct tn__error_state {
+    char msg[1024];
+    unsigned long fails;
+    int over_limit;      /* the memory budget refused an allocation; not yet reported */
+    int msg_over_limit;  /* msg is about the memory budget */
+} tn__error_state;
 
 #if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
 #if defined(_MSC_VER)
@@ -115,7 +133,12 @@ TN_API const char *tn_status_string(tn_status s)
 }
 
 TN_API const char *tn_last_error(void) { return tn__err()->msg; }
-TN_API void tn_clear_error(void) { tn__err()->msg[0] = 0; }
+TN_API void tn_clear_error(void)
+{
+    tn__error_state *e = tn__err();
+    e->msg[0] = 0;
+    e->over_limit = e->msg_over_limit = 0;
+}
 
 /* Records a failure message (printf-style) and returns the status, so callers can write
    `return tn__fail(TN_ERR_IO, "%s: cannot open", path);`. */
@@ -123,12 +146,36 @@ static tn_status tn__fail(tn_status s, const char *fmt, ...)
 {
     tn__error_state *e = tn__err();
     va_list ap;
+    char limit[256];
+    /* an allocation the memory budget refused reaches its caller as NULL; whoever reports that
+       as out of memory reports the budget instead */
+    int over = s == TN_ERR_OUT_OF_MEMORY && e->over_limit && e->msg_over_limit;
+    if (over) {
+        size_t l = strlen(e->msg) < sizeof limit ? strlen(e->msg) : sizeof limit - 1;
+        memcpy(limit, e->msg, l);
+        limit[l] = 0;
+    }
     va_start(ap, fmt);
     vsnprintf(e->msg, sizeof e->msg, fmt, ap);
     va_end(ap);
+    e->msg_over_limit = 0;
+    if (over) { /* the budget's message first; the caller's "out of memory ..." after it */
+        char caller[512];
+        size_t l = strlen(e->msg) < sizeof caller ? strlen(e->msg) : sizeof caller - 1;
+        memcpy(caller, e->msg, l);
+        caller[l] = 0;
+        snprintf(e->msg, sizeof e->msg, "%s; refused: %s", limit, caller);
+        s = TN_ERR_TOO_LARGE;
+        e->over_limit = 0;
+        e->msg_over_limit = 1;
+    }
     e->fails++;
     return s;
 }
+
+/* The status for an allocation that came back NULL where no message was written: the memory
+   budget's TN_ERR_TOO_LARGE when it refused (its message stands), else TN_ERR_OUT_OF_MEMORY. */
+static tn_status tn__oom(void) { return tn__err()->msg_over_limit ? TN_ERR_TOO_LARGE : TN_ERR_OUT_OF_MEMORY; }
 
 /* Prefixes the current message with a context string ("alps.png: " ...), keeping the status. */
 static tn_status tn__fail_context(tn_status s, const char *context)
@@ -136,6 +183,7 @@ static tn_status tn__fail_context(tn_status s, const char *context)
     char *msg = tn__err()->msg;
     const size_t cap = sizeof tn__err()->msg;
     size_t lc, lm;
+    if (s == TN_ERR_OUT_OF_MEMORY && tn__err()->msg_over_limit) s = TN_ERR_TOO_LARGE;
     if (!context || !context[0]) return s;
     lc = strlen(context);
     lm = strlen(msg);
@@ -148,6 +196,190 @@ static tn_status tn__fail_context(tn_status s, const char *context)
     msg[lc + 1] = ' ';
     return s;
 }
+
+/* The memory budget. Every TN_MALLOC / TN_REALLOC / TN_FREE after this point (the
+   whole library below @@core) goes through the wrappers here: allocations of TN__MEM_TRACK_MIN
+   bytes and more are recorded in a pointer -> size table (open addressing, linear probing), so
+   frees need no size and buffers the caller frees keep their plain layout; small ones are not
+   counted (their number is bounded by the work, their total by the big ones they index). */
+#define TN__MEM_TRACK_MIN ((size_t)64 << 10)
+static void *tn__raw_malloc(size_t n) { return TN_MALLOC(n); }
+static void *tn__raw_realloc(void *p, size_t n) { return TN_REALLOC(p, n); }
+static void tn__raw_free(void *p) { TN_FREE(p); }
+
+typedef struct tn__mem_entry { void *p; size_t n; } tn__mem_entry;
+static tn__mem_entry *tn__mem_slot; /* tn__mem_cap slots (a power of two), p == NULL: empty */
+static size_t tn__mem_cap, tn__mem_count, tn__mem_live, tn__mem_limit;
+#if !defined(TN_NO_THREADS)
+static pthread_mutex_t tn__mem_mutex = PTHREAD_MUTEX_INITIALIZER;
+#define TN__MEM_LOCK() pthread_mutex_lock(&tn__mem_mutex)
+#define TN__MEM_UNLOCK() pthread_mutex_unlock(&tn__mem_mutex)
+#else
+#define TN__MEM_LOCK() ((void)0)
+#define TN__MEM_UNLOCK() ((void)0)
+#endif
+
+static size_t tn__mem_default_limit(void)
+{
+#if defined(TN_MEMORY_LIMIT)
+    return (size_t)(TN_MEMORY_LIMIT);
+#else
+#if !defined(TN_NO_THREADS) && defined(_SC_PHYS_PAGES) && defined(_SC_PAGESIZE)
+    long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+    if (pages > 0 && page > 0) {
+        double half = 0.5 * (double)pages * (double)page;
+        return half >= (double)SIZE_MAX ? SIZE_MAX : (size_t)half;
+    }
+#endif
+    return TN_MAX_ALLOC;
+#endif
+}
+
+static size_t tn__mem_hash(const void *p, size_t cap) { return (size_t)(((uint64_t)(uintptr_t)p >> 4) * 0x9E3779B97F4A7C15ULL >> 20) & (cap - 1); }
+
+/* Records p (n bytes); the lock is held. If the table cannot grow, p goes uncounted. */
+static void tn__mem_put(void *p, size_t n)
+{
+    size_t h;
+    if (2 * (tn__mem_count + 1) > tn__mem_cap) {
+        size_t cap = tn__mem_cap ? 2 * tn__mem_cap : 1024, i;
+        tn__mem_entry *slot = (tn__mem_entry *)tn__raw_malloc(cap * sizeof *slot);
+        if (!slot) return;
+        memset(slot, 0, cap * sizeof *slot);
+        for (i = 0; i < tn__mem_cap; i++)
+            if (tn__mem_slot[i].p) {
+                for (h = tn__mem_hash(tn__mem_slot[i].p, cap); slot[h].p; h = (h + 1) & (cap - 1)) {}
+                slot[h] = tn__mem_slot[i];
+            }
+        tn__raw_free(tn__mem_slot);
+        tn__mem_slot = slot;
+        tn__mem_cap = cap;
+    }
+    for (h = tn__mem_hash(p, tn__mem_cap); tn__mem_slot[h].p && tn__mem_slot[h].p != p; h = (h + 1) & (tn__mem_cap - 1)) {}
+    if (tn__mem_slot[h].p) tn__mem_live -= tn__mem_slot[h].n; /* freed behind our back, then reused */
+    else tn__mem_count++;
+    tn__mem_slot[h].p = p;
+    tn__mem_slot[h].n = n;
+    tn__mem_live += n;
+}
+
+/* Forgets p and returns its size (0 if it was not counted); the lock is held. Deletion shifts
+   the entries after it back, so probing never needs tombstones. */
+static size_t tn__mem_take(void *p)
+{
+    size_t h, j, k, n, m = tn__mem_cap - 1;
+    if (!p || !tn__mem_count) return 0;
+    for (h = tn__mem_hash(p, tn__mem_cap); tn__mem_slot[h].p != p; h = (h + 1) & m)
+        if (!tn__mem_slot[h].p) return 0;
+    n = tn__mem_slot[h].n;
+    tn__mem_live -= n;
+    tn__mem_count--;
+    for (j = h;;) {
+        tn__mem_slot[h].p = NULL;
+        for (;;) {
+            j = (j + 1) & m;
+            if (!tn__mem_slot[j].p) return n;
+            k = tn__mem_hash(tn__mem_slot[j].p, tn__mem_cap);
+            if (h <= j ? (h < k && k <= j) : (h < k || k <= j)) continue; /* k lies cyclically in (h, j]: stays */
+            break;
+        }
+        tn__mem_slot[h] = tn__mem_slot[j];
+        h = j;
+    }
+}
+
+/* Whether growing the total by (n - old) bytes stays within the limit; the lock is held. */
+static int tn__mem_admit(size_t old, size_t n)
+{
+    if (!tn__mem_limit) tn__mem_limit = tn__mem_default_limit();
+    return n <= old || (tn__mem_live <= tn__mem_limit && n - old <= tn__mem_limit - tn__mem_live);
+}
+
+static void tn__mem_refuse(size_t n, size_t live, size_t limit)
+{
+    tn__error_state *e;
+    tn__fail(TN_ERR_TOO_LARGE, "%.1f MB more would take terrainnet's memory from %.1f MB past its limit of %.1f MB (tn_set_memory_limit, --max-memory)",
+             (double)n / 1048576.0, (double)live / 1048576.0, (double)limit / 1048576.0);
+    e = tn__err();
+    e->over_limit = 1;
+    e->msg_over_limit = 1;
+}
+
+static void *tn__mem_malloc(size_t n)
+{
+    void *p = NULL;
+    size_t live = 0, limit = 0;
+    int ok;
+    if (n < TN__MEM_TRACK_MIN) return tn__raw_malloc(n);
+    TN__MEM_LOCK();
+    ok = tn__mem_admit(0, n);
+    if (ok && (p = tn__raw_malloc(n)) != NULL) tn__mem_put(p, n);
+    live = tn__mem_live;
+    limit = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    if (!ok) tn__mem_refuse(n, live, limit);
+    return p;
+}
+
+static void *tn__mem_realloc(void *p, size_t n)
+{
+    void *q = NULL;
+    size_t old, live, limit;
+    int ok;
+    TN__MEM_LOCK();
+    old = tn__mem_take(p); /* put back below if the realloc fails */
+    ok = n < TN__MEM_TRACK_MIN || tn__mem_admit(old, n);
+    if (ok) q = tn__raw_realloc(p, n);
+    if (q && n >= TN__MEM_TRACK_MIN) tn__mem_put(q, n);
+    else if (!q && old) tn__mem_put(p, old);
+    live = tn__mem_live;
+    limit = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    if (!ok) tn__mem_refuse(n - old, live, limit);
+    return q;
+}
+
+static void tn__mem_free(void *p)
+{
+    if (!p) return;
+    TN__MEM_LOCK();
+    (void)tn__mem_take(p);
+    TN__MEM_UNLOCK();
+    tn__raw_free(p);
+}
+
+TN_API void tn_set_memory_limit(size_t bytes)
+{
+    TN__MEM_LOCK();
+    tn__mem_limit = bytes ? bytes : tn__mem_default_limit();
+    TN__MEM_UNLOCK();
+}
+
+TN_API size_t tn_get_memory_limit(void)
+{
+    size_t l;
+    TN__MEM_LOCK();
+    if (!tn__mem_limit) tn__mem_limit = tn__mem_default_limit();
+    l = tn__mem_limit;
+    TN__MEM_UNLOCK();
+    return l;
+}
+
+TN_API size_t tn_memory_in_use(void)
+{
+    size_t l;
+    TN__MEM_LOCK();
+    l = tn__mem_live;
+    TN__MEM_UNLOCK();
+    return l;
+}
+
+#undef TN_MALLOC
+#undef TN_REALLOC
+#undef TN_FREE
+#define TN_MALLOC(sz) tn__mem_malloc(sz)
+#define TN_REALLOC(p, sz) tn__mem_realloc(p, sz)
+#define TN_FREE(p) tn__mem_free(p)
 
 /* a * b with overflow check; returns 0 on overflow. */
 static int tn__mul_size(size_t a, size_t b, size_t *out)

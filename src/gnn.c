@@ -256,7 +256,6 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
-#endif /* TN_NO_GNN */
 
 /* Densify by example (issue 30): a drawing of a few strokes leaves most of the map to the
    membrane, smooth slopes between the strokes. tn_gnn_grow fills the space between the user's
@@ -301,6 +300,7 @@ typedef struct tn_gnn_plan {
    beyond the gain test). */
 TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                 tn_gnn_plan *plan);
+#endif /* TN_NO_GNN */
 
 /* --------------------------------------------------------------------------------------------
    >>gnn  (@@gnn implementation)

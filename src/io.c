@@ -653,7 +653,7 @@ TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, si
     *out_size = 0;
     if (max_out == 0 || max_out > TN_MAX_ALLOC) max_out = TN_MAX_ALLOC;
     s = (tn__inflate *)tn__alloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     s->what = "zlib";
     s->out = NULL;
     s->len = s->cap = 0;
@@ -1099,7 +1099,7 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     if (!src && n) return tn__fail(TN_ERR_INVALID_ARG, "deflate: NULL input");
     if (level <= 0) level = 6;
     s = (tn__deflate *)tn__calloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     s->src = src;
     s->n = n;
     tn__z_level_params(s, level);
@@ -1116,7 +1116,7 @@ TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_
     s->prev = (uint16_t *)tn__calloc(sizeof(uint16_t) * (n < TN__Z_WSIZE ? n + 1 : TN__Z_WSIZE)); /* p < n */
     s->sym_len = (uint16_t *)tn__alloc(sizeof(uint16_t) * TN__Z_BLOCK_SYMS);
     s->sym_dist = (uint16_t *)tn__alloc(sizeof(uint16_t) * TN__Z_BLOCK_SYMS);
-    if (!s->head || !s->prev || !s->sym_len || !s->sym_dist) st = TN_ERR_OUT_OF_MEMORY;
+    if (!s->head || !s->prev || !s->sym_len || !s->sym_dist) st = tn__oom();
     if (st == TN_OK) st = tn__reserve((void **)&s->out, &s->ocap, n / 2 + 1024);
     if (st == TN_OK) {
         s->out[0] = 0x78; /* deflate, 32K window; FLEVEL as zlib sets it */
@@ -1391,13 +1391,13 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
         return tn__fail(TN_ERR_CORRUPT, "%s: %zu bytes of IDAT cannot hold %zu bytes of pixel data", p->name, zn, raw_size);
 
     s = (tn__inflate *)tn__alloc(sizeof *s);
-    if (!s) return TN_ERR_OUT_OF_MEMORY;
+    if (!s) return tn__oom();
     snprintf(what, sizeof what, "%s: IDAT", p->name);
     s->what = what;
     s->out = (uint8_t *)tn__alloc(raw_size + TN__Z_SLACK);
     s->len = 0;
     s->cap = s->max = raw_size;
-    if (!s->out) st = TN_ERR_OUT_OF_MEMORY;
+    if (!s->out) st = tn__oom();
     if (st == TN_OK) {
         st = tn__z_inflate_run(s, z, zn);
         if (st == TN_ERR_TOO_LARGE) st = tn__fail(TN_ERR_CORRUPT, "%s: IDAT holds more than the %zu bytes of pixel data", p->name, raw_size);
@@ -1406,7 +1406,7 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
     }
     if (st == TN_OK) {
         data = (float *)tn__alloc(fbytes);
-        if (!data) st = TN_ERR_OUT_OF_MEMORY;
+        if (!data) st = tn__oom();
     }
     for (i = 0; i < 256; i++) lut[i] = (float)i / (float)(i <= maxcode ? maxcode : 255u);
     if (p->ctype == 3) for (i = 0; i < 256; i++) lut[i] = (float)i / 255.0f;
@@ -1459,7 +1459,7 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
     if (!name) name = "png";
     if (n < 8 || memcmp(buf, tn__png_sig, 8) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a PNG file (bad signature)", name);
     p = (tn__png *)tn__calloc(sizeof *p);
-    if (!p) return TN_ERR_OUT_OF_MEMORY;
+    if (!p) return tn__oom();
     p->name = name;
     for (i = 0; i < 256; i++) p->pal[i][3] = 255;
 
@@ -1545,7 +1545,7 @@ static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, 
         } else {
             size_t q = first_idat, zo = 0;
             z = (uint8_t *)tn__alloc(idat_total);
-            if (!z) st = TN_ERR_OUT_OF_MEMORY;
+            if (!z) st = tn__oom();
             while (st == TN_OK && zo < idat_total) {
                 uint32_t len = tn__png_be32(buf + q);
                 memcpy(z + zo, buf + q + 8, len);
@@ -1656,7 +1656,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
     if ((st = tn__size4(h, rowbytes + 1, 1, 1, &fsize)) != TN_OK) return st;
     filt = (uint8_t *)tn__alloc(fsize);
     rows = (uint8_t *)tn__calloc(rowbytes * 8); /* current, previous, 5 candidates, zero row */
-    if (!filt || !rows) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!filt || !rows) { st = tn__oom(); goto done; }
     scale = maxcode / (hi - lo);
     for (y = 0; y < (uint32_t)h; y++) {
         uint8_t *cur = rows + (y & 1u) * rowbytes, *prev = y ? rows + ((y + 1) & 1u) * rowbytes : rows + 7 * rowbytes;
@@ -1690,7 +1690,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
     nchunks = zn ? (zn + TN__PNG_IDAT_MAX - 1) / TN__PNG_IDAT_MAX : 1;
     total = 8 + 25 + (tlen ? 12 + tlen : 0) + nchunks * 12 + zn + 12;
     buf = (uint8_t *)tn__alloc(total);
-    if (!buf) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!buf) { st = tn__oom(); goto done; }
     memcpy(buf, tn__png_sig, 8);
     tn__png_put_be32(ihdr, (uint32_t)w);
     tn__png_put_be32(ihdr + 4, (uint32_t)h);

@@ -222,7 +222,7 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
     if (nv == n) return tn__fail(TN_ERR_EMPTY, "%s: every cell is void / NODATA", name);
     if (tn__size4(nv, sizeof(size_t), 1, 1, &bytes)) return TN_ERR_TOO_LARGE;
     q = (size_t *)tn__alloc(bytes);
-    if (!q) return TN_ERR_OUT_OF_MEMORY;
+    if (!q) return tn__oom();
     /* mask: 0 known, 1 void not yet queued, 2 void queued; the first ring touches known cells */
     tail = 0;
     for (i = 0; i < n; i++) {
@@ -465,7 +465,7 @@ static tn_status tn__pnm_encode(const tn_image *img, int bits, double lo, double
     count = data / ((size_t)bits / 8);
     total = (size_t)len + data;
     buf = (uint8_t *)tn__alloc(total);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     d = buf + len;
     for (k = 0; k < count; k++) {
@@ -541,7 +541,7 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
     st = tn__size4(w, h, ch, 4, &data);
     if (st) return st;
     buf = (uint8_t *)tn__alloc((size_t)len + data);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     memcpy(buf, hdr, (size_t)len);
     for (row = 0; row < h; row++) {
         uint8_t *dst = buf + len + row * w * ch * 4;
@@ -594,7 +594,7 @@ static tn_status tn__hgt_encode(const tn_image *img, uint8_t **out, size_t *out_
                         img->width, img->height, img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         double v = floor((double)img->data[k] + 0.5);
         int s = v < -32767.0 ? -32767 : (v > 32767.0 ? 32767 : (int)v);
@@ -780,7 +780,7 @@ static tn_status tn__r16_encode(const tn_image *img, double lo, double hi, uint8
     if (img->channels != 1) return tn__fail(TN_ERR_SHAPE, ".r16 stores 1 channel, not %d", img->channels);
     count = (size_t)img->width * (size_t)img->height;
     buf = (uint8_t *)tn__alloc(count * 2);
-    if (!buf) return TN_ERR_OUT_OF_MEMORY;
+    if (!buf) return tn__oom();
     for (k = 0; k < count; k++) {
         unsigned c = tn__io_code(img->data[k], lo, scale, 65535u);
         buf[2 * k] = (uint8_t)c;
@@ -1433,6 +1433,29 @@ static void tn__tif_georef(const tn__tif *t, tn_georef *g)
     }
 }
 
+/* Byte ranges of strips or tiles that overlap or repeat let a few KB of deflate decode again and
+   again into gigabytes (issue 33: a 17 KB file gave 6.26 GB); every chunk must own its bytes. The
+   (offset, count) pairs are sorted by offset and each must end before the next starts. */
+static tn_status tn__tif_disjoint(const tn__tif *t, const char *what)
+{
+    uint64_t *r;
+    size_t k;
+    tn_status st = TN_OK;
+    if (t->nchunks < 2) return TN_OK;
+    if (!(r = (uint64_t *)tn__alloc(t->nchunks * 2 * sizeof(uint64_t)))) return tn__fail_context(TN_ERR_OUT_OF_MEMORY, t->name);
+    for (k = 0; k < t->nchunks; k++) {
+        r[2 * k] = t->offs[k];
+        r[2 * k + 1] = t->cnts[k];
+    }
+    qsort(r, t->nchunks, 2 * sizeof(uint64_t), tn__z_cmp_u64); /* compares the offsets */
+    for (k = 0; k + 1 < t->nchunks && !st; k++)
+        if (r[2 * k] + r[2 * k + 1] > r[2 * k + 2])
+            st = tn__fail(TN_ERR_CORRUPT, "%s: TIFF %ss overlap or share bytes (%llu bytes at offset %llu reach into the %s at %llu)", t->name,
+                          what, (unsigned long long)r[2 * k + 1], (unsigned long long)r[2 * k], what, (unsigned long long)r[2 * k + 2]);
+    TN_FREE(r);
+    return st;
+}
+
 /* Checks the chosen image's tags and fills the layout fields of t. */
 static tn_status tn__tif_layout(tn__tif *t)
 {
@@ -1541,6 +1564,7 @@ static tn_status tn__tif_layout(tn__tif *t)
             t->offs[k] = o;
             t->cnts[k] = c;
         }
+        if ((st = tn__tif_disjoint(t, what))) return st;
     }
     return TN_OK;
 }
@@ -1851,7 +1875,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     j.z = (uint8_t **)tn__calloc(j.nstrips * sizeof(uint8_t *));
     j.zn = (size_t *)tn__calloc(j.nstrips * sizeof(size_t));
     j.st = (tn_status *)tn__calloc(j.nstrips * sizeof(tn_status));
-    if (!j.z || !j.zn || !j.st) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!j.z || !j.zn || !j.st) { st = tn__oom(); goto done; }
     tn_parallel_for(j.nstrips, 1, tn__tif_enc_range, &j);
     for (k = 0; k < j.nstrips; k++) {
         if (j.st[k] && !st) st = tn__fail(j.st[k], "TIFF: compressing strip %zu failed", k);
@@ -1874,7 +1898,7 @@ static tn_status tn__tif_encode(const tn_image *img, int bits, int level, const 
     size = data_at + total_z;
     o.buf = (uint8_t *)tn__calloc(size);
     tmp = (uint8_t *)tn__alloc(j.nstrips * 8 + 16 * 8 + (has_geo ? (size_t)geo->nkeys * 2 + (size_t)geo->ndoubles * 8 : 0));
-    if (!o.buf || !tmp) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+    if (!o.buf || !tmp) { st = tn__oom(); goto done; }
     memcpy(o.buf, "II", 2);
     if (big) {
         tn__tif_put(o.buf + 2, 43, 2);
@@ -2167,17 +2191,113 @@ static unsigned long tn__io_process_id(void)
 
 static unsigned long tn__io_tmp_counter;
 
-/* Writes buf to "<path>.tmp.<pid>.<n>" and renames it over path; removes the temporary on failure. */
+/* POSIX: saves go through open/write/fsync so the data is on disk before the rename, and the
+   directory is synced after it; stale temporaries are found with opendir. Elsewhere stdio. */
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+#include <fcntl.h>
+#include <dirent.h>
+#include <sys/stat.h>
+#define TN__IO_POSIX 1
+#endif
+
+/* Removes the "<path>.tmp.<pid>.<n>" files a killed save left next to path (issue 33: 20-126 MB
+   each, there for good): another process's, untouched for 2 minutes, whose process is gone
+   (where /proc tells; elsewhere untouched for an hour). Best effort, silent. */
+static void tn__io_remove_stale(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
+    size_t dl = slash ? (size_t)(slash - path) : 0, bl = strlen(base);
+    char dir[1024], full[1400], proc[48];
+    DIR *d;
+    struct dirent *e;
+    struct stat sb;
+    int have_proc = stat("/proc/self", &sb) == 0;
+    unsigned long me = tn__io_process_id();
+    if (dl >= sizeof dir || bl == 0 || bl > 255) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if (!(d = opendir(dir))) return;
+    while ((e = readdir(d)) != NULL) {
+        const char *nm = e->d_name, *q;
+        unsigned long pid = 0;
+        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp.", 5) != 0) continue;
+        for (q = nm + bl + 5; *q >= '0' && *q <= '9'; q++) pid = pid * 10 + (unsigned long)(*q - '0');
+        if (q == nm + bl + 5 || *q != '.' || pid == me) continue;
+        for (q++; *q >= '0' && *q <= '9'; q++) {}
+        if (*q || q[-1] == '.') continue;
+        snprintf(full, sizeof full, "%s/%s", dir, nm);
+        if (stat(full, &sb) != 0 || difftime(time(NULL), sb.st_mtime) < (have_proc ? 120.0 : 3600.0)) continue;
+        snprintf(proc, sizeof proc, "/proc/%lu", pid);
+        if (have_proc && stat(proc, &sb) == 0) continue; /* its process still runs */
+        remove(full);
+    }
+    closedir(d);
+#else
+    (void)path;
+#endif
+}
+
+/* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
+static void tn__io_sync_dir(const char *path)
+{
+#if defined(TN__IO_POSIX)
+    const char *slash = strrchr(path, '/');
+    char dir[1024];
+    int fd;
+    size_t dl = slash ? (size_t)(slash - path) : 0;
+    if (dl >= sizeof dir) return;
+    if (!slash) strcpy(dir, ".");
+    else if (dl == 0) strcpy(dir, "/");
+    else {
+        memcpy(dir, path, dl);
+        dir[dl] = 0;
+    }
+    if ((fd = open(dir, O_RDONLY)) < 0) return;
+    (void)fsync(fd);
+    close(fd);
+#else
+    (void)path;
+#endif
+}
+
+/* Writes buf to "<path>.tmp.<pid>.<n>", flushes it to disk and renames it over path; removes the
+   temporary on failure, and stale ones of earlier saves of path first. */
 static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
 {
     size_t cap = strlen(path) + 64;
     char *tmp = (char *)tn__alloc(cap);
     unsigned long serial = ++tn__io_tmp_counter;
-    FILE *f;
     int ok;
-    if (!tmp) return TN_ERR_OUT_OF_MEMORY;
+#if defined(TN__IO_POSIX)
+    int fd;
+    size_t off = 0;
+#else
+    FILE *f;
+#endif
+    if (!tmp) return tn__oom();
+    tn__io_remove_stale(path);
     serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
     snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+#if defined(TN__IO_POSIX)
+    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
+    if (fd < 0) {
+        TN_FREE(tmp);
+        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
+    }
+    ok = 1;
+    while (ok && off < n) {
+        ssize_t w = write(fd, buf + off, n - off < ((size_t)1 << 30) ? n - off : ((size_t)1 << 30));
+        if (w <= 0) ok = 0; /* a signal mid-write counts as a failure: the save is refused, not torn */
+        else off += (size_t)w;
+    }
+    ok = fsync(fd) == 0 && ok;
+    ok = close(fd) == 0 && ok;
+#else
     f = fopen(tmp, "wb");
     if (!f) {
         TN_FREE(tmp);
@@ -2187,6 +2307,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
     ok = fflush(f) == 0 && ok;
     ok = !ferror(f) && ok;
     ok = fclose(f) == 0 && ok;
+#endif
     if (!ok) {
         remove(tmp);
         TN_FREE(tmp);
@@ -2200,6 +2321,7 @@ static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_
         TN_FREE(tmp);
         return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
     }
+    tn__io_sync_dir(path);
     TN_FREE(tmp);
     return TN_OK;
 }

@@ -93,6 +93,9 @@ struct tn_params {
     int n, cap;
     char **meta;  /* 2 * nmeta strings: key, value, key, value, ... (each malloc'd) */
     int nmeta, metacap;
+    int *slot;    /* name hash table, hcap (a power of two) slots of tensor index + 1, 0 = empty:
+                     a linear search made loading n tensors O(n^2) (100k names took minutes) */
+    int hcap;
 };
 
 TN_API tn_params *tn_params_create(void)
@@ -123,7 +126,38 @@ TN_API void tn_params_free(tn_params *p)
     tn__meta_clear(p);
     tn_ctx_free(p->ctx);
     TN_FREE(p->t);
+    TN_FREE(p->slot);
     TN_FREE(p);
+}
+
+static uint32_t tn__name_hash(const char *s)
+{
+    uint32_t h = 2166136261u; /* FNV-1a */
+    while (*s) h = (h ^ (uint8_t)*s++) * 16777619u;
+    return h;
+}
+
+static void tn__params_slot_put(int *slot, int hcap, const char *name, int index)
+{
+    uint32_t m = (uint32_t)hcap - 1, h = tn__name_hash(name) & m;
+    while (slot[h]) h = (h + 1) & m;
+    slot[h] = index + 1;
+}
+
+/* Keeps the table at most half full: doubles it and reinserts every name. */
+static int tn__params_slot_grow(tn_params *p)
+{
+    int hcap = p->hcap ? p->hcap : 64, *slot, i;
+    while (hcap < 2 * (p->n + 1)) hcap *= 2;
+    if (hcap == p->hcap) return 1;
+    slot = (int *)TN_MALLOC((size_t)hcap * sizeof(int));
+    if (!slot) return 0;
+    memset(slot, 0, (size_t)hcap * sizeof(int));
+    for (i = 0; i < p->n; i++) tn__params_slot_put(slot, hcap, p->t[i]->name, i);
+    TN_FREE(p->slot);
+    p->slot = slot;
+    p->hcap = hcap;
+    return 1;
 }
 
 static tn_tensor *tn__params_new(tn_params *p, const char *name, int ndim, const int *shape, int learned)
@@ -165,10 +199,15 @@ static tn_tensor *tn__params_new(tn_params *p, const char *name, int ndim, const
         p->t = nt;
         p->cap = cap;
     }
+    if (!tn__params_slot_grow(p)) {
+        tn__fail(TN_ERR_OUT_OF_MEMORY, "parameters: out of memory");
+        return NULL;
+    }
     t = tn_tensor_new(p->ctx, ndim, shape);
     if (!t) return NULL;
     if (learned && !tn_tensor_requires_grad(p->ctx, t)) return NULL;
     strcpy(t->name, name);
+    tn__params_slot_put(p->slot, p->hcap, name, p->n);
     p->t[p->n++] = t;
     return t;
 }
@@ -180,9 +219,11 @@ TN_API tn_tensor *tn_params_get(const tn_params *p, int i) { return i >= 0 && i 
 
 TN_API tn_tensor *tn_params_find(const tn_params *p, const char *name)
 {
-    int i;
-    for (i = 0; i < p->n; i++)
-        if (!strcmp(p->t[i]->name, name)) return p->t[i];
+    uint32_t m, h;
+    if (!p->hcap) return NULL;
+    m = (uint32_t)p->hcap - 1;
+    for (h = tn__name_hash(name) & m; p->slot[h]; h = (h + 1) & m)
+        if (!strcmp(p->t[p->slot[h] - 1]->name, name)) return p->t[p->slot[h] - 1];
     return NULL;
 }
 
@@ -312,6 +353,9 @@ TN_API tn_status tn_params_save(const tn_params *p, const char *path)
 
 #define TN__TNW_VERSION 2
 #define TN__META_MAX 65536
+/* No model format needs more tensors (the largest, a GNN, has a few hundred): a file claiming
+   more is refused before anything is parsed. */
+#define TN__TNW_MAX_TENSORS 65536
 
 static int tn__meta_key_ok(const char *k)
 {
@@ -432,6 +476,8 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
     count = tn__get_u32(b + 8);
     if (count > (n - 16) / 9) return tn__fail(TN_ERR_CORRUPT, "%s: %u tensors cannot fit in %zu bytes", name, (unsigned)count, n);
+    if (count > TN__TNW_MAX_TENSORS)
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: %u tensors, more than any model has (at most %d)", name, (unsigned)count, TN__TNW_MAX_TENSORS);
     if (!(p = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", name);
     if (version >= 2) {
         size_t ml = tn__get_u32(b + 12);

@@ -464,7 +464,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
     for (mo = m0; mo < m0 + nm; mo++)
         if (o.day > mdays[mo]) return tn__fail(TN_ERR_INVALID_ARG, "insolation: day %d does not exist in month %d", o.day, mo + 1);
     n = (size_t)dem->width * dem->height;
-    if (!(h = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(h = (float *)tn__alloc(n * sizeof(float)))) return tn__oom();
     for (i = 0; i < n; i++) {
         h[i] = dem->data[i * dem->channels];
         if (!isfinite(h[i])) {
@@ -504,7 +504,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         if (!(fx = (float *)tn__alloc(tab * sizeof(float))) || !(fy = (float *)tn__alloc(tab * sizeof(float))) ||
             !(it = (float *)tn__alloc(tab * sizeof(float))) || !(ix = (int *)tn__alloc(tab * sizeof(int))) ||
             !(iy = (int *)tn__alloc(tab * sizeof(int))) || !(need = (unsigned char *)tn__calloc((size_t)j.dirs)) ||
-            !(hbuf = (float *)tn__alloc((size_t)nthr * j.dirs * j.w * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+            !(hbuf = (float *)tn__alloc((size_t)nthr * j.dirs * j.w * sizeof(float)))) { st = tn__oom(); goto done; }
     }
     for (k = 0; k < j.dirs; k++) {
         double az = 2.0 * TN__SEASON_PI * k / j.dirs, t = base;
@@ -540,7 +540,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         m->scale = o.solar_constant * ecc * 24.0 / (2.0 * TN__SEASON_PI);
         cw = -(j.sphi * m->sd) / (j.cphi * m->cd);
         ws = j.cphi < 1e-12 ? (j.sphi * m->sd > 0 ? TN__SEASON_PI : 0.0) : cw <= -1.0 ? TN__SEASON_PI : cw >= 1.0 ? 0.0 : acos(cw);
-        if (!(m->steps = (tn__sun_step *)tn__alloc((size_t)nst * sizeof(tn__sun_step)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
+        if (!(m->steps = (tn__sun_step *)tn__alloc((size_t)nst * sizeof(tn__sun_step)))) { st = tn__oom(); goto done; }
         m->ws = ws;
         m->dstep = dstep;
         m->first = -1;
@@ -958,7 +958,7 @@ TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climat
         return tn__fail(TN_ERR_SHAPE, "season: the insolation must be 12 channels of %d x %d (got %d channels of %d x %d)", dem->width,
                         dem->height, insolation->channels, insolation->width, insolation->height);
     n = (size_t)dem->width * dem->height;
-    if (!(j = (tn__season_job *)tn__calloc(sizeof *j))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(j = (tn__season_job *)tn__calloc(sizeof *j))) return tn__oom();
     if (opts) j->o = *opts;
     if (!isfinite(j->o.lapse_rate) || !isfinite(j->o.melt_factor) || !isfinite(j->o.radiation_factor) || !isfinite(j->o.snow_temp) ||
         !isfinite(j->o.rock_slope) || !isfinite(j->o.shade) || !isfinite(j->o.detail) || j->o.shade < 0.0f || j->o.shade > 1.0f ||
@@ -1259,7 +1259,7 @@ static tn_status tn__kpd_conv_add(tn_params *p, const char *name, int cin, int c
     ws[0] = cout;
     ws[1] = cin;
     ws[2] = ws[3] = k;
-    if (!(w = tn__param_new(p, name, "w", -1, 4, ws, 1)) || (bias && !tn__param_new(p, name, "b", -1, 1, &cout, 1))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(w = tn__param_new(p, name, "w", -1, 4, ws, 1)) || (bias && !tn__param_new(p, name, "b", -1, 1, &cout, 1))) return tn__oom();
     if (rng) tn_init_kaiming(w, rng, 1.0f);
     return TN_OK;
 }
@@ -1375,7 +1375,7 @@ static tn_status tn__kpd_model_params(const tn_kpd *A, tn_rng *rng, tn_params **
     *out = NULL;
     if (!p || !tn_params_add_buffer(p, "kpd.config", 1, &n)) {
         tn_params_free(p);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     if ((st = tn__kpd_conv_add(p, "in.", C, W, 3, 1, rng)) || (st = tn__kpd_resblk_add(p, "r0.", C, W, W, rng)) ||
         (st = tn__kpd_resblk_add(p, "r1.", C, W, W2, rng)) || (st = tn__kpd_resblk_add(p, "r2.", C, W2, W2, rng)) ||
@@ -1732,7 +1732,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     tn_rng_seed(&t.rng, tn_train_seed(t.run), 0x6b7064ULL);
     if ((st = tn__kpd_model_params(&t.A, &t.rng, &t.g))) goto done;
     if (!(t.d = tn_params_create())) {
-        st = TN_ERR_OUT_OF_MEMORY;
+        st = tn__oom();
         goto done;
     }
     if (t.o.gan_weight > 0 && (st = tn_patch_disc_add(t.d, "d.", t.A.cond_channels + t.A.out_channels, 32, 3, 3, &t.rng, &t.disc))) goto done;
@@ -2023,11 +2023,11 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
         int c = *cap_s ? *cap_s * 2 : 4;
         tn_image *a = (tn_image *)TN_REALLOC(d->dems, (size_t)c * sizeof *a), *b;
         tn_climate *cl;
-        if (!a) return TN_ERR_OUT_OF_MEMORY;
+        if (!a) return tn__oom();
         d->dems = a;
-        if (!(b = (tn_image *)TN_REALLOC(d->insolation, (size_t)c * sizeof *b))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(b = (tn_image *)TN_REALLOC(d->insolation, (size_t)c * sizeof *b))) return tn__oom();
         d->insolation = b;
-        if (!(cl = (tn_climate *)TN_REALLOC(d->climates, (size_t)c * sizeof *cl))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(cl = (tn_climate *)TN_REALLOC(d->climates, (size_t)c * sizeof *cl))) return tn__oom();
         d->climates = cl;
         *cap_s = c;
     }
@@ -2036,16 +2036,43 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
         tn_image *a = (tn_image *)TN_REALLOC(d->targets, (size_t)c * sizeof *a), *b;
         tn_season_sample *s;
         char(*lb)[32];
-        if (!a) return TN_ERR_OUT_OF_MEMORY;
+        if (!a) return tn__oom();
         d->targets = a;
-        if (!(b = (tn_image *)TN_REALLOC(d->masks, (size_t)c * sizeof *b))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(b = (tn_image *)TN_REALLOC(d->masks, (size_t)c * sizeof *b))) return tn__oom();
         d->masks = b;
-        if (!(s = (tn_season_sample *)TN_REALLOC(d->samples, (size_t)c * sizeof *s))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(s = (tn_season_sample *)TN_REALLOC(d->samples, (size_t)c * sizeof *s))) return tn__oom();
         d->samples = s;
-        if (!(lb = (char(*)[32])TN_REALLOC(d->labels, (size_t)c * sizeof *lb))) return TN_ERR_OUT_OF_MEMORY;
+        if (!(lb = (char(*)[32])TN_REALLOC(d->labels, (size_t)c * sizeof *lb))) return tn__oom();
         d->labels = lb;
         *cap_f = c;
     }
+    return TN_OK;
+}
+
+/* Refuses up front a site whose frame rows cannot fit in memory (issue 33: 20,000 rows naming
+   one 512 x 512 frame wanted about 40 GB): each frame keeps a picture of at least one channel
+   and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the next dem
+   row must stay within what the memory budget has left. */
+static tn_status tn__season_frames_fit(const char *s, size_t from, size_t n, const tn_image *dem, const char *name)
+{
+    size_t i = from, rows = 0, left, limit = tn_get_memory_limit(), used = tn_memory_in_use();
+    double need;
+    while (i < n) {
+        size_t b = i, e, fl[1];
+        const char *fb[1];
+        while (i < n && s[i] != '\n') i++;
+        e = i++;
+        while (b < e && tn__io_space((unsigned char)s[b])) b++;
+        if (b == e || s[b] == '#') continue;
+        (void)tn__climate_fields(s + b, e - b, fb, fl, 1);
+        if (tn__io_token_is(fb[0], fl[0], "dem")) break;
+        if (tn__io_token_is(fb[0], fl[0], "frame")) rows++;
+    }
+    left = used < limit ? limit - used : 0;
+    need = (double)rows * (double)dem->width * (double)dem->height * 8.0;
+    if (need > (double)left)
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: %zu frame rows of %d x %d need at least %.0f MB, over the %.0f MB the memory limit leaves "
+                        "(tn_set_memory_limit, --max-memory)", name, rows, dem->width, dem->height, need / 1048576.0, (double)left / 1048576.0);
     return TN_OK;
 }
 
@@ -2150,11 +2177,12 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if ((st = tn_image_load(p, dm, NULL))) { st = tn__season_fail_at(st, name); break; }
             {
                 float *nd = (float *)TN_REALLOC(dx, (size_t)cap_s * sizeof(float));
-                if (!nd) { st = TN_ERR_OUT_OF_MEMORY; break; }
+                if (!nd) { st = tn__oom(); break; }
                 dx = nd;
                 dx[d.sites] = 1.0f;
             }
             d.sites++;
+            if ((st = tn__season_frames_fit(s, i, n, dm, name))) break;
             if (nf == 4) {
                 size_t q, np = (size_t)dm->width * dm->height * dm->channels;
                 if (!tn__io_number(fb[2], fl[2], &v[0]) || !tn__io_number(fb[3], fl[3], &v[1]) || !(v[1] > v[0]) || !isfinite(v[1] - v[0])) {
@@ -2203,7 +2231,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if ((st = tn__season_grow(&d, 0, d.count + 1, &cap_s, &cap_f))) break;
             {
                 int *so = (int *)TN_REALLOC(site_of, (size_t)cap_f * sizeof(int));
-                if (!so) { st = TN_ERR_OUT_OF_MEMORY; break; }
+                if (!so) { st = tn__oom(); break; }
                 site_of = so;
             }
             if ((st = tn__season_frame(&d, path, name, &d.dems[d.sites - 1], fb, fl, nf, &skip))) break;

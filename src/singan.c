@@ -125,7 +125,6 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
    round(factor * in's size). */
 TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
                                    tn_image *out);
-#endif /* TN_NO_SINGAN */
 
 /* GPNN baseline (Granot et al. 2022, "Drop the GAN"): generation by patch nearest neighbours,
    no training. A pyramid of the example (factor, down to `coarsest` px); the output's coarsest
@@ -153,6 +152,7 @@ typedef struct tn_gpnn_opts {
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
    in its units. *out (one channel) is allocated here. opts may be NULL (defaults). */
 TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out);
+#endif /* TN_NO_SINGAN */
 
 /* --------------------------------------------------------------------------------------------
    >>singan  (@@singan implementation)
@@ -1355,7 +1355,6 @@ TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, f
     TN_FREE(map);
     return st;
 }
-#endif /* TN_NO_SINGAN */
 
 /* ---- GPNN baseline (patch nearest neighbours, no training) ---- */
 
@@ -1642,4 +1641,5 @@ done:
     else *out = y;
     return st;
 }
+#endif /* TN_NO_SINGAN */
 

@@ -259,7 +259,8 @@ static void tn__tg_write_config(const tn_texgan *m, int disc_width, int disc_lay
     c[8] = m->hi;
     c[9] = (float)(m->iterations & 0xffffff);
     c[10] = (float)(m->iterations >> 24);
-    c[11] = (float)m->train_seconds;
+    c[11] = 0.0f; /* was the training seconds: provenance is in the metadata (train_seconds), so the
+                     tensors, and a digest of them, are the same on every run with the same seed */
     c[12] = (float)disc_width;
     c[13] = (float)disc_layers;
     c[14] = (float)m->scale;
@@ -332,6 +333,31 @@ static tn_status tn__tg_add_gen(tn_params *p, const tn_texgan *m, const char *pr
     return TN_OK;
 }
 
+/* Whether a model file holds the generator its config names, shape for shape, checked on the
+   file's own tensors before the model is allocated: a config naming a wide, deep generator over
+   a few small tensors would otherwise allocate its size first (issue 33, item 1). */
+static tn_status tn__tg_file_matches(const tn_texgan *m, const tn_params *f, const char *name)
+{
+    int i, cin = tn__tg_zdim(m);
+    char tname[40];
+    for (i = 0; i < m->stages; i++) {
+        int cout = tn__tg_gen_out(m, i);
+        const tn_tensor *w, *b, *n;
+        snprintf(tname, sizeof tname, "g.w%d", i);
+        w = tn_params_find(f, tname);
+        snprintf(tname, sizeof tname, "g.b%d", i);
+        b = tn_params_find(f, tname);
+        snprintf(tname, sizeof tname, "g.n%d", i);
+        n = tn_params_find(f, tname);
+        if (!w || w->ndim != 4 || w->shape[0] != cout || w->shape[1] != cin || w->shape[2] != 5 || w->shape[3] != 5 || !b || b->ndim != 1 ||
+            b->shape[0] != cout || (m->stage_noise && (!n || n->ndim != 1 || n->shape[0] != cout)))
+            return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config names a generator whose stage %d is %d x %d x 5 x 5; the file's tensors differ", name, i,
+                            cout, cin);
+        cin = cout;
+    }
+    return TN_OK;
+}
+
 /* The model's params: config, wave vectors (periodic dims, at least one row), EMA generator. */
 static tn_status tn__tg_model_params(tn_texgan *m)
 {
@@ -382,6 +408,12 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
     if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
+    if (!st && m.train_seconds == 0 && tn_params_meta(f, "train_seconds")) { /* models since the config's field is 0 */
+        double v;
+        const char *t = tn_params_meta(f, "train_seconds");
+        if (tn__io_number(t, strlen(t), &v) && v >= 0 && v <= 1e15) m.train_seconds = v;
+    }
+    if (!st) st = tn__tg_file_matches(&m, f, path);
     if (!st) st = tn__tg_model_params(&m);
     if (!st) st = tn__params_assign(m.weights, f, path);
     tn_params_free(f);
@@ -1465,6 +1497,7 @@ TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed
         cap = w.final[g] ? strlen(w.final[g]) + 40 : 0;
         w.tmp[g] = cap ? (char *)tn__alloc(cap) : NULL;
         if (!w.final[g] || !w.tmp[g]) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        tn__io_remove_stale(w.final[g]);
         snprintf(w.tmp[g], cap, "%s.tmp.%lu.%lu", w.final[g], tn__io_process_id(), ++tn__io_tmp_counter);
         if (!(w.f[g] = fopen(w.tmp[g], "wb"))) {
             st = tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", w.final[g]);

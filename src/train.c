@@ -83,6 +83,10 @@ TN_API double tn_train_fraction(const tn_train *run);
 /* The run's seed (a resumed run reports the seed of the run that wrote the checkpoint). */
 TN_API uint64_t tn_train_seed(const tn_train *run);
 TN_API int tn_train_checkpoints(const tn_train *run);
+/* Checkpoints that could not be written (TN_ERR_IO: a full disk, a missing directory): a warning,
+   not a failure, so training goes on and the model is still saved to its own path. Returns how
+   many failed; *message (may be NULL) gets the last failure's detail, "" if none. */
+TN_API int tn_train_checkpoint_failures(const tn_train *run, const char **message);
 /* Writes a checkpoint now (to opts->checkpoint, or to path if not NULL). */
 TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path);
 
@@ -183,8 +187,25 @@ struct tn_train {
     long it, it0, last_ck_it;
     double seconds, sec0, t0, last_ck;
     int started, stopped, ckpts;
+    int ck_failures;        /* checkpoints that could not be written (warnings) */
+    char ck_warning[256];
     tn_status st;
 };
+
+/* A checkpoint that could not be written is a warning (training goes on); other failures stop. */
+static tn_status tn__train_try_checkpoint(tn_train *run)
+{
+    tn_status st = tn_train_checkpoint(run, NULL);
+    if (st != TN_ERR_IO) return st;
+    run->ck_failures++;
+    {
+        const char *m = tn_last_error();
+        size_t l = strlen(m) < sizeof run->ck_warning ? strlen(m) : sizeof run->ck_warning - 1;
+        memcpy(run->ck_warning, m, l);
+        run->ck_warning[l] = 0;
+    }
+    return TN_OK;
+}
 
 static double tn__progress_eta_s = -1.0;
 
@@ -332,6 +353,11 @@ TN_API double tn_train_fraction(const tn_train *run)
 }
 TN_API uint64_t tn_train_seed(const tn_train *run) { return run->o.seed; }
 TN_API int tn_train_checkpoints(const tn_train *run) { return run->ckpts; }
+TN_API int tn_train_checkpoint_failures(const tn_train *run, const char **message)
+{
+    if (message) *message = run->ck_warning;
+    return run->ck_failures;
+}
 
 TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds)
 {
@@ -588,7 +614,7 @@ TN_API int tn_train_next(tn_train *run)
         run->seconds = run->sec0 + (now - run->t0);
         if (run->o.checkpoint && run->o.checkpoint[0] &&
             (now - run->last_ck >= run->o.checkpoint_seconds || (run->o.checkpoint_iters && run->it % run->o.checkpoint_iters == 0))) {
-            if ((run->st = tn_train_checkpoint(run, NULL))) {
+            if ((run->st = tn__train_try_checkpoint(run))) {
                 run->stopped = 1;
                 return 0;
             }
@@ -620,7 +646,7 @@ TN_API tn_status tn_train_finish(tn_train *run)
 {
     run->stopped = 1;
     if ((run->st == TN_OK || run->st == TN_ERR_CANCELLED) && run->o.checkpoint && run->o.checkpoint[0] && run->it != run->last_ck_it) {
-        tn_status st = tn_train_checkpoint(run, NULL); /* leaves the cancel message alone when it succeeds */
+        tn_status st = tn__train_try_checkpoint(run); /* leaves the cancel message alone when it succeeds */
         if (st) return st;
     }
     return run->st;

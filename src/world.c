@@ -66,17 +66,22 @@ typedef struct tn_world_run_opts {
 
 typedef struct tn_world_run_stats {
     int written, skipped;      /* tiles computed and written; tiles already in DIR */
+    int repaired;              /* of the written: files in DIR that did not match the manifest's size
+                                  and digest (or, unlisted, did not decode as this world's tile) */
     double seconds;
 } tn_world_run_stats;
 
 /* Writes the selected tiles as DIR/r{row}_c{col}.png (created atomically; a tile already there
-   is complete and skipped, so a run resumes). DIR must exist; DIR/world.spec is written on
+   is skipped, so a run resumes, when it matches DIR/manifest.txt's size and digest or, unlisted,
+   decodes as this tile; a damaged or foreign file is computed again). DIR must exist; DIR/world.spec is written on
    first use and a different world in DIR is refused. Progress stage "world". stats may be NULL. */
 TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts,
                                       tn_world_run_stats *stats);
 /* Writes DIR/world.vrt (a GDAL mosaic of the whole grid, heights in metres through the band's
-   offset and scale) and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's
-   FNV-1a 64 digest of its file bytes), both atomically. present (may be NULL) gets the count. */
+   offset and scale; above 64 x 64 tiles a mosaic of DIR/world_bI_J.vrt, each of 64 x 64 tiles)
+   and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's FNV-1a 64 digest of
+   its file bytes and its size; a file that fails the check above is not present), both
+   atomically. present (may be NULL) gets the count. */
 TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
@@ -96,6 +101,11 @@ TN_API const char *tn_world_method_help(int i);
 #define TN__WORLD_MAX_KV 8
 #define TN__WORLD_MAX_STAGES 16
 #define TN__WORLD_MAX_SIDE (1 << 28)
+/* The grid's bound: the index lists every tile (a VRT source, a manifest check each), so a grid
+   of 2^48 tiles hung the index writer; 2^20 tiles keep it to seconds. Above TN__WORLD_VRT_BLOCK^2
+   tiles, world.vrt is a mosaic of block VRTs of that many tiles a side, each file a few MB. */
+#define TN__WORLD_MAX_TILES (1 << 20)
+#define TN__WORLD_VRT_BLOCK 64
 
 struct tn__world_method;
 
@@ -372,7 +382,7 @@ static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, c
     char *path;
     tn_status st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->model = (tn_texgan *)tn__calloc(sizeof *s->model);
     st = s->model ? tn_texgan_load(s->model, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -431,7 +441,7 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     char *path;
     tn_status st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
     st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -497,8 +507,8 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
     s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
     s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
-    if (!s->gnn || !s->sketch) return TN_ERR_OUT_OF_MEMORY;
-    if (!(path = tn__world_join(base_dir, s->val[km]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!s->gnn || !s->sketch) return tn__oom();
+    if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
     st = tn_gnn_load(path, s->gnn);
     TN_FREE(path);
     if (st) {
@@ -506,7 +516,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         s->gnn = NULL;
         return st;
     }
-    if (!(path = tn__world_join(base_dir, s->val[ks]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
     st = tn_sketch_load(path, s->sketch);
     TN_FREE(path);
     if (st) {
@@ -559,7 +569,7 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
     (void)w;
     if ((st = tn__world_need_heights(s))) return st;
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
     st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
@@ -668,7 +678,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
     /* the input in network units, as tn__sg_input makes it before resizing */
     if ((st = tn_image_create(&one, in->width, in->height, 1))) return st;
     for (i = 0; i < (size_t)in->width * in->height; i++) one.data[i] = (in->data[i * in->channels] - m->offset) / m->range;
-    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!(map = (float *)tn__alloc((size_t)(bx - ax) * (by - ay) * sizeof(float)))) st = tn__oom();
     if (!st && n == 0) { /* scale K is the finest: the input itself */
         long y;
         ok = ax >= in_r.x && bx <= (long)in_r.x + in_r.w && ay >= in_r.y && by <= (long)in_r.y + in_r.h;
@@ -682,7 +692,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
             sy.idx = (int *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(int));
             sy.wt = (float *)tn__alloc((size_t)(by - ay) * fy.ntaps * sizeof(float));
             tmp = (float *)tn__alloc((size_t)in->height * (bx - ax) * sizeof(float));
-            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = TN_ERR_OUT_OF_MEMORY;
+            if (!sx.idx || !sx.wt || !sy.idx || !sy.wt || !tmp) st = tn__oom();
         }
         if (!st) ok = tn__world_sub_taps(&fx, ax, bx, in_r.x, in_r.w, &sx) && tn__world_sub_taps(&fy, ay, by, in_r.y, in_r.h, &sy);
         if (!st && ok) {
@@ -741,7 +751,7 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
     if (w->cellsize <= 0)
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
                         "are in metres", s->line);
-    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return tn__oom();
     if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
     else {
         char *path = tn__world_join(base_dir, s->val[kc]);
@@ -931,7 +941,7 @@ static tn_status tn__world_detail_run(const tn__world_stage *s, const tn_world *
     a.wl = (in->width + f - 1) / f;
     a.hl = (in->height + f - 1) / f;
     if ((st = tn__size4((size_t)a.wl, (size_t)a.hl, (size_t)a.channels, sizeof(double), &n))) return st;
-    if (!(a.sum = (double *)tn__calloc(n))) return TN_ERR_OUT_OF_MEMORY;
+    if (!(a.sum = (double *)tn__calloc(n))) return tn__oom();
     tn__dm_acc_band(&a, 0, in);
     st = tn_image_create(&low, a.wl, a.hl, a.channels);
     for (y = 0; !st && y < a.hl; y++)
@@ -1183,6 +1193,9 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
     w->out_heights = im->st[im->n - 1].out_heights;
     w->cols = (w->out_width + w->tile - 1) / w->tile;
     w->rows = (w->out_height + w->tile - 1) / w->tile;
+    if ((long long)w->rows * w->cols > TN__WORLD_MAX_TILES)
+        return tn__fail(TN_ERR_TOO_LARGE, "world: a %d x %d raster in tiles of %d is a %d x %d grid, more than %d tiles; use a larger `tile` (up to 65536)",
+                        w->out_width, w->out_height, w->tile, w->rows, w->cols, TN__WORLD_MAX_TILES);
     return TN_OK;
 }
 
@@ -1204,7 +1217,7 @@ static tn_status tn__world_normalise(tn_world *w, const tn__world_impl *im)
     }
     if (t.failed) {
         TN_FREE(t.s);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     w->text = t.s;
     w->digest = tn__world_fnv(TN__WORLD_FNV0, (const uint8_t *)t.s, t.n);
@@ -1227,7 +1240,7 @@ static tn_status tn__world_parse_with(const char *text, const tn_world_opts *opt
     if (!im || !copy) {
         TN_FREE(im);
         TN_FREE(copy);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     memcpy(copy, text, n + 1);
     st = tn__world_parse(&w, im, copy, opts, base_dir);
@@ -1266,7 +1279,7 @@ TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_w
         TN_FREE(buf);
         TN_FREE(text);
         TN_FREE(dir);
-        return TN_ERR_OUT_OF_MEMORY;
+        return tn__oom();
     }
     if (n) memcpy(text, buf, n);
     text[n] = 0;
@@ -1339,7 +1352,7 @@ static tn_status tn__world_claim_dir(const tn_world *w, const char *dir)
     uint8_t *buf = NULL;
     size_t n = 0, len = strlen(w->text);
     tn_status st = TN_OK;
-    if (!path) return TN_ERR_OUT_OF_MEMORY;
+    if (!path) return tn__oom();
     if (tn__world_exists(path)) {
         st = tn__io_read_file(path, &buf, &n);
         if (!st && (n != len || memcmp(buf, w->text, len) != 0))
@@ -1372,6 +1385,123 @@ static tn_status tn__world_save_tile(const tn_world *w, tn_image *img, const cha
     return tn_image_save(path, img, &o);
 }
 
+/* The tiles DIR/manifest.txt lists, by (row, col): digest and size of each file. A resumed run
+   trusts a tile on disk only when it matches its line (issue 33: a 0-byte r0_c0.png counted as
+   present and went into the manifest); an unlisted tile must decode as this world's tile. */
+typedef struct tn__world_listed { int row, col; uint64_t digest; long long size; } tn__world_listed;
+typedef struct tn__world_manifest { tn__world_listed *slot; size_t cap; } tn__world_manifest;
+
+static size_t tn__world_listed_hash(int row, int col, size_t cap)
+{
+    return (size_t)((((uint64_t)(uint32_t)row << 32) | (uint32_t)col) * 0x9E3779B97F4A7C15ULL >> 17) & (cap - 1);
+}
+
+static const tn__world_listed *tn__world_listed_find(const tn__world_manifest *m, int row, int col)
+{
+    size_t h;
+    if (!m->cap) return NULL;
+    for (h = tn__world_listed_hash(row, col, m->cap); m->slot[h].row >= 0; h = (h + 1) & (m->cap - 1))
+        if (m->slot[h].row == row && m->slot[h].col == col) return &m->slot[h];
+    return NULL;
+}
+
+/* Reads DIR/manifest.txt when there is one (none, or one this library cannot read: empty). */
+static tn_status tn__world_manifest_read(const tn_world *w, const char *dir, tn__world_manifest *m)
+{
+    char *path = tn__world_join(dir, "manifest.txt");
+    uint8_t *buf = NULL;
+    size_t n = 0, i = 0, lines = 0, k;
+    m->slot = NULL;
+    m->cap = 0;
+    if (!path) return tn__oom();
+    if (!tn__world_exists(path) || tn__io_read_file(path, &buf, &n)) {
+        TN_FREE(path);
+        tn_clear_error();
+        return TN_OK;
+    }
+    TN_FREE(path);
+    for (k = 0; k < n; k++) lines += buf[k] == '\n';
+    for (m->cap = 16; m->cap < 2 * lines + 2; m->cap *= 2) {}
+    if (!(m->slot = (tn__world_listed *)tn__alloc(m->cap * sizeof *m->slot))) {
+        TN_FREE(buf);
+        return tn__oom();
+    }
+    for (k = 0; k < m->cap; k++) m->slot[k].row = -1;
+    while (i < n) {
+        char line[128];
+        size_t b = i, len;
+        int row, col, used = 0;
+        unsigned long long size = 0;
+        char hex[17];
+        while (i < n && buf[i] != '\n') i++;
+        len = i - b < sizeof line - 1 ? i - b : sizeof line - 1;
+        memcpy(line, buf + b, len);
+        line[len] = 0;
+        i++;
+        if (sscanf(line, "r%d_c%d.png %16[0-9a-f]%n", &row, &col, hex, &used) == 3 && row >= 0 && col >= 0 && row < w->rows && col < w->cols &&
+            strlen(hex) == 16 && !tn__world_listed_find(m, row, col)) {
+            size_t h = tn__world_listed_hash(row, col, m->cap);
+            uint64_t d = 0;
+            for (k = 0; k < 16; k++) d = d << 4 | (uint64_t)(hex[k] <= '9' ? hex[k] - '0' : hex[k] - 'a' + 10);
+            while (m->slot[h].row >= 0) h = (h + 1) & (m->cap - 1);
+            m->slot[h].row = row;
+            m->slot[h].col = col;
+            m->slot[h].digest = d;
+            m->slot[h].size = sscanf(line + used, "%llu", &size) == 1 ? (long long)size : -1; /* older manifests: no size */
+        }
+    }
+    TN_FREE(buf);
+    return TN_OK;
+}
+
+/* Whether the file at path is this world's tile (row, col): its size and digest as listed, or,
+   unlisted, a PNG that decodes to the tile's size, channels, bit depth and range. *digest and
+   *size get the file's. */
+static int tn__world_tile_ok(const tn_world *w, const tn__world_manifest *m, int row, int col, const char *path, uint64_t *digest, size_t *size)
+{
+    const tn__world_listed *l = tn__world_listed_find(m, row, col);
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    int ok = 0;
+    if (tn__io_read_file(path, &buf, &n)) {
+        tn_clear_error();
+        return 0;
+    }
+    *digest = tn__world_fnv(TN__WORLD_FNV0, buf, n);
+    *size = n;
+    if (l) ok = *digest == l->digest && (l->size < 0 || (size_t)l->size == n);
+    else {
+        tn_image img = {0, 0, 0, NULL};
+        tn_image_info info;
+        tn_rect r = tn_world_tile_rect(w, row, col);
+        if (!tn_image_load_memory(buf, n, path, &img, &info, NULL))
+            ok = info.format == TN_FORMAT_PNG && img.width == r.w && img.height == r.h && img.channels == w->out_channels &&
+                 info.bit_depth == (w->out_heights ? 16 : 8) &&
+                 (!w->out_heights || (info.has_range && (float)info.range_lo == w->lo && (float)info.range_hi == w->hi));
+        tn_image_free(&img);
+        tn_clear_error();
+    }
+    TN_FREE(buf);
+    return ok;
+}
+
+/* Refuses, before DIR/world.spec is written, a tile that cannot be computed: the first stage
+   alone holds the tile grown by the halo in floats, which must fit TN_MAX_ALLOC and what the
+   memory budget leaves (a `tile 65536` failed only after claiming the directory). A lower bound,
+   so nothing that could succeed is refused. */
+static tn_status tn__world_tile_fits(const tn_world *w)
+{
+    tn_rect r = tn_world_tile_rect(w, 0, 0);
+    double one = ((double)r.w + 2.0 * w->halo) * ((double)r.h + 2.0 * w->halo) * sizeof(float);
+    double limit = (double)tn_get_memory_limit() - (double)tn_memory_in_use();
+    if (limit > (double)TN_MAX_ALLOC) limit = (double)TN_MAX_ALLOC;
+    if (one > limit)
+        return tn__fail(TN_ERR_TOO_LARGE, "world: a tile of %d x %d with its halo of %d needs at least %.0f MB, over the %.0f MB the allocation "
+                        "and memory limits allow (tn_set_memory_limit, --max-memory); use a smaller `tile`", r.w, r.h, w->halo,
+                        one / 1048576.0, limit / 1048576.0);
+    return TN_OK;
+}
+
 TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts, tn_world_run_stats *stats)
 {
     tn_world_run_opts o;
@@ -1379,6 +1509,9 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
     tn_status st;
     int row, col;
     long long k = 0, total, done = 0;
+    tn__world_manifest man;
+    uint64_t digest;
+    size_t size;
     TN_ASSERT(w);
     memset(&o, 0, sizeof o);
     memset(&s, 0, sizeof s);
@@ -1392,7 +1525,9 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
         return tn__fail(TN_ERR_INVALID_ARG, "world: tiles rows %d:%d, columns %d:%d are not inside the %d x %d grid", o.row0, o.row1,
                         o.col0, o.col1, w->rows, w->cols);
     if (o.parts < 1 || o.part < 0 || o.part >= o.parts) return tn__fail(TN_ERR_INVALID_ARG, "world: part %d of %d", o.part, o.parts);
+    if ((st = tn__world_tile_fits(w))) return st;
     if ((st = tn__world_claim_dir(w, dir))) return st;
+    if ((st = tn__world_manifest_read(w, dir, &man))) return st;
     s.seconds = tn_time_seconds();
     total = ((long long)(o.row1 - o.row0) * (o.col1 - o.col0) - o.part + o.parts - 1) / o.parts;
     for (row = o.row0; row < o.row1 && !st; row++)
@@ -1401,11 +1536,12 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             if (k % o.parts != o.part) continue;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
             if (!(path = tn__world_join(dir, leaf))) {
-                st = TN_ERR_OUT_OF_MEMORY;
+                st = tn__oom();
                 break;
             }
-            if (tn__world_exists(path)) s.skipped++;
+            if (tn__world_exists(path) && tn__world_tile_ok(w, &man, row, col, path, &digest, &size)) s.skipped++;
             else {
+                if (tn__world_exists(path)) s.repaired++; /* damaged or foreign: computed again */
                 tn_image img = {0, 0, 0, NULL};
                 st = tn_world_rect(w, tn_world_tile_rect(w, row, col), &img);
                 if (!st) st = tn__world_save_tile(w, &img, path);
@@ -1416,50 +1552,95 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             if (!st) st = tn__progress("world", (double)++done / (double)(total > 0 ? total : 1));
         }
     s.seconds = tn_time_seconds() - s.seconds;
+    TN_FREE(man.slot);
     if (stats) *stats = s;
     return st;
 }
 
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+/* GDAL mosaic of tiles rows [r0, r1) x columns [c0, c1), its pixels from that block's corner;
+   blocks: its sources are the block mosaics of TN__WORLD_VRT_BLOCK tiles a side instead. The
+   whole grid's (r0 = c0 = 0) carries the geotransform. */
+static void tn__world_vrt(tn__text *vrt, const tn_world *w, int r0, int r1, int c0, int c1, int blocks)
 {
-    tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
-    char num[3][40], hex[17], *path = NULL;
-    int row, col, c, count = 0;
-    tn_status st = TN_OK;
-    TN_ASSERT(w);
-    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
-    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
-    if ((st = tn__world_claim_dir(w, dir))) return st;
+    static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
+    char num[3][40];
+    int c, row, col, step = blocks ? TN__WORLD_VRT_BLOCK : 1;
+    tn_rect o = tn_world_tile_rect(w, r0, c0), e = tn_world_tile_rect(w, r1 - 1, c1 - 1);
     tn__io_format_number(num[0], sizeof num[0], w->lo, 1);
     tn__io_format_number(num[1], sizeof num[1], ((double)w->hi - w->lo) / 65535.0, 0);
-    tn__text_add(&vrt, "<VRTDataset rasterXSize=\"%d\" rasterYSize=\"%d\">\n", w->out_width, w->out_height);
-    if (w->cellsize > 0) {
+    tn__text_add(vrt, "<VRTDataset rasterXSize=\"%d\" rasterYSize=\"%d\">\n", e.x + e.w - o.x, e.y + e.h - o.y);
+    if (w->cellsize > 0 && r0 == 0 && c0 == 0) {
         tn__io_format_number(num[2], sizeof num[2], (double)w->cellsize * w->width / w->out_width, 0);
-        tn__text_add(&vrt, "  <GeoTransform>0, %s, 0, 0, 0, -%s</GeoTransform>\n", num[2], num[2]);
+        tn__text_add(vrt, "  <GeoTransform>0, %s, 0, 0, 0, -%s</GeoTransform>\n", num[2], num[2]);
     }
     for (c = 0; c < w->out_channels; c++) {
-        static const char *colour[4] = {"Red", "Green", "Blue", "Alpha"};
         /* heights: Float32 metres, code * (hi - lo) / 65535 + lo per source, so every GDAL reader
            (gdalinfo -stats, QGIS, gdal_translate) sees metres without applying a band scale */
-        tn__text_add(&vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
-        if (!w->out_heights && w->out_channels >= 3) tn__text_add(&vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
-        for (row = 0; row < w->rows; row++)
-            for (col = 0; col < w->cols; col++) {
+        tn__text_add(vrt, "  <VRTRasterBand dataType=\"%s\" band=\"%d\">\n", w->out_heights ? "Float32" : "Byte", c + 1);
+        if (!w->out_heights && w->out_channels >= 3) tn__text_add(vrt, "    <ColorInterp>%s</ColorInterp>\n", colour[c]);
+        for (row = r0; row < r1; row += step)
+            for (col = c0; col < c1; col += step) {
                 tn_rect r = tn_world_tile_rect(w, row, col);
-                tn__text_add(&vrt,
+                if (blocks) {
+                    tn_rect z = tn_world_tile_rect(w, row + step < r1 ? row + step - 1 : r1 - 1, col + step < c1 ? col + step - 1 : c1 - 1);
+                    int bw = z.x + z.w - r.x, bh = z.y + z.h - r.y;
+                    tn__text_add(vrt,
+                                 "    <SimpleSource>\n      <SourceFilename relativeToVRT=\"1\">world_b%d_%d.vrt</SourceFilename>\n"
+                                 "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
+                                 "DataType=\"%s\" BlockXSize=\"128\" BlockYSize=\"128\"/>\n"
+                                 "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
+                                 "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n    </SimpleSource>\n",
+                                 row / step, col / step, c + 1, bw, bh, w->out_heights ? "Float32" : "Byte", bw, bh, r.x - o.x, r.y - o.y, bw, bh);
+                    continue;
+                }
+                tn__text_add(vrt,
                              "    <%s>\n      <SourceFilename relativeToVRT=\"1\">r%d_c%d.png</SourceFilename>\n"
                              "      <SourceBand>%d</SourceBand>\n      <SourceProperties RasterXSize=\"%d\" RasterYSize=\"%d\" "
                              "DataType=\"%s\" BlockXSize=\"%d\" BlockYSize=\"1\"/>\n"
                              "      <SrcRect xOff=\"0\" yOff=\"0\" xSize=\"%d\" ySize=\"%d\"/>\n"
                              "      <DstRect xOff=\"%d\" yOff=\"%d\" xSize=\"%d\" ySize=\"%d\"/>\n",
                              w->out_heights ? "ComplexSource" : "SimpleSource", row, col, c + 1, r.w, r.h,
-                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x, r.y, r.w, r.h);
-                if (w->out_heights) tn__text_add(&vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
-                tn__text_add(&vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
+                             w->out_heights ? "UInt16" : "Byte", r.w, r.w, r.h, r.x - o.x, r.y - o.y, r.w, r.h);
+                if (w->out_heights) tn__text_add(vrt, "      <ScaleOffset>%s</ScaleOffset>\n      <ScaleRatio>%s</ScaleRatio>\n", num[0], num[1]);
+                tn__text_add(vrt, "    </%s>\n", w->out_heights ? "ComplexSource" : "SimpleSource");
             }
-        tn__text_add(&vrt, "  </VRTRasterBand>\n");
+        tn__text_add(vrt, "  </VRTRasterBand>\n");
     }
-    tn__text_add(&vrt, "</VRTDataset>\n");
+    tn__text_add(vrt, "</VRTDataset>\n");
+}
+
+TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+{
+    tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
+    tn__world_manifest old;
+    char num[3][40], hex[17], *path = NULL;
+    int row, col, count = 0;
+    tn_status st = TN_OK;
+    TN_ASSERT(w);
+    if (!dir || !dir[0]) return tn__fail(TN_ERR_INVALID_ARG, "world: no output directory");
+    if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
+    if ((st = tn__world_claim_dir(w, dir))) return st;
+    if ((st = tn__world_manifest_read(w, dir, &old))) return st;
+    tn__io_format_number(num[0], sizeof num[0], w->lo, 1);
+    if ((long long)w->rows * w->cols <= (long long)TN__WORLD_VRT_BLOCK * TN__WORLD_VRT_BLOCK)
+        tn__world_vrt(&vrt, w, 0, w->rows, 0, w->cols, 0);
+    else { /* a mosaic of block mosaics: no file holds more than a block's sources */
+        int br, bc;
+        for (br = 0; br < w->rows && !st; br += TN__WORLD_VRT_BLOCK)
+            for (bc = 0; bc < w->cols && !st; bc += TN__WORLD_VRT_BLOCK) {
+                tn__text blk = {NULL, 0, 0, 0};
+                char leaf[48];
+                tn__world_vrt(&blk, w, br, br + TN__WORLD_VRT_BLOCK < w->rows ? br + TN__WORLD_VRT_BLOCK : w->rows, bc,
+                              bc + TN__WORLD_VRT_BLOCK < w->cols ? bc + TN__WORLD_VRT_BLOCK : w->cols, 0);
+                snprintf(leaf, sizeof leaf, "world_b%d_%d.vrt", br / TN__WORLD_VRT_BLOCK, bc / TN__WORLD_VRT_BLOCK);
+                if (blk.failed || !(path = tn__world_join(dir, leaf))) st = tn__oom();
+                if (!st) st = tn__io_write_atomic(path, (const uint8_t *)blk.s, blk.n);
+                TN_FREE(path);
+                path = NULL;
+                TN_FREE(blk.s);
+            }
+        tn__world_vrt(&vrt, w, 0, w->rows, 0, w->cols, 1);
+    }
     tn__hex64(hex, w->digest);
     tn__text_add(&man, "terrainnet world manifest\nversion %s\nspec_digest %s\nseed %llu\nsize %d %d\ntile %d\ngrid %d %d\n",
                   TN_VERSION_STRING, hex, (unsigned long long)w->seed, w->out_width, w->out_height, w->tile, w->rows, w->cols);
@@ -1470,29 +1651,29 @@ TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *p
     for (row = 0; row < w->rows && !st; row++)
         for (col = 0; col < w->cols && !st; col++) {
             char leaf[48];
-            uint8_t *buf = NULL;
+            uint64_t digest;
             size_t n = 0;
             snprintf(leaf, sizeof leaf, "r%d_c%d.png", row, col);
             if (!(path = tn__world_join(dir, leaf))) {
-                st = TN_ERR_OUT_OF_MEMORY;
+                st = tn__oom();
                 break;
             }
-            if (tn__world_exists(path) && !(st = tn__io_read_file(path, &buf, &n))) {
-                tn__hex64(hex, tn__world_fnv(TN__WORLD_FNV0, buf, n));
-                tn__text_add(&man, "%s %s\n", leaf, hex);
+            if (tn__world_exists(path) && tn__world_tile_ok(w, &old, row, col, path, &digest, &n)) { /* a damaged tile is not present */
+                tn__hex64(hex, digest);
+                tn__text_add(&man, "%s %s %zu\n", leaf, hex, n);
                 count++;
-                TN_FREE(buf);
             }
             TN_FREE(path);
             path = NULL;
         }
+    TN_FREE(old.slot);
     tn__text_add(&man, "tiles %d of %d\n", count, w->rows * w->cols);
-    if (!st && (vrt.failed || man.failed)) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && !(path = tn__world_join(dir, "world.vrt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && (vrt.failed || man.failed)) st = tn__oom();
+    if (!st && !(path = tn__world_join(dir, "world.vrt"))) st = tn__oom();
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)vrt.s, vrt.n);
     TN_FREE(path);
     path = NULL;
-    if (!st && !(path = tn__world_join(dir, "manifest.txt"))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(path = tn__world_join(dir, "manifest.txt"))) st = tn__oom();
     if (!st) st = tn__io_write_atomic(path, (const uint8_t *)man.s, man.n);
     TN_FREE(path);
     TN_FREE(vrt.s);

@@ -11,6 +11,9 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <float.h>
+#if defined(__unix__) || defined(__APPLE__)
+#include <utime.h>
+#endif
 
 /* ---- helpers ---- */
 
@@ -548,6 +551,103 @@ TN_TEST(test_tnw_loader)
     tn_params_free(p);
 }
 
+/* A .tnw of `count` one-value tensors "t0", "t1", ... claiming `claim` tensors; returns its size. */
+static size_t tnw_many(uint8_t *b, uint32_t count, uint32_t claim)
+{
+    size_t o = 12;
+    uint32_t i;
+    memcpy(b, "TNW1", 4);
+    put_le32(b + 4, 1);
+    put_le32(b + 8, claim);
+    for (i = 0; i < count; i++) {
+        int nl = snprintf((char *)b + o + 2, 16, "t%u", (unsigned)i);
+        b[o] = (uint8_t)nl;
+        b[o + 1] = 0;
+        o += 2 + (size_t)nl;
+        b[o++] = 1;
+        b[o++] = 1;
+        put_le32(b + o, 1);
+        put_le32(b + o + 4, 0x3f000000u); /* 0.5f */
+        o += 8;
+    }
+    put_le32(b + o, crc32_bytes(b, o));
+    return o + 4;
+}
+
+/* Issue 33 item 2: names are hashed, so 65536 tensors (the cap) load in well under a second, not
+   the minutes a linear lookup per name took (25k: 33 s, 100k: > 10 min); more are refused up front. */
+TN_TEST(test_tnw_many_tensors)
+{
+    const uint32_t cap = 65536;
+    uint8_t *b = (uint8_t *)malloc((size_t)cap * 24 + 64);
+    tn_params *p = NULL;
+    double t0, dt;
+    size_t n;
+    TN_CHECK(b != NULL);
+    if (!b) return;
+    n = tnw_many(b, cap, cap);
+    t0 = tn_time_seconds();
+    TN_CHECK(tn_params_open_memory(b, n, "many.tnw", &p) == TN_OK);
+    dt = tn_time_seconds() - t0;
+    fprintf(stderr, "   65536 tensors loaded in %.2f s\n", dt);
+    TN_CHECK(dt < 10.0);
+    TN_CHECK(p && tn_params_count(p) == (int)cap);
+    TN_CHECK(p && tn_params_find(p, "t65535") && tn_params_find(p, "t0") && !tn_params_find(p, "t65536"));
+    tn_params_free(p);
+    p = NULL;
+    n = tnw_many(b, cap + 1, cap + 1);
+    TN_CHECK(tn_params_open_memory(b, n, "toomany.tnw", &p) == TN_ERR_TOO_LARGE && p == NULL);
+    TN_CHECK(strstr(tn_last_error(), "tensors") != NULL);
+    /* a duplicate name among many is still found */
+    n = tnw_many(b, 1000, 1001);
+    n -= 4;
+    memcpy(b + n, b + 12, 2 + 2 + 2 + 8);
+    n += 14;
+    put_le32(b + n, crc32_bytes(b, n));
+    TN_CHECK(tn_params_open_memory(b, n + 4, "dup.tnw", &p) == TN_ERR_CORRUPT && p == NULL);
+    free(b);
+}
+
+/* Issue 33 item 4: the memory budget over the library's live allocations. */
+TN_TEST(test_memory_limit)
+{
+    size_t def = tn_get_memory_limit(), base = tn_memory_in_use();
+    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, c = {0, 0, 0, NULL};
+    uint8_t *tif = NULL;
+    size_t ntif = 0;
+    tn_status st;
+    TN_CHECK(def > 0);
+#if defined(_SC_PHYS_PAGES) && defined(_SC_PAGESIZE)
+    if (sysconf(_SC_PHYS_PAGES) > 0) TN_CHECK((double)def < (double)sysconf(_SC_PHYS_PAGES) * (double)sysconf(_SC_PAGESIZE));
+#endif
+    tn_set_memory_limit((size_t)24 << 20);
+    TN_CHECK(tn_get_memory_limit() == (size_t)24 << 20);
+    TN_CHECK(tn_image_create(&a, 2048, 2048, 1) == TN_OK); /* 16 MB: within */
+    TN_CHECK(tn_memory_in_use() >= base + ((size_t)16 << 20));
+    st = tn_image_create(&b, 2048, 2048, 1); /* 16 MB more: over the total, though each fits */
+    TN_CHECK(st != TN_OK && b.data == NULL); /* TN_ERR_OUT_OF_MEMORY: tn_image_create returns that for any NULL */
+    TN_CHECK(strstr(tn_last_error(), "limit") != NULL);
+    fprintf(stderr, "   %s\n", tn_last_error());
+    tn_image_free(&a);
+    TN_CHECK(tn_memory_in_use() == base);
+    TN_CHECK(tn_image_create(&b, 2048, 2048, 1) == TN_OK); /* freed memory is counted back */
+    tn_set_memory_limit(0);
+    TN_CHECK(tn_get_memory_limit() == def);
+    /* a valid TIFF that decodes past a low limit fails cleanly */
+    TN_CHECK(tn_image_save_memory(&b, NULL, TN_FORMAT_TIFF, &tif, &ntif) == TN_OK);
+    tn_image_free(&b);
+    tn_set_memory_limit((size_t)8 << 20);
+    tn_clear_error();
+    st = tn_image_load_memory(tif, ntif, "big.tif", &c, NULL, NULL);
+    TN_CHECK(st == TN_ERR_TOO_LARGE && c.data == NULL && strstr(tn_last_error(), "limit"));
+    fprintf(stderr, "   %s\n", tn_last_error());
+    tn_set_memory_limit(0);
+    TN_CHECK(tn_image_load_memory(tif, ntif, "big.tif", &c, NULL, NULL) == TN_OK && c.width == 2048);
+    tn_image_free(&c);
+    tn_free(tif);
+    TN_CHECK(tn_memory_in_use() == base);
+}
+
 /* ---- absurd arguments ---- */
 
 static tn_image small_dem(int w, int h)
@@ -558,6 +658,83 @@ static tn_image small_dem(int w, int h)
     for (y = 0; y < h; y++)
         for (x = 0; x < w; x++) d.data[y * w + x] = (float)(sin(x * 0.3) * cos(y * 0.2) * 50.0 + x + 0.5 * y);
     return d;
+}
+
+/* Issue 33 item 5: a season file whose frame rows cannot fit is refused before any frame loads. */
+TN_TEST(test_season_frame_total)
+{
+    const char *dem_path = tmp_path("s_dem.png"), *frame_path = tmp_path("s_frame.png"), *list = tmp_path("s.txt");
+    tn_image dem = small_dem(128, 128), fr = {0, 0, 0, NULL};
+    tn_season_data d;
+    FILE *f;
+    int k;
+    double t0;
+    tn_status st;
+    TN_CHECK(dem.data && tn_image_create(&fr, 128, 128, 1) == TN_OK);
+    if (!dem.data || !fr.data) { tn_image_free(&dem); tn_image_free(&fr); return; }
+    for (k = 0; k < 128 * 128; k++) fr.data[k] = 0.5f;
+    TN_CHECK(tn_image_save(dem_path, &dem, NULL) == TN_OK && tn_image_save(frame_path, &fr, NULL) == TN_OK);
+    for (k = 0; k < 2; k++) {
+        int rows = k ? 3 : 20000, r;
+        f = fopen(list, "w");
+        TN_CHECK(f != NULL);
+        if (!f) break;
+        fprintf(f, "dem,%s\nkoppen,Cfb\nlatitude,45\n", strrchr(dem_path, '/') + 1);
+        for (r = 0; r < rows; r++) fprintf(f, "frame,2020-%02d-15,%s\n", 1 + r % 12, strrchr(frame_path, '/') + 1);
+        fclose(f);
+        tn_set_memory_limit((size_t)64 << 20);
+        t0 = tn_time_seconds();
+        st = tn_season_data_load(list, &d);
+        if (!k) {
+            /* 20000 x 128 x 128 x 8 bytes = 2.5 GB: refused at once */
+            TN_CHECK(st == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "frame rows"));
+            TN_CHECK(tn_time_seconds() - t0 < 5.0);
+            fprintf(stderr, "   %s\n", tn_last_error());
+        } else {
+            TN_CHECK(st == TN_OK && d.count == 3);
+            if (!st) tn_season_data_free(&d);
+        }
+        tn_set_memory_limit(0);
+    }
+    remove(dem_path);
+    remove(frame_path);
+    remove(list);
+    tn_image_free(&dem);
+    tn_image_free(&fr);
+}
+
+/* Issue 33 item 7: a save removes the temporaries a killed save of the same target left (another
+   process's, gone, untouched for long), and only those. */
+TN_TEST(test_stale_temporaries)
+{
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+    const char *out = tmp_path("stale.png");
+    char dead[600], fresh[600], mine[600], other[600];
+    const char *const names[4] = {dead, fresh, mine, other};
+    tn_image img = small_dem(8, 8);
+    struct utimbuf old;
+    int k;
+    snprintf(dead, sizeof dead, "%s.tmp.4194303.7", out);   /* beyond any pid_max: gone */
+    snprintf(fresh, sizeof fresh, "%s.tmp.4194303.8", out); /* gone, but written just now */
+    snprintf(mine, sizeof mine, "%s.tmp.%lu.9", out, (unsigned long)getpid());
+    snprintf(other, sizeof other, "%s.tmpx.4194303.7", out);
+    for (k = 0; k < 4; k++) TN_CHECK(write_file(names[k], "partial", 7));
+    old.actime = old.modtime = time(NULL) - 86400;
+    for (k = 0; k < 4; k++)
+        if (k != 1) TN_CHECK(utime(names[k], &old) == 0);
+    TN_CHECK(tn_image_save(out, &img, NULL) == TN_OK);
+    TN_CHECK(fopen(dead, "rb") == NULL);
+    for (k = 1; k < 4; k++) {
+        FILE *f = fopen(names[k], "rb");
+        TN_CHECK(f != NULL);
+        if (f) fclose(f);
+        remove(names[k]);
+    }
+    remove(out);
+    tn_image_free(&img);
+#else
+    TN_SKIP("POSIX only");
+#endif
 }
 
 TN_TEST(test_image_args)
@@ -1114,6 +1291,24 @@ TN_TEST(test_texgan_config)
             TN_CHECK(st != TN_OK && tn_last_error()[0] && m.weights == NULL);
             remove(path);
         }
+    { /* issue 33 item 1: a config naming a 6-stage, 2048-wide generator (about 280 MB) over no
+         generator tensors is refused on the file's shapes, before allocating (before: the 64 MB
+         budget stopped the allocation) */
+        const char *path = write_texgan_config(5, 6.0f);
+        tn_params *p = NULL;
+        tn_status st;
+        TN_CHECK(path && tn_params_open(path, &p) == TN_OK);
+        if (p) {
+            tn_params_find(p, "texgan.config")->data[6] = 2048.0f;
+            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            tn_params_free(p);
+            tn_set_memory_limit((size_t)64 << 20);
+            st = tn_texgan_load(&m, path);
+            tn_set_memory_limit(0);
+            TN_CHECK(st == TN_ERR_CORRUPT && strstr(tn_last_error(), "generator") && m.weights == NULL);
+            remove(path);
+        }
+    }
     TN_CHECK(tn_texgan_load(&m, tmp_path("nothing.tnw")) == TN_ERR_IO);
     TN_CHECK(tn_texgan_load(&m, "") == TN_ERR_INVALID_ARG);
     TN_CHECK(tn_texgan_load(&m, NULL) == TN_ERR_INVALID_ARG);
@@ -1181,6 +1376,19 @@ static int tiff_set_array(uint8_t *b, size_t n, unsigned tag, uint32_t k, uint32
     if (type != 4 || (size_t)at + 4 * (k + 1) > n) return 0;
     put_le32(b + at + 4 * k, v);
     return 1;
+}
+
+/* Value k of an out-of-line SHORT or LONG array entry, 0 if absent. */
+static uint32_t tiff_get_array(const uint8_t *b, size_t n, unsigned tag, uint32_t k)
+{
+    const uint8_t *e = tiff_entry((uint8_t *)b, n, tag);
+    uint32_t at, type;
+    if (!e) return 0;
+    type = e[2] | (e[3] << 8);
+    at = (uint32_t)e[8] | ((uint32_t)e[9] << 8) | ((uint32_t)e[10] << 16) | ((uint32_t)e[11] << 24);
+    if (type == 3) return (size_t)at + 2 * (k + 1) > n ? 0 : (uint32_t)(b[at + 2 * k] | (b[at + 2 * k + 1] << 8));
+    if (type != 4 || (size_t)at + 4 * (k + 1) > n) return 0;
+    return (uint32_t)b[at + 4 * k] | ((uint32_t)b[at + 4 * k + 1] << 8) | ((uint32_t)b[at + 4 * k + 2] << 16) | ((uint32_t)b[at + 4 * k + 3] << 24);
 }
 
 static uint8_t *tiff_fixture(const char *name, size_t *n)
@@ -1324,6 +1532,26 @@ TN_TEST(test_tiff_hostile)
     TN_CHECK(tiff_set_array(b, nd, 279, 3, 1));
     TN_CHECK(tn_image_load_memory(b, nd, "cut.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
     tn_image_free(&img);
+    /* issue 33 item 4: strips sharing one deflate stream (a decompression bomb's trick, which
+       loaded with TN_OK before) and strips overlapping by a byte: refused */
+    {
+        uint8_t *eo = tiff_entry(defl, nd, 273);
+        uint32_t ns = eo ? (uint32_t)eo[4] | ((uint32_t)eo[5] << 8) : 0, k;
+        uint32_t o0 = tiff_get_array(defl, nd, 273, 0), c0 = tiff_get_array(defl, nd, 279, 0);
+        TN_CHECK(ns >= 3 && o0 && c0);
+        memcpy(b, defl, nd);
+        for (k = 1; k + 1 < ns; k++) TN_CHECK(tiff_set_array(b, nd, 273, k, o0) && tiff_set_array(b, nd, 279, k, c0));
+        TN_CHECK(tn_image_load_memory(b, nd, "shared.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+        TN_CHECK(strstr(tn_last_error(), "overlap") != NULL);
+        tn_image_free(&img);
+        memcpy(b, defl, nd);
+        TN_CHECK(tiff_set_array(b, nd, 273, 1, tiff_get_array(defl, nd, 273, 1) - 1));
+        TN_CHECK(tiff_set_array(b, nd, 279, 1, tiff_get_array(defl, nd, 279, 1) + 1));
+        TN_CHECK(tn_image_load_memory(b, nd, "overlap.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+        tn_image_free(&img);
+        TN_CHECK(tn_image_load_memory(defl, nd, "defl.tif", &img, NULL, NULL) == TN_OK);
+        tn_image_free(&img);
+    }
     /* tiles: zero and huge tile sizes in the BigTIFF big-endian fixture (values patched by search) */
     {
         static const uint32_t tsz[] = {0, 1, 0x7fffffffu, 0xffffffffu};
@@ -1681,6 +1909,7 @@ int main(void)
     RUN(test_range_metadata);
     RUN(test_sketch_text_mutated);
     RUN(test_tnw_loader);
+    RUN(test_tnw_many_tensors);
     RUN(test_image_args);
     RUN(test_deflate_and_metrics_args);
     RUN(test_noise_args);
@@ -1696,6 +1925,9 @@ int main(void)
     RUN(test_skeleton_blobs);
     RUN(test_tiff_mutated);
     RUN(test_tiff_hostile);
+    RUN(test_memory_limit);
+    RUN(test_season_frame_total);
+    RUN(test_stale_temporaries);
     RUN(test_tiff_lzw_streams);
     return tn_test_summary("test_robust");
 }

@@ -323,6 +323,17 @@ TN_TEST(deterministic_for_1_and_2_threads)
     TN_CHECK(tn_texgan_synthesize(&b, 7, 70, 50, &s2) == TN_OK);
     TN_CHECK(tn_test_same_params(a.weights, b.weights, 1));
     TN_CHECK(max_abs_diff(&s1, &s2) == 0.0);
+    { /* issue 33 item 9: every tensor, the config included, is the same (values_digest); the
+         training seconds are metadata */
+        int i;
+        TN_CHECK(tn_params_count(a.weights) == tn_params_count(b.weights));
+        for (i = 0; i < tn_params_count(a.weights) && i < tn_params_count(b.weights); i++) {
+            const tn_tensor *ta = tn_params_get(a.weights, i), *tb = tn_params_get(b.weights, i);
+            TN_CHECK(ta->numel == tb->numel && !memcmp(ta->data, tb->data, ta->numel * sizeof(float)));
+        }
+        TN_CHECK(tn_params_find(a.weights, "texgan.config")->data[11] == 0.0f);
+        TN_CHECK(tn_params_meta(a.weights, "train_seconds") != NULL && a.train_seconds > 0);
+    }
     tn_set_threads(0);
     tn_image_free(&s1);
     tn_image_free(&s2);
@@ -342,6 +353,7 @@ TN_TEST(model_file_round_trip_and_streamed_files)
     TN_CHECK(trained_tiny(&m, 6, 1) == TN_OK); /* RGB + normal map */
     TN_CHECK(tn_texgan_save(&m, path) == TN_OK);
     TN_CHECK(tn_texgan_load(&l, path) == TN_OK);
+    TN_CHECK(m.train_seconds > 0 && fabs(l.train_seconds - m.train_seconds) < 0.01); /* from the metadata */
     TN_CHECK(l.channels == 6 && l.stages == 2 && l.noise_periodic == 1 && l.iterations == 2);
     TN_CHECK(tn_test_same_params(m.weights, l.weights, 0));
     TN_CHECK(tn_texgan_synthesize(&l, 3, 37, 29, &mem) == TN_OK);

@@ -116,6 +116,24 @@ TN_TEST(budget_learns_and_stops)
     toy_free(&t);
 }
 
+/* Issue 33 item 8: a checkpoint that cannot be written (here: into a missing directory, as on a
+   full disk) is a warning; training runs to its end and succeeds. */
+TN_TEST(failed_checkpoint_is_a_warning)
+{
+    tn_train_opts o;
+    toy t;
+    const char *msg = NULL;
+    memset(&o, 0, sizeof o);
+    o.max_iters = 20;
+    o.checkpoint_iters = 5;
+    o.checkpoint = tn_test_tmp_path("train", "no_such_dir/x.ckpt");
+    TN_CHECK(toy_run(&o, &t, NULL) == TN_OK);
+    TN_CHECK(tn_train_iteration(t.run) == 20);
+    TN_CHECK(tn_train_checkpoint_failures(t.run, &msg) >= 4 && msg && strstr(msg, "x.ckpt"));
+    TN_CHECK(tn_train_checkpoints(t.run) == 0);
+    toy_free(&t);
+}
+
 TN_TEST(resume_is_bit_identical)
 {
     const char *ck = tn_test_tmp_path("train", "toy.ckpt");
@@ -513,6 +531,7 @@ TN_TEST(ema_and_best_k)
 int main(void)
 {
     TN_RUN(budget_learns_and_stops);
+    TN_RUN(failed_checkpoint_is_a_warning);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(cancel_keeps_a_checkpoint);
     TN_RUN(bad_settings_are_refused);

@@ -516,6 +516,141 @@ TN_TEST(tiles_on_disk_resume_and_index)
     tn_image_free(&ref);
 }
 
+/* Issue 33 item 3: a grid past 2^20 tiles is refused at parse time (2^48 tiles hung the index
+   writer), a tile that cannot be allocated before DIR/world.spec is written, and an index of
+   more than 64 x 64 tiles is a mosaic of block VRTs (a 10^6-pixel-square world wrote one
+   457 MB world.vrt). */
+TN_TEST(huge_worlds_bounded)
+{
+    const char *dir = tn_test_tmp_path("world", "huge"), *dir2 = tn_test_tmp_path("world", "bigtile");
+    char path[600], *text;
+    tn_world w;
+    tn_world_run_opts ro;
+    int present = 0, b;
+    size_t n;
+    TN_CHECK(tn_world_parse("world 268435456 268435456\ntile 16\nperlin\n", NULL, &w) == TN_ERR_TOO_LARGE);
+    TN_CHECK(strstr(tn_last_error(), "grid") != NULL);
+    TN_CHECK(tn_world_parse("world 1000000 1000000\ntile 256\nperlin\n", NULL, &w) == TN_ERR_TOO_LARGE);
+    /* tile 65536: 16 GiB of floats for one tile, refused before the directory is claimed */
+    mkdir(dir2, 0755);
+    snprintf(path, sizeof path, "%s/world.spec", dir2);
+    remove(path);
+    TN_CHECK(tn_world_parse("world 65536 65536\ntile 65536\nperlin\n", NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(&w, dir2, NULL, NULL) == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "tile"));
+    TN_CHECK(fopen(path, "rb") == NULL);
+    tn_world_free(&w);
+    /* 69 x 69 tiles: world.vrt lists 2 x 2 block mosaics */
+    mkdir(dir, 0755);
+    snprintf(path, sizeof path, "%s/world.spec", dir);
+    remove(path);
+    snprintf(path, sizeof path, "%s/r0_c0.png", dir);
+    remove(path);
+    TN_CHECK(tn_world_parse("world 1100 1100\ntile 16\nheight 0 100\nperlin\n", NULL, &w) == TN_OK);
+    TN_CHECK(w.rows == 69 && w.cols == 69);
+    memset(&ro, 0, sizeof ro);
+    ro.row1 = ro.col1 = 1;
+    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, NULL) == TN_OK);
+    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 1);
+    snprintf(path, sizeof path, "%s/world.vrt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && n < 8192 && strstr(text, "rasterXSize=\"1100\"") && strstr(text, "world_b1_1.vrt") &&
+             strstr(text, "<DstRect xOff=\"1024\" yOff=\"1024\" xSize=\"76\" ySize=\"76\"/>") && !strstr(text, ".png"));
+    free(text);
+    snprintf(path, sizeof path, "%s/world_b1_1.vrt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && strstr(text, "rasterXSize=\"76\"") && strstr(text, "r68_c68.png") &&
+             strstr(text, "<DstRect xOff=\"64\" yOff=\"64\" xSize=\"12\" ySize=\"12\"/>"));
+    free(text);
+    snprintf(path, sizeof path, "%s/manifest.txt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && strstr(text, "tiles 1 of 4761"));
+    free(text);
+    for (b = 0; b < 4; b++) {
+        snprintf(path, sizeof path, "%s/world_b%d_%d.vrt", dir, b / 2, b % 2);
+        TN_CHECK(remove(path) == 0);
+    }
+    tn_world_free(&w);
+}
+
+/* Issue 33 item 6: a resumed run checks the tiles on disk against the manifest (size, digest) or,
+   unlisted, decodes them; damaged and foreign ones are computed again, and the index lists only
+   good tiles. */
+TN_TEST(resume_checks_tiles)
+{
+    const char *spec = "world 100 80\nseed 8\nheight 0 500\nperlin frequency=2\n";
+    const char *dir = tn_test_tmp_path("world", "resume");
+    char path[600], *good = NULL, *text;
+    tn_world w;
+    tn_world_opts o;
+    tn_world_run_stats s;
+    tn_image other = {0, 0, 0, NULL};
+    tn_save_opts so;
+    size_t gn = 0, n;
+    int present = 0, row, col;
+    FILE *f;
+    memset(&o, 0, sizeof o);
+    o.tile = 50;
+    mkdir(dir, 0755);
+    for (row = 0; row < 2; row++)
+        for (col = 0; col < 2; col++) {
+            snprintf(path, sizeof path, "%s/r%d_c%d.png", dir, row, col);
+            remove(path);
+        }
+    snprintf(path, sizeof path, "%s/world.spec", dir);
+    remove(path);
+    snprintf(path, sizeof path, "%s/manifest.txt", dir);
+    remove(path);
+    TN_CHECK(tn_world_parse(spec, &o, &w) == TN_OK);
+    /* an empty file where no manifest exists yet: it does not decode, so it is computed */
+    snprintf(path, sizeof path, "%s/r0_c0.png", dir);
+    f = fopen(path, "wb");
+    if (f) fclose(f);
+    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(s.written == 4 && s.skipped == 0 && s.repaired == 1);
+    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 4);
+    good = (char *)tn_test_read_file(path, &gn);
+    TN_CHECK(good && gn > 100);
+    snprintf(path, sizeof path, "%s/manifest.txt", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    {
+        char line[64];
+        snprintf(line, sizeof line, " %zu\n", gn);
+        TN_CHECK(text && strstr(text, "r0_c0.png ") && strstr(text, line));
+    }
+    free(text);
+    /* damage: a 0-byte tile, and a foreign PNG of the right size and range in another */
+    snprintf(path, sizeof path, "%s/r0_c0.png", dir);
+    f = fopen(path, "wb");
+    if (f) fclose(f);
+    TN_CHECK(tn_image_create(&other, 50, 50, 1) == TN_OK);
+    memset(&so, 0, sizeof so);
+    so.format = TN_FORMAT_PNG;
+    so.bit_depth = 16;
+    so.has_range = 1;
+    so.range_lo = 0;
+    so.range_hi = 500;
+    snprintf(path, sizeof path, "%s/r1_c1.png", dir);
+    TN_CHECK(tn_image_save(path, &other, &so) == TN_OK);
+    tn_image_free(&other);
+    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(s.written == 2 && s.skipped == 2 && s.repaired == 2);
+    snprintf(path, sizeof path, "%s/r0_c0.png", dir);
+    text = (char *)tn_test_read_file(path, &n);
+    TN_CHECK(text && good && n == gn && !memcmp(text, good, n)); /* the same bytes as the first run */
+    free(text);
+    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 4);
+    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(s.written == 0 && s.skipped == 4 && s.repaired == 0);
+    /* the index leaves a damaged tile out */
+    f = fopen(path, "wb");
+    if (f) fclose(f);
+    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 3);
+    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(s.written == 1 && s.repaired == 1);
+    free(good);
+    tn_world_free(&w);
+}
+
 int main(void)
 {
     TN_RUN(rect_halo_clips_to_the_raster);
@@ -529,5 +664,7 @@ int main(void)
     TN_RUN(gnn_tiles_equal_the_whole_map);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
+    TN_RUN(huge_worlds_bounded);
+    TN_RUN(resume_checks_tiles);
     return tn_test_summary("test_world");
 }

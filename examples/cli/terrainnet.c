@@ -2209,11 +2209,12 @@ static void print_usage(FILE *f)
 {
     size_t i;
     fprintf(f, "terrainnet %s - learn terrain from one example; synthesise terrain and textures\n\n"
-               "usage: terrainnet [--threads N] [--precision auto|bf16|fp32] COMMAND [ARGS]\n"
+               "usage: terrainnet [--threads N] [--precision auto|bf16|fp32] [--max-memory MB] COMMAND [ARGS]\n"
                "       (`terrainnet COMMAND --help` or `terrainnet help COMMAND` for its arguments;\n"
                "       --precision: of the products under convolutions and dense layers, bf16 with\n"
-               "       float32 sums and weights, or float32; auto = fp32 for now)\n\ncommands:\n",
-            TN_VERSION_STRING);
+               "       float32 sums and weights, or float32; auto = fp32 for now;\n"
+               "       --max-memory caps the library's memory, default %.0f MB, half the RAM)\n\ncommands:\n",
+            TN_VERSION_STRING, (double)tn_get_memory_limit() / 1048576.0);
     for (i = 0; i < NCOMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i]->name, commands[i]->summary);
 }
 
@@ -2244,6 +2245,15 @@ int main(int argc, char **argv)
                 return 2;
             }
             tn_set_precision(p);
+            a += 2;
+        } else if (!strcmp(argv[a], "--max-memory") && a + 1 < argc) {
+            char *end;
+            double mb = strtod(argv[a + 1], &end);
+            if (*end || end == argv[a + 1] || !(mb >= 16 && mb <= 1e12)) {
+                fprintf(stderr, "terrainnet: --max-memory needs megabytes from 16 to 1e12\n");
+                return 2;
+            }
+            tn_set_memory_limit(mb * 1048576.0 >= (double)SIZE_MAX ? SIZE_MAX : (size_t)(mb * 1048576.0));
             a += 2;
         } else {
             fprintf(stderr, "terrainnet: unknown option %s\n", argv[a]);
