@@ -35,12 +35,13 @@ CONFIGURATION (define before including the implementation)
     TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
                         TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
                         TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,
-                        TN_NO_NOISE, and TN_NO_ENGINE (the tensor engine, @@gemm ... @@train).
-                        A part that needs one compiled out stops the build with #error naming
-                        it: @@world needs every generator and @@export; @@style, @@texgan,
-                        @@singan, @@gnn and @@season need the engine; @@style, @@texgan and
-                        @@season need @@noise; @@style and @@gnn need @@extract, which needs
-                        @@sketch. @@core, @@thread, @@image, @@io and @@metrics are always in.
+                        TN_NO_NOISE, TN_NO_FINEDETAIL, and TN_NO_ENGINE (the tensor engine,
+                        @@gemm ... @@train). A part that needs one compiled out stops the build
+                        with #error naming it: @@world needs every generator and @@export;
+                        @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
+                        @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
@@ -83,6 +84,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@train     training runs (budget, progress, checkpoints, resume), model files, shared blocks
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
+    @@finedetail  detail by example: a terrain's low-pass plus an example DEM's fine detail, patch-matched
     @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton; realism
     @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam
@@ -935,6 +937,35 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
 #endif /* TN_NO_NOISE */
 
 /* ============================================================================================
+   @@finedetail  detail by example (the fine scales of paper 000's sketch path, section 4.4's role)
+   A terrain keeps its coarse shape, a Gaussian low-pass, and takes everything finer from
+   patches of an example DEM at the same pixel size, as image analogies with the low-pass as
+   the guide: every 7 x 7 patch of the terrain's low-pass is matched to the nearest patch of the
+   example's low-pass (under the example's 8 rotations and mirrors, heights relative to the
+   patch mean), and the example's detail (itself minus its low-pass) at the matches is added.
+   A pixel depends only on the terrain within tn_fine_detail_halo pixels, so tiles equal the
+   whole map, and on no thread count.
+   ============================================================================================ */
+#ifndef TN_NO_FINEDETAIL
+
+typedef struct tn_fine_detail_opts {
+    float sigma;   /* px: the terrain keeps what a Gaussian of this sigma keeps, the example gives
+                      the rest; 0 = 2 */
+    int patch;     /* odd patch side in px, 3..15; 0 = 7 */
+    int probes;    /* patch clusters searched per patch, 1..64; 0 = 2 (more: nearer matches, slower) */
+} tn_fine_detail_opts;
+
+/* out = terrain's low-pass + the example's finer detail, matched by shape. example and terrain:
+   one channel, the same pixel size and height units (metres), each at least patch x patch
+   (example: 2 patches); out is allocated here, terrain's size. opts may be NULL. */
+TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out);
+
+/* Pixels around a window that tn_fine_detail reads for it: a window computed from the
+   terrain grown by this much (tn_rect_halo) equals the whole map's pixels there. */
+TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts);
+#endif /* TN_NO_FINEDETAIL */
+
+/* ============================================================================================
    @@sketch  contour sets: ridge and valley polylines (paper 000, sections 4.1 and 5)
    One type carries extracted ridge/valley networks, their contour parts and user sketches: a
    canvas size and a list of polylines, each point (x, y, height) in canvas pixels and the
@@ -1679,8 +1710,8 @@ TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_
    crossing them), or on request by random sketches (5.2).
    ============================================================================================ */
 #ifndef TN_NO_GNN
-#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT)
-#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract; define TN_NO_GNN too, or none of them"
+#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT) || defined(TN_NO_FINEDETAIL)
+#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract, @@finedetail; define TN_NO_GNN too, or none of them"
 #endif
 
 /* Zero = default (tn_gnn_defaults gives the values and the reasons). */
@@ -1830,6 +1861,11 @@ typedef struct tn_gnn_generate_opts {
                                 example network's (a drawing of a few strokes: 6-10 % of it; an
                                 extracted network at 500 cells, 30 %, is not grown) and random_nodes
                                 is 0; 1 = always; -1 = never */
+    int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
+                                detail of the example heights the model holds (gnn-train stores them),
+                                matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
+                                network gives its layout, not the example's roughness), when the model
+                                holds its example; 1 = always (fails without the example); -1 = never */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -1861,8 +1897,9 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
    pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
    the network plus the membrane's blocks (see >>gnn), so the window is computed on itself grown
-   by that halo. Large maps and windows run in tiles of 256 px (+ halo) internally, so memory
-   follows the tile, not the map (the fine-tune's too: it works on windows of maps over 256^2). */
+   by that halo (plus tn_fine_detail_halo with the fine detail). Large maps and windows run in
+   tiles of 256 px (+ halo) internally, so memory follows the tile, not the map (the fine-tune's
+   too: it works on windows of maps over 256^2; the fine detail's tiles are 1024 px). */
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
                                         int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
 
@@ -1892,6 +1929,30 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
 
+/* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
+typedef struct tn_gnn_plan {
+    int user_lines;       /* the sketch's polylines */
+    int grown_lines;      /* polylines tn_gnn_grow added (0: not grown) */
+    double user_density;  /* the sketch's line pixels per map pixel */
+    double example_density; /* the example network's, per example pixel */
+    float gain;           /* the residual gain generation uses (tn_gnn_gain) */
+    double gain_raw;      /* the held-out lines' estimate before scale and clamp; NAN = untested */
+    double gain_scale;    /* the model's scale of the test (1 without holdouts) */
+    const char *gain_why; /* one line: why the gain is what it is (static text) */
+    int detail;           /* 1: the fine detail by example is added (tn_gnn_generate_opts.detail) */
+    const char *detail_why; /* one line: why it is or is not (static text) */
+} tn_gnn_plan;
+/* Fills *plan for tn_gnn_generate with the same arguments (without running the network
+   beyond the gain test). */
+TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                tn_gnn_plan *plan);
+#endif /* TN_NO_GNN */
+
+/* ============================================================================================
+   (@@gnn, continued: densify by example)
+   ============================================================================================ */
+#ifndef TN_NO_GNN
+
 /* Densify by example (issue 30): a drawing of a few strokes leaves most of the map to the
    membrane, smooth slopes between the strokes. tn_gnn_grow fills the space between the user's
    lines with the example's own network, the network the model rebuilds best: the map is cut
@@ -1919,22 +1980,6 @@ typedef struct tn_gnn_grow_opts {
    number of added polylines. */
 TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                              const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added);
-
-/* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
-typedef struct tn_gnn_plan {
-    int user_lines;       /* the sketch's polylines */
-    int grown_lines;      /* polylines tn_gnn_grow added (0: not grown) */
-    double user_density;  /* the sketch's line pixels per map pixel */
-    double example_density; /* the example network's, per example pixel */
-    float gain;           /* the residual gain generation uses (tn_gnn_gain) */
-    double gain_raw;      /* the held-out lines' estimate before scale and clamp; NAN = untested */
-    double gain_scale;    /* the model's scale of the test (1 without holdouts) */
-    const char *gain_why; /* one line: why the gain is what it is (static text) */
-} tn_gnn_plan;
-/* Fills *plan for tn_gnn_generate with the same arguments (without running the network
-   beyond the gain test). */
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan);
 #endif /* TN_NO_GNN */
 
 /* ============================================================================================
@@ -3251,6 +3296,7 @@ typedef __m512 tn__vf;
 #define tn__vf_store(p, v) _mm512_storeu_ps((p), (v))
 #define tn__vf_set1(x) _mm512_set1_ps(x)
 #define tn__vf_add(a, b) _mm512_add_ps((a), (b))
+#define tn__vf_sub(a, b) _mm512_sub_ps((a), (b))
 #define tn__vf_mul(a, b) _mm512_mul_ps((a), (b))
 #define tn__vf_madd(a, b, c) _mm512_fmadd_ps((a), (b), (c))
 #define TN__VD_N 8
@@ -3272,6 +3318,7 @@ typedef __m256 tn__vf;
 #define tn__vf_store(p, v) _mm256_storeu_ps((p), (v))
 #define tn__vf_set1(x) _mm256_set1_ps(x)
 #define tn__vf_add(a, b) _mm256_add_ps((a), (b))
+#define tn__vf_sub(a, b) _mm256_sub_ps((a), (b))
 #define tn__vf_mul(a, b) _mm256_mul_ps((a), (b))
 #define tn__vf_madd(a, b, c) _mm256_fmadd_ps((a), (b), (c))
 #define TN__VD_N 4
@@ -3293,6 +3340,7 @@ typedef float tn__vf;
 #define tn__vf_store(p, v) (*(p) = (v))
 #define tn__vf_set1(x) (x)
 #define tn__vf_add(a, b) ((a) + (b))
+#define tn__vf_sub(a, b) ((a) - (b))
 #define tn__vf_mul(a, b) ((a) * (b))
 #define tn__vf_madd(a, b, c) ((a) * (b) + (c))
 #define TN__VD_N 1
@@ -13401,6 +13449,589 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
 #endif /* TN_NO_NOISE */
 
 /* --------------------------------------------------------------------------------------------
+   >>finedetail  (@@finedetail implementation)
+   Patches are keyed by their low-pass heights minus their mean (matching the detailed terrain
+   against the detailed example instead, as texture optimisation does, favours the smoothest
+   example patches pass after pass). Nearest patches are found in an inverted file:
+   k-means clusters of the keys (deterministic start and subsample), each query scans the keys
+   of its `probes` nearest clusters exactly, 16 keys a block; a key is the patch sampled every
+   second pixel (the low-pass loses nothing by it; 16 values for 7 x 7). Then coherence: each pixel may take
+   a 4-neighbour's match shifted by one pixel when that fits its patch better (Jacobi sweeps), so
+   neighbouring patches come from one place of the example (a match that no neighbour shares
+   counts its distance twice). The detail comes in two bands: down to a Gaussian of 1 px, the
+   Gaussian-weighted vote of the patches over the pixel (smooth where neighbouring matches
+   disagree, so scaled to the local RMS of the band at the pixels' own matches); finer, the
+   example's at the pixel's own match, which a vote would average away (the finest band is what
+   slope breaks and gullies are made of). The detail starts below a Gaussian of sqrt(3) sigma, not
+   sigma: the terrain's low-pass and the example's detail are uncorrelated, so their powers add,
+   and with filters g and 1 - g^3 (g = the Gaussian's response) that sum stays within -0.04 ..
+   +0.01 decades of 1 where 1 - g would dip by 0.3 at the crossover. (The finest band does not
+   overlap the voted one so: taken pixel by pixel it is close to white, and the overlap made the
+   Laplacian twice the example's.)
+   -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_FINEDETAIL
+
+#define TN__FD_MAX_KEYS 131072 /* the example is subsampled to at most this many patch centres */
+#define TN__FD_KMEANS_ITERS 6
+#define TN__FD_SWEEPS 4        /* coherence sweeps, red-black */
+#define TN__FD_KAPPA 1.0f      /* a match no neighbour shares counts its distance (1 + kappa) times */
+#define TN__FD_VOTE_SIGMA 1.0f /* px: the vote's Gaussian weight */
+#define TN__FD_FINE_SIGMA 1.0f /* px: detail finer than this comes from each pixel's own match */
+#define TN__FD_RMS_SIGMA 4.0f  /* px: the window of the voted band's local RMS */
+#define TN__FD_BAND 1.7320508f /* the detail band reaches up to a Gaussian of sqrt(3) sigma (below) */
+#define TN__FD_LANES 16        /* keys a block (one or two SIMD vectors) */
+#define TN__FD_PAD 1e15f       /* the heights of padding keys: never nearest */
+
+typedef struct tn__fd_keys {
+    int k;            /* clusters */
+    int nblk;         /* key blocks */
+    float *blk;       /* nblk x D x LANES: keys minus their mean, grouped by cluster */
+    int *where;       /* nblk x LANES: plane index of the key's centre, -1 = padding */
+    int *bstart;      /* k + 1: cluster c's blocks are bstart[c] .. bstart[c + 1] - 1 */
+    float *cent;      /* ceil(k / LANES) x D x LANES centroids (padding past k) */
+} tn__fd_keys;
+
+typedef struct tn__fd {
+    int P, r, D, DK, probes, side, plane; /* D = P^2 patch values, DK key values */
+    float sigma;
+    float *low, *det; /* 8 transforms of the example's low-pass (sigma) and its detail: the band
+                         between Gaussians of sqrt(3) sigma and FINE_SIGMA, side x side each */
+    float *fine;      /* the finest detail: the example minus a Gaussian of FINE_SIGMA */
+    float *lowm;      /* the low-pass's patch means at every valid centre */
+    int tw[8], th[8];
+    tn__fd_keys keys;
+} tn__fd;
+
+static void tn__fd_opts_defaults(tn_fine_detail_opts *o)
+{
+    if (o->sigma == 0) o->sigma = 2.0f;
+    if (o->patch == 0) o->patch = 7;
+    if (o->probes == 0) o->probes = 2;
+}
+
+static tn_status tn__fd_opts_check(const tn_fine_detail_opts *o)
+{
+    if (!(o->sigma >= 0.5f && o->sigma <= 32.0f))
+        return tn__fail(TN_ERR_INVALID_ARG, "fine detail: sigma %g is not in 0.5 .. 32 px", (double)o->sigma);
+    if (o->patch < 3 || o->patch > 15 || !(o->patch & 1))
+        return tn__fail(TN_ERR_INVALID_ARG, "fine detail: patch %d is not odd in 3 .. 15", o->patch);
+    if (o->probes < 1 || o->probes > 64) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: probes %d is not in 1 .. 64", o->probes);
+    return TN_OK;
+}
+
+static int tn__fd_blur_radius(float sigma) { return (int)(4.0f * sigma + 0.5f); }
+
+TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts)
+{
+    tn_fine_detail_opts o;
+    int b;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    tn__fd_opts_defaults(&o);
+    if (tn__fd_opts_check(&o)) return -1;
+    b = tn__fd_blur_radius(o.sigma);
+    /* the guide's blur, the match's patch, a pixel a sweep, the vote, the RMS window */
+    return b + 2 * (o.patch / 2) + TN__FD_SWEEPS + tn__fd_blur_radius(TN__FD_RMS_SIGMA);
+}
+
+static void tn__fd_keys_free(tn__fd_keys *K)
+{
+    TN_FREE(K->blk);
+    TN_FREE(K->where);
+    TN_FREE(K->bstart);
+    TN_FREE(K->cent);
+    memset(K, 0, sizeof *K);
+}
+
+TN__SHARED void tn__fd_free(tn__fd *d)
+{
+    tn__fd_keys_free(&d->keys);
+    TN_FREE(d->low);
+    TN_FREE(d->det);
+    TN_FREE(d->fine);
+    TN_FREE(d->lowm);
+    memset(d, 0, sizeof *d);
+}
+
+/* Squared distances of q to the LANES keys of a block (lanes are keys: no reduction to reorder). */
+static void tn__fd_dist(const float *q, const float *blk, int D, float *out)
+{
+    int i, l;
+    for (l = 0; l < TN__FD_LANES; l += TN__VF_N) {
+        tn__vf acc = tn__vf_set1(0.0f);
+        for (i = 0; i < D; i++) {
+            tn__vf e = tn__vf_sub(tn__vf_set1(q[i]), tn__vf_load(blk + i * TN__FD_LANES + l));
+            acc = tn__vf_madd(e, e, acc);
+        }
+        tn__vf_store(out + l, acc);
+    }
+}
+
+/* A patch's key: its values at every second pixel from the corner (the match runs on low-passes,
+   which that sampling keeps), minus their mean. */
+static void tn__fd_key(const float *src, int w, int h, size_t stride, int x, int y, int r, float *out)
+{
+    int u, v, n = 0;
+    float m = 0;
+    for (v = -r; v <= r; v += 2) {
+        int yy = y + v < 0 ? 0 : y + v >= h ? h - 1 : y + v;
+        for (u = -r; u <= r; u += 2) {
+            int xx = x + u < 0 ? 0 : x + u >= w ? w - 1 : x + u;
+            out[n] = src[(size_t)yy * stride + xx];
+            m += out[n++];
+        }
+    }
+    m /= (float)n;
+    for (u = 0; u < n; u++) out[u] -= m;
+}
+
+/* Patch of src (w x h, rows of `stride`) centred at (x, y), coordinates clamped, minus its mean
+   (returned). */
+static float tn__fd_patch(const float *src, int w, int h, size_t stride, int x, int y, int r, float *out)
+{
+    int u, v, n = 0;
+    float m = 0;
+    for (v = -r; v <= r; v++) {
+        int yy = y + v < 0 ? 0 : y + v >= h ? h - 1 : y + v;
+        for (u = -r; u <= r; u++) {
+            int xx = x + u < 0 ? 0 : x + u >= w ? w - 1 : x + u;
+            out[n] = src[(size_t)yy * stride + xx];
+            m += out[n++];
+        }
+    }
+    m /= (float)n;
+    for (u = 0; u < n; u++) out[u] -= m;
+    return m;
+}
+
+/* 1 when plane index `at` is a patch centre (r px inside its transform). */
+static int tn__fd_valid(const tn__fd *d, int at)
+{
+    int t = at / d->plane, y = at % d->plane / d->side, x = at % d->side;
+    return at >= 0 && t < 8 && x >= d->r && y >= d->r && x < d->tw[t] - d->r && y < d->th[t] - d->r;
+}
+
+/* Squared distance of q (mean removed) to src's patch at `at` (mean m removed). */
+static float tn__fd_dist_at(const tn__fd *d, const float *q, const float *src, int at, float m)
+{
+    const float *p = src + at - d->r * d->side - d->r;
+    float s = 0;
+    int u, v, n = 0;
+    for (v = 0; v < d->P; v++, p += d->side)
+        for (u = 0; u < d->P; u++) {
+            float e = q[n++] - (p[u] - m);
+            s += e * e;
+        }
+    return s;
+}
+
+typedef struct tn__fd_assign_job {
+    const float *key, *cent; /* key: n x D rows; cent: blocks */
+    int D, k;
+    int *label;
+} tn__fd_assign_job;
+
+static void tn__fd_assign_task(void *vj, size_t b, size_t e)
+{
+    const tn__fd_assign_job *j = (const tn__fd_assign_job *)vj;
+    float dist[TN__FD_LANES];
+    size_t i;
+    int c, l;
+    for (i = b; i < e; i++) {
+        float best = FLT_MAX;
+        int bc = 0;
+        for (c = 0; c < j->k; c += TN__FD_LANES) {
+            tn__fd_dist(j->key + i * j->D, j->cent + (size_t)c * j->D, j->D, dist);
+            for (l = 0; l < TN__FD_LANES && c + l < j->k; l++)
+                if (dist[l] < best) best = dist[l], bc = c + l;
+        }
+        j->label[i] = bc;
+    }
+}
+
+/* Writes centroid c (D floats) into the block layout. */
+static void tn__fd_cent_set(float *cent, int D, int c, const float *v)
+{
+    float *b = cent + (size_t)(c / TN__FD_LANES) * D * TN__FD_LANES + c % TN__FD_LANES;
+    int i;
+    for (i = 0; i < D; i++) b[i * TN__FD_LANES] = v[i];
+}
+
+/* The keys (n rows of D, centres `where`) clustered and laid out in blocks by cluster. */
+static tn_status tn__fd_index(const float *key, const int *where, int n, int D, tn__fd_keys *K)
+{
+    int k = (int)sqrt((double)n), it, c, i, l, q;
+    int m, nt, ncb, *label = NULL, *count = NULL, *pos = NULL;
+    float *train = NULL, *v = NULL;
+    double *sum = NULL;
+    tn__fd_assign_job job;
+    tn_status st = TN_OK;
+    if (k < 1) k = 1;
+    if (k > 1024) k = 1024;
+    m = n / (k * 64) > 1 ? n / (k * 64) : 1; /* ~64 training keys a cluster */
+    nt = (n + m - 1) / m;
+    ncb = (k + TN__FD_LANES - 1) / TN__FD_LANES;
+    K->k = k;
+    K->cent = (float *)tn__alloc((size_t)ncb * D * TN__FD_LANES * sizeof(float));
+    K->bstart = (int *)tn__alloc((size_t)(k + 1) * sizeof(int));
+    label = (int *)tn__alloc((size_t)n * sizeof(int));
+    count = (int *)tn__alloc((size_t)k * sizeof(int));
+    pos = (int *)tn__alloc((size_t)k * sizeof(int));
+    sum = (double *)tn__alloc((size_t)k * D * sizeof(double));
+    train = (float *)tn__alloc((size_t)nt * D * sizeof(float));
+    v = (float *)tn__alloc((size_t)D * sizeof(float));
+    if (!K->cent || !K->bstart || !label || !count || !pos || !sum || !train || !v) {
+        st = tn__oom();
+        goto done;
+    }
+    for (i = 0; i < ncb * D * TN__FD_LANES; i++) K->cent[i] = TN__FD_PAD;
+    for (i = 0; i < nt; i++) memcpy(train + (size_t)i * D, key + (size_t)i * m * D, (size_t)D * sizeof(float));
+    for (c = 0; c < k; c++) tn__fd_cent_set(K->cent, D, c, train + (size_t)((long long)c * nt / k) * D);
+    job.cent = K->cent;
+    job.D = D;
+    job.k = k;
+    job.label = label;
+    for (it = 0; it < TN__FD_KMEANS_ITERS; it++) {
+        job.key = train;
+        tn_parallel_for((size_t)nt, 256, tn__fd_assign_task, &job);
+        memset(count, 0, (size_t)k * sizeof(int));
+        memset(sum, 0, (size_t)k * D * sizeof(double));
+        for (i = 0; i < nt; i++) {
+            count[label[i]]++;
+            for (q = 0; q < D; q++) sum[(size_t)label[i] * D + q] += train[(size_t)i * D + q];
+        }
+        for (c = 0; c < k; c++)
+            if (count[c]) {
+                for (q = 0; q < D; q++) v[q] = (float)(sum[(size_t)c * D + q] / count[c]);
+                tn__fd_cent_set(K->cent, D, c, v);
+            }
+    }
+    job.key = key;
+    tn_parallel_for((size_t)n, 256, tn__fd_assign_task, &job);
+    memset(count, 0, (size_t)k * sizeof(int));
+    for (i = 0; i < n; i++) count[label[i]]++;
+    K->bstart[0] = 0;
+    for (c = 0; c < k; c++) K->bstart[c + 1] = K->bstart[c] + (count[c] + TN__FD_LANES - 1) / TN__FD_LANES, pos[c] = 0;
+    K->nblk = K->bstart[k];
+    K->blk = (float *)tn__alloc((size_t)K->nblk * D * TN__FD_LANES * sizeof(float));
+    K->where = (int *)tn__alloc((size_t)K->nblk * TN__FD_LANES * sizeof(int));
+    if (!K->blk || !K->where) {
+        st = tn__oom();
+        goto done;
+    }
+    for (i = 0; i < K->nblk * D * TN__FD_LANES; i++) K->blk[i] = TN__FD_PAD;
+    for (i = 0; i < K->nblk * TN__FD_LANES; i++) K->where[i] = -1;
+    for (i = 0; i < n; i++) {
+        int c2 = label[i], slot = K->bstart[c2] * TN__FD_LANES + pos[c2]++;
+        float *b = K->blk + (size_t)(slot / TN__FD_LANES) * D * TN__FD_LANES + slot % TN__FD_LANES;
+        for (l = 0; l < D; l++) b[l * TN__FD_LANES] = key[(size_t)i * D + l];
+        K->where[slot] = where[i];
+    }
+done:
+    TN_FREE(label);
+    TN_FREE(count);
+    TN_FREE(pos);
+    TN_FREE(sum);
+    TN_FREE(train);
+    TN_FREE(v);
+    return st;
+}
+
+/* The keys of src's 8 transforms (planes as d->low), every `step` px, and their index. */
+static tn_status tn__fd_keys_make(const tn__fd *d, const float *src, int step, tn__fd_keys *K)
+{
+    float *key = NULL;
+    int *where = NULL, t, x, y, n = 0, cap = 0;
+    tn_status st;
+    for (t = 0; t < 8; t++) cap += ((d->tw[t] - 2 * d->r + step - 1) / step) * ((d->th[t] - 2 * d->r + step - 1) / step);
+    key = (float *)tn__alloc((size_t)cap * d->DK * sizeof(float));
+    where = (int *)tn__alloc((size_t)cap * sizeof(int));
+    if (!key || !where) {
+        TN_FREE(key);
+        TN_FREE(where);
+        return tn__oom();
+    }
+    for (t = 0; t < 8; t++)
+        for (y = d->r; y < d->th[t] - d->r; y += step)
+            for (x = d->r; x < d->tw[t] - d->r; x += step) {
+                tn__fd_key(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, key + (size_t)n * d->DK);
+                where[n++] = t * d->plane + y * d->side + x;
+            }
+    st = tn__fd_index(key, where, n, d->DK, K);
+    TN_FREE(key);
+    TN_FREE(where);
+    return st;
+}
+
+/* The 8 rotations and mirrors of a w x h image into side x side planes. */
+static void tn__fd_transforms(const float *src, int w, int h, int side, float *dst, int *tw, int *th)
+{
+    int t, x, y;
+    for (t = 0; t < 8; t++) {
+        int swap = t & 1, W = swap ? h : w, H = swap ? w : h;
+        float *pl = dst + (size_t)t * side * side;
+        tw[t] = W, th[t] = H;
+        for (y = 0; y < H; y++)
+            for (x = 0; x < W; x++) {
+                int sx = swap ? y : x, sy = swap ? x : y;
+                if (t & 2) sx = w - 1 - sx;
+                if (t & 4) sy = h - 1 - sy;
+                pl[(size_t)y * side + x] = src[(size_t)sy * w + sx];
+            }
+    }
+}
+
+/* Patch means of the planes at every valid centre. */
+static void tn__fd_means(const tn__fd *d, const float *src, float *mean)
+{
+    float q[225];
+    int t, x, y;
+    for (t = 0; t < 8; t++)
+        for (y = d->r; y < d->th[t] - d->r; y++)
+            for (x = d->r; x < d->tw[t] - d->r; x++) {
+                size_t at = (size_t)t * d->plane + (size_t)y * d->side + x;
+                mean[at] = tn__fd_patch(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, q);
+            }
+}
+
+TN__SHARED tn_status tn__fd_build(const tn_image *example, const tn_fine_detail_opts *opts, tn__fd *d)
+{
+    tn_fine_detail_opts o;
+    tn_image lo = {0, 0, 0, NULL}, mid = {0, 0, 0, NULL};
+    size_t bytes, i;
+    int w, h, step = 1;
+    tn_status st;
+    memset(d, 0, sizeof *d);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    tn__fd_opts_defaults(&o);
+    if ((st = tn__fd_opts_check(&o))) return st;
+    if ((st = tn__dem_check(example, 2 * o.patch, "fine detail: example"))) return st;
+    if (example->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: the example must have one channel (heights)");
+    w = example->width, h = example->height;
+    d->P = o.patch, d->r = o.patch / 2, d->D = o.patch * o.patch, d->DK = (o.patch / 2 + 1) * (o.patch / 2 + 1);
+    d->probes = o.probes, d->sigma = o.sigma;
+    d->side = w > h ? w : h;
+    if ((st = tn__size4(8, (size_t)d->side, (size_t)d->side, sizeof(float), &bytes))) return st;
+    d->plane = d->side * d->side;
+    while ((double)8 * ((w - 2 * d->r + step - 1) / step) * ((h - 2 * d->r + step - 1) / step) > TN__FD_MAX_KEYS) step++;
+    if (!(d->low = (float *)tn__calloc(bytes)) || !(d->det = (float *)tn__calloc(bytes)) || !(d->fine = (float *)tn__calloc(bytes)) ||
+        !(d->lowm = (float *)tn__calloc(bytes))) {
+        st = tn__oom();
+        goto done;
+    }
+    if ((st = tn_image_blur(&lo, example, o.sigma)) || (st = tn_image_blur(&mid, example, TN__FD_FINE_SIGMA))) goto done;
+    tn__fd_transforms(lo.data, w, h, d->side, d->low, d->tw, d->th);
+    tn_image_free(&lo);
+    if ((st = tn_image_blur(&lo, example, o.sigma * TN__FD_BAND))) goto done;
+    for (i = 0; i < (size_t)w * h; i++) {
+        lo.data[i] = mid.data[i] - lo.data[i];
+        mid.data[i] = example->data[i] - mid.data[i];
+    }
+    tn__fd_transforms(lo.data, w, h, d->side, d->det, d->tw, d->th);
+    tn__fd_transforms(mid.data, w, h, d->side, d->fine, d->tw, d->th);
+    tn__fd_means(d, d->low, d->lowm);
+    st = tn__fd_keys_make(d, d->low, step, &d->keys);
+done:
+    tn_image_free(&lo);
+    tn_image_free(&mid);
+    if (st) tn__fd_free(d);
+    return st;
+}
+
+typedef struct tn__fd_job {
+    const tn__fd *d;
+    const float *img;        /* the terrain's low-pass, w x h */
+    int w, h, parity;
+    const int *from;         /* sweeps: the matches before the sweep */
+    int *match;              /* w x h plane indices */
+    float *vote, *own, *band;/* w x h: the voted band, the finest detail at each pixel's own match, the
+                                voted band's there */
+} tn__fd_job;
+
+/* Nearest key of each pixel's patch: the probes nearest clusters, scanned whole. */
+static void tn__fd_match_task(void *vj, size_t b, size_t e)
+{
+    const tn__fd_job *j = (const tn__fd_job *)vj;
+    const tn__fd *d = j->d;
+    const tn__fd_keys *K = &d->keys;
+    float q[225], cd[64], dist[TN__FD_LANES];
+    int cc[64];
+    size_t row;
+    for (row = b; row < e; row++) {
+        int x;
+        for (x = 0; x < j->w; x++) {
+            int c, p, l, n = 0, best = -1;
+            float bd = FLT_MAX;
+            tn__fd_key(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, q);
+            for (c = 0; c < K->k; c += TN__FD_LANES) {
+                tn__fd_dist(q, K->cent + (size_t)c * d->DK, d->DK, dist);
+                for (l = 0; l < TN__FD_LANES && c + l < K->k; l++) {
+                    float dc = dist[l];
+                    if (K->bstart[c + l + 1] == K->bstart[c + l] || (n == d->probes && dc >= cd[n - 1])) continue;
+                    p = n < d->probes ? n++ : n - 1; /* insertion into the sorted list; ties keep the lower index */
+                    while (p > 0 && cd[p - 1] > dc) cd[p] = cd[p - 1], cc[p] = cc[p - 1], p--;
+                    cd[p] = dc, cc[p] = c + l;
+                }
+            }
+            for (p = 0; p < n; p++) {
+                int bk;
+                for (bk = K->bstart[cc[p]]; bk < K->bstart[cc[p] + 1]; bk++) {
+                    tn__fd_dist(q, K->blk + (size_t)bk * d->DK * TN__FD_LANES, d->DK, dist);
+                    for (l = 0; l < TN__FD_LANES; l++)
+                        if (dist[l] < bd) bd = dist[l], best = K->where[bk * TN__FD_LANES + l];
+                }
+            }
+            j->match[row * j->w + x] = best;
+        }
+    }
+}
+
+/* One coherence half-sweep over the pixels of one colour (x + y even or odd): each keeps its
+   match or takes a 4-neighbour's, shifted by the pixel between them, whichever fits its patch
+   best, a match that no neighbour shares counting (1 + kappa) times its distance. Red-black, so
+   two neighbours never swap matches back and forth. */
+static void tn__fd_sweep_task(void *vj, size_t b, size_t e)
+{
+    static const int nx[4] = {-1, 1, 0, 0}, ny[4] = {0, 0, -1, 1};
+    const tn__fd_job *j = (const tn__fd_job *)vj;
+    const tn__fd *d = j->d;
+    float q[225];
+    size_t row;
+    for (row = b; row < e; row++) {
+        int x, k;
+        for (x = 0; x < j->w; x++) {
+            size_t i = row * j->w + x;
+            int best = j->from[i], cand[4], shared = 0;
+            float bd;
+            j->match[i] = best;
+            if (((x + (int)row) & 1) != j->parity) continue;
+            for (k = 0; k < 4; k++) {
+                int x2 = x + nx[k], y2 = (int)row + ny[k];
+                cand[k] = -1;
+                if (x2 < 0 || y2 < 0 || x2 >= j->w || y2 >= j->h) continue;
+                cand[k] = j->from[(size_t)y2 * j->w + x2] - nx[k] - ny[k] * d->side;
+                if (cand[k] == best) shared = 1;
+            }
+            tn__fd_patch(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, q);
+            bd = tn__fd_dist_at(d, q, d->low, best, d->lowm[best]) * (shared ? 1.0f : 1.0f + TN__FD_KAPPA);
+            for (k = 0; k < 4; k++) {
+                float dk;
+                if (cand[k] == best || !tn__fd_valid(d, cand[k])) continue;
+                dk = tn__fd_dist_at(d, q, d->low, cand[k], d->lowm[cand[k]]);
+                if (dk < bd) bd = dk, best = cand[k];
+            }
+            j->match[i] = best;
+        }
+    }
+}
+
+/* Each pixel: the Gaussian-weighted mean over the patches that cover it of the example's detail
+   there, and the detail at its own match. */
+static void tn__fd_vote_task(void *vj, size_t b, size_t e)
+{
+    const tn__fd_job *j = (const tn__fd_job *)vj;
+    const tn__fd *d = j->d;
+    float wt[16];
+    size_t row;
+    int u, v;
+    for (u = 0; u <= d->r; u++) wt[u] = expf(-0.5f * (float)(u * u) / (TN__FD_VOTE_SIGMA * TN__FD_VOTE_SIGMA));
+    for (row = b; row < e; row++) {
+        int x;
+        for (x = 0; x < j->w; x++) {
+            float s = 0, sw = 0;
+            for (v = -d->r; v <= d->r; v++) {
+                int y2 = (int)row - v;
+                if (y2 < 0 || y2 >= j->h) continue;
+                for (u = -d->r; u <= d->r; u++) {
+                    int x2 = x - u;
+                    float w;
+                    if (x2 < 0 || x2 >= j->w) continue;
+                    w = wt[u < 0 ? -u : u] * wt[v < 0 ? -v : v];
+                    s += w * d->det[j->match[(size_t)y2 * j->w + x2] + v * d->side + u];
+                    sw += w;
+                }
+            }
+            j->vote[row * j->w + x] = s / sw;
+            j->own[row * j->w + x] = d->fine[j->match[row * j->w + x]];
+            j->band[row * j->w + x] = d->det[j->match[row * j->w + x]];
+        }
+    }
+}
+
+/* out (terrain's size) = terrain's low-pass + detail from d's example. */
+TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, tn_image *out)
+{
+    tn_image guide = {0, 0, 0, NULL}, vote = {0, 0, 0, NULL}, own = {0, 0, 0, NULL}, band = {0, 0, 0, NULL}, v2 = {0, 0, 0, NULL};
+    size_t n = (size_t)terrain->width * terrain->height, i;
+    int s, *match = NULL, *other = NULL;
+    tn__fd_job j;
+    tn_status st;
+    if ((st = tn__dem_check(terrain, 1, "fine detail: terrain"))) return st;
+    if (terrain->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: the terrain must have one channel (heights)");
+    if ((st = tn_image_blur(&guide, terrain, d->sigma)) || (st = tn_image_create(&vote, terrain->width, terrain->height, 1)) ||
+        (st = tn_image_create(&own, terrain->width, terrain->height, 1)) || (st = tn_image_create(&band, terrain->width, terrain->height, 1)))
+        goto done;
+    if (!(match = (int *)tn__alloc(n * sizeof(int))) || !(other = (int *)tn__alloc(n * sizeof(int)))) {
+        st = tn__oom();
+        goto done;
+    }
+    memset(&j, 0, sizeof j);
+    j.d = d;
+    j.img = guide.data;
+    j.w = terrain->width;
+    j.h = terrain->height;
+    j.match = match;
+    j.vote = vote.data;
+    j.own = own.data;
+    j.band = band.data;
+    tn_parallel_for((size_t)j.h, 1, tn__fd_match_task, &j);
+    for (s = 0; s < TN__FD_SWEEPS; s++) {
+        int *t = match;
+        j.from = match;
+        j.match = other;
+        j.parity = s & 1;
+        tn_parallel_for((size_t)j.h, 2, tn__fd_sweep_task, &j);
+        match = other, other = t;
+    }
+    j.match = match;
+    tn_parallel_for((size_t)j.h, 4, tn__fd_vote_task, &j);
+    /* the vote averages disagreeing matches down: its local RMS is brought to that of the band at
+       the pixels' own matches (at most 4x) */
+    if ((st = tn_image_copy(&v2, &vote))) goto done;
+    for (i = 0; i < n; i++) v2.data[i] *= v2.data[i], band.data[i] *= band.data[i];
+    if ((st = tn_image_blur(&v2, &v2, TN__FD_RMS_SIGMA)) || (st = tn_image_blur(&band, &band, TN__FD_RMS_SIGMA))) goto done;
+    for (i = 0; i < n; i++) {
+        float g = v2.data[i] > 0 ? sqrtf(band.data[i] / v2.data[i]) : 1.0f;
+        guide.data[i] += vote.data[i] * (g < 4.0f ? g : 4.0f) + own.data[i];
+    }
+    *out = guide;
+    guide.data = NULL;
+done:
+    tn_image_free(&guide);
+    tn_image_free(&vote);
+    tn_image_free(&own);
+    tn_image_free(&band);
+    tn_image_free(&v2);
+    TN_FREE(match);
+    TN_FREE(other);
+    return st;
+}
+
+TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out)
+{
+    tn__fd d;
+    tn_status st;
+    TN_ASSERT(out);
+    if ((st = tn__dem_check(terrain, 1, "fine detail: terrain"))) return st;
+    if (terrain->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: the terrain must have one channel (heights)");
+    if ((st = tn__fd_build(example, opts, &d))) return st;
+    st = tn__fd_apply(&d, terrain, out);
+    tn__fd_free(&d);
+    return st;
+}
+#endif /* TN_NO_FINEDETAIL */
+/* --------------------------------------------------------------------------------------------
    >>sketch  (@@sketch implementation)
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_SKETCH
@@ -23333,6 +23964,18 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 
 static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
 
+/* The example's heights (example units), which the fine detail by example draws on at generation. */
+static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
+{
+    int shape[2];
+    tn_tensor *t;
+    shape[0] = dem->height;
+    shape[1] = dem->width;
+    if (!(t = tn_params_add_buffer(w, "detail.example", 2, shape))) return tn__oom();
+    memcpy(t->data, dem->data, (size_t)dem->width * dem->height * sizeof(float));
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
@@ -23519,6 +24162,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             stats->holdout_last_ssim = info->data[3];
         }
     }
+    if (!st) st = tn__gnn_store_example(s.w, d1);
     if (!st) {
         tn_model_provenance pv;
         memset(&pv, 0, sizeof pv);
@@ -23593,10 +24237,25 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
         int one = 1;
         if (!tn_params_add_buffer(w, "gain.scale", 1, &one)) st = TN_ERR_OUT_OF_MEMORY;
     }
+    if (!st && tn_params_find(f, "detail.example")) { /* models before it have none: no detail by example */
+        int shape[2];
+        shape[0] = A.height;
+        shape[1] = A.width;
+        if (!tn_params_add_buffer(w, "detail.example", 2, shape)) st = TN_ERR_OUT_OF_MEMORY;
+    }
     if (!st) st = tn__params_assign(w, f, path);
     if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1))) /* NaN too */
         st = tn__fail(TN_ERR_CORRUPT, "%s: gain.scale %g is not in 0 .. 2", path, tn__gnn_gain_scale(w));
     if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
+    if (!st && tn_params_find(w, "detail.example")) {
+        const tn_tensor *e = tn_params_find(w, "detail.example");
+        size_t i;
+        for (i = 0; i < e->numel; i++)
+            if (!isfinite(e->data[i])) {
+                st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in the example heights (detail.example)", path);
+                break;
+            }
+    }
     if (!st) {
         const tn_tensor *e = tn_params_find(w, "gnn.emb"), *e2 = tn_params_find(w, "early.gnn.emb");
         size_t i;
@@ -23715,6 +24374,9 @@ typedef struct tn__gnn_gen {
     uint8_t *fixed;            /* W x H: sketch pixel */
     const tn_params *w;        /* the network it runs on (tn__gnn_pick_net) */
     tn_params *own_w;          /* w when it is the model's early network */
+    int detail;                /* 1: fd's fine detail is added to the output */
+    const char *detail_why;
+    tn__fd fd;                 /* the example's patch index (@@finedetail) */
 } tn__gnn_gen;
 
 /* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
@@ -23738,6 +24400,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
     tn_params_free(G->own_w);
+    tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
 }
 
@@ -24285,6 +24948,464 @@ static void tn__gnn_chamfer(const uint8_t *src, int W, int H, float *d, int *nea
     }
 }
 
+/* Some line of s runs 5 px or more (a contour part's length). */
+static int tn__gnn_has_part_length(const tn_contour_set *s)
+{
+    tn_contour_set d;
+    int i, yes = 0;
+    if (tn_sketch_densify(s, &d)) return 0;
+    for (i = 0; i < d.count && !yes; i++) yes = d.items[i].npoints >= 5;
+    tn_contour_set_free(&d);
+    return yes;
+}
+
+/* Line pixels of a set per canvas pixel. */
+static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
+{
+    tn_image r = {0, 0, 0, NULL};
+    size_t i, n = (size_t)s->width * s->height, k = 0;
+    tn_status st = tn_sketch_rasterise(s, s->width, s->height, &r);
+    if (st) return st;
+    for (i = 0; i < n; i++) k += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
+    tn_image_free(&r);
+    *density = (double)k / (double)n;
+    return TN_OK;
+}
+
+/* Whether the fine detail by example runs (opts->detail, the model's example), and its index. */
+static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
+{
+    const tn_tensor *e = tn_params_find(model->weights, "detail.example");
+    tn_image ex;
+    if (o->detail < 0) {
+        G->detail_why = "off (--detail none)";
+        return TN_OK;
+    }
+    if (!e) {
+        G->detail_why = "none: the model holds no example heights (trained before them: train it again for the detail)";
+        return o->detail > 0 ? tn__fail(TN_ERR_INVALID_ARG, "gnn generate: %s", G->detail_why) : TN_OK;
+    }
+    if (o->detail == 0 && !G->grown) {
+        G->detail_why = "off: the sketch is not grown (a dense network carries its own detail; --detail example adds it)";
+        return TN_OK;
+    }
+    ex.width = G->A.width;
+    ex.height = G->A.height;
+    ex.channels = 1;
+    ex.data = e->data;
+    G->detail = 1;
+    G->detail_why = "the example's fine detail, matched by shape to the terrain's low-pass (below 2 px)";
+    return tn__fd_build(&ex, NULL, &G->fd);
+}
+
+static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                  tn__gnn_gen *G)
+{
+    tn_gnn_generate_opts o;
+    tn_contour_set sk, rnd;
+    int i, known = 0;
+    tn_status st;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    memset(G, 0, sizeof *G);
+    memset(&sk, 0, sizeof sk);
+    memset(&rnd, 0, sizeof rnd);
+    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
+    if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
+    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 || o.detail < -1 || o.detail > 1 ||
+        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
+                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
+    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
+        tn_sketch_random_opts ro;
+        memset(&ro, 0, sizeof ro);
+        ro.seed = o.seed;
+        ro.nodes = o.random_nodes;
+        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        for (i = sk.count; i < rnd.count; i++) {
+            int j;
+            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
+        }
+        tn_contour_set_free(&sk);
+        sk = rnd;
+        memset(&rnd, 0, sizeof rnd);
+    }
+    if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
+                                                            network between them (a sketch without a 5 px line fails below, ungrown) */
+        tn_contour_set ex;
+        memset(&ex, 0, sizeof ex);
+        if (!(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex)) && !(st = tn__gnn_line_density(&sk, &G->user_density)))
+            st = tn__gnn_line_density(&ex, &G->example_density);
+        if (!st && (o.grow == 1 || (o.random_nodes == 0 && G->user_density < G->example_density / 6))) {
+            tn_gnn_grow_opts go;
+            memset(&go, 0, sizeof go);
+            go.seed = o.seed;
+            if (!(st = tn_gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown))) {
+                tn_contour_set_free(&sk);
+                sk = rnd;
+                memset(&rnd, 0, sizeof rnd);
+            }
+        }
+        tn_contour_set_free(&ex);
+        if (st) goto done;
+    }
+    if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
+    if ((st = tn__gnn_detail_plan(model, &o, G))) goto done;
+    if (G->grown > 0) { /* the user's lines of a grown sketch keep their heights (tn__gnn_pin) */
+        tn_contour_set u = sk;
+        tn_image r = {0, 0, 0, NULL};
+        size_t q, n = (size_t)width * height;
+        int *near = (int *)tn__alloc(n * sizeof(int));
+        u.count = sketch->count;
+        G->pin = (uint8_t *)tn__alloc(n);
+        G->pin_d = (float *)tn__alloc(n * sizeof(float));
+        if (!near || !G->pin || !G->pin_d) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st && !(st = tn_sketch_rasterise(&u, width, height, &r))) {
+            for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
+            tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
+        }
+        tn_image_free(&r);
+        TN_FREE(near);
+        if (st) goto done;
+    }
+    if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
+    else if (G->A.membrane && !known && !(st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain_raw)) && isfinite(G->gain_raw))
+        G->gain = tn__gnn_gain_of(tn__gnn_gain_scale(G->w), G->gain_raw);
+    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
+done:
+    tn_contour_set_free(&sk);
+    tn_contour_set_free(&rnd);
+    if (st) tn__gnn_gen_free(G);
+    return st;
+}
+
+/* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
+   grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
+   the network's residual. base_dst (may be NULL): the membrane there. */
+#define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
+
+/* A grown sketch's user lines keep their heights where the network moved them against their
+   kind: the residual near them, minus a smooth local mean of the residual on them that lowers a
+   ridge or raises a valley (min(r, 0) on ridge pixels, max(r, 0) on valley pixels; kernel
+   (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to
+   them. So a ridge is never below, a valley never above, its asked height by more than what is
+   left of that mean; a residual that deepens a valley or lifts a ridge stays (pinning it too made
+   the land beside a Sahara valley lower than the valley: 77 -> 44 % followed). The network alone
+   moved a stroke of a weak model by up to 19 % of the range (Sahara, docs/gnn.md). Reads pred (rw x rh
+   at (rx, ry), normalised) within L of the window (x, y, ww, wh), which the caller computed
+   exactly; writes the correction of each window pixel into corr (ww x wh). */
+static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const float *pred, int x, int y, int ww, int wh, float *corr)
+{
+    const int L = TN__GNN_PIN;
+    int u, v, a, b;
+    for (v = 0; v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            int X = x + u, Y = y + v;
+            float d = G->pin_d[(size_t)Y * G->W + X], phi;
+            double num = 0, den = 0;
+            corr[(size_t)v * ww + u] = 0;
+            if (!(d < (float)L)) continue;
+            for (b = Y - L + 1; b < Y + L; b++)
+                for (a = X - L + 1; a < X + L; a++) {
+                    float e, k;
+                    size_t i;
+                    if (a < 0 || b < 0 || a >= G->W || b >= G->H || !G->pin[(size_t)b * G->W + a]) continue;
+                    e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+                    if (e >= (float)L) continue;
+                    k = (1 - e / L) * (1 - e / L) / (e + 0.5f);
+                    i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
+                    e = pred[i] - R->base[i];
+                    num += k * (G->pin[(size_t)b * G->W + a] == 1 ? fminf(e, 0.0f) : fmaxf(e, 0.0f));
+                    den += k;
+                }
+            phi = 1 - d / L;
+            phi = phi * phi * (3 - 2 * phi);
+            if (den > 0) corr[(size_t)v * ww + u] = (float)(phi * num / den);
+        }
+}
+
+static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                    size_t stride)
+{
+    tn__gnn_region R;
+    float *pred = NULL, *corr = NULL;
+    int L = G->pin ? TN__GNN_PIN : 0, gx = x - L > 0 ? x - L : 0, gy = y - L > 0 ? y - L : 0; /* pinning reads L px around the window */
+    int gx1 = x + ww + L < G->W ? x + ww + L : G->W, gy1 = y + wh + L < G->H ? y + wh + L : G->H;
+    int rx = gx - G->halo > 0 ? gx - G->halo : 0, ry = gy - G->halo > 0 ? gy - G->halo : 0, u, v;
+    int rx1 = gx1 + G->halo < G->W ? gx1 + G->halo : G->W, ry1 = gy1 + G->halo < G->H ? gy1 + G->halo : G->H;
+    tn_status st;
+    if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
+        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
+    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
+    if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && G->pin && !(corr = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
+    if (!st && corr) tn__gnn_pin(G, &R, pred, x, y, ww, wh, corr);
+    for (v = 0; !st && v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
+            float r = pred[i] - (corr ? corr[(size_t)v * ww + u] : 0.0f);
+            float p = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]), h = G->A.mean + G->A.std * p;
+            if (!isfinite(h)) {
+                st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
+                break;
+            }
+            dst[(size_t)v * stride + u] = h;
+            if (base_dst) base_dst[(size_t)v * stride + u] = G->A.mean + G->A.std * R.base[i];
+        }
+    tn__gnn_region_free(&R);
+    TN_FREE(pred);
+    TN_FREE(corr);
+    return st;
+}
+
+#define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
+/* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
+   floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
+   gives the same pixels. */
+static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
+                                 const char *stage)
+{
+    int tile = (size_t)ww * wh <= TN__GNN_ONE_PASS ? (ww > wh ? ww : wh) : TN__GNN_TILE, tx, ty, done_t = 0;
+    int nt = ((ww + tile - 1) / tile) * ((wh + tile - 1) / tile);
+    tn_status st = TN_OK;
+    for (ty = 0; !st && ty < wh; ty += tile)
+        for (tx = 0; !st && tx < ww; tx += tile) {
+            int tw = ww - tx < tile ? ww - tx : tile, th = wh - ty < tile ? wh - ty : tile;
+            size_t o = (size_t)ty * ww + tx;
+            st = tn__gnn_gen_window(G, w, ctx, x + tx, y + ty, tw, th, dst + o, base_dst ? base_dst + o : NULL, (size_t)ww);
+            if (!st && nt > 1) st = tn__progress(stage, (double)++done_t / nt);
+        }
+    return st;
+}
+
+#define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
+
+/* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
+   terrain is computed grown by the detail's halo (tn_rect_halo), detailed, and cropped. */
+static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
+{
+    int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
+    tn_status st = TN_OK;
+    for (ty = 0; !st && ty < wh; ty += T)
+        for (tx = 0; !st && tx < ww; tx += T) {
+            tn_rect r, g;
+            tn_image t = {0, 0, 0, NULL}, d = {0, 0, 0, NULL};
+            r.x = x + tx, r.y = y + ty;
+            r.w = ww - tx < T ? ww - tx : T;
+            r.h = wh - ty < T ? wh - ty : T;
+            g = tn_rect_halo(r, halo, G->W, G->H);
+            if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
+                !(st = tn__fd_apply(&G->fd, &t, &d)))
+                for (v = 0; v < r.h; v++)
+                    memcpy(dst + (size_t)(ty + v) * ww + tx, d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x), (size_t)r.w * sizeof(float));
+            tn_image_free(&t);
+            tn_image_free(&d);
+        }
+    return st;
+}
+
+TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
+                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    tn__gnn_gen G;
+    tn_image res = {0, 0, 0, NULL};
+    tn_ctx *ctx = NULL;
+    tn_status st;
+    TN_ASSERT(out);
+    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
+    if ((st = tn_image_create(&res, w, h, 1))) goto done;
+    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
+    st = G.detail ? tn__gnn_gen_detailed(&G, ctx, x, y, w, h, res.data) : tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
+    if (!st) {
+        *out = res;
+        res.data = NULL;
+    }
+done:
+    tn_image_free(&res);
+    tn_ctx_free(ctx);
+    tn__gnn_gen_free(&G);
+    return st;
+}
+
+/* The gain test's scale, "gain.scale" of s->w, from the holdouts: each holdout sketch of
+   TN__GNN_GAIN_MIN_LINES lines or more is generated as any other sketch (the network other terrain
+   runs on, its gain tested on its lines) and the scale, 0 .. 2 in steps of 0.05, is the smallest
+   with the best mean SSIM over them of the membrane plus min(1, scale x its raw estimate) times
+   the residual. The held-out lines are where the membrane errs most, and SSIM wants less
+   residual than least squares, so the raw estimate runs high where the style fits loosely. */
+static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
+{
+    double ssim[TN__GNN_GAIN_SCALES] = {0}, best = -2;
+    tn_gnn m;
+    tn_gnn_generate_opts go;
+    tn_tensor *sc;
+    tn_ctx *ctx = NULL;
+    int i, k, n = 0, one = 1;
+    tn_status st = TN_OK;
+    if (!s->best) return TN_OK;
+    memset(&m, 0, sizeof m);
+    tn__gnn_model_fields(&m, &s->A);
+    m.weights = s->w;
+    memset(&go, 0, sizeof go);
+    if (!(ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    for (i = 0; !st && i < 2 * s->o.holdout_count; i++) {
+        const tn_image *h = &s->o.holdout[i / 2];
+        tn_image out = {0, 0, 0, NULL};
+        tn__gnn_gen G;
+        float *pred = NULL, *base = NULL;
+        size_t q, np = (size_t)h->width * h->height;
+        if (s->hsk[i].count < TN__GNN_GAIN_MIN_LINES) continue;
+        st = tn__gnn_gen_make(&m, &s->hsk[i], h->width, h->height, &go, &G);
+        if (st == TN_ERR_EMPTY) { /* no part of 5 px */
+            st = TN_OK;
+            continue;
+        }
+        if (st) break;
+        if (isfinite(G.gain_raw)) {
+            pred = (float *)tn__alloc(np * sizeof(float));
+            base = (float *)tn__alloc(np * sizeof(float));
+            G.gain = 1.0f;
+            if (!pred || !base) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_gen_run(&G, G.w, ctx, 0, 0, h->width, h->height, pred, base, "gnn-gain-scale");
+            if (!st) st = tn_image_create(&out, h->width, h->height, 1);
+            for (k = 0; !st && k < TN__GNN_GAIN_SCALES; k++) {
+                float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
+                tn_metrics mt;
+                for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
+                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
+            }
+            n += !st;
+        }
+        tn_image_free(&out);
+        TN_FREE(pred);
+        TN_FREE(base);
+        tn__gnn_gen_free(&G);
+    }
+    tn_ctx_free(ctx);
+    if (st || !n) return st;
+    if (!(sc = tn_params_find(s->w, "gain.scale")) && !(sc = tn_params_add_buffer(s->w, "gain.scale", 1, &one))) return TN_ERR_OUT_OF_MEMORY;
+    for (k = 0; k < TN__GNN_GAIN_SCALES; k++)
+        if (ssim[k] > best) {
+            best = ssim[k];
+            sc->data[0] = 0.05f * (float)k;
+        }
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                             float *gain)
+{
+    tn__gnn_gen G;
+    tn_gnn_generate_opts o;
+    tn_status st;
+    TN_ASSERT(gain);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    o.finetune = 0; /* the test never fine-tunes */
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    *gain = G.gain;
+    tn__gnn_gen_free(&G);
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
+                                tn_gnn_plan *plan)
+{
+    tn__gnn_gen G;
+    tn_gnn_generate_opts o;
+    tn_status st;
+    TN_ASSERT(plan);
+    memset(plan, 0, sizeof *plan);
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    o.finetune = 0;
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    plan->user_lines = sketch->count;
+    plan->grown_lines = G.grown;
+    plan->user_density = G.user_density;
+    plan->example_density = G.example_density;
+    plan->gain = G.gain;
+    plan->gain_raw = G.gain_raw;
+    plan->gain_scale = tn__gnn_gain_scale(G.w);
+    if (o.gain > 0) plan->gain_why = "set by --gain";
+    else if (o.gain < 0) plan->gain_why = "set to none: the membrane of the sketch alone";
+    else if (!G.A.membrane) plan->gain_why = "the model predicts heights directly (no membrane): gain 1";
+    else if (isfinite(G.gain_raw))
+        plan->gain_why = G.gain <= 0 ? "tested on the sketch: the network's relief did not fit the held-out lines, so the output is the membrane "
+                                       "of the lines (smooth between them); --gain 1 forces the relief"
+                                     : "tested on the sketch: held-out lines predicted from the rest";
+    else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
+        plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
+    else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
+    plan->detail = G.detail;
+    plan->detail_why = G.detail_why;
+    tn__gnn_gen_free(&G);
+    return TN_OK;
+}
+
+TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                 const tn_gnn_generate_opts *opts, tn_image *out)
+{
+    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
+}
+
+TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count)
+{
+    tn_contour_set sk, dense;
+    int i, j, n = 0, good = 0, W, H;
+    float d = distance > 0 ? distance : 3.0f;
+    tn__gnn_arch A;
+    tn_status st;
+    TN_ASSERT(share);
+    *share = 0;
+    if (count) *count = 0;
+    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: the sketch is empty");
+    if ((st = tn__cset_check(sketch, "gnn ordering"))) return st;
+    if (!terrain || !terrain->data || terrain->width <= 0 || terrain->height <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: no terrain");
+    if (!(distance >= 0 && distance < 4096)) return tn__fail(TN_ERR_INVALID_ARG, "gnn ordering: distance %g", (double)distance);
+    W = terrain->width;
+    H = terrain->height;
+    memset(&A, 0, sizeof A);
+    if ((st = tn__gnn_sketch_units(&A, sketch, W, H, TN_GNN_HEIGHTS_EXAMPLE, &sk))) return st; /* in the terrain's pixels */
+    st = tn_sketch_densify(&sk, &dense);
+    tn_contour_set_free(&sk);
+    if (st) return st;
+    for (i = 0; i < dense.count; i++)
+        for (j = 0; j < dense.items[i].npoints; j++) {
+            int p, q1, q2;
+            float hp, h1, h2;
+            tn__gnn_across(&dense.items[i], j, W, H, d, &p, &q1, &q2);
+            if (p < 0 || q1 < 0 || q2 < 0) continue;
+            hp = terrain->data[(size_t)p * terrain->channels];
+            h1 = terrain->data[(size_t)q1 * terrain->channels];
+            h2 = terrain->data[(size_t)q2 * terrain->channels];
+            n++;
+            good += dense.items[i].type == TN_RIDGE ? hp > h1 && hp > h2 : hp < h1 && hp < h2;
+        }
+    tn_contour_set_free(&dense);
+    *share = n ? (double)good / n : 0.0;
+    if (count) *count = n;
+    return TN_OK;
+}
+#endif /* TN_NO_GNN */
+
+/* --------------------------------------------------------------------------------------------
+   >>gnn_grow  (part of @@gnn implementation; goes after >>gnn, whose chamfer distance it uses)
+   Densify by example: image quilting of the example's extracted network between the user's
+   lines (issue 30).
+   -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_GNN
+
 /* Position in the example of pixel (i, j) of an S x S window at (ox, oy) under dihedral t. */
 static size_t tn__gnn_grow_at(int i, int j, int S, int t, int ox, int oy, int Wx)
 {
@@ -24497,403 +25618,7 @@ done:
     if (added) *added = (int)nl;
     return TN_OK;
 }
-
-/* Some line of s runs 5 px or more (a contour part's length). */
-static int tn__gnn_has_part_length(const tn_contour_set *s)
-{
-    tn_contour_set d;
-    int i, yes = 0;
-    if (tn_sketch_densify(s, &d)) return 0;
-    for (i = 0; i < d.count && !yes; i++) yes = d.items[i].npoints >= 5;
-    tn_contour_set_free(&d);
-    return yes;
-}
-
-/* Line pixels of a set per canvas pixel. */
-static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
-{
-    tn_image r = {0, 0, 0, NULL};
-    size_t i, n = (size_t)s->width * s->height, k = 0;
-    tn_status st = tn_sketch_rasterise(s, s->width, s->height, &r);
-    if (st) return st;
-    for (i = 0; i < n; i++) k += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
-    tn_image_free(&r);
-    *density = (double)k / (double)n;
-    return TN_OK;
-}
-
-static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                  tn__gnn_gen *G)
-{
-    tn_gnn_generate_opts o;
-    tn_contour_set sk, rnd;
-    int i, known = 0;
-    tn_status st;
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    memset(G, 0, sizeof *G);
-    memset(&sk, 0, sizeof sk);
-    memset(&rnd, 0, sizeof rnd);
-    if ((st = tn__gnn_arch_of(model, &G->A))) return st;
-    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch is empty");
-    if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
-    if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
-    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 ||
-        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
-                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
-    if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
-    if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
-        tn_sketch_random_opts ro;
-        memset(&ro, 0, sizeof ro);
-        ro.seed = o.seed;
-        ro.nodes = o.random_nodes;
-        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
-        for (i = sk.count; i < rnd.count; i++) {
-            int j;
-            for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
-        }
-        tn_contour_set_free(&sk);
-        sk = rnd;
-        memset(&rnd, 0, sizeof rnd);
-    }
-    if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
-                                                            network between them (a sketch without a 5 px line fails below, ungrown) */
-        tn_contour_set ex;
-        memset(&ex, 0, sizeof ex);
-        if (!(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex)) && !(st = tn__gnn_line_density(&sk, &G->user_density)))
-            st = tn__gnn_line_density(&ex, &G->example_density);
-        if (!st && (o.grow == 1 || (o.random_nodes == 0 && G->user_density < G->example_density / 6))) {
-            tn_gnn_grow_opts go;
-            memset(&go, 0, sizeof go);
-            go.seed = o.seed;
-            if (!(st = tn_gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown))) {
-                tn_contour_set_free(&sk);
-                sk = rnd;
-                memset(&rnd, 0, sizeof rnd);
-            }
-        }
-        tn_contour_set_free(&ex);
-        if (st) goto done;
-    }
-    if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
-    if (G->grown > 0) { /* the user's lines of a grown sketch keep their heights (tn__gnn_pin) */
-        tn_contour_set u = sk;
-        tn_image r = {0, 0, 0, NULL};
-        size_t q, n = (size_t)width * height;
-        int *near = (int *)tn__alloc(n * sizeof(int));
-        u.count = sketch->count;
-        G->pin = (uint8_t *)tn__alloc(n);
-        G->pin_d = (float *)tn__alloc(n * sizeof(float));
-        if (!near || !G->pin || !G->pin_d) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st && !(st = tn_sketch_rasterise(&u, width, height, &r))) {
-            for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
-            tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
-        }
-        tn_image_free(&r);
-        TN_FREE(near);
-        if (st) goto done;
-    }
-    if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
-    else if (G->A.membrane && !known && !(st = tn__gnn_gain_validate(model, G, &sk, sketch->count, &o, &G->gain_raw)) && isfinite(G->gain_raw))
-        G->gain = tn__gnn_gain_of(tn__gnn_gain_scale(G->w), G->gain_raw);
-    if (!st && o.finetune > 0) st = tn__gnn_finetune(G, &o);
-done:
-    tn_contour_set_free(&sk);
-    tn_contour_set_free(&rnd);
-    if (st) tn__gnn_gen_free(G);
-    return st;
-}
-
-/* Pixels (x, y, w, h) of the map into dst (row stride `stride`, example units): the region
-   grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
-   the network's residual. base_dst (may be NULL): the membrane there. */
-#define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
-
-/* A grown sketch's user lines keep their heights where the network moved them against their
-   kind: the residual near them, minus a smooth local mean of the residual on them that lowers a
-   ridge or raises a valley (min(r, 0) on ridge pixels, max(r, 0) on valley pixels; kernel
-   (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to
-   them. So a ridge is never below, a valley never above, its asked height by more than what is
-   left of that mean; a residual that deepens a valley or lifts a ridge stays (pinning it too made
-   the land beside a Sahara valley lower than the valley: 77 -> 44 % followed). The network alone
-   moved a stroke of a weak model by up to 19 % of the range (Sahara, docs/gnn.md). Reads pred (rw x rh
-   at (rx, ry), normalised) within L of the window (x, y, ww, wh), which the caller computed
-   exactly; writes the correction of each window pixel into corr (ww x wh). */
-static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const float *pred, int x, int y, int ww, int wh, float *corr)
-{
-    const int L = TN__GNN_PIN;
-    int u, v, a, b;
-    for (v = 0; v < wh; v++)
-        for (u = 0; u < ww; u++) {
-            int X = x + u, Y = y + v;
-            float d = G->pin_d[(size_t)Y * G->W + X], phi;
-            double num = 0, den = 0;
-            corr[(size_t)v * ww + u] = 0;
-            if (!(d < (float)L)) continue;
-            for (b = Y - L + 1; b < Y + L; b++)
-                for (a = X - L + 1; a < X + L; a++) {
-                    float e, k;
-                    size_t i;
-                    if (a < 0 || b < 0 || a >= G->W || b >= G->H || !G->pin[(size_t)b * G->W + a]) continue;
-                    e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
-                    if (e >= (float)L) continue;
-                    k = (1 - e / L) * (1 - e / L) / (e + 0.5f);
-                    i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
-                    e = pred[i] - R->base[i];
-                    num += k * (G->pin[(size_t)b * G->W + a] == 1 ? fminf(e, 0.0f) : fmaxf(e, 0.0f));
-                    den += k;
-                }
-            phi = 1 - d / L;
-            phi = phi * phi * (3 - 2 * phi);
-            if (den > 0) corr[(size_t)v * ww + u] = (float)(phi * num / den);
-        }
-}
-
-static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
-                                    size_t stride)
-{
-    tn__gnn_region R;
-    float *pred = NULL, *corr = NULL;
-    int L = G->pin ? TN__GNN_PIN : 0, gx = x - L > 0 ? x - L : 0, gy = y - L > 0 ? y - L : 0; /* pinning reads L px around the window */
-    int gx1 = x + ww + L < G->W ? x + ww + L : G->W, gy1 = y + wh + L < G->H ? y + wh + L : G->H;
-    int rx = gx - G->halo > 0 ? gx - G->halo : 0, ry = gy - G->halo > 0 ? gy - G->halo : 0, u, v;
-    int rx1 = gx1 + G->halo < G->W ? gx1 + G->halo : G->W, ry1 = gy1 + G->halo < G->H ? gy1 + G->halo : G->H;
-    tn_status st;
-    if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
-        return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
-    if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
-    if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && G->pin && !(corr = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
-    if (!st && corr) tn__gnn_pin(G, &R, pred, x, y, ww, wh, corr);
-    for (v = 0; !st && v < wh; v++)
-        for (u = 0; u < ww; u++) {
-            size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
-            float r = pred[i] - (corr ? corr[(size_t)v * ww + u] : 0.0f);
-            float p = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]), h = G->A.mean + G->A.std * p;
-            if (!isfinite(h)) {
-                st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
-                break;
-            }
-            dst[(size_t)v * stride + u] = h;
-            if (base_dst) base_dst[(size_t)v * stride + u] = G->A.mean + G->A.std * R.base[i];
-        }
-    tn__gnn_region_free(&R);
-    TN_FREE(pred);
-    TN_FREE(corr);
-    return st;
-}
-
-#define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
-#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
-
-/* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
-   floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
-   gives the same pixels. */
-static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
-                                 const char *stage)
-{
-    int tile = (size_t)ww * wh <= TN__GNN_ONE_PASS ? (ww > wh ? ww : wh) : TN__GNN_TILE, tx, ty, done_t = 0;
-    int nt = ((ww + tile - 1) / tile) * ((wh + tile - 1) / tile);
-    tn_status st = TN_OK;
-    for (ty = 0; !st && ty < wh; ty += tile)
-        for (tx = 0; !st && tx < ww; tx += tile) {
-            int tw = ww - tx < tile ? ww - tx : tile, th = wh - ty < tile ? wh - ty : tile;
-            size_t o = (size_t)ty * ww + tx;
-            st = tn__gnn_gen_window(G, w, ctx, x + tx, y + ty, tw, th, dst + o, base_dst ? base_dst + o : NULL, (size_t)ww);
-            if (!st && nt > 1) st = tn__progress(stage, (double)++done_t / nt);
-        }
-    return st;
-}
-
-TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
-                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
-{
-    tn__gnn_gen G;
-    tn_image res = {0, 0, 0, NULL};
-    tn_ctx *ctx = NULL;
-    tn_status st;
-    TN_ASSERT(out);
-    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
-    if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
-    if ((st = tn_image_create(&res, w, h, 1))) goto done;
-    if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    st = tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
-    if (!st) {
-        *out = res;
-        res.data = NULL;
-    }
-done:
-    tn_image_free(&res);
-    tn_ctx_free(ctx);
-    tn__gnn_gen_free(&G);
-    return st;
-}
-
-/* The gain test's scale, "gain.scale" of s->w, from the holdouts: each holdout sketch of
-   TN__GNN_GAIN_MIN_LINES lines or more is generated as any other sketch (the network other terrain
-   runs on, its gain tested on its lines) and the scale, 0 .. 2 in steps of 0.05, is the smallest
-   with the best mean SSIM over them of the membrane plus min(1, scale x its raw estimate) times
-   the residual. The held-out lines are where the membrane errs most, and SSIM wants less
-   residual than least squares, so the raw estimate runs high where the style fits loosely. */
-static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
-{
-    double ssim[TN__GNN_GAIN_SCALES] = {0}, best = -2;
-    tn_gnn m;
-    tn_gnn_generate_opts go;
-    tn_tensor *sc;
-    tn_ctx *ctx = NULL;
-    int i, k, n = 0, one = 1;
-    tn_status st = TN_OK;
-    if (!s->best) return TN_OK;
-    memset(&m, 0, sizeof m);
-    tn__gnn_model_fields(&m, &s->A);
-    m.weights = s->w;
-    memset(&go, 0, sizeof go);
-    if (!(ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
-    for (i = 0; !st && i < 2 * s->o.holdout_count; i++) {
-        const tn_image *h = &s->o.holdout[i / 2];
-        tn_image out = {0, 0, 0, NULL};
-        tn__gnn_gen G;
-        float *pred = NULL, *base = NULL;
-        size_t q, np = (size_t)h->width * h->height;
-        if (s->hsk[i].count < TN__GNN_GAIN_MIN_LINES) continue;
-        st = tn__gnn_gen_make(&m, &s->hsk[i], h->width, h->height, &go, &G);
-        if (st == TN_ERR_EMPTY) { /* no part of 5 px */
-            st = TN_OK;
-            continue;
-        }
-        if (st) break;
-        if (isfinite(G.gain_raw)) {
-            pred = (float *)tn__alloc(np * sizeof(float));
-            base = (float *)tn__alloc(np * sizeof(float));
-            G.gain = 1.0f;
-            if (!pred || !base) st = TN_ERR_OUT_OF_MEMORY;
-            if (!st) st = tn__gnn_gen_run(&G, G.w, ctx, 0, 0, h->width, h->height, pred, base, "gnn-gain-scale");
-            if (!st) st = tn_image_create(&out, h->width, h->height, 1);
-            for (k = 0; !st && k < TN__GNN_GAIN_SCALES; k++) {
-                float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
-                tn_metrics mt;
-                for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
-                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
-            }
-            n += !st;
-        }
-        tn_image_free(&out);
-        TN_FREE(pred);
-        TN_FREE(base);
-        tn__gnn_gen_free(&G);
-    }
-    tn_ctx_free(ctx);
-    if (st || !n) return st;
-    if (!(sc = tn_params_find(s->w, "gain.scale")) && !(sc = tn_params_add_buffer(s->w, "gain.scale", 1, &one))) return TN_ERR_OUT_OF_MEMORY;
-    for (k = 0; k < TN__GNN_GAIN_SCALES; k++)
-        if (ssim[k] > best) {
-            best = ssim[k];
-            sc->data[0] = 0.05f * (float)k;
-        }
-    return TN_OK;
-}
-
-TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                             float *gain)
-{
-    tn__gnn_gen G;
-    tn_gnn_generate_opts o;
-    tn_status st;
-    TN_ASSERT(gain);
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    o.finetune = 0; /* the test never fine-tunes */
-    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
-    *gain = G.gain;
-    tn__gnn_gen_free(&G);
-    return TN_OK;
-}
-
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan)
-{
-    tn__gnn_gen G;
-    tn_gnn_generate_opts o;
-    tn_status st;
-    TN_ASSERT(plan);
-    memset(plan, 0, sizeof *plan);
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    o.finetune = 0;
-    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
-    plan->user_lines = sketch->count;
-    plan->grown_lines = G.grown;
-    plan->user_density = G.user_density;
-    plan->example_density = G.example_density;
-    plan->gain = G.gain;
-    plan->gain_raw = G.gain_raw;
-    plan->gain_scale = tn__gnn_gain_scale(G.w);
-    if (o.gain > 0) plan->gain_why = "set by --gain";
-    else if (o.gain < 0) plan->gain_why = "set to none: the membrane of the sketch alone";
-    else if (!G.A.membrane) plan->gain_why = "the model predicts heights directly (no membrane): gain 1";
-    else if (isfinite(G.gain_raw))
-        plan->gain_why = G.gain <= 0 ? "tested on the sketch: the network's relief did not fit the held-out lines, so the output is the membrane "
-                                       "of the lines (smooth between them); --gain 1 forces the relief"
-                                     : "tested on the sketch: held-out lines predicted from the rest";
-    else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
-        plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
-    else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
-    tn__gnn_gen_free(&G);
-    return TN_OK;
-}
-
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out)
-{
-    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
-}
-
-TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count)
-{
-    tn_contour_set sk, dense;
-    int i, j, n = 0, good = 0, W, H;
-    float d = distance > 0 ? distance : 3.0f;
-    tn__gnn_arch A;
-    tn_status st;
-    TN_ASSERT(share);
-    *share = 0;
-    if (count) *count = 0;
-    if (!sketch || sketch->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: the sketch is empty");
-    if ((st = tn__cset_check(sketch, "gnn ordering"))) return st;
-    if (!terrain || !terrain->data || terrain->width <= 0 || terrain->height <= 0) return tn__fail(TN_ERR_EMPTY, "gnn ordering: no terrain");
-    if (!(distance >= 0 && distance < 4096)) return tn__fail(TN_ERR_INVALID_ARG, "gnn ordering: distance %g", (double)distance);
-    W = terrain->width;
-    H = terrain->height;
-    memset(&A, 0, sizeof A);
-    if ((st = tn__gnn_sketch_units(&A, sketch, W, H, TN_GNN_HEIGHTS_EXAMPLE, &sk))) return st; /* in the terrain's pixels */
-    st = tn_sketch_densify(&sk, &dense);
-    tn_contour_set_free(&sk);
-    if (st) return st;
-    for (i = 0; i < dense.count; i++)
-        for (j = 0; j < dense.items[i].npoints; j++) {
-            int p, q1, q2;
-            float hp, h1, h2;
-            tn__gnn_across(&dense.items[i], j, W, H, d, &p, &q1, &q2);
-            if (p < 0 || q1 < 0 || q2 < 0) continue;
-            hp = terrain->data[(size_t)p * terrain->channels];
-            h1 = terrain->data[(size_t)q1 * terrain->channels];
-            h2 = terrain->data[(size_t)q2 * terrain->channels];
-            n++;
-            good += dense.items[i].type == TN_RIDGE ? hp > h1 && hp > h2 : hp < h1 && hp < h2;
-        }
-    tn_contour_set_free(&dense);
-    *share = n ? (double)good / n : 0.0;
-    if (count) *count = n;
-    return TN_OK;
-}
 #endif /* TN_NO_GNN */
-
 /* --------------------------------------------------------------------------------------------
    >>season  (@@season implementation)
    Insolation runs row by row over the thread pool: each pixel casts its horizon in every

@@ -1,12 +1,14 @@
 /* bench_sketch: a drawing of a few strokes becomes terrain (paper 000's user path, issue 30).
    For one region and a trained gnn model of its 128 crop (gnn-train), each drawing of
    examples/data (sketch_valley, sketch_summit, sketch_ring, sketch_cross: heights 0..1 over the
-   example's range) is generated at 256 x 256 four ways:
+   example's range) is generated at 256 x 256 six ways:
    - membrane: the Laplace interpolation of the strokes' heights (no network);
    - today: the network on the strokes alone (--grow off), the gain as tested;
    - random48: the strokes with 48 random nodes' ridges and valleys (paper 5.2, --random 48);
-   - new: densified by example (tn_gnn_grow, the default for a drawing of few strokes);
-   - grown_membrane: the membrane of the densified sketch (gain -1), what the network adds to.
+   - new: the default for a drawing of few strokes: densified by example (tn_gnn_grow), then the
+     example's fine detail (tn_fine_detail) when the model holds its example;
+   - grown_membrane: the membrane of the densified sketch (gain -1), what the network adds to;
+   - grown_nodetail: new without the fine detail (--detail none).
    Figures per drawing and way (`name: value unit` lines):
    - follow: the share of stroke points above (ridge) or below (valley) both terrain pixels 4 px
      across the stroke (tn_gnn_ordering, distance 4);
@@ -18,7 +20,8 @@
    - seconds: generation time (gain test included).
    Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...]
    from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
-   128 px at their own size) | drawing | today | new, hillshaded on the example's range. */
+   128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
+   range. */
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -124,7 +127,7 @@ static void save_strip(const char *path, const tn_image *const *img, int n, floa
 int main(int argc, char **argv)
 {
     static const char *all[] = {"valley", "summit", "ring", "cross"};
-    static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane"};
+    static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *only = NULL;
     double dxy[2], h0, h1, real[3] = {0, 0, 0};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
@@ -184,7 +187,7 @@ int main(int argc, char **argv)
     for (d = 0; d < 4; d++) {
         char path[512];
         tn_contour_set sk, asked;
-        tn_image out[5], rast = {0, 0, 0, NULL}, drawing = {0, 0, 0, NULL};
+        tn_image out[6], rast = {0, 0, 0, NULL}, drawing = {0, 0, 0, NULL};
         if (only && !strstr(only, all[d])) continue;
         snprintf(path, sizeof path, "examples/data/sketch_%s.tns", all[d]);
         if (tn_sketch_load(path, &sk)) {
@@ -204,7 +207,7 @@ int main(int argc, char **argv)
             }
         }
         tn_sketch_rasterise(&asked, 256, 256, &rast);
-        for (w = 0; w < 5; w++) {
+        for (w = 0; w < 6; w++) {
             tn_gnn_generate_opts o;
             tn_gnn_plan plan;
             double t0 = tn_time_seconds(), share = 0, err = 0, dist[3], secs;
@@ -217,6 +220,7 @@ int main(int argc, char **argv)
             o.seed = 1;
             o.finetune = w == 0 ? 0 : finetune;
             o.grow = w >= 3 ? 0 : -1;
+            o.detail = w >= 4 ? -1 : 0;
             o.random_nodes = w == 2 ? 48 : 0;
             if (w == 0) st = tn_gnn_membrane(&asked, 256, 256, &out[w]);
             else {
@@ -240,19 +244,20 @@ int main(int argc, char **argv)
             printf("%s_%s_slope: %.4f (%.2f x real)\n", all[d], way[w], dist[0], dist[0] / real[0]);
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
-            if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, secs);
+            if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             fflush(stdout);
         }
         if (pictures && out[1].data && out[3].data && !tn_sketch_preview(&asked, NULL, 256, 256, &drawing)) {
-            const tn_image *panel[4];
+            const tn_image *panel[5];
             panel[0] = &ex;
             panel[1] = &drawing;
             panel[2] = &out[1];
-            panel[3] = &out[3];
+            panel[3] = &out[5];
+            panel[4] = &out[3];
             snprintf(path, sizeof path, "%s/sketch_%s_%s.png", pictures, region, all[d]);
-            save_strip(path, panel, 4, model.lo, model.hi, dxy);
+            save_strip(path, panel, out[5].data ? 5 : 4, model.lo, model.hi, dxy);
         }
-        for (w = 0; w < 5; w++) tn_image_free(&out[w]);
+        for (w = 0; w < 6; w++) tn_image_free(&out[w]);
         tn_image_free(&rast);
         tn_image_free(&drawing);
         tn_contour_set_free(&asked);

@@ -3,6 +3,7 @@
    bin/preview_only DEM OUT.png        Build alone: cc -O2 -I. examples/preview_only.c -lm -pthread */
 #define TN_NO_ENGINE
 #define TN_NO_NOISE
+#define TN_NO_FINEDETAIL
 #define TN_NO_SKETCH
 #define TN_NO_EXTRACT
 #define TN_NO_STYLE

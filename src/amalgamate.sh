@@ -5,8 +5,8 @@
 # from its first ">>" banner on. `make header` runs this; never edit terrainnet.h by hand.
 set -eu
 src=$(dirname "$0")
-SECTIONS="core thread image io io_formats metrics gemm tensor ops loss optim train noise sketch
-extract style texgan singan gnn season render export world"
+SECTIONS="core thread image io io_formats metrics gemm tensor ops loss optim train noise finedetail sketch
+extract style texgan singan gnn gnn_grow season render export world"
 part() { # part api|impl FILE
     awk -v part="$1" '
         { line[NR] = $0 }

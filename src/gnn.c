@@ -44,8 +44,8 @@
    crossing them), or on request by random sketches (5.2).
    ============================================================================================ */
 #ifndef TN_NO_GNN
-#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT)
-#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract; define TN_NO_GNN too, or none of them"
+#if defined(TN_NO_ENGINE) || defined(TN_NO_SKETCH) || defined(TN_NO_EXTRACT) || defined(TN_NO_FINEDETAIL)
+#error "terrainnet: @@gnn needs the tensor engine, @@sketch, @@extract, @@finedetail; define TN_NO_GNN too, or none of them"
 #endif
 
 /* Zero = default (tn_gnn_defaults gives the values and the reasons). */
@@ -195,6 +195,11 @@ typedef struct tn_gnn_generate_opts {
                                 example network's (a drawing of a few strokes: 6-10 % of it; an
                                 extracted network at 500 cells, 30 %, is not grown) and random_nodes
                                 is 0; 1 = always; -1 = never */
+    int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
+                                detail of the example heights the model holds (gnn-train stores them),
+                                matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
+                                network gives its layout, not the example's roughness), when the model
+                                holds its example; 1 = always (fails without the example); -1 = never */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -226,8 +231,9 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
    pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
    the network plus the membrane's blocks (see >>gnn), so the window is computed on itself grown
-   by that halo. Large maps and windows run in tiles of 256 px (+ halo) internally, so memory
-   follows the tile, not the map (the fine-tune's too: it works on windows of maps over 256^2). */
+   by that halo (plus tn_fine_detail_halo with the fine detail). Large maps and windows run in
+   tiles of 256 px (+ halo) internally, so memory follows the tile, not the map (the fine-tune's
+   too: it works on windows of maps over 256^2; the fine detail's tiles are 1024 px). */
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
                                         int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
 
@@ -257,34 +263,6 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
    the border), in the sketch's height units. *out (one channel) allocated here. */
 TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
 
-/* Densify by example (issue 30): a drawing of a few strokes leaves most of the map to the
-   membrane, smooth slopes between the strokes. tn_gnn_grow fills the space between the user's
-   lines with the example's own network, the network the model rebuilds best: the map is cut
-   into blocks, and each copies the example's network from a window of the example under one of
-   the 8 rotations and mirrors, the best of `candidates` random placements by how well its lines
-   lie on the user's lines nearby (ridge on ridge, valley on valley) and continue the blocks
-   placed before it across their overlap (image quilting, on the network). So line spacing,
-   branch angles, segment lengths and ridge/valley alternation are the example's. Added lines keep
-   `gap` px from every user line, so none crosses or touches one; they are thinned and traced
-   into polylines of 5+ px. Their heights: the membrane of the user's lines plus the example
-   line's own height above the mean of the example's lines within 48 px (its local relief; the
-   quilting also matches these heights across the overlap),
-   then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
-   user valley (the nearest user line) by the example's mean local relief / 16 px per px. */
-typedef struct tn_gnn_grow_opts {
-    uint64_t seed;
-    float gap;            /* px between an added line and every user line; 0 = 4 */
-    int block;            /* side of the copied blocks (px); 0 = 48 (2/3 of the example's side when that is smaller) */
-    int candidates;       /* random placements scored per block; 0 = 48 */
-} tn_gnn_grow_opts;
-/* *out = the user's polylines (unchanged, first) followed by the added ones. user: on a width x
-   height canvas (else TN_ERR_SHAPE), heights in the example's units; example: a network with
-   heights (tn_gnn_parts of a model, or an extraction's contours), same pixel size, at least
-   16 x 16. Same inputs and seed, same output. opts may be NULL. *added (may be NULL) = the
-   number of added polylines. */
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added);
-
 /* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
 typedef struct tn_gnn_plan {
     int user_lines;       /* the sketch's polylines */
@@ -295,6 +273,8 @@ typedef struct tn_gnn_plan {
     double gain_raw;      /* the held-out lines' estimate before scale and clamp; NAN = untested */
     double gain_scale;    /* the model's scale of the test (1 without holdouts) */
     const char *gain_why; /* one line: why the gain is what it is (static text) */
+    int detail;           /* 1: the fine detail by example is added (tn_gnn_generate_opts.detail) */
+    const char *detail_why; /* one line: why it is or is not (static text) */
 } tn_gnn_plan;
 /* Fills *plan for tn_gnn_generate with the same arguments (without running the network
    beyond the gain test). */
@@ -2325,6 +2305,18 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 
 static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
 
+/* The example's heights (example units), which the fine detail by example draws on at generation. */
+static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
+{
+    int shape[2];
+    tn_tensor *t;
+    shape[0] = dem->height;
+    shape[1] = dem->width;
+    if (!(t = tn_params_add_buffer(w, "detail.example", 2, shape))) return tn__oom();
+    memcpy(t->data, dem->data, (size_t)dem->width * dem->height * sizeof(float));
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
@@ -2511,6 +2503,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             stats->holdout_last_ssim = info->data[3];
         }
     }
+    if (!st) st = tn__gnn_store_example(s.w, d1);
     if (!st) {
         tn_model_provenance pv;
         memset(&pv, 0, sizeof pv);
@@ -2585,10 +2578,25 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
         int one = 1;
         if (!tn_params_add_buffer(w, "gain.scale", 1, &one)) st = TN_ERR_OUT_OF_MEMORY;
     }
+    if (!st && tn_params_find(f, "detail.example")) { /* models before it have none: no detail by example */
+        int shape[2];
+        shape[0] = A.height;
+        shape[1] = A.width;
+        if (!tn_params_add_buffer(w, "detail.example", 2, shape)) st = TN_ERR_OUT_OF_MEMORY;
+    }
     if (!st) st = tn__params_assign(w, f, path);
     if (!st && !(tn__gnn_gain_scale(w) >= 0 && tn__gnn_gain_scale(w) <= 0.05 * (TN__GNN_GAIN_SCALES - 1))) /* NaN too */
         st = tn__fail(TN_ERR_CORRUPT, "%s: gain.scale %g is not in 0 .. 2", path, tn__gnn_gain_scale(w));
     if (!st) st = tn__gnn_stored_parts(w, &A, path, &parts); /* validates the parts */
+    if (!st && tn_params_find(w, "detail.example")) {
+        const tn_tensor *e = tn_params_find(w, "detail.example");
+        size_t i;
+        for (i = 0; i < e->numel; i++)
+            if (!isfinite(e->data[i])) {
+                st = tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in the example heights (detail.example)", path);
+                break;
+            }
+    }
     if (!st) {
         const tn_tensor *e = tn_params_find(w, "gnn.emb"), *e2 = tn_params_find(w, "early.gnn.emb");
         size_t i;
@@ -2707,6 +2715,9 @@ typedef struct tn__gnn_gen {
     uint8_t *fixed;            /* W x H: sketch pixel */
     const tn_params *w;        /* the network it runs on (tn__gnn_pick_net) */
     tn_params *own_w;          /* w when it is the model's early network */
+    int detail;                /* 1: fd's fine detail is added to the output */
+    const char *detail_why;
+    tn__fd fd;                 /* the example's patch index (@@finedetail) */
 } tn__gnn_gen;
 
 /* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
@@ -2730,6 +2741,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
     tn_params_free(G->own_w);
+    tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
 }
 
@@ -3277,219 +3289,6 @@ static void tn__gnn_chamfer(const uint8_t *src, int W, int H, float *d, int *nea
     }
 }
 
-/* Position in the example of pixel (i, j) of an S x S window at (ox, oy) under dihedral t. */
-static size_t tn__gnn_grow_at(int i, int j, int S, int t, int ox, int oy, int Wx)
-{
-    int a = i, b = j;
-    if (t & 1) a = j, b = i;
-    if (t & 2) a = S - 1 - a;
-    if (t & 4) b = S - 1 - b;
-    return (size_t)(oy + b) * Wx + ox + a;
-}
-
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
-{
-    tn_gnn_grow_opts o;
-    tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
-    tn_contour_set set;
-    tn__pts pts = {NULL, 0, 0};
-    size_t n = (size_t)width * height, nx, i, cap = 0, nl = 0;
-    int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
-    int8_t *etype = NULL, *ptype = NULL;
-    uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *erel = NULL, *prel = NULL, fall, relief;
-    double *sum = NULL, *cnt = NULL, rel_sum = 0;
-    tn_rng rng;
-    tn_status st;
-    TN_ASSERT(out);
-    memset(&o, 0, sizeof o);
-    if (opts) o = *opts;
-    if (added) *added = 0;
-    if (!user || user->count <= 0) return tn__fail(TN_ERR_EMPTY, "gnn grow: the sketch is empty");
-    if ((st = tn__cset_check(user, "gnn grow"))) return st;
-    if ((st = tn__cset_check(example, "gnn grow (example)"))) return st;
-    if (user->width != width || user->height != height)
-        return tn__fail(TN_ERR_SHAPE, "gnn grow: the sketch's canvas %d x %d is not the map's %d x %d", user->width, user->height, width, height);
-    if (example->count <= 0 || example->width < 16 || example->height < 16)
-        return tn__fail(TN_ERR_EMPTY, "gnn grow: the example network is empty or under 16 x 16");
-    if (!(o.gap >= 0 && o.gap <= 1e4f) || o.block < 0 || o.candidates < 0 || o.candidates > 100000)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn grow: bad option (gap %g, block %d, candidates %d)", (double)o.gap, o.block, o.candidates);
-    if (o.gap == 0) o.gap = 4;
-    if (!o.block) o.block = 48;
-    if (!o.candidates) o.candidates = 48;
-    Wx = example->width;
-    Hx = example->height;
-    B = o.block;
-    if (B + B / 2 > (Wx < Hx ? Wx : Hx)) B = (Wx < Hx ? Wx : Hx) * 2 / 3;
-    mg = B / 4;
-    S = B + 2 * mg;
-    nx = (size_t)Wx * Hx;
-    memset(&set, 0, sizeof set);
-    set.width = width;
-    set.height = height;
-    if ((st = tn_sketch_rasterise(user, width, height, &ur)) || (st = tn_sketch_rasterise(example, Wx, Hx, &er)) ||
-        (st = tn_gnn_membrane(user, width, height, &mem)))
-        goto done;
-    umask = (uint8_t *)tn__alloc(n);
-    placed = (uint8_t *)tn__calloc(n);
-    mask = (uint8_t *)tn__alloc(n);
-    ptype = (int8_t *)tn__calloc(n);
-    prel = (float *)tn__calloc(n * sizeof(float));
-    D = (float *)tn__alloc(n * sizeof(float));
-    near = (int *)tn__alloc(n * sizeof(int));
-    etype = (int8_t *)tn__alloc(nx);
-    emask = (uint8_t *)tn__alloc(nx);
-    erel = (float *)tn__alloc(nx * sizeof(float));
-    sum = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
-    cnt = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
-    if (!umask || !placed || !mask || !ptype || !prel || !D || !near || !etype || !emask || !erel || !sum || !cnt) {
-        st = TN_ERR_OUT_OF_MEMORY;
-        goto done;
-    }
-    for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
-    tn__gnn_chamfer(umask, width, height, D, near);
-    /* the example: line types, each line pixel's height above the mean of the lines within R px
-       (integral images of (Wx + 1) x (Hx + 1)) */
-    {
-        int x, y, R = 48, W1 = Wx + 1;
-        size_t nline = 0;
-        for (i = 0; i < nx; i++) {
-            etype[i] = (int8_t)(er.data[3 * i] > 0 ? 1 : er.data[3 * i + 1] > 0 ? -1 : 0);
-            emask[i] = (uint8_t)(etype[i] != 0);
-        }
-        for (y = 0; y < Hx; y++)
-            for (x = 0; x < Wx; x++) {
-                size_t q = (size_t)(y + 1) * W1 + x + 1, p = (size_t)y * Wx + x;
-                sum[q] = (emask[p] ? er.data[3 * p + 2] : 0.0) + sum[q - 1] + sum[q - W1] - sum[q - W1 - 1];
-                cnt[q] = (double)emask[p] + cnt[q - 1] + cnt[q - W1] - cnt[q - W1 - 1];
-            }
-        for (y = 0; y < Hx; y++)
-            for (x = 0; x < Wx; x++) {
-                size_t p = (size_t)y * Wx + x;
-                int x0 = x - R < 0 ? 0 : x - R, y0 = y - R < 0 ? 0 : y - R, x1 = x + R + 1 > Wx ? Wx : x + R + 1, y1 = y + R + 1 > Hx ? Hx : y + R + 1;
-                double s = sum[(size_t)y1 * W1 + x1] - sum[(size_t)y0 * W1 + x1] - sum[(size_t)y1 * W1 + x0] + sum[(size_t)y0 * W1 + x0];
-                double k = cnt[(size_t)y1 * W1 + x1] - cnt[(size_t)y0 * W1 + x1] - cnt[(size_t)y1 * W1 + x0] + cnt[(size_t)y0 * W1 + x0];
-                erel[p] = emask[p] && k > 0 ? (float)(er.data[3 * p + 2] - s / k) : 0.0f;
-                if (emask[p]) rel_sum += fabsf(erel[p]), nline++;
-            }
-        if (!nline) {
-            st = tn__fail(TN_ERR_EMPTY, "gnn grow: the example network covers no pixel");
-            goto done;
-        }
-        relief = (float)(rel_sum / (double)nline) + 1e-6f;
-        fall = relief / 16; /* a third of the relief over the radius it is measured on: steeper ruled the moat (docs/gnn.md) */
-    }
-    /* quilting: blocks in raster order, each the best of the candidates */
-    tn_rng_seed(&rng, o.seed, 0x67726f77ULL);
-    for (by = 0; by * B < height; by++)
-        for (bx = 0; bx * B < width; bx++) {
-            int x0 = bx * B, y0 = by * B, bt = 0, box = 0, boy = 0, u, v;
-            double best = -DBL_MAX;
-            for (c = 0; c < o.candidates; c++) {
-                int t = (int)(tn_rng_u32(&rng) % 8u), ox = (int)(tn_rng_u32(&rng) % (uint32_t)(Wx - S + 1)),
-                    oy = (int)(tn_rng_u32(&rng) % (uint32_t)(Hx - S + 1));
-                double score = 0;
-                for (v = -mg; v < B + mg; v++)
-                    for (u = -mg; u < B + mg; u++) {
-                        int X = x0 + u, Y = y0 + v, e;
-                        size_t p, q;
-                        if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
-                        p = (size_t)Y * width + X;
-                        q = tn__gnn_grow_at(u + mg, v + mg, S, t, ox, oy, Wx);
-                        e = etype[q];
-                        if (D[p] <= o.gap && near[p] >= 0) { /* lie on the user's lines: same type near them */
-                            int ut = ur.data[3 * (size_t)near[p]] > 0 ? 1 : -1;
-                            score += e * ut;
-                        }
-                        if (placed[p] && (e || ptype[p])) { /* continue the earlier blocks: lines and their heights */
-                            score += e == ptype[p] ? 1.0 : -0.5;
-                            if (e && e == ptype[p]) score -= fabsf(erel[q] - prel[p]) / relief;
-                        }
-                    }
-                if (score > best) best = score, bt = t, box = ox, boy = oy;
-            }
-            for (v = 0; v < B; v++)
-                for (u = 0; u < B; u++) {
-                    int X = x0 + u, Y = y0 + v;
-                    size_t p, q;
-                    if (X >= width || Y >= height) continue;
-                    p = (size_t)Y * width + X;
-                    q = tn__gnn_grow_at(u + mg, v + mg, S, bt, box, boy, Wx);
-                    placed[p] = 1;
-                    ptype[p] = etype[q];
-                    prel[p] = erel[q];
-                }
-        }
-    /* the user's lines first, then each type's added pixels away from them, thinned and traced */
-    for (c = 0; c < user->count; c++) {
-        const tn_contour *u = &user->items[c];
-        if ((st = tn__cset_add(&set, &cap, u->type, u->order, u->mean_gradient, u->points, u->npoints))) goto done;
-    }
-    for (type = 0; type < 2; type++) {
-        int want = type == TN_RIDGE ? 1 : -1, x, y, k;
-        tn__trace t;
-        size_t l;
-        for (i = 0; i < n; i++) mask[i] = (uint8_t)(ptype[i] == want && D[i] >= o.gap);
-        if ((st = tn_skeletonize(mask, width, height))) goto done;
-        if (type == TN_RIDGE) /* the valleys give way where a block's seam put them next to a ridge */
-            for (y = 0; y < height; y++)
-                for (x = 0; x < width; x++) {
-                    size_t p = (size_t)y * width + x;
-                    if (!mask[p]) ptype[p] = (int8_t)(ptype[p] == 1 ? 0 : ptype[p]);
-                    else
-                        for (k = 0; k < 8; k++) {
-                            int qx = x + tn__d8x[k], qy = y + tn__d8y[k];
-                            if (qx >= 0 && qy >= 0 && qx < width && qy < height && ptype[(size_t)qy * width + qx] == -1)
-                                ptype[(size_t)qy * width + qx] = 0;
-                        }
-                }
-        if ((st = tn__trace_skeleton(mask, width, height, &t))) goto done;
-        for (l = 0; !st && l < t.nlines; l++) {
-            if (t.starts[l + 1] - t.starts[l] < 5) continue;
-            pts.n = 0;
-            for (k = 0; !st && (size_t)k < t.starts[l + 1] - t.starts[l]; k++) {
-                size_t p = t.cells[t.starts[l] + (size_t)k];
-                float h = mem.data[p] + prel[p], d = D[p];
-                if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
-                    float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
-                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - fall * d) : fmaxf(h, hs + fall * d);
-                    h = w * h + (1 - w) * b;
-                }
-                st = tn__pts_push(&pts, (float)(p % (size_t)width), (float)(p / (size_t)width), h);
-            }
-            if (!st) st = tn__cset_add(&set, &cap, (tn_contour_type)type, 0, 0.0f, pts.p, pts.n);
-            nl++;
-        }
-        tn__trace_free(&t);
-        if (st) goto done;
-    }
-done:
-    tn_image_free(&ur);
-    tn_image_free(&er);
-    tn_image_free(&mem);
-    TN_FREE(umask);
-    TN_FREE(placed);
-    TN_FREE(mask);
-    TN_FREE(ptype);
-    TN_FREE(prel);
-    TN_FREE(D);
-    TN_FREE(near);
-    TN_FREE(etype);
-    TN_FREE(emask);
-    TN_FREE(erel);
-    TN_FREE(sum);
-    TN_FREE(cnt);
-    TN_FREE(pts.p);
-    if (st) {
-        tn_contour_set_free(&set);
-        return st;
-    }
-    *out = set;
-    if (added) *added = (int)nl;
-    return TN_OK;
-}
-
 /* Some line of s runs 5 px or more (a contour part's length). */
 static int tn__gnn_has_part_length(const tn_contour_set *s)
 {
@@ -3514,6 +3313,32 @@ static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
     return TN_OK;
 }
 
+/* Whether the fine detail by example runs (opts->detail, the model's example), and its index. */
+static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
+{
+    const tn_tensor *e = tn_params_find(model->weights, "detail.example");
+    tn_image ex;
+    if (o->detail < 0) {
+        G->detail_why = "off (--detail none)";
+        return TN_OK;
+    }
+    if (!e) {
+        G->detail_why = "none: the model holds no example heights (trained before them: train it again for the detail)";
+        return o->detail > 0 ? tn__fail(TN_ERR_INVALID_ARG, "gnn generate: %s", G->detail_why) : TN_OK;
+    }
+    if (o->detail == 0 && !G->grown) {
+        G->detail_why = "off: the sketch is not grown (a dense network carries its own detail; --detail example adds it)";
+        return TN_OK;
+    }
+    ex.width = G->A.width;
+    ex.height = G->A.height;
+    ex.channels = 1;
+    ex.data = e->data;
+    G->detail = 1;
+    G->detail_why = "the example's fine detail, matched by shape to the terrain's low-pass (below 2 px)";
+    return tn__fd_build(&ex, NULL, &G->fd);
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -3532,7 +3357,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
     if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 ||
+        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 || o.detail < -1 || o.detail > 1 ||
         !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
                         "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
@@ -3571,6 +3396,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         if (st) goto done;
     }
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
+    if ((st = tn__gnn_detail_plan(model, &o, G))) goto done;
     if (G->grown > 0) { /* the user's lines of a grown sketch keep their heights (tn__gnn_pin) */
         tn_contour_set u = sk;
         tn_image r = {0, 0, 0, NULL};
@@ -3701,6 +3527,32 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
     return st;
 }
 
+#define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
+
+/* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
+   terrain is computed grown by the detail's halo (tn_rect_halo), detailed, and cropped. */
+static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
+{
+    int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
+    tn_status st = TN_OK;
+    for (ty = 0; !st && ty < wh; ty += T)
+        for (tx = 0; !st && tx < ww; tx += T) {
+            tn_rect r, g;
+            tn_image t = {0, 0, 0, NULL}, d = {0, 0, 0, NULL};
+            r.x = x + tx, r.y = y + ty;
+            r.w = ww - tx < T ? ww - tx : T;
+            r.h = wh - ty < T ? wh - ty : T;
+            g = tn_rect_halo(r, halo, G->W, G->H);
+            if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
+                !(st = tn__fd_apply(&G->fd, &t, &d)))
+                for (v = 0; v < r.h; v++)
+                    memcpy(dst + (size_t)(ty + v) * ww + tx, d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x), (size_t)r.w * sizeof(float));
+            tn_image_free(&t);
+            tn_image_free(&d);
+        }
+    return st;
+}
+
 TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
                                         int h, const tn_gnn_generate_opts *opts, tn_image *out)
 {
@@ -3714,7 +3566,7 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
     if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
     if ((st = tn_image_create(&res, w, h, 1))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    st = tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
+    st = G.detail ? tn__gnn_gen_detailed(&G, ctx, x, y, w, h, res.data) : tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
     if (!st) {
         *out = res;
         res.data = NULL;
@@ -3836,6 +3688,8 @@ TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketc
     else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
         plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
     else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
+    plan->detail = G.detail;
+    plan->detail_why = G.detail_why;
     tn__gnn_gen_free(&G);
     return TN_OK;
 }

@@ -151,6 +151,7 @@ typedef __m512 tn__vf;
 #define tn__vf_store(p, v) _mm512_storeu_ps((p), (v))
 #define tn__vf_set1(x) _mm512_set1_ps(x)
 #define tn__vf_add(a, b) _mm512_add_ps((a), (b))
+#define tn__vf_sub(a, b) _mm512_sub_ps((a), (b))
 #define tn__vf_mul(a, b) _mm512_mul_ps((a), (b))
 #define tn__vf_madd(a, b, c) _mm512_fmadd_ps((a), (b), (c))
 #define TN__VD_N 8
@@ -172,6 +173,7 @@ typedef __m256 tn__vf;
 #define tn__vf_store(p, v) _mm256_storeu_ps((p), (v))
 #define tn__vf_set1(x) _mm256_set1_ps(x)
 #define tn__vf_add(a, b) _mm256_add_ps((a), (b))
+#define tn__vf_sub(a, b) _mm256_sub_ps((a), (b))
 #define tn__vf_mul(a, b) _mm256_mul_ps((a), (b))
 #define tn__vf_madd(a, b, c) _mm256_fmadd_ps((a), (b), (c))
 #define TN__VD_N 4
@@ -193,6 +195,7 @@ typedef float tn__vf;
 #define tn__vf_store(p, v) (*(p) = (v))
 #define tn__vf_set1(x) (x)
 #define tn__vf_add(a, b) ((a) + (b))
+#define tn__vf_sub(a, b) ((a) - (b))
 #define tn__vf_mul(a, b) ((a) * (b))
 #define tn__vf_madd(a, b, c) ((a) * (b) + (c))
 #define TN__VD_N 1

@@ -35,12 +35,13 @@ CONFIGURATION (define before including the implementation)
     TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
                         TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
                         TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,
-                        TN_NO_NOISE, and TN_NO_ENGINE (the tensor engine, @@gemm ... @@train).
-                        A part that needs one compiled out stops the build with #error naming
-                        it: @@world needs every generator and @@export; @@style, @@texgan,
-                        @@singan, @@gnn and @@season need the engine; @@style, @@texgan and
-                        @@season need @@noise; @@style and @@gnn need @@extract, which needs
-                        @@sketch. @@core, @@thread, @@image, @@io and @@metrics are always in.
+                        TN_NO_NOISE, TN_NO_FINEDETAIL, and TN_NO_ENGINE (the tensor engine,
+                        @@gemm ... @@train). A part that needs one compiled out stops the build
+                        with #error naming it: @@world needs every generator and @@export;
+                        @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
+                        @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
                         requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
@@ -83,6 +84,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@optim     parameters, .tnw files, Adam / SGD / L-BFGS
     @@train     training runs (budget, progress, checkpoints, resume), model files, shared blocks
     @@noise     procedural maps: Perlin fBm, explicit multi-scale noise, drawn-map blending
+    @@finedetail  detail by example: a terrain's low-pass plus an example DEM's fine detail, patch-matched
     @@sketch    contour sets, .tns sketch files, drawn sketches, random sketches, parts, alignment
     @@extract   ridges and valleys from a DEM: fill, D8, accumulation, Strahler, skeleton; realism
     @@style     terrain style transfer: built-in random-feature net or VGG-19, pyramid, L-BFGS/SGD/Adam

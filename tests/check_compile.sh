@@ -34,7 +34,7 @@ run no_tls      gcc   -std=c99 -Wall -Wextra -pedantic -fsyntax-only -DTN_NO_TLS
 run portable    gcc   -std=c99 -Wall -Wextra -pedantic -O2 -march=x86-64 -I. -c "$tu" -o build/check/portable.o
 # Compile-out switches: the learned methods out; everything but I/O and rendering out.
 methods="-DTN_NO_STYLE -DTN_NO_TEXGAN -DTN_NO_SINGAN -DTN_NO_GNN -DTN_NO_SEASON -DTN_NO_WORLD"
-base="$methods -DTN_NO_ENGINE -DTN_NO_NOISE -DTN_NO_SKETCH -DTN_NO_EXTRACT -DTN_NO_EXPORT"
+base="$methods -DTN_NO_ENGINE -DTN_NO_NOISE -DTN_NO_FINEDETAIL -DTN_NO_SKETCH -DTN_NO_EXTRACT -DTN_NO_EXPORT"
 run no_methods  gcc   -std=c99 -Wall -Wextra -pedantic -O2 $methods -I. -c "$tu" -o build/check/nomethods.o
 run io_render   gcc   -std=c99 -Wall -Wextra -pedantic -O2 $base -I. -c "$tu" -o build/check/iorender.o
 report

@@ -1069,9 +1069,14 @@ TN_TEST(grown_generation)
     TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK);
     TN_CHECK(plan.grown_lines > 0 && plan.user_lines == 2 && plan.gain_why && strstr(plan.gain_why, "fewer than 8") && plan.gain == 1.0f);
     TN_CHECK(plan.user_density > 0 && plan.user_density < plan.example_density / 6);
+    TN_CHECK(plan.detail == 1 && plan.detail_why && strstr(plan.detail_why, "fine detail"));
     go.grow = -1;
     TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.grown_lines == 0);
+    TN_CHECK(plan.detail == 0 && strstr(plan.detail_why, "not grown"));
     go.grow = 0;
+    go.detail = -1;
+    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.detail == 0);
+    go.detail = 0;
     go.gain = -1;
     TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.gain == 0 && strstr(plan.gain_why, "membrane"));
     go.gain = 0;
@@ -1080,6 +1085,27 @@ TN_TEST(grown_generation)
     TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &b) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(same_image(&a, &b));
+    /* with the fine detail by example (the default here), a window still equals the whole map */
+    {
+        tn_image win = {0, 0, 0, NULL}, want = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
+        tn_tensor *e = tn_params_find(m.weights, "detail.example");
+        TN_CHECK(e && e->numel == (size_t)64 * 64 && e->data[0] == dem.data[0]);
+        TN_CHECK(tn_gnn_generate_window(&m, &user, 240, 180, 150, 100, 60, 50, &go, &win) == TN_OK);
+        TN_CHECK(tn_image_crop(&want, &a, 150, 100, 60, 50) == TN_OK && same_image(&win, &want));
+        go.detail = -1;
+        TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &plain) == TN_OK && !same_image(&a, &plain));
+        /* a model without the example's heights (trained before them): auto skips, 1 fails */
+        if (e) strcpy(e->name, "detail.other");
+        go.detail = 0;
+        TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.detail == 0 && strstr(plan.detail_why, "no example"));
+        go.detail = 1;
+        TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "no example"));
+        if (e) strcpy(e->name, "detail.example");
+        go.detail = 0;
+        tn_image_free(&win);
+        tn_image_free(&want);
+        tn_image_free(&plain);
+    }
     /* the grown sketch's membrane holds every stroke pixel at its asked height */
     TN_CHECK(tn_gnn_parts(&m, &ex) == TN_OK);
     TN_CHECK(tn_gnn_grow(&user, &ex, 240, 180, NULL, &grown, NULL) == TN_OK);

@@ -1766,10 +1766,12 @@ static const cli_opt gnn_generate_opts[] = {
     {"gain", 0, ARG_FLOAT, 0, &gnn_generate_arg.o.gain, NULL, -1, 1e6, "G",
      "share of the network's relief added to the membrane of the sketch heights (1 = the network as trained, -1 = none)",
      "0 = tested on the sketch: held-out lines, scaled as the model's holdouts showed"},
-    {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "SINGAN.tnw",
-     "add the example's fine detail with a singan-train model of the same example (singan-refine)", NULL},
+    {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "auto|example|none|SINGAN.tnw",
+     "the fine scales: the example's own detail matched by shape to the terrain (fine detail by example; the model holds "
+     "its example), or a singan-train model of the same example (singan-refine), or none",
+     "auto: by example on a grown sketch (a drawing of a few strokes)"},
     {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
-     "with --detail: first SinGAN scale that runs on the terrain (higher = finer detail only)", "scales - 3"},
+     "with --detail SINGAN.tnw: first SinGAN scale that runs on the terrain (higher = finer detail only)", "scales - 3"},
     {"preview", 0, ARG_STR, 0, &gnn_generate_arg.preview, NULL, 0, 0, "PNG", "hillshaded colour preview of the terrain", NULL},
 };
 
@@ -1832,6 +1834,8 @@ static int run_gnn_generate(void)
     tn_status st;
     memset(&sk, 0, sizeof sk);
     memset(&detail, 0, sizeof detail);
+    a->o.detail = !a->detail || !strcmp(a->detail, "auto") ? 0 : !strcmp(a->detail, "example") ? 1 : -1;
+    if (a->detail && (!strcmp(a->detail, "auto") || !strcmp(a->detail, "example") || !strcmp(a->detail, "none"))) a->detail = NULL;
     if (a->detail && (st = tn_singan_load(a->detail, &detail))) return fail_status(st);
     if ((st = tn_gnn_load(a->model, &model))) {
         tn_singan_free(&detail);
@@ -1887,6 +1891,7 @@ static int run_gnn_generate(void)
                plan.grown_lines, plan.grown_lines ? " (densified by example: blocks of the example's network between the lines)" : "");
         printf("residual_gain: %.3f\nresidual_gain_why: %s", a->o.gain > 0 ? a->o.gain : 0.0, plan.gain_why);
         if (isfinite(plan.gain_raw)) printf(" (estimate %.3f x scale %.2f, clamped to 0..1)", plan.gain_raw, plan.gain_scale);
+        printf("\ndetail: %s", a->detail ? "singan-refine with the given model" : plan.detail_why);
         printf("\nfinetune_steps: %d\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n", a->o.finetune, tn_time_seconds() - t0, lo, hi, a->out);
     }
     tn_image_free(&terrain);
