@@ -555,6 +555,20 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
 
 /* ---- SRTM .hgt ---- */
 
+/* The pixel size in metres of an SRTM tile (1" or 3" of arc): the mean of its north-south and
+   east-west spacing at the latitude its name gives ("N47E009.hgt": 47.5 degrees; else 0). */
+static double tn__hgt_spacing(const char *name, size_t side)
+{
+    const char *base = name, *q;
+    double ns = (side == 3601 ? 1.0 : 3.0) * 30.87, lat = 0;
+    for (q = name; *q; q++)
+        if (*q == '/' || *q == '\\') base = q + 1;
+    if ((base[0] == 'N' || base[0] == 'S' || base[0] == 'n' || base[0] == 's') && base[1] >= '0' && base[1] <= '9' && base[2] >= '0' &&
+        base[2] <= '9')
+        lat = (base[1] - '0') * 10 + (base[2] - '0') + ((base[0] == 'S' || base[0] == 's') ? -0.5 : 0.5);
+    return 0.5 * (ns + ns * cos(lat * 0.017453292519943295));
+}
+
 static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn_image *img, tn_image_info *info)
 {
     size_t side, count, k, nvoid = 0;
@@ -581,6 +595,7 @@ static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn
     if (st) { tn_image_free(img); return st; }
     info->bit_depth = 16;
     info->file_channels = 1;
+    info->cellsize = tn__hgt_spacing(name, side);
     return TN_OK;
 }
 
@@ -2061,14 +2076,20 @@ TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char 
     return TN_OK;
 }
 
+#include <errno.h> /* ENOENT: "no such file" */
+
 /* Reads a whole file with one fread. *out is TN_MALLOC'd. */
 static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
 {
-    FILE *f = fopen(path, "rb");
+    FILE *f;
     long end = -1;
     size_t n, got;
     uint8_t *buf;
-    if (!f) return tn__fail(TN_ERR_IO, "%s: cannot open for reading", path);
+    errno = 0;
+    if (!(f = fopen(path, "rb"))) {
+        if (errno == ENOENT) return tn__fail(TN_ERR_IO, "%s: no such file", path);
+        return tn__fail(TN_ERR_IO, "%s: cannot open for reading%s%s", path, errno ? ": " : "", errno ? strerror(errno) : "");
+    }
     if (fseek(f, 0, SEEK_END) != 0 || (end = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
         fclose(f);
         return tn__fail(TN_ERR_IO, "%s: cannot determine the file size", path);
