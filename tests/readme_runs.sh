@@ -42,16 +42,16 @@ for f in "$W"/cmd/*.sh; do
     first=$(head -n 1 "$f")
     prog=${first%% *}
     if ! command -v "$prog" >/dev/null 2>&1 && [ ! -x "$W/$prog" ]; then
-        echo "skipped readme_runs: $first ($prog is not installed)"; skip=$((skip + 1)); continue
+        printf "skipped readme_runs: %s (%s is not installed)\n" "$first" "$prog"; skip=$((skip + 1)); continue
     fi
     t0=$(date +%s)
     (cd "$W" && D="$D" TERRAINNET_TRAIN_SECONDS=${TERRAINNET_TRAIN_SECONDS:-4} sh -e "cmd/$(basename "$f")") > "$f.out" 2>&1
     rc=$?
     t1=$(date +%s)
     if [ $rc -eq 0 ]; then
-        echo "ok ($((t1 - t0)) s): $first"; pass=$((pass + 1))
+        printf "ok (%s s): %s\n" "$((t1 - t0))" "$first"; pass=$((pass + 1))
     else
-        echo "FAIL readme_runs (exit $rc, $((t1 - t0)) s): $first"; tail -n 5 "$f.out"; fail=$((fail + 1))
+        printf "FAIL readme_runs (exit %s, %s s): %s\n" "$rc" "$((t1 - t0))" "$first"; tail -n 5 "$f.out"; fail=$((fail + 1))
     fi
 done
 echo "readme_runs: $pass passed, $fail failed, $skip skipped"

@@ -487,5 +487,38 @@ if [ -f "$D/seasonal_slovenia/frames.csv" ]; then
 else
     skipped "season-train on Sentinel-2 NDVI (absent)"
 fi
+# issue 34: the first hour of a new user
+expect_usage "mistyped command" "unknown command 'rendr'; did you mean 'render'?" $T rendr a.png -o b.png
+expect_usage "mistyped command, transposed" "did you mean 'singan-train'?" $T singan-trian a.png -o b.tnw
+expect_error "no such file" "no_such_file.png: no such file" $T info no_such_file.png
+if $T insolation --help | grep -q -- "--range LO HI" && ! $T insolation --help | grep -q -- "--heights" &&
+    $T singan-train --help | grep -q -- "--range LO HI" && $T export --help | grep -q -- "--range LO HI"; then ok;
+else bad "--range LO HI on insolation, singan-train and export, --heights hidden"; fi
+$T noise -o "$W/unit.png" --size 48 > /dev/null 2>&1 # records no range
+if $T insolation "$W/unit.png" --lat 46 --month 6 --heights 100 900 -o "$W/alias" > /dev/null 2> "$W/alias.txt" && ! grep -q "warning\|heights" "$W/alias.txt" &&
+    $T insolation "$W/unit.png" --lat 46 --month 6 --range 100 900 -o "$W/alias2" > /dev/null 2>&1 && cmp -s "$W/alias_06.pfm" "$W/alias2_06.pfm"; then ok;
+else bad "insolation --heights is a silent alias of --range: $(cat "$W/alias.txt")"; fi
+if $T insolation "$W/unit.png" --lat 46 --month 6 -o "$W/u" 2>&1 >/dev/null | grep -q "records no height range.*give --range LO HI" &&
+    $T season "$W/unit.png" --koppen Cfb --month 6 -o "$W/u" 2>&1 >/dev/null | grep -q "give --range LO HI"; then ok;
+else bad "insolation/season on a unit-less DEM name --range"; fi
+if $T export "$W/unit.png" --to glb -o "$W/u.glb" 2>&1 >/dev/null | grep -q "nearly flat" &&
+    ! $T export "$W/unit.png" --to glb --spacing 30 --range 0 900 -o "$W/u.glb" 2>&1 >/dev/null | grep -q "warning"; then ok;
+else bad "export of a unit-less DEM without --spacing warns"; fi
+if $T singan-train "$W/unit.png" -o "$W/u_sg.tnw" --iters 2 --coarsest 12 > "$W/usg.txt" 2>/dev/null && grep -q "units: the file's \[0, 1\] codes" "$W/usg.txt" &&
+    $T singan-train "$W/unit.png" -o "$W/m_sg.tnw" --iters 2 --coarsest 12 --range 100 900 > "$W/msg.txt" 2>/dev/null && grep -q "units: metres" "$W/msg.txt" &&
+    $T singan-sample "$W/m_sg.tnw" -o "$W/m_s.pfm" > /dev/null 2>&1 && $T info "$W/m_s.pfm" | awk '/^min:/ { lo = $2 } /^max:/ { hi = $2 } END { exit !(lo > 50 && hi > 500) }'; then ok;
+else bad "singan-train --range learns metres: $(cat "$W/usg.txt" "$W/msg.txt" | head -5)"; fi
+if $T realism "$W/unit.png" "$W/noise64.png" 2>/dev/null | grep -q "^ssim: n/a (sizes differ)"; then ok; else bad "realism on two sizes: ssim n/a"; fi
+if $T gnn-train "$W/noise64.png" -o "$W/h.tnw" --size 32 --iters 1 --crop 16 16 2>/dev/null | grep -q "^holdout_why: .*--crop 0 0 gives 3" ; then ok;
+else bad "gnn-train says why holdout_windows is 0"; fi
+if $T insolation "$W/noise64.png" --lat 46 --spacing 30 -o "$W/ip" > "$W/ip.txt" 2>/dev/null && $T info "$W/ip_03.png" | grep -q "channels: 3" &&
+    $T info "$W/ip_sheet.png" | grep -q "channels: 3" && grep -q "^sheet: " "$W/ip.txt"; then ok; else bad "insolation PNG previews and year sheet"; fi
+# the ramp: a DEM that records no sea paints no water; a sea level does
+printf 'P2\n4 2\n9\n0 0 9 9\n0 0 9 9\n' > "$W/two.pgm"
+$T render "$W/two.pgm" -o "$W/two_land.ppm" > /dev/null 2>&1
+$T render "$W/two.pgm" --sea-level 0.5 -o "$W/two_sea.ppm" > /dev/null 2>&1
+if [ -f "$W/two_land.ppm" ] && [ -f "$W/two_sea.ppm" ] &&
+    od -An -tu1 -j 11 -N 3 "$W/two_land.ppm" | awk '{ exit !($2 > $3) }' && od -An -tu1 -j 11 -N 3 "$W/two_sea.ppm" | awk '{ exit !($3 > $1 && $3 > $2) }'; then ok;
+else bad "render: green lowland without a sea level, blue below --sea-level"; fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

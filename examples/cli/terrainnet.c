@@ -110,11 +110,15 @@ static int cli_progress(void *user, const char *stage, double f)
     progress_state *p = (progress_state *)user;
     double now = tn_time_seconds(), el;
     int changed = strncmp(p->stage, stage, sizeof p->stage - 1) != 0;
+    size_t word = strcspn(stage, " ");
     if (g_interrupted) return 1;
-    if (changed) {
+    if (changed) { /* a new operation restarts the clock; a new step of the same one ("singan-train scale 3/9") does not */
+        int same = word == strcspn(p->stage, " ") && !strncmp(p->stage, stage, word) && tn_progress_eta() >= 0;
         snprintf(p->stage, sizeof p->stage, "%s", stage);
-        p->t0 = now;
-        p->last_decile = -1;
+        if (!same) {
+            p->t0 = now;
+            p->last_decile = -1;
+        }
     }
     el = now - p->t0;
     if (p->tty) {
@@ -1993,7 +1997,8 @@ static struct insolation_args { const char *in, *out; double lat, lo, hi; tn_ins
 static const cli_opt insolation_opts[] = {
     {"DEM", 0, ARG_POS, 0, &insolation_arg.in, NULL, 0, 0, NULL, "heightmap in metres", NULL},
     {"lat", 0, ARG_DOUBLE, REQ, &insolation_arg.lat, NULL, -90, 90, "DEG", "latitude (south negative; row 0 is north)", NULL},
-    {"output", 'o', ARG_STR, REQ, &insolation_arg.out, NULL, 0, 0, "PREFIX", "writes PREFIX_01.pfm .. PREFIX_12.pfm (W h/m^2 per day)", NULL},
+    {"output", 'o', ARG_STR, REQ, &insolation_arg.out, NULL, 0, 0, "PREFIX",
+     "writes PREFIX_01.pfm .. PREFIX_12.pfm (W h/m^2 per day), their pictures PREFIX_MM.png and PREFIX_sheet.png, the labelled year", NULL},
     {"month", 0, ARG_INT, 0, &insolation_arg.o.month, NULL, 1, 12, "M", "only month M (PREFIX_MM.pfm)", "all twelve"},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &insolation_arg.o.dx, &insolation_arg.o.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &insolation_arg.lo, &insolation_arg.hi, 0, 0, "LO HI",
@@ -2015,18 +2020,43 @@ static tn_status season_channel(const tn_image *src, int c, tn_image *dst)
     return TN_OK;
 }
 
+/* Insolation as a picture: black (none) through red and orange to pale yellow at top. */
+static tn_status insolation_preview(const tn_image *one, float top, tn_image *rgb)
+{
+    static const float stops[5][4] = {{0.0f, 0.0f, 0.0f, 0.02f}, {0.3f, 0.35f, 0.05f, 0.35f}, {0.6f, 0.85f, 0.25f, 0.1f},
+                                      {0.85f, 1.0f, 0.65f, 0.1f}, {1.0f, 1.0f, 1.0f, 0.75f}};
+    size_t i, n = (size_t)one->width * one->height;
+    tn_status st = tn_image_create(rgb, one->width, one->height, 3);
+    for (i = 0; !st && i < n; i++) {
+        float t = top > 0 ? one->data[i] / top : 0.0f, f;
+        int k = 1, c;
+        t = t < 0 ? 0 : t > 1 ? 1 : t;
+        while (k < 4 && t > stops[k][0]) k++;
+        f = (t - stops[k - 1][0]) / (stops[k][0] - stops[k - 1][0]);
+        for (c = 0; c < 3; c++) rgb->data[i * 3 + c] = stops[k - 1][c + 1] + f * (stops[k][c + 1] - stops[k - 1][c + 1]);
+    }
+    return st;
+}
+
 static int run_insolation(void)
 {
     struct insolation_args *a = &insolation_arg;
-    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
+    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, one = {0, 0, 0, NULL}, pics[12], sheet = {0, 0, 0, NULL};
+    tn_save_opts so;
     tn_status st;
-    char path[4096];
+    char path[4096], label[12][24];
+    const char *labels[12];
+    float top = 0, lo0, hi0;
     int c;
     double t0 = tn_time_seconds();
     if ((st = season_load_dem("insolation", a->in, a->lo, a->hi, &dem))) return fail_status(st);
     st = tn_insolation(&dem, a->lat, &a->o, &out);
     tn_image_free(&dem);
     if (st) return fail_status(st);
+    memset(pics, 0, sizeof pics);
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    if (tn_image_range(&out, &lo0, &hi0) == TN_OK) top = hi0; /* one scale for the year, so months compare */
     for (c = 0; c < out.channels && !st; c++) {
         int month = a->o.month ? a->o.month : c + 1;
         float lo, hi;
@@ -2038,15 +2068,29 @@ static int run_insolation(void)
         for (i = 0; i < n; i++) sum += one.data[i];
         st = tn_image_save(path, &one, NULL);
         if (!st) printf("%s: month %2d mean %.0f min %.0f max %.0f W h/m^2 per day\n", path, month, sum / (double)n, lo, hi);
+        snprintf(path, sizeof path, "%s_%02d.png", a->out, month);
+        if (!st) st = insolation_preview(&one, top, &pics[c]);
+        if (!st) st = tn_image_save(path, &pics[c], &so);
+        snprintf(label[c], sizeof label[c], "%s MEAN %.0f", tn_season_time_label((float)(month - 1), path, 8), sum / (double)n);
+        labels[c] = label[c];
         tn_image_free(&one);
     }
+    if (!st) printf("previews: %s_MM.png, black = 0 to pale yellow = %.0f W h/m^2 per day (the year's highest)\n", a->out, top);
+    if (!st && out.channels > 1) {
+        snprintf(path, sizeof path, "%s_sheet.png", a->out);
+        if (!(st = tn_season_sheet_labelled(pics, labels, out.channels, 4, out.width < 256 ? out.width : 256, &sheet)))
+            st = tn_image_save(path, &sheet, &so);
+        if (!st) printf("sheet: %s (the year, each month with its mean in W h/m^2 per day)\n", path);
+    }
+    for (c = 0; c < 12; c++) tn_image_free(&pics[c]);
+    tn_image_free(&sheet);
     tn_image_free(&out);
     if (st) return fail_status(st);
     printf("insolation: %.2f s\n", tn_time_seconds() - t0);
     return 0;
 }
 
-static const cli_command insolation_cmd = {"insolation", CLI_CMD(insolation), "monthly direct-sun maps with terrain shadows (PFM)",
+static const cli_command insolation_cmd = {"insolation", CLI_CMD(insolation), "monthly direct-sun maps with terrain shadows (PFM + PNG sheet)",
     "Daily direct-beam insolation outside the atmosphere (W h/m^2 per day) on each pixel's slope on the 15th of every month, "
     "with shadows cast by the terrain (docs/season.md). Heights must be metres: give --spacing, and --range for a file "
     "that records no range."};
@@ -2174,9 +2218,16 @@ static int run_season(void)
         else snprintf(path, sizeof path, "%s_%02d.png", a->out, a->month ? a->month : i + 1);
         st = tn_image_save(path, &imgs[i], &so);
     }
-    if (!st && count > 1) {
+    if (!st && count > 1) { /* the year at a glance, each picture under its date */
+        char(*label)[16] = (char(*)[16])calloc((size_t)count, sizeof *label);
+        const char **labels = (const char **)calloc((size_t)count, sizeof *labels);
+        for (i = 0; label && labels && i < count; i++) labels[i] = tn_season_time_label(times[i], label[i], sizeof label[i]);
         snprintf(path, sizeof path, "%s_sheet.png", a->out);
-        if (!(st = tn_season_sheet(imgs, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet))) st = tn_image_save(path, &sheet, &so);
+        if (!label || !labels) st = TN_ERR_OUT_OF_MEMORY;
+        else if (!(st = tn_season_sheet_labelled(imgs, labels, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet)))
+            st = tn_image_save(path, &sheet, &so);
+        free(label);
+        free(labels);
     }
     if (!st) printf("season: %s, %d image%s of %d x %d in %.2f s\n", clim.name, count, count > 1 ? "s" : "", dem.width, dem.height, tn_time_seconds() - t0);
     for (i = 0; i < count; i++) tn_image_free(&imgs[i]);
