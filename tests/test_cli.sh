@@ -290,7 +290,9 @@ if $T export "$W/noise.png" --to normal -o "$W/n1.png" --spacing 30 > /dev/null 
 # make demo in its fast mode (seconds-long budgets): every picture and the page; then the page in
 # headless Chromium (tests/demo_page.sh, skipped without chromium)
 if DEMO_FAST=1 DEMO_DIR="$W/demo" sh examples/demo.sh > "$W/demo.log" 2>&1 && grep -q "^demo: wrote .*index.html ([1-9][0-9]* pictures" "$W/demo.log" &&
-    [ -s "$W/demo/terrain.glb" ] && [ -s "$W/demo/splat.png" ] && [ -s "$W/demo/sketch_terrain.png" ]; then ok; else bad "fast demo: $(tail -n 3 "$W/demo.log")"; fi
+    [ -s "$W/demo/terrain.glb" ] && [ -s "$W/demo/splat.png" ] && [ -s "$W/demo/sketch_terrain.png" ] &&
+    [ -s "$W/demo/sun_sheet.png" ] && [ -s "$W/demo/season_sheet.png" ] && grep -q "<p><b>[0-9]* pictures in [0-9]* s</b>" "$W/demo/index.html"; then ok;
+else bad "fast demo: $(tail -n 3 "$W/demo.log")"; fi
 sh tests/demo_page.sh "$W/demo" > "$W/demo_page.txt" 2>&1
 if grep -q "^skipped demo_page" "$W/demo_page.txt"; then skipped "demo page in Chromium: $(sed -n 's/^skipped demo_page: //p' "$W/demo_page.txt")";
 elif grep -q "^demo_page: [1-9][0-9]* passed, 0 failed" "$W/demo_page.txt"; then ok; else bad "demo page in Chromium: $(grep -v '^picture' "$W/demo_page.txt" | head -c 600)"; fi
