@@ -464,7 +464,7 @@ if $T season "$W/noise.png" --spacing 30 --climate "$W/clim.csv" --insolation "$
 $T noise -o "$W/noise64.png" --size 64 64 --range 100 900 > /dev/null 2>&1
 expect_error "season wrong-size insolation" "insolation must be 12 channels of 64 x 64" $T season "$W/noise64.png" --koppen Cfb --insolation "$W/ins" -o "$W/sea"
 if [ -f "$MB" ]; then
-    if $T season "$MB" --heights 454 4810 --spacing 92.7 --koppen Cfb --month 2 -o "$W/mb" > /dev/null 2>&1 &&
+    if $T season "$MB" --range 454 4810 --spacing 92.7 --koppen Cfb --month 2 -o "$W/mb" > /dev/null 2>&1 &&
         $T info "$W/mb_02.png" | grep -q "size: 256 x 256" && [ ! -f "$W/mb_sheet.png" ]; then ok; else bad "season --month on alps_montblanc"; fi
 else
     skipped "season on a real DEM (absent)"
@@ -510,6 +510,10 @@ if $T singan-train "$W/unit.png" -o "$W/u_sg.tnw" --iters 2 --coarsest 12 > "$W/
     $T singan-train "$W/unit.png" -o "$W/m_sg.tnw" --iters 2 --coarsest 12 --range 100 900 > "$W/msg.txt" 2>/dev/null && grep -q "units: metres" "$W/msg.txt" &&
     $T singan-sample "$W/m_sg.tnw" -o "$W/m_s.pfm" > /dev/null 2>&1 && $T info "$W/m_s.pfm" | awk '/^min:/ { lo = $2 } /^max:/ { hi = $2 } END { exit !(lo > 50 && hi > 500) }'; then ok;
 else bad "singan-train --range learns metres: $(cat "$W/usg.txt" "$W/msg.txt" | head -5)"; fi
+# SinGAN's progress: one run, one clock, to 100 % when the scales finish before the budget
+if $T singan-train "$W/unit.png" -o "$W/p_sg.tnw" --scale-iters 2 --coarsest 12 --channels 8 --minutes 5 2> "$W/psg.txt" > /dev/null &&
+    grep -q "^singan-train scale [0-9]*/[0-9]*: 100%" "$W/psg.txt" && [ "$(grep -c "ETA" "$W/psg.txt")" -ge 1 ]; then ok;
+else bad "singan-train progress reaches 100 %: $(tail -n 3 "$W/psg.txt")"; fi
 if $T realism "$W/unit.png" "$W/noise64.png" 2>/dev/null | grep -q "^ssim: n/a (sizes differ)"; then ok; else bad "realism on two sizes: ssim n/a"; fi
 if $T gnn-train "$W/noise64.png" -o "$W/h.tnw" --size 32 --iters 1 --crop 16 16 2>/dev/null | grep -q "^holdout_why: .*--crop 0 0 gives 3" ; then ok;
 else bad "gnn-train says why holdout_windows is 0"; fi
