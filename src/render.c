@@ -217,9 +217,9 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     if (opts) o = *opts;
     if (o.width < 0 || o.height < 0 || !(fabsf(o.azimuth_deg) <= 1e6f) || !(fabsf(o.pitch_deg) < 89.0f) ||
         !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f) ||
-        !(o.spacing >= 0 && o.spacing <= 1e9f) || !(fabsf(o.exaggeration) <= 1e6f))
-        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
-                        o.width, o.height);
+        !(o.spacing == 0 || (o.spacing >= 1e-6f && o.spacing <= 1e9f)) || !(fabsf(o.exaggeration) <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170, "
+                        "spacing 0 or 1e-6..1e9)", o.width, o.height);
     tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
