@@ -343,7 +343,8 @@ typedef struct tn_image_info {
     int interlaced;          /* PNG Adam7 */
     int has_range;           /* 1 if the file gives a height mapping; pixels were converted with it */
     double range_lo, range_hi; /* code 0 -> range_lo, max code -> range_hi */
-    double cellsize;         /* .asc cell size; a GeoTIFF's square pixel size in CRS units (0 if unknown) */
+    double cellsize;         /* .asc cell size; a GeoTIFF's square pixel size in CRS units; an SRTM .hgt's
+                                mean spacing in metres at its name's latitude (0 if unknown) */
     double x_origin, y_origin; /* .asc / GeoTIFF lower-left corner */
     size_t voids_filled;     /* .hgt / .asc / TIFF cells that were void/NODATA and were filled */
     int has_nodata;          /* the file named a NODATA value (.asc NODATA_value, TIFF GDAL_NODATA) */
@@ -2096,6 +2097,13 @@ TN_API void tn_season_state_free(tn_season_state *s);
 /* A preview sheet: the images side by side in `columns` columns (0 = 4), each scaled to
    `cell` pixels wide (0 = 256), 4 px gaps. *out allocated here. */
 TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out);
+/* The same with a caption over each image: labels[i] (NULL or labels NULL: none), in capitals,
+   digits and - / . : % (other characters show as blanks), e.g. tn_season_time_label's. */
+TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
+                                          tn_image *out);
+/* "JAN", or "MAR 30" for a time between months: time in months from mid-January (as
+   tn_season_texture takes them). Writes at most size bytes to buf; returns buf. */
+TN_API char *tn_season_time_label(float time, char *buf, size_t size);
 
 /* KPD generator (paper 003, 3.1-3.2): a SPADE-style network whose denormalisation blocks take
    the heightfield (height and its gradient) plus the year of climate rotated so the target month
@@ -2218,10 +2226,14 @@ typedef struct tn_render_opts {
     float lo, hi;              /* height range for the colour ramp; lo == hi: the DEM's own range */
     tn_hillshade_opts shade;   /* light and spacing (zero = defaults) */
     float shade_strength;      /* 0..1 how much the hillshade darkens the colours; 0 = default 0.7; else TN_ERR_INVALID_ARG */
+    int sea;                   /* 0: land colours only (heights that say nothing of the sea: a valley
+                                  floor stays green); 1: water below sea_level, land above it */
+    float sea_level;           /* with sea = 1: the shore's height in the DEM's units (0 on a DEM in metres) */
 } tn_render_opts;
 
-/* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used).
-   opts may be NULL. Caller frees *out. */
+/* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used):
+   green lowlands, tan and brown hills, grey rock, snow over [lo, hi], and with opts->sea blues
+   below the sea level. opts may be NULL. Caller frees *out. */
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out);
 
 typedef struct tn_view_opts {
@@ -2230,7 +2242,11 @@ typedef struct tn_view_opts {
     float pitch_deg;           /* downward look angle; 0 = default 30 */
     float distance;            /* camera distance in DEM widths from the centre; 0 = default 1.1 */
     float fov_deg;             /* horizontal field of view; 0 = default 60 */
-    float relief;              /* height of the full DEM range as a fraction of the DEM width; 0 = 0.2 */
+    float relief;              /* height of the full DEM range as a fraction of the DEM width; 0 = 0.2,
+                                  or from spacing and exaggeration when spacing > 0 */
+    float spacing;             /* metres per pixel of a DEM in metres (e.g. an .hgt: tn_image_info.cellsize);
+                                  0 = unknown: relief applies */
+    float exaggeration;        /* with spacing: vertical exaggeration of the true relief; 0 = 2 */
     tn_render_opts colours;    /* colouring of the surface */
 } tn_view_opts;
 
@@ -5835,7 +5851,7 @@ done:
 /* --------------------------------------------------------------------------------------------
    >>formats  (part of @@io implementation; goes after >>png, whose tn__png_decode/encode it calls)
    Everything in @@io but the PNG codec: format detection (magic bytes, then extension), reading
-   a whole file with one fread, saving through "<path>.tmp.<pid>.<n>" + rename() so a failed save
+   a whole file with one fread, saving through "<path>.tmp" + rename() so a failed save
    never clobbers the old file, the integer-format value mapping shared with PNG, and the codecs
    for PGM/PPM (P2 P3 P5 P6), PFM, SRTM .hgt, ESRI ASCII grid .asc and headerless .r16.
    Every parser works on one memory buffer with explicit bounds: sizes go through tn__size4
@@ -6389,6 +6405,20 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
 
 /* ---- SRTM .hgt ---- */
 
+/* The pixel size in metres of an SRTM tile (1" or 3" of arc): the mean of its north-south and
+   east-west spacing at the latitude its name gives ("N47E009.hgt": 47.5 degrees; else 0). */
+static double tn__hgt_spacing(const char *name, size_t side)
+{
+    const char *base = name, *q;
+    double ns = (side == 3601 ? 1.0 : 3.0) * 30.87, lat = 0;
+    for (q = name; *q; q++)
+        if (*q == '/' || *q == '\\') base = q + 1;
+    if ((base[0] == 'N' || base[0] == 'S' || base[0] == 'n' || base[0] == 's') && base[1] >= '0' && base[1] <= '9' && base[2] >= '0' &&
+        base[2] <= '9')
+        lat = (base[1] - '0') * 10 + (base[2] - '0') + ((base[0] == 'S' || base[0] == 's') ? -0.5 : 0.5);
+    return 0.5 * (ns + ns * cos(lat * 0.017453292519943295));
+}
+
 static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn_image *img, tn_image_info *info)
 {
     size_t side, count, k, nvoid = 0;
@@ -6415,6 +6445,7 @@ static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn
     if (st) { tn_image_free(img); return st; }
     info->bit_depth = 16;
     info->file_channels = 1;
+    info->cellsize = tn__hgt_spacing(name, side);
     return TN_OK;
 }
 
@@ -7895,14 +7926,20 @@ TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char 
     return TN_OK;
 }
 
+#include <errno.h> /* ENOENT: "no such file" */
+
 /* Reads a whole file with one fread. *out is TN_MALLOC'd. */
 static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
 {
-    FILE *f = fopen(path, "rb");
+    FILE *f;
     long end = -1;
     size_t n, got;
     uint8_t *buf;
-    if (!f) return tn__fail(TN_ERR_IO, "%s: cannot open for reading", path);
+    errno = 0;
+    if (!(f = fopen(path, "rb"))) {
+        if (errno == ENOENT) return tn__fail(TN_ERR_IO, "%s: no such file", path);
+        return tn__fail(TN_ERR_IO, "%s: cannot open for reading%s%s", path, errno ? ": " : "", errno ? strerror(errno) : "");
+    }
     if (fseek(f, 0, SEEK_END) != 0 || (end = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
         fclose(f);
         return tn__fail(TN_ERR_IO, "%s: cannot determine the file size", path);
@@ -8025,55 +8062,118 @@ static unsigned long tn__io_process_id(void)
 
 static unsigned long tn__io_tmp_counter;
 
-/* POSIX: saves go through open/write/fsync so the data is on disk before the rename, and the
-   directory is synced after it; stale temporaries are found with opendir. Elsewhere stdio. */
+/* Atomic saves, with <stdio.h> and <unistd.h> only. A save of PATH writes "PATH.tmp", flushes it
+   to disk (fsync where POSIX has it) and renames it over PATH, so a failed or killed save never
+   leaves PATH torn. The temporary's name is the same for every save of PATH, so a killed save
+   leaves at most one and the next save replaces it (issue 33 found 20-126 MB leftovers with
+   per-process names, there for good). A save holds its temporary: in this process through the
+   list of targets being saved, across processes through a lockf lock, which the system drops
+   with a killed process. A save that finds the temporary held writes "PATH.tmp.PID.N" instead;
+   only a kill during such an overlap leaves one of those. */
 #if defined(_POSIX_VERSION) && !defined(_WIN32)
-#include <fcntl.h>
-#include <dirent.h>
-#include <sys/stat.h>
 #define TN__IO_POSIX 1
+#if !defined(__cplusplus) && !defined(fileno)
+int fileno(FILE *stream); /* POSIX <stdio.h>; a strict -std=c99 hides it */
+#endif
+#if !defined(F_TLOCK) && !defined(__cplusplus)
+#include <sys/types.h>
+int lockf(int fd, int cmd, off_t len); /* POSIX (XSI) <unistd.h>; a strict -std=c99 hides it */
+#define F_TLOCK 2                      /* the values of every POSIX system */
+#define F_TEST 3
+#endif
+#if defined(F_TLOCK)
+#define TN__IO_LOCKF 1
+#endif
 #endif
 
-/* Removes the "<path>.tmp.<pid>.<n>" files a killed save left next to path (issue 33: 20-126 MB
-   each, there for good): another process's, untouched for 2 minutes, whose process is gone
-   (where /proc tells; elsewhere untouched for an hour). Best effort, silent. */
-static void tn__io_remove_stale(const char *path)
-{
-#if defined(TN__IO_POSIX)
-    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
-    size_t dl = slash ? (size_t)(slash - path) : 0, bl = strlen(base);
-    char dir[1024], full[1400], proc[48];
-    DIR *d;
-    struct dirent *e;
-    struct stat sb;
-    int have_proc = stat("/proc/self", &sb) == 0;
-    unsigned long me = tn__io_process_id();
-    if (dl >= sizeof dir || bl == 0 || bl > 255) return;
-    if (!slash) strcpy(dir, ".");
-    else if (dl == 0) strcpy(dir, "/");
-    else {
-        memcpy(dir, path, dl);
-        dir[dl] = 0;
-    }
-    if (!(d = opendir(dir))) return;
-    while ((e = readdir(d)) != NULL) {
-        const char *nm = e->d_name, *q;
-        unsigned long pid = 0;
-        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp.", 5) != 0) continue;
-        for (q = nm + bl + 5; *q >= '0' && *q <= '9'; q++) pid = pid * 10 + (unsigned long)(*q - '0');
-        if (q == nm + bl + 5 || *q != '.' || pid == me) continue;
-        for (q++; *q >= '0' && *q <= '9'; q++) {}
-        if (*q || q[-1] == '.') continue;
-        snprintf(full, sizeof full, "%s/%s", dir, nm);
-        if (stat(full, &sb) != 0 || difftime(time(NULL), sb.st_mtime) < (have_proc ? 120.0 : 3600.0)) continue;
-        snprintf(proc, sizeof proc, "/proc/%lu", pid);
-        if (have_proc && stat(proc, &sb) == 0) continue; /* its process still runs */
-        remove(full);
-    }
-    closedir(d);
+/* The targets this process is saving (64-bit name hashes; a collision only costs a fallback
+   name). Threads saving one target must not share its temporary: lockf locks are per process. */
+#define TN__IO_SAVING 64
+static uint64_t tn__io_saving[TN__IO_SAVING];
+#if !defined(TN_NO_THREADS)
+static pthread_mutex_t tn__io_saving_mutex = PTHREAD_MUTEX_INITIALIZER;
+#define TN__IO_SAVING_LOCK() pthread_mutex_lock(&tn__io_saving_mutex)
+#define TN__IO_SAVING_UNLOCK() pthread_mutex_unlock(&tn__io_saving_mutex)
 #else
-    (void)path;
+#define TN__IO_SAVING_LOCK() (void)0
+#define TN__IO_SAVING_UNLOCK() (void)0
 #endif
+
+static uint64_t tn__io_name_hash(const char *path)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (; *path; path++) h = (h ^ (unsigned char)*path) * 1099511628211ull;
+    return h ? h : 1;
+}
+
+/* Marks path as being saved here; 0 when it already is (or 64 saves run at once). */
+static int tn__io_saving_enter(const char *path)
+{
+    uint64_t h = tn__io_name_hash(path);
+    int i, free_slot = -1;
+    TN__IO_SAVING_LOCK();
+    for (i = 0; i < TN__IO_SAVING; i++) {
+        if (tn__io_saving[i] == h) free_slot = -2;
+        if (!tn__io_saving[i] && free_slot == -1) free_slot = i;
+    }
+    if (free_slot >= 0) tn__io_saving[free_slot] = h;
+    TN__IO_SAVING_UNLOCK();
+    return free_slot >= 0;
+}
+
+static void tn__io_saving_leave(const char *path)
+{
+    uint64_t h = tn__io_name_hash(path);
+    int i;
+    TN__IO_SAVING_LOCK();
+    for (i = 0; i < TN__IO_SAVING; i++)
+        if (tn__io_saving[i] == h) {
+            tn__io_saving[i] = 0;
+            break;
+        }
+    TN__IO_SAVING_UNLOCK();
+}
+
+/* Opens tmp, the temporary of a target this process holds (tn__io_saving_enter), for writing,
+   and locks it; a leftover of a killed save (unlocked) is replaced. NULL: another process's
+   save holds it. */
+static FILE *tn__io_claim(const char *tmp)
+{
+#if defined(TN__IO_LOCKF)
+    FILE *f = fopen(tmp, "r+b");
+    if (f) {
+        int leftover = lockf(fileno(f), F_TLOCK, 0) == 0;
+        if (leftover) remove(tmp);
+        fclose(f);
+        if (!leftover) return NULL;
+    }
+    if (!(f = fopen(tmp, "wbx"))) return NULL; /* created by another save in between */
+    if (lockf(fileno(f), F_TLOCK, 0) != 0) {   /* taken by a save that thought it a leftover */
+        fclose(f);
+        return NULL;
+    }
+    return f;
+#else
+    return fopen(tmp, "wb");
+#endif
+}
+
+/* Removes the temporary a killed save of path left ("PATH.tmp"), unless a save holds it. */
+TN__SHARED void tn__io_remove_stale(const char *path)
+{
+    size_t n = strlen(path) + 5;
+    char *tmp = (char *)TN_MALLOC(n);
+    FILE *f;
+    if (!tmp) return;
+    snprintf(tmp, n, "%s.tmp", path);
+    if (tn__io_saving_enter(path)) {
+        if ((f = tn__io_claim(tmp)) != NULL) {
+            remove(tmp);
+            fclose(f);
+        }
+        tn__io_saving_leave(path);
+    }
+    TN_FREE(tmp);
 }
 
 /* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
@@ -8082,7 +8182,7 @@ static void tn__io_sync_dir(const char *path)
 #if defined(TN__IO_POSIX)
     const char *slash = strrchr(path, '/');
     char dir[1024];
-    int fd;
+    FILE *f;
     size_t dl = slash ? (size_t)(slash - path) : 0;
     if (dl >= sizeof dir) return;
     if (!slash) strcpy(dir, ".");
@@ -8091,72 +8191,81 @@ static void tn__io_sync_dir(const char *path)
         memcpy(dir, path, dl);
         dir[dl] = 0;
     }
-    if ((fd = open(dir, O_RDONLY)) < 0) return;
-    (void)fsync(fd);
-    close(fd);
+    if (!(f = fopen(dir, "rb"))) return; /* a directory opens read-only on POSIX systems */
+    (void)fsync(fileno(f));
+    fclose(f);
 #else
     (void)path;
 #endif
 }
 
-/* Writes buf to "<path>.tmp.<pid>.<n>", flushes it to disk and renames it over path; removes the
-   temporary on failure, and stale ones of earlier saves of path first. */
+/* Writes buf to path's temporary (above), flushes it to disk and renames it over path; removes
+   the temporary on failure. */
 static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
 {
     size_t cap = strlen(path) + 64;
     char *tmp = (char *)tn__alloc(cap);
-    unsigned long serial = ++tn__io_tmp_counter;
-    int ok;
-#if defined(TN__IO_POSIX)
-    int fd;
-    size_t off = 0;
-#else
-    FILE *f;
-#endif
+    int ok = 1, held, own = 0, attempt;
+    FILE *f = NULL, *check = NULL;
     if (!tmp) return tn__oom();
-    tn__io_remove_stale(path);
-    serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
-    snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+    held = tn__io_saving_enter(path);
+    for (attempt = held ? 0 : 1; attempt < 2; attempt++) {
+        if (attempt == 0) {
+            snprintf(tmp, cap, "%s.tmp", path);
+            if (!(f = tn__io_claim(tmp))) continue;
+        } else { /* another save of path runs: a name of this save's own */
+            unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
+            snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+            if (!(f = fopen(tmp, "wb"))) break;
+        }
+        ok = fwrite(buf, 1, n, f) == n;
+        ok = fflush(f) == 0 && ok;
 #if defined(TN__IO_POSIX)
-    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
-    if (fd < 0) {
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
-    }
-    ok = 1;
-    while (ok && off < n) {
-        ssize_t w = write(fd, buf + off, n - off < ((size_t)1 << 30) ? n - off : ((size_t)1 << 30));
-        if (w <= 0) ok = 0; /* a signal mid-write counts as a failure: the save is refused, not torn */
-        else off += (size_t)w;
-    }
-    ok = fsync(fd) == 0 && ok;
-    ok = close(fd) == 0 && ok;
-#else
-    f = fopen(tmp, "wb");
-    if (!f) {
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
-    }
-    ok = fwrite(buf, 1, n, f) == n;
-    ok = fflush(f) == 0 && ok;
-    ok = !ferror(f) && ok;
-    ok = fclose(f) == 0 && ok;
+        ok = fsync(fileno(f)) == 0 && ok; /* on disk before the rename */
 #endif
-    if (!ok) {
-        remove(tmp);
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
+        ok = !ferror(f) && ok;
+#if defined(TN__IO_LOCKF)
+        /* the name is still this save's file (locked by no other process): a save that took the
+           file for a leftover before this one locked it would hold the name now */
+        if (ok && attempt == 0 && (!(check = fopen(tmp, "rb")) || lockf(fileno(check), F_TEST, 0) != 0)) {
+            if (check) fclose(check);
+            check = NULL;
+            fclose(f);
+            f = NULL;
+            continue;
+        }
+#endif
+        own = 1;
+        break;
     }
-    if (rename(tmp, path) != 0) {
+    if (!own) {
+        if (held) tn__io_saving_leave(path);
+        TN_FREE(tmp);
+        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
+    }
+    if (ok && rename(tmp, path) != 0) {
 #ifdef _WIN32
-        if (remove(path) == 0 && rename(tmp, path) == 0) { TN_FREE(tmp); return TN_OK; } /* no replacing rename */
+        fclose(f), f = NULL; /* no rename over an open or existing file */
+        ok = remove(path) == 0 && rename(tmp, path) == 0;
+#else
+        ok = 0;
 #endif
-        remove(tmp);
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
-    }
-    tn__io_sync_dir(path);
+        if (!ok) {
+            remove(tmp);
+            if (check) fclose(check);
+            if (f) fclose(f);
+            if (held) tn__io_saving_leave(path);
+            TN_FREE(tmp);
+            return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
+        }
+    } else if (!ok)
+        remove(tmp); /* while still held */
+    if (check) fclose(check); /* after the rename: closing either drops the lock */
+    if (f && fclose(f) != 0) ok = 0;
+    if (held) tn__io_saving_leave(path);
     TN_FREE(tmp);
+    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
+    tn__io_sync_dir(path);
     return TN_OK;
 }
 
@@ -21405,6 +21514,11 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         nh++;
     }
     if (!done_all) sch[5 + sc] = (float)(tn_train_iteration(s.run) - (long)sch[1]);
+    else { /* the last scale ended before the budget: the run is done, say 100 % (issue 34) */
+        char stage[48];
+        snprintf(stage, sizeof stage, "singan-train scale %d/%d", sc + 1, s.A.scales);
+        (void)tn__progress(stage, 1.0);
+    }
     s.A.trained = sc + 1;
     tn__sg_write_config(&s.A, tn_params_find(s.g, "singan.config")->data);
     st = tn_train_finish(s.run);
@@ -26460,10 +26574,72 @@ done:
     return st;
 }
 
+/* A 5 x 7 pixel font for sheet captions: each glyph is 7 rows of 5 bits (bit 4 = left). */
+static const char tn__font_chars[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-/.:%";
+static const unsigned char tn__font_rows[][7] = {
+    {14, 17, 17, 31, 17, 17, 17}, {30, 17, 17, 30, 17, 17, 30}, {14, 17, 16, 16, 16, 17, 14}, {30, 17, 17, 17, 17, 17, 30},
+    {31, 16, 16, 30, 16, 16, 31}, {31, 16, 16, 30, 16, 16, 16}, {14, 17, 16, 23, 17, 17, 15}, {17, 17, 17, 31, 17, 17, 17},
+    {14, 4, 4, 4, 4, 4, 14},      {7, 2, 2, 2, 2, 18, 12},      {17, 18, 20, 24, 20, 18, 17}, {16, 16, 16, 16, 16, 16, 31},
+    {17, 27, 21, 21, 17, 17, 17}, {17, 17, 25, 21, 19, 17, 17}, {14, 17, 17, 17, 17, 17, 14}, {30, 17, 17, 30, 16, 16, 16},
+    {14, 17, 17, 17, 21, 18, 13}, {30, 17, 17, 30, 20, 18, 17}, {15, 16, 16, 14, 1, 1, 30},   {31, 4, 4, 4, 4, 4, 4},
+    {17, 17, 17, 17, 17, 17, 14}, {17, 17, 17, 17, 17, 10, 4},  {17, 17, 17, 21, 21, 21, 10}, {17, 17, 10, 4, 10, 17, 17},
+    {17, 17, 10, 4, 4, 4, 4},     {31, 1, 2, 4, 8, 16, 31},     {14, 17, 19, 21, 25, 17, 14}, {4, 12, 4, 4, 4, 4, 14},
+    {14, 17, 1, 2, 4, 8, 31},     {31, 2, 4, 2, 1, 17, 14},     {2, 6, 10, 18, 31, 2, 2},     {31, 16, 30, 1, 1, 17, 14},
+    {6, 8, 16, 30, 17, 17, 14},   {31, 1, 2, 4, 8, 8, 8},       {14, 17, 17, 14, 17, 17, 14}, {14, 17, 17, 15, 1, 2, 12},
+    {0, 0, 0, 31, 0, 0, 0},       {1, 1, 2, 4, 8, 16, 16},      {0, 0, 0, 0, 0, 12, 12},      {0, 12, 12, 0, 12, 12, 0},
+    {24, 25, 2, 4, 8, 19, 3}};
+
+/* Draws text in dark grey at (x0, y0), each font pixel scale x scale, clipped to img. */
+static void tn__draw_text(tn_image *img, int x0, int y0, int scale, const char *text)
+{
+    int k, r, b, u, v, c;
+    for (k = 0; text[k]; k++) {
+        int ch = text[k] >= 'a' && text[k] <= 'z' ? text[k] - 32 : text[k];
+        const char *at = ch ? strchr(tn__font_chars, ch) : NULL;
+        if (!at) continue; /* a blank */
+        for (r = 0; r < 7; r++)
+            for (b = 0; b < 5; b++)
+                if (tn__font_rows[at - tn__font_chars][r] & (16 >> b))
+                    for (v = 0; v < scale; v++)
+                        for (u = 0; u < scale; u++) {
+                            int x = x0 + (6 * k + b) * scale + u, y = y0 + r * scale + v;
+                            if (x >= 0 && y >= 0 && x < img->width && y < img->height)
+                                for (c = 0; c < img->channels; c++) TN_PIXEL(img, x, y, c) = 0.15f;
+                        }
+    }
+}
+
+TN_API char *tn_season_time_label(float time, char *buf, size_t size)
+{
+    static const char *const names[12] = {"JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC"};
+    static const int days[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+    double t = isfinite(time) ? fmod((double)time, 12.0) : 0.0, day;
+    int m = 0;
+    if (!buf || !size) return buf;
+    if (t < 0) t += 12.0;
+    if (fabs(t - floor(t + 0.5)) < 0.02) { /* a month's 15th: its name */
+        snprintf(buf, size, "%s", names[(int)floor(t + 0.5) % 12]);
+        return buf;
+    }
+    day = 15.0 + t * 365.0 / 12.0; /* days from the 1st of January */
+    while (day >= days[m]) {
+        day -= days[m];
+        m = (m + 1) % 12;
+    }
+    snprintf(buf, size, "%s %d", names[m], (int)day + 1);
+    return buf;
+}
+
 TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out)
 {
+    return tn_season_sheet_labelled(images, NULL, count, columns, cell, out);
+}
+
+TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
+                                          tn_image *out)
+{
     tn_image sheet = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
-    int i, rows, ch = 0, gap = 4, x, y, c;
+    int i, rows, ch = 0, gap = 4, x, y, c, scale = 2, top = 0;
     tn_status st = TN_OK;
     if (!images || !out || count < 1) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: no images");
     if (columns < 0 || cell < 0 || cell > 8192) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: bad columns %d or cell %d", columns, cell);
@@ -26477,12 +26653,16 @@ TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns,
         h = (int)((double)images[i].height * cell / images[i].width + 0.5);
         if (h < 1) h = 1;
         if (h > ch) ch = h;
+        if (labels && labels[i] && labels[i][0]) top = 7 * scale + 6; /* a caption strip over every image */
     }
+    if (cell < 96) scale = 1, top = top ? 7 + 4 : 0;
     rows = (count + columns - 1) / columns;
-    if ((st = tn_image_create(&sheet, columns * cell + (columns + 1) * gap, rows * ch + (rows + 1) * gap, 3))) return st;
+    if ((st = tn_image_create(&sheet, columns * cell + (columns + 1) * gap, rows * (ch + top) + (rows + 1) * gap, 3))) return st;
     for (i = 0; i < (int)((size_t)sheet.width * sheet.height * 3); i++) sheet.data[i] = 1.0f;
     for (i = 0; i < count; i++) {
-        int h = (int)((double)images[i].height * cell / images[i].width + 0.5), ox = gap + (i % columns) * (cell + gap), oy = gap + (i / columns) * (ch + gap);
+        int h = (int)((double)images[i].height * cell / images[i].width + 0.5), ox = gap + (i % columns) * (cell + gap),
+            oy = gap + (i / columns) * (ch + top + gap) + top;
+        if (labels && labels[i]) tn__draw_text(&sheet, ox, oy - top + (top - 7 * scale) / 2, scale, labels[i]);
         if (h < 1) h = 1;
         if ((st = tn_image_resize(&tmp, &images[i], cell, h, cell < images[i].width ? TN_RESIZE_AREA : TN_RESIZE_BILINEAR))) goto done;
         for (y = 0; y < h; y++)
@@ -27679,19 +27859,41 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
 
 /* --------------------------------------------------------------------------------------------
    >>render  (@@render implementation)
-   The preview multiplies a hypsometric colour ramp by a hillshade. The 3D view is the classic
+   The preview multiplies a hypsometric colour ramp by a hillshade. The ramp is a land ramp unless
+   the caller says where the sea is: a range mapped to [0, 1] cannot tell an inland valley floor
+   (the Rhine at 431 m on the Alps) from a coast (issue 34). The 3D view is the classic
    height-field ray caster: every screen column marches a ray away from the camera; a sample
    whose projected top lies above everything drawn so far in that column fills the gap. Columns
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_RENDER
 
-/* The zero rule of tn_render_opts: shade strength 0.7. lo == hi (the DEM's own range) is the
-   colour ramp's rule, and shade is resolved by tn_image_hillshade. */
+/* The zero rule of tn_render_opts: shade strength 0.7, land colours only. lo == hi (the DEM's
+   own range) is resolved in tn_render_preview, and shade by tn_image_hillshade. */
 static void tn__render_opts_defaults(tn_render_opts *o)
 {
     if (o->shade_strength == 0) o->shade_strength = 0.7f;
 }
+
+/* Colour of stop table s (rows t, r, g, b; t rising from 0 to 1) at t in [0, 1]. */
+static void tn__render_stops(const float (*s)[4], int n, float t, float *rgb)
+{
+    int i = 1, c;
+    float f;
+    if (!(t > 0.0f)) t = 0.0f;
+    if (t > 1.0f) t = 1.0f;
+    while (i < n - 1 && t > s[i][0]) i++;
+    f = (t - s[i - 1][0]) / (s[i][0] - s[i - 1][0]);
+    for (c = 0; c < 3; c++) rgb[c] = s[i - 1][c + 1] + f * (s[i][c + 1] - s[i - 1][c + 1]);
+}
+
+/* Land from the lowest to the highest height: green lowlands, tan and brown hills, grey rock,
+   snow; the sea from its deepest point to the shore: deep to shallow blue. */
+static const float tn__render_land[][4] = {{0.00f, 0.30f, 0.55f, 0.27f}, {0.25f, 0.56f, 0.68f, 0.36f},
+                                           {0.48f, 0.74f, 0.66f, 0.44f}, {0.66f, 0.55f, 0.42f, 0.30f},
+                                           {0.80f, 0.55f, 0.53f, 0.51f}, {0.91f, 0.85f, 0.85f, 0.86f},
+                                           {1.00f, 1.00f, 1.00f, 1.00f}};
+static const float tn__render_sea[][4] = {{0.00f, 0.10f, 0.22f, 0.45f}, {0.85f, 0.30f, 0.55f, 0.75f}, {1.00f, 0.45f, 0.66f, 0.80f}};
 
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
 {
@@ -27707,16 +27909,25 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
         return tn__fail(TN_ERR_INVALID_ARG, "render preview: shade_strength %g is not in 0..1", (double)o.shade_strength);
     tn__render_opts_defaults(&o);
     k = o.shade_strength;
-    if ((st = tn_image_colour_ramp(&ramp, dem, o.lo, o.hi))) return st;
+    if (!(o.lo == o.lo && o.hi == o.hi && (!o.sea || o.sea_level == o.sea_level)))
+        return tn__fail(TN_ERR_INVALID_ARG, "render preview: lo, hi or sea_level is NaN");
+    if (o.lo == o.hi && tn_image_range(dem, &o.lo, &o.hi)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
+    if ((st = tn_image_create(&ramp, dem->width, dem->height, 3))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);
         return st;
     }
     n = (size_t)dem->width * dem->height;
     for (i = 0; i < n; i++) {
-        float f = (1.0f - k) + k * 1.25f * shade.data[i];
+        float f = (1.0f - k) + k * 1.25f * shade.data[i], h = dem->data[i * dem->channels], rgb[3];
         int c;
-        for (c = 0; c < 3; c++) ramp.data[i * 3 + c] = tn__clampf(ramp.data[i * 3 + c] * f, 0.0f, 1.0f);
+        if (o.sea && h < o.sea_level) /* depth below the shore, down to the lowest point */
+            tn__render_stops(tn__render_sea, 3, o.sea_level > o.lo ? (h - o.lo) / (o.sea_level - o.lo) : 1.0f, rgb);
+        else {
+            float base = o.sea && o.sea_level > o.lo ? o.sea_level : o.lo;
+            tn__render_stops(tn__render_land, 7, o.hi > base ? (h - base) / (o.hi - base) : 0.0f, rgb);
+        }
+        for (c = 0; c < 3; c++) ramp.data[i * 3 + c] = tn__clampf(rgb[c] * f, 0.0f, 1.0f);
     }
     tn_image_free(&shade);
     *out = ramp;
@@ -27799,7 +28010,8 @@ static void tn__view_columns(void *ctx, size_t b, size_t e)
 
 /* The zero rules of tn_view_opts: 960 x 540 when either side is 0; seen from the south (180),
    30 degrees down, from 1.1 DEM widths, 60 degree field of view, relief 0.2 (the last three
-   also replace negative values). colours is resolved by tn_render_preview. */
+   also replace negative values), exaggeration 2 (the relief when spacing is given).
+   colours is resolved by tn_render_preview. */
 static void tn__view_opts_defaults(tn_view_opts *o)
 {
     if (o->width == 0 || o->height == 0) {
@@ -27811,6 +28023,7 @@ static void tn__view_opts_defaults(tn_view_opts *o)
     if (o->distance <= 0) o->distance = 1.1f;
     if (o->fov_deg <= 0) o->fov_deg = 60.0f;
     if (o->relief <= 0) o->relief = 0.2f;
+    if (o->exaggeration <= 0) o->exaggeration = 2.0f;
 }
 
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out)
@@ -27824,9 +28037,10 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     if (o.width < 0 || o.height < 0 || !(fabsf(o.azimuth_deg) <= 1e6f) || !(fabsf(o.pitch_deg) < 89.0f) ||
-        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f))
-        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
-                        o.width, o.height);
+        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f) ||
+        !(o.spacing == 0 || (o.spacing >= 1e-6f && o.spacing <= 1e9f)) || !(fabsf(o.exaggeration) <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170, "
+                        "spacing 0 or 1e-6..1e9)", o.width, o.height);
     tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
@@ -27838,7 +28052,8 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     }
     size = (float)(dem->width > dem->height ? dem->width : dem->height);
     dist = o.distance * size;
-    zmax = o.relief * size;
+    /* with the pixel size known, the relief is the true one times the exaggeration */
+    zmax = o.spacing > 0 ? o.exaggeration * (hi - lo) / o.spacing : o.relief * size;
     j.dem = dem;
     j.colour = &colour;
     j.out = &img;

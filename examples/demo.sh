@@ -5,6 +5,7 @@
 #   sh examples/demo.sh                 minutes on 2 cores (GNN, SinGAN, texture GAN: DEMO_MINUTES=2 each)
 #   DEMO_FAST=1 sh examples/demo.sh     seconds-long budgets, for tests (pictures are rough)
 #   DEMO_DIR=out DEM=my.png DEM_SPACING="30 30" sh examples/demo.sh   another place, another example
+#   KPD=slo.tnw sh examples/demo.sh    adds the seasons of a KPD network from season-train
 #
 # The page is data-driven: STEPS below lists one picture per line (`name  title`), and each name
 # has a function step_<name> that runs its commands through `run` and names its picture in PIC
@@ -16,6 +17,8 @@ OUT=${DEMO_DIR:-demo}
 DATA=examples/data
 DEM=${DEM:-$DATA/alps_n47e009_256.png}
 DEM_SPACING=${DEM_SPACING:-62.6 92.6}   # metres per pixel east-west, north-south (examples/data/README.md)
+DEM_LAT=${DEM_LAT:-47.1}                # latitude of the example, for the sun
+DEM_KOPPEN=${DEM_KOPPEN:-Dfb}           # its climate (Köppen): Vorarlberg's valleys Cfb, the heights Dfb
 TEXTURE=${TEXTURE:-$DATA/grass_128.png}
 DEM_ABOUT=${DEM_ABOUT:-'256 x 256 samples of the SRTM 3" tile N47E009 (NASA/USGS, public domain): Liechtenstein and
 Vorarlberg, the Rhine valley and the northern Rätikon, 431-2908 m, 62.6 x 92.6 m per pixel.'}
@@ -40,7 +43,11 @@ texture  Texture GAN: grass learnt from one photo over the example; left tiled, 
 splat    Splat map: vegetation, bare ground, rock, snow weights
 view3d   3D preview of the example
 glb      Engine exports: glTF 2.0 mesh (splat colours draped), Unity RAW, normal map (shown)
+sun      Insolation: direct sun per month with terrain shadows (paper 003), one scale for the year
+seasons  Seasons: the example through the year, textured by the procedural model for its climate
 '
+[ -z "${KPD:-}" ] || STEPS="${STEPS}kpd      Seasons by the KPD network ($(basename "$KPD")), learnt from dated pictures
+"
 # ---- steps: each runs its commands with `run` and sets PIC (and LINK) ------------------------
 
 step_example() {
@@ -92,6 +99,18 @@ step_glb() { # drapes the splat step's colours
     run $T export "$DEM" --to normal -o "$OUT/normal.png" --spacing $DEM_SPACING
     PIC=normal.png; LINK=terrain.glb
 }
+step_sun() {
+    run $T insolation "$DEM" --spacing $DEM_SPACING --lat $DEM_LAT -o "$OUT/sun"
+    PIC=sun_sheet.png; LINK=sun_07.pfm
+}
+step_seasons() { # reads the sun step's insolation
+    run $T season "$DEM" --spacing $DEM_SPACING --lat $DEM_LAT --koppen $DEM_KOPPEN --insolation "$OUT/sun" -o "$OUT/season" --columns 4
+    PIC=season_sheet.png; LINK=season_07.png
+}
+step_kpd() {
+    run $T season "$DEM" --spacing $DEM_SPACING --lat $DEM_LAT --koppen $DEM_KOPPEN --model "$KPD" -o "$OUT/kpd" --columns 4
+    PIC=kpd_sheet.png
+}
 
 # ---- machinery: run the steps, collect commands, write the page ------------------------------
 
@@ -138,9 +157,10 @@ pre { white-space: pre-wrap; word-break: break-all; font-size: 11px; background:
 </style></head>
 <body>
 <header><h1>terrainnet: learning from one example</h1>
+<p><b>$(grep -c '<figure' "$OUT/figures.html") pictures in $((t1 - t0)) s</b> ($(($((t1 - t0)) / 60)) min $(($((t1 - t0)) % 60)) s) on this machine,
+each step's seconds under its picture$([ -n "${DEMO_FAST:-}" ] && echo ', in the fast mode (seconds-long budgets: rough pictures)').</p>
 <p>The example is <code>$(basename "$DEM")</code>: $DEM_ABOUT The texture exemplar is <code>$(basename "$TEXTURE")</code>:
-$TEXTURE_ABOUT (Sources: examples/data/README.md.) Each picture shows the commands that made it (click it for the full-size file or the download); all ran
-in $((t1 - t0)) s on this machine$([ -n "${DEMO_FAST:-}" ] && echo ' in the fast mode (seconds-long budgets: rough pictures)').</p></header>
+$TEXTURE_ABOUT (Sources: examples/data/README.md.) Each picture shows the commands that made it (click it for the full-size file or the download).</p></header>
 <main>
 $(cat "$OUT/figures.html")
 </main>

@@ -66,7 +66,8 @@ typedef struct tn_image_info {
     int interlaced;          /* PNG Adam7 */
     int has_range;           /* 1 if the file gives a height mapping; pixels were converted with it */
     double range_lo, range_hi; /* code 0 -> range_lo, max code -> range_hi */
-    double cellsize;         /* .asc cell size; a GeoTIFF's square pixel size in CRS units (0 if unknown) */
+    double cellsize;         /* .asc cell size; a GeoTIFF's square pixel size in CRS units; an SRTM .hgt's
+                                mean spacing in metres at its name's latitude (0 if unknown) */
     double x_origin, y_origin; /* .asc / GeoTIFF lower-left corner */
     size_t voids_filled;     /* .hgt / .asc / TIFF cells that were void/NODATA and were filled */
     int has_nodata;          /* the file named a NODATA value (.asc NODATA_value, TIFF GDAL_NODATA) */

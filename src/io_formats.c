@@ -1,7 +1,7 @@
 /* --------------------------------------------------------------------------------------------
    >>formats  (part of @@io implementation; goes after >>png, whose tn__png_decode/encode it calls)
    Everything in @@io but the PNG codec: format detection (magic bytes, then extension), reading
-   a whole file with one fread, saving through "<path>.tmp.<pid>.<n>" + rename() so a failed save
+   a whole file with one fread, saving through "<path>.tmp" + rename() so a failed save
    never clobbers the old file, the integer-format value mapping shared with PNG, and the codecs
    for PGM/PPM (P2 P3 P5 P6), PFM, SRTM .hgt, ESRI ASCII grid .asc and headerless .r16.
    Every parser works on one memory buffer with explicit bounds: sizes go through tn__size4
@@ -555,6 +555,20 @@ static tn_status tn__pfm_encode(const tn_image *img, uint8_t **out, size_t *out_
 
 /* ---- SRTM .hgt ---- */
 
+/* The pixel size in metres of an SRTM tile (1" or 3" of arc): the mean of its north-south and
+   east-west spacing at the latitude its name gives ("N47E009.hgt": 47.5 degrees; else 0). */
+static double tn__hgt_spacing(const char *name, size_t side)
+{
+    const char *base = name, *q;
+    double ns = (side == 3601 ? 1.0 : 3.0) * 30.87, lat = 0;
+    for (q = name; *q; q++)
+        if (*q == '/' || *q == '\\') base = q + 1;
+    if ((base[0] == 'N' || base[0] == 'S' || base[0] == 'n' || base[0] == 's') && base[1] >= '0' && base[1] <= '9' && base[2] >= '0' &&
+        base[2] <= '9')
+        lat = (base[1] - '0') * 10 + (base[2] - '0') + ((base[0] == 'S' || base[0] == 's') ? -0.5 : 0.5);
+    return 0.5 * (ns + ns * cos(lat * 0.017453292519943295));
+}
+
 static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn_image *img, tn_image_info *info)
 {
     size_t side, count, k, nvoid = 0;
@@ -581,6 +595,7 @@ static tn_status tn__hgt_decode(const uint8_t *p, size_t n, const char *name, tn
     if (st) { tn_image_free(img); return st; }
     info->bit_depth = 16;
     info->file_channels = 1;
+    info->cellsize = tn__hgt_spacing(name, side);
     return TN_OK;
 }
 
@@ -2061,14 +2076,20 @@ TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char 
     return TN_OK;
 }
 
+#include <errno.h> /* ENOENT: "no such file" */
+
 /* Reads a whole file with one fread. *out is TN_MALLOC'd. */
 static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
 {
-    FILE *f = fopen(path, "rb");
+    FILE *f;
     long end = -1;
     size_t n, got;
     uint8_t *buf;
-    if (!f) return tn__fail(TN_ERR_IO, "%s: cannot open for reading", path);
+    errno = 0;
+    if (!(f = fopen(path, "rb"))) {
+        if (errno == ENOENT) return tn__fail(TN_ERR_IO, "%s: no such file", path);
+        return tn__fail(TN_ERR_IO, "%s: cannot open for reading%s%s", path, errno ? ": " : "", errno ? strerror(errno) : "");
+    }
     if (fseek(f, 0, SEEK_END) != 0 || (end = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) {
         fclose(f);
         return tn__fail(TN_ERR_IO, "%s: cannot determine the file size", path);
@@ -2191,55 +2212,118 @@ static unsigned long tn__io_process_id(void)
 
 static unsigned long tn__io_tmp_counter;
 
-/* POSIX: saves go through open/write/fsync so the data is on disk before the rename, and the
-   directory is synced after it; stale temporaries are found with opendir. Elsewhere stdio. */
+/* Atomic saves, with <stdio.h> and <unistd.h> only. A save of PATH writes "PATH.tmp", flushes it
+   to disk (fsync where POSIX has it) and renames it over PATH, so a failed or killed save never
+   leaves PATH torn. The temporary's name is the same for every save of PATH, so a killed save
+   leaves at most one and the next save replaces it (issue 33 found 20-126 MB leftovers with
+   per-process names, there for good). A save holds its temporary: in this process through the
+   list of targets being saved, across processes through a lockf lock, which the system drops
+   with a killed process. A save that finds the temporary held writes "PATH.tmp.PID.N" instead;
+   only a kill during such an overlap leaves one of those. */
 #if defined(_POSIX_VERSION) && !defined(_WIN32)
-#include <fcntl.h>
-#include <dirent.h>
-#include <sys/stat.h>
 #define TN__IO_POSIX 1
+#if !defined(__cplusplus) && !defined(fileno)
+int fileno(FILE *stream); /* POSIX <stdio.h>; a strict -std=c99 hides it */
+#endif
+#if !defined(F_TLOCK) && !defined(__cplusplus)
+#include <sys/types.h>
+int lockf(int fd, int cmd, off_t len); /* POSIX (XSI) <unistd.h>; a strict -std=c99 hides it */
+#define F_TLOCK 2                      /* the values of every POSIX system */
+#define F_TEST 3
+#endif
+#if defined(F_TLOCK)
+#define TN__IO_LOCKF 1
+#endif
 #endif
 
-/* Removes the "<path>.tmp.<pid>.<n>" files a killed save left next to path (issue 33: 20-126 MB
-   each, there for good): another process's, untouched for 2 minutes, whose process is gone
-   (where /proc tells; elsewhere untouched for an hour). Best effort, silent. */
-static void tn__io_remove_stale(const char *path)
-{
-#if defined(TN__IO_POSIX)
-    const char *slash = strrchr(path, '/'), *base = slash ? slash + 1 : path;
-    size_t dl = slash ? (size_t)(slash - path) : 0, bl = strlen(base);
-    char dir[1024], full[1400], proc[48];
-    DIR *d;
-    struct dirent *e;
-    struct stat sb;
-    int have_proc = stat("/proc/self", &sb) == 0;
-    unsigned long me = tn__io_process_id();
-    if (dl >= sizeof dir || bl == 0 || bl > 255) return;
-    if (!slash) strcpy(dir, ".");
-    else if (dl == 0) strcpy(dir, "/");
-    else {
-        memcpy(dir, path, dl);
-        dir[dl] = 0;
-    }
-    if (!(d = opendir(dir))) return;
-    while ((e = readdir(d)) != NULL) {
-        const char *nm = e->d_name, *q;
-        unsigned long pid = 0;
-        if (strncmp(nm, base, bl) != 0 || strncmp(nm + bl, ".tmp.", 5) != 0) continue;
-        for (q = nm + bl + 5; *q >= '0' && *q <= '9'; q++) pid = pid * 10 + (unsigned long)(*q - '0');
-        if (q == nm + bl + 5 || *q != '.' || pid == me) continue;
-        for (q++; *q >= '0' && *q <= '9'; q++) {}
-        if (*q || q[-1] == '.') continue;
-        snprintf(full, sizeof full, "%s/%s", dir, nm);
-        if (stat(full, &sb) != 0 || difftime(time(NULL), sb.st_mtime) < (have_proc ? 120.0 : 3600.0)) continue;
-        snprintf(proc, sizeof proc, "/proc/%lu", pid);
-        if (have_proc && stat(proc, &sb) == 0) continue; /* its process still runs */
-        remove(full);
-    }
-    closedir(d);
+/* The targets this process is saving (64-bit name hashes; a collision only costs a fallback
+   name). Threads saving one target must not share its temporary: lockf locks are per process. */
+#define TN__IO_SAVING 64
+static uint64_t tn__io_saving[TN__IO_SAVING];
+#if !defined(TN_NO_THREADS)
+static pthread_mutex_t tn__io_saving_mutex = PTHREAD_MUTEX_INITIALIZER;
+#define TN__IO_SAVING_LOCK() pthread_mutex_lock(&tn__io_saving_mutex)
+#define TN__IO_SAVING_UNLOCK() pthread_mutex_unlock(&tn__io_saving_mutex)
 #else
-    (void)path;
+#define TN__IO_SAVING_LOCK() (void)0
+#define TN__IO_SAVING_UNLOCK() (void)0
 #endif
+
+static uint64_t tn__io_name_hash(const char *path)
+{
+    uint64_t h = 1469598103934665603ull;
+    for (; *path; path++) h = (h ^ (unsigned char)*path) * 1099511628211ull;
+    return h ? h : 1;
+}
+
+/* Marks path as being saved here; 0 when it already is (or 64 saves run at once). */
+static int tn__io_saving_enter(const char *path)
+{
+    uint64_t h = tn__io_name_hash(path);
+    int i, free_slot = -1;
+    TN__IO_SAVING_LOCK();
+    for (i = 0; i < TN__IO_SAVING; i++) {
+        if (tn__io_saving[i] == h) free_slot = -2;
+        if (!tn__io_saving[i] && free_slot == -1) free_slot = i;
+    }
+    if (free_slot >= 0) tn__io_saving[free_slot] = h;
+    TN__IO_SAVING_UNLOCK();
+    return free_slot >= 0;
+}
+
+static void tn__io_saving_leave(const char *path)
+{
+    uint64_t h = tn__io_name_hash(path);
+    int i;
+    TN__IO_SAVING_LOCK();
+    for (i = 0; i < TN__IO_SAVING; i++)
+        if (tn__io_saving[i] == h) {
+            tn__io_saving[i] = 0;
+            break;
+        }
+    TN__IO_SAVING_UNLOCK();
+}
+
+/* Opens tmp, the temporary of a target this process holds (tn__io_saving_enter), for writing,
+   and locks it; a leftover of a killed save (unlocked) is replaced. NULL: another process's
+   save holds it. */
+static FILE *tn__io_claim(const char *tmp)
+{
+#if defined(TN__IO_LOCKF)
+    FILE *f = fopen(tmp, "r+b");
+    if (f) {
+        int leftover = lockf(fileno(f), F_TLOCK, 0) == 0;
+        if (leftover) remove(tmp);
+        fclose(f);
+        if (!leftover) return NULL;
+    }
+    if (!(f = fopen(tmp, "wbx"))) return NULL; /* created by another save in between */
+    if (lockf(fileno(f), F_TLOCK, 0) != 0) {   /* taken by a save that thought it a leftover */
+        fclose(f);
+        return NULL;
+    }
+    return f;
+#else
+    return fopen(tmp, "wb");
+#endif
+}
+
+/* Removes the temporary a killed save of path left ("PATH.tmp"), unless a save holds it. */
+TN__SHARED void tn__io_remove_stale(const char *path)
+{
+    size_t n = strlen(path) + 5;
+    char *tmp = (char *)TN_MALLOC(n);
+    FILE *f;
+    if (!tmp) return;
+    snprintf(tmp, n, "%s.tmp", path);
+    if (tn__io_saving_enter(path)) {
+        if ((f = tn__io_claim(tmp)) != NULL) {
+            remove(tmp);
+            fclose(f);
+        }
+        tn__io_saving_leave(path);
+    }
+    TN_FREE(tmp);
 }
 
 /* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
@@ -2248,7 +2332,7 @@ static void tn__io_sync_dir(const char *path)
 #if defined(TN__IO_POSIX)
     const char *slash = strrchr(path, '/');
     char dir[1024];
-    int fd;
+    FILE *f;
     size_t dl = slash ? (size_t)(slash - path) : 0;
     if (dl >= sizeof dir) return;
     if (!slash) strcpy(dir, ".");
@@ -2257,72 +2341,81 @@ static void tn__io_sync_dir(const char *path)
         memcpy(dir, path, dl);
         dir[dl] = 0;
     }
-    if ((fd = open(dir, O_RDONLY)) < 0) return;
-    (void)fsync(fd);
-    close(fd);
+    if (!(f = fopen(dir, "rb"))) return; /* a directory opens read-only on POSIX systems */
+    (void)fsync(fileno(f));
+    fclose(f);
 #else
     (void)path;
 #endif
 }
 
-/* Writes buf to "<path>.tmp.<pid>.<n>", flushes it to disk and renames it over path; removes the
-   temporary on failure, and stale ones of earlier saves of path first. */
+/* Writes buf to path's temporary (above), flushes it to disk and renames it over path; removes
+   the temporary on failure. */
 static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
 {
     size_t cap = strlen(path) + 64;
     char *tmp = (char *)tn__alloc(cap);
-    unsigned long serial = ++tn__io_tmp_counter;
-    int ok;
-#if defined(TN__IO_POSIX)
-    int fd;
-    size_t off = 0;
-#else
-    FILE *f;
-#endif
+    int ok = 1, held, own = 0, attempt;
+    FILE *f = NULL, *check = NULL;
     if (!tmp) return tn__oom();
-    tn__io_remove_stale(path);
-    serial ^= (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
-    snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+    held = tn__io_saving_enter(path);
+    for (attempt = held ? 0 : 1; attempt < 2; attempt++) {
+        if (attempt == 0) {
+            snprintf(tmp, cap, "%s.tmp", path);
+            if (!(f = tn__io_claim(tmp))) continue;
+        } else { /* another save of path runs: a name of this save's own */
+            unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
+            snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+            if (!(f = fopen(tmp, "wb"))) break;
+        }
+        ok = fwrite(buf, 1, n, f) == n;
+        ok = fflush(f) == 0 && ok;
 #if defined(TN__IO_POSIX)
-    fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
-    if (fd < 0) {
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
-    }
-    ok = 1;
-    while (ok && off < n) {
-        ssize_t w = write(fd, buf + off, n - off < ((size_t)1 << 30) ? n - off : ((size_t)1 << 30));
-        if (w <= 0) ok = 0; /* a signal mid-write counts as a failure: the save is refused, not torn */
-        else off += (size_t)w;
-    }
-    ok = fsync(fd) == 0 && ok;
-    ok = close(fd) == 0 && ok;
-#else
-    f = fopen(tmp, "wb");
-    if (!f) {
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
-    }
-    ok = fwrite(buf, 1, n, f) == n;
-    ok = fflush(f) == 0 && ok;
-    ok = !ferror(f) && ok;
-    ok = fclose(f) == 0 && ok;
+        ok = fsync(fileno(f)) == 0 && ok; /* on disk before the rename */
 #endif
-    if (!ok) {
-        remove(tmp);
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
+        ok = !ferror(f) && ok;
+#if defined(TN__IO_LOCKF)
+        /* the name is still this save's file (locked by no other process): a save that took the
+           file for a leftover before this one locked it would hold the name now */
+        if (ok && attempt == 0 && (!(check = fopen(tmp, "rb")) || lockf(fileno(check), F_TEST, 0) != 0)) {
+            if (check) fclose(check);
+            check = NULL;
+            fclose(f);
+            f = NULL;
+            continue;
+        }
+#endif
+        own = 1;
+        break;
     }
-    if (rename(tmp, path) != 0) {
+    if (!own) {
+        if (held) tn__io_saving_leave(path);
+        TN_FREE(tmp);
+        return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
+    }
+    if (ok && rename(tmp, path) != 0) {
 #ifdef _WIN32
-        if (remove(path) == 0 && rename(tmp, path) == 0) { TN_FREE(tmp); return TN_OK; } /* no replacing rename */
+        fclose(f), f = NULL; /* no rename over an open or existing file */
+        ok = remove(path) == 0 && rename(tmp, path) == 0;
+#else
+        ok = 0;
 #endif
-        remove(tmp);
-        TN_FREE(tmp);
-        return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
-    }
-    tn__io_sync_dir(path);
+        if (!ok) {
+            remove(tmp);
+            if (check) fclose(check);
+            if (f) fclose(f);
+            if (held) tn__io_saving_leave(path);
+            TN_FREE(tmp);
+            return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
+        }
+    } else if (!ok)
+        remove(tmp); /* while still held */
+    if (check) fclose(check); /* after the rename: closing either drops the lock */
+    if (f && fclose(f) != 0) ok = 0;
+    if (held) tn__io_saving_leave(path);
     TN_FREE(tmp);
+    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
+    tn__io_sync_dir(path);
     return TN_OK;
 }
 

@@ -7,10 +7,14 @@ typedef struct tn_render_opts {
     float lo, hi;              /* height range for the colour ramp; lo == hi: the DEM's own range */
     tn_hillshade_opts shade;   /* light and spacing (zero = defaults) */
     float shade_strength;      /* 0..1 how much the hillshade darkens the colours; 0 = default 0.7; else TN_ERR_INVALID_ARG */
+    int sea;                   /* 0: land colours only (heights that say nothing of the sea: a valley
+                                  floor stays green); 1: water below sea_level, land above it */
+    float sea_level;           /* with sea = 1: the shore's height in the DEM's units (0 on a DEM in metres) */
 } tn_render_opts;
 
-/* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used).
-   opts may be NULL. Caller frees *out. */
+/* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used):
+   green lowlands, tan and brown hills, grey rock, snow over [lo, hi], and with opts->sea blues
+   below the sea level. opts may be NULL. Caller frees *out. */
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out);
 
 typedef struct tn_view_opts {
@@ -19,7 +23,11 @@ typedef struct tn_view_opts {
     float pitch_deg;           /* downward look angle; 0 = default 30 */
     float distance;            /* camera distance in DEM widths from the centre; 0 = default 1.1 */
     float fov_deg;             /* horizontal field of view; 0 = default 60 */
-    float relief;              /* height of the full DEM range as a fraction of the DEM width; 0 = 0.2 */
+    float relief;              /* height of the full DEM range as a fraction of the DEM width; 0 = 0.2,
+                                  or from spacing and exaggeration when spacing > 0 */
+    float spacing;             /* metres per pixel of a DEM in metres (e.g. an .hgt: tn_image_info.cellsize);
+                                  0 = unknown: relief applies */
+    float exaggeration;        /* with spacing: vertical exaggeration of the true relief; 0 = 2 */
     tn_render_opts colours;    /* colouring of the surface */
 } tn_view_opts;
 
@@ -30,19 +38,41 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
 
 /* --------------------------------------------------------------------------------------------
    >>render  (@@render implementation)
-   The preview multiplies a hypsometric colour ramp by a hillshade. The 3D view is the classic
+   The preview multiplies a hypsometric colour ramp by a hillshade. The ramp is a land ramp unless
+   the caller says where the sea is: a range mapped to [0, 1] cannot tell an inland valley floor
+   (the Rhine at 431 m on the Alps) from a coast (issue 34). The 3D view is the classic
    height-field ray caster: every screen column marches a ray away from the camera; a sample
    whose projected top lies above everything drawn so far in that column fills the gap. Columns
    are independent, so they run in parallel and the image does not depend on the thread count.
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_RENDER
 
-/* The zero rule of tn_render_opts: shade strength 0.7. lo == hi (the DEM's own range) is the
-   colour ramp's rule, and shade is resolved by tn_image_hillshade. */
+/* The zero rule of tn_render_opts: shade strength 0.7, land colours only. lo == hi (the DEM's
+   own range) is resolved in tn_render_preview, and shade by tn_image_hillshade. */
 static void tn__render_opts_defaults(tn_render_opts *o)
 {
     if (o->shade_strength == 0) o->shade_strength = 0.7f;
 }
+
+/* Colour of stop table s (rows t, r, g, b; t rising from 0 to 1) at t in [0, 1]. */
+static void tn__render_stops(const float (*s)[4], int n, float t, float *rgb)
+{
+    int i = 1, c;
+    float f;
+    if (!(t > 0.0f)) t = 0.0f;
+    if (t > 1.0f) t = 1.0f;
+    while (i < n - 1 && t > s[i][0]) i++;
+    f = (t - s[i - 1][0]) / (s[i][0] - s[i - 1][0]);
+    for (c = 0; c < 3; c++) rgb[c] = s[i - 1][c + 1] + f * (s[i][c + 1] - s[i - 1][c + 1]);
+}
+
+/* Land from the lowest to the highest height: green lowlands, tan and brown hills, grey rock,
+   snow; the sea from its deepest point to the shore: deep to shallow blue. */
+static const float tn__render_land[][4] = {{0.00f, 0.30f, 0.55f, 0.27f}, {0.25f, 0.56f, 0.68f, 0.36f},
+                                           {0.48f, 0.74f, 0.66f, 0.44f}, {0.66f, 0.55f, 0.42f, 0.30f},
+                                           {0.80f, 0.55f, 0.53f, 0.51f}, {0.91f, 0.85f, 0.85f, 0.86f},
+                                           {1.00f, 1.00f, 1.00f, 1.00f}};
+static const float tn__render_sea[][4] = {{0.00f, 0.10f, 0.22f, 0.45f}, {0.85f, 0.30f, 0.55f, 0.75f}, {1.00f, 0.45f, 0.66f, 0.80f}};
 
 TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
 {
@@ -58,16 +88,25 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
         return tn__fail(TN_ERR_INVALID_ARG, "render preview: shade_strength %g is not in 0..1", (double)o.shade_strength);
     tn__render_opts_defaults(&o);
     k = o.shade_strength;
-    if ((st = tn_image_colour_ramp(&ramp, dem, o.lo, o.hi))) return st;
+    if (!(o.lo == o.lo && o.hi == o.hi && (!o.sea || o.sea_level == o.sea_level)))
+        return tn__fail(TN_ERR_INVALID_ARG, "render preview: lo, hi or sea_level is NaN");
+    if (o.lo == o.hi && tn_image_range(dem, &o.lo, &o.hi)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
+    if ((st = tn_image_create(&ramp, dem->width, dem->height, 3))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);
         return st;
     }
     n = (size_t)dem->width * dem->height;
     for (i = 0; i < n; i++) {
-        float f = (1.0f - k) + k * 1.25f * shade.data[i];
+        float f = (1.0f - k) + k * 1.25f * shade.data[i], h = dem->data[i * dem->channels], rgb[3];
         int c;
-        for (c = 0; c < 3; c++) ramp.data[i * 3 + c] = tn__clampf(ramp.data[i * 3 + c] * f, 0.0f, 1.0f);
+        if (o.sea && h < o.sea_level) /* depth below the shore, down to the lowest point */
+            tn__render_stops(tn__render_sea, 3, o.sea_level > o.lo ? (h - o.lo) / (o.sea_level - o.lo) : 1.0f, rgb);
+        else {
+            float base = o.sea && o.sea_level > o.lo ? o.sea_level : o.lo;
+            tn__render_stops(tn__render_land, 7, o.hi > base ? (h - base) / (o.hi - base) : 0.0f, rgb);
+        }
+        for (c = 0; c < 3; c++) ramp.data[i * 3 + c] = tn__clampf(rgb[c] * f, 0.0f, 1.0f);
     }
     tn_image_free(&shade);
     *out = ramp;
@@ -150,7 +189,8 @@ static void tn__view_columns(void *ctx, size_t b, size_t e)
 
 /* The zero rules of tn_view_opts: 960 x 540 when either side is 0; seen from the south (180),
    30 degrees down, from 1.1 DEM widths, 60 degree field of view, relief 0.2 (the last three
-   also replace negative values). colours is resolved by tn_render_preview. */
+   also replace negative values), exaggeration 2 (the relief when spacing is given).
+   colours is resolved by tn_render_preview. */
 static void tn__view_opts_defaults(tn_view_opts *o)
 {
     if (o->width == 0 || o->height == 0) {
@@ -162,6 +202,7 @@ static void tn__view_opts_defaults(tn_view_opts *o)
     if (o->distance <= 0) o->distance = 1.1f;
     if (o->fov_deg <= 0) o->fov_deg = 60.0f;
     if (o->relief <= 0) o->relief = 0.2f;
+    if (o->exaggeration <= 0) o->exaggeration = 2.0f;
 }
 
 TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out)
@@ -175,9 +216,10 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     if (o.width < 0 || o.height < 0 || !(fabsf(o.azimuth_deg) <= 1e6f) || !(fabsf(o.pitch_deg) < 89.0f) ||
-        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f))
-        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170)",
-                        o.width, o.height);
+        !(fabsf(o.distance) <= 1e6f) || !(o.fov_deg <= 170.0f && o.fov_deg >= -1e6f) || !(fabsf(o.relief) <= 1e6f) ||
+        !(o.spacing == 0 || (o.spacing >= 1e-6f && o.spacing <= 1e9f)) || !(fabsf(o.exaggeration) <= 1e6f))
+        return tn__fail(TN_ERR_INVALID_ARG, "render view: bad options (size %d x %d, angles and distances finite, |pitch| < 89, fov <= 170, "
+                        "spacing 0 or 1e-6..1e9)", o.width, o.height);
     tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
@@ -189,7 +231,8 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     }
     size = (float)(dem->width > dem->height ? dem->width : dem->height);
     dist = o.distance * size;
-    zmax = o.relief * size;
+    /* with the pixel size known, the relief is the true one times the exaggeration */
+    zmax = o.spacing > 0 ? o.exaggeration * (hi - lo) / o.spacing : o.relief * size;
     j.dem = dem;
     j.colour = &colour;
     j.out = &img;

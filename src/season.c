@@ -112,6 +112,13 @@ TN_API void tn_season_state_free(tn_season_state *s);
 /* A preview sheet: the images side by side in `columns` columns (0 = 4), each scaled to
    `cell` pixels wide (0 = 256), 4 px gaps. *out allocated here. */
 TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out);
+/* The same with a caption over each image: labels[i] (NULL or labels NULL: none), in capitals,
+   digits and - / . : % (other characters show as blanks), e.g. tn_season_time_label's. */
+TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
+                                          tn_image *out);
+/* "JAN", or "MAR 30" for a time between months: time in months from mid-January (as
+   tn_season_texture takes them). Writes at most size bytes to buf; returns buf. */
+TN_API char *tn_season_time_label(float time, char *buf, size_t size);
 
 /* KPD generator (paper 003, 3.1-3.2): a SPADE-style network whose denormalisation blocks take
    the heightfield (height and its gradient) plus the year of climate rotated so the target month
@@ -1066,10 +1073,72 @@ done:
     return st;
 }
 
+/* A 5 x 7 pixel font for sheet captions: each glyph is 7 rows of 5 bits (bit 4 = left). */
+static const char tn__font_chars[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789-/.:%";
+static const unsigned char tn__font_rows[][7] = {
+    {14, 17, 17, 31, 17, 17, 17}, {30, 17, 17, 30, 17, 17, 30}, {14, 17, 16, 16, 16, 17, 14}, {30, 17, 17, 17, 17, 17, 30},
+    {31, 16, 16, 30, 16, 16, 31}, {31, 16, 16, 30, 16, 16, 16}, {14, 17, 16, 23, 17, 17, 15}, {17, 17, 17, 31, 17, 17, 17},
+    {14, 4, 4, 4, 4, 4, 14},      {7, 2, 2, 2, 2, 18, 12},      {17, 18, 20, 24, 20, 18, 17}, {16, 16, 16, 16, 16, 16, 31},
+    {17, 27, 21, 21, 17, 17, 17}, {17, 17, 25, 21, 19, 17, 17}, {14, 17, 17, 17, 17, 17, 14}, {30, 17, 17, 30, 16, 16, 16},
+    {14, 17, 17, 17, 21, 18, 13}, {30, 17, 17, 30, 20, 18, 17}, {15, 16, 16, 14, 1, 1, 30},   {31, 4, 4, 4, 4, 4, 4},
+    {17, 17, 17, 17, 17, 17, 14}, {17, 17, 17, 17, 17, 10, 4},  {17, 17, 17, 21, 21, 21, 10}, {17, 17, 10, 4, 10, 17, 17},
+    {17, 17, 10, 4, 4, 4, 4},     {31, 1, 2, 4, 8, 16, 31},     {14, 17, 19, 21, 25, 17, 14}, {4, 12, 4, 4, 4, 4, 14},
+    {14, 17, 1, 2, 4, 8, 31},     {31, 2, 4, 2, 1, 17, 14},     {2, 6, 10, 18, 31, 2, 2},     {31, 16, 30, 1, 1, 17, 14},
+    {6, 8, 16, 30, 17, 17, 14},   {31, 1, 2, 4, 8, 8, 8},       {14, 17, 17, 14, 17, 17, 14}, {14, 17, 17, 15, 1, 2, 12},
+    {0, 0, 0, 31, 0, 0, 0},       {1, 1, 2, 4, 8, 16, 16},      {0, 0, 0, 0, 0, 12, 12},      {0, 12, 12, 0, 12, 12, 0},
+    {24, 25, 2, 4, 8, 19, 3}};
+
+/* Draws text in dark grey at (x0, y0), each font pixel scale x scale, clipped to img. */
+static void tn__draw_text(tn_image *img, int x0, int y0, int scale, const char *text)
+{
+    int k, r, b, u, v, c;
+    for (k = 0; text[k]; k++) {
+        int ch = text[k] >= 'a' && text[k] <= 'z' ? text[k] - 32 : text[k];
+        const char *at = ch ? strchr(tn__font_chars, ch) : NULL;
+        if (!at) continue; /* a blank */
+        for (r = 0; r < 7; r++)
+            for (b = 0; b < 5; b++)
+                if (tn__font_rows[at - tn__font_chars][r] & (16 >> b))
+                    for (v = 0; v < scale; v++)
+                        for (u = 0; u < scale; u++) {
+                            int x = x0 + (6 * k + b) * scale + u, y = y0 + r * scale + v;
+                            if (x >= 0 && y >= 0 && x < img->width && y < img->height)
+                                for (c = 0; c < img->channels; c++) TN_PIXEL(img, x, y, c) = 0.15f;
+                        }
+    }
+}
+
+TN_API char *tn_season_time_label(float time, char *buf, size_t size)
+{
+    static const char *const names[12] = {"JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC"};
+    static const int days[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
+    double t = isfinite(time) ? fmod((double)time, 12.0) : 0.0, day;
+    int m = 0;
+    if (!buf || !size) return buf;
+    if (t < 0) t += 12.0;
+    if (fabs(t - floor(t + 0.5)) < 0.02) { /* a month's 15th: its name */
+        snprintf(buf, size, "%s", names[(int)floor(t + 0.5) % 12]);
+        return buf;
+    }
+    day = 15.0 + t * 365.0 / 12.0; /* days from the 1st of January */
+    while (day >= days[m]) {
+        day -= days[m];
+        m = (m + 1) % 12;
+    }
+    snprintf(buf, size, "%s %d", names[m], (int)day + 1);
+    return buf;
+}
+
 TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out)
 {
+    return tn_season_sheet_labelled(images, NULL, count, columns, cell, out);
+}
+
+TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
+                                          tn_image *out)
+{
     tn_image sheet = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
-    int i, rows, ch = 0, gap = 4, x, y, c;
+    int i, rows, ch = 0, gap = 4, x, y, c, scale = 2, top = 0;
     tn_status st = TN_OK;
     if (!images || !out || count < 1) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: no images");
     if (columns < 0 || cell < 0 || cell > 8192) return tn__fail(TN_ERR_INVALID_ARG, "season sheet: bad columns %d or cell %d", columns, cell);
@@ -1083,12 +1152,16 @@ TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns,
         h = (int)((double)images[i].height * cell / images[i].width + 0.5);
         if (h < 1) h = 1;
         if (h > ch) ch = h;
+        if (labels && labels[i] && labels[i][0]) top = 7 * scale + 6; /* a caption strip over every image */
     }
+    if (cell < 96) scale = 1, top = top ? 7 + 4 : 0;
     rows = (count + columns - 1) / columns;
-    if ((st = tn_image_create(&sheet, columns * cell + (columns + 1) * gap, rows * ch + (rows + 1) * gap, 3))) return st;
+    if ((st = tn_image_create(&sheet, columns * cell + (columns + 1) * gap, rows * (ch + top) + (rows + 1) * gap, 3))) return st;
     for (i = 0; i < (int)((size_t)sheet.width * sheet.height * 3); i++) sheet.data[i] = 1.0f;
     for (i = 0; i < count; i++) {
-        int h = (int)((double)images[i].height * cell / images[i].width + 0.5), ox = gap + (i % columns) * (cell + gap), oy = gap + (i / columns) * (ch + gap);
+        int h = (int)((double)images[i].height * cell / images[i].width + 0.5), ox = gap + (i % columns) * (cell + gap),
+            oy = gap + (i / columns) * (ch + top + gap) + top;
+        if (labels && labels[i]) tn__draw_text(&sheet, ox, oy - top + (top - 7 * scale) / 2, scale, labels[i]);
         if (h < 1) h = 1;
         if ((st = tn_image_resize(&tmp, &images[i], cell, h, cell < images[i].width ? TN_RESIZE_AREA : TN_RESIZE_BILINEAR))) goto done;
         for (y = 0; y < h; y++)

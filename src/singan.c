@@ -1107,6 +1107,11 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         nh++;
     }
     if (!done_all) sch[5 + sc] = (float)(tn_train_iteration(s.run) - (long)sch[1]);
+    else { /* the last scale ended before the budget: the run is done, say 100 % (issue 34) */
+        char stage[48];
+        snprintf(stage, sizeof stage, "singan-train scale %d/%d", sc + 1, s.A.scales);
+        (void)tn__progress(stage, 1.0);
+    }
     s.A.trained = sc + 1;
     tn__sg_write_config(&s.A, tn_params_find(s.g, "singan.config")->data);
     st = tn_train_finish(s.run);

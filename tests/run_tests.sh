@@ -34,6 +34,10 @@ sh tests/test_cli.sh > "$out" 2>&1
 cat "$out" >> "$log"
 grep -E '^(FAIL|skipped)' "$out" || true
 tally "$out" test_cli
+sh tests/readme_runs.sh > "$out" 2>&1 # the README's quick start, as written (issue 34)
+cat "$out" >> "$log"
+grep -E '^(FAIL|skipped)' "$out" || true
+tally "$out" readme_runs
 echo "(full output: $log)"
 echo "$P passed, $F failed, $S skipped"
 [ "$F" -eq 0 ]

@@ -128,7 +128,7 @@ if $T noise -o "$W/like.png" --size 64 --seed 5 --like "$W/rough.png" > "$W/like
     g=$(sed -n 's/^gain: //p' "$W/like.txt") && $T noise -o "$W/like2.png" --size 64 --seed 5 --gain "$g" > /dev/null 2>&1 &&
     cmp -s "$W/like.png" "$W/like2.png" && awk -v g="$g" 'BEGIN { exit !(g > 0.6) }'; then ok;
 else bad "noise --like: $(head -c 200 "$W/like.txt")"; fi
-expect_error "noise --like missing" "cannot open" $T noise -o "$W/x.png" --like "$W/nonexistent.png"
+expect_error "noise --like missing" "no such file" $T noise -o "$W/x.png" --like "$W/nonexistent.png"
 expect_error "style no --style" "needs --content" $T style --content "$W/noise.png" -o "$W/x.png"
 expect_error "style bad optimizer" "optimizer" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --optimizer newton
 expect_error "style missing weights" "no_such.tnw" $T style --content "$W/noise.png" --style "$W/src.png" -o "$W/x.png" --weights "$W/no_such.tnw"
@@ -290,7 +290,9 @@ if $T export "$W/noise.png" --to normal -o "$W/n1.png" --spacing 30 > /dev/null 
 # make demo in its fast mode (seconds-long budgets): every picture and the page; then the page in
 # headless Chromium (tests/demo_page.sh, skipped without chromium)
 if DEMO_FAST=1 DEMO_DIR="$W/demo" sh examples/demo.sh > "$W/demo.log" 2>&1 && grep -q "^demo: wrote .*index.html ([1-9][0-9]* pictures" "$W/demo.log" &&
-    [ -s "$W/demo/terrain.glb" ] && [ -s "$W/demo/splat.png" ] && [ -s "$W/demo/sketch_terrain.png" ]; then ok; else bad "fast demo: $(tail -n 3 "$W/demo.log")"; fi
+    [ -s "$W/demo/terrain.glb" ] && [ -s "$W/demo/splat.png" ] && [ -s "$W/demo/sketch_terrain.png" ] &&
+    [ -s "$W/demo/sun_sheet.png" ] && [ -s "$W/demo/season_sheet.png" ] && grep -q "<p><b>[0-9]* pictures in [0-9]* s</b>" "$W/demo/index.html"; then ok;
+else bad "fast demo: $(tail -n 3 "$W/demo.log")"; fi
 sh tests/demo_page.sh "$W/demo" > "$W/demo_page.txt" 2>&1
 if grep -q "^skipped demo_page" "$W/demo_page.txt"; then skipped "demo page in Chromium: $(sed -n 's/^skipped demo_page: //p' "$W/demo_page.txt")";
 elif grep -q "^demo_page: [1-9][0-9]* passed, 0 failed" "$W/demo_page.txt"; then ok; else bad "demo page in Chromium: $(grep -v '^picture' "$W/demo_page.txt" | head -c 600)"; fi
@@ -455,14 +457,14 @@ expect_error "season no climate" "exactly one of" $T season "$W/noise.png" -o "$
 expect_error "season 11 months" "month 12 is missing" $T season "$W/noise.png" --climate "$W/clim11.csv" -o "$W/sea"
 expect_error "season unknown koppen" "unknown preset" $T season "$W/noise.png" --koppen Qxx -o "$W/sea"
 if $T insolation "$W/noise.png" --lat 46 --spacing 30 -o "$W/ins" --step 30 > "$W/ins.txt" 2>/dev/null &&
-    [ "$(grep -c 'W h/m^2 per day' "$W/ins.txt")" = 12 ] && $T info "$W/ins_07.pfm" | grep -q "size: 96 x 64"; then ok;
+    [ "$(grep -c 'pfm: month' "$W/ins.txt")" = 12 ] && $T info "$W/ins_07.pfm" | grep -q "size: 96 x 64"; then ok;
 else bad "insolation year: $(cat "$W/ins.txt")"; fi
 if $T season "$W/noise.png" --spacing 30 --climate "$W/clim.csv" --insolation "$W/ins" --frames 6 -o "$W/sea" > /dev/null 2>&1 &&
     [ -f "$W/sea_f005.png" ] && $T info "$W/sea_sheet.png" | grep -q "channels: 3"; then ok; else bad "season frames from a CSV"; fi
 $T noise -o "$W/noise64.png" --size 64 64 --range 100 900 > /dev/null 2>&1
 expect_error "season wrong-size insolation" "insolation must be 12 channels of 64 x 64" $T season "$W/noise64.png" --koppen Cfb --insolation "$W/ins" -o "$W/sea"
 if [ -f "$MB" ]; then
-    if $T season "$MB" --heights 454 4810 --spacing 92.7 --koppen Cfb --month 2 -o "$W/mb" > /dev/null 2>&1 &&
+    if $T season "$MB" --range 454 4810 --spacing 92.7 --koppen Cfb --month 2 -o "$W/mb" > /dev/null 2>&1 &&
         $T info "$W/mb_02.png" | grep -q "size: 256 x 256" && [ ! -f "$W/mb_sheet.png" ]; then ok; else bad "season --month on alps_montblanc"; fi
 else
     skipped "season on a real DEM (absent)"
@@ -487,5 +489,42 @@ if [ -f "$D/seasonal_slovenia/frames.csv" ]; then
 else
     skipped "season-train on Sentinel-2 NDVI (absent)"
 fi
+# issue 34: the first hour of a new user
+expect_usage "mistyped command" "unknown command 'rendr'; did you mean 'render'?" $T rendr a.png -o b.png
+expect_usage "mistyped command, transposed" "did you mean 'singan-train'?" $T singan-trian a.png -o b.tnw
+expect_error "no such file" "no_such_file.png: no such file" $T info no_such_file.png
+if $T insolation --help | grep -q -- "--range LO HI" && ! $T insolation --help | grep -q -- "--heights" &&
+    $T singan-train --help | grep -q -- "--range LO HI" && $T export --help | grep -q -- "--range LO HI"; then ok;
+else bad "--range LO HI on insolation, singan-train and export, --heights hidden"; fi
+$T noise -o "$W/unit.png" --size 48 > /dev/null 2>&1 # records no range
+if $T insolation "$W/unit.png" --lat 46 --month 6 --heights 100 900 -o "$W/alias" > /dev/null 2> "$W/alias.txt" && ! grep -q "warning\|heights" "$W/alias.txt" &&
+    $T insolation "$W/unit.png" --lat 46 --month 6 --range 100 900 -o "$W/alias2" > /dev/null 2>&1 && cmp -s "$W/alias_06.pfm" "$W/alias2_06.pfm"; then ok;
+else bad "insolation --heights is a silent alias of --range: $(cat "$W/alias.txt")"; fi
+if $T insolation "$W/unit.png" --lat 46 --month 6 -o "$W/u" 2>&1 >/dev/null | grep -q "records no height range.*give --range LO HI" &&
+    $T season "$W/unit.png" --koppen Cfb --month 6 -o "$W/u" 2>&1 >/dev/null | grep -q "give --range LO HI"; then ok;
+else bad "insolation/season on a unit-less DEM name --range"; fi
+if $T export "$W/unit.png" --to glb -o "$W/u.glb" 2>&1 >/dev/null | grep -q "nearly flat" &&
+    ! $T export "$W/unit.png" --to glb --spacing 30 --range 0 900 -o "$W/u.glb" 2>&1 >/dev/null | grep -q "warning"; then ok;
+else bad "export of a unit-less DEM without --spacing warns"; fi
+if $T singan-train "$W/unit.png" -o "$W/u_sg.tnw" --iters 2 --coarsest 12 > "$W/usg.txt" 2>/dev/null && grep -q "units: the file's \[0, 1\] codes" "$W/usg.txt" &&
+    $T singan-train "$W/unit.png" -o "$W/m_sg.tnw" --iters 2 --coarsest 12 --range 100 900 > "$W/msg.txt" 2>/dev/null && grep -q "units: metres" "$W/msg.txt" &&
+    $T singan-sample "$W/m_sg.tnw" -o "$W/m_s.pfm" > /dev/null 2>&1 && $T info "$W/m_s.pfm" | awk '/^min:/ { lo = $2 } /^max:/ { hi = $2 } END { exit !(lo > 50 && hi > 500) }'; then ok;
+else bad "singan-train --range learns metres: $(cat "$W/usg.txt" "$W/msg.txt" | head -5)"; fi
+# SinGAN's progress: one run, one clock, to 100 % when the scales finish before the budget
+if $T singan-train "$W/unit.png" -o "$W/p_sg.tnw" --scale-iters 2 --coarsest 12 --channels 8 --minutes 5 2> "$W/psg.txt" > /dev/null &&
+    grep -q "^singan-train scale [0-9]*/[0-9]*: 100%" "$W/psg.txt" && [ "$(grep -c "ETA" "$W/psg.txt")" -ge 1 ]; then ok;
+else bad "singan-train progress reaches 100 %: $(tail -n 3 "$W/psg.txt")"; fi
+if $T realism "$W/unit.png" "$W/noise64.png" 2>/dev/null | grep -q "^ssim: n/a (sizes differ)"; then ok; else bad "realism on two sizes: ssim n/a"; fi
+if $T gnn-train "$W/noise64.png" -o "$W/h.tnw" --size 32 --iters 1 --crop 16 16 2>/dev/null | grep -q "^holdout_why: .*--crop 0 0 gives 3" ; then ok;
+else bad "gnn-train says why holdout_windows is 0"; fi
+if $T insolation "$W/noise64.png" --lat 46 --spacing 30 -o "$W/ip" > "$W/ip.txt" 2>/dev/null && $T info "$W/ip_03.png" | grep -q "channels: 3" &&
+    $T info "$W/ip_sheet.png" | grep -q "channels: 3" && grep -q "^sheet: " "$W/ip.txt"; then ok; else bad "insolation PNG previews and year sheet"; fi
+# the ramp: a DEM that records no sea paints no water; a sea level does
+printf 'P2\n4 2\n9\n0 0 9 9\n0 0 9 9\n' > "$W/two.pgm"
+$T render "$W/two.pgm" -o "$W/two_land.ppm" > /dev/null 2>&1
+$T render "$W/two.pgm" --sea-level 0.5 -o "$W/two_sea.ppm" > /dev/null 2>&1
+if [ -f "$W/two_land.ppm" ] && [ -f "$W/two_sea.ppm" ] &&
+    od -An -tu1 -j 11 -N 3 "$W/two_land.ppm" | awk '{ exit !($2 > $3) }' && od -An -tu1 -j 11 -N 3 "$W/two_sea.ppm" | awk '{ exit !($3 > $1 && $3 > $2) }'; then ok;
+else bad "render: green lowland without a sea level, blue below --sea-level"; fi
 echo "test_cli: $pass passed, $fail failed, $skip skipped"
 [ $fail -eq 0 ]

@@ -34,6 +34,15 @@ static int train_interrupted(const char *cmd, long iterations, const char *ckpt)
 
 static void progress_close(void);
 
+/* TERRAINNET_TRAIN_SECONDS=S caps every training budget at S seconds (tests/readme_runs.sh runs
+   the README's command lines so); an iteration budget still applies. */
+static void train_budget_cap(tn_train_opts *t)
+{
+    const char *e = getenv("TERRAINNET_TRAIN_SECONDS");
+    double s = e ? strtod(e, NULL) : 0;
+    if (s > 0 && (t->minutes <= 0 || t->minutes * 60.0 > s)) t->minutes = s / 60.0;
+}
+
 static int fail_status(tn_status st)
 {
     const char *msg = tn_last_error();
@@ -101,11 +110,15 @@ static int cli_progress(void *user, const char *stage, double f)
     progress_state *p = (progress_state *)user;
     double now = tn_time_seconds(), el;
     int changed = strncmp(p->stage, stage, sizeof p->stage - 1) != 0;
+    size_t word = strcspn(stage, " ");
     if (g_interrupted) return 1;
-    if (changed) {
+    if (changed) { /* a new operation restarts the clock; a new step of the same one ("singan-train scale 3/9") does not */
+        int same = word == strcspn(p->stage, " ") && !strncmp(p->stage, stage, word) && tn_progress_eta() >= 0;
         snprintf(p->stage, sizeof p->stage, "%s", stage);
-        p->t0 = now;
-        p->last_decile = -1;
+        if (!same) {
+            p->t0 = now;
+            p->last_decile = -1;
+        }
     }
     el = now - p->t0;
     if (p->tty) {
@@ -140,6 +153,39 @@ static void install_progress(void)
     signal(SIGINT, on_interrupt);
 }
 
+/* ---- heights in metres --------------------------------------------------------------------- */
+
+/* An integer file (PNG, PNM, RAW) that records no height range loads as [0, 1] codes. */
+static int unitless(const tn_image_info *info)
+{
+    return !info->has_range && (info->format == TN_FORMAT_PNG || info->format == TN_FORMAT_PNM || info->format == TN_FORMAT_R16);
+}
+
+/* A DEM as metres: the file's own range, else --range LO HI (hi > lo) applied to its [0, 1]
+   codes. *metres: 0 when the heights stayed [0, 1] codes (a float or GeoTIFF file's values
+   count as metres). info may be NULL. */
+static tn_status load_dem_metres(const char *path, double lo, double hi, tn_image *dem, int *metres, tn_image_info *info)
+{
+    tn_image_info own;
+    tn_status st;
+    size_t i;
+    if (!info) info = &own;
+    st = tn_image_load(path, dem, info);
+    *metres = !st && !unitless(info);
+    if (st || *metres || !(hi > lo)) return st;
+    for (i = 0; i < (size_t)dem->width * dem->height * dem->channels; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
+    *metres = 1;
+    return TN_OK;
+}
+
+/* What a command that needs metres says when it got [0, 1] codes. */
+static void warn_unitless(const char *cmd, const char *path, const char *effect)
+{
+    progress_close();
+    fprintf(stderr, "terrainnet %s: warning: %s records no height range, so its heights are read as 0..1 m (%s); give --range LO HI, "
+                    "the metres of its lowest and highest code\n", cmd, path, effect);
+}
+
 /* ---- option parser ----------------------------------------------------------------------- */
 
 /* A command declares its arguments once, as rows of a cli_opt table: positionals (ARG_POS, in
@@ -162,8 +208,9 @@ enum {
     OPT2 = 4,    /* with PAIR: the second may be left out (then it equals the first) */
     ORDERED = 8, /* with PAIR (ARG_DOUBLE): the first must be below the second */
     ABOVE = 16,  /* the range excludes min */
-    SET = 32     /* def is parsed into the field before argv; else it is only shown (the field
+    SET = 32,    /* def is parsed into the field before argv; else it is only shown (the field
                     stays 0 and the library applies that default) */
+    HIDDEN = 64  /* an alias kept for old command lines: accepted, left out of --help */
 };
 #define NO_MAX 1e300 /* max of a range open at the top */
 
@@ -365,7 +412,7 @@ static void cli_help(const cli_command *c)
         for (i = 0; i < c->nopts; i++) {
             const cli_opt *o = &c->opts[i];
             int req = (o->flags & REQ) != 0, opt = o->kind != ARG_POS && !req;
-            if (pass != (o->kind == ARG_POS ? 0 : req ? 1 : 2)) continue;
+            if (pass != (o->kind == ARG_POS ? 0 : req ? 1 : 2) || (o->flags & HIDDEN)) continue;
             snprintf(item, sizeof item, "%s%s%s%s%s", opt ? "[" : "", o->kind == ARG_POS ? o->name : cli_spelled(o, sp, sizeof sp),
                      o->meta ? " " : "", o->meta ? o->meta : "", opt ? "]" : "");
             if (col + 1 + (int)strlen(item) > HELP_WIDTH) col = printf("\n%*s", indent, "") - 1;
@@ -374,11 +421,11 @@ static void cli_help(const cli_command *c)
     putchar('\n');
     cli_wrap(c->about, 0, 0);
     for (i = 0; i < c->nopts; i++)
-        if ((col = (int)strlen(cli_label(&c->opts[i], item, sizeof item))) > w && col <= 28) w = col;
+        if (!(c->opts[i].flags & HIDDEN) && (col = (int)strlen(cli_label(&c->opts[i], item, sizeof item))) > w && col <= 28) w = col;
     for (pass = 0; pass < 2; pass++) /* arguments, then options */
         for (i = 0, header = 0; i < c->nopts; i++) {
             const cli_opt *o = &c->opts[i];
-            if ((o->kind == ARG_POS) == pass) continue;
+            if ((o->kind == ARG_POS) == pass || (o->flags & HIDDEN)) continue;
             if (!header++) printf(pass ? "\noptions:\n" : "\narguments:\n");
             col = printf("  %s", cli_label(o, item, sizeof item));
             printf("%-*s", col > w + 2 ? w + 5 : w + 4 - col, col > w + 2 ? "\n" : "");
@@ -564,7 +611,7 @@ static const cli_command metrics_cmd = {"metrics", CLI_CMD(metrics), "compare tw
 
 /* ---- render ------------------------------------------------------------------------------ */
 
-static struct render_args { const char *in, *out; int view; tn_view_opts vo; } render_arg;
+static struct render_args { const char *in, *out; int view; double sea; tn_view_opts vo; } render_arg = {.sea = NAN};
 static const cli_opt render_opts[] = {
     {"DEM", 0, ARG_POS, 0, &render_arg.in, NULL, 0, 0, NULL, "heightmap to draw", NULL},
     {"output", 'o', ARG_STR, REQ, &render_arg.out, NULL, 0, 0, "OUT.png", "picture to write (8-bit)", NULL},
@@ -572,7 +619,13 @@ static const cli_opt render_opts[] = {
     {"size", 0, ARG_INT, PAIR, &render_arg.vo.width, &render_arg.vo.height, 16, 16384, "W H", "size of the 3D view", "960 540"},
     {"azimuth", 0, ARG_FLOAT, 0, &render_arg.vo.azimuth_deg, NULL, 0, 0, "DEG", "3D camera direction, clockwise from north", "180, from the south"},
     {"pitch", 0, ARG_FLOAT, 0, &render_arg.vo.pitch_deg, NULL, 0, 0, "DEG", "3D camera's downward angle", "30"},
-    {"relief", 0, ARG_FLOAT, 0, &render_arg.vo.relief, NULL, 0, 0, "F", "3D height of the full range as a fraction of the DEM width", "0.2"},
+    {"relief", 0, ARG_FLOAT, 0, &render_arg.vo.relief, NULL, 0, 0, "F", "3D height of the full range as a fraction of the DEM width",
+     "0.2, or from --spacing"},
+    {"spacing", 0, ARG_FLOAT, ABOVE, &render_arg.vo.spacing, NULL, 0, NO_MAX, "M",
+     "3D: metres per pixel of a DEM in metres, for its true relief times --exaggeration", "an .hgt's or GeoTIFF's own, else none"},
+    {"exaggeration", 0, ARG_FLOAT, ABOVE, &render_arg.vo.exaggeration, NULL, 0, 1000, "F", "3D: vertical exaggeration with a known spacing", "2"},
+    {"sea-level", 0, ARG_DOUBLE, 0, &render_arg.sea, NULL, 0, 0, "H",
+     "draw water below height H (the DEM's units)", "0 on a DEM that records metres (a range, .hgt, GeoTIFF, .asc), else no sea"},
     {"light", 0, ARG_FLOAT, 0, &render_arg.vo.colours.shade.azimuth_deg, NULL, 0, 0, "DEG", "sun azimuth, clockwise from north", "315"},
 };
 
@@ -584,6 +637,12 @@ static int run_render(void)
     tn_save_opts so;
     tn_status st;
     if ((st = tn_image_load_ex(a->in, &dem, &info, NULL))) return fail_status(st);
+    if (isnan(a->sea) && (info.has_range || info.format == TN_FORMAT_HGT || info.format == TN_FORMAT_TIFF || info.format == TN_FORMAT_ASC))
+        a->sea = 0; /* metres: the sea is below 0 m */
+    a->vo.colours.sea = !isnan(a->sea);
+    a->vo.colours.sea_level = a->vo.colours.sea ? (float)a->sea : 0.0f;
+    if (!a->vo.spacing && !a->vo.relief) /* a pixel size in metres: the true relief, exaggerated */
+        a->vo.spacing = info.format == TN_FORMAT_HGT ? (float)info.cellsize : info.georef.dx > 0 ? (float)(0.5 * (info.georef.dx + info.georef.dy)) : 0.0f;
     st = a->view ? tn_render_view(&dem, &a->vo, &out) : tn_render_preview(&dem, &a->vo.colours, &out);
     tn_image_free(&dem);
     if (st) return fail_status(st);
@@ -604,6 +663,7 @@ static const cli_command render_cmd = {"render", CLI_CMD(render), "hillshaded co
 static struct export_args {
     const char *in, *out, *texture, *snow, *vegetation, *splat_preview;
     int to, drape, raw_size;
+    double range[2];
     tn_mesh_opts mo;
     tn_splat_opts so;
 } export_arg;
@@ -617,6 +677,9 @@ static const cli_opt export_opts[] = {
     {"output", 'o', ARG_STR, REQ, &export_arg.out, NULL, 0, 0, "OUT", "file to write", NULL},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &export_arg.mo.dx, &export_arg.mo.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres",
      "a GeoTIFF's own, else 1"},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &export_arg.range[0], &export_arg.range[1], 0, 0, "LO HI",
+     "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for", "the file's range, else its [0, 1] codes"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED | HIDDEN, &export_arg.range[0], &export_arg.range[1], 0, 0, "LO HI", "--range", NULL},
     {"z-scale", 0, ARG_FLOAT, 0, &export_arg.mo.z_scale, NULL, 0, 0, "F", "height exaggeration", "1"},
     {"step", 0, ARG_INT, 0, &export_arg.mo.step, NULL, 1, 65536, "N", "keep every N-th sample (grid decimation)", "1"},
     {"texture", 0, ARG_STR, 0, &export_arg.texture, NULL, 0, 0, "IMG", "colour image draped over the mesh", NULL},
@@ -714,12 +777,15 @@ static int run_export(void)
     tn_image dem = {0, 0, 0, NULL}, tex = {0, 0, 0, NULL};
     tn_image_info info;
     tn_status st;
+    int metres;
     if (a->texture && a->drape) return usage_error("export", "--texture and --preview-texture exclude each other");
-    if ((st = tn_image_load_ex(a->in, &dem, &info, NULL))) return fail_status(st);
+    if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres, &info))) return fail_status(st);
     if (!a->mo.dx && info.georef.dx > 0) { /* a GeoTIFF knows its pixel size in metres */
         a->mo.dx = (float)info.georef.dx;
         a->mo.dy = (float)info.georef.dy;
     }
+    if ((a->to == EXPORT_GLB || a->to == EXPORT_OBJ) && !metres && !a->mo.dx)
+        warn_unitless("export", a->in, "with no --spacing either, 1 m pixels: the mesh comes out nearly flat; give --spacing M too");
     if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
     else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
     if (!st && a->to != EXPORT_GLB && a->to != EXPORT_OBJ) st = export_image(a, &dem);
@@ -1097,10 +1163,12 @@ static int run_realism(void)
     if (st) return fail_status(st);
     printf("slope_distance: %.6f\ncurvature_distance: %.6f\nspectrum_distance: %.6f\n"
            "spectrum_slope_a: %.4f\nspectrum_slope_b: %.4f\ndrainage_density_a: %.6f\ndrainage_density_b: %.6f\n"
-           "bifurcation_ratio_a: %.4f\nbifurcation_ratio_b: %.4f\nssim: %.6f\npsnr: %.4f\ndistance: %.6f\n",
+           "bifurcation_ratio_a: %.4f\nbifurcation_ratio_b: %.4f\n",
            r.slope_distance, r.curvature_distance, r.spectrum_distance, r.spectrum_slope_a, r.spectrum_slope_b,
-           r.drainage_density_a, r.drainage_density_b, r.bifurcation_ratio_a, r.bifurcation_ratio_b, r.ssim, r.psnr,
-           r.distance);
+           r.drainage_density_a, r.drainage_density_b, r.bifurcation_ratio_a, r.bifurcation_ratio_b);
+    if (isfinite(r.ssim)) printf("ssim: %.6f\npsnr: %.4f\n", r.ssim, r.psnr);
+    else printf("ssim: n/a (sizes differ)\npsnr: n/a (sizes differ)\n"); /* pixel by pixel needs one size */
+    printf("distance: %.6f\n", r.distance);
     return 0;
 }
 
@@ -1227,6 +1295,7 @@ static int run_texgan_train(void)
         a->ckpt = ckbuf;
     }
     a->o.train.checkpoint = a->ckpt;
+    train_budget_cap(&a->o.train);
     if ((st = tn_image_load(a->in, &ex, NULL))) return fail_status(st);
     if (a->normal) {
         tn_image both = {0, 0, 0, NULL};
@@ -1446,10 +1515,14 @@ static const cli_command world_cmd = {"world", CLI_CMD(world), "a world of any s
 
 /* ---- SinGAN: random terrain, refinement, upscaling ---------------------------------------- */
 
-static struct singan_train_args { const char *in, *out, *ckpt; tn_singan_opts o; } singan_train_arg;
+static struct singan_train_args { const char *in, *out, *ckpt; double range[2]; tn_singan_opts o; } singan_train_arg;
 static const cli_opt singan_train_opts[] = {
     {"DEM", 0, ARG_POS, 0, &singan_train_arg.in, NULL, 0, 0, NULL, "the example heightmap (channel 0; heights kept in its units)", NULL},
     {"output", 'o', ARG_STR, REQ, &singan_train_arg.out, NULL, 0, 0, "MODEL.tnw", "the model: one generator per scale + the height mapping", NULL},
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &singan_train_arg.range[0], &singan_train_arg.range[1], 0, 0, "LO HI",
+     "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for (samples then come out in metres)",
+     "the file's range, else its [0, 1] codes"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED | HIDDEN, &singan_train_arg.range[0], &singan_train_arg.range[1], 0, 0, "LO HI", "--range", NULL},
     {"minutes", 0, ARG_DOUBLE, 0, &singan_train_arg.o.train.minutes, NULL, 0, 1e9, "M", "wall-clock budget of the whole run, shared by the scales", "10"},
     {"iters", 0, ARG_LONG, 0, &singan_train_arg.o.train.max_iters, NULL, 0, 1e9, "N", "stop after N iterations in total (N / scales per scale)", "0 = only the time budget"},
     {"scale-iters", 0, ARG_INT, 0, &singan_train_arg.o.iters, NULL, 0, 1e9, "N", "iterations per scale at most", "2000"},
@@ -1475,8 +1548,12 @@ static int run_singan_train(void)
         snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
         a->ckpt = ckbuf;
     }
+    int metres;
     a->o.train.checkpoint = a->ckpt;
-    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
+    train_budget_cap(&a->o.train);
+    if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres, NULL))) return fail_status(st);
+    printf("units: %s\n", metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)");
+    fflush(stdout);
     st = tn_singan_train(&dem, &a->o, &model, &s);
     tn_image_free(&dem);
     if (st == TN_ERR_CANCELLED) return train_interrupted("singan-train", s.iterations, a->ckpt);
@@ -1618,19 +1695,6 @@ static void highest_relief_window(const tn_image *dem, int side, int *x0, int *y
     free(hi);
 }
 
-/* A DEM as metres: the file's own range, else --range LO HI applied to its [0, 1] codes. */
-static tn_status load_dem_metres(const char *path, double lo, double hi, tn_image *dem, int *metres)
-{
-    tn_image_info info;
-    tn_status st = tn_image_load(path, dem, &info);
-    size_t i;
-    *metres = !st && info.has_range;
-    if (st || info.has_range || !(hi > lo)) return st;
-    for (i = 0; i < (size_t)dem->width * dem->height * dem->channels; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
-    *metres = 1;
-    return TN_OK;
-}
-
 static struct gnn_train_args {
     const char *in, *out, *ckpt;
     int crop[2], size, holdout;
@@ -1652,6 +1716,7 @@ static const cli_opt gnn_train_opts[] = {
      "(gain_scale:)", "4; 0 = none"},
     {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &gnn_train_arg.range[0], &gnn_train_arg.range[1], 0, 0, "LO HI",
      "metres that codes 0..max of an 8/16-bit DEM without a recorded range stand for", "the file's range, else its [0, 1] codes"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED | HIDDEN, &gnn_train_arg.range[0], &gnn_train_arg.range[1], 0, 0, "LO HI", "--range", NULL},
     {"resume", 0, ARG_FLAG, 0, &gnn_train_arg.o.train.resume, NULL, 0, 0, NULL, "continue the checkpoint identically", NULL},
     {"checkpoint", 0, ARG_STR, 0, &gnn_train_arg.ckpt, NULL, 0, 0, "PATH", "full training state, saved atomically", "MODEL.tnw.ckpt"},
     {"checkpoint-seconds", 0, ARG_DOUBLE, 0, &gnn_train_arg.o.train.checkpoint_seconds, NULL, 0, 1e9, "S", "checkpoint interval", "60"},
@@ -1678,26 +1743,40 @@ static int run_gnn_train(void)
     tn_gnn_stats s;
     tn_status st;
     char ckbuf[1024];
-    int side = a->size ? a->size : 128, x = a->crop[0], y = a->crop[1], w, h, metres, given = a->crop[0] >= 0, nhold = 0, i;
+    int side = a->size ? a->size : 128, x = a->crop[0], y = a->crop[1], w, h, metres, given = a->crop[0] >= 0, nhold = 0, i, corner = 0;
+    int dem_w, dem_h;
     if (!a->ckpt) {
         snprintf(ckbuf, sizeof ckbuf, "%s.ckpt", a->out);
         a->ckpt = ckbuf;
     }
     a->o.train.checkpoint = a->ckpt;
-    if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres))) return fail_status(st);
+    train_budget_cap(&a->o.train);
+    if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres, NULL))) return fail_status(st);
     w = side < dem.width ? side : dem.width;
     h = side < dem.height ? side : dem.height;
     if (!given) highest_relief_window(&dem, side, &x, &y);
+    dem_w = dem.width;
+    dem_h = dem.height;
     if (x + w > dem.width || y + h > dem.height) {
         tn_image_free(&dem);
         return usage_error("gnn-train", "the %d x %d window at (%d, %d) does not fit in the %d x %d DEM", w, h, x, y, dem.width, dem.height);
     }
     st = tn_image_crop(&win, &dem, x, y, w, h);
     if (!st) nhold = tn_gnn_holdout_windows(&dem, x, y, w, h, a->holdout, hold);
+    if (!st && !nhold && a->holdout > 0) { /* holdouts are whole windows beside the training one: would the corner have some? */
+        corner = tn_gnn_holdout_windows(&dem, 0, 0, w, h, a->holdout, hold);
+        for (i = 0; i < corner; i++) tn_image_free(&hold[i]);
+    }
     tn_image_free(&dem);
     if (st) return fail_status(st);
     printf("window: %d x %d at (%d, %d)%s\nunits: %s\nholdout_windows: %d\n", w, h, x, y, given ? "" : " (highest relief)",
            metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)", nhold);
+    if (!nhold && a->holdout > 0) {
+        printf("holdout_why: holdouts are %d x %d windows beside the training window, shifted by whole windows, and none fits in "
+               "the %d x %d DEM", w, h, dem_w, dem_h);
+        if (corner) printf("; --crop 0 0 gives %d\n", corner);
+        else printf("; a DEM at least twice the window's side (or a smaller --size) gives some\n");
+    }
     fflush(stdout);
     a->o.holdout = nhold ? hold : NULL;
     a->o.holdout_count = nhold;
@@ -1792,7 +1871,7 @@ static tn_status load_gnn_sketch(const char *path, double lo, double hi, tn_cont
         *kind = "sketch (.tns)";
         return tn_sketch_load(path, out);
     }
-    if ((st = load_dem_metres(path, lo, hi, &img, &metres))) return st;
+    if ((st = load_dem_metres(path, lo, hi, &img, &metres, NULL))) return st;
     if (img.channels >= 3) {
         *kind = "drawn sketch";
         st = tn_sketch_from_image(&img, out);
@@ -1909,28 +1988,27 @@ static const cli_command gnn_generate_cmd = {"gnn-generate", CLI_CMD(gnn_generat
 
 /* ---- insolation, season ------------------------------------------------------------------- */
 
-/* Loads a DEM for the seasonal commands; --heights LO HI maps a file without a recorded range
-   (values 0..1) to metres. */
-static tn_status season_load_dem(const char *path, double lo, double hi, tn_image *dem)
+/* Loads a DEM for the seasonal commands, which need metres: --range LO HI maps a file without a
+   recorded range (values 0..1) to metres, and without it they say so. */
+static tn_status season_load_dem(const char *cmd, const char *path, double lo, double hi, tn_image *dem)
 {
-    tn_image_info info;
-    tn_status st = tn_image_load(path, dem, &info);
-    size_t i, n;
-    if (st || lo == hi) return st;
-    n = (size_t)dem->width * dem->height * dem->channels;
-    for (i = 0; i < n; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
-    return TN_OK;
+    int metres;
+    tn_status st = load_dem_metres(path, lo, hi, dem, &metres, NULL);
+    if (!st && !metres) warn_unitless(cmd, path, "slopes, shadows and the snow line come out wrong");
+    return st;
 }
 
 static struct insolation_args { const char *in, *out; double lat, lo, hi; tn_insolation_opts o; } insolation_arg;
 static const cli_opt insolation_opts[] = {
     {"DEM", 0, ARG_POS, 0, &insolation_arg.in, NULL, 0, 0, NULL, "heightmap in metres", NULL},
     {"lat", 0, ARG_DOUBLE, REQ, &insolation_arg.lat, NULL, -90, 90, "DEG", "latitude (south negative; row 0 is north)", NULL},
-    {"output", 'o', ARG_STR, REQ, &insolation_arg.out, NULL, 0, 0, "PREFIX", "writes PREFIX_01.pfm .. PREFIX_12.pfm (W h/m^2 per day)", NULL},
+    {"output", 'o', ARG_STR, REQ, &insolation_arg.out, NULL, 0, 0, "PREFIX",
+     "writes PREFIX_01.pfm .. PREFIX_12.pfm (W h/m^2 per day), their pictures PREFIX_MM.png and PREFIX_sheet.png, the labelled year", NULL},
     {"month", 0, ARG_INT, 0, &insolation_arg.o.month, NULL, 1, 12, "M", "only month M (PREFIX_MM.pfm)", "all twelve"},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &insolation_arg.o.dx, &insolation_arg.o.dy, 0, NO_MAX, "DX [DY]", "pixel spacing in metres", "1"},
-    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED, &insolation_arg.lo, &insolation_arg.hi, 0, 0, "LO HI",
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &insolation_arg.lo, &insolation_arg.hi, 0, 0, "LO HI",
      "metres of the lowest and highest code, for a file that records no range", "the file's values"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED | HIDDEN, &insolation_arg.lo, &insolation_arg.hi, 0, 0, "LO HI", "--range", NULL},
     {"step", 0, ARG_FLOAT, 0, &insolation_arg.o.step_minutes, NULL, 1, 720, "MIN", "time step of the shadow test", "15"},
     {"directions", 0, ARG_INT, 0, &insolation_arg.o.directions, NULL, 4, 1024, "N", "horizon azimuths", "32"},
     {"day", 0, ARG_INT, 0, &insolation_arg.o.day, NULL, 1, 31, "D", "day of the month of the sun path", "15"},
@@ -1947,18 +2025,43 @@ static tn_status season_channel(const tn_image *src, int c, tn_image *dst)
     return TN_OK;
 }
 
+/* Insolation as a picture: black (none) through red and orange to pale yellow at top. */
+static tn_status insolation_preview(const tn_image *one, float top, tn_image *rgb)
+{
+    static const float stops[5][4] = {{0.0f, 0.0f, 0.0f, 0.02f}, {0.3f, 0.35f, 0.05f, 0.35f}, {0.6f, 0.85f, 0.25f, 0.1f},
+                                      {0.85f, 1.0f, 0.65f, 0.1f}, {1.0f, 1.0f, 1.0f, 0.75f}};
+    size_t i, n = (size_t)one->width * one->height;
+    tn_status st = tn_image_create(rgb, one->width, one->height, 3);
+    for (i = 0; !st && i < n; i++) {
+        float t = top > 0 ? one->data[i] / top : 0.0f, f;
+        int k = 1, c;
+        t = t < 0 ? 0 : t > 1 ? 1 : t;
+        while (k < 4 && t > stops[k][0]) k++;
+        f = (t - stops[k - 1][0]) / (stops[k][0] - stops[k - 1][0]);
+        for (c = 0; c < 3; c++) rgb->data[i * 3 + c] = stops[k - 1][c + 1] + f * (stops[k][c + 1] - stops[k - 1][c + 1]);
+    }
+    return st;
+}
+
 static int run_insolation(void)
 {
     struct insolation_args *a = &insolation_arg;
-    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
+    tn_image dem = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, one = {0, 0, 0, NULL}, pics[12], sheet = {0, 0, 0, NULL};
+    tn_save_opts so;
     tn_status st;
-    char path[4096];
+    char path[4096], label[12][24];
+    const char *labels[12];
+    float top = 0, lo0, hi0;
     int c;
     double t0 = tn_time_seconds();
-    if ((st = season_load_dem(a->in, a->lo, a->hi, &dem))) return fail_status(st);
+    if ((st = season_load_dem("insolation", a->in, a->lo, a->hi, &dem))) return fail_status(st);
     st = tn_insolation(&dem, a->lat, &a->o, &out);
     tn_image_free(&dem);
     if (st) return fail_status(st);
+    memset(pics, 0, sizeof pics);
+    memset(&so, 0, sizeof so);
+    so.bit_depth = 8;
+    if (tn_image_range(&out, &lo0, &hi0) == TN_OK) top = hi0; /* one scale for the year, so months compare */
     for (c = 0; c < out.channels && !st; c++) {
         int month = a->o.month ? a->o.month : c + 1;
         float lo, hi;
@@ -1970,17 +2073,31 @@ static int run_insolation(void)
         for (i = 0; i < n; i++) sum += one.data[i];
         st = tn_image_save(path, &one, NULL);
         if (!st) printf("%s: month %2d mean %.0f min %.0f max %.0f W h/m^2 per day\n", path, month, sum / (double)n, lo, hi);
+        snprintf(path, sizeof path, "%s_%02d.png", a->out, month);
+        if (!st) st = insolation_preview(&one, top, &pics[c]);
+        if (!st) st = tn_image_save(path, &pics[c], &so);
+        snprintf(label[c], sizeof label[c], "%s MEAN %.0f", tn_season_time_label((float)(month - 1), path, 8), sum / (double)n);
+        labels[c] = label[c];
         tn_image_free(&one);
     }
+    if (!st) printf("previews: %s_MM.png, black = 0 to pale yellow = %.0f W h/m^2 per day (the year's highest)\n", a->out, top);
+    if (!st && out.channels > 1) {
+        snprintf(path, sizeof path, "%s_sheet.png", a->out);
+        if (!(st = tn_season_sheet_labelled(pics, labels, out.channels, 4, out.width < 256 ? out.width : 256, &sheet)))
+            st = tn_image_save(path, &sheet, &so);
+        if (!st) printf("sheet: %s (the year, each month with its mean in W h/m^2 per day)\n", path);
+    }
+    for (c = 0; c < 12; c++) tn_image_free(&pics[c]);
+    tn_image_free(&sheet);
     tn_image_free(&out);
     if (st) return fail_status(st);
     printf("insolation: %.2f s\n", tn_time_seconds() - t0);
     return 0;
 }
 
-static const cli_command insolation_cmd = {"insolation", CLI_CMD(insolation), "monthly direct-sun maps with terrain shadows (PFM)",
+static const cli_command insolation_cmd = {"insolation", CLI_CMD(insolation), "monthly direct-sun maps with terrain shadows (PFM + PNG sheet)",
     "Daily direct-beam insolation outside the atmosphere (W h/m^2 per day) on each pixel's slope on the 15th of every month, "
-    "with shadows cast by the terrain (docs/season.md). Heights must be metres: give --spacing, and --heights for a file "
+    "with shadows cast by the terrain (docs/season.md). Heights must be metres: give --spacing, and --range for a file "
     "that records no range."};
 
 static struct season_args {
@@ -2002,8 +2119,9 @@ static const cli_opt season_opts[] = {
     {"frames", 0, ARG_INT, 0, &season_arg.frames, NULL, 1, 1000, "N", "N frames evenly through the year from mid-January", NULL},
     {"spacing", 0, ARG_FLOAT, PAIR | OPT2 | ABOVE, &season_arg.o.insolation.dx, &season_arg.o.insolation.dy, 0, NO_MAX, "DX [DY]",
      "pixel spacing in metres", "1"},
-    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED, &season_arg.lo, &season_arg.hi, 0, 0, "LO HI",
+    {"range", 0, ARG_DOUBLE, PAIR | ORDERED, &season_arg.lo, &season_arg.hi, 0, 0, "LO HI",
      "metres of the lowest and highest code, for a file that records no range", "the file's values"},
+    {"heights", 0, ARG_DOUBLE, PAIR | ORDERED | HIDDEN, &season_arg.lo, &season_arg.hi, 0, 0, "LO HI", "--range", NULL},
     {"insolation", 0, ARG_STR, 0, &season_arg.insol, NULL, 0, 0, "PREFIX", "read PREFIX_01..12.pfm from `terrainnet insolation`", "computed"},
     {"shade", 0, ARG_FLOAT, SET, &season_arg.o.shade, NULL, 0, 1, "F", "hillshade mixed into the colours (0 = albedo only)", "0.5"},
     {"seed", 0, ARG_U64, 0, &season_arg.o.seed, NULL, 0, 0, "S", "seed of the fine detail noise", "0"},
@@ -2084,7 +2202,7 @@ static int run_season(void)
     if (st) return fail_status(st);
     count = a->month ? 1 : a->frames ? a->frames : 12;
     for (i = 0; i < count; i++) times[i] = a->month ? (float)(a->month - 1) : a->frames ? 12.0f * (float)i / (float)count : (float)i;
-    if ((st = season_load_dem(a->in, a->lo, a->hi, &dem))) return fail_status(st);
+    if ((st = season_load_dem("season", a->in, a->lo, a->hi, &dem))) return fail_status(st);
     if (a->insol && (st = season_read_insolation(a->insol, &ins))) {
         tn_image_free(&dem);
         return fail_status(st);
@@ -2105,9 +2223,16 @@ static int run_season(void)
         else snprintf(path, sizeof path, "%s_%02d.png", a->out, a->month ? a->month : i + 1);
         st = tn_image_save(path, &imgs[i], &so);
     }
-    if (!st && count > 1) {
+    if (!st && count > 1) { /* the year at a glance, each picture under its date */
+        char(*label)[16] = (char(*)[16])calloc((size_t)count, sizeof *label);
+        const char **labels = (const char **)calloc((size_t)count, sizeof *labels);
+        for (i = 0; label && labels && i < count; i++) labels[i] = tn_season_time_label(times[i], label[i], sizeof label[i]);
         snprintf(path, sizeof path, "%s_sheet.png", a->out);
-        if (!(st = tn_season_sheet(imgs, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet))) st = tn_image_save(path, &sheet, &so);
+        if (!label || !labels) st = TN_ERR_OUT_OF_MEMORY;
+        else if (!(st = tn_season_sheet_labelled(imgs, labels, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet)))
+            st = tn_image_save(path, &sheet, &so);
+        free(label);
+        free(labels);
     }
     if (!st) printf("season: %s, %d image%s of %d x %d in %.2f s\n", clim.name, count, count > 1 ? "s" : "", dem.width, dem.height, tn_time_seconds() - t0);
     for (i = 0; i < count; i++) tn_image_free(&imgs[i]);
@@ -2154,6 +2279,7 @@ static int run_season_train(void)
         a->ckpt = ckbuf;
     }
     a->o.train.checkpoint = a->ckpt;
+    train_budget_cap(&a->o.train);
     if (a->cond && (st = tn_kpd_condition_parse(a->cond, &a->o.condition))) return fail_status(st);
     { /* a folder holding season.csv */
         FILE *f;
@@ -2223,6 +2349,36 @@ static void print_usage(FILE *f)
     for (i = 0; i < NCOMMANDS; i++) fprintf(f, "  %-13s %s\n", commands[i]->name, commands[i]->summary);
 }
 
+/* Edit distance (insert, delete, substitute, swap two neighbours) between two short words. */
+static int edit_distance(const char *a, const char *b)
+{
+    int d[32][32], i, j, n = (int)strlen(a), m = (int)strlen(b);
+    if (n > 31 || m > 31) return 99;
+    for (i = 0; i <= n; i++) d[i][0] = i;
+    for (j = 0; j <= m; j++) d[0][j] = j;
+    for (i = 1; i <= n; i++)
+        for (j = 1; j <= m; j++) {
+            int v = d[i - 1][j - 1] + (a[i - 1] != b[j - 1]);
+            if (d[i - 1][j] + 1 < v) v = d[i - 1][j] + 1;
+            if (d[i][j - 1] + 1 < v) v = d[i][j - 1] + 1;
+            if (i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] && d[i - 2][j - 2] + 1 < v) v = d[i - 2][j - 2] + 1;
+            d[i][j] = v;
+        }
+    return d[n][m];
+}
+
+/* The command nearest to a mistyped one (at most a third of its letters off), or NULL. */
+static const char *nearest_command(const char *word)
+{
+    const char *best = NULL;
+    int i, bd = 99;
+    for (i = 0; i < (int)NCOMMANDS; i++) {
+        int dist = edit_distance(word, commands[i]->name);
+        if (dist < bd) bd = dist, best = commands[i]->name;
+    }
+    return bd <= 1 + (int)strlen(word) / 3 ? best : NULL;
+}
+
 int main(int argc, char **argv)
 {
     const cli_command *c = NULL;
@@ -2278,6 +2434,11 @@ int main(int argc, char **argv)
     for (i = 0; i < (int)NCOMMANDS; i++)
         if (!strcmp(argv[a + help], commands[i]->name)) c = commands[i];
     if (!c) {
+        const char *near = nearest_command(argv[a + help]);
+        if (near) {
+            fprintf(stderr, "terrainnet: unknown command '%s'; did you mean '%s'? (`terrainnet --help` lists them all)\n", argv[a + help], near);
+            return 2;
+        }
         fprintf(stderr, "terrainnet: unknown command '%s'\n", argv[a + help]);
         print_usage(stderr);
         return 2;
