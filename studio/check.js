@@ -3,8 +3,9 @@
 // and fetch() need http://). With --screenshots DIR it also draws a sketch of its own on the
 // page, generates it and saves studio_drawing.png, studio_result.png, studio_3d.png and
 // studio_page.png into DIR; with --exports DIR it saves the self-test's four exported files there;
-// with --learn DEM it learns a style in the page (--learn-minutes M, default 0.5) and generates with it.
-//   NODE_PATH=build/pw/node_modules node studio/check.js [--chromium PATH] [--screenshots DIR] [--exports DIR] [--learn DEM]
+// with --learn DEM it learns a style in the page (--learn-minutes M, default 0.5) and generates with it;
+// --url BASE loads the page from another server (BASE ending in /).
+//   NODE_PATH=build/pw/node_modules node studio/check.js [--chromium PATH] [--screenshots DIR] [--exports DIR] [--learn DEM] [--url BASE]
 'use strict';
 const http = require('http');
 const fs = require('fs');
@@ -26,7 +27,8 @@ const server = http.createServer((req, res) => {
 
 async function main() {
     await new Promise((r) => server.listen(0, '127.0.0.1', r));
-    const base = `http://127.0.0.1:${server.address().port}/`;
+    // --url: the page from another server (e.g. python3 -m http.server -d studio), not our own
+    const base = opt('--url', `http://127.0.0.1:${server.address().port}/`);
     const browser = await chromium.launch({
         executablePath: opt('--chromium', 'chromium'),
         args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
