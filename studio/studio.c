@@ -124,17 +124,22 @@ STUDIO_API void studio_clear(void)
     g_lo = g_hi = 0;
 }
 
+/* Keeps channel 0, the height, of a DEM loaded with more (grey + alpha, RGB). */
+static void studio_channel0(tn_image *img)
+{
+    size_t i, n = (size_t)img->width * img->height;
+    if (img->channels == 1) return;
+    for (i = 0; i < n; i++) img->data[i] = img->data[i * img->channels];
+    img->channels = 1;
+}
+
 /* Replaces the terrain by a DEM file (to view or export one). */
 STUDIO_API int studio_load_terrain(const char *path)
 {
     tn_image img = {0, 0, 0, NULL};
     tn_status st = tn_image_load(path, &img, NULL);
     if (st) return studio_fail(st, path);
-    if (img.channels != 1) { /* channel 0 is the height */
-        size_t i, n = (size_t)img.width * img.height;
-        for (i = 0; i < n; i++) img.data[i] = img.data[i * img.channels];
-        img.channels = 1;
-    }
+    studio_channel0(&img);
     tn_image_free(&g_terrain);
     g_terrain = img;
     studio_range();
@@ -207,7 +212,8 @@ STUDIO_API int studio_export(const char *path, int kind, float dx)
     return st ? studio_fail(st, path) : 0;
 }
 
-/* The side x side window of highest relief (max - min on an 8 px grid), as gnn-train picks it. */
+/* The side x side window of highest relief (max - min on an 8 px grid), as gnn-train picks it
+   (examples/cli/terrainnet.c's highest_relief_window: the CLI's, not the library's, so not callable). */
 static void studio_relief_window(const tn_image *dem, int side, int *x0, int *y0)
 {
     int x, y, u, v;
@@ -240,11 +246,7 @@ STUDIO_API int studio_train(const char *dem_path, double lo, double hi, double m
     tn_status st;
     int side, x, y, nhold = 0, i;
     if ((st = tn_image_load(dem_path, &dem, &info))) return studio_fail(st, dem_path);
-    if (dem.channels != 1) { /* channel 0 is the height */
-        size_t k, n = (size_t)dem.width * dem.height;
-        for (k = 0; k < n; k++) dem.data[k] = dem.data[k * dem.channels];
-        dem.channels = 1;
-    }
+    studio_channel0(&dem);
     if (!info.has_range && hi > lo) {
         size_t k, n = (size_t)dem.width * dem.height;
         for (k = 0; k < n; k++) dem.data[k] = (float)(lo + dem.data[k] * (hi - lo));
