@@ -24,7 +24,7 @@ BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
-.PHONY: all header check-header check-single-header test check-compile check-layout demo demo-check bench fuzz clean mpi
+.PHONY: all header check-header check-single-header test check-compile check-layout demo demo-check bench fuzz clean mpi m32 studio studio-check
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
 
 header: terrainnet.h
@@ -110,3 +110,44 @@ fuzz: $(FUZZERS)
 
 clean:
 	rm -rf bin build
+
+# 32-bit build (issue 35: wasm32 and -m32 have a 32-bit size_t): the implementation and a few
+# tests with $(CC) -m32, no sanitizers. SSE arithmetic as on wasm32 and every 64-bit target: x87's
+# excess precision (FLT_EVAL_METHOD 2) breaks the exact float round trips test_sketch checks.
+# Skipped, saying so, when the compiler cannot target it (Debian: apt-get install gcc-multilib).
+M32      = -m32 -msse2 -mfpmath=sse
+M32_TESTS = test_noise test_image test_export test_tensor test_metrics test_sketch
+m32: | build
+	@if ! printf 'int main(void) { return 0; }\n' | $(CC) $(M32) -x c - -o build/m32_probe > /dev/null 2>&1; then \
+	  echo "skipped m32: $(CC) -m32 cannot link (Debian: apt-get install gcc-multilib)"; echo "m32: 0 passed, 0 failed, 1 skipped"; exit 0; fi; \
+	mkdir -p build/m32 build/test; \
+	$(CC) $(M32) $(WARN) -O2 $(CFLAGS) -c src/terrainnet.c -o build/m32/terrainnet.o || \
+	  { echo "FAIL m32: the implementation does not compile"; echo "m32: 0 passed, 1 failed, 0 skipped"; exit 1; }; \
+	pass=0; fail=0; for t in $(M32_TESTS); do \
+	  if grep -q '^#define TERRAINNET_IMPLEMENTATION' tests/$$t.c; then lib=; else lib=build/m32/terrainnet.o; fi; \
+	  if $(CC) $(M32) $(WARN) -O1 $(CFLAGS) -I. tests/$$t.c $$lib -o build/m32/$$t $(LDLIBS) && ./build/m32/$$t > build/m32/$$t.out 2>&1; \
+	  then pass=$$((pass + 1)); tail -n 1 build/m32/$$t.out; \
+	  else fail=$$((fail + 1)); echo "FAIL m32 $$t:"; grep FAIL build/m32/$$t.out | head -n 5; fi; done; \
+	echo "m32: $$pass passed, $$fail failed, 0 skipped"; [ $$fail -eq 0 ]
+
+# The studio (docs/studio.md): studio/studio.c and terrainnet.h compiled to WebAssembly with
+# emscripten (Debian's 3.1.6: its optimiser needs the Debian node modules, NODE_PATH below),
+# single-threaded, into studio/terrainnet.js + .wasm (committed, so the page works from any
+# static server without a build), and the bundled styles copied from examples/data/styles/.
+# Installs nothing: says what is missing. Always rebuilds (a fresh clone's file times say nothing).
+EMCC ?= emcc
+STUDIO_EMFLAGS = -std=c99 -Wall -Wextra -pedantic -O3 -msimd128 -DTN_NO_THREADS \
+  -sMODULARIZE=1 -sEXPORT_NAME=createTerrainnet -sENVIRONMENT=web,worker -sALLOW_MEMORY_GROWTH=1 -sMAXIMUM_MEMORY=2GB \
+  -sEXPORTED_RUNTIME_METHODS='["FS","ccall","UTF8ToString","HEAPF32","HEAPU8","HEAP32"]' -sEXPORTED_FUNCTIONS='["_malloc","_free"]'
+studio:
+	@command -v $(EMCC) > /dev/null 2>&1 || { echo "make studio: $(EMCC) not found (Debian: apt-get install emscripten)"; exit 1; }
+	@[ -d /usr/share/nodejs ] || [ -n "$$NODE_PATH" ] || echo "make studio: no /usr/share/nodejs: emcc's optimiser may fail (Debian: apt-get install emscripten pulls the node modules)"
+	NODE_PATH=$${NODE_PATH:-/usr/share/nodejs} $(EMCC) $(STUDIO_EMFLAGS) -I. studio/studio.c -o studio/terrainnet.js
+	@rm -rf studio/styles && mkdir -p studio/styles && cp examples/data/styles/* studio/styles/
+	@echo "make studio: studio/terrainnet.wasm $$(wc -c < studio/terrainnet.wasm) bytes, studio/terrainnet.js $$(wc -c < studio/terrainnet.js) bytes, $$(ls studio/styles/*.tnw | wc -l) styles; serve it: python3 -m http.server -d studio"
+
+# index.html?selftest=1 in headless Chromium (studio/check.js, playwright-core from npm in
+# build/pw): the bundled test sketch generated in WebAssembly against the native CLI's output
+# stored beside its style. Fails unless the page writes "selftest: ok".
+studio-check: studio
+	@sh studio/check.sh

@@ -43,8 +43,8 @@ CONFIGURATION (define before including the implementation)
                         @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
-    TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
-                        requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
+    TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on
+                        32-bit targets); larger requests fail with TN_ERR_TOO_LARGE
 
 ERRORS
     Every fallible call returns tn_status (TN_OK = 0). tn_status_string() names the code and
@@ -2446,8 +2446,14 @@ TN_API const char *tn_world_method_help(int i);
 #define TN_ASSERT(x) assert(x)
 #endif
 
+/* 8 GiB where size_t holds it; on 32-bit targets (wasm32, -m32) 8 << 30 wraps to 0 and every
+   allocation would be refused, so the limit is 2 GiB, which such a process cannot reach anyway. */
 #ifndef TN_MAX_ALLOC
+#if SIZE_MAX > 0xffffffffu
 #define TN_MAX_ALLOC ((size_t)8 << 30)
+#else
+#define TN_MAX_ALLOC ((size_t)1 << 31)
+#endif
 #endif
 
 #if !defined(TN_NO_THREADS)

@@ -33,8 +33,14 @@
 #define TN_ASSERT(x) assert(x)
 #endif
 
+/* 8 GiB where size_t holds it; on 32-bit targets (wasm32, -m32) 8 << 30 wraps to 0 and every
+   allocation would be refused, so the limit is 2 GiB, which such a process cannot reach anyway. */
 #ifndef TN_MAX_ALLOC
+#if SIZE_MAX > 0xffffffffu
 #define TN_MAX_ALLOC ((size_t)8 << 30)
+#else
+#define TN_MAX_ALLOC ((size_t)1 << 31)
+#endif
 #endif
 
 #if !defined(TN_NO_THREADS)

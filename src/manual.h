@@ -43,8 +43,8 @@ CONFIGURATION (define before including the implementation)
                         @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
-    TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB); larger
-                        requests fail with TN_ERR_TOO_LARGE instead of exhausting memory
+    TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on
+                        32-bit targets); larger requests fail with TN_ERR_TOO_LARGE
 
 ERRORS
     Every fallible call returns tn_status (TN_OK = 0). tn_status_string() names the code and
