@@ -146,33 +146,16 @@ static void tn__fd_dist(const float *q, const float *blk, int D, float *out)
     }
 }
 
-/* A patch's key: its values at every second pixel from the corner (the match runs on low-passes,
-   which that sampling keeps), minus their mean. */
-static void tn__fd_key(const float *src, int w, int h, size_t stride, int x, int y, int r, float *out)
+/* The values of src (w x h, rows of `stride`) every `step` px from (x - r, y - r) to (x + r,
+   y + r), coordinates clamped, minus their mean (returned). step 1: the patch; step 2: its key
+   (the match runs on low-passes, which that sampling keeps: 16 values for 7 x 7). */
+static float tn__fd_sample(const float *src, int w, int h, size_t stride, int x, int y, int r, int step, float *out)
 {
     int u, v, n = 0;
     float m = 0;
-    for (v = -r; v <= r; v += 2) {
+    for (v = -r; v <= r; v += step) {
         int yy = y + v < 0 ? 0 : y + v >= h ? h - 1 : y + v;
-        for (u = -r; u <= r; u += 2) {
-            int xx = x + u < 0 ? 0 : x + u >= w ? w - 1 : x + u;
-            out[n] = src[(size_t)yy * stride + xx];
-            m += out[n++];
-        }
-    }
-    m /= (float)n;
-    for (u = 0; u < n; u++) out[u] -= m;
-}
-
-/* Patch of src (w x h, rows of `stride`) centred at (x, y), coordinates clamped, minus its mean
-   (returned). */
-static float tn__fd_patch(const float *src, int w, int h, size_t stride, int x, int y, int r, float *out)
-{
-    int u, v, n = 0;
-    float m = 0;
-    for (v = -r; v <= r; v++) {
-        int yy = y + v < 0 ? 0 : y + v >= h ? h - 1 : y + v;
-        for (u = -r; u <= r; u++) {
+        for (u = -r; u <= r; u += step) {
             int xx = x + u < 0 ? 0 : x + u >= w ? w - 1 : x + u;
             out[n] = src[(size_t)yy * stride + xx];
             m += out[n++];
@@ -333,7 +316,7 @@ static tn_status tn__fd_keys_make(const tn__fd *d, const float *src, int step, t
     for (t = 0; t < 8; t++)
         for (y = d->r; y < d->th[t] - d->r; y += step)
             for (x = d->r; x < d->tw[t] - d->r; x += step) {
-                tn__fd_key(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, key + (size_t)n * d->DK);
+                tn__fd_sample(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, 2, key + (size_t)n * d->DK);
                 where[n++] = t * d->plane + y * d->side + x;
             }
     st = tn__fd_index(key, where, n, d->DK, K);
@@ -369,7 +352,7 @@ static void tn__fd_means(const tn__fd *d, const float *src, float *mean)
         for (y = d->r; y < d->th[t] - d->r; y++)
             for (x = d->r; x < d->tw[t] - d->r; x++) {
                 size_t at = (size_t)t * d->plane + (size_t)y * d->side + x;
-                mean[at] = tn__fd_patch(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, q);
+                mean[at] = tn__fd_sample(src + (size_t)t * d->plane, d->tw[t], d->th[t], (size_t)d->side, x, y, d->r, 1, q);
             }
 }
 
@@ -442,7 +425,7 @@ static void tn__fd_match_task(void *vj, size_t b, size_t e)
         for (x = 0; x < j->w; x++) {
             int c, p, l, n = 0, best = -1;
             float bd = FLT_MAX;
-            tn__fd_key(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, q);
+            tn__fd_sample(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, 2, q);
             for (c = 0; c < K->k; c += TN__FD_LANES) {
                 tn__fd_dist(q, K->cent + (size_t)c * d->DK, d->DK, dist);
                 for (l = 0; l < TN__FD_LANES && c + l < K->k; l++) {
@@ -492,7 +475,7 @@ static void tn__fd_sweep_task(void *vj, size_t b, size_t e)
                 cand[k] = j->from[(size_t)y2 * j->w + x2] - nx[k] - ny[k] * d->side;
                 if (cand[k] == best) shared = 1;
             }
-            tn__fd_patch(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, q);
+            tn__fd_sample(j->img, j->w, j->h, (size_t)j->w, x, (int)row, d->r, 1, q);
             bd = tn__fd_dist_at(d, q, d->low, best, d->lowm[best]) * (shared ? 1.0f : 1.0f + TN__FD_KAPPA);
             for (k = 0; k < 4; k++) {
                 float dk;
