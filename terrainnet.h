@@ -1514,21 +1514,24 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *e
    al. 2019, SinGAN)
    A pyramid of the example DEM from a coarsest side of about 25 px, each scale `factor` (0.75)
    times the next finer one; per scale a generator of 5 valid 3 x 3 convolutions (conv, batch
-   norm, leaky ReLU 0.2; tanh last) that adds a residual to the upsampled coarser output, fed
-   that output plus noise of amplitude 0.1 x the RMSE of the coarser reconstruction (1 at the
-   coarsest scale). Scales train one after another, coarse to fine, each against its own
-   spectral-normalised patch discriminator with the hinge loss (the engine has no double
-   backward for SinGAN's WGAN-GP) plus 10 x the MSE of the reconstruction: the image the
-   generators make from one fixed noise map at the coarsest scale and no noise above it.
+   norm, leaky ReLU 0.2; tanh last, times a gain of 5 x the example's detail RMS sigma at that
+   scale) that adds a residual to the upsampled coarser output, fed that output plus noise of
+   amplitude noise_amp x sigma (1 at the coarsest scale). Scales train one after another, coarse
+   to fine, each against its own spectral-normalised patch discriminator with the hinge loss (the
+   engine has no double backward for SinGAN's WGAN-GP) plus 10 x the MSE of the reconstruction
+   in units of sigma^2: the fixed noise map at the coarsest scale, and above it the example's
+   coarser scale upsampled (teacher forcing) with no noise.
    The discriminator judges a scale's DETAIL (the generator's residual; for the example, the
-   scale minus its coarser scale upsampled) in units of the example's detail RMS sigma at that
-   scale, and the adversarial loss is weighted by adv_weight x sigma: a spectral-normalised
-   critic of the heights themselves cannot tell the finest scales' detail (about 0.005 of the
-   range) apart, and its gradient alone taught the generators ripples (docs/singan.md).
+   scale minus its coarser scale upsampled) in units of sigma, beside the gradient of the base it
+   was added to (so detail must fit the slope it lies on: none on a lake). Issue 31 measured why
+   (docs/singan.md): the generator's output in network units made every Adam step move the finest
+   scales by more than their whole detail (0.005 of the range), the copied coarser tail added
+   the coarser detail again, and the reconstruction taught the fine scales to correct the coarse
+   scales' errors: ripples of 4-11x the example's detail RMS.
    Adam 5e-4 (0.5, 0.999), reset at every scale; a scale starts from the coarser one's weights
-   when the widths match. Scales larger than 64 px train on random 64 px windows (7x the
-   iterations of whole scales in the same time on a 256 px example). The time budget gives the
-   scales equal iteration counts, estimated from each scale's measured speed.
+   when the widths match, with the tail at zero (the identity). Scales larger than 64 px train on
+   random 64 px windows. The time budget gives the scales equal iteration counts, estimated from
+   each scale's measured speed.
    Everything is defined on the infinite integer grid of each scale: noise is a hash of the seed,
    the scale and the GLOBAL pixel position, upsampling is bilinear between global positions, the
    convolutions are valid and the norms use their running statistics when sampling. So any
@@ -1558,9 +1561,10 @@ typedef struct tn_singan_opts {
                               networks are fully convolutional); 0 = 64, < 0 = whole scales */
     float lr;              /* Adam rate of G and D; 0 = 5e-4 */
     float rec_weight;      /* weight of the reconstruction MSE; 0 = 10 */
-    float noise_amp;       /* noise amplitude / RMSE of the coarser reconstruction; 0 = 0.1 */
-    float adv_weight;      /* weight of the adversarial loss x the scale's detail RMS; 0 = 1, < 0 = none
-                              (reconstruction only: smooth samples, no ripples; docs/singan.md) */
+    float noise_amp;       /* noise amplitude / the example's detail RMS at the scale; 0 = 0.5 (0.1:
+                              too smooth, 3.6x the curvature distance on Mont Blanc; docs/singan.md) */
+    float adv_weight;      /* weight of the adversarial loss (both losses in units of the scale's
+                              detail RMS); 0 = 1, < 0 = none (reconstruction only; docs/singan.md) */
     int d_steps;           /* discriminator steps per iteration (SinGAN: 3); 0 = 1 */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
@@ -20561,8 +20565,9 @@ done:
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_SINGAN
 
-#define TN__SG_FORMAT 1
-#define TN__SG_CONFIG (8 + 2 * TN_SINGAN_MAX_SCALES)
+#define TN__SG_FORMAT 2 /* 2: the per-scale output gain (issue 31); format 1 models are refused */
+#define TN__SG_CONFIG (8 + 3 * TN_SINGAN_MAX_SCALES)
+#define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
 #define TN__SG_M 5 /* context of 5 valid 3 x 3 convolutions */
 
@@ -20570,7 +20575,8 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
 {
     TN_ASSERT(o);
     /* SinGAN's recipe: coarsest ~25 px, factor 0.75, 32 channels doubling every 4 scales,
-       Adam 5e-4 (0.5, 0.999), reconstruction weight 10, noise 0.1 x RMSE. The width cap is 32:
+       Adam 5e-4 (0.5, 0.999), reconstruction weight 10; noise 0.5 x the detail RMS (SinGAN: 0.1 x
+       the coarser reconstruction's RMSE, measured too smooth here). The width cap is 32:
        at 64 channels the finest scales of a 256 x 256 example cost 4x as much and the default
        10-minute budget on 2 cores leaves too few iterations per scale (docs/singan.md). */
     if (o->coarsest <= 0) o->coarsest = 25;
@@ -20582,7 +20588,7 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->patch == 0) o->patch = 64;
     if (o->lr <= 0) o->lr = 5e-4f;
     if (o->rec_weight == 0) o->rec_weight = 10.0f;
-    if (o->noise_amp == 0) o->noise_amp = 0.1f;
+    if (o->noise_amp == 0) o->noise_amp = 0.5f;
     if (o->adv_weight == 0) o->adv_weight = 1.0f;
     if (o->adv_weight < 0) o->adv_weight = 0.0f;
     if (o->d_steps <= 0) o->d_steps = 1;
@@ -20603,6 +20609,7 @@ typedef struct tn__sg_arch {
     int scales, width, height, trained, disc_layers;
     float factor, offset, range;
     float amp[TN_SINGAN_MAX_SCALES];
+    float gain[TN_SINGAN_MAX_SCALES]; /* the generator's tanh times this: 5 x the example's detail RMS (<= 1; 1 at scale 0) */
     int ch[TN_SINGAN_MAX_SCALES];
 } tn__sg_arch;
 
@@ -20629,6 +20636,7 @@ static void tn__sg_write_config(const tn__sg_arch *A, float *c)
     for (s = 0; s < A->scales; s++) {
         c[8 + s] = A->amp[s];
         c[8 + TN_SINGAN_MAX_SCALES + s] = (float)A->ch[s];
+        c[8 + 2 * TN_SINGAN_MAX_SCALES + s] = A->gain[s];
     }
 }
 
@@ -20650,10 +20658,11 @@ static tn_status tn__sg_read_config(const float *c, tn__sg_arch *A, const char *
     A->trained = (int)c[6];
     A->disc_layers = (int)c[7];
     for (s = 0; s < A->scales; s++) {
-        float a = c[8 + s], w = c[8 + TN_SINGAN_MAX_SCALES + s];
-        if (!(a >= 0 && a <= 100) || !(w >= 1 && w <= 512 && w == floorf(w)))
+        float a = c[8 + s], w = c[8 + TN_SINGAN_MAX_SCALES + s], g = c[8 + 2 * TN_SINGAN_MAX_SCALES + s];
+        if (!(a >= 0 && a <= 100) || !(w >= 1 && w <= 512 && w == floorf(w)) || !(g > 0 && g <= 1))
             return tn__fail(TN_ERR_CORRUPT, "%s: damaged singan configuration (scale %d)", name, s);
         A->amp[s] = a;
+        A->gain[s] = g;
         A->ch[s] = (int)w;
     }
     return TN_OK;
@@ -20714,7 +20723,7 @@ static tn_status tn__sg_model_params(const tn__sg_arch *A, tn_rng *rng, tn_param
 /* 5 valid 3 x 3 convolutions: (h + 10) x (w + 10) in, h x w out. training: batch statistics
    (and running averages updated); else the running statistics, so every pixel depends only on
    its 11 x 11 input neighbourhood. */
-static tn_tensor *tn__sg_gen(tn_ctx *ctx, const tn_params *p, int s, tn_tensor *x, int training)
+static tn_tensor *tn__sg_gen(tn_ctx *ctx, const tn_params *p, int s, float gain, tn_tensor *x, int training)
 {
     char pre[16];
     int l;
@@ -20728,7 +20737,7 @@ static tn_tensor *tn__sg_gen(tn_ctx *ctx, const tn_params *p, int s, tn_tensor *
         } else
             x = tn_tanh(ctx, x);
     }
-    return x;
+    return gain != 1.0f ? tn_scale_shift(ctx, x, gain, 0.0f) : x;
 }
 
 /* ---- noise ---- */
@@ -20885,7 +20894,7 @@ static tn_status tn__sg_window(const tn__sg_gen_run *r, int level, long x0, long
         memcpy(xin->data, base, (size_t)ew * eh * sizeof(float));
         tn__sg_add_noise(r, level, x0 - M, y0 - M, ew, eh, xin->data);
     }
-    g = tn__sg_gen(r->ctx, r->g, net, xin, 0);
+    g = tn__sg_gen(r->ctx, r->g, net, r->A->gain[net], xin, 0);
     if (!g) {
         TN_FREE(base);
         return tn_ctx_status(r->ctx) ? tn_ctx_status(r->ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
@@ -20943,6 +20952,8 @@ typedef struct tn__sg_train {
     tn_optim *og, *od;
     tn_patch_disc disc[TN_SINGAN_MAX_SCALES];
     float sigma[TN_SINGAN_MAX_SCALES]; /* RMS of the example's detail per scale (the scale minus the coarser one upsampled) */
+    float gnorm[TN_SINGAN_MAX_SCALES]; /* RMS of the gradient of the example's upsampled coarser scale per scale */
+    float *fcond;              /* this iteration's fake base gradient (2 x patch), the discriminator's context */
     float *realbase;           /* the example's coarser scale upsampled to the current scale */
     tn_rng rng;
     tn_image real[TN_SINGAN_MAX_SCALES]; /* the example pyramid in network units */
@@ -20968,6 +20979,7 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->base);
     TN_FREE(s->xin);
     TN_FREE(s->fake);
+    TN_FREE(s->fcond);
     TN_FREE(s->realbase);
 }
 
@@ -21017,11 +21029,11 @@ static tn__sg_gen_run tn__sg_train_gen(tn__sg_train *s, tn_ctx *ctx, int rec, ui
 }
 
 /* The example's scale sc - 1 upsampled to scale sc's grid as generation upsamples (bilinear
-   between global positions, clamped at the border); zeros at scale 0. */
-static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
+   between global positions, clamped at the border), on the window (ox, oy, W, H); zeros at scale 0. */
+static void tn__sg_real_base_window(const tn__sg_train *s, int sc, int ox, int oy, int W, int H, float *out)
 {
     const tn_image *c = sc > 0 ? &s->real[sc - 1] : NULL;
-    int W = s->real[sc].width, H = s->real[sc].height, x, y;
+    int x, y;
     if (!c) {
         memset(out, 0, (size_t)W * H * sizeof(float));
         return;
@@ -21029,19 +21041,24 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
     for (y = 0; y < H; y++) {
         long iy, y0, y1;
         float ty;
-        tn__sg_coord(y, s->A.factor, &iy, &ty);
+        tn__sg_coord(oy + y, s->A.factor, &iy, &ty);
         y0 = iy < 0 ? 0 : iy >= c->height ? c->height - 1 : iy;
         y1 = iy + 1 < 0 ? 0 : iy + 1 >= c->height ? c->height - 1 : iy + 1;
         for (x = 0; x < W; x++) {
             long ix, x0, x1;
             float tx;
             const float *r0 = c->data + (size_t)y0 * c->width, *r1 = c->data + (size_t)y1 * c->width;
-            tn__sg_coord(x, s->A.factor, &ix, &tx);
+            tn__sg_coord(ox + x, s->A.factor, &ix, &tx);
             x0 = ix < 0 ? 0 : ix >= c->width ? c->width - 1 : ix;
             x1 = ix + 1 < 0 ? 0 : ix + 1 >= c->width ? c->width - 1 : ix + 1;
             out[(size_t)y * W + x] = (1 - ty) * ((1 - tx) * r0[x0] + tx * r0[x1]) + ty * ((1 - tx) * r1[x0] + tx * r1[x1]);
         }
     }
+}
+
+static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
+{
+    tn__sg_real_base_window(s, sc, 0, 0, s->real[sc].width, s->real[sc].height, out);
 }
 
 /* Enters scale sc: progress name, the reconstruction's base and noise amplitude, the starting
@@ -21052,7 +21069,6 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     float *sch = tn_params_find(s->sched, "singan.sched")->data;
     int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * TN__SG_M, eh = H + 2 * TN__SG_M, i, pw, ph;
     tn__sg_gen_run r;
-    tn_status st;
     {
         char stage[48];
         snprintf(stage, sizeof stage, "singan-train scale %d/%d", sc + 1, s->A.scales);
@@ -21066,30 +21082,28 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     s->recbase = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
     s->xrec = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
     TN_FREE(s->fake);
+    TN_FREE(s->fcond);
     tn__sg_patch_size(s, sc, &pw, &ph);
+    s->fcond = (float *)tn__alloc((size_t)2 * pw * ph * sizeof(float));
     s->base = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
     s->xin = (float *)tn__alloc((size_t)(pw + 2 * TN__SG_M) * (ph + 2 * TN__SG_M) * sizeof(float));
     s->fake = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
     TN_FREE(s->realbase);
     s->realbase = (float *)tn__alloc((size_t)W * H * sizeof(float));
-    if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake || !s->realbase) return TN_ERR_OUT_OF_MEMORY;
+    if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake || !s->fcond || !s->realbase) return TN_ERR_OUT_OF_MEMORY;
     tn__sg_real_base(s, sc, s->realbase);
+    /* the reconstruction's input: the fixed noise map at scale 0; above it the EXAMPLE's coarser
+       scale upsampled (teacher forcing), not the coarser generators' reconstruction: that one's
+       error (0.1 of the range at the coarse scales, 3x the finest scale's detail) was what the
+       fine scales were taught to correct (docs/singan.md) */
     r = tn__sg_train_gen(s, ctx, 1, 0);
-    if ((st = tn__sg_base(&r, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->recbase))) return st;
+    tn__sg_real_base_window(s, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->recbase);
     memcpy(s->xrec, s->recbase, (size_t)ew * eh * sizeof(float));
     tn__sg_add_noise(&r, sc, -TN__SG_M, -TN__SG_M, ew, eh, s->xrec);
     if (!resumed) {
-        if (sc == 0) s->A.amp[0] = 1.0f;
-        else {
-            double se = 0;
-            int y, x;
-            for (y = 0; y < H; y++)
-                for (x = 0; x < W; x++) {
-                    double d = (double)s->real[sc].data[(size_t)y * W + x] - s->recbase[(size_t)(y + TN__SG_M) * ew + x + TN__SG_M];
-                    se += d * d;
-                }
-            s->A.amp[sc] = (float)(s->o.noise_amp * sqrt(se / ((double)W * H)));
-        }
+        /* noise_amp x the example's detail RMS at this scale (SinGAN: x the RMSE of the coarser
+           reconstruction, which is that detail when the reconstruction is good) */
+        s->A.amp[sc] = sc == 0 ? 1.0f : s->o.noise_amp * s->sigma[sc];
         if (sc > 0 && s->A.ch[sc] == s->A.ch[sc - 1]) { /* start from the coarser scale's weights */
             char a[16], b[16];
             int l;
@@ -21102,6 +21116,11 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
                 snprintf(nm, sizeof nm, "%s%s", b, t->name + strlen(a));
                 if ((u = tn_params_find(s->g, nm))) memcpy(u->data, t->data, t->numel * sizeof(float));
             }
+            /* but the tail at zero: the scale starts as the identity on its input. The coarser
+               tail added that scale's detail again (6.5x the finest scale's detail RMS on Mont
+               Blanc in 3 minutes: the ripples; docs/singan.md) */
+            tn_tensor_fill(tn__param_named(s->g, b, "w", 4), 0.0f);
+            tn_tensor_fill(tn__param_named(s->g, b, "b", 4), 0.0f);
             snprintf(a, sizeof a, "d%d.", sc - 1);
             snprintf(b, sizeof b, "d%d.", sc);
             for (l = 0; l < tn_params_count(s->d); l++) {
@@ -21170,10 +21189,25 @@ static tn_status tn__sg_calibrate(tn__sg_train *s, tn_ctx *ctx, int sc)
             for (j = 0; j < pew * peh; j++) x->data[j] -= sc == 0 ? x->data[j] : 0.0f; /* scale 0: noise only */
             tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, x->data);
         }
-        if (!tn__sg_gen(ctx, s->g, sc, x, 1)) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+        if (!tn__sg_gen(ctx, s->g, sc, s->A.gain[sc], x, 1)) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     }
     tn_ctx_set_grad(ctx, 1);
     return TN_OK;
+}
+
+/* The discriminator's context: the gradient (central differences, clamped at the buffer's
+   border) of the base b (bw x bh) on the window (x0, y0, w, h), x then y, times inv. */
+static void tn__sg_cond(const float *b, int bw, int bh, int x0, int y0, int w, int h, float inv, float *out)
+{
+    int x, y;
+    for (y = 0; y < h; y++) {
+        int yy = y0 + y, ya = yy > 0 ? yy - 1 : 0, yb = yy + 1 < bh ? yy + 1 : bh - 1;
+        for (x = 0; x < w; x++) {
+            int xx = x0 + x, xa = xx > 0 ? xx - 1 : 0, xb = xx + 1 < bw ? xx + 1 : bw - 1;
+            out[(size_t)y * w + x] = 0.5f * inv * (b[(size_t)yy * bw + xb] - b[(size_t)yy * bw + xa]);
+            out[(size_t)w * h + (size_t)y * w + x] = 0.5f * inv * (b[(size_t)yb * bw + xx] - b[(size_t)ya * bw + xx]);
+        }
+    }
 }
 
 /* One G step and one D step at scale sc on a random window (the whole scale or a patch): the G
@@ -21201,19 +21235,25 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
     memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
     tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
+    tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
     /* G step: adversarial + reconstruction on the same window */
     tn_ctx_reset(ctx);
     tn_ctx_set_grad(ctx, 1);
     tn_patch_disc_begin(ctx, &s->disc[sc]);
-    gres = tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1);
-    /* D judges the residual in units of the example's detail RMS; the weight x sigma keeps the
-       gradient G gets in network units as from a 1-Lipschitz critic of the heights */
-    lg = tn_scale_shift(ctx, tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], tn_scale_shift(ctx, gres, 1.0f / s->sigma[sc], 0.0f))),
-                        s->o.adv_weight * s->sigma[sc], 0.0f);
-    rec = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh), 1),
+    gres = tn__sg_gen(ctx, s->g, sc, s->A.gain[sc], tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1);
+    /* D judges the residual in units of the example's detail RMS sigma beside the base's
+       gradient; the reconstruction's MSE is in units of sigma^2 too, so the two terms weigh the
+       same at every scale */
+    {
+        tn_tensor *cond = tn_tensor_4d(ctx, 1, 2, ph, pw);
+        if (cond) memcpy(cond->data, s->fcond, (size_t)2 * pw * ph * sizeof(float));
+        lg = tn_scale_shift(ctx, tn_hinge_g_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], tn_concat(ctx, tn_scale_shift(ctx, gres, 1.0f / s->sigma[sc], 0.0f), cond, 1))),
+                            s->o.adv_weight, 0.0f);
+    }
+    rec = tn_add(ctx, tn__sg_gen(ctx, s->g, sc, s->A.gain[sc], tn__sg_tensor(ctx, s->xrec, ew, ox, oy, pew, peh), 1),
                  tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
     lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
-    loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight, 0.0f));
+    loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight / (s->sigma[sc] * s->sigma[sc]), 0.0f));
     if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     tn_params_zero_grad(s->g);
     if ((st = tn_backward(ctx, loss))) return st;
@@ -21234,24 +21274,28 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
             if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
             memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
             tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
+            tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
             tn_ctx_reset(ctx);
             tn_ctx_set_grad(ctx, 0);
-            if (!(gres = tn__sg_gen(ctx, s->g, sc, tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1)))
+            if (!(gres = tn__sg_gen(ctx, s->g, sc, s->A.gain[sc], tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1)))
                 return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
             memcpy(s->fake, gres->data, (size_t)pw * ph * sizeof(float));
             tn_ctx_set_grad(ctx, 1);
         }
         tn_ctx_reset(ctx);
-        fake = tn__sg_tensor(ctx, s->fake, pw, 0, 0, pw, ph);
-        real = tn__sg_tensor(ctx, s->real[sc].data, W, rx, ry, pw, ph);
-        if (real && fake) { /* the detail, in units of its RMS */
+        fake = tn_tensor_4d(ctx, 1, 3, ph, pw);
+        real = tn_tensor_4d(ctx, 1, 3, ph, pw);
+        if (real && fake) { /* the detail in units of its RMS, and the base's gradient */
             int y, x;
+            size_t n1 = (size_t)pw * ph;
             for (y = 0; y < ph; y++)
                 for (x = 0; x < pw; x++) {
-                    size_t k = (size_t)y * pw + x;
-                    real->data[k] = (real->data[k] - s->realbase[(size_t)(y + ry) * W + x + rx]) / s->sigma[sc];
-                    fake->data[k] /= s->sigma[sc];
+                    size_t k = (size_t)y * pw + x, q = (size_t)(y + ry) * W + x + rx;
+                    real->data[k] = (s->real[sc].data[q] - s->realbase[q]) / s->sigma[sc];
+                    fake->data[k] = s->fake[k] / s->sigma[sc];
                 }
+            tn__sg_cond(s->realbase, W, H, rx, ry, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, real->data + n1);
+            memcpy(fake->data + n1, s->fcond, 2 * n1 * sizeof(float));
         }
         tn_patch_disc_begin(ctx, &s->disc[sc]);
         loss = tn_hinge_d_loss(ctx, tn_patch_disc_score(ctx, &s->disc[sc], real), tn_patch_disc_score(ctx, &s->disc[sc], fake));
@@ -21328,7 +21372,7 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
     for (s_ = 0; s_ < s->A.scales; s_++) {
         char pre[16];
         snprintf(pre, sizeof pre, "d%d.", s_);
-        if ((st = tn_patch_disc_add(s->d, pre, 1, s->A.ch[s_], s->A.disc_layers, 3, &s->rng, &s->disc[s_]))) return st;
+        if ((st = tn_patch_disc_add(s->d, pre, 3, s->A.ch[s_], s->A.disc_layers, 3, &s->rng, &s->disc[s_]))) return st;
     }
     if (!tn_params_add_buffer(s->sched, "singan.sched", 1, &n)) return TN_ERR_OUT_OF_MEMORY;
     memset(&oo, 0, sizeof oo);
@@ -21378,6 +21422,10 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         const char *sd;
         if ((st = tn_train_open_checkpoint(s.run, &ck))) goto done;
         if (!(cfg = tn_params_find(ck, "singan.config")) || cfg->numel != TN__SG_CONFIG) {
+            if (cfg && cfg->numel == TN__SG_CONFIG1) {
+                st = tn__fail(TN_ERR_FORMAT, "%s: a singan checkpoint of format 1 (before issue 31's output gain): train again", s.o.train.checkpoint);
+                goto done;
+            }
             st = tn__fail(TN_ERR_FORMAT, "%s: not a singan checkpoint", s.o.train.checkpoint);
             goto done;
         }
@@ -21433,8 +21481,23 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         }
         tn__sg_real_base(&s, i, b);
         for (k = 0; k < nn; k++) se += (double)(s.real[i].data[k] - b[k]) * (s.real[i].data[k] - b[k]);
-        TN_FREE(b);
         s.sigma[i] = (float)sqrt(se / (double)nn + 1e-12);
+        if (!s.o.train.resume) s.A.gain[i] = i == 0 || 5.0f * s.sigma[i] > 1.0f ? 1.0f : 5.0f * s.sigma[i];
+        { /* the RMS of the base's gradient (0 at the coarsest scale, whose base is zero) */
+            float *gxy = (float *)tn__alloc(2 * nn * sizeof(float));
+            double sg = 0;
+            if (!gxy) {
+                TN_FREE(b);
+                st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+                goto done;
+            }
+            tn__sg_cond(b, s.real[i].width, s.real[i].height, 0, 0, s.real[i].width, s.real[i].height, 1.0f, gxy);
+            for (k = 0; k < 2 * nn; k++) sg += (double)gxy[k] * gxy[k];
+            s.gnorm[i] = (float)sqrt(sg / (double)nn);
+            if (!(s.gnorm[i] > 1e-9f)) s.gnorm[i] = 0;
+            TN_FREE(gxy);
+        }
+        TN_FREE(b);
     }
     if ((st = tn__sg_train_nets(&s))) goto done;
     if ((st = tn_train_add_net(s.run, "g", s.g, s.og)) || (st = tn_train_add_net(s.run, "d", s.d, s.od)) ||
@@ -21605,7 +21668,9 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
     if ((st = tn_params_open(path, &f))) return st;
     st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
-    if (!st && (!(cfg = tn_params_find(f, "singan.config")) || cfg->numel != TN__SG_CONFIG))
+    if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
+        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
+    else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
     if (!st) st = tn__sg_model_params(&A, NULL, &w);

@@ -31,7 +31,12 @@ TN_TEST(training_lowers_the_reconstruction_loss)
     TN_CHECK(trained.scales == 3 && st.scales == 3 && trained.trained == 3);
     TN_CHECK(st.iterations == 120);
     TN_CHECK(st.scale_iters[0] == 40 && st.scale_iters[1] == 40 && st.scale_iters[2] == 40);
-    TN_CHECK(st.loss_rec < 0.75f * st.loss_rec_first); /* the last scale starts from the coarser one's weights */
+    TN_CHECK(st.loss_rec < 0.75f * st.loss_rec_first);
+    /* the last scale starts from the coarser one's weights but with its tail at zero (issue 31:
+       the copied tail added the coarser scale's detail again): its first reconstruction is the
+       example's coarser scale upsampled (teacher forcing), whose RMSE against the scale is the
+       detail RMS that the noise amplitude is 0.5 x of */
+    TN_CHECK_NEAR(st.loss_rec_first, (trained.amp[2] / 0.5f) * (trained.amp[2] / 0.5f), 1e-4f * st.loss_rec_first);
     TN_CHECK(trained.amp[0] == 1.0f && trained.amp[1] > 0 && trained.amp[1] < 0.2f && trained.amp[2] > 0);
     TN_CHECK_NEAR(trained.offset, 1500, 501);
     { /* one scale from scratch: its tail starts at zero, so the first reconstruction is flat */
@@ -200,6 +205,19 @@ TN_TEST(bad_inputs)
         tn_params_free(p);
         TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
         TN_CHECK(strstr(tn_last_error(), "texgan") != NULL);
+        remove(path);
+    }
+    { /* a singan model of format 1 (before the per-scale output gain of issue 31): refused by name */
+        tn_params *p = tn_params_create();
+        tn_model_provenance pv;
+        int n = 8 + 2 * TN_SINGAN_MAX_SCALES;
+        memset(&pv, 0, sizeof pv);
+        tn_params_add_buffer(p, "singan.config", 1, &n);
+        TN_CHECK(tn_model_stamp(p, "singan", 1, &pv) == TN_OK);
+        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        tn_params_free(p);
+        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(strstr(tn_last_error(), "format 1") != NULL);
         remove(path);
     }
     if (have_trained) {
