@@ -37,7 +37,7 @@ example  The example: a real DEM (SRTM 3", Alps), hillshaded colour map
 ridges   Its ridges (yellow) and valleys (blue), extracted
 noise    Input for style transfer: Perlin noise (no learning)
 style    Style transfer: that noise restyled by the example
-gnn      Sketch to terrain: the letter A ridge in a circular valley (examples/data/sketch_a.tns), in the style of the example
+gnn      Sketch to terrain: the letter A ridge in a circular valley (examples/data/sketch_a.tns), in the style of the example (densified by example, with its fine detail)
 singan   SinGAN: new terrain like the example, 1.5 times its size (a new sample, not a copy)
 texture  Texture GAN: grass learnt from one photo over the example; left tiled, right detail-mapped; top far, bottom near
 splat    Splat map: vegetation, bare ground, rock, snow weights
@@ -71,7 +71,7 @@ step_style() { # restyles the noise step's map
 }
 step_gnn() {
     run $T gnn-train "$DEM" -o "$OUT/gnn.tnw" $GNN_ARGS
-    run $T gnn-generate "$OUT/gnn.tnw" $DATA/sketch_a.tns -o "$OUT/sketch_terrain.png" --size 256x256 --random 48 --preview "$OUT/sketch_terrain_preview.png"
+    run $T gnn-generate "$OUT/gnn.tnw" $DATA/sketch_a.tns -o "$OUT/sketch_terrain.png" --size 256x256 --preview "$OUT/sketch_terrain_preview.png"
     PIC=sketch_terrain_preview.png; LINK=sketch_terrain.png
 }
 step_singan() {
