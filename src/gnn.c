@@ -2717,7 +2717,7 @@ typedef struct tn__gnn_gen {
     tn_params *own_w;          /* w when it is the model's early network */
     int detail;                /* 1: fd's fine detail is added to the output */
     const char *detail_why;
-    tn__fd fd;                 /* the example's patch index (@@finedetail) */
+    tn__fd fd;                 /* the example's patch index (@@finedetail), built for generation only */
 } tn__gnn_gen;
 
 /* One region of the map with its own graph: the parts that can reach it, in the sketch's order. */
@@ -3313,11 +3313,11 @@ static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
     return TN_OK;
 }
 
-/* Whether the fine detail by example runs (opts->detail, the model's example), and its index. */
+/* Whether the fine detail by example runs (opts->detail, the model's example); generation
+   builds its index (tn__gnn_detail_index), a plan does not need it. */
 static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
 {
     const tn_tensor *e = tn_params_find(model->weights, "detail.example");
-    tn_image ex;
     if (o->detail < 0) {
         G->detail_why = "off (--detail none)";
         return TN_OK;
@@ -3330,12 +3330,19 @@ static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_
         G->detail_why = "off: the sketch is not grown (a dense network carries its own detail; --detail example adds it)";
         return TN_OK;
     }
+    G->detail = 1;
+    G->detail_why = "the example's fine detail, matched by shape to the terrain's low-pass (below 2 px)";
+    return TN_OK;
+}
+
+/* The example's patch index, for a generation whose plan has the fine detail. */
+static tn_status tn__gnn_detail_index(const tn_gnn *model, tn__gnn_gen *G)
+{
+    tn_image ex;
     ex.width = G->A.width;
     ex.height = G->A.height;
     ex.channels = 1;
-    ex.data = e->data;
-    G->detail = 1;
-    G->detail_why = "the example's fine detail, matched by shape to the terrain's low-pass (below 2 px)";
+    ex.data = tn_params_find(model->weights, "detail.example")->data;
     return tn__fd_build(&ex, NULL, &G->fd);
 }
 
@@ -3566,6 +3573,7 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
     if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
     if ((st = tn_image_create(&res, w, h, 1))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
+    if (G.detail && (st = tn__gnn_detail_index(model, &G))) goto done;
     st = G.detail ? tn__gnn_gen_detailed(&G, ctx, x, y, w, h, res.data) : tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
     if (!st) {
         *out = res;
