@@ -23,61 +23,11 @@
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
    range. */
 #include "terrainnet.h"
+#include "bench_data.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <math.h>
-
-static const char *data_dir(void)
-{
-    const char *d = getenv("TN_DATA");
-    return d && d[0] ? d : "../shared/data";
-}
-
-/* dx, dy, h_at_0, h_at_65535 of <region>_full.png from dem_index.csv */
-static int mapping(const char *region, double *dxy, double *h0, double *h1)
-{
-    char path[512], line[1024], want[256];
-    FILE *f;
-    snprintf(path, sizeof path, "%s/dem_index.csv", data_dir());
-    snprintf(want, sizeof want, "dem/%s/%s_full.png,", region, region);
-    if (!(f = fopen(path, "r"))) return 0;
-    while (fgets(line, sizeof line, f)) {
-        char *p = line;
-        int col;
-        if (strncmp(line, want, strlen(want))) continue;
-        for (col = 0; col < 5 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
-        if (!p || sscanf(p, "%lf,%lf", dxy, dxy + 1) != 2) dxy[0] = dxy[1] = 1;
-        for (col = 0; col < 2 && p; col++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
-        fclose(f);
-        return p && sscanf(p, "%lf,%lf", h0, h1) == 2;
-    }
-    fclose(f);
-    return 0;
-}
-
-static int load_metres(const char *region, const char *suffix, double h0, double h1, tn_image *img)
-{
-    char path[512];
-    size_t i;
-    snprintf(path, sizeof path, "%s/dem/%s/%s_%s.png", data_dir(), region, region, suffix);
-    if (tn_image_load(path, img, NULL)) return 0;
-    for (i = 0; i < (size_t)img->width * img->height * img->channels; i++) img->data[i] = (float)(h0 + img->data[i] * (h1 - h0));
-    return 1;
-}
-
-static int locate(const tn_image *full, const tn_image *crop, int *cx, int *cy)
-{
-    int x, y, u, v;
-    for (y = 0; y + crop->height <= full->height; y++)
-        for (x = 0; x + crop->width <= full->width; x++) {
-            int ok = 1;
-            for (v = 0; v < crop->height && ok; v++)
-                for (u = 0; u < crop->width && ok; u++) ok = TN_PIXEL(full, x + u, y + v, 0) == TN_PIXEL(crop, u, v, 0);
-            if (ok) return *cx = x, *cy = y, 1;
-        }
-    return 0;
-}
 
 static tn_realism_opts ropts;
 
@@ -146,11 +96,12 @@ int main(int argc, char **argv)
         else threads = atoi(argv[a]);
     }
     tn_set_threads(threads);
-    if (!mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &ex) ||
+    if (!height_mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &ex) ||
         !locate(&full, &ex, &ex_x, &ex_y)) {
         fprintf(stderr, "bench_sketch: %s: data not found under %s\n", region, data_dir());
         return 1;
     }
+    if (dxy[0] <= 0) dxy[0] = dxy[1] = 1; /* no spacing recorded: 1 per pixel */
     if (tn_gnn_load(model_path, &model)) {
         fprintf(stderr, "bench_sketch: %s: %s\n", model_path, tn_last_error());
         return 1;
