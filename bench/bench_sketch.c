@@ -13,6 +13,7 @@
    - follow: the share of stroke points above (ridge) or below (valley) both terrain pixels 4 px
      across the stroke (tn_gnn_ordering, distance 4);
    - height_error: mean |terrain - asked height| over the strokes' pixels, % of the example's range;
+     height_bias: the mean of terrain - asked height there (< 0: strokes deeper than asked);
    - slope, curvature, spectrum: tn_realism_compare distances of the output to the example (the
      128 crop, metres, its pixel spacing; nothing resized), each divided by the mean distance of
      three real 256 crops of the same DEM (the corners of <region>_full.png farthest from the
@@ -161,7 +162,7 @@ int main(int argc, char **argv)
         for (w = 0; w < 6; w++) {
             tn_gnn_generate_opts o;
             tn_gnn_plan plan;
-            double t0 = tn_time_seconds(), share = 0, err = 0, dist[3], secs;
+            double t0 = tn_time_seconds(), share = 0, err = 0, bias = 0, dist[3], secs;
             size_t q, nq = 0;
             int cnt = 0;
             tn_status st;
@@ -188,10 +189,11 @@ int main(int argc, char **argv)
             }
             tn_gnn_ordering(&sk, &out[w], 4, &share, &cnt);
             for (q = 0; q < (size_t)256 * 256; q++)
-                if (rast.data[3 * q] > 0 || rast.data[3 * q + 1] > 0) err += fabs(out[w].data[q] - rast.data[3 * q + 2]), nq++;
+                if (rast.data[3 * q] > 0 || rast.data[3 * q + 1] > 0) err += fabs(out[w].data[q] - rast.data[3 * q + 2]), bias += out[w].data[q] - rast.data[3 * q + 2], nq++;
             distances(&ex, &out[w], dist);
             printf("%s_%s_follow: %.1f %%\n", all[d], way[w], 100 * share);
             printf("%s_%s_height_error: %.2f %% of range\n", all[d], way[w], 100 * err / (nq ? nq : 1) / (model.hi - model.lo));
+            printf("%s_%s_height_bias: %+.2f %% of range\n", all[d], way[w], 100 * bias / (nq ? nq : 1) / (model.hi - model.lo));
             printf("%s_%s_slope: %.4f (%.2f x real)\n", all[d], way[w], dist[0], dist[0] / real[0]);
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);

@@ -2693,6 +2693,9 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
     }
 }
 
+static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+                              const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+
 /* What every window of one generation shares: the sketch's parts, cut once from the whole
    sketch so that every window sees the same parts in the same order, their embeddings and
    initial states, and the rasterised sketch. */
@@ -2703,6 +2706,7 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
     double gain_raw;           /* the held-out lines' least-squares gain before scale and clamp
@@ -3386,6 +3390,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
                                                             network between them (a sketch without a 5 px line fails below, ungrown) */
         tn_contour_set ex;
+        float relief = 0;
         memset(&ex, 0, sizeof ex);
         if (!(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex)) && !(st = tn__gnn_line_density(&sk, &G->user_density)))
             st = tn__gnn_line_density(&ex, &G->example_density);
@@ -3393,7 +3398,8 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             tn_gnn_grow_opts go;
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
-            if (!(st = tn_gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown))) {
+            if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
+                G->side = relief / 16 / G->A.std; /* the fall added lines keep near a stroke */
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);
@@ -3437,16 +3443,13 @@ done:
    the network's residual. base_dst (may be NULL): the membrane there. */
 #define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
 
-/* A grown sketch's user lines keep their heights where the network moved them against their
-   kind: the residual near them, minus a smooth local mean of the residual on them that lowers a
-   ridge or raises a valley (min(r, 0) on ridge pixels, max(r, 0) on valley pixels; kernel
-   (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to
-   them. So a ridge is never below, a valley never above, its asked height by more than what is
-   left of that mean; a residual that deepens a valley or lifts a ridge stays (pinning it too made
-   the land beside a Sahara valley lower than the valley: 77 -> 44 % followed). The network alone
-   moved a stroke of a weak model by up to 19 % of the range (Sahara, docs/gnn.md). Reads pred (rw x rh
-   at (rx, ry), normalised) within L of the window (x, y, ww, wh), which the caller computed
-   exactly; writes the correction of each window pixel into corr (ww x wh). */
+/* A grown sketch's user lines keep their heights: the residual near them, minus a smooth local
+   mean of the residual on them (kernel (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by
+   a smoothstep of the distance to them. The network alone moved a stroke of a weak model by up to
+   19 % of the range (Sahara, docs/gnn.md); that the land beside a stroke stays below a ridge and
+   above a valley is the notch's work (tn__gnn_incise). Reads pred (rw x rh at (rx, ry),
+   normalised) within L of the window (x, y, ww, wh), which the caller computed exactly; writes
+   the correction of each window pixel into corr (ww x wh). */
 static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const float *pred, int x, int y, int ww, int wh, float *corr)
 {
     const int L = TN__GNN_PIN;
@@ -3468,7 +3471,7 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const flo
                     k = (1 - e / L) * (1 - e / L) / (e + 0.5f);
                     i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
                     e = pred[i] - R->base[i];
-                    num += k * (G->pin[(size_t)b * G->W + a] == 1 ? fminf(e, 0.0f) : fmaxf(e, 0.0f));
+                    num += k * e;
                     den += k;
                 }
             phi = 1 - d / L;
@@ -3477,28 +3480,103 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const flo
         }
 }
 
+#define TN__GNN_BANK 4  /* px: a stroke's banks, which stay above a valley and below a ridge */
+#define TN__GNN_NOTCH 7 /* px: half-width of the notch that deepens a valley or raises a ridge */
+
+/* A grown sketch's user lines stay the lowest (valley) or highest (ridge) ground across them:
+   where a bank (the output 4 px from a stroke pixel, off the strokes) is not at least `side` per
+   px above a valley pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
+   in a notch of (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the
+   network leave a stroke on a hillside where the land around it tilts more than the stroke's own
+   profile (a tributary above a main valley); lifting the low bank instead left levees at a fixed
+   distance. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which holds every
+   pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def: aw x ah
+   scratch; the result goes into out (ww x wh). */
+static void tn__gnn_incise(const tn__gnn_gen *G, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww, int wh,
+                           float *def, float *out)
+{
+    const int Wn = TN__GNN_NOTCH, Bk = TN__GNN_BANK;
+    const float keep = 1 - (1 - (float)Bk / Wn) * (1 - (float)Bk / Wn); /* what the notch leaves of a bank-to-stroke difference */
+    int u, v, a, b;
+    for (v = 0; v < ah; v++)
+        for (u = 0; u < aw; u++) {
+            int X = ax + u, Y = ay + v, t = G->pin[(size_t)Y * G->W + X];
+            float m = t == 1 ? -FLT_MAX : FLT_MAX, h = val[(size_t)v * aw + u], need;
+            int any = 0;
+            def[(size_t)v * aw + u] = 0;
+            if (!t || X < x - Wn || Y < y - Wn || X >= x + ww + Wn || Y >= y + wh + Wn) continue;
+            for (b = Y - Bk - 1; b <= Y + Bk + 1; b++)
+                for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
+                    float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
+                    if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah ||
+                        G->pin_d[(size_t)b * G->W + a] < 2)
+                        continue;
+                    q = val[(size_t)(b - ay) * aw + (a - ax)];
+                    m = t == 1 ? fmaxf(m, q) : fminf(m, q);
+                    any = 1;
+                }
+            if (!any) continue;
+            need = t == 1 ? m + G->side * Bk - h : h - (m - G->side * Bk);
+            if (need > 0) def[(size_t)v * aw + u] = (t == 1 ? need : -need) / keep;
+        }
+    for (v = 0; v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            int X = x + u, Y = y + v;
+            float d = G->pin_d[(size_t)Y * G->W + X], h = val[(size_t)(Y - ay) * aw + (X - ax)];
+            double num = 0, den = 0;
+            if (d < (float)Wn) {
+                for (b = Y - Wn + 1; b < Y + Wn; b++)
+                    for (a = X - Wn + 1; a < X + Wn; a++) {
+                        float e, k;
+                        if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !G->pin[(size_t)b * G->W + a]) continue;
+                        e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+                        if (e >= (float)Wn) continue;
+                        k = (1 - e / Wn) * (1 - e / Wn) / (e + 0.5f);
+                        num += k * def[(size_t)(b - ay) * aw + (a - ax)];
+                        den += k;
+                    }
+                if (den > 0) h += (1 - d / Wn) * (1 - d / Wn) * (float)(num / den);
+            }
+            out[(size_t)v * ww + u] = h;
+        }
+}
+
 static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
                                     size_t stride)
 {
     tn__gnn_region R;
-    float *pred = NULL, *corr = NULL;
-    int L = G->pin ? TN__GNN_PIN : 0, gx = x - L > 0 ? x - L : 0, gy = y - L > 0 ? y - L : 0; /* pinning reads L px around the window */
-    int gx1 = x + ww + L < G->W ? x + ww + L : G->W, gy1 = y + wh + L < G->H ? y + wh + L : G->H;
+    float *pred = NULL, *corr = NULL, *val = NULL, *inc = NULL;
+    /* the notch reads the pinned output within L of the window, the pinning pred within L of that */
+    int L = G->pin ? TN__GNN_PIN : 0, gx = x - 2 * L > 0 ? x - 2 * L : 0, gy = y - 2 * L > 0 ? y - 2 * L : 0;
+    int gx1 = x + ww + 2 * L < G->W ? x + ww + 2 * L : G->W, gy1 = y + wh + 2 * L < G->H ? y + wh + 2 * L : G->H;
+    int ax = x - L > 0 ? x - L : 0, ay = y - L > 0 ? y - L : 0, aw = (x + ww + L < G->W ? x + ww + L : G->W) - ax,
+        ah = (y + wh + L < G->H ? y + wh + L : G->H) - ay;
     int rx = gx - G->halo > 0 ? gx - G->halo : 0, ry = gy - G->halo > 0 ? gy - G->halo : 0, u, v;
     int rx1 = gx1 + G->halo < G->W ? gx1 + G->halo : G->W, ry1 = gy1 + G->halo < G->H ? gy1 + G->halo : G->H;
     tn_status st;
     if ((size_t)(rx1 - rx) * (ry1 - ry) * G->A.k > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn generate: a %d x %d window needs more than %d edges", ww, wh, TN__GNN_MAX_EDGES);
     if ((st = tn__gnn_region_make(G, rx, ry, rx1 - rx, ry1 - ry, NULL, &R))) return st;
-    if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && G->pin && !(corr = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float))) ||
+        !(val = (float *)tn__alloc((size_t)aw * ah * sizeof(float))))
+        st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && G->pin && (!(corr = (float *)tn__alloc((size_t)aw * ah * sizeof(float))) ||
+                          !(inc = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))))
+        st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
-    if (!st && corr) tn__gnn_pin(G, &R, pred, x, y, ww, wh, corr);
+    if (!st && corr) tn__gnn_pin(G, &R, pred, ax, ay, aw, ah, corr);
+    for (v = 0; !st && v < ah; v++)
+        for (u = 0; u < aw; u++) {
+            size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
+            float r = pred[i] - (corr ? corr[j] : 0.0f);
+            val[j] = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]);
+        }
+    if (!st && inc) tn__gnn_incise(G, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
     for (v = 0; !st && v < wh; v++)
         for (u = 0; u < ww; u++) {
             size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
-            float r = pred[i] - (corr ? corr[(size_t)v * ww + u] : 0.0f);
-            float p = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]), h = G->A.mean + G->A.std * p;
+            float p = inc ? inc[(size_t)v * ww + u] : val[(size_t)(y - ay + v) * aw + (x - ax + u)];
+            float h = G->A.mean + G->A.std * p;
             if (!isfinite(h)) {
                 st = tn__fail(TN_ERR_NUMERIC, "gnn generate: the network gave NaN/Inf (damaged model?)");
                 break;
@@ -3509,6 +3587,8 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     tn__gnn_region_free(&R);
     TN_FREE(pred);
     TN_FREE(corr);
+    TN_FREE(val);
+    TN_FREE(inc);
     return st;
 }
 

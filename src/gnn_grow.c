@@ -49,8 +49,10 @@ static size_t tn__gnn_grow_at(int i, int j, int S, int t, int ox, int oy, int Wx
     return (size_t)(oy + b) * Wx + ox + a;
 }
 
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
+/* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
+   from which generation takes the least slope from a stroke to its banks. */
+static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+                              const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
 {
     tn_gnn_grow_opts o;
     tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
@@ -60,7 +62,7 @@ TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *e
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *erel = NULL, *prel = NULL, fall, relief;
+    float *D = NULL, *erel = NULL, *prel = NULL, fall = 0, relief = 0;
     double *sum = NULL, *cnt = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
@@ -249,6 +251,13 @@ done:
     }
     *out = set;
     if (added) *added = (int)nl;
+    if (relief_out) *relief_out = relief;
     return TN_OK;
+}
+
+TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
+{
+    return tn__gnn_grow(user, example, width, height, opts, out, added, NULL);
 }
 #endif /* TN_NO_GNN */
