@@ -5,10 +5,10 @@
    times the next finer one; per scale a generator of 5 valid 3 x 3 convolutions (conv, batch
    norm, leaky ReLU 0.2; tanh last, times a gain of 5 x the example's detail RMS sigma at that
    scale) that adds a residual to the upsampled coarser output, fed that output plus noise of
-   amplitude noise_amp x sigma (1 at the coarsest scale). Scales train one after another, coarse
-   to fine, each against its own spectral-normalised patch discriminator with the hinge loss (the
-   engine has no double backward for SinGAN's WGAN-GP) plus 10 x the MSE of the reconstruction
-   in units of sigma^2: the fixed noise map at the coarsest scale, and above it the example's
+   amplitude noise_amp x sigma (1 at the coarsest scale, smoothed over 1.4 px). Scales train one
+   after another, coarse to fine, each against its own spectral-normalised patch discriminator
+   with the hinge loss (the engine has no double backward for SinGAN's WGAN-GP) plus 10 x the
+   MSE of the reconstruction in units of sigma^2: the fixed noise map at the coarsest scale, and above it the example's
    coarser scale upsampled (teacher forcing) with no noise.
    The discriminator judges a scale's DETAIL (the generator's residual; for the example, the
    scale minus its coarser scale upsampled) in units of sigma, beside the gradient of the base it
@@ -169,7 +169,8 @@ TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_SINGAN
 
-#define TN__SG_FORMAT 2 /* 2: the per-scale output gain (issue 31); format 1 models are refused */
+#define TN__SG_FORMAT 3 /* 2: the per-scale output gain (issue 31); 3: the smoothed coarsest
+                           noise (its third round). Older models are refused */
 #define TN__SG_CONFIG (8 + 3 * TN_SINGAN_MAX_SCALES)
 #define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
@@ -359,6 +360,24 @@ static float tn__sg_noise(uint64_t key, long gx, long gy)
     return (s * (1.0f / 65536.0f) - 2.0f + 2.0f / 65536.0f) * 1.7320508f;
 }
 
+/* The coarsest scale's noise: tn__sg_noise filtered by a 9 x 9 binomial kernel (std 1.4 px),
+   scaled back to unit variance. From white noise the coarsest generator made pixel-sized bumps
+   that the bilinear upsampling drew as axis-aligned straight lines (docs/singan.md). */
+#define TN__SG_BLUR0 4
+static float tn__sg_noise0(uint64_t key, long gx, long gy)
+{
+    static const float k[2 * TN__SG_BLUR0 + 1] = {1, 8, 28, 56, 70, 56, 28, 8, 1};
+    const float norm = 1.0f / 12870.0f; /* 1 / sum of k^2, once per axis: unit variance */
+    float v = 0;
+    int a, b;
+    for (b = 0; b <= 2 * TN__SG_BLUR0; b++) {
+        float r = 0;
+        for (a = 0; a <= 2 * TN__SG_BLUR0; a++) r += k[a] * tn__sg_noise(key, gx + a - TN__SG_BLUR0, gy + b - TN__SG_BLUR0);
+        v += k[b] * r;
+    }
+    return v * norm;
+}
+
 /* ---- windowed generation ---- */
 
 typedef struct tn__sg_gen_run {
@@ -470,6 +489,11 @@ static void tn__sg_add_noise(const tn__sg_gen_run *r, int level, long x0, long y
     uint64_t key = r->rec ? TN__SG_REC_KEY : tn__sg_level_key(r->seed, level);
     int i, j;
     if (amp == 0) return;
+    if (level == 0) { /* smoothed: see tn__sg_noise0 */
+        for (j = 0; j < h; j++)
+            for (i = 0; i < w; i++) x[(size_t)j * w + i] += amp * tn__sg_noise0(key, x0 + i, y0 + j);
+        return;
+    }
     for (j = 0; j < h; j++)
         for (i = 0; i < w; i++) x[(size_t)j * w + i] += amp * tn__sg_noise(key, x0 + i, y0 + j);
 }
@@ -1274,6 +1298,8 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
     if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
+    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
+        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 2 (before issue 31's smoothed coarsest noise): train it again", path);
     else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);

@@ -220,6 +220,19 @@ TN_TEST(bad_inputs)
         TN_CHECK(strstr(tn_last_error(), "format 1") != NULL);
         remove(path);
     }
+    { /* format 2 (white noise at the coarsest scale, before issue 31's third round): refused by name */
+        tn_params *p = tn_params_create();
+        tn_model_provenance pv;
+        int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
+        memset(&pv, 0, sizeof pv);
+        tn_params_add_buffer(p, "singan.config", 1, &n);
+        TN_CHECK(tn_model_stamp(p, "singan", 2, &pv) == TN_OK);
+        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        tn_params_free(p);
+        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(strstr(tn_last_error(), "format 2") != NULL);
+        remove(path);
+    }
     if (have_trained) {
         tn_singan_gen_opts g;
         memset(&g, 0, sizeof g);
