@@ -1468,6 +1468,68 @@ TN_TEST(test_model_config_sizes)
     TN_CHECK(refused_up_front(load_kpd, write_model_config("k1.tnw", "kpd", 1, "kpd.config", k, 12, NULL, 0, 0), "generator"));
 }
 
+/* ---- huge sketches (issue 33 item 10) ---- */
+
+typedef struct progress_log { int calls; double last; } progress_log;
+
+static int log_progress(void *user, const char *stage, double f)
+{
+    progress_log *l = (progress_log *)user;
+    (void)stage;
+    l->last = f;
+    l->calls++;
+    return 0;
+}
+
+/* A sketch of many segments (random walks, the kind of a 5-million-segment drawing, scaled down)
+   on a map of several tiles: generation reports progress as it goes. */
+TN_TEST(test_huge_sketch_progress)
+{
+    tn_gnn m;
+    tn_contour_set sk;
+    tn_gnn_generate_opts o;
+    tn_image out = {0, 0, 0, NULL};
+    progress_log l = {0, 0.0};
+    tn_rng rng;
+    int i, j;
+    if (tn_gnn_load("tests/fuzz/corpus/fuzz_model/gnn.tnw", &m) != TN_OK) {
+        TN_SKIP("tests/fuzz/corpus/fuzz_model/gnn.tnw not found (run from the repository root)");
+    }
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 400;
+    sk.count = 40;
+    sk.items = (tn_contour *)calloc((size_t)sk.count, sizeof(tn_contour));
+    tn_rng_seed(&rng, 5, 5);
+    for (i = 0; sk.items && i < sk.count; i++) {
+        tn_contour *c = &sk.items[i];
+        float x = 20 + 360 * tn_rng_uniform(&rng), y = 20 + 360 * tn_rng_uniform(&rng);
+        c->type = i % 2 ? TN_VALLEY : TN_RIDGE;
+        c->npoints = 2000;
+        if (!(c->points = (float *)malloc((size_t)c->npoints * 3 * sizeof(float)))) break;
+        for (j = 0; j < c->npoints; j++) {
+            x += 3 * tn_rng_uniform(&rng) - 1.5f;
+            y += 3 * tn_rng_uniform(&rng) - 1.5f;
+            x = x < 1 ? 1 : x > 398 ? 398 : x;
+            y = y < 1 ? 1 : y > 398 ? 398 : y;
+            c->points[3 * j] = x;
+            c->points[3 * j + 1] = y;
+            c->points[3 * j + 2] = 0.5f;
+        }
+    }
+    TN_CHECK(sk.items && i == sk.count);
+    memset(&o, 0, sizeof o);
+    o.gain = 1.0f;
+    tn_set_progress(log_progress, &l);
+    if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&m, &sk, 400, 400, &o, &out) == TN_OK && image_finite(&out));
+    tn_set_progress(NULL, NULL);
+    fprintf(stderr, "   %d progress reports for 80000 segments on 400 x 400\n", l.calls);
+    TN_CHECK(l.calls >= 4 && l.last == 1.0);
+    tn_image_free(&out);
+    for (i = 0; sk.items && i < sk.count; i++) free(sk.items[i].points);
+    free(sk.items);
+    tn_gnn_free(&m);
+}
+
 /* ---- TIFF / GeoTIFF ---- */
 
 /* First IFD entry of `tag` in a little-endian classic TIFF, or NULL. */
@@ -2067,6 +2129,7 @@ int main(void)
     RUN(test_texgan_config);
     RUN(test_texgan_checkpoint_fields);
     RUN(test_model_config_sizes);
+    RUN(test_huge_sketch_progress);
     RUN(test_render_args);
     RUN(test_detail_sidecar);
     RUN(test_detail_and_colour_args);
