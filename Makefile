@@ -23,6 +23,8 @@ EXAMPLES := $(filter-out bin/world_mpi,$(patsubst examples/%.c,bin/%,$(wildcard 
 BENCHES  := $(patsubst bench/%.c,bin/%,$(wildcard bench/*.c))
 TESTS    := $(patsubst tests/%.c,build/test/%,$(wildcard tests/test_*.c))
 FUZZERS  := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
+# the same drivers without libFuzzer: `make test` replays the committed corpus through each
+FUZZ_REPLAY := $(patsubst tests/fuzz/%.c,build/test/fuzz/%,$(wildcard tests/fuzz/fuzz_*.c))
 
 .PHONY: all header check-header check-single-header test check-compile check-layout demo demo-check bench fuzz clean mpi m32 studio studio-check
 all: bin/terrainnet $(EXAMPLES) $(BENCHES)
@@ -54,7 +56,7 @@ bin/%: bench/%.c $(LIB) | bin
 check-single-header: | build/check
 	$(CC) $(WARN) $(OPT) -I. examples/render_terrain.c -o build/check/render_terrain_single -lm -pthread
 
-bin build build/test build/fuzz build/check:
+bin build build/test build/fuzz build/check build/test/fuzz:
 	mkdir -p $@
 
 # Tests run under AddressSanitizer + UndefinedBehaviorSanitizer.
@@ -63,6 +65,11 @@ $(LIB_SAN): src/terrainnet.c terrainnet.h | build
 
 build/test/%: tests/%.c $(LIB_SAN) tests/tn_test.h | build/test
 	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB_SAN)) -o $@ $(LDLIBS)
+
+# A fuzz driver that reaches private tn__ code builds alone; the others link the sanitised
+# implementation. Run without arguments, each replays tests/fuzz/seeds and tests/fuzz/corpus/NAME.
+build/test/fuzz/%: tests/fuzz/%.c tests/fuzz/fuzz_replay.h tests/fuzz/fuzz_files.h $(LIB_SAN) | build/test/fuzz
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -DTN_FUZZ_MAIN -I. $< $(if $(shell grep -l 'tn__' $<),,-DTN_IMPLEMENTATION_LINKED $(LIB_SAN)) -o $@ $(LDLIBS)
 
 # The header must compile warning-free as C99 with gcc and clang, as C++, and without threads.
 check-compile: | build/check
@@ -77,8 +84,8 @@ build/test/test_layout: tests/check_layout.c
 # Test binaries build two at a time even from a plain `make test`: each is a full sanitised
 # compile of the header, so a serial build would dominate the run.
 test: bin/terrainnet | build/check build/test
-	@$(MAKE) --no-print-directory -j2 $(TESTS)
-	@sh tests/run_tests.sh $(TESTS)
+	@$(MAKE) --no-print-directory -j2 $(TESTS) $(FUZZ_REPLAY)
+	@sh tests/run_tests.sh $(TESTS) $(FUZZ_REPLAY)
 
 # examples/world_mpi.c with OpenMPI (Debian: openmpi-bin libopenmpi-dev); skipped without mpicc.
 MPICC ?= mpicc
@@ -98,15 +105,24 @@ demo-check:
 bench: $(BENCHES)
 	@for b in $(BENCHES); do echo "== $$b"; ./$$b; done
 
-# Short fuzzing runs (not part of CI). Needs clang with libFuzzer (Debian: clang, libclang-rt-14-dev).
+# Fuzzing runs of every driver, FUZZ_SECONDS each, at the library's default limits (`make test`
+# only replays the committed corpus). Needs clang with libFuzzer (Debian: clang, libclang-rt-14-dev).
+# New inputs go to build/fuzz/corpus-NAME; tests/fuzz/corpus/NAME is the committed regression corpus.
+# As in make test, a driver that reaches private tn__ code builds alone; the others link the
+# implementation instrumented once.
 FUZZ_SECONDS ?= 30
-build/fuzz/%: tests/fuzz/%.c terrainnet.h | build/fuzz
-	clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -I. $< -o $@ -lm -pthread
+FUZZ_CC   = clang -std=c99 -g -O1
+LIB_FUZZ  = build/fuzz/terrainnet.o
+$(LIB_FUZZ): src/terrainnet.c terrainnet.h | build/fuzz
+	$(FUZZ_CC) -fsanitize=fuzzer-no-link,address,undefined -c $< -o $@
+build/fuzz/%: tests/fuzz/%.c tests/fuzz/fuzz_replay.h tests/fuzz/fuzz_files.h terrainnet.h $(LIB_FUZZ) | build/fuzz
+	$(FUZZ_CC) -fsanitize=fuzzer,address,undefined -I. $< $(if $(shell grep -l 'tn__' $<),,-DTN_IMPLEMENTATION_LINKED $(LIB_FUZZ)) -o $@ -lm -pthread
 
 fuzz: $(FUZZERS)
-	@for f in $(FUZZERS); do echo "== $$f ($(FUZZ_SECONDS) s)"; \
-	  mkdir -p build/fuzz/corpus-$$(basename $$f); \
-	  ./$$f -max_total_time=$(FUZZ_SECONDS) -max_len=65536 build/fuzz/corpus-$$(basename $$f) tests/fuzz/seeds || exit 1; done
+	@for f in $(FUZZERS); do n=$$(basename $$f); echo "== $$f ($(FUZZ_SECONDS) s)"; \
+	  mkdir -p build/fuzz/corpus-$$n; \
+	  ./$$f -max_total_time=$(FUZZ_SECONDS) -max_len=65536 build/fuzz/corpus-$$n tests/fuzz/seeds \
+	    $$([ -d tests/fuzz/corpus/$$n ] && echo tests/fuzz/corpus/$$n) || exit 1; done
 
 clean:
 	rm -rf bin build

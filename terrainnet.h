@@ -12182,6 +12182,19 @@ TN_API tn_status tn_params_open(const char *path, tn_params **out)
     return st;
 }
 
+/* Whether p holds `name` with exactly this shape. Model loaders check the shapes their config
+   implies against the file's tensors with it before building the model, so a config cannot make
+   them allocate more than the file holds. */
+TN__SHARED int tn__params_has(const tn_params *p, const char *name, int ndim, const int *shape)
+{
+    const tn_tensor *t = tn_params_find(p, name);
+    int i;
+    if (!t || t->ndim != ndim) return 0;
+    for (i = 0; i < ndim; i++)
+        if (t->shape[i] != shape[i]) return 0;
+    return 1;
+}
+
 /* Copies src's tensors into p's same-named ones: the same count, every name present with the
    same shape, checked before anything changes; then the metadata. */
 static tn_status tn__params_assign(tn_params *p, const tn_params *src, const char *name)
@@ -21681,6 +21694,25 @@ TN_API tn_status tn_singan_save(const tn_singan *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the generators its config names, checked on the file's own tensors
+   before the model is allocated (each scale's convolutions grow with its width squared). */
+static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name)
+{
+    int s, l, ws[4];
+    char pre[16], tname[40];
+    for (s = 0; s < A->scales; s++)
+        for (l = 0; l < 5; l++) {
+            ws[0] = l == 4 ? 1 : A->ch[s];
+            ws[1] = l == 0 ? 1 : A->ch[s];
+            ws[2] = ws[3] = 3;
+            snprintf(pre, sizeof pre, "g%d.", s);
+            if (!tn__params_has(f, tn__param_name(tname, sizeof tname, pre, "w", l), 4, ws))
+                return tn__fail(TN_ERR_CORRUPT, "%s: the singan config names %d scales, scale %d of width %d; the file's generator differs", name,
+                                A->scales, s, A->ch[s]);
+        }
+    return TN_OK;
+}
+
 TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -21699,6 +21731,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
+    if (!st) st = tn__sg_file_matches(f, &A, path);
     if (!st) st = tn__sg_model_params(&A, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
     if (!st) st = tn__model_check_finite(w, path);
@@ -23423,6 +23456,9 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
         !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096) ||
         !tn__gnn_whole(c[17], 0, 1))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged gnn configuration", name);
+    if ((double)c[7] * c[8] * c[3] > TN__GNN_MAX_EDGES) /* training refuses such an example */
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn configuration's %g x %g example at k = %g needs more than %d graph edges", name, (double)c[7],
+                        (double)c[8], (double)c[3], TN__GNN_MAX_EDGES);
     A->hidden = (int)c[1];
     A->rounds = (int)c[2];
     A->k = (int)c[3];
@@ -24409,6 +24445,31 @@ TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the tensors its config implies, checked on the file's own tensors
+   before the model is allocated: the parts, the embeddings and the example scale with the
+   config's counts, the network with its width and rounds. */
+static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A, const char *name)
+{
+    int pts[2], info[2], emb[2], ex[2];
+    char last[40];
+    pts[0] = A->npts;
+    pts[1] = 3;
+    info[0] = emb[0] = A->parts;
+    info[1] = 4;
+    emb[1] = A->embed;
+    ex[0] = A->height;
+    ex[1] = A->width;
+    if (!tn__params_has(f, "gnn.part_pts", 2, pts) || !tn__params_has(f, "gnn.part_info", 2, info) || !tn__params_has(f, "gnn.emb", 2, emb))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names %d parts of %d points with %d-wide embeddings; the file's part tensors differ",
+                        name, A->parts, A->npts, A->embed);
+    snprintf(last, sizeof last, "gnn.%ds.a", A->rounds - 1);
+    if (!tn__params_has(f, last, 1, &A->hidden))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names %d rounds of width %d; the file's network differs", name, A->rounds, A->hidden);
+    if (tn_params_find(f, "detail.example") && !tn__params_has(f, "detail.example", 2, ex))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names a %d x %d example; the file's detail.example differs", name, A->width, A->height);
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -24425,6 +24486,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
+    if (!st) st = tn__gnn_file_matches(f, &A, path);
     if (!st) st = tn__gnn_model_params(&A, NULL, &w);
     if (!st && tn_params_find(f, "early.gnn.emb")) st = tn__gnn_early_add(w);
     if (!st && tn_params_find(f, "gain.scale")) {
@@ -27592,6 +27654,22 @@ TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the generator its config names: the input and output convolutions
+   fix its width and outputs, checked on the file's own tensors before the model is allocated. */
+static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
+{
+    int in[4], out[4];
+    in[0] = A->width;
+    in[1] = A->cond_channels;
+    out[0] = A->out_channels;
+    out[1] = A->width / 2;
+    in[2] = in[3] = out[2] = out[3] = 3;
+    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
+                        A->out_channels);
+    return TN_OK;
+}
+
 TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -27606,6 +27684,7 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
     if (!st) st = tn__kpd_read_config(cfg->data, &m, path);
+    if (!st) st = tn__kpd_file_matches(f, &m, path);
     if (!st) st = tn__kpd_model_params(&m, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
     if (!st) st = tn__model_check_finite(w, path);

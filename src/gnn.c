@@ -1570,6 +1570,9 @@ static tn_status tn__gnn_read_config(const float *c, tn__gnn_arch *A, const char
         !tn__gnn_whole(c[14], 5, 1 << 26) || c[15] != TN__GNN_F || !(c[16] >= 0 && c[16] <= 4096) ||
         !tn__gnn_whole(c[17], 0, 1))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged gnn configuration", name);
+    if ((double)c[7] * c[8] * c[3] > TN__GNN_MAX_EDGES) /* training refuses such an example */
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn configuration's %g x %g example at k = %g needs more than %d graph edges", name, (double)c[7],
+                        (double)c[8], (double)c[3], TN__GNN_MAX_EDGES);
     A->hidden = (int)c[1];
     A->rounds = (int)c[2];
     A->k = (int)c[3];
@@ -2556,6 +2559,31 @@ TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the tensors its config implies, checked on the file's own tensors
+   before the model is allocated: the parts, the embeddings and the example scale with the
+   config's counts, the network with its width and rounds. */
+static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A, const char *name)
+{
+    int pts[2], info[2], emb[2], ex[2];
+    char last[40];
+    pts[0] = A->npts;
+    pts[1] = 3;
+    info[0] = emb[0] = A->parts;
+    info[1] = 4;
+    emb[1] = A->embed;
+    ex[0] = A->height;
+    ex[1] = A->width;
+    if (!tn__params_has(f, "gnn.part_pts", 2, pts) || !tn__params_has(f, "gnn.part_info", 2, info) || !tn__params_has(f, "gnn.emb", 2, emb))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names %d parts of %d points with %d-wide embeddings; the file's part tensors differ",
+                        name, A->parts, A->npts, A->embed);
+    snprintf(last, sizeof last, "gnn.%ds.a", A->rounds - 1);
+    if (!tn__params_has(f, last, 1, &A->hidden))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names %d rounds of width %d; the file's network differs", name, A->rounds, A->hidden);
+    if (tn_params_find(f, "detail.example") && !tn__params_has(f, "detail.example", 2, ex))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the gnn config names a %d x %d example; the file's detail.example differs", name, A->width, A->height);
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -2572,6 +2600,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
+    if (!st) st = tn__gnn_file_matches(f, &A, path);
     if (!st) st = tn__gnn_model_params(&A, NULL, &w);
     if (!st && tn_params_find(f, "early.gnn.emb")) st = tn__gnn_early_add(w);
     if (!st && tn_params_find(f, "gain.scale")) {

@@ -553,6 +553,19 @@ TN_API tn_status tn_params_open(const char *path, tn_params **out)
     return st;
 }
 
+/* Whether p holds `name` with exactly this shape. Model loaders check the shapes their config
+   implies against the file's tensors with it before building the model, so a config cannot make
+   them allocate more than the file holds. */
+TN__SHARED int tn__params_has(const tn_params *p, const char *name, int ndim, const int *shape)
+{
+    const tn_tensor *t = tn_params_find(p, name);
+    int i;
+    if (!t || t->ndim != ndim) return 0;
+    for (i = 0; i < ndim; i++)
+        if (t->shape[i] != shape[i]) return 0;
+    return 1;
+}
+
 /* Copies src's tensors into p's same-named ones: the same count, every name present with the
    same shape, checked before anything changes; then the metadata. */
 static tn_status tn__params_assign(tn_params *p, const tn_params *src, const char *name)

@@ -1914,6 +1914,22 @@ TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the generator its config names: the input and output convolutions
+   fix its width and outputs, checked on the file's own tensors before the model is allocated. */
+static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
+{
+    int in[4], out[4];
+    in[0] = A->width;
+    in[1] = A->cond_channels;
+    out[0] = A->out_channels;
+    out[1] = A->width / 2;
+    in[2] = in[3] = out[2] = out[3] = 3;
+    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
+                        A->out_channels);
+    return TN_OK;
+}
+
 TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -1928,6 +1944,7 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
     if (!st) st = tn__kpd_read_config(cfg->data, &m, path);
+    if (!st) st = tn__kpd_file_matches(f, &m, path);
     if (!st) st = tn__kpd_model_params(&m, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
     if (!st) st = tn__model_check_finite(w, path);

@@ -1285,6 +1285,25 @@ TN_API tn_status tn_singan_save(const tn_singan *model, const char *path)
     return tn_params_save(model->weights, path);
 }
 
+/* Whether a model file holds the generators its config names, checked on the file's own tensors
+   before the model is allocated (each scale's convolutions grow with its width squared). */
+static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name)
+{
+    int s, l, ws[4];
+    char pre[16], tname[40];
+    for (s = 0; s < A->scales; s++)
+        for (l = 0; l < 5; l++) {
+            ws[0] = l == 4 ? 1 : A->ch[s];
+            ws[1] = l == 0 ? 1 : A->ch[s];
+            ws[2] = ws[3] = 3;
+            snprintf(pre, sizeof pre, "g%d.", s);
+            if (!tn__params_has(f, tn__param_name(tname, sizeof tname, pre, "w", l), 4, ws))
+                return tn__fail(TN_ERR_CORRUPT, "%s: the singan config names %d scales, scale %d of width %d; the file's generator differs", name,
+                                A->scales, s, A->ch[s]);
+        }
+    return TN_OK;
+}
+
 TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
 {
     tn_params *f = NULL, *w = NULL;
@@ -1303,6 +1322,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
+    if (!st) st = tn__sg_file_matches(f, &A, path);
     if (!st) st = tn__sg_model_params(&A, NULL, &w);
     if (!st) st = tn__params_assign(w, f, path);
     if (!st) st = tn__model_check_finite(w, path);

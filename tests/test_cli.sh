@@ -189,6 +189,13 @@ else bad "texgan-synth png"; fi
 if $T detail-maps "$W/tg.tnw" "$W/noise.png" -o "$W/dm" --size 200x140 --compose "$W/comp.png" --preview "$W/prev.png" > "$W/dm.txt" 2>&1 &&
     grep -q "low map: 20 x 14" "$W/dm.txt" && grep -q "tiling 2.08333" "$W/dm_detail.txt" && $T info "$W/comp.png" | grep -q "size: 200 x 140" &&
     [ -f "$W/dm_low.png" ] && [ -f "$W/dm_high.png" ] && [ -f "$W/prev.png" ]; then ok; else bad "detail-maps: $(head -c 400 "$W/dm.txt")"; fi
+# a checkpoint that cannot be written (its directory is missing, as a full disk would fail it) is a
+# warning: the run ends, the model is saved to its own path, and the CLI says so (issue 33 item 8)
+if $T texgan-train "$W/noise.png" -o "$W/tgc.tnw" --iters 2 --checkpoint "$W/no_such_dir/tgc.ckpt" $TG > "$W/tgc.txt" 2>&1 &&
+    [ -f "$W/tgc.tnw" ] && grep -q "warning: no checkpoint could be written to $W/no_such_dir/tgc.ckpt" "$W/tgc.txt" &&
+    $T texgan-train "$W/noise.png" -o "$W/tgc.tnw" --iters 2 --checkpoint "$W/tgc.ckpt" $TG > "$W/tgc2.txt" 2>&1 &&
+    ! grep -q "warning" "$W/tgc2.txt"; then ok;
+else bad "texgan-train failed checkpoint: $(head -c 400 "$W/tgc.txt")"; fi
 # Ctrl-C: the run stops at its next iteration, saves its checkpoint and says how to resume
 $T texgan-train "$W/noise.png" -o "$W/int.tnw" --iters 1000000 $TG > "$W/int.txt" 2>&1 &
 pid=$!

@@ -1353,6 +1353,183 @@ TN_TEST(test_texgan_config)
     tn_image_free(&ex);
 }
 
+/* ---- model configs that name more than their files hold (issue 33 item 1) ---- */
+
+/* A model file of one config tensor (and `extra`, a tensor of the given 2-D shape, when named),
+   stamped as `method`; the config's fields from `cfg`. */
+static const char *write_model_config(const char *leaf, const char *method, int format, const char *cfg_name, const float *cfg, int n,
+                                      const char *extra, int rows, int cols)
+{
+    const char *path = tmp_path(leaf);
+    tn_params *p = tn_params_create();
+    tn_tensor *c;
+    int shape[2];
+    shape[0] = rows;
+    shape[1] = cols;
+    if (!p) return NULL;
+    if (!(c = tn_params_add_buffer(p, cfg_name, 1, &n)) || (extra && !tn_params_add_buffer(p, extra, 2, shape)) ||
+        tn_model_stamp(p, method, format, NULL) || (memcpy(c->data, cfg, (size_t)n * sizeof(float)), tn_params_save(p, path)))
+        path = NULL;
+    tn_params_free(p);
+    return path;
+}
+
+/* The load must fail at once, with TN_ERR_CORRUPT and a message holding `why`, under a budget
+   the config's model would pass. */
+static int refused_up_front(tn_status (*load)(const char *, void *), const char *path, const char *why)
+{
+    double t0 = tn_time_seconds();
+    size_t base = tn_memory_in_use();
+    tn_status st;
+    if (!path) return 0;
+    tn_set_memory_limit((size_t)64 << 20);
+    tn_clear_error();
+    st = load(path, NULL);
+    tn_set_memory_limit(0);
+    fprintf(stderr, "   %s\n", tn_last_error());
+    remove(path);
+    return st == TN_ERR_CORRUPT && strstr(tn_last_error(), why) && tn_time_seconds() - t0 < 2.0 && tn_memory_in_use() == base;
+}
+
+static tn_status load_gnn(const char *path, void *unused)
+{
+    tn_gnn m;
+    tn_status st = tn_gnn_load(path, &m);
+    (void)unused;
+    if (!st) tn_gnn_free(&m);
+    return st;
+}
+
+static tn_status load_singan(const char *path, void *unused)
+{
+    tn_singan m;
+    tn_status st = tn_singan_load(path, &m);
+    (void)unused;
+    if (!st) tn_singan_free(&m);
+    return st;
+}
+
+static tn_status load_kpd(const char *path, void *unused)
+{
+    tn_kpd m;
+    tn_status st = tn_kpd_load(path, &m);
+    (void)unused;
+    if (!st) tn_kpd_free(&m);
+    return st;
+}
+
+TN_TEST(test_model_config_sizes)
+{
+    /* gnn: a 128^2 example's config (hidden 32, 2 rounds, k 10, embedding 16) naming 2^23 parts */
+    float g[24] = {1, 32, 2, 10, 16, 0, 8388608.0f, 128, 128, 0, 1, 0, 1, 0, 41943040.0f, 5, 24, 0};
+    float sg[8 + 3 * 16] = {16, 256, 256, 0.75f, 0, 1, 16, 2}, k[12] = {1, 0, 39, 16, 256, 0, 1, 0, 0, 1, 1, 0};
+    int s;
+    TN_CHECK(refused_up_front(load_gnn, write_model_config("g1.tnw", "gnn", 1, "gnn.config", g, 24, NULL, 0, 0), "part tensors"));
+    /* parts that match, a network that does not: 16 rounds of width 256 */
+    g[6] = 3;
+    g[14] = 15;
+    TN_CHECK(refused_up_front(load_gnn, write_model_config("g2.tnw", "gnn", 1, "gnn.config", g, 24, "gnn.part_pts", 15, 3), "part tensors"));
+    g[1] = 256;
+    g[2] = 16;
+    {
+        const char *path = tmp_path("g3.tnw");
+        tn_params *p = tn_params_create();
+        int pts[2] = {15, 3}, info[2] = {3, 4}, emb[2] = {3, 16}, ex[2] = {4096, 4};
+        tn_tensor *c;
+        int n = 24;
+        TN_CHECK(p && (c = tn_params_add_buffer(p, "gnn.config", 1, &n)) && tn_params_add_buffer(p, "gnn.part_pts", 2, pts) &&
+                 tn_params_add_buffer(p, "gnn.part_info", 2, info) && tn_params_add(p, "gnn.emb", 2, emb) && !tn_model_stamp(p, "gnn", 1, NULL));
+        if (p && (c = tn_params_find(p, "gnn.config"))) {
+            memcpy(c->data, g, sizeof g);
+            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            TN_CHECK(refused_up_front(load_gnn, path, "network"));
+            /* the network right (1 round of width 32 needs only its last attention vector here),
+               the example heights of another size */
+            c->data[1] = 32;
+            c->data[2] = 1;
+            n = 32;
+            TN_CHECK(tn_params_add(p, "gnn.0s.a", 1, &n) && tn_params_add_buffer(p, "detail.example", 2, ex));
+            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            TN_CHECK(refused_up_front(load_gnn, path, "detail.example"));
+        }
+        tn_params_free(p);
+    }
+    /* an example whose graph training would refuse */
+    g[7] = g[8] = 65536;
+    TN_CHECK(refused_up_front(load_gnn, write_model_config("g4.tnw", "gnn", 1, "gnn.config", g, 24, NULL, 0, 0), "graph edges"));
+    /* singan: 16 scales of width 512 (about 900 MB with gradients) over no generator */
+    for (s = 0; s < 16; s++) {
+        sg[8 + s] = 0.1f;
+        sg[8 + 16 + s] = 512;
+        sg[8 + 32 + s] = 1;
+    }
+    TN_CHECK(refused_up_front(load_singan, write_model_config("s1.tnw", "singan", 2, "singan.config", sg, 8 + 3 * 16, NULL, 0, 0), "generator"));
+    /* kpd: the widest generator, 16 outputs */
+    TN_CHECK(refused_up_front(load_kpd, write_model_config("k1.tnw", "kpd", 1, "kpd.config", k, 12, NULL, 0, 0), "generator"));
+}
+
+/* ---- huge sketches (issue 33 item 10) ---- */
+
+typedef struct progress_log { int calls; double last; } progress_log;
+
+static int log_progress(void *user, const char *stage, double f)
+{
+    progress_log *l = (progress_log *)user;
+    (void)stage;
+    l->last = f;
+    l->calls++;
+    return 0;
+}
+
+/* A sketch of many segments (random walks, the kind of a 5-million-segment drawing, scaled down)
+   on a map of several tiles: generation reports progress as it goes. */
+TN_TEST(test_huge_sketch_progress)
+{
+    tn_gnn m;
+    tn_contour_set sk;
+    tn_gnn_generate_opts o;
+    tn_image out = {0, 0, 0, NULL};
+    progress_log l = {0, 0.0};
+    tn_rng rng;
+    int i, j;
+    if (tn_gnn_load("tests/fuzz/corpus/fuzz_model/gnn.tnw", &m) != TN_OK) {
+        TN_SKIP("tests/fuzz/corpus/fuzz_model/gnn.tnw not found (run from the repository root)");
+    }
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 400;
+    sk.count = 40;
+    sk.items = (tn_contour *)calloc((size_t)sk.count, sizeof(tn_contour));
+    tn_rng_seed(&rng, 5, 5);
+    for (i = 0; sk.items && i < sk.count; i++) {
+        tn_contour *c = &sk.items[i];
+        float x = 20 + 360 * tn_rng_uniform(&rng), y = 20 + 360 * tn_rng_uniform(&rng);
+        c->type = i % 2 ? TN_VALLEY : TN_RIDGE;
+        c->npoints = 2000;
+        if (!(c->points = (float *)malloc((size_t)c->npoints * 3 * sizeof(float)))) break;
+        for (j = 0; j < c->npoints; j++) {
+            x += 3 * tn_rng_uniform(&rng) - 1.5f;
+            y += 3 * tn_rng_uniform(&rng) - 1.5f;
+            x = x < 1 ? 1 : x > 398 ? 398 : x;
+            y = y < 1 ? 1 : y > 398 ? 398 : y;
+            c->points[3 * j] = x;
+            c->points[3 * j + 1] = y;
+            c->points[3 * j + 2] = 0.5f;
+        }
+    }
+    TN_CHECK(sk.items && i == sk.count);
+    memset(&o, 0, sizeof o);
+    o.gain = 1.0f;
+    tn_set_progress(log_progress, &l);
+    if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&m, &sk, 400, 400, &o, &out) == TN_OK && image_finite(&out));
+    tn_set_progress(NULL, NULL);
+    fprintf(stderr, "   %d progress reports for 80000 segments on 400 x 400\n", l.calls);
+    TN_CHECK(l.calls >= 4 && l.last == 1.0);
+    tn_image_free(&out);
+    for (i = 0; sk.items && i < sk.count; i++) free(sk.items[i].points);
+    free(sk.items);
+    tn_gnn_free(&m);
+}
+
 /* ---- TIFF / GeoTIFF ---- */
 
 /* First IFD entry of `tag` in a little-endian classic TIFF, or NULL. */
@@ -1951,6 +2128,8 @@ int main(void)
     RUN(test_optim_args);
     RUN(test_texgan_config);
     RUN(test_texgan_checkpoint_fields);
+    RUN(test_model_config_sizes);
+    RUN(test_huge_sketch_progress);
     RUN(test_render_args);
     RUN(test_detail_sidecar);
     RUN(test_detail_and_colour_args);

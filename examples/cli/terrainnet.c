@@ -32,6 +32,18 @@ static int train_interrupted(const char *cmd, long iterations, const char *ckpt)
     return 130;
 }
 
+/* A run whose checkpoints all failed (TN_ERR_IO: a full disk, a missing or read-only directory)
+   still trains and saves its model (the library makes a failed checkpoint a warning); say so,
+   since without a checkpoint neither Ctrl-C nor --resume can continue the run. Called after the
+   save, while tn_last_error() still holds the checkpoint's failure. */
+static void checkpoint_warning(const char *cmd, long iterations, long resumed_from, int checkpoints, const char *ckpt)
+{
+    const char *why = tn_last_error();
+    if (checkpoints > 0 || iterations <= resumed_from) return;
+    fprintf(stderr, "terrainnet %s: warning: no checkpoint could be written to %s (%s); the model was saved, but the run cannot be resumed\n", cmd,
+            ckpt, why[0] && strstr(why, ckpt) ? why : "a full disk, or a missing or read-only directory?");
+}
+
 static void progress_close(void);
 
 /* TERRAINNET_TRAIN_SECONDS=S caps every training budget at S seconds (tests/readme_runs.sh runs
@@ -1325,6 +1337,7 @@ static int run_texgan_train(void)
         printf("iterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\nloss_d: %.4f\nloss_g: %.4f\n"
                "checkpoints: %d (%s)\nmodel: %s\n",
                s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_d, (double)s.loss_g, s.checkpoints, a->ckpt, a->out);
+    if (!st) checkpoint_warning("texgan-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     tn_texgan_free(&model);
     return st ? fail_status(st) : 0;
 }
@@ -1567,6 +1580,7 @@ static int run_singan_train(void)
                "checkpoints: %d (%s)\nmodel: %s\n",
                s.seconds / 60.0, s.seconds_per_iter, s.seconds_per_iter_finest, (double)s.loss_d, (double)s.loss_g, (double)s.loss_rec,
                s.checkpoints, a->ckpt, a->out);
+        checkpoint_warning("singan-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     }
     tn_singan_free(&model);
     return st ? fail_status(st) : 0;
@@ -1791,6 +1805,7 @@ static int run_gnn_train(void)
                "steps_per_second: %.2f\nloss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
                s.parts, s.levels, s.iterations, s.resumed_from, s.embed_phase_from, s.seconds / 60.0,
                s.seconds_per_iter > 0 ? 1.0 / s.seconds_per_iter : 0.0, (double)s.loss_mse, (double)s.loss_ssim, s.checkpoints, a->ckpt, a->out);
+    if (!st) checkpoint_warning("gnn-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     if (!st && nhold)
         printf("holdout_ssim: %.4f (iteration %ld, the best of %d checks; the trained network's %.4f)\nearly_network: %s\n", s.holdout_ssim,
                s.holdout_iteration, s.holdout_checks, s.holdout_last_ssim,
@@ -2311,6 +2326,7 @@ static int run_season_train(void)
                "loss_l1: %.5f (first %.5f)\nloss_g: %.4f\nloss_d: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
                tn_kpd_condition_name(model.condition), s.iterations, s.resumed_from, s.seconds / 60.0, s.seconds_per_iter, (double)s.loss_l1,
                (double)s.loss_l1_first, (double)s.loss_g, (double)s.loss_d, s.checkpoints, a->ckpt, a->out);
+    if (!st) checkpoint_warning("season-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     tn_kpd_free(&model);
     return st ? fail_status(st) : 0;
 }

@@ -8,7 +8,6 @@
      no libFuzzer: cc -DTN_FUZZ_MAIN -fsanitize=address,undefined -I. fuzz_tiff.c -lm -pthread
                    ./a.out files...   (runs each file as one input)
    Seeds: tests/fuzz/seeds/tiff_* (small GDAL-made files of tests/refs/tiff). */
-#define TN_MAX_ALLOC ((size_t)1 << 28) /* keeps "huge but allowed" sizes within the fuzzer's RSS limit */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
