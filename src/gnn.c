@@ -3621,7 +3621,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     return st;
 }
 
-#define TN__GNN_TILE 256          /* core of a generation tile (the halo comes on top) */
+#define TN__GNN_TILE 512          /* core of a generation tile; the 148 px halo comes on top, a smaller core recomputes more of it */
 #define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
 
 /* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
@@ -3638,7 +3638,7 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
             int tw = ww - tx < tile ? ww - tx : tile, th = wh - ty < tile ? wh - ty : tile;
             size_t o = (size_t)ty * ww + tx;
             st = tn__gnn_gen_window(G, w, ctx, x + tx, y + ty, tw, th, dst + o, base_dst ? base_dst + o : NULL, (size_t)ww);
-            if (!st && nt > 1) st = tn__progress(stage, (double)++done_t / nt);
+            if (!st && (nt > 1 || (size_t)ww * wh > TN__GNN_ONE_PASS)) st = tn__progress(stage, (double)++done_t / nt);
         }
     return st;
 }

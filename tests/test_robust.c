@@ -1463,7 +1463,7 @@ TN_TEST(test_model_config_sizes)
         sg[8 + 16 + s] = 512;
         sg[8 + 32 + s] = 1;
     }
-    TN_CHECK(refused_up_front(load_singan, write_model_config("s1.tnw", "singan", 2, "singan.config", sg, 8 + 3 * 16, NULL, 0, 0), "generator"));
+    TN_CHECK(refused_up_front(load_singan, write_model_config("s1.tnw", "singan", 3, "singan.config", sg, 8 + 3 * 16, NULL, 0, 0), "generator"));
     /* kpd: the widest generator, 16 outputs */
     TN_CHECK(refused_up_front(load_kpd, write_model_config("k1.tnw", "kpd", 1, "kpd.config", k, 12, NULL, 0, 0), "generator"));
 }
@@ -1523,7 +1523,7 @@ TN_TEST(test_huge_sketch_progress)
     if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&m, &sk, 400, 400, &o, &out) == TN_OK && image_finite(&out));
     tn_set_progress(NULL, NULL);
     fprintf(stderr, "   %d progress reports for 80000 segments on 400 x 400\n", l.calls);
-    TN_CHECK(l.calls >= 4 && l.last == 1.0);
+    TN_CHECK(l.calls >= 1 && l.last == 1.0); /* one 512 px tile here */
     tn_image_free(&out);
     for (i = 0; sk.items && i < sk.count; i++) free(sk.items[i].points);
     free(sk.items);
