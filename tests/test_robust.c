@@ -46,18 +46,6 @@ static int outcome_ok(tn_status st, const tn_image *img)
     return st > TN_OK && st < TN_STATUS_COUNT && tn_last_error()[0] != 0 && img->data == NULL;
 }
 
-static uint32_t crc32_bytes(const uint8_t *p, size_t n)
-{
-    uint32_t c = 0xffffffffu;
-    size_t i;
-    int j;
-    for (i = 0; i < n; i++) {
-        c ^= p[i];
-        for (j = 0; j < 8; j++) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-    }
-    return ~c;
-}
-
 static uint32_t be32(const uint8_t *p) { return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | p[3]; }
 static void put_be32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)(v >> 24); p[1] = (uint8_t)(v >> 16); p[2] = (uint8_t)(v >> 8); p[3] = (uint8_t)v; }
 static void put_le32(uint8_t *p, uint32_t v) { p[0] = (uint8_t)v; p[1] = (uint8_t)(v >> 8); p[2] = (uint8_t)(v >> 16); p[3] = (uint8_t)(v >> 24); }
@@ -69,7 +57,7 @@ static void png_fix_crcs(uint8_t *b, size_t n)
     while (pos + 12 <= n) {
         uint32_t len = be32(b + pos);
         if (len > n - pos - 12) break;
-        put_be32(b + pos + 8 + len, crc32_bytes(b + pos + 4, (size_t)len + 4));
+        put_be32(b + pos + 8 + len, tn__crc32(0, b + pos + 4, (size_t)len + 4));
         pos += (size_t)len + 12;
     }
 }
@@ -479,7 +467,7 @@ static size_t tnw_build(uint8_t *b, const char *const *names, const uint32_t *nd
         }
     }
     {
-        uint32_t c = crc32_bytes(b, o);
+        uint32_t c = tn__crc32(0, b, o);
         put_le32(b + o, c);
         o += 4;
     }
@@ -518,7 +506,7 @@ TN_TEST(test_tnw_loader)
         tn_status st;
         memcpy(b, good, gn);
         b[tn_rng_below(&rng, (uint32_t)gn - 4)] ^= (uint8_t)(1u << tn_rng_below(&rng, 8));
-        put_le32(b + gn - 4, crc32_bytes(b, gn - 4)); /* past the CRC, into the parser */
+        put_le32(b + gn - 4, tn__crc32(0, b, gn - 4)); /* past the CRC, into the parser */
         tn_clear_error();
         st = tn_params_load_memory(p, b, gn, "w.tnw");
         if (st != TN_OK && !tn_last_error()[0]) bad++;
@@ -571,7 +559,7 @@ static size_t tnw_many(uint8_t *b, uint32_t count, uint32_t claim)
         put_le32(b + o + 4, 0x3f000000u); /* 0.5f */
         o += 8;
     }
-    put_le32(b + o, crc32_bytes(b, o));
+    put_le32(b + o, tn__crc32(0, b, o));
     return o + 4;
 }
 
@@ -604,7 +592,7 @@ TN_TEST(test_tnw_many_tensors)
     n -= 4;
     memcpy(b + n, b + 12, 2 + 2 + 2 + 8);
     n += 14;
-    put_le32(b + n, crc32_bytes(b, n));
+    put_le32(b + n, tn__crc32(0, b, n));
     TN_CHECK(tn_params_open_memory(b, n + 4, "dup.tnw", &p) == TN_ERR_CORRUPT && p == NULL);
     free(b);
 }
@@ -1855,7 +1843,7 @@ static int tnw_patch(uint8_t *b, size_t n, const char *name, int index, float va
     if (off + 4 * (size_t)index + 4 > n - 4) return 0;
     memcpy(&u, &value, 4);
     put_le32(b + off + 4 * (size_t)index, u);
-    put_le32(b + n - 4, crc32_bytes(b, n - 4));
+    put_le32(b + n - 4, tn__crc32(0, b, n - 4));
     return 1;
 }
 
@@ -1877,7 +1865,7 @@ static size_t tnw_patch_meta(uint8_t *b, size_t n, size_t cap, const char *key, 
     memcpy(b + pos, value, vl);
     n = n - (end - pos) + vl;
     put_le32(b + 12, (uint32_t)(ml - (end - pos) + vl));
-    put_le32(b + n - 4, crc32_bytes(b, n - 4));
+    put_le32(b + n - 4, tn__crc32(0, b, n - 4));
     return n;
 }
 
