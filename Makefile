@@ -132,7 +132,7 @@ clean:
 # excess precision (FLT_EVAL_METHOD 2) breaks the exact float round trips test_sketch checks.
 # Skipped, saying so, when the compiler cannot target it (Debian: apt-get install gcc-multilib).
 M32      = -m32 -msse2 -mfpmath=sse
-M32_TESTS = test_noise test_image test_export test_tensor test_metrics test_sketch
+M32_TESTS = test_core test_noise test_image test_export test_tensor test_metrics test_sketch
 m32: | build
 	@if ! printf 'int main(void) { return 0; }\n' | $(CC) $(M32) -x c - -o build/m32_probe > /dev/null 2>&1; then \
 	  echo "skipped m32: $(CC) -m32 cannot link (Debian: apt-get install gcc-multilib)"; echo "m32: 0 passed, 0 failed, 1 skipped"; exit 0; fi; \

@@ -261,7 +261,7 @@ TN_TEST(size_checks_overflow)
 {
     size_t out = 0;
     TN_CHECK(tn__size4(1000, 1000, 3, 4, &out) == TN_OK && out == 12000000u);
-    TN_CHECK(tn__size4((size_t)1 << 40, (size_t)1 << 40, 1, 1, &out) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn__size4((size_t)1 << (4 * sizeof(size_t)), (size_t)1 << (4 * sizeof(size_t)), 1, 1, &out) == TN_ERR_TOO_LARGE); /* 2^64 or 2^32 */
     TN_CHECK(tn__size4(SIZE_MAX / 2, 3, 1, 1, &out) == TN_ERR_TOO_LARGE);
 }
 
