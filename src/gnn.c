@@ -3472,6 +3472,13 @@ done:
    the network's residual. base_dst (may be NULL): the membrane there. */
 #define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
 
+/* Weight of a stroke pixel at distance e (< L) in the smooth means along the strokes: the
+   nearest ones dominate, and it falls to 0 at L. */
+static float tn__gnn_line_kernel(float e, int L)
+{
+    return (1 - e / L) * (1 - e / L) / (e + 0.5f);
+}
+
 /* A grown sketch's user lines keep their heights: the residual near them, minus a smooth local
    mean of the residual on them (kernel (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by
    a smoothstep of the distance to them. The network alone moved a stroke of a weak model by up to
@@ -3497,7 +3504,7 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const flo
                     if (a < 0 || b < 0 || a >= G->W || b >= G->H || !G->pin[(size_t)b * G->W + a]) continue;
                     e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
                     if (e >= (float)L) continue;
-                    k = (1 - e / L) * (1 - e / L) / (e + 0.5f);
+                    k = tn__gnn_line_kernel(e, L);
                     i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
                     e = pred[i] - R->base[i];
                     num += k * e;
@@ -3560,7 +3567,7 @@ static void tn__gnn_incise(const tn__gnn_gen *G, const float *val, int ax, int a
                         if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !G->pin[(size_t)b * G->W + a]) continue;
                         e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
                         if (e >= (float)Wn) continue;
-                        k = (1 - e / Wn) * (1 - e / Wn) / (e + 0.5f);
+                        k = tn__gnn_line_kernel(e, Wn);
                         num += k * def[(size_t)(b - ay) * aw + (a - ax)];
                         den += k;
                     }
