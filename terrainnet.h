@@ -25767,6 +25767,28 @@ static size_t tn__gnn_grow_at(int i, int j, int S, int t, int ox, int oy, int Wx
     return (size_t)(oy + b) * Wx + ox + a;
 }
 
+/* The line types (+1 ridge, -1 valley, 0) averaged over the placed pixels of a 5 x 5 box, at the
+   placed pixels of the ww x wh window at (x0, y0) of the map (0 elsewhere; placed NULL: all are):
+   blurred, two networks correlate where their lines run close and alike, and an empty overlap
+   does not. Returns how many placed line pixels the window holds. */
+static int tn__gnn_grow_blur(const uint8_t *placed, const int8_t *ptype, int width, int height, int x0, int y0, int ww, int wh, float *out)
+{
+    int u, v, a, b, n = 0;
+    for (v = 0; v < wh; v++)
+        for (u = 0; u < ww; u++) {
+            int X = x0 + u, Y = y0 + v, k = 0, m = 0;
+            out[(size_t)v * ww + u] = 0;
+            if (X < 0 || Y < 0 || X >= width || Y >= height || (placed && !placed[(size_t)Y * width + X])) continue;
+            for (b = Y - 2; b <= Y + 2; b++)
+                for (a = X - 2; a <= X + 2; a++)
+                    if (a >= 0 && b >= 0 && a < width && b < height && (!placed || placed[(size_t)b * width + a]))
+                        k += ptype[(size_t)b * width + a], m++;
+            out[(size_t)v * ww + u] = (float)k / (float)m;
+            n += ptype[(size_t)Y * width + X] != 0;
+        }
+    return n;
+}
+
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
@@ -25780,7 +25802,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *erel = NULL, *prel = NULL, fall = 0, relief = 0;
+    float *D = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, fall = 0, relief = 0;
     double *sum = NULL, *cnt = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
@@ -25825,7 +25847,9 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     erel = (float *)tn__alloc(nx * sizeof(float));
     sum = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
     cnt = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
-    if (!umask || !placed || !mask || !ptype || !prel || !D || !near || !etype || !emask || !erel || !sum || !cnt) {
+    ebl = (float *)tn__alloc(nx * sizeof(float));
+    pbl = (float *)tn__alloc((size_t)S * S * sizeof(float));
+    if (!umask || !placed || !mask || !ptype || !prel || !D || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -25862,16 +25886,18 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         relief = (float)(rel_sum / (double)nline) + 1e-6f;
         fall = relief / 16; /* a third of the relief over the radius it is measured on: steeper ruled the moat (docs/gnn.md) */
     }
+    (void)tn__gnn_grow_blur(NULL, etype, Wx, Hx, 0, 0, Wx, Hx, ebl);
     /* quilting: blocks in raster order, each the best of the candidates */
     tn_rng_seed(&rng, o.seed, 0x67726f77ULL);
     for (by = 0; by * B < height; by++)
         for (bx = 0; bx * B < width; bx++) {
             int x0 = bx * B, y0 = by * B, bt = 0, box = 0, boy = 0, u, v;
             double best = -DBL_MAX;
+            int nl = tn__gnn_grow_blur(placed, ptype, width, height, x0 - mg, y0 - mg, S, S, pbl);
             for (c = 0; c < o.candidates; c++) {
                 int t = (int)(tn_rng_u32(&rng) % 8u), ox = (int)(tn_rng_u32(&rng) % (uint32_t)(Wx - S + 1)),
                     oy = (int)(tn_rng_u32(&rng) % (uint32_t)(Hx - S + 1));
-                double score = 0;
+                double score = 0, sxy = 0, sxx = 0, syy = 0;
                 for (v = -mg; v < B + mg; v++)
                     for (u = -mg; u < B + mg; u++) {
                         int X = x0 + u, Y = y0 + v, e;
@@ -25884,11 +25910,13 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                             int ut = ur.data[3 * (size_t)near[p]] > 0 ? 1 : -1;
                             score += e * ut;
                         }
-                        if (placed[p] && (e || ptype[p])) { /* continue the earlier blocks: lines and their heights */
-                            score += e == ptype[p] ? 1.0 : -0.5;
+                        if (placed[p]) { /* continue the earlier blocks: their lines, and heights where lines meet */
+                            float a = ebl[q], b = pbl[(size_t)(v + mg) * S + u + mg];
+                            sxy += a * b, sxx += a * a, syy += b * b;
                             if (e && e == ptype[p]) score -= fabsf(erel[q] - prel[p]) / relief;
                         }
                     }
+                if (sxx > 0 && syy > 0) score += nl * sxy / sqrt(sxx * syy);
                 if (score > best) best = score, bt = t, box = ox, boy = oy;
             }
             for (v = 0; v < B; v++)
@@ -25962,6 +25990,8 @@ done:
     TN_FREE(erel);
     TN_FREE(sum);
     TN_FREE(cnt);
+    TN_FREE(ebl);
+    TN_FREE(pbl);
     TN_FREE(pts.p);
     if (st) {
         tn_contour_set_free(&set);

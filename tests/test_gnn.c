@@ -1046,6 +1046,39 @@ TN_TEST(grow_by_example)
     tn_image_free(&dem);
 }
 
+TN_TEST(grow_without_block_grid)
+{
+    /* the quilted blocks (48 px) must not show: line pixels are as dense at every phase of the
+       block grid, rows and columns (no block is chosen for an empty overlap); the example is the
+       network of the bundled Alps DEM's central 128 px */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, r = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float rp[30], vp[30];
+    double bin[12], lo = 1e30, hi = 0;
+    int x, y, k;
+    memset(bin, 0, sizeof bin);
+    TN_CHECK(tn_image_load("examples/data/alps_n47e009_256.png", &full, NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    user = two_strokes(480, 480, rp, vp);
+    TN_CHECK(tn_gnn_grow(&user, &ex, 480, 480, NULL, &g, NULL) == TN_OK);
+    TN_CHECK(tn_sketch_rasterise(&g, 480, 480, &r) == TN_OK);
+    for (y = 0; y < 480; y++)
+        for (x = 0; x < 480; x++) {
+            size_t i = (size_t)y * 480 + x;
+            int l = r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
+            bin[(y % 48) / 8] += l;
+            bin[6 + (x % 48) / 8] += l;
+        }
+    for (k = 0; k < 12; k++) lo = fmin(lo, bin[k]), hi = fmax(hi, bin[k]);
+    TN_CHECK(hi > 0 && lo / hi >= 0.8); /* 0.67 when the overlap score liked empty overlaps */
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&r);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grown_generation)
 {
     /* gnn generation of a drawing of two strokes: grown by default (the plan says how much and
@@ -1173,6 +1206,7 @@ int main(void)
     TN_RUN(residual_gain);
     TN_RUN(ordering_share);
     TN_RUN(grow_by_example);
+    TN_RUN(grow_without_block_grid);
     TN_RUN(grown_generation);
     return tn_test_summary("test_gnn");
 }
