@@ -9,13 +9,18 @@
        256 x 256, mean) and their ratios to the reference's; the samples' height range against
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
        every 128 px crop of the example (stride 4; copy check); whether two seeds differ,
+     - with --layout 1: the same model's samples laid out by GPNN on the example's coarsest scale
+       (tn_singan_gen_opts.layout; --layout-noise S its GPNN noise), the same lines,
      - GPNN (no training): the same lines,
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
-       (DIR/REGION_singan.png) and model (DIR/REGION_singan.tnw),
+       (DIR/REGION_singan.png) and model (DIR/REGION_singan.tnw); with --layout the laid-out sample
+       between SinGAN and GPNN,
+     - with --model DIR: the models an earlier --pictures DIR run saved, instead of training,
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
-   Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
+   Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--layout 1] [--layout-noise S] [--extras] [--peer]
+                       [--no-singan] [--no-gpnn]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below, M = 10, 2 threads) */
@@ -33,7 +38,7 @@
 typedef struct region { const char *dir; int tuned; } region;
 static const region regions[] = {
     {"alps_montblanc", 1},         {"sahara_erg_oriental", 1},     {"grandcanyon_hoppe8bit", 0}, {"moon_nearside_lola4ppd", 0},
-    {"volcano_fuji_terrainrgb", 0}, {"volcano_sthelens_10m", 0},   {"greenriver_utah_lidar1m", 0}, {"himalaya_everest", 0},
+    {"volcano_fuji_terrainrgb", 0}, {"volcano_sthelens_10m", 1},   {"greenriver_utah_lidar1m", 0}, {"himalaya_everest", 0},
 };
 
 static const char *g_root = "../shared/data";
@@ -246,7 +251,9 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
     tn_image_free(&row);
 }
 
-static const char *g_argv0, *g_pictures;
+static const char *g_argv0, *g_pictures, *g_model_dir;
+static int g_layout;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
+static float g_layout_noise;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
 static tn_gpnn_opts g_gopts;
@@ -256,12 +263,12 @@ static void extras(const char *n, const tn_image *ex, tn_singan *m, int threads,
 static void bench_region(const region *rg, double minutes, int threads)
 {
     tn_image ex = {0, 0, 0, NULL}, full = {0, 0, 0, NULL}, other = {0, 0, 0, NULL};
-    tn_image sg[3], gp[3];
+    tn_image sg[3], gp[3], sl[3];
     tn_singan m;
     tn_singan_opts o;
     tn_singan_stats st;
     tn_singan_gen_opts g;
-    measured ms, mg;
+    measured ms, mg, ml;
     dists ref;
     double t0;
     float dx, dy, fdx, fdy, elo, ehi;
@@ -270,6 +277,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     const char *n = rg->dir;
     memset(sg, 0, sizeof sg);
     memset(gp, 0, sizeof gp);
+    memset(sl, 0, sizeof sl);
     if (!load(n, "256", &ex, &dx, &dy) || !load(n, "full", &full, &fdx, &fdy)) {
         printf("# %s: skipped (no data)\n", n);
         return;
@@ -289,7 +297,15 @@ static void bench_region(const region *rg, double minutes, int threads)
         o.train.minutes = minutes;
         o.train.seed = 1;
         t0 = tn_time_seconds();
-        if (tn_singan_train(&ex, &o, &m, &st)) {
+        if (g_model_dir) { /* a model an earlier run saved (--pictures), instead of training */
+            char path[512];
+            snprintf(path, sizeof path, "%s/%s_singan.tnw", g_model_dir, n);
+            if (tn_singan_load(path, &m)) {
+                printf("# %s: %s\n", n, tn_last_error());
+                g_singan = -1;
+            } else
+                printf("%s_singan_model: %s (%ld iterations, %.2f min)\n", n, path, m.iterations, m.train_seconds / 60.0);
+        } else if (tn_singan_train(&ex, &o, &m, &st)) {
             printf("# %s: training failed: %s\n", n, tn_last_error());
             g_singan = -1;
         } else {
@@ -298,6 +314,8 @@ static void bench_region(const region *rg, double minutes, int threads)
             for (i = 0; i < st.scales; i++) printf(" %ld", st.scale_iters[i]);
             printf(", %.3f s / iteration (finest %.3f), finest scale's last losses: D %.3f, G %.3f, reconstruction %.5f\n", st.seconds_per_iter,
                    st.seconds_per_iter_finest, (double)st.loss_d, (double)st.loss_g, (double)st.loss_rec);
+        }
+        if (g_singan > 0) {
             memset(&g, 0, sizeof g);
             for (i = 0; i < 3; i++) {
                 g.seed = 100 + (uint64_t)i;
@@ -307,6 +325,22 @@ static void bench_region(const region *rg, double minutes, int threads)
                 measure(&ex, sg, dx, dy, &ms);
                 report(n, "singan", &ms, &ref, elo, ehi);
             }
+        }
+    }
+    fflush(stdout);
+    if (g_singan > 0 && g_layout > 0) { /* the same model's samples laid out by GPNN (tn_singan_gen_opts.layout) */
+        memset(&g, 0, sizeof g);
+        g.layout = g_layout;
+        g.layout_noise = g_layout_noise;
+        t0 = tn_time_seconds();
+        for (i = 0; i < 3; i++) {
+            g.seed = 100 + (uint64_t)i;
+            if (tn_singan_sample(&m, 0, 0, 256, 256, &g, &sl[i])) printf("# %s: layout failed: %s\n", n, tn_last_error());
+        }
+        printf("%s_layout_seconds: %.2f s per sample (layout %d)\n", n, (tn_time_seconds() - t0) / 3.0, g_layout);
+        if (sl[0].data && sl[1].data && sl[2].data) {
+            measure(&ex, sl, dx, dy, &ml);
+            report(n, "singan_layout", &ml, &ref, elo, ehi);
         }
     }
     fflush(stdout);
@@ -324,10 +358,11 @@ static void bench_region(const region *rg, double minutes, int threads)
         }
     }
     if (g_pictures) {
-        tn_image set[3];
+        tn_image set[4];
         int k = 0;
         set[k++] = ex;
         if (sg[0].data) set[k++] = sg[0];
+        if (sl[0].data) set[k++] = sl[0];
         if (gp[0].data) set[k++] = gp[0];
         pictures(g_pictures, n, set, k, dx, dy, elo, ehi);
         {
@@ -345,6 +380,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     for (i = 0; i < 3; i++) {
         tn_image_free(&sg[i]);
         tn_image_free(&gp[i]);
+        tn_image_free(&sl[i]);
     }
     tn_image_free(&ex);
     tn_image_free(&full);
@@ -446,6 +482,9 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--d-steps") && v) g_opts.d_steps = atoi(argv[++i]);
         else if (!strcmp(a, "--coarsest") && v) g_opts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--channels") && v) g_opts.channels = g_opts.max_channels = atoi(argv[++i]);
+        else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
+        else if (!strcmp(a, "--layout") && v) g_layout = atoi(argv[++i]);
+        else if (!strcmp(a, "--layout-noise") && v) g_layout_noise = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-coarsest") && v) g_gopts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-noise") && v) g_gopts.noise = (float)atof(argv[++i]);

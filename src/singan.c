@@ -95,6 +95,10 @@ typedef struct tn_singan_gen_opts {
                               for + 1 (1..scales; 0 = the output at the example's pixel size) */
     float noise;           /* multiplier of the trained noise amplitudes; 0 = 1, < 0 = no noise */
     int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
+    int layout;            /* sample: 1 = the coarsest scale is the example's coarsest scale rearranged by patch
+                              nearest neighbours (GPNN), the finer scales add SinGAN's detail; the map is then
+                              finite (origin (0, 0) only). 0 = the coarsest generator (infinite terrain) */
+    float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 5 */
 } tn_singan_gen_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -169,8 +173,9 @@ TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_SINGAN
 
-#define TN__SG_FORMAT 3 /* 2: the per-scale output gain (issue 31); 3: the smoothed coarsest
-                           noise (its third round). Older models are refused */
+#define TN__SG_FORMAT 4 /* 2: the per-scale output gain (issue 31); 3: the smoothed coarsest
+                           noise (its third round); 4: the example's coarsest scale for the
+                           layout (its fourth). Older models are refused */
 #define TN__SG_CONFIG (8 + 3 * TN_SINGAN_MAX_SCALES)
 #define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
@@ -206,6 +211,7 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->noise == 0) o->noise = 1.0f;
     if (o->noise < 0) o->noise = 0.0f;
     if (o->tile <= 0) o->tile = 256;
+    if (o->layout_noise == 0) o->layout_noise = 5.0f;
 }
 
 /* ---- sizes and config ---- */
@@ -314,8 +320,13 @@ static tn_status tn__sg_model_params(const tn__sg_arch *A, tn_rng *rng, tn_param
     tn_status st = TN_OK;
     *out = NULL;
     if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    int ls[2];
+    ls[0] = tn__sg_size(A->height, A->factor, A->scales - 1);
+    ls[1] = tn__sg_size(A->width, A->factor, A->scales - 1);
     if (!(cfg = tn_params_add_buffer(p, "singan.config", 1, &n))) st = TN_ERR_OUT_OF_MEMORY;
     else tn__sg_write_config(A, cfg->data);
+    /* the example's coarsest scale (network units): what a laid-out sample rearranges */
+    if (!st && !tn_params_add_buffer(p, "singan.layout", 2, ls)) st = TN_ERR_OUT_OF_MEMORY;
     for (s = 0; s < A->scales && !st; s++) st = tn__sg_gen_add(p, s, A->ch[s], rng);
     if (st) {
         tn_params_free(p);
@@ -1128,6 +1139,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
         TN_FREE(b);
     }
     if ((st = tn__sg_train_nets(&s))) goto done;
+    memcpy(tn_params_find(s.g, "singan.layout")->data, s.real[0].data, (size_t)s.real[0].width * s.real[0].height * sizeof(float));
     if ((st = tn_train_add_net(s.run, "g", s.g, s.og)) || (st = tn_train_add_net(s.run, "d", s.d, s.od)) ||
         (st = tn_train_add_params(s.run, "", s.sched)) || (st = tn_train_add_rng(s.run, "main", &s.rng)))
         goto done;
@@ -1319,6 +1331,9 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
     else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 2 (before issue 31's smoothed coarsest noise): train it again", path);
+    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
+        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 3 (before issue 31's layout: it lacks the example's coarsest scale): train it again",
+                      path);
     else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
@@ -1358,8 +1373,9 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if (opts) *o = *opts;
     tn_singan_gen_defaults(o);
     if ((st = tn__sg_arch_of(model, A))) return st;
-    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096)
-        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096)", (double)o->noise, o->tile);
+    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100))
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, layout noise %g <= 100)",
+                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
@@ -1368,18 +1384,59 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     return TN_OK;
 }
 
+/* The layout of a w x h sample on the coarsest scale's grid (*mw x *mh, network units, allocated
+   here): GPNN on the example's coarsest scale. The coarsest generator, 5 layers on noise with
+   an 11 px view, made a field of features without the example's arrangement (no cone, no rim,
+   no massif); the example's own coarsest scale rearranged by patches keeps it, and SinGAN's
+   finer scales with their noise on top keep samples from being copies (docs/singan.md). */
+static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const tn_singan_gen_opts *o, int w, int h, float **map, int *mw, int *mh)
+{
+    const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
+    tn_image ex, lay = {0, 0, 0, NULL};
+    tn_gpnn_opts go;
+    tn_status st;
+    *map = NULL;
+    *mw = tn__sg_size(w, A->factor, A->scales - 1);
+    *mh = tn__sg_size(h, A->factor, A->scales - 1);
+    if (!t || t->ndim != 2) return tn__fail(TN_ERR_INVALID_ARG, "singan sample: the model holds no layout");
+    ex.width = t->shape[1];
+    ex.height = t->shape[0];
+    ex.channels = 1;
+    ex.data = t->data;
+    memset(&go, 0, sizeof go);
+    go.seed = o->seed;
+    go.noise = o->layout_noise;
+    go.coarsest = ex.width < ex.height ? ex.width : ex.height; /* one GPNN scale: the coarsest */
+    if (go.coarsest < 7 || *mw < 7 || *mh < 7)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a layout needs the coarsest scale of the example and of the map at least 7 px "
+                        "(%d x %d and %d x %d)", ex.width, ex.height, *mw, *mh);
+    if (!(st = tn_gpnn_sample(&ex, *mw, *mh, &go, &lay))) *map = lay.data;
+    return st;
+}
+
 TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts, tn_image *out)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
     tn__sg_gen_run r;
+    float *map = NULL;
     tn_status st;
     TN_ASSERT(out);
     if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
+    if (o.layout && (x0 || y0))
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a laid-out map is finite: its origin must be (0, 0), not (%d, %d)", x0, y0);
     r.limit = 1;
-    return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
+    if (o.layout) { /* the layout is the coarsest scale's output */
+        if ((st = tn__sg_layout(model, &A, &o, w, h, &map, &r.mw, &r.mh))) return st;
+        r.map = map;
+        r.map_level = 0;
+        r.map_is_output = 1;
+    }
+    st = tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
+    TN_FREE(map);
+    return st;
 }
 
 /* in (channel 0, finite) in network units, resized to w x h. */

@@ -109,6 +109,56 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
     tn_image_free(&other);
 }
 
+/* Issue 31's fourth round: a laid-out sample's coarsest scale is GPNN on the example's coarsest
+   scale (stored in the model). Its tiles still equal the whole map, seeds differ, heights stay in
+   the band; without any noise it rebuilds the example, which a sample of the coarsest generator
+   does not (the stored scale is the example's, and it is the one used). */
+TN_TEST(layout_from_the_example)
+{
+    tn_image ex = tn_test_dem(24, 1), whole = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, other = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
+    tn_singan_gen_opts g;
+    float elo, ehi, lo, hi;
+    double s_layout = 0, s_plain = 0;
+    int k, differ = 0;
+    if (!have_trained) TN_SKIP("no model");
+    tn_image_range(&ex, &elo, &ehi);
+    memset(&g, 0, sizeof g);
+    g.seed = 11;
+    g.layout = 1;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &whole) == TN_OK);
+    g.tile = 16;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &tiled) == TN_OK);
+    TN_CHECK(whole.data && tiled.data && !memcmp(whole.data, tiled.data, 50 * 40 * sizeof(float)));
+    g.tile = 0;
+    g.seed = 12;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &other) == TN_OK);
+    for (k = 0; k < 2000 && other.data && whole.data; k++) differ += fabsf(other.data[k] - whole.data[k]) > 1.0f;
+    TN_CHECK(differ > 1000);
+    tn_image_range(&whole, &lo, &hi);
+    TN_CHECK(lo >= elo - 0.1f * (ehi - elo) && hi <= ehi + 0.1f * (ehi - elo) && hi - lo > 0.3f * (ehi - elo));
+    tn_image_free(&whole);
+    g.noise = -1;
+    g.layout_noise = -1;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &whole) == TN_OK);
+    g.layout = 0;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &plain) == TN_OK);
+    TN_CHECK(tn_ssim(&ex, &whole, ehi - elo, &s_layout) == TN_OK && tn_ssim(&ex, &plain, ehi - elo, &s_plain) == TN_OK);
+    printf("# layout without noise: SSIM to the example %.3f (the coarsest generator's: %.3f)\n", s_layout, s_plain);
+    TN_CHECK(s_layout > 0.8 && s_layout > s_plain + 0.2);
+    g.layout = 1; /* finite: no other origin; one kind of layout */
+    TN_CHECK(tn_singan_sample(&trained, 4, 0, 24, 24, &g, &plain) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "origin") != NULL);
+    g.layout = 2;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &plain) == TN_ERR_INVALID_ARG);
+    g.layout = 1;
+    TN_CHECK(tn_singan_sample(&trained, 0, 0, 8, 8, &g, &plain) == TN_ERR_INVALID_ARG); /* coarsest scale of 4 px: smaller than a patch */
+    tn_image_free(&whole);
+    tn_image_free(&tiled);
+    tn_image_free(&other);
+    tn_image_free(&plain);
+    tn_image_free(&ex);
+}
+
 TN_TEST(refine_and_upscale)
 {
     tn_image dem = tn_test_dem(24, 1), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -233,6 +283,19 @@ TN_TEST(bad_inputs)
         TN_CHECK(strstr(tn_last_error(), "format 2") != NULL);
         remove(path);
     }
+    { /* format 3 (no example's coarsest scale to lay out, before issue 31's fourth round): refused by name */
+        tn_params *p = tn_params_create();
+        tn_model_provenance pv;
+        int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
+        memset(&pv, 0, sizeof pv);
+        tn_params_add_buffer(p, "singan.config", 1, &n);
+        TN_CHECK(tn_model_stamp(p, "singan", 3, &pv) == TN_OK);
+        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        tn_params_free(p);
+        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(strstr(tn_last_error(), "format 3") != NULL);
+        remove(path);
+    }
     if (have_trained) {
         tn_singan_gen_opts g;
         memset(&g, 0, sizeof g);
@@ -312,6 +375,7 @@ int main(void)
     TN_RUN(training_lowers_the_reconstruction_loss);
     TN_RUN(save_load_round_trip);
     TN_RUN(tile_equals_whole_map_and_seeds_differ);
+    TN_RUN(layout_from_the_example);
     TN_RUN(refine_and_upscale);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);

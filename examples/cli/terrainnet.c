@@ -1601,6 +1601,8 @@ static const cli_opt singan_sample_opts[] = {
      "the window's corner in the infinite sample (tiles of one seed fit together exactly)", "0 0"},
     {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+    {"layout", 0, ARG_FLAG, 0, &singan_gen_arg.g.layout, NULL, 0, 0, NULL,
+     "the coarsest scale is the example's own, rearranged by patches (GPNN): its layout; a finite map (origin 0 0)", NULL},
 };
 static const cli_opt singan_refine_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
