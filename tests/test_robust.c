@@ -5,6 +5,7 @@
    Every case must end in an error status with a message, or in success with finite output;
    crashes, sanitizer reports and hangs are failures too (the Makefile builds tests with ASan and
    UBSan). Fixed seeds, so a failure reproduces. */
+#define _POSIX_C_SOURCE 200809L /* fork, kill, nanosleep */
 /* A 256 MiB allocation cap keeps "huge but allowed" sizes from eating the machine under ASan. */
 #define TN_MAX_ALLOC ((size_t)1 << 28)
 #define TERRAINNET_IMPLEMENTATION
@@ -14,6 +15,7 @@
 #if defined(__unix__) || defined(__APPLE__)
 #include <unistd.h>
 #include <sys/wait.h>
+#include <signal.h>
 #endif
 
 /* ---- helpers ---- */
@@ -752,6 +754,69 @@ TN_TEST(test_stale_temporaries)
     remove(tmp);
     remove(out);
     tn_image_free(&img);
+#else
+    TN_SKIP("POSIX only");
+#endif
+}
+
+/* texgan's streamed .ppm/.pfm files (written in bands, so through tn__io_temp_open rather than
+   one write) follow the same rule: a synthesis killed mid-file leaves at most "PATH.tmp", which
+   the next save replaces (before: "PATH.tmp.PID.N", there for good). */
+TN_TEST(test_stale_texgan_stream)
+{
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+    const char *out = tmp_path("tg_stream.ppm");
+    char tmp[600], mine[600];
+    tn_image ex = {0}, back = {0};
+    tn_texgan m;
+    tn_texgan_opts o;
+    pid_t child;
+    int k, status = 0;
+    unsigned long serial = tn__io_tmp_counter + 1; /* the child's first temporary, named as before */
+    struct timespec pause = {0, 10000000};
+    FILE *f = NULL;
+    memset(&o, 0, sizeof o);
+    o.noise_local = 4;
+    o.stages = 2;
+    o.gen_width = 8;
+    o.disc_width = 8;
+    o.disc_layers = 2;
+    o.patch = 16;
+    o.batch = 1;
+    o.train.max_iters = 1;
+    o.train.seed = 5;
+    TN_CHECK(tn_image_create(&ex, 32, 32, 3) == TN_OK);
+    for (k = 0; ex.data && k < 32 * 32 * 3; k++) ex.data[k] = (float)(k % 7) / 7.0f;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
+    tn_image_free(&ex);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
+    remove(tmp);
+    remove(out);
+    child = fork();
+    if (child == 0) _exit((int)tn_texgan_synthesize_file(&m, 1, 4096, 4096, NULL, out) ? 1 : 3);
+    TN_CHECK(child > 0);
+    if (child > 0) {
+        snprintf(mine, sizeof mine, "%s.tmp.%lu.%lu", out, (unsigned long)child, serial);
+        for (k = 0; k < 2000; k++) { /* until the child has begun writing: 20 s at most */
+            if ((f = fopen(tmp, "rb")) != NULL || (f = fopen(mine, "rb")) != NULL) break;
+            nanosleep(&pause, NULL);
+        }
+        TN_CHECK(f != NULL);
+        if (f) fclose(f);
+        kill(child, SIGKILL);
+        TN_CHECK(waitpid(child, &status, 0) == child && WIFSIGNALED(status)); /* killed mid-file */
+        TN_CHECK((f = fopen(mine, "rb")) == NULL); /* not a name of its own */
+        if (f) fclose(f), remove(mine);
+        TN_CHECK((f = fopen(tmp, "rb")) != NULL);
+        if (f) fclose(f);
+        TN_CHECK(tn_texgan_synthesize_file(&m, 1, 40, 30, NULL, out) == TN_OK);
+        TN_CHECK(fopen(tmp, "rb") == NULL); /* the leftover was replaced */
+        TN_CHECK(tn_image_load(out, &back, NULL) == TN_OK && back.width == 40 && back.height == 30);
+        tn_image_free(&back);
+    }
+    remove(tmp);
+    remove(out);
+    tn_texgan_free(&m);
 #else
     TN_SKIP("POSIX only");
 #endif
@@ -2127,6 +2192,7 @@ int main(void)
     RUN(test_memory_limit);
     RUN(test_season_frame_total);
     RUN(test_stale_temporaries);
+    RUN(test_stale_texgan_stream);
     RUN(test_tiff_lzw_streams);
     return tn_test_summary("test_robust");
 }
