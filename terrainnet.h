@@ -19274,6 +19274,24 @@ static tn_status tn__tg_register(tn__tg_train *s)
     return st;
 }
 
+/* Whether a checkpoint holds the discriminator its config names (tn_patch_disc_add's layers),
+   checked before it is allocated: a width of 1024 over 5 layers took 5.3 GB and 22 s to fail. */
+static tn_status tn__tg_disc_matches(const tn__tg_train *s, const tn_params *ck, const char *path)
+{
+    int l, ws[4];
+    char name[40];
+    ws[1] = s->m.channels;
+    ws[2] = ws[3] = 5;
+    for (l = 0; l <= s->disc_layers; l++) {
+        ws[0] = l == s->disc_layers ? 1 : s->disc_width << l;
+        if (!tn__params_has(ck, tn__param_name(name, sizeof name, "d.", "w", l), 4, ws))
+            return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config names a discriminator %d wide with %d layers; the checkpoint's differs", path,
+                            s->disc_width, s->disc_layers);
+        ws[1] = ws[0];
+    }
+    return TN_OK;
+}
+
 /* Resumes from the run's checkpoint: the architecture and settings come from the file. */
 static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *path)
 {
@@ -19288,6 +19306,8 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
         st = tn__fail(TN_ERR_CORRUPT, "%s: bad discriminator size", path);
     if (!st && s->m.channels != ex->channels)
         st = tn__fail(TN_ERR_SHAPE, "%s: checkpoint has %d channels, the exemplar %d", path, s->m.channels, ex->channels);
+    if (!st) st = tn__tg_file_matches(&s->m, ck, path); /* the training generator's tensors, before the config sizes anything */
+    if (!st) st = tn__tg_disc_matches(s, ck, path);
     if (!st) st = tn__tg_get_settings(s);
     if (!st) st = tn__tg_build(s);
     if (!st) st = tn__tg_register(s);
@@ -21421,6 +21441,8 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
     return TN_OK;
 }
 
+static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
+
 TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
 {
     tn__sg_train s;
@@ -21468,6 +21490,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
             goto done;
         }
         if ((st = tn__sg_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__sg_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__sg_get_meta(&s, digest))) goto done;
         if (s.A.width != d1->width || s.A.height != d1->height) {
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example is %d x %d, this one %d x %d", s.o.train.checkpoint, s.A.width, s.A.height,
@@ -24194,6 +24217,7 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 #undef TN__GNN_LATER_SETTINGS
 
 static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
+static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A, const char *name);
 
 /* The example's heights (example units), which the fine detail by example draws on at generation. */
 static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
@@ -24259,6 +24283,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             goto done;
         }
         if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__gnn_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__gnn_get_meta(&s, digest))) goto done;
         ck_best = tn_params_find(ck, "best.holdout") != NULL;
         sd = tn_params_meta(ck, "seed");
@@ -25115,6 +25140,8 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
    have 16-138 lines. */
 #define TN__GNN_GAIN_MIN_LINES 8
 
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
 /* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's.
    *raw = the held-out lines' pooled least-squares gain, before scale and clamp; NAN = untested. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
@@ -25144,6 +25171,8 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             else keep.items[keep.count++] = sk->items[i];
         }
         if (!drop.count || keep.count == sk->count - n_user) continue; /* nothing held out, or no user line left */
+        /* each round cuts the whole sketch again before its window's one tile reports (a huge sketch: seconds) */
+        if ((size_t)G->W * G->H > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", (round + 1) / 4.0))) break;
         memset(&T, 0, sizeof T);
         T.A = G->A;
         st = tn__gnn_gen_build(model, &keep, G->W, G->H, opts, &T, &known);
@@ -25303,6 +25332,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         sk = rnd;
         memset(&rnd, 0, sizeof rnd);
     }
+    if ((size_t)width * height > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", 0.0))) goto done; /* growing and cutting the whole sketch are silent */
     if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
                                                             network between them (a sketch without a 5 px line fails below, ungrown) */
         tn_contour_set ex;
@@ -25516,7 +25546,6 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
 }
 
 #define TN__GNN_TILE 512          /* core of a generation tile; the 148 px halo comes on top, a smaller core recomputes more of it */
-#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
 
 /* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
    floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
