@@ -759,6 +759,22 @@ TN_TEST(test_stale_temporaries)
 #endif
 }
 
+/* A texgan run of one iteration on a tiny generator and critic (checkpoint ck, may be NULL). */
+static void tiny_texgan_opts(tn_texgan_opts *o, const char *ck)
+{
+    memset(o, 0, sizeof *o);
+    o->noise_local = 4;
+    o->stages = 2;
+    o->gen_width = 8;
+    o->disc_width = 8;
+    o->disc_layers = 2;
+    o->patch = 16;
+    o->batch = 1;
+    o->train.max_iters = 1;
+    o->train.seed = 5;
+    o->train.checkpoint = ck;
+}
+
 /* texgan's streamed .ppm/.pfm files (written in bands, so through tn__io_temp_open rather than
    one write) follow the same rule: a synthesis killed mid-file leaves at most "PATH.tmp", which
    the next save replaces (before: "PATH.tmp.PID.N", there for good). */
@@ -775,16 +791,7 @@ TN_TEST(test_stale_texgan_stream)
     unsigned long serial = tn__io_tmp_counter + 1; /* the child's first temporary, named as before */
     struct timespec pause = {0, 10000000};
     FILE *f = NULL;
-    memset(&o, 0, sizeof o);
-    o.noise_local = 4;
-    o.stages = 2;
-    o.gen_width = 8;
-    o.disc_width = 8;
-    o.disc_layers = 2;
-    o.patch = 16;
-    o.batch = 1;
-    o.train.max_iters = 1;
-    o.train.seed = 5;
+    tiny_texgan_opts(&o, NULL);
     TN_CHECK(tn_image_create(&ex, 32, 32, 3) == TN_OK);
     for (k = 0; ex.data && k < 32 * 32 * 3; k++) ex.data[k] = (float)(k % 7) / 7.0f;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
@@ -1653,17 +1660,7 @@ TN_TEST(test_resume_config_sizes)
         tn_image ex = tn_test_exemplar(32, 32, 3, 1);
         tn_texgan_opts to;
         tn_texgan tg;
-        memset(&to, 0, sizeof to);
-        to.noise_local = 4;
-        to.stages = 2;
-        to.gen_width = 8;
-        to.disc_width = 8;
-        to.disc_layers = 2;
-        to.patch = 16;
-        to.batch = 1;
-        to.train.max_iters = 1;
-        to.train.seed = 5;
-        to.train.checkpoint = sck;
+        tiny_texgan_opts(&to, sck);
         TN_CHECK(tn_texgan_train(&tg, &ex, &to, NULL) == TN_OK);
         tn_texgan_free(&tg);
         TN_CHECK(resume_texgan(sck) == TN_OK);
