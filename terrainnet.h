@@ -8172,24 +8172,6 @@ static FILE *tn__io_claim(const char *tmp)
 #endif
 }
 
-/* Removes the temporary a killed save of path left ("PATH.tmp"), unless a save holds it. */
-TN__SHARED void tn__io_remove_stale(const char *path)
-{
-    size_t n = strlen(path) + 5;
-    char *tmp = (char *)TN_MALLOC(n);
-    FILE *f;
-    if (!tmp) return;
-    snprintf(tmp, n, "%s.tmp", path);
-    if (tn__io_saving_enter(path)) {
-        if ((f = tn__io_claim(tmp)) != NULL) {
-            remove(tmp);
-            fclose(f);
-        }
-        tn__io_saving_leave(path);
-    }
-    TN_FREE(tmp);
-}
-
 /* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
 static void tn__io_sync_dir(const char *path)
 {
@@ -8213,74 +8195,104 @@ static void tn__io_sync_dir(const char *path)
 #endif
 }
 
-/* Writes buf to path's temporary (above), flushes it to disk and renames it over path; removes
-   the temporary on failure. */
-static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
+/* A save in progress: the temporary of path (above), open for writing as f. tn__io_temp_open
+   claims it; tn__io_temp_finish flushes it to disk and renames it over path, or removes it. A
+   streamed writer (texgan) writes f in pieces between the two. */
+typedef struct tn__io_temp {
+    FILE *f, *check;
+    char *tmp;
+    const char *path;
+    int held, shared; /* holds path in this process; shared: PATH.tmp (not a name of its own) */
+} tn__io_temp;
+
+/* own: a name of this save's own, for when PATH.tmp turned out not to be this save's. */
+static tn_status tn__io_temp_open(tn__io_temp *t, const char *path, int own)
 {
     size_t cap = strlen(path) + 64;
-    char *tmp = (char *)tn__alloc(cap);
-    int ok = 1, held, own = 0, attempt;
-    FILE *f = NULL, *check = NULL;
-    if (!tmp) return tn__oom();
-    held = tn__io_saving_enter(path);
-    for (attempt = held ? 0 : 1; attempt < 2; attempt++) {
-        if (attempt == 0) {
-            snprintf(tmp, cap, "%s.tmp", path);
-            if (!(f = tn__io_claim(tmp))) continue;
-        } else { /* another save of path runs: a name of this save's own */
-            unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
-            snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
-            if (!(f = fopen(tmp, "wb"))) break;
-        }
-        ok = fwrite(buf, 1, n, f) == n;
-        ok = fflush(f) == 0 && ok;
-#if defined(TN__IO_POSIX)
-        ok = fsync(fileno(f)) == 0 && ok; /* on disk before the rename */
-#endif
-        ok = !ferror(f) && ok;
-#if defined(TN__IO_LOCKF)
-        /* the name is still this save's file (locked by no other process): a save that took the
-           file for a leftover before this one locked it would hold the name now */
-        if (ok && attempt == 0 && (!(check = fopen(tmp, "rb")) || lockf(fileno(check), F_TEST, 0) != 0)) {
-            if (check) fclose(check);
-            check = NULL;
-            fclose(f);
-            f = NULL;
-            continue;
-        }
-#endif
-        own = 1;
-        break;
+    memset(t, 0, sizeof *t);
+    t->path = path;
+    if (!(t->tmp = (char *)tn__alloc(cap))) return tn__oom();
+    t->held = tn__io_saving_enter(path);
+    if (t->held && !own) {
+        snprintf(t->tmp, cap, "%s.tmp", path);
+        if ((t->f = tn__io_claim(t->tmp)) != NULL) t->shared = 1;
     }
-    if (!own) {
-        if (held) tn__io_saving_leave(path);
-        TN_FREE(tmp);
+    if (!t->f) { /* another save of path runs: a name of this save's own */
+        unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
+        snprintf(t->tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+        t->f = fopen(t->tmp, "wb");
+    }
+    if (!t->f) {
+        if (t->held) tn__io_saving_leave(path);
+        TN_FREE(t->tmp);
         return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
     }
-    if (ok && rename(tmp, path) != 0) {
-#ifdef _WIN32
-        fclose(f), f = NULL; /* no rename over an open or existing file */
-        ok = remove(path) == 0 && rename(tmp, path) == 0;
-#else
-        ok = 0;
-#endif
-        if (!ok) {
-            remove(tmp);
-            if (check) fclose(check);
-            if (f) fclose(f);
-            if (held) tn__io_saving_leave(path);
-            TN_FREE(tmp);
-            return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
-        }
-    } else if (!ok)
-        remove(tmp); /* while still held */
-    if (check) fclose(check); /* after the rename: closing either drops the lock */
-    if (f && fclose(f) != 0) ok = 0;
-    if (held) tn__io_saving_leave(path);
-    TN_FREE(tmp);
-    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
-    tn__io_sync_dir(path);
     return TN_OK;
+}
+
+/* Ends the save: ok (nothing failed while writing) puts the temporary in place, otherwise it is
+   removed. 1: done; 0: failed (the error is set); -1: PATH.tmp was taken from this save (its
+   writes are lost; nothing is set), so the caller writes again under tn__io_temp_open(.., 1). */
+static int tn__io_temp_finish(tn__io_temp *t, int ok)
+{
+    int unrenamed = 0;
+    ok = fflush(t->f) == 0 && ok;
+#if defined(TN__IO_POSIX)
+    ok = fsync(fileno(t->f)) == 0 && ok; /* on disk before the rename */
+#endif
+    ok = !ferror(t->f) && ok;
+#if defined(TN__IO_LOCKF)
+    /* the name is still this save's file (locked by no other process): a save that took the
+       file for a leftover before this one locked it would hold the name now */
+    if (ok && t->shared && (!(t->check = fopen(t->tmp, "rb")) || lockf(fileno(t->check), F_TEST, 0) != 0)) {
+        if (t->check) fclose(t->check);
+        fclose(t->f);
+        if (t->held) tn__io_saving_leave(t->path);
+        TN_FREE(t->tmp);
+        return -1;
+    }
+#endif
+    if (ok && rename(t->tmp, t->path) != 0) {
+#ifdef _WIN32
+        fclose(t->f), t->f = NULL; /* no rename over an open or existing file */
+        unrenamed = !(remove(t->path) == 0 && rename(t->tmp, t->path) == 0);
+#else
+        unrenamed = 1;
+#endif
+        ok = !unrenamed;
+    }
+    if (!ok) remove(t->tmp); /* while still held */
+    if (t->check) fclose(t->check); /* after the rename: closing either drops the lock */
+    if (t->f && fclose(t->f) != 0) ok = 0;
+    if (t->held) tn__io_saving_leave(t->path);
+    TN_FREE(t->tmp);
+    if (unrenamed) return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", t->path), 0;
+    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", t->path), 0;
+    tn__io_sync_dir(t->path);
+    return 1;
+}
+
+/* Ends a save that failed before its end (its error is set): the temporary is removed. */
+TN__SHARED void tn__io_temp_discard(tn__io_temp *t)
+{
+    remove(t->tmp); /* while still held */
+    fclose(t->f);
+    if (t->held) tn__io_saving_leave(t->path);
+    TN_FREE(t->tmp);
+}
+
+/* Writes buf to path's temporary, flushes it to disk and renames it over path. */
+static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
+{
+    tn__io_temp t;
+    int own, r = 0;
+    tn_status st;
+    for (own = 0; own < 2; own++) {
+        if ((st = tn__io_temp_open(&t, path, own))) return st;
+        r = tn__io_temp_finish(&t, fwrite(buf, 1, n, t.f) == n);
+        if (r >= 0) break;
+    }
+    return r == 1 ? TN_OK : TN_ERR_IO;
 }
 
 TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_save_opts *opts)
@@ -19266,6 +19278,24 @@ static tn_status tn__tg_register(tn__tg_train *s)
     return st;
 }
 
+/* Whether a checkpoint holds the discriminator its config names (tn_patch_disc_add's layers),
+   checked before it is allocated: a width of 1024 over 5 layers took 5.3 GB and 22 s to fail. */
+static tn_status tn__tg_disc_matches(const tn__tg_train *s, const tn_params *ck, const char *path)
+{
+    int l, ws[4];
+    char name[40];
+    ws[1] = s->m.channels;
+    ws[2] = ws[3] = 5;
+    for (l = 0; l <= s->disc_layers; l++) {
+        ws[0] = l == s->disc_layers ? 1 : s->disc_width << l;
+        if (!tn__params_has(ck, tn__param_name(name, sizeof name, "d.", "w", l), 4, ws))
+            return tn__fail(TN_ERR_CORRUPT, "%s: the texgan config names a discriminator %d wide with %d layers; the checkpoint's differs", path,
+                            s->disc_width, s->disc_layers);
+        ws[1] = ws[0];
+    }
+    return TN_OK;
+}
+
 /* Resumes from the run's checkpoint: the architecture and settings come from the file. */
 static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *path)
 {
@@ -19280,6 +19310,8 @@ static tn_status tn__tg_resume(tn__tg_train *s, const tn_image *ex, const char *
         st = tn__fail(TN_ERR_CORRUPT, "%s: bad discriminator size", path);
     if (!st && s->m.channels != ex->channels)
         st = tn__fail(TN_ERR_SHAPE, "%s: checkpoint has %d channels, the exemplar %d", path, s->m.channels, ex->channels);
+    if (!st) st = tn__tg_file_matches(&s->m, ck, path); /* the training generator's tensors, before the config sizes anything */
+    if (!st) st = tn__tg_disc_matches(s, ck, path);
     if (!st) st = tn__tg_get_settings(s);
     if (!st) st = tn__tg_build(s);
     if (!st) st = tn__tg_register(s);
@@ -19808,9 +19840,13 @@ TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int
 
 /* ---- streaming files ---- */
 
+/* Each channel group's file goes through its target's temporary as every other save does
+   (tn__io_temp_open), so a killed synthesis leaves at most "PATH.tmp", which the next save of
+   PATH replaces. */
 typedef struct tn__tg_writer {
-    FILE *f[TN_TEXGAN_MAX_CHANNELS];
-    char *tmp[TN_TEXGAN_MAX_CHANNELS], *final[TN_TEXGAN_MAX_CHANNELS];
+    tn__io_temp t[TN_TEXGAN_MAX_CHANNELS];
+    int open[TN_TEXGAN_MAX_CHANNELS];
+    char *final[TN_TEXGAN_MAX_CHANNELS];
     long hdr[TN_TEXGAN_MAX_CHANNELS];
     int groups, pfm, width, height, channels;
     const float *shift;
@@ -19851,7 +19887,7 @@ static tn_status tn__tg_writer_band(void *user, int y0, const tn_image *band)
                     if (w->pfm) tn__io_put_f32le(w->row + 4 * ((size_t)x * fc + k), v);
                     else w->row[(size_t)x * fc + k] = (uint8_t)tn__io_code(v, w->lo, 255.0 / ((double)w->hi - w->lo), 255u);
                 }
-            if (fseek(w->f[g], off, SEEK_SET) != 0 || fwrite(w->row, 1, rowbytes, w->f[g]) != rowbytes)
+            if (fseek(w->t[g].f, off, SEEK_SET) != 0 || fwrite(w->row, 1, rowbytes, w->t[g].f) != rowbytes)
                 return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", w->final[g]);
         }
     }
@@ -19860,18 +19896,11 @@ static tn_status tn__tg_writer_band(void *user, int y0, const tn_image *band)
 
 static void tn__tg_writer_close(tn__tg_writer *w, tn_status *st)
 {
-    int g;
+    int g, r;
     for (g = 0; g < w->groups; g++) {
-        if (w->f[g]) {
-            int bad = fflush(w->f[g]) != 0 || ferror(w->f[g]);
-            bad = (fclose(w->f[g]) != 0) || bad;
-            if (bad && !*st) *st = tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", w->final[g]);
-        }
-        if (w->tmp[g]) {
-            if (!*st && rename(w->tmp[g], w->final[g]) != 0) *st = tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", w->final[g]);
-            if (*st) remove(w->tmp[g]);
-        }
-        TN_FREE(w->tmp[g]);
+        if (w->open[g] && *st) tn__io_temp_discard(&w->t[g]);
+        else if (w->open[g] && (r = tn__io_temp_finish(&w->t[g], 1)) != 1) /* -1: rare, a race of two saves */
+            *st = r ? tn__fail(TN_ERR_IO, "%s: another save of it took its temporary file; run again", w->final[g]) : TN_ERR_IO;
         TN_FREE(w->final[g]);
     }
     TN_FREE(w->row);
@@ -19932,21 +19961,13 @@ TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed
     if (!(w.row = (uint8_t *)tn__alloc((size_t)width * 3 * 4))) return TN_ERR_OUT_OF_MEMORY;
     for (g = 0; !st && g < w.groups; g++) {
         int fc = tn__tg_group_channels(g, model->channels) == 1 ? 1 : 3;
-        size_t cap;
-        w.final[g] = tn__tg_group_path(path, g, model->channels);
-        cap = w.final[g] ? strlen(w.final[g]) + 40 : 0;
-        w.tmp[g] = cap ? (char *)tn__alloc(cap) : NULL;
-        if (!w.final[g] || !w.tmp[g]) { st = TN_ERR_OUT_OF_MEMORY; break; }
-        tn__io_remove_stale(w.final[g]);
-        snprintf(w.tmp[g], cap, "%s.tmp.%lu.%lu", w.final[g], tn__io_process_id(), ++tn__io_tmp_counter);
-        if (!(w.f[g] = fopen(w.tmp[g], "wb"))) {
-            st = tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", w.final[g]);
-            TN_FREE(w.tmp[g]);
-            w.tmp[g] = NULL;
-            break;
-        }
-        if (w.pfm) w.hdr[g] = fprintf(w.f[g], "P%c\n%d %d\n-1.0\n", fc == 3 ? 'F' : 'f', width, height);
-        else w.hdr[g] = fprintf(w.f[g], "P%d\n%d %d\n255\n", fc == 3 ? 6 : 5, width, height);
+        FILE *f;
+        if (!(w.final[g] = tn__tg_group_path(path, g, model->channels))) { st = TN_ERR_OUT_OF_MEMORY; break; }
+        if ((st = tn__io_temp_open(&w.t[g], w.final[g], 0))) break;
+        w.open[g] = 1;
+        f = w.t[g].f;
+        if (w.pfm) w.hdr[g] = fprintf(f, "P%c\n%d %d\n-1.0\n", fc == 3 ? 'F' : 'f', width, height);
+        else w.hdr[g] = fprintf(f, "P%d\n%d %d\n255\n", fc == 3 ? 6 : 5, width, height);
         if (w.hdr[g] <= 0) st = tn__fail(TN_ERR_IO, "%s: write failed", w.final[g]);
     }
     if (!st) st = tn_texgan_synthesize_stream(model, seed, width, height, 0, tn__tg_writer_band, &w);
@@ -21431,6 +21452,8 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
     return TN_OK;
 }
 
+static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
+
 TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
 {
     tn__sg_train s;
@@ -21478,6 +21501,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
             goto done;
         }
         if ((st = tn__sg_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__sg_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__sg_get_meta(&s, digest))) goto done;
         if (s.A.width != d1->width || s.A.height != d1->height) {
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example is %d x %d, this one %d x %d", s.o.train.checkpoint, s.A.width, s.A.height,
@@ -24250,6 +24274,7 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 #undef TN__GNN_LATER_SETTINGS
 
 static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
+static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A, const char *name);
 
 /* The example's heights (example units), which the fine detail by example draws on at generation. */
 static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
@@ -24315,6 +24340,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             goto done;
         }
         if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__gnn_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__gnn_get_meta(&s, digest))) goto done;
         ck_best = tn_params_find(ck, "best.holdout") != NULL;
         sd = tn_params_meta(ck, "seed");
@@ -25171,6 +25197,8 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
    have 16-138 lines. */
 #define TN__GNN_GAIN_MIN_LINES 8
 
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
 /* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's.
    *raw = the held-out lines' pooled least-squares gain, before scale and clamp; NAN = untested. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
@@ -25200,6 +25228,8 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             else keep.items[keep.count++] = sk->items[i];
         }
         if (!drop.count || keep.count == sk->count - n_user) continue; /* nothing held out, or no user line left */
+        /* each round cuts the whole sketch again before its window's one tile reports (a huge sketch: seconds) */
+        if ((size_t)G->W * G->H > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", (round + 1) / 4.0))) break;
         memset(&T, 0, sizeof T);
         T.A = G->A;
         st = tn__gnn_gen_build(model, &keep, G->W, G->H, opts, &T, &known);
@@ -25359,6 +25389,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         sk = rnd;
         memset(&rnd, 0, sizeof rnd);
     }
+    if ((size_t)width * height > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", 0.0))) goto done; /* growing and cutting the whole sketch are silent */
     if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
                                                             network between them (a sketch without a 5 px line fails below, ungrown) */
         tn_contour_set ex;
@@ -25572,7 +25603,6 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
 }
 
 #define TN__GNN_TILE 512          /* core of a generation tile; the 148 px halo comes on top, a smaller core recomputes more of it */
-#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
 
 /* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
    floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split
@@ -29922,8 +29952,9 @@ static int tn__world_u64(const char *s, uint64_t *out)
 
 static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, const tn_world_opts *opts, const char *base_dir)
 {
+    static const char *const settings[5] = {"world", "seed", "height", "cellsize", "tile"};
     char *line = text, *word[TN__WORLD_MAX_KV + 2];
-    int ln = 0, have_size = 0, k, i;
+    int ln = 0, have_size = 0, k, i, seen[5] = {0, 0, 0, 0, 0};
     tn_status st;
     w->tile = 1024;
     w->seed = 1;
@@ -29939,6 +29970,11 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
         nw = tn__world_words(line, word, TN__WORLD_MAX_KV + 1);
         line = next;
         if (nw == 0) continue;
+        for (k = 0; k < 5; k++) /* a second value would silently win (and size what was set up for the first) */
+            if (!strcmp(word[0], settings[k])) {
+                if (seen[k]) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `%s` given twice (first on line %d)", ln, settings[k], seen[k]);
+                seen[k] = ln;
+            }
         if (!strcmp(word[0], "world")) {
             if (nw != 3 || !tn__world_int(word[1], 1, TN__WORLD_MAX_SIDE, &w->width) || !tn__world_int(word[2], 1, TN__WORLD_MAX_SIDE, &w->height))
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `world WIDTH HEIGHT` in pixels, 1..%d", ln, TN__WORLD_MAX_SIDE);
@@ -29991,10 +30027,11 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
         if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
         w->tile = opts->tile;
     }
+    for (k = 1; k < im->n; k++) /* before any stage is set up: a gnn row's setup runs generations */
+        if (im->st[k].m->source) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: only the first stage may be a generator", im->st[k].line);
     w->halo = 0;
     for (k = 0; k < im->n; k++) {
         tn__world_stage *s = &im->st[k];
-        if (k > 0 && s->m->source) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: only the first stage may be a generator", s->line);
         if (k > 0) {
             s->in_w = im->st[k - 1].out_w;
             s->in_h = im->st[k - 1].out_h;

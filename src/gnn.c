@@ -2307,6 +2307,7 @@ static tn_status tn__gnn_get_meta(tn__gnn_train *s, uint64_t digest)
 #undef TN__GNN_LATER_SETTINGS
 
 static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s);
+static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A, const char *name);
 
 /* The example's heights (example units), which the fine detail by example draws on at generation. */
 static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
@@ -2372,6 +2373,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
             goto done;
         }
         if ((st = tn__gnn_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__gnn_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__gnn_get_meta(&s, digest))) goto done;
         ck_best = tn_params_find(ck, "best.holdout") != NULL;
         sd = tn_params_meta(ck, "seed");
@@ -3228,6 +3230,8 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
    have 16-138 lines. */
 #define TN__GNN_GAIN_MIN_LINES 8
 
+#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
+
 /* tn_gnn_gain's test (see its comment): sk in example units, its first n_user lines the user's.
    *raw = the held-out lines' pooled least-squares gain, before scale and clamp; NAN = untested. */
 static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sk, int n_user,
@@ -3257,6 +3261,8 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             else keep.items[keep.count++] = sk->items[i];
         }
         if (!drop.count || keep.count == sk->count - n_user) continue; /* nothing held out, or no user line left */
+        /* each round cuts the whole sketch again before its window's one tile reports (a huge sketch: seconds) */
+        if ((size_t)G->W * G->H > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", (round + 1) / 4.0))) break;
         memset(&T, 0, sizeof T);
         T.A = G->A;
         st = tn__gnn_gen_build(model, &keep, G->W, G->H, opts, &T, &known);
@@ -3416,6 +3422,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         sk = rnd;
         memset(&rnd, 0, sizeof rnd);
     }
+    if ((size_t)width * height > TN__GNN_ONE_PASS && (st = tn__progress("gnn-prepare", 0.0))) goto done; /* growing and cutting the whole sketch are silent */
     if (o.grow >= 0 && tn__gnn_has_part_length(&sk)) { /* densify by example: a drawing of a few strokes gets the example's
                                                             network between them (a sketch without a 5 px line fails below, ungrown) */
         tn_contour_set ex;
@@ -3629,7 +3636,6 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
 }
 
 #define TN__GNN_TILE 512          /* core of a generation tile; the 148 px halo comes on top, a smaller core recomputes more of it */
-#define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
 
 /* Window (x, y, ww, wh) of G's map into dst (and the membrane into base_dst, may be NULL), ww
    floats a row, in tiles; a pixel depends only on the sketch within the halo, so any split

@@ -2308,24 +2308,6 @@ static FILE *tn__io_claim(const char *tmp)
 #endif
 }
 
-/* Removes the temporary a killed save of path left ("PATH.tmp"), unless a save holds it. */
-TN__SHARED void tn__io_remove_stale(const char *path)
-{
-    size_t n = strlen(path) + 5;
-    char *tmp = (char *)TN_MALLOC(n);
-    FILE *f;
-    if (!tmp) return;
-    snprintf(tmp, n, "%s.tmp", path);
-    if (tn__io_saving_enter(path)) {
-        if ((f = tn__io_claim(tmp)) != NULL) {
-            remove(tmp);
-            fclose(f);
-        }
-        tn__io_saving_leave(path);
-    }
-    TN_FREE(tmp);
-}
-
 /* Makes a rename in path's directory durable (POSIX; a no-op elsewhere or where it fails). */
 static void tn__io_sync_dir(const char *path)
 {
@@ -2349,74 +2331,104 @@ static void tn__io_sync_dir(const char *path)
 #endif
 }
 
-/* Writes buf to path's temporary (above), flushes it to disk and renames it over path; removes
-   the temporary on failure. */
-static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
+/* A save in progress: the temporary of path (above), open for writing as f. tn__io_temp_open
+   claims it; tn__io_temp_finish flushes it to disk and renames it over path, or removes it. A
+   streamed writer (texgan) writes f in pieces between the two. */
+typedef struct tn__io_temp {
+    FILE *f, *check;
+    char *tmp;
+    const char *path;
+    int held, shared; /* holds path in this process; shared: PATH.tmp (not a name of its own) */
+} tn__io_temp;
+
+/* own: a name of this save's own, for when PATH.tmp turned out not to be this save's. */
+static tn_status tn__io_temp_open(tn__io_temp *t, const char *path, int own)
 {
     size_t cap = strlen(path) + 64;
-    char *tmp = (char *)tn__alloc(cap);
-    int ok = 1, held, own = 0, attempt;
-    FILE *f = NULL, *check = NULL;
-    if (!tmp) return tn__oom();
-    held = tn__io_saving_enter(path);
-    for (attempt = held ? 0 : 1; attempt < 2; attempt++) {
-        if (attempt == 0) {
-            snprintf(tmp, cap, "%s.tmp", path);
-            if (!(f = tn__io_claim(tmp))) continue;
-        } else { /* another save of path runs: a name of this save's own */
-            unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
-            snprintf(tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
-            if (!(f = fopen(tmp, "wb"))) break;
-        }
-        ok = fwrite(buf, 1, n, f) == n;
-        ok = fflush(f) == 0 && ok;
-#if defined(TN__IO_POSIX)
-        ok = fsync(fileno(f)) == 0 && ok; /* on disk before the rename */
-#endif
-        ok = !ferror(f) && ok;
-#if defined(TN__IO_LOCKF)
-        /* the name is still this save's file (locked by no other process): a save that took the
-           file for a leftover before this one locked it would hold the name now */
-        if (ok && attempt == 0 && (!(check = fopen(tmp, "rb")) || lockf(fileno(check), F_TEST, 0) != 0)) {
-            if (check) fclose(check);
-            check = NULL;
-            fclose(f);
-            f = NULL;
-            continue;
-        }
-#endif
-        own = 1;
-        break;
+    memset(t, 0, sizeof *t);
+    t->path = path;
+    if (!(t->tmp = (char *)tn__alloc(cap))) return tn__oom();
+    t->held = tn__io_saving_enter(path);
+    if (t->held && !own) {
+        snprintf(t->tmp, cap, "%s.tmp", path);
+        if ((t->f = tn__io_claim(t->tmp)) != NULL) t->shared = 1;
     }
-    if (!own) {
-        if (held) tn__io_saving_leave(path);
-        TN_FREE(tmp);
+    if (!t->f) { /* another save of path runs: a name of this save's own */
+        unsigned long serial = ++tn__io_tmp_counter ^ (unsigned long)((size_t)&cap >> 4) << 16; /* distinct per thread stack */
+        snprintf(t->tmp, cap, "%s.tmp.%lu.%lu", path, tn__io_process_id(), serial);
+        t->f = fopen(t->tmp, "wb");
+    }
+    if (!t->f) {
+        if (t->held) tn__io_saving_leave(path);
+        TN_FREE(t->tmp);
         return tn__fail(TN_ERR_IO, "%s: cannot create a temporary file next to it", path);
     }
-    if (ok && rename(tmp, path) != 0) {
-#ifdef _WIN32
-        fclose(f), f = NULL; /* no rename over an open or existing file */
-        ok = remove(path) == 0 && rename(tmp, path) == 0;
-#else
-        ok = 0;
-#endif
-        if (!ok) {
-            remove(tmp);
-            if (check) fclose(check);
-            if (f) fclose(f);
-            if (held) tn__io_saving_leave(path);
-            TN_FREE(tmp);
-            return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", path);
-        }
-    } else if (!ok)
-        remove(tmp); /* while still held */
-    if (check) fclose(check); /* after the rename: closing either drops the lock */
-    if (f && fclose(f) != 0) ok = 0;
-    if (held) tn__io_saving_leave(path);
-    TN_FREE(tmp);
-    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", path);
-    tn__io_sync_dir(path);
     return TN_OK;
+}
+
+/* Ends the save: ok (nothing failed while writing) puts the temporary in place, otherwise it is
+   removed. 1: done; 0: failed (the error is set); -1: PATH.tmp was taken from this save (its
+   writes are lost; nothing is set), so the caller writes again under tn__io_temp_open(.., 1). */
+static int tn__io_temp_finish(tn__io_temp *t, int ok)
+{
+    int unrenamed = 0;
+    ok = fflush(t->f) == 0 && ok;
+#if defined(TN__IO_POSIX)
+    ok = fsync(fileno(t->f)) == 0 && ok; /* on disk before the rename */
+#endif
+    ok = !ferror(t->f) && ok;
+#if defined(TN__IO_LOCKF)
+    /* the name is still this save's file (locked by no other process): a save that took the
+       file for a leftover before this one locked it would hold the name now */
+    if (ok && t->shared && (!(t->check = fopen(t->tmp, "rb")) || lockf(fileno(t->check), F_TEST, 0) != 0)) {
+        if (t->check) fclose(t->check);
+        fclose(t->f);
+        if (t->held) tn__io_saving_leave(t->path);
+        TN_FREE(t->tmp);
+        return -1;
+    }
+#endif
+    if (ok && rename(t->tmp, t->path) != 0) {
+#ifdef _WIN32
+        fclose(t->f), t->f = NULL; /* no rename over an open or existing file */
+        unrenamed = !(remove(t->path) == 0 && rename(t->tmp, t->path) == 0);
+#else
+        unrenamed = 1;
+#endif
+        ok = !unrenamed;
+    }
+    if (!ok) remove(t->tmp); /* while still held */
+    if (t->check) fclose(t->check); /* after the rename: closing either drops the lock */
+    if (t->f && fclose(t->f) != 0) ok = 0;
+    if (t->held) tn__io_saving_leave(t->path);
+    TN_FREE(t->tmp);
+    if (unrenamed) return tn__fail(TN_ERR_IO, "%s: cannot rename the temporary file into place", t->path), 0;
+    if (!ok) return tn__fail(TN_ERR_IO, "%s: write failed (disk full?)", t->path), 0;
+    tn__io_sync_dir(t->path);
+    return 1;
+}
+
+/* Ends a save that failed before its end (its error is set): the temporary is removed. */
+TN__SHARED void tn__io_temp_discard(tn__io_temp *t)
+{
+    remove(t->tmp); /* while still held */
+    fclose(t->f);
+    if (t->held) tn__io_saving_leave(t->path);
+    TN_FREE(t->tmp);
+}
+
+/* Writes buf to path's temporary, flushes it to disk and renames it over path. */
+static tn_status tn__io_write_atomic(const char *path, const uint8_t *buf, size_t n)
+{
+    tn__io_temp t;
+    int own, r = 0;
+    tn_status st;
+    for (own = 0; own < 2; own++) {
+        if ((st = tn__io_temp_open(&t, path, own))) return st;
+        r = tn__io_temp_finish(&t, fwrite(buf, 1, n, t.f) == n);
+        if (r >= 0) break;
+    }
+    return r == 1 ? TN_OK : TN_ERR_IO;
 }
 
 TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_save_opts *opts)

@@ -1022,6 +1022,8 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
     return TN_OK;
 }
 
+static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
+
 TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
 {
     tn__sg_train s;
@@ -1069,6 +1071,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
             goto done;
         }
         if ((st = tn__sg_read_config(cfg->data, &s.A, s.o.train.checkpoint))) goto done;
+        if ((st = tn__sg_file_matches(ck, &s.A, s.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if ((st = tn__sg_get_meta(&s, digest))) goto done;
         if (s.A.width != d1->width || s.A.height != d1->height) {
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint's example is %d x %d, this one %d x %d", s.o.train.checkpoint, s.A.width, s.A.height,

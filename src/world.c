@@ -1096,8 +1096,9 @@ static int tn__world_u64(const char *s, uint64_t *out)
 
 static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, const tn_world_opts *opts, const char *base_dir)
 {
+    static const char *const settings[5] = {"world", "seed", "height", "cellsize", "tile"};
     char *line = text, *word[TN__WORLD_MAX_KV + 2];
-    int ln = 0, have_size = 0, k, i;
+    int ln = 0, have_size = 0, k, i, seen[5] = {0, 0, 0, 0, 0};
     tn_status st;
     w->tile = 1024;
     w->seed = 1;
@@ -1113,6 +1114,11 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
         nw = tn__world_words(line, word, TN__WORLD_MAX_KV + 1);
         line = next;
         if (nw == 0) continue;
+        for (k = 0; k < 5; k++) /* a second value would silently win (and size what was set up for the first) */
+            if (!strcmp(word[0], settings[k])) {
+                if (seen[k]) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `%s` given twice (first on line %d)", ln, settings[k], seen[k]);
+                seen[k] = ln;
+            }
         if (!strcmp(word[0], "world")) {
             if (nw != 3 || !tn__world_int(word[1], 1, TN__WORLD_MAX_SIDE, &w->width) || !tn__world_int(word[2], 1, TN__WORLD_MAX_SIDE, &w->height))
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: `world WIDTH HEIGHT` in pixels, 1..%d", ln, TN__WORLD_MAX_SIDE);
@@ -1165,10 +1171,11 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
         if (opts->tile < 16 || opts->tile > 65536) return tn__fail(TN_ERR_INVALID_ARG, "world: tile side %d is not 16..65536", opts->tile);
         w->tile = opts->tile;
     }
+    for (k = 1; k < im->n; k++) /* before any stage is set up: a gnn row's setup runs generations */
+        if (im->st[k].m->source) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: only the first stage may be a generator", im->st[k].line);
     w->halo = 0;
     for (k = 0; k < im->n; k++) {
         tn__world_stage *s = &im->st[k];
-        if (k > 0 && s->m->source) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: only the first stage may be a generator", s->line);
         if (k > 0) {
             s->in_w = im->st[k - 1].out_w;
             s->in_h = im->st[k - 1].out_h;

@@ -5,6 +5,7 @@
    Every case must end in an error status with a message, or in success with finite output;
    crashes, sanitizer reports and hangs are failures too (the Makefile builds tests with ASan and
    UBSan). Fixed seeds, so a failure reproduces. */
+#define _POSIX_C_SOURCE 200809L /* fork, kill, nanosleep */
 /* A 256 MiB allocation cap keeps "huge but allowed" sizes from eating the machine under ASan. */
 #define TN_MAX_ALLOC ((size_t)1 << 28)
 #define TERRAINNET_IMPLEMENTATION
@@ -14,6 +15,7 @@
 #if defined(__unix__) || defined(__APPLE__)
 #include <unistd.h>
 #include <sys/wait.h>
+#include <signal.h>
 #endif
 
 /* ---- helpers ---- */
@@ -757,6 +759,76 @@ TN_TEST(test_stale_temporaries)
 #endif
 }
 
+/* A texgan run of one iteration on a tiny generator and critic (checkpoint ck, may be NULL). */
+static void tiny_texgan_opts(tn_texgan_opts *o, const char *ck)
+{
+    memset(o, 0, sizeof *o);
+    o->noise_local = 4;
+    o->stages = 2;
+    o->gen_width = 8;
+    o->disc_width = 8;
+    o->disc_layers = 2;
+    o->patch = 16;
+    o->batch = 1;
+    o->train.max_iters = 1;
+    o->train.seed = 5;
+    o->train.checkpoint = ck;
+}
+
+/* texgan's streamed .ppm/.pfm files (written in bands, so through tn__io_temp_open rather than
+   one write) follow the same rule: a synthesis killed mid-file leaves at most "PATH.tmp", which
+   the next save replaces (before: "PATH.tmp.PID.N", there for good). */
+TN_TEST(test_stale_texgan_stream)
+{
+#if defined(_POSIX_VERSION) && !defined(_WIN32)
+    const char *out = tmp_path("tg_stream.ppm");
+    char tmp[600], mine[600];
+    tn_image ex = {0}, back = {0};
+    tn_texgan m;
+    tn_texgan_opts o;
+    pid_t child;
+    int k, status = 0;
+    unsigned long serial = tn__io_tmp_counter + 1; /* the child's first temporary, named as before */
+    struct timespec pause = {0, 10000000};
+    FILE *f = NULL;
+    tiny_texgan_opts(&o, NULL);
+    TN_CHECK(tn_image_create(&ex, 32, 32, 3) == TN_OK);
+    for (k = 0; ex.data && k < 32 * 32 * 3; k++) ex.data[k] = (float)(k % 7) / 7.0f;
+    TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
+    tn_image_free(&ex);
+    snprintf(tmp, sizeof tmp, "%s.tmp", out);
+    remove(tmp);
+    remove(out);
+    child = fork();
+    if (child == 0) _exit((int)tn_texgan_synthesize_file(&m, 1, 4096, 4096, NULL, out) ? 1 : 3);
+    TN_CHECK(child > 0);
+    if (child > 0) {
+        snprintf(mine, sizeof mine, "%s.tmp.%lu.%lu", out, (unsigned long)child, serial);
+        for (k = 0; k < 2000; k++) { /* until the child has begun writing: 20 s at most */
+            if ((f = fopen(tmp, "rb")) != NULL || (f = fopen(mine, "rb")) != NULL) break;
+            nanosleep(&pause, NULL);
+        }
+        TN_CHECK(f != NULL);
+        if (f) fclose(f);
+        kill(child, SIGKILL);
+        TN_CHECK(waitpid(child, &status, 0) == child && WIFSIGNALED(status)); /* killed mid-file */
+        TN_CHECK((f = fopen(mine, "rb")) == NULL); /* not a name of its own */
+        if (f) fclose(f), remove(mine);
+        TN_CHECK((f = fopen(tmp, "rb")) != NULL);
+        if (f) fclose(f);
+        TN_CHECK(tn_texgan_synthesize_file(&m, 1, 40, 30, NULL, out) == TN_OK);
+        TN_CHECK(fopen(tmp, "rb") == NULL); /* the leftover was replaced */
+        TN_CHECK(tn_image_load(out, &back, NULL) == TN_OK && back.width == 40 && back.height == 30);
+        tn_image_free(&back);
+    }
+    remove(tmp);
+    remove(out);
+    tn_texgan_free(&m);
+#else
+    TN_SKIP("POSIX only");
+#endif
+}
+
 TN_TEST(test_image_args)
 {
     tn_image dem = small_dem(24, 20), out = {0}, gx = {0}, gy = {0}, nanimg = {0};
@@ -1456,14 +1528,168 @@ TN_TEST(test_model_config_sizes)
     TN_CHECK(refused_up_front(load_kpd, write_model_config("k1.tnw", "kpd", 1, "kpd.config", k, 12, NULL, 0, 0), "generator"));
 }
 
+/* A resume (issue 33, after item 1): a real checkpoint whose config was changed (CRC valid)
+   must be refused on the checkpoint's own tensors before the training run builds the model,
+   as a load is; before, the model was allocated from the config first. `train` runs a resume
+   of ck; the refusal must come at once, under a 64 MB budget, naming `why`. */
+static int resume_refused(tn_status (*train)(const char *ck), const char *ck, const char *why)
+{
+    double t0 = tn_time_seconds();
+    size_t base = tn_memory_in_use();
+    tn_status st;
+    tn_set_memory_limit((size_t)64 << 20);
+    tn_clear_error();
+    st = train(ck);
+    tn_set_memory_limit(0);
+    fprintf(stderr, "   %s (%.2f s)\n", tn_last_error(), tn_time_seconds() - t0);
+    return st == TN_ERR_CORRUPT && strstr(tn_last_error(), why) && tn_time_seconds() - t0 < 5.0 && tn_memory_in_use() == base;
+}
+
+/* Sets a checkpoint's config value (CRC recomputed on save). */
+static int patch_config(const char *ck, const char *tensor, int index, float value)
+{
+    tn_params *p = NULL;
+    tn_tensor *c;
+    int ok = tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, tensor)) != NULL && index < (int)c->numel;
+    if (ok) {
+        tn_params_find(p, tensor)->data[index] = value;
+        ok = tn_params_save(p, ck) == TN_OK;
+    }
+    tn_params_free(p);
+    return ok;
+}
+
+static void resume_gnn_opts(tn_gnn_opts *o, const char *ck)
+{
+    memset(o, 0, sizeof *o);
+    o->hidden = 8;
+    o->embed = 4;
+    o->k = 6;
+    o->random_edges = 100;
+    o->train.max_iters = 1;
+    o->train.seed = 7;
+    o->train.checkpoint = ck;
+}
+
+static tn_status resume_gnn(const char *ck)
+{
+    tn_image dem = tn_test_dem(40, 5);
+    tn_gnn_opts o;
+    tn_gnn m;
+    tn_status st;
+    resume_gnn_opts(&o, ck);
+    o.train.resume = 1;
+    o.train.max_iters = 2;
+    st = tn_gnn_train(&dem, &o, &m, NULL);
+    if (!st) tn_gnn_free(&m);
+    tn_image_free(&dem);
+    return st;
+}
+
+static void resume_singan_opts(tn_singan_opts *o, const char *ck)
+{
+    memset(o, 0, sizeof *o);
+    o->coarsest = 12;
+    o->factor = 0.7f;
+    o->channels = 8;
+    o->max_channels = 8;
+    o->iters = 1;
+    o->train.seed = 3;
+    o->train.checkpoint = ck;
+}
+
+static tn_status resume_singan(const char *ck)
+{
+    tn_image dem = tn_test_dem(24, 2);
+    tn_singan_opts o;
+    tn_singan m;
+    tn_status st;
+    resume_singan_opts(&o, ck);
+    o.train.resume = 1;
+    o.iters = 2;
+    st = tn_singan_train(&dem, &o, &m, NULL);
+    if (!st) tn_singan_free(&m);
+    tn_image_free(&dem);
+    return st;
+}
+
+static tn_status resume_texgan(const char *ck)
+{
+    tn_image ex = tn_test_exemplar(32, 32, 3, 1);
+    tn_texgan_opts o;
+    tn_texgan m;
+    tn_status st;
+    memset(&o, 0, sizeof o);
+    o.train.checkpoint = ck;
+    o.train.resume = 1;
+    o.train.max_iters = 2;
+    st = tn_texgan_train(&m, &ex, &o, NULL);
+    if (!st) tn_texgan_free(&m);
+    tn_image_free(&ex);
+    return st;
+}
+
+TN_TEST(test_resume_config_sizes)
+{
+    const char *gck = tmp_path("gnn_resume.ckpt"), *sck = tmp_path("singan_resume.ckpt");
+    tn_image dem = tn_test_dem(40, 5), small = tn_test_dem(24, 2);
+    tn_gnn_opts go;
+    tn_singan_opts so;
+    tn_gnn g;
+    tn_singan sg;
+    int s;
+    resume_gnn_opts(&go, gck);
+    TN_CHECK(tn_gnn_train(&dem, &go, &g, NULL) == TN_OK);
+    tn_gnn_free(&g);
+    TN_CHECK(resume_gnn(gck) == TN_OK); /* the checkpoint as written resumes */
+    /* 2^26 part points (805 MB of part_pts) over the example's real parts */
+    TN_CHECK(patch_config(gck, "gnn.config", 14, 67108864.0f) && resume_refused(resume_gnn, gck, "part tensors"));
+    TN_CHECK(tn_gnn_train(&dem, &go, &g, NULL) == TN_OK);
+    tn_gnn_free(&g);
+    /* 16 rounds of the widest network, 256-wide embeddings */
+    TN_CHECK(patch_config(gck, "gnn.config", 1, 256.0f) && patch_config(gck, "gnn.config", 2, 16.0f) &&
+             resume_refused(resume_gnn, gck, "network"));
+    resume_singan_opts(&so, sck);
+    TN_CHECK(tn_singan_train(&small, &so, &sg, NULL) == TN_OK);
+    tn_singan_free(&sg);
+    TN_CHECK(resume_singan(sck) == TN_OK);
+    /* every scale 512 wide (about 1.3 GB of generators, critics and Adam moments at 3 scales) */
+    for (s = 0; s < 16; s++) TN_CHECK(patch_config(sck, "singan.config", 8 + 16 + s, 512.0f));
+    TN_CHECK(resume_refused(resume_singan, sck, "generator"));
+    { /* texgan: a 6-stage, 2048-wide generator (about 280 MB before its critic and moments) */
+        tn_image ex = tn_test_exemplar(32, 32, 3, 1);
+        tn_texgan_opts to;
+        tn_texgan tg;
+        tiny_texgan_opts(&to, sck);
+        TN_CHECK(tn_texgan_train(&tg, &ex, &to, NULL) == TN_OK);
+        tn_texgan_free(&tg);
+        TN_CHECK(resume_texgan(sck) == TN_OK);
+        TN_CHECK(patch_config(sck, "ema.texgan.config", 5, 6.0f) && patch_config(sck, "ema.texgan.config", 6, 2048.0f) &&
+                 resume_refused(resume_texgan, sck, "generator"));
+        /* the generator right, a critic 1024 wide over 5 layers (5.3 GB and 22 s through the CLI) */
+        TN_CHECK(tn_texgan_train(&tg, &ex, &to, NULL) == TN_OK);
+        tn_texgan_free(&tg);
+        TN_CHECK(patch_config(sck, "ema.texgan.config", 12, 1024.0f) && patch_config(sck, "ema.texgan.config", 13, 5.0f) &&
+                 resume_refused(resume_texgan, sck, "discriminator"));
+        tn_image_free(&ex);
+    }
+    remove(gck);
+    remove(sck);
+    tn_image_free(&dem);
+    tn_image_free(&small);
+}
+
 /* ---- huge sketches (issue 33 item 10) ---- */
 
-typedef struct progress_log { int calls; double last; } progress_log;
+typedef struct progress_log { int calls, prepare, first_prepare; double last; } progress_log;
 
 static int log_progress(void *user, const char *stage, double f)
 {
     progress_log *l = (progress_log *)user;
-    (void)stage;
+    if (!strcmp(stage, "gnn-prepare")) {
+        if (!l->calls) l->first_prepare = f == 0.0;
+        l->prepare++;
+    }
     l->last = f;
     l->calls++;
     return 0;
@@ -1477,7 +1703,7 @@ TN_TEST(test_huge_sketch_progress)
     tn_contour_set sk;
     tn_gnn_generate_opts o;
     tn_image out = {0, 0, 0, NULL};
-    progress_log l = {0, 0.0};
+    progress_log l = {0, 0, 0, 0.0};
     tn_rng rng;
     int i, j;
     if (tn_gnn_load("tests/fuzz/corpus/fuzz_model/gnn.tnw", &m) != TN_OK) {
@@ -1506,12 +1732,15 @@ TN_TEST(test_huge_sketch_progress)
     }
     TN_CHECK(sk.items && i == sk.count);
     memset(&o, 0, sizeof o);
-    o.gain = 1.0f;
-    tn_set_progress(log_progress, &l);
+    tn_set_progress(log_progress, &l); /* the gain by its test (default) */
     if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&m, &sk, 400, 400, &o, &out) == TN_OK && image_finite(&out));
     tn_set_progress(NULL, NULL);
-    fprintf(stderr, "   %d progress reports for 80000 segments on 400 x 400\n", l.calls);
+    fprintf(stderr, "   %d progress reports (%d of gnn-prepare) for 80000 segments on 400 x 400\n", l.calls, l.prepare);
     TN_CHECK(l.calls >= 1 && l.last == 1.0); /* one 512 px tile here */
+    /* the phases before the first tile (cutting the whole sketch into parts, once and per round of
+       the gain's test) report too, from 0 % before any of them: a 5-million-segment sketch on
+       4096 x 4096 gave its first report after 24 s */
+    TN_CHECK(l.first_prepare && l.prepare >= 2);
     tn_image_free(&out);
     for (i = 0; sk.items && i < sk.count; i++) free(sk.items[i].points);
     free(sk.items);
@@ -2117,6 +2346,7 @@ int main(void)
     RUN(test_texgan_config);
     RUN(test_texgan_checkpoint_fields);
     RUN(test_model_config_sizes);
+    RUN(test_resume_config_sizes);
     RUN(test_huge_sketch_progress);
     RUN(test_render_args);
     RUN(test_detail_sidecar);
@@ -2127,6 +2357,7 @@ int main(void)
     RUN(test_memory_limit);
     RUN(test_season_frame_total);
     RUN(test_stale_temporaries);
+    RUN(test_stale_texgan_stream);
     RUN(test_tiff_lzw_streams);
     return tn_test_summary("test_robust");
 }

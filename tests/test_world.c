@@ -520,6 +520,30 @@ TN_TEST(tiles_on_disk_resume_and_index)
    writer), a tile that cannot be allocated before DIR/world.spec is written, and an index of
    more than 64 x 64 tiles is a mosaic of block VRTs (a 10^6-pixel-square world wrote one
    457 MB world.vrt). */
+/* Issue 33: fuzz_world's slow SPEC. A gnn row's setup runs the residual gain test (three
+   generations of a 512 px window: 2.4 s at -O2, past 120 s instrumented), sized by whichever
+   `world` line came last, and only then was the second generator refused. A repeated setting is
+   now refused as it is read, and a misplaced generator before any stage is set up. */
+TN_TEST(bad_specs_refused_before_setup)
+{
+    static const char *specs[] = {
+        "world 46 96\nheight 0 2000\ngnn model=tests/fuzz/corpus/fuzz_model/gnn.tnw sketch=examples/data/sketch_ring.tns\n"
+        "world 437 264\nperlin\n",
+        "world 437 264\nheight 0 2000\ngnn model=tests/fuzz/corpus/fuzz_model/gnn.tnw sketch=examples/data/sketch_ring.tns\nperlin\n",
+        "world 96 96\ntile 64\ntile 128\nperlin\n"};
+    static const char *why[] = {"twice", "only the first stage", "twice"};
+    tn_world w;
+    size_t i;
+    for (i = 0; i < sizeof specs / sizeof specs[0]; i++) {
+        double t0 = tn_time_seconds();
+        tn_status st = tn_world_parse(specs[i], NULL, &w);
+        TN_CHECK(st == TN_ERR_INVALID_ARG && strstr(tn_last_error(), why[i]));
+        if (!st) tn_world_free(&w);
+        TN_CHECK(tn_time_seconds() - t0 < 0.2);
+        fprintf(stderr, "   %.3f s: %s\n", tn_time_seconds() - t0, tn_last_error());
+    }
+}
+
 TN_TEST(huge_worlds_bounded)
 {
     const char *dir = tn_test_tmp_path("world", "huge"), *dir2 = tn_test_tmp_path("world", "bigtile");
@@ -665,6 +689,7 @@ int main(void)
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     TN_RUN(huge_worlds_bounded);
+    TN_RUN(bad_specs_refused_before_setup);
     TN_RUN(resume_checks_tiles);
     return tn_test_summary("test_world");
 }
