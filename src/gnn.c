@@ -3486,17 +3486,18 @@ static float tn__gnn_line_kernel(float e, int L)
     return (1 - e / L) * (1 - e / L) / (e + 0.5f);
 }
 
-/* A grown sketch's user lines keep their heights: the residual near them, minus a smooth local
-   mean of the residual on them (kernel (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by
-   a smoothstep of the distance to them. The network alone moved a stroke of a weak model by up to
-   19 % of the range (Sahara, docs/gnn.md); that the land beside a stroke stays below a ridge and
-   above a valley is the notch's work (tn__gnn_incise). Reads pred (rw x rh at (rx, ry),
-   normalised) within L of the window (x, y, ww, wh), which the caller computed exactly; writes
-   the correction of each window pixel into corr (ww x wh). */
-static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const float *pred, int x, int y, int ww, int wh, float *corr)
+/* A grown sketch's user lines keep their heights: a change a - b near them (the network's
+   residual; the fine detail's), minus a smooth local mean of that change on them (kernel
+   (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to them.
+   The network alone moved a stroke of a weak model by up to 19 % of the range (Sahara,
+   docs/gnn.md), the detail's low-pass lowers a drawn crest; that the land beside a stroke stays
+   below a ridge and above a valley is the notch's work (tn__gnn_incise). Reads a and b (rw
+   floats a row, origin (rx, ry)) within L of the window (x, y, ww, wh), which the caller computed
+   exactly; writes the correction of each window pixel into corr (ww x wh). */
+static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, int rx, int ry, int rw, int x, int y, int ww, int wh, float *corr)
 {
     const int L = TN__GNN_PIN;
-    int u, v, a, b;
+    int u, v, px, py;
     for (v = 0; v < wh; v++)
         for (u = 0; u < ww; u++) {
             int X = x + u, Y = y + v;
@@ -3504,16 +3505,16 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const tn__gnn_region *R, const flo
             double num = 0, den = 0;
             corr[(size_t)v * ww + u] = 0;
             if (!(d < (float)L)) continue;
-            for (b = Y - L + 1; b < Y + L; b++)
-                for (a = X - L + 1; a < X + L; a++) {
+            for (py = Y - L + 1; py < Y + L; py++)
+                for (px = X - L + 1; px < X + L; px++) {
                     float e, k;
                     size_t i;
-                    if (a < 0 || b < 0 || a >= G->W || b >= G->H || !G->pin[(size_t)b * G->W + a]) continue;
-                    e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+                    if (px < 0 || py < 0 || px >= G->W || py >= G->H || !G->pin[(size_t)py * G->W + px]) continue;
+                    e = sqrtf((float)((px - X) * (px - X) + (py - Y) * (py - Y)));
                     if (e >= (float)L) continue;
                     k = tn__gnn_line_kernel(e, L);
-                    i = (size_t)(b - R->ry) * R->rw + (a - R->rx);
-                    e = pred[i] - R->base[i];
+                    i = (size_t)(py - ry) * rw + (px - rx);
+                    e = a[i] - b[i];
                     num += k * e;
                     den += k;
                 }
@@ -3607,7 +3608,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
                           !(inc = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))))
         st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
-    if (!st && corr) tn__gnn_pin(G, &R, pred, ax, ay, aw, ah, corr);
+    if (!st && corr) tn__gnn_pin(G, pred, R.base, R.rx, R.ry, R.rw, ax, ay, aw, ah, corr);
     for (v = 0; !st && v < ah; v++)
         for (u = 0; u < aw; u++) {
             size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
@@ -3659,7 +3660,8 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
 #define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
 
 /* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
-   terrain is computed grown by the detail's halo (tn_rect_halo), detailed, and cropped. */
+   terrain is computed grown by the detail's halo (tn_rect_halo; plus the pinning's reach on a
+   grown sketch, whose strokes are pinned again after the detail), detailed, and cropped. */
 static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
 {
     int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
@@ -3668,16 +3670,26 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
         for (tx = 0; !st && tx < ww; tx += T) {
             tn_rect r, g;
             tn_image t = {0, 0, 0, NULL}, d = {0, 0, 0, NULL};
+            float *corr = NULL;
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo, G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN : 0), G->W, G->H);
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
-                !(st = tn__fd_apply(&G->fd, &t, &d)))
-                for (v = 0; v < r.h; v++)
-                    memcpy(dst + (size_t)(ty + v) * ww + tx, d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x), (size_t)r.w * sizeof(float));
+                !(st = tn__fd_apply(&G->fd, &t, &d))) {
+                if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, corr); /* the strokes keep their heights through the detail too */
+                for (v = 0; !st && v < r.h; v++) {
+                    float *o = dst + (size_t)(ty + v) * ww + tx;
+                    int u;
+                    memcpy(o, d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x), (size_t)r.w * sizeof(float));
+                    for (u = 0; corr && u < r.w; u++) o[u] -= corr[(size_t)v * r.w + u];
+                }
+            }
             tn_image_free(&t);
             tn_image_free(&d);
+            TN_FREE(corr);
+            corr = NULL;
         }
     return st;
 }

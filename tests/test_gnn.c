@@ -1127,6 +1127,18 @@ TN_TEST(grown_generation)
         TN_CHECK(tn_image_crop(&want, &a, 150, 100, 60, 50) == TN_OK && same_image(&win, &want));
         go.detail = -1;
         TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &plain) == TN_OK && !same_image(&a, &plain));
+        { /* the strokes keep their heights through the detail too (pinned again after it) */
+            tn_image r = {0, 0, 0, NULL};
+            double ea = 0, ep = 0;
+            size_t k, nk = 0;
+            TN_CHECK(tn_sketch_rasterise(&user, 240, 180, &r) == TN_OK);
+            for (k = 0; r.data && k < (size_t)240 * 180; k++)
+                if (r.data[3 * k] > 0 || r.data[3 * k + 1] > 0)
+                    ea += fabs(a.data[k] - r.data[3 * k + 2]), ep += fabs(plain.data[k] - r.data[3 * k + 2]), nk++;
+            printf("  strokes' height error with / without the detail: %.2f / %.2f m\n", ea / (double)nk, ep / (double)nk);
+            TN_CHECK(nk > 0 && ea <= 1.25 * ep); /* 1.05 x; 1.55 x when the detail's low-pass lowered them */
+            tn_image_free(&r);
+        }
         { /* a valley drawn across a steep hillside (at the height the slope has there) is still the
              lowest ground 4 px across it: the notch cuts it in (44.6 % without it) */
             float hp[3][6];
