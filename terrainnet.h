@@ -1971,9 +1971,11 @@ TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketc
    placed before it across their overlap (image quilting, on the network). So line spacing,
    branch angles, segment lengths and ridge/valley alternation are the example's. Added lines keep
    `gap` px from every user line, so none crosses or touches one; they are thinned and traced
-   into polylines of 5+ px. Their heights: the membrane of the user's lines plus the example
-   line's own height above the mean of the example's lines within 48 px (its local relief; the
-   quilting also matches these heights across the overlap),
+   into polylines of 5+ px. Their heights: the membrane of the user's lines, falling away from
+   a user ridge and rising away from a user valley by twice the example's mean local relief over
+   48 px (so a stroke stays the main line around it), plus the example line's own height above
+   the mean of the example's lines within 48 px (its local relief; the quilting also matches
+   these heights across the overlap),
    then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
    user valley (the nearest user line) by the example's mean local relief / 16 px per px. */
 typedef struct tn_gnn_grow_opts {
@@ -25888,6 +25890,22 @@ static int tn__gnn_grow_blur(const uint8_t *placed, const int8_t *ptype, int wid
     return n;
 }
 
+/* What the ground between the strokes takes from their kind: it falls away from a user ridge and
+   rises away from a user valley, by `relief` x TN__GNN_FALL over 48 px, so a stroke stays the main
+   line around it rather than one line among the example's; between a ridge and a valley the two
+   cancel (the membrane already slopes from one to the other). dr, dv: px to the nearest user ridge
+   and valley, FLT_MAX when the drawing has none. */
+#define TN__GNN_FALL 2.0f
+static float tn__gnn_grow_fall(float dr, float dv, float relief)
+{
+    float fr = dr < 48 ? dr / 48 : 1, fv = dv < 48 ? dv / 48 : 1, wr;
+    if (dr == FLT_MAX && dv == FLT_MAX) return 0;
+    if (dv == FLT_MAX) return -TN__GNN_FALL * relief * fr;
+    if (dr == FLT_MAX) return TN__GNN_FALL * relief * fv;
+    wr = dv / (dr + dv);
+    return TN__GNN_FALL * relief * (fv * (1 - wr) - fr * wr);
+}
+
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
@@ -25901,7 +25919,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, fall = 0, relief = 0;
+    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, fall = 0, relief = 0;
     double *sum = NULL, *cnt = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
@@ -25941,6 +25959,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     prel = (float *)tn__calloc(n * sizeof(float));
     D = (float *)tn__alloc(n * sizeof(float));
     near = (int *)tn__alloc(n * sizeof(int));
+    Dr = (float *)tn__alloc(n * sizeof(float));
+    Dv = (float *)tn__alloc(n * sizeof(float));
     etype = (int8_t *)tn__alloc(nx);
     emask = (uint8_t *)tn__alloc(nx);
     erel = (float *)tn__alloc(nx * sizeof(float));
@@ -25948,9 +25968,13 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     cnt = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
     ebl = (float *)tn__alloc(nx * sizeof(float));
     pbl = (float *)tn__alloc((size_t)S * S * sizeof(float));
-    if (!umask || !placed || !mask || !ptype || !prel || !D || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl) {
+    if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
+    }
+    for (type = 0; type < 2; type++) { /* the distance to the nearest user ridge, then valley (FLT_MAX: none) */
+        for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i + (size_t)type] > 0);
+        tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, near);
     }
     for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
     tn__gnn_chamfer(umask, width, height, D, near);
@@ -26059,7 +26083,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             pts.n = 0;
             for (k = 0; !st && (size_t)k < t.starts[l + 1] - t.starts[l]; k++) {
                 size_t p = t.cells[t.starts[l] + (size_t)k];
-                float h = mem.data[p] + prel[p], d = D[p];
+                float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], Dv[p], relief) + prel[p], d = D[p];
                 if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
                     float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
                     b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - fall * d) : fmaxf(h, hs + fall * d);
@@ -26083,6 +26107,8 @@ done:
     TN_FREE(ptype);
     TN_FREE(prel);
     TN_FREE(D);
+    TN_FREE(Dr);
+    TN_FREE(Dv);
     TN_FREE(near);
     TN_FREE(etype);
     TN_FREE(emask);

@@ -1079,6 +1079,63 @@ TN_TEST(grow_without_block_grid)
     tn_image_free(&full);
 }
 
+TN_TEST(grown_strokes_stay_main_lines)
+{
+    /* a drawing of one kind of stroke: the ground grown around it falls away from a lone ridge
+       and rises away from a lone valley, so the stroke stays the main line: the added lines
+       beyond 48 px lie, on average, more than a third of the example lines' height spread below
+       the ridge (above the valley); the membrane plus the example's own relief put them level
+       with it. Example: the bundled Alps DEM's central 128 px */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    tn_contour c;
+    float pts[3 * 20];
+    double m = 0, m2 = 0, n = 0, sd;
+    int i, j, kind;
+    TN_CHECK(tn_image_load("examples/data/alps_n47e009_256.png", &full, NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    for (i = 0; i < ex.count; i++)
+        for (j = 0; j < ex.items[i].npoints; j++) {
+            double h = ex.items[i].points[3 * j + 2];
+            m += h, m2 += h * h, n += 1;
+        }
+    TN_CHECK(n > 0);
+    m /= n;
+    sd = sqrt(fmax(m2 / n - m * m, 0));
+    for (kind = 0; kind < 2; kind++) {
+        double far = 0, nf = 0, H = kind ? m - sd : m + sd;
+        for (i = 0; i < 20; i++) {
+            pts[3 * i] = 10.0f + 11.0f * (float)i;
+            pts[3 * i + 1] = 120.0f + 8.0f * sinf(0.5f * (float)i);
+            pts[3 * i + 2] = (float)H;
+        }
+        memset(&c, 0, sizeof c);
+        c.type = kind ? TN_VALLEY : TN_RIDGE;
+        c.npoints = 20;
+        c.points = pts;
+        memset(&user, 0, sizeof user);
+        user.width = user.height = 240;
+        user.count = 1;
+        user.items = &c;
+        TN_CHECK(tn_gnn_grow(&user, &ex, 240, 240, NULL, &g, NULL) == TN_OK);
+        for (i = 1; i < g.count; i++)
+            for (j = 0; j < g.items[i].npoints; j++) {
+                float y = g.items[i].points[3 * j + 1];
+                if (fabsf(y - 120) < 58) continue; /* 48 px beyond the stroke's 8 px swing and more */
+                far += g.items[i].points[3 * j + 2], nf += 1;
+            }
+        TN_CHECK(nf > 100);
+        far /= nf;
+        printf("# lone %s at %.0f: added lines beyond 48 px at %.0f (spread %.0f)\n", kind ? "valley" : "ridge", H, far, sd);
+        TN_CHECK(kind ? far > H + sd / 3 : far < H - sd / 3);
+        tn_contour_set_free(&g);
+    }
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grown_generation)
 {
     /* gnn generation of a drawing of two strokes: grown by default (the plan says how much and
@@ -1219,6 +1276,7 @@ int main(void)
     TN_RUN(ordering_share);
     TN_RUN(grow_by_example);
     TN_RUN(grow_without_block_grid);
+    TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     return tn_test_summary("test_gnn");
 }
