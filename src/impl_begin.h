@@ -17,6 +17,10 @@
 #include <limits.h>
 #include <float.h>
 #include <time.h>
+#if !defined(_WIN32) && (defined(__unix__) || defined(__APPLE__) || defined(__EMSCRIPTEN__))
+#include <sys/time.h> /* gettimeofday: wall time where a strict C mode hides clock_gettime */
+#define TN__HAVE_GETTIMEOFDAY 1
+#endif
 
 #if defined(TN_MALLOC) && defined(TN_FREE) && defined(TN_REALLOC)
 /* all three given */

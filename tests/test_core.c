@@ -16,6 +16,9 @@
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
+#if defined(__unix__) || defined(__APPLE__)
+#include <unistd.h>
+#endif
 
 TN_TEST(status_strings_are_distinct)
 {
@@ -257,6 +260,22 @@ TN_TEST(progress_hook_can_cancel)
     TN_CHECK(tn__progress("stage", 0.75) == TN_OK);
 }
 
+TN_TEST(time_is_wall_time)
+{
+    /* training budgets, checkpoints and ETAs run on tn_time_seconds: a second asleep is a
+       second (clock(), the process's CPU time, stood still: the strict -std=c99 build fell
+       back to it) */
+#if defined(__unix__) || defined(__APPLE__)
+    double t0 = tn_time_seconds(), dt;
+    sleep(1);
+    dt = tn_time_seconds() - t0;
+    printf("# a second asleep: %.3f s\n", dt);
+    TN_CHECK(dt > 0.9 && dt < 30);
+#else
+    TN_SKIP("no sleep() here");
+#endif
+}
+
 TN_TEST(size_checks_overflow)
 {
     size_t out = 0;
@@ -278,5 +297,6 @@ int main(void)
     TN_RUN(worker_failure_reaches_the_caller);
     TN_RUN(progress_hook_can_cancel);
     TN_RUN(size_checks_overflow);
+    TN_RUN(time_is_wall_time);
     return tn_test_summary("test_core");
 }
