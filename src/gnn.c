@@ -17,8 +17,8 @@
    l_gradient, l_smooth; 6.1's sketch and distance terms are options; weights in
    tn_gnn_defaults).
    Baseline: the network predicts a RESIDUAL over the membrane (Laplace) interpolation of the
-   sketch pixels' heights, the strong baseline the neighbour test rewards (issue 14: SSIM 0.937
-   on alps_montblanc 128), so the model starts at it and learns what the example adds;
+   sketch pixels' heights, the strong baseline the neighbour test rewards (docs/gnn.md), so the
+   model starts at it and learns what the example adds;
    `membrane = -1` trains the paper's direct form instead.
    Generalising from one example: embeddings let the network memorise the example (the
    reconstruction), but a part of another terrain given an aligned part's embedding (5.3) gets
@@ -313,12 +313,9 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
 {
     TN_ASSERT(o);
     /* H = 32, two-layer MLPs and k = 10 are the paper's (A.5, 4.2); T = 2 the issue's prototype.
-       The embedding (16) gives each 5-10 px part room to memorise its neighbourhood. Noise:
-       with the paper's N(0, 1) edge noise and part states, alps_montblanc 128 (600 steps)
-       reconstructed at SSIM 0.959 and its neighbours at 0.901; without, 0.962 and 0.906
-       (membrane 0.898), so both are off unless asked for. Loss weights: MSE 1, SSIM 0.1,
-       gradient 0.1 on normalised heights (std 1); SSIM weight 1 (with the noise on) gave
-       0.956 / 0.899 instead of 0.959 / 0.901. */
+       The embedding (16) gives each 5-10 px part room to memorise its neighbourhood. The paper's
+       edge and part noise are off unless asked for, and the loss weights (MSE 1, SSIM 0.1,
+       gradient 0.1 on heights of std 1) stay as measured best in docs/gnn.md ("Design choices"). */
     if (o->hidden <= 0) o->hidden = 32;
     if (o->rounds <= 0) o->rounds = 2;
     if (o->k <= 0) o->k = 10;
@@ -332,20 +329,18 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->sparse_levels == 0) o->sparse_levels = 3;
     if (o->sparse_levels > TN__GNN_MAX_LEVELS - 1) o->sparse_levels = TN__GNN_MAX_LEVELS - 1;
     if (o->thin == 0) o->thin = 0.5f;
-    /* a quarter: the embeddings catch up on what dropout and the sparse levels kept from them,
-       while the network keeps most of its training (Sahara, 10 minutes: reconstruction +0.035
-       SSIM, neighbours unchanged). With an early network for other terrain the phase trains
-       everything for the example alone, so it gets half (Sahara 0.929 -> 0.939 at the base rate;
-       every holdout's best check came before half; docs/gnn.md) */
+    /* the embeddings catch up at the end on what dropout and the sparse levels kept from them,
+       while the network keeps most of its training: a quarter of the budget; with an early
+       network for other terrain the phase trains everything for the example alone, so half
+       (docs/gnn.md, "Embedding phase") */
     if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
     if (o->lr <= 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
     if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
     if (o->grad_weight == 0) o->grad_weight = 0.1f;
-    /* smoothness 0.1: 1000-step runs on Alps, Grand Canyon and Sahara kept the reconstruction
-       (+-0.002 SSIM) and lifted the neighbours' SSIM in 7 of 9 region x density cells (up to
-       +0.012); the sketch term cost 0.01-0.03 everywhere and the distance term the drawn
-       sketch's ordering on Grand Canyon (99.7 -> 80.4 %), so both stay off (docs/gnn.md) */
+    /* smoothness 0.1 keeps the reconstruction and helps the neighbours; 6.1's sketch and distance
+       terms cost the neighbours and the drawn sketch's ordering, so they stay off (docs/gnn.md,
+       "Design choices") */
     if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
     if (o->holdout_every <= 0) o->holdout_every = 150;
     tn_train_defaults(&o->train, 10.0);
@@ -1789,7 +1784,7 @@ static tn_status tn__gnn_level_make(const tn__gnn_arch *A, const tn_contour_set 
 
 /* A random thinning of sparse level L into T: each part kept with probability 1 - q, q uniform
    in [0, thin); the sketch pixels are the kept parts' points, so the membrane and the nearest
-   parts are rebuilt (700-step runs at 128^2 took 6 % longer with it). */
+   parts are rebuilt. */
 static tn_status tn__gnn_level_thin(tn__gnn_train *s, const tn__gnn_level *L, tn__gnn_level *T)
 {
     const tn__gnn_parts *P = &L->P;
@@ -3021,8 +3016,8 @@ static tn_status tn__gnn_finetune(tn__gnn_gen *G, const tn_gnn_generate_opts *o)
     tn_status st = TN_OK;
     memset(&R, 0, sizeof R);
     memset(&F, 0, sizeof F);
-    /* ordering on by default: on the A sketch it took a 180-step alps model from 89.0 to 97.8 %
-       and left one already at 94.3 % there (docs/gnn.md) */
+    /* ordering on by default: it lifts a drawn sketch's ordering on weak models and leaves good
+       ones be (docs/gnn.md) */
     F.sw = o->smooth_weight == 0 ? 0.1f : o->smooth_weight > 0 ? o->smooth_weight : 0.0f;
     F.ow = o->order_weight == 0 ? 1.0f : o->order_weight > 0 ? o->order_weight : 0.0f;
     for (i = 0; i < npix; i++) F.nsk += G->type[i] != 0;
@@ -3225,9 +3220,9 @@ done:
 static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst, float *base_dst,
                                  const char *stage);
 
-/* Fewer user lines than this keep gain 1: Himalaya's model tested on the 4 strokes of the
-   Figure 10 sketch got gain 0 (the membrane: 30.5 % ordering); the bench's extracted sketches
-   have 16-138 lines. */
+/* Fewer user lines than this keep gain 1: a held-out stroke of a drawing of a few says little
+   about the rest (a 4-stroke drawing tested to gain 0, the membrane; docs/gnn.md), while
+   extracted networks have tens to hundreds of lines. */
 #define TN__GNN_GAIN_MIN_LINES 8
 
 #define TN__GNN_ONE_PASS (384 * 384) /* maps up to this many pixels run as one region */
@@ -3489,8 +3484,8 @@ static float tn__gnn_line_kernel(float e, int L)
 /* A grown sketch's user lines keep their heights: a change a - b near them (the network's
    residual; the fine detail's), minus a smooth local mean of that change on them (kernel
    (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to them.
-   The network alone moved a stroke of a weak model by up to 19 % of the range (Sahara,
-   docs/gnn.md), the detail's low-pass lowers a drawn crest; that the land beside a stroke stays
+   The network alone moves the strokes of a weak model (docs/gnn.md) and the detail's low-pass
+   lowers a drawn crest; that the land beside a stroke stays
    below a ridge and above a valley is the notch's work (tn__gnn_incise). Reads a and b (rw
    floats a row, origin (rx, ry)) within L of the window (x, y, ww, wh), which the caller computed
    exactly; writes the correction of each window pixel into corr (ww x wh). */

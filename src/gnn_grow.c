@@ -190,7 +190,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             goto done;
         }
         relief = (float)(rel_sum / (double)nline) + 1e-6f;
-        fall = relief / 16; /* a third of the relief over the radius it is measured on: steeper ruled the moat (docs/gnn.md) */
+        fall = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
     }
     (void)tn__gnn_grow_blur(NULL, etype, Wx, Hx, 0, 0, Wx, Hx, ebl);
     /* quilting: blocks in raster order, each the best of the candidates */
