@@ -1018,11 +1018,20 @@ TN_API void tn_contour_set_free(tn_contour_set *set);
 
 #define TN_SKETCH_MAX_SIDE 65536           /* largest canvas side */
 #define TN_SKETCH_MAX_POINTS (1 << 26)     /* most points in one file */
+#define TN_SKETCH_MAX_COVER 1              /* strokes cover the canvas at most once over (below) */
+
+/* The strokes' limit. A set's polylines drawn pixel by pixel (as tn_sketch_densify draws them:
+   a polyline's first point, then for each segment whose ends lie in different pixels its span
+   max(|dx|, |dy|) rounded up) may cover at most TN_SKETCH_MAX_COVER x width x height + 4096
+   pixels, and never more than TN_SKETCH_MAX_POINTS. A traced drawing covers at most about half
+   its canvas (one-pixel lines need gaps between them), an extracted network about a tenth; the
+   work of generating from a sketch grows with its strokes. Every function that takes a contour
+   set refuses more with TN_ERR_TOO_LARGE, the parser as soon as the strokes pass the limit. */
 
 /* Parses .tns text (n bytes, need not be NUL-terminated). `name` (may be NULL) prefixes messages.
    Fails with TN_ERR_FORMAT (not a sketch, unknown version), TN_ERR_CORRUPT (malformed line,
    missing canvas or end, point outside the canvas), TN_ERR_NUMERIC (NaN/Inf), TN_ERR_TOO_LARGE
-   (canvas side or point count over the limits). On success *out is allocated (tn_contour_set_free). */
+   (canvas side, point count or strokes over the limits). On success *out is allocated (tn_contour_set_free). */
 TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out);
 /* Loads a .tns file, or a sketch drawn as an image (see tn_sketch_from_image) when the file is
    not .tns text. *out is untouched on failure. */
@@ -14282,9 +14291,28 @@ static tn_status tn__chain_pixels(const float *pts, int n, float sx, float sy, t
     return TN_OK;
 }
 
-/* Checks that every point is finite and the canvas sane; `what` names the set in messages. */
+/* Pixels a segment adds to its polyline drawn pixel by pixel (tn__chain_pixels at scale 1): none
+   within one pixel, else its span rounded up. In double: the same count from the parser and from
+   the set it made, on any FPU. */
+static uint64_t tn__stroke_pixels(const float *a, const float *b)
+{
+    double dx = fabs((double)b[0] - a[0]), dy = fabs((double)b[1] - a[1]);
+    if (floor((double)a[0] + 0.5) == floor((double)b[0] + 0.5) && floor((double)a[1] + 0.5) == floor((double)b[1] + 0.5)) return 0;
+    return (uint64_t)ceil(dx > dy ? dx : dy);
+}
+
+/* Most stroke pixels a w x h canvas takes (TN_SKETCH_MAX_COVER). */
+static uint64_t tn__stroke_limit(int w, int h)
+{
+    uint64_t l = (uint64_t)TN_SKETCH_MAX_COVER * (uint64_t)w * (uint64_t)h + 4096;
+    return l < (uint64_t)TN_SKETCH_MAX_POINTS ? l : (uint64_t)TN_SKETCH_MAX_POINTS;
+}
+
+/* Checks that every point is finite, the canvas sane and the strokes within their limit; `what`
+   names the set in messages. */
 static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
 {
+    uint64_t strokes = 0;
     int i, j;
     if (!s || s->width <= 0 || s->height <= 0) return tn__fail(TN_ERR_INVALID_ARG, "%s: no canvas size", what);
     if (s->width > TN_SKETCH_MAX_SIDE || s->height > TN_SKETCH_MAX_SIDE)
@@ -14300,7 +14328,13 @@ static tn_status tn__cset_check(const tn_contour_set *s, const char *what)
             if (j % 3 != 2 && fabsf(c->points[j]) > (float)(16 * TN_SKETCH_MAX_SIDE))
                 return tn__fail(TN_ERR_INVALID_ARG, "%s: polyline %d point %d lies far outside the canvas", what, i, j / 3);
         }
+        strokes++;
+        for (j = 1; j < c->npoints; j++) strokes += tn__stroke_pixels(c->points + 3 * j - 3, c->points + 3 * j);
     }
+    if (strokes > tn__stroke_limit(s->width, s->height))
+        return tn__fail(TN_ERR_TOO_LARGE, "%s: the polylines drawn pixel by pixel cover %llu pixels, over the limit of %llu for a %d x %d "
+                        "canvas (%d per canvas pixel + 4096, at most %d)", what, (unsigned long long)strokes,
+                        (unsigned long long)tn__stroke_limit(s->width, s->height), s->width, s->height, TN_SKETCH_MAX_COVER, TN_SKETCH_MAX_POINTS);
     return TN_OK;
 }
 
@@ -14315,6 +14349,7 @@ typedef struct tn__tns_parser {
     size_t set_cap;
     tn__pts pts;
     long total_points;
+    uint64_t strokes;      /* pixels drawn so far (tn__stroke_pixels) */
 } tn__tns_parser;
 
 /* Fails with "name:line: message". */
@@ -14437,6 +14472,13 @@ static tn_status tn__tns_parse_lines(tn__tns_parser *p, char *buf)
             if (++p->total_points > TN_SKETCH_MAX_POINTS)
                 return tn__tns_err(p, TN_ERR_TOO_LARGE, "more than %d points", TN_SKETCH_MAX_POINTS);
             if ((st = tn__pts_push(&p->pts, (float)x, (float)y, (float)h))) return st;
+            /* refused as it passes, before the rest of a huge file is read */
+            p->strokes += p->pts.n == 1 ? 1 : tn__stroke_pixels(p->pts.p + 3 * p->pts.n - 6, p->pts.p + 3 * p->pts.n - 3);
+            if (p->strokes > tn__stroke_limit(p->set.width, p->set.height))
+                return tn__tns_err(p, TN_ERR_TOO_LARGE, "the polylines drawn pixel by pixel pass the limit of %llu pixels for a %d x %d "
+                                   "canvas (%d per canvas pixel + 4096, at most %d) at point %ld",
+                                   (unsigned long long)tn__stroke_limit(p->set.width, p->set.height), p->set.width, p->set.height,
+                                   TN_SKETCH_MAX_COVER, TN_SKETCH_MAX_POINTS, p->total_points);
         }
     }
     if (state == 0) return tn__fail(TN_ERR_FORMAT, "%s: empty file, not a terrainnet sketch", p->name);
@@ -27239,7 +27281,8 @@ static tn_status tn__kpd_read_config(const float *c, tn_kpd *A, const char *name
     for (i = 0; i < TN__KPD_CONFIG; i++)
         if (!isfinite(c[i])) return tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in kpd.config", name);
     if (c[0] != TN__KPD_FORMAT || !(c[1] >= 0 && c[1] < TN_KPD_CONDITIONS) || c[1] != floor(c[1]) || !(c[3] >= 1 && c[3] <= 16) ||
-        c[3] != floor(c[3]) || !(c[4] >= 4 && c[4] <= 256) || c[4] != floor(c[4]) || !(c[6] > c[5]) || !(c[9] > 0) || !(c[10] > 0))
+        c[3] != floor(c[3]) || !(c[4] >= 4 && c[4] <= 256) || c[4] != floor(c[4]) || !(c[6] > c[5]) || !isfinite(c[6] - c[5]) ||
+        !(c[9] > 0) || !(c[10] > 0))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged kpd.config", name);
     A->condition = (tn_kpd_condition)(int)c[1];
     A->cond_channels = tn__kpd_cond_channels(A->condition);
@@ -27395,6 +27438,23 @@ static tn_status tn__kpd_model_params(const tn_kpd *A, tn_rng *rng, tn_params **
     }
     tn__kpd_write_config(A, tn_params_find(p, "kpd.config")->data);
     *out = p;
+    return TN_OK;
+}
+
+/* Whether a model file or a checkpoint holds the generator its config names: the input and
+   output convolutions fix its width and outputs, checked on the file's own tensors before the
+   model is allocated. */
+static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
+{
+    int in[4], out[4];
+    in[0] = A->width;
+    in[1] = A->cond_channels;
+    out[0] = A->out_channels;
+    out[1] = A->width / 2;
+    in[2] = in[3] = out[2] = out[3] = 3;
+    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
+                        A->out_channels);
     return TN_OK;
 }
 
@@ -27721,6 +27781,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint makes %d channels, these pictures have %d", t.o.train.checkpoint, t.A.out_channels, oc);
             goto done;
         }
+        if ((st = tn__kpd_file_matches(ck, &t.A, t.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if (t.A.condition != t.o.condition) { /* the checkpoint's condition may need other inputs */
             t.o.condition = t.A.condition;
             if ((st = tn__kpd_check_samples(samples, count, t.o.condition, &oc))) goto done;
@@ -27756,6 +27817,10 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     if (t.o.train.resume) {
         double v;
         if ((st = tn_train_check_example(t.run, digest)) || (st = tn_train_meta_number(t.run, "crop", 16, 1 << 20, &v))) goto done;
+        if (v != 8 * floor(v / 8)) { /* the windows pool by 8 */
+            st = tn__fail(TN_ERR_CORRUPT, "%s: bad crop %g (a multiple of 8)", t.o.train.checkpoint, v);
+            goto done;
+        }
         t.o.crop = (int)v;
         if ((st = tn_train_meta_number(t.run, "batch", 1, 64, &v))) goto done;
         t.o.batch = (int)v;
@@ -27844,22 +27909,6 @@ TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
     if (!model || !model->weights || !tn_params_find(model->weights, "kpd.config")) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: not a trained or loaded model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: empty path");
     return tn_params_save(model->weights, path);
-}
-
-/* Whether a model file holds the generator its config names: the input and output convolutions
-   fix its width and outputs, checked on the file's own tensors before the model is allocated. */
-static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
-{
-    int in[4], out[4];
-    in[0] = A->width;
-    in[1] = A->cond_channels;
-    out[0] = A->out_channels;
-    out[1] = A->width / 2;
-    in[2] = in[3] = out[2] = out[3] = 3;
-    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
-        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
-                        A->out_channels);
-    return TN_OK;
 }
 
 TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)

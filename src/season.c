@@ -1307,7 +1307,8 @@ static tn_status tn__kpd_read_config(const float *c, tn_kpd *A, const char *name
     for (i = 0; i < TN__KPD_CONFIG; i++)
         if (!isfinite(c[i])) return tn__fail(TN_ERR_CORRUPT, "%s: NaN/Inf in kpd.config", name);
     if (c[0] != TN__KPD_FORMAT || !(c[1] >= 0 && c[1] < TN_KPD_CONDITIONS) || c[1] != floor(c[1]) || !(c[3] >= 1 && c[3] <= 16) ||
-        c[3] != floor(c[3]) || !(c[4] >= 4 && c[4] <= 256) || c[4] != floor(c[4]) || !(c[6] > c[5]) || !(c[9] > 0) || !(c[10] > 0))
+        c[3] != floor(c[3]) || !(c[4] >= 4 && c[4] <= 256) || c[4] != floor(c[4]) || !(c[6] > c[5]) || !isfinite(c[6] - c[5]) ||
+        !(c[9] > 0) || !(c[10] > 0))
         return tn__fail(TN_ERR_CORRUPT, "%s: damaged kpd.config", name);
     A->condition = (tn_kpd_condition)(int)c[1];
     A->cond_channels = tn__kpd_cond_channels(A->condition);
@@ -1463,6 +1464,23 @@ static tn_status tn__kpd_model_params(const tn_kpd *A, tn_rng *rng, tn_params **
     }
     tn__kpd_write_config(A, tn_params_find(p, "kpd.config")->data);
     *out = p;
+    return TN_OK;
+}
+
+/* Whether a model file or a checkpoint holds the generator its config names: the input and
+   output convolutions fix its width and outputs, checked on the file's own tensors before the
+   model is allocated. */
+static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
+{
+    int in[4], out[4];
+    in[0] = A->width;
+    in[1] = A->cond_channels;
+    out[0] = A->out_channels;
+    out[1] = A->width / 2;
+    in[2] = in[3] = out[2] = out[3] = 3;
+    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
+        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
+                        A->out_channels);
     return TN_OK;
 }
 
@@ -1789,6 +1807,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
             st = tn__fail(TN_ERR_SHAPE, "%s: the checkpoint makes %d channels, these pictures have %d", t.o.train.checkpoint, t.A.out_channels, oc);
             goto done;
         }
+        if ((st = tn__kpd_file_matches(ck, &t.A, t.o.train.checkpoint))) goto done; /* before the config sizes anything */
         if (t.A.condition != t.o.condition) { /* the checkpoint's condition may need other inputs */
             t.o.condition = t.A.condition;
             if ((st = tn__kpd_check_samples(samples, count, t.o.condition, &oc))) goto done;
@@ -1824,6 +1843,10 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     if (t.o.train.resume) {
         double v;
         if ((st = tn_train_check_example(t.run, digest)) || (st = tn_train_meta_number(t.run, "crop", 16, 1 << 20, &v))) goto done;
+        if (v != 8 * floor(v / 8)) { /* the windows pool by 8 */
+            st = tn__fail(TN_ERR_CORRUPT, "%s: bad crop %g (a multiple of 8)", t.o.train.checkpoint, v);
+            goto done;
+        }
         t.o.crop = (int)v;
         if ((st = tn_train_meta_number(t.run, "batch", 1, 64, &v))) goto done;
         t.o.batch = (int)v;
@@ -1912,22 +1935,6 @@ TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
     if (!model || !model->weights || !tn_params_find(model->weights, "kpd.config")) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: not a trained or loaded model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: empty path");
     return tn_params_save(model->weights, path);
-}
-
-/* Whether a model file holds the generator its config names: the input and output convolutions
-   fix its width and outputs, checked on the file's own tensors before the model is allocated. */
-static tn_status tn__kpd_file_matches(const tn_params *f, const tn_kpd *A, const char *name)
-{
-    int in[4], out[4];
-    in[0] = A->width;
-    in[1] = A->cond_channels;
-    out[0] = A->out_channels;
-    out[1] = A->width / 2;
-    in[2] = in[3] = out[2] = out[3] = 3;
-    if (!tn__params_has(f, "in.w", 4, in) || !tn__params_has(f, "out.w", 4, out))
-        return tn__fail(TN_ERR_CORRUPT, "%s: the kpd config names a generator %d wide with %d outputs; the file's differs", name, A->width,
-                        A->out_channels);
-    return TN_OK;
 }
 
 TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)

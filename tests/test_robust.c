@@ -1742,6 +1742,20 @@ TN_TEST(test_huge_sketch_progress)
        4096 x 4096 gave its first report after 24 s */
     TN_CHECK(l.first_prepare && l.prepare >= 2);
     tn_image_free(&out);
+    /* the same walks squeezed onto 64 x 64 draw 17,704 stroke pixels there, past the strokes'
+       limit of 8192: refused at once (before: generated, its parts 6 x denser than on 400 x 400) */
+    if (sk.items && i == sk.count) {
+        double t0 = tn_time_seconds();
+        for (i = 0; i < sk.count; i++)
+            for (j = 0; j < 3 * sk.items[i].npoints; j++)
+                if (j % 3 != 2) sk.items[i].points[j] *= 0.16f;
+        sk.width = sk.height = 64;
+        TN_CHECK(tn_gnn_generate(&m, &sk, 64, 64, &o, &out) == TN_ERR_TOO_LARGE &&
+                 strstr(tn_last_error(), "gnn generate: the polylines drawn pixel by pixel cover"));
+        TN_CHECK(tn_time_seconds() - t0 < 1.0 && out.data == NULL);
+        fprintf(stderr, "   on 64 x 64: %s (%.3f s)\n", tn_last_error(), tn_time_seconds() - t0);
+        i = sk.count;
+    }
     for (i = 0; sk.items && i < sk.count; i++) free(sk.items[i].points);
     free(sk.items);
     tn_gnn_free(&m);

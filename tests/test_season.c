@@ -483,6 +483,95 @@ TN_TEST(test_kpd_learns_and_resumes)
     remove(ck);
 }
 
+/* Resumes season-train from ck (3 more iterations of kpd_small_opts on k). */
+static tn_status kpd_resume(kpd_set *k, const char *ck)
+{
+    tn_kpd_opts o;
+    tn_kpd m;
+    tn_status st;
+    kpd_small_opts(&o, 6);
+    o.train.checkpoint = ck;
+    o.train.resume = 1;
+    st = tn_kpd_train(k->s, 4, &o, &m, NULL);
+    if (!st) tn_kpd_free(&m);
+    return st;
+}
+
+/* Writes a fresh 3-iteration checkpoint of k to ck, then changes kpd.config[index] (CRC valid)
+   or, with index < 0, the metadata entry named ...`key`. */
+static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float value, const char *key, const char *text)
+{
+    tn_kpd_opts o;
+    tn_kpd m;
+    tn_params *p = NULL;
+    tn_tensor *c;
+    int ok, i;
+    remove(ck);
+    kpd_small_opts(&o, 3);
+    o.train.checkpoint = ck;
+    if (tn_kpd_train(k->s, 4, &o, &m, NULL)) return 0;
+    tn_kpd_free(&m);
+    ok = tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, "kpd.config")) != NULL;
+    if (ok && index >= 0) c->data[index] = value;
+    for (i = 0; ok && index < 0 && i < tn_params_meta_count(p); i++) {
+        const char *v, *name = tn_params_meta_key(p, i, &v);
+        size_t n = strlen(name), kn = strlen(key);
+        if (n >= kn && !strcmp(name + n - kn, key)) {
+            char full[128];
+            snprintf(full, sizeof full, "%s", name);
+            ok = tn_params_set_meta(p, full, text) == TN_OK;
+            index = 0;
+        }
+    }
+    ok = ok && index >= 0 && tn_params_save(p, ck) == TN_OK;
+    tn_params_free(p);
+    return ok;
+}
+
+/* A resume whose checkpoint config was changed (issue 33): refused on the checkpoint's own
+   tensors before anything is built from the config, at once, under a 64 MB budget, nothing left
+   allocated. Before, the 256-wide generator (66 MB with its Adam moments and critic) was built
+   first and the budget stopped it with "out of memory". */
+static int kpd_resume_refused(kpd_set *k, const char *ck, const char *why)
+{
+    double t0 = tn_time_seconds();
+    size_t base = tn_memory_in_use();
+    tn_status st;
+    tn_set_memory_limit((size_t)64 << 20);
+    tn_clear_error();
+    st = kpd_resume(k, ck);
+    tn_set_memory_limit(0);
+    fprintf(stderr, "   %s (%.2f s)\n", tn_last_error(), tn_time_seconds() - t0);
+    return st == TN_ERR_CORRUPT && strstr(tn_last_error(), why) && tn_time_seconds() - t0 < 5.0 && tn_memory_in_use() == base;
+}
+
+TN_TEST(test_kpd_resume_config_sizes)
+{
+    kpd_set k;
+    const char *ck = tn_test_tmp_path("season", "kpd_resume.ckpt");
+    TN_CHECK(kpd_set_make(&k, 48));
+    /* the checkpoint as written resumes */
+    TN_CHECK(kpd_patched_checkpoint(&k, ck, 4, 8.0f, NULL, NULL) && kpd_resume(&k, ck) == TN_OK);
+    /* the widest generator over the 8-wide one's tensors */
+    TN_CHECK(kpd_patched_checkpoint(&k, ck, 4, 256.0f, NULL, NULL) && kpd_resume_refused(&k, ck, "names a generator 256 wide"));
+    /* a value range that overflows */
+    TN_CHECK(kpd_patched_checkpoint(&k, ck, 5, -3e38f, NULL, NULL));
+    {
+        tn_params *p = NULL;
+        tn_tensor *c;
+        if (tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, "kpd.config"))) {
+            c->data[6] = 3e38f;
+            TN_CHECK(tn_params_save(p, ck) == TN_OK);
+        }
+        tn_params_free(p);
+        TN_CHECK(kpd_resume_refused(&k, ck, "damaged kpd.config"));
+    }
+    /* training windows that do not pool by 8 */
+    TN_CHECK(kpd_patched_checkpoint(&k, ck, -1, 0, "crop", "36") && kpd_resume_refused(&k, ck, "bad crop 36"));
+    kpd_set_free(&k);
+    remove(ck);
+}
+
 TN_TEST(test_kpd_bad_input)
 {
     kpd_set k;
@@ -616,6 +705,7 @@ int main(void)
     TN_RUN(test_season_real_dem);
     TN_RUN(test_kpd_window_equals_whole_map);
     TN_RUN(test_kpd_learns_and_resumes);
+    TN_RUN(test_kpd_resume_config_sizes);
     TN_RUN(test_kpd_bad_input);
     TN_RUN(test_season_data_slovenia);
     return tn_test_summary("test_season");

@@ -113,7 +113,7 @@ static tn_status random_float_set(tn_contour_set *s, int n, uint64_t seed)
         pts[i] = i % 3 < 2 ? f * 64.0f : f;
     }
     memset(s, 0, sizeof *s);
-    s->width = s->height = 64;
+    s->width = s->height = 256; /* its jumps of up to 16 px stay within the strokes' limit */
     st = tn__cset_add(s, &cap, TN_RIDGE, 3, pts[2], pts, n);
     free(pts);
     return st;
@@ -207,6 +207,85 @@ TN_TEST(tns_malformed)
         TN_CHECK(tn_sketch_align(&s, &s, NULL, m) == TN_ERR_EMPTY);
     }
     tn_contour_set_free(&s);
+}
+
+/* .tns text of one ridge on a 16 x 16 canvas: n points, each in another pixel than the one
+   before (alternating x 1 and 2: one stroke pixel each) when `step`, else all inside pixel (1, 1). */
+static char *strokes_tns(int n, int step, size_t *len)
+{
+    char *t = (char *)malloc((size_t)n * 16 + 64), *q = t;
+    int i;
+    if (!t) return NULL;
+    q += sprintf(q, "terrainnet-sketch 1\ncanvas 16 16\nridge\n");
+    for (i = 0; i < n; i++) q += sprintf(q, step ? "%d 1 0.5\n" : "1.%d 1 0.5\n", step ? 1 + i % 2 : i % 4);
+    q += sprintf(q, "end\n");
+    *len = (size_t)(q - t);
+    return t;
+}
+
+/* The strokes' limit (issue 33, item 10): a sketch whose polylines, drawn pixel by pixel, cover
+   its canvas more than once over (+ 4096 px) is refused before any heavy work, by the parser as
+   soon as it passes the limit and by every function that takes a set. Before, a 5-million-segment
+   sketch on 512 x 512 parsed and gnn-generate ran past 120 s at 3 GB. */
+TN_TEST(strokes_limit)
+{
+    const int limit = 16 * 16 + 4096;
+    tn_contour_set s = {0, 0, 0, NULL}, d = {0, 0, 0, NULL};
+    tn_contour c;
+    size_t n;
+    char *t, *text = NULL;
+    int i;
+    /* at the limit: parses, saves and densifies */
+    if ((t = strokes_tns(limit, 1, &n))) {
+        TN_CHECK(tn_sketch_parse(t, n, "lim.tns", &s) == TN_OK && s.count == 1 && s.items[0].npoints == limit);
+        TN_CHECK(tn_sketch_format(&s, &text, &n) == TN_OK);
+        TN_CHECK(tn_sketch_densify(&s, &d) == TN_OK);
+        tn_free(text);
+        tn_contour_set_free(&d);
+        tn_contour_set_free(&s);
+        free(t);
+    }
+    /* one point more: refused, naming the limit and where */
+    if ((t = strokes_tns(limit + 1, 1, &n))) {
+        TN_CHECK(tn_sketch_parse(t, n, "over.tns", &s) == TN_ERR_TOO_LARGE && s.count == 0);
+        TN_CHECK(strstr(tn_last_error(), "over.tns:4356:") && strstr(tn_last_error(), "limit of 4352 pixels for a 16 x 16 canvas") &&
+                 strstr(tn_last_error(), "at point 4353"));
+        free(t);
+    }
+    /* a huge file stops at the limit: 2 million points (before: parsed whole) */
+    if ((t = strokes_tns(2000000, 1, &n))) {
+        TN_CHECK(tn_sketch_parse(t, n, "huge.tns", &s) == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "huge.tns:4356:"));
+        free(t);
+    }
+    /* points inside one pixel draw nothing more: 20,000 of them pass */
+    if ((t = strokes_tns(20000, 0, &n))) {
+        TN_CHECK(tn_sketch_parse(t, n, "dots.tns", &s) == TN_OK && s.items[0].npoints == 20000);
+        tn_contour_set_free(&s);
+        free(t);
+    }
+    /* a set in memory: 400 points zigzagging across the canvas (15 px a segment, 5986 px) */
+    memset(&c, 0, sizeof c);
+    c.npoints = 400;
+    c.points = (float *)calloc((size_t)c.npoints * 3, sizeof(float));
+    s.width = s.height = 16;
+    s.count = 1;
+    s.items = &c;
+    for (i = 0; c.points && i < c.npoints; i++) {
+        c.points[3 * i] = i % 2 ? 15.0f : 0.0f;
+        c.points[3 * i + 1] = (float)(i % 16);
+    }
+    if (c.points) {
+        tn_contour_set parts = {0, 0, 0, NULL};
+        tn_image r = {0, 0, 0, NULL};
+        TN_CHECK(tn_sketch_densify(&s, &d) == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "densify: the polylines drawn pixel by pixel cover 5986 pixels, over the limit of 4352"));
+        TN_CHECK(tn_contour_parts_make(&s, 1, &parts) == TN_ERR_TOO_LARGE);
+        TN_CHECK(tn_sketch_rasterise(&s, 16, 16, &r) == TN_ERR_TOO_LARGE);
+        TN_CHECK(tn_sketch_format(&s, &text, &n) == TN_ERR_TOO_LARGE && text == NULL);
+        c.npoints = 290; /* 1 + 289 x 15 = 4336 px */
+        TN_CHECK(tn_sketch_densify(&s, &d) == TN_OK && d.count == 1);
+        tn_contour_set_free(&d);
+    }
+    free(c.points);
 }
 
 /* A drawn sketch: a bright red horizontal stroke (3 px wide) and a dark blue diagonal. */
@@ -643,6 +722,7 @@ int main(void)
     TN_RUN(tns_numbers_round_trip_exactly);
     TN_RUN(tns_comma_locale);
     TN_RUN(tns_malformed);
+    TN_RUN(strokes_limit);
     TN_RUN(png_sketch_read);
     TN_RUN(densify_and_rasterise);
     TN_RUN(mst_known_points);

@@ -30,8 +30,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     /* the pixel-chain stages only on small canvases (a chain can be as long as the canvas) */
     if (s.width <= 512 && s.height <= 512 && tn_sketch_densify(&s, &d) == TN_OK && tn_contour_parts_make(&d, 1, &p) == TN_OK &&
         p.count > 0 && p.count <= 4096 && (match = (int *)malloc((size_t)p.count * sizeof(int)))) {
-        if (tn_sketch_align(&p, &p, NULL, match) != TN_OK) abort();
-        for (i = 0; i < p.count; i++)
+        /* parts can draw more than their set (each starts a polyline; the graph walk may repeat
+           junctions), so near the strokes' limit they may pass it */
+        tn_status st = tn_sketch_align(&p, &p, NULL, match);
+        if (st != TN_OK && st != TN_ERR_TOO_LARGE) abort();
+        for (i = 0; !st && i < p.count; i++)
             if (match[i] < 0 || match[i] >= p.count) abort();
         free(match);
     }
