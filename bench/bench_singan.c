@@ -21,7 +21,7 @@
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--layout 1] [--layout-noise S] [--extras] [--peer]
                        [--no-singan] [--no-gpnn]
-                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--coarsest PX] [--channels N]
+                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below, M = 10, 2 threads) */
 #include "terrainnet.h"
@@ -480,6 +480,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--noise-amp") && v) g_opts.noise_amp = (float)atof(argv[++i]);
         else if (!strcmp(a, "--adv-weight") && v) g_opts.adv_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--d-steps") && v) g_opts.d_steps = atoi(argv[++i]);
+        else if (!strcmp(a, "--curv-weight") && v) g_opts.curv_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--coarsest") && v) g_opts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--channels") && v) g_opts.channels = g_opts.max_channels = atoi(argv[++i]);
         else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
@@ -497,8 +498,8 @@ int main(int argc, char **argv)
             any = 1;
     }
     printf("# bench_singan: %.1f min per DEM, %d threads, singan options (0 = default): patch %d, disc_layers %d, noise_amp %g, adv_weight %g, d_steps %d, "
-           "coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp, (double)g_opts.adv_weight,
-           g_opts.d_steps, g_opts.coarsest, g_opts.channels);
+           "curv_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp, (double)g_opts.adv_weight,
+           g_opts.d_steps, (double)g_opts.curv_weight, g_opts.coarsest, g_opts.channels);
     fflush(stdout);
     if (peer) {
         if (system("/usr/bin/python3 /work/shared/peers/torch_singan_step.py --threads 2 --size 256 --runs 3 2>&1 | sed 's/^/peer: /'"))

@@ -55,6 +55,10 @@ typedef struct tn_singan_opts {
     float adv_weight;      /* weight of the adversarial loss (both losses in units of the scale's
                               detail RMS); 0 = 1, < 0 = none (reconstruction only; docs/singan.md) */
     int d_steps;           /* discriminator steps per iteration (SinGAN: 3); 0 = 1 */
+    float curv_weight;     /* weight of the curvature loss: the 1-D Wasserstein distance between the
+                              Laplacians of a scale's output and of the example's scale, in units of
+                              the example's mean square Laplacian; 0 = 10, < 0 = none (without it the
+                              finest scales add crumpled detail, no smooth floors or sharp crests) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -202,6 +206,8 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->adv_weight == 0) o->adv_weight = 1.0f;
     if (o->adv_weight < 0) o->adv_weight = 0.0f;
     if (o->d_steps <= 0) o->d_steps = 1;
+    if (o->curv_weight == 0) o->curv_weight = 10.0f;
+    if (o->curv_weight < 0) o->curv_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -583,6 +589,11 @@ done:
 
 /* ---- training (a tn_train run) ---- */
 
+typedef struct tn__sg_ranked {
+    float v;
+    int i;
+} tn__sg_ranked;
+
 typedef struct tn__sg_train {
     tn_singan_opts o;
     tn__sg_arch A;
@@ -600,6 +611,11 @@ typedef struct tn__sg_train {
     float *xrec;               /* the reconstruction's generator input at the current scale */
     float *base, *xin;         /* this iteration's random base and generator input (patch window) */
     float *fake;               /* this iteration's fake patch (for the D step) */
+    float *lapq;               /* the example's Laplacian at the current scale, sorted (its quantiles) */
+    size_t nlapq;
+    double lapms;              /* its mean square */
+    float *lapc;               /* the curvature loss's gradient on the fake patch */
+    tn__sg_ranked *lapv;       /* the fake patch's Laplacian values and their pixels */
     double budget;             /* seconds */
 } tn__sg_train;
 
@@ -620,6 +636,9 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->fake);
     TN_FREE(s->fcond);
     TN_FREE(s->realbase);
+    TN_FREE(s->lapq);
+    TN_FREE(s->lapc);
+    TN_FREE(s->lapv);
 }
 
 /* The training window of scale sc: the whole scale or a patch. */
@@ -700,6 +719,55 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
     tn__sg_real_base_window(s, sc, 0, 0, s->real[sc].width, s->real[sc].height, out);
 }
 
+static int tn__sg_cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return x < y ? -1 : x > y;
+}
+
+static int tn__sg_cmp_ranked(const void *a, const void *b)
+{
+    const tn__sg_ranked *x = (const tn__sg_ranked *)a, *y = (const tn__sg_ranked *)b;
+    return x->v < y->v ? -1 : x->v > y->v ? 1 : x->i - y->i;
+}
+
+/* The curvature loss's gradient with respect to the fake output patch out (pw x ph) into s->lapc:
+   the patch's Laplacian values, sorted, are pulled to the example's Laplacian quantiles of the
+   same ranks (the 1-D optimal transport between the two histograms, as the sliced Wasserstein
+   texture loss), so the sample gets the example's smooth floors and sharp crests rather than
+   the network's Gaussian-like texture. Returns the loss (weighted). */
+static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph)
+{
+    size_t n = 0, i;
+    int x, y;
+    double loss = 0, gs;
+    memset(s->lapc, 0, (size_t)pw * ph * sizeof(float));
+    if (!s->nlapq || pw < 3 || ph < 3 || !(s->o.curv_weight > 0)) return 0;
+    for (y = 1; y < ph - 1; y++)
+        for (x = 1; x < pw - 1; x++) {
+            const float *q = out + (size_t)y * pw + x;
+            s->lapv[n].v = q[1] + q[-1] + q[pw] + q[-pw] - 4.0f * q[0];
+            s->lapv[n].i = (int)n;
+            n++;
+        }
+    qsort(s->lapv, n, sizeof(tn__sg_ranked), tn__sg_cmp_ranked);
+    gs = 2.0 * s->o.curv_weight / ((double)n * s->lapms);
+    for (i = 0; i < n; i++) {
+        int j = s->lapv[i].i, xx = 1 + j % (pw - 2), yy = 1 + j / (pw - 2);
+        size_t qi = (size_t)(((double)i + 0.5) / (double)n * (double)s->nlapq);
+        double e = (double)s->lapv[i].v - s->lapq[qi < s->nlapq ? qi : s->nlapq - 1];
+        float g = (float)(gs * e);
+        float *c = s->lapc + (size_t)yy * pw + xx;
+        loss += e * e;
+        c[0] -= 4.0f * g; /* the Laplacian is its own adjoint */
+        c[1] += g;
+        c[-1] += g;
+        c[pw] += g;
+        c[-pw] += g;
+    }
+    return s->o.curv_weight * loss / ((double)n * s->lapms);
+}
+
 /* Enters scale sc: progress name, the reconstruction's base and noise amplitude, the starting
    weights (the coarser scale's when the widths match), fresh optimiser state, its deadline.
    resumed: the schedule and weights come from the checkpoint; only derived data is rebuilt. */
@@ -731,6 +799,30 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     s->realbase = (float *)tn__alloc((size_t)W * H * sizeof(float));
     if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake || !s->fcond || !s->realbase) return TN_ERR_OUT_OF_MEMORY;
     tn__sg_real_base(s, sc, s->realbase);
+    TN_FREE(s->lapq);
+    TN_FREE(s->lapc);
+    TN_FREE(s->lapv);
+    s->nlapq = 0;
+    if (W >= 3 && H >= 3) { /* the example's Laplacian quantiles at this scale (the curvature loss's target) */
+        const float *e = s->real[sc].data;
+        int x, y;
+        size_t k = 0;
+        s->lapq = (float *)tn__alloc((size_t)(W - 2) * (H - 2) * sizeof(float));
+        s->lapc = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+        s->lapv = (tn__sg_ranked *)tn__alloc((size_t)pw * ph * sizeof(tn__sg_ranked));
+        if (!s->lapq || !s->lapc || !s->lapv) return TN_ERR_OUT_OF_MEMORY;
+        s->lapms = 0;
+        for (y = 1; y < H - 1; y++)
+            for (x = 1; x < W - 1; x++) {
+                const float *q = e + (size_t)y * W + x;
+                s->lapq[k] = q[1] + q[-1] + q[W] + q[-W] - 4.0f * q[0];
+                s->lapms += (double)s->lapq[k] * s->lapq[k];
+                k++;
+            }
+        s->nlapq = k;
+        s->lapms = s->lapms / (double)k + 1e-20;
+        qsort(s->lapq, k, sizeof(float), tn__sg_cmp_float);
+    }
     /* the reconstruction's input: the fixed noise map at scale 0; above it the EXAMPLE's coarser
        scale upsampled (teacher forcing), not the coarser generators' reconstruction: that one's
        error (0.1 of the range at the coarse scales, 3x the finest scale's detail) was what the
@@ -893,6 +985,15 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
                  tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
     lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
     loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight / (s->sigma[sc] * s->sigma[sc]), 0.0f));
+    if (gres && s->o.curv_weight > 0 && s->nlapq) { /* the curvature loss, as sum(fake x its gradient) */
+        tn_tensor *c = tn_tensor_4d(ctx, 1, 1, ph, pw);
+        int y, x;
+        for (y = 0; y < ph; y++)
+            for (x = 0; x < pw; x++) s->fake[(size_t)y * pw + x] = s->base[(size_t)(y + M) * pew + x + M] + gres->data[(size_t)y * pw + x];
+        tn__sg_curv_grad(s, s->fake, pw, ph);
+        if (c) memcpy(c->data, s->lapc, (size_t)pw * ph * sizeof(float));
+        loss = tn_add(ctx, loss, tn_sum(ctx, tn_mul(ctx, gres, c)));
+    }
     if (!loss) return tn_ctx_status(ctx) ? tn_ctx_status(ctx) : tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     tn_params_zero_grad(s->g);
     if ((st = tn_backward(ctx, loss))) return st;
@@ -1044,7 +1145,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
     tn_singan_defaults(&s.o);
     if (!(s.o.factor >= 0.5f && s.o.factor <= 0.9f) || s.o.coarsest < 4 || s.o.channels > 256 || s.o.max_channels > 256 ||
         s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0 ||
-        !(s.o.adv_weight <= 1e6f) || s.o.d_steps > 100)
+        !(s.o.adv_weight <= 1e6f) || s.o.d_steps > 100 || !(s.o.curv_weight <= 1e6f))
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad option (factor %g in 0.5..0.9, coarsest %d >= 4, channels %d and %d <= 256, "
                         "discriminator layers %d <= 4, patch >= 16, lr %g < 10, finite weights, noise amplitude %g in 0..100, iterations >= 0)",
                         (double)s.o.factor, s.o.coarsest, s.o.channels, s.o.max_channels, s.o.disc_layers, (double)s.o.lr, (double)s.o.noise_amp);

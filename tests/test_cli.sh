@@ -413,6 +413,8 @@ if $T singan-sample "$W/sg.tnw" -o "$W/sg_big.pfm" --size 40x30 --seed 2 2>/dev/
     $T singan-sample "$W/sg.tnw" -o "$W/sg_big3.pfm" --size 40x30 --seed 3 2>/dev/null && ! cmp -s "$W/sg_big.pfm" "$W/sg_big3.pfm" &&
     $T singan-sample "$W/sg.tnw" -o "$W/sg_win.pfm" --size 10x10 --origin -20 15 2>/dev/null &&
     $T info "$W/sg_big.pfm" | grep -q "size: 40 x 30"; then ok; else bad "singan-sample: same seed same bytes, seeds differ, windows"; fi
+if $T singan-sample "$W/sg.tnw" -o "$W/sg_lay.pfm" --size 40x30 --seed 2 --layout 2>/dev/null && [ -s "$W/sg_lay.pfm" ] &&
+    $T info "$W/sg_lay.pfm" | grep -q "size: 40 x 30"; then ok; else bad "singan-sample --layout: a file of the size asked"; fi
 if $T singan-refine "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_ref.pfm" --from-scale 1 2>/dev/null && $T info "$W/sg_ref.pfm" | grep -q "size: 32 x 32" &&
     $T singan-upscale "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_up.pfm" --factor 1.5 --from-scale 2 2>/dev/null &&
     $T info "$W/sg_up.pfm" | grep -q "size: 48 x 48"; then ok; else bad "singan-refine / singan-upscale sizes"; fi
