@@ -42,8 +42,9 @@ TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts);
    disagree, so scaled to the local RMS of the band at the pixels' own matches); finer, the
    example's at the pixel's own match, which a wide vote would average away (the finest band is
    what slope breaks and gullies are made of), read through the 3 x 3 neighbours' matches so
-   that it stays the example's texture where they agree and is not white where they do not. The detail starts below a Gaussian of sqrt(3) sigma, not
-   sigma: the terrain's low-pass and the example's detail are uncorrelated, so their powers add,
+   that it stays the example's texture where they agree and is not white where they do not.
+   The detail starts below a Gaussian of sqrt(3) sigma, not sigma: the terrain's low-pass and
+   the example's detail are uncorrelated, so their powers add,
    and with filters g and 1 - g^3 (g = the Gaussian's response) that sum stays within -0.04 ..
    +0.01 decades of 1 where 1 - g would dip by 0.3 at the crossover. (The finest band does not
    overlap the voted one so: taken pixel by pixel it is close to white, and the overlap made the
@@ -57,7 +58,7 @@ TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts);
 #define TN__FD_KAPPA 1.0f      /* a match no neighbour shares counts its distance (1 + kappa) times */
 #define TN__FD_VOTE_SIGMA 1.0f /* px: the vote's Gaussian weight */
 #define TN__FD_FINE_SIGMA 1.0f /* px: detail finer than this comes from each pixel's own match */
-#define TN__FD_OWN_SIGMA 0.7f  /* px: ... as its 3 x 3 neighbours' matches give it (tn__fd_own) */
+#define TN__FD_OWN_SIGMA 0.7f  /* px: the weight of the 3 x 3 neighbours' matches in that (tn__fd_own) */
 #define TN__FD_RMS_SIGMA 4.0f  /* px: the window of the voted band's local RMS */
 #define TN__FD_BAND 1.7320508f /* the detail band reaches up to a Gaussian of sqrt(3) sigma (below) */
 #define TN__FD_LANES 16        /* keys a block (one or two SIMD vectors) */
@@ -491,10 +492,11 @@ static void tn__fd_sweep_task(void *vj, size_t b, size_t e)
 }
 
 /* The finest detail at pixel (x, y): the example's at its own match, as the 3 x 3 neighbours'
-   matches (shifted to the pixel) give it, weighted by a Gaussian of TN__FD_OWN_SIGMA. Where the
+   matches (shifted to the pixel) give it, weighted by wo[squared offset] (a Gaussian of
+   TN__FD_OWN_SIGMA). Where the
    matches are coherent all nine agree and this is the own match's detail exactly; where they
    disagree, detail picked pixel by pixel is white, with a Laplacian about 1.5 x the example's. */
-static float tn__fd_own(const tn__fd_job *j, int y, int x)
+static float tn__fd_own(const tn__fd_job *j, const float wo[3], int y, int x)
 {
     const tn__fd *d = j->d;
     float s = 0, sw = 0;
@@ -502,9 +504,8 @@ static float tn__fd_own(const tn__fd_job *j, int y, int x)
     for (v = -1; v <= 1; v++)
         for (u = -1; u <= 1; u++) {
             int x2 = x - u, y2 = y - v;
-            float w;
+            float w = wo[u * u + v * v];
             if (x2 < 0 || y2 < 0 || x2 >= j->w || y2 >= j->h) continue;
-            w = expf(-0.5f * (float)(u * u + v * v) / (TN__FD_OWN_SIGMA * TN__FD_OWN_SIGMA));
             s += w * d->fine[j->match[(size_t)y2 * j->w + x2] + v * d->side + u];
             sw += w;
         }
@@ -517,10 +518,11 @@ static void tn__fd_vote_task(void *vj, size_t b, size_t e)
 {
     const tn__fd_job *j = (const tn__fd_job *)vj;
     const tn__fd *d = j->d;
-    float wt[16];
+    float wt[16], wo[3];
     size_t row;
     int u, v;
     for (u = 0; u <= d->r; u++) wt[u] = expf(-0.5f * (float)(u * u) / (TN__FD_VOTE_SIGMA * TN__FD_VOTE_SIGMA));
+    for (u = 0; u < 3; u++) wo[u] = expf(-0.5f * (float)u / (TN__FD_OWN_SIGMA * TN__FD_OWN_SIGMA));
     for (row = b; row < e; row++) {
         int x;
         for (x = 0; x < j->w; x++) {
@@ -538,7 +540,7 @@ static void tn__fd_vote_task(void *vj, size_t b, size_t e)
                 }
             }
             j->vote[row * j->w + x] = s / sw;
-            j->own[row * j->w + x] = tn__fd_own(j, (int)row, x);
+            j->own[row * j->w + x] = tn__fd_own(j, wo, (int)row, x);
             j->band[row * j->w + x] = d->det[j->match[row * j->w + x]];
         }
     }
