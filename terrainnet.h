@@ -21230,6 +21230,9 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
     tn__sg_real_base_window(s, sc, 0, 0, s->real[sc].width, s->real[sc].height, out);
 }
 
+/* The 5-point Laplacian at q, rows `stride` floats apart. */
+static float tn__sg_lap5(const float *q, int stride) { return q[1] + q[-1] + q[stride] + q[-stride] - 4.0f * q[0]; }
+
 static int tn__sg_cmp_float(const void *a, const void *b)
 {
     float x = *(const float *)a, y = *(const float *)b;
@@ -21257,7 +21260,7 @@ static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph
     for (y = 1; y < ph - 1; y++)
         for (x = 1; x < pw - 1; x++) {
             const float *q = out + (size_t)y * pw + x;
-            s->lapv[n].v = q[1] + q[-1] + q[pw] + q[-pw] - 4.0f * q[0];
+            s->lapv[n].v = tn__sg_lap5(q, pw);
             s->lapv[n].i = (int)n;
             n++;
         }
@@ -21326,7 +21329,7 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
         for (y = 1; y < H - 1; y++)
             for (x = 1; x < W - 1; x++) {
                 const float *q = e + (size_t)y * W + x;
-                s->lapq[k] = q[1] + q[-1] + q[W] + q[-W] - 4.0f * q[0];
+                s->lapq[k] = tn__sg_lap5(q, W);
                 s->lapms += (double)s->lapq[k] * s->lapq[k];
                 k++;
             }
