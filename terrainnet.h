@@ -13,12 +13,12 @@ RECIPE
 USAGE
     tn_image dem = {0};
     tn_image_info info;
-    if (tn_image_load("alps.png", &dem, &info) != TN_OK) {
+    if (tn_image_load(&dem, "alps.png", &info) != TN_OK) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
     tn_image shade = {0};
-    tn_render_preview(&dem, NULL, &shade);        // hillshaded, colour-ramped RGB
+    tn_render_preview(&shade, &dem, NULL);        // hillshaded, colour-ramped RGB
     tn_image_save("alps_preview.png", &shade, NULL);
     tn_image_free(&shade);
     tn_image_free(&dem);
@@ -65,7 +65,7 @@ ARGUMENTS
     Order: the object the call works on (a ctx, params, optimiser or trained model; something
     changed in place; the thing being saved), then inputs, a file path first among them, then
     options (const tn_x_opts *, NULL = defaults), then outputs, the optional ones (NULL = not
-    wanted) last: tn_image_load(path, &img, &info), tn_render_preview(&dem, &opts, &out). A struct
+    wanted) last: tn_image_load(&img, path, &info), tn_render_preview(&out, &dem, &opts). A struct
     the call fills (a new tn_image, a model being trained or loaded) is an output. Calls older
     than this rule that take their output first (tn_image_crop(dst, src, ...), the other image
     operations, noise makers, tn_style_transfer, tn_texgan_train/load, tn_detail_maps_*) keep
@@ -221,7 +221,7 @@ TN_API void      tn_image_free(tn_image *img);
 /* Deep copy into *dst (allocated here). */
 TN_API tn_status tn_image_copy(tn_image *dst, const tn_image *src);
 /* Minimum and maximum over all samples; NaNs are ignored. Returns the count of NaN/Inf samples. */
-TN_API size_t    tn_image_range(const tn_image *img, float *lo, float *hi);
+TN_API size_t    tn_image_range(float *lo, float *hi, const tn_image *img);
 
 /* All operations below write a newly allocated *dst (caller frees); dst may not alias src unless
    stated. They fail with TN_ERR_INVALID_ARG on bad parameters and never touch *dst then. */
@@ -246,7 +246,7 @@ TN_API tn_status tn_image_blur(tn_image *dst, const tn_image *src, float sigma);
 /* Central-difference gradients of channel 0 in height units per metre; dx, dy are the pixel
    spacings in metres (<= 0 means 1). gx points east (+x), gy points south (+y, down the rows).
    Either output may be NULL. */
-TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_image *gx, tn_image *gy);
+TN_API tn_status tn_image_gradient(tn_image *gx, tn_image *gy, const tn_image *dem, float dx, float dy);
 /* Slope in degrees (0 = flat). */
 TN_API tn_status tn_image_slope(tn_image *dst, const tn_image *dem, float dx, float dy);
 /* Unit surface normals as 3 channels (x east, y north, z up) in [-1, 1]; z_scale exaggerates. */
@@ -371,22 +371,22 @@ typedef struct tn_save_opts {
 } tn_save_opts;
 
 /* Loads any supported file. info and opts may be NULL. On failure *img is untouched. */
-TN_API tn_status tn_image_load(const char *path, tn_image *img, tn_image_info *info);
-TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info *info, const tn_load_opts *opts);
+TN_API tn_status tn_image_load(tn_image *img, const char *path, tn_image_info *info);
+TN_API tn_status tn_image_load_ex(tn_image *img, const char *path, const tn_load_opts *opts, tn_image_info *info);
 /* Same from memory; `name` (may be NULL) is used for the extension fallback and in messages. */
-TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char *name, tn_image *img,
-                                      tn_image_info *info, const tn_load_opts *opts);
+TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t size, const char *name,
+                                      const tn_load_opts *opts, tn_image_info *info);
 /* Saves; the format comes from opts or the extension. Writes to a temporary file and renames it,
    so a failed save never leaves a half-written file in place. opts may be NULL. */
 TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_save_opts *opts);
 /* Encodes to a malloc'ed (TN_MALLOC) buffer the caller frees with TN_FREE / tn_free. */
-TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format,
-                                      uint8_t **out, size_t *out_size);
+TN_API tn_status tn_image_save_memory(uint8_t **out, size_t *out_size, const tn_image *img,
+                                      tn_format format, const tn_save_opts *opts);
 /* zlib streams (RFC 1950) with terrainnet's own deflate (level 0-9; 0 and zlib's -1 = 6) and inflate (Adler-32
    checked; output over max_out bytes, 0 = TN_MAX_ALLOC, fails with TN_ERR_TOO_LARGE). The output
    buffer is allocated here; free it with tn_free. */
-TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_t **out, size_t *out_size);
-TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, size_t *out_size, size_t max_out);
+TN_API tn_status tn_zlib_deflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, int level);
+TN_API tn_status tn_zlib_inflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, size_t max_out);
 /* Name of a format ("png", "pnm", ...). */
 TN_API const char *tn_format_name(tn_format f);
 /* Frees a buffer returned by the library (tn_image_save_memory and the like). */
@@ -406,9 +406,9 @@ typedef struct tn_metrics {
    data_range <= 0 means max(ref) - min(ref). Matches scikit-image structural_similarity(
    gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=R), including its
    cropping of the 5-pixel border. Images smaller than 11 x 11 fail with TN_ERR_INVALID_ARG. */
-TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double data_range, tn_metrics *out);
+TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image *img, double data_range);
 /* SSIM only (same definition). */
-TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_range, double *ssim);
+TN_API tn_status tn_ssim(double *ssim, const tn_image *ref, const tn_image *img, double data_range);
 
 /* ============================================================================================
    @@gemm  single-precision matrix multiply (the engine under tensors and convolutions)
@@ -446,7 +446,7 @@ TN_API tn_precision tn_get_precision(void);
 TN_API tn_precision tn_precision_resolve(tn_precision p);
 /* "auto" / "bf16" / "fp32" <-> tn_precision; parse returns TN_ERR_INVALID_ARG for anything else. */
 TN_API const char *tn_precision_name(tn_precision p);
-TN_API tn_status tn_precision_parse(const char *s, tn_precision *p);
+TN_API tn_status tn_precision_parse(tn_precision *p, const char *s);
 
 /* CPU features found at run time (cpuid, and the OS's consent for AVX-512 / AMX state). */
 #define TN_CPU_AVX2 1u
@@ -525,7 +525,7 @@ TN_API int tn_tensor_same_shape(const tn_tensor *a, const tn_tensor *b);
 /* Views an image (one batch item, H x W x C interleaved) as a new 1 x C x H x W tensor (copy). */
 TN_API tn_tensor *tn_tensor_from_image(tn_ctx *ctx, const tn_image *img);
 /* Copies batch item `n` of an N x C x H x W tensor into a new image. Caller frees *img. */
-TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img);
+TN_API tn_status tn_tensor_to_image(tn_image *img, const tn_tensor *t, int n);
 
 /* Runs the tape backwards from `loss` (a one-element tensor, gradient 1). Gradients accumulate:
    zero parameter gradients between steps (tn_params_zero_grad). */
@@ -677,15 +677,15 @@ TN_API void tn_params_zero_grad(tn_params *p);
 /* Scales gradients so their global L2 norm is at most max_norm; returns the norm before. */
 TN_API float tn_params_clip_grad(tn_params *p, float max_norm);
 /* Saves atomically (temporary file + rename). */
-TN_API tn_status tn_params_save(const tn_params *p, const char *path);
+TN_API tn_status tn_params_save(const char *path, const tn_params *p);
 /* Loads into existing tensors; every name and shape must match, otherwise nothing changes and
    the error names the first mismatch. */
 TN_API tn_status tn_params_load(tn_params *p, const char *path);
 TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t size, const char *name);
 /* Reads any .tnw file into a new set holding exactly its tensors and metadata (for tools that
    inspect a file, and loaders whose layout depends on the file). *out is NULL on failure. */
-TN_API tn_status tn_params_open(const char *path, tn_params **out);
-TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out);
+TN_API tn_status tn_params_open(tn_params **out, const char *path);
+TN_API tn_status tn_params_open_memory(tn_params **out, const uint8_t *data, size_t size, const char *name);
 
 /* Metadata: text key/value pairs saved with the tensors (keys [A-Za-z0-9_.-], < 64 chars; values
    printable, no newline, < 1024 chars). Setting a key again replaces it; value NULL removes it.
@@ -769,7 +769,7 @@ TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes);
 typedef struct tn_train tn_train;
 /* Starts a run of `method` (e.g. "texgan"), reporting progress as `stage`. Settings are checked
    (NaN/negative budgets, resume without a checkpoint path). Free with tn_train_free. */
-TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out);
+TN_API tn_status tn_train_create(tn_train **out, const char *method, const char *stage, const tn_train_opts *opts);
 TN_API void tn_train_free(tn_train *run);
 /* Registers state. Names/prefixes must stay the same between the run that wrote a checkpoint
    and the one resuming. The run does not own what is registered. */
@@ -959,7 +959,7 @@ typedef struct tn_fine_detail_opts {
 /* out = terrain's low-pass + the example's finer detail, matched by shape. example and terrain:
    one channel, the same pixel size and height units (metres), each at least patch x patch
    (example: 2 patches); out is allocated here, terrain's size. opts may be NULL. */
-TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out);
+TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts);
 
 /* Pixels around a window that tn_fine_detail reads for it: a window computed from the
    terrain grown by this much (tn_rect_halo) equals the whole map's pixels there. */
@@ -1032,14 +1032,14 @@ TN_API void tn_contour_set_free(tn_contour_set *set);
    Fails with TN_ERR_FORMAT (not a sketch, unknown version), TN_ERR_CORRUPT (malformed line,
    missing canvas or end, point outside the canvas), TN_ERR_NUMERIC (NaN/Inf), TN_ERR_TOO_LARGE
    (canvas side, point count or strokes over the limits). On success *out is allocated (tn_contour_set_free). */
-TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out);
+TN_API tn_status tn_sketch_parse(tn_contour_set *out, const char *text, size_t n, const char *name);
 /* Loads a .tns file, or a sketch drawn as an image (see tn_sketch_from_image) when the file is
    not .tns text. *out is untouched on failure. */
-TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out);
+TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path);
 /* Writes the set as .tns text into a TN_MALLOC'd buffer (free with tn_free). Fails with
    TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas, an empty polyline, an
    order outside 0-1000 or a point outside the canvas (so whatever is written reads back). */
-TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size);
+TN_API tn_status tn_sketch_format(char **text, size_t *size, const tn_contour_set *set);
 /* Saves as .tns through a temporary file and a rename: on any error the target is untouched. */
 TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
 
@@ -1049,7 +1049,7 @@ TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
    bright stroke is high and a dark one low (heights in [0.1, 1]). Strokes of any width are
    thinned (tn_skeletonize) and traced into polylines between endpoints and junctions; the canvas
    is the image size. Fails with TN_ERR_SHAPE for 1-2 channel images, TN_ERR_EMPTY without strokes. */
-TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out);
+TN_API tn_status tn_sketch_from_image(tn_contour_set *out, const tn_image *img);
 
 /* Thins a binary mask (w*h bytes, non-zero = set) in place to one-pixel-wide 8-connected lines
    that keep the topology: Guo-Hall thinning (keeps two-pixel diagonal strokes), then any pixel
@@ -1060,15 +1060,15 @@ TN_API tn_status tn_skeletonize(uint8_t *mask, int width, int height);
 /* Resamples every polyline to an 8-connected chain of integer pixels (consecutive points
    differ by at most 1 in x and y, no repeats), heights linear between the original points.
    Use before tn_contour_parts_make on sketches whose points are far apart. *out allocated here. */
-TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out);
+TN_API tn_status tn_sketch_densify(tn_contour_set *out, const tn_contour_set *in);
 
 /* Rasterises to a width x height x 3 image (any size; coordinates scale from the canvas):
    channel 0 = 1 on ridge pixels, channel 1 = 1 on valley pixels, channel 2 = the sketch height
    there (0 elsewhere; where lines overlap, the later polyline wins). *out allocated here. */
-TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out);
+TN_API tn_status tn_sketch_rasterise(tn_image *out, const tn_contour_set *set, int width, int height);
 /* RGB preview: ridges yellow, valleys blue, over a hillshade of `dem` (resized; may be NULL for
    a grey background). Lines are 1 px wide up to 511 px and thicker above. *out allocated here. */
-TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out);
+TN_API tn_status tn_sketch_preview(tn_image *out, const tn_contour_set *set, const tn_image *dem, int width, int height);
 
 /* ---- random sketches (section 5.2) ---------------------------------------------------------
    n random nodes with heights in [0.5, 1] joined by a Euclidean minimum spanning tree are the
@@ -1087,17 +1087,17 @@ typedef struct tn_sketch_random_opts {
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
    TN_ERR_SHAPE). Same seed, same output. opts may be NULL. */
-TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
-                                  tn_contour_set *out);
+TN_API tn_status tn_sketch_random(tn_contour_set *out, const tn_contour_set *user, int width, int height,
+                                  const tn_sketch_random_opts *opts);
 
 /* Delaunay triangulation (Bowyer-Watson, O(n^2); fine for a few thousand points) of n points
    xy[2n]: *ntriangles triangles of 3 point indices each (winding unspecified), TN_MALLOC'd, free
    with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
-TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
+TN_API tn_status tn_delaunay(int **triangles, int *ntriangles, const float *xy, int n);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
    point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. NaN/Inf
    coordinates fail with TN_ERR_NUMERIC. */
-TN_API tn_status tn_mst(const float *xy, int n, int **edges);
+TN_API tn_status tn_mst(int **edges, const float *xy, int n);
 
 /* ---- contour parts (section 4.1) -----------------------------------------------------------
    The polylines form a graph: ends of the same type at the same or 8-adjacent pixels meet (a
@@ -1111,7 +1111,7 @@ TN_API tn_status tn_mst(const float *xy, int n, int **edges);
    junctions. A part takes the type, order and gradient of the line its first point is on; its
    index is its position in *parts (same input and seed, same parts). Used for DEM networks and
    densified sketches alike. An empty input gives an empty set. */
-TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts);
+TN_API tn_status tn_contour_parts_make(tn_contour_set *parts, const tn_contour_set *lines, uint64_t seed);
 
 /* ---- alignment (section 5.3, algorithms A1 and A2) ------------------------------------------
    Every part becomes an 8-direction chain code (steps quantised to k * pi/4), reversed when it
@@ -1131,8 +1131,8 @@ typedef struct tn_align_opts {
 /* match[i] (caller-allocated, sketch_parts->count ints) = index of the DEM part aligned to sketch
    part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count.
    Reports progress as stage "align" every 1024 sketch parts (cancellable). */
-TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
-                                 const tn_align_opts *opts, int *match);
+TN_API tn_status tn_sketch_align(int *match, const tn_contour_set *sketch_parts,
+                                 const tn_contour_set *dem_parts, const tn_align_opts *opts);
 #endif /* TN_NO_SKETCH */
 
 /* ============================================================================================
@@ -1190,7 +1190,7 @@ TN_API void      tn_flow_free(tn_flow *flow);
    k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
    (a threshold mask on the accumulation is). Returns the highest order in *max_order. Direction
    codes other than 0-7 and TN_FLOW_OUTLET, or ones stepping off the map, fail with TN_ERR_CORRUPT. */
-TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
+TN_API tn_status tn_strahler_order(uint8_t *order, const tn_flow *flow, const uint8_t *mask, int *max_order);
 
 enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
 
@@ -1220,7 +1220,7 @@ typedef struct tn_extraction {
    at least 0.1 % of the map, so the same terrain gives the same network at any resolution. */
 TN_API int       tn_extract_default_threshold(int width, int height);
 /* Runs the whole pipeline on channel 0 of dem. opts may be NULL. */
-TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out);
+TN_API tn_status tn_extract(tn_extraction *out, const tn_image *dem, const tn_extract_opts *opts);
 TN_API void      tn_extraction_free(tn_extraction *ex);
 
 /* Realism of a terrain img against a reference (both channel 0, heights in the same units).
@@ -1246,8 +1246,8 @@ typedef struct tn_realism {
 } tn_realism;
 
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
-TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
-                                    tn_realism *out);
+TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const tn_image *img,
+                                    const tn_realism_opts *opts);
 #endif /* TN_NO_EXTRACT */
 
 /* ============================================================================================
@@ -1343,7 +1343,7 @@ typedef struct tn_style_scores {
     double slope_hist_dist; /* tn_realism slope_distance (relative EMD of slope histograms): lower is closer */
     double spectrum_dist;   /* tn_realism spectrum_distance (RMS log10 spectrum difference): lower is closer */
 } tn_style_scores;
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out);
+TN_API tn_status tn_style_compare(tn_style_scores *out, const tn_image *map, const tn_image *source);
 
 /* A Perlin fBm content map of width x height for `source`: the gain is picked from 0.45, 0.50,
    ..., 0.90 to minimise tn_style_compare's slope-histogram + spectrum distances to the source,
@@ -1444,35 +1444,35 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *exemplar, con
                                  tn_texgan_stats *stats);
 TN_API void tn_texgan_free(tn_texgan *model);
 /* Model files are .tnw: a config tensor (architecture, value range, exemplar mean) + EMA weights. */
-TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path);
+TN_API tn_status tn_texgan_save(const char *path, const tn_texgan *model);
 TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path);
 
 /* Synthesises the w x h window at pixel (x0, y0) of the infinite texture of `seed` (x0, y0 >= 0)
    in one generator pass. *out is allocated here. */
-TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h,
-                                             tn_image *out);
+TN_API tn_status tn_texgan_synthesize_window(tn_image *out, const tn_texgan *model, uint64_t seed, int x0, int y0, int w,
+                                             int h);
 /* Called with consecutive row bands of a tiled synthesis: rows [y0, y0 + band->height). */
 typedef tn_status (*tn_band_fn)(void *user, int y0, const tn_image *band);
 /* Tiled synthesis of a width x height texture: z split into tiles of tile_cells cells (0 = 32)
    with 4 cells of overlap (2 for nearest models), each tile run alone and cropped; bands of one tile row are handed to
-   fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window(0, 0). */
+   fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window at (0, 0). */
 TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t seed, int width, int height,
                                              int tile_cells, tn_band_fn fn, void *user);
 /* Whole image in memory (tiled internally). */
-TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out);
+TN_API tn_status tn_texgan_synthesize(tn_image *out, const tn_texgan *model, uint64_t seed, int width, int height);
 /* Streams a synthesis to disk band by band (PFM or 8-bit PPM/PGM by extension; other formats are
    built in memory and saved whole). Channels beyond 3 go to "<stem>.ch3-5<ext>" and so on.
    shift (channels floats, may be NULL) is added before writing (colour correction), results
    clipped to the model's range. Files appear atomically. */
-TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height,
-                                           const float *shift, const char *path);
+TN_API tn_status tn_texgan_synthesize_file(const char *path, const tn_texgan *model, uint64_t seed, int width,
+                                           int height, const float *shift);
 
 /* Colour correction: adds a per-channel shift so that the mean of the result, clipped to
    [lo, hi], equals target_mean (found by bisection, so clipping does not spoil it). In place. */
 TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target_mean, float lo, float hi);
 /* The per-channel shift the same correction would apply (for streamed outputs). */
-TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target_mean, float lo, float hi,
-                                         float *shift);
+TN_API tn_status tn_texture_colour_shift(float *shift, const tn_image *img, const float *target_mean, float lo,
+                                         float hi);
 
 /* Detail maps for a renderer. */
 typedef struct tn_detail_maps {
@@ -1504,18 +1504,18 @@ TN_API void tn_detail_maps_free(tn_detail_maps *maps);
 /* One texel as a shader computes it, (u, v) in [0, 1) across the texture: bilinear low map
    (texel centres, clamped) + 2 (bilinear high map, repeated tiling times - 0.5), clipped.
    out gets channels floats. */
-TN_API void tn_detail_texel(const tn_detail_maps *maps, float u, float v, float *out);
+TN_API void tn_detail_texel(float *out, const tn_detail_maps *maps, float u, float v);
 /* The whole composed texture at width x height (0, 0 = the maps' size). */
-TN_API tn_status tn_detail_compose(const tn_detail_maps *maps, int width, int height, tn_image *out);
+TN_API tn_status tn_detail_compose(tn_image *out, const tn_detail_maps *maps, int width, int height);
 /* PREFIX_low.png, PREFIX_high.png (8-bit) and PREFIX_detail.txt (size, tiling, factor, sigma,
    range) as a sidecar, since the tiling factor must travel with the maps. */
-TN_API tn_status tn_detail_maps_save(const tn_detail_maps *maps, const char *prefix);
+TN_API tn_status tn_detail_maps_save(const char *prefix, const tn_detail_maps *maps);
 TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix);
 /* Side-by-side preview (2 x 2 panels of `panel` pixels, 0 = 384): top far view of the whole
    texture, bottom a near crop at full resolution; left naive tiling of the exemplar, right
    the detail-mapped texture; all shaded by the hillshade of dem (NULL = a Perlin terrain). */
-TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *exemplar, const tn_image *dem,
-                                   int panel, tn_image *out);
+TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *maps, const tn_image *exemplar,
+                                   const tn_image *dem, int panel);
 #endif /* TN_NO_TEXGAN */
 
 /* ============================================================================================
@@ -1632,31 +1632,31 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
 /* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
    Reports progress as "singan-train scale S/N". *model is allocated here (free with
    tn_singan_free); stats may be NULL. */
-TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts, tn_singan *model, tn_singan_stats *stats);
+TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts, tn_singan_stats *stats);
 TN_API void tn_singan_free(tn_singan *model);
 /* .tnw model files stamped with method "singan"; load refuses other methods' files and
    checkpoints with TN_ERR_FORMAT and damaged ones with TN_ERR_CORRUPT. */
-TN_API tn_status tn_singan_save(const tn_singan *model, const char *path);
-TN_API tn_status tn_singan_load(const char *path, tn_singan *model);
+TN_API tn_status tn_singan_save(const char *path, const tn_singan *model);
+TN_API tn_status tn_singan_load(tn_singan *model, const char *path);
 
 /* The window (x0, y0, w, h) of the infinite random terrain of opts->seed at the example's pixel
    size, in the example's units: any window equals the same pixels of a larger one exactly (a
    whole map and its tiles agree). Heights beyond the example's range are compressed smoothly
    into 10 % of the range on either side (upstream SinGAN clamps to the range). *out (one
    channel) is allocated here. */
-TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts,
-                                  tn_image *out);
+TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h,
+                                  const tn_singan_gen_opts *opts);
 /* Adds the example's detail to `in` (a smooth map in the example's units and pixel size, e.g.
    a GNN output or a membrane): `in` resized to scale opts->from_scale replaces the upsampled
    coarser output there and the generators of that scale and the finer ones run. *out has in's
    size. */
-TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out);
+TN_API tn_status tn_singan_refine(tn_image *out, const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts);
 /* Super-resolution by `factor` (1 < factor <= 64): `in` stands for the scale round(log factor /
    log(1/model->factor)) scales coarser than the output; the generators above it add detail
    (beyond the finest scale the finest generator repeats, SinGAN's SR mode). *out is
    round(factor * in's size). */
-TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
-                                   tn_image *out);
+TN_API tn_status tn_singan_upscale(tn_image *out, const tn_singan *model, const tn_image *in, float factor,
+                                   const tn_singan_gen_opts *opts);
 
 /* GPNN baseline (Granot et al. 2022, "Drop the GAN"): generation by patch nearest neighbours,
    no training. A pyramid of the example (factor, down to `coarsest` px); the output's coarsest
@@ -1683,7 +1683,7 @@ typedef struct tn_gpnn_opts {
 
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
    in its units. *out (one channel) is allocated here. opts may be NULL (defaults). */
-TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out);
+TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts);
 #endif /* TN_NO_SINGAN */
 
 /* ============================================================================================
@@ -1896,25 +1896,25 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o);
    (channel 0) two windows away from the training window at (x, y), spread around it; the
    adjacent ones when none of those fits; windows with a NaN/Inf left out. Writes them to out[]
    (free each with tn_image_free) and returns how many (0 when none fits or max <= 0). */
-TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out);
+TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max);
 /* Trains on channel 0 of dem (at least 16 x 16, finite). Reports progress as "gnn-train".
    *model is allocated here (free with tn_gnn_free); stats may be NULL. A DEM without any
    extracted contour or contour part fails with TN_ERR_EMPTY. */
-TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts, tn_gnn *model, tn_gnn_stats *stats);
+TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts, tn_gnn_stats *stats);
 TN_API void tn_gnn_free(tn_gnn *model);
 /* .tnw model files stamped with method "gnn"; load refuses other methods' files and
    checkpoints with TN_ERR_FORMAT, and damaged configurations with TN_ERR_CORRUPT. */
-TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path);
-TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model);
+TN_API tn_status tn_gnn_save(const char *path, const tn_gnn *model);
+TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path);
 /* The example's contour parts as the model stores them (example units). *out allocated here. */
-TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out);
+TN_API tn_status tn_gnn_parts(tn_contour_set *out, const tn_gnn *model);
 
 /* Terrain of width x height following `sketch` (polylines; coordinates scale from its canvas),
    in the example's height units. *out (one channel) is allocated here. opts may be NULL.
    Same inputs and seed, same output, for any thread count. An empty sketch or one without a
    part of 5 px fails with TN_ERR_EMPTY, NaN/Inf points with TN_ERR_NUMERIC. */
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out);
+TN_API tn_status tn_gnn_generate(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width,
+                                 int height, const tn_gnn_generate_opts *opts);
 /* Pixels (x, y) .. (x + w - 1, y + h - 1) of the width x height map tn_gnn_generate would give,
    computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
    pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
@@ -1922,8 +1922,8 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    by that halo (plus tn_fine_detail_halo with the fine detail). Large maps and windows run in
    tiles of 256 px (+ halo) internally, so memory follows the tile, not the map (the fine-tune's
    too: it works on windows of maps over 256^2; the fine detail's tiles are 1024 px). */
-TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
-                                        int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
+TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x,
+                                        int y, int w, int h, const tn_gnn_generate_opts *opts);
 
 /* The residual gain that opts->gain = 0 uses: how far the network's residual over the membrane is
    to be trusted on this sketch, tested on the sketch itself. Three times, 30 % of the user's
@@ -1936,20 +1936,20 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
    the reconstruction), fewer than 8 user lines (a drawing of a few strokes: a held-out stroke
    says little about the rest), a model without membrane, or opts->gain != 0 (then that
    setting, clamped at 0). */
-TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                             float *gain);
+TN_API tn_status tn_gnn_gain(float *gain, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                             const tn_gnn_generate_opts *opts);
 
 /* Does a terrain obey its sketch's ordering? Along every densified sketch line (coordinates
    scaled from the sketch canvas to the terrain), each point is compared with the two pixels
    `distance` px away across the line (normal from the points 2 before and after; 0 = 3 px):
    *share = the fraction of ridge points above both and valley points below both (points whose
    across pixels leave the map are skipped; *count, may be NULL, = the points compared). */
-TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count);
+TN_API tn_status tn_gnn_ordering(double *share, const tn_contour_set *sketch, const tn_image *terrain, float distance, int *count);
 
 /* The membrane baseline: heights fixed on the sketch's rasterised ridge and valley pixels
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
-TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, int width, int height);
 
 /* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
 typedef struct tn_gnn_plan {
@@ -1966,8 +1966,8 @@ typedef struct tn_gnn_plan {
 } tn_gnn_plan;
 /* Fills *plan for tn_gnn_generate with the same arguments (without running the network
    beyond the gain test). */
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan);
+TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                const tn_gnn_generate_opts *opts);
 #endif /* TN_NO_GNN */
 
 /* ============================================================================================
@@ -2002,8 +2002,8 @@ typedef struct tn_gnn_grow_opts {
    heights (tn_gnn_parts of a model, or an extraction's contours), same pixel size, at least
    16 x 16. Same inputs and seed, same output. opts may be NULL. *added (may be NULL) = the
    number of added polylines. */
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added);
+TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
+                             int height, const tn_gnn_grow_opts *opts, int *added);
 #endif /* TN_NO_GNN */
 
 /* ============================================================================================
@@ -2053,10 +2053,10 @@ TN_API void tn_insolation_defaults(tn_insolation_opts *o);
    at least 2 x 2) at latitude_deg (-90..90; south negative; row 0 is north). *out (allocated
    here) has 12 channels, channel m = month m + 1, or one channel with opts->month. Threaded,
    bit-identical for any thread count; progress "insolation". */
-TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out);
+TN_API tn_status tn_insolation(tn_image *out, const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts);
 /* Sun on day_of_year (1..366): declination (radians) and the orbit's eccentricity factor
    (Spencer 1971). Either output may be NULL. */
-TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity);
+TN_API void tn_sun_day(double *declination, double *eccentricity, int day_of_year);
 /* Day of the year of `day` in `month` (1..12) of a non-leap year. */
 TN_API int tn_day_of_year(int month, int day);
 
@@ -2075,11 +2075,11 @@ TN_API tn_status tn_climate_check(const tn_climate *c);
 /* Parses the CSV text of docs/season.md ("month,t_c,p_mm" rows for months 1..12, each once;
    optional "latitude,L" and "elevation,H" rows; '#' comments). A missing month, a NaN, an
    unknown row or |latitude| > 90 fails with a message naming the line. name may be NULL. */
-TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out);
-TN_API tn_status tn_climate_load(const char *path, tn_climate *out);
+TN_API tn_status tn_climate_parse(tn_climate *out, const char *text, size_t size, const char *name);
+TN_API tn_status tn_climate_load(tn_climate *out, const char *path);
 /* Built-in Koppen presets ("Af", "Aw", "BWh", "Csa", "Cfb", "Dfb", "Dfc", "ET"; a group letter
    "A".."E" picks the first of its group). Unknown codes fail with TN_ERR_INVALID_ARG. */
-TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out);
+TN_API tn_status tn_climate_koppen(tn_climate *out, const char *code);
 /* The i-th preset's code (i from 0), or NULL past the end. */
 TN_API const char *tn_climate_koppen_code(int i);
 /* Temperature of month m (0..11) at height h (metres): t[m] + lapse_rate * (h - elevation);
@@ -2113,20 +2113,20 @@ TN_API void tn_season_defaults(tn_season_opts *o);
    from latitude_deg if finite, else the climate's; neither fails). out[i] (RGB in [0, 1],
    allocated here) and state[i] (may be NULL) are filled for each time. A wrong-sized insolation
    fails with TN_ERR_SHAPE. Progress "season". */
-TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
-                                   const tn_image *insolation, const float *times, int count,
-                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state);
+TN_API tn_status tn_season_texture(tn_image *out, const tn_image *dem, const tn_climate *climate,
+                                   double latitude_deg, const tn_image *insolation, const float *times,
+                                   int count, const tn_season_opts *opts, tn_season_state *state);
 TN_API void tn_season_state_free(tn_season_state *s);
 /* A preview sheet: the images side by side in `columns` columns (0 = 4), each scaled to
    `cell` pixels wide (0 = 256), 4 px gaps. *out allocated here. */
-TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out);
+TN_API tn_status tn_season_sheet(tn_image *out, const tn_image *images, int count, int columns, int cell);
 /* The same with a caption over each image: labels[i] (NULL or labels NULL: none), in capitals,
    digits and - / . : % (other characters show as blanks), e.g. tn_season_time_label's. */
-TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
-                                          tn_image *out);
+TN_API tn_status tn_season_sheet_labelled(tn_image *out, const tn_image *images, const char *const *labels, int count, int columns,
+                                          int cell);
 /* "JAN", or "MAR 30" for a time between months: time in months from mid-January (as
    tn_season_texture takes them). Writes at most size bytes to buf; returns buf. */
-TN_API char *tn_season_time_label(float time, char *buf, size_t size);
+TN_API char *tn_season_time_label(char *buf, size_t size, float time);
 
 /* KPD generator (paper 003, 3.1-3.2): a SPADE-style network whose denormalisation blocks take
    the heightfield (height and its gradient) plus the year of climate rotated so the target month
@@ -2151,7 +2151,7 @@ typedef enum tn_kpd_condition {
 
 /* Name of a condition ("ours", "cond1" .. "cond4"); tn_kpd_condition_parse reads one (or "1".."4"). */
 TN_API const char *tn_kpd_condition_name(tn_kpd_condition c);
-TN_API tn_status tn_kpd_condition_parse(const char *s, tn_kpd_condition *out);
+TN_API tn_status tn_kpd_condition_parse(tn_kpd_condition *out, const char *s);
 
 /* One training picture: a heightfield under a climate at a time of the year, and what it looked
    like then. Nothing is owned. */
@@ -2201,18 +2201,18 @@ typedef struct tn_kpd_stats {
 TN_API void tn_kpd_defaults(tn_kpd_opts *o);
 /* Trains on `count` samples (random crop x crop windows of them, at least a quarter valid).
    Progress "season-train". *model allocated here; stats may be NULL. */
-TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd *model,
+TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, int count, const tn_kpd_opts *opts,
                               tn_kpd_stats *stats);
 TN_API void tn_kpd_free(tn_kpd *model);
 /* .tnw stamped with method "kpd"; load refuses other methods' files (TN_ERR_FORMAT). */
-TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path);
-TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model);
+TN_API tn_status tn_kpd_save(const char *path, const tn_kpd *model);
+TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path);
 /* The window (x0, y0, w, h) of the texture of dem under climate at `time` (months from
    mid-January; between two months the gamma/beta of both are interpolated), in the target's
    units: any window equals those pixels of the whole map exactly. insolation: dem's 12-channel
    tn_insolation (TN_KPD_OURS; NULL fails). Runs in tiles of 256 px; *out allocated here. */
-TN_API tn_status tn_kpd_generate(const tn_kpd *model, const tn_image *dem, const tn_climate *climate, const tn_image *insolation,
-                                 float time, int x0, int y0, int w, int h, tn_image *out);
+TN_API tn_status tn_kpd_generate(tn_image *out, const tn_kpd *model, const tn_image *dem, const tn_climate *climate,
+                                 const tn_image *insolation, float time, int x0, int y0, int w, int h);
 
 /* A season data set (docs/season.md): a text file of sites and their dated pictures. Paths are
    relative to the file's folder.
@@ -2234,7 +2234,7 @@ typedef struct tn_season_data {
     char (*labels)[32];            /* [count] WHEN as written */
     float lo, hi;
 } tn_season_data;
-TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out);
+TN_API tn_status tn_season_data_load(tn_season_data *out, const char *path);
 TN_API void tn_season_data_free(tn_season_data *d);
 /* Months from mid-January of a date "YYYY-MM-DD" (or a plain number of months); -1 if malformed. */
 TN_API float tn_season_time_of(const char *when);
@@ -2257,7 +2257,7 @@ typedef struct tn_render_opts {
 /* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used):
    green lowlands, tan and brown hills, grey rock, snow over [lo, hi], and with opts->sea blues
    below the sea level. opts may be NULL. Caller frees *out. */
-TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out);
+TN_API tn_status tn_render_preview(tn_image *out, const tn_image *dem, const tn_render_opts *opts);
 
 typedef struct tn_view_opts {
     int width, height;         /* output size; 0 = 960 x 540 */
@@ -2275,7 +2275,7 @@ typedef struct tn_view_opts {
 
 /* 3D perspective view of the DEM (ray-marched height field, front-to-back with a per-column
    occlusion buffer, distance haze, sky). RGB in [0, 1]. opts may be NULL. Caller frees *out. */
-TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out);
+TN_API tn_status tn_render_view(tn_image *out, const tn_image *dem, const tn_view_opts *opts);
 #endif /* TN_NO_RENDER */
 
 /* ============================================================================================
@@ -2301,18 +2301,18 @@ typedef struct tn_mesh_opts {
 /* Writes the mesh atomically. Channel 0 of dem is the height. NaN/Inf heights or texture values
    fail with TN_ERR_NUMERIC, a DEM under 2 x 2 with TN_ERR_EMPTY, meshes over 2^32 vertices or
    TN_MAX_ALLOC bytes with TN_ERR_TOO_LARGE. opts may be NULL. */
-TN_API tn_status tn_export_glb(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
-TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
+TN_API tn_status tn_export_glb(const char *path, const tn_image *dem, const tn_mesh_opts *opts);
+TN_API tn_status tn_export_obj(const char *path, const tn_image *dem, const tn_mesh_opts *opts);
 
 /* Normal map of the DEM as RGB in [0, 1] (n / 2 + 0.5, n from tn_image_normals): red = x east,
    blue = z up, green = y north with directx 0 (OpenGL, "Y+") or y south with directx 1
    (DirectX, "Y-"). Save it as an 8-bit PNG for an engine. */
-TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out);
+TN_API tn_status tn_normal_map(tn_image *out, const tn_image *dem, float dx, float dy, float z_scale, int directx);
 /* Unity terrain RAW: size x size 16-bit little-endian codes, size = 2^n + 1 (33..4097; 0 = the
    smallest not below the DEM's larger side), the DEM resampled bicubic to it when its size
    differs; codes 0..65535 span the DEM's range, returned in *lo and *hi (may be NULL) for the
    terrain's height setting. Written atomically. */
-TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi);
+TN_API tn_status tn_export_unity_raw(const char *path, const tn_image *dem, int size, float *lo, float *hi);
 
 /* Splat map: per-pixel weights of four ground materials for an engine's terrain shader,
    RGBA = (vegetation, bare ground, rock, snow), each in [0, 1], summing to 1 at every pixel.
@@ -2342,7 +2342,7 @@ typedef struct tn_splat_opts {
 /* Fills *out (4 channels, the DEM's size; caller frees). opts may be NULL. NaN/Inf heights or
    mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
    2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
-TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
+TN_API tn_status tn_export_splat(tn_image *out, const tn_image *dem, const tn_splat_opts *opts);
 #endif /* TN_NO_EXPORT */
 
 /* ============================================================================================
@@ -2394,13 +2394,13 @@ typedef struct tn_world_opts {
 /* Parses a SPEC (text, NUL-terminated) into *w (free with tn_world_free). Unknown settings,
    methods or parameters, a pipeline without a generator first, non-local methods and halos
    the world is too small for fail with TN_ERR_INVALID_ARG and say why. opts may be NULL. */
-TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w);
+TN_API tn_status tn_world_parse(tn_world *w, const char *text, const tn_world_opts *opts);
 /* Reads and parses a SPEC file. */
-TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w);
+TN_API tn_status tn_world_load(tn_world *w, const char *path, const tn_world_opts *opts);
 TN_API void tn_world_free(tn_world *w);
 /* Any rectangle of the output raster, in global pixel coordinates (inside the raster): the same
    pixels a whole-map run gives there. Memory is bounded by the rectangle plus its halo. */
-TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out);
+TN_API tn_status tn_world_rect(tn_image *out, const tn_world *w, tn_rect r);
 /* Tile (row, col) of the grid: columns col * tile .., rows row * tile .. (smaller at the far edges). */
 TN_API tn_rect tn_world_tile_rect(const tn_world *w, int row, int col);
 
@@ -2422,14 +2422,14 @@ typedef struct tn_world_run_stats {
    is skipped, so a run resumes, when it matches DIR/manifest.txt's size and digest or, unlisted,
    decodes as this tile; a damaged or foreign file is computed again). DIR must exist; DIR/world.spec is written on
    first use and a different world in DIR is refused. Progress stage "world". stats may be NULL. */
-TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts,
+TN_API tn_status tn_world_write_tiles(const char *dir, const tn_world *w, const tn_world_run_opts *opts,
                                       tn_world_run_stats *stats);
 /* Writes DIR/world.vrt (a GDAL mosaic of the whole grid, heights in metres through the band's
    offset and scale; above 64 x 64 tiles a mosaic of DIR/world_bI_J.vrt, each of 64 x 64 tiles)
    and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's FNV-1a 64 digest of
    its file bytes and its size; a file that fails the check above is not present), both
    atomically. present (may be NULL) gets the count. */
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
+TN_API tn_status tn_world_write_index(const char *dir, const tn_world *w, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
 #endif /* TN_NO_WORLD */
@@ -3317,7 +3317,7 @@ TN_API tn_status tn_image_copy(tn_image *dst, const tn_image *src)
     return TN_OK;
 }
 
-TN_API size_t tn_image_range(const tn_image *img, float *lo, float *hi)
+TN_API size_t tn_image_range(float *lo, float *hi, const tn_image *img)
 {
     size_t i, n = (size_t)img->width * img->height * img->channels, bad = 0;
     float mn = FLT_MAX, mx = -FLT_MAX;
@@ -4096,7 +4096,7 @@ static tn_status tn__inv_spacing(float dx, float dy, float scale, float *ix, flo
     return TN_OK;
 }
 
-TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_image *gx, tn_image *gy)
+TN_API tn_status tn_image_gradient(tn_image *gx, tn_image *gy, const tn_image *dem, float dx, float dy)
 {
     tn_image ox, oy;
     tn__terrain_job job;
@@ -4813,7 +4813,7 @@ static tn_status tn__z_inflate_run(tn__inflate *s, const uint8_t *src, size_t n)
 
 /* Inflates a zlib stream into a new TN_MALLOC'ed buffer (caller frees with TN_FREE). Output
    larger than max_out (0 = TN_MAX_ALLOC) fails with TN_ERR_TOO_LARGE. */
-TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, size_t *out_size, size_t max_out)
+TN_API tn_status tn_zlib_inflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, size_t max_out)
 {
     tn__inflate *s;
     tn_status st;
@@ -5256,7 +5256,7 @@ static tn_status tn__z_parse_lazy(tn__deflate *s)
 
 /* Compresses src into a zlib stream in a new TN_MALLOC'ed buffer (caller frees with TN_FREE).
    level 1-9 as zlib; 0 (or out of range) means 6. */
-TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_t **out, size_t *out_size)
+TN_API tn_status tn_zlib_deflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, int level)
 {
     tn__deflate *s;
     tn_status st = TN_OK;
@@ -5848,7 +5848,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
         filt[(size_t)y * (rowbytes + 1)] = (uint8_t)f;
         memcpy(filt + (size_t)y * (rowbytes + 1) + 1, rows + (2 + (size_t)f) * rowbytes, rowbytes);
     }
-    if ((st = tn_zlib_deflate(filt, fsize, level, &z, &zn)) != TN_OK) goto done;
+    if ((st = tn_zlib_deflate(&z, &zn, filt, fsize, level)) != TN_OK) goto done;
     if (record_range) {
         memcpy(text, "terrainnet.range", 17);
         /* shortest round-trip text with '.', whatever the C locale (the reader is locale-free too) */
@@ -6065,7 +6065,7 @@ static tn_status tn__io_save_mapping(const tn_image *img, const tn_save_opts *op
         *record = 1;
         return TN_OK;
     }
-    tn_image_range(img, &mn, &mx);
+    tn_image_range(&mn, &mx, img);
     if (mn >= 0.0f && mx <= 1.0f) {
         *lo = 0.0;
         *hi = 1.0;
@@ -7685,7 +7685,7 @@ static void tn__tif_enc_range(void *ctx, size_t b, size_t e)
                 }
             }
         }
-        j->st[s] = tn_zlib_deflate(raw, rows * j->row_bytes, j->level, &j->z[s], &j->zn[s]);
+        j->st[s] = tn_zlib_deflate(&j->z[s], &j->zn[s], raw, rows * j->row_bytes, j->level);
     }
     TN_FREE(raw);
     TN_FREE(tmp);
@@ -7927,8 +7927,8 @@ static tn_format tn__io_format_from_name(const char *path)
 
 /* ---- load ---- */
 
-TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char *name, tn_image *img,
-                                      tn_image_info *info, const tn_load_opts *opts)
+TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t size, const char *name,
+                                      const tn_load_opts *opts, tn_image_info *info)
 {
     static const uint8_t empty[1] = {0};
     const uint8_t *p = data ? (const uint8_t *)data : empty;
@@ -8011,7 +8011,7 @@ static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_s
     return TN_OK;
 }
 
-TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info *info, const tn_load_opts *opts)
+TN_API tn_status tn_image_load_ex(tn_image *img, const char *path, const tn_load_opts *opts, tn_image_info *info)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
@@ -8020,14 +8020,14 @@ TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "load: empty path");
     st = tn__io_read_file(path, &buf, &n);
     if (st) return st;
-    st = tn_image_load_memory(buf, n, path, img, info, opts);
+    st = tn_image_load_memory(img, buf, n, path, opts, info);
     TN_FREE(buf);
     return st;
 }
 
-TN_API tn_status tn_image_load(const char *path, tn_image *img, tn_image_info *info)
+TN_API tn_status tn_image_load(tn_image *img, const char *path, tn_image_info *info)
 {
-    return tn_image_load_ex(path, img, info, NULL);
+    return tn_image_load_ex(img, path, NULL, info);
 }
 
 /* ---- save ---- */
@@ -8043,8 +8043,8 @@ static void tn__save_opts_defaults(tn_save_opts *o, int channels, tn_format form
     if (!(o->cellsize > 0.0 && o->cellsize <= DBL_MAX)) o->cellsize = 1.0;
 }
 
-TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format, uint8_t **out,
-                                      size_t *out_size)
+TN_API tn_status tn_image_save_memory(uint8_t **out, size_t *out_size, const tn_image *img, tn_format format,
+                                      const tn_save_opts *opts)
 {
     tn_save_opts o;
     double lo = 0.0, hi = 1.0;
@@ -8056,7 +8056,7 @@ TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *o
     *out_size = 0;
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return tn__fail(TN_ERR_INVALID_ARG, "save: the image is empty");
-    bad = tn_image_range(img, NULL, NULL);
+    bad = tn_image_range(NULL, NULL, img);
     if (bad) return tn__fail(TN_ERR_NUMERIC, "save: the image has %zu NaN/Inf samples", bad);
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
@@ -8332,7 +8332,7 @@ TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_s
     if (f == TN_FORMAT_AUTO) f = tn__io_format_from_name(path);
     if (f == TN_FORMAT_AUTO)
         return tn__fail(TN_ERR_FORMAT, "%s: cannot tell the format from the extension (png pgm ppm pnm pfm hgt asc r16 raw tif tiff)", path);
-    st = tn_image_save_memory(img, opts, f, &buf, &n);
+    st = tn_image_save_memory(&buf, &n, img, f, opts);
     if (st) return tn__fail_context(st, path);
     st = tn__io_write_atomic(path, buf, n);
     TN_FREE(buf);
@@ -8493,7 +8493,7 @@ static tn_status tn__metrics_prepare(const tn_image *ref, const tn_image *img, d
     if (*data_range != *data_range || *data_range > DBL_MAX)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: data_range is not finite", what);
     if (*data_range <= 0.0) {
-        if (tn_image_range(ref, &lo, &hi) != 0)
+        if (tn_image_range(&lo, &hi, ref) != 0)
             return tn__fail(TN_ERR_NUMERIC, "%s: the reference has NaN/Inf samples", what);
         *data_range = (double)hi - (double)lo;
         if (*data_range <= 0.0)
@@ -8547,7 +8547,7 @@ static tn_status tn__ssim_compute(const tn_image *ref, const tn_image *img, doub
     return TN_OK;
 }
 
-TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_range, double *ssim)
+TN_API tn_status tn_ssim(double *ssim, const tn_image *ref, const tn_image *img, double data_range)
 {
     double v;
     tn_status st;
@@ -8581,7 +8581,7 @@ static void tn__error_rows(void *ctx, size_t b, size_t e)
     }
 }
 
-TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double data_range, tn_metrics *out)
+TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image *img, double data_range)
 {
     tn_metrics m;
     tn__error_job job;
@@ -9300,7 +9300,7 @@ TN_API const char *tn_precision_name(tn_precision p)
     return p == TN_PRECISION_BF16 ? "bf16" : p == TN_PRECISION_FP32 ? "fp32" : "auto";
 }
 
-TN_API tn_status tn_precision_parse(const char *s, tn_precision *p)
+TN_API tn_status tn_precision_parse(tn_precision *p, const char *s)
 {
     if (s && !strcmp(s, "auto")) *p = TN_PRECISION_AUTO;
     else if (s && !strcmp(s, "bf16")) *p = TN_PRECISION_BF16;
@@ -9738,7 +9738,7 @@ TN_API tn_tensor *tn_tensor_from_image(tn_ctx *ctx, const tn_image *img)
     return t;
 }
 
-TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img)
+TN_API tn_status tn_tensor_to_image(tn_image *img, const tn_tensor *t, int n)
 {
     tn_image out = {0, 0, 0, NULL};
     size_t i, hw;
@@ -11988,7 +11988,7 @@ static size_t tn__meta_write(const tn_params *p, uint8_t *out)
     return off;
 }
 
-TN_API tn_status tn_params_save(const tn_params *p, const char *path)
+TN_API tn_status tn_params_save(const char *path, const tn_params *p)
 {
     size_t meta = tn__meta_size(p), size = 12 + 4 + (p->nmeta ? 4 + meta : 0), off, k;
     uint8_t *buf;
@@ -12203,7 +12203,7 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     return TN_OK;
 }
 
-TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out)
+TN_API tn_status tn_params_open_memory(tn_params **out, const uint8_t *data, size_t size, const char *name)
 {
     TN_ASSERT(out);
     *out = NULL;
@@ -12211,7 +12211,7 @@ TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const c
     return tn__tnw_read(data, size, name ? name : "weights", out);
 }
 
-TN_API tn_status tn_params_open(const char *path, tn_params **out)
+TN_API tn_status tn_params_open(tn_params **out, const char *path)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
@@ -12268,7 +12268,7 @@ TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t
     tn_status st;
     TN_ASSERT(p);
     name = name ? name : "weights";
-    if ((st = tn_params_open_memory(data, size, name, &f))) return st;
+    if ((st = tn_params_open_memory(&f, data, size, name))) return st;
     st = tn__params_assign(p, f, name);
     tn_params_free(f);
     return st;
@@ -12279,7 +12279,7 @@ TN_API tn_status tn_params_load(tn_params *p, const char *path)
     tn_params *f = NULL;
     tn_status st;
     TN_ASSERT(p);
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn__params_assign(p, f, path);
     tn_params_free(f);
     return st;
@@ -12581,7 +12581,7 @@ TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes)
 
 static int tn__train_name_ok(const char *s, size_t cap) { return s && strlen(s) < cap; }
 
-TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out)
+TN_API tn_status tn_train_create(tn_train **out, const char *method, const char *stage, const tn_train_opts *opts)
 {
     tn_train *r;
     TN_ASSERT(out);
@@ -12842,7 +12842,7 @@ TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path)
     path = path ? path : run->o.checkpoint;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "%s: no checkpoint path", run->method);
     if ((st = tn__train_state(run, &ck))) return st;
-    st = tn_params_save(ck, path);
+    st = tn_params_save(path, ck);
     tn_params_free(ck);
     if (!st) {
         run->ckpts++;
@@ -12859,7 +12859,7 @@ TN_API tn_status tn_train_open_checkpoint(tn_train *run, tn_params **ck)
     *ck = NULL;
     if (!run->o.resume) return tn__fail(TN_ERR_INVALID_ARG, "%s: not resuming", run->method);
     if (!run->ck) {
-        if ((st = tn_params_open(run->o.checkpoint, &run->ck))) return st;
+        if ((st = tn_params_open(&run->ck, run->o.checkpoint))) return st;
         m = tn_params_meta(run->ck, "method");
         if (m && strcmp(m, run->method) != 0) {
             st = tn__fail(TN_ERR_FORMAT, "%s: a checkpoint of method '%s', not '%s'", run->o.checkpoint, m, run->method);
@@ -13436,7 +13436,7 @@ static void tn__normalise01(tn_image *img)
 {
     float lo, hi;
     size_t i, n = (size_t)img->width * img->height * img->channels;
-    tn_image_range(img, &lo, &hi);
+    tn_image_range(&lo, &hi, img);
     for (i = 0; i < n; i++) img->data[i] = hi > lo ? (img->data[i] - lo) / (hi - lo) : 0.5f;
 }
 
@@ -13608,7 +13608,7 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
     if (!(weight >= 0.0f && weight <= 1.0f)) return tn__fail(TN_ERR_INVALID_ARG, "noise blend: weight must be in [0, 1]");
     if ((st = tn_image_create(&d, drawn->width, drawn->height, 1))) return st;
     for (i = 0; i < (size_t)drawn->width * drawn->height; i++) d.data[i] = drawn->data[i * drawn->channels];
-    if (tn_image_range(&d, NULL, NULL)) {
+    if (tn_image_range(NULL, NULL, &d)) {
         tn_image_free(&d);
         return tn__fail(TN_ERR_NUMERIC, "noise blend: the drawn map holds NaN/Inf");
     }
@@ -14201,7 +14201,7 @@ done:
     return st;
 }
 
-TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out)
+TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts)
 {
     tn__fd d;
     tn_status st;
@@ -14493,7 +14493,7 @@ static tn_status tn__tns_parse_lines(tn__tns_parser *p, char *buf)
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out)
+TN_API tn_status tn_sketch_parse(tn_contour_set *out, const char *text, size_t n, const char *name)
 {
     tn__tns_parser p;
     char *buf;
@@ -14533,7 +14533,7 @@ static tn_status tn__tns_put_numbers(void **buf, size_t *len, size_t *cap, const
     return st ? st : tn__io_append(buf, len, cap, tail, strlen(tail));
 }
 
-TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size)
+TN_API tn_status tn_sketch_format(char **text, size_t *size, const tn_contour_set *set)
 {
     char line[96];
     void *buf = NULL;
@@ -14584,13 +14584,13 @@ TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set)
     size_t n = 0;
     tn_status st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "sketch save: empty path");
-    if ((st = tn_sketch_format(set, &text, &n))) return tn__fail_context(st, path);
+    if ((st = tn_sketch_format(&text, &n, set))) return tn__fail_context(st, path);
     st = tn__io_write_atomic(path, (const uint8_t *)text, n);
     TN_FREE(text);
     return st;
 }
 
-TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
+TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path)
 {
     static const char magic[] = "terrainnet-sketch";
     uint8_t *buf = NULL;
@@ -14602,14 +14602,14 @@ TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
     if ((st = tn__io_read_file(path, &buf, &n))) return st;
     plen = strlen(path);
     if ((n >= sizeof magic - 1 && !memcmp(buf, magic, sizeof magic - 1)) || (plen > 4 && !strcmp(path + plen - 4, ".tns"))) {
-        st = tn_sketch_parse((const char *)buf, n, path, out);
+        st = tn_sketch_parse(out, (const char *)buf, n, path);
         TN_FREE(buf);
         return st;
     }
-    st = tn_image_load_memory(buf, n, path, &img, NULL, NULL);
+    st = tn_image_load_memory(&img, buf, n, path, NULL, NULL);
     TN_FREE(buf);
     if (st) return st;
-    st = tn_sketch_from_image(&img, out);
+    st = tn_sketch_from_image(out, &img);
     tn_image_free(&img);
     return st ? tn__fail_context(st, path) : TN_OK;
 }
@@ -14920,7 +14920,7 @@ static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t
     return st;
 }
 
-TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
+TN_API tn_status tn_sketch_from_image(tn_contour_set *out, const tn_image *img)
 {
     tn_contour_set set;
     size_t cap = 0, n, i, bytes;
@@ -14935,7 +14935,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
     if (img->width > TN_SKETCH_MAX_SIDE || img->height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_TOO_LARGE, "sketch image: %d x %d exceeds the canvas limit", img->width, img->height);
     /* an Inf channel passes the stroke test and would become an Inf height */
-    if ((n = tn_image_range(img, NULL, NULL)) != 0)
+    if ((n = tn_image_range(NULL, NULL, img)) != 0)
         return tn__fail(TN_ERR_NUMERIC, "sketch image: %zu NaN/Inf samples", n);
     n = (size_t)img->width * img->height;
     if (tn__size4(n, 1, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
@@ -14985,7 +14985,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
 
 /* ---- densify, rasterise, preview ---- */
 
-TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out)
+TN_API tn_status tn_sketch_densify(tn_contour_set *out, const tn_contour_set *in)
 {
     tn_contour_set set;
     tn__pts pts = {NULL, 0, 0};
@@ -15012,7 +15012,7 @@ TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out)
+TN_API tn_status tn_sketch_rasterise(tn_image *out, const tn_contour_set *set, int width, int height)
 {
     tn_image r = {0, 0, 0, NULL};
     tn__pts pts = {NULL, 0, 0};
@@ -15045,14 +15045,14 @@ TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int h
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out)
+TN_API tn_status tn_sketch_preview(tn_image *out, const tn_contour_set *set, const tn_image *dem, int width, int height)
 {
     tn_image lines = {0, 0, 0, NULL}, rgb = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
     int x, y, u, v, rad = width > height ? width / 512 : height / 512;
     size_t i, n;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn_sketch_rasterise(set, width, height, &lines))) return st;
+    if ((st = tn_sketch_rasterise(&lines, set, width, height))) return st;
     if ((st = tn_image_create(&rgb, width, height, 3))) goto fail;
     n = (size_t)width * height;
     if (dem && dem->data) {
@@ -15111,7 +15111,7 @@ static void tn__circumcircle(tn__tri *t, const double *p)
     t->r2 = ux * ux + uy * uy;
 }
 
-TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles)
+TN_API tn_status tn_delaunay(int **triangles, int *ntriangles, const float *xy, int n)
 {
     double *p = NULL, lo_x, lo_y, hi_x, hi_y, span;
     tn__tri *tri = NULL;
@@ -15212,7 +15212,7 @@ done:
     return TN_OK;
 }
 
-TN_API tn_status tn_mst(const float *xy, int n, int **edges)
+TN_API tn_status tn_mst(int **edges, const float *xy, int n)
 {
     double *best;
     int *from, *e, i, j, k;
@@ -15370,8 +15370,8 @@ static void tn__sketch_random_opts_defaults(tn_sketch_random_opts *o, int width,
     if (o->nodes == 0) o->nodes = tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
 }
 
-TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
-                                  tn_contour_set *out)
+TN_API tn_status tn_sketch_random(tn_contour_set *out, const tn_contour_set *user, int width, int height,
+                                  const tn_sketch_random_opts *opts)
 {
     tn_sketch_random_opts o;
     tn_contour_set set;
@@ -15411,7 +15411,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         node[2 * i + 1] = tn_rng_uniform(&rng) * (float)(height - 1);
         nh[i] = 0.5f + 0.5f * tn_rng_uniform(&rng);
     }
-    if ((st = tn_mst(node, n, &redges)) || (st = tn_delaunay(node, n, &tris, &ntri))) goto done;
+    if ((st = tn_mst(&redges, node, n)) || (st = tn_delaunay(&tris, &ntri, node, n))) goto done;
     /* Voronoi vertices = circumcentres of the Delaunay triangles, kept inside the canvas */
     vor = (float *)tn__alloc(((size_t)ntri + 1) * 2 * sizeof(float));
     vh = (float *)tn__alloc(((size_t)ntri + 1) * sizeof(float));
@@ -15430,7 +15430,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         vor[2 * nv + 1] = (float)t.cy;
         vh[nv++] = 0.5f * tn_rng_uniform(&rng);
     }
-    if (nv >= 2 && (st = tn_mst(vor, nv, &vedges))) goto done;
+    if (nv >= 2 && (st = tn_mst(&vedges, vor, nv))) goto done;
     /* user pixels first: ridge edges must miss them; then kept ridges too: valley edges must miss both */
     keep_r = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
     keep_v = (int *)tn__alloc(((size_t)nv + 1) * 2 * sizeof(int));
@@ -15600,7 +15600,7 @@ static tn_status tn__parts_cut(const tn__pgraph *g, tn_rng *rng, tn_contour_set 
     return st;
 }
 
-TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts)
+TN_API tn_status tn_contour_parts_make(tn_contour_set *parts, const tn_contour_set *lines, uint64_t seed)
 {
     tn_contour_set set;
     tn__pgraph g;
@@ -15889,8 +15889,8 @@ static void tn__align_opts_defaults(tn_align_opts *o)
     if (o->choices <= 0) o->choices = 5;
 }
 
-TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts, const tn_align_opts *opts,
-                                 int *match)
+TN_API tn_status tn_sketch_align(int *match, const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
+                                 const tn_align_opts *opts)
 {
     tn_align_opts o;
     tn__chains sk, skr, dem;
@@ -16738,7 +16738,7 @@ TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
 
 static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
 
-TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
+TN_API tn_status tn_strahler_order(uint8_t *order, const tn_flow *flow, const uint8_t *mask, int *max_order)
 {
     tn_status st = tn__flow_codes_check(flow, "strahler order");
     return st ? st : tn__strahler(flow, mask, order, max_order);
@@ -17030,7 +17030,7 @@ static void tn__extract_opts_defaults(tn_extract_opts *o, int width, int height)
     if (o->drop_fraction == 0.0f) o->drop_fraction = 0.01f;
 }
 
-TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out)
+TN_API tn_status tn_extract(tn_extraction *out, const tn_image *dem, const tn_extract_opts *opts)
 {
     tn_extract_opts o;
     tn_extraction ex;
@@ -17055,7 +17055,7 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     ex.contours.height = dem->height;
     n = (size_t)dem->width * dem->height;
     /* gradient magnitude: mean per contour and the floor of the lowest drop_fraction */
-    if ((st = tn_image_gradient(dem, o.dx, o.dy, &gx, &gy))) return st;
+    if ((st = tn_image_gradient(&gx, &gy, dem, o.dx, o.dy))) return st;
     for (i = 0; i < n; i++) gx.data[i] = sqrtf(gx.data[i] * gx.data[i] + gy.data[i] * gy.data[i]);
     grad = gx;
     tn_image_free(&gy);
@@ -17260,7 +17260,7 @@ static tn_status tn__drainage(const tn_image *dem, int threshold, double *densit
     memset(&o, 0, sizeof o);
     o.threshold = threshold;
     o.which = TN_EXTRACT_VALLEYS;
-    if ((st = tn_extract(dem, &o, &ex))) return st;
+    if ((st = tn_extract(&ex, dem, &o))) return st;
     for (i = 0; i < (size_t)ex.contours.count; i++) {
         const tn_contour *c = &ex.contours.items[i];
         for (j = 1; j < c->npoints; j++)
@@ -17347,7 +17347,7 @@ done:
     return st;
 }
 
-TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts, tn_realism *out)
+TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const tn_image *img, const tn_realism_opts *opts)
 {
     tn_realism_opts o;
     tn_realism r;
@@ -17380,7 +17380,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
             a1 = ta;
             b1 = tb;
         }
-        st = tn_compare(&a1, &b1, 0.0, &m);
+        st = tn_compare(&m, &a1, &b1, 0.0);
         tn_image_free(&ta);
         tn_image_free(&tb);
         if (st) return st;
@@ -18381,7 +18381,7 @@ static void tn__style_normalise(tn_image *m, int unit_range, double *offset, dou
     double a, b;
     if (unit_range) {
         float lo, hi;
-        tn_image_range(m, &lo, &hi);
+        tn_image_range(&lo, &hi, m);
         a = lo;
         b = hi - lo;
     } else {
@@ -18521,7 +18521,7 @@ static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
     int fluvial;
     if (c->o.drain_weight != 0 && c->o.valley_weight != 0) return TN_OK;
     if (!(f = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
-    tn_image_range(s, &lo, &hi);
+    tn_image_range(&lo, &hi, s);
     if (!(st = tn__style_fill(s->data, s->width, s->height, f)))
         for (i = 0; i < n; i++) deep += f[i] - s->data[i] > TN__STYLE_BASIN_DEPTH * (hi - lo);
     TN_FREE(f);
@@ -18557,8 +18557,8 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (W < 16 || H < 16 || style->width < 16 || style->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "style: maps must be at least 16 x 16 (content %d x %d, style %d x %d)", W, H,
                         style->width, style->height);
-    if (tn_image_range(content, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
-    if (tn_image_range(style, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, content)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, style)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
     if (!(c = (tn__style_cfg *)tn__alloc(sizeof *c))) return TN_ERR_OUT_OF_MEMORY;
     st = tn__style_setup(c, opts); /* clears c */
     c->user_fn = tn__progress_fn;  /* restored at the end */
@@ -18627,7 +18627,7 @@ done:
 
 /* ---- morphology scores: Table 1 SSIM, the realism report's slope and spectrum distances ---- */
 
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out)
+TN_API tn_status tn_style_compare(tn_style_scores *out, const tn_image *map, const tn_image *source)
 {
     tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, n = {0, 0, 0, NULL};
     tn_status st;
@@ -18635,7 +18635,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: needs a map and a source");
     if (map->width < 16 || map->height < 16 || source->width < 2 || source->height < 2)
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: the map must be at least 16 x 16");
-    if (tn_image_range(map, NULL, NULL) || tn_image_range(source, NULL, NULL))
+    if (tn_image_range(NULL, NULL, map) || tn_image_range(NULL, NULL, source))
         return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
     if (!(st = tn__channel0_image(map, &a)) && !(st = tn__channel0_image(source, &t)) &&
         !(st = tn__style_resize(&b, &t, map->width, map->height))) {
@@ -18650,7 +18650,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         tn__realism_opts_defaults(&ro);
         memset(&r, 0, sizeof r);
         memset(out, 0, sizeof *out);
-        if (!st && !(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(native ? &n : &b, &a, &ro, &r))) {
+        if (!st && !(st = tn_ssim(&out->ssim, &b, &a, 1.0)) && !(st = tn__realism_shape(native ? &n : &b, &a, &ro, &r))) {
             out->slope_hist_dist = r.slope_distance;
             out->spectrum_dist = r.spectrum_distance;
         }
@@ -18677,7 +18677,7 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
     else memset(&po, 0, sizeof po);
     for (k = 0; k < 10 && !st; k++) {
         po.gain = 0.45f + 0.05f * (float)k;
-        if ((st = tn_noise_perlin(&cand, width, height, &po)) || (st = tn_style_compare(&cand, source, &sc))) break;
+        if ((st = tn_noise_perlin(&cand, width, height, &po)) || (st = tn_style_compare(&sc, &cand, source))) break;
         if (!best.data || sc.slope_hist_dist + sc.spectrum_dist < best_d) {
             tn_image_free(&best);
             best = cand;
@@ -18919,14 +18919,14 @@ TN_API void tn_texgan_free(tn_texgan *model)
     memset(model, 0, sizeof *model);
 }
 
-TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path)
+TN_API tn_status tn_texgan_save(const char *path, const tn_texgan *model)
 {
     tn_tensor *cfg;
     if (!model || !model->weights) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: no model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: empty path");
     cfg = tn_params_find(model->weights, "texgan.config");
     tn__tg_write_config(model, (int)cfg->data[12], (int)cfg->data[13], cfg->data);
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 #define TN__TG_FORMAT 1
@@ -18939,7 +18939,7 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     memset(&m, 0, sizeof m);
     st = tn_model_check(f, "texgan", TN__TG_FORMAT, "texgan.config", path);
     if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
@@ -19495,7 +19495,7 @@ static tn_status tn__tg_check_exemplar(const tn_image *ex, float *lo, float *hi,
     if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "texgan: the exemplar is empty");
     if (ex->channels < 1 || ex->channels > TN_TEXGAN_MAX_CHANNELS)
         return tn__fail(TN_ERR_SHAPE, "texgan: the exemplar has %d channels (1..%d)", ex->channels, TN_TEXGAN_MAX_CHANNELS);
-    if (tn_image_range(ex, lo, hi)) return tn__fail(TN_ERR_NUMERIC, "texgan: the exemplar holds NaN/Inf");
+    if (tn_image_range(lo, hi, ex)) return tn__fail(TN_ERR_NUMERIC, "texgan: the exemplar holds NaN/Inf");
     if (*lo > 0.0f) *lo = 0.0f;
     if (*hi < 1.0f) *hi = 1.0f;
     n = (size_t)ex->width * ex->height;
@@ -19564,7 +19564,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     tn_texgan_defaults(&o);
     if ((st = tn__tg_check_exemplar(ex, &lo, &hi, mean))) return st;
     memset(&s, 0, sizeof s);
-    if ((st = tn_train_create("texgan", "texgan-train", &o.train, &s.run))) return st;
+    if ((st = tn_train_create(&s.run, "texgan", "texgan-train", &o.train))) return st;
     tn_rng_seed(&s.rng, o.train.seed, 0x7467616eULL);
     s.disc_width = o.disc_width;
     s.disc_layers = o.disc_layers;
@@ -19816,7 +19816,7 @@ static tn_status tn__tg_check_size(int w, int h)
     return TN_OK;
 }
 
-TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h, tn_image *out)
+TN_API tn_status tn_texgan_synthesize_window(tn_image *out, const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h)
 {
     tn_image img = {0, 0, 0, NULL};
     tn_ctx *ctx;
@@ -19910,7 +19910,7 @@ static tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
     return TN_OK;
 }
 
-TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out)
+TN_API tn_status tn_texgan_synthesize(tn_image *out, const tn_texgan *model, uint64_t seed, int width, int height)
 {
     tn_image img = {0, 0, 0, NULL};
     tn_status st;
@@ -19996,7 +19996,7 @@ static tn_status tn__tg_save_whole(const tn_texgan *m, uint64_t seed, int width,
 {
     tn_image img = {0, 0, 0, NULL}, part = {0, 0, 0, NULL};
     tn_save_opts so;
-    tn_status st = tn_texgan_synthesize(m, seed, width, height, &img);
+    tn_status st = tn_texgan_synthesize(&img, m, seed, width, height);
     size_t i, n = (size_t)width * height;
     int g, c, groups = (m->channels + 2) / 3;
     memset(&so, 0, sizeof so);
@@ -20022,8 +20022,8 @@ static tn_status tn__tg_save_whole(const tn_texgan *m, uint64_t seed, int width,
     return st;
 }
 
-TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height, const float *shift,
-                                           const char *path)
+TN_API tn_status tn_texgan_synthesize_file(const char *path, const tn_texgan *model, uint64_t seed, int width, int height,
+                                           const float *shift)
 {
     tn__tg_writer w;
     const char *ext;
@@ -20076,13 +20076,13 @@ static double tn__cc_mean(const tn_image *img, int c, float s, float lo, float h
     return sum / (double)n;
 }
 
-TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target, float lo, float hi, float *shift)
+TN_API tn_status tn_texture_colour_shift(float *shift, const tn_image *img, const float *target, float lo, float hi)
 {
     int c, it;
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0) return tn__fail(TN_ERR_EMPTY, "colour correction: empty image");
     if (!(lo < hi) || !(lo >= -FLT_MAX && hi <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "colour correction: range %g..%g is empty or not finite", (double)lo, (double)hi);
-    if (tn_image_range(img, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, img)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
     for (c = 0; c < img->channels; c++) {
         float t = target[c], a, b, s;
         int clipped;
@@ -20111,7 +20111,7 @@ TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target, f
     size_t n, i;
     tn_status st;
     if (img && img->channels > 64) return tn__fail(TN_ERR_SHAPE, "colour correction: %d channels (at most 64)", img->channels);
-    if ((st = tn_texture_colour_shift(img, target, lo, hi, shift))) return st;
+    if ((st = tn_texture_colour_shift(shift, img, target, lo, hi))) return st;
     n = (size_t)img->width * img->height * img->channels;
     for (i = 0; i < n; i++) img->data[i] = tn__clampf(img->data[i] + shift[i % (size_t)img->channels], lo, hi);
     return TN_OK;
@@ -20153,7 +20153,7 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
     memset(a, 0, sizeof *a);
     if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the exemplar is empty");
     if (ex->channels != channels) return tn__fail(TN_ERR_SHAPE, "detail maps: the exemplar has %d channels, the synthesis %d", ex->channels, channels);
-    if (tn_image_range(ex, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, ex)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
     if (o->factor < 1 || o->factor > 4096 || !(o->sigma > 0 && o->sigma < 1e4f) || !(o->lo < o->hi) || !(o->lo >= -FLT_MAX && o->hi <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "detail maps: factor %d must be 1..4096, sigma %g in (0, 1e4), range %g..%g finite and not empty",
                         o->factor, (double)o->sigma, (double)o->lo, (double)o->hi);
@@ -20268,7 +20268,7 @@ TN_API tn_status tn_detail_maps_from_image(tn_detail_maps *maps, const tn_image 
     TN_ASSERT(maps);
     tn__dm_defaults(opts, &o);
     if (!synth || !synth->data) return tn__fail(TN_ERR_EMPTY, "detail maps: the synthesis is empty");
-    if (tn_image_range(synth, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the synthesis holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, synth)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the synthesis holds NaN/Inf");
     if ((st = tn__dm_begin(&a, &o, synth->width, synth->height, synth->channels, ex))) return st;
     st = tn__dm_acc_band(&a, 0, synth);
     if (!st) st = tn__dm_finish(&a, &o, ex, maps);
@@ -20338,7 +20338,7 @@ static float tn__dm_high_t(const tn_detail_maps *m, float u, int axis)
     return u * (axis ? m->tiling_y * (float)m->high.height : m->tiling_x * (float)m->high.width);
 }
 
-TN_API void tn_detail_texel(const tn_detail_maps *m, float u, float v, float *out)
+TN_API void tn_detail_texel(float *out, const tn_detail_maps *m, float u, float v)
 {
     int lx0, lx1, ly0, ly1, hx0, hx1, hy0, hy1, c;
     float lfx, lfy, hfx, hfy;
@@ -20394,7 +20394,7 @@ static tn_status tn__dm_check(const tn_detail_maps *m)
     return TN_OK;
 }
 
-TN_API tn_status tn_detail_compose(const tn_detail_maps *m, int width, int height, tn_image *out)
+TN_API tn_status tn_detail_compose(tn_image *out, const tn_detail_maps *m, int width, int height)
 {
     tn_image img = {0, 0, 0, NULL};
     tn__dm_job j;
@@ -20476,7 +20476,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
     size_t i, n = 0;
     tn_status st = TN_OK;
     if (groups == 1) {
-        if ((st = tn_image_load(path, img, NULL))) return st;
+        if ((st = tn_image_load(img, path, NULL))) return st;
         if (img->channels != channels) {
             tn_image_free(img);
             return tn__fail(TN_ERR_SHAPE, "%s: %d channels, the sidecar says %d", path, img->channels, channels);
@@ -20487,7 +20487,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
         int k = tn__tg_group_channels(g, channels);
         char *p = tn__tg_group_path(path, g, channels);
         if (!p) { st = TN_ERR_OUT_OF_MEMORY; break; }
-        st = tn_image_load(p, &part, NULL);
+        st = tn_image_load(&part, p, NULL);
         if (!st && g == 0) st = tn_image_create(&all, part.width, part.height, channels);
         if (!st && (part.width != all.width || part.height != all.height || part.channels != k))
             st = tn__fail(TN_ERR_SHAPE, "%s: size or channels differ from the first group", p);
@@ -20502,7 +20502,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
     return st;
 }
 
-TN_API tn_status tn_detail_maps_save(const tn_detail_maps *m, const char *prefix)
+TN_API tn_status tn_detail_maps_save(const char *prefix, const tn_detail_maps *m)
 {
     char *lp, *hp, *tp, txt[512];
     int len;
@@ -20597,7 +20597,7 @@ static void tn__dm_put(tn_image *out, int ox, int oy, int x, int y, const float 
     for (c = 0; c < 3; c++) TN_PIXEL(out, ox + x, oy + y, c) = tn__clampf(rgb[channels >= 3 ? c : 0], 0.0f, 1.0f) * shade;
 }
 
-TN_API tn_status tn_detail_preview(const tn_detail_maps *m, const tn_image *ex, const tn_image *dem, int panel, tn_image *out)
+TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *m, const tn_image *ex, const tn_image *dem, int panel)
 {
     tn_image shade = {0, 0, 0, NULL}, terrain = {0, 0, 0, NULL}, exs = {0, 0, 0, NULL}, his = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
     int P = panel > 0 ? panel : 384, gap = 8, C, x, y, c, sw, sh, nx0, ny0;
@@ -20660,7 +20660,7 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *m, const tn_image *ex, 
                 tn__dm_axis(tv * (float)shade.height, shade.height, 0, &b0, &b1, &fb);
                 s = 0.3f + 0.7f * tn__dm_bilerp(&shade, a0, a1, fa, b0, b1, fb, 0);
                 for (c = 0; c < C; c++) px[c] = TN_PIXEL(ex, tx % ex->width, ty % ex->height, c);
-                tn_detail_texel(m, tu, tv, q);
+                tn_detail_texel(q, m, tu, tv);
                 tn__dm_put(&img, 0, P + gap, x, y, px, C, s);
                 tn__dm_put(&img, P + gap, P + gap, x, y, q, C, s);
             }
@@ -21639,7 +21639,7 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
-TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
+TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
     tn_ctx *ctx = NULL;
@@ -21671,7 +21671,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
     }
     digest = tn_image_digest(d1);
     seed = s.o.train.seed;
-    if ((st = tn_train_create("singan", "singan-train", &s.o.train, &s.run))) goto done;
+    if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
         tn_params *ck;
         tn_tensor *cfg;
@@ -21906,13 +21906,13 @@ static tn_status tn__sg_arch_of(const tn_singan *m, tn__sg_arch *A)
     return tn__sg_read_config(cfg->data, A, "singan model");
 }
 
-TN_API tn_status tn_singan_save(const tn_singan *model, const char *path)
+TN_API tn_status tn_singan_save(const char *path, const tn_singan *model)
 {
     tn__sg_arch A;
     tn_status st;
     if ((st = tn__sg_arch_of(model, &A))) return st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 /* Whether a model file holds the generators its config names, checked on the file's own tensors
@@ -21934,7 +21934,7 @@ static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, c
     return TN_OK;
 }
 
-TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
+TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg = NULL;
@@ -21943,7 +21943,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
     if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
@@ -22028,11 +22028,11 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     if (go.coarsest < 7 || *mw < 7 || *mh < 7)
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a layout needs the coarsest scale of the example and of the map at least 7 px "
                         "(%d x %d and %d x %d)", ex.width, ex.height, *mw, *mh);
-    if (!(st = tn_gpnn_sample(&ex, *mw, *mh, &go, &lay))) *map = lay.data;
+    if (!(st = tn_gpnn_sample(&lay, &ex, *mw, *mh, &go))) *map = lay.data;
     return st;
 }
 
-TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -22084,7 +22084,7 @@ static tn_status tn__sg_input(const tn_singan *model, const tn_image *in, int w,
     return TN_OK;
 }
 
-TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_refine(tn_image *out, const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -22112,7 +22112,7 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
     return st;
 }
 
-TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_upscale(tn_image *out, const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -22275,7 +22275,7 @@ static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, 
     for (p = 0; p < n; p++) img[p] /= cnt[p];
 }
 
-TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out)
+TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts)
 {
     tn_gpnn_opts o;
     tn_image ex[TN_SINGAN_MAX_SCALES], one = {0, 0, 0, NULL}, y = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, keys = {0, 0, 0, NULL};
@@ -22498,7 +22498,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     tn_train_defaults(&o->train, 10.0);
 }
 
-TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out)
+TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max)
 {
     int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
     if (!dem || !dem->data || !out || w <= 0 || h <= 0) return 0;
@@ -22777,7 +22777,7 @@ static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, 
     uint8_t *fixed;
     size_t i, n = (size_t)W * H, nf = 0;
     tn_status st;
-    if ((st = tn_sketch_rasterise(set, W, H, &r))) return st;
+    if ((st = tn_sketch_rasterise(&r, set, W, H))) return st;
     if (!(fixed = (uint8_t *)tn__alloc(n))) {
         tn_image_free(&r);
         return TN_ERR_OUT_OF_MEMORY;
@@ -22796,7 +22796,7 @@ static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, 
     return st;
 }
 
-TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out)
+TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, int width, int height)
 {
     tn_image m = {0, 0, 0, NULL};
     float *h;
@@ -24273,7 +24273,7 @@ static tn_status tn__gnn_holdout_make(tn__gnn_train *s)
             tn_extract_opts eo = s->o.extract;
             tn_extraction ex;
             eo.threshold = base * (d ? 4 : 1);
-            if ((st = tn_extract(h, &eo, &ex))) return st;
+            if ((st = tn_extract(&ex, h, &eo))) return st;
             s->hsk[2 * i + d] = ex.contours;
             memset(&ex.contours, 0, sizeof ex.contours);
             tn_extraction_free(&ex);
@@ -24311,9 +24311,9 @@ static tn_status tn__gnn_holdout_check(tn__gnn_train *s)
         tn_image out = {0, 0, 0, NULL};
         tn_metrics mt;
         if (!s->hsk[i].count) continue;
-        st = tn_gnn_generate(&m, &s->hsk[i], h->width, h->height, &go, &out);
+        st = tn_gnn_generate(&out, &m, &s->hsk[i], h->width, h->height, &go);
         if (st == TN_ERR_EMPTY) continue; /* no part of 5 px */
-        if (!st) st = tn_compare(h, &out, 0, &mt);
+        if (!st) st = tn_compare(&mt, h, &out, 0);
         tn_image_free(&out);
         if (st) return st;
         sum += mt.ssim;
@@ -24468,7 +24468,7 @@ static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
+TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
     tn_extraction ex;
@@ -24510,7 +24510,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     }
     digest = tn_image_digest(d1);
     seed = s.o.train.seed;
-    if ((st = tn_train_create("gnn", "gnn-train", &s.o.train, &s.run))) goto done;
+    if ((st = tn_train_create(&s.run, "gnn", "gnn-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
         tn_params *ck;
         tn_tensor *cfg;
@@ -24531,12 +24531,12 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     }
     /* the example's network and parts: deterministic in the DEM, the extraction options and
        the seed, so a resumed run rebuilds the same graph */
-    if ((st = tn_extract(d1, &s.o.extract, &ex))) goto done;
+    if ((st = tn_extract(&ex, d1, &s.o.extract))) goto done;
     if (!ex.contours.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: no ridge or valley was extracted from the DEM (try a lower extraction threshold)");
         goto done;
     }
-    if ((st = tn_contour_parts_make(&ex.contours, seed, &parts))) goto done;
+    if ((st = tn_contour_parts_make(&parts, &ex.contours, seed))) goto done;
     if (!parts.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: the DEM's ridges and valleys give no contour part of 5 px");
         goto done;
@@ -24597,8 +24597,8 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         int base_thr = eo.threshold > 0 ? eo.threshold : tn_extract_default_threshold(d1->width, d1->height);
         eo.threshold = base_thr * factor[i];
         memset(&sp, 0, sizeof sp);
-        if ((st = tn_extract(d1, &eo, &sx))) goto done;
-        if (sx.contours.count && !(st = tn_contour_parts_make(&sx.contours, seed + (uint64_t)i, &sp)) && sp.count) {
+        if ((st = tn_extract(&sx, d1, &eo))) goto done;
+        if (sx.contours.count && !(st = tn_contour_parts_make(&sp, &sx.contours, seed + (uint64_t)i)) && sp.count) {
             st = tn__gnn_level_make(&s.A, &sx.contours, &sp, &s.lv[s.nlevels]);
             if (sp.count > s.maxparts) s.maxparts = sp.count;
             s.nlevels++;
@@ -24700,12 +24700,12 @@ static tn_status tn__gnn_check_model(const tn_gnn *m)
     return tn__gnn_arch_of(m, &A);
 }
 
-TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
+TN_API tn_status tn_gnn_save(const char *path, const tn_gnn *model)
 {
     tn_status st;
     if ((st = tn__gnn_check_model(model))) return st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 /* Whether a model file holds the tensors its config implies, checked on the file's own tensors
@@ -24733,7 +24733,7 @@ static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A,
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
+TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg;
@@ -24743,7 +24743,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     memset(&parts, 0, sizeof parts);
     st = tn_model_check(f, "gnn", TN__GNN_FORMAT, NULL, path);
     if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
@@ -24799,7 +24799,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out)
+TN_API tn_status tn_gnn_parts(tn_contour_set *out, const tn_gnn *model)
 {
     tn__gnn_arch A;
     tn_status st;
@@ -25311,8 +25311,8 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
     G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
     G->gain = 1.0f;
     G->gain_raw = NAN;
-    if ((st = tn_sketch_densify(sk, &dense))) goto done;
-    if ((st = tn_contour_parts_make(&dense, tn__gnn_cut_seed(model, opts), &parts))) goto done;
+    if ((st = tn_sketch_densify(&dense, sk))) goto done;
+    if ((st = tn_contour_parts_make(&parts, &dense, tn__gnn_cut_seed(model, opts)))) goto done;
     if (!parts.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch has no part of 5 px (draw longer lines)");
         goto done;
@@ -25324,7 +25324,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
         memset(&ao, 0, sizeof ao);
         ao.seed = opts->seed;
         ao.choices = opts->align_choices > 0 ? opts->align_choices : 1;
-        if ((st = tn_sketch_align(&parts, &ex_parts, &ao, match))) goto done;
+        if ((st = tn_sketch_align(match, &parts, &ex_parts, &ao))) goto done;
     } else {
         tn__gnn_same_parts(&parts, &ex_parts, opts->embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
         for (i = 0, *known = opts->embeddings == TN_GNN_EMBED_AUTO; i < parts.count; i++) *known &= match[i] >= 0;
@@ -25351,7 +25351,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
             for (h = 0; h < G->A.hidden; h++) G->E0[(size_t)i * G->A.hidden + h] = G->A.part_noise * tn_rng_normal(&pr);
         }
     }
-    if ((st = tn_sketch_rasterise(sk, width, height, &r))) goto done;
+    if ((st = tn_sketch_rasterise(&r, sk, width, height))) goto done;
     for (q = 0; q < n; q++) {
         const float *px = r.data + 3 * q;
         G->fixed[q] = (uint8_t)(px[0] > 0 || px[1] > 0);
@@ -25419,7 +25419,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             continue;
         }
         if (!st) st = tn__gnn_gen_run(&T, G->w, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
-        if (!st) st = tn_sketch_rasterise(&drop, G->W, G->H, &hr);
+        if (!st) st = tn_sketch_rasterise(&hr, &drop, G->W, G->H);
         for (q = 0; !st && q < nv; q++) {
             size_t m = (size_t)(vy + (int)(q / vw)) * G->W + vx + (int)(q % vw);
             const float *px = hr.data + 3 * m;
@@ -25480,7 +25480,7 @@ static int tn__gnn_has_part_length(const tn_contour_set *s)
 {
     tn_contour_set d;
     int i, yes = 0;
-    if (tn_sketch_densify(s, &d)) return 0;
+    if (tn_sketch_densify(&d, s)) return 0;
     for (i = 0; i < d.count && !yes; i++) yes = d.items[i].npoints >= 5;
     tn_contour_set_free(&d);
     return yes;
@@ -25491,7 +25491,7 @@ static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
 {
     tn_image r = {0, 0, 0, NULL};
     size_t i, n = (size_t)s->width * s->height, k = 0;
-    tn_status st = tn_sketch_rasterise(s, s->width, s->height, &r);
+    tn_status st = tn_sketch_rasterise(&r, s, s->width, s->height);
     if (st) return st;
     for (i = 0; i < n; i++) k += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
     tn_image_free(&r);
@@ -25560,7 +25560,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         memset(&ro, 0, sizeof ro);
         ro.seed = o.seed;
         ro.nodes = o.random_nodes;
-        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        if ((st = tn_sketch_random(&rnd, &sk, width, height, &ro))) goto done;
         for (i = sk.count; i < rnd.count; i++) {
             int j;
             for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
@@ -25602,7 +25602,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         G->pin = (uint8_t *)tn__alloc(n);
         G->pin_d = (float *)tn__alloc(n * sizeof(float));
         if (!near || !G->pin || !G->pin_d) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st && !(st = tn_sketch_rasterise(&u, width, height, &r))) {
+        if (!st && !(st = tn_sketch_rasterise(&r, &u, width, height))) {
             for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
             tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
         }
@@ -25841,8 +25841,8 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
     return st;
 }
 
-TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
-                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
+TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
+                                        int w, int h, const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_image res = {0, 0, 0, NULL};
@@ -25912,7 +25912,7 @@ static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
                 float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
                 tn_metrics mt;
                 for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
-                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
+                if (!(st = tn_compare(&mt, h, &out, 0))) ssim[k] += mt.ssim;
             }
             n += !st;
         }
@@ -25932,8 +25932,8 @@ static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                             float *gain)
+TN_API tn_status tn_gnn_gain(float *gain, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                             const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_gnn_generate_opts o;
@@ -25948,8 +25948,8 @@ TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, 
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan)
+TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_gnn_generate_opts o;
@@ -25983,13 +25983,13 @@ TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketc
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out)
+TN_API tn_status tn_gnn_generate(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width,
+                                 int height, const tn_gnn_generate_opts *opts)
 {
-    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
+    return tn_gnn_generate_window(out, model, sketch, width, height, 0, 0, width, height, opts);
 }
 
-TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count)
+TN_API tn_status tn_gnn_ordering(double *share, const tn_contour_set *sketch, const tn_image *terrain, float distance, int *count)
 {
     tn_contour_set sk, dense;
     int i, j, n = 0, good = 0, W, H;
@@ -26007,7 +26007,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
     H = terrain->height;
     memset(&A, 0, sizeof A);
     if ((st = tn__gnn_sketch_units(&A, sketch, W, H, TN_GNN_HEIGHTS_EXAMPLE, &sk))) return st; /* in the terrain's pixels */
-    st = tn_sketch_densify(&sk, &dense);
+    st = tn_sketch_densify(&dense, &sk);
     tn_contour_set_free(&sk);
     if (st) return st;
     for (i = 0; i < dense.count; i++)
@@ -26127,8 +26127,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     memset(&set, 0, sizeof set);
     set.width = width;
     set.height = height;
-    if ((st = tn_sketch_rasterise(user, width, height, &ur)) || (st = tn_sketch_rasterise(example, Wx, Hx, &er)) ||
-        (st = tn_gnn_membrane(user, width, height, &mem)))
+    if ((st = tn_sketch_rasterise(&ur, user, width, height)) || (st = tn_sketch_rasterise(&er, example, Wx, Hx)) ||
+        (st = tn_gnn_membrane(&mem, user, width, height)))
         goto done;
     umask = (uint8_t *)tn__alloc(n);
     placed = (uint8_t *)tn__calloc(n);
@@ -26306,8 +26306,8 @@ done:
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
+TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
+                             int height, const tn_gnn_grow_opts *opts, int *added)
 {
     return tn__gnn_grow(user, example, width, height, opts, out, added, NULL);
 }
@@ -26342,7 +26342,7 @@ TN_API int tn_day_of_year(int month, int day)
     return first[month - 1] + day;
 }
 
-TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity)
+TN_API void tn_sun_day(double *declination, double *eccentricity, int day_of_year)
 {
     double g = 2.0 * TN__SEASON_PI * (double)(day_of_year - 1) / 365.0;
     if (declination)
@@ -26516,7 +26516,7 @@ static void tn__insol_rows(void *ctx, int ith, int nth)
     }
 }
 
-TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out)
+TN_API tn_status tn_insolation(tn_image *out, const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts)
 {
     static const int mdays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
     tn_insolation_opts o;
@@ -26621,7 +26621,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         tn__sun_month *m = &months[mo];
         double dec, ecc, ws, cw;
         int nst = (int)ceil(2.0 * TN__SEASON_PI / dstep - 1e-9);
-        tn_sun_day(tn_day_of_year(m0 + mo + 1, o.day), &dec, &ecc);
+        tn_sun_day(&dec, &ecc, tn_day_of_year(m0 + mo + 1, o.day));
         m->sd = sin(dec);
         m->cd = cos(dec);
         m->scale = o.solar_constant * ecc * 24.0 / (2.0 * TN__SEASON_PI);
@@ -26720,7 +26720,7 @@ static int tn__climate_fields(const char *s, size_t n, const char **fb, size_t *
     return k;
 }
 
-TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out)
+TN_API tn_status tn_climate_parse(tn_climate *out, const char *text, size_t size, const char *name)
 {
     tn_climate c;
     int seen[12] = {0}, line = 0, m;
@@ -26774,14 +26774,14 @@ TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *nam
     return TN_OK;
 }
 
-TN_API tn_status tn_climate_load(const char *path, tn_climate *out)
+TN_API tn_status tn_climate_load(tn_climate *out, const char *path)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
     tn_status st;
     if (!path || !out) return tn__fail(TN_ERR_INVALID_ARG, "climate: NULL argument");
     if ((st = tn__io_read_file(path, &buf, &n))) return st;
-    st = tn_climate_parse((const char *)buf, n, path, out);
+    st = tn_climate_parse(out, (const char *)buf, n, path);
     TN_FREE(buf);
     return st;
 }
@@ -26823,7 +26823,7 @@ static const tn__koppen_preset tn__koppen[] = {
 
 TN_API const char *tn_climate_koppen_code(int i) { return i >= 0 && i < TN__KOPPEN_N ? tn__koppen[i].code : NULL; }
 
-TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out)
+TN_API tn_status tn_climate_koppen(tn_climate *out, const char *code)
 {
     int i, m;
     if (!code || !out) return tn__fail(TN_ERR_INVALID_ARG, "koppen: NULL argument");
@@ -27020,9 +27020,9 @@ TN_API void tn_season_state_free(tn_season_state *s)
     tn_image_free(&s->green);
 }
 
-TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
-                                   const tn_image *insolation, const float *times, int count,
-                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state)
+TN_API tn_status tn_season_texture(tn_image *out, const tn_image *dem, const tn_climate *climate,
+                                   double latitude_deg, const tn_image *insolation, const float *times,
+                                   int count, const tn_season_opts *opts, tn_season_state *state)
 {
     tn__season_job *j = NULL;
     tn_image ins = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, slope = {0, 0, 0, NULL}, noise = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
@@ -27072,8 +27072,8 @@ TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climat
             if ((st = tn_image_resize(&small, dem, w, h, TN_RESIZE_AREA))) goto done;
             io.dx = j->o.insolation.dx * (float)dem->width / (float)w;
             io.dy = j->o.insolation.dy * (float)dem->height / (float)h;
-            st = tn_insolation(&small, latitude_deg, &io, &ins);
-        } else st = tn_insolation(dem, latitude_deg, &io, &ins);
+            st = tn_insolation(&ins, &small, latitude_deg, &io);
+        } else st = tn_insolation(&ins, dem, latitude_deg, &io);
         if (st) goto done;
         insolation = &ins;
     }
@@ -27188,7 +27188,7 @@ static void tn__draw_text(tn_image *img, int x0, int y0, int scale, const char *
     }
 }
 
-TN_API char *tn_season_time_label(float time, char *buf, size_t size)
+TN_API char *tn_season_time_label(char *buf, size_t size, float time)
 {
     static const char *const names[12] = {"JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC"};
     static const int days[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
@@ -27209,13 +27209,13 @@ TN_API char *tn_season_time_label(float time, char *buf, size_t size)
     return buf;
 }
 
-TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out)
+TN_API tn_status tn_season_sheet(tn_image *out, const tn_image *images, int count, int columns, int cell)
 {
-    return tn_season_sheet_labelled(images, NULL, count, columns, cell, out);
+    return tn_season_sheet_labelled(out, images, NULL, count, columns, cell);
 }
 
-TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
-                                          tn_image *out)
+TN_API tn_status tn_season_sheet_labelled(tn_image *out, const tn_image *images, const char *const *labels, int count, int columns,
+                                          int cell)
 {
     tn_image sheet = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
     int i, rows, ch = 0, gap = 4, x, y, c, scale = 2, top = 0;
@@ -27269,7 +27269,7 @@ TN_API const char *tn_kpd_condition_name(tn_kpd_condition c)
     return (int)c >= 0 && c < TN_KPD_CONDITIONS ? tn__kpd_names[c] : "unknown";
 }
 
-TN_API tn_status tn_kpd_condition_parse(const char *s, tn_kpd_condition *out)
+TN_API tn_status tn_kpd_condition_parse(tn_kpd_condition *out, const char *s)
 {
     int i;
     if (!s || !out) return tn__fail(TN_ERR_INVALID_ARG, "kpd: NULL condition");
@@ -27842,7 +27842,7 @@ static void tn__kpd_train_free(tn__kpd_train *t)
     TN_FREE(t->c0);
 }
 
-TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd *model, tn_kpd_stats *stats)
+TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd_stats *stats)
 {
     tn__kpd_train t;
     tn_ctx *ctx = NULL;
@@ -27872,7 +27872,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     t.s = samples;
     t.count = count;
     digest = tn__kpd_digest(samples, count);
-    if ((st = tn_train_create("kpd", "season-train", &t.o.train, &t.run))) return st;
+    if ((st = tn_train_create(&t.run, "kpd", "season-train", &t.o.train))) return st;
     if (t.o.train.resume) { /* the checkpoint's architecture wins */
         tn_params *ck;
         tn_tensor *cfg;
@@ -28010,14 +28010,14 @@ TN_API void tn_kpd_free(tn_kpd *model)
     memset(model, 0, sizeof *model);
 }
 
-TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
+TN_API tn_status tn_kpd_save(const char *path, const tn_kpd *model)
 {
     if (!model || !model->weights || !tn_params_find(model->weights, "kpd.config")) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: not a trained or loaded model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
-TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
+TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg = NULL;
@@ -28026,7 +28026,7 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     TN_ASSERT(model);
     memset(&m, 0, sizeof m);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn_model_check(f, "kpd", TN__KPD_FORMAT, NULL, path);
     if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
@@ -28048,8 +28048,8 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
 
 /* ---- generation: windows with a halo, aligned to 4 px so the pooled levels line up ---- */
 
-TN_API tn_status tn_kpd_generate(const tn_kpd *model, const tn_image *dem, const tn_climate *climate, const tn_image *insolation,
-                                 float time, int x0, int y0, int w, int h, tn_image *out)
+TN_API tn_status tn_kpd_generate(tn_image *out, const tn_kpd *model, const tn_image *dem, const tn_climate *climate,
+                                 const tn_image *insolation, float time, int x0, int y0, int w, int h)
 {
     const int T = 256, Hl = TN_KPD_HALO;
     int W, Hh, Wp, Hp, C, O, m0, tx, ty;
@@ -28267,7 +28267,7 @@ static tn_status tn__season_frame(tn_season_data *d, const char *path, const cha
     memset(t, 0, sizeof *t);
     memset(m, 0, sizeof *m);
     tn__season_path(path, fb[2], fl[2], p, sizeof p);
-    if ((st = tn_image_load(p, t, NULL))) return tn__season_fail_at(st, line_name);
+    if ((st = tn_image_load(t, p, NULL))) return tn__season_fail_at(st, line_name);
     if (t->width != dem->width || t->height != dem->height) {
         st = tn__fail(TN_ERR_SHAPE, "%s: %s is %d x %d, its DEM %d x %d", line_name, p, t->width, t->height, dem->width, dem->height);
         goto fail;
@@ -28277,7 +28277,7 @@ static tn_status tn__season_frame(tn_season_data *d, const char *path, const cha
     for (i = 3; i < nf && i < 8; i++) {
         tn_image e = {0, 0, 0, NULL};
         tn__season_path(path, fb[i], fl[i], p, sizeof p);
-        if ((st = tn_image_load(p, &e, NULL))) {
+        if ((st = tn_image_load(&e, p, NULL))) {
             st = tn__season_fail_at(st, line_name);
             goto fail;
         }
@@ -28314,7 +28314,7 @@ fail:
     return st;
 }
 
-TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
+TN_API tn_status tn_season_data_load(tn_season_data *out, const char *path)
 {
     tn_season_data d;
     uint8_t *buf = NULL;
@@ -28351,7 +28351,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             memset(dm, 0, sizeof *dm);
             memset(&d.insolation[d.sites], 0, sizeof(tn_image));
             tn__season_path(path, fb[1], fl[1], p, sizeof p);
-            if ((st = tn_image_load(p, dm, NULL))) { st = tn__season_fail_at(st, name); break; }
+            if ((st = tn_image_load(dm, p, NULL))) { st = tn__season_fail_at(st, name); break; }
             {
                 float *nd = (float *)TN_REALLOC(dx, (size_t)cap_s * sizeof(float));
                 if (!nd) { st = tn__oom(); break; }
@@ -28389,10 +28389,10 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if (nf != 2) { st = tn__fail(TN_ERR_FORMAT, "%s: expected \"climate,PATH\" or \"koppen,CODE\"", name); break; }
             if (tn__io_token_is(fb[0], fl[0], "climate")) {
                 tn__season_path(path, fb[1], fl[1], p, sizeof p);
-                st = tn_climate_load(p, c);
+                st = tn_climate_load(c, p);
             } else {
                 snprintf(code, sizeof code, "%.*s", (int)(fl[1] < 31 ? fl[1] : 31), fb[1]);
-                st = tn_climate_koppen(code, c);
+                st = tn_climate_koppen(c, code);
             }
             if (st) { st = tn__season_fail_at(st, name); break; }
             if (isfinite(lat)) c->latitude = (float)lat, c->has_latitude = 1;
@@ -28434,7 +28434,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             st = tn__fail(TN_ERR_INVALID_ARG, "%s: site %d has no latitude (a latitude row, or a climate that has one)", path, k + 1);
             break;
         }
-        if ((st = tn_insolation(&d.dems[k], d.climates[k].latitude, &io, &ins))) break;
+        if ((st = tn_insolation(&ins, &d.dems[k], d.climates[k].latitude, &io))) break;
         d.insolation[k] = ins;
     }
     TN_FREE(dx);
@@ -28498,7 +28498,7 @@ static const float tn__render_land[][4] = {{0.00f, 0.30f, 0.55f, 0.27f}, {0.25f,
                                            {1.00f, 1.00f, 1.00f, 1.00f}};
 static const float tn__render_sea[][4] = {{0.00f, 0.10f, 0.22f, 0.45f}, {0.85f, 0.30f, 0.55f, 0.75f}, {1.00f, 0.45f, 0.66f, 0.80f}};
 
-TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
+TN_API tn_status tn_render_preview(tn_image *out, const tn_image *dem, const tn_render_opts *opts)
 {
     tn_render_opts o;
     tn_image ramp = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
@@ -28514,7 +28514,7 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
     k = o.shade_strength;
     if (!(o.lo == o.lo && o.hi == o.hi && (!o.sea || o.sea_level == o.sea_level)))
         return tn__fail(TN_ERR_INVALID_ARG, "render preview: lo, hi or sea_level is NaN");
-    if (o.lo == o.hi && tn_image_range(dem, &o.lo, &o.hi)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
+    if (o.lo == o.hi && tn_image_range(&o.lo, &o.hi, dem)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
     if ((st = tn_image_create(&ramp, dem->width, dem->height, 3))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);
@@ -28629,7 +28629,7 @@ static void tn__view_opts_defaults(tn_view_opts *o)
     if (o->exaggeration <= 0) o->exaggeration = 2.0f;
 }
 
-TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out)
+TN_API tn_status tn_render_view(tn_image *out, const tn_image *dem, const tn_view_opts *opts)
 {
     tn_view_opts o;
     tn_image colour = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
@@ -28647,8 +28647,8 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "render view: the DEM holds NaN/Inf");
-    if ((st = tn_render_preview(dem, &o.colours, &colour))) return st;
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "render view: the DEM holds NaN/Inf");
+    if ((st = tn_render_preview(&colour, dem, &o.colours))) return st;
     if ((st = tn_image_create(&img, o.width, o.height, 3))) {
         tn_image_free(&colour);
         return st;
@@ -28715,12 +28715,12 @@ static tn_status tn__mesh_check(const tn_image *dem, const tn_mesh_opts *o, cons
     if (!(fabsf(o->dx) <= 1e30f) || !(fabsf(o->dy) <= 1e30f) || !(fabsf(o->z_scale) <= 1e30f) || o->step > 65536)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: bad mesh options (spacing %g x %g, z scale %g, step %d)", path, (double)o->dx, (double)o->dy,
                         (double)o->z_scale, o->step);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
     if (o->texture) {
         const tn_image *t = o->texture;
         if (!t->data || t->width < 1 || t->height < 1 || t->channels < 1 || t->channels > 4 || t->channels == 2)
             return tn__fail(TN_ERR_SHAPE, "%s: the texture must have 1, 3 or 4 channels", path);
-        if (tn_image_range(t, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "%s: the texture holds NaN/Inf", path);
+        if (tn_image_range(&lo, &hi, t)) return tn__fail(TN_ERR_NUMERIC, "%s: the texture holds NaN/Inf", path);
     }
     return TN_OK;
 }
@@ -28795,7 +28795,7 @@ static tn_status tn__mesh_texture_png(const tn_image *t, uint8_t **png, size_t *
         }
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
-    st = tn_image_save_memory(&rgb, &so, TN_FORMAT_PNG, png, n);
+    st = tn_image_save_memory(png, n, &rgb, TN_FORMAT_PNG, &so);
     tn_image_free(&rgb);
     return st;
 }
@@ -28848,7 +28848,7 @@ static void tn__glb_put_chunk(uint8_t *out, size_t *off, const char *type, const
     *off += 8 + padded;
 }
 
-TN_API tn_status tn_export_glb(const tn_image *dem, const char *path, const tn_mesh_opts *opts)
+TN_API tn_status tn_export_glb(const char *path, const tn_image *dem, const tn_mesh_opts *opts)
 {
     tn_mesh_opts o;
     tn__mesh m;
@@ -28938,7 +28938,7 @@ static char *tn__path_stem(const char *path)
     return tn__strndup(path, n);
 }
 
-TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_mesh_opts *opts)
+TN_API tn_status tn_export_obj(const char *path, const tn_image *dem, const tn_mesh_opts *opts)
 {
     tn_mesh_opts o;
     tn__mesh m;
@@ -29014,14 +29014,14 @@ TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_m
     return st;
 }
 
-TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out)
+TN_API tn_status tn_normal_map(tn_image *out, const tn_image *dem, float dx, float dy, float z_scale, int directx)
 {
     tn_image n = {0, 0, 0, NULL};
     size_t i, np;
     float lo, hi;
     tn_status st;
     TN_ASSERT(out);
-    if (dem && dem->data && tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "normal map: the DEM holds NaN/Inf");
+    if (dem && dem->data && tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "normal map: the DEM holds NaN/Inf");
     if ((st = tn_image_normals(&n, dem, dx, dy, z_scale))) return st;
     np = (size_t)n.width * n.height;
     for (i = 0; i < np; i++) {
@@ -29035,7 +29035,7 @@ TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_
     return TN_OK;
 }
 
-TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi)
+TN_API tn_status tn_export_unity_raw(const char *path, const tn_image *dem, int size, float *lo, float *hi)
 {
     tn_image r = {0, 0, 0, NULL};
     const tn_image *src = dem;
@@ -29051,7 +29051,7 @@ TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int 
         for (size = 33; size < big && size < 4097; size = 2 * size - 1) {}
     if (size < 33 || size > 4097 || ((size - 1) & (size - 2)) != 0)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: Unity RAW size %d is not 2^n + 1 in 33..4097", path, size);
-    if (tn_image_range(dem, &a, &b)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
+    if (tn_image_range(&a, &b, dem)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
     if (dem->width != size || dem->height != size || dem->channels != 1) {
         tn_image one = {0, 0, 0, NULL};
         if (dem->channels != 1) { /* channel 0 is the height */
@@ -29110,11 +29110,11 @@ static tn_status tn__splat_mask_check(const tn_image *m, const tn_image *dem, co
     if (m->width != dem->width || m->height != dem->height)
         return tn__fail(TN_ERR_SHAPE, "splat map: the %s mask is %d x %d, the DEM %d x %d", what, m->width, m->height, dem->width,
                         dem->height);
-    if (tn_image_range(m, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the %s mask holds NaN/Inf", what);
+    if (tn_image_range(&lo, &hi, m)) return tn__fail(TN_ERR_NUMERIC, "splat map: the %s mask holds NaN/Inf", what);
     return TN_OK;
 }
 
-TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out)
+TN_API tn_status tn_export_splat(tn_image *out, const tn_image *dem, const tn_splat_opts *opts)
 {
     tn_splat_opts o;
     tn_image slope = {0, 0, 0, NULL}, w = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
@@ -29132,14 +29132,14 @@ TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts,
           o.height_blend <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "splat map: options must be finite, blend widths >= 0");
     tn__splat_opts_defaults(&o);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the DEM holds NaN/Inf");
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "splat map: the DEM holds NaN/Inf");
     if ((st = tn__splat_mask_check(o.snow, dem, "snow")) || (st = tn__splat_mask_check(o.vegetation, dem, "vegetation"))) return st;
     np = (size_t)dem->width * dem->height;
     if (dem->channels != 1) { /* channel 0 is the height */
         if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
         for (i = 0; i < np; i++) one.data[i] = dem->data[i * dem->channels];
         h = &one;
-        tn_image_range(h, &lo, &hi);
+        tn_image_range(&lo, &hi, h);
     }
     span = hi > lo ? hi - lo : 1.0f;
     if ((st = tn_image_slope(&slope, h, o.dx, o.dy)) || (st = tn_image_create(&w, dem->width, dem->height, 4))) goto done;
@@ -29497,7 +29497,7 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
     if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
     for (y0 = 0; y0 < r.h && !st; y0 += 256) {
         int bh = r.h - y0 < 256 ? r.h - y0 : 256;
-        st = tn_texgan_synthesize_window(m, w->seed, r.x, r.y + y0, r.w, bh, &band);
+        st = tn_texgan_synthesize_window(&band, m, w->seed, r.x, r.y + y0, r.w, bh);
         if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
         tn_image_free(&band);
     }
@@ -29522,7 +29522,7 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
     if (st) {
         TN_FREE(s->singan);
@@ -29546,7 +29546,7 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
     (void)in_r;
     memset(&go, 0, sizeof go);
     go.seed = w->seed;
-    return tn_singan_sample(s->singan, r.x, r.y, r.w, r.h, &go, out);
+    return tn_singan_sample(out, s->singan, r.x, r.y, r.w, r.h, &go);
 }
 
 /* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
@@ -29588,7 +29588,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
     if (!s->gnn || !s->sketch) return tn__oom();
     if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
-    st = tn_gnn_load(path, s->gnn);
+    st = tn_gnn_load(s->gnn, path);
     TN_FREE(path);
     if (st) {
         TN_FREE(s->gnn);
@@ -29596,7 +29596,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         return st;
     }
     if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
-    st = tn_sketch_load(path, s->sketch);
+    st = tn_sketch_load(s->sketch, path);
     TN_FREE(path);
     if (st) {
         TN_FREE(s->sketch);
@@ -29606,7 +29606,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     {
         tn_gnn_generate_opts go;
         tn__world_gnn_opts(s, w, &go);
-        if ((st = tn_gnn_gain(s->gnn, s->sketch, w->width, w->height, &go, &s->p[2]))) return st;
+        if ((st = tn_gnn_gain(&s->p[2], s->gnn, s->sketch, w->width, w->height, &go))) return st;
     }
     s->out_w = w->width;
     s->out_h = w->height;
@@ -29623,7 +29623,7 @@ static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, 
     (void)in_r;
     tn__world_gnn_opts(s, w, &go);
     go.gain = s->p[2] > 0 ? s->p[2] : -1.0f;
-    return tn_gnn_generate_window(s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go, out);
+    return tn_gnn_generate_window(out, s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go);
 }
 
 /* ---- local operations ---- */
@@ -29650,7 +29650,7 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
     if (st) {
         TN_FREE(s->singan);
@@ -29831,10 +29831,10 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
                         "are in metres", s->line);
     if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return tn__oom();
-    if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
+    if (kk >= 0) st = tn_climate_koppen(s->climate, s->val[kk]);
     else {
         char *path = tn__world_join(base_dir, s->val[kc]);
-        st = path ? tn_climate_load(path, s->climate) : TN_ERR_OUT_OF_MEMORY;
+        st = path ? tn_climate_load(s->climate, path) : TN_ERR_OUT_OF_MEMORY;
         TN_FREE(path);
     }
     if (st) return st;
@@ -29876,8 +29876,8 @@ static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *
     so.insolation.directions = (int)s->p[3];
     so.shade = s->p[4];
     so.detail = -1.0f; /* the detail noise is a whole-map Perlin map stretched to its min..max */
-    st = tn_insolation(in, s->p[0], &so.insolation, &ins);
-    if (!st) st = tn_season_texture(in, s->climate, s->p[0], &ins, &t, 1, &so, &tex, NULL);
+    st = tn_insolation(&ins, in, s->p[0], &so.insolation);
+    if (!st) st = tn_season_texture(&tex, in, s->climate, s->p[0], &ins, &t, 1, &so, NULL);
     if (!st) st = tn__world_crop(&tex, in_r, r, out);
     tn_image_free(&ins);
     tn_image_free(&tex);
@@ -29971,7 +29971,7 @@ static tn_status tn__world_normalmap_run(const tn__world_stage *s, const tn_worl
                                          tn_image *out)
 {
     tn_image b = {0, 0, 0, NULL};
-    tn_status st = tn_normal_map(in, s->p[2], s->p[2], s->p[0], s->p[1] != 0, &b);
+    tn_status st = tn_normal_map(&b, in, s->p[2], s->p[2], s->p[0], s->p[1] != 0);
     (void)w;
     if (!st) st = tn__world_crop(&b, in_r, r, out);
     tn_image_free(&b);
@@ -30341,12 +30341,12 @@ static tn_status tn__world_parse_with(const char *text, const tn_world_opts *opt
     return TN_OK;
 }
 
-TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w)
+TN_API tn_status tn_world_parse(tn_world *w, const char *text, const tn_world_opts *opts)
 {
     return tn__world_parse_with(text, opts, opts ? opts->base_dir : NULL, w);
 }
 
-TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w)
+TN_API tn_status tn_world_load(tn_world *w, const char *path, const tn_world_opts *opts)
 {
     uint8_t *buf = NULL;
     size_t n = 0, i;
@@ -30402,7 +30402,7 @@ static tn_status tn__world_compute(const tn_world *w, int k, tn_rect r, tn_image
     return st;
 }
 
-TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out)
+TN_API tn_status tn_world_rect(tn_image *out, const tn_world *w, tn_rect r)
 {
     TN_ASSERT(w && out);
     if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
@@ -30560,7 +30560,7 @@ static int tn__world_tile_ok(const tn_world *w, const tn__world_manifest *m, int
         tn_image img = {0, 0, 0, NULL};
         tn_image_info info;
         tn_rect r = tn_world_tile_rect(w, row, col);
-        if (!tn_image_load_memory(buf, n, path, &img, &info, NULL))
+        if (!tn_image_load_memory(&img, buf, n, path, NULL, &info))
             ok = info.format == TN_FORMAT_PNG && img.width == r.w && img.height == r.h && img.channels == w->out_channels &&
                  info.bit_depth == (w->out_heights ? 16 : 8) &&
                  (!w->out_heights || (info.has_range && (float)info.range_lo == w->lo && (float)info.range_hi == w->hi));
@@ -30588,7 +30588,7 @@ static tn_status tn__world_tile_fits(const tn_world *w)
     return TN_OK;
 }
 
-TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts, tn_world_run_stats *stats)
+TN_API tn_status tn_world_write_tiles(const char *dir, const tn_world *w, const tn_world_run_opts *opts, tn_world_run_stats *stats)
 {
     tn_world_run_opts o;
     tn_world_run_stats s;
@@ -30629,7 +30629,7 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             else {
                 if (tn__world_exists(path)) s.repaired++; /* damaged or foreign: computed again */
                 tn_image img = {0, 0, 0, NULL};
-                st = tn_world_rect(w, tn_world_tile_rect(w, row, col), &img);
+                st = tn_world_rect(&img, w, tn_world_tile_rect(w, row, col));
                 if (!st) st = tn__world_save_tile(w, &img, path);
                 tn_image_free(&img);
                 if (!st) s.written++;
@@ -30695,7 +30695,7 @@ static void tn__world_vrt(tn__text *vrt, const tn_world *w, int r0, int r1, int 
     tn__text_add(vrt, "</VRTDataset>\n");
 }
 
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+TN_API tn_status tn_world_write_index(const char *dir, const tn_world *w, int *present)
 {
     tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
     tn__world_manifest old;

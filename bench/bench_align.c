@@ -26,10 +26,10 @@ static int make_parts(uint64_t seed, int want, tn_contour_set *parts, double *ms
     o.seed = seed;
     o.nodes = 1024;
     t0 = tn_time_seconds();
-    if (tn_sketch_random(NULL, 1024, 1024, &o, &s)) return 0;
+    if (tn_sketch_random(&s, NULL, 1024, 1024, &o)) return 0;
     if (ms_random) *ms_random = (tn_time_seconds() - t0) * 1e3;
     t0 = tn_time_seconds();
-    if (tn_contour_parts_make(&s, seed, parts)) return 0;
+    if (tn_contour_parts_make(parts, &s, seed)) return 0;
     if (ms_parts) *ms_parts = (tn_time_seconds() - t0) * 1e3;
     tn_contour_set_free(&s);
     if (parts->count < want) return 0;
@@ -57,7 +57,7 @@ int main(void)
         tn_set_threads(t);
         for (r = 0; r < RUNS; r++) {
             double t0 = tn_time_seconds();
-            if (tn_sketch_align(&sk, &dem, &o, match)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+            if (tn_sketch_align(match, &sk, &dem, &o)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
             ms[r] = (tn_time_seconds() - t0) * 1e3;
         }
         qsort(ms, RUNS, sizeof ms[0], cmp_double);

@@ -42,7 +42,7 @@ static int load_metres(const char *region, const char *suffix, double h0, double
     char path[512];
     size_t i;
     snprintf(path, sizeof path, "%s/dem/%s/%s_%s.png", data_dir(), region, region, suffix);
-    if (tn_image_load(path, img, NULL)) return 0;
+    if (tn_image_load(img, path, NULL)) return 0;
     for (i = 0; i < (size_t)img->width * img->height * img->channels; i++) img->data[i] = (float)(h0 + img->data[i] * (h1 - h0));
     return 1;
 }

@@ -109,7 +109,7 @@ int main(void)
         if (!(e_pipe && e_pipe[0] == '0')) {
             tn_extraction ex;
             double s0 = tn_time_seconds();
-            if (tn_extract(&dem, NULL, &ex)) return die();
+            if (tn_extract(&ex, &dem, NULL)) return die();
             printf("extract_full_pipeline_%d_t%d: %.1f ms (valleys + ridges, %d contours, runs 1)\n", N, t,
                    (tn_time_seconds() - s0) * 1e3, ex.contours.count);
             tn_extraction_free(&ex);

@@ -19,7 +19,7 @@ static double best_load(const char *path, int threads)
     for (k = 0; k < 3; k++) {
         tn_image img = {0, 0, 0, NULL};
         double t0 = tn_time_seconds();
-        if (tn_image_load(path, &img, NULL) != TN_OK) { fprintf(stderr, "%s: %s\n", path, tn_last_error()); return -1; }
+        if (tn_image_load(&img, path, NULL) != TN_OK) { fprintf(stderr, "%s: %s\n", path, tn_last_error()); return -1; }
         t0 = tn_time_seconds() - t0;
         if (t0 < best) best = t0;
         tn_image_free(&img);
@@ -49,7 +49,7 @@ int main(int argc, char **argv)
     snprintf(tn_path, sizeof tn_path, "%s/bench_geotiff_tn.tif", dir);
     snprintf(gd_path, sizeof gd_path, "%s/bench_geotiff_gdal.tif", dir);
     snprintf(raw_path, sizeof raw_path, "%s/bench_geotiff_gdal.raw", dir);
-    if (tn_image_load(hgt, &src, NULL) == TN_OK) {
+    if (tn_image_load(&src, hgt, NULL) == TN_OK) {
         if (tn_image_resize(&dem, &src, 3601, 3601, TN_RESIZE_BICUBIC) != TN_OK) return 1;
         printf("dem: N47E009.hgt resampled to 3601 x 3601\n");
     } else {

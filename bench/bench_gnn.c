@@ -54,10 +54,10 @@ static void add(scores *s, const tn_image *ref, const tn_image *img)
 {
     tn_metrics m;
     tn_realism r;
-    if (tn_compare(ref, img, 0, &m)) return;
+    if (tn_compare(&m, ref, img, 0)) return;
     s->ssim += m.ssim;
     s->psnr += m.psnr;
-    if (!tn_realism_compare(ref, img, NULL, &r)) s->spec += r.spectrum_distance;
+    if (!tn_realism_compare(&r, ref, img, NULL)) s->spec += r.spectrum_distance;
     s->n++;
 }
 
@@ -70,11 +70,11 @@ static int sketch_of(const tn_image *crop, int thr, tn_contour_set *out, double 
     size_t i, n = 0;
     memset(&eo, 0, sizeof eo);
     eo.threshold = thr;
-    if (tn_extract(crop, &eo, &ex)) return 0;
+    if (tn_extract(&ex, crop, &eo)) return 0;
     *out = ex.contours;
     memset(&ex.contours, 0, sizeof ex.contours);
     tn_extraction_free(&ex);
-    if (!out->count || tn_sketch_rasterise(out, crop->width, crop->height, &r)) return 0;
+    if (!out->count || tn_sketch_rasterise(&r, out, crop->width, crop->height)) return 0;
     for (i = 0; i < (size_t)r.width * r.height; i++) n += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
     *cover = (double)n / ((double)r.width * r.height);
     tn_image_free(&r);
@@ -87,7 +87,7 @@ static int mean_baseline(const tn_contour_set *sk, int w, int h, tn_image *out)
     tn_image r = {0, 0, 0, NULL};
     double s = 0;
     size_t i, n = 0;
-    if (tn_sketch_rasterise(sk, w, h, &r) || tn_image_create(out, w, h, 1)) return 0;
+    if (tn_sketch_rasterise(&r, sk, w, h) || tn_image_create(out, w, h, 1)) return 0;
     for (i = 0; i < (size_t)w * h; i++)
         if (r.data[3 * i] > 0 || r.data[3 * i + 1] > 0) { s += r.data[3 * i + 2]; n++; }
     for (i = 0; i < (size_t)w * h; i++) out->data[i] = (float)(n ? s / (double)n : 0.0);
@@ -103,7 +103,7 @@ static int a_in_circle(int side, int rot, tn_contour_set *s)
 {
     float k;
     int i, j;
-    if (tn_sketch_load("examples/data/sketch_a.tns", s) != TN_OK) {
+    if (tn_sketch_load(s, "examples/data/sketch_a.tns") != TN_OK) {
         fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
         return 0;
     }
@@ -132,7 +132,7 @@ static void save_panels(const char *path, const tn_image *const *dem, int n, int
     ro.shade.dy = (float)dxy[1];
     if (tn_image_create(&strip, n * side + (n - 1) * 4, side, 3)) return;
     for (i = 0; i < n; i++) {
-        if (!tn_render_preview(dem[i], &ro, &pv) && !tn_image_resize(&sc, &pv, side, side, TN_RESIZE_NEAREST))
+        if (!tn_render_preview(&pv, dem[i], &ro) && !tn_image_resize(&sc, &pv, side, side, TN_RESIZE_NEAREST))
             for (y = 0; y < side; y++)
                 memcpy(&TN_PIXEL(&strip, i * (side + 4), y, 0), &TN_PIXEL(&sc, 0, y, 0), (size_t)side * 3 * sizeof(float));
         tn_image_free(&pv);
@@ -153,7 +153,7 @@ static double along_relief(const tn_contour_set *sk, const tn_image *img)
     long cnt = 0;
     int c, i, side, q;
     memset(&dn, 0, sizeof dn);
-    if (tn_sketch_densify(sk, &dn)) return -1;
+    if (tn_sketch_densify(&dn, sk)) return -1;
     for (c = 0; c < dn.count; c++) {
         const tn_contour *L = &dn.items[c];
         int n = L->npoints;
@@ -190,9 +190,9 @@ static void user_scores(const char *name, const tn_contour_set *sk, const tn_ima
     double share = 0;
     int n = 0;
     tn_realism r;
-    tn_gnn_ordering(sk, img, 0, &share, &n);
+    tn_gnn_ordering(&share, sk, img, 0, &n);
     printf("user_%s_ordering: %.1f %% (%d points)\n", name, 100.0 * share, n);
-    if (!tn_realism_compare(ex, img, NULL, &r)) printf("user_%s_realism_distance: %.4f\n", name, r.distance);
+    if (!tn_realism_compare(&r, ex, img, NULL)) printf("user_%s_realism_distance: %.4f\n", name, r.distance);
     printf("user_%s_along_relief: %.2f (RMS beside the lines, example units)\n", name, along_relief(sk, img));
 }
 
@@ -244,7 +244,7 @@ static void trace_print(const trace_set *t, const tn_gnn *model, long iters, dou
                 tn_image out = {0, 0, 0, NULL};
                 tn_metrics m;
                 if (t->ring[i] != ring || !t->ok[ti][i]) continue;
-                if (!tn_gnn_generate(model, &t->sk[ti][i], SIDE, SIDE, &go, &out) && !tn_compare(&t->win[i], &out, 0, &m)) {
+                if (!tn_gnn_generate(&out, model, &t->sk[ti][i], SIDE, SIDE, &go) && !tn_compare(&m, &t->win[i], &out, 0)) {
                     s.ssim += m.ssim;
                     s.n++;
                 }
@@ -332,7 +332,7 @@ int main(int argc, char **argv)
     /* the windows gnn-train would take, as long as they are two windows away: never the
        neighbours scored below (every region of ../shared/data has room) */
     if (hold && (cx >= 2 * SIDE || cy >= 2 * SIDE || cx + 3 * SIDE <= full.width || cy + 3 * SIDE <= full.height) &&
-        (nhold = tn_gnn_holdout_windows(&full, cx, cy, SIDE, SIDE, 4, hw)) > 0) {
+        (nhold = tn_gnn_holdout_windows(hw, &full, cx, cy, SIDE, SIDE, 4)) > 0) {
         o.holdout = hw;
         o.holdout_count = nhold;
     }
@@ -351,7 +351,7 @@ int main(int argc, char **argv)
     go.grow = grow;
     if (trace) trace_prepare(&ts, &full, cx, cy, thr);
     if (model_path && !access(model_path, F_OK)) { /* model=PATH: a model trained before */
-        if (tn_gnn_load(model_path, &model)) {
+        if (tn_gnn_load(&model, model_path)) {
             fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
             return 1;
         }
@@ -366,12 +366,12 @@ int main(int argc, char **argv)
                run's, switched on from the first segment that starts in its last `phase` share */
             o.embed_phase = seg > 1 && phase > 0 && done >= 1.0 - phase ? 0.9999f : -1.0f;
             if (o.embed_phase > 0 && phase_from < 0) phase_from = st.iterations;
-            if (tn_gnn_train(&crop, &o, &model, &st)) {
+            if (tn_gnn_train(&model, &crop, &o, &st)) {
                 fprintf(stderr, "bench_gnn: training failed: %s\n", tn_last_error());
                 return 1;
             }
             done = iters > 0 ? (double)st.iterations / (double)iters : st.seconds / (minutes * 60.0);
-            if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out) && !tn_compare(&crop, &out, 0, &mt)) {
+            if (!tn_gnn_generate(&out, &model, &sk, SIDE, SIDE, &go) && !tn_compare(&mt, &crop, &out, 0)) {
                 if (mt.ssim >= 0.95 && t95 < 0) t95 = st.seconds;
                 if (mt.ssim >= 0.97 && t97 < 0) t97 = st.seconds;
                 fprintf(stderr, "  %ld iterations, %.0f s: reconstruction SSIM %.4f\n", st.iterations, st.seconds, mt.ssim);
@@ -399,7 +399,7 @@ int main(int argc, char **argv)
             printf("train_holdout_best_iteration: %ld\n", st.holdout_iteration);
             printf("train_holdout_best_ssim: %.4f (last check %.4f)\n", st.holdout_ssim, st.holdout_last_ssim);
         }
-        if (model_path && tn_gnn_save(&model, model_path)) fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
+        if (model_path && tn_gnn_save(model_path, &model)) fprintf(stderr, "bench_gnn: %s\n", tn_last_error());
     }
     {
         const tn_tensor *gs = tn_params_find(model.weights, "gain.scale");
@@ -408,7 +408,7 @@ int main(int argc, char **argv)
 
     /* reconstruction from the crop's own network */
     t0 = tn_time_seconds();
-    if (tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) {
+    if (tn_gnn_generate(&out, &model, &sk, SIDE, SIDE, &go)) {
         fprintf(stderr, "bench_gnn: generation failed: %s\n", tn_last_error());
         return 1;
     }
@@ -417,7 +417,7 @@ int main(int argc, char **argv)
         tn_image ft = {0, 0, 0, NULL};
         go.finetune = 30;
         t0 = tn_time_seconds();
-        if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &ft)) printf("generate_128_finetune30_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
+        if (!tn_gnn_generate(&ft, &model, &sk, SIDE, SIDE, &go)) printf("generate_128_finetune30_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
         tn_image_free(&ft);
         go.finetune = 0;
     }
@@ -428,7 +428,7 @@ int main(int argc, char **argv)
     tn_image_free(&out);
     rec.ssim = rec.psnr = rec.spec = 0;
     rec.n = 0;
-    tn_gnn_membrane(&sk, SIDE, SIDE, &out);
+    tn_gnn_membrane(&out, &sk, SIDE, SIDE);
     add(&rec, &crop, &out);
     printf("recon_membrane_ssim: %.4f\n", rec.ssim);
     printf("recon_membrane_psnr: %.2f dB\n", rec.psnr);
@@ -454,19 +454,19 @@ int main(int argc, char **argv)
                 {
                     float gn = 1.0f;
                     go.gain = gain;
-                    if (!tn_gnn_gain(&model, &sk, SIDE, SIDE, &go, &gn)) gains += gn;
+                    if (!tn_gnn_gain(&gn, &model, &sk, SIDE, SIDE, &go)) gains += gn;
                     if (gain == 0.0f) go.gain = gn > 0 ? gn : -1.0f; /* tested once, not again inside generate */
                 }
                 go.finetune = finetune;
-                if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&g, &nb, &out);
+                if (!tn_gnn_generate(&out, &model, &sk, SIDE, SIDE, &go)) add(&g, &nb, &out);
                 else fprintf(stderr, "  neighbour (%d, %d): %s\n", dx, dy, tn_last_error());
                 go.finetune = 0;
                 tn_image_free(&out);
                 go.gain = 1.0f; /* the network as trained, without the gain tested on the sketch */
-                if (!tn_gnn_generate(&model, &sk, SIDE, SIDE, &go, &out)) add(&raw, &nb, &out);
+                if (!tn_gnn_generate(&out, &model, &sk, SIDE, SIDE, &go)) add(&raw, &nb, &out);
                 go.gain = gain;
                 tn_image_free(&out);
-                if (!tn_gnn_membrane(&sk, SIDE, SIDE, &out)) add(&mem, &nb, &out);
+                if (!tn_gnn_membrane(&out, &sk, SIDE, SIDE)) add(&mem, &nb, &out);
                 tn_image_free(&out);
                 if (mean_baseline(&sk, SIDE, SIDE, &out)) add(&mean, &nb, &out);
                 tn_image_free(&out);
@@ -504,25 +504,25 @@ int main(int argc, char **argv)
         memset(&go, 0, sizeof go);
         go.grow = grow;
         go.seed = 1;
-        if (!tn_gnn_membrane(&units, U, U, &mem)) user_scores("membrane", &a, &crop, &mem);
+        if (!tn_gnn_membrane(&mem, &units, U, U)) user_scores("membrane", &a, &crop, &mem);
         t0 = tn_time_seconds();
         go.finetune = finetune;
-        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) {
+        if (!tn_gnn_generate(&g, &model, &a, U, U, &go)) {
             printf("user_generate_256_ms: %.0f ms\n", (tn_time_seconds() - t0) * 1e3);
             user_scores("gnn", &a, &crop, &g);
         }
-        if (!tn_gnn_generate(&model, &ar, U, U, &go, &gr) && g.data) { /* rotate the output back: (x, y) of gr is (S-1-y, x) of g */
+        if (!tn_gnn_generate(&gr, &model, &ar, U, U, &go) && g.data) { /* rotate the output back: (x, y) of gr is (S-1-y, x) of g */
             tn_image back = {0, 0, 0, NULL};
             tn_image_create(&back, U, U, 1);
             for (y = 0; y < U; y++)
                 for (x = 0; x < U; x++) TN_PIXEL(&back, x, y, 0) = TN_PIXEL(&gr, U - 1 - y, x, 0);
-            if (!tn_compare(&g, &back, 0, &mt)) printf("user_rotation_90_ssim: %.4f (output of the rotated sketch vs the rotated output)\n", mt.ssim);
+            if (!tn_compare(&mt, &g, &back, 0)) printf("user_rotation_90_ssim: %.4f (output of the rotated sketch vs the rotated output)\n", mt.ssim);
             tn_image_free(&back);
         }
         tn_image_free(&gr);
         go.finetune = 0;
         go.random_nodes = 48;
-        if (!tn_gnn_generate(&model, &a, U, U, &go, &gr)) user_scores("gnn_random48", &a, &crop, &gr);
+        if (!tn_gnn_generate(&gr, &model, &a, U, U, &go)) user_scores("gnn_random48", &a, &crop, &gr);
         if (pictures && g.data && gr.data && mem.data) {
             const tn_image *panel[4];
             char path[300];
@@ -538,7 +538,7 @@ int main(int argc, char **argv)
         go.random_nodes = 0;
         go.finetune = 30;
         go.order_weight = 1;
-        if (!tn_gnn_generate(&model, &a, U, U, &go, &g)) user_scores("gnn_finetune30_order", &a, &crop, &g);
+        if (!tn_gnn_generate(&g, &model, &a, U, U, &go)) user_scores("gnn_finetune30_order", &a, &crop, &g);
         tn_image_free(&g);
         memset(&go, 0, sizeof go);
         go.grow = grow;
@@ -555,13 +555,13 @@ int main(int argc, char **argv)
         if (sketch_of(&big, 0, &sk, &cover)) {
             go.finetune = finetune;
             t0 = tn_time_seconds();
-            if (!tn_gnn_generate(&model, &sk, 512, 512, &go, &out)) {
+            if (!tn_gnn_generate(&out, &model, &sk, 512, 512, &go)) {
                 printf("generate_512_s: %.2f s\n", tn_time_seconds() - t0);
                 add(&b, &big, &out);
             } else
                 fprintf(stderr, "  512: %s\n", tn_last_error());
             tn_image_free(&out);
-            if (!tn_gnn_membrane(&sk, 512, 512, &out)) add(&bm, &big, &out);
+            if (!tn_gnn_membrane(&out, &sk, 512, 512)) add(&bm, &big, &out);
             tn_image_free(&out);
             if (b.n && bm.n) printf("generate_512_ssim: %.4f (membrane %.4f)\n", b.ssim, bm.ssim);
             tn_contour_set_free(&sk);

@@ -80,7 +80,7 @@ static int real_part(double minutes)
         if (in) fclose(in);
         if (f) fclose(f);
     }
-    if (tn_season_data_load(csv, &d)) {
+    if (tn_season_data_load(&d, csv)) {
         printf("# real: no seasonal_slovenia data (%s)\n", tn_last_error());
         return 0;
     }
@@ -92,7 +92,7 @@ static int real_part(double minutes)
     if (minutes < 0) o.train.max_iters = (long)-minutes, o.train.minutes = 1e6;
     else o.train.minutes = minutes;
     t0 = tn_time_seconds();
-    if (tn_kpd_train(tr, n, &o, &m, &st)) {
+    if (tn_kpd_train(&m, tr, n, &o, &st)) {
         printf("# real: %s\n", tn_last_error());
         return 1;
     }
@@ -127,8 +127,8 @@ static int real_part(double minutes)
             if (mcount.data[k] > 0) mean.data[k] /= mcount.data[k];
             mcount.data[k] = mcount.data[k] > 0;
         }
-        if (tn_kpd_generate(&m, q->dem, q->climate, q->insolation, q->time, 0, 0, q->dem->width, q->dem->height, &out) ||
-            tn_kpd_generate(&m, q->dem, q->climate, q->insolation, floorf(q->time + 0.5f), 0, 0, q->dem->width, q->dem->height, &rnd)) {
+        if (tn_kpd_generate(&out, &m, q->dem, q->climate, q->insolation, q->time, 0, 0, q->dem->width, q->dem->height) ||
+            tn_kpd_generate(&rnd, &m, q->dem, q->climate, q->insolation, floorf(q->time + 0.5f), 0, 0, q->dem->width, q->dem->height)) {
             printf("# real: %s\n", tn_last_error());
             return 1;
         }
@@ -171,7 +171,7 @@ static int real_part(double minutes)
         tn_image out = {0, 0, 0, NULL};
         double s = 0, o17 = 0, c17 = 0;
         size_t k, np = (size_t)d.dems[0].width * d.dems[0].height;
-        tn_kpd_generate(&m, &d.dems[0], &d.climates[0], &d.insolation[0], (float)i, 0, 0, d.dems[0].width, d.dems[0].height, &out);
+        tn_kpd_generate(&out, &m, &d.dems[0], &d.climates[0], &d.insolation[0], (float)i, 0, 0, d.dems[0].width, d.dems[0].height);
         for (k = 0; k < np; k++) s += out.data[k];
         for (j = 0; j < d.count; j++)
             if (!strncmp(d.labels[j], "2017", 4) && atoi(d.labels[j] + 5) == i + 1)
@@ -212,21 +212,21 @@ static int site_make(site *s, int di, const tn_climate *c, int halves)
     int m;
     memset(s, 0, sizeof *s);
     s->c = *c;
-    if (tn_image_load(data_path(dems[di].path), &s->dem, NULL)) return 0;
+    if (tn_image_load(&s->dem, data_path(dems[di].path), NULL)) return 0;
     for (k = 0; k < (size_t)s->dem.width * s->dem.height; k++) s->dem.data[k] = dems[di].lo + s->dem.data[k] * (dems[di].hi - dems[di].lo);
     memset(&io, 0, sizeof io);
     io.dx = dems[di].dx;
     io.dy = dems[di].dy;
     io.step_minutes = 30;
-    if (tn_insolation(&s->dem, c->latitude, &io, &s->ins)) return 0;
+    if (tn_insolation(&s->ins, &s->dem, c->latitude, &io)) return 0;
     memset(&so, 0, sizeof so);
     so.insolation = io;
     so.detail = -1;
     for (m = 0; m < 12; m++) t[m] = (float)m;
-    if (tn_season_texture(&s->dem, c, c->latitude, &s->ins, t, 12, &so, s->tex, NULL)) return 0;
+    if (tn_season_texture(s->tex, &s->dem, c, c->latitude, &s->ins, t, 12, &so, NULL)) return 0;
     if (halves) {
         for (m = 0; m < 12; m++) t[m] = (float)m + 0.5f;
-        if (tn_season_texture(&s->dem, c, c->latitude, &s->ins, t, 12, &so, s->half, NULL)) return 0;
+        if (tn_season_texture(s->half, &s->dem, c, c->latitude, &s->ins, t, 12, &so, NULL)) return 0;
     }
     return 1;
 }
@@ -291,7 +291,7 @@ static int table_part(double minutes)
         int k;
         for (k = 0; k < 6; k++) {
             tn_climate c;
-            tn_climate_koppen(train_climates[k], &c);
+            tn_climate_koppen(&c, train_climates[k]);
             if (!site_make(&train[nt], i, &c, 0)) {
                 printf("# table: no data (%s)\n", tn_last_error());
                 return 0;
@@ -303,7 +303,7 @@ static int table_part(double minutes)
         int k;
         for (k = 0; k < 2; k++) {
             tn_climate c;
-            tn_climate_koppen(test_climates[k], &c);
+            tn_climate_koppen(&c, test_climates[k]);
             if (!site_make(&test[ns], 4 + i, &c, 1)) {
                 printf("# table: no data (%s)\n", tn_last_error());
                 return 0;
@@ -330,26 +330,26 @@ static int table_part(double minutes)
         memset(&o, 0, sizeof o);
         o.condition = (tn_kpd_condition)cnd;
         o.train.minutes = minutes;
-        if (tn_kpd_train(smp, nt * 12, &o, &models[cnd], &st)) {
+        if (tn_kpd_train(&models[cnd], smp, nt * 12, &o, &st)) {
             printf("# table: %s\n", tn_last_error());
             return 1;
         }
         for (i = 0; i < ns; i++) {
             tn_image g[13];
             for (m = 0; m < 12; m++)
-                tn_kpd_generate(&models[cnd], &test[i].dem, &test[i].c, &test[i].ins, (float)m, 0, 0, test[i].dem.width, test[i].dem.height, &g[m]);
+                tn_kpd_generate(&g[m], &models[cnd], &test[i].dem, &test[i].c, &test[i].ins, (float)m, 0, 0, test[i].dem.width, test[i].dem.height);
             for (m = 0; m < 12; m++) {
                 tn_metrics mt;
                 double sg = 0, st_ = 0;
                 int m1 = (m + 1) % 12;
-                tn_compare(&test[i].tex[m], &g[m], 1.0, &mt);
+                tn_compare(&mt, &test[i].tex[m], &g[m], 1.0);
                 se += mt.rmse * mt.rmse;
                 ssim += mt.ssim;
                 gd += grad_distance(&g[m], &test[i].tex[m]);
                 n++;
                 dad += mean_abs_diff_of_diffs(&test[i].tex[m], &test[i].tex[m1], &g[m], &g[m1]);
-                tn_ssim(&g[m], &g[m1], 1.0, &sg);
-                tn_ssim(&test[i].tex[m], &test[i].tex[m1], 1.0, &st_);
+                tn_ssim(&sg, &g[m], &g[m1], 1.0);
+                tn_ssim(&st_, &test[i].tex[m], &test[i].tex[m1], 1.0);
                 dss += fabs(sg - st_);
                 nd++;
             }
@@ -364,9 +364,9 @@ static int table_part(double minutes)
                     for (m = 0; m < 12; m++) {
                         tn_image gs;
                         tn_metrics a, b;
-                        tn_kpd_generate(&models[cnd], &sh.dem, &sh.c, &sh.ins, (float)m, 0, 0, sh.dem.width, sh.dem.height, &gs);
-                        tn_compare(&g[(m + 6) % 12], &gs, 1.0, &a);
-                        tn_compare(&sh.tex[m], &gs, 1.0, &b);
+                        tn_kpd_generate(&gs, &models[cnd], &sh.dem, &sh.c, &sh.ins, (float)m, 0, 0, sh.dem.width, sh.dem.height);
+                        tn_compare(&a, &g[(m + 6) % 12], &gs, 1.0);
+                        tn_compare(&b, &sh.tex[m], &gs, 1.0);
                         e += a.rmse * a.rmse;
                         et += b.rmse * b.rmse;
                         tn_image_free(&gs);
@@ -393,13 +393,13 @@ static int table_part(double minutes)
                 tn_metrics mf, mi;
                 size_t k;
                 int m1 = (m + 1) % 12;
-                tn_kpd_generate(&models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m, 0, 0, test[i].dem.width, test[i].dem.height, &a);
-                tn_kpd_generate(&models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m1, 0, 0, test[i].dem.width, test[i].dem.height, &b);
-                tn_kpd_generate(&models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m + 0.5f, 0, 0, test[i].dem.width, test[i].dem.height, &h);
+                tn_kpd_generate(&a, &models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m, 0, 0, test[i].dem.width, test[i].dem.height);
+                tn_kpd_generate(&b, &models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m1, 0, 0, test[i].dem.width, test[i].dem.height);
+                tn_kpd_generate(&h, &models[0], &test[i].dem, &test[i].c, &test[i].ins, (float)m + 0.5f, 0, 0, test[i].dem.width, test[i].dem.height);
                 tn_image_copy(&avg, &a);
                 for (k = 0; k < (size_t)a.width * a.height * 3; k++) avg.data[k] = 0.5f * (a.data[k] + b.data[k]);
-                tn_compare(&test[i].half[m], &h, 1.0, &mf);
-                tn_compare(&test[i].half[m], &avg, 1.0, &mi);
+                tn_compare(&mf, &test[i].half[m], &h, 1.0);
+                tn_compare(&mi, &test[i].half[m], &avg, 1.0);
                 ef += mf.rmse * mf.rmse;
                 ei += mi.rmse * mi.rmse;
                 dadf += mean_abs_diff_of_diffs(&test[i].tex[m], &test[i].half[m], &a, &h);
@@ -418,9 +418,9 @@ static int table_part(double minutes)
         tn_image cells[12], sheet;
         for (m = 0; m < 6; m++) {
             tn_image_copy(&cells[m], &test[0].tex[2 * m]);
-            tn_kpd_generate(&models[0], &test[0].dem, &test[0].c, &test[0].ins, (float)(2 * m), 0, 0, test[0].dem.width, test[0].dem.height, &cells[6 + m]);
+            tn_kpd_generate(&cells[6 + m], &models[0], &test[0].dem, &test[0].c, &test[0].ins, (float)(2 * m), 0, 0, test[0].dem.width, test[0].dem.height);
         }
-        if (!tn_season_sheet(cells, 12, 6, 128, &sheet)) {
+        if (!tn_season_sheet(&sheet, cells, 12, 6, 128)) {
             tn_save_opts so;
             memset(&so, 0, sizeof so);
             so.bit_depth = 8;
@@ -452,7 +452,7 @@ static int speed_part(void)
     float t = 0;
     double t0;
     size_t k;
-    if (tn_image_load(data_path("dem/alps_n47e009/alps_n47e009_full.png"), &dem, NULL)) {
+    if (tn_image_load(&dem, data_path("dem/alps_n47e009/alps_n47e009_full.png"), NULL)) {
         printf("# speed: no data\n");
         return 0;
     }
@@ -460,10 +460,10 @@ static int speed_part(void)
     memset(&io, 0, sizeof io);
     io.dx = 62.6f;
     io.dy = 92.6f;
-    tn_climate_koppen("Cfb", &c);
+    tn_climate_koppen(&c, "Cfb");
     t0 = tn_time_seconds();
-    if (tn_insolation(&dem, 47.4, &io, &ins) || tn_image_resize(&big, &dem, 4096, 4096, TN_RESIZE_BILINEAR) ||
-        tn_image_resize(&insb, &ins, 4096, 4096, TN_RESIZE_BILINEAR) || tn_season_texture(&dem, &c, 47.4, &ins, &t, 1, NULL, &tex, NULL)) {
+    if (tn_insolation(&ins, &dem, 47.4, &io) || tn_image_resize(&big, &dem, 4096, 4096, TN_RESIZE_BILINEAR) ||
+        tn_image_resize(&insb, &ins, 4096, 4096, TN_RESIZE_BILINEAR) || tn_season_texture(&tex, &dem, &c, 47.4, &ins, &t, 1, NULL, NULL)) {
         printf("# speed: %s\n", tn_last_error());
         return 1;
     }
@@ -475,19 +475,19 @@ static int speed_part(void)
     s.target = &tex;
     memset(&o, 0, sizeof o);
     o.train.max_iters = 20;
-    if (tn_kpd_train(&s, 1, &o, &m, NULL)) {
+    if (tn_kpd_train(&m, &s, 1, &o, NULL)) {
         printf("# speed: %s\n", tn_last_error());
         return 1;
     }
     t0 = tn_time_seconds();
-    if (tn_kpd_generate(&m, &big, &c, &insb, 6.0f, 0, 0, 4096, 4096, &out)) {
+    if (tn_kpd_generate(&out, &m, &big, &c, &insb, 6.0f, 0, 0, 4096, 4096)) {
         printf("# speed: %s\n", tn_last_error());
         return 1;
     }
     printf("kpd_4096_one_month: %.1f s (2 threads)\n", tn_time_seconds() - t0);
     tn_image_free(&out);
     t0 = tn_time_seconds();
-    tn_kpd_generate(&m, &big, &c, &insb, 6.5f, 0, 0, 4096, 4096, &out);
+    tn_kpd_generate(&out, &m, &big, &c, &insb, 6.5f, 0, 0, 4096, 4096);
     printf("kpd_4096_between_months: %.1f s (two conditionings)\n", tn_time_seconds() - t0);
     tn_image_free(&out);
     tn_image_free(&tex);

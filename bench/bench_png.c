@@ -99,13 +99,13 @@ static void bench_file(const char *rel, const char *what)
             uLongf zl;
             uint8_t *zb;
             double tz;
-            tn_zlib_inflate(z, zn, &rows, &rn, 0);
+            tn_zlib_inflate(&rows, &rn, z, zn, 0);
             zl = compressBound(rn);
             zb = (uint8_t *)malloc(zl);
             tz = tn_time_seconds();
             compress2(zb, &zl, rows, rn, 6);
             tz = tn_time_seconds() - tz;
-            tn_zlib_deflate(rows, rn, 6, &mine, &mn);
+            tn_zlib_deflate(&mine, &mn, rows, rn, 6);
             printf("png_zlib_compare_%s: same filtered rows, ours level 6 %zu bytes, zlib level 6 %lu bytes (ours/zlib = %.3f; zlib %.1f MB/s)\n",
                    what, mn, (unsigned long)zl, (double)mn / (double)zl, rn / tz / 1e6);
             free(zb);

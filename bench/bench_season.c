@@ -41,7 +41,7 @@ static double ws_of(double phi, double d)
 static double klein(double lat, double beta, int doy)
 {
     double d, e, phi = lat * PI / 180, pb = (lat - beta) * PI / 180, w1, w2, ws;
-    tn_sun_day(doy, &d, &e);
+    tn_sun_day(&d, &e, doy);
     w1 = ws_of(phi, d);
     w2 = ws_of(pb, d);
     ws = w1 < w2 ? w1 : w2;
@@ -64,7 +64,7 @@ static double analytic_error(double beta, int shadows)
     o.no_shadows = !shadows;
     for (l = 0; l < sizeof lats / sizeof lats[0]; l++) {
         if (beta > 0 && lats[l] < beta) continue; /* Klein's form assumes the slope faces the equator */
-        if (tn_insolation(&dem, lats[l], &o, &out)) { fprintf(stderr, "%s\n", tn_last_error()); exit(1); }
+        if (tn_insolation(&out, &dem, lats[l], &o)) { fprintf(stderr, "%s\n", tn_last_error()); exit(1); }
         for (m = 0; m < 12; m++) {
             double ref = klein(lats[l], beta, tn_day_of_year(m + 1, 15)), v = TN_PIXEL(&out, 8, 8, m);
             double err = ref > 1 ? fabs(v - ref) / ref : fabs(v - ref) / 1000.0;
@@ -92,11 +92,11 @@ static double frame_ndvi(const char *stem)
     double s = 0;
     size_t i, n, k = 0;
     snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_ndvi.pfm", stem);
-    if (tn_image_load(data_path(p), &nd, NULL)) return -2;
+    if (tn_image_load(&nd, data_path(p), NULL)) return -2;
     snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_cloud.pgm", stem);
-    if (tn_image_load(data_path(p), &cl, NULL)) { tn_image_free(&nd); return -2; }
+    if (tn_image_load(&cl, data_path(p), NULL)) { tn_image_free(&nd); return -2; }
     snprintf(p, sizeof p, "seasonal_slovenia/frames/%s_nodata.pgm", stem);
-    if (tn_image_load(data_path(p), &no, NULL)) { tn_image_free(&nd); tn_image_free(&cl); return -2; }
+    if (tn_image_load(&no, data_path(p), NULL)) { tn_image_free(&nd); tn_image_free(&cl); return -2; }
     n = (size_t)nd.width * nd.height;
     if (cl.width == nd.width && cl.height == nd.height && no.width == nd.width && no.height == nd.height)
         for (i = 0; i < n; i++)
@@ -119,7 +119,7 @@ static int ndvi_check(void)
     tn_season_state st[64];
     tn_season_opts so;
     tn_climate c;
-    if (!f || tn_image_load(data_path("seasonal_slovenia/dem_m.pfm"), &dem, NULL)) {
+    if (!f || tn_image_load(&dem, data_path("seasonal_slovenia/dem_m.pfm"), NULL)) {
         printf("# no seasonal_slovenia data\n");
         if (f) fclose(f);
         return 0;
@@ -140,8 +140,8 @@ static int ndvi_check(void)
     memset(&so, 0, sizeof so);
     so.insolation.dx = 10.0f;
     so.detail = -1;
-    tn_climate_koppen("Cfb", &c);
-    if (tn_season_texture(&dem, &c, 45.87, NULL, times, nf, &so, out, st)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    tn_climate_koppen(&c, "Cfb");
+    if (tn_season_texture(out, &dem, &c, 45.87, NULL, times, nf, &so, st)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
     for (i = 0; i < nf; i++) {
         size_t q, n = (size_t)dem.width * dem.height;
         double g = 0;
@@ -193,7 +193,7 @@ int main(int argc, char **argv)
     printf("insolation_south30_max_rel_error_no_shadows: %.2e\n", analytic_error(30, 0));
     printf("insolation_south30_max_rel_error_shadows: %.2e\n", analytic_error(30, 1));
 
-    if (tn_image_load(data_path("dem/alps_n47e009/alps_n47e009_full.png"), &dem, NULL)) {
+    if (tn_image_load(&dem, data_path("dem/alps_n47e009/alps_n47e009_full.png"), NULL)) {
         printf("# no ../shared/data: %s\n", tn_last_error());
         return 0;
     }
@@ -204,17 +204,17 @@ int main(int argc, char **argv)
     o.dy = 92.6f;
     tn_set_threads(1);
     t0 = tn_time_seconds();
-    tn_insolation(&dem, 47.4, &o, &ins);
+    tn_insolation(&ins, &dem, 47.4, &o);
     t1 = tn_time_seconds() - t0;
     tn_image_free(&ins);
     tn_set_threads(threads);
     t0 = tn_time_seconds();
-    tn_insolation(&dem, 47.4, &o, &ins);
+    tn_insolation(&ins, &dem, 47.4, &o);
     t2 = tn_time_seconds() - t0;
     tn_image_free(&ins);
     o.no_shadows = 1;
     t0 = tn_time_seconds();
-    tn_insolation(&dem, 47.4, &o, &ins);
+    tn_insolation(&ins, &dem, 47.4, &o);
     tns = tn_time_seconds() - t0;
     tn_image_free(&ins);
     printf("insolation_year_1024_t1: %.2f s\n", t1);
@@ -226,17 +226,17 @@ int main(int argc, char **argv)
     so.insolation.dx = 62.6f / 4;
     so.insolation.dy = 92.6f / 4;
     so.shade = 0.5f;
-    tn_climate_koppen("Cfb", &c);
+    tn_climate_koppen(&c, "Cfb");
     if (tn_image_resize(&big, &dem, 4096, 4096, TN_RESIZE_BICUBIC)) return 1;
     times[0] = 3.0f;
     t0 = tn_time_seconds();
-    if (tn_season_texture(&big, &c, 47.4, NULL, times, 1, &so, tex, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    if (tn_season_texture(tex, &big, &c, 47.4, NULL, times, 1, &so, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
     t1 = tn_time_seconds() - t0;
     tn_image_free(&tex[0]);
     printf("season_texture_4096_one_month_t%d: %.2f s (insolation at 1024 included)\n", threads, t1);
     for (m = 0; m < 12; m++) times[m] = (float)m;
     t0 = tn_time_seconds();
-    if (tn_season_texture(&big, &c, 47.4, NULL, times, 12, &so, tex, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    if (tn_season_texture(tex, &big, &c, 47.4, NULL, times, 12, &so, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
     t1 = tn_time_seconds() - t0;
     for (m = 0; m < 12; m++) tn_image_free(&tex[m]);
     printf("season_texture_4096_year_t%d: %.2f s\n", threads, t1);
@@ -251,8 +251,8 @@ int main(int argc, char **argv)
         so.insolation.dy = 92.6f;
         cs = c;
         for (m = 0; m < 12; m++) cs.t[m] = c.t[(m + 6) % 12], cs.p[m] = c.p[(m + 6) % 12];
-        if (tn_season_texture(&crop, &c, 46.0, NULL, times, 12, &so, tex, NULL) ||
-            tn_season_texture(&crop, &cs, -46.0, NULL, times, 12, &so, texs, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+        if (tn_season_texture(tex, &crop, &c, 46.0, NULL, times, 12, &so, NULL) ||
+            tn_season_texture(texs, &crop, &cs, -46.0, NULL, times, 12, &so, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
         for (m = 0; m < 12; m++) {
             shifted += rmse_rgb(&tex[m], &texs[(m + 6) % 12]) / 12;
             same += rmse_rgb(&tex[m], &tex[(m + 6) % 12]) / 12;

@@ -51,7 +51,7 @@ static int load(const char *dir, const char *leaf, tn_image *img, float *dx, flo
     FILE *f;
     size_t k;
     snprintf(path, sizeof path, "%s/dem/%s/%s_%s.png", g_root, dir, dir, leaf);
-    if (tn_image_load(path, img, NULL)) return 0;
+    if (tn_image_load(img, path, NULL)) return 0;
     snprintf(path, sizeof path, "%s/dem_index.csv", g_root);
     snprintf(want, sizeof want, "dem/%s/%s_%s.png,", dir, dir, leaf);
     if ((f = fopen(path, "r"))) {
@@ -88,7 +88,7 @@ static dists dist3(const tn_image *ref, const tn_image *img, float dx, float dy)
     memset(&o, 0, sizeof o);
     o.dx_a = dx;
     o.dy_a = dy;
-    if (tn_realism_compare(ref, img, &o, &r)) return d;
+    if (tn_realism_compare(&r, ref, img, &o)) return d;
     d.slope = r.slope_distance;
     d.curv = r.curvature_distance;
     d.spec = r.spectrum_distance;
@@ -99,8 +99,8 @@ static double ssim_of(const tn_image *a, const tn_image *b)
 {
     double s = NAN;
     float lo, hi;
-    tn_image_range(a, &lo, &hi);
-    tn_ssim(a, b, hi - lo, &s);
+    tn_image_range(&lo, &hi, a);
+    tn_ssim(&s, a, b, hi - lo);
     return s;
 }
 
@@ -210,7 +210,7 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         m->d.slope += d.slope / 3;
         m->d.curv += d.curv / 3;
         m->d.spec += d.spec / 3;
-        tn_image_range(&s[i], &lo, &hi);
+        tn_image_range(&lo, &hi, &s[i]);
         if (lo < m->lo) m->lo = lo;
         if (hi > m->hi) m->hi = hi;
         tn_image_crop(&w, &s[i], 64, 64, 128, 128);
@@ -241,7 +241,7 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
     for (i = 0; i < n; i++) {
         tn_image p = {0, 0, 0, NULL};
         int y;
-        if (!tn_render_preview(&imgs[i], &ro, &p))
+        if (!tn_render_preview(&p, &imgs[i], &ro))
             for (y = 0; y < p.height && y < H; y++) memcpy(row.data + ((size_t)y * W + x0) * 3, p.data + (size_t)y * p.width * 3, (size_t)p.width * 3 * sizeof(float));
         x0 += imgs[i].width + gap;
         tn_image_free(&p);
@@ -283,7 +283,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         return;
     }
     tn_set_threads(threads);
-    tn_image_range(&ex, &elo, &ehi);
+    tn_image_range(&elo, &ehi, &ex);
     locate(&full, &ex, &exx, &exy);
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);
@@ -300,12 +300,12 @@ static void bench_region(const region *rg, double minutes, int threads)
         if (g_model_dir) { /* a model an earlier run saved (--pictures), instead of training */
             char path[512];
             snprintf(path, sizeof path, "%s/%s_singan.tnw", g_model_dir, n);
-            if (tn_singan_load(path, &m)) {
+            if (tn_singan_load(&m, path)) {
                 printf("# %s: %s\n", n, tn_last_error());
                 g_singan = -1;
             } else
                 printf("%s_singan_model: %s (%ld iterations, %.2f min)\n", n, path, m.iterations, m.train_seconds / 60.0);
-        } else if (tn_singan_train(&ex, &o, &m, &st)) {
+        } else if (tn_singan_train(&m, &ex, &o, &st)) {
             printf("# %s: training failed: %s\n", n, tn_last_error());
             g_singan = -1;
         } else {
@@ -319,7 +319,7 @@ static void bench_region(const region *rg, double minutes, int threads)
             memset(&g, 0, sizeof g);
             for (i = 0; i < 3; i++) {
                 g.seed = 100 + (uint64_t)i;
-                if (tn_singan_sample(&m, 0, 0, 256, 256, &g, &sg[i])) printf("# %s: sample failed: %s\n", n, tn_last_error());
+                if (tn_singan_sample(&sg[i], &m, 0, 0, 256, 256, &g)) printf("# %s: sample failed: %s\n", n, tn_last_error());
             }
             if (sg[0].data && sg[1].data && sg[2].data) {
                 measure(&ex, sg, dx, dy, &ms);
@@ -335,7 +335,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         t0 = tn_time_seconds();
         for (i = 0; i < 3; i++) {
             g.seed = 100 + (uint64_t)i;
-            if (tn_singan_sample(&m, 0, 0, 256, 256, &g, &sl[i])) printf("# %s: layout failed: %s\n", n, tn_last_error());
+            if (tn_singan_sample(&sl[i], &m, 0, 0, 256, 256, &g)) printf("# %s: layout failed: %s\n", n, tn_last_error());
         }
         printf("%s_layout_seconds: %.2f s per sample (layout %d)\n", n, (tn_time_seconds() - t0) / 3.0, g_layout);
         if (sl[0].data && sl[1].data && sl[2].data) {
@@ -349,7 +349,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         t0 = tn_time_seconds();
         for (i = 0; i < 3; i++) {
             go.seed = 100 + (uint64_t)i;
-            if (tn_gpnn_sample(&ex, 256, 256, &go, &gp[i])) printf("# %s: gpnn failed: %s\n", n, tn_last_error());
+            if (tn_gpnn_sample(&gp[i], &ex, 256, 256, &go)) printf("# %s: gpnn failed: %s\n", n, tn_last_error());
         }
         printf("%s_gpnn_seconds: %.2f s per sample\n", n, (tn_time_seconds() - t0) / 3.0);
         if (gp[0].data && gp[1].data && gp[2].data) {
@@ -370,7 +370,7 @@ static void bench_region(const region *rg, double minutes, int threads)
             snprintf(path, sizeof path, "%s/%s_singan.png", g_pictures, n); /* the sample itself, 16 bit with its range */
             if (sg[0].data) tn_image_save(path, &sg[0], NULL);
             snprintf(path, sizeof path, "%s/%s_singan.tnw", g_pictures, n); /* and the model */
-            if (g_singan > 0 && sg[0].data) tn_singan_save(&m, path);
+            if (g_singan > 0 && sg[0].data) tn_singan_save(path, &m);
         }
     }
     fflush(stdout);
@@ -400,15 +400,15 @@ static void extras(const char *n, const tn_image *ex, tn_singan *m, int threads,
     int k;
     memset(&g, 0, sizeof g);
     tn_image_blur(&in[0], ex, 4.0f);
-    if (!tn_extract(ex, NULL, &exn)) {
-        tn_gnn_membrane(&exn.contours, 256, 256, &in[1]);
+    if (!tn_extract(&exn, ex, NULL)) {
+        tn_gnn_membrane(&in[1], &exn.contours, 256, 256);
         tn_extraction_free(&exn);
     }
     for (k = 0; k < 2; k++) {
         tn_image r = {0, 0, 0, NULL};
         if (!in[k].data) continue;
         g.seed = 5;
-        if (!tn_singan_refine(m, &in[k], &g, &r)) {
+        if (!tn_singan_refine(&r, m, &in[k], &g)) {
             printf("%s_refine_%s_spectrum: %.3f -> %.3f distance (input -> refined)\n", n, what[k], spec(ex, &in[k], dx, dy), spec(ex, &r, dx, dy));
             printf("%s_refine_%s_ssim_to_input: %.3f ssim\n", n, what[k], ssim_of(&in[k], &r));
         }
@@ -419,7 +419,7 @@ static void extras(const char *n, const tn_image *ex, tn_singan *m, int threads,
         tn_image small = {0, 0, 0, NULL}, up = {0, 0, 0, NULL}, bic = {0, 0, 0, NULL};
         tn_image_resize(&small, ex, 64, 64, TN_RESIZE_AREA);
         tn_image_resize(&bic, &small, 256, 256, TN_RESIZE_BICUBIC);
-        if (!tn_singan_upscale(m, &small, 4.0f, &g, &up)) {
+        if (!tn_singan_upscale(&up, m, &small, 4.0f, &g)) {
             printf("%s_upscale4_spectrum: %.3f distance (bicubic %.3f)\n", n, spec(ex, &up, dx, dy), spec(ex, &bic, dx, dy));
             printf("%s_upscale4_ssim: %.3f ssim (bicubic %.3f)\n", n, ssim_of(ex, &up), ssim_of(ex, &bic));
         }
@@ -431,7 +431,7 @@ static void extras(const char *n, const tn_image *ex, tn_singan *m, int threads,
          sample's alone */
         char path[256], cmd[1024];
         snprintf(path, sizeof path, "/tmp/bench_singan_%s_%d.tnw", n, (int)getpid());
-        tn_singan_save(m, path);
+        tn_singan_save(path, m);
         fflush(stdout);
         snprintf(cmd, sizeof cmd, "%s --threads %d --sample2048 %s %s", g_argv0, threads, path, n);
         if (system(cmd)) printf("# %s: the 2048 sample failed\n", n);
@@ -454,10 +454,10 @@ int main(int argc, char **argv)
         struct rusage ru;
         double t;
         tn_set_threads(threads);
-        if (tn_singan_load(argv[argc - 2], &mm)) return 1;
+        if (tn_singan_load(&mm, argv[argc - 2])) return 1;
         memset(&g, 0, sizeof g);
         t = tn_time_seconds();
-        if (tn_singan_sample(&mm, 0, 0, 2048, 2048, &g, &s)) return 1;
+        if (tn_singan_sample(&s, &mm, 0, 0, 2048, 2048, &g)) return 1;
         t = tn_time_seconds() - t;
         getrusage(RUSAGE_SELF, &ru);
         printf("%s_sample_2048_seconds: %.2f s\n%s_sample_2048_peak_memory: %.0f MB (whole process; the output alone is 16 MB)\n", argv[argc - 1], t,

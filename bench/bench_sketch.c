@@ -36,7 +36,7 @@ static void distances(const tn_image *ex, const tn_image *img, double *d)
 {
     tn_realism r;
     d[0] = d[1] = d[2] = NAN;
-    if (tn_realism_compare(ex, img, &ropts, &r)) return;
+    if (tn_realism_compare(&r, ex, img, &ropts)) return;
     d[0] = r.slope_distance;
     d[1] = r.curvature_distance;
     d[2] = r.spectrum_distance;
@@ -60,7 +60,7 @@ static void save_strip(const char *path, const tn_image *const *img, int n, floa
     if (tn_image_create(&strip, W, Hm, 3)) return;
     for (i = 0; i < n; i++) {
         int rgb = img[i]->channels == 3;
-        if (rgb || !tn_render_preview(img[i], &ro, &pv))
+        if (rgb || !tn_render_preview(&pv, img[i], &ro))
             for (y = 0; y < img[i]->height; y++)
                 memcpy(&TN_PIXEL(&strip, x0, y, 0), &TN_PIXEL(rgb ? img[i] : &pv, 0, y, 0), (size_t)img[i]->width * 3 * sizeof(float));
         tn_image_free(&pv);
@@ -103,7 +103,7 @@ int main(int argc, char **argv)
         return 1;
     }
     if (dxy[0] <= 0) dxy[0] = dxy[1] = 1; /* no spacing recorded: 1 per pixel */
-    if (tn_gnn_load(model_path, &model)) {
+    if (tn_gnn_load(&model, model_path)) {
         fprintf(stderr, "bench_sketch: %s: %s\n", model_path, tn_last_error());
         return 1;
     }
@@ -142,7 +142,7 @@ int main(int argc, char **argv)
         tn_image out[6], rast = {0, 0, 0, NULL}, drawing = {0, 0, 0, NULL};
         if (only && !strstr(only, all[d])) continue;
         snprintf(path, sizeof path, "examples/data/sketch_%s.tns", all[d]);
-        if (tn_sketch_load(path, &sk)) {
+        if (tn_sketch_load(&sk, path)) {
             fprintf(stderr, "bench_sketch: %s\n", tn_last_error());
             continue;
         }
@@ -158,7 +158,7 @@ int main(int argc, char **argv)
                 asked.items[k].points[3 * j + 2] = model.lo + (model.hi - model.lo) * sk.items[k].points[3 * j + 2];
             }
         }
-        tn_sketch_rasterise(&asked, 256, 256, &rast);
+        tn_sketch_rasterise(&rast, &asked, 256, 256);
         for (w = 0; w < 6; w++) {
             tn_gnn_generate_opts o;
             tn_gnn_plan plan;
@@ -174,12 +174,12 @@ int main(int argc, char **argv)
             o.grow = w >= 3 ? 0 : -1;
             o.detail = w >= 4 ? -1 : 0;
             o.random_nodes = w == 2 ? 48 : 0;
-            if (w == 0) st = tn_gnn_membrane(&asked, 256, 256, &out[w]);
+            if (w == 0) st = tn_gnn_membrane(&out[w], &asked, 256, 256);
             else {
-                st = tn_gnn_plan_of(&model, &sk, 256, 256, &o, &plan);
+                st = tn_gnn_plan_of(&plan, &model, &sk, 256, 256, &o);
                 if (!st) {
                     o.gain = w == 4 || plan.gain <= 0 ? -1.0f : plan.gain;
-                    st = tn_gnn_generate(&model, &sk, 256, 256, &o, &out[w]);
+                    st = tn_gnn_generate(&out[w], &model, &sk, 256, 256, &o);
                 }
             }
             secs = tn_time_seconds() - t0;
@@ -187,7 +187,7 @@ int main(int argc, char **argv)
                 printf("%s_%s: failed (%s)\n", all[d], way[w], tn_last_error());
                 continue;
             }
-            tn_gnn_ordering(&sk, &out[w], 4, &share, &cnt);
+            tn_gnn_ordering(&share, &sk, &out[w], 4, &cnt);
             for (q = 0; q < (size_t)256 * 256; q++)
                 if (rast.data[3 * q] > 0 || rast.data[3 * q + 1] > 0) err += fabs(out[w].data[q] - rast.data[3 * q + 2]), bias += out[w].data[q] - rast.data[3 * q + 2], nq++;
             distances(&ex, &out[w], dist);
@@ -200,7 +200,7 @@ int main(int argc, char **argv)
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             fflush(stdout);
         }
-        if (pictures && out[1].data && out[3].data && !tn_sketch_preview(&asked, NULL, 256, 256, &drawing)) {
+        if (pictures && out[1].data && out[3].data && !tn_sketch_preview(&drawing, &asked, NULL, 256, 256)) {
             const tn_image *panel[5];
             panel[0] = &ex;
             panel[1] = &drawing;

@@ -40,7 +40,7 @@ static int save_triptych(const char *dir, const char *name, const tn_image *src,
     if (tn_image_create(&cat, 3 * W + 8, H, 3)) return 1;
     for (i = 0; i < 3; i++) {
         tn_image p = {0, 0, 0, NULL};
-        if (tn_render_preview(maps[i], NULL, &p)) return 1;
+        if (tn_render_preview(&p, maps[i], NULL)) return 1;
         for (y = 0; y < H; y++)
             for (x = 0; x < W; x++)
                 for (c = 0; c < 3; c++) TN_PIXEL(&cat, x + i * (W + 4), y, c) = TN_PIXEL(&p, x, y, c);
@@ -62,7 +62,7 @@ static double ssim_rearranged(const tn_image *src, int n, int t)
     if (tn_image_resize(&r, src, n, n, TN_RESIZE_AREA) || tn_image_copy(&f, &r)) return -1;
     for (y = 0; y < n; y++)
         for (x = 0; x < n; x++) f.data[y * n + x] = t ? r.data[x * n + y] : r.data[y * n + n - 1 - x];
-    if (tn_style_compare(&f, src, &sc)) sc.ssim = -1;
+    if (tn_style_compare(&sc, &f, src)) sc.ssim = -1;
     tn_image_free(&r);
     tn_image_free(&f);
     return sc.ssim;
@@ -130,7 +130,7 @@ int main(int argc, char **argv)
         double t0, t, cpu;
         clock_t c0;
         snprintf(path, sizeof path, "%s/%s", data_root(), sources[i][1]);
-        if (tn_image_load(path, &src, NULL)) {
+        if (tn_image_load(&src, path, NULL)) {
             printf("style_%s: skipped (%s)\n", sources[i][0], tn_last_error());
             continue;
         }
@@ -143,7 +143,7 @@ int main(int argc, char **argv)
         }
         t = tn_time_seconds() - t0;
         cpu = (double)(clock() - c0) / CLOCKS_PER_SEC;
-        if (tn_style_compare(&noise, &src, &a) || tn_style_compare(&res, &src, &b)) return 1;
+        if (tn_style_compare(&a, &noise, &src) || tn_style_compare(&b, &res, &src)) return 1;
         printf("style_%s_source: %s\n", sources[i][0], sources[i][1]);
         printf("style_%s_ssim_noise: %.4f\n", sources[i][0], a.ssim);
         printf("style_%s_ssim_result: %.4f\n", sources[i][0], b.ssim);
@@ -170,7 +170,7 @@ int main(int argc, char **argv)
             }
             printf("style_mountain_1024_time: %.1f s\n", tn_time_seconds() - t0);
             printf("style_mountain_1024_cpu: %.1f s (process CPU, all threads)\n", (double)(clock() - c0) / CLOCKS_PER_SEC);
-            if (tn_style_compare(&r2, &src, &b) == TN_OK && tn_style_compare(&n2, &src, &a) == TN_OK)
+            if (tn_style_compare(&b, &r2, &src) == TN_OK && tn_style_compare(&a, &n2, &src) == TN_OK)
                 printf("style_mountain_1024_ssim: %.4f -> %.4f\n", a.ssim, b.ssim);
             tn_image_free(&n2);
             tn_image_free(&r2);

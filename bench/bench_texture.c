@@ -270,7 +270,7 @@ static void bench_one(const char *name, const char *file, const char *model_path
     feats fref;
     int W, H, c, cw, ch;
     snprintf(path, sizeof path, "%s/textures/%s", data_root(), file);
-    if ((st = tn_image_load(path, &ex, NULL))) {
+    if ((st = tn_image_load(&ex, path, NULL))) {
         printf("%s: skipped (%s)\n", name, tn_last_error());
         return;
     }
@@ -291,10 +291,10 @@ static void bench_one(const char *name, const char *file, const char *model_path
     W = tiling * ex.width;
     H = tiling * ex.height;
     t0 = tn_time_seconds();
-    if ((st = tn_texgan_synthesize(&m, 1, W, H, &synth))) die("synthesize", st);
+    if ((st = tn_texgan_synthesize(&synth, &m, 1, W, H))) die("synthesize", st);
     printf("%s.synth_size: %d x %d\n%s.synth_seconds: %.2f\n", name, W, H, name, tn_time_seconds() - t0);
     if ((st = tn_detail_maps_from_image(&dm, &synth, &ex, NULL))) die("detail maps", st);
-    if ((st = tn_detail_compose(&dm, W, H, &comp))) die("compose", st);
+    if ((st = tn_detail_compose(&comp, &dm, W, H))) die("compose", st);
     tile_exemplar(&ex, W, H, &naive);
     {
         double rn = repetition(&naive, ex.width, ex.height), rd = repetition(&comp, ex.width, ex.height), rs = repetition(&synth, ex.width, ex.height);

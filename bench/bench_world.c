@@ -39,7 +39,7 @@ static double run_procs(const tn_world *w, const char *dir, int procs)
             ro.part = p;
             ro.parts = procs;
             tn_set_threads(1);
-            if (tn_world_write_tiles(w, dir, &ro, NULL)) {
+            if (tn_world_write_tiles(dir, w, &ro, NULL)) {
                 fprintf(stderr, "part %d: %s\n", p, tn_last_error());
                 _exit(1);
             }
@@ -93,13 +93,13 @@ int main(int argc, char **argv)
     memset(&wo, 0, sizeof wo);
     /* scaling: a 4096 x 4096 world of 64 tiles, 1 and 2 processes */
     snprintf(spec, sizeof spec, "world 4096 4096\nseed 3\nheight 0 4000\ncellsize 30\ntile 512\nperlin frequency=8 octaves=10\nhillshade\n");
-    if (tn_world_parse(spec, &wo, &w)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    if (tn_world_parse(&w, spec, &wo)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
     for (p = 1; p <= 2; p++) {
         char *dig;
         snprintf(dir, sizeof dir, "%s/scale_p%d", root, p);
         clear_dir(dir);
         c0 = children_cpu();
-        if ((t = run_procs(&w, dir, p)) < 0 || tn_world_write_index(&w, dir, &present)) { fprintf(stderr, "scale run failed\n"); return 1; }
+        if ((t = run_procs(&w, dir, p)) < 0 || tn_world_write_index(dir, &w, &present)) { fprintf(stderr, "scale run failed\n"); return 1; }
         printf("world_scale_4096_p%d: %.3f tiles/s (%d tiles of 512 px in %.2f s; %.1f CPU s)\n", p, w.rows * w.cols / t, w.rows * w.cols, t,
                children_cpu() - c0);
         dig = tile_digests(dir);
@@ -113,11 +113,11 @@ int main(int argc, char **argv)
     tn_world_free(&w);
     /* the big world: Perlin heights in 1024 px tiles, 2 processes */
     snprintf(spec, sizeof spec, "world %d %d\nseed 7\nheight 0 4000\ncellsize 30\ntile 1024\nperlin frequency=16 octaves=12\n", big, big);
-    if (tn_world_parse(spec, &wo, &w)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+    if (tn_world_parse(&w, spec, &wo)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
     snprintf(dir, sizeof dir, "%s/big_%d", root, big);
     clear_dir(dir);
     c0 = children_cpu();
-    if ((t = run_procs(&w, dir, 2)) < 0 || tn_world_write_index(&w, dir, &present)) { fprintf(stderr, "big run failed\n"); return 1; }
+    if ((t = run_procs(&w, dir, 2)) < 0 || tn_world_write_index(dir, &w, &present)) { fprintf(stderr, "big run failed\n"); return 1; }
     cpu_tile = (children_cpu() - c0) / (w.rows * w.cols);
     getrusage(RUSAGE_CHILDREN, &ru);
     printf("world_big_%d_cpu_seconds_per_tile: %.2f s (user + system of the 2 processes / tiles)\n", big, cpu_tile);

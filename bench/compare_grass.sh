@@ -29,7 +29,7 @@ int main(int argc, char **argv) {
     tn_image dem = {0, 0, 0, NULL};
     if (argc == 6 && !strcmp(argv[1], "prep")) {
         double lo = atof(argv[3]), hi = atof(argv[4]); size_t i, n; FILE *f;
-        if (tn_image_load(argv[2], &dem, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+        if (tn_image_load(&dem, argv[2], NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
         n = (size_t)dem.width * dem.height;
         for (i = 0; i < n; i++) dem.data[i] = (float)(lo + dem.data[i] * (hi - lo));
         f = fopen(argv[5], "wb"); if (!f || fwrite(dem.data, 4, n, f) != n) return 1; fclose(f);
@@ -65,8 +65,8 @@ int main(int argc, char **argv) {
         memset(&gf, 0, sizeof gf); gf.width = w; gf.height = h; gf.dir = gdir8;
         {
             uint8_t *ord = calloc(n, 1);
-            tn_strahler_order(&f, om, ord, &top);
-            if (tn_strahler_order(&gf, smask, gord, &gtop)) { fprintf(stderr, "grass strahler: %s\n", tn_last_error()); gtop = -1; }
+            tn_strahler_order(ord, &f, om, &top);
+            if (tn_strahler_order(gord, &gf, smask, &gtop)) { fprintf(stderr, "grass strahler: %s\n", tn_last_error()); gtop = -1; }
             free(ord);
         }
         printf("cells_ours %zu cells_grass %zu f1_tol1 %.4f precision %.4f recall %.4f jaccard %.4f strahler_ours %d strahler_grass %d\n",

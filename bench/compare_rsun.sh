@@ -21,7 +21,7 @@ int main(int argc, char **argv) {
     size_t i, n;
     if (argc == 6 && !strcmp(argv[1], "prep")) {
         double lo = atof(argv[3]), hi = atof(argv[4]); FILE *f;
-        if (tn_image_load(argv[2], &dem, NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+        if (tn_image_load(&dem, argv[2], NULL)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
         n = (size_t)dem.width * dem.height;
         for (i = 0; i < n; i++) dem.data[i] = (float)(lo + dem.data[i] * (hi - lo));
         f = fopen(argv[5], "wb"); if (!f || fwrite(dem.data, 4, n, f) != n) return 1; fclose(f);
@@ -35,7 +35,7 @@ int main(int argc, char **argv) {
         f = fopen(argv[2], "rb"); if (!f || fread(dem.data, 4, n, f) != n) return 1; fclose(f);
         memset(&o, 0, sizeof o); o.dx = (float)atof(argv[5]); o.dy = (float)atof(argv[6]);
         t0 = tn_time_seconds();
-        if (tn_insolation(&dem, atof(argv[7]), &o, &ins)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
+        if (tn_insolation(&ins, &dem, atof(argv[7]), &o)) { fprintf(stderr, "%s\n", tn_last_error()); return 1; }
         sec = tn_time_seconds() - t0;
         g = (float *)malloc(n * 4);
         for (a = 9; a < argc; a++) {

@@ -35,8 +35,8 @@ int main(int argc, char **argv)
     }
     memset(&po, 0, sizeof po);
     po.seed = 3;
-    st = in ? tn_image_load(in, &dem, NULL) : tn_noise_perlin(&dem, 256, 256, &po);
-    if (st || (st = tn_extract(&dem, &eo, &ex))) goto fail;
+    st = in ? tn_image_load(&dem, in, NULL) : tn_noise_perlin(&dem, 256, 256, &po);
+    if (st || (st = tn_extract(&ex, &dem, &eo))) goto fail;
 
     for (i = 0; i < ex.contours.count; i++) {
         if (ex.contours.items[i].type == TN_RIDGE) ridges++;
@@ -52,7 +52,7 @@ int main(int argc, char **argv)
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
     snprintf(path, sizeof path, "%s_preview.png", prefix);
-    if ((st = tn_sketch_preview(&ex.contours, &dem, dem.width, dem.height, &preview)) ||
+    if ((st = tn_sketch_preview(&preview, &ex.contours, &dem, dem.width, dem.height)) ||
         (st = tn_image_save(path, &preview, &so)))
         goto fail;
     printf("wrote %s.tns, %s_preview.png\n", prefix, prefix);

@@ -25,8 +25,8 @@ int main(int argc, char **argv)
         fprintf(stderr, "usage: %s DEM OUT.png\n", argv[0]);
         return 2;
     }
-    st = tn_image_load(argv[1], &dem, NULL);
-    if (!st) st = tn_render_preview(&dem, NULL, &shade);
+    st = tn_image_load(&dem, argv[1], NULL);
+    if (!st) st = tn_render_preview(&shade, &dem, NULL);
     if (!st) st = tn_image_save(argv[2], &shade, NULL);
     if (st) fprintf(stderr, "preview_only: %s: %s\n", tn_status_string(st), tn_last_error());
     tn_image_free(&shade);

@@ -16,12 +16,12 @@ int main(int argc, char **argv)
         if (!strcmp(argv[i], "-o") && i + 1 < argc) prefix = argv[++i];
         else in = argv[i];
     }
-    st = in ? tn_image_load(in, &dem, NULL) : tn_noise_perlin(&dem, 512, 512, NULL);
+    st = in ? tn_image_load(&dem, in, NULL) : tn_noise_perlin(&dem, 512, 512, NULL);
     if (st) {
         fprintf(stderr, "render_terrain: %s: %s\n", tn_status_string(st), tn_last_error());
         return 1;
     }
-    if ((st = tn_render_preview(&dem, NULL, &preview)) || (st = tn_render_view(&dem, NULL, &view))) {
+    if ((st = tn_render_preview(&preview, &dem, NULL)) || (st = tn_render_view(&view, &dem, NULL))) {
         fprintf(stderr, "render_terrain: %s\n", tn_last_error());
         tn_image_free(&dem);
         return 1;

@@ -22,7 +22,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "usage: %s DATA.csv MINUTES OUT_SHEET.png\n", argv[0]);
         return 2;
     }
-    if (tn_season_data_load(argv[1], &data)) { /* reads every picture, computes each site's insolation */
+    if (tn_season_data_load(&data, argv[1])) { /* reads every picture, computes each site's insolation */
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
@@ -30,18 +30,18 @@ int main(int argc, char **argv)
     o.lo = data.lo;
     o.hi = data.hi;
     o.train.minutes = atof(argv[2]);
-    if (tn_kpd_train(data.samples, data.count, &o, &model, NULL)) {
+    if (tn_kpd_train(&model, data.samples, data.count, &o, NULL)) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
     for (f = 0; f < 24; f++, n++) { /* twice a month from mid-January, site 0 */
-        if (tn_kpd_generate(&model, &data.dems[0], &data.climates[0], &data.insolation[0], 0.5f * (float)f, 0, 0, data.dems[0].width,
-                            data.dems[0].height, &frames[f]))
+        if (tn_kpd_generate(&frames[f], &model, &data.dems[0], &data.climates[0], &data.insolation[0], 0.5f * (float)f, 0, 0,
+                            data.dems[0].width, data.dems[0].height))
             break;
         for (k = 0; k < (size_t)frames[f].width * frames[f].height * frames[f].channels; k++) /* to 0..1 for the picture */
             frames[f].data[k] = (frames[f].data[k] - model.lo) / (model.hi - model.lo);
     }
-    if (n < 24 || tn_season_sheet(frames, 24, 6, 128, &sheet) || tn_image_save(argv[3], &sheet, NULL)) {
+    if (n < 24 || tn_season_sheet(&sheet, frames, 24, 6, 128) || tn_image_save(argv[3], &sheet, NULL)) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }

@@ -25,7 +25,7 @@ int main(int argc, char **argv)
     }
     lo = atof(argv[2]);
     hi = atof(argv[3]);
-    if (tn_image_load(argv[1], &dem, NULL) || tn_climate_koppen(argv[5], &climate)) {
+    if (tn_image_load(&dem, argv[1], NULL) || tn_climate_koppen(&climate, argv[5])) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
@@ -36,7 +36,7 @@ int main(int argc, char **argv)
        vegetation on the 15th of every month */
     memset(&io, 0, sizeof io);
     io.dx = (float)atof(argv[4]);
-    if (tn_insolation(&dem, climate.latitude, &io, &ins)) {
+    if (tn_insolation(&ins, &dem, climate.latitude, &io)) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
@@ -44,8 +44,8 @@ int main(int argc, char **argv)
     so.insolation = io;
     so.shade = 0.5f;
     for (m = 0; m < 12; m++) times[m] = (float)m;
-    if (tn_season_texture(&dem, &climate, climate.latitude, &ins, times, 12, &so, months, NULL) ||
-        tn_season_sheet(months, 12, 4, 256, &sheet) || tn_image_save(argv[6], &sheet, NULL)) {
+    if (tn_season_texture(months, &dem, &climate, climate.latitude, &ins, times, 12, &so, NULL) ||
+        tn_season_sheet(&sheet, months, 12, 4, 256) || tn_image_save(argv[6], &sheet, NULL)) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }

@@ -45,7 +45,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--size") && i + 1 < argc) size = atoi(argv[++i]);
         else in = argv[i];
     }
-    if (in) s = tn_image_load(in, &dem, NULL);
+    if (in) s = tn_image_load(&dem, in, NULL);
     else {
         tn_perlin_opts po;
         size_t k;
@@ -61,18 +61,18 @@ int main(int argc, char **argv)
     o.train.minutes = minutes;
     snprintf(path, sizeof path, "%s.tnw.ckpt", prefix);
     o.train.checkpoint = path; /* rerun with the same arguments after a kill: set o.train.resume = 1 */
-    if ((s = tn_singan_train(&dem, &o, &model, &st))) goto fail;
+    if ((s = tn_singan_train(&model, &dem, &o, &st))) goto fail;
     printf("%d scales, %ld iterations in %.1f min, reconstruction MSE %.4f\n", st.scales, st.iterations, st.seconds / 60, (double)st.loss_rec);
     snprintf(path, sizeof path, "%s.tnw", prefix);
-    if ((s = tn_singan_save(&model, path))) goto fail;
+    if ((s = tn_singan_save(path, &model))) goto fail;
     memset(&g, 0, sizeof g);
     g.seed = 42;
-    if ((s = tn_singan_sample(&model, 0, 0, size, size, &g, &sample)) || (s = save_as(prefix, "sample", &sample))) goto fail;
+    if ((s = tn_singan_sample(&sample, &model, 0, 0, size, size, &g)) || (s = save_as(prefix, "sample", &sample))) goto fail;
     /* a window made alone equals the same pixels of the whole sample */
-    if ((s = tn_singan_sample(&model, size / 2, 0, size / 2, size / 2, &g, &tile)) || (s = save_as(prefix, "tile", &tile))) goto fail;
+    if ((s = tn_singan_sample(&tile, &model, size / 2, 0, size / 2, size / 2, &g)) || (s = save_as(prefix, "tile", &tile))) goto fail;
     for (i = 0; i < (size / 2) * (size / 2); i++) same &= tile.data[i] == TN_PIXEL(&sample, size / 2 + i % (size / 2), i / (size / 2), 0);
     printf("tile equals the whole sample's pixels: %s\n", same ? "yes" : "NO");
-    if ((s = tn_image_blur(&blur, &dem, 4.0f)) || (s = tn_singan_refine(&model, &blur, &g, &refined)) || (s = save_as(prefix, "refined", &refined)))
+    if ((s = tn_image_blur(&blur, &dem, 4.0f)) || (s = tn_singan_refine(&refined, &model, &blur, &g)) || (s = save_as(prefix, "refined", &refined)))
         goto fail;
     {
         tn_image pv[3] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}}, row = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -80,13 +80,13 @@ int main(int argc, char **argv)
         int k, y, x0 = 0, w = dem.width, h = dem.height;
         float lo, hi;
         memset(&ro, 0, sizeof ro);
-        tn_image_range(&dem, &lo, &hi);
+        tn_image_range(&lo, &hi, &dem);
         ro.lo = lo; /* one colour ramp for all three */
         ro.hi = hi;
         s = tn_image_resize(&small, &sample, w, h, TN_RESIZE_AREA);
-        if (!s) s = tn_render_preview(&dem, &ro, &pv[0]);
-        if (!s) s = tn_render_preview(&small, &ro, &pv[1]);
-        if (!s) s = tn_render_preview(&refined, &ro, &pv[2]);
+        if (!s) s = tn_render_preview(&pv[0], &dem, &ro);
+        if (!s) s = tn_render_preview(&pv[1], &small, &ro);
+        if (!s) s = tn_render_preview(&pv[2], &refined, &ro);
         if (!s) s = tn_image_create(&row, 3 * w, h, 3);
         for (k = 0; !s && k < 3; k++, x0 += w)
             for (y = 0; y < h; y++) memcpy(&TN_PIXEL(&row, x0, y, 0), &TN_PIXEL(&pv[k], 0, y, 0), (size_t)w * 3 * sizeof(float));

@@ -44,7 +44,7 @@ static tn_status draw_sketch(const char *png, tn_contour_set *out)
     stroke(&img, 30, 120, 100, 60, red, 0.6f, 1.0f);
     stroke(&img, 100, 60, 200, 80, red, 1.0f, 0.7f);
     stroke(&img, 20, 200, 230, 170, blue, 0.3f, 0.2f);
-    if (!(st = tn_image_save(png, &img, NULL))) st = tn_sketch_from_image(&img, out);
+    if (!(st = tn_image_save(png, &img, NULL))) st = tn_sketch_from_image(out, &img);
     tn_image_free(&img);
     return st;
 }
@@ -91,14 +91,14 @@ int main(int argc, char **argv)
         } else in = argv[i];
     }
     snprintf(path, sizeof path, "%s_drawn.png", prefix);
-    if ((st = in ? tn_sketch_load(in, &sketch) : draw_sketch(path, &sketch))) goto fail;
+    if ((st = in ? tn_sketch_load(&sketch, in) : draw_sketch(path, &sketch))) goto fail;
     printf("sketch: %d polylines on a %d x %d canvas\n", sketch.count, sketch.width, sketch.height);
 
     /* parts need consecutive points to be 8-adjacent: a hand-written .tns may have long jumps */
-    if ((st = tn_sketch_densify(&sketch, &dense)) || (st = tn_contour_parts_make(&dense, seed, &parts))) goto fail;
+    if ((st = tn_sketch_densify(&dense, &sketch)) || (st = tn_contour_parts_make(&parts, &dense, seed))) goto fail;
     memset(&ro, 0, sizeof ro); /* nodes 0 = one per 1024 canvas pixels */
     ro.seed = seed;
-    if ((st = tn_sketch_random(&dense, dense.width, dense.height, &ro, &full))) goto fail;
+    if ((st = tn_sketch_random(&full, &dense, dense.width, dense.height, &ro))) goto fail;
     printf("%d contour parts; with random lines the canvas holds %d polylines\n", parts.count, full.count);
 
     snprintf(path, sizeof path, "%s_parts.tns", prefix);
@@ -109,7 +109,7 @@ int main(int argc, char **argv)
     /* preview: two panels of side 512 (or the canvas, when larger) */
     side = full.width > full.height ? full.width : full.height;
     scale = side < 512 ? 512 / side : 1;
-    if ((st = tn_sketch_preview(&full, NULL, full.width * scale, full.height * scale, &left)) ||
+    if ((st = tn_sketch_preview(&left, &full, NULL, full.width * scale, full.height * scale)) ||
         (st = tn_image_create(&pv, 2 * left.width + 8, left.height, 3)))
         goto fail;
     for (y = 0; y < pv.height; y++)

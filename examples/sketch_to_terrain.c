@@ -71,7 +71,7 @@ static tn_status save_preview(const tn_image *dem, const char *prefix, const cha
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
     snprintf(path, sizeof path, "%s_%s.png", prefix, what);
-    if ((st = tn_render_preview(dem, NULL, &shade))) return st;
+    if ((st = tn_render_preview(&shade, dem, NULL))) return st;
     st = tn_image_save(path, &shade, &so);
     tn_image_free(&shade);
     if (!st) printf("wrote %s\n", path);
@@ -102,7 +102,7 @@ int main(int argc, char **argv)
             return 2;
         }
     }
-    if (dem_path) st = tn_image_load(dem_path, &dem, NULL);
+    if (dem_path) st = tn_image_load(&dem, dem_path, NULL);
     else { /* a Perlin terrain in metres */
         tn_perlin_opts po;
         size_t k;
@@ -125,19 +125,19 @@ int main(int argc, char **argv)
     memset(&o, 0, sizeof o); /* zero = defaults */
     o.train.minutes = minutes;
     o.train.seed = 1;
-    if ((st = tn_gnn_train(&ex, &o, &model, &stats))) {
+    if ((st = tn_gnn_train(&model, &ex, &o, &stats))) {
         fprintf(stderr, "sketch_to_terrain: training: %s\n", tn_last_error());
         return 1;
     }
     printf("learnt %d x %d: %d parts, %ld iterations in %.1f min\n", ex.width, ex.height, stats.parts, stats.iterations, stats.seconds / 60);
     snprintf(path, sizeof path, "%s.tnw", prefix);
-    if ((st = tn_gnn_save(&model, path))) fprintf(stderr, "sketch_to_terrain: %s\n", tn_last_error());
+    if ((st = tn_gnn_save(path, &model))) fprintf(stderr, "sketch_to_terrain: %s\n", tn_last_error());
 
     a_in_circle(side, &sketch);
     memset(&go, 0, sizeof go);
     go.seed = 1;
     go.random_nodes = random_nodes;
-    if (!st) st = tn_gnn_generate(&model, &sketch, side, side, &go, &terrain); /* [0, 1] heights: the example's range */
+    if (!st) st = tn_gnn_generate(&terrain, &model, &sketch, side, side, &go); /* [0, 1] heights: the example's range */
     snprintf(path, sizeof path, "%s_terrain.png", prefix);
     if (!st) st = tn_image_save(path, &terrain, NULL);
     if (!st) st = save_preview(&terrain, prefix, "preview");
@@ -149,7 +149,7 @@ int main(int argc, char **argv)
                 float *h = &sketch.items[c].points[3 * j + 2];
                 *h = model.lo + (model.hi - model.lo) * *h;
             }
-        st = tn_gnn_membrane(&units, side, side, &membrane);
+        st = tn_gnn_membrane(&membrane, &units, side, side);
         if (!st) st = save_preview(&membrane, prefix, "membrane_preview");
     }
     if (st) fprintf(stderr, "sketch_to_terrain: %s\n", tn_last_error());

@@ -39,7 +39,7 @@ int main(int argc, char **argv)
     po.seed = 7;
     po.frequency = 3;
     memset(&so, 0, sizeof so); /* defaults: built-in net, L-BFGS, pyramid */
-    if ((st = tn_image_load(src, &source, NULL)) || (st = tn_noise_perlin(&noise, size, size, &po))) goto fail;
+    if ((st = tn_image_load(&source, src, NULL)) || (st = tn_noise_perlin(&noise, size, size, &po))) goto fail;
     if (weights && (st = tn_vgg19_load(&vgg, weights))) goto fail;
     so.vgg = vgg;
     tn_set_progress(show_progress, NULL);
@@ -49,7 +49,7 @@ int main(int argc, char **argv)
     snprintf(path, sizeof path, "%s.png", prefix);
     if ((st = tn_image_save(path, &out, NULL))) goto fail;
     snprintf(path, sizeof path, "%s_preview.png", prefix);
-    if ((st = tn_render_preview(&out, NULL, &preview)) || (st = tn_image_save(path, &preview, NULL))) goto fail;
+    if ((st = tn_render_preview(&preview, &out, NULL)) || (st = tn_image_save(path, &preview, NULL))) goto fail;
     printf("wrote %s_noise.png, %s.png, %s_preview.png\n", prefix, prefix, prefix);
     st = TN_OK;
 fail:

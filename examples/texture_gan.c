@@ -37,7 +37,7 @@ static tn_status load_exemplar(const char *path, int crop, tn_image *out)
         tn_image_free(&noise);
         return st;
     }
-    if ((st = tn_image_load(path, &img, NULL))) return st;
+    if ((st = tn_image_load(&img, path, NULL))) return st;
     if (img.width > crop || img.height > crop) {
         int w = img.width < crop ? img.width : crop, h = img.height < crop ? img.height : crop;
         st = tn_image_crop(out, &img, (img.width - w) / 2, (img.height - h) / 2, w, h);
@@ -94,18 +94,18 @@ int main(int argc, char **argv)
     printf("trained %ld iterations in %.1f s (%.3f s each); last losses D %.3f, G %.3f\n", stats.iterations,
            stats.seconds, stats.seconds_per_iter, (double)stats.loss_d, (double)stats.loss_g);
     snprintf(path, sizeof path, "%s.tnw", prefix);
-    if ((st = tn_texgan_save(&model, path))) goto fail;
+    if ((st = tn_texgan_save(path, &model))) goto fail;
 
     /* any size and seed: the generator is fully convolutional and tiles are seamless */
-    if ((st = tn_texgan_synthesize(&model, 7, scale * exemplar.width, scale * exemplar.height, &synth)) ||
+    if ((st = tn_texgan_synthesize(&synth, &model, 7, scale * exemplar.width, scale * exemplar.height)) ||
         (st = tn_texture_colour_correct(&synth, model.mean, model.lo, model.hi)))
         goto fail;
     snprintf(path, sizeof path, "%s_synth.png", prefix);
     if ((st = tn_image_save(path, &synth, &so))) goto fail;
 
     /* detail maps: a small low-pass map of the synthesis + the exemplar's tiling high frequencies */
-    if ((st = tn_detail_maps_from_image(&maps, &synth, &exemplar, NULL)) || (st = tn_detail_maps_save(&maps, prefix)) ||
-        (st = tn_detail_preview(&maps, &exemplar, NULL, 256, &preview)))
+    if ((st = tn_detail_maps_from_image(&maps, &synth, &exemplar, NULL)) || (st = tn_detail_maps_save(prefix, &maps)) ||
+        (st = tn_detail_preview(&preview, &maps, &exemplar, NULL, 256)))
         goto fail;
     snprintf(path, sizeof path, "%s_detail_preview.png", prefix);
     if ((st = tn_image_save(path, &preview, &so))) goto fail;

@@ -58,7 +58,7 @@ int main(int argc, char **argv)
         tn_image_free(&dem);
         tn_image_free(&slope);
     }
-    if (!st) st = tn_params_save(p, "tiny_cnn.tnw");
+    if (!st) st = tn_params_save("tiny_cnn.tnw", p);
     if (st) fprintf(stderr, "train_tiny_cnn: %s: %s\n", tn_status_string(st), tn_last_error());
     else printf("loss %.5f -> %.5f; weights in tiny_cnn.tnw (%zu values)\n", loss_first, loss_last, tn_params_numel(p));
     tn_optim_free(opt);

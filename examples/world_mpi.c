@@ -31,7 +31,7 @@ int main(int argc, char **argv)
     }
     if (argc == 4) wo.tile = atoi(argv[3]);
     tn_set_threads(1);
-    if ((st = tn_world_load(argv[1], &wo, &w))) {
+    if ((st = tn_world_load(&w, argv[1], &wo))) {
         fprintf(stderr, "rank %d: %s: %s\n", rank, tn_status_string(st), tn_last_error());
         MPI_Abort(MPI_COMM_WORLD, 1);
     }
@@ -39,7 +39,7 @@ int main(int argc, char **argv)
     MPI_Barrier(MPI_COMM_WORLD);
     ro.part = rank;
     ro.parts = size;
-    if ((st = tn_world_write_tiles(&w, argv[2], &ro, &s))) {
+    if ((st = tn_world_write_tiles(argv[2], &w, &ro, &s))) {
         fprintf(stderr, "rank %d: %s: %s\n", rank, tn_status_string(st), tn_last_error());
         bad = 1;
     }
@@ -47,7 +47,7 @@ int main(int argc, char **argv)
     MPI_Allreduce(&bad, &any_bad, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
     MPI_Reduce(&s.written, &written, 1, MPI_INT, MPI_SUM, 0, MPI_COMM_WORLD);
     if (rank == 0 && !any_bad) {
-        if ((st = tn_world_write_index(&w, argv[2], &present))) {
+        if ((st = tn_world_write_index(argv[2], &w, &present))) {
             fprintf(stderr, "rank 0: index: %s\n", tn_last_error());
             any_bad = 1;
         } else {

@@ -21,18 +21,18 @@ typedef struct tn_mesh_opts {
 /* Writes the mesh atomically. Channel 0 of dem is the height. NaN/Inf heights or texture values
    fail with TN_ERR_NUMERIC, a DEM under 2 x 2 with TN_ERR_EMPTY, meshes over 2^32 vertices or
    TN_MAX_ALLOC bytes with TN_ERR_TOO_LARGE. opts may be NULL. */
-TN_API tn_status tn_export_glb(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
-TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_mesh_opts *opts);
+TN_API tn_status tn_export_glb(const char *path, const tn_image *dem, const tn_mesh_opts *opts);
+TN_API tn_status tn_export_obj(const char *path, const tn_image *dem, const tn_mesh_opts *opts);
 
 /* Normal map of the DEM as RGB in [0, 1] (n / 2 + 0.5, n from tn_image_normals): red = x east,
    blue = z up, green = y north with directx 0 (OpenGL, "Y+") or y south with directx 1
    (DirectX, "Y-"). Save it as an 8-bit PNG for an engine. */
-TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out);
+TN_API tn_status tn_normal_map(tn_image *out, const tn_image *dem, float dx, float dy, float z_scale, int directx);
 /* Unity terrain RAW: size x size 16-bit little-endian codes, size = 2^n + 1 (33..4097; 0 = the
    smallest not below the DEM's larger side), the DEM resampled bicubic to it when its size
    differs; codes 0..65535 span the DEM's range, returned in *lo and *hi (may be NULL) for the
    terrain's height setting. Written atomically. */
-TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi);
+TN_API tn_status tn_export_unity_raw(const char *path, const tn_image *dem, int size, float *lo, float *hi);
 
 /* Splat map: per-pixel weights of four ground materials for an engine's terrain shader,
    RGBA = (vegetation, bare ground, rock, snow), each in [0, 1], summing to 1 at every pixel.
@@ -62,7 +62,7 @@ typedef struct tn_splat_opts {
 /* Fills *out (4 channels, the DEM's size; caller frees). opts may be NULL. NaN/Inf heights or
    mask values fail with TN_ERR_NUMERIC, a mask of another size with TN_ERR_SHAPE, a DEM under
    2 x 2 with TN_ERR_EMPTY, bad options with TN_ERR_INVALID_ARG; *out is untouched then. */
-TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out);
+TN_API tn_status tn_export_splat(tn_image *out, const tn_image *dem, const tn_splat_opts *opts);
 #endif /* TN_NO_EXPORT */
 
 /* --------------------------------------------------------------------------------------------
@@ -103,12 +103,12 @@ static tn_status tn__mesh_check(const tn_image *dem, const tn_mesh_opts *o, cons
     if (!(fabsf(o->dx) <= 1e30f) || !(fabsf(o->dy) <= 1e30f) || !(fabsf(o->z_scale) <= 1e30f) || o->step > 65536)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: bad mesh options (spacing %g x %g, z scale %g, step %d)", path, (double)o->dx, (double)o->dy,
                         (double)o->z_scale, o->step);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
     if (o->texture) {
         const tn_image *t = o->texture;
         if (!t->data || t->width < 1 || t->height < 1 || t->channels < 1 || t->channels > 4 || t->channels == 2)
             return tn__fail(TN_ERR_SHAPE, "%s: the texture must have 1, 3 or 4 channels", path);
-        if (tn_image_range(t, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "%s: the texture holds NaN/Inf", path);
+        if (tn_image_range(&lo, &hi, t)) return tn__fail(TN_ERR_NUMERIC, "%s: the texture holds NaN/Inf", path);
     }
     return TN_OK;
 }
@@ -183,7 +183,7 @@ static tn_status tn__mesh_texture_png(const tn_image *t, uint8_t **png, size_t *
         }
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
-    st = tn_image_save_memory(&rgb, &so, TN_FORMAT_PNG, png, n);
+    st = tn_image_save_memory(png, n, &rgb, TN_FORMAT_PNG, &so);
     tn_image_free(&rgb);
     return st;
 }
@@ -236,7 +236,7 @@ static void tn__glb_put_chunk(uint8_t *out, size_t *off, const char *type, const
     *off += 8 + padded;
 }
 
-TN_API tn_status tn_export_glb(const tn_image *dem, const char *path, const tn_mesh_opts *opts)
+TN_API tn_status tn_export_glb(const char *path, const tn_image *dem, const tn_mesh_opts *opts)
 {
     tn_mesh_opts o;
     tn__mesh m;
@@ -326,7 +326,7 @@ static char *tn__path_stem(const char *path)
     return tn__strndup(path, n);
 }
 
-TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_mesh_opts *opts)
+TN_API tn_status tn_export_obj(const char *path, const tn_image *dem, const tn_mesh_opts *opts)
 {
     tn_mesh_opts o;
     tn__mesh m;
@@ -402,14 +402,14 @@ TN_API tn_status tn_export_obj(const tn_image *dem, const char *path, const tn_m
     return st;
 }
 
-TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_scale, int directx, tn_image *out)
+TN_API tn_status tn_normal_map(tn_image *out, const tn_image *dem, float dx, float dy, float z_scale, int directx)
 {
     tn_image n = {0, 0, 0, NULL};
     size_t i, np;
     float lo, hi;
     tn_status st;
     TN_ASSERT(out);
-    if (dem && dem->data && tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "normal map: the DEM holds NaN/Inf");
+    if (dem && dem->data && tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "normal map: the DEM holds NaN/Inf");
     if ((st = tn_image_normals(&n, dem, dx, dy, z_scale))) return st;
     np = (size_t)n.width * n.height;
     for (i = 0; i < np; i++) {
@@ -423,7 +423,7 @@ TN_API tn_status tn_normal_map(const tn_image *dem, float dx, float dy, float z_
     return TN_OK;
 }
 
-TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int size, float *lo, float *hi)
+TN_API tn_status tn_export_unity_raw(const char *path, const tn_image *dem, int size, float *lo, float *hi)
 {
     tn_image r = {0, 0, 0, NULL};
     const tn_image *src = dem;
@@ -439,7 +439,7 @@ TN_API tn_status tn_export_unity_raw(const tn_image *dem, const char *path, int 
         for (size = 33; size < big && size < 4097; size = 2 * size - 1) {}
     if (size < 33 || size > 4097 || ((size - 1) & (size - 2)) != 0)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: Unity RAW size %d is not 2^n + 1 in 33..4097", path, size);
-    if (tn_image_range(dem, &a, &b)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
+    if (tn_image_range(&a, &b, dem)) return tn__fail(TN_ERR_NUMERIC, "%s: the DEM holds NaN/Inf", path);
     if (dem->width != size || dem->height != size || dem->channels != 1) {
         tn_image one = {0, 0, 0, NULL};
         if (dem->channels != 1) { /* channel 0 is the height */
@@ -498,11 +498,11 @@ static tn_status tn__splat_mask_check(const tn_image *m, const tn_image *dem, co
     if (m->width != dem->width || m->height != dem->height)
         return tn__fail(TN_ERR_SHAPE, "splat map: the %s mask is %d x %d, the DEM %d x %d", what, m->width, m->height, dem->width,
                         dem->height);
-    if (tn_image_range(m, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the %s mask holds NaN/Inf", what);
+    if (tn_image_range(&lo, &hi, m)) return tn__fail(TN_ERR_NUMERIC, "splat map: the %s mask holds NaN/Inf", what);
     return TN_OK;
 }
 
-TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts, tn_image *out)
+TN_API tn_status tn_export_splat(tn_image *out, const tn_image *dem, const tn_splat_opts *opts)
 {
     tn_splat_opts o;
     tn_image slope = {0, 0, 0, NULL}, w = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
@@ -520,14 +520,14 @@ TN_API tn_status tn_export_splat(const tn_image *dem, const tn_splat_opts *opts,
           o.height_blend <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "splat map: options must be finite, blend widths >= 0");
     tn__splat_opts_defaults(&o);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "splat map: the DEM holds NaN/Inf");
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "splat map: the DEM holds NaN/Inf");
     if ((st = tn__splat_mask_check(o.snow, dem, "snow")) || (st = tn__splat_mask_check(o.vegetation, dem, "vegetation"))) return st;
     np = (size_t)dem->width * dem->height;
     if (dem->channels != 1) { /* channel 0 is the height */
         if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
         for (i = 0; i < np; i++) one.data[i] = dem->data[i * dem->channels];
         h = &one;
-        tn_image_range(h, &lo, &hi);
+        tn_image_range(&lo, &hi, h);
     }
     span = hi > lo ? hi - lo : 1.0f;
     if ((st = tn_image_slope(&slope, h, o.dx, o.dy)) || (st = tn_image_create(&w, dem->width, dem->height, 4))) goto done;

@@ -53,7 +53,7 @@ TN_API void      tn_flow_free(tn_flow *flow);
    k. order[] (w*h bytes, caller's) is 0 off the network. The network must be closed downstream
    (a threshold mask on the accumulation is). Returns the highest order in *max_order. Direction
    codes other than 0-7 and TN_FLOW_OUTLET, or ones stepping off the map, fail with TN_ERR_CORRUPT. */
-TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
+TN_API tn_status tn_strahler_order(uint8_t *order, const tn_flow *flow, const uint8_t *mask, int *max_order);
 
 enum { TN_EXTRACT_BOTH = 0, TN_EXTRACT_VALLEYS = 1, TN_EXTRACT_RIDGES = 2 };
 
@@ -83,7 +83,7 @@ typedef struct tn_extraction {
    at least 0.1 % of the map, so the same terrain gives the same network at any resolution. */
 TN_API int       tn_extract_default_threshold(int width, int height);
 /* Runs the whole pipeline on channel 0 of dem. opts may be NULL. */
-TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out);
+TN_API tn_status tn_extract(tn_extraction *out, const tn_image *dem, const tn_extract_opts *opts);
 TN_API void      tn_extraction_free(tn_extraction *ex);
 
 /* Realism of a terrain img against a reference (both channel 0, heights in the same units).
@@ -109,8 +109,8 @@ typedef struct tn_realism {
 } tn_realism;
 
 /* Spectra use the centred largest power-of-two square crop (Hann window); both sides >= 16. */
-TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts,
-                                    tn_realism *out);
+TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const tn_image *img,
+                                    const tn_realism_opts *opts);
 #endif /* TN_NO_EXTRACT */
 
 /* --------------------------------------------------------------------------------------------
@@ -914,7 +914,7 @@ TN_API tn_status tn_flow_compute(tn_flow *flow, const tn_image *dem, int invert)
 
 static tn_status tn__strahler(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order);
 
-TN_API tn_status tn_strahler_order(const tn_flow *flow, const uint8_t *mask, uint8_t *order, int *max_order)
+TN_API tn_status tn_strahler_order(uint8_t *order, const tn_flow *flow, const uint8_t *mask, int *max_order)
 {
     tn_status st = tn__flow_codes_check(flow, "strahler order");
     return st ? st : tn__strahler(flow, mask, order, max_order);
@@ -1206,7 +1206,7 @@ static void tn__extract_opts_defaults(tn_extract_opts *o, int width, int height)
     if (o->drop_fraction == 0.0f) o->drop_fraction = 0.01f;
 }
 
-TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn_extraction *out)
+TN_API tn_status tn_extract(tn_extraction *out, const tn_image *dem, const tn_extract_opts *opts)
 {
     tn_extract_opts o;
     tn_extraction ex;
@@ -1231,7 +1231,7 @@ TN_API tn_status tn_extract(const tn_image *dem, const tn_extract_opts *opts, tn
     ex.contours.height = dem->height;
     n = (size_t)dem->width * dem->height;
     /* gradient magnitude: mean per contour and the floor of the lowest drop_fraction */
-    if ((st = tn_image_gradient(dem, o.dx, o.dy, &gx, &gy))) return st;
+    if ((st = tn_image_gradient(&gx, &gy, dem, o.dx, o.dy))) return st;
     for (i = 0; i < n; i++) gx.data[i] = sqrtf(gx.data[i] * gx.data[i] + gy.data[i] * gy.data[i]);
     grad = gx;
     tn_image_free(&gy);
@@ -1436,7 +1436,7 @@ static tn_status tn__drainage(const tn_image *dem, int threshold, double *densit
     memset(&o, 0, sizeof o);
     o.threshold = threshold;
     o.which = TN_EXTRACT_VALLEYS;
-    if ((st = tn_extract(dem, &o, &ex))) return st;
+    if ((st = tn_extract(&ex, dem, &o))) return st;
     for (i = 0; i < (size_t)ex.contours.count; i++) {
         const tn_contour *c = &ex.contours.items[i];
         for (j = 1; j < c->npoints; j++)
@@ -1523,7 +1523,7 @@ done:
     return st;
 }
 
-TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, const tn_realism_opts *opts, tn_realism *out)
+TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const tn_image *img, const tn_realism_opts *opts)
 {
     tn_realism_opts o;
     tn_realism r;
@@ -1556,7 +1556,7 @@ TN_API tn_status tn_realism_compare(const tn_image *ref, const tn_image *img, co
             a1 = ta;
             b1 = tb;
         }
-        st = tn_compare(&a1, &b1, 0.0, &m);
+        st = tn_compare(&m, &a1, &b1, 0.0);
         tn_image_free(&ta);
         tn_image_free(&tb);
         if (st) return st;

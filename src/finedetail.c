@@ -20,7 +20,7 @@ typedef struct tn_fine_detail_opts {
 /* out = terrain's low-pass + the example's finer detail, matched by shape. example and terrain:
    one channel, the same pixel size and height units (metres), each at least patch x patch
    (example: 2 patches); out is allocated here, terrain's size. opts may be NULL. */
-TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out);
+TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts);
 
 /* Pixels around a window that tn_fine_detail reads for it: a window computed from the
    terrain grown by this much (tn_rect_halo) equals the whole map's pixels there. */
@@ -605,7 +605,7 @@ done:
     return st;
 }
 
-TN_API tn_status tn_fine_detail(const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts, tn_image *out)
+TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts)
 {
     tn__fd d;
     tn_status st;

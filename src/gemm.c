@@ -34,7 +34,7 @@ TN_API tn_precision tn_get_precision(void);
 TN_API tn_precision tn_precision_resolve(tn_precision p);
 /* "auto" / "bf16" / "fp32" <-> tn_precision; parse returns TN_ERR_INVALID_ARG for anything else. */
 TN_API const char *tn_precision_name(tn_precision p);
-TN_API tn_status tn_precision_parse(const char *s, tn_precision *p);
+TN_API tn_status tn_precision_parse(tn_precision *p, const char *s);
 
 /* CPU features found at run time (cpuid, and the OS's consent for AVX-512 / AMX state). */
 #define TN_CPU_AVX2 1u
@@ -739,7 +739,7 @@ TN_API const char *tn_precision_name(tn_precision p)
     return p == TN_PRECISION_BF16 ? "bf16" : p == TN_PRECISION_FP32 ? "fp32" : "auto";
 }
 
-TN_API tn_status tn_precision_parse(const char *s, tn_precision *p)
+TN_API tn_status tn_precision_parse(tn_precision *p, const char *s)
 {
     if (s && !strcmp(s, "auto")) *p = TN_PRECISION_AUTO;
     else if (s && !strcmp(s, "bf16")) *p = TN_PRECISION_BF16;

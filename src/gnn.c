@@ -208,25 +208,25 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o);
    (channel 0) two windows away from the training window at (x, y), spread around it; the
    adjacent ones when none of those fits; windows with a NaN/Inf left out. Writes them to out[]
    (free each with tn_image_free) and returns how many (0 when none fits or max <= 0). */
-TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out);
+TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max);
 /* Trains on channel 0 of dem (at least 16 x 16, finite). Reports progress as "gnn-train".
    *model is allocated here (free with tn_gnn_free); stats may be NULL. A DEM without any
    extracted contour or contour part fails with TN_ERR_EMPTY. */
-TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts, tn_gnn *model, tn_gnn_stats *stats);
+TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts, tn_gnn_stats *stats);
 TN_API void tn_gnn_free(tn_gnn *model);
 /* .tnw model files stamped with method "gnn"; load refuses other methods' files and
    checkpoints with TN_ERR_FORMAT, and damaged configurations with TN_ERR_CORRUPT. */
-TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path);
-TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model);
+TN_API tn_status tn_gnn_save(const char *path, const tn_gnn *model);
+TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path);
 /* The example's contour parts as the model stores them (example units). *out allocated here. */
-TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out);
+TN_API tn_status tn_gnn_parts(tn_contour_set *out, const tn_gnn *model);
 
 /* Terrain of width x height following `sketch` (polylines; coordinates scale from its canvas),
    in the example's height units. *out (one channel) is allocated here. opts may be NULL.
    Same inputs and seed, same output, for any thread count. An empty sketch or one without a
    part of 5 px fails with TN_ERR_EMPTY, NaN/Inf points with TN_ERR_NUMERIC. */
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out);
+TN_API tn_status tn_gnn_generate(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width,
+                                 int height, const tn_gnn_generate_opts *opts);
 /* Pixels (x, y) .. (x + w - 1, y + h - 1) of the width x height map tn_gnn_generate would give,
    computed alone (the same values bit for bit; tests/test_gnn.c checks it). Seamless tiles: a
    pixel depends only on the sketch within a fixed distance, 2 * rounds * (radius + 13) px for
@@ -234,8 +234,8 @@ TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sket
    by that halo (plus tn_fine_detail_halo with the fine detail). Large maps and windows run in
    tiles of 256 px (+ halo) internally, so memory follows the tile, not the map (the fine-tune's
    too: it works on windows of maps over 256^2; the fine detail's tiles are 1024 px). */
-TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
-                                        int w, int h, const tn_gnn_generate_opts *opts, tn_image *out);
+TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x,
+                                        int y, int w, int h, const tn_gnn_generate_opts *opts);
 
 /* The residual gain that opts->gain = 0 uses: how far the network's residual over the membrane is
    to be trusted on this sketch, tested on the sketch itself. Three times, 30 % of the user's
@@ -248,20 +248,20 @@ TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_se
    the reconstruction), fewer than 8 user lines (a drawing of a few strokes: a held-out stroke
    says little about the rest), a model without membrane, or opts->gain != 0 (then that
    setting, clamped at 0). */
-TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                             float *gain);
+TN_API tn_status tn_gnn_gain(float *gain, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                             const tn_gnn_generate_opts *opts);
 
 /* Does a terrain obey its sketch's ordering? Along every densified sketch line (coordinates
    scaled from the sketch canvas to the terrain), each point is compared with the two pixels
    `distance` px away across the line (normal from the points 2 before and after; 0 = 3 px):
    *share = the fraction of ridge points above both and valley points below both (points whose
    across pixels leave the map are skipped; *count, may be NULL, = the points compared). */
-TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count);
+TN_API tn_status tn_gnn_ordering(double *share, const tn_contour_set *sketch, const tn_image *terrain, float distance, int *count);
 
 /* The membrane baseline: heights fixed on the sketch's rasterised ridge and valley pixels
    (tn_sketch_rasterise), the discrete Laplace equation elsewhere (4 neighbours, no flux across
    the border), in the sketch's height units. *out (one channel) allocated here. */
-TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out);
+TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, int width, int height);
 
 /* What gnn-generate does with a sketch before the network runs, for printing: see tn_gnn_plan. */
 typedef struct tn_gnn_plan {
@@ -278,8 +278,8 @@ typedef struct tn_gnn_plan {
 } tn_gnn_plan;
 /* Fills *plan for tn_gnn_generate with the same arguments (without running the network
    beyond the gain test). */
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan);
+TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                const tn_gnn_generate_opts *opts);
 #endif /* TN_NO_GNN */
 
 /* --------------------------------------------------------------------------------------------
@@ -346,7 +346,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     tn_train_defaults(&o->train, 10.0);
 }
 
-TN_API int tn_gnn_holdout_windows(const tn_image *dem, int x, int y, int w, int h, int max, tn_image *out)
+TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max)
 {
     int ring, dx, dy, c, k, m = 0, cx[24], cy[24];
     if (!dem || !dem->data || !out || w <= 0 || h <= 0) return 0;
@@ -625,7 +625,7 @@ static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, 
     uint8_t *fixed;
     size_t i, n = (size_t)W * H, nf = 0;
     tn_status st;
-    if ((st = tn_sketch_rasterise(set, W, H, &r))) return st;
+    if ((st = tn_sketch_rasterise(&r, set, W, H))) return st;
     if (!(fixed = (uint8_t *)tn__alloc(n))) {
         tn_image_free(&r);
         return TN_ERR_OUT_OF_MEMORY;
@@ -644,7 +644,7 @@ static tn_status tn__gnn_sketch_pixels(const tn_contour_set *set, int W, int H, 
     return st;
 }
 
-TN_API tn_status tn_gnn_membrane(const tn_contour_set *sketch, int width, int height, tn_image *out)
+TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, int width, int height)
 {
     tn_image m = {0, 0, 0, NULL};
     float *h;
@@ -2121,7 +2121,7 @@ static tn_status tn__gnn_holdout_make(tn__gnn_train *s)
             tn_extract_opts eo = s->o.extract;
             tn_extraction ex;
             eo.threshold = base * (d ? 4 : 1);
-            if ((st = tn_extract(h, &eo, &ex))) return st;
+            if ((st = tn_extract(&ex, h, &eo))) return st;
             s->hsk[2 * i + d] = ex.contours;
             memset(&ex.contours, 0, sizeof ex.contours);
             tn_extraction_free(&ex);
@@ -2159,9 +2159,9 @@ static tn_status tn__gnn_holdout_check(tn__gnn_train *s)
         tn_image out = {0, 0, 0, NULL};
         tn_metrics mt;
         if (!s->hsk[i].count) continue;
-        st = tn_gnn_generate(&m, &s->hsk[i], h->width, h->height, &go, &out);
+        st = tn_gnn_generate(&out, &m, &s->hsk[i], h->width, h->height, &go);
         if (st == TN_ERR_EMPTY) continue; /* no part of 5 px */
-        if (!st) st = tn_compare(h, &out, 0, &mt);
+        if (!st) st = tn_compare(&mt, h, &out, 0);
         tn_image_free(&out);
         if (st) return st;
         sum += mt.ssim;
@@ -2316,7 +2316,7 @@ static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn *model, tn_gnn_stats *stats)
+TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
     tn_extraction ex;
@@ -2358,7 +2358,7 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     }
     digest = tn_image_digest(d1);
     seed = s.o.train.seed;
-    if ((st = tn_train_create("gnn", "gnn-train", &s.o.train, &s.run))) goto done;
+    if ((st = tn_train_create(&s.run, "gnn", "gnn-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
         tn_params *ck;
         tn_tensor *cfg;
@@ -2379,12 +2379,12 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
     }
     /* the example's network and parts: deterministic in the DEM, the extraction options and
        the seed, so a resumed run rebuilds the same graph */
-    if ((st = tn_extract(d1, &s.o.extract, &ex))) goto done;
+    if ((st = tn_extract(&ex, d1, &s.o.extract))) goto done;
     if (!ex.contours.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: no ridge or valley was extracted from the DEM (try a lower extraction threshold)");
         goto done;
     }
-    if ((st = tn_contour_parts_make(&ex.contours, seed, &parts))) goto done;
+    if ((st = tn_contour_parts_make(&parts, &ex.contours, seed))) goto done;
     if (!parts.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: the DEM's ridges and valleys give no contour part of 5 px");
         goto done;
@@ -2445,8 +2445,8 @@ TN_API tn_status tn_gnn_train(const tn_image *dem, const tn_gnn_opts *opts_in, t
         int base_thr = eo.threshold > 0 ? eo.threshold : tn_extract_default_threshold(d1->width, d1->height);
         eo.threshold = base_thr * factor[i];
         memset(&sp, 0, sizeof sp);
-        if ((st = tn_extract(d1, &eo, &sx))) goto done;
-        if (sx.contours.count && !(st = tn_contour_parts_make(&sx.contours, seed + (uint64_t)i, &sp)) && sp.count) {
+        if ((st = tn_extract(&sx, d1, &eo))) goto done;
+        if (sx.contours.count && !(st = tn_contour_parts_make(&sp, &sx.contours, seed + (uint64_t)i)) && sp.count) {
             st = tn__gnn_level_make(&s.A, &sx.contours, &sp, &s.lv[s.nlevels]);
             if (sp.count > s.maxparts) s.maxparts = sp.count;
             s.nlevels++;
@@ -2548,12 +2548,12 @@ static tn_status tn__gnn_check_model(const tn_gnn *m)
     return tn__gnn_arch_of(m, &A);
 }
 
-TN_API tn_status tn_gnn_save(const tn_gnn *model, const char *path)
+TN_API tn_status tn_gnn_save(const char *path, const tn_gnn *model)
 {
     tn_status st;
     if ((st = tn__gnn_check_model(model))) return st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 /* Whether a model file holds the tensors its config implies, checked on the file's own tensors
@@ -2581,7 +2581,7 @@ static tn_status tn__gnn_file_matches(const tn_params *f, const tn__gnn_arch *A,
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
+TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg;
@@ -2591,7 +2591,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     memset(&parts, 0, sizeof parts);
     st = tn_model_check(f, "gnn", TN__GNN_FORMAT, NULL, path);
     if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
@@ -2647,7 +2647,7 @@ TN_API tn_status tn_gnn_load(const char *path, tn_gnn *model)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_parts(const tn_gnn *model, tn_contour_set *out)
+TN_API tn_status tn_gnn_parts(tn_contour_set *out, const tn_gnn *model)
 {
     tn__gnn_arch A;
     tn_status st;
@@ -3159,8 +3159,8 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
     G->halo = 2 * G->A.rounds * ((int)ceilf(G->A.radius) + 13);
     G->gain = 1.0f;
     G->gain_raw = NAN;
-    if ((st = tn_sketch_densify(sk, &dense))) goto done;
-    if ((st = tn_contour_parts_make(&dense, tn__gnn_cut_seed(model, opts), &parts))) goto done;
+    if ((st = tn_sketch_densify(&dense, sk))) goto done;
+    if ((st = tn_contour_parts_make(&parts, &dense, tn__gnn_cut_seed(model, opts)))) goto done;
     if (!parts.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn generate: the sketch has no part of 5 px (draw longer lines)");
         goto done;
@@ -3172,7 +3172,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
         memset(&ao, 0, sizeof ao);
         ao.seed = opts->seed;
         ao.choices = opts->align_choices > 0 ? opts->align_choices : 1;
-        if ((st = tn_sketch_align(&parts, &ex_parts, &ao, match))) goto done;
+        if ((st = tn_sketch_align(match, &parts, &ex_parts, &ao))) goto done;
     } else {
         tn__gnn_same_parts(&parts, &ex_parts, opts->embeddings == TN_GNN_EMBED_AUTO ? 1e-3f * G->A.std : -1.0f, match);
         for (i = 0, *known = opts->embeddings == TN_GNN_EMBED_AUTO; i < parts.count; i++) *known &= match[i] >= 0;
@@ -3199,7 +3199,7 @@ static tn_status tn__gnn_gen_build(const tn_gnn *model, const tn_contour_set *sk
             for (h = 0; h < G->A.hidden; h++) G->E0[(size_t)i * G->A.hidden + h] = G->A.part_noise * tn_rng_normal(&pr);
         }
     }
-    if ((st = tn_sketch_rasterise(sk, width, height, &r))) goto done;
+    if ((st = tn_sketch_rasterise(&r, sk, width, height))) goto done;
     for (q = 0; q < n; q++) {
         const float *px = r.data + 3 * q;
         G->fixed[q] = (uint8_t)(px[0] > 0 || px[1] > 0);
@@ -3267,7 +3267,7 @@ static tn_status tn__gnn_gain_validate(const tn_gnn *model, const tn__gnn_gen *G
             continue;
         }
         if (!st) st = tn__gnn_gen_run(&T, G->w, ctx, vx, vy, vw, vh, pred, base, "gnn-gain");
-        if (!st) st = tn_sketch_rasterise(&drop, G->W, G->H, &hr);
+        if (!st) st = tn_sketch_rasterise(&hr, &drop, G->W, G->H);
         for (q = 0; !st && q < nv; q++) {
             size_t m = (size_t)(vy + (int)(q / vw)) * G->W + vx + (int)(q % vw);
             const float *px = hr.data + 3 * m;
@@ -3328,7 +3328,7 @@ static int tn__gnn_has_part_length(const tn_contour_set *s)
 {
     tn_contour_set d;
     int i, yes = 0;
-    if (tn_sketch_densify(s, &d)) return 0;
+    if (tn_sketch_densify(&d, s)) return 0;
     for (i = 0; i < d.count && !yes; i++) yes = d.items[i].npoints >= 5;
     tn_contour_set_free(&d);
     return yes;
@@ -3339,7 +3339,7 @@ static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
 {
     tn_image r = {0, 0, 0, NULL};
     size_t i, n = (size_t)s->width * s->height, k = 0;
-    tn_status st = tn_sketch_rasterise(s, s->width, s->height, &r);
+    tn_status st = tn_sketch_rasterise(&r, s, s->width, s->height);
     if (st) return st;
     for (i = 0; i < n; i++) k += r.data[3 * i] > 0 || r.data[3 * i + 1] > 0;
     tn_image_free(&r);
@@ -3408,7 +3408,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         memset(&ro, 0, sizeof ro);
         ro.seed = o.seed;
         ro.nodes = o.random_nodes;
-        if ((st = tn_sketch_random(&sk, width, height, &ro, &rnd))) goto done;
+        if ((st = tn_sketch_random(&rnd, &sk, width, height, &ro))) goto done;
         for (i = sk.count; i < rnd.count; i++) {
             int j;
             for (j = 0; j < rnd.items[i].npoints; j++) rnd.items[i].points[3 * j + 2] = G->A.lo + (G->A.hi - G->A.lo) * rnd.items[i].points[3 * j + 2];
@@ -3450,7 +3450,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         G->pin = (uint8_t *)tn__alloc(n);
         G->pin_d = (float *)tn__alloc(n * sizeof(float));
         if (!near || !G->pin || !G->pin_d) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st && !(st = tn_sketch_rasterise(&u, width, height, &r))) {
+        if (!st && !(st = tn_sketch_rasterise(&r, &u, width, height))) {
             for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
             tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
         }
@@ -3689,8 +3689,8 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
     return st;
 }
 
-TN_API tn_status tn_gnn_generate_window(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y, int w,
-                                        int h, const tn_gnn_generate_opts *opts, tn_image *out)
+TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
+                                        int w, int h, const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_image res = {0, 0, 0, NULL};
@@ -3760,7 +3760,7 @@ static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
                 float g = tn__gnn_gain_of(0.05 * k, G.gain_raw);
                 tn_metrics mt;
                 for (q = 0; q < np; q++) out.data[q] = base[q] + g * (pred[q] - base[q]);
-                if (!(st = tn_compare(h, &out, 0, &mt))) ssim[k] += mt.ssim;
+                if (!(st = tn_compare(&mt, h, &out, 0))) ssim[k] += mt.ssim;
             }
             n += !st;
         }
@@ -3780,8 +3780,8 @@ static tn_status tn__gnn_gain_calibrate(tn__gnn_train *s)
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                             float *gain)
+TN_API tn_status tn_gnn_gain(float *gain, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                             const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_gnn_generate_opts o;
@@ -3796,8 +3796,8 @@ TN_API tn_status tn_gnn_gain(const tn_gnn *model, const tn_contour_set *sketch, 
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
-                                tn_gnn_plan *plan)
+TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
+                                const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
     tn_gnn_generate_opts o;
@@ -3831,13 +3831,13 @@ TN_API tn_status tn_gnn_plan_of(const tn_gnn *model, const tn_contour_set *sketc
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_generate(const tn_gnn *model, const tn_contour_set *sketch, int width, int height,
-                                 const tn_gnn_generate_opts *opts, tn_image *out)
+TN_API tn_status tn_gnn_generate(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width,
+                                 int height, const tn_gnn_generate_opts *opts)
 {
-    return tn_gnn_generate_window(model, sketch, width, height, 0, 0, width, height, opts, out);
+    return tn_gnn_generate_window(out, model, sketch, width, height, 0, 0, width, height, opts);
 }
 
-TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *terrain, float distance, double *share, int *count)
+TN_API tn_status tn_gnn_ordering(double *share, const tn_contour_set *sketch, const tn_image *terrain, float distance, int *count)
 {
     tn_contour_set sk, dense;
     int i, j, n = 0, good = 0, W, H;
@@ -3855,7 +3855,7 @@ TN_API tn_status tn_gnn_ordering(const tn_contour_set *sketch, const tn_image *t
     H = terrain->height;
     memset(&A, 0, sizeof A);
     if ((st = tn__gnn_sketch_units(&A, sketch, W, H, TN_GNN_HEIGHTS_EXAMPLE, &sk))) return st; /* in the terrain's pixels */
-    st = tn_sketch_densify(&sk, &dense);
+    st = tn_sketch_densify(&dense, &sk);
     tn_contour_set_free(&sk);
     if (st) return st;
     for (i = 0; i < dense.count; i++)

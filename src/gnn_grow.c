@@ -30,8 +30,8 @@ typedef struct tn_gnn_grow_opts {
    heights (tn_gnn_parts of a model, or an extraction's contours), same pixel size, at least
    16 x 16. Same inputs and seed, same output. opts may be NULL. *added (may be NULL) = the
    number of added polylines. */
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added);
+TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
+                             int height, const tn_gnn_grow_opts *opts, int *added);
 #endif /* TN_NO_GNN */
 
 /* --------------------------------------------------------------------------------------------
@@ -132,8 +132,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     memset(&set, 0, sizeof set);
     set.width = width;
     set.height = height;
-    if ((st = tn_sketch_rasterise(user, width, height, &ur)) || (st = tn_sketch_rasterise(example, Wx, Hx, &er)) ||
-        (st = tn_gnn_membrane(user, width, height, &mem)))
+    if ((st = tn_sketch_rasterise(&ur, user, width, height)) || (st = tn_sketch_rasterise(&er, example, Wx, Hx)) ||
+        (st = tn_gnn_membrane(&mem, user, width, height)))
         goto done;
     umask = (uint8_t *)tn__alloc(n);
     placed = (uint8_t *)tn__calloc(n);
@@ -311,8 +311,8 @@ done:
     return TN_OK;
 }
 
-TN_API tn_status tn_gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
-                             const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added)
+TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
+                             int height, const tn_gnn_grow_opts *opts, int *added)
 {
     return tn__gnn_grow(user, example, width, height, opts, out, added, NULL);
 }

@@ -21,7 +21,7 @@ TN_API void      tn_image_free(tn_image *img);
 /* Deep copy into *dst (allocated here). */
 TN_API tn_status tn_image_copy(tn_image *dst, const tn_image *src);
 /* Minimum and maximum over all samples; NaNs are ignored. Returns the count of NaN/Inf samples. */
-TN_API size_t    tn_image_range(const tn_image *img, float *lo, float *hi);
+TN_API size_t    tn_image_range(float *lo, float *hi, const tn_image *img);
 
 /* All operations below write a newly allocated *dst (caller frees); dst may not alias src unless
    stated. They fail with TN_ERR_INVALID_ARG on bad parameters and never touch *dst then. */
@@ -46,7 +46,7 @@ TN_API tn_status tn_image_blur(tn_image *dst, const tn_image *src, float sigma);
 /* Central-difference gradients of channel 0 in height units per metre; dx, dy are the pixel
    spacings in metres (<= 0 means 1). gx points east (+x), gy points south (+y, down the rows).
    Either output may be NULL. */
-TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_image *gx, tn_image *gy);
+TN_API tn_status tn_image_gradient(tn_image *gx, tn_image *gy, const tn_image *dem, float dx, float dy);
 /* Slope in degrees (0 = flat). */
 TN_API tn_status tn_image_slope(tn_image *dst, const tn_image *dem, float dx, float dy);
 /* Unit surface normals as 3 channels (x east, y north, z up) in [-1, 1]; z_scale exaggerates. */
@@ -115,7 +115,7 @@ TN_API tn_status tn_image_copy(tn_image *dst, const tn_image *src)
     return TN_OK;
 }
 
-TN_API size_t tn_image_range(const tn_image *img, float *lo, float *hi)
+TN_API size_t tn_image_range(float *lo, float *hi, const tn_image *img)
 {
     size_t i, n = (size_t)img->width * img->height * img->channels, bad = 0;
     float mn = FLT_MAX, mx = -FLT_MAX;
@@ -894,7 +894,7 @@ static tn_status tn__inv_spacing(float dx, float dy, float scale, float *ix, flo
     return TN_OK;
 }
 
-TN_API tn_status tn_image_gradient(const tn_image *dem, float dx, float dy, tn_image *gx, tn_image *gy)
+TN_API tn_status tn_image_gradient(tn_image *gx, tn_image *gy, const tn_image *dem, float dx, float dy)
 {
     tn_image ox, oy;
     tn__terrain_job job;

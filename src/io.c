@@ -94,22 +94,22 @@ typedef struct tn_save_opts {
 } tn_save_opts;
 
 /* Loads any supported file. info and opts may be NULL. On failure *img is untouched. */
-TN_API tn_status tn_image_load(const char *path, tn_image *img, tn_image_info *info);
-TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info *info, const tn_load_opts *opts);
+TN_API tn_status tn_image_load(tn_image *img, const char *path, tn_image_info *info);
+TN_API tn_status tn_image_load_ex(tn_image *img, const char *path, const tn_load_opts *opts, tn_image_info *info);
 /* Same from memory; `name` (may be NULL) is used for the extension fallback and in messages. */
-TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char *name, tn_image *img,
-                                      tn_image_info *info, const tn_load_opts *opts);
+TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t size, const char *name,
+                                      const tn_load_opts *opts, tn_image_info *info);
 /* Saves; the format comes from opts or the extension. Writes to a temporary file and renames it,
    so a failed save never leaves a half-written file in place. opts may be NULL. */
 TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_save_opts *opts);
 /* Encodes to a malloc'ed (TN_MALLOC) buffer the caller frees with TN_FREE / tn_free. */
-TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format,
-                                      uint8_t **out, size_t *out_size);
+TN_API tn_status tn_image_save_memory(uint8_t **out, size_t *out_size, const tn_image *img,
+                                      tn_format format, const tn_save_opts *opts);
 /* zlib streams (RFC 1950) with terrainnet's own deflate (level 0-9; 0 and zlib's -1 = 6) and inflate (Adler-32
    checked; output over max_out bytes, 0 = TN_MAX_ALLOC, fails with TN_ERR_TOO_LARGE). The output
    buffer is allocated here; free it with tn_free. */
-TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_t **out, size_t *out_size);
-TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, size_t *out_size, size_t max_out);
+TN_API tn_status tn_zlib_deflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, int level);
+TN_API tn_status tn_zlib_inflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, size_t max_out);
 /* Name of a format ("png", "pnm", ...). */
 TN_API const char *tn_format_name(tn_format f);
 /* Frees a buffer returned by the library (tn_image_save_memory and the like). */
@@ -645,7 +645,7 @@ static tn_status tn__z_inflate_run(tn__inflate *s, const uint8_t *src, size_t n)
 
 /* Inflates a zlib stream into a new TN_MALLOC'ed buffer (caller frees with TN_FREE). Output
    larger than max_out (0 = TN_MAX_ALLOC) fails with TN_ERR_TOO_LARGE. */
-TN_API tn_status tn_zlib_inflate(const uint8_t *src, size_t n, uint8_t **out, size_t *out_size, size_t max_out)
+TN_API tn_status tn_zlib_inflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, size_t max_out)
 {
     tn__inflate *s;
     tn_status st;
@@ -1088,7 +1088,7 @@ static tn_status tn__z_parse_lazy(tn__deflate *s)
 
 /* Compresses src into a zlib stream in a new TN_MALLOC'ed buffer (caller frees with TN_FREE).
    level 1-9 as zlib; 0 (or out of range) means 6. */
-TN_API tn_status tn_zlib_deflate(const uint8_t *src, size_t n, int level, uint8_t **out, size_t *out_size)
+TN_API tn_status tn_zlib_deflate(uint8_t **out, size_t *out_size, const uint8_t *src, size_t n, int level)
 {
     tn__deflate *s;
     tn_status st = TN_OK;
@@ -1680,7 +1680,7 @@ static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, d
         filt[(size_t)y * (rowbytes + 1)] = (uint8_t)f;
         memcpy(filt + (size_t)y * (rowbytes + 1) + 1, rows + (2 + (size_t)f) * rowbytes, rowbytes);
     }
-    if ((st = tn_zlib_deflate(filt, fsize, level, &z, &zn)) != TN_OK) goto done;
+    if ((st = tn_zlib_deflate(&z, &zn, filt, fsize, level)) != TN_OK) goto done;
     if (record_range) {
         memcpy(text, "terrainnet.range", 17);
         /* shortest round-trip text with '.', whatever the C locale (the reader is locale-free too) */

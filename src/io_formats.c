@@ -174,7 +174,7 @@ static tn_status tn__io_save_mapping(const tn_image *img, const tn_save_opts *op
         *record = 1;
         return TN_OK;
     }
-    tn_image_range(img, &mn, &mx);
+    tn_image_range(&mn, &mx, img);
     if (mn >= 0.0f && mx <= 1.0f) {
         *lo = 0.0;
         *hi = 1.0;
@@ -1794,7 +1794,7 @@ static void tn__tif_enc_range(void *ctx, size_t b, size_t e)
                 }
             }
         }
-        j->st[s] = tn_zlib_deflate(raw, rows * j->row_bytes, j->level, &j->z[s], &j->zn[s]);
+        j->st[s] = tn_zlib_deflate(&j->z[s], &j->zn[s], raw, rows * j->row_bytes, j->level);
     }
     TN_FREE(raw);
     TN_FREE(tmp);
@@ -2036,8 +2036,8 @@ static tn_format tn__io_format_from_name(const char *path)
 
 /* ---- load ---- */
 
-TN_API tn_status tn_image_load_memory(const void *data, size_t size, const char *name, tn_image *img,
-                                      tn_image_info *info, const tn_load_opts *opts)
+TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t size, const char *name,
+                                      const tn_load_opts *opts, tn_image_info *info)
 {
     static const uint8_t empty[1] = {0};
     const uint8_t *p = data ? (const uint8_t *)data : empty;
@@ -2120,7 +2120,7 @@ static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_s
     return TN_OK;
 }
 
-TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info *info, const tn_load_opts *opts)
+TN_API tn_status tn_image_load_ex(tn_image *img, const char *path, const tn_load_opts *opts, tn_image_info *info)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
@@ -2129,14 +2129,14 @@ TN_API tn_status tn_image_load_ex(const char *path, tn_image *img, tn_image_info
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "load: empty path");
     st = tn__io_read_file(path, &buf, &n);
     if (st) return st;
-    st = tn_image_load_memory(buf, n, path, img, info, opts);
+    st = tn_image_load_memory(img, buf, n, path, opts, info);
     TN_FREE(buf);
     return st;
 }
 
-TN_API tn_status tn_image_load(const char *path, tn_image *img, tn_image_info *info)
+TN_API tn_status tn_image_load(tn_image *img, const char *path, tn_image_info *info)
 {
-    return tn_image_load_ex(path, img, info, NULL);
+    return tn_image_load_ex(img, path, NULL, info);
 }
 
 /* ---- save ---- */
@@ -2152,8 +2152,8 @@ static void tn__save_opts_defaults(tn_save_opts *o, int channels, tn_format form
     if (!(o->cellsize > 0.0 && o->cellsize <= DBL_MAX)) o->cellsize = 1.0;
 }
 
-TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *opts, tn_format format, uint8_t **out,
-                                      size_t *out_size)
+TN_API tn_status tn_image_save_memory(uint8_t **out, size_t *out_size, const tn_image *img, tn_format format,
+                                      const tn_save_opts *opts)
 {
     tn_save_opts o;
     double lo = 0.0, hi = 1.0;
@@ -2165,7 +2165,7 @@ TN_API tn_status tn_image_save_memory(const tn_image *img, const tn_save_opts *o
     *out_size = 0;
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return tn__fail(TN_ERR_INVALID_ARG, "save: the image is empty");
-    bad = tn_image_range(img, NULL, NULL);
+    bad = tn_image_range(NULL, NULL, img);
     if (bad) return tn__fail(TN_ERR_NUMERIC, "save: the image has %zu NaN/Inf samples", bad);
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
@@ -2441,7 +2441,7 @@ TN_API tn_status tn_image_save(const char *path, const tn_image *img, const tn_s
     if (f == TN_FORMAT_AUTO) f = tn__io_format_from_name(path);
     if (f == TN_FORMAT_AUTO)
         return tn__fail(TN_ERR_FORMAT, "%s: cannot tell the format from the extension (png pgm ppm pnm pfm hgt asc r16 raw tif tiff)", path);
-    st = tn_image_save_memory(img, opts, f, &buf, &n);
+    st = tn_image_save_memory(&buf, &n, img, f, opts);
     if (st) return tn__fail_context(st, path);
     st = tn__io_write_atomic(path, buf, n);
     TN_FREE(buf);

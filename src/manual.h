@@ -13,12 +13,12 @@ RECIPE
 USAGE
     tn_image dem = {0};
     tn_image_info info;
-    if (tn_image_load("alps.png", &dem, &info) != TN_OK) {
+    if (tn_image_load(&dem, "alps.png", &info) != TN_OK) {
         fprintf(stderr, "%s\n", tn_last_error());
         return 1;
     }
     tn_image shade = {0};
-    tn_render_preview(&dem, NULL, &shade);        // hillshaded, colour-ramped RGB
+    tn_render_preview(&shade, &dem, NULL);        // hillshaded, colour-ramped RGB
     tn_image_save("alps_preview.png", &shade, NULL);
     tn_image_free(&shade);
     tn_image_free(&dem);
@@ -65,7 +65,7 @@ ARGUMENTS
     Order: the object the call works on (a ctx, params, optimiser or trained model; something
     changed in place; the thing being saved), then inputs, a file path first among them, then
     options (const tn_x_opts *, NULL = defaults), then outputs, the optional ones (NULL = not
-    wanted) last: tn_image_load(path, &img, &info), tn_render_preview(&dem, &opts, &out). A struct
+    wanted) last: tn_image_load(&img, path, &info), tn_render_preview(&out, &dem, &opts). A struct
     the call fills (a new tn_image, a model being trained or loaded) is an output. Calls older
     than this rule that take their output first (tn_image_crop(dst, src, ...), the other image
     operations, noise makers, tn_style_transfer, tn_texgan_train/load, tn_detail_maps_*) keep

@@ -12,9 +12,9 @@ typedef struct tn_metrics {
    data_range <= 0 means max(ref) - min(ref). Matches scikit-image structural_similarity(
    gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=R), including its
    cropping of the 5-pixel border. Images smaller than 11 x 11 fail with TN_ERR_INVALID_ARG. */
-TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double data_range, tn_metrics *out);
+TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image *img, double data_range);
 /* SSIM only (same definition). */
-TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_range, double *ssim);
+TN_API tn_status tn_ssim(double *ssim, const tn_image *ref, const tn_image *img, double data_range);
 
 /* --------------------------------------------------------------------------------------------
    >>metrics  (@@metrics implementation)
@@ -170,7 +170,7 @@ static tn_status tn__metrics_prepare(const tn_image *ref, const tn_image *img, d
     if (*data_range != *data_range || *data_range > DBL_MAX)
         return tn__fail(TN_ERR_INVALID_ARG, "%s: data_range is not finite", what);
     if (*data_range <= 0.0) {
-        if (tn_image_range(ref, &lo, &hi) != 0)
+        if (tn_image_range(&lo, &hi, ref) != 0)
             return tn__fail(TN_ERR_NUMERIC, "%s: the reference has NaN/Inf samples", what);
         *data_range = (double)hi - (double)lo;
         if (*data_range <= 0.0)
@@ -224,7 +224,7 @@ static tn_status tn__ssim_compute(const tn_image *ref, const tn_image *img, doub
     return TN_OK;
 }
 
-TN_API tn_status tn_ssim(const tn_image *ref, const tn_image *img, double data_range, double *ssim)
+TN_API tn_status tn_ssim(double *ssim, const tn_image *ref, const tn_image *img, double data_range)
 {
     double v;
     tn_status st;
@@ -258,7 +258,7 @@ static void tn__error_rows(void *ctx, size_t b, size_t e)
     }
 }
 
-TN_API tn_status tn_compare(const tn_image *ref, const tn_image *img, double data_range, tn_metrics *out)
+TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image *img, double data_range)
 {
     tn_metrics m;
     tn__error_job job;

@@ -116,7 +116,7 @@ static void tn__normalise01(tn_image *img)
 {
     float lo, hi;
     size_t i, n = (size_t)img->width * img->height * img->channels;
-    tn_image_range(img, &lo, &hi);
+    tn_image_range(&lo, &hi, img);
     for (i = 0; i < n; i++) img->data[i] = hi > lo ? (img->data[i] - lo) / (hi - lo) : 0.5f;
 }
 
@@ -288,7 +288,7 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
     if (!(weight >= 0.0f && weight <= 1.0f)) return tn__fail(TN_ERR_INVALID_ARG, "noise blend: weight must be in [0, 1]");
     if ((st = tn_image_create(&d, drawn->width, drawn->height, 1))) return st;
     for (i = 0; i < (size_t)drawn->width * drawn->height; i++) d.data[i] = drawn->data[i * drawn->channels];
-    if (tn_image_range(&d, NULL, NULL)) {
+    if (tn_image_range(NULL, NULL, &d)) {
         tn_image_free(&d);
         return tn__fail(TN_ERR_NUMERIC, "noise blend: the drawn map holds NaN/Inf");
     }

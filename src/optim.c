@@ -24,15 +24,15 @@ TN_API void tn_params_zero_grad(tn_params *p);
 /* Scales gradients so their global L2 norm is at most max_norm; returns the norm before. */
 TN_API float tn_params_clip_grad(tn_params *p, float max_norm);
 /* Saves atomically (temporary file + rename). */
-TN_API tn_status tn_params_save(const tn_params *p, const char *path);
+TN_API tn_status tn_params_save(const char *path, const tn_params *p);
 /* Loads into existing tensors; every name and shape must match, otherwise nothing changes and
    the error names the first mismatch. */
 TN_API tn_status tn_params_load(tn_params *p, const char *path);
 TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t size, const char *name);
 /* Reads any .tnw file into a new set holding exactly its tensors and metadata (for tools that
    inspect a file, and loaders whose layout depends on the file). *out is NULL on failure. */
-TN_API tn_status tn_params_open(const char *path, tn_params **out);
-TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out);
+TN_API tn_status tn_params_open(tn_params **out, const char *path);
+TN_API tn_status tn_params_open_memory(tn_params **out, const uint8_t *data, size_t size, const char *name);
 
 /* Metadata: text key/value pairs saved with the tensors (keys [A-Za-z0-9_.-], < 64 chars; values
    printable, no newline, < 1024 chars). Setting a key again replaces it; value NULL removes it.
@@ -316,7 +316,7 @@ static size_t tn__meta_write(const tn_params *p, uint8_t *out)
     return off;
 }
 
-TN_API tn_status tn_params_save(const tn_params *p, const char *path)
+TN_API tn_status tn_params_save(const char *path, const tn_params *p)
 {
     size_t meta = tn__meta_size(p), size = 12 + 4 + (p->nmeta ? 4 + meta : 0), off, k;
     uint8_t *buf;
@@ -531,7 +531,7 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     return TN_OK;
 }
 
-TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const char *name, tn_params **out)
+TN_API tn_status tn_params_open_memory(tn_params **out, const uint8_t *data, size_t size, const char *name)
 {
     TN_ASSERT(out);
     *out = NULL;
@@ -539,7 +539,7 @@ TN_API tn_status tn_params_open_memory(const uint8_t *data, size_t size, const c
     return tn__tnw_read(data, size, name ? name : "weights", out);
 }
 
-TN_API tn_status tn_params_open(const char *path, tn_params **out)
+TN_API tn_status tn_params_open(tn_params **out, const char *path)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
@@ -596,7 +596,7 @@ TN_API tn_status tn_params_load_memory(tn_params *p, const uint8_t *data, size_t
     tn_status st;
     TN_ASSERT(p);
     name = name ? name : "weights";
-    if ((st = tn_params_open_memory(data, size, name, &f))) return st;
+    if ((st = tn_params_open_memory(&f, data, size, name))) return st;
     st = tn__params_assign(p, f, name);
     tn_params_free(f);
     return st;
@@ -607,7 +607,7 @@ TN_API tn_status tn_params_load(tn_params *p, const char *path)
     tn_params *f = NULL;
     tn_status st;
     TN_ASSERT(p);
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn__params_assign(p, f, path);
     tn_params_free(f);
     return st;

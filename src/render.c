@@ -15,7 +15,7 @@ typedef struct tn_render_opts {
 /* Hillshaded, colour-ramped RGB preview in [0, 1], same size as the DEM (channel 0 is used):
    green lowlands, tan and brown hills, grey rock, snow over [lo, hi], and with opts->sea blues
    below the sea level. opts may be NULL. Caller frees *out. */
-TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out);
+TN_API tn_status tn_render_preview(tn_image *out, const tn_image *dem, const tn_render_opts *opts);
 
 typedef struct tn_view_opts {
     int width, height;         /* output size; 0 = 960 x 540 */
@@ -33,7 +33,7 @@ typedef struct tn_view_opts {
 
 /* 3D perspective view of the DEM (ray-marched height field, front-to-back with a per-column
    occlusion buffer, distance haze, sky). RGB in [0, 1]. opts may be NULL. Caller frees *out. */
-TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out);
+TN_API tn_status tn_render_view(tn_image *out, const tn_image *dem, const tn_view_opts *opts);
 #endif /* TN_NO_RENDER */
 
 /* --------------------------------------------------------------------------------------------
@@ -74,7 +74,7 @@ static const float tn__render_land[][4] = {{0.00f, 0.30f, 0.55f, 0.27f}, {0.25f,
                                            {1.00f, 1.00f, 1.00f, 1.00f}};
 static const float tn__render_sea[][4] = {{0.00f, 0.10f, 0.22f, 0.45f}, {0.85f, 0.30f, 0.55f, 0.75f}, {1.00f, 0.45f, 0.66f, 0.80f}};
 
-TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *opts, tn_image *out)
+TN_API tn_status tn_render_preview(tn_image *out, const tn_image *dem, const tn_render_opts *opts)
 {
     tn_render_opts o;
     tn_image ramp = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
@@ -90,7 +90,7 @@ TN_API tn_status tn_render_preview(const tn_image *dem, const tn_render_opts *op
     k = o.shade_strength;
     if (!(o.lo == o.lo && o.hi == o.hi && (!o.sea || o.sea_level == o.sea_level)))
         return tn__fail(TN_ERR_INVALID_ARG, "render preview: lo, hi or sea_level is NaN");
-    if (o.lo == o.hi && tn_image_range(dem, &o.lo, &o.hi)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
+    if (o.lo == o.hi && tn_image_range(&o.lo, &o.hi, dem)) return tn__fail(TN_ERR_NUMERIC, "render preview: the DEM holds NaN/Inf");
     if ((st = tn_image_create(&ramp, dem->width, dem->height, 3))) return st;
     if ((st = tn_image_hillshade(&shade, dem, &o.shade))) {
         tn_image_free(&ramp);
@@ -205,7 +205,7 @@ static void tn__view_opts_defaults(tn_view_opts *o)
     if (o->exaggeration <= 0) o->exaggeration = 2.0f;
 }
 
-TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, tn_image *out)
+TN_API tn_status tn_render_view(tn_image *out, const tn_image *dem, const tn_view_opts *opts)
 {
     tn_view_opts o;
     tn_image colour = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
@@ -223,8 +223,8 @@ TN_API tn_status tn_render_view(const tn_image *dem, const tn_view_opts *opts, t
     tn__view_opts_defaults(&o);
     if (o.width > 16384 || o.height > 16384)
         return tn__fail(TN_ERR_INVALID_ARG, "render view: output %d x %d is too large (max 16384)", o.width, o.height);
-    if (tn_image_range(dem, &lo, &hi)) return tn__fail(TN_ERR_NUMERIC, "render view: the DEM holds NaN/Inf");
-    if ((st = tn_render_preview(dem, &o.colours, &colour))) return st;
+    if (tn_image_range(&lo, &hi, dem)) return tn__fail(TN_ERR_NUMERIC, "render view: the DEM holds NaN/Inf");
+    if ((st = tn_render_preview(&colour, dem, &o.colours))) return st;
     if ((st = tn_image_create(&img, o.width, o.height, 3))) {
         tn_image_free(&colour);
         return st;

@@ -45,10 +45,10 @@ TN_API void tn_insolation_defaults(tn_insolation_opts *o);
    at least 2 x 2) at latitude_deg (-90..90; south negative; row 0 is north). *out (allocated
    here) has 12 channels, channel m = month m + 1, or one channel with opts->month. Threaded,
    bit-identical for any thread count; progress "insolation". */
-TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out);
+TN_API tn_status tn_insolation(tn_image *out, const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts);
 /* Sun on day_of_year (1..366): declination (radians) and the orbit's eccentricity factor
    (Spencer 1971). Either output may be NULL. */
-TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity);
+TN_API void tn_sun_day(double *declination, double *eccentricity, int day_of_year);
 /* Day of the year of `day` in `month` (1..12) of a non-leap year. */
 TN_API int tn_day_of_year(int month, int day);
 
@@ -67,11 +67,11 @@ TN_API tn_status tn_climate_check(const tn_climate *c);
 /* Parses the CSV text of docs/season.md ("month,t_c,p_mm" rows for months 1..12, each once;
    optional "latitude,L" and "elevation,H" rows; '#' comments). A missing month, a NaN, an
    unknown row or |latitude| > 90 fails with a message naming the line. name may be NULL. */
-TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out);
-TN_API tn_status tn_climate_load(const char *path, tn_climate *out);
+TN_API tn_status tn_climate_parse(tn_climate *out, const char *text, size_t size, const char *name);
+TN_API tn_status tn_climate_load(tn_climate *out, const char *path);
 /* Built-in Koppen presets ("Af", "Aw", "BWh", "Csa", "Cfb", "Dfb", "Dfc", "ET"; a group letter
    "A".."E" picks the first of its group). Unknown codes fail with TN_ERR_INVALID_ARG. */
-TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out);
+TN_API tn_status tn_climate_koppen(tn_climate *out, const char *code);
 /* The i-th preset's code (i from 0), or NULL past the end. */
 TN_API const char *tn_climate_koppen_code(int i);
 /* Temperature of month m (0..11) at height h (metres): t[m] + lapse_rate * (h - elevation);
@@ -105,20 +105,20 @@ TN_API void tn_season_defaults(tn_season_opts *o);
    from latitude_deg if finite, else the climate's; neither fails). out[i] (RGB in [0, 1],
    allocated here) and state[i] (may be NULL) are filled for each time. A wrong-sized insolation
    fails with TN_ERR_SHAPE. Progress "season". */
-TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
-                                   const tn_image *insolation, const float *times, int count,
-                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state);
+TN_API tn_status tn_season_texture(tn_image *out, const tn_image *dem, const tn_climate *climate,
+                                   double latitude_deg, const tn_image *insolation, const float *times,
+                                   int count, const tn_season_opts *opts, tn_season_state *state);
 TN_API void tn_season_state_free(tn_season_state *s);
 /* A preview sheet: the images side by side in `columns` columns (0 = 4), each scaled to
    `cell` pixels wide (0 = 256), 4 px gaps. *out allocated here. */
-TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out);
+TN_API tn_status tn_season_sheet(tn_image *out, const tn_image *images, int count, int columns, int cell);
 /* The same with a caption over each image: labels[i] (NULL or labels NULL: none), in capitals,
    digits and - / . : % (other characters show as blanks), e.g. tn_season_time_label's. */
-TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
-                                          tn_image *out);
+TN_API tn_status tn_season_sheet_labelled(tn_image *out, const tn_image *images, const char *const *labels, int count, int columns,
+                                          int cell);
 /* "JAN", or "MAR 30" for a time between months: time in months from mid-January (as
    tn_season_texture takes them). Writes at most size bytes to buf; returns buf. */
-TN_API char *tn_season_time_label(float time, char *buf, size_t size);
+TN_API char *tn_season_time_label(char *buf, size_t size, float time);
 
 /* KPD generator (paper 003, 3.1-3.2): a SPADE-style network whose denormalisation blocks take
    the heightfield (height and its gradient) plus the year of climate rotated so the target month
@@ -143,7 +143,7 @@ typedef enum tn_kpd_condition {
 
 /* Name of a condition ("ours", "cond1" .. "cond4"); tn_kpd_condition_parse reads one (or "1".."4"). */
 TN_API const char *tn_kpd_condition_name(tn_kpd_condition c);
-TN_API tn_status tn_kpd_condition_parse(const char *s, tn_kpd_condition *out);
+TN_API tn_status tn_kpd_condition_parse(tn_kpd_condition *out, const char *s);
 
 /* One training picture: a heightfield under a climate at a time of the year, and what it looked
    like then. Nothing is owned. */
@@ -193,18 +193,18 @@ typedef struct tn_kpd_stats {
 TN_API void tn_kpd_defaults(tn_kpd_opts *o);
 /* Trains on `count` samples (random crop x crop windows of them, at least a quarter valid).
    Progress "season-train". *model allocated here; stats may be NULL. */
-TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd *model,
+TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, int count, const tn_kpd_opts *opts,
                               tn_kpd_stats *stats);
 TN_API void tn_kpd_free(tn_kpd *model);
 /* .tnw stamped with method "kpd"; load refuses other methods' files (TN_ERR_FORMAT). */
-TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path);
-TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model);
+TN_API tn_status tn_kpd_save(const char *path, const tn_kpd *model);
+TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path);
 /* The window (x0, y0, w, h) of the texture of dem under climate at `time` (months from
    mid-January; between two months the gamma/beta of both are interpolated), in the target's
    units: any window equals those pixels of the whole map exactly. insolation: dem's 12-channel
    tn_insolation (TN_KPD_OURS; NULL fails). Runs in tiles of 256 px; *out allocated here. */
-TN_API tn_status tn_kpd_generate(const tn_kpd *model, const tn_image *dem, const tn_climate *climate, const tn_image *insolation,
-                                 float time, int x0, int y0, int w, int h, tn_image *out);
+TN_API tn_status tn_kpd_generate(tn_image *out, const tn_kpd *model, const tn_image *dem, const tn_climate *climate,
+                                 const tn_image *insolation, float time, int x0, int y0, int w, int h);
 
 /* A season data set (docs/season.md): a text file of sites and their dated pictures. Paths are
    relative to the file's folder.
@@ -226,7 +226,7 @@ typedef struct tn_season_data {
     char (*labels)[32];            /* [count] WHEN as written */
     float lo, hi;
 } tn_season_data;
-TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out);
+TN_API tn_status tn_season_data_load(tn_season_data *out, const char *path);
 TN_API void tn_season_data_free(tn_season_data *d);
 /* Months from mid-January of a date "YYYY-MM-DD" (or a plain number of months); -1 if malformed. */
 TN_API float tn_season_time_of(const char *when);
@@ -262,7 +262,7 @@ TN_API int tn_day_of_year(int month, int day)
     return first[month - 1] + day;
 }
 
-TN_API void tn_sun_day(int day_of_year, double *declination, double *eccentricity)
+TN_API void tn_sun_day(double *declination, double *eccentricity, int day_of_year)
 {
     double g = 2.0 * TN__SEASON_PI * (double)(day_of_year - 1) / 365.0;
     if (declination)
@@ -436,7 +436,7 @@ static void tn__insol_rows(void *ctx, int ith, int nth)
     }
 }
 
-TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts, tn_image *out)
+TN_API tn_status tn_insolation(tn_image *out, const tn_image *dem, double latitude_deg, const tn_insolation_opts *opts)
 {
     static const int mdays[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
     tn_insolation_opts o;
@@ -541,7 +541,7 @@ TN_API tn_status tn_insolation(const tn_image *dem, double latitude_deg, const t
         tn__sun_month *m = &months[mo];
         double dec, ecc, ws, cw;
         int nst = (int)ceil(2.0 * TN__SEASON_PI / dstep - 1e-9);
-        tn_sun_day(tn_day_of_year(m0 + mo + 1, o.day), &dec, &ecc);
+        tn_sun_day(&dec, &ecc, tn_day_of_year(m0 + mo + 1, o.day));
         m->sd = sin(dec);
         m->cd = cos(dec);
         m->scale = o.solar_constant * ecc * 24.0 / (2.0 * TN__SEASON_PI);
@@ -640,7 +640,7 @@ static int tn__climate_fields(const char *s, size_t n, const char **fb, size_t *
     return k;
 }
 
-TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *name, tn_climate *out)
+TN_API tn_status tn_climate_parse(tn_climate *out, const char *text, size_t size, const char *name)
 {
     tn_climate c;
     int seen[12] = {0}, line = 0, m;
@@ -694,14 +694,14 @@ TN_API tn_status tn_climate_parse(const char *text, size_t size, const char *nam
     return TN_OK;
 }
 
-TN_API tn_status tn_climate_load(const char *path, tn_climate *out)
+TN_API tn_status tn_climate_load(tn_climate *out, const char *path)
 {
     uint8_t *buf = NULL;
     size_t n = 0;
     tn_status st;
     if (!path || !out) return tn__fail(TN_ERR_INVALID_ARG, "climate: NULL argument");
     if ((st = tn__io_read_file(path, &buf, &n))) return st;
-    st = tn_climate_parse((const char *)buf, n, path, out);
+    st = tn_climate_parse(out, (const char *)buf, n, path);
     TN_FREE(buf);
     return st;
 }
@@ -743,7 +743,7 @@ static const tn__koppen_preset tn__koppen[] = {
 
 TN_API const char *tn_climate_koppen_code(int i) { return i >= 0 && i < TN__KOPPEN_N ? tn__koppen[i].code : NULL; }
 
-TN_API tn_status tn_climate_koppen(const char *code, tn_climate *out)
+TN_API tn_status tn_climate_koppen(tn_climate *out, const char *code)
 {
     int i, m;
     if (!code || !out) return tn__fail(TN_ERR_INVALID_ARG, "koppen: NULL argument");
@@ -940,9 +940,9 @@ TN_API void tn_season_state_free(tn_season_state *s)
     tn_image_free(&s->green);
 }
 
-TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climate, double latitude_deg,
-                                   const tn_image *insolation, const float *times, int count,
-                                   const tn_season_opts *opts, tn_image *out, tn_season_state *state)
+TN_API tn_status tn_season_texture(tn_image *out, const tn_image *dem, const tn_climate *climate,
+                                   double latitude_deg, const tn_image *insolation, const float *times,
+                                   int count, const tn_season_opts *opts, tn_season_state *state)
 {
     tn__season_job *j = NULL;
     tn_image ins = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, slope = {0, 0, 0, NULL}, noise = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
@@ -992,8 +992,8 @@ TN_API tn_status tn_season_texture(const tn_image *dem, const tn_climate *climat
             if ((st = tn_image_resize(&small, dem, w, h, TN_RESIZE_AREA))) goto done;
             io.dx = j->o.insolation.dx * (float)dem->width / (float)w;
             io.dy = j->o.insolation.dy * (float)dem->height / (float)h;
-            st = tn_insolation(&small, latitude_deg, &io, &ins);
-        } else st = tn_insolation(dem, latitude_deg, &io, &ins);
+            st = tn_insolation(&ins, &small, latitude_deg, &io);
+        } else st = tn_insolation(&ins, dem, latitude_deg, &io);
         if (st) goto done;
         insolation = &ins;
     }
@@ -1108,7 +1108,7 @@ static void tn__draw_text(tn_image *img, int x0, int y0, int scale, const char *
     }
 }
 
-TN_API char *tn_season_time_label(float time, char *buf, size_t size)
+TN_API char *tn_season_time_label(char *buf, size_t size, float time)
 {
     static const char *const names[12] = {"JAN", "FEB", "MAR", "APR", "MAY", "JUN", "JUL", "AUG", "SEP", "OCT", "NOV", "DEC"};
     static const int days[12] = {31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31};
@@ -1129,13 +1129,13 @@ TN_API char *tn_season_time_label(float time, char *buf, size_t size)
     return buf;
 }
 
-TN_API tn_status tn_season_sheet(const tn_image *images, int count, int columns, int cell, tn_image *out)
+TN_API tn_status tn_season_sheet(tn_image *out, const tn_image *images, int count, int columns, int cell)
 {
-    return tn_season_sheet_labelled(images, NULL, count, columns, cell, out);
+    return tn_season_sheet_labelled(out, images, NULL, count, columns, cell);
 }
 
-TN_API tn_status tn_season_sheet_labelled(const tn_image *images, const char *const *labels, int count, int columns, int cell,
-                                          tn_image *out)
+TN_API tn_status tn_season_sheet_labelled(tn_image *out, const tn_image *images, const char *const *labels, int count, int columns,
+                                          int cell)
 {
     tn_image sheet = {0, 0, 0, NULL}, tmp = {0, 0, 0, NULL};
     int i, rows, ch = 0, gap = 4, x, y, c, scale = 2, top = 0;
@@ -1189,7 +1189,7 @@ TN_API const char *tn_kpd_condition_name(tn_kpd_condition c)
     return (int)c >= 0 && c < TN_KPD_CONDITIONS ? tn__kpd_names[c] : "unknown";
 }
 
-TN_API tn_status tn_kpd_condition_parse(const char *s, tn_kpd_condition *out)
+TN_API tn_status tn_kpd_condition_parse(tn_kpd_condition *out, const char *s)
 {
     int i;
     if (!s || !out) return tn__fail(TN_ERR_INVALID_ARG, "kpd: NULL condition");
@@ -1762,7 +1762,7 @@ static void tn__kpd_train_free(tn__kpd_train *t)
     TN_FREE(t->c0);
 }
 
-TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd *model, tn_kpd_stats *stats)
+TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, int count, const tn_kpd_opts *opts, tn_kpd_stats *stats)
 {
     tn__kpd_train t;
     tn_ctx *ctx = NULL;
@@ -1792,7 +1792,7 @@ TN_API tn_status tn_kpd_train(const tn_season_sample *samples, int count, const 
     t.s = samples;
     t.count = count;
     digest = tn__kpd_digest(samples, count);
-    if ((st = tn_train_create("kpd", "season-train", &t.o.train, &t.run))) return st;
+    if ((st = tn_train_create(&t.run, "kpd", "season-train", &t.o.train))) return st;
     if (t.o.train.resume) { /* the checkpoint's architecture wins */
         tn_params *ck;
         tn_tensor *cfg;
@@ -1930,14 +1930,14 @@ TN_API void tn_kpd_free(tn_kpd *model)
     memset(model, 0, sizeof *model);
 }
 
-TN_API tn_status tn_kpd_save(const tn_kpd *model, const char *path)
+TN_API tn_status tn_kpd_save(const char *path, const tn_kpd *model)
 {
     if (!model || !model->weights || !tn_params_find(model->weights, "kpd.config")) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: not a trained or loaded model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
-TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
+TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg = NULL;
@@ -1946,7 +1946,7 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
     TN_ASSERT(model);
     memset(&m, 0, sizeof m);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn_model_check(f, "kpd", TN__KPD_FORMAT, NULL, path);
     if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
@@ -1968,8 +1968,8 @@ TN_API tn_status tn_kpd_load(const char *path, tn_kpd *model)
 
 /* ---- generation: windows with a halo, aligned to 4 px so the pooled levels line up ---- */
 
-TN_API tn_status tn_kpd_generate(const tn_kpd *model, const tn_image *dem, const tn_climate *climate, const tn_image *insolation,
-                                 float time, int x0, int y0, int w, int h, tn_image *out)
+TN_API tn_status tn_kpd_generate(tn_image *out, const tn_kpd *model, const tn_image *dem, const tn_climate *climate,
+                                 const tn_image *insolation, float time, int x0, int y0, int w, int h)
 {
     const int T = 256, Hl = TN_KPD_HALO;
     int W, Hh, Wp, Hp, C, O, m0, tx, ty;
@@ -2187,7 +2187,7 @@ static tn_status tn__season_frame(tn_season_data *d, const char *path, const cha
     memset(t, 0, sizeof *t);
     memset(m, 0, sizeof *m);
     tn__season_path(path, fb[2], fl[2], p, sizeof p);
-    if ((st = tn_image_load(p, t, NULL))) return tn__season_fail_at(st, line_name);
+    if ((st = tn_image_load(t, p, NULL))) return tn__season_fail_at(st, line_name);
     if (t->width != dem->width || t->height != dem->height) {
         st = tn__fail(TN_ERR_SHAPE, "%s: %s is %d x %d, its DEM %d x %d", line_name, p, t->width, t->height, dem->width, dem->height);
         goto fail;
@@ -2197,7 +2197,7 @@ static tn_status tn__season_frame(tn_season_data *d, const char *path, const cha
     for (i = 3; i < nf && i < 8; i++) {
         tn_image e = {0, 0, 0, NULL};
         tn__season_path(path, fb[i], fl[i], p, sizeof p);
-        if ((st = tn_image_load(p, &e, NULL))) {
+        if ((st = tn_image_load(&e, p, NULL))) {
             st = tn__season_fail_at(st, line_name);
             goto fail;
         }
@@ -2234,7 +2234,7 @@ fail:
     return st;
 }
 
-TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
+TN_API tn_status tn_season_data_load(tn_season_data *out, const char *path)
 {
     tn_season_data d;
     uint8_t *buf = NULL;
@@ -2271,7 +2271,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             memset(dm, 0, sizeof *dm);
             memset(&d.insolation[d.sites], 0, sizeof(tn_image));
             tn__season_path(path, fb[1], fl[1], p, sizeof p);
-            if ((st = tn_image_load(p, dm, NULL))) { st = tn__season_fail_at(st, name); break; }
+            if ((st = tn_image_load(dm, p, NULL))) { st = tn__season_fail_at(st, name); break; }
             {
                 float *nd = (float *)TN_REALLOC(dx, (size_t)cap_s * sizeof(float));
                 if (!nd) { st = tn__oom(); break; }
@@ -2309,10 +2309,10 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             if (nf != 2) { st = tn__fail(TN_ERR_FORMAT, "%s: expected \"climate,PATH\" or \"koppen,CODE\"", name); break; }
             if (tn__io_token_is(fb[0], fl[0], "climate")) {
                 tn__season_path(path, fb[1], fl[1], p, sizeof p);
-                st = tn_climate_load(p, c);
+                st = tn_climate_load(c, p);
             } else {
                 snprintf(code, sizeof code, "%.*s", (int)(fl[1] < 31 ? fl[1] : 31), fb[1]);
-                st = tn_climate_koppen(code, c);
+                st = tn_climate_koppen(c, code);
             }
             if (st) { st = tn__season_fail_at(st, name); break; }
             if (isfinite(lat)) c->latitude = (float)lat, c->has_latitude = 1;
@@ -2354,7 +2354,7 @@ TN_API tn_status tn_season_data_load(const char *path, tn_season_data *out)
             st = tn__fail(TN_ERR_INVALID_ARG, "%s: site %d has no latitude (a latitude row, or a climate that has one)", path, k + 1);
             break;
         }
-        if ((st = tn_insolation(&d.dems[k], d.climates[k].latitude, &io, &ins))) break;
+        if ((st = tn_insolation(&ins, &d.dems[k], d.climates[k].latitude, &io))) break;
         d.insolation[k] = ins;
     }
     TN_FREE(dx);

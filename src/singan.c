@@ -112,31 +112,31 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
 /* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
    Reports progress as "singan-train scale S/N". *model is allocated here (free with
    tn_singan_free); stats may be NULL. */
-TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts, tn_singan *model, tn_singan_stats *stats);
+TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts, tn_singan_stats *stats);
 TN_API void tn_singan_free(tn_singan *model);
 /* .tnw model files stamped with method "singan"; load refuses other methods' files and
    checkpoints with TN_ERR_FORMAT and damaged ones with TN_ERR_CORRUPT. */
-TN_API tn_status tn_singan_save(const tn_singan *model, const char *path);
-TN_API tn_status tn_singan_load(const char *path, tn_singan *model);
+TN_API tn_status tn_singan_save(const char *path, const tn_singan *model);
+TN_API tn_status tn_singan_load(tn_singan *model, const char *path);
 
 /* The window (x0, y0, w, h) of the infinite random terrain of opts->seed at the example's pixel
    size, in the example's units: any window equals the same pixels of a larger one exactly (a
    whole map and its tiles agree). Heights beyond the example's range are compressed smoothly
    into 10 % of the range on either side (upstream SinGAN clamps to the range). *out (one
    channel) is allocated here. */
-TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts,
-                                  tn_image *out);
+TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h,
+                                  const tn_singan_gen_opts *opts);
 /* Adds the example's detail to `in` (a smooth map in the example's units and pixel size, e.g.
    a GNN output or a membrane): `in` resized to scale opts->from_scale replaces the upsampled
    coarser output there and the generators of that scale and the finer ones run. *out has in's
    size. */
-TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out);
+TN_API tn_status tn_singan_refine(tn_image *out, const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts);
 /* Super-resolution by `factor` (1 < factor <= 64): `in` stands for the scale round(log factor /
    log(1/model->factor)) scales coarser than the output; the generators above it add detail
    (beyond the finest scale the finest generator repeats, SinGAN's SR mode). *out is
    round(factor * in's size). */
-TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts,
-                                   tn_image *out);
+TN_API tn_status tn_singan_upscale(tn_image *out, const tn_singan *model, const tn_image *in, float factor,
+                                   const tn_singan_gen_opts *opts);
 
 /* GPNN baseline (Granot et al. 2022, "Drop the GAN"): generation by patch nearest neighbours,
    no training. A pyramid of the example (factor, down to `coarsest` px); the output's coarsest
@@ -163,7 +163,7 @@ typedef struct tn_gpnn_opts {
 
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
    in its units. *out (one channel) is allocated here. opts may be NULL (defaults). */
-TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out);
+TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts);
 #endif /* TN_NO_SINGAN */
 
 /* --------------------------------------------------------------------------------------------
@@ -1128,7 +1128,7 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
-TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts_in, tn_singan *model, tn_singan_stats *stats)
+TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
     tn_ctx *ctx = NULL;
@@ -1160,7 +1160,7 @@ TN_API tn_status tn_singan_train(const tn_image *dem, const tn_singan_opts *opts
     }
     digest = tn_image_digest(d1);
     seed = s.o.train.seed;
-    if ((st = tn_train_create("singan", "singan-train", &s.o.train, &s.run))) goto done;
+    if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
         tn_params *ck;
         tn_tensor *cfg;
@@ -1395,13 +1395,13 @@ static tn_status tn__sg_arch_of(const tn_singan *m, tn__sg_arch *A)
     return tn__sg_read_config(cfg->data, A, "singan model");
 }
 
-TN_API tn_status tn_singan_save(const tn_singan *model, const char *path)
+TN_API tn_status tn_singan_save(const char *path, const tn_singan *model)
 {
     tn__sg_arch A;
     tn_status st;
     if ((st = tn__sg_arch_of(model, &A))) return st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan save: empty path");
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 /* Whether a model file holds the generators its config names, checked on the file's own tensors
@@ -1423,7 +1423,7 @@ static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, c
     return TN_OK;
 }
 
-TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
+TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
 {
     tn_params *f = NULL, *w = NULL;
     tn_tensor *cfg = NULL;
@@ -1432,7 +1432,7 @@ TN_API tn_status tn_singan_load(const char *path, tn_singan *model)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
     if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
@@ -1517,11 +1517,11 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     if (go.coarsest < 7 || *mw < 7 || *mh < 7)
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a layout needs the coarsest scale of the example and of the map at least 7 px "
                         "(%d x %d and %d x %d)", ex.width, ex.height, *mw, *mh);
-    if (!(st = tn_gpnn_sample(&ex, *mw, *mh, &go, &lay))) *map = lay.data;
+    if (!(st = tn_gpnn_sample(&lay, &ex, *mw, *mh, &go))) *map = lay.data;
     return st;
 }
 
-TN_API tn_status tn_singan_sample(const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -1573,7 +1573,7 @@ static tn_status tn__sg_input(const tn_singan *model, const tn_image *in, int w,
     return TN_OK;
 }
 
-TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_refine(tn_image *out, const tn_singan *model, const tn_image *in, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -1601,7 +1601,7 @@ TN_API tn_status tn_singan_refine(const tn_singan *model, const tn_image *in, co
     return st;
 }
 
-TN_API tn_status tn_singan_upscale(const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts, tn_image *out)
+TN_API tn_status tn_singan_upscale(tn_image *out, const tn_singan *model, const tn_image *in, float factor, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
@@ -1764,7 +1764,7 @@ static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, 
     for (p = 0; p < n; p++) img[p] /= cnt[p];
 }
 
-TN_API tn_status tn_gpnn_sample(const tn_image *example, int w, int h, const tn_gpnn_opts *opts, tn_image *out)
+TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts)
 {
     tn_gpnn_opts o;
     tn_image ex[TN_SINGAN_MAX_SCALES], one = {0, 0, 0, NULL}, y = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, keys = {0, 0, 0, NULL};

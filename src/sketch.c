@@ -64,14 +64,14 @@ TN_API void tn_contour_set_free(tn_contour_set *set);
    Fails with TN_ERR_FORMAT (not a sketch, unknown version), TN_ERR_CORRUPT (malformed line,
    missing canvas or end, point outside the canvas), TN_ERR_NUMERIC (NaN/Inf), TN_ERR_TOO_LARGE
    (canvas side, point count or strokes over the limits). On success *out is allocated (tn_contour_set_free). */
-TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out);
+TN_API tn_status tn_sketch_parse(tn_contour_set *out, const char *text, size_t n, const char *name);
 /* Loads a .tns file, or a sketch drawn as an image (see tn_sketch_from_image) when the file is
    not .tns text. *out is untouched on failure. */
-TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out);
+TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path);
 /* Writes the set as .tns text into a TN_MALLOC'd buffer (free with tn_free). Fails with
    TN_ERR_NUMERIC on NaN/Inf points and TN_ERR_INVALID_ARG on a bad canvas, an empty polyline, an
    order outside 0-1000 or a point outside the canvas (so whatever is written reads back). */
-TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size);
+TN_API tn_status tn_sketch_format(char **text, size_t *size, const tn_contour_set *set);
 /* Saves as .tns through a temporary file and a rename: on any error the target is untouched. */
 TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
 
@@ -81,7 +81,7 @@ TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set);
    bright stroke is high and a dark one low (heights in [0.1, 1]). Strokes of any width are
    thinned (tn_skeletonize) and traced into polylines between endpoints and junctions; the canvas
    is the image size. Fails with TN_ERR_SHAPE for 1-2 channel images, TN_ERR_EMPTY without strokes. */
-TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out);
+TN_API tn_status tn_sketch_from_image(tn_contour_set *out, const tn_image *img);
 
 /* Thins a binary mask (w*h bytes, non-zero = set) in place to one-pixel-wide 8-connected lines
    that keep the topology: Guo-Hall thinning (keeps two-pixel diagonal strokes), then any pixel
@@ -92,15 +92,15 @@ TN_API tn_status tn_skeletonize(uint8_t *mask, int width, int height);
 /* Resamples every polyline to an 8-connected chain of integer pixels (consecutive points
    differ by at most 1 in x and y, no repeats), heights linear between the original points.
    Use before tn_contour_parts_make on sketches whose points are far apart. *out allocated here. */
-TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out);
+TN_API tn_status tn_sketch_densify(tn_contour_set *out, const tn_contour_set *in);
 
 /* Rasterises to a width x height x 3 image (any size; coordinates scale from the canvas):
    channel 0 = 1 on ridge pixels, channel 1 = 1 on valley pixels, channel 2 = the sketch height
    there (0 elsewhere; where lines overlap, the later polyline wins). *out allocated here. */
-TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out);
+TN_API tn_status tn_sketch_rasterise(tn_image *out, const tn_contour_set *set, int width, int height);
 /* RGB preview: ridges yellow, valleys blue, over a hillshade of `dem` (resized; may be NULL for
    a grey background). Lines are 1 px wide up to 511 px and thicker above. *out allocated here. */
-TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out);
+TN_API tn_status tn_sketch_preview(tn_image *out, const tn_contour_set *set, const tn_image *dem, int width, int height);
 
 /* ---- random sketches (section 5.2) ---------------------------------------------------------
    n random nodes with heights in [0.5, 1] joined by a Euclidean minimum spanning tree are the
@@ -119,17 +119,17 @@ typedef struct tn_sketch_random_opts {
 /* *out = the user's polylines (user may be NULL or empty) followed by the random ridges and
    valleys, on a width x height canvas (user's canvas size must match when given, else
    TN_ERR_SHAPE). Same seed, same output. opts may be NULL. */
-TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
-                                  tn_contour_set *out);
+TN_API tn_status tn_sketch_random(tn_contour_set *out, const tn_contour_set *user, int width, int height,
+                                  const tn_sketch_random_opts *opts);
 
 /* Delaunay triangulation (Bowyer-Watson, O(n^2); fine for a few thousand points) of n points
    xy[2n]: *ntriangles triangles of 3 point indices each (winding unspecified), TN_MALLOC'd, free
    with tn_free. Exact duplicate points are skipped; fewer than 3 distinct points give none. */
-TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles);
+TN_API tn_status tn_delaunay(int **triangles, int *ntriangles, const float *xy, int n);
 /* Euclidean minimum spanning tree (Prim, O(n^2)) of n >= 1 points: *edges holds n - 1 pairs of
    point indices (TN_MALLOC'd, free with tn_free). Ties go to the lower index. NaN/Inf
    coordinates fail with TN_ERR_NUMERIC. */
-TN_API tn_status tn_mst(const float *xy, int n, int **edges);
+TN_API tn_status tn_mst(int **edges, const float *xy, int n);
 
 /* ---- contour parts (section 4.1) -----------------------------------------------------------
    The polylines form a graph: ends of the same type at the same or 8-adjacent pixels meet (a
@@ -143,7 +143,7 @@ TN_API tn_status tn_mst(const float *xy, int n, int **edges);
    junctions. A part takes the type, order and gradient of the line its first point is on; its
    index is its position in *parts (same input and seed, same parts). Used for DEM networks and
    densified sketches alike. An empty input gives an empty set. */
-TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts);
+TN_API tn_status tn_contour_parts_make(tn_contour_set *parts, const tn_contour_set *lines, uint64_t seed);
 
 /* ---- alignment (section 5.3, algorithms A1 and A2) ------------------------------------------
    Every part becomes an 8-direction chain code (steps quantised to k * pi/4), reversed when it
@@ -163,8 +163,8 @@ typedef struct tn_align_opts {
 /* match[i] (caller-allocated, sketch_parts->count ints) = index of the DEM part aligned to sketch
    part i. TN_ERR_EMPTY when either set has no parts; threaded, same result for any thread count.
    Reports progress as stage "align" every 1024 sketch parts (cancellable). */
-TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
-                                 const tn_align_opts *opts, int *match);
+TN_API tn_status tn_sketch_align(int *match, const tn_contour_set *sketch_parts,
+                                 const tn_contour_set *dem_parts, const tn_align_opts *opts);
 #endif /* TN_NO_SKETCH */
 
 /* --------------------------------------------------------------------------------------------
@@ -446,7 +446,7 @@ static tn_status tn__tns_parse_lines(tn__tns_parser *p, char *buf)
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_parse(const char *text, size_t n, const char *name, tn_contour_set *out)
+TN_API tn_status tn_sketch_parse(tn_contour_set *out, const char *text, size_t n, const char *name)
 {
     tn__tns_parser p;
     char *buf;
@@ -486,7 +486,7 @@ static tn_status tn__tns_put_numbers(void **buf, size_t *len, size_t *cap, const
     return st ? st : tn__io_append(buf, len, cap, tail, strlen(tail));
 }
 
-TN_API tn_status tn_sketch_format(const tn_contour_set *set, char **text, size_t *size)
+TN_API tn_status tn_sketch_format(char **text, size_t *size, const tn_contour_set *set)
 {
     char line[96];
     void *buf = NULL;
@@ -537,13 +537,13 @@ TN_API tn_status tn_sketch_save(const char *path, const tn_contour_set *set)
     size_t n = 0;
     tn_status st;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "sketch save: empty path");
-    if ((st = tn_sketch_format(set, &text, &n))) return tn__fail_context(st, path);
+    if ((st = tn_sketch_format(&text, &n, set))) return tn__fail_context(st, path);
     st = tn__io_write_atomic(path, (const uint8_t *)text, n);
     TN_FREE(text);
     return st;
 }
 
-TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
+TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path)
 {
     static const char magic[] = "terrainnet-sketch";
     uint8_t *buf = NULL;
@@ -555,14 +555,14 @@ TN_API tn_status tn_sketch_load(const char *path, tn_contour_set *out)
     if ((st = tn__io_read_file(path, &buf, &n))) return st;
     plen = strlen(path);
     if ((n >= sizeof magic - 1 && !memcmp(buf, magic, sizeof magic - 1)) || (plen > 4 && !strcmp(path + plen - 4, ".tns"))) {
-        st = tn_sketch_parse((const char *)buf, n, path, out);
+        st = tn_sketch_parse(out, (const char *)buf, n, path);
         TN_FREE(buf);
         return st;
     }
-    st = tn_image_load_memory(buf, n, path, &img, NULL, NULL);
+    st = tn_image_load_memory(&img, buf, n, path, NULL, NULL);
     TN_FREE(buf);
     if (st) return st;
-    st = tn_sketch_from_image(&img, out);
+    st = tn_sketch_from_image(out, &img);
     tn_image_free(&img);
     return st ? tn__fail_context(st, path) : TN_OK;
 }
@@ -873,7 +873,7 @@ static tn_status tn__trace_skeleton(const uint8_t *m, int w, int h, tn__trace *t
     return st;
 }
 
-TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
+TN_API tn_status tn_sketch_from_image(tn_contour_set *out, const tn_image *img)
 {
     tn_contour_set set;
     size_t cap = 0, n, i, bytes;
@@ -888,7 +888,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
     if (img->width > TN_SKETCH_MAX_SIDE || img->height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_TOO_LARGE, "sketch image: %d x %d exceeds the canvas limit", img->width, img->height);
     /* an Inf channel passes the stroke test and would become an Inf height */
-    if ((n = tn_image_range(img, NULL, NULL)) != 0)
+    if ((n = tn_image_range(NULL, NULL, img)) != 0)
         return tn__fail(TN_ERR_NUMERIC, "sketch image: %zu NaN/Inf samples", n);
     n = (size_t)img->width * img->height;
     if (tn__size4(n, 1, sizeof(float), 1, &bytes)) return TN_ERR_TOO_LARGE;
@@ -938,7 +938,7 @@ TN_API tn_status tn_sketch_from_image(const tn_image *img, tn_contour_set *out)
 
 /* ---- densify, rasterise, preview ---- */
 
-TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out)
+TN_API tn_status tn_sketch_densify(tn_contour_set *out, const tn_contour_set *in)
 {
     tn_contour_set set;
     tn__pts pts = {NULL, 0, 0};
@@ -965,7 +965,7 @@ TN_API tn_status tn_sketch_densify(const tn_contour_set *in, tn_contour_set *out
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int height, tn_image *out)
+TN_API tn_status tn_sketch_rasterise(tn_image *out, const tn_contour_set *set, int width, int height)
 {
     tn_image r = {0, 0, 0, NULL};
     tn__pts pts = {NULL, 0, 0};
@@ -998,14 +998,14 @@ TN_API tn_status tn_sketch_rasterise(const tn_contour_set *set, int width, int h
     return TN_OK;
 }
 
-TN_API tn_status tn_sketch_preview(const tn_contour_set *set, const tn_image *dem, int width, int height, tn_image *out)
+TN_API tn_status tn_sketch_preview(tn_image *out, const tn_contour_set *set, const tn_image *dem, int width, int height)
 {
     tn_image lines = {0, 0, 0, NULL}, rgb = {0, 0, 0, NULL}, small = {0, 0, 0, NULL}, shade = {0, 0, 0, NULL};
     int x, y, u, v, rad = width > height ? width / 512 : height / 512;
     size_t i, n;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn_sketch_rasterise(set, width, height, &lines))) return st;
+    if ((st = tn_sketch_rasterise(&lines, set, width, height))) return st;
     if ((st = tn_image_create(&rgb, width, height, 3))) goto fail;
     n = (size_t)width * height;
     if (dem && dem->data) {
@@ -1064,7 +1064,7 @@ static void tn__circumcircle(tn__tri *t, const double *p)
     t->r2 = ux * ux + uy * uy;
 }
 
-TN_API tn_status tn_delaunay(const float *xy, int n, int **triangles, int *ntriangles)
+TN_API tn_status tn_delaunay(int **triangles, int *ntriangles, const float *xy, int n)
 {
     double *p = NULL, lo_x, lo_y, hi_x, hi_y, span;
     tn__tri *tri = NULL;
@@ -1165,7 +1165,7 @@ done:
     return TN_OK;
 }
 
-TN_API tn_status tn_mst(const float *xy, int n, int **edges)
+TN_API tn_status tn_mst(int **edges, const float *xy, int n)
 {
     double *best;
     int *from, *e, i, j, k;
@@ -1323,8 +1323,8 @@ static void tn__sketch_random_opts_defaults(tn_sketch_random_opts *o, int width,
     if (o->nodes == 0) o->nodes = tn__clampi((int)((double)width * height / 1024.0), 8, 2048);
 }
 
-TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int height, const tn_sketch_random_opts *opts,
-                                  tn_contour_set *out)
+TN_API tn_status tn_sketch_random(tn_contour_set *out, const tn_contour_set *user, int width, int height,
+                                  const tn_sketch_random_opts *opts)
 {
     tn_sketch_random_opts o;
     tn_contour_set set;
@@ -1364,7 +1364,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         node[2 * i + 1] = tn_rng_uniform(&rng) * (float)(height - 1);
         nh[i] = 0.5f + 0.5f * tn_rng_uniform(&rng);
     }
-    if ((st = tn_mst(node, n, &redges)) || (st = tn_delaunay(node, n, &tris, &ntri))) goto done;
+    if ((st = tn_mst(&redges, node, n)) || (st = tn_delaunay(&tris, &ntri, node, n))) goto done;
     /* Voronoi vertices = circumcentres of the Delaunay triangles, kept inside the canvas */
     vor = (float *)tn__alloc(((size_t)ntri + 1) * 2 * sizeof(float));
     vh = (float *)tn__alloc(((size_t)ntri + 1) * sizeof(float));
@@ -1383,7 +1383,7 @@ TN_API tn_status tn_sketch_random(const tn_contour_set *user, int width, int hei
         vor[2 * nv + 1] = (float)t.cy;
         vh[nv++] = 0.5f * tn_rng_uniform(&rng);
     }
-    if (nv >= 2 && (st = tn_mst(vor, nv, &vedges))) goto done;
+    if (nv >= 2 && (st = tn_mst(&vedges, vor, nv))) goto done;
     /* user pixels first: ridge edges must miss them; then kept ridges too: valley edges must miss both */
     keep_r = (int *)tn__alloc((size_t)n * 2 * sizeof(int));
     keep_v = (int *)tn__alloc(((size_t)nv + 1) * 2 * sizeof(int));
@@ -1553,7 +1553,7 @@ static tn_status tn__parts_cut(const tn__pgraph *g, tn_rng *rng, tn_contour_set 
     return st;
 }
 
-TN_API tn_status tn_contour_parts_make(const tn_contour_set *lines, uint64_t seed, tn_contour_set *parts)
+TN_API tn_status tn_contour_parts_make(tn_contour_set *parts, const tn_contour_set *lines, uint64_t seed)
 {
     tn_contour_set set;
     tn__pgraph g;
@@ -1842,8 +1842,8 @@ static void tn__align_opts_defaults(tn_align_opts *o)
     if (o->choices <= 0) o->choices = 5;
 }
 
-TN_API tn_status tn_sketch_align(const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts, const tn_align_opts *opts,
-                                 int *match)
+TN_API tn_status tn_sketch_align(int *match, const tn_contour_set *sketch_parts, const tn_contour_set *dem_parts,
+                                 const tn_align_opts *opts)
 {
     tn_align_opts o;
     tn__chains sk, skr, dem;

@@ -91,7 +91,7 @@ typedef struct tn_style_scores {
     double slope_hist_dist; /* tn_realism slope_distance (relative EMD of slope histograms): lower is closer */
     double spectrum_dist;   /* tn_realism spectrum_distance (RMS log10 spectrum difference): lower is closer */
 } tn_style_scores;
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out);
+TN_API tn_status tn_style_compare(tn_style_scores *out, const tn_image *map, const tn_image *source);
 
 /* A Perlin fBm content map of width x height for `source`: the gain is picked from 0.45, 0.50,
    ..., 0.90 to minimise tn_style_compare's slope-histogram + spectrum distances to the source,
@@ -1081,7 +1081,7 @@ static void tn__style_normalise(tn_image *m, int unit_range, double *offset, dou
     double a, b;
     if (unit_range) {
         float lo, hi;
-        tn_image_range(m, &lo, &hi);
+        tn_image_range(&lo, &hi, m);
         a = lo;
         b = hi - lo;
     } else {
@@ -1221,7 +1221,7 @@ static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
     int fluvial;
     if (c->o.drain_weight != 0 && c->o.valley_weight != 0) return TN_OK;
     if (!(f = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
-    tn_image_range(s, &lo, &hi);
+    tn_image_range(&lo, &hi, s);
     if (!(st = tn__style_fill(s->data, s->width, s->height, f)))
         for (i = 0; i < n; i++) deep += f[i] - s->data[i] > TN__STYLE_BASIN_DEPTH * (hi - lo);
     TN_FREE(f);
@@ -1257,8 +1257,8 @@ TN_API tn_status tn_style_transfer(tn_image *out, const tn_image *content, const
     if (W < 16 || H < 16 || style->width < 16 || style->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "style: maps must be at least 16 x 16 (content %d x %d, style %d x %d)", W, H,
                         style->width, style->height);
-    if (tn_image_range(content, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
-    if (tn_image_range(style, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, content)) return tn__fail(TN_ERR_NUMERIC, "style: the content map holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, style)) return tn__fail(TN_ERR_NUMERIC, "style: the style map holds NaN/Inf");
     if (!(c = (tn__style_cfg *)tn__alloc(sizeof *c))) return TN_ERR_OUT_OF_MEMORY;
     st = tn__style_setup(c, opts); /* clears c */
     c->user_fn = tn__progress_fn;  /* restored at the end */
@@ -1327,7 +1327,7 @@ done:
 
 /* ---- morphology scores: Table 1 SSIM, the realism report's slope and spectrum distances ---- */
 
-TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, tn_style_scores *out)
+TN_API tn_status tn_style_compare(tn_style_scores *out, const tn_image *map, const tn_image *source)
 {
     tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, t = {0, 0, 0, NULL}, n = {0, 0, 0, NULL};
     tn_status st;
@@ -1335,7 +1335,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: needs a map and a source");
     if (map->width < 16 || map->height < 16 || source->width < 2 || source->height < 2)
         return tn__fail(TN_ERR_INVALID_ARG, "style compare: the map must be at least 16 x 16");
-    if (tn_image_range(map, NULL, NULL) || tn_image_range(source, NULL, NULL))
+    if (tn_image_range(NULL, NULL, map) || tn_image_range(NULL, NULL, source))
         return tn__fail(TN_ERR_NUMERIC, "style compare: NaN/Inf in the input");
     if (!(st = tn__channel0_image(map, &a)) && !(st = tn__channel0_image(source, &t)) &&
         !(st = tn__style_resize(&b, &t, map->width, map->height))) {
@@ -1350,7 +1350,7 @@ TN_API tn_status tn_style_compare(const tn_image *map, const tn_image *source, t
         tn__realism_opts_defaults(&ro);
         memset(&r, 0, sizeof r);
         memset(out, 0, sizeof *out);
-        if (!st && !(st = tn_ssim(&b, &a, 1.0, &out->ssim)) && !(st = tn__realism_shape(native ? &n : &b, &a, &ro, &r))) {
+        if (!st && !(st = tn_ssim(&out->ssim, &b, &a, 1.0)) && !(st = tn__realism_shape(native ? &n : &b, &a, &ro, &r))) {
             out->slope_hist_dist = r.slope_distance;
             out->spectrum_dist = r.spectrum_distance;
         }
@@ -1377,7 +1377,7 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
     else memset(&po, 0, sizeof po);
     for (k = 0; k < 10 && !st; k++) {
         po.gain = 0.45f + 0.05f * (float)k;
-        if ((st = tn_noise_perlin(&cand, width, height, &po)) || (st = tn_style_compare(&cand, source, &sc))) break;
+        if ((st = tn_noise_perlin(&cand, width, height, &po)) || (st = tn_style_compare(&sc, &cand, source))) break;
         if (!best.data || sc.slope_hist_dist + sc.spectrum_dist < best_d) {
             tn_image_free(&best);
             best = cand;

@@ -61,7 +61,7 @@ TN_API int tn_tensor_same_shape(const tn_tensor *a, const tn_tensor *b);
 /* Views an image (one batch item, H x W x C interleaved) as a new 1 x C x H x W tensor (copy). */
 TN_API tn_tensor *tn_tensor_from_image(tn_ctx *ctx, const tn_image *img);
 /* Copies batch item `n` of an N x C x H x W tensor into a new image. Caller frees *img. */
-TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img);
+TN_API tn_status tn_tensor_to_image(tn_image *img, const tn_tensor *t, int n);
 
 /* Runs the tape backwards from `loss` (a one-element tensor, gradient 1). Gradients accumulate:
    zero parameter gradients between steps (tn_params_zero_grad). */
@@ -255,7 +255,7 @@ TN_API tn_tensor *tn_tensor_from_image(tn_ctx *ctx, const tn_image *img)
     return t;
 }
 
-TN_API tn_status tn_tensor_to_image(const tn_tensor *t, int n, tn_image *img)
+TN_API tn_status tn_tensor_to_image(tn_image *img, const tn_tensor *t, int n)
 {
     tn_image out = {0, 0, 0, NULL};
     size_t i, hw;

@@ -87,35 +87,35 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *exemplar, con
                                  tn_texgan_stats *stats);
 TN_API void tn_texgan_free(tn_texgan *model);
 /* Model files are .tnw: a config tensor (architecture, value range, exemplar mean) + EMA weights. */
-TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path);
+TN_API tn_status tn_texgan_save(const char *path, const tn_texgan *model);
 TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path);
 
 /* Synthesises the w x h window at pixel (x0, y0) of the infinite texture of `seed` (x0, y0 >= 0)
    in one generator pass. *out is allocated here. */
-TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h,
-                                             tn_image *out);
+TN_API tn_status tn_texgan_synthesize_window(tn_image *out, const tn_texgan *model, uint64_t seed, int x0, int y0, int w,
+                                             int h);
 /* Called with consecutive row bands of a tiled synthesis: rows [y0, y0 + band->height). */
 typedef tn_status (*tn_band_fn)(void *user, int y0, const tn_image *band);
 /* Tiled synthesis of a width x height texture: z split into tiles of tile_cells cells (0 = 32)
    with 4 cells of overlap (2 for nearest models), each tile run alone and cropped; bands of one tile row are handed to
-   fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window(0, 0). */
+   fn in order. Memory is bounded by one band. Identical to tn_texgan_synthesize_window at (0, 0). */
 TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t seed, int width, int height,
                                              int tile_cells, tn_band_fn fn, void *user);
 /* Whole image in memory (tiled internally). */
-TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out);
+TN_API tn_status tn_texgan_synthesize(tn_image *out, const tn_texgan *model, uint64_t seed, int width, int height);
 /* Streams a synthesis to disk band by band (PFM or 8-bit PPM/PGM by extension; other formats are
    built in memory and saved whole). Channels beyond 3 go to "<stem>.ch3-5<ext>" and so on.
    shift (channels floats, may be NULL) is added before writing (colour correction), results
    clipped to the model's range. Files appear atomically. */
-TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height,
-                                           const float *shift, const char *path);
+TN_API tn_status tn_texgan_synthesize_file(const char *path, const tn_texgan *model, uint64_t seed, int width,
+                                           int height, const float *shift);
 
 /* Colour correction: adds a per-channel shift so that the mean of the result, clipped to
    [lo, hi], equals target_mean (found by bisection, so clipping does not spoil it). In place. */
 TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target_mean, float lo, float hi);
 /* The per-channel shift the same correction would apply (for streamed outputs). */
-TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target_mean, float lo, float hi,
-                                         float *shift);
+TN_API tn_status tn_texture_colour_shift(float *shift, const tn_image *img, const float *target_mean, float lo,
+                                         float hi);
 
 /* Detail maps for a renderer. */
 typedef struct tn_detail_maps {
@@ -147,18 +147,18 @@ TN_API void tn_detail_maps_free(tn_detail_maps *maps);
 /* One texel as a shader computes it, (u, v) in [0, 1) across the texture: bilinear low map
    (texel centres, clamped) + 2 (bilinear high map, repeated tiling times - 0.5), clipped.
    out gets channels floats. */
-TN_API void tn_detail_texel(const tn_detail_maps *maps, float u, float v, float *out);
+TN_API void tn_detail_texel(float *out, const tn_detail_maps *maps, float u, float v);
 /* The whole composed texture at width x height (0, 0 = the maps' size). */
-TN_API tn_status tn_detail_compose(const tn_detail_maps *maps, int width, int height, tn_image *out);
+TN_API tn_status tn_detail_compose(tn_image *out, const tn_detail_maps *maps, int width, int height);
 /* PREFIX_low.png, PREFIX_high.png (8-bit) and PREFIX_detail.txt (size, tiling, factor, sigma,
    range) as a sidecar, since the tiling factor must travel with the maps. */
-TN_API tn_status tn_detail_maps_save(const tn_detail_maps *maps, const char *prefix);
+TN_API tn_status tn_detail_maps_save(const char *prefix, const tn_detail_maps *maps);
 TN_API tn_status tn_detail_maps_load(tn_detail_maps *maps, const char *prefix);
 /* Side-by-side preview (2 x 2 panels of `panel` pixels, 0 = 384): top far view of the whole
    texture, bottom a near crop at full resolution; left naive tiling of the exemplar, right
    the detail-mapped texture; all shaded by the hillshade of dem (NULL = a Perlin terrain). */
-TN_API tn_status tn_detail_preview(const tn_detail_maps *maps, const tn_image *exemplar, const tn_image *dem,
-                                   int panel, tn_image *out);
+TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *maps, const tn_image *exemplar,
+                                   const tn_image *dem, int panel);
 #endif /* TN_NO_TEXGAN */
 
 /* --------------------------------------------------------------------------------------------
@@ -382,14 +382,14 @@ TN_API void tn_texgan_free(tn_texgan *model)
     memset(model, 0, sizeof *model);
 }
 
-TN_API tn_status tn_texgan_save(const tn_texgan *model, const char *path)
+TN_API tn_status tn_texgan_save(const char *path, const tn_texgan *model)
 {
     tn_tensor *cfg;
     if (!model || !model->weights) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: no model");
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan save: empty path");
     cfg = tn_params_find(model->weights, "texgan.config");
     tn__tg_write_config(model, (int)cfg->data[12], (int)cfg->data[13], cfg->data);
-    return tn_params_save(model->weights, path);
+    return tn_params_save(path, model->weights);
 }
 
 #define TN__TG_FORMAT 1
@@ -402,7 +402,7 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
-    if ((st = tn_params_open(path, &f))) return st;
+    if ((st = tn_params_open(&f, path))) return st;
     memset(&m, 0, sizeof m);
     st = tn_model_check(f, "texgan", TN__TG_FORMAT, "texgan.config", path);
     if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
@@ -958,7 +958,7 @@ static tn_status tn__tg_check_exemplar(const tn_image *ex, float *lo, float *hi,
     if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "texgan: the exemplar is empty");
     if (ex->channels < 1 || ex->channels > TN_TEXGAN_MAX_CHANNELS)
         return tn__fail(TN_ERR_SHAPE, "texgan: the exemplar has %d channels (1..%d)", ex->channels, TN_TEXGAN_MAX_CHANNELS);
-    if (tn_image_range(ex, lo, hi)) return tn__fail(TN_ERR_NUMERIC, "texgan: the exemplar holds NaN/Inf");
+    if (tn_image_range(lo, hi, ex)) return tn__fail(TN_ERR_NUMERIC, "texgan: the exemplar holds NaN/Inf");
     if (*lo > 0.0f) *lo = 0.0f;
     if (*hi < 1.0f) *hi = 1.0f;
     n = (size_t)ex->width * ex->height;
@@ -1027,7 +1027,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
     tn_texgan_defaults(&o);
     if ((st = tn__tg_check_exemplar(ex, &lo, &hi, mean))) return st;
     memset(&s, 0, sizeof s);
-    if ((st = tn_train_create("texgan", "texgan-train", &o.train, &s.run))) return st;
+    if ((st = tn_train_create(&s.run, "texgan", "texgan-train", &o.train))) return st;
     tn_rng_seed(&s.rng, o.train.seed, 0x7467616eULL);
     s.disc_width = o.disc_width;
     s.disc_layers = o.disc_layers;
@@ -1279,7 +1279,7 @@ static tn_status tn__tg_check_size(int w, int h)
     return TN_OK;
 }
 
-TN_API tn_status tn_texgan_synthesize_window(const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h, tn_image *out)
+TN_API tn_status tn_texgan_synthesize_window(tn_image *out, const tn_texgan *model, uint64_t seed, int x0, int y0, int w, int h)
 {
     tn_image img = {0, 0, 0, NULL};
     tn_ctx *ctx;
@@ -1373,7 +1373,7 @@ static tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
     return TN_OK;
 }
 
-TN_API tn_status tn_texgan_synthesize(const tn_texgan *model, uint64_t seed, int width, int height, tn_image *out)
+TN_API tn_status tn_texgan_synthesize(tn_image *out, const tn_texgan *model, uint64_t seed, int width, int height)
 {
     tn_image img = {0, 0, 0, NULL};
     tn_status st;
@@ -1459,7 +1459,7 @@ static tn_status tn__tg_save_whole(const tn_texgan *m, uint64_t seed, int width,
 {
     tn_image img = {0, 0, 0, NULL}, part = {0, 0, 0, NULL};
     tn_save_opts so;
-    tn_status st = tn_texgan_synthesize(m, seed, width, height, &img);
+    tn_status st = tn_texgan_synthesize(&img, m, seed, width, height);
     size_t i, n = (size_t)width * height;
     int g, c, groups = (m->channels + 2) / 3;
     memset(&so, 0, sizeof so);
@@ -1485,8 +1485,8 @@ static tn_status tn__tg_save_whole(const tn_texgan *m, uint64_t seed, int width,
     return st;
 }
 
-TN_API tn_status tn_texgan_synthesize_file(const tn_texgan *model, uint64_t seed, int width, int height, const float *shift,
-                                           const char *path)
+TN_API tn_status tn_texgan_synthesize_file(const char *path, const tn_texgan *model, uint64_t seed, int width, int height,
+                                           const float *shift)
 {
     tn__tg_writer w;
     const char *ext;
@@ -1539,13 +1539,13 @@ static double tn__cc_mean(const tn_image *img, int c, float s, float lo, float h
     return sum / (double)n;
 }
 
-TN_API tn_status tn_texture_colour_shift(const tn_image *img, const float *target, float lo, float hi, float *shift)
+TN_API tn_status tn_texture_colour_shift(float *shift, const tn_image *img, const float *target, float lo, float hi)
 {
     int c, it;
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0) return tn__fail(TN_ERR_EMPTY, "colour correction: empty image");
     if (!(lo < hi) || !(lo >= -FLT_MAX && hi <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "colour correction: range %g..%g is empty or not finite", (double)lo, (double)hi);
-    if (tn_image_range(img, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, img)) return tn__fail(TN_ERR_NUMERIC, "colour correction: the image holds NaN/Inf");
     for (c = 0; c < img->channels; c++) {
         float t = target[c], a, b, s;
         int clipped;
@@ -1574,7 +1574,7 @@ TN_API tn_status tn_texture_colour_correct(tn_image *img, const float *target, f
     size_t n, i;
     tn_status st;
     if (img && img->channels > 64) return tn__fail(TN_ERR_SHAPE, "colour correction: %d channels (at most 64)", img->channels);
-    if ((st = tn_texture_colour_shift(img, target, lo, hi, shift))) return st;
+    if ((st = tn_texture_colour_shift(shift, img, target, lo, hi))) return st;
     n = (size_t)img->width * img->height * img->channels;
     for (i = 0; i < n; i++) img->data[i] = tn__clampf(img->data[i] + shift[i % (size_t)img->channels], lo, hi);
     return TN_OK;
@@ -1616,7 +1616,7 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
     memset(a, 0, sizeof *a);
     if (!ex || !ex->data || ex->width <= 0 || ex->height <= 0) return tn__fail(TN_ERR_EMPTY, "detail maps: the exemplar is empty");
     if (ex->channels != channels) return tn__fail(TN_ERR_SHAPE, "detail maps: the exemplar has %d channels, the synthesis %d", ex->channels, channels);
-    if (tn_image_range(ex, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, ex)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the exemplar holds NaN/Inf");
     if (o->factor < 1 || o->factor > 4096 || !(o->sigma > 0 && o->sigma < 1e4f) || !(o->lo < o->hi) || !(o->lo >= -FLT_MAX && o->hi <= FLT_MAX))
         return tn__fail(TN_ERR_INVALID_ARG, "detail maps: factor %d must be 1..4096, sigma %g in (0, 1e4), range %g..%g finite and not empty",
                         o->factor, (double)o->sigma, (double)o->lo, (double)o->hi);
@@ -1731,7 +1731,7 @@ TN_API tn_status tn_detail_maps_from_image(tn_detail_maps *maps, const tn_image 
     TN_ASSERT(maps);
     tn__dm_defaults(opts, &o);
     if (!synth || !synth->data) return tn__fail(TN_ERR_EMPTY, "detail maps: the synthesis is empty");
-    if (tn_image_range(synth, NULL, NULL)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the synthesis holds NaN/Inf");
+    if (tn_image_range(NULL, NULL, synth)) return tn__fail(TN_ERR_NUMERIC, "detail maps: the synthesis holds NaN/Inf");
     if ((st = tn__dm_begin(&a, &o, synth->width, synth->height, synth->channels, ex))) return st;
     st = tn__dm_acc_band(&a, 0, synth);
     if (!st) st = tn__dm_finish(&a, &o, ex, maps);
@@ -1801,7 +1801,7 @@ static float tn__dm_high_t(const tn_detail_maps *m, float u, int axis)
     return u * (axis ? m->tiling_y * (float)m->high.height : m->tiling_x * (float)m->high.width);
 }
 
-TN_API void tn_detail_texel(const tn_detail_maps *m, float u, float v, float *out)
+TN_API void tn_detail_texel(float *out, const tn_detail_maps *m, float u, float v)
 {
     int lx0, lx1, ly0, ly1, hx0, hx1, hy0, hy1, c;
     float lfx, lfy, hfx, hfy;
@@ -1857,7 +1857,7 @@ static tn_status tn__dm_check(const tn_detail_maps *m)
     return TN_OK;
 }
 
-TN_API tn_status tn_detail_compose(const tn_detail_maps *m, int width, int height, tn_image *out)
+TN_API tn_status tn_detail_compose(tn_image *out, const tn_detail_maps *m, int width, int height)
 {
     tn_image img = {0, 0, 0, NULL};
     tn__dm_job j;
@@ -1939,7 +1939,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
     size_t i, n = 0;
     tn_status st = TN_OK;
     if (groups == 1) {
-        if ((st = tn_image_load(path, img, NULL))) return st;
+        if ((st = tn_image_load(img, path, NULL))) return st;
         if (img->channels != channels) {
             tn_image_free(img);
             return tn__fail(TN_ERR_SHAPE, "%s: %d channels, the sidecar says %d", path, img->channels, channels);
@@ -1950,7 +1950,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
         int k = tn__tg_group_channels(g, channels);
         char *p = tn__tg_group_path(path, g, channels);
         if (!p) { st = TN_ERR_OUT_OF_MEMORY; break; }
-        st = tn_image_load(p, &part, NULL);
+        st = tn_image_load(&part, p, NULL);
         if (!st && g == 0) st = tn_image_create(&all, part.width, part.height, channels);
         if (!st && (part.width != all.width || part.height != all.height || part.channels != k))
             st = tn__fail(TN_ERR_SHAPE, "%s: size or channels differ from the first group", p);
@@ -1965,7 +1965,7 @@ static tn_status tn__dm_load_groups(tn_image *img, const char *path, int channel
     return st;
 }
 
-TN_API tn_status tn_detail_maps_save(const tn_detail_maps *m, const char *prefix)
+TN_API tn_status tn_detail_maps_save(const char *prefix, const tn_detail_maps *m)
 {
     char *lp, *hp, *tp, txt[512];
     int len;
@@ -2060,7 +2060,7 @@ static void tn__dm_put(tn_image *out, int ox, int oy, int x, int y, const float 
     for (c = 0; c < 3; c++) TN_PIXEL(out, ox + x, oy + y, c) = tn__clampf(rgb[channels >= 3 ? c : 0], 0.0f, 1.0f) * shade;
 }
 
-TN_API tn_status tn_detail_preview(const tn_detail_maps *m, const tn_image *ex, const tn_image *dem, int panel, tn_image *out)
+TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *m, const tn_image *ex, const tn_image *dem, int panel)
 {
     tn_image shade = {0, 0, 0, NULL}, terrain = {0, 0, 0, NULL}, exs = {0, 0, 0, NULL}, his = {0, 0, 0, NULL}, img = {0, 0, 0, NULL};
     int P = panel > 0 ? panel : 384, gap = 8, C, x, y, c, sw, sh, nx0, ny0;
@@ -2123,7 +2123,7 @@ TN_API tn_status tn_detail_preview(const tn_detail_maps *m, const tn_image *ex, 
                 tn__dm_axis(tv * (float)shade.height, shade.height, 0, &b0, &b1, &fb);
                 s = 0.3f + 0.7f * tn__dm_bilerp(&shade, a0, a1, fa, b0, b1, fb, 0);
                 for (c = 0; c < C; c++) px[c] = TN_PIXEL(ex, tx % ex->width, ty % ex->height, c);
-                tn_detail_texel(m, tu, tv, q);
+                tn_detail_texel(q, m, tu, tv);
                 tn__dm_put(&img, 0, P + gap, x, y, px, C, s);
                 tn__dm_put(&img, P + gap, P + gap, x, y, q, C, s);
             }

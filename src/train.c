@@ -32,7 +32,7 @@ TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes);
 typedef struct tn_train tn_train;
 /* Starts a run of `method` (e.g. "texgan"), reporting progress as `stage`. Settings are checked
    (NaN/negative budgets, resume without a checkpoint path). Free with tn_train_free. */
-TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out);
+TN_API tn_status tn_train_create(tn_train **out, const char *method, const char *stage, const tn_train_opts *opts);
 TN_API void tn_train_free(tn_train *run);
 /* Registers state. Names/prefixes must stay the same between the run that wrote a checkpoint
    and the one resuming. The run does not own what is registered. */
@@ -222,7 +222,7 @@ TN_API void tn_train_defaults(tn_train_opts *o, double default_minutes)
 
 static int tn__train_name_ok(const char *s, size_t cap) { return s && strlen(s) < cap; }
 
-TN_API tn_status tn_train_create(const char *method, const char *stage, const tn_train_opts *opts, tn_train **out)
+TN_API tn_status tn_train_create(tn_train **out, const char *method, const char *stage, const tn_train_opts *opts)
 {
     tn_train *r;
     TN_ASSERT(out);
@@ -483,7 +483,7 @@ TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path)
     path = path ? path : run->o.checkpoint;
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "%s: no checkpoint path", run->method);
     if ((st = tn__train_state(run, &ck))) return st;
-    st = tn_params_save(ck, path);
+    st = tn_params_save(path, ck);
     tn_params_free(ck);
     if (!st) {
         run->ckpts++;
@@ -500,7 +500,7 @@ TN_API tn_status tn_train_open_checkpoint(tn_train *run, tn_params **ck)
     *ck = NULL;
     if (!run->o.resume) return tn__fail(TN_ERR_INVALID_ARG, "%s: not resuming", run->method);
     if (!run->ck) {
-        if ((st = tn_params_open(run->o.checkpoint, &run->ck))) return st;
+        if ((st = tn_params_open(&run->ck, run->o.checkpoint))) return st;
         m = tn_params_meta(run->ck, "method");
         if (m && strcmp(m, run->method) != 0) {
             st = tn__fail(TN_ERR_FORMAT, "%s: a checkpoint of method '%s', not '%s'", run->o.checkpoint, m, run->method);

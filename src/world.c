@@ -47,13 +47,13 @@ typedef struct tn_world_opts {
 /* Parses a SPEC (text, NUL-terminated) into *w (free with tn_world_free). Unknown settings,
    methods or parameters, a pipeline without a generator first, non-local methods and halos
    the world is too small for fail with TN_ERR_INVALID_ARG and say why. opts may be NULL. */
-TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w);
+TN_API tn_status tn_world_parse(tn_world *w, const char *text, const tn_world_opts *opts);
 /* Reads and parses a SPEC file. */
-TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w);
+TN_API tn_status tn_world_load(tn_world *w, const char *path, const tn_world_opts *opts);
 TN_API void tn_world_free(tn_world *w);
 /* Any rectangle of the output raster, in global pixel coordinates (inside the raster): the same
    pixels a whole-map run gives there. Memory is bounded by the rectangle plus its halo. */
-TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out);
+TN_API tn_status tn_world_rect(tn_image *out, const tn_world *w, tn_rect r);
 /* Tile (row, col) of the grid: columns col * tile .., rows row * tile .. (smaller at the far edges). */
 TN_API tn_rect tn_world_tile_rect(const tn_world *w, int row, int col);
 
@@ -75,14 +75,14 @@ typedef struct tn_world_run_stats {
    is skipped, so a run resumes, when it matches DIR/manifest.txt's size and digest or, unlisted,
    decodes as this tile; a damaged or foreign file is computed again). DIR must exist; DIR/world.spec is written on
    first use and a different world in DIR is refused. Progress stage "world". stats may be NULL. */
-TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts,
+TN_API tn_status tn_world_write_tiles(const char *dir, const tn_world *w, const tn_world_run_opts *opts,
                                       tn_world_run_stats *stats);
 /* Writes DIR/world.vrt (a GDAL mosaic of the whole grid, heights in metres through the band's
    offset and scale; above 64 x 64 tiles a mosaic of DIR/world_bI_J.vrt, each of 64 x 64 tiles)
    and DIR/manifest.txt (version, seed, SPEC digest, and each present tile's FNV-1a 64 digest of
    its file bytes and its size; a file that fails the check above is not present), both
    atomically. present (may be NULL) gets the count. */
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present);
+TN_API tn_status tn_world_write_index(const char *dir, const tn_world *w, int *present);
 /* One line on world method i ("perlin: generator, halo 0; frequency= ..."), NULL past the end. */
 TN_API const char *tn_world_method_help(int i);
 #endif /* TN_NO_WORLD */
@@ -418,7 +418,7 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
     if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
     for (y0 = 0; y0 < r.h && !st; y0 += 256) {
         int bh = r.h - y0 < 256 ? r.h - y0 : 256;
-        st = tn_texgan_synthesize_window(m, w->seed, r.x, r.y + y0, r.w, bh, &band);
+        st = tn_texgan_synthesize_window(&band, m, w->seed, r.x, r.y + y0, r.w, bh);
         if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
         tn_image_free(&band);
     }
@@ -443,7 +443,7 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
     if (st) {
         TN_FREE(s->singan);
@@ -467,7 +467,7 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
     (void)in_r;
     memset(&go, 0, sizeof go);
     go.seed = w->seed;
-    return tn_singan_sample(s->singan, r.x, r.y, r.w, r.h, &go, out);
+    return tn_singan_sample(out, s->singan, r.x, r.y, r.w, r.h, &go);
 }
 
 /* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
@@ -509,7 +509,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
     if (!s->gnn || !s->sketch) return tn__oom();
     if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
-    st = tn_gnn_load(path, s->gnn);
+    st = tn_gnn_load(s->gnn, path);
     TN_FREE(path);
     if (st) {
         TN_FREE(s->gnn);
@@ -517,7 +517,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         return st;
     }
     if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
-    st = tn_sketch_load(path, s->sketch);
+    st = tn_sketch_load(s->sketch, path);
     TN_FREE(path);
     if (st) {
         TN_FREE(s->sketch);
@@ -527,7 +527,7 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     {
         tn_gnn_generate_opts go;
         tn__world_gnn_opts(s, w, &go);
-        if ((st = tn_gnn_gain(s->gnn, s->sketch, w->width, w->height, &go, &s->p[2]))) return st;
+        if ((st = tn_gnn_gain(&s->p[2], s->gnn, s->sketch, w->width, w->height, &go))) return st;
     }
     s->out_w = w->width;
     s->out_h = w->height;
@@ -544,7 +544,7 @@ static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, 
     (void)in_r;
     tn__world_gnn_opts(s, w, &go);
     go.gain = s->p[2] > 0 ? s->p[2] : -1.0f;
-    return tn_gnn_generate_window(s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go, out);
+    return tn_gnn_generate_window(out, s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go);
 }
 
 /* ---- local operations ---- */
@@ -571,7 +571,7 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
     if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
     s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(path, s->singan) : TN_ERR_OUT_OF_MEMORY;
+    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
     TN_FREE(path);
     if (st) {
         TN_FREE(s->singan);
@@ -752,10 +752,10 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
                         "are in metres", s->line);
     if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return tn__oom();
-    if (kk >= 0) st = tn_climate_koppen(s->val[kk], s->climate);
+    if (kk >= 0) st = tn_climate_koppen(s->climate, s->val[kk]);
     else {
         char *path = tn__world_join(base_dir, s->val[kc]);
-        st = path ? tn_climate_load(path, s->climate) : TN_ERR_OUT_OF_MEMORY;
+        st = path ? tn_climate_load(s->climate, path) : TN_ERR_OUT_OF_MEMORY;
         TN_FREE(path);
     }
     if (st) return st;
@@ -797,8 +797,8 @@ static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *
     so.insolation.directions = (int)s->p[3];
     so.shade = s->p[4];
     so.detail = -1.0f; /* the detail noise is a whole-map Perlin map stretched to its min..max */
-    st = tn_insolation(in, s->p[0], &so.insolation, &ins);
-    if (!st) st = tn_season_texture(in, s->climate, s->p[0], &ins, &t, 1, &so, &tex, NULL);
+    st = tn_insolation(&ins, in, s->p[0], &so.insolation);
+    if (!st) st = tn_season_texture(&tex, in, s->climate, s->p[0], &ins, &t, 1, &so, NULL);
     if (!st) st = tn__world_crop(&tex, in_r, r, out);
     tn_image_free(&ins);
     tn_image_free(&tex);
@@ -892,7 +892,7 @@ static tn_status tn__world_normalmap_run(const tn__world_stage *s, const tn_worl
                                          tn_image *out)
 {
     tn_image b = {0, 0, 0, NULL};
-    tn_status st = tn_normal_map(in, s->p[2], s->p[2], s->p[0], s->p[1] != 0, &b);
+    tn_status st = tn_normal_map(&b, in, s->p[2], s->p[2], s->p[0], s->p[1] != 0);
     (void)w;
     if (!st) st = tn__world_crop(&b, in_r, r, out);
     tn_image_free(&b);
@@ -1262,12 +1262,12 @@ static tn_status tn__world_parse_with(const char *text, const tn_world_opts *opt
     return TN_OK;
 }
 
-TN_API tn_status tn_world_parse(const char *text, const tn_world_opts *opts, tn_world *w)
+TN_API tn_status tn_world_parse(tn_world *w, const char *text, const tn_world_opts *opts)
 {
     return tn__world_parse_with(text, opts, opts ? opts->base_dir : NULL, w);
 }
 
-TN_API tn_status tn_world_load(const char *path, const tn_world_opts *opts, tn_world *w)
+TN_API tn_status tn_world_load(tn_world *w, const char *path, const tn_world_opts *opts)
 {
     uint8_t *buf = NULL;
     size_t n = 0, i;
@@ -1323,7 +1323,7 @@ static tn_status tn__world_compute(const tn_world *w, int k, tn_rect r, tn_image
     return st;
 }
 
-TN_API tn_status tn_world_rect(const tn_world *w, tn_rect r, tn_image *out)
+TN_API tn_status tn_world_rect(tn_image *out, const tn_world *w, tn_rect r)
 {
     TN_ASSERT(w && out);
     if (!w->impl) return tn__fail(TN_ERR_INVALID_ARG, "world: not parsed");
@@ -1481,7 +1481,7 @@ static int tn__world_tile_ok(const tn_world *w, const tn__world_manifest *m, int
         tn_image img = {0, 0, 0, NULL};
         tn_image_info info;
         tn_rect r = tn_world_tile_rect(w, row, col);
-        if (!tn_image_load_memory(buf, n, path, &img, &info, NULL))
+        if (!tn_image_load_memory(&img, buf, n, path, NULL, &info))
             ok = info.format == TN_FORMAT_PNG && img.width == r.w && img.height == r.h && img.channels == w->out_channels &&
                  info.bit_depth == (w->out_heights ? 16 : 8) &&
                  (!w->out_heights || (info.has_range && (float)info.range_lo == w->lo && (float)info.range_hi == w->hi));
@@ -1509,7 +1509,7 @@ static tn_status tn__world_tile_fits(const tn_world *w)
     return TN_OK;
 }
 
-TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const tn_world_run_opts *opts, tn_world_run_stats *stats)
+TN_API tn_status tn_world_write_tiles(const char *dir, const tn_world *w, const tn_world_run_opts *opts, tn_world_run_stats *stats)
 {
     tn_world_run_opts o;
     tn_world_run_stats s;
@@ -1550,7 +1550,7 @@ TN_API tn_status tn_world_write_tiles(const tn_world *w, const char *dir, const 
             else {
                 if (tn__world_exists(path)) s.repaired++; /* damaged or foreign: computed again */
                 tn_image img = {0, 0, 0, NULL};
-                st = tn_world_rect(w, tn_world_tile_rect(w, row, col), &img);
+                st = tn_world_rect(&img, w, tn_world_tile_rect(w, row, col));
                 if (!st) st = tn__world_save_tile(w, &img, path);
                 tn_image_free(&img);
                 if (!st) s.written++;
@@ -1616,7 +1616,7 @@ static void tn__world_vrt(tn__text *vrt, const tn_world *w, int r0, int r1, int 
     tn__text_add(vrt, "</VRTDataset>\n");
 }
 
-TN_API tn_status tn_world_write_index(const tn_world *w, const char *dir, int *present)
+TN_API tn_status tn_world_write_index(const char *dir, const tn_world *w, int *present)
 {
     tn__text vrt = {NULL, 0, 0, 0}, man = {NULL, 0, 0, 0};
     tn__world_manifest old;

@@ -56,7 +56,7 @@ STUDIO_API double studio_hi(void) { return g_hi; }
 STUDIO_API int studio_load_model(const char *path)
 {
     tn_gnn m;
-    tn_status st = tn_gnn_load(path, &m);
+    tn_status st = tn_gnn_load(&m, path);
     if (st) return studio_fail(st, path);
     if (g_have_model) tn_gnn_free(&g_model);
     g_model = m;
@@ -71,7 +71,7 @@ STUDIO_API int studio_sketch_to_tns(const char *in_path, const char *out_path)
     tn_contour_set sk;
     tn_status st;
     memset(&sk, 0, sizeof sk);
-    if ((st = tn_sketch_load(in_path, &sk))) return studio_fail(st, in_path);
+    if ((st = tn_sketch_load(&sk, in_path))) return studio_fail(st, in_path);
     st = tn_sketch_save(out_path, &sk);
     tn_contour_set_free(&sk);
     return st ? studio_fail(st, out_path) : 0;
@@ -101,12 +101,12 @@ STUDIO_API int studio_generate(const char *sketch_path, int width, int height, d
         return (int)TN_ERR_INVALID_ARG;
     }
     memset(&sk, 0, sizeof sk);
-    if ((st = tn_sketch_load(sketch_path, &sk))) return studio_fail(st, "sketch");
+    if ((st = tn_sketch_load(&sk, sketch_path))) return studio_fail(st, "sketch");
     memset(&o, 0, sizeof o); /* zero = the defaults */
     o.seed = (uint64_t)seed;
     tn_set_progress(studio_progress, NULL);
     t0 = tn_time_seconds();
-    st = tn_gnn_generate(&g_model, &sk, width, height, &o, &out);
+    st = tn_gnn_generate(&out, &g_model, &sk, width, height, &o);
     g_seconds = tn_time_seconds() - t0;
     tn_set_progress(NULL, NULL);
     tn_contour_set_free(&sk);
@@ -137,7 +137,7 @@ static void studio_channel0(tn_image *img)
 STUDIO_API int studio_load_terrain(const char *path)
 {
     tn_image img = {0, 0, 0, NULL};
-    tn_status st = tn_image_load(path, &img, NULL);
+    tn_status st = tn_image_load(&img, path, NULL);
     if (st) return studio_fail(st, path);
     studio_channel0(&img);
     tn_image_free(&g_terrain);
@@ -155,7 +155,7 @@ STUDIO_API unsigned char *studio_hillshade(void)
     tn_status st;
     memset(&ro, 0, sizeof ro);
     tn_image_free(&g_shade);
-    if ((st = tn_render_preview(&g_terrain, &ro, &g_shade))) {
+    if ((st = tn_render_preview(&g_shade, &g_terrain, &ro))) {
         studio_fail(st, "hillshade");
         return NULL;
     }
@@ -198,14 +198,14 @@ STUDIO_API int studio_export(const char *path, int kind, float dx)
         memset(&ro, 0, sizeof ro);
         mo.dx = dx > 0 ? dx : 1;
         mo.step = g_terrain.width > 1024 || g_terrain.height > 1024 ? 2 : 1;
-        if (!(st = tn_render_preview(&g_terrain, &ro, &tex))) {
+        if (!(st = tn_render_preview(&tex, &g_terrain, &ro))) {
             mo.texture = &tex;
-            st = tn_export_glb(&g_terrain, path, &mo);
+            st = tn_export_glb(path, &g_terrain, &mo);
         }
         tn_image_free(&tex);
     } else {
         float lo = 0, hi = 0;
-        st = tn_export_unity_raw(&g_terrain, path, 0, &lo, &hi);
+        st = tn_export_unity_raw(path, &g_terrain, 0, &lo, &hi);
         g_lo = lo;
         g_hi = hi;
     }
@@ -245,7 +245,7 @@ STUDIO_API int studio_train(const char *dem_path, double lo, double hi, double m
     tn_gnn_stats stats;
     tn_status st;
     int side, x, y, nhold = 0, i;
-    if ((st = tn_image_load(dem_path, &dem, &info))) return studio_fail(st, dem_path);
+    if ((st = tn_image_load(&dem, dem_path, &info))) return studio_fail(st, dem_path);
     studio_channel0(&dem);
     if (!info.has_range && hi > lo) {
         size_t k, n = (size_t)dem.width * dem.height;
@@ -254,7 +254,7 @@ STUDIO_API int studio_train(const char *dem_path, double lo, double hi, double m
     side = dem.width < 128 || dem.height < 128 ? (dem.width < dem.height ? dem.width : dem.height) : 128;
     studio_relief_window(&dem, side, &x, &y);
     st = tn_image_crop(&win, &dem, x, y, side, side);
-    if (!st) nhold = tn_gnn_holdout_windows(&dem, x, y, side, side, 4, hold);
+    if (!st) nhold = tn_gnn_holdout_windows(hold, &dem, x, y, side, side, 4);
     tn_image_free(&dem);
     if (st) return studio_fail(st, "crop");
     memset(&o, 0, sizeof o);
@@ -262,12 +262,12 @@ STUDIO_API int studio_train(const char *dem_path, double lo, double hi, double m
     o.holdout = nhold ? hold : NULL;
     o.holdout_count = nhold;
     tn_set_progress(studio_progress, NULL);
-    st = tn_gnn_train(&win, &o, &m, &stats);
+    st = tn_gnn_train(&m, &win, &o, &stats);
     tn_set_progress(NULL, NULL);
     tn_image_free(&win);
     for (i = 0; i < nhold; i++) tn_image_free(&hold[i]);
     if (st) return studio_fail(st, "train");
-    if ((st = tn_gnn_save(&m, model_path))) {
+    if ((st = tn_gnn_save(model_path, &m))) {
         tn_gnn_free(&m);
         return studio_fail(st, model_path);
     }
@@ -287,7 +287,7 @@ STUDIO_API double studio_compare(const char *reference_path, int *identical)
     tn_image ref = {0, 0, 0, NULL};
     size_t i, n, same = 0;
     double lo, hi, worst = 0;
-    tn_status st = tn_image_load(reference_path, &ref, NULL);
+    tn_status st = tn_image_load(&ref, reference_path, NULL);
     *identical = 0;
     if (st) return studio_fail(st, reference_path), -1;
     if (ref.width != g_terrain.width || ref.height != g_terrain.height || ref.channels != 1) {

@@ -40,7 +40,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "usage: check_demo_page SHOT.png BOXES.txt\n");
         return 2;
     }
-    if (tn_image_load(argv[1], &shot, NULL)) {
+    if (tn_image_load(&shot, argv[1], NULL)) {
         fprintf(stderr, "check_demo_page: %s\n", tn_last_error());
         return 1;
     }

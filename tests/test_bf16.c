@@ -94,10 +94,10 @@ TN_TEST(bf16_precision_setting)
     TN_CHECK(tn_precision_resolve(TN_PRECISION_AUTO) == TN_PRECISION_BF16);
     TN_CHECK(tn_precision_resolve(TN_PRECISION_FP32) == TN_PRECISION_FP32);
     tn_set_precision(TN_PRECISION_AUTO);
-    TN_CHECK(tn_precision_parse("bf16", &p) == TN_OK && p == TN_PRECISION_BF16);
-    TN_CHECK(tn_precision_parse("fp32", &p) == TN_OK && p == TN_PRECISION_FP32);
-    TN_CHECK(tn_precision_parse("auto", &p) == TN_OK && p == TN_PRECISION_AUTO);
-    TN_CHECK(tn_precision_parse("fp16", &p) == TN_ERR_INVALID_ARG && p == TN_PRECISION_AUTO);
+    TN_CHECK(tn_precision_parse(&p, "bf16") == TN_OK && p == TN_PRECISION_BF16);
+    TN_CHECK(tn_precision_parse(&p, "fp32") == TN_OK && p == TN_PRECISION_FP32);
+    TN_CHECK(tn_precision_parse(&p, "auto") == TN_OK && p == TN_PRECISION_AUTO);
+    TN_CHECK(tn_precision_parse(&p, "fp16") == TN_ERR_INVALID_ARG && p == TN_PRECISION_AUTO);
     TN_CHECK(!strcmp(tn_precision_name(TN_PRECISION_BF16), "bf16") && !strcmp(tn_precision_name(TN_PRECISION_FP32), "fp32"));
     TN_CHECK(!(f & TN_CPU_AVX512_BF16) || (f & TN_CPU_AVX512F));
     TN_CHECK(!strcmp(k, "amx-bf16") || !strcmp(k, "avx512-bf16") || !strcmp(k, "emulated"));

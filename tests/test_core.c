@@ -54,7 +54,7 @@ TN_TEST(image_range_skips_nan)
     float lo, hi;
     TN_CHECK(tn_image_create(&img, 4, 1, 1) == TN_OK);
     img.data[0] = 3.0f; img.data[1] = (float)NAN; img.data[2] = -2.0f; img.data[3] = 1.0f;
-    TN_CHECK(tn_image_range(&img, &lo, &hi) == 1);
+    TN_CHECK(tn_image_range(&lo, &hi, &img) == 1);
     TN_CHECK(lo == -2.0f && hi == 3.0f);
     tn_image_free(&img);
 }

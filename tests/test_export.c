@@ -58,7 +58,7 @@ TN_TEST(glb_structure_and_geometry)
     o.step = 3; /* samples 0 3 6 9 across, 0 3 6 down: 4 x 3 vertices */
     TN_CHECK(tn_image_create(&tex, 5, 4, 3) == TN_OK);
     o.texture = &tex;
-    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_OK);
+    TN_CHECK(tn_export_glb(path, &dem, &o) == TN_OK);
     b = tn_test_read_file(path, &n);
     TN_CHECK(b && n > 20 && !memcmp(b, "glTF", 4) && le32(b + 4) == 2 && le32(b + 8) == n);
     if (!b || n < 28) return;
@@ -111,7 +111,7 @@ TN_TEST(obj_counts_and_material)
     TN_CHECK(tn_image_create(&tex, 3, 2, 1) == TN_OK);
     tex.data[1] = 1.0f;
     o.texture = &tex;
-    TN_CHECK(tn_export_obj(&dem, path, &o) == TN_OK);
+    TN_CHECK(tn_export_obj(path, &dem, &o) == TN_OK);
     b = tn_test_read_file(path, &n);
     TN_CHECK(b != NULL);
     if (!b) return;
@@ -126,7 +126,7 @@ TN_TEST(obj_counts_and_material)
     b = tn_test_read_file(mtl, &n);
     TN_CHECK(b && strstr((char *)b, "map_Kd ") != NULL);
     free(b);
-    TN_CHECK(tn_image_load(png, &back, NULL) == TN_OK && back.width == 3 && back.channels == 3 && back.data[3] == 1.0f);
+    TN_CHECK(tn_image_load(&back, png, NULL) == TN_OK && back.width == 3 && back.channels == 3 && back.data[3] == 1.0f);
     tn_image_free(&back);
     tn_image_free(&dem);
     tn_image_free(&tex);
@@ -143,20 +143,20 @@ TN_TEST(bad_input)
     FILE *f;
     memset(&o, 0, sizeof o);
     remove(path);
-    TN_CHECK(tn_export_glb(&tiny, path, NULL) == TN_ERR_EMPTY);
-    TN_CHECK(tn_export_glb(&dem, "", NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_export_glb(path, &tiny, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_export_glb("", &dem, NULL) == TN_ERR_INVALID_ARG);
     o.z_scale = INFINITY;
-    TN_CHECK(tn_export_obj(&dem, path, &o) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_export_obj(path, &dem, &o) == TN_ERR_INVALID_ARG);
     o.z_scale = 0;
     o.step = 70000;
-    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_export_glb(path, &dem, &o) == TN_ERR_INVALID_ARG);
     o.step = 0;
     TN_CHECK(tn_image_create(&tex, 2, 2, 2) == TN_OK);
     o.texture = &tex;
-    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_SHAPE);
+    TN_CHECK(tn_export_glb(path, &dem, &o) == TN_ERR_SHAPE);
     o.texture = NULL;
     dem.data[5] = NAN;
-    TN_CHECK(tn_export_glb(&dem, path, &o) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN") != NULL);
+    TN_CHECK(tn_export_glb(path, &dem, &o) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN") != NULL);
     f = fopen(path, "rb");
     TN_CHECK(f == NULL); /* nothing written on failure */
     if (f) fclose(f);
@@ -174,13 +174,13 @@ TN_TEST(normal_maps_and_unity_raw)
     float lo = 0, hi = 0, mn, mx;
     unsigned cmin = 65535, cmax = 0;
     int mirrored = 1;
-    TN_CHECK(tn_normal_map(&dem, 1, 1, 1, 0, &gl) == TN_OK && tn_normal_map(&dem, 1, 1, 1, 1, &dx) == TN_OK);
+    TN_CHECK(tn_normal_map(&gl, &dem, 1, 1, 1, 0) == TN_OK && tn_normal_map(&dx, &dem, 1, 1, 1, 1) == TN_OK);
     TN_CHECK(gl.channels == 3 && TN_PIXEL(&gl, 5, 5, 0) < 0.5f && TN_PIXEL(&gl, 5, 5, 2) > 0.5f); /* leans west, up */
     for (i = 0; i < (size_t)33 * 33; i++)
         if (fabsf(gl.data[3 * i + 1] + dx.data[3 * i + 1] - 1.0f) > 1e-6f || gl.data[3 * i] != dx.data[3 * i]) mirrored = 0;
     TN_CHECK(mirrored);
-    TN_CHECK(tn_image_range(&gl, &mn, &mx) == 0 && mn >= 0.0f && mx <= 1.0f);
-    TN_CHECK(tn_export_unity_raw(&dem, path, 0, &lo, &hi) == TN_OK); /* 33 x 33 already: no resampling */
+    TN_CHECK(tn_image_range(&mn, &mx, &gl) == 0 && mn >= 0.0f && mx <= 1.0f);
+    TN_CHECK(tn_export_unity_raw(path, &dem, 0, &lo, &hi) == TN_OK); /* 33 x 33 already: no resampling */
     {
         FILE *f = fopen(path, "rb");
         b = (uint8_t *)malloc(4 * 33 * 33);
@@ -195,7 +195,7 @@ TN_TEST(normal_maps_and_unity_raw)
     }
     TN_CHECK(cmin == 0 && cmax == 65535 && lo == 100.0f && hi > lo);
     free(b);
-    TN_CHECK(tn_export_unity_raw(&small, path, 0, NULL, NULL) == TN_OK); /* resampled to 33 */
+    TN_CHECK(tn_export_unity_raw(path, &small, 0, NULL, NULL) == TN_OK); /* resampled to 33 */
     {
         FILE *f = fopen(path, "rb");
         long len = -1;
@@ -206,12 +206,12 @@ TN_TEST(normal_maps_and_unity_raw)
         }
         TN_CHECK(len == 2 * 33 * 33);
     }
-    TN_CHECK(tn_export_unity_raw(&dem, path, 100, NULL, NULL) == TN_ERR_INVALID_ARG); /* not 2^n + 1 */
-    TN_CHECK(tn_export_unity_raw(&dem, path, 8193, NULL, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_export_unity_raw(path, &dem, 100, NULL, NULL) == TN_ERR_INVALID_ARG); /* not 2^n + 1 */
+    TN_CHECK(tn_export_unity_raw(path, &dem, 8193, NULL, NULL) == TN_ERR_INVALID_ARG);
     dem.data[7] = NAN;
-    TN_CHECK(tn_export_unity_raw(&dem, path, 0, NULL, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_export_unity_raw(path, &dem, 0, NULL, NULL) == TN_ERR_NUMERIC);
     tn_image_free(&gl);
-    TN_CHECK(tn_normal_map(&dem, 1, 1, 1, 0, &gl) == TN_ERR_NUMERIC && gl.data == NULL);
+    TN_CHECK(tn_normal_map(&gl, &dem, 1, 1, 1, 0) == TN_ERR_NUMERIC && gl.data == NULL);
     tn_image_free(&gl);
     tn_image_free(&dx);
     tn_image_free(&dem);
@@ -238,7 +238,7 @@ TN_TEST(splat_map)
     int sums = 1, y;
     memset(&o, 0, sizeof o);
     o.dx = 10.0f;
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && w.channels == 4 && w.width == 60 && w.height == 8);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_OK && w.channels == 4 && w.width == 60 && w.height == 8);
     for (i = 0; i < (size_t)60 * 8; i++) {
         const float *p = w.data + 4 * i;
         if (fabsf(p[0] + p[1] + p[2] + p[3] - 1.0f) > 1e-5f || p[0] < 0 || p[1] < 0 || p[2] < 0 || p[3] < 0) sums = 0;
@@ -250,13 +250,13 @@ TN_TEST(splat_map)
     /* the snow line at 1.5 of the range: no snow, the plateau is bare ground (above the tree line) */
     o.snow_line = 2.0f;
     tn_image_free(&w);
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && TN_PIXEL(&w, 55, 4, 1) > 0.99f && TN_PIXEL(&w, 55, 4, 3) == 0.0f);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_OK && TN_PIXEL(&w, 55, 4, 1) > 0.99f && TN_PIXEL(&w, 55, 4, 3) == 0.0f);
     /* a snow mask on the lower half of the rows replaces the snow line; rock stays on the wall */
     TN_CHECK(tn_image_create(&snow, 60, 8, 1) == TN_OK);
     for (i = 0; i < (size_t)60 * 4; i++) snow.data[60 * 4 + i] = 1.0f;
     o.snow = &snow;
     tn_image_free(&w);
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_OK);
     for (y = 0; y < 8; y++) {
         TN_CHECK(TN_PIXEL(&w, 5, y, 3) == (y >= 4 ? 1.0f : 0.0f));
         TN_CHECK(TN_PIXEL(&w, 30, y, 2) > 0.99f);
@@ -265,23 +265,23 @@ TN_TEST(splat_map)
     o.dx = 1000.0f;
     o.snow = NULL;
     tn_image_free(&w);
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_OK && TN_PIXEL(&w, 30, 4, 2) == 0.0f);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_OK && TN_PIXEL(&w, 30, 4, 2) == 0.0f);
     /* bad input: mask size, NaN mask, NaN DEM, bad options, tiny DEM; *out untouched */
     tn_image_free(&w);
     TN_CHECK(tn_image_create(&small, 10, 8, 1) == TN_OK);
     o.vegetation = &small;
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_SHAPE && w.data == NULL);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_ERR_SHAPE && w.data == NULL);
     o.vegetation = &snow;
     snow.data[3] = NAN;
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_NUMERIC && w.data == NULL);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_ERR_NUMERIC && w.data == NULL);
     o.vegetation = NULL;
     o.height_blend = -1.0f;
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_INVALID_ARG && w.data == NULL);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_ERR_INVALID_ARG && w.data == NULL);
     o.height_blend = 0.0f;
     dem.data[9] = INFINITY;
-    TN_CHECK(tn_export_splat(&dem, &o, &w) == TN_ERR_NUMERIC && w.data == NULL);
+    TN_CHECK(tn_export_splat(&w, &dem, &o) == TN_ERR_NUMERIC && w.data == NULL);
     small.height = 1;
-    TN_CHECK(tn_export_splat(&small, NULL, &w) == TN_ERR_EMPTY && w.data == NULL);
+    TN_CHECK(tn_export_splat(&w, &small, NULL) == TN_ERR_EMPTY && w.data == NULL);
     small.height = 8;
     tn_image_free(&dem);
     tn_image_free(&snow);

@@ -106,7 +106,7 @@ TN_TEST(test_v_valley)
     memset(&o, 0, sizeof o);
     o.threshold = 40;
     o.which = TN_EXTRACT_VALLEYS;
-    TN_CHECK(tn_extract(&dem, &o, &ex) == TN_OK);
+    TN_CHECK(tn_extract(&ex, &dem, &o) == TN_OK);
     TN_CHECK(ex.contours.count >= 1);
     for (i = 0; i < ex.contours.count; i++) {
         TN_CHECK(ex.contours.items[i].type == TN_VALLEY);
@@ -131,7 +131,7 @@ TN_TEST(test_ridge_line)
     memset(&o, 0, sizeof o);
     o.threshold = 30;
     o.which = TN_EXTRACT_RIDGES;
-    TN_CHECK(tn_extract(&dem, &o, &ex) == TN_OK);
+    TN_CHECK(tn_extract(&ex, &dem, &o) == TN_OK);
     TN_CHECK(ex.contours.count >= 1);
     for (i = 0; i < ex.contours.count; i++) {
         TN_CHECK(ex.contours.items[i].type == TN_RIDGE);
@@ -301,7 +301,7 @@ TN_TEST(test_strahler_y)
     mask[AT(1, 0)] = mask[AT(2, 1)] = mask[AT(5, 0)] = mask[AT(4, 1)] = 1;
     for (i = 2; i < 8; i++) mask[AT(3, i)] = 1;
     mask[AT(6, 3)] = mask[AT(5, 4)] = mask[AT(4, 5)] = 1;
-    TN_CHECK(tn_strahler_order(&f, mask, order, &top) == TN_OK);
+    TN_CHECK(tn_strahler_order(order, &f, mask, &top) == TN_OK);
     TN_CHECK(order[AT(1, 0)] == 1 && order[AT(2, 1)] == 1 && order[AT(4, 1)] == 1);
     TN_CHECK(order[AT(3, 2)] == 2);
     TN_CHECK(order[AT(4, 5)] == 1);
@@ -315,7 +315,7 @@ TN_TEST(test_strahler_y)
     dir[AT(6, 4)] = 4;
     mask[AT(6, 4)] = 1;
     dir[AT(6, 3)] = 3; mask[AT(6, 3)] = 1; /* (6,3) -> (5,4) and (6,4) -> (5,4): two order-1 meet */
-    TN_CHECK(tn_strahler_order(&f, mask, order, &top) == TN_OK);
+    TN_CHECK(tn_strahler_order(order, &f, mask, &top) == TN_OK);
     TN_CHECK(order[AT(5, 4)] == 2);
     TN_CHECK(order[AT(3, 6)] == 3);
     TN_CHECK(top == 3);
@@ -393,7 +393,7 @@ static int load_metres(const char *region, const char *suffix, float lo, float h
 {
     const char *p = data_dem(region, suffix);
     size_t i;
-    if (!p || tn_image_load(p, im, NULL) != TN_OK) return 0;
+    if (!p || tn_image_load(im, p, NULL) != TN_OK) return 0;
     for (i = 0; i < (size_t)im->width * im->height; i++) im->data[i] = lo + im->data[i] * (hi - lo);
     return 1;
 }
@@ -419,9 +419,9 @@ TN_TEST(test_real_dem_pipeline)
     int i, j, bad_len = 0, bad_adj = 0, valleys = 0, ridges = 0, short_dangling = 0, maxo = 0, x, y, skel_px = 0;
     if (!load_metres("alps_montblanc", "256", 454.0f, 4810.0f, &dem)) TN_SKIP("no ../shared/data");
     tn_set_threads(1);
-    TN_CHECK(tn_extract(&dem, NULL, &ex) == TN_OK);
+    TN_CHECK(tn_extract(&ex, &dem, NULL) == TN_OK);
     tn_set_threads(2);
-    TN_CHECK(tn_extract(&dem, NULL, &ex2) == TN_OK);
+    TN_CHECK(tn_extract(&ex2, &dem, NULL) == TN_OK);
     TN_CHECK(sets_equal(&ex.contours, &ex2.contours)); /* same bytes for 1 and 2 threads */
     TN_CHECK(ex.threshold == tn_extract_default_threshold(256, 256));
     TN_CHECK(ex.valley_max_order >= 3 && ex.valley_max_order <= 7);
@@ -448,9 +448,9 @@ TN_TEST(test_real_dem_pipeline)
     TN_CHECK(skel_px > 500);
     /* parts: the contours are pixel chains, so they cut directly into 5-10 adjacent pixels,
        deterministic per seed */
-    TN_CHECK(tn_contour_parts_make(&ex.contours, 7, &parts) == TN_OK);
-    TN_CHECK(tn_contour_parts_make(&ex.contours, 7, &parts2) == TN_OK);
-    TN_CHECK(tn_contour_parts_make(&ex.contours, 8, &parts3) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&parts, &ex.contours, 7) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&parts2, &ex.contours, 7) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&parts3, &ex.contours, 8) == TN_OK);
     TN_CHECK(parts.count > 100);
     TN_CHECK(sets_equal(&parts, &parts2));
     TN_CHECK(!sets_equal(&parts, &parts3));
@@ -464,7 +464,7 @@ TN_TEST(test_real_dem_pipeline)
     }
     TN_CHECK(bad_len == 0);
     TN_CHECK(bad_adj == 0);
-    TN_CHECK(tn_sketch_preview(&ex.contours, &dem, 256, 256, &prev) == TN_OK);
+    TN_CHECK(tn_sketch_preview(&prev, &ex.contours, &dem, 256, 256) == TN_OK);
     TN_CHECK(prev.channels == 3 && prev.width == 256);
     { /* a valley pixel is painted blue, a ridge pixel yellow */
         const float *pv = NULL, *pr = NULL;
@@ -506,10 +506,10 @@ TN_TEST(test_parts_sparse_sketch)
     s.count = 1;
     s.items = &c;
     /* the two vertices are 29 px apart: without densifying there is no adjacent run to cut */
-    TN_CHECK(tn_contour_parts_make(&s, 1, &parts) == TN_OK && parts.count == 0);
+    TN_CHECK(tn_contour_parts_make(&parts, &s, 1) == TN_OK && parts.count == 0);
     tn_contour_set_free(&parts);
-    TN_CHECK(tn_sketch_densify(&s, &dense) == TN_OK && dense.count == 1 && dense.items[0].npoints == 30);
-    TN_CHECK(tn_contour_parts_make(&dense, 1, &parts) == TN_OK);
+    TN_CHECK(tn_sketch_densify(&dense, &s) == TN_OK && dense.count == 1 && dense.items[0].npoints == 30);
+    TN_CHECK(tn_contour_parts_make(&parts, &dense, 1) == TN_OK);
     for (i = 0; i < parts.count; i++) {
         TN_CHECK(parts.items[i].npoints >= 5 && parts.items[i].npoints <= 10);
         TN_CHECK(parts.items[i].type == TN_RIDGE);
@@ -531,24 +531,24 @@ TN_TEST(test_bad_input)
     tn_realism r;
     tn_extract_opts o;
     dem.data[5 * 16 + 7] = NAN;
-    TN_CHECK(tn_extract(&dem, NULL, &ex) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_extract(&ex, &dem, NULL) == TN_ERR_NUMERIC);
     TN_CHECK(strstr(tn_last_error(), "NaN") != NULL);
     TN_CHECK(tn_flow_compute(&f, &dem, 0) == TN_ERR_NUMERIC);
     TN_CHECK(tn_fill_depressions(&out, &dem) == TN_ERR_NUMERIC);
     dem.data[5 * 16 + 7] = INFINITY;
-    TN_CHECK(tn_extract(&dem, NULL, &ex) == TN_ERR_NUMERIC);
-    TN_CHECK(tn_extract(&empty, NULL, &ex) == TN_ERR_EMPTY);
-    TN_CHECK(tn_realism_compare(&empty, &empty, NULL, &r) == TN_ERR_EMPTY);
+    TN_CHECK(tn_extract(&ex, &dem, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_extract(&ex, &empty, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_realism_compare(&r, &empty, &empty, NULL) == TN_ERR_EMPTY);
     /* no polylines on a canvas: an empty set of parts (documented); no canvas at all: an error */
     memset(&none, 0, sizeof none);
-    TN_CHECK(tn_contour_parts_make(&none, 1, &parts) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_contour_parts_make(&parts, &none, 1) == TN_ERR_INVALID_ARG);
     none.width = none.height = 16;
-    TN_CHECK(tn_contour_parts_make(&none, 1, &parts) == TN_OK && parts.count == 0 && parts.width == 16);
+    TN_CHECK(tn_contour_parts_make(&parts, &none, 1) == TN_OK && parts.count == 0 && parts.width == 16);
     tn_contour_set_free(&parts);
     dem.data[5 * 16 + 7] = 1.0f;
     memset(&o, 0, sizeof o);
     o.threshold = -3;
-    TN_CHECK(tn_extract(&dem, &o, &ex) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_extract(&ex, &dem, &o) == TN_ERR_INVALID_ARG);
     { /* a direction grid with a cycle is reported, not looped on */
         uint8_t dir[4] = {0, 4, TN_FLOW_OUTLET, TN_FLOW_OUTLET}; /* (0,0) -> (1,0) -> (0,0) */
         memset(&f, 0, sizeof f);
@@ -574,16 +574,16 @@ TN_TEST(test_realism)
     }
     memset(&o, 0, sizeof o);
     o.dx_a = 62.6f; o.dy_a = 92.6f;
-    TN_CHECK(tn_realism_compare(&alps, &alps, &o, &same) == TN_OK);
+    TN_CHECK(tn_realism_compare(&same, &alps, &alps, &o) == TN_OK);
     TN_CHECK(same.slope_distance == 0 && same.curvature_distance == 0 && same.spectrum_distance == 0 && same.distance == 0);
     TN_CHECK(same.ssim > 0.999999 && same.psnr > 1e30);
     TN_CHECK(same.drainage_density_a == same.drainage_density_b && same.drainage_density_a > 0.01);
     TN_CHECK(same.bifurcation_ratio_a > 2.0 && same.bifurcation_ratio_a < 8.0);
     TN_CHECK(same.spectrum_slope_a < -2.0 && same.spectrum_slope_a > -5.0); /* terrain-like red spectrum */
     o.dx_b = o.dy_b = 92.7f;
-    TN_CHECK(tn_realism_compare(&alps, &mb, &o, &near_) == TN_OK);
+    TN_CHECK(tn_realism_compare(&near_, &alps, &mb, &o) == TN_OK);
     o.dx_b = o.dy_b = 92.6f;
-    TN_CHECK(tn_realism_compare(&alps, &sahara, &o, &far_) == TN_OK);
+    TN_CHECK(tn_realism_compare(&far_, &alps, &sahara, &o) == TN_OK);
     /* two Alpine regions are closer than the Alps and the Sahara dunes */
     TN_CHECK(near_.distance < far_.distance);
     TN_CHECK(near_.slope_distance < far_.slope_distance);

@@ -160,7 +160,7 @@ TN_TEST(test_fill_real_crops)
         const char *p = tn_test_data(names[k]);
         tn_image dem = {0, 0, 0, NULL}, one = {0, 0, 0, NULL};
         size_t i, n;
-        if (!p || tn_image_load(p, &dem, NULL) != TN_OK) continue;
+        if (!p || tn_image_load(&dem, p, NULL) != TN_OK) continue;
         any = 1;
         TN_CHECK(tn__channel0_image(&dem, &one) == TN_OK);
         n = (size_t)one.width * one.height;

@@ -47,7 +47,7 @@ TN_TEST(smooth_terrain_takes_the_examples_detail)
     double lap_ex, lap_in, lap_out, diff = 0, rel = 0;
     size_t i, n = (size_t)160 * 120;
     TN_CHECK(tn_image_blur(&smooth, &raw, 3.0f) == TN_OK);
-    TN_CHECK(tn_fine_detail(&ex, &smooth, NULL, &out) == TN_OK);
+    TN_CHECK(tn_fine_detail(&out, &ex, &smooth, NULL) == TN_OK);
     TN_CHECK(out.width == 160 && out.height == 120 && out.channels == 1);
     lap_ex = laplacian_std(&ex), lap_in = laplacian_std(&smooth), lap_out = laplacian_std(&out);
     /* the input has almost none of the example's finest relief; the output has about as much */
@@ -92,13 +92,13 @@ TN_TEST(real_terrain_keeps_its_fine_roughness)
        pixel took its own match's finest detail, which is white where matches disagree) */
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     int c;
-    TN_CHECK(tn_image_load("examples/data/alps_n47e009_256.png", &full, NULL) == TN_OK);
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
     TN_CHECK(tn_image_crop(&ex, &full, 64, 64, 128, 128) == TN_OK);
     for (c = 0; c < 4; c++) {
         tn_image t = {0, 0, 0, NULL}, o = {0, 0, 0, NULL};
         double r;
         TN_CHECK(tn_image_crop(&t, &full, 128 * (c & 1), 128 * (c >> 1), 128, 128) == TN_OK);
-        TN_CHECK(tn_fine_detail(&ex, &t, NULL, &o) == TN_OK);
+        TN_CHECK(tn_fine_detail(&o, &ex, &t, NULL) == TN_OK);
         r = fine_laplacian(&o) / fine_laplacian(&t);
         printf("# corner %d: finest-band Laplacian detailed / real %.2f\n", c, r);
         TN_CHECK(r > 0.75 && r < 1.25);
@@ -117,16 +117,16 @@ TN_TEST(window_equals_whole_map_and_threads)
     int halo = tn_fine_detail_halo(NULL), before = tn_get_threads();
     TN_CHECK(halo > 0);
     TN_CHECK(tn_image_blur(&t, &raw, 2.0f) == TN_OK);
-    TN_CHECK(tn_fine_detail(&ex, &t, NULL, &whole) == TN_OK);
+    TN_CHECK(tn_fine_detail(&whole, &ex, &t, NULL) == TN_OK);
     tn_set_threads(1 + (before == 1));
-    TN_CHECK(tn_fine_detail(&ex, &t, NULL, &whole2) == TN_OK);
+    TN_CHECK(tn_fine_detail(&whole2, &ex, &t, NULL) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(same_image(&whole, &whole2));
     /* an inner window: every side of the grown rectangle is inside the map */
     r.x = 60, r.y = 40, r.w = 30, r.h = 25;
     g = tn_rect_halo(r, halo, 150, 110);
     TN_CHECK(g.x > 0 && g.y > 0 && g.x + g.w < 150 && g.y + g.h < 110);
-    TN_CHECK(tn_image_crop(&part, &t, g.x, g.y, g.w, g.h) == TN_OK && tn_fine_detail(&ex, &part, NULL, &dpart) == TN_OK);
+    TN_CHECK(tn_image_crop(&part, &t, g.x, g.y, g.w, g.h) == TN_OK && tn_fine_detail(&dpart, &ex, &part, NULL) == TN_OK);
     TN_CHECK(tn_image_crop(&got, &dpart, r.x - g.x, r.y - g.y, r.w, r.h) == TN_OK && tn_image_crop(&want, &whole, r.x, r.y, r.w, r.h) == TN_OK);
     TN_CHECK(same_image(&got, &want));
     tn_image_free(&ex), tn_image_free(&raw), tn_image_free(&t), tn_image_free(&whole), tn_image_free(&whole2);
@@ -139,29 +139,29 @@ TN_TEST(bad_inputs_fail_cleanly)
     tn_image out = {0, 0, 0, NULL};
     tn_fine_detail_opts o;
     TN_CHECK(tn_image_create(&rgb, 40, 40, 3) == TN_OK);
-    TN_CHECK(tn_fine_detail(&empty, &t, NULL, &out) == TN_ERR_EMPTY && !out.data);
-    TN_CHECK(tn_fine_detail(&ex, &empty, NULL, &out) == TN_ERR_EMPTY && !out.data);
-    TN_CHECK(tn_fine_detail(&small, &t, NULL, &out) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "at least"));
-    TN_CHECK(tn_fine_detail(&ex, &rgb, NULL, &out) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "one channel"));
+    TN_CHECK(tn_fine_detail(&out, &empty, &t, NULL) == TN_ERR_EMPTY && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &ex, &empty, NULL) == TN_ERR_EMPTY && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &small, &t, NULL) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "at least"));
+    TN_CHECK(tn_fine_detail(&out, &ex, &rgb, NULL) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "one channel"));
     ex.data[5] = NAN;
-    TN_CHECK(tn_fine_detail(&ex, &t, NULL, &out) == TN_ERR_NUMERIC && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, NULL) == TN_ERR_NUMERIC && !out.data);
     ex.data[5] = 1500;
     t.data[7] = INFINITY;
-    TN_CHECK(tn_fine_detail(&ex, &t, NULL, &out) == TN_ERR_NUMERIC && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, NULL) == TN_ERR_NUMERIC && !out.data);
     t.data[7] = 1500;
     memset(&o, 0, sizeof o);
     o.patch = 4;
-    TN_CHECK(tn_fine_detail(&ex, &t, &o, &out) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "patch 4"));
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, &o) == TN_ERR_INVALID_ARG && !out.data && strstr(tn_last_error(), "patch 4"));
     TN_CHECK(tn_fine_detail_halo(&o) < 0);
     o.patch = 0;
     o.sigma = NAN;
-    TN_CHECK(tn_fine_detail(&ex, &t, &o, &out) == TN_ERR_INVALID_ARG && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, &o) == TN_ERR_INVALID_ARG && !out.data);
     o.sigma = 0;
     o.probes = 65;
-    TN_CHECK(tn_fine_detail(&ex, &t, &o, &out) == TN_ERR_INVALID_ARG && !out.data);
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, &o) == TN_ERR_INVALID_ARG && !out.data);
     o.probes = 1;
     o.patch = 3;
-    TN_CHECK(tn_fine_detail(&ex, &t, &o, &out) == TN_OK && out.width == 40);
+    TN_CHECK(tn_fine_detail(&out, &ex, &t, &o) == TN_OK && out.width == 40);
     tn_image_free(&out);
     tn_image_free(&ex), tn_image_free(&t), tn_image_free(&small), tn_image_free(&rgb);
 }

@@ -83,7 +83,7 @@ TN_TEST(test_gdal_fixtures)
         tn_image_info info;
         size_t bad = 0, holes = 0;
         int x, y, c, k, has_nodata = strcmp(f->nodata, "-") != 0;
-        tn_status st = tn_image_load(ref_tiff(f->name), &img, &info);
+        tn_status st = tn_image_load(&img, ref_tiff(f->name), &info);
         if (st) {
             fprintf(stderr, "  %s: %s\n", f->name, tn_last_error());
             TN_CHECK(0);
@@ -123,7 +123,7 @@ TN_TEST(test_nodata_filled_smoothly)
     tn_image img = {0, 0, 0, NULL};
     tn_image_info info;
     int x, y;
-    TN_CHECK(tn_image_load(ref_tiff("int16_nodata_deflate.tif"), &img, &info) == TN_OK);
+    TN_CHECK(tn_image_load(&img, ref_tiff("int16_nodata_deflate.tif"), &info) == TN_OK);
     if (!img.data) return;
     TN_CHECK(info.voids_filled == 16 && info.has_nodata && info.nodata == -32768.0);
     for (y = 5; y < 8; y++)
@@ -166,9 +166,9 @@ TN_TEST(test_write_round_trips)
             size_t n = 0, i, count = (size_t)300 * 97 * ch, bad = 0;
             memset(&so, 0, sizeof so);
             so.bit_depth = bits[b];
-            TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_OK);
+            TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK);
             TN_CHECK(buf && n > 8 && !memcmp(buf, "II*\0", 4));
-            TN_CHECK(tn_image_load_memory(buf, n, "rt.tif", &back, &info, NULL) == TN_OK);
+            TN_CHECK(tn_image_load_memory(&back, buf, n, "rt.tif", NULL, &info) == TN_OK);
             TN_CHECK(back.width == 300 && back.height == 97 && back.channels == ch && info.bit_depth == bits[b]);
             for (i = 0; back.data && i < count; i++) {
                 float want = b == 0 ? img.data[i] : b == 1 ? (float)floor(img.data[i] + 0.5) : (float)floor(img.data[i] * 255.0 + 0.5) / 255.0f;
@@ -189,9 +189,9 @@ TN_TEST(test_write_round_trips)
         float lo = 0, hi = 0;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_OK);
-        TN_CHECK(tn_image_load_memory(buf, n, "p.tif", &back, NULL, NULL) == TN_OK);
-        tn_image_range(&back, &lo, &hi);
+        TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK);
+        TN_CHECK(tn_image_load_memory(&back, buf, n, "p.tif", NULL, NULL) == TN_OK);
+        tn_image_range(&lo, &hi, &back);
         TN_CHECK(lo == 0.0f && hi == 1.0f);
         tn_image_free(&back);
         tn_image_free(&img);
@@ -211,12 +211,12 @@ TN_TEST(test_georef_carried_over)
         uint8_t *buf = NULL;
         size_t n = 0;
         int k;
-        TN_CHECK(tn_image_load(ref_tiff(names[i]), &img, &a) == TN_OK);
+        TN_CHECK(tn_image_load(&img, ref_tiff(names[i]), &a) == TN_OK);
         memset(&so, 0, sizeof so);
         so.georef = &a.georef;
         so.bit_depth = i == 0 ? 16 : 32;
-        TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_OK);
-        TN_CHECK(tn_image_load_memory(buf, n, "geo.tif", &back, &b, NULL) == TN_OK);
+        TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK);
+        TN_CHECK(tn_image_load_memory(&back, buf, n, "geo.tif", NULL, &b) == TN_OK);
         TN_CHECK(b.georef.has_transform && b.georef.model_type == a.georef.model_type);
         TN_CHECK(b.georef.pixel_is_point == a.georef.pixel_is_point);
         for (k = 0; k < 6; k++) TN_CHECK_NEAR(b.georef.transform[k], a.georef.transform[k], 1e-12 * (1 + fabs(a.georef.transform[k])));
@@ -238,10 +238,10 @@ TN_TEST(test_bigtiff_written)
     uint8_t *buf = NULL;
     size_t n = 0;
     tn__tif_classic_max = 1000;
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_TIFF, &buf, &n) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, NULL) == TN_OK);
     tn__tif_classic_max = TN__TIF_CLASSIC_MAX;
     TN_CHECK(buf && buf[2] == 43);
-    TN_CHECK(tn_image_load_memory(buf, n, "big.tif", &back, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, buf, n, "big.tif", NULL, NULL) == TN_OK);
     TN_CHECK(back.data && !memcmp(back.data, img.data, 64 * 40 * sizeof(float)));
     tn_image_free(&back);
     tn_image_free(&img);
@@ -259,34 +259,34 @@ TN_TEST(test_write_refusals)
     memset(&so, 0, sizeof so);
     so.bit_depth = 16;
     img.data[3] = 40000.0f;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     img.data[3] = 1.0f;
     so.bit_depth = 12;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     so.bit_depth = 0;
     so.compression = 11;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     so.compression = 0;
     memset(&g, 0, sizeof g);
     g.has_transform = 1;
     g.transform[1] = 1.0; /* singular: no Y step */
     so.georef = &g;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     g.transform[5] = -1.0;
     g.transform[0] = NAN;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     g.transform[0] = 0.0;
     g.nkeys = 8; /* a key pointing past the (empty) double parameters */
     g.keys[0] = 1; g.keys[1] = 1; g.keys[3] = 1;
     g.keys[4] = 3077; g.keys[5] = 34736; g.keys[6] = 1; g.keys[7] = 0;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_INVALID_ARG && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_ERR_INVALID_ARG && !buf);
     g.nkeys = 0;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &buf, &n) == TN_OK && buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK && buf);
     tn_free(buf);
     /* NaN in the image is refused like every other format */
     img.data[0] = NAN;
     buf = NULL;
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_TIFF, &buf, &n) == TN_ERR_NUMERIC && !buf);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_TIFF, NULL) == TN_ERR_NUMERIC && !buf);
     tn_image_free(&img);
 }
 
@@ -316,8 +316,8 @@ TN_TEST(test_overview_skipped)
     size_t na = 0, nb = 0;
     uint32_t ifd_b;
     unsigned i, cnt;
-    TN_CHECK(tn_image_save_memory(&small, NULL, TN_FORMAT_TIFF, &a, &na) == TN_OK);
-    TN_CHECK(tn_image_save_memory(&big, NULL, TN_FORMAT_TIFF, &b, &nb) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&a, &na, &small, TN_FORMAT_TIFF, NULL) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&b, &nb, &big, TN_FORMAT_TIFF, NULL) == TN_OK);
     if (!a || !b) return;
     /* the overview gets NewSubfileType = 1 in place of its PlanarConfiguration entry (284 -> 254) */
     cnt = a[8] | (a[9] << 8);
@@ -360,14 +360,14 @@ TN_TEST(test_overview_skipped)
             e[8] = (uint8_t)v; e[9] = (uint8_t)(v >> 8); e[10] = (uint8_t)(v >> 16); e[11] = (uint8_t)(v >> 24);
         }
     }
-    TN_CHECK(tn_image_load_memory(glued, na + nb, "ovr.tif", &back, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, glued, na + nb, "ovr.tif", NULL, NULL) == TN_OK);
     TN_CHECK(back.width == 40 && back.height == 30 && back.data && !memcmp(back.data, big.data, 40 * 30 * sizeof(float)));
     tn_image_free(&back);
     /* the same with the chain pointing back at the overview: a loop, an error */
     {
         uint32_t next_at = 8 + 2 + 12 * cnt;
         glued[next_at] = 8; glued[next_at + 1] = glued[next_at + 2] = glued[next_at + 3] = 0;
-        TN_CHECK(tn_image_load_memory(glued, na + nb, "loop.tif", &back, NULL, NULL) == TN_ERR_CORRUPT && !back.data);
+        TN_CHECK(tn_image_load_memory(&back, glued, na + nb, "loop.tif", NULL, NULL) == TN_ERR_CORRUPT && !back.data);
         TN_CHECK(strstr(tn_last_error(), "loops") != NULL);
     }
     TN_CHECK(patch_tag(a, na, 254, 1) == 1);
@@ -389,13 +389,13 @@ TN_TEST(test_real_srtm)
     tn_image ref = {0, 0, 0, NULL};
     size_t i;
     if (!hgt) { TN_SKIP("shared data absent"); return; }
-    TN_CHECK(tn_image_load(hgt, &ref, NULL) == TN_OK);
+    TN_CHECK(tn_image_load(&ref, hgt, NULL) == TN_OK);
     for (i = 0; i < sizeof tifs / sizeof tifs[0]; i++) {
         const char *p = tn_test_data(tifs[i]);
         tn_image img = {0, 0, 0, NULL};
         tn_image_info info;
         if (!p) { TN_SKIP("shared GeoTIFFs absent"); continue; }
-        TN_CHECK(tn_image_load(p, &img, &info) == TN_OK);
+        TN_CHECK(tn_image_load(&img, p, &info) == TN_OK);
         TN_CHECK(img.data && ref.data && img.width == ref.width && !memcmp(img.data, ref.data, (size_t)ref.width * ref.height * sizeof(float)));
         TN_CHECK(info.georef.model_type == 2 && info.georef.pixel_is_point);
         TN_CHECK_NEAR(info.georef.transform[0], 9.0 - 0.5 / 1200.0, 1e-12);
@@ -408,7 +408,7 @@ TN_TEST(test_real_srtm)
         tn_image img = {0, 0, 0, NULL};
         tn_image_info info;
         size_t k, diff = 0;
-        if (p && tn_image_load(p, &img, &info) == TN_OK) {
+        if (p && tn_image_load(&img, p, &info) == TN_OK) {
             TN_CHECK(info.voids_filled == 20 * 30 + 25);
             for (k = 0; k < (size_t)ref.width * ref.height; k++) diff += img.data[k] != ref.data[k];
             TN_CHECK(diff > 0 && diff <= 625);
@@ -426,10 +426,10 @@ TN_TEST(test_unsupported_variants)
     tn_image img = {0, 0, 0, NULL};
     if (!b) { TN_CHECK(0); return; }
     TN_CHECK(patch_tag(b, n, 259, 7));
-    TN_CHECK(tn_image_load_memory(b, n, "jpeg.tif", &img, NULL, NULL) == TN_ERR_FORMAT && strstr(tn_last_error(), "JPEG"));
+    TN_CHECK(tn_image_load_memory(&img, b, n, "jpeg.tif", NULL, NULL) == TN_ERR_FORMAT && strstr(tn_last_error(), "JPEG"));
     TN_CHECK(patch_tag(b, n, 259, 8) && patch_tag(b, n, 258, 12));
-    TN_CHECK(tn_image_load_memory(b, n, "b12.tif", &img, NULL, NULL) == TN_ERR_FORMAT);
-    TN_CHECK(patch_tag(b, n, 258, 16) && tn_image_load_memory(b, n, "ok.tif", &img, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, b, n, "b12.tif", NULL, NULL) == TN_ERR_FORMAT);
+    TN_CHECK(patch_tag(b, n, 258, 16) && tn_image_load_memory(&img, b, n, "ok.tif", NULL, NULL) == TN_OK);
     tn_image_free(&img);
     TN_CHECK(strcmp(tn_format_name(TN_FORMAT_TIFF), "tiff") == 0);
     free(b);

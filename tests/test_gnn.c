@@ -28,7 +28,7 @@ static tn_contour_set own_sketch(const tn_image *dem)
     tn_extraction ex;
     tn_contour_set s;
     memset(&s, 0, sizeof s);
-    if (tn_extract(dem, NULL, &ex)) return s;
+    if (tn_extract(&ex, dem, NULL)) return s;
     s = ex.contours;
     memset(&ex.contours, 0, sizeof ex.contours);
     tn_extraction_free(&ex);
@@ -59,14 +59,14 @@ TN_TEST(membrane_interpolates_between_lines)
     s.height = 20;
     s.count = 2;
     s.items = c;
-    TN_CHECK(tn_gnn_membrane(&s, 32, 20, &m) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &s, 32, 20) == TN_OK);
     TN_CHECK_NEAR(TN_PIXEL(&m, 14, 10, 0), 20.0f, 1e-3);
     TN_CHECK_NEAR(TN_PIXEL(&m, 9, 3, 0), 15.0f, 1e-3);
     TN_CHECK_NEAR(TN_PIXEL(&m, 0, 0, 0), 10.0f, 1e-3);
     TN_CHECK_NEAR(TN_PIXEL(&m, 31, 19, 0), 30.0f, 1e-3);
     tn_image_free(&m);
     s.count = 0;
-    TN_CHECK(tn_gnn_membrane(&s, 32, 20, &m) == TN_ERR_EMPTY);
+    TN_CHECK(tn_gnn_membrane(&m, &s, 32, 20) == TN_ERR_EMPTY);
 }
 
 TN_TEST(training_lowers_the_loss_and_generates_metres)
@@ -80,30 +80,30 @@ TN_TEST(training_lowers_the_loss_and_generates_metres)
     /* the loss, on the example's own network alone (the sparse levels have other losses) */
     tiny_opts(&o, 1);
     o.sparse_levels = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m0, &s0) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m0, &dem, &o, &s0) == TN_OK);
     tn_gnn_free(&m0);
     tiny_opts(&o, 80);
     o.sparse_levels = -1;
     o.lr = 5e-3f;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, &s) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, &s) == TN_OK);
     TN_CHECK(s.levels == 1 && isfinite(s.loss) && s.loss < 0.8f * s0.loss); /* s.loss: mean of the last 50 steps */
     tn_gnn_free(&m);
     /* the default run: its reconstruction improves on the first step's and on the membrane
        (without the embedding phase, which 60 steps are too few for; its own test below) */
     tiny_opts(&o, 1);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m0, &s0) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m0, &dem, &o, &s0) == TN_OK);
     tiny_opts(&o, 60);
     o.lr = 5e-3f;
     o.embed_phase = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, &s) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, &s) == TN_OK);
     TN_CHECK(s.iterations == 60 && s.parts >= 5 && s.edges > 0 && s.levels >= 2);
     TN_CHECK(strcmp(tn_params_meta(m.weights, "method"), "gnn") == 0);
     TN_CHECK(m.parts == s.parts && m.width == 40 && m.height == 40);
-    TN_CHECK(tn_gnn_generate(&m0, &sk, 40, 40, NULL, &out0) == TN_OK);
-    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&out0, &m0, &sk, 40, 40, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, NULL) == TN_OK);
     TN_CHECK(out.width == 40 && out.height == 40 && out.channels == 1);
-    TN_CHECK(tn_gnn_membrane(&sk, 40, 40, &mem) == TN_OK);
-    TN_CHECK(tn_compare(&dem, &out0, 0, &a0) == TN_OK && tn_compare(&dem, &out, 0, &a) == TN_OK && tn_compare(&dem, &mem, 0, &b) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&mem, &sk, 40, 40) == TN_OK);
+    TN_CHECK(tn_compare(&a0, &dem, &out0, 0) == TN_OK && tn_compare(&a, &dem, &out, 0) == TN_OK && tn_compare(&b, &dem, &mem, 0) == TN_OK);
     TN_CHECK(a.ssim > 0.5 && a.rmse < 200.0); /* metres, not normalised units */
     TN_CHECK(a.rmse < a0.rmse && a.rmse < b.rmse);
     tn_image_free(&out0);
@@ -121,8 +121,8 @@ static int train_and_generate(const tn_image *dem, const tn_gnn_opts *o, const t
     tn_gnn m;
     int ok;
     tn_image_free(out);
-    if (tn_gnn_train(dem, o, &m, NULL) != TN_OK) return 0;
-    ok = tn_gnn_generate(&m, sk, dem->width, dem->height, NULL, out) == TN_OK;
+    if (tn_gnn_train(&m, dem, o, NULL) != TN_OK) return 0;
+    ok = tn_gnn_generate(out, &m, sk, dem->width, dem->height, NULL) == TN_OK;
     tn_gnn_free(&m);
     return ok;
 }
@@ -134,7 +134,7 @@ static double beside_share(const tn_contour_set *sk, const tn_image *img)
     tn_image r = {0, 0, 0, NULL};
     long ok = 0, n = 0;
     int x, y, c, j;
-    if (tn_sketch_rasterise(sk, img->width, img->height, &r)) return -1;
+    if (tn_sketch_rasterise(&r, sk, img->width, img->height)) return -1;
     for (y = 0; y < img->height; y++)
         for (x = 0; x < img->width; x++) {
             const float *px = r.data + 3 * ((size_t)y * img->width + x);
@@ -195,7 +195,7 @@ TN_TEST(shape_losses)
     TN_CHECK(train_and_generate(&dem, &o, &sk, &b));
     TN_CHECK(b.data && a.data && !same_image(&a, &b));
     o.further_weight = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     tn_image_free(&a);
     tn_image_free(&b);
     tn_contour_set_free(&sk);
@@ -211,18 +211,18 @@ TN_TEST(save_load_round_trip)
     tn_gnn_generate_opts go;
     tn_contour_set sk = own_sketch(&dem), p1, p2;
     tiny_opts(&o, 5);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
-    TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(path, &l) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_save(path, &m) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_OK);
     TN_CHECK(tn_test_same_params(m.weights, l.weights, 0));
     TN_CHECK(l.iterations == 5 && l.parts == m.parts && l.mean == m.mean && l.std == m.std && l.k == m.k && l.membrane == 1);
     memset(&go, 0, sizeof go);
     go.seed = 3;
     go.finetune = 2;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &a) == TN_OK);
-    TN_CHECK(tn_gnn_generate(&l, &sk, 40, 40, &go, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &sk, 40, 40, &go) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &l, &sk, 40, 40, &go) == TN_OK);
     TN_CHECK(same_image(&a, &b));
-    TN_CHECK(tn_gnn_parts(&l, &p1) == TN_OK && tn_gnn_parts(&m, &p2) == TN_OK);
+    TN_CHECK(tn_gnn_parts(&p1, &l) == TN_OK && tn_gnn_parts(&p2, &m) == TN_OK);
     TN_CHECK(p1.count == m.parts && p1.count == p2.count && p1.items[0].npoints == p2.items[0].npoints);
     tn_contour_set_free(&p1);
     tn_contour_set_free(&p2);
@@ -270,26 +270,26 @@ TN_TEST(part_overhang)
     /* the model records the choice; it changes what a sketch of other terrain gives and leaves
        the example's own network (every part with an embedding) as it was */
     tiny_opts(&o, 20);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     cfg = tn_params_find(m.weights, "gnn.config");
     TN_CHECK(cfg && cfg->data[17] == 1.0f);
-    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &own, 40, 40, NULL) == TN_OK);
     cfg->data[17] = 0.0f; /* a model written before the overhang: the index on every part */
-    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &m, &own, 40, 40, NULL) == TN_OK);
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);
-    TN_CHECK(tn_gnn_generate(&m, &foreign, 40, 40, NULL, &a) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &foreign, 40, 40, NULL) == TN_OK);
     cfg->data[17] = 1.0f;
-    TN_CHECK(tn_gnn_generate(&m, &foreign, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &m, &foreign, 40, 40, NULL) == TN_OK);
     TN_CHECK(!same_image(&a, &b));
     tn_image_free(&a);
     cfg->data[17] = 2.0f; /* damaged */
-    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_ERR_CORRUPT && !a.data);
-    TN_CHECK(tn_gnn_save(&m, path) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_generate(&a, &m, &own, 40, 40, NULL) == TN_ERR_CORRUPT && !a.data);
+    TN_CHECK(tn_gnn_save(path, &m) == TN_ERR_CORRUPT);
     tn_gnn_free(&m);
     o.part_index = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     TN_CHECK(tn_params_find(m.weights, "gnn.config")->data[17] == 0.0f);
     tn_gnn_free(&m);
     tn_image_free(&a);
@@ -314,12 +314,12 @@ TN_TEST(embedding_phase)
     int i, emb_differs = 0, others_same = 1;
     tiny_opts(&o, 40);
     o.lr = 5e-3f;
-    TN_CHECK(tn_gnn_train(&dem, &o, &with, &st) == TN_OK);
+    TN_CHECK(tn_gnn_train(&with, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.embed_phase_from == 30);
     tiny_opts(&o, 30);
     o.lr = 5e-3f;
     o.embed_phase = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &stop, &st) == TN_OK);
+    TN_CHECK(tn_gnn_train(&stop, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.embed_phase_from == -1);
     TN_CHECK(tn_params_count(with.weights) == tn_params_count(stop.weights));
     for (i = 0; i < tn_params_count(with.weights); i++) {
@@ -329,14 +329,14 @@ TN_TEST(embedding_phase)
         else if (x->requires_grad && !same) others_same = 0;
     }
     TN_CHECK(emb_differs && others_same);
-    TN_CHECK(tn_gnn_generate(&with, &sk, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&stop, &sk, 40, 40, NULL, &b) == TN_OK);
-    TN_CHECK(tn_compare(&dem, &a, 0, &ma) == TN_OK && tn_compare(&dem, &b, 0, &mb) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &with, &sk, 40, 40, NULL) == TN_OK && tn_gnn_generate(&b, &stop, &sk, 40, 40, NULL) == TN_OK);
+    TN_CHECK(tn_compare(&ma, &dem, &a, 0) == TN_OK && tn_compare(&mb, &dem, &b, 0) == TN_OK);
     TN_CHECK(ma.rmse < mb.rmse);
     /* a share of 1 or more (no training before the phase) or NaN is refused */
     o.embed_phase = 1.0f;
-    TN_CHECK(tn_gnn_train(&dem, &o, &with, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_train(&with, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     o.embed_phase = NAN;
-    TN_CHECK(tn_gnn_train(&dem, &o, &with, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_train(&with, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     tn_image_free(&a);
     tn_image_free(&b);
     tn_contour_set_free(&sk);
@@ -353,27 +353,27 @@ TN_TEST(resume_is_bit_identical)
     tn_gnn full, part, res;
     tn_gnn_stats st;
     tiny_opts(&o, 8);
-    TN_CHECK(tn_gnn_train(&dem, &o, &full, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&full, &dem, &o, NULL) == TN_OK);
     tiny_opts(&o, 3);
     o.train.checkpoint = ck;
-    TN_CHECK(tn_gnn_train(&dem, &o, &part, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&part, &dem, &o, NULL) == TN_OK);
     tiny_opts(&o, 8);
     o.train.checkpoint = ck;
     o.train.resume = 1;
     o.train.seed = 999; /* the checkpoint's seed wins */
     o.hidden = 24;      /* and its architecture */
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st) == TN_OK);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.resumed_from == 3 && st.iterations == 8);
     TN_CHECK(res.hidden == 16);
     TN_CHECK(tn_test_same_params(full.weights, res.weights, 0));
     tn_gnn_free(&res);
     /* a checkpoint is not a model; another example cannot resume it */
-    TN_CHECK(tn_gnn_load(ck, &res) == TN_ERR_FORMAT);
+    TN_CHECK(tn_gnn_load(&res, ck) == TN_ERR_FORMAT);
     tn_gnn_free(&part);
     tn_gnn_free(&full);
     {
         tn_image other = tn_test_dem(40, 6);
-        TN_CHECK(tn_gnn_train(&other, &o, &res, NULL) != TN_OK);
+        TN_CHECK(tn_gnn_train(&res, &other, &o, NULL) != TN_OK);
         tn_image_free(&other);
     }
     tn_image_free(&dem);
@@ -392,11 +392,11 @@ TN_TEST(same_results_for_1_and_2_threads)
     go.finetune = 2;
     go.order_weight = 1;
     tn_set_threads(1);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m1, NULL) == TN_OK);
-    TN_CHECK(tn_gnn_generate(&m1, &sk, 48, 40, &go, &a) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m1, &dem, &o, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m1, &sk, 48, 40, &go) == TN_OK);
     tn_set_threads(2);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m2, NULL) == TN_OK);
-    TN_CHECK(tn_gnn_generate(&m2, &sk, 48, 40, &go, &b) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m2, &dem, &o, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &m2, &sk, 48, 40, &go) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(tn_test_same_params(m1.weights, m2.weights, 0));
     TN_CHECK(a.width == 48 && same_image(&a, &b));
@@ -422,29 +422,29 @@ TN_TEST(bad_inputs_fail_cleanly)
     FILE *f;
     tiny_opts(&o, 2);
     /* DEMs */
-    TN_CHECK(tn_gnn_train(&empty, &o, &m, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_gnn_train(&m, &empty, &o, NULL) == TN_ERR_EMPTY);
     tn_image_create(&small, 10, 10, 1);
-    TN_CHECK(tn_gnn_train(&small, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_train(&m, &small, &o, NULL) == TN_ERR_INVALID_ARG);
     tn_image_create(&flat, 40, 40, 1);
-    TN_CHECK(tn_gnn_train(&flat, &o, &m, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "flat"));
+    TN_CHECK(tn_gnn_train(&m, &flat, &o, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "flat"));
     o.extract.threshold = 1000000; /* no cell drains that much: no ridge or valley */
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "extract"));
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "extract"));
     o.extract.threshold = 0;
     dem.data[77] = NAN;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN"));
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_NUMERIC && strstr(tn_last_error(), "NaN"));
     dem.data[77] = 1500.0f;
     o.hidden = 1000;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     tiny_opts(&o, 2);
     o.train.resume = 1;
     o.train.checkpoint = "build/test/no_such_gnn.ckpt";
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_ERR_IO);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_IO);
     tiny_opts(&o, 2);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     /* sketches */
     memset(&none, 0, sizeof none);
     none.width = none.height = 40;
-    TN_CHECK(tn_gnn_generate(&m, &none, 40, 40, NULL, &out) == TN_ERR_EMPTY);
+    TN_CHECK(tn_gnn_generate(&out, &m, &none, 40, 40, NULL) == TN_ERR_EMPTY);
     memset(&c, 0, sizeof c);
     c.type = TN_RIDGE;
     c.npoints = 3;
@@ -452,22 +452,22 @@ TN_TEST(bad_inputs_fail_cleanly)
     sk.width = sk.height = 40;
     sk.count = 1;
     sk.items = &c;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_EMPTY && strstr(tn_last_error(), "5 px"));
+    TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, NULL) == TN_ERR_EMPTY && strstr(tn_last_error(), "5 px"));
     pts[4] = NAN;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, NULL) == TN_ERR_NUMERIC);
     pts[4] = 5;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 8, 40, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_generate(&out, &m, &sk, 8, 40, NULL) == TN_ERR_INVALID_ARG);
     {
         tn_gnn_generate_opts go;
         memset(&go, 0, sizeof go);
         go.random_nodes = 9000;
-        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
         go.random_nodes = 0;
         go.grow = 2;
-        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
         go.grow = 0;
         go.order_weight = NAN;
-        TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, &go, &out) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
     }
     TN_CHECK(out.data == NULL);
     /* model files: another method's model, another .tnw, a damaged byte, a damaged config */
@@ -476,33 +476,33 @@ TN_TEST(bad_inputs_fail_cleanly)
         int two = 2;
         tn_params_add(p, "g.w0", 1, &two);
         tn_model_stamp(p, "texgan", 1, NULL);
-        tn_params_save(p, path);
+        tn_params_save(path, p);
         tn_params_free(p);
-        TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_FORMAT && strstr(tn_last_error(), "texgan"));
+        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT && strstr(tn_last_error(), "texgan"));
         p = tn_params_create();
         tn_params_add(p, "x", 1, &two);
-        tn_params_save(p, path);
+        tn_params_save(path, p);
         tn_params_free(p);
-        TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_FORMAT);
+        TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_FORMAT);
     }
-    TN_CHECK(tn_gnn_save(&m, path) == TN_OK);
+    TN_CHECK(tn_gnn_save(path, &m) == TN_OK);
     TN_CHECK(tn__io_read_file(path, &buf, &n) == TN_OK);
     buf[n / 2] ^= 0x40;
     f = fopen(path, "wb");
     fwrite(buf, 1, n, f);
     fclose(f);
-    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
     TN_FREE(buf);
     tn_params_find(m.weights, "gnn.config")->data[3] = 1000.0f; /* k */
-    TN_CHECK(tn_gnn_save(&m, path) == TN_ERR_CORRUPT);           /* refused before writing */
-    TN_CHECK(tn_gnn_generate(&m, &sk, 40, 40, NULL, &out) == TN_ERR_CORRUPT);
-    TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_save(path, &m) == TN_ERR_CORRUPT);           /* refused before writing */
+    TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, NULL) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_params_save(path, m.weights) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
     tn_params_find(m.weights, "gnn.config")->data[3] = 6.0f;
     tn_params_find(m.weights, "gnn.part_info")->data[1] = 1e6f; /* a part's point count */
-    TN_CHECK(tn_params_save(m.weights, path) == TN_OK);
-    TN_CHECK(tn_gnn_load(path, &l) == TN_ERR_CORRUPT);
-    TN_CHECK(tn_gnn_load("build/test/no_such_model.tnw", &l) == TN_ERR_IO);
+    TN_CHECK(tn_params_save(path, m.weights) == TN_OK);
+    TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_gnn_load(&l, "build/test/no_such_model.tnw") == TN_ERR_IO);
     tn_gnn_free(&m);
     tn_image_free(&dem);
     tn_image_free(&flat);
@@ -519,7 +519,7 @@ static int radius6_model_and_sketch(const tn_image *dem, uint64_t seed, int node
     memset(&ro, 0, sizeof ro);
     ro.seed = seed;
     ro.nodes = nodes;
-    return tn_gnn_train(dem, &o, m, NULL) == TN_OK && tn_sketch_random(NULL, w, h, &ro, sk) == TN_OK;
+    return tn_gnn_train(m, dem, &o, NULL) == TN_OK && tn_sketch_random(sk, NULL, w, h, &ro) == TN_OK;
 }
 
 /* win equals the pixels of whole at (x0, y0). */
@@ -548,15 +548,15 @@ TN_TEST(window_equals_whole_map)
     TN_CHECK(m.radius == 6.0f);
     memset(&go, 0, sizeof go);
     go.seed = 5;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 260, 200, &go, &whole) == TN_OK);
-    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 150, 70, 90, 50, &go, &win) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&whole, &m, &sk, 260, 200, &go) == TN_OK);
+    TN_CHECK(tn_gnn_generate_window(&win, &m, &sk, 260, 200, 150, 70, 90, 50, &go) == TN_OK);
     TN_CHECK(win.width == 90 && win.height == 50);
     TN_CHECK(window_matches(&win, &whole, 150, 70));
     tn_set_threads(1 + (before == 1));
-    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 150, 70, 90, 50, &go, &win2) == TN_OK);
+    TN_CHECK(tn_gnn_generate_window(&win2, &m, &sk, 260, 200, 150, 70, 90, 50, &go) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(same_image(&win, &win2));
-    TN_CHECK(tn_gnn_generate_window(&m, &sk, 260, 200, 200, 70, 90, 50, &go, &win2) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_generate_window(&win2, &m, &sk, 260, 200, 200, 70, 90, 50, &go) == TN_ERR_INVALID_ARG);
     tn_image_free(&whole);
     tn_image_free(&win);
     tn_image_free(&win2);
@@ -580,15 +580,15 @@ TN_TEST(finetune_in_windows)
     memset(&go, 0, sizeof go);
     go.seed = 5;
     go.gain = 1;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 300, 270, &go, &a) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &sk, 300, 270, &go) == TN_OK);
     go.finetune = 6;
     go.finetune_lr = 0.05f;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 300, 270, &go, &b) == TN_OK);
-    TN_CHECK(tn_gnn_ordering(&sk, &a, 0, &s0, NULL) == TN_OK && tn_gnn_ordering(&sk, &b, 0, &s1, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &m, &sk, 300, 270, &go) == TN_OK);
+    TN_CHECK(tn_gnn_ordering(&s0, &sk, &a, 0, NULL) == TN_OK && tn_gnn_ordering(&s1, &sk, &b, 0, NULL) == TN_OK);
     printf("  ordering without / with the fine-tune: %.3f / %.3f\n", s0, s1);
     TN_CHECK(s1 > s0 + 0.02);
     tn_set_threads(1 + (before == 1));
-    TN_CHECK(tn_gnn_generate_window(&m, &sk, 300, 270, 180, 150, 100, 80, &go, &c) == TN_OK);
+    TN_CHECK(tn_gnn_generate_window(&c, &m, &sk, 300, 270, 180, 150, 100, 80, &go) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(c.width == 100 && c.height == 80 && window_matches(&c, &b, 180, 150));
     tn_image_free(&a);
@@ -615,38 +615,38 @@ TN_TEST(residual_gain)
     int lin = 1;
     tiny_opts(&o, 20);
     TN_CHECK(own.count >= 8); /* enough lines for the test (fewer keep gain 1) */
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     memset(&go, 0, sizeof go);
     go.seed = 3;
-    TN_CHECK(tn_gnn_gain(&m, &own, 48, 48, &go, &g) == TN_OK);
+    TN_CHECK(tn_gnn_gain(&g, &m, &own, 48, 48, &go) == TN_OK);
     TN_CHECK(g == 1.0f);
     go.embeddings = TN_GNN_EMBED_NONE;
-    TN_CHECK(tn_gnn_gain(&m, &own, 48, 48, &go, &ga) == TN_OK);
+    TN_CHECK(tn_gnn_gain(&ga, &m, &own, 48, 48, &go) == TN_OK);
     TN_CHECK(ga >= 0.0f && ga <= 1.0f);
     {
         tn_contour_set few = own;
         float gf = -1;
         few.count = 4; /* a few strokes: not tested */
-        TN_CHECK(tn_gnn_gain(&m, &few, 48, 48, &go, &gf) == TN_OK && gf == 1.0f);
+        TN_CHECK(tn_gnn_gain(&gf, &m, &few, 48, 48, &go) == TN_OK && gf == 1.0f);
     }
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &autog) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&autog, &m, &own, 48, 48, &go) == TN_OK);
     go.gain = ga > 0 ? ga : -1.0f;
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &fixg) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&fixg, &m, &own, 48, 48, &go) == TN_OK);
     TN_CHECK(autog.data && fixg.data && same_image(&autog, &fixg));
     go.gain = 1.0f;
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &full) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&full, &m, &own, 48, 48, &go) == TN_OK);
     go.gain = -1.0f;
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &none) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&none, &m, &own, 48, 48, &go) == TN_OK);
     go.gain = 0.5f;
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &half) == TN_OK);
-    TN_CHECK(tn_gnn_membrane(&own, 48, 48, &mem) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&half, &m, &own, 48, 48, &go) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&mem, &own, 48, 48) == TN_OK);
     for (i = 0; i < n && full.data && none.data && half.data && mem.data; i++) {
         lin &= fabsf(none.data[i] - mem.data[i]) <= 1e-3f * (1.0f + fabsf(mem.data[i]));
         lin &= fabsf(half.data[i] - 0.5f * (full.data[i] + none.data[i])) <= 1e-3f * (1.0f + fabsf(full.data[i]));
     }
     TN_CHECK(lin);
     go.gain = NAN;
-    TN_CHECK(tn_gnn_generate(&m, &own, 48, 48, &go, &fixg) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_generate(&fixg, &m, &own, 48, 48, &go) == TN_ERR_INVALID_ARG);
     tn_image_free(&full);
     tn_image_free(&none);
     tn_image_free(&half);
@@ -678,15 +678,15 @@ TN_TEST(ordering_share)
     TN_CHECK(tn_image_create(&t, 40, 40, 1) == TN_OK);
     for (y = 0; y < 40; y++)
         for (x = 0; x < 40; x++) TN_PIXEL(&t, x, y, 0) = 100.0f - (float)abs(y - 10);
-    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_OK && n >= 30 && share == 1.0);
+    TN_CHECK(tn_gnn_ordering(&share, &s, &t, 0, &n) == TN_OK && n >= 30 && share == 1.0);
     for (y = 0; y < 40; y++)
         for (x = 0; x < 40; x++) TN_PIXEL(&t, x, y, 0) = -TN_PIXEL(&t, x, y, 0);
-    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_OK && share == 0.0);
+    TN_CHECK(tn_gnn_ordering(&share, &s, &t, 0, &n) == TN_OK && share == 0.0);
     c.type = TN_VALLEY;
-    TN_CHECK(tn_gnn_ordering(&s, &t, 2, &share, &n) == TN_OK && share == 1.0);
-    TN_CHECK(tn_gnn_ordering(&s, &t, -1, &share, &n) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_ordering(&share, &s, &t, 2, &n) == TN_OK && share == 1.0);
+    TN_CHECK(tn_gnn_ordering(&share, &s, &t, -1, &n) == TN_ERR_INVALID_ARG);
     s.count = 0;
-    TN_CHECK(tn_gnn_ordering(&s, &t, 0, &share, &n) == TN_ERR_EMPTY);
+    TN_CHECK(tn_gnn_ordering(&share, &s, &t, 0, &n) == TN_ERR_EMPTY);
     tn_image_free(&t);
 }
 
@@ -722,7 +722,7 @@ static int stopped_run(const tn_image *dem, long iters, tn_gnn *out)
     tn_gnn_opts o;
     holdout_opts(&o, iters, NULL);
     o.holdout_count = 0;
-    return tn_gnn_train(dem, &o, out, NULL) == TN_OK;
+    return tn_gnn_train(out, dem, &o, NULL) == TN_OK;
 }
 
 TN_TEST(holdout_early_stopping)
@@ -742,38 +742,38 @@ TN_TEST(holdout_early_stopping)
     hold[1] = tn_test_dem(40, 9);
     other = own_sketch(&hold[1]);
     holdout_opts(&o, 12, hold);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, &st) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.holdout_checks == 6); /* 2, 4, ..., 10 and the end */
     TN_CHECK(st.holdout_ssim > -1 && st.holdout_ssim <= 1 && st.holdout_ssim >= st.holdout_last_ssim);
     TN_CHECK(st.holdout_iteration >= 2 && st.holdout_iteration < 12 && st.holdout_iteration % 2 == 0); /* this seed: not the last */
     holdout_opts(&o, 12, NULL);
     o.holdout_count = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &full, &st2) == TN_OK && st2.holdout_iteration == -1);
+    TN_CHECK(tn_gnn_train(&full, &dem, &o, &st2) == TN_OK && st2.holdout_iteration == -1);
     TN_CHECK(same_learned(&m, 0, &full, 0) && !tn_params_find(full.weights, "early.gnn.emb"));
     TN_CHECK(stopped_run(&dem, st.holdout_iteration, &stop));
     TN_CHECK(same_learned(&m, 1, &stop, 0));
     memset(&g1, 0, sizeof g1);
     g1.gain = 1.0f; /* the networks alone: m's gain test also has a scale from the holdouts */
-    TN_CHECK(tn_gnn_generate(&m, &other, 40, 40, &g1, &a) == TN_OK && tn_gnn_generate(&stop, &other, 40, 40, &g1, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &other, 40, 40, &g1) == TN_OK && tn_gnn_generate(&b, &stop, &other, 40, 40, &g1) == TN_OK);
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);
-    TN_CHECK(tn_gnn_generate(&m, &own, 40, 40, NULL, &a) == TN_OK && tn_gnn_generate(&full, &own, 40, 40, NULL, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &own, 40, 40, NULL) == TN_OK && tn_gnn_generate(&b, &full, &own, 40, 40, NULL) == TN_OK);
     TN_CHECK(same_image(&a, &b));
     tn_image_free(&b);
-    TN_CHECK(tn_gnn_save(&m, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_OK);
+    TN_CHECK(tn_gnn_save(mp, &m) == TN_OK && tn_gnn_load(&ld, mp) == TN_OK);
     TN_CHECK(same_learned(&ld, 1, &stop, 0) && same_learned(&ld, 0, &full, 0));
-    TN_CHECK(tn_gnn_generate(&ld, &own, 40, 40, NULL, &b) == TN_OK && same_image(&a, &b));
+    TN_CHECK(tn_gnn_generate(&b, &ld, &own, 40, 40, NULL) == TN_OK && same_image(&a, &b));
     tn_image_free(&a);
     tn_image_free(&b);
     /* stopped at 6 and resumed to 12: the same model and checks */
     holdout_opts(&o, 6, hold);
     o.train.checkpoint = ck;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, NULL) == TN_OK);
     tn_gnn_free(&res);
     o.train.max_iters = 12;
     o.train.resume = 1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, &st2) == TN_OK);
     TN_CHECK(st2.holdout_iteration == st.holdout_iteration && st2.holdout_checks == st.holdout_checks);
     TN_CHECK(same_learned(&res, 0, &full, 0) && same_learned(&res, 1, &stop, 0));
     tn_gnn_free(&res);
@@ -781,7 +781,7 @@ TN_TEST(holdout_early_stopping)
        and 6; it trains the network on (it serves only the example's own network now) */
     holdout_opts(&o, 12, hold);
     o.embed_phase = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 3);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 3);
     TN_CHECK(st2.holdout_iteration >= 2 && st2.holdout_iteration <= 6 && tn_params_find(res.weights, "early.gnn.emb"));
     tn_gnn_free(&stop);
     TN_CHECK(stopped_run(&dem, 6, &stop));
@@ -792,7 +792,7 @@ TN_TEST(holdout_early_stopping)
     holdout_opts(&o, 12, hold);
     o.embed_phase = 0;
     o.phase_network = -1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, &st2) == TN_OK && st2.embed_phase_from == 9 && st2.holdout_checks == 5);
     tn_gnn_free(&stop);
     TN_CHECK(stopped_run(&dem, 9, &stop));
     TN_CHECK(same_learned(&res, 0, &stop, 1) && !same_learned(&res, 0, &stop, 0));
@@ -809,7 +809,7 @@ TN_TEST(holdout_early_stopping)
         }
         holdout_opts(&o, 12, flat);
         o.embed_phase = 0;
-        TN_CHECK(tn_gnn_train(&dem, &o, &res, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 0);
+        TN_CHECK(tn_gnn_train(&res, &dem, &o, &st2) == TN_OK && st2.embed_phase_from == 6 && st2.holdout_checks == 0);
         TN_CHECK(st2.holdout_iteration == -1 && !tn_params_find(res.weights, "early.gnn.emb"));
         tn_gnn_free(&stop);
         TN_CHECK(stopped_run(&dem, 6, &stop));
@@ -821,15 +821,15 @@ TN_TEST(holdout_early_stopping)
     /* bad holdouts */
     tiny_opts(&o, 2);
     o.holdout_count = 1;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_INVALID_ARG); /* none given */
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, NULL) == TN_ERR_INVALID_ARG); /* none given */
     TN_CHECK(tn_image_create(&bad, 40, 40, 1) == TN_OK);
     memcpy(bad.data, hold[0].data, 40 * 40 * sizeof(float));
     bad.data[77] = NAN;
     o.holdout = &bad;
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, NULL) == TN_ERR_NUMERIC);
     tn_image_free(&bad);
     TN_CHECK(tn_image_create(&bad, 40, 40, 3) == TN_OK);
-    TN_CHECK(tn_gnn_train(&dem, &o, &res, NULL) == TN_ERR_INVALID_ARG); /* three channels */
+    TN_CHECK(tn_gnn_train(&res, &dem, &o, NULL) == TN_ERR_INVALID_ARG); /* three channels */
     tn_image_free(&bad);
     tn_gnn_free(&m);
     tn_gnn_free(&full);
@@ -857,9 +857,9 @@ static double holdout_mean_ssim(tn_gnn *m, const tn_image *hold, int n, float sc
             tn_metrics mt;
             memset(&eo, 0, sizeof eo);
             eo.threshold = tn_extract_default_threshold(hold[i].width, hold[i].height) * (d ? 4 : 1);
-            if (tn_extract(&hold[i], &eo, &ex)) return -2;
-            if (ex.contours.count >= 8 && !tn_gnn_generate(m, &ex.contours, hold[i].width, hold[i].height, NULL, &out) &&
-                !tn_compare(&hold[i], &out, 0, &mt)) {
+            if (tn_extract(&ex, &hold[i], &eo)) return -2;
+            if (ex.contours.count >= 8 && !tn_gnn_generate(&out, m, &ex.contours, hold[i].width, hold[i].height, NULL) &&
+                !tn_compare(&mt, &hold[i], &out, 0)) {
                 sum += mt.ssim;
                 k++;
             }
@@ -891,7 +891,7 @@ TN_TEST(gain_scale_from_holdouts)
     o.holdout = hold;
     o.holdout_count = 2;
     o.holdout_every = 4;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, &st) == TN_OK && tn_params_find(m.weights, "gain.scale"));
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, &st) == TN_OK && tn_params_find(m.weights, "gain.scale"));
     s = tn_params_find(m.weights, "gain.scale")->data[0];
     TN_CHECK(st.gain_scale == s && s >= 0 && s <= 2 && fabsf(s * 20 - floorf(s * 20 + 0.5f)) < 1e-4f);
     best = holdout_mean_ssim(&m, hold, 2, s);
@@ -901,20 +901,20 @@ TN_TEST(gain_scale_from_holdouts)
     TN_CHECK(best >= s0 - 1e-4 && best >= s1 - 1e-4 && best >= holdout_mean_ssim(&m, hold, 2, 2.0f) - 1e-4);
     TN_CHECK(s0 != s1); /* the scale reaches the generation */
     tn_params_find(m.weights, "gain.scale")->data[0] = 1.0f;
-    TN_CHECK(tn_gnn_gain(&m, &sk, 48, 48, NULL, &g1) == TN_OK && g1 >= 0 && g1 <= 1);
+    TN_CHECK(tn_gnn_gain(&g1, &m, &sk, 48, 48, NULL) == TN_OK && g1 >= 0 && g1 <= 1);
     tn_params_find(m.weights, "gain.scale")->data[0] = 0.5f;
-    TN_CHECK(tn_gnn_gain(&m, &sk, 48, 48, NULL, &gh) == TN_OK);
+    TN_CHECK(tn_gnn_gain(&gh, &m, &sk, 48, 48, NULL) == TN_OK);
     TN_CHECK(g1 < 1 ? fabsf(gh - 0.5f * g1) < 1e-6f : gh >= 0.5f);
     tn_params_find(m.weights, "gain.scale")->data[0] = s;
-    TN_CHECK(tn_gnn_save(&m, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_OK);
+    TN_CHECK(tn_gnn_save(mp, &m) == TN_OK && tn_gnn_load(&ld, mp) == TN_OK);
     TN_CHECK(tn_params_find(ld.weights, "gain.scale") && tn_params_find(ld.weights, "gain.scale")->data[0] == s);
     tn_gnn_free(&ld);
     tn_params_find(m.weights, "gain.scale")->data[0] = 3.0f;
-    TN_CHECK(tn_params_save(m.weights, mp) == TN_OK && tn_gnn_load(mp, &ld) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_params_save(mp, m.weights) == TN_OK && tn_gnn_load(&ld, mp) == TN_ERR_CORRUPT);
     /* without holdouts: no scale (1) */
     o.holdout = NULL;
     o.holdout_count = 0;
-    TN_CHECK(tn_gnn_train(&dem, &o, &plain, &st) == TN_OK && !tn_params_find(plain.weights, "gain.scale") && st.gain_scale == 1.0f);
+    TN_CHECK(tn_gnn_train(&plain, &dem, &o, &st) == TN_OK && !tn_params_find(plain.weights, "gain.scale") && st.gain_scale == 1.0f);
     remove(mp);
     tn_gnn_free(&plain);
     tn_gnn_free(&m);
@@ -929,21 +929,21 @@ TN_TEST(holdout_windows)
     /* two windows away, spread (4 of the 11 that fit), else adjacent; NaN windows left out */
     tn_image dem = tn_test_dem(200, 3), out[6], small = tn_test_dem(100, 3);
     int n, u, v, same = 1;
-    n = tn_gnn_holdout_windows(&dem, 80, 55, 40, 40, 4, out); /* 200 x 200: ring 2 at x 0 and 160, y 135 (not -25) */
+    n = tn_gnn_holdout_windows(out, &dem, 80, 55, 40, 40, 4); /* 200 x 200: ring 2 at x 0 and 160, y 135 (not -25) */
     TN_CHECK(n == 4);
     for (v = 0; v < 40; v++)
         for (u = 0; u < 40; u++) same &= TN_PIXEL(&out[0], u, v, 0) == TN_PIXEL(&dem, 0 + u, 15 + v, 0);
     TN_CHECK(same && out[0].width == 40 && out[0].height == 40 && out[0].channels == 1);
     while (n > 0) tn_image_free(&out[--n]);
-    TN_CHECK(tn_gnn_holdout_windows(&small, 30, 30, 40, 40, 4, out) == 0); /* no window fits */
-    n = tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 4, out);              /* the adjacent three */
+    TN_CHECK(tn_gnn_holdout_windows(out, &small, 30, 30, 40, 40, 4) == 0); /* no window fits */
+    n = tn_gnn_holdout_windows(out, &small, 0, 0, 40, 40, 4);              /* the adjacent three */
     TN_CHECK(n == 3);
     while (n > 0) tn_image_free(&out[--n]);
     TN_PIXEL(&small, 45, 5, 0) = NAN; /* inside the window at (40, 0) */
-    n = tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 4, out);
+    n = tn_gnn_holdout_windows(out, &small, 0, 0, 40, 40, 4);
     TN_CHECK(n == 2);
     while (n > 0) tn_image_free(&out[--n]);
-    TN_CHECK(tn_gnn_holdout_windows(&small, 0, 0, 40, 40, 0, out) == 0);
+    TN_CHECK(tn_gnn_holdout_windows(out, &small, 0, 0, 40, 40, 0) == 0);
     tn_image_free(&dem);
     tn_image_free(&small);
 }
@@ -991,12 +991,12 @@ TN_TEST(grow_by_example)
     user = two_strokes(120, 90, rp, vp);
     memset(&go, 0, sizeof go);
     go.seed = 3;
-    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g1, &added) == TN_OK);
+    TN_CHECK(tn_gnn_grow(&g1, &user, &ex, 120, 90, &go, &added) == TN_OK);
     TN_CHECK(added > 4 && g1.count == 2 + added);
     for (i = 0; i < 2; i++)
         TN_CHECK(g1.items[i].type == user.items[i].type && g1.items[i].npoints == 10 &&
                  !memcmp(g1.items[i].points, user.items[i].points, 30 * sizeof(float)));
-    TN_CHECK(tn_sketch_rasterise(&user, 120, 90, &ur) == TN_OK);
+    TN_CHECK(tn_sketch_rasterise(&ur, &user, 120, 90) == TN_OK);
     for (i = 2; i < g1.count; i++) {
         const tn_contour *c = &g1.items[i];
         types[c->type == TN_RIDGE]++;
@@ -1014,11 +1014,11 @@ TN_TEST(grow_by_example)
         }
     }
     TN_CHECK(types[0] > 0 && types[1] > 0);
-    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g2, &added2) == TN_OK && added2 == added);
+    TN_CHECK(tn_gnn_grow(&g2, &user, &ex, 120, 90, &go, &added2) == TN_OK && added2 == added);
     for (i = 0; i < g1.count; i++)
         TN_CHECK(g2.items[i].npoints == g1.items[i].npoints && !memcmp(g2.items[i].points, g1.items[i].points, (size_t)g1.items[i].npoints * 3 * sizeof(float)));
     go.seed = 4;
-    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_grow(&g3, &user, &ex, 120, 90, &go, NULL) == TN_OK);
     {
         int differ = g3.count != g1.count;
         for (i = 2; !differ && i < g1.count; i++)
@@ -1027,18 +1027,18 @@ TN_TEST(grow_by_example)
     }
     tn_contour_set_free(&g3);
     /* bad inputs */
-    TN_CHECK(tn_gnn_grow(&user, &ex, 100, 90, &go, &g3, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_gnn_grow(&g3, &user, &ex, 100, 90, &go, NULL) == TN_ERR_SHAPE);
     bad = user;
     bad.count = 0;
-    TN_CHECK(tn_gnn_grow(&bad, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_gnn_grow(&g3, &bad, &ex, 120, 90, &go, NULL) == TN_ERR_EMPTY);
     bad = ex;
     bad.width = bad.height = 8;
-    TN_CHECK(tn_gnn_grow(&user, &bad, 120, 90, &go, &g3, NULL) != TN_OK);
+    TN_CHECK(tn_gnn_grow(&g3, &user, &bad, 120, 90, &go, NULL) != TN_OK);
     go.gap = -1;
-    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gnn_grow(&g3, &user, &ex, 120, 90, &go, NULL) == TN_ERR_INVALID_ARG);
     go.gap = 0;
     rp[4] = NAN;
-    TN_CHECK(tn_gnn_grow(&user, &ex, 120, 90, &go, &g3, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_gnn_grow(&g3, &user, &ex, 120, 90, &go, NULL) == TN_ERR_NUMERIC);
     tn_contour_set_free(&g1);
     tn_contour_set_free(&g2);
     tn_contour_set_free(&ex);
@@ -1057,12 +1057,12 @@ TN_TEST(grow_without_block_grid)
     double bin[12], lo = 1e30, hi = 0;
     int x, y, k;
     memset(bin, 0, sizeof bin);
-    TN_CHECK(tn_image_load("examples/data/alps_n47e009_256.png", &full, NULL) == TN_OK);
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
     TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
     ex = own_sketch(&dem);
     user = two_strokes(480, 480, rp, vp);
-    TN_CHECK(tn_gnn_grow(&user, &ex, 480, 480, NULL, &g, NULL) == TN_OK);
-    TN_CHECK(tn_sketch_rasterise(&g, 480, 480, &r) == TN_OK);
+    TN_CHECK(tn_gnn_grow(&g, &user, &ex, 480, 480, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_sketch_rasterise(&r, &g, 480, 480) == TN_OK);
     for (y = 0; y < 480; y++)
         for (x = 0; x < 480; x++) {
             size_t i = (size_t)y * 480 + x;
@@ -1092,7 +1092,7 @@ TN_TEST(grown_strokes_stay_main_lines)
     float pts[3 * 20];
     double m = 0, m2 = 0, n = 0, sd;
     int i, j, kind;
-    TN_CHECK(tn_image_load("examples/data/alps_n47e009_256.png", &full, NULL) == TN_OK);
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
     TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
     ex = own_sketch(&dem);
     for (i = 0; i < ex.count; i++)
@@ -1118,7 +1118,7 @@ TN_TEST(grown_strokes_stay_main_lines)
         user.width = user.height = 240;
         user.count = 1;
         user.items = &c;
-        TN_CHECK(tn_gnn_grow(&user, &ex, 240, 240, NULL, &g, NULL) == TN_OK);
+        TN_CHECK(tn_gnn_grow(&g, &user, &ex, 240, 240, NULL, NULL) == TN_OK);
         for (i = 1; i < g.count; i++)
             for (j = 0; j < g.items[i].npoints; j++) {
                 float y = g.items[i].points[3 * j + 1];
@@ -1152,27 +1152,27 @@ TN_TEST(grown_generation)
     size_t q, n = 0;
     double err = 0;
     tiny_opts(&o, 3);
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     user = two_strokes(240, 180, rp, vp);
     memset(&go, 0, sizeof go);
     go.seed = 2;
-    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK);
+    TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK);
     TN_CHECK(plan.grown_lines > 0 && plan.user_lines == 2 && plan.gain_why && strstr(plan.gain_why, "fewer than 8") && plan.gain == 1.0f);
     TN_CHECK(plan.user_density > 0 && plan.user_density < plan.example_density / 6);
     TN_CHECK(plan.detail == 1 && plan.detail_why && strstr(plan.detail_why, "fine detail"));
     go.grow = -1;
-    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.grown_lines == 0);
+    TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.grown_lines == 0);
     TN_CHECK(plan.detail == 0 && strstr(plan.detail_why, "not grown"));
     go.grow = 0;
     go.detail = -1;
-    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.detail == 0);
+    TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.detail == 0);
     go.detail = 0;
     go.gain = -1;
-    TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.gain == 0 && strstr(plan.gain_why, "membrane"));
+    TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.gain == 0 && strstr(plan.gain_why, "membrane"));
     go.gain = 0;
-    TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &a) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&a, &m, &user, 240, 180, &go) == TN_OK);
     tn_set_threads(1 + (before == 1));
-    TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &b) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&b, &m, &user, 240, 180, &go) == TN_OK);
     tn_set_threads(before);
     TN_CHECK(same_image(&a, &b));
     /* with the fine detail by example (the default here), a window still equals the whole map */
@@ -1180,15 +1180,15 @@ TN_TEST(grown_generation)
         tn_image win = {0, 0, 0, NULL}, want = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
         tn_tensor *e = tn_params_find(m.weights, "detail.example");
         TN_CHECK(e && e->numel == (size_t)64 * 64 && e->data[0] == dem.data[0]);
-        TN_CHECK(tn_gnn_generate_window(&m, &user, 240, 180, 150, 100, 60, 50, &go, &win) == TN_OK);
+        TN_CHECK(tn_gnn_generate_window(&win, &m, &user, 240, 180, 150, 100, 60, 50, &go) == TN_OK);
         TN_CHECK(tn_image_crop(&want, &a, 150, 100, 60, 50) == TN_OK && same_image(&win, &want));
         go.detail = -1;
-        TN_CHECK(tn_gnn_generate(&m, &user, 240, 180, &go, &plain) == TN_OK && !same_image(&a, &plain));
+        TN_CHECK(tn_gnn_generate(&plain, &m, &user, 240, 180, &go) == TN_OK && !same_image(&a, &plain));
         { /* the strokes keep their heights through the detail too (pinned again after it) */
             tn_image r = {0, 0, 0, NULL};
             double ea = 0, ep = 0;
             size_t k, nk = 0;
-            TN_CHECK(tn_sketch_rasterise(&user, 240, 180, &r) == TN_OK);
+            TN_CHECK(tn_sketch_rasterise(&r, &user, 240, 180) == TN_OK);
             for (k = 0; r.data && k < (size_t)240 * 180; k++)
                 if (r.data[3 * k] > 0 || r.data[3 * k + 1] > 0)
                     ea += fabs(a.data[k] - r.data[3 * k + 2]), ep += fabs(plain.data[k] - r.data[3 * k + 2]), nk++;
@@ -1218,11 +1218,11 @@ TN_TEST(grown_generation)
             hill.count = 3;
             hill.items = hc;
             go.grow = 1; /* long strokes: denser than auto grows on this small example */
-            TN_CHECK(tn_gnn_generate(&m, &hill, 240, 180, &go, &hi) == TN_OK);
+            TN_CHECK(tn_gnn_generate(&hi, &m, &hill, 240, 180, &go) == TN_OK);
             go.grow = 0;
             hill.count = 1;
             hill.items = &hc[2];
-            TN_CHECK(tn_gnn_ordering(&hill, &hi, 4, &share, NULL) == TN_OK);
+            TN_CHECK(tn_gnn_ordering(&share, &hill, &hi, 4, NULL) == TN_OK);
             printf("  a valley across a hillside: %.1f %% of its points below both sides 4 px across\n", 100 * share);
             TN_CHECK(share >= 0.95);
             tn_image_free(&hi);
@@ -1230,9 +1230,9 @@ TN_TEST(grown_generation)
         /* a model without the example's heights (trained before them): auto skips, 1 fails */
         if (e) strcpy(e->name, "detail.other");
         go.detail = 0;
-        TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_OK && plan.detail == 0 && strstr(plan.detail_why, "no example"));
+        TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.detail == 0 && strstr(plan.detail_why, "no example"));
         go.detail = 1;
-        TN_CHECK(tn_gnn_plan_of(&m, &user, 240, 180, &go, &plan) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "no example"));
+        TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "no example"));
         if (e) strcpy(e->name, "detail.example");
         go.detail = 0;
         tn_image_free(&win);
@@ -1240,9 +1240,9 @@ TN_TEST(grown_generation)
         tn_image_free(&plain);
     }
     /* the grown sketch's membrane holds every stroke pixel at its asked height */
-    TN_CHECK(tn_gnn_parts(&m, &ex) == TN_OK);
-    TN_CHECK(tn_gnn_grow(&user, &ex, 240, 180, NULL, &grown, NULL) == TN_OK);
-    TN_CHECK(tn_gnn_membrane(&grown, 240, 180, &mem) == TN_OK && tn_sketch_rasterise(&user, 240, 180, &ur) == TN_OK);
+    TN_CHECK(tn_gnn_parts(&ex, &m) == TN_OK);
+    TN_CHECK(tn_gnn_grow(&grown, &user, &ex, 240, 180, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&mem, &grown, 240, 180) == TN_OK && tn_sketch_rasterise(&ur, &user, 240, 180) == TN_OK);
     for (q = 0; q < (size_t)240 * 180; q++)
         if (ur.data[3 * q] > 0 || ur.data[3 * q + 1] > 0) err += fabs(mem.data[q] - ur.data[3 * q + 2]), n++;
     TN_CHECK(n > 100 && err / n < 1e-3);

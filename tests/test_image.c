@@ -293,7 +293,7 @@ TN_TEST(gradient_slope_normals_of_a_plane)
     double len = sqrt(4.0 / 0.25 + 9.0 / 4.0 + 1.0);
     int x, y;
     TN_CHECK(ti_plane(&d, 9, 6, 2.0f, 3.0f));
-    TN_CHECK(tn_image_gradient(&d, 0.5f, 2.0f, &gx, &gy) == TN_OK);
+    TN_CHECK(tn_image_gradient(&gx, &gy, &d, 0.5f, 2.0f) == TN_OK);
     TN_CHECK(tn_image_slope(&s, &d, 0.0f, 0.0f) == TN_OK);
     TN_CHECK(tn_image_normals(&n, &d, 0.5f, 2.0f, 1.0f) == TN_OK);
     TN_CHECK(n.channels == 3);
@@ -308,7 +308,7 @@ TN_TEST(gradient_slope_normals_of_a_plane)
         }
     tn_image_free(&gx);
     tn_image_free(&gy);
-    TN_CHECK(tn_image_gradient(&d, 1.0f, 1.0f, NULL, &gy) == TN_OK); /* either output may be NULL */
+    TN_CHECK(tn_image_gradient(NULL, &gy, &d, 1.0f, 1.0f) == TN_OK); /* either output may be NULL */
     tn_image_free(&gy);
     tn_image_free(&s);
     tn_image_free(&n);

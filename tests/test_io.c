@@ -71,7 +71,7 @@ static void write_file(const char *path, const void *d, size_t n)
 
 static tn_status load_text(const char *text, const char *name, tn_image *img, tn_image_info *info)
 {
-    return tn_image_load_memory(text, strlen(text), name, img, info, NULL);
+    return tn_image_load_memory(img, text, strlen(text), name, NULL, info);
 }
 
 /* Saves img in format f with opts, loads it back, checks shape and error bound. */
@@ -90,8 +90,8 @@ static void roundtrip(tn_format f, int w, int h, int ch, int bits, float lo, flo
     o.bit_depth = bits;
     TN_CHECK(tn_image_create(&img, w, h, ch) == TN_OK);
     fill_pattern(&img, lo, hi);
-    TN_CHECK(tn_image_save_memory(&img, &o, f, &buf, &n) == TN_OK);
-    TN_CHECK(tn_image_load_memory(buf, n, NULL, &back, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, f, &o) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, buf, n, NULL, NULL, &info) == TN_OK);
     TN_CHECK(back.width == w && back.height == h && back.channels == ch);
     TN_CHECK(info.format == f);
     TN_CHECK(info.file_channels == ch);
@@ -161,7 +161,7 @@ TN_TEST(pnm_header_text_and_files)
         TN_CHECK(strncmp(text, "P5\n# terrainnet.range 388 2937\n4 3\n65535\n", 41) == 0);
         TN_CHECK(n == 41 + 4 * 3 * 2);
     }
-    TN_CHECK(tn_image_load(path, &back, &info) == TN_OK);
+    TN_CHECK(tn_image_load(&back, path, &info) == TN_OK);
     TN_CHECK(info.format == TN_FORMAT_PNM && info.has_range == 1 && info.range_lo == 388.0 && info.range_hi == 2937.0);
     TN_CHECK(back.data && max_abs_diff(&img, &back) < 0.03);
     tn_image_free(&back);
@@ -219,7 +219,7 @@ TN_TEST(pnm_16bit_is_big_endian)
     static const unsigned char p5[] = {'P', '5', '\n', '2', ' ', '1', '\n', '6', '5', '5', '3', '5', '\n', 0x01, 0x02, 0xff, 0xfe};
     tn_image img = {0, 0, 0, NULL};
     tn_image_info info;
-    TN_CHECK(tn_image_load_memory(p5, sizeof p5, NULL, &img, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, p5, sizeof p5, NULL, NULL, &info) == TN_OK);
     TN_CHECK(info.bit_depth == 16);
     if (img.data) {
         TN_CHECK_NEAR(img.data[0], 258.0 / 65535.0, 1e-7);
@@ -240,7 +240,7 @@ TN_TEST(pfm_roundtrip_and_orientation)
     uint8_t *buf = NULL;
     size_t n = 0;
     int ch;
-    TN_CHECK(tn_image_load_memory(be, sizeof be, NULL, &img, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, be, sizeof be, NULL, NULL, &info) == TN_OK);
     TN_CHECK(info.format == TN_FORMAT_PFM && info.bit_depth == 32 && info.file_channels == 1);
     if (img.data) {
         TN_CHECK(img.data[0] == 3.0f && img.data[1] == -4.0f && img.data[2] == 1.0f && img.data[3] == 2.0f);
@@ -248,16 +248,16 @@ TN_TEST(pfm_roundtrip_and_orientation)
     tn_image_free(&img);
     memcpy(nanpfm, be, sizeof be);
     nanpfm[11] = 0x7f; nanpfm[12] = 0xc0; /* NaN */
-    TN_CHECK(tn_image_load_memory(nanpfm, sizeof nanpfm, "n.pfm", &img, NULL, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_image_load_memory(&img, nanpfm, sizeof nanpfm, "n.pfm", NULL, NULL) == TN_ERR_NUMERIC);
     TN_CHECK(strstr(tn_last_error(), "n.pfm") != NULL);
     TN_CHECK(img.data == NULL);
     for (ch = 1; ch <= 3; ch += 2) { /* bit exact, little endian as written */
         TN_CHECK(tn_image_create(&img, 13, 7, ch) == TN_OK);
         fill_pattern(&img, -1234.5f, 8848.25f);
         img.data[5] = 1e-30f;
-        TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_PFM, &buf, &n) == TN_OK);
+        TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_PFM, NULL) == TN_OK);
         TN_CHECK(n > 4 && buf[0] == 'P' && buf[1] == (ch == 3 ? 'F' : 'f'));
-        TN_CHECK(tn_image_load_memory(buf, n, NULL, &back, &info, NULL) == TN_OK);
+        TN_CHECK(tn_image_load_memory(&back, buf, n, NULL, NULL, &info) == TN_OK);
         TN_CHECK(back.channels == ch && back.data && max_abs_diff(&img, &back) == 0.0);
         tn_free(buf);
         tn_image_free(&img);
@@ -295,14 +295,14 @@ TN_TEST(hgt_roundtrip_voids_and_errors)
     int x, y;
     double worst = 0;
     if (!b) TN_SKIP("no memory");
-    TN_CHECK(tn_image_load_memory(b, n, "N00E000.hgt", &img, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, b, n, "N00E000.hgt", NULL, &info) == TN_OK);
     TN_CHECK(img.width == 1201 && img.height == 1201 && info.format == TN_FORMAT_HGT && info.voids_filled == 0);
     if (img.data) {
         TN_CHECK(img.data[0] == 100.0f && img.data[1] == 102.0f && img.data[1201] == 103.0f);
         img.data[0] = 40000.0f;  /* clamps to 32767 */
         img.data[1] = -40000.0f; /* clamps to -32767, not the void marker */
         img.data[2] = 103.6f;    /* rounds */
-        TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_HGT, &out, &on) == TN_OK);
+        TN_CHECK(tn_image_save_memory(&out, &on, &img, TN_FORMAT_HGT, NULL) == TN_OK);
         TN_CHECK(on == n);
         if (out) {
             TN_CHECK(out[0] == 0x7f && out[1] == 0xff && out[2] == 0x80 && out[3] == 0x01);
@@ -318,7 +318,7 @@ TN_TEST(hgt_roundtrip_voids_and_errors)
     set_void(b, 0, 0);
     set_void(b, 1200, 1200);
     set_void(b, 77, 1000);
-    TN_CHECK(tn_image_load_memory(b, n, "N00E000.HGT", &img, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, b, n, "N00E000.HGT", NULL, &info) == TN_OK);
     TN_CHECK(info.voids_filled == 30 * 20 + 3);
     if (img.data) {
         for (y = 500; y < 520; y++)
@@ -337,15 +337,15 @@ TN_TEST(hgt_roundtrip_voids_and_errors)
     /* all void -> empty */
     memset(b, 0, n);
     for (i = 0; i < n; i += 2) b[i] = 0x80;
-    TN_CHECK(tn_image_load_memory(b, n, "v.hgt", &img, &info, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_image_load_memory(&img, b, n, "v.hgt", NULL, &info) == TN_ERR_EMPTY);
     TN_CHECK(img.data == NULL);
     /* wrong sizes */
-    TN_CHECK(tn_image_load_memory(b, n - 1, "t.hgt", &img, &info, NULL) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_image_load_memory(&img, b, n - 1, "t.hgt", NULL, &info) == TN_ERR_CORRUPT);
     TN_CHECK(strstr(tn_last_error(), "t.hgt") != NULL);
-    TN_CHECK(tn_image_load_memory(b, 0, "t.hgt", &img, &info, NULL) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_image_load_memory(&img, b, 0, "t.hgt", NULL, &info) == TN_ERR_CORRUPT);
     /* only 1201/3601 squares can be written */
     TN_CHECK(tn_image_create(&small, 100, 100, 1) == TN_OK);
-    TN_CHECK(tn_image_save_memory(&small, NULL, TN_FORMAT_HGT, &out, &on) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_save_memory(&out, &on, &small, TN_FORMAT_HGT, NULL) == TN_ERR_SHAPE);
     TN_CHECK(out == NULL);
     tn_image_free(&small);
     free(b);
@@ -358,11 +358,11 @@ TN_TEST(hgt_real_srtm_tile)
     tn_image_info info;
     float lo, hi;
     if (!path) TN_SKIP("shared data not found");
-    TN_CHECK(tn_image_load(path, &img, &info) == TN_OK);
+    TN_CHECK(tn_image_load(&img, path, &info) == TN_OK);
     TN_CHECK(img.width == 1201 && img.height == 1201 && img.channels == 1);
     TN_CHECK(info.format == TN_FORMAT_HGT && info.voids_filled == 0 && info.bit_depth == 16);
     if (img.data) {
-        TN_CHECK(tn_image_range(&img, &lo, &hi) == 0);
+        TN_CHECK(tn_image_range(&lo, &hi, &img) == 0);
         TN_CHECK(lo == 388.0f && hi == 2937.0f); /* MANIFEST.md: 388 .. 2937 m */
     }
     tn_image_free(&img);
@@ -384,10 +384,10 @@ TN_TEST(png_real_16bit_matches_hgt)
     snprintf(png, sizeof png, "%s", p);
     h = tn_test_data("dem/alps_n47e009/original/N47E009.hgt");
     if (!h) TN_SKIP("shared data not found");
-    TN_CHECK(tn_image_load(png, &a, &info) == TN_OK);
+    TN_CHECK(tn_image_load(&a, png, &info) == TN_OK);
     TN_CHECK(info.format == TN_FORMAT_PNG && info.bit_depth == 16 && info.has_range == 0);
     TN_CHECK(a.width == 1024 && a.height == 1024 && a.channels == 1);
-    TN_CHECK(tn_image_load(h, &b, NULL) == TN_OK);
+    TN_CHECK(tn_image_load(&b, h, NULL) == TN_OK);
     if (a.data && b.data && a.width == 1024) { /* MANIFEST: rows/cols 177-1200 of the tile, 0 -> 388 m, 65535 -> 2937 m */
         for (y = 0; y < 1024; y++)
             for (x = 0; x < 1024; x++) {
@@ -402,10 +402,10 @@ TN_TEST(png_real_16bit_matches_hgt)
     p = tn_test_data("dem/grandcanyon_hoppe8bit/grandcanyon_hoppe8bit_256.png");
     if (p) {
         float lo, hi;
-        TN_CHECK(tn_image_load(p, &a, &info) == TN_OK);
+        TN_CHECK(tn_image_load(&a, p, &info) == TN_OK);
         TN_CHECK(a.width == 256 && a.height == 256);
         if (a.data) {
-            tn_image_range(&a, &lo, &hi);
+            tn_image_range(&lo, &hi, &a);
             TN_CHECK_NEAR(lo * 255.0, 39.0, 1e-3); /* MANIFEST: grey 39 .. 172 */
             TN_CHECK_NEAR(hi * 255.0, 172.0, 1e-3);
         }
@@ -446,8 +446,8 @@ TN_TEST(asc_roundtrip_and_header)
     img.data[4] = 1e-7f;
     memset(&o, 0, sizeof o);
     o.cellsize = 30.0;
-    TN_CHECK(tn_image_save_memory(&img, &o, TN_FORMAT_ASC, &buf, &n) == TN_OK);
-    TN_CHECK(tn_image_load_memory(buf, n, NULL, &back, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_ASC, &o) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, buf, n, NULL, NULL, &info) == TN_OK);
     TN_CHECK(info.format == TN_FORMAT_ASC && info.cellsize == 30.0 && info.x_origin == 0.0 && info.voids_filled == 0);
     TN_CHECK(back.width == 9 && back.height == 5 && back.data && max_abs_diff(&img, &back) == 0.0); /* exact text */
     tn_free(buf);
@@ -486,21 +486,21 @@ TN_TEST(r16_roundtrip_and_size_inference)
     memset(&lo, 0, sizeof lo);
     TN_CHECK(tn_image_create(&img, 20, 20, 1) == TN_OK);
     fill_pattern(&img, 0.0f, 1.0f);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_R16, &buf, &n) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_R16, NULL) == TN_OK);
     TN_CHECK(n == 800);
     lo.format = TN_FORMAT_R16;
-    TN_CHECK(tn_image_load_memory(buf, n, NULL, &back, &info, &lo) == TN_OK); /* 20x20 inferred */
+    TN_CHECK(tn_image_load_memory(&back, buf, n, NULL, &lo, &info) == TN_OK); /* 20x20 inferred */
     TN_CHECK(back.width == 20 && back.height == 20 && info.bit_depth == 16);
     TN_CHECK(back.data && max_abs_diff(&img, &back) <= 0.5 / 65535 + 1e-7);
     tn_image_free(&back);
     tn_free(buf);
     /* metres: mapped from min..max, which .r16 cannot record */
     fill_pattern(&img, 388.0f, 2937.0f);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_R16, &buf, &n) == TN_OK);
-    TN_CHECK(tn_image_load_memory(buf, n, "x.r16", &back, &info, NULL) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_R16, NULL) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, buf, n, "x.r16", NULL, &info) == TN_OK);
     TN_CHECK(info.has_range == 0 && back.data);
     if (back.data) {
-        tn_image_range(&back, &mn, &mx);
+        tn_image_range(&mn, &mx, &back);
         TN_CHECK(mn == 0.0f && mx == 1.0f);
     }
     tn_image_free(&back);
@@ -509,21 +509,21 @@ TN_TEST(r16_roundtrip_and_size_inference)
     /* non-square without dims, with dims, mismatching dims */
     memset(raw, 0, sizeof raw);
     raw[0] = 0xff; raw[1] = 0xff; raw[2] = 0x01; raw[3] = 0x00; /* 65535, 1: little endian */
-    TN_CHECK(tn_image_load_memory(raw, sizeof raw, "x.r16", &back, NULL, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_load_memory(&back, raw, sizeof raw, "x.r16", NULL, NULL) == TN_ERR_SHAPE);
     TN_CHECK(strstr(tn_last_error(), "x.r16") != NULL);
     lo.format = TN_FORMAT_AUTO;
     lo.raw_width = 3;
     lo.raw_height = 2;
-    TN_CHECK(tn_image_load_memory(raw, sizeof raw, "x.raw", &back, &info, &lo) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&back, raw, sizeof raw, "x.raw", &lo, &info) == TN_OK);
     TN_CHECK(back.width == 3 && back.height == 2 && info.format == TN_FORMAT_R16);
     if (back.data) TN_CHECK(back.data[0] == 1.0f && back.data[1] == 1.0f / 65535.0f);
     tn_image_free(&back);
     lo.raw_width = 2;
-    TN_CHECK(tn_image_load_memory(raw, sizeof raw, "x.raw", &back, &info, &lo) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_load_memory(&back, raw, sizeof raw, "x.raw", &lo, &info) == TN_ERR_SHAPE);
     lo.raw_height = 0;
-    TN_CHECK(tn_image_load_memory(raw, sizeof raw, "x.raw", &back, &info, &lo) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_image_load_memory(raw, 5, "x.r16", &back, NULL, NULL) == TN_ERR_SHAPE);
-    TN_CHECK(tn_image_load_memory(raw, 0, "x.r16", &back, NULL, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_image_load_memory(&back, raw, sizeof raw, "x.raw", &lo, &info) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_load_memory(&back, raw, 5, "x.r16", NULL, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_load_memory(&back, raw, 0, "x.r16", NULL, NULL) == TN_ERR_EMPTY);
     TN_CHECK(back.data == NULL);
 }
 
@@ -542,9 +542,9 @@ TN_TEST(format_detection)
     tn_image_free(&img);
     TN_CHECK(load_text("\x01\x02", "dir.v1/noext", &img, &info) == TN_ERR_FORMAT);
     TN_CHECK(strstr(tn_last_error(), "dir.v1/noext") != NULL);
-    TN_CHECK(tn_image_load("/nonexistent/dir/x.png", &img, &info) == TN_ERR_IO);
+    TN_CHECK(tn_image_load(&img, "/nonexistent/dir/x.png", &info) == TN_ERR_IO);
     TN_CHECK(strstr(tn_last_error(), "/nonexistent/dir/x.png") != NULL);
-    TN_CHECK(tn_image_load("/tmp", &img, &info) == TN_ERR_IO || tn_image_load("/tmp", &img, &info) == TN_ERR_FORMAT);
+    TN_CHECK(tn_image_load(&img, "/tmp", &info) == TN_ERR_IO || tn_image_load(&img, "/tmp", &info) == TN_ERR_FORMAT);
     TN_CHECK(img.data == NULL);
 }
 
@@ -562,12 +562,12 @@ static void check_truncations(const uint8_t *buf, size_t n, const char *name, tn
         while (limit > 0 && buf[limit - 1] != ' ' && buf[limit - 1] != '\n') limit--;
     }
     for (cut = 0; cut < limit; cut++) {
-        tn_status st = tn_image_load_memory(buf, cut, name, &img, NULL, &o);
+        tn_status st = tn_image_load_memory(&img, buf, cut, name, &o, NULL);
         if (st == TN_OK) { bad++; tn_image_free(&img); }
     }
     if (bad) fprintf(stderr, "  %s: %zu truncations loaded\n", name, bad);
     TN_CHECK(bad == 0);
-    TN_CHECK(tn_image_load_memory(buf, n, name, &img, NULL, &o) == TN_OK);
+    TN_CHECK(tn_image_load_memory(&img, buf, n, name, &o, NULL) == TN_OK);
     tn_image_free(&img);
 }
 
@@ -585,7 +585,7 @@ TN_TEST(truncated_inputs_fail)
     for (k = 0; k < 4; k++)
         for (bits = 8; bits <= 16; bits += 8) {
             so.bit_depth = bits;
-            if (tn_image_save_memory(&img, &so, fmts[k], &buf, &n) != TN_OK) { TN_CHECK(0); continue; }
+            if (tn_image_save_memory(&buf, &n, &img, fmts[k], &so) != TN_OK) { TN_CHECK(0); continue; }
             check_truncations(buf, n, tn_format_name(fmts[k]), fmts[k], fmts[k] == TN_FORMAT_ASC);
             tn_free(buf);
         }
@@ -616,7 +616,7 @@ TN_TEST(absurd_sizes_fail_without_allocating)
     o.raw_width = 2000000000;
     o.raw_height = 2000000000;
     before = tn_io_test_allocs;
-    TN_CHECK(tn_image_load_memory("ab", 2, NULL, &img, NULL, &o) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_image_load_memory(&img, "ab", 2, NULL, &o, NULL) == TN_ERR_TOO_LARGE);
     TN_CHECK(tn_io_test_allocs == before);
     /* big header, tiny data: truncation is reported before allocating */
     before = tn_io_test_allocs;
@@ -641,21 +641,21 @@ TN_TEST(garbage_never_crashes)
         for (i = 0; i < len; i++) buf[i] = (uint8_t)tn_rng_u32(&r);
         if (len > 3 && k % 3 == 0) { buf[0] = 'P'; buf[1] = "2356Ff"[k % 6]; buf[2] = ' '; }
         o.format = (tn_format)(k % 7);
-        if (tn_image_load_memory(buf, len, NULL, &img, NULL, &o) == TN_OK) { ok++; tn_image_free(&img); }
+        if (tn_image_load_memory(&img, buf, len, NULL, &o, NULL) == TN_OK) { ok++; tn_image_free(&img); }
     }
     /* mutated valid files */
     TN_CHECK(tn_image_create(&img, 9, 9, 1) == TN_OK);
     fill_pattern(&img, 0.0f, 1.0f);
     for (f = TN_FORMAT_PNG; f <= TN_FORMAT_ASC; f++) {
         if (f == TN_FORMAT_HGT) continue;
-        if (tn_image_save_memory(&img, NULL, (tn_format)f, &enc, &n) != TN_OK) { TN_CHECK(0); continue; }
+        if (tn_image_save_memory(&enc, &n, &img, (tn_format)f, NULL) != TN_OK) { TN_CHECK(0); continue; }
         for (k = 0; k < 500; k++) {
             tn_image t = {0, 0, 0, NULL};
             uint8_t *m = (uint8_t *)malloc(n);
             if (!m) break;
             memcpy(m, enc, n);
             for (i = 0; i < 1 + k % 4; i++) m[tn_rng_below(&r, (uint32_t)n)] = (uint8_t)tn_rng_u32(&r);
-            if (tn_image_load_memory(m, n, NULL, &t, NULL, NULL) == TN_OK) tn_image_free(&t);
+            if (tn_image_load_memory(&t, m, n, NULL, NULL, NULL) == TN_OK) tn_image_free(&t);
             free(m);
         }
         tn_free(enc);
@@ -710,11 +710,11 @@ TN_TEST(save_rejects_bad_channels)
     uint8_t *buf = NULL;
     size_t n = 0;
     TN_CHECK(tn_image_create(&img, 4, 4, 2) == TN_OK);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_PNM, &buf, &n) == TN_ERR_SHAPE);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_PFM, &buf, &n) == TN_ERR_SHAPE);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_ASC, &buf, &n) == TN_ERR_SHAPE);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_R16, &buf, &n) == TN_ERR_SHAPE);
-    TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_AUTO, &buf, &n) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_PNM, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_PFM, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_ASC, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_R16, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_image_save_memory(&buf, &n, &img, TN_FORMAT_AUTO, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(buf == NULL && n == 0);
     tn_image_free(&img);
 }

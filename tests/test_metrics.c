@@ -79,9 +79,9 @@ TN_TEST(ssim_matches_skimage)
         double s = -1.0;
         tn_metrics m;
         TN_CHECK(tm_make_pair(tm_refs[i].kind, tm_refs[i].w, tm_refs[i].h, tm_refs[i].ch, &a, &b));
-        TN_CHECK(tn_ssim(&a, &b, tm_refs[i].range, &s) == TN_OK);
+        TN_CHECK(tn_ssim(&s, &a, &b, tm_refs[i].range) == TN_OK);
         TN_CHECK_NEAR(s, tm_refs[i].ssim, 1e-7); /* acceptance is 1e-4; double gets ~1e-12 */
-        TN_CHECK(tn_compare(&a, &b, tm_refs[i].range, &m) == TN_OK);
+        TN_CHECK(tn_compare(&m, &a, &b, tm_refs[i].range) == TN_OK);
         TN_CHECK(m.ssim == s);
         TN_CHECK_NEAR(m.psnr, tm_refs[i].psnr, 1e-7);
         tn_image_free(&a);
@@ -98,17 +98,17 @@ TN_TEST(compare_errors_and_identity)
     TN_CHECK(tm_make_pair(0, 30, 20, 2, &a, &b));
     n = 30 * 20 * 2;
     for (i = 0; i < n; i++) b.data[i] = a.data[i] + ((i & 1) ? 0.25f : -0.125f); /* float rounding ~6e-8 */
-    TN_CHECK(tn_compare(&a, &b, 2.0, &m) == TN_OK);
+    TN_CHECK(tn_compare(&m, &a, &b, 2.0) == TN_OK);
     TN_CHECK_NEAR(m.mae, (0.25 + 0.125) / 2, 1e-7);
     TN_CHECK_NEAR(m.rmse, sqrt((0.0625 + 0.015625) / 2), 1e-7);
     TN_CHECK_NEAR(m.psnr, 20 * log10(2.0 / m.rmse), 1e-9);
     TN_CHECK(m.ssim < 1.0);
-    TN_CHECK(tn_compare(&a, &a, 1.0, &m) == TN_OK);
+    TN_CHECK(tn_compare(&m, &a, &a, 1.0) == TN_OK);
     TN_CHECK_NEAR(m.ssim, 1.0, 1e-12);
     TN_CHECK(m.rmse == 0.0 && m.mae == 0.0 && m.psnr > 1e300);
     /* SSIM is symmetric in its arguments when the range is given */
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s) == TN_OK);
-    TN_CHECK(tn_compare(&b, &a, 1.0, &m) == TN_OK);
+    TN_CHECK(tn_ssim(&s, &a, &b, 1.0) == TN_OK);
+    TN_CHECK(tn_compare(&m, &b, &a, 1.0) == TN_OK);
     TN_CHECK_NEAR(m.ssim, s, 1e-12);
     tn_image_free(&a);
     tn_image_free(&b);
@@ -121,11 +121,11 @@ TN_TEST(ssim_same_for_any_thread_count)
     int saved = tn_get_threads();
     TN_CHECK(tm_make_pair(1, 301, 257, 1, &a, &b));
     tn_set_threads(1);
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s1) == TN_OK);
+    TN_CHECK(tn_ssim(&s1, &a, &b, 1.0) == TN_OK);
     tn_set_threads(2);
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s2) == TN_OK);
+    TN_CHECK(tn_ssim(&s2, &a, &b, 1.0) == TN_OK);
     tn_set_threads(3);
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s3) == TN_OK);
+    TN_CHECK(tn_ssim(&s3, &a, &b, 1.0) == TN_OK);
     tn_set_threads(saved);
     TN_CHECK(memcmp(&s1, &s2, sizeof s1) == 0 && memcmp(&s1, &s3, sizeof s1) == 0);
     tn_image_free(&a);
@@ -140,22 +140,22 @@ TN_TEST(bad_inputs_fail_and_leave_output)
     m.ssim = 42.0;
     TN_CHECK(tm_make_pair(0, 20, 20, 1, &a, &b));
     TN_CHECK(tn_image_create(&c, 20, 21, 1) == TN_OK);
-    TN_CHECK(tn_ssim(&a, &c, 1.0, &s) == TN_ERR_SHAPE);
-    TN_CHECK(tn_compare(&a, &c, 1.0, &m) == TN_ERR_SHAPE);
+    TN_CHECK(tn_ssim(&s, &a, &c, 1.0) == TN_ERR_SHAPE);
+    TN_CHECK(tn_compare(&m, &a, &c, 1.0) == TN_ERR_SHAPE);
     TN_CHECK(strstr(tn_last_error(), "20 x 21") != NULL);
     TN_CHECK(tn_image_create(&small, 10, 30, 1) == TN_OK);
-    TN_CHECK(tn_ssim(&small, &small, 1.0, &s) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_ssim(NULL, &b, 1.0, &s) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_ssim(&s, &small, &small, 1.0) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_ssim(&s, NULL, &b, 1.0) == TN_ERR_INVALID_ARG);
     b.data[0] = (float)NAN; /* a corner: only reaches the cropped map through the window edge */
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s) == TN_ERR_NUMERIC);
-    TN_CHECK(tn_compare(&a, &b, 1.0, &m) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_ssim(&s, &a, &b, 1.0) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_compare(&m, &a, &b, 1.0) == TN_ERR_NUMERIC);
     b.data[0] = 0.5f;
     a.data[399] = (float)INFINITY;
-    TN_CHECK(tn_ssim(&a, &b, 1.0, &s) == TN_ERR_NUMERIC);
-    TN_CHECK(tn_ssim(&a, &b, 0.0, &s) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_ssim(&s, &a, &b, 1.0) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_ssim(&s, &a, &b, 0.0) == TN_ERR_NUMERIC);
     a.data[399] = 0.5f;
-    TN_CHECK(tn_ssim(&c, &c, 0.0, &s) == TN_ERR_INVALID_ARG); /* constant reference, no range */
-    TN_CHECK(tn_ssim(&a, &b, (double)NAN, &s) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_ssim(&s, &c, &c, 0.0) == TN_ERR_INVALID_ARG); /* constant reference, no range */
+    TN_CHECK(tn_ssim(&s, &a, &b, (double)NAN) == TN_ERR_INVALID_ARG);
     TN_CHECK(s == 42.0 && m.ssim == 42.0);
     tn_image_free(&a);
     tn_image_free(&b);

@@ -25,7 +25,7 @@ TN_TEST(perlin_range_seed_and_threads)
     TN_CHECK(tn_noise_perlin(&b, 300, 200, &o) == TN_OK);
     tn_set_threads(0);
     TN_CHECK(memcmp(a.data, b.data, 300 * 200 * sizeof(float)) == 0);
-    tn_image_range(&a, &lo, &hi);
+    tn_image_range(&lo, &hi, &a);
     TN_CHECK(lo == 0.0f && hi == 1.0f);
     o.seed = 43;
     TN_CHECK(tn_noise_perlin(&c, 300, 200, &o) == TN_OK);
@@ -89,7 +89,7 @@ TN_TEST(explicit_noise_is_smooth_and_deterministic)
     TN_CHECK(tn_noise_explicit(&a, 128, 128, &o) == TN_OK);
     TN_CHECK(tn_noise_explicit(&b, 128, 128, &o) == TN_OK);
     TN_CHECK(memcmp(a.data, b.data, 128 * 128 * sizeof(float)) == 0);
-    tn_image_range(&a, &lo, &hi);
+    tn_image_range(&lo, &hi, &a);
     TN_CHECK(lo == 0.0f && hi == 1.0f);
     TN_CHECK(mean_abs_step(&a, 1, 0) < 0.02); /* smoothed, unlike raw uniform noise (~0.33) */
     tn_image_free(&a);

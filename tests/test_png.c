@@ -590,7 +590,7 @@ static uint8_t *make_png(uint32_t w, uint32_t h, int depth, int ctype, const uin
     ihdr[8] = (uint8_t)depth;
     ihdr[9] = (uint8_t)ctype;
     ihdr[10] = ihdr[11] = ihdr[12] = 0;
-    tn_zlib_deflate(raw, rawn, 6, &z, &zn);
+    tn_zlib_deflate(&z, &zn, raw, rawn, 6);
     out = (uint8_t *)malloc(8 + 25 + 12 + zn + 12);
     memcpy(out, tn__png_sig, 8);
     tn__png_put_chunk(out + 8, "IHDR", ihdr, 13);
@@ -805,33 +805,33 @@ TN_TEST(test_inflate_python_streams)
     uint8_t *out = NULL, expect[4000];
     size_t n = 0, i;
     const char *hello = "hello hello hello hello terrain\n";
-    TN_CHECK(tn_zlib_inflate(py_hello, sizeof py_hello, &out, &n, 0) == TN_OK);
+    TN_CHECK(tn_zlib_inflate(&out, &n, py_hello, sizeof py_hello, 0) == TN_OK);
     TN_CHECK(n == 96);
     for (i = 0; out && i < 3; i++) TN_CHECK(memcmp(out + 32 * i, hello, 32) == 0);
     TN_FREE(out);
-    TN_CHECK(tn_zlib_inflate(py_stored, sizeof py_stored, &out, &n, 0) == TN_OK);
+    TN_CHECK(tn_zlib_inflate(&out, &n, py_stored, sizeof py_stored, 0) == TN_OK);
     TN_CHECK(n == 40);
     for (i = 0; out && i < 40; i++) TN_CHECK(out[i] == i);
     TN_FREE(out);
     gen_dynamic(expect, sizeof expect);
-    TN_CHECK(tn_zlib_inflate(py_dynamic, sizeof py_dynamic, &out, &n, 0) == TN_OK);
+    TN_CHECK(tn_zlib_inflate(&out, &n, py_dynamic, sizeof py_dynamic, 0) == TN_OK);
     TN_CHECK(n == sizeof expect && out && memcmp(out, expect, n) == 0);
     TN_FREE(out);
     /* the same stream under a 1000-byte cap is too large; damaged, it is corrupt */
-    TN_CHECK(tn_zlib_inflate(py_dynamic, sizeof py_dynamic, &out, &n, 1000) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_zlib_inflate(&out, &n, py_dynamic, sizeof py_dynamic, 1000) == TN_ERR_TOO_LARGE);
     TN_CHECK(out == NULL);
     for (i = 0; i < sizeof py_dynamic; i++) { /* every truncation fails */
-        if (tn_zlib_inflate(py_dynamic, i, &out, &n, 0) == TN_OK) { TN_CHECK(0); TN_FREE(out); }
+        if (tn_zlib_inflate(&out, &n, py_dynamic, i, 0) == TN_OK) { TN_CHECK(0); TN_FREE(out); }
     }
     {
         uint8_t bad[sizeof py_hello];
         memcpy(bad, py_hello, sizeof bad);
         bad[sizeof bad - 1] ^= 1; /* Adler-32 */
-        TN_CHECK(tn_zlib_inflate(bad, sizeof bad, &out, &n, 0) == TN_ERR_CORRUPT);
+        TN_CHECK(tn_zlib_inflate(&out, &n, bad, sizeof bad, 0) == TN_ERR_CORRUPT);
         TN_CHECK(strstr(tn_last_error(), "Adler") != NULL);
         memcpy(bad, py_hello, sizeof bad);
         bad[1] ^= 1; /* header check */
-        TN_CHECK(tn_zlib_inflate(bad, sizeof bad, &out, &n, 0) == TN_ERR_CORRUPT);
+        TN_CHECK(tn_zlib_inflate(&out, &n, bad, sizeof bad, 0) == TN_ERR_CORRUPT);
     }
 }
 
@@ -861,8 +861,8 @@ TN_TEST(test_deflate_roundtrip)
                 size_t zn = 0, bn = 0;
                 int ok;
                 if (n > 40000 && level != 1 && level != 6 && level != 9) continue;
-                TN_CHECK(tn_zlib_deflate(src, n, level, &z, &zn) == TN_OK);
-                ok = z && tn_zlib_inflate(z, zn, &back, &bn, 0) == TN_OK && bn == n && (n == 0 || memcmp(back, src, n) == 0);
+                TN_CHECK(tn_zlib_deflate(&z, &zn, src, n, level) == TN_OK);
+                ok = z && tn_zlib_inflate(&back, &bn, z, zn, 0) == TN_OK && bn == n && (n == 0 || memcmp(back, src, n) == 0);
                 if (!ok) fprintf(stderr, "  kind %d size %zu level %d failed: %s\n", kind, n, level, tn_last_error());
                 TN_CHECK(ok);
                 if (kind == 0) TN_CHECK(zn <= n + 5 * (n / 16000 + 1) + 6); /* random data falls back to stored blocks */
@@ -875,12 +875,12 @@ TN_TEST(test_deflate_roundtrip)
     { /* long runs: 1 MiB of zeros compresses ~1000:1 and the cap catches it */
         size_t n = (size_t)1 << 20, zn = 0, bn = 0;
         uint8_t *zeros = (uint8_t *)calloc(n, 1), *z = NULL, *back = NULL;
-        TN_CHECK(tn_zlib_deflate(zeros, n, 9, &z, &zn) == TN_OK);
+        TN_CHECK(tn_zlib_deflate(&z, &zn, zeros, n, 9) == TN_OK);
         TN_CHECK(zn < 2000);
-        TN_CHECK(tn_zlib_inflate(z, zn, &back, &bn, n) == TN_OK && bn == n);
+        TN_CHECK(tn_zlib_inflate(&back, &bn, z, zn, n) == TN_OK && bn == n);
         TN_FREE(back);
         back = NULL;
-        TN_CHECK(tn_zlib_inflate(z, zn, &back, &bn, n - 1) == TN_ERR_TOO_LARGE);
+        TN_CHECK(tn_zlib_inflate(&back, &bn, z, zn, n - 1) == TN_ERR_TOO_LARGE);
         TN_CHECK(back == NULL);
         TN_FREE(z);
         free(zeros);

@@ -111,9 +111,9 @@ static int make_seed(int which, uint8_t **out, size_t *n, const char **name)
     case SEED_ASC: *name = "seed.asc"; break;
     default: *name = "seed.pfm"; break;
     }
-    st = tn_image_save_memory(&img, &so,
-                              which <= SEED_PNG8GA ? TN_FORMAT_PNG : which <= SEED_PPM8 ? TN_FORMAT_PNM
-                                                   : which == SEED_ASC ? TN_FORMAT_ASC : TN_FORMAT_PFM, out, n);
+    st = tn_image_save_memory(out, n,
+                              &img, which <= SEED_PNG8GA ? TN_FORMAT_PNG : which <= SEED_PPM8 ? TN_FORMAT_PNM
+                                                   : which == SEED_ASC ? TN_FORMAT_ASC : TN_FORMAT_PFM, &so);
     if (st == TN_OK && which == SEED_ASC) { /* a NODATA header and cell, so the void filling runs too */
         static const char hdr[] = "ncols 13\nnrows 9\nxllcorner 0\nyllcorner 0\ncellsize 30\nNODATA_value -9999\n-9999 ";
         size_t body = 0, k, lines = 0;
@@ -139,7 +139,7 @@ static int load_checked(const uint8_t *b, size_t n, const char *name)
     tn_status st;
     int ok;
     tn_clear_error();
-    st = tn_image_load_memory(b, n, name, &img, &info, NULL);
+    st = tn_image_load_memory(&img, b, n, name, NULL, &info);
     ok = outcome_ok(st, &img);
     if (!ok) fprintf(stderr, "  %s (%zu bytes): status %d '%s'\n", name, n, (int)st, tn_last_error());
     tn_image_free(&img);
@@ -162,7 +162,7 @@ TN_TEST(test_image_readers_mutated)
         { /* the seed itself must load */
             tn_image img = {0};
             tn_image_info info;
-            TN_CHECK(tn_image_load_memory(seed, n, name, &img, &info, NULL) == TN_OK && image_finite(&img));
+            TN_CHECK(tn_image_load_memory(&img, seed, n, name, NULL, &info) == TN_OK && image_finite(&img));
             if (which == SEED_ASC) TN_CHECK(info.voids_filled == 1);
             tn_image_free(&img);
         }
@@ -274,11 +274,11 @@ TN_TEST(test_range_metadata)
         uint8_t *b = png_with_range(huge[i], &n);
         TN_CHECK(b != NULL);
         if (!b) continue;
-        TN_CHECK(tn_image_load_memory(b, n, "huge.png", &img, &info, NULL) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_image_load_memory(&img, b, n, "huge.png", NULL, &info) == TN_ERR_NUMERIC);
         TN_CHECK(img.data == NULL);
         free(b);
         n = (size_t)snprintf(pgm, sizeof pgm, "P2\n# terrainnet.range %s\n2 1\n255\n0 255\n", huge[i]);
-        TN_CHECK(tn_image_load_memory(pgm, n, "huge.pgm", &img, &info, NULL) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_image_load_memory(&img, pgm, n, "huge.pgm", NULL, &info) == TN_ERR_NUMERIC);
         TN_CHECK(img.data == NULL);
     }
     /* malformed range text is an ignored comment / ancillary chunk: [0, 1] codes */
@@ -286,14 +286,14 @@ TN_TEST(test_range_metadata)
         uint8_t *b = png_with_range(ignored[i], &n);
         TN_CHECK(b != NULL);
         if (!b) continue;
-        TN_CHECK(tn_image_load_memory(b, n, "odd.png", &img, &info, NULL) == TN_OK && !info.has_range && image_finite(&img));
+        TN_CHECK(tn_image_load_memory(&img, b, n, "odd.png", NULL, &info) == TN_OK && !info.has_range && image_finite(&img));
         tn_image_free(&img);
         free(b);
     }
     /* range text is read locale-free: "1e-3 2.5" is a range, whatever LC_NUMERIC says */
     {
         uint8_t *b = png_with_range("0.25 2.5", &n);
-        TN_CHECK(b && tn_image_load_memory(b, n, "r.png", &img, &info, NULL) == TN_OK && info.has_range &&
+        TN_CHECK(b && tn_image_load_memory(&img, b, n, "r.png", NULL, &info) == TN_OK && info.has_range &&
                  info.range_lo == 0.25 && info.range_hi == 2.5);
         tn_image_free(&img);
         free(b);
@@ -304,13 +304,13 @@ TN_TEST(test_range_metadata)
     so.has_range = 1;
     so.range_lo = 0.0;
     so.range_hi = HUGE_VAL;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNM, &out, &n) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&out, &n, &img, TN_FORMAT_PNG, &so) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&out, &n, &img, TN_FORMAT_PNM, &so) != TN_OK && out == NULL);
     so.range_hi = NAN;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&out, &n, &img, TN_FORMAT_PNG, &so) != TN_OK && out == NULL);
     so.range_hi = 1e300;
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNG, &out, &n) != TN_OK && out == NULL);
-    TN_CHECK(tn_image_save_memory(&img, &so, TN_FORMAT_PNM, &out, &n) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&out, &n, &img, TN_FORMAT_PNG, &so) != TN_OK && out == NULL);
+    TN_CHECK(tn_image_save_memory(&out, &n, &img, TN_FORMAT_PNM, &so) != TN_OK && out == NULL);
     /* a failed save leaves an existing file as it was */
     {
         const char *path = tmp_path("keep.png");
@@ -345,7 +345,7 @@ static int sketch_checked(const char *text, size_t n)
     int i, j, ok = 1;
     memset(&s, 0, sizeof s);
     tn_clear_error();
-    st = tn_sketch_parse(text, n, "fuzz.tns", &s);
+    st = tn_sketch_parse(&s, text, n, "fuzz.tns");
     if (st != TN_OK) {
         ok = st < TN_STATUS_COUNT && tn_last_error()[0] && s.items == NULL && s.count == 0;
     } else {
@@ -398,9 +398,9 @@ TN_TEST(test_sketch_text_mutated)
     {
         tn_contour_set s;
         memset(&s, 0, sizeof s);
-        TN_CHECK(tn_sketch_parse(whole[3], strlen(whole[3]), NULL, &s) == TN_ERR_NUMERIC);
-        TN_CHECK(tn_sketch_parse(whole[5], strlen(whole[5]), NULL, &s) != TN_OK);
-        TN_CHECK(tn_sketch_parse(whole[2], strlen(whole[2]), NULL, &s) == TN_ERR_TOO_LARGE);
+        TN_CHECK(tn_sketch_parse(&s, whole[3], strlen(whole[3]), NULL) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_sketch_parse(&s, whole[5], strlen(whole[5]), NULL) != TN_OK);
+        TN_CHECK(tn_sketch_parse(&s, whole[2], strlen(whole[2]), NULL) == TN_ERR_TOO_LARGE);
     }
     for (round = 0; round < 6000; round++) {
         size_t len = n, at, tl;
@@ -489,7 +489,7 @@ TN_TEST(test_tnw_loader)
     if (!p) return;
     TN_CHECK(tn_params_add(p, "a", 1, &s4) != NULL);
     TN_CHECK(tn_params_add(p, "b", 2, s23) != NULL);
-    TN_CHECK(tn_params_save(p, path) == TN_OK);
+    TN_CHECK(tn_params_save(path, p) == TN_OK);
     f = fopen(path, "rb");
     if (f) {
         good = (uint8_t *)malloc(4096);
@@ -578,7 +578,7 @@ TN_TEST(test_tnw_many_tensors)
     if (!b) return;
     n = tnw_many(b, cap, cap);
     t0 = tn_time_seconds();
-    TN_CHECK(tn_params_open_memory(b, n, "many.tnw", &p) == TN_OK);
+    TN_CHECK(tn_params_open_memory(&p, b, n, "many.tnw") == TN_OK);
     dt = tn_time_seconds() - t0;
     fprintf(stderr, "   65536 tensors loaded in %.2f s\n", dt);
     TN_CHECK(dt < 10.0);
@@ -587,7 +587,7 @@ TN_TEST(test_tnw_many_tensors)
     tn_params_free(p);
     p = NULL;
     n = tnw_many(b, cap + 1, cap + 1);
-    TN_CHECK(tn_params_open_memory(b, n, "toomany.tnw", &p) == TN_ERR_TOO_LARGE && p == NULL);
+    TN_CHECK(tn_params_open_memory(&p, b, n, "toomany.tnw") == TN_ERR_TOO_LARGE && p == NULL);
     TN_CHECK(strstr(tn_last_error(), "tensors") != NULL);
     /* a duplicate name among many is still found */
     n = tnw_many(b, 1000, 1001);
@@ -595,7 +595,7 @@ TN_TEST(test_tnw_many_tensors)
     memcpy(b + n, b + 12, 2 + 2 + 2 + 8);
     n += 14;
     put_le32(b + n, tn__crc32(0, b, n));
-    TN_CHECK(tn_params_open_memory(b, n + 4, "dup.tnw", &p) == TN_ERR_CORRUPT && p == NULL);
+    TN_CHECK(tn_params_open_memory(&p, b, n + 4, "dup.tnw") == TN_ERR_CORRUPT && p == NULL);
     free(b);
 }
 
@@ -625,15 +625,15 @@ TN_TEST(test_memory_limit)
     tn_set_memory_limit(0);
     TN_CHECK(tn_get_memory_limit() == def);
     /* a valid TIFF that decodes past a low limit fails cleanly */
-    TN_CHECK(tn_image_save_memory(&b, NULL, TN_FORMAT_TIFF, &tif, &ntif) == TN_OK);
+    TN_CHECK(tn_image_save_memory(&tif, &ntif, &b, TN_FORMAT_TIFF, NULL) == TN_OK);
     tn_image_free(&b);
     tn_set_memory_limit((size_t)8 << 20);
     tn_clear_error();
-    st = tn_image_load_memory(tif, ntif, "big.tif", &c, NULL, NULL);
+    st = tn_image_load_memory(&c, tif, ntif, "big.tif", NULL, NULL);
     TN_CHECK(st == TN_ERR_TOO_LARGE && c.data == NULL && strstr(tn_last_error(), "limit"));
     fprintf(stderr, "   %s\n", tn_last_error());
     tn_set_memory_limit(0);
-    TN_CHECK(tn_image_load_memory(tif, ntif, "big.tif", &c, NULL, NULL) == TN_OK && c.width == 2048);
+    TN_CHECK(tn_image_load_memory(&c, tif, ntif, "big.tif", NULL, NULL) == TN_OK && c.width == 2048);
     tn_image_free(&c);
     tn_free(tif);
     TN_CHECK(tn_memory_in_use() == base);
@@ -675,7 +675,7 @@ TN_TEST(test_season_frame_total)
         fclose(f);
         tn_set_memory_limit((size_t)64 << 20);
         t0 = tn_time_seconds();
-        st = tn_season_data_load(list, &d);
+        st = tn_season_data_load(&d, list);
         if (!k) {
             /* 20000 x 128 x 128 x 8 bytes = 2.5 GB: refused at once */
             TN_CHECK(st == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "frame rows"));
@@ -714,7 +714,7 @@ TN_TEST(test_stale_temporaries)
         TN_CHECK(write_file(tmp, "partial", 7));
         TN_CHECK(tn_image_save(out, &img, NULL) == TN_OK);
         TN_CHECK(fopen(tmp, "rb") == NULL);
-        TN_CHECK(tn_image_load(out, &back, NULL) == TN_OK && back.width == 8);
+        TN_CHECK(tn_image_load(&back, out, NULL) == TN_OK && back.width == 8);
         tn_image_free(&back);
     }
     TN_CHECK(write_file(other, "partial", 7));
@@ -739,7 +739,7 @@ TN_TEST(test_stale_temporaries)
         int status = 0;
         TN_CHECK(read(ready[0], &c, 1) == 1 && c == 1);
         TN_CHECK(tn_image_save(out, &img, NULL) == TN_OK);
-        TN_CHECK(tn_image_load(out, &back, NULL) == TN_OK && back.width == 8);
+        TN_CHECK(tn_image_load(&back, out, NULL) == TN_OK && back.width == 8);
         tn_image_free(&back);
         f = fopen(tmp, "rb");
         TN_CHECK(f && fread(got, 1, 5, f) == 5 && !memcmp(got, "child", 5)); /* untouched */
@@ -800,7 +800,7 @@ TN_TEST(test_stale_texgan_stream)
     remove(tmp);
     remove(out);
     child = fork();
-    if (child == 0) _exit((int)tn_texgan_synthesize_file(&m, 1, 4096, 4096, NULL, out) ? 1 : 3);
+    if (child == 0) _exit((int)tn_texgan_synthesize_file(out, &m, 1, 4096, 4096, NULL) ? 1 : 3);
     TN_CHECK(child > 0);
     if (child > 0) {
         snprintf(mine, sizeof mine, "%s.tmp.%lu.%lu", out, (unsigned long)child, serial);
@@ -816,9 +816,9 @@ TN_TEST(test_stale_texgan_stream)
         if (f) fclose(f), remove(mine);
         TN_CHECK((f = fopen(tmp, "rb")) != NULL);
         if (f) fclose(f);
-        TN_CHECK(tn_texgan_synthesize_file(&m, 1, 40, 30, NULL, out) == TN_OK);
+        TN_CHECK(tn_texgan_synthesize_file(out, &m, 1, 40, 30, NULL) == TN_OK);
         TN_CHECK(fopen(tmp, "rb") == NULL); /* the leftover was replaced */
-        TN_CHECK(tn_image_load(out, &back, NULL) == TN_OK && back.width == 40 && back.height == 30);
+        TN_CHECK(tn_image_load(&back, out, NULL) == TN_OK && back.width == 40 && back.height == 30);
         tn_image_free(&back);
     }
     remove(tmp);
@@ -850,7 +850,7 @@ TN_TEST(test_image_args)
     TN_CHECK(tn_image_resize(&out, &dem, 3000, 1, TN_RESIZE_BICUBIC) == TN_OK && image_finite(&out));
     tn_image_free(&out);
     for (i = 0; i < sizeof bad_sp / sizeof bad_sp[0]; i++) {
-        tn_status st = tn_image_gradient(&dem, bad_sp[i], 1.0f, &gx, &gy);
+        tn_status st = tn_image_gradient(&gx, &gy, &dem, bad_sp[i], 1.0f);
         TN_CHECK(st != TN_OK ? gx.data == NULL : image_finite(&gx) && image_finite(&gy));
         tn_image_free(&gx);
         tn_image_free(&gy);
@@ -911,18 +911,18 @@ TN_TEST(test_deflate_and_metrics_args)
     tn_metrics m;
     for (i = 0; i < sizeof src; i++) src[i] = (uint8_t)(i * 7);
     for (i = 0; i < sizeof levels / sizeof levels[0]; i++) {
-        TN_CHECK(tn_zlib_deflate(src, sizeof src, levels[i], &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+        TN_CHECK(tn_zlib_deflate(&out, &n, src, sizeof src, levels[i]) == TN_ERR_INVALID_ARG && out == NULL);
         tn_free(out);
         out = NULL;
     }
-    TN_CHECK(tn_zlib_deflate(src, 0, 9, &out, &n) == TN_OK && tn_zlib_inflate(out, n, &back, &bn, 0) == TN_OK && bn == 0);
+    TN_CHECK(tn_zlib_deflate(&out, &n, src, 0, 9) == TN_OK && tn_zlib_inflate(&back, &bn, out, n, 0) == TN_OK && bn == 0);
     tn_free(out);
     tn_free(back);
     out = back = NULL;
     { /* zlib's -1 ("default") is level 6, as 0 is */
         uint8_t *o6 = NULL;
         size_t n6 = 0;
-        TN_CHECK(tn_zlib_deflate(src, sizeof src, -1, &out, &n) == TN_OK && tn_zlib_deflate(src, sizeof src, 6, &o6, &n6) == TN_OK &&
+        TN_CHECK(tn_zlib_deflate(&out, &n, src, sizeof src, -1) == TN_OK && tn_zlib_deflate(&o6, &n6, src, sizeof src, 6) == TN_OK &&
                  n == n6 && memcmp(out, o6, n) == 0);
         tn_free(out);
         tn_free(o6);
@@ -932,14 +932,14 @@ TN_TEST(test_deflate_and_metrics_args)
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.compression = 11;
-        TN_CHECK(tn_image_save_memory(&a, &so, TN_FORMAT_PNG, &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+        TN_CHECK(tn_image_save_memory(&out, &n, &a, TN_FORMAT_PNG, &so) == TN_ERR_INVALID_ARG && out == NULL);
         so.compression = -3;
-        TN_CHECK(tn_image_save_memory(&a, &so, TN_FORMAT_PNG, &out, &n) == TN_ERR_INVALID_ARG && out == NULL);
+        TN_CHECK(tn_image_save_memory(&out, &n, &a, TN_FORMAT_PNG, &so) == TN_ERR_INVALID_ARG && out == NULL);
     }
-    TN_CHECK(tn_zlib_inflate(src, sizeof src, &back, &bn, 0) == TN_ERR_CORRUPT);
-    TN_CHECK(tn_compare(&a, &b, NAN, &m) != TN_OK || (m.ssim == m.ssim));
+    TN_CHECK(tn_zlib_inflate(&back, &bn, src, sizeof src, 0) == TN_ERR_CORRUPT);
+    TN_CHECK(tn_compare(&m, &a, &b, NAN) != TN_OK || (m.ssim == m.ssim));
     b.data[3] = NAN;
-    TN_CHECK(tn_compare(&a, &b, 1.0, &m) != TN_OK || 1);
+    TN_CHECK(tn_compare(&m, &a, &b, 1.0) != TN_OK || 1);
     tn_image_free(&a);
     tn_image_free(&b);
 }
@@ -1029,9 +1029,9 @@ TN_TEST(test_extract_args)
     TN_CHECK(tn_image_copy(&bad, &dem) == TN_OK);
     bad.data[40] = NAN;
     TN_CHECK(tn_flow_compute(&flow, &bad, 0) == TN_ERR_NUMERIC && flow.dir == NULL);
-    TN_CHECK(tn_extract(&bad, NULL, &ex) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_extract(&ex, &bad, NULL) == TN_ERR_NUMERIC);
     bad.data[40] = -INFINITY;
-    TN_CHECK(tn_extract(&bad, NULL, &ex) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_extract(&ex, &bad, NULL) == TN_ERR_NUMERIC);
     {
         tn_image f = {0};
         TN_CHECK(tn_fill_depressions(&f, &bad) == TN_ERR_NUMERIC && f.data == NULL);
@@ -1041,28 +1041,28 @@ TN_TEST(test_extract_args)
     }
     memset(&eo, 0, sizeof eo);
     eo.threshold = -5;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) != TN_OK || ex.contours.count >= 0);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) != TN_OK || ex.contours.count >= 0);
     tn_extraction_free(&ex);
     eo.threshold = INT_MAX;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_OK || tn_last_error()[0]);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) == TN_OK || tn_last_error()[0]);
     tn_extraction_free(&ex);
     memset(&eo, 0, sizeof eo);
     eo.dx = NAN;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) == TN_ERR_INVALID_ARG);
     tn_extraction_free(&ex);
     memset(&eo, 0, sizeof eo);
     eo.drop_fraction = NAN;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) == TN_ERR_INVALID_ARG);
     tn_extraction_free(&ex);
     memset(&eo, 0, sizeof eo);
     eo.which = 7;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) == TN_ERR_INVALID_ARG);
     tn_extraction_free(&ex);
     memset(&eo, 0, sizeof eo);
     eo.max_length = -3;
     eo.min_length = INT_MAX;
     eo.closing = INT_MAX;
-    TN_CHECK(tn_extract(&dem, &eo, &ex) != TN_OK || ex.contours.count >= 0);
+    TN_CHECK(tn_extract(&ex, &dem, &eo) != TN_OK || ex.contours.count >= 0);
     tn_extraction_free(&ex);
     /* accumulation over corrupt directions */
     TN_CHECK(tn_flow_compute(&flow, &dem, 0) == TN_OK);
@@ -1083,33 +1083,33 @@ TN_TEST(test_extract_args)
         uint8_t mask[32 * 32], order[32 * 32];
         int top = 0;
         memset(mask, 1, sizeof mask);
-        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+        TN_CHECK(tn_strahler_order(order, &flow, mask, &top) == TN_ERR_CORRUPT);
         flow.dir[0] = 200;
-        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT);
+        TN_CHECK(tn_strahler_order(order, &flow, mask, &top) == TN_ERR_CORRUPT);
         flow.dir[0] = TN_FLOW_OUTLET;
-        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_OK);
+        TN_CHECK(tn_strahler_order(order, &flow, mask, &top) == TN_OK);
         flow.dir[5 * 32 + 5] = 0;
         flow.dir[5 * 32 + 6] = 4; /* E then W: a cycle inside the network */
-        TN_CHECK(tn_strahler_order(&flow, mask, order, &top) == TN_ERR_CORRUPT && strstr(tn_last_error(), "cycle"));
+        TN_CHECK(tn_strahler_order(order, &flow, mask, &top) == TN_ERR_CORRUPT && strstr(tn_last_error(), "cycle"));
     }
     tn_flow_free(&flow);
     /* realism */
     memset(&ro, 0, sizeof ro);
     bad.data[40] = NAN;
-    TN_CHECK(tn_realism_compare(&dem, &bad, NULL, &r) == TN_ERR_NUMERIC);
-    TN_CHECK(tn_realism_compare(&bad, &dem, NULL, &r) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_realism_compare(&r, &dem, &bad, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_realism_compare(&r, &bad, &dem, NULL) == TN_ERR_NUMERIC);
     ro.dx_b = INFINITY;
-    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_realism_compare(&r, &dem, &dem, &ro) == TN_ERR_INVALID_ARG);
     ro.dx_a = NAN;
-    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_realism_compare(&r, &dem, &dem, &ro) == TN_ERR_INVALID_ARG);
     ro.dx_a = -1.0f;
-    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_realism_compare(&r, &dem, &dem, &ro) == TN_ERR_INVALID_ARG);
     memset(&ro, 0, sizeof ro);
     ro.threshold = -1;
-    TN_CHECK(tn_realism_compare(&dem, &dem, &ro, &r) != TN_OK || r.distance == r.distance);
+    TN_CHECK(tn_realism_compare(&r, &dem, &dem, &ro) != TN_OK || r.distance == r.distance);
     {
         tn_image tiny = small_dem(4, 4);
-        TN_CHECK(tn_realism_compare(&tiny, &dem, NULL, &r) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_realism_compare(&r, &tiny, &dem, NULL) == TN_ERR_INVALID_ARG);
         tn_image_free(&tiny);
     }
     tn_image_free(&bad);
@@ -1127,36 +1127,36 @@ TN_TEST(test_sketch_args)
     memset(&user, 0, sizeof user);
     memset(&ro, 0, sizeof ro);
     ro.nodes = -5;
-    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+    TN_CHECK(tn_sketch_random(&out, NULL, 64, 64, &ro) == TN_ERR_INVALID_ARG && out.items == NULL);
     ro.nodes = INT_MIN;
-    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
+    TN_CHECK(tn_sketch_random(&out, NULL, 64, 64, &ro) == TN_ERR_INVALID_ARG && out.items == NULL);
     ro.nodes = INT_MAX;
-    TN_CHECK(tn_sketch_random(NULL, 64, 64, &ro, &out) == TN_ERR_TOO_LARGE);
-    TN_CHECK(tn_sketch_random(NULL, -4, 64, NULL, &out) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_sketch_random(NULL, INT_MAX, INT_MAX, NULL, &out) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_sketch_random(&out, NULL, 64, 64, &ro) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_sketch_random(&out, NULL, -4, 64, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_sketch_random(&out, NULL, INT_MAX, INT_MAX, NULL) == TN_ERR_TOO_LARGE);
     ro.nodes = 3;
-    TN_CHECK(tn_sketch_random(NULL, 2, 2, &ro, &out) == TN_OK);
+    TN_CHECK(tn_sketch_random(&out, NULL, 2, 2, &ro) == TN_OK);
     tn_contour_set_free(&out);
     /* MST / Delaunay with NaN coordinates */
-    TN_CHECK(tn_mst(xy, 4, &edges) == TN_ERR_NUMERIC && edges == NULL);
-    TN_CHECK(tn_delaunay(xy, 4, &tris, &ntri) == TN_ERR_NUMERIC && tris == NULL);
+    TN_CHECK(tn_mst(&edges, xy, 4) == TN_ERR_NUMERIC && edges == NULL);
+    TN_CHECK(tn_delaunay(&tris, &ntri, xy, 4) == TN_ERR_NUMERIC && tris == NULL);
     xy[4] = INFINITY;
-    TN_CHECK(tn_mst(xy, 4, &edges) == TN_ERR_NUMERIC && edges == NULL);
-    TN_CHECK(tn_delaunay(xy, 4, &tris, &ntri) == TN_ERR_NUMERIC && tris == NULL);
+    TN_CHECK(tn_mst(&edges, xy, 4) == TN_ERR_NUMERIC && edges == NULL);
+    TN_CHECK(tn_delaunay(&tris, &ntri, xy, 4) == TN_ERR_NUMERIC && tris == NULL);
     xy[4] = 2.0f;
-    TN_CHECK(tn_mst(xy, 0, &edges) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_mst(xy, -1, &edges) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_mst(NULL, 3, &edges) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_delaunay(xy, -1, &tris, &ntri) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_mst(xy, 4, &edges) == TN_OK);
+    TN_CHECK(tn_mst(&edges, xy, 0) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(&edges, xy, -1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(&edges, NULL, 3) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_delaunay(&tris, &ntri, xy, -1) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_mst(&edges, xy, 4) == TN_OK);
     tn_free(edges);
     /* huge-but-finite coordinates */
     {
         float big[8] = {-FLT_MAX, -FLT_MAX, FLT_MAX, FLT_MAX, FLT_MAX, -FLT_MAX, 0, 0};
         edges = NULL;
-        TN_CHECK(tn_mst(big, 4, &edges) == TN_OK);
+        TN_CHECK(tn_mst(&edges, big, 4) == TN_OK);
         tn_free(edges);
-        TN_CHECK(tn_delaunay(big, 4, &tris, &ntri) == TN_OK || tn_last_error()[0]);
+        TN_CHECK(tn_delaunay(&tris, &ntri, big, 4) == TN_OK || tn_last_error()[0]);
         tn_free(tris);
         tris = NULL;
     }
@@ -1166,11 +1166,11 @@ TN_TEST(test_sketch_args)
     img.data[3 * 9] = 1.0f;
     img.data[3 * 10] = 1.0f;
     img.data[3 * 11] = NAN;
-    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    TN_CHECK(tn_sketch_from_image(&out, &img) == TN_ERR_NUMERIC && out.items == NULL);
     img.data[3 * 11] = INFINITY;
-    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    TN_CHECK(tn_sketch_from_image(&out, &img) == TN_ERR_NUMERIC && out.items == NULL);
     img.data[3 * 11 + 1] = -INFINITY;
-    TN_CHECK(tn_sketch_from_image(&img, &out) == TN_ERR_NUMERIC && out.items == NULL);
+    TN_CHECK(tn_sketch_from_image(&out, &img) == TN_ERR_NUMERIC && out.items == NULL);
     tn_image_free(&img);
     /* skeleton and rasterising */
     TN_CHECK(tn_skeletonize(NULL, 4, 4) == TN_ERR_INVALID_ARG);
@@ -1183,26 +1183,26 @@ TN_TEST(test_sketch_args)
         static const char t[] = "terrainnet-sketch 1\ncanvas 8 8\nridge\n0 0 1\n7 7 0\nend\n";
         tn_contour_set s;
         memset(&s, 0, sizeof s);
-        TN_CHECK(tn_sketch_parse(t, sizeof t - 1, NULL, &s) == TN_OK);
-        TN_CHECK(tn_sketch_rasterise(&s, 0, 8, &img) == TN_ERR_INVALID_ARG && img.data == NULL);
-        TN_CHECK(tn_sketch_rasterise(&s, INT_MAX, INT_MAX, &img) != TN_OK && img.data == NULL);
-        TN_CHECK(tn_sketch_preview(&s, NULL, -1, 8, &img) != TN_OK && img.data == NULL);
+        TN_CHECK(tn_sketch_parse(&s, t, sizeof t - 1, NULL) == TN_OK);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, 0, 8) == TN_ERR_INVALID_ARG && img.data == NULL);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, INT_MAX, INT_MAX) != TN_OK && img.data == NULL);
+        TN_CHECK(tn_sketch_preview(&img, &s, NULL, -1, 8) != TN_OK && img.data == NULL);
         s.items[0].points[0] = NAN; /* a programmatic set holding NaN */
-        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_NUMERIC && img.data == NULL);
-        TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_NUMERIC && out.items == NULL);
-        TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_NUMERIC && out.items == NULL);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, 8, 8) == TN_ERR_NUMERIC && img.data == NULL);
+        TN_CHECK(tn_sketch_densify(&out, &s) == TN_ERR_NUMERIC && out.items == NULL);
+        TN_CHECK(tn_contour_parts_make(&out, &s, 1) == TN_ERR_NUMERIC && out.items == NULL);
         s.items[0].points[0] = 1e30f; /* far outside: was an undefined float-to-int conversion */
-        TN_CHECK(tn_sketch_densify(&s, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
-        TN_CHECK(tn_contour_parts_make(&s, 1, &out) == TN_ERR_INVALID_ARG && out.items == NULL);
-        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) == TN_ERR_INVALID_ARG && img.data == NULL);
+        TN_CHECK(tn_sketch_densify(&out, &s) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_contour_parts_make(&out, &s, 1) == TN_ERR_INVALID_ARG && out.items == NULL);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, 8, 8) == TN_ERR_INVALID_ARG && img.data == NULL);
         s.items[0].points[0] = 0.0f;
-        TN_CHECK(tn_sketch_rasterise(&s, 1 << 14, 1 << 14, &img) == TN_ERR_TOO_LARGE && img.data == NULL);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, 1 << 14, 1 << 14) == TN_ERR_TOO_LARGE && img.data == NULL);
         s.items[0].npoints = -1;
-        TN_CHECK(tn_sketch_densify(&s, &out) != TN_OK && out.items == NULL);
+        TN_CHECK(tn_sketch_densify(&out, &s) != TN_OK && out.items == NULL);
         s.items[0].npoints = 2;
         s.items[0].points[0] = 0.0f;
         s.width = -8;
-        TN_CHECK(tn_sketch_rasterise(&s, 8, 8, &img) != TN_OK && img.data == NULL);
+        TN_CHECK(tn_sketch_rasterise(&img, &s, 8, 8) != TN_OK && img.data == NULL);
         tn_contour_set_free(&s);
     }
 }
@@ -1217,22 +1217,22 @@ TN_TEST(test_align_args)
     memset(&parts, 0, sizeof parts);
     memset(&empty, 0, sizeof empty);
     empty.width = empty.height = 32;
-    TN_CHECK(tn_sketch_parse(t, sizeof t - 1, NULL, &s) == TN_OK);
-    TN_CHECK(tn_contour_parts_make(&s, 1, &parts) == TN_OK && parts.count >= 1);
+    TN_CHECK(tn_sketch_parse(&s, t, sizeof t - 1, NULL) == TN_OK);
+    TN_CHECK(tn_contour_parts_make(&parts, &s, 1) == TN_OK && parts.count >= 1);
     memset(&ao, 0, sizeof ao);
-    TN_CHECK(tn_sketch_align(&parts, &empty, &ao, match) == TN_ERR_EMPTY);
+    TN_CHECK(tn_sketch_align(match, &parts, &empty, &ao) == TN_ERR_EMPTY);
     ao.top = -3;
-    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    TN_CHECK(tn_sketch_align(match, &parts, &parts, &ao) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
     ao.top = INT_MAX;
     ao.choices = INT_MAX;
-    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    TN_CHECK(tn_sketch_align(match, &parts, &parts, &ao) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
     ao.top = 0;
     ao.choices = -7;
-    TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
+    TN_CHECK(tn_sketch_align(match, &parts, &parts, &ao) != TN_OK || (match[0] >= 0 && match[0] < parts.count));
     if (parts.count) {
         parts.items[0].points[2] = NAN;
         memset(&ao, 0, sizeof ao);
-        TN_CHECK(tn_sketch_align(&parts, &parts, &ao, match) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_sketch_align(match, &parts, &parts, &ao) == TN_ERR_NUMERIC);
     }
     tn_contour_set_free(&parts);
     tn_contour_set_free(&s);
@@ -1349,7 +1349,7 @@ static const char *write_texgan_config(int field, float bad)
     c->data[15] = 2.0f;
     c->data[24] = 1.0f;
     c->data[field] = bad;
-    if (tn_params_save(p, path)) path = NULL;
+    if (tn_params_save(path, p)) path = NULL;
     tn_params_free(p);
     return path;
 }
@@ -1389,10 +1389,10 @@ TN_TEST(test_texgan_config)
         const char *path = write_texgan_config(5, 6.0f);
         tn_params *p = NULL;
         tn_status st;
-        TN_CHECK(path && tn_params_open(path, &p) == TN_OK);
+        TN_CHECK(path && tn_params_open(&p, path) == TN_OK);
         if (p) {
             tn_params_find(p, "texgan.config")->data[6] = 2048.0f;
-            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            TN_CHECK(tn_params_save(path, p) == TN_OK);
             tn_params_free(p);
             tn_set_memory_limit((size_t)64 << 20);
             st = tn_texgan_load(&m, path);
@@ -1428,7 +1428,7 @@ static const char *write_model_config(const char *leaf, const char *method, int 
     shape[1] = cols;
     if (!p) return NULL;
     if (!(c = tn_params_add_buffer(p, cfg_name, 1, &n)) || (extra && !tn_params_add_buffer(p, extra, 2, shape)) ||
-        tn_model_stamp(p, method, format, NULL) || (memcpy(c->data, cfg, (size_t)n * sizeof(float)), tn_params_save(p, path)))
+        tn_model_stamp(p, method, format, NULL) || (memcpy(c->data, cfg, (size_t)n * sizeof(float)), tn_params_save(path, p)))
         path = NULL;
     tn_params_free(p);
     return path;
@@ -1454,7 +1454,7 @@ static int refused_up_front(tn_status (*load)(const char *, void *), const char 
 static tn_status load_gnn(const char *path, void *unused)
 {
     tn_gnn m;
-    tn_status st = tn_gnn_load(path, &m);
+    tn_status st = tn_gnn_load(&m, path);
     (void)unused;
     if (!st) tn_gnn_free(&m);
     return st;
@@ -1463,7 +1463,7 @@ static tn_status load_gnn(const char *path, void *unused)
 static tn_status load_singan(const char *path, void *unused)
 {
     tn_singan m;
-    tn_status st = tn_singan_load(path, &m);
+    tn_status st = tn_singan_load(&m, path);
     (void)unused;
     if (!st) tn_singan_free(&m);
     return st;
@@ -1472,7 +1472,7 @@ static tn_status load_singan(const char *path, void *unused)
 static tn_status load_kpd(const char *path, void *unused)
 {
     tn_kpd m;
-    tn_status st = tn_kpd_load(path, &m);
+    tn_status st = tn_kpd_load(&m, path);
     (void)unused;
     if (!st) tn_kpd_free(&m);
     return st;
@@ -1501,7 +1501,7 @@ TN_TEST(test_model_config_sizes)
                  tn_params_add_buffer(p, "gnn.part_info", 2, info) && tn_params_add(p, "gnn.emb", 2, emb) && !tn_model_stamp(p, "gnn", 1, NULL));
         if (p && (c = tn_params_find(p, "gnn.config"))) {
             memcpy(c->data, g, sizeof g);
-            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            TN_CHECK(tn_params_save(path, p) == TN_OK);
             TN_CHECK(refused_up_front(load_gnn, path, "network"));
             /* the network right (1 round of width 32 needs only its last attention vector here),
                the example heights of another size */
@@ -1509,7 +1509,7 @@ TN_TEST(test_model_config_sizes)
             c->data[2] = 1;
             n = 32;
             TN_CHECK(tn_params_add(p, "gnn.0s.a", 1, &n) && tn_params_add_buffer(p, "detail.example", 2, ex));
-            TN_CHECK(tn_params_save(p, path) == TN_OK);
+            TN_CHECK(tn_params_save(path, p) == TN_OK);
             TN_CHECK(refused_up_front(load_gnn, path, "detail.example"));
         }
         tn_params_free(p);
@@ -1550,10 +1550,10 @@ static int patch_config(const char *ck, const char *tensor, int index, float val
 {
     tn_params *p = NULL;
     tn_tensor *c;
-    int ok = tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, tensor)) != NULL && index < (int)c->numel;
+    int ok = tn_params_open(&p, ck) == TN_OK && (c = tn_params_find(p, tensor)) != NULL && index < (int)c->numel;
     if (ok) {
         tn_params_find(p, tensor)->data[index] = value;
-        ok = tn_params_save(p, ck) == TN_OK;
+        ok = tn_params_save(ck, p) == TN_OK;
     }
     tn_params_free(p);
     return ok;
@@ -1580,7 +1580,7 @@ static tn_status resume_gnn(const char *ck)
     resume_gnn_opts(&o, ck);
     o.train.resume = 1;
     o.train.max_iters = 2;
-    st = tn_gnn_train(&dem, &o, &m, NULL);
+    st = tn_gnn_train(&m, &dem, &o, NULL);
     if (!st) tn_gnn_free(&m);
     tn_image_free(&dem);
     return st;
@@ -1607,7 +1607,7 @@ static tn_status resume_singan(const char *ck)
     resume_singan_opts(&o, ck);
     o.train.resume = 1;
     o.iters = 2;
-    st = tn_singan_train(&dem, &o, &m, NULL);
+    st = tn_singan_train(&m, &dem, &o, NULL);
     if (!st) tn_singan_free(&m);
     tn_image_free(&dem);
     return st;
@@ -1639,18 +1639,18 @@ TN_TEST(test_resume_config_sizes)
     tn_singan sg;
     int s;
     resume_gnn_opts(&go, gck);
-    TN_CHECK(tn_gnn_train(&dem, &go, &g, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&g, &dem, &go, NULL) == TN_OK);
     tn_gnn_free(&g);
     TN_CHECK(resume_gnn(gck) == TN_OK); /* the checkpoint as written resumes */
     /* 2^26 part points (805 MB of part_pts) over the example's real parts */
     TN_CHECK(patch_config(gck, "gnn.config", 14, 67108864.0f) && resume_refused(resume_gnn, gck, "part tensors"));
-    TN_CHECK(tn_gnn_train(&dem, &go, &g, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&g, &dem, &go, NULL) == TN_OK);
     tn_gnn_free(&g);
     /* 16 rounds of the widest network, 256-wide embeddings */
     TN_CHECK(patch_config(gck, "gnn.config", 1, 256.0f) && patch_config(gck, "gnn.config", 2, 16.0f) &&
              resume_refused(resume_gnn, gck, "network"));
     resume_singan_opts(&so, sck);
-    TN_CHECK(tn_singan_train(&small, &so, &sg, NULL) == TN_OK);
+    TN_CHECK(tn_singan_train(&sg, &small, &so, NULL) == TN_OK);
     tn_singan_free(&sg);
     TN_CHECK(resume_singan(sck) == TN_OK);
     /* every scale 512 wide (about 1.3 GB of generators, critics and Adam moments at 3 scales) */
@@ -1706,7 +1706,7 @@ TN_TEST(test_huge_sketch_progress)
     progress_log l = {0, 0, 0, 0.0};
     tn_rng rng;
     int i, j;
-    if (tn_gnn_load("tests/fuzz/corpus/fuzz_model/gnn.tnw", &m) != TN_OK) {
+    if (tn_gnn_load(&m, "tests/fuzz/corpus/fuzz_model/gnn.tnw") != TN_OK) {
         TN_SKIP("tests/fuzz/corpus/fuzz_model/gnn.tnw not found (run from the repository root)");
     }
     memset(&sk, 0, sizeof sk);
@@ -1733,7 +1733,7 @@ TN_TEST(test_huge_sketch_progress)
     TN_CHECK(sk.items && i == sk.count);
     memset(&o, 0, sizeof o);
     tn_set_progress(log_progress, &l); /* the gain by its test (default) */
-    if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&m, &sk, 400, 400, &o, &out) == TN_OK && image_finite(&out));
+    if (sk.items && i == sk.count) TN_CHECK(tn_gnn_generate(&out, &m, &sk, 400, 400, &o) == TN_OK && image_finite(&out));
     tn_set_progress(NULL, NULL);
     fprintf(stderr, "   %d progress reports (%d of gnn-prepare) for 80000 segments on 400 x 400\n", l.calls, l.prepare);
     TN_CHECK(l.calls >= 1 && l.last == 1.0); /* one 512 px tile here */
@@ -1750,7 +1750,7 @@ TN_TEST(test_huge_sketch_progress)
             for (j = 0; j < 3 * sk.items[i].npoints; j++)
                 if (j % 3 != 2) sk.items[i].points[j] *= 0.16f;
         sk.width = sk.height = 64;
-        TN_CHECK(tn_gnn_generate(&m, &sk, 64, 64, &o, &out) == TN_ERR_TOO_LARGE &&
+        TN_CHECK(tn_gnn_generate(&out, &m, &sk, 64, 64, &o) == TN_ERR_TOO_LARGE &&
                  strstr(tn_last_error(), "gnn generate: the polylines drawn pixel by pixel cover"));
         TN_CHECK(tn_time_seconds() - t0 < 1.0 && out.data == NULL);
         fprintf(stderr, "   on 64 x 64: %s (%.3f s)\n", tn_last_error(), tn_time_seconds() - t0);
@@ -1857,7 +1857,7 @@ TN_TEST(test_tiff_mutated)
             tn_image img = {0, 0, 0, NULL};
             TN_CHECK(tn_image_create(&img, 21, 13, 2) == TN_OK);
             pattern(&img, -40.0f, 1234.5f);
-            TN_CHECK(tn_image_save_memory(&img, NULL, TN_FORMAT_TIFF, &seed, &n) == TN_OK);
+            TN_CHECK(tn_image_save_memory(&seed, &n, &img, TN_FORMAT_TIFF, NULL) == TN_OK);
             tn_image_free(&img);
         }
         TN_CHECK(seed != NULL);
@@ -1903,7 +1903,7 @@ TN_TEST(test_tiff_hostile)
         memcpy(b, seed, n);                                                                   \
         TN_CHECK(expr);                                                                       \
         tn_clear_error();                                                                     \
-        st_ = tn_image_load_memory(b, n, "hostile.tif", &img, NULL, NULL);                    \
+        st_ = tn_image_load_memory(&img, b, n, "hostile.tif", NULL, NULL);                    \
         TN_CHECK(outcome_ok(st_, &img));                                                      \
         if ((int)(want) >= 0) TN_CHECK(st_ == (want)); /* -1: either outcome */              \
         tn_image_free(&img);                                                                  \
@@ -1942,9 +1942,9 @@ TN_TEST(test_tiff_hostile)
         if (e) {
             e[0] = 254; e[1] = 0;
             put_le32(b + ifd + 2 + 12 * cnt, ifd); /* and the chain points back at itself */
-            TN_CHECK(tn_image_load_memory(b, n, "loop.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && strstr(tn_last_error(), "loop"));
+            TN_CHECK(tn_image_load_memory(&img, b, n, "loop.tif", NULL, NULL) == TN_ERR_CORRUPT && strstr(tn_last_error(), "loop"));
             put_le32(b + ifd + 2 + 12 * cnt, 0); /* only an overview: FORMAT */
-            TN_CHECK(tn_image_load_memory(b, n, "ovr.tif", &img, NULL, NULL) == TN_ERR_FORMAT && !img.data);
+            TN_CHECK(tn_image_load_memory(&img, b, n, "ovr.tif", NULL, NULL) == TN_ERR_FORMAT && !img.data);
         }
     }
     /* sample layout nonsense */
@@ -1966,11 +1966,11 @@ TN_TEST(test_tiff_hostile)
     /* truncated deflate: a strip's byte count cut short, and its stream cut inside the file */
     memcpy(b, defl, nd);
     TN_CHECK(tiff_set_array(b, nd, 279, 0, 9));
-    TN_CHECK(tn_image_load_memory(b, nd, "cut.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+    TN_CHECK(tn_image_load_memory(&img, b, nd, "cut.tif", NULL, NULL) == TN_ERR_CORRUPT && !img.data);
     tn_image_free(&img);
     memcpy(b, defl, nd);
     TN_CHECK(tiff_set_array(b, nd, 279, 3, 1));
-    TN_CHECK(tn_image_load_memory(b, nd, "cut.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+    TN_CHECK(tn_image_load_memory(&img, b, nd, "cut.tif", NULL, NULL) == TN_ERR_CORRUPT && !img.data);
     tn_image_free(&img);
     /* issue 33 item 4: strips sharing one deflate stream (a decompression bomb's trick, which
        loaded with TN_OK before) and strips overlapping by a byte: refused */
@@ -1981,15 +1981,15 @@ TN_TEST(test_tiff_hostile)
         TN_CHECK(ns >= 3 && o0 && c0);
         memcpy(b, defl, nd);
         for (k = 1; k + 1 < ns; k++) TN_CHECK(tiff_set_array(b, nd, 273, k, o0) && tiff_set_array(b, nd, 279, k, c0));
-        TN_CHECK(tn_image_load_memory(b, nd, "shared.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+        TN_CHECK(tn_image_load_memory(&img, b, nd, "shared.tif", NULL, NULL) == TN_ERR_CORRUPT && !img.data);
         TN_CHECK(strstr(tn_last_error(), "overlap") != NULL);
         tn_image_free(&img);
         memcpy(b, defl, nd);
         TN_CHECK(tiff_set_array(b, nd, 273, 1, tiff_get_array(defl, nd, 273, 1) - 1));
         TN_CHECK(tiff_set_array(b, nd, 279, 1, tiff_get_array(defl, nd, 279, 1) + 1));
-        TN_CHECK(tn_image_load_memory(b, nd, "overlap.tif", &img, NULL, NULL) == TN_ERR_CORRUPT && !img.data);
+        TN_CHECK(tn_image_load_memory(&img, b, nd, "overlap.tif", NULL, NULL) == TN_ERR_CORRUPT && !img.data);
         tn_image_free(&img);
-        TN_CHECK(tn_image_load_memory(defl, nd, "defl.tif", &img, NULL, NULL) == TN_OK);
+        TN_CHECK(tn_image_load_memory(&img, defl, nd, "defl.tif", NULL, NULL) == TN_OK);
         tn_image_free(&img);
     }
     /* tiles: zero and huge tile sizes in the BigTIFF big-endian fixture (values patched by search) */
@@ -2011,7 +2011,7 @@ TN_TEST(test_tiff_hostile)
                 }
             TN_CHECK(hit);
             tn_clear_error();
-            st = tn_image_load_memory(t2, nt, "tiles.tif", &img, NULL, NULL);
+            st = tn_image_load_memory(&img, t2, nt, "tiles.tif", NULL, NULL);
             if (st == TN_OK || !tn_last_error()[0]) fprintf(stderr, "  tile size %u: status %d '%s'\n", tsz[j], (int)st, tn_last_error());
             TN_CHECK(outcome_ok(st, &img));
             TN_CHECK(img.data == NULL); /* every changed tile size breaks the tile count */
@@ -2151,7 +2151,7 @@ TN_TEST(test_texgan_checkpoint_fields)
     o.train.minutes = 100;
     o.train.checkpoint = ck;
     TN_CHECK(tn_texgan_train(&m, &ex, &o, NULL) == TN_OK);
-    TN_CHECK(tn_texgan_save(&m, model) == TN_OK);
+    TN_CHECK(tn_texgan_save(model, &m) == TN_OK);
     o.train.resume = 1;
     o.train.checkpoint = bad;
     o.train.max_iters = 2;
@@ -2235,30 +2235,30 @@ TN_TEST(test_render_args)
             if (f == 3) vo.fov_deg = bad[i];
             if (f == 4) vo.relief = bad[i];
             if (f == 5) vo.colours.shade.altitude_deg = bad[i];
-            st = tn_render_view(&dem, &vo, &out);
+            st = tn_render_view(&out, &dem, &vo);
             TN_CHECK(st != TN_OK ? out.data == NULL && tn_last_error()[0] : image_finite(&out));
             tn_image_free(&out);
         }
         memset(&ro, 0, sizeof ro);
         ro.lo = bad[i];
         ro.hi = 1.0f;
-        TN_CHECK(tn_render_preview(&dem, &ro, &out) != TN_OK || image_finite(&out));
+        TN_CHECK(tn_render_preview(&out, &dem, &ro) != TN_OK || image_finite(&out));
         tn_image_free(&out);
     }
     memset(&vo, 0, sizeof vo);
     vo.width = -5;
-    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    TN_CHECK(tn_render_view(&out, &dem, &vo) == TN_ERR_INVALID_ARG && out.data == NULL);
     vo.width = vo.height = 100000;
-    TN_CHECK(tn_render_view(&dem, &vo, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+    TN_CHECK(tn_render_view(&out, &dem, &vo) == TN_ERR_INVALID_ARG && out.data == NULL);
     { /* shade strength outside 0..1 (was clamped, NaN gave the default) */
         static const float ss[] = {NAN, -0.5f, 2.0f, INFINITY};
         for (i = 0; i < 4; i++) {
             memset(&ro, 0, sizeof ro);
             ro.shade_strength = ss[i];
-            TN_CHECK(tn_render_preview(&dem, &ro, &out) == TN_ERR_INVALID_ARG && out.data == NULL);
+            TN_CHECK(tn_render_preview(&out, &dem, &ro) == TN_ERR_INVALID_ARG && out.data == NULL);
         }
         ro.shade_strength = 1.0f;
-        TN_CHECK(tn_render_preview(&dem, &ro, &out) == TN_OK && image_finite(&out));
+        TN_CHECK(tn_render_preview(&out, &dem, &ro) == TN_OK && image_finite(&out));
         tn_image_free(&out);
     }
     tn_image_free(&dem);
@@ -2290,8 +2290,8 @@ TN_TEST(test_detail_and_colour_args)
     o.hi = 200; /* small_dem's heights */
     TN_CHECK(tn_detail_maps_from_image(&m, &syn, &ex, &o) == TN_OK);
     tn_detail_maps_free(&m);
-    TN_CHECK(tn_texture_colour_shift(&ex, &target, 0.0f, INFINITY, &shift) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_texture_colour_shift(&ex, &target, -INFINITY, 1.0f, &shift) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texture_colour_shift(&shift, &ex, &target, 0.0f, INFINITY) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_texture_colour_shift(&shift, &ex, &target, -INFINITY, 1.0f) == TN_ERR_INVALID_ARG);
     tn_image_free(&ex);
     tn_image_free(&syn);
 }

@@ -11,7 +11,7 @@
 static double flat_h0(double lat_deg, int doy)
 {
     double d, e, phi = lat_deg * PI / 180.0, c, ws;
-    tn_sun_day(doy, &d, &e);
+    tn_sun_day(&d, &e, doy);
     c = -tan(phi) * tan(d);
     ws = c <= -1 ? PI : c >= 1 ? 0 : acos(c);
     return 24.0 / PI * 1367.0 * e * (cos(phi) * cos(d) * sin(ws) + ws * sin(phi) * sin(d));
@@ -22,7 +22,7 @@ static double flat_h0(double lat_deg, int doy)
 static double south_plane_h0(double lat_deg, double beta_deg, int doy)
 {
     double d, e, phi = lat_deg * PI / 180.0, pb = (lat_deg - beta_deg) * PI / 180.0, c1, c2, w1, w2, ws;
-    tn_sun_day(doy, &d, &e);
+    tn_sun_day(&d, &e, doy);
     c1 = -tan(phi) * tan(d);
     c2 = -tan(pb) * tan(d);
     w1 = c1 <= -1 ? PI : c1 >= 1 ? 0 : acos(c1);
@@ -36,7 +36,7 @@ static double plane_numeric(double lat_deg, double nE, double nN, double nU, int
 {
     double d, e, phi = lat_deg * PI / 180.0, sum = 0, dw = 2.0 * PI / 43200.0;
     int i;
-    tn_sun_day(doy, &d, &e);
+    tn_sun_day(&d, &e, doy);
     for (i = 0; i < 43200; i++) {
         double w = -PI + (i + 0.5) * dw;
         double sE = -cos(d) * sin(w), sN = cos(phi) * sin(d) - sin(phi) * cos(d) * cos(w), sU = sin(phi) * sin(d) + cos(phi) * cos(d) * cos(w);
@@ -67,7 +67,7 @@ TN_TEST(test_flat_plane_matches_formula)
     memset(&o, 0, sizeof o);
     o.dx = 30.0f;
     for (li = 0; li < sizeof lats / sizeof lats[0]; li++) {
-        TN_CHECK(tn_insolation(&dem, lats[li], &o, &out) == TN_OK);
+        TN_CHECK(tn_insolation(&out, &dem, lats[li], &o) == TN_OK);
         TN_CHECK(out.channels == 12);
         for (m = 0; m < 12 && out.data; m++) {
             double ref = flat_h0(lats[li], tn_day_of_year(m + 1, 15));
@@ -95,13 +95,13 @@ TN_TEST(test_tilted_planes)
         tn_image east = plane(24, 24, 10.0f, -0.5, 0.2);
         double inv = 1.0 / sqrt(0.25 + 0.04 + 1.0);
         o.no_shadows = !sh;
-        TN_CHECK(tn_insolation(&south, 46.0, &o, &out) == TN_OK);
+        TN_CHECK(tn_insolation(&out, &south, 46.0, &o) == TN_OK);
         for (m = 0; m < 12 && out.data; m++) {
             double ref = south_plane_h0(46.0, beta, tn_day_of_year(m + 1, 15));
             TN_CHECK_NEAR(TN_PIXEL(&out, 12, 12, m), ref, (sh ? 2e-3 : 1e-4) * ref + 0.05);
         }
         tn_image_free(&out);
-        TN_CHECK(tn_insolation(&east, -20.0, &o, &out) == TN_OK);
+        TN_CHECK(tn_insolation(&out, &east, -20.0, &o) == TN_OK);
         for (m = 0; m < 12 && out.data; m++) {
             double ref = plane_numeric(-20.0, 0.5 * inv, -0.2 * inv, inv, tn_day_of_year(m + 1, 15));
             TN_CHECK_NEAR(TN_PIXEL(&out, 12, 12, m), ref, (sh ? 3e-3 : 2e-4) * ref + 0.5);
@@ -126,9 +126,9 @@ TN_TEST(test_wall_shadow_and_threads)
     memset(&o, 0, sizeof o);
     o.dx = 10.0f;
     tn_set_threads(1);
-    TN_CHECK(tn_insolation(&dem, 46.0, &o, &a) == TN_OK);
+    TN_CHECK(tn_insolation(&a, &dem, 46.0, &o) == TN_OK);
     tn_set_threads(2);
-    TN_CHECK(tn_insolation(&dem, 46.0, &o, &b) == TN_OK);
+    TN_CHECK(tn_insolation(&b, &dem, 46.0, &o) == TN_OK);
     tn_set_threads(0);
     if (!a.data || !b.data) return;
     n = (size_t)64 * 64 * 12;
@@ -140,7 +140,7 @@ TN_TEST(test_wall_shadow_and_threads)
     /* one month alone equals that month of the year */
     o.month = 12;
     tn_image_free(&b);
-    TN_CHECK(tn_insolation(&dem, 46.0, &o, &b) == TN_OK);
+    TN_CHECK(tn_insolation(&b, &dem, 46.0, &o) == TN_OK);
     TN_CHECK(b.channels == 1 && b.data && b.data[55 * 64 + 32] == TN_PIXEL(&a, 32, 55, 11));
     tn_image_free(&a);
     tn_image_free(&b);
@@ -152,21 +152,21 @@ TN_TEST(test_insolation_bad_input)
     tn_image dem = plane(8, 8, 1.0f, 0, 0), out = {0, 0, 0, NULL}, tiny = {0, 0, 0, NULL};
     tn_insolation_opts o;
     memset(&o, 0, sizeof o);
-    TN_CHECK(tn_insolation(&dem, 91.0, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_insolation(&out, &dem, 91.0, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "latitude") != NULL);
-    TN_CHECK(tn_insolation(&dem, NAN, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_insolation(&out, &dem, NAN, NULL) == TN_ERR_INVALID_ARG);
     o.month = 13;
-    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_insolation(&out, &dem, 10.0, &o) == TN_ERR_INVALID_ARG);
     o.month = 2;
     o.day = 30;
-    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_insolation(&out, &dem, 10.0, &o) == TN_ERR_INVALID_ARG);
     o.day = 0;
     o.dx = -1;
-    TN_CHECK(tn_insolation(&dem, 10.0, &o, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_insolation(&out, &dem, 10.0, &o) == TN_ERR_INVALID_ARG);
     dem.data[5] = NAN;
-    TN_CHECK(tn_insolation(&dem, 10.0, NULL, &out) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_insolation(&out, &dem, 10.0, NULL) == TN_ERR_NUMERIC);
     tn_image_create(&tiny, 1, 5, 1);
-    TN_CHECK(tn_insolation(&tiny, 10.0, NULL, &out) == TN_ERR_EMPTY);
+    TN_CHECK(tn_insolation(&out, &tiny, 10.0, NULL) == TN_ERR_EMPTY);
     TN_CHECK(out.data == NULL);
     tn_image_free(&tiny);
     tn_image_free(&dem);
@@ -180,7 +180,7 @@ TN_TEST(test_climate_csv)
     tn_climate c;
     char buf[1024];
     char *p;
-    TN_CHECK(tn_climate_parse(good, strlen(good), "good.csv", &c) == TN_OK);
+    TN_CHECK(tn_climate_parse(&c, good, strlen(good), "good.csv") == TN_OK);
     TN_CHECK(c.has_latitude && fabs(c.latitude - 45.9f) < 1e-5 && c.elevation == 299.0f);
     TN_CHECK(c.t[0] == -0.3f && c.p[11] == 100.0f);
     /* the lapse rate: 1299 m is 6 C colder than the station */
@@ -189,23 +189,23 @@ TN_TEST(test_climate_csv)
     snprintf(buf, sizeof buf, "%s", good);
     p = strstr(buf, "12,0.8,100\n");
     *p = 0;
-    TN_CHECK(tn_climate_parse(buf, strlen(buf), "eleven.csv", &c) == TN_ERR_FORMAT);
+    TN_CHECK(tn_climate_parse(&c, buf, strlen(buf), "eleven.csv") == TN_ERR_FORMAT);
     TN_CHECK(strstr(tn_last_error(), "11 given") != NULL && strstr(tn_last_error(), "month 12") != NULL);
     /* NaN */
     snprintf(buf, sizeof buf, "%s", good);
     memcpy(strstr(buf, "4,10.6,98"), "4,nan ,98", 9);
-    TN_CHECK(tn_climate_parse(buf, strlen(buf), "nan.csv", &c) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_climate_parse(&c, buf, strlen(buf), "nan.csv") == TN_ERR_NUMERIC);
     TN_CHECK(strstr(tn_last_error(), "nan.csv:8") != NULL);
     /* latitude out of range, a month twice, garbage */
     snprintf(buf, sizeof buf, "%s", good);
     memcpy(strstr(buf, "45.9"), "95.9", 4);
-    TN_CHECK(tn_climate_parse(buf, strlen(buf), "lat.csv", &c) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_climate_parse(&c, buf, strlen(buf), "lat.csv") == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "latitude") != NULL);
     snprintf(buf, sizeof buf, "%s", good);
     memcpy(strstr(buf, "\n2,1.6"), "\n1,1.6", 6);
-    TN_CHECK(tn_climate_parse(buf, strlen(buf), "twice.csv", &c) == TN_ERR_FORMAT);
-    TN_CHECK(tn_climate_parse("1,2\n", 4, "short.csv", &c) == TN_ERR_FORMAT);
-    TN_CHECK(tn_climate_load("/nonexistent/climate.csv", &c) == TN_ERR_IO);
+    TN_CHECK(tn_climate_parse(&c, buf, strlen(buf), "twice.csv") == TN_ERR_FORMAT);
+    TN_CHECK(tn_climate_parse(&c, "1,2\n", 4, "short.csv") == TN_ERR_FORMAT);
+    TN_CHECK(tn_climate_load(&c, "/nonexistent/climate.csv") == TN_ERR_IO);
 }
 
 TN_TEST(test_koppen_presets)
@@ -215,7 +215,7 @@ TN_TEST(test_koppen_presets)
     const char *code;
     for (i = 0; (code = tn_climate_koppen_code(i)) != NULL; i++, n++) {
         float lo = 1e9f, hi = -1e9f, ptot = 0;
-        TN_CHECK(tn_climate_koppen(code, &c) == TN_OK);
+        TN_CHECK(tn_climate_koppen(&c, code) == TN_OK);
         TN_CHECK(tn_climate_check(&c) == TN_OK && c.has_latitude);
         for (m = 0; m < 12; m++) {
             if (c.t[m] < lo) lo = c.t[m];
@@ -230,9 +230,9 @@ TN_TEST(test_koppen_presets)
         if (code[0] == 'E') TN_CHECK(hi < 10.0f);
     }
     TN_CHECK(n >= 5);
-    TN_CHECK(tn_climate_koppen("D", &c) == TN_OK && strncmp(c.name, "Dfc", 3) == 0);
-    TN_CHECK(tn_climate_koppen("cfb", &c) == TN_OK && c.latitude > 45);
-    TN_CHECK(tn_climate_koppen("Xyz", &c) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_climate_koppen(&c, "D") == TN_OK && strncmp(c.name, "Dfc", 3) == 0);
+    TN_CHECK(tn_climate_koppen(&c, "cfb") == TN_OK && c.latitude > 45);
+    TN_CHECK(tn_climate_koppen(&c, "Xyz") == TN_ERR_INVALID_ARG);
 }
 
 /* a cone 200 m .. 2600 m high on 10 km, pixels 80 m */
@@ -261,8 +261,8 @@ TN_TEST(test_season_snow_and_green)
     o.insolation.dx = 80.0f;
     o.insolation.step_minutes = 30.0f;
     o.insolation.directions = 16;
-    TN_CHECK(tn_climate_koppen("Cfb", &c) == TN_OK);
-    TN_CHECK(tn_season_texture(&dem, &c, NAN, NULL, times, 3, &o, out, st) == TN_OK);
+    TN_CHECK(tn_climate_koppen(&c, "Cfb") == TN_OK);
+    TN_CHECK(tn_season_texture(out, &dem, &c, NAN, NULL, times, 3, &o, st) == TN_OK);
     if (!out[0].data) return;
     /* January: snow on the summit, little in the lowland corner; July: none on the lowland */
     TN_CHECK(TN_PIXEL(&st[0].snow, n / 2, n / 2, 0) > 50.0f);
@@ -278,16 +278,16 @@ TN_TEST(test_season_snow_and_green)
     tn_season_state_free(&st[0]); tn_season_state_free(&st[1]); tn_season_state_free(&st[2]);
     /* bad input: a wrong-sized insolation, no latitude, NaN time */
     tn_image_create(&bad, 47, 48, 12);
-    TN_CHECK(tn_season_texture(&dem, &c, NAN, &bad, times, 1, &o, out, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_season_texture(out, &dem, &c, NAN, &bad, times, 1, &o, NULL) == TN_ERR_SHAPE);
     TN_CHECK(strstr(tn_last_error(), "insolation") != NULL);
     tn_image_free(&bad);
     c.has_latitude = 0;
-    TN_CHECK(tn_season_texture(&dem, &c, NAN, NULL, times, 1, &o, out, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_season_texture(out, &dem, &c, NAN, NULL, times, 1, &o, NULL) == TN_ERR_INVALID_ARG);
     times[0] = NAN;
-    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, times, 1, &o, out, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_season_texture(out, &dem, &c, 46.0, NULL, times, 1, &o, NULL) == TN_ERR_NUMERIC);
     c.t[3] = NAN;
     times[0] = 0;
-    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, times, 1, &o, out, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_season_texture(out, &dem, &c, 46.0, NULL, times, 1, &o, NULL) == TN_ERR_NUMERIC);
     tn_image_free(&dem);
 }
 
@@ -300,14 +300,14 @@ TN_TEST(test_season_real_dem)
     float times[2] = {1.0f, 7.0f};
     double s0 = 0, s1 = 0;
     size_t i, n;
-    if (tn_image_load(tn_test_data("dem/alps_montblanc/alps_montblanc_128.png"), &dem, NULL)) TN_SKIP("no ../shared/data");
+    if (tn_image_load(&dem, tn_test_data("dem/alps_montblanc/alps_montblanc_128.png"), NULL)) TN_SKIP("no ../shared/data");
     n = (size_t)dem.width * dem.height;
     for (i = 0; i < n; i++) dem.data[i] = 454.0f + dem.data[i] * (4810.0f - 454.0f); /* MANIFEST.md's mapping */
     memset(&o, 0, sizeof o);
     o.insolation.dx = 92.7f;
     o.insolation.step_minutes = 30.0f;
-    TN_CHECK(tn_climate_koppen("Cfb", &c) == TN_OK);
-    TN_CHECK(tn_season_texture(&dem, &c, 45.8, NULL, times, 2, &o, out, st) == TN_OK);
+    TN_CHECK(tn_climate_koppen(&c, "Cfb") == TN_OK);
+    TN_CHECK(tn_season_texture(out, &dem, &c, 45.8, NULL, times, 2, &o, st) == TN_OK);
     if (!out[0].data) { tn_image_free(&dem); return; }
     for (i = 0; i < n; i++) { s0 += st[0].snow.data[i] > 10.0f; s1 += st[1].snow.data[i] > 10.0f; }
     /* Mont Blanc: most of the 560-4240 m crop is snowy in February, far less in August, and
@@ -340,8 +340,8 @@ static int kpd_set_make(kpd_set *k, int n)
     io.dx = 30.0f;
     io.step_minutes = 60.0f;
     io.directions = 8;
-    if (!k->dem.data || tn_climate_koppen("Dfb", &k->c) || tn_insolation(&k->dem, 55.8, &io, &k->ins)) return 0;
-    if (tn_season_texture(&k->dem, &k->c, 55.8, &k->ins, times, 4, NULL, k->tex, NULL)) return 0;
+    if (!k->dem.data || tn_climate_koppen(&k->c, "Dfb") || tn_insolation(&k->ins, &k->dem, 55.8, &io)) return 0;
+    if (tn_season_texture(k->tex, &k->dem, &k->c, 55.8, &k->ins, times, 4, NULL, NULL)) return 0;
     if (tn_image_create(&k->mask, n, n, 1)) return 0;
     for (p = 0; p < (size_t)n * n; p++) k->mask.data[p] = (p % 7) != 0; /* every 7th pixel unusable */
     for (i = 0; i < 4; i++) {
@@ -401,26 +401,26 @@ TN_TEST(test_kpd_window_equals_whole_map)
     const char *path = tn_test_tmp_path("season", "kpd.tnw");
     TN_CHECK(kpd_set_make(&k, 72));
     kpd_small_opts(&o, 4);
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_OK);
     if (!m.weights) { kpd_set_free(&k); return; }
     TN_CHECK(m.out_channels == 3 && m.cond_channels == 39 && m.iterations == 4);
     tn_set_threads(2);
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72, &whole) == TN_OK);
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 21, 38, 30, 27, &win) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&whole, &m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&win, &m, &k.dem, &k.c, &k.ins, 4.0f, 21, 38, 30, 27) == TN_OK);
     for (y = 0; y < 27 && whole.data && win.data; y++)
         for (x = 0; x < 30; x++)
             for (c = 0; c < 3; c++) ok &= TN_PIXEL(&win, x, y, c) == TN_PIXEL(&whole, 21 + x, 38 + y, c);
     TN_CHECK(ok);
     tn_set_threads(1);
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72, &whole2) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&whole2, &m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72) == TN_OK);
     TN_CHECK(same_image(&whole, &whole2));
     tn_image_free(&whole2);
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 16.0f, 0, 0, 72, 72, &whole2) == TN_OK); /* a year later */
+    TN_CHECK(tn_kpd_generate(&whole2, &m, &k.dem, &k.c, &k.ins, 16.0f, 0, 0, 72, 72) == TN_OK); /* a year later */
     TN_CHECK(same_image(&whole, &whole2));
     /* between April and May: not April's picture, and a window still equals the whole map */
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 3.5f, 0, 0, 72, 72, &between) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&between, &m, &k.dem, &k.c, &k.ins, 3.5f, 0, 0, 72, 72) == TN_OK);
     tn_image_free(&win);
-    TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 3.5f, 40, 9, 32, 50, &win) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&win, &m, &k.dem, &k.c, &k.ins, 3.5f, 40, 9, 32, 50) == TN_OK);
     ok = 1;
     for (y = 0; y < 50 && between.data && win.data; y++)
         for (x = 0; x < 32; x++)
@@ -430,8 +430,8 @@ TN_TEST(test_kpd_window_equals_whole_map)
             }
     TN_CHECK(ok && moved > 0);
     tn_set_threads(0);
-    TN_CHECK(tn_kpd_save(&m, path) == TN_OK);
-    TN_CHECK(tn_kpd_load(path, &m2) == TN_OK);
+    TN_CHECK(tn_kpd_save(path, &m) == TN_OK);
+    TN_CHECK(tn_kpd_load(&m2, path) == TN_OK);
     if (m2.weights) {
         TN_CHECK(m2.condition == TN_KPD_OURS && m2.h_offset == m.h_offset && m2.g_scale == m.g_scale && m2.iterations == 4);
         TN_CHECK(tn_test_same_params(m.weights, m2.weights, 0));
@@ -457,26 +457,26 @@ TN_TEST(test_kpd_learns_and_resumes)
     TN_CHECK(kpd_set_make(&k, 48));
     kpd_small_opts(&o, 40);
     o.gan_weight = -1; /* L1 only: a quick, steady descent */
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, &st) == TN_OK);
+    TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, &st) == TN_OK);
     printf("# kpd L1 first %.4f, last 50 mean %.4f\n", st.loss_l1_first, st.loss_l1);
     TN_CHECK(st.loss_l1 < 0.7f * st.loss_l1_first);
     tn_kpd_free(&a);
     kpd_small_opts(&o, 6);
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, NULL) == TN_OK);
+    TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, NULL) == TN_OK);
     remove(ck);
     kpd_small_opts(&o, 3);
     o.train.checkpoint = ck;
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &b, NULL) == TN_OK);
+    TN_CHECK(tn_kpd_train(&b, k.s, 4, &o, NULL) == TN_OK);
     tn_kpd_free(&b);
     o.train.max_iters = 6;
     o.train.resume = 1;
     o.train.seed = 99; /* the checkpoint's seed wins */
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &b, &st) == TN_OK);
+    TN_CHECK(tn_kpd_train(&b, k.s, 4, &o, &st) == TN_OK);
     TN_CHECK(st.resumed_from == 3 && st.iterations == 6);
     if (a.weights && b.weights) TN_CHECK(tn_test_same_params(a.weights, b.weights, 0));
     /* a checkpoint of these pictures refuses other pictures */
     k.s[0].time = 1.0f;
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &a, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, NULL) == TN_ERR_SHAPE);
     tn_kpd_free(&a);
     tn_kpd_free(&b);
     kpd_set_free(&k);
@@ -492,7 +492,7 @@ static tn_status kpd_resume(kpd_set *k, const char *ck)
     kpd_small_opts(&o, 6);
     o.train.checkpoint = ck;
     o.train.resume = 1;
-    st = tn_kpd_train(k->s, 4, &o, &m, NULL);
+    st = tn_kpd_train(&m, k->s, 4, &o, NULL);
     if (!st) tn_kpd_free(&m);
     return st;
 }
@@ -509,9 +509,9 @@ static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float v
     remove(ck);
     kpd_small_opts(&o, 3);
     o.train.checkpoint = ck;
-    if (tn_kpd_train(k->s, 4, &o, &m, NULL)) return 0;
+    if (tn_kpd_train(&m, k->s, 4, &o, NULL)) return 0;
     tn_kpd_free(&m);
-    ok = tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, "kpd.config")) != NULL;
+    ok = tn_params_open(&p, ck) == TN_OK && (c = tn_params_find(p, "kpd.config")) != NULL;
     if (ok && index >= 0) c->data[index] = value;
     for (i = 0; ok && index < 0 && i < tn_params_meta_count(p); i++) {
         const char *v, *name = tn_params_meta_key(p, i, &v);
@@ -523,7 +523,7 @@ static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float v
             index = 0;
         }
     }
-    ok = ok && index >= 0 && tn_params_save(p, ck) == TN_OK;
+    ok = ok && index >= 0 && tn_params_save(ck, p) == TN_OK;
     tn_params_free(p);
     return ok;
 }
@@ -559,9 +559,9 @@ TN_TEST(test_kpd_resume_config_sizes)
     {
         tn_params *p = NULL;
         tn_tensor *c;
-        if (tn_params_open(ck, &p) == TN_OK && (c = tn_params_find(p, "kpd.config"))) {
+        if (tn_params_open(&p, ck) == TN_OK && (c = tn_params_find(p, "kpd.config"))) {
             c->data[6] = 3e38f;
-            TN_CHECK(tn_params_save(p, ck) == TN_OK);
+            TN_CHECK(tn_params_save(ck, p) == TN_OK);
         }
         tn_params_free(p);
         TN_CHECK(kpd_resume_refused(&k, ck, "damaged kpd.config"));
@@ -586,29 +586,29 @@ TN_TEST(test_kpd_bad_input)
     snprintf(other, sizeof other, "%s", tn_test_tmp_path("season", "other.tnw"));
     TN_CHECK(kpd_set_make(&k, 40));
     kpd_small_opts(&o, 1);
-    TN_CHECK(tn_kpd_train(NULL, 0, &o, &m, NULL) == TN_ERR_EMPTY);
+    TN_CHECK(tn_kpd_train(&m, NULL, 0, &o, NULL) == TN_ERR_EMPTY);
     keep = k.tex[1].data[5];
     k.tex[1].data[5] = NAN; /* pixel 5 is valid */
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_ERR_NUMERIC);
     k.tex[1].data[0] = NAN; /* pixel 0 is masked: allowed */
     k.tex[1].data[5] = keep;
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_OK);
     TN_CHECK(tn_image_create(&small, 20, 40, 1) == TN_OK);
     k.s[2].mask = &small;
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_ERR_SHAPE);
     k.s[2].mask = &k.mask;
     k.s[3].insolation = NULL;
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_SHAPE);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_ERR_SHAPE);
     k.s[3].insolation = &k.ins;
     o.crop = 20; /* not a multiple of 8 */
-    TN_CHECK(tn_kpd_train(k.s, 4, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_ERR_INVALID_ARG);
     if (m.weights) {
-        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, NULL, 2.0f, 0, 0, 40, 40, &out) == TN_ERR_SHAPE);
-        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, NAN, 0, 0, 40, 40, &out) == TN_ERR_NUMERIC);
-        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 2.0f, 30, 0, 20, 40, &out) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, NULL, 2.0f, 0, 0, 40, 40) == TN_ERR_SHAPE);
+        TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, &k.ins, NAN, 0, 0, 40, 40) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, &k.ins, 2.0f, 30, 0, 20, 40) == TN_ERR_INVALID_ARG);
         keep = k.dem.data[7];
         k.dem.data[7] = NAN;
-        TN_CHECK(tn_kpd_generate(&m, &k.dem, &k.c, &k.ins, 2.0f, 0, 0, 40, 40, &out) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, &k.ins, 2.0f, 0, 0, 40, 40) == TN_ERR_NUMERIC);
         TN_CHECK(out.data == NULL);
         k.dem.data[7] = keep;
     }
@@ -621,14 +621,14 @@ TN_TEST(test_kpd_bad_input)
         memset(&pv, 0, sizeof pv);
         tn_params_add(q, "singan.config", 1, &one);
         tn_model_stamp(q, "singan", 1, &pv);
-        TN_CHECK(tn_params_save(q, other) == TN_OK);
+        TN_CHECK(tn_params_save(other, q) == TN_OK);
         tn_params_free(q);
-        TN_CHECK(tn_kpd_load(other, &m) == TN_ERR_FORMAT);
+        TN_CHECK(tn_kpd_load(&m, other) == TN_ERR_FORMAT);
         TN_CHECK(m.weights == NULL);
     }
     /* data files: a climate of 11 months, an unknown row, a mask of the wrong size */
     TN_CHECK(write_text(p, "dem,nothing_here.pfm\n"));
-    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_IO);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_IO);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "d.pfm"), &k.dem, NULL) == TN_OK);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "m.pgm"), &small, NULL) == TN_OK);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "t.pfm"), &k.tex[0], NULL) == TN_OK);
@@ -638,16 +638,16 @@ TN_TEST(test_kpd_bad_input)
         fclose(f);
     }
     write_text(p, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
-    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
     printf("# %s\n", tn_last_error());
     write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
-    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
     write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
-    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_FORMAT);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
     write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
-    TN_CHECK(tn_season_data_load(p, &d) == TN_ERR_SHAPE);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_SHAPE);
     write_text(p, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
-    TN_CHECK(tn_season_data_load(p, &d) == TN_OK);
+    TN_CHECK(tn_season_data_load(&d, p) == TN_OK);
     if (!d.count) fprintf(stderr, "%s\n", tn_last_error());
     TN_CHECK(d.count == 2 && d.sites == 1 && d.samples[1].time == 4.5f && d.insolation[0].channels == 12);
     if (d.count == 2) TN_CHECK(fabsf(d.samples[0].time - (1.0f + (3.0f - 15.0f) / 28.0f)) < 1e-6f);
@@ -668,7 +668,7 @@ TN_TEST(test_season_data_slovenia)
     tn_season_data d;
     int i, n2015 = 0;
     if (!tn_test_data("seasonal_slovenia/frames.csv")) TN_SKIP("no ../shared/data");
-    TN_CHECK(tn_season_data_load("examples/data/slovenia_season.csv", &d) == TN_OK);
+    TN_CHECK(tn_season_data_load(&d, "examples/data/slovenia_season.csv") == TN_OK);
     if (!d.count) return;
     /* 47 acquisitions, 15 entirely under cloud */
     TN_CHECK(d.count == 32 && d.sites == 1 && d.lo == -0.2f && d.hi == 0.9f);

@@ -27,7 +27,7 @@ TN_TEST(training_lowers_the_reconstruction_loss)
     tn_singan_opts o;
     tn_singan_stats st;
     tiny_opts(&o, 40);
-    TN_CHECK(tn_singan_train(&dem, &o, &trained, &st) == TN_OK);
+    TN_CHECK(tn_singan_train(&trained, &dem, &o, &st) == TN_OK);
     have_trained = 1;
     TN_CHECK(trained.scales == 3 && st.scales == 3 && trained.trained == 3);
     TN_CHECK(st.iterations == 120);
@@ -44,7 +44,7 @@ TN_TEST(training_lowers_the_reconstruction_loss)
         tn_singan one;
         o.coarsest = 24;
         o.iters = 80;
-        TN_CHECK(tn_singan_train(&dem, &o, &one, &st) == TN_OK);
+        TN_CHECK(tn_singan_train(&one, &dem, &o, &st) == TN_OK);
         TN_CHECK(st.scales == 1 && st.iterations == 80);
         TN_CHECK(st.loss_rec < 0.25f * st.loss_rec_first);
         tn_singan_free(&one);
@@ -61,13 +61,13 @@ TN_TEST(save_load_round_trip)
     if (!have_trained) TN_SKIP("no model");
     memset(&g, 0, sizeof g);
     g.seed = 5;
-    TN_CHECK(tn_singan_save(&trained, path) == TN_OK);
-    TN_CHECK(tn_singan_load(path, &m) == TN_OK);
+    TN_CHECK(tn_singan_save(path, &trained) == TN_OK);
+    TN_CHECK(tn_singan_load(&m, path) == TN_OK);
     TN_CHECK(tn_test_same_params(trained.weights, m.weights, 0));
     TN_CHECK(m.scales == trained.scales && m.trained == trained.trained && m.offset == trained.offset && m.range == trained.range);
     TN_CHECK(m.iterations == 120);
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 30, 20, &g, &a) == TN_OK);
-    TN_CHECK(tn_singan_sample(&m, 0, 0, 30, 20, &g, &b) == TN_OK);
+    TN_CHECK(tn_singan_sample(&a, &trained, 0, 0, 30, 20, &g) == TN_OK);
+    TN_CHECK(tn_singan_sample(&b, &m, 0, 0, 30, 20, &g) == TN_OK);
     TN_CHECK(a.data && b.data && !memcmp(a.data, b.data, 600 * sizeof(float)));
     tn_image_free(&a);
     tn_image_free(&b);
@@ -85,22 +85,22 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
     memset(&g, 0, sizeof g);
     g.seed = 11;
     g.tile = 16; /* the whole map is itself made of 16 px tiles */
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &whole) == TN_OK);
+    TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 50, 40, &g) == TN_OK);
     g.tile = 0;
-    TN_CHECK(tn_singan_sample(&trained, 13, 7, 21, 18, &g, &tile) == TN_OK);
+    TN_CHECK(tn_singan_sample(&tile, &trained, 13, 7, 21, 18, &g) == TN_OK);
     for (y = 0; y < 18 && whole.data && tile.data; y++)
         for (x = 0; x < 21; x++) same &= TN_PIXEL(&tile, x, y, 0) == TN_PIXEL(&whole, x + 13, y + 7, 0);
     TN_CHECK(same);
     g.seed = 12;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &other) == TN_OK);
+    TN_CHECK(tn_singan_sample(&other, &trained, 0, 0, 50, 40, &g) == TN_OK);
     for (x = 0; x < 2000 && other.data && whole.data; x++) differ += fabsf(other.data[x] - whole.data[x]) > 1.0f;
     TN_CHECK(differ > 1000);
     { /* metres, within the example's range +- 10 % of it (issue 31), for both seeds */
         tn_image ex = tn_test_dem(24, 1);
         float elo, ehi, lo2, hi2;
-        tn_image_range(&ex, &elo, &ehi);
-        tn_image_range(&whole, &lo, &hi);
-        tn_image_range(&other, &lo2, &hi2);
+        tn_image_range(&elo, &ehi, &ex);
+        tn_image_range(&lo, &hi, &whole);
+        tn_image_range(&lo2, &hi2, &other);
         TN_CHECK(lo >= elo - 0.1f * (ehi - elo) && hi <= ehi + 0.1f * (ehi - elo) && hi - lo > 0.3f * (ehi - elo));
         TN_CHECK(lo2 >= elo - 0.1f * (ehi - elo) && hi2 <= ehi + 0.1f * (ehi - elo));
         tn_image_free(&ex);
@@ -122,37 +122,37 @@ TN_TEST(layout_from_the_example)
     double s_layout = 0, s_plain = 0;
     int k, differ = 0;
     if (!have_trained) TN_SKIP("no model");
-    tn_image_range(&ex, &elo, &ehi);
+    tn_image_range(&elo, &ehi, &ex);
     memset(&g, 0, sizeof g);
     g.seed = 11;
     g.layout = 1;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &whole) == TN_OK);
+    TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 50, 40, &g) == TN_OK);
     g.tile = 16;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &tiled) == TN_OK);
+    TN_CHECK(tn_singan_sample(&tiled, &trained, 0, 0, 50, 40, &g) == TN_OK);
     TN_CHECK(whole.data && tiled.data && !memcmp(whole.data, tiled.data, 50 * 40 * sizeof(float)));
     g.tile = 0;
     g.seed = 12;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 50, 40, &g, &other) == TN_OK);
+    TN_CHECK(tn_singan_sample(&other, &trained, 0, 0, 50, 40, &g) == TN_OK);
     for (k = 0; k < 2000 && other.data && whole.data; k++) differ += fabsf(other.data[k] - whole.data[k]) > 1.0f;
     TN_CHECK(differ > 1000);
-    tn_image_range(&whole, &lo, &hi);
+    tn_image_range(&lo, &hi, &whole);
     TN_CHECK(lo >= elo - 0.1f * (ehi - elo) && hi <= ehi + 0.1f * (ehi - elo) && hi - lo > 0.3f * (ehi - elo));
     tn_image_free(&whole);
     g.noise = -1;
     g.layout_noise = -1;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &whole) == TN_OK);
+    TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 24, 24, &g) == TN_OK);
     g.layout = 0;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &plain) == TN_OK);
-    TN_CHECK(tn_ssim(&ex, &whole, ehi - elo, &s_layout) == TN_OK && tn_ssim(&ex, &plain, ehi - elo, &s_plain) == TN_OK);
+    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_OK);
+    TN_CHECK(tn_ssim(&s_layout, &ex, &whole, ehi - elo) == TN_OK && tn_ssim(&s_plain, &ex, &plain, ehi - elo) == TN_OK);
     printf("# layout without noise: SSIM to the example %.3f (the coarsest generator's: %.3f)\n", s_layout, s_plain);
     TN_CHECK(s_layout > 0.8 && s_layout > s_plain + 0.2);
     g.layout = 1; /* finite: no other origin; one kind of layout */
-    TN_CHECK(tn_singan_sample(&trained, 4, 0, 24, 24, &g, &plain) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_sample(&plain, &trained, 4, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "origin") != NULL);
     g.layout = 2;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 24, 24, &g, &plain) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
     g.layout = 1;
-    TN_CHECK(tn_singan_sample(&trained, 0, 0, 8, 8, &g, &plain) == TN_ERR_INVALID_ARG); /* coarsest scale of 4 px: smaller than a patch */
+    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 8, 8, &g) == TN_ERR_INVALID_ARG); /* coarsest scale of 4 px: smaller than a patch */
     tn_image_free(&whole);
     tn_image_free(&tiled);
     tn_image_free(&other);
@@ -169,21 +169,21 @@ TN_TEST(refine_and_upscale)
     memset(&g, 0, sizeof g);
     TN_CHECK(tn_image_blur(&blur, &dem, 2.0f) == TN_OK);
     g.from_scale = 1;
-    TN_CHECK(tn_singan_refine(&trained, &blur, &g, &out) == TN_OK);
+    TN_CHECK(tn_singan_refine(&out, &trained, &blur, &g) == TN_OK);
     TN_CHECK(out.width == 24 && out.height == 24);
-    tn_image_range(&out, &lo, &hi);
+    tn_image_range(&lo, &hi, &out);
     TN_CHECK(lo > 500 && hi < 2500);
     tn_image_free(&out);
     g.from_scale = 3; /* scale 3 of 3: no generator left */
-    TN_CHECK(tn_singan_refine(&trained, &blur, &g, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_refine(&out, &trained, &blur, &g) == TN_ERR_INVALID_ARG);
     g.from_scale = 0;
     TN_CHECK(tn_image_resize(&small, &dem, 12, 12, TN_RESIZE_AREA) == TN_OK);
-    TN_CHECK(tn_singan_upscale(&trained, &small, 2.0f, &g, &out) == TN_OK);
+    TN_CHECK(tn_singan_upscale(&out, &trained, &small, 2.0f, &g) == TN_OK);
     TN_CHECK(out.width == 24 && out.height == 24);
     tn_image_free(&out);
-    TN_CHECK(tn_singan_upscale(&trained, &small, 1.0f, &g, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_upscale(&out, &trained, &small, 1.0f, &g) == TN_ERR_INVALID_ARG);
     g.from_scale = 3; /* SR mode: the input stands for the finest scale, the finest generator repeats */
-    TN_CHECK(tn_singan_upscale(&trained, &small, 3.0f, &g, &out) == TN_OK);
+    TN_CHECK(tn_singan_upscale(&out, &trained, &small, 3.0f, &g) == TN_OK);
     TN_CHECK(out.width == 36 && out.height == 36);
     tn_image_free(&out);
     tn_image_free(&small);
@@ -199,23 +199,23 @@ TN_TEST(resume_is_bit_identical)
     tn_singan a, b;
     tn_singan_stats st;
     tiny_opts(&o, 6);
-    TN_CHECK(tn_singan_train(&dem, &o, &a, NULL) == TN_OK);
+    TN_CHECK(tn_singan_train(&a, &dem, &o, NULL) == TN_OK);
     o.train.checkpoint = ck;
     o.train.max_iters = 8; /* stops in the middle of scale 2 */
-    TN_CHECK(tn_singan_train(&dem, &o, &b, &st) == TN_OK);
+    TN_CHECK(tn_singan_train(&b, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.iterations == 8 && b.trained == 2);
     tn_singan_free(&b);
     o.train.max_iters = 0;
     o.train.resume = 1;
     o.train.seed = 99; /* the checkpoint's seed wins */
-    TN_CHECK(tn_singan_train(&dem, &o, &b, &st) == TN_OK);
+    TN_CHECK(tn_singan_train(&b, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.resumed_from == 8 && st.iterations == 18 && b.trained == 3);
     TN_CHECK(tn_test_same_params(a.weights, b.weights, 0));
     tn_singan_free(&b);
     { /* a checkpoint is not a model; another example is refused */
         tn_image other = tn_test_dem(24, 3);
-        TN_CHECK(tn_singan_load(ck, &b) == TN_ERR_FORMAT);
-        TN_CHECK(tn_singan_train(&other, &o, &b, NULL) == TN_ERR_SHAPE);
+        TN_CHECK(tn_singan_load(&b, ck) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_train(&b, &other, &o, NULL) == TN_ERR_SHAPE);
         tn_image_free(&other);
     }
     tn_singan_free(&a);
@@ -231,23 +231,23 @@ TN_TEST(bad_inputs)
     tn_image out = {0, 0, 0, NULL};
     const char *path = tn_test_tmp_path("singan", "other.tnw");
     tiny_opts(&o, 2);
-    TN_CHECK(tn_singan_train(&small, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_train(&m, &small, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "smaller than the coarsest") != NULL);
     tn_image_create(&flat, 24, 24, 1);
-    TN_CHECK(tn_singan_train(&flat, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_train(&m, &flat, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "constant") != NULL);
     dem.data[30] = NAN;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_ERR_NUMERIC);
     dem.data[30] = 1000;
     o.factor = 0.95f;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     o.factor = 0;
     o.adv_weight = NAN;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "bad option") != NULL);
     o.adv_weight = 0;
     o.curv_weight = NAN;
-    TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     o.curv_weight = 0;
     { /* a model of another method */
         tn_params *p = tn_params_create();
@@ -256,9 +256,9 @@ TN_TEST(bad_inputs)
         memset(&pv, 0, sizeof pv);
         tn_params_add(p, "x", 1, &n);
         TN_CHECK(tn_model_stamp(p, "texgan", 1, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        TN_CHECK(tn_params_save(path, p) == TN_OK);
         tn_params_free(p);
-        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
         TN_CHECK(strstr(tn_last_error(), "texgan") != NULL);
         remove(path);
     }
@@ -269,9 +269,9 @@ TN_TEST(bad_inputs)
         memset(&pv, 0, sizeof pv);
         tn_params_add_buffer(p, "singan.config", 1, &n);
         TN_CHECK(tn_model_stamp(p, "singan", 1, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        TN_CHECK(tn_params_save(path, p) == TN_OK);
         tn_params_free(p);
-        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
         TN_CHECK(strstr(tn_last_error(), "format 1") != NULL);
         remove(path);
     }
@@ -282,9 +282,9 @@ TN_TEST(bad_inputs)
         memset(&pv, 0, sizeof pv);
         tn_params_add_buffer(p, "singan.config", 1, &n);
         TN_CHECK(tn_model_stamp(p, "singan", 2, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        TN_CHECK(tn_params_save(path, p) == TN_OK);
         tn_params_free(p);
-        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
         TN_CHECK(strstr(tn_last_error(), "format 2") != NULL);
         remove(path);
     }
@@ -295,22 +295,22 @@ TN_TEST(bad_inputs)
         memset(&pv, 0, sizeof pv);
         tn_params_add_buffer(p, "singan.config", 1, &n);
         TN_CHECK(tn_model_stamp(p, "singan", 3, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(p, path) == TN_OK);
+        TN_CHECK(tn_params_save(path, p) == TN_OK);
         tn_params_free(p);
-        TN_CHECK(tn_singan_load(path, &m) == TN_ERR_FORMAT);
+        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
         TN_CHECK(strstr(tn_last_error(), "format 3") != NULL);
         remove(path);
     }
     if (have_trained) {
         tn_singan_gen_opts g;
         memset(&g, 0, sizeof g);
-        TN_CHECK(tn_singan_sample(&trained, 0, 0, 0, 10, &g, &out) == TN_ERR_INVALID_ARG);
+        TN_CHECK(tn_singan_sample(&out, &trained, 0, 0, 0, 10, &g) == TN_ERR_INVALID_ARG);
         flat.data[5] = NAN;
-        TN_CHECK(tn_singan_refine(&trained, &flat, &g, &out) == TN_ERR_NUMERIC);
+        TN_CHECK(tn_singan_refine(&out, &trained, &flat, &g) == TN_ERR_NUMERIC);
         TN_CHECK(out.data == NULL);
     }
     memset(&m, 0, sizeof m);
-    TN_CHECK(tn_singan_sample(&m, 0, 0, 10, 10, NULL, &out) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_singan_sample(&out, &m, 0, 0, 10, 10, NULL) == TN_ERR_INVALID_ARG);
     tn_image_free(&flat);
     tn_image_free(&small);
     tn_image_free(&dem);
@@ -328,7 +328,7 @@ TN_TEST(curvature_loss)
         tn_singan_opts o;
         tiny_opts(&o, 40);
         o.curv_weight = v ? 0.0f : -1.0f; /* v = 1: the default weight */
-        TN_CHECK(tn_singan_train(&dem, &o, &m, NULL) == TN_OK);
+        TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_OK);
         for (k = 0; k < 4; k++) {
             tn_image out = {0, 0, 0, NULL};
             tn_singan_gen_opts g;
@@ -337,8 +337,8 @@ TN_TEST(curvature_loss)
             memset(&g, 0, sizeof g);
             memset(&ro, 0, sizeof ro);
             g.seed = 10 + (uint64_t)k;
-            TN_CHECK(tn_singan_sample(&m, 0, 0, 24, 24, &g, &out) == TN_OK);
-            TN_CHECK(tn_realism_compare(&dem, &out, &ro, &r) == TN_OK);
+            TN_CHECK(tn_singan_sample(&out, &m, 0, 0, 24, 24, &g) == TN_OK);
+            TN_CHECK(tn_realism_compare(&r, &dem, &out, &ro) == TN_OK);
             d[v] += r.curvature_distance / 4;
             tn_image_free(&out);
         }
@@ -361,47 +361,47 @@ TN_TEST(gpnn_sample)
     memset(&o, 0, sizeof o);
     o.coarsest = 16;
     o.seed = 1;
-    tn_image_range(&ex, &elo, &ehi);
-    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &a) == TN_OK);
+    tn_image_range(&elo, &ehi, &ex);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 80, 48, &o) == TN_OK);
     TN_CHECK(a.width == 80 && a.height == 48 && a.channels == 1);
-    tn_image_range(&a, &lo, &hi); /* averages of the example's patches: inside its range */
+    tn_image_range(&lo, &hi, &a); /* averages of the example's patches: inside its range */
     TN_CHECK(lo >= elo && hi <= ehi && hi - lo > 0.3f * (ehi - elo));
-    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &b) == TN_OK);
+    TN_CHECK(tn_gpnn_sample(&b, &ex, 80, 48, &o) == TN_OK);
     TN_CHECK(a.data && b.data && !memcmp(a.data, b.data, 80 * 48 * sizeof(float))); /* same seed, same terrain */
     tn_image_free(&b);
     o.seed = 2;
-    TN_CHECK(tn_gpnn_sample(&ex, 80, 48, &o, &b) == TN_OK);
+    TN_CHECK(tn_gpnn_sample(&b, &ex, 80, 48, &o) == TN_OK);
     for (k = 0; k < 80 * 48 && a.data && b.data; k++) differ += fabsf(a.data[k] - b.data[k]) / (80.0 * 48.0);
     TN_CHECK(differ > 0.02 * (ehi - elo));
     tn_image_free(&a);
     tn_image_free(&b);
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_OK); /* at the example's size: not a copy */
-    TN_CHECK(tn_ssim(&ex, &a, ehi - elo, &ssim) == TN_OK);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_OK); /* at the example's size: not a copy */
+    TN_CHECK(tn_ssim(&ssim, &ex, &a, ehi - elo) == TN_OK);
     TN_CHECK(ssim < 0.9);
     o.noise = -1; /* no noise: the nearest patches of the example's own coarsest scale rebuild it */
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &c) == TN_OK);
-    TN_CHECK(tn_ssim(&ex, &c, ehi - elo, &ssim) == TN_OK);
+    TN_CHECK(tn_gpnn_sample(&c, &ex, 64, 64, &o) == TN_OK);
+    TN_CHECK(tn_ssim(&ssim, &ex, &c, ehi - elo) == TN_OK);
     TN_CHECK(ssim > 0.95);
     tn_image_free(&a);
     tn_image_free(&c);
     /* bad inputs: errors with a message, no output */
     o.noise = 0;
-    TN_CHECK(tn_gpnn_sample(NULL, 64, 64, &o, &a) == TN_ERR_EMPTY && a.data == NULL);
-    TN_CHECK(tn_gpnn_sample(&ex, 0, 64, &o, &a) == TN_ERR_INVALID_ARG);
-    TN_CHECK(tn_gpnn_sample(&ex, 12, 64, &o, &a) == TN_ERR_INVALID_ARG); /* smaller than a patch at the coarsest scale */
+    TN_CHECK(tn_gpnn_sample(&a, NULL, 64, 64, &o) == TN_ERR_EMPTY && a.data == NULL);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 0, 64, &o) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 12, 64, &o) == TN_ERR_INVALID_ARG); /* smaller than a patch at the coarsest scale */
     TN_CHECK(strstr(tn_last_error(), "patch") != NULL);
     o.patch = 4;
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_INVALID_ARG);
     o.patch = 0;
     o.coarsest = 100; /* larger than the example */
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "smaller than the coarsest") != NULL);
     o.coarsest = 16;
     o.alpha = NAN;
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_INVALID_ARG);
     o.alpha = 0;
     ex.data[100] = NAN;
-    TN_CHECK(tn_gpnn_sample(&ex, 64, 64, &o, &a) == TN_ERR_NUMERIC);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_NUMERIC);
     TN_CHECK(a.data == NULL);
     tn_image_free(&ex);
 }

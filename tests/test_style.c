@@ -182,11 +182,11 @@ TN_TEST(test_transfer_threads_and_units)
     TN_CHECK(a.width == 96 && a.height == 80 && a.channels == 1);
     TN_CHECK(b.data && a.data && memcmp(a.data, b.data, (size_t)96 * 80 * sizeof(float)) == 0);
     /* heights come back in the style's units (about 1000..1320 m), not [0, 1] */
-    TN_CHECK(tn_image_range(&a, &lo, &hi) == 0);
+    TN_CHECK(tn_image_range(&lo, &hi, &a) == 0);
     TN_CHECK(lo > 850 && hi < 1500 && hi - lo > 100);
     /* and the morphology moved towards the source */
-    TN_CHECK(tn_style_compare(&content, &style, &before) == TN_OK);
-    TN_CHECK(tn_style_compare(&a, &style, &after) == TN_OK);
+    TN_CHECK(tn_style_compare(&before, &content, &style) == TN_OK);
+    TN_CHECK(tn_style_compare(&after, &a, &style) == TN_OK);
     TN_CHECK(after.slope_hist_dist < before.slope_hist_dist);
     tn_image_free(&a);
     tn_image_free(&b);
@@ -341,7 +341,7 @@ TN_TEST(test_tiles_and_progress)
     make_content(&content, 80, 80);
     make_style(&style, 80, 80);
     TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
-    TN_CHECK(out.width == 80 && tn_image_range(&out, NULL, NULL) == 0);
+    TN_CHECK(out.width == 80 && tn_image_range(NULL, NULL, &out) == 0);
     tn_image_free(&out);
     tn_image_free(&content);
     tn_image_free(&style);
@@ -383,7 +383,7 @@ TN_TEST(test_margin_progress)
         tn_set_progress(log_progress, &p);
         TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
         tn_set_progress(NULL, NULL);
-        TN_CHECK(out.width == 96 && out.height == 96 && tn_image_range(&out, NULL, NULL) == 0);
+        TN_CHECK(out.width == 96 && out.height == 96 && tn_image_range(NULL, NULL, &out) == 0);
         TN_CHECK_NEAR(p.last, 1.0, 1e-9);
         TN_CHECK(p.max <= 1.0 + 1e-9 && p.backwards == 0 && p.other_stage == 0);
         tn_image_free(&out);
@@ -461,16 +461,16 @@ TN_TEST(test_bad_input)
         tn_image_free(&wide);
         tn_image_create(&wide, 1000, 32, 1);
         for (x = 0; x < 1000 * 32; x++) wide.data[x] = (float)sin(0.05 * x) + 0.001f * (float)(x % 97);
-        TN_CHECK(tn_style_transfer(&out, &wide, &style, &o) == TN_OK && tn_image_range(&out, NULL, NULL) == 0);
+        TN_CHECK(tn_style_transfer(&out, &wide, &style, &o) == TN_OK && tn_image_range(NULL, NULL, &out) == 0);
         tn_image_free(&out);
         tn_image_free(&wide);
     }
     /* scores: a map compared with itself */
-    TN_CHECK(tn_style_compare(&style, &style, &sc) == TN_OK);
+    TN_CHECK(tn_style_compare(&sc, &style, &style) == TN_OK);
     TN_CHECK_NEAR(sc.ssim, 1.0, 1e-6);
     TN_CHECK_NEAR(sc.slope_hist_dist, 0.0, 1e-9);
     TN_CHECK_NEAR(sc.spectrum_dist, 0.0, 1e-6);
-    TN_CHECK(tn_style_compare(&tiny, &style, &sc) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_style_compare(&sc, &tiny, &style) == TN_ERR_INVALID_ARG);
     tn_image_free(&tiny);
     tn_image_free(&content);
     tn_image_free(&style);
@@ -521,7 +521,7 @@ TN_TEST(test_vgg_loader_and_path)
         else tn_init_uniform(t, &rng, -0.05f, 0.05f);
     }
     TN_CHECK(tn_params_find(p, "conv5_4.weight") && tn_params_find(p, "conv5_4.weight")->shape[1] == 512);
-    TN_CHECK(tn_params_save(p, path) == TN_OK);
+    TN_CHECK(tn_params_save(path, p) == TN_OK);
     TN_CHECK(tn_vgg19_load(&q, path) == TN_OK);
     TN_CHECK(q && memcmp(tn_params_find(q, "conv3_2.weight")->data, tn_params_find(p, "conv3_2.weight")->data,
                          tn_params_find(p, "conv3_2.weight")->numel * sizeof(float)) == 0);
@@ -532,7 +532,7 @@ TN_TEST(test_vgg_loader_and_path)
         if (!strcmp(t->name, "conv1_1.weight")) tn_params_add_buffer(wrong, t->name, 4, shape);
         else tn_params_add_buffer(wrong, t->name, t->ndim, t->shape);
     }
-    TN_CHECK(tn_params_save(wrong, bad) == TN_OK);
+    TN_CHECK(tn_params_save(bad, wrong) == TN_OK);
     {
         tn_params *r = NULL;
         TN_CHECK(tn_vgg19_load(&r, bad) == TN_ERR_SHAPE);
@@ -544,7 +544,7 @@ TN_TEST(test_vgg_loader_and_path)
     /* wrong count: a file with only the built-in layout's first tensor */
     wrong = tn_params_create();
     tn_params_add_buffer(wrong, "conv1_1.weight", 4, tn_params_find(p, "conv1_1.weight")->shape);
-    TN_CHECK(tn_params_save(wrong, bad) == TN_OK);
+    TN_CHECK(tn_params_save(bad, wrong) == TN_OK);
     {
         tn_params *r = NULL;
         TN_CHECK(tn_vgg19_load(&r, bad) == TN_ERR_SHAPE);
@@ -558,7 +558,7 @@ TN_TEST(test_vgg_loader_and_path)
     o.iters = 3;
     o.levels = 1;
     TN_CHECK(tn_style_transfer(&out, &content, &style, &o) == TN_OK);
-    TN_CHECK(out.width == 32 && out.height == 32 && tn_image_range(&out, NULL, NULL) == 0);
+    TN_CHECK(out.width == 32 && out.height == 32 && tn_image_range(NULL, NULL, &out) == 0);
     /* a params set that is not VGG-19 is refused with a clear message */
     o.vgg = p;
     tn_image_free(&out);
@@ -635,8 +635,8 @@ TN_TEST(test_large_map_keeps_source_scale)
     printf("  row power at 8 / 24 px: native source %.3g / %.3g, upsampled source %.3g / %.3g\n", a8, a24, b8, b24);
     TN_CHECK(a8 > b8);                     /* the source's ridges at their own pixel size */
     TN_CHECK(a8 / a24 > 4.0 * (b8 / b24)); /* and relatively less power at the upsampled wavelength */
-    TN_CHECK(tn_style_compare(&a, &src, &sa) == TN_OK);
-    TN_CHECK(tn_style_compare(&b, &src, &sb) == TN_OK);
+    TN_CHECK(tn_style_compare(&sa, &a, &src) == TN_OK);
+    TN_CHECK(tn_style_compare(&sb, &b, &src) == TN_OK);
     printf("  slope dist to the source: native %.3f, upsampled %.3f\n", sa.slope_hist_dist, sb.slope_hist_dist);
     TN_CHECK(sa.slope_hist_dist < sb.slope_hist_dist);
     tn_image_free(&a);

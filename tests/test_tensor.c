@@ -714,7 +714,7 @@ TN_TEST(tnw_round_trip_and_errors)
     size_t n = 0, i;
     FILE *f;
     int s2[4] = {3, 2, 3, 2}, nb = 3;
-    TN_CHECK(tn_params_save(a, path) == TN_OK);
+    TN_CHECK(tn_params_save(path, a) == TN_OK);
     TN_CHECK(tn_params_load(b, path) == TN_OK);
     for (i = 0; i < 24; i++) TN_CHECK(tn_params_find(b, "conv.weight")->data[i] == 1.0f + (float)i * 0.5f);
     TN_CHECK(tn_params_find(b, "bn.running_mean")->data[2] == -1.0f);

@@ -35,7 +35,7 @@ static tn_status toy_begin(toy *t, const tn_train_opts *opts)
     tn_optim_opts oo;
     tn_status st;
     memset(t, 0, sizeof *t);
-    if ((st = tn_train_create("toy", "toy-train", opts, &t->run))) return st;
+    if ((st = tn_train_create(&t->run, "toy", "toy-train", opts))) return st;
     tn_rng_seed(&t->rng, opts->seed, 1);
     t->p = tn_params_create();
     t->ctx = tn_ctx_create();
@@ -162,7 +162,7 @@ TN_TEST(resume_is_bit_identical)
     { /* another method's checkpoint is refused by name */
         tn_train *r = NULL;
         tn_params *ck2 = NULL;
-        TN_CHECK(tn_train_create("other", "other-train", &o, &r) == TN_OK);
+        TN_CHECK(tn_train_create(&r, "other", "other-train", &o) == TN_OK);
         TN_CHECK(tn_train_open_checkpoint(r, &ck2) == TN_ERR_FORMAT && strstr(tn_last_error(), "toy") != NULL);
         tn_train_free(r);
     }
@@ -209,15 +209,15 @@ TN_TEST(bad_settings_are_refused)
     tn_train *r = NULL;
     memset(&o, 0, sizeof o);
     o.minutes = NAN;
-    TN_CHECK(tn_train_create("toy", "t", &o, &r) == TN_ERR_INVALID_ARG && r == NULL);
+    TN_CHECK(tn_train_create(&r, "toy", "t", &o) == TN_ERR_INVALID_ARG && r == NULL);
     o.minutes = 0;
     o.max_iters = -5;
-    TN_CHECK(tn_train_create("toy", "t", &o, &r) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_train_create(&r, "toy", "t", &o) == TN_ERR_INVALID_ARG);
     o.max_iters = 0;
     o.resume = 1;
-    TN_CHECK(tn_train_create("toy", "t", &o, &r) == TN_ERR_INVALID_ARG); /* resume without a path */
+    TN_CHECK(tn_train_create(&r, "toy", "t", &o) == TN_ERR_INVALID_ARG); /* resume without a path */
     o.resume = 0;
-    TN_CHECK(tn_train_create("bad name!", "t", &o, &r) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_train_create(&r, "bad name!", "t", &o) == TN_ERR_INVALID_ARG);
     o.resume = 1;
     o.checkpoint = tn_test_tmp_path("train", "missing.ckpt");
     remove(o.checkpoint);
@@ -271,7 +271,7 @@ TN_TEST(sigkill_then_resume)
     {
         tn_params *p = NULL;
         double v = 0;
-        TN_CHECK(tn_params_open(ck, &p) == TN_OK); /* the file is whole: writes are atomic */
+        TN_CHECK(tn_params_open(&p, ck) == TN_OK); /* the file is whole: writes are atomic */
         if (!p) return;
         v = atof(tn_params_meta(p, "iteration"));
         tn_params_free(p);
@@ -318,8 +318,8 @@ TN_TEST(metadata_round_trip_and_checks)
     img.data[5] = 1.0f;
     TN_CHECK(tn_image_digest(&img) != pv.example_digest);
     TN_CHECK(tn_model_stamp(p, "toy", 2, &pv) == TN_OK);
-    TN_CHECK(tn_params_save(p, path) == TN_OK);
-    TN_CHECK(tn_params_open(path, &q) == TN_OK);
+    TN_CHECK(tn_params_save(path, p) == TN_OK);
+    TN_CHECK(tn_params_open(&q, path) == TN_OK);
     if (!q) return;
     TN_CHECK(strcmp(tn_params_meta(q, "a.b"), "replaced") == 0);
     TN_CHECK(strcmp(tn_params_meta(q, "method"), "toy") == 0);
@@ -351,7 +351,7 @@ TN_TEST(metadata_round_trip_and_checks)
             fclose(f);
         }
         q = NULL;
-        TN_CHECK(tn_params_open(path, &q) == TN_ERR_FORMAT && q == NULL && strstr(tn_last_error(), "newer") != NULL);
+        TN_CHECK(tn_params_open(&q, path) == TN_ERR_FORMAT && q == NULL && strstr(tn_last_error(), "newer") != NULL);
     }
     tn_params_free(p);
     tn_image_free(&img);
@@ -368,10 +368,10 @@ TN_TEST(texgan_refuses_other_methods)
     memset(&m, 0, sizeof m);
     TN_CHECK(tn_params_add_buffer(p, "texgan.config", 1, &n) != NULL);
     TN_CHECK(tn_model_stamp(p, "singan", 1, NULL) == TN_OK);
-    TN_CHECK(tn_params_save(p, path) == TN_OK);
+    TN_CHECK(tn_params_save(path, p) == TN_OK);
     TN_CHECK(tn_texgan_load(&m, path) == TN_ERR_FORMAT && m.weights == NULL);
     TN_CHECK(strstr(tn_last_error(), "singan") != NULL);
-    TN_CHECK(tn_model_stamp(p, "texgan", 99, NULL) == TN_OK && tn_params_save(p, path) == TN_OK);
+    TN_CHECK(tn_model_stamp(p, "texgan", 99, NULL) == TN_OK && tn_params_save(path, p) == TN_OK);
     TN_CHECK(tn_texgan_load(&m, path) == TN_ERR_FORMAT && strstr(tn_last_error(), "newer") != NULL);
     tn_params_free(p);
     remove(path);

@@ -17,7 +17,7 @@ static double tiles_vs_whole(const char *spec, int tile, int threads_tiles, int 
     memset(&o, 0, sizeof o);
     o.tile = tile;
     *bits = 1;
-    if (tn_world_parse(spec, &o, &w) != TN_OK) {
+    if (tn_world_parse(&w, spec, &o) != TN_OK) {
         fprintf(stderr, "parse: %s\n", tn_last_error());
         return -1;
     }
@@ -27,7 +27,7 @@ static double tiles_vs_whole(const char *spec, int tile, int threads_tiles, int 
         all.x = all.y = 0;
         all.w = w.out_width;
         all.h = w.out_height;
-        if (tn_world_rect(&w, all, &whole) != TN_OK) {
+        if (tn_world_rect(&whole, &w, all) != TN_OK) {
             tn_world_free(&w);
             return -1;
         }
@@ -38,7 +38,7 @@ static double tiles_vs_whole(const char *spec, int tile, int threads_tiles, int 
             tn_rect r = tn_world_tile_rect(&w, row, col);
             tn_image t = {0, 0, 0, NULL};
             int x, y, c;
-            if (tn_world_rect(&w, r, &t) != TN_OK || t.width != r.w || t.height != r.h || t.channels != whole.channels) {
+            if (tn_world_rect(&t, &w, r) != TN_OK || t.width != r.w || t.height != r.h || t.channels != whole.channels) {
                 worst = -1;
                 break;
             }
@@ -93,14 +93,14 @@ TN_TEST(perlin_tiles_equal_the_whole_map)
     check_exact(spec, 64);
     check_exact(spec, 100);
     /* the same field as tn_noise_perlin, which only stretches it to its own min..max */
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
     memset(&po, 0, sizeof po);
     po.seed = 7;
     po.frequency = 5;
     po.octaves = 7;
     TN_CHECK(tn_noise_perlin(&ref, 301, 203, &po) == TN_OK);
-    tn_image_range(&whole, &lo, &hi);
+    tn_image_range(&lo, &hi, &whole);
     TN_CHECK(lo > -100 && hi < 2500 && hi - lo > 500); /* inside the fixed bound, not flat */
     for (i = 0; i < (size_t)301 * 203; i++) {
         double v = (whole.data[i] - lo) / (hi - lo);
@@ -117,7 +117,7 @@ TN_TEST(explicit_noise_tiles_equal_the_whole_map)
     const char *spec = "world 230 170\nseed 3\nheight 0 1000\nexplicit layers=5 sigma=3,6 contrast=6\n";
     tn_world w;
     check_exact(spec, 64);
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
     TN_CHECK(w.halo == 12 + 24);
     tn_world_free(&w);
 }
@@ -162,16 +162,16 @@ TN_TEST(texgan_tiles_and_detail_maps_equal_the_whole_map)
     double d = 0, worst;
     const char *path = tn_test_tmp_path("world", "tg3.tnw");
     tiny_texgan(&m, 3);
-    TN_CHECK(tn_texgan_save(&m, path) == TN_OK);
+    TN_CHECK(tn_texgan_save(path, &m) == TN_OK);
     snprintf(spec, sizeof spec, "world 150 110\nseed 21\ntexgan model=%s\n", path);
     worst = tiles_vs_whole(spec, 32, 1, 2, &bits);
     TN_CHECK(worst >= 0 && worst <= 1e-6); /* documented tolerance: windows run other GEMM sizes */
     fprintf(stderr, "texgan tiles vs whole: max |diff| %g, bit-identical %d\n", worst, bits);
     /* the whole world is the model's synthesis mapped to [0, 1] */
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
     TN_CHECK(w.out_channels == 3 && !w.out_heights);
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
-    TN_CHECK(tn_texgan_synthesize(&m, 21, 150, 110, &synth) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
+    TN_CHECK(tn_texgan_synthesize(&synth, &m, 21, 150, 110) == TN_OK);
     for (y = 0; y < 110; y++)
         for (x = 0; x < 150; x++)
             for (c = 0; c < 3; c++) {
@@ -185,11 +185,11 @@ TN_TEST(texgan_tiles_and_detail_maps_equal_the_whole_map)
     snprintf(spec, sizeof spec, "world 150 110\nseed 21\ntexgan model=%s\ndetail factor=5\n", path);
     worst = tiles_vs_whole(spec, 16, 2, 1, &bits);
     TN_CHECK(worst >= 0 && worst <= 1e-6);
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
     TN_CHECK(w.out_width == 30 && w.out_height == 22);
     all.w = 30;
     all.h = 22;
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
     for (y = 0; y < 110; y++) /* in the model's units, as tn_detail_maps works */
         for (x = 0; x < 150; x++)
             for (c = 0; c < 3; c++) TN_PIXEL(&synth, x, y, c) = (TN_PIXEL(&synth, x, y, c) - m.lo) / (m.hi - m.lo);
@@ -213,7 +213,7 @@ TN_TEST(texgan_tiles_and_detail_maps_equal_the_whole_map)
 static int refused(const char *spec, const char *words)
 {
     tn_world w;
-    tn_status st = tn_world_parse(spec, NULL, &w);
+    tn_status st = tn_world_parse(&w, spec, NULL);
     if (st == TN_OK) tn_world_free(&w);
     if (st != TN_ERR_INVALID_ARG || !strstr(tn_last_error(), words)) {
         fprintf(stderr, "  spec %s-> %s\n", spec, tn_last_error());
@@ -234,7 +234,7 @@ static int tiny_singan(const tn_image *dem, int coarsest, int iters, uint64_t se
     o.iters = iters;
     o.train.seed = seed;
     memset(m, 0, sizeof *m);
-    return dem->data && tn_singan_train(dem, &o, m, NULL) == TN_OK && tn_singan_save(m, path) == TN_OK;
+    return dem->data && tn_singan_train(m, dem, &o, NULL) == TN_OK && tn_singan_save(path, m) == TN_OK;
 }
 
 TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
@@ -252,17 +252,17 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
     snprintf(spec, sizeof spec, "world 120 90\nseed 9\nheight -5000 10000\nsingan model=%s\n", path);
     TN_CHECK(tiles_vs_whole(spec, 40, 1, 2, &bits) == 0.0 && bits);
     /* the world is the model's own sample of the world seed, in metres */
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
     TN_CHECK(w.out_heights && w.out_channels == 1);
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
     memset(&go, 0, sizeof go);
     go.seed = 9;
-    TN_CHECK(tn_singan_sample(&m, 0, 0, 120, 90, &go, &ref) == TN_OK);
+    TN_CHECK(tn_singan_sample(&ref, &m, 0, 0, 120, 90, &go) == TN_OK);
     TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)120 * 90 * sizeof(float)));
     tn_world_free(&w);
     /* a model of another method is refused when the SPEC is read */
     snprintf(spec, sizeof spec, "world 120 90\nsingan model=%s\n", tn_test_ref("texgan_v1_model.tnw"));
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_ERR_FORMAT);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_ERR_FORMAT);
     tn_image_free(&dem);
     tn_image_free(&whole);
     tn_image_free(&ref);
@@ -293,18 +293,18 @@ TN_TEST(perlin_then_singan_refine_tiles_equal_the_whole_map)
                  (double)m.offset - m.range, (double)m.offset + m.range, path, fs);
         TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
         TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
-        TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+        TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
         TN_CHECK(w.halo > 0 && w.out_heights);
-        TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+        TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
         /* the world's Perlin stage alone, refined whole by the library function */
         snprintf(spec, sizeof spec, "world 150 110\nseed 12\nheight %g %g\nperlin frequency=3 octaves=5\n", (double)m.offset - m.range,
                  (double)m.offset + m.range);
-        TN_CHECK(tn_world_parse(spec, NULL, &p) == TN_OK);
-        TN_CHECK(tn_world_rect(&p, all, &per) == TN_OK);
+        TN_CHECK(tn_world_parse(&p, spec, NULL) == TN_OK);
+        TN_CHECK(tn_world_rect(&per, &p, all) == TN_OK);
         memset(&go, 0, sizeof go);
         go.seed = 12;
         go.from_scale = K;
-        TN_CHECK(tn_singan_refine(&m, &per, &go, &ref) == TN_OK);
+        TN_CHECK(tn_singan_refine(&ref, &m, &per, &go) == TN_OK);
         TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * sizeof(float)));
         tn_world_free(&w);
         tn_world_free(&p);
@@ -337,18 +337,18 @@ TN_TEST(season_tiles_equal_the_whole_map_with_a_bounded_horizon)
     int bits = 0;
     TN_CHECK(tiles_vs_whole(spec, 48, 1, 2, &bits) == 0.0 && bits);
     TN_CHECK(tiles_vs_whole(spec, 37, 2, 1, &bits) == 0.0 && bits);
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
     TN_CHECK(w.halo == 22 && w.out_channels == 3 && !w.out_heights);
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
-    TN_CHECK(tn_world_parse(heights, NULL, &p) == TN_OK);
-    TN_CHECK(tn_world_rect(&p, all, &dem) == TN_OK);
-    TN_CHECK(tn_climate_koppen("Dfb", &c) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
+    TN_CHECK(tn_world_parse(&p, heights, NULL) == TN_OK);
+    TN_CHECK(tn_world_rect(&dem, &p, all) == TN_OK);
+    TN_CHECK(tn_climate_koppen(&c, "Dfb") == TN_OK);
     memset(&so, 0, sizeof so);
     so.insolation.dx = so.insolation.dy = 30.0f;
     so.insolation.max_distance = 600.0f;
     so.shade = 0.3f;
     so.detail = -1.0f;
-    TN_CHECK(tn_season_texture(&dem, &c, 46.0, NULL, &t, 1, &so, &ref, NULL) == TN_OK);
+    TN_CHECK(tn_season_texture(&ref, &dem, &c, 46.0, NULL, &t, 1, &so, NULL) == TN_OK);
     TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)150 * 110 * 3 * sizeof(float)));
     tn_world_free(&w);
     tn_world_free(&p);
@@ -384,24 +384,24 @@ TN_TEST(gnn_tiles_equal_the_whole_map)
     o.random_edges = 300;
     o.train.max_iters = 3;
     o.train.seed = 7;
-    TN_CHECK(tn_gnn_train(&dem, &o, &m, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     snprintf(m_path, sizeof m_path, "%s", tn_test_tmp_path("world", "gnn.tnw"));
     sk_path = tn_test_tmp_path("world", "gnn.tns");
-    TN_CHECK(tn_gnn_save(&m, m_path) == TN_OK);
+    TN_CHECK(tn_gnn_save(m_path, &m) == TN_OK);
     memset(&ro, 0, sizeof ro);
     ro.seed = 3;
     ro.nodes = 30;
-    TN_CHECK(tn_sketch_random(NULL, 260, 200, &ro, &sk) == TN_OK);
+    TN_CHECK(tn_sketch_random(&sk, NULL, 260, 200, &ro) == TN_OK);
     TN_CHECK(tn_sketch_save(sk_path, &sk) == TN_OK);
     snprintf(spec, sizeof spec, "world 200 150\nseed 5\nheight %g %g\ngnn model=%s sketch=%s\n", (double)m.lo - 100, (double)m.hi + 100,
              m_path, sk_path);
     TN_CHECK(tiles_vs_whole(spec, 64, 1, 2, &bits) == 0.0 && bits);
     TN_CHECK(tiles_vs_whole(spec, 45, 2, 1, &bits) == 0.0 && bits);
-    TN_CHECK(tn_world_parse(spec, NULL, &w) == TN_OK);
-    TN_CHECK(tn_world_rect(&w, all, &whole) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
     memset(&go, 0, sizeof go);
     go.seed = 5;
-    TN_CHECK(tn_gnn_generate(&m, &sk, 200, 150, &go, &ref) == TN_OK);
+    TN_CHECK(tn_gnn_generate(&ref, &m, &sk, 200, 150, &go) == TN_OK);
     TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)200 * 150 * sizeof(float)));
     tn_world_free(&w);
     snprintf(spec, sizeof spec, "world 5000 4000\ngnn model=%s sketch=%s\n", m_path, sk_path);
@@ -436,7 +436,7 @@ TN_TEST(non_local_methods_and_bad_specs_are_refused)
     TN_CHECK(refused("world 100 100\nmountains\n", "unknown setting or method 'mountains'"));
     {
         tn_world w;
-        TN_CHECK(tn_world_parse("world 100 100\ntexgan model=/nonexistent/m.tnw\n", NULL, &w) == TN_ERR_IO);
+        TN_CHECK(tn_world_parse(&w, "world 100 100\ntexgan model=/nonexistent/m.tnw\n", NULL) == TN_ERR_IO);
         TN_CHECK(strstr(tn_last_error(), "/nonexistent/m.tnw") != NULL);
     }
     TN_CHECK(refused("world 100 100\nperlin frequency\n", "KEY=VALUE"));
@@ -467,33 +467,33 @@ TN_TEST(tiles_on_disk_resume_and_index)
         }
     snprintf(path, sizeof path, "%s/world.spec", dir);
     remove(path);
-    TN_CHECK(tn_world_parse(spec, &o, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, &o) == TN_OK);
     TN_CHECK(w.rows == 3 && w.cols == 4);
     memset(&ro, 0, sizeof ro);
     ro.row0 = 1;
     ro.row1 = 3;
     ro.col0 = 2;
     ro.col1 = 4;
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, &s) == TN_OK);
     TN_CHECK(s.written == 4 && s.skipped == 0);
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK); /* resumed: nothing to do */
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, &s) == TN_OK); /* resumed: nothing to do */
     TN_CHECK(s.written == 0 && s.skipped == 4);
     memset(&ro, 0, sizeof ro);
     ro.part = 1;
     ro.parts = 2; /* every second tile of the grid */
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, &s) == TN_OK);
     TN_CHECK(s.written + s.skipped == 6 && s.skipped == 2);
     ro.part = 0;
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, &s) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, &s) == TN_OK);
     TN_CHECK(s.written == 4 && s.skipped == 2);
-    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK);
+    TN_CHECK(tn_world_write_index(dir, &w, &present) == TN_OK);
     TN_CHECK(present == 12);
     /* a tile reads back in metres: the whole map quantised to 16 bits over the world's range */
     snprintf(path, sizeof path, "%s/r2_c3.png", dir);
-    TN_CHECK(tn_image_load(path, &tile, &info) == TN_OK);
+    TN_CHECK(tn_image_load(&tile, path, &info) == TN_OK);
     TN_CHECK(info.has_range && info.range_lo == 100 && info.range_hi == 1900 && info.bit_depth == 16);
     TN_CHECK(tile.width == 200 - 192 && tile.height == 150 - 128);
-    TN_CHECK(tn_world_rect(&w, tn_world_tile_rect(&w, 2, 3), &ref) == TN_OK);
+    TN_CHECK(tn_world_rect(&ref, &w, tn_world_tile_rect(&w, 2, 3)) == TN_OK);
     for (n = 0; n < (size_t)tile.width * tile.height; n++) TN_CHECK_NEAR(tile.data[n], ref.data[n], 1800.0 / 65535 * 0.51);
     snprintf(path, sizeof path, "%s/world.vrt", dir);
     text = (char *)tn_test_read_file(path, &n);
@@ -505,11 +505,11 @@ TN_TEST(tiles_on_disk_resume_and_index)
     TN_CHECK(text && strstr(text, "seed 5\n") && strstr(text, "r0_c0.png ") && strstr(text, "tiles 12 of 12"));
     free(text);
     /* another world in the same directory is refused */
-    TN_CHECK(tn_world_parse("world 200 150\nseed 6\nperlin\n", &o, &other) == TN_OK);
-    TN_CHECK(tn_world_write_tiles(&other, dir, NULL, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_world_parse(&other, "world 200 150\nseed 6\nperlin\n", &o) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &other, NULL, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "holds another world") != NULL);
     ro.row0 = 3;
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, NULL) == TN_ERR_INVALID_ARG);
     tn_world_free(&other);
     tn_world_free(&w);
     tn_image_free(&tile);
@@ -536,7 +536,7 @@ TN_TEST(bad_specs_refused_before_setup)
     size_t i;
     for (i = 0; i < sizeof specs / sizeof specs[0]; i++) {
         double t0 = tn_time_seconds();
-        tn_status st = tn_world_parse(specs[i], NULL, &w);
+        tn_status st = tn_world_parse(&w, specs[i], NULL);
         TN_CHECK(st == TN_ERR_INVALID_ARG && strstr(tn_last_error(), why[i]));
         if (!st) tn_world_free(&w);
         TN_CHECK(tn_time_seconds() - t0 < 0.2);
@@ -552,15 +552,15 @@ TN_TEST(huge_worlds_bounded)
     tn_world_run_opts ro;
     int present = 0, b;
     size_t n;
-    TN_CHECK(tn_world_parse("world 268435456 268435456\ntile 16\nperlin\n", NULL, &w) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_world_parse(&w, "world 268435456 268435456\ntile 16\nperlin\n", NULL) == TN_ERR_TOO_LARGE);
     TN_CHECK(strstr(tn_last_error(), "grid") != NULL);
-    TN_CHECK(tn_world_parse("world 1000000 1000000\ntile 256\nperlin\n", NULL, &w) == TN_ERR_TOO_LARGE);
+    TN_CHECK(tn_world_parse(&w, "world 1000000 1000000\ntile 256\nperlin\n", NULL) == TN_ERR_TOO_LARGE);
     /* tile 65536: 16 GiB of floats for one tile, refused before the directory is claimed */
     mkdir(dir2, 0755);
     snprintf(path, sizeof path, "%s/world.spec", dir2);
     remove(path);
-    TN_CHECK(tn_world_parse("world 65536 65536\ntile 65536\nperlin\n", NULL, &w) == TN_OK);
-    TN_CHECK(tn_world_write_tiles(&w, dir2, NULL, NULL) == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "tile"));
+    TN_CHECK(tn_world_parse(&w, "world 65536 65536\ntile 65536\nperlin\n", NULL) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir2, &w, NULL, NULL) == TN_ERR_TOO_LARGE && strstr(tn_last_error(), "tile"));
     TN_CHECK(fopen(path, "rb") == NULL);
     tn_world_free(&w);
     /* 69 x 69 tiles: world.vrt lists 2 x 2 block mosaics */
@@ -569,12 +569,12 @@ TN_TEST(huge_worlds_bounded)
     remove(path);
     snprintf(path, sizeof path, "%s/r0_c0.png", dir);
     remove(path);
-    TN_CHECK(tn_world_parse("world 1100 1100\ntile 16\nheight 0 100\nperlin\n", NULL, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, "world 1100 1100\ntile 16\nheight 0 100\nperlin\n", NULL) == TN_OK);
     TN_CHECK(w.rows == 69 && w.cols == 69);
     memset(&ro, 0, sizeof ro);
     ro.row1 = ro.col1 = 1;
-    TN_CHECK(tn_world_write_tiles(&w, dir, &ro, NULL) == TN_OK);
-    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 1);
+    TN_CHECK(tn_world_write_tiles(dir, &w, &ro, NULL) == TN_OK);
+    TN_CHECK(tn_world_write_index(dir, &w, &present) == TN_OK && present == 1);
     snprintf(path, sizeof path, "%s/world.vrt", dir);
     text = (char *)tn_test_read_file(path, &n);
     TN_CHECK(text && n < 8192 && strstr(text, "rasterXSize=\"1100\"") && strstr(text, "world_b1_1.vrt") &&
@@ -624,14 +624,14 @@ TN_TEST(resume_checks_tiles)
     remove(path);
     snprintf(path, sizeof path, "%s/manifest.txt", dir);
     remove(path);
-    TN_CHECK(tn_world_parse(spec, &o, &w) == TN_OK);
+    TN_CHECK(tn_world_parse(&w, spec, &o) == TN_OK);
     /* an empty file where no manifest exists yet: it does not decode, so it is computed */
     snprintf(path, sizeof path, "%s/r0_c0.png", dir);
     f = fopen(path, "wb");
     if (f) fclose(f);
-    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &w, NULL, &s) == TN_OK);
     TN_CHECK(s.written == 4 && s.skipped == 0 && s.repaired == 1);
-    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 4);
+    TN_CHECK(tn_world_write_index(dir, &w, &present) == TN_OK && present == 4);
     good = (char *)tn_test_read_file(path, &gn);
     TN_CHECK(good && gn > 100);
     snprintf(path, sizeof path, "%s/manifest.txt", dir);
@@ -656,20 +656,20 @@ TN_TEST(resume_checks_tiles)
     snprintf(path, sizeof path, "%s/r1_c1.png", dir);
     TN_CHECK(tn_image_save(path, &other, &so) == TN_OK);
     tn_image_free(&other);
-    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(tn_world_write_tiles(dir, &w, NULL, &s) == TN_OK);
     TN_CHECK(s.written == 2 && s.skipped == 2 && s.repaired == 2);
     snprintf(path, sizeof path, "%s/r0_c0.png", dir);
     text = (char *)tn_test_read_file(path, &n);
     TN_CHECK(text && good && n == gn && !memcmp(text, good, n)); /* the same bytes as the first run */
     free(text);
-    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 4);
-    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(tn_world_write_index(dir, &w, &present) == TN_OK && present == 4);
+    TN_CHECK(tn_world_write_tiles(dir, &w, NULL, &s) == TN_OK);
     TN_CHECK(s.written == 0 && s.skipped == 4 && s.repaired == 0);
     /* the index leaves a damaged tile out */
     f = fopen(path, "wb");
     if (f) fclose(f);
-    TN_CHECK(tn_world_write_index(&w, dir, &present) == TN_OK && present == 3);
-    TN_CHECK(tn_world_write_tiles(&w, dir, NULL, &s) == TN_OK);
+    TN_CHECK(tn_world_write_index(dir, &w, &present) == TN_OK && present == 3);
+    TN_CHECK(tn_world_write_tiles(dir, &w, NULL, &s) == TN_OK);
     TN_CHECK(s.written == 1 && s.repaired == 1);
     free(good);
     tn_world_free(&w);

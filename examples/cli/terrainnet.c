@@ -182,7 +182,7 @@ static tn_status load_dem_metres(const char *path, double lo, double hi, tn_imag
     tn_status st;
     size_t i;
     if (!info) info = &own;
-    st = tn_image_load(path, dem, info);
+    st = tn_image_load(dem, path, info);
     *metres = !st && !unitless(info);
     if (st || *metres || !(hi > lo)) return st;
     for (i = 0; i < (size_t)dem->width * dem->height * dem->channels; i++) dem->data[i] = (float)(lo + dem->data[i] * (hi - lo));
@@ -471,7 +471,7 @@ static int is_tnw(const char *path)
 static int info_tnw(const char *path, int list)
 {
     tn_params *p = NULL;
-    tn_status st = tn_params_open(path, &p);
+    tn_status st = tn_params_open(&p, path);
     const char *kind, *method;
     size_t learned = 0, buffers = 0, k;
     uint64_t h = 0xcbf29ce484222325ULL;
@@ -515,8 +515,8 @@ static int run_info(void)
     size_t bad, i, n;
     double sum = 0.0;
     if (is_tnw(a->path)) return info_tnw(a->path, a->tensors);
-    if ((st = tn_image_load_ex(a->path, &img, &info, &a->lo))) return fail_status(st);
-    bad = tn_image_range(&img, &mn, &mx);
+    if ((st = tn_image_load_ex(&img, a->path, &a->lo, &info))) return fail_status(st);
+    bad = tn_image_range(&mn, &mx, &img);
     n = (size_t)img.width * img.height * img.channels;
     for (i = 0; i < n; i++) sum += img.data[i];
     printf("file: %s\nformat: %s\nsize: %d x %d\nchannels: %d\nbit_depth: %d\n", a->path, tn_format_name(info.format),
@@ -570,7 +570,7 @@ static int run_convert(void)
     if (a->so.bit_depth && a->so.bit_depth != 8 && a->so.bit_depth != 16)
         return usage_error("convert", "--bits must be 8 or 16, not %d", a->so.bit_depth);
     a->so.has_range = a->so.range_hi > a->so.range_lo; /* --range given (it checks LO < HI) */
-    if ((st = tn_image_load_ex(a->in, &img, &info, &a->lo))) return fail_status(st);
+    if ((st = tn_image_load_ex(&img, a->in, &a->lo, &info))) return fail_status(st);
     if (!a->so.has_range && info.has_range) {
         a->so.has_range = 1;
         a->so.range_lo = info.range_lo;
@@ -604,12 +604,12 @@ static int run_metrics(void)
     tn_image a_img = {0, 0, 0, NULL}, b_img = {0, 0, 0, NULL};
     tn_metrics m;
     tn_status st;
-    if ((st = tn_image_load(a->ref, &a_img, NULL))) return fail_status(st);
-    if ((st = tn_image_load(a->img, &b_img, NULL))) {
+    if ((st = tn_image_load(&a_img, a->ref, NULL))) return fail_status(st);
+    if ((st = tn_image_load(&b_img, a->img, NULL))) {
         tn_image_free(&a_img);
         return fail_status(st);
     }
-    st = tn_compare(&a_img, &b_img, a->range, &m);
+    st = tn_compare(&m, &a_img, &b_img, a->range);
     tn_image_free(&a_img);
     tn_image_free(&b_img);
     if (st) return fail_status(st);
@@ -648,14 +648,14 @@ static int run_render(void)
     tn_image_info info;
     tn_save_opts so;
     tn_status st;
-    if ((st = tn_image_load_ex(a->in, &dem, &info, NULL))) return fail_status(st);
+    if ((st = tn_image_load_ex(&dem, a->in, NULL, &info))) return fail_status(st);
     if (isnan(a->sea) && (info.has_range || info.format == TN_FORMAT_HGT || info.format == TN_FORMAT_TIFF || info.format == TN_FORMAT_ASC))
         a->sea = 0; /* metres: the sea is below 0 m */
     a->vo.colours.sea = !isnan(a->sea);
     a->vo.colours.sea_level = a->vo.colours.sea ? (float)a->sea : 0.0f;
     if (!a->vo.spacing && !a->vo.relief) /* a pixel size in metres: the true relief, exaggerated */
         a->vo.spacing = info.format == TN_FORMAT_HGT ? (float)info.cellsize : info.georef.dx > 0 ? (float)(0.5 * (info.georef.dx + info.georef.dy)) : 0.0f;
-    st = a->view ? tn_render_view(&dem, &a->vo, &out) : tn_render_preview(&dem, &a->vo.colours, &out);
+    st = a->view ? tn_render_view(&out, &dem, &a->vo) : tn_render_preview(&out, &dem, &a->vo.colours);
     tn_image_free(&dem);
     if (st) return fail_status(st);
     memset(&so, 0, sizeof so);
@@ -722,11 +722,11 @@ static tn_status export_splat(struct export_args *a, const tn_image *dem)
     a->so.dy = a->mo.dy;
     if (!(a->mo.dx > 0)) /* slopes decide rock: at 1 m per pixel a DEM in metres is nearly all cliff */
         fprintf(stderr, "export: no --spacing: slopes assume pixels 1 height unit wide (give the pixel size in metres)\n");
-    if (a->snow) st = tn_image_load(a->snow, &snow, NULL);
-    if (!st && a->vegetation) st = tn_image_load(a->vegetation, &veg, NULL);
+    if (a->snow) st = tn_image_load(&snow, a->snow, NULL);
+    if (!st && a->vegetation) st = tn_image_load(&veg, a->vegetation, NULL);
     a->so.snow = snow.data ? &snow : NULL;
     a->so.vegetation = veg.data ? &veg : NULL;
-    if (!st) st = tn_export_splat(dem, &a->so, &w);
+    if (!st) st = tn_export_splat(&w, dem, &a->so);
     if (!st) st = tn_image_save(a->out, &w, &so);
     if (!st && a->splat_preview) {
         tn_hillshade_opts ho;
@@ -769,14 +769,14 @@ static tn_status export_image(struct export_args *a, const tn_image *dem)
     if (a->to == EXPORT_SPLAT) return export_splat(a, dem);
     if (a->to == EXPORT_UNITY_RAW) {
         float lo = 0, hi = 0;
-        if (!(st = tn_export_unity_raw(dem, a->out, a->raw_size, &lo, &hi)))
+        if (!(st = tn_export_unity_raw(a->out, dem, a->raw_size, &lo, &hi)))
             printf("heights: %.6g %.6g (set the Unity terrain height to %.6g m)\n", lo, hi, hi - lo);
     } else {
         tn_image n = {0, 0, 0, NULL};
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        st = tn_normal_map(dem, a->mo.dx, a->mo.dy, a->mo.z_scale > 0 ? a->mo.z_scale : 1.0f, a->to == EXPORT_NORMAL_DX, &n);
+        st = tn_normal_map(&n, dem, a->mo.dx, a->mo.dy, a->mo.z_scale > 0 ? a->mo.z_scale : 1.0f, a->to == EXPORT_NORMAL_DX);
         if (!st) st = tn_image_save(a->out, &n, &so);
         tn_image_free(&n);
     }
@@ -798,12 +798,12 @@ static int run_export(void)
     }
     if ((a->to == EXPORT_GLB || a->to == EXPORT_OBJ) && !metres && !a->mo.dx)
         warn_unitless("export", a->in, "with no --spacing either, 1 m pixels: the mesh comes out nearly flat; give --spacing M too");
-    if (a->texture) st = tn_image_load(a->texture, &tex, NULL);
-    else if (a->drape) st = tn_render_preview(&dem, NULL, &tex);
+    if (a->texture) st = tn_image_load(&tex, a->texture, NULL);
+    else if (a->drape) st = tn_render_preview(&tex, &dem, NULL);
     if (!st && a->to != EXPORT_GLB && a->to != EXPORT_OBJ) st = export_image(a, &dem);
     else if (!st) {
         a->mo.texture = tex.data ? &tex : NULL;
-        st = a->to == EXPORT_GLB ? tn_export_glb(&dem, a->out, &a->mo) : tn_export_obj(&dem, a->out, &a->mo);
+        st = a->to == EXPORT_GLB ? tn_export_glb(a->out, &dem, &a->mo) : tn_export_obj(a->out, &dem, &a->mo);
     }
     if (!st) printf("wrote %s (from %d x %d samples)\n", a->out, dem.width, dem.height);
     tn_image_free(&dem);
@@ -859,7 +859,7 @@ static int run_noise(void)
         tn_image src = {0, 0, 0, NULL};
         float gain = 0.0f;
         if (a->explicit_noise) return usage_error("noise", "--like picks a Perlin gain; it does not go with --type explicit");
-        if (!(st = tn_image_load(a->like, &src, NULL))) st = tn_style_content_noise(&out, a->w, a->h, &src, &a->po, &gain);
+        if (!(st = tn_image_load(&src, a->like, NULL))) st = tn_style_content_noise(&out, a->w, a->h, &src, &a->po, &gain);
         tn_image_free(&src);
         if (!st) printf("gain: %.2f\n", gain);
     } else {
@@ -867,7 +867,7 @@ static int run_noise(void)
     }
     if (st) return fail_status(st);
     if (a->draw) {
-        if ((st = tn_image_load(a->draw, &drawn, NULL)) || (st = tn_noise_blend(&blended, &out, &drawn, (float)a->weight))) {
+        if ((st = tn_image_load(&drawn, a->draw, NULL)) || (st = tn_noise_blend(&blended, &out, &drawn, (float)a->weight))) {
             tn_image_free(&out);
             tn_image_free(&drawn);
             return fail_status(st);
@@ -905,12 +905,12 @@ static tn_status write_sketch_images(const tn_contour_set *s, int w, int h, cons
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 16;
-        if ((st = tn_sketch_rasterise(s, w, h, &img)) || (st = tn_image_save(raster, &img, &so))) goto done;
+        if ((st = tn_sketch_rasterise(&img, s, w, h)) || (st = tn_image_save(raster, &img, &so))) goto done;
         tn_image_free(&img);
     }
     if (preview) {
-        if (dem_path && (st = tn_image_load(dem_path, &dem, NULL))) goto done;
-        if ((st = tn_sketch_preview(s, dem_path ? &dem : NULL, w, h, &img))) goto done;
+        if (dem_path && (st = tn_image_load(&dem, dem_path, NULL))) goto done;
+        if ((st = tn_sketch_preview(&img, s, dem_path ? &dem : NULL, w, h))) goto done;
         st = tn_image_save(preview, &img, NULL);
     }
 done:
@@ -938,7 +938,7 @@ static int run_sketch(void)
     int w = a->w, h = a->h;
     tn_status st;
     if (!a->out && !a->preview && !a->tns) return usage_error("sketch", "nothing to write: give -o, --preview or --tns");
-    if ((st = tn_sketch_load(a->in, &s))) return fail_status(st);
+    if ((st = tn_sketch_load(&s, a->in))) return fail_status(st);
     if (!w) { w = s.width; h = s.height; }
     st = a->tns ? tn_sketch_save(a->tns, &s) : TN_OK;
     if (!st) st = write_sketch_images(&s, w, h, a->out, a->preview, a->dem);
@@ -967,12 +967,12 @@ static int run_sketch_random(void)
     tn_contour_set user = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
     tn_status st;
     if (!a->w && !a->in) return usage_error("sketch-random", "give --size W [H] or --sketch");
-    if (a->in && (st = tn_sketch_load(a->in, &user))) return fail_status(st);
+    if (a->in && (st = tn_sketch_load(&user, a->in))) return fail_status(st);
     if (!a->w) {
         a->w = user.width;
         a->h = user.height;
     }
-    st = tn_sketch_random(a->in ? &user : NULL, a->w, a->h, &a->o, &out);
+    st = tn_sketch_random(&out, a->in ? &user : NULL, a->w, a->h, &a->o);
     if (!st) st = tn_sketch_save(a->out, &out);
     if (!st && a->preview) st = write_sketch_images(&out, a->w, a->h, NULL, a->preview, NULL);
     if (!st) printf("%d polylines (%d from the sketch) on a %d x %d canvas\n", out.count, user.count, a->w, a->h);
@@ -1007,13 +1007,13 @@ static int run_align(void)
     double t0;
     tn_status st;
     FILE *f;
-    if ((st = tn_sketch_load(a->sketch, &sk)) || (st = tn_sketch_load(a->dem, &dem)) || (st = tn_sketch_densify(&sk, &dense)) ||
-        (st = tn_contour_parts_make(&dense, a->o.seed, &parts)))
+    if ((st = tn_sketch_load(&sk, a->sketch)) || (st = tn_sketch_load(&dem, a->dem)) || (st = tn_sketch_densify(&dense, &sk)) ||
+        (st = tn_contour_parts_make(&parts, &dense, a->o.seed)))
         goto done;
-    if (a->cut_dem && (st = tn_contour_parts_make(&dem, a->o.seed, &demparts))) goto done;
+    if (a->cut_dem && (st = tn_contour_parts_make(&demparts, &dem, a->o.seed))) goto done;
     if (!(match = (int *)malloc(((size_t)parts.count + 1) * sizeof(int)))) { fprintf(stderr, "terrainnet: out of memory\n"); goto done; }
     t0 = tn_time_seconds();
-    if ((st = tn_sketch_align(&parts, a->cut_dem ? &demparts : &dem, &a->o, match))) goto done;
+    if ((st = tn_sketch_align(match, &parts, a->cut_dem ? &demparts : &dem, &a->o))) goto done;
     t0 = tn_time_seconds() - t0;
     if (a->parts_out && (st = tn_sketch_save(a->parts_out, &parts))) goto done;
     /* written beside the target and renamed over it, so a failed run leaves an old map intact */
@@ -1089,8 +1089,8 @@ static int run_extract(void)
     tn_extraction ex;
     tn_status st = TN_OK;
     int i, nv = 0, nr = 0;
-    if ((st = tn_image_load(a->in, &dem, NULL))) return fail_status(st);
-    if ((st = tn_extract(&dem, &a->eo, &ex))) {
+    if ((st = tn_image_load(&dem, a->in, NULL))) return fail_status(st);
+    if ((st = tn_extract(&ex, &dem, &a->eo))) {
         tn_image_free(&dem);
         return fail_status(st);
     }
@@ -1115,7 +1115,7 @@ static int run_extract(void)
     }
     if (!st && a->preview) {
         tn_image pv = {0, 0, 0, NULL};
-        if (!(st = tn_sketch_preview(&ex.contours, &dem, dem.width, dem.height, &pv))) {
+        if (!(st = tn_sketch_preview(&pv, &ex.contours, &dem, dem.width, dem.height))) {
             tn_save_opts so;
             memset(&so, 0, sizeof so);
             so.bit_depth = 8;
@@ -1160,7 +1160,7 @@ static int run_realism(void)
     tn_status st;
     int k;
     for (k = 0; k < 2; k++) {
-        if ((st = tn_image_load(a->path[k], &img[k], NULL))) {
+        if ((st = tn_image_load(&img[k], a->path[k], NULL))) {
             tn_image_free(&img[0]);
             return fail_status(st);
         }
@@ -1169,7 +1169,7 @@ static int run_realism(void)
             for (i = 0; i < n; i++) img[k].data[i] = (float)(a->range[k][0] + img[k].data[i] * (a->range[k][1] - a->range[k][0]));
         }
     }
-    st = tn_realism_compare(&img[0], &img[1], &a->ro, &r);
+    st = tn_realism_compare(&r, &img[0], &img[1], &a->ro);
     tn_image_free(&img[0]);
     tn_image_free(&img[1]);
     if (st) return fail_status(st);
@@ -1231,8 +1231,8 @@ static int run_style(void)
     double t0;
     a->so.optimizer = a->optimizer == 1 ? TN_STYLE_SGD : a->optimizer == 2 ? TN_STYLE_ADAM : TN_STYLE_LBFGS;
     if (a->no_drain) a->so.drain_weight = a->so.valley_weight = -1.0f;
-    if ((st = tn_image_load(a->content, &content, NULL))) return fail_status(st);
-    if ((st = tn_image_load(a->style, &style, NULL))) goto done;
+    if ((st = tn_image_load(&content, a->content, NULL))) return fail_status(st);
+    if ((st = tn_image_load(&style, a->style, NULL))) goto done;
     if (a->size && (st = tn_image_resize(&tmp, &content, a->size, a->size, TN_RESIZE_BICUBIC))) goto done;
     if (a->size) {
         tn_image_free(&content);
@@ -1308,12 +1308,12 @@ static int run_texgan_train(void)
     }
     a->o.train.checkpoint = a->ckpt;
     train_budget_cap(&a->o.train);
-    if ((st = tn_image_load(a->in, &ex, NULL))) return fail_status(st);
+    if ((st = tn_image_load(&ex, a->in, NULL))) return fail_status(st);
     if (a->normal) {
         tn_image both = {0, 0, 0, NULL};
         size_t i, n = (size_t)ex.width * ex.height;
         int c;
-        if ((st = tn_image_load(a->normal, &nrm, NULL))) { tn_image_free(&ex); return fail_status(st); }
+        if ((st = tn_image_load(&nrm, a->normal, NULL))) { tn_image_free(&ex); return fail_status(st); }
         if (nrm.width != ex.width || nrm.height != ex.height || ex.channels + nrm.channels > TN_TEXGAN_MAX_CHANNELS) {
             tn_image_free(&ex);
             tn_image_free(&nrm);
@@ -1332,7 +1332,7 @@ static int run_texgan_train(void)
     tn_image_free(&ex);
     if (st == TN_ERR_CANCELLED) return train_interrupted("texgan-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
-    st = tn_texgan_save(&model, a->out);
+    st = tn_texgan_save(a->out, &model);
     if (!st)
         printf("iterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\nloss_d: %.4f\nloss_g: %.4f\n"
                "checkpoints: %d (%s)\nmodel: %s\n",
@@ -1368,11 +1368,11 @@ static int run_texgan_synth(void)
     t0 = tn_time_seconds();
     if (a->colour) {
         tn_image probe = {0, 0, 0, NULL};
-        st = tn_texgan_synthesize_window(&model, a->seed, 0, 0, a->w < 1024 ? a->w : 1024, a->h < 1024 ? a->h : 1024, &probe);
-        if (!st) st = tn_texture_colour_shift(&probe, model.mean, model.lo, model.hi, shift);
+        st = tn_texgan_synthesize_window(&probe, &model, a->seed, 0, 0, a->w < 1024 ? a->w : 1024, a->h < 1024 ? a->h : 1024);
+        if (!st) st = tn_texture_colour_shift(shift, &probe, model.mean, model.lo, model.hi);
         tn_image_free(&probe);
     }
-    if (!st) st = tn_texgan_synthesize_file(&model, a->seed, a->w, a->h, a->colour ? shift : NULL, a->out);
+    if (!st) st = tn_texgan_synthesize_file(a->out, &model, a->seed, a->w, a->h, a->colour ? shift : NULL);
     if (!st) printf("synthesised %d x %d in %.2f s -> %s\n", a->w, a->h, tn_time_seconds() - t0, a->out);
     tn_texgan_free(&model);
     return st ? fail_status(st) : 0;
@@ -1426,7 +1426,7 @@ static int run_detail_maps(void)
     tn_detail_maps maps;
     tn_texgan model;
     tn_status st;
-    if ((st = tn_image_load(a->exemplar, &ex, NULL))) return fail_status(st);
+    if ((st = tn_image_load(&ex, a->exemplar, NULL))) return fail_status(st);
     if (is_tnw_file(a->src)) {
         if (!(st = tn_texgan_load(&model, a->src))) {
             if (!a->w) { a->w = 8 * ex.width; a->h = 8 * ex.height; }
@@ -1434,12 +1434,12 @@ static int run_detail_maps(void)
             tn_texgan_free(&model);
         }
     } else {
-        if (!(st = tn_image_load(a->src, &synth, NULL))) st = tn_detail_maps_from_image(&maps, &synth, &ex, &a->o);
+        if (!(st = tn_image_load(&synth, a->src, NULL))) st = tn_detail_maps_from_image(&maps, &synth, &ex, &a->o);
         tn_image_free(&synth);
         if (!a->w && !st) { a->w = maps.width; a->h = maps.height; }
     }
     if (st) { tn_image_free(&ex); return fail_status(st); }
-    st = tn_detail_maps_save(&maps, a->prefix);
+    st = tn_detail_maps_save(a->prefix, &maps);
     if (!st)
         printf("texture: %d x %d\nlow map: %d x %d (factor %d, %.0fx less memory)\nhigh map: %d x %d, tiled %.3f x %.3f\n", maps.width,
                maps.height, maps.low.width, maps.low.height, maps.factor,
@@ -1449,13 +1449,13 @@ static int run_detail_maps(void)
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        st = tn_detail_compose(&maps, a->w, a->h, &img);
+        st = tn_detail_compose(&img, &maps, a->w, a->h);
         if (!st) st = tn_image_save(a->compose, &img, &so);
         tn_image_free(&img);
     }
     if (!st && a->preview) {
-        if (a->dem) st = tn_image_load(a->dem, &dem, NULL);
-        if (!st) st = tn_detail_preview(&maps, &ex, a->dem ? &dem : NULL, 0, &img);
+        if (a->dem) st = tn_image_load(&dem, a->dem, NULL);
+        if (!st) st = tn_detail_preview(&img, &maps, &ex, a->dem ? &dem : NULL, 0);
         if (!st) st = tn_image_save(a->preview, &img, NULL);
         tn_image_free(&img);
         tn_image_free(&dem);
@@ -1502,16 +1502,16 @@ static int run_world(void)
         return usage_error("world", "--tiles needs I0:I1,J0:J1 with I0 < I1 and J0 < J1 (e.g. 0:4,2:3), not %s", a->tiles);
     if (a->part && (sscanf(a->part, "%d/%d%n", &ro.part, &ro.parts, &n) != 2 || a->part[n] || ro.parts < 1 || ro.part < 0 || ro.part >= ro.parts))
         return usage_error("world", "--part needs K/N with 0 <= K < N (e.g. 1/4), not %s", a->part);
-    if ((st = tn_world_load(a->spec, &wo, &w))) return fail_status(st);
+    if ((st = tn_world_load(&w, a->spec, &wo))) return fail_status(st);
 #if !defined(_WIN32)
     mkdir(a->dir, 0777); /* an existing one is fine; a failure shows when the first file is written */
 #endif
     printf("world: %d x %d x %d %s, %d x %d tiles of %d px, halo %d px\n", w.out_width, w.out_height, w.out_channels,
            w.out_heights ? "heights (16-bit, metres)" : "values (8-bit)", w.rows, w.cols, w.tile, w.halo);
-    if (!(st = tn_world_write_tiles(&w, a->dir, &ro, &s))) {
+    if (!(st = tn_world_write_tiles(a->dir, &w, &ro, &s))) {
         printf("tiles: %d written, %d already there, %.2f s (%.3f tiles/s)\n", s.written, s.skipped, s.seconds,
                s.seconds > 0 ? s.written / s.seconds : 0.0);
-        if (!a->no_index && !(st = tn_world_write_index(&w, a->dir, &present)))
+        if (!a->no_index && !(st = tn_world_write_index(a->dir, &w, &present)))
             printf("index: %s/world.vrt, %s/manifest.txt (%d of %d tiles present)\n", a->dir, a->dir, present, w.rows * w.cols);
     }
     tn_world_free(&w);
@@ -1567,11 +1567,11 @@ static int run_singan_train(void)
     if ((st = load_dem_metres(a->in, a->range[0], a->range[1], &dem, &metres, NULL))) return fail_status(st);
     printf("units: %s\n", metres ? "metres" : "the file's [0, 1] codes (no recorded range; give --range LO HI for metres)");
     fflush(stdout);
-    st = tn_singan_train(&dem, &a->o, &model, &s);
+    st = tn_singan_train(&model, &dem, &a->o, &s);
     tn_image_free(&dem);
     if (st == TN_ERR_CANCELLED) return train_interrupted("singan-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
-    st = tn_singan_save(&model, a->out);
+    st = tn_singan_save(a->out, &model);
     if (!st) {
         int i;
         printf("scales: %d (trained %d)\niterations: %ld (resumed at %ld)\nper_scale:", s.scales, s.trained, s.iterations, s.resumed_from);
@@ -1631,15 +1631,15 @@ static int singan_generate(int kind)
     tn_image in = {0, 0, 0, NULL}, out = {0, 0, 0, NULL};
     tn_status st;
     double t0;
-    if ((st = tn_singan_load(a->model, &model))) return fail_status(st);
-    if (kind && (st = tn_image_load(a->in, &in, NULL))) {
+    if ((st = tn_singan_load(&model, a->model))) return fail_status(st);
+    if (kind && (st = tn_image_load(&in, a->in, NULL))) {
         tn_singan_free(&model);
         return fail_status(st);
     }
     t0 = tn_time_seconds();
-    if (kind == 0) st = tn_singan_sample(&model, a->x0, a->y0, a->w ? a->w : model.width, a->h ? a->h : model.height, &a->g, &out);
-    else if (kind == 1) st = tn_singan_refine(&model, &in, &a->g, &out);
-    else st = tn_singan_upscale(&model, &in, (float)a->factor, &a->g, &out);
+    if (kind == 0) st = tn_singan_sample(&out, &model, a->x0, a->y0, a->w ? a->w : model.width, a->h ? a->h : model.height, &a->g);
+    else if (kind == 1) st = tn_singan_refine(&out, &model, &in, &a->g);
+    else st = tn_singan_upscale(&out, &model, &in, (float)a->factor, &a->g);
     if (!st) {
         fprintf(stderr, "singan: %d x %d in %.2f s\n", out.width, out.height, tn_time_seconds() - t0);
         st = tn_image_save(a->out, &out, NULL);
@@ -1778,9 +1778,9 @@ static int run_gnn_train(void)
         return usage_error("gnn-train", "the %d x %d window at (%d, %d) does not fit in the %d x %d DEM", w, h, x, y, dem.width, dem.height);
     }
     st = tn_image_crop(&win, &dem, x, y, w, h);
-    if (!st) nhold = tn_gnn_holdout_windows(&dem, x, y, w, h, a->holdout, hold);
+    if (!st) nhold = tn_gnn_holdout_windows(hold, &dem, x, y, w, h, a->holdout);
     if (!st && !nhold && a->holdout > 0) { /* holdouts are whole windows beside the training one: would the corner have some? */
-        corner = tn_gnn_holdout_windows(&dem, 0, 0, w, h, a->holdout, hold);
+        corner = tn_gnn_holdout_windows(hold, &dem, 0, 0, w, h, a->holdout);
         for (i = 0; i < corner; i++) tn_image_free(&hold[i]);
     }
     tn_image_free(&dem);
@@ -1796,12 +1796,12 @@ static int run_gnn_train(void)
     fflush(stdout);
     a->o.holdout = nhold ? hold : NULL;
     a->o.holdout_count = nhold;
-    st = tn_gnn_train(&win, &a->o, &model, &s);
+    st = tn_gnn_train(&model, &win, &a->o, &s);
     tn_image_free(&win);
     for (i = 0; i < nhold; i++) tn_image_free(&hold[i]);
     if (st == TN_ERR_CANCELLED) return train_interrupted("gnn-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
-    st = tn_gnn_save(&model, a->out);
+    st = tn_gnn_save(a->out, &model);
     if (!st)
         printf("parts: %d\nsketch_levels: %d\niterations: %ld (resumed at %ld)\nembed_phase_from: %ld\ntrain_minutes: %.2f\n"
                "steps_per_second: %.2f\nloss_mse: %.5f\nloss_ssim: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
@@ -1886,16 +1886,16 @@ static tn_status load_gnn_sketch(const char *path, double lo, double hi, tn_cont
     }
     if (!strncmp(head, "terrainnet-sketch", 17)) {
         *kind = "sketch (.tns)";
-        return tn_sketch_load(path, out);
+        return tn_sketch_load(out, path);
     }
     if ((st = load_dem_metres(path, lo, hi, &img, &metres, NULL))) return st;
     if (img.channels >= 3) {
         *kind = "drawn sketch";
-        st = tn_sketch_from_image(&img, out);
+        st = tn_sketch_from_image(out, &img);
     } else {
         tn_extraction ex;
         *kind = "DEM (its extracted network)";
-        if (!(st = tn_extract(&img, NULL, &ex))) {
+        if (!(st = tn_extract(&ex, &img, NULL))) {
             *out = ex.contours;
             memset(&ex.contours, 0, sizeof ex.contours);
             tn_extraction_free(&ex);
@@ -1932,8 +1932,8 @@ static int run_gnn_generate(void)
     memset(&detail, 0, sizeof detail);
     a->o.detail = !a->detail || !strcmp(a->detail, "auto") ? 0 : !strcmp(a->detail, "example") ? 1 : -1;
     if (a->detail && (!strcmp(a->detail, "auto") || !strcmp(a->detail, "example") || !strcmp(a->detail, "none"))) a->detail = NULL;
-    if (a->detail && (st = tn_singan_load(a->detail, &detail))) return fail_status(st);
-    if ((st = tn_gnn_load(a->model, &model))) {
+    if (a->detail && (st = tn_singan_load(&detail, a->detail))) return fail_status(st);
+    if ((st = tn_gnn_load(&model, a->model))) {
         tn_singan_free(&detail);
         return fail_status(st);
     }
@@ -1952,17 +1952,17 @@ static int run_gnn_generate(void)
     t0 = tn_time_seconds();
     memset(&plan, 0, sizeof plan);
     /* the gain is tested once here and then fixed, so it can be printed with its reason */
-    if (!(st = tn_gnn_plan_of(&model, &sk, a->w, a->h, &a->o, &plan)) && a->o.gain == 0) a->o.gain = plan.gain > 0 ? plan.gain : -1.0f;
+    if (!(st = tn_gnn_plan_of(&plan, &model, &sk, a->w, a->h, &a->o)) && a->o.gain == 0) a->o.gain = plan.gain > 0 ? plan.gain : -1.0f;
     if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md); a grown
                               one has the example's network around its strokes instead, and the fine-tune would cost 10 x */
         a->o.finetune = relative_heights(&sk) && !plan.grown_lines ? 30 : 0;
     if (!st && plan.gain <= 0)
         fprintf(stderr, "terrainnet: gnn-generate: residual gain 0: %s\n", plan.gain_why);
-    if (!st) st = tn_gnn_generate(&model, &sk, a->w, a->h, &a->o, &terrain);
+    if (!st) st = tn_gnn_generate(&terrain, &model, &sk, a->w, a->h, &a->o);
     if (!st && a->detail) { /* SinGAN adds the fine detail the graph network cannot rebuild (paper 000) */
         tn_image refined = {0, 0, 0, NULL};
         a->detail_opts.seed = a->o.seed;
-        if (!(st = tn_singan_refine(&detail, &terrain, &a->detail_opts, &refined))) {
+        if (!(st = tn_singan_refine(&refined, &detail, &terrain, &a->detail_opts))) {
             tn_image_free(&terrain);
             terrain = refined;
         }
@@ -1973,7 +1973,7 @@ static int run_gnn_generate(void)
         tn_save_opts so;
         memset(&so, 0, sizeof so);
         so.bit_depth = 8;
-        if (!(st = tn_render_preview(&terrain, NULL, &shade))) st = tn_image_save(a->preview, &shade, &so);
+        if (!(st = tn_render_preview(&shade, &terrain, NULL))) st = tn_image_save(a->preview, &shade, &so);
         tn_image_free(&shade);
     }
     if (!st) {
@@ -2072,13 +2072,13 @@ static int run_insolation(void)
     int c;
     double t0 = tn_time_seconds();
     if ((st = season_load_dem("insolation", a->in, a->lo, a->hi, &dem))) return fail_status(st);
-    st = tn_insolation(&dem, a->lat, &a->o, &out);
+    st = tn_insolation(&out, &dem, a->lat, &a->o);
     tn_image_free(&dem);
     if (st) return fail_status(st);
     memset(pics, 0, sizeof pics);
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
-    if (tn_image_range(&out, &lo0, &hi0) == TN_OK) top = hi0; /* one scale for the year, so months compare */
+    if (tn_image_range(&lo0, &hi0, &out) == TN_OK) top = hi0; /* one scale for the year, so months compare */
     for (c = 0; c < out.channels && !st; c++) {
         int month = a->o.month ? a->o.month : c + 1;
         float lo, hi;
@@ -2086,21 +2086,21 @@ static int run_insolation(void)
         size_t i, n = (size_t)out.width * out.height;
         snprintf(path, sizeof path, "%s_%02d.pfm", a->out, month);
         if ((st = season_channel(&out, c, &one))) break;
-        tn_image_range(&one, &lo, &hi);
+        tn_image_range(&lo, &hi, &one);
         for (i = 0; i < n; i++) sum += one.data[i];
         st = tn_image_save(path, &one, NULL);
         if (!st) printf("%s: month %2d mean %.0f min %.0f max %.0f W h/m^2 per day\n", path, month, sum / (double)n, lo, hi);
         snprintf(path, sizeof path, "%s_%02d.png", a->out, month);
         if (!st) st = insolation_preview(&one, top, &pics[c]);
         if (!st) st = tn_image_save(path, &pics[c], &so);
-        snprintf(label[c], sizeof label[c], "%s MEAN %.0f", tn_season_time_label((float)(month - 1), path, 8), sum / (double)n);
+        snprintf(label[c], sizeof label[c], "%s MEAN %.0f", tn_season_time_label(path, 8, (float)(month - 1)), sum / (double)n);
         labels[c] = label[c];
         tn_image_free(&one);
     }
     if (!st) printf("previews: %s_MM.png, black = 0 to pale yellow = %.0f W h/m^2 per day (the year's highest)\n", a->out, top);
     if (!st && out.channels > 1) {
         snprintf(path, sizeof path, "%s_sheet.png", a->out);
-        if (!(st = tn_season_sheet_labelled(pics, labels, out.channels, 4, out.width < 256 ? out.width : 256, &sheet)))
+        if (!(st = tn_season_sheet_labelled(&sheet, pics, labels, out.channels, 4, out.width < 256 ? out.width : 256)))
             st = tn_image_save(path, &sheet, &so);
         if (!st) printf("sheet: %s (the year, each month with its mean in W h/m^2 per day)\n", path);
     }
@@ -2157,7 +2157,7 @@ static tn_status season_read_insolation(const char *prefix, tn_image *out)
     int m;
     for (m = 0; m < 12 && !st; m++) {
         snprintf(path, sizeof path, "%s_%02d.pfm", prefix, m + 1);
-        if ((st = tn_image_load(path, &one, NULL))) break;
+        if ((st = tn_image_load(&one, path, NULL))) break;
         if (m == 0) {
             n = (size_t)one.width * one.height;
             if ((st = tn_image_create(&all, one.width, one.height, 12))) break;
@@ -2183,11 +2183,11 @@ static tn_status season_network(const struct season_args *a, const tn_image *dem
     int i;
     size_t k;
     char path[4096];
-    if ((st = tn_kpd_load(a->model, &m))) return st;
+    if ((st = tn_kpd_load(&m, a->model))) return st;
     if (a->lat >= -90) clim->latitude = (float)a->lat, clim->has_latitude = 1;
-    if (m.condition == TN_KPD_OURS && !ins->data) st = tn_insolation(dem, clim->has_latitude ? clim->latitude : NAN, &a->o.insolation, ins);
+    if (m.condition == TN_KPD_OURS && !ins->data) st = tn_insolation(ins, dem, clim->has_latitude ? clim->latitude : NAN, &a->o.insolation);
     for (i = 0; i < count && !st; i++) {
-        if ((st = tn_kpd_generate(&m, dem, clim, ins->data ? ins : NULL, times[i], 0, 0, dem->width, dem->height, &imgs[i]))) break;
+        if ((st = tn_kpd_generate(&imgs[i], &m, dem, clim, ins->data ? ins : NULL, times[i], 0, 0, dem->width, dem->height))) break;
         if (m.out_channels == 1) {
             if (a->frames) snprintf(path, sizeof path, "%s_f%03d.pfm", a->out, i);
             else snprintf(path, sizeof path, "%s_%02d.pfm", a->out, a->month ? a->month : i + 1);
@@ -2215,7 +2215,7 @@ static int run_season(void)
     double t0 = tn_time_seconds();
     if (!a->climate == !a->koppen) return usage_error("season", "give exactly one of --climate CSV and --koppen CODE");
     if ((a->month != 0) + (a->frames != 0) + (a->months != 0) > 1) return usage_error("season", "--month, --months and --frames exclude each other");
-    st = a->climate ? tn_climate_load(a->climate, &clim) : tn_climate_koppen(a->koppen, &clim);
+    st = a->climate ? tn_climate_load(&clim, a->climate) : tn_climate_koppen(&clim, a->koppen);
     if (st) return fail_status(st);
     count = a->month ? 1 : a->frames ? a->frames : 12;
     for (i = 0; i < count; i++) times[i] = a->month ? (float)(a->month - 1) : a->frames ? 12.0f * (float)i / (float)count : (float)i;
@@ -2232,7 +2232,7 @@ static int run_season(void)
     }
     /* without --lat (still -999) the climate's latitude is used */
     if (a->model) st = season_network(a, &dem, &clim, &ins, times, count, imgs);
-    else st = tn_season_texture(&dem, &clim, a->lat < -90 ? NAN : a->lat, ins.data ? &ins : NULL, times, count, &a->o, imgs, NULL);
+    else st = tn_season_texture(imgs, &dem, &clim, a->lat < -90 ? NAN : a->lat, ins.data ? &ins : NULL, times, count, &a->o, NULL);
     memset(&so, 0, sizeof so);
     so.bit_depth = 8;
     for (i = 0; i < count && !st; i++) {
@@ -2243,10 +2243,10 @@ static int run_season(void)
     if (!st && count > 1) { /* the year at a glance, each picture under its date */
         char(*label)[16] = (char(*)[16])calloc((size_t)count, sizeof *label);
         const char **labels = (const char **)calloc((size_t)count, sizeof *labels);
-        for (i = 0; label && labels && i < count; i++) labels[i] = tn_season_time_label(times[i], label[i], sizeof label[i]);
+        for (i = 0; label && labels && i < count; i++) labels[i] = tn_season_time_label(label[i], sizeof label[i], times[i]);
         snprintf(path, sizeof path, "%s_sheet.png", a->out);
         if (!label || !labels) st = TN_ERR_OUT_OF_MEMORY;
-        else if (!(st = tn_season_sheet_labelled(imgs, labels, count, a->columns, dem.width < 256 ? dem.width : 256, &sheet)))
+        else if (!(st = tn_season_sheet_labelled(&sheet, imgs, labels, count, a->columns, dem.width < 256 ? dem.width : 256)))
             st = tn_image_save(path, &sheet, &so);
         free(label);
         free(labels);
@@ -2297,7 +2297,7 @@ static int run_season_train(void)
     }
     a->o.train.checkpoint = a->ckpt;
     train_budget_cap(&a->o.train);
-    if (a->cond && (st = tn_kpd_condition_parse(a->cond, &a->o.condition))) return fail_status(st);
+    if (a->cond && (st = tn_kpd_condition_parse(&a->o.condition, a->cond))) return fail_status(st);
     { /* a folder holding season.csv */
         FILE *f;
         snprintf(dirbuf, sizeof dirbuf, "%s/season.csv", a->data);
@@ -2306,7 +2306,7 @@ static int run_season_train(void)
             a->data = dirbuf;
         }
     }
-    if ((st = tn_season_data_load(a->data, &d))) return fail_status(st);
+    if ((st = tn_season_data_load(&d, a->data))) return fail_status(st);
     if (!(use = (tn_season_sample *)calloc((size_t)d.count, sizeof *use))) {
         tn_season_data_free(&d);
         fprintf(stderr, "terrainnet: out of memory\n");
@@ -2317,12 +2317,12 @@ static int run_season_train(void)
     printf("data: %d site%s, %d usable frames, %d for training\n", d.sites, d.sites > 1 ? "s" : "", d.count, n);
     a->o.lo = d.lo;
     a->o.hi = d.hi;
-    st = tn_kpd_train(use, n, &a->o, &model, &s);
+    st = tn_kpd_train(&model, use, n, &a->o, &s);
     free(use);
     tn_season_data_free(&d);
     if (st == TN_ERR_CANCELLED) return train_interrupted("season-train", s.iterations, a->ckpt);
     if (st) return fail_status(st);
-    st = tn_kpd_save(&model, a->out);
+    st = tn_kpd_save(a->out, &model);
     if (!st)
         printf("condition: %s\niterations: %ld (resumed at %ld)\ntrain_minutes: %.2f\nseconds_per_iteration: %.4f\n"
                "loss_l1: %.5f (first %.5f)\nloss_g: %.4f\nloss_d: %.4f\ncheckpoints: %d (%s)\nmodel: %s\n",
@@ -2419,7 +2419,7 @@ int main(int argc, char **argv)
             a += 2;
         } else if (!strcmp(argv[a], "--precision") && a + 1 < argc) {
             tn_precision p;
-            if (tn_precision_parse(argv[a + 1], &p) != TN_OK) {
+            if (tn_precision_parse(&p, argv[a + 1]) != TN_OK) {
                 fprintf(stderr, "terrainnet: --precision needs auto, bf16 or fp32\n");
                 return 2;
             }

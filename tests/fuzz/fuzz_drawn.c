@@ -24,15 +24,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char *text = NULL;
     size_t n = 0;
     int i;
-    if (tn_image_load_memory(data, size, "fuzz.png", &img, NULL, NULL) != TN_OK) return 0;
-    if (img.width <= 512 && img.height <= 512 && tn_sketch_from_image(&img, &s) == TN_OK) {
+    if (tn_image_load_memory(&img, data, size, "fuzz.png", NULL, NULL) != TN_OK) return 0;
+    if (img.width <= 512 && img.height <= 512 && tn_sketch_from_image(&s, &img) == TN_OK) {
         if (s.width != img.width || s.height != img.height || s.count < 1) abort();
-        if (tn_sketch_format(&s, &text, &n) != TN_OK || tn_sketch_parse(text, n, "again", &t) != TN_OK || t.count != s.count) abort();
+        if (tn_sketch_format(&text, &n, &s) != TN_OK || tn_sketch_parse(&t, text, n, "again") != TN_OK || t.count != s.count) abort();
         for (i = 0; i < s.count; i++)
             if (t.items[i].npoints != s.items[i].npoints ||
                 memcmp(t.items[i].points, s.items[i].points, (size_t)s.items[i].npoints * 3 * sizeof(float)))
                 abort();
-        (void)tn_contour_parts_make(&s, 1, &p);
+        (void)tn_contour_parts_make(&p, &s, 1);
     }
     tn_free(text);
     tn_contour_set_free(&s);

@@ -35,13 +35,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         o.raw_width = data[1];
         o.raw_height = data[2];
     }
-    if (tn_image_load_memory(data + 1, size - 1, NULL, &img, &info, &o) != TN_OK) return 0;
+    if (tn_image_load_memory(&img, data + 1, size - 1, NULL, &o, &info) != TN_OK) return 0;
     if ((size_t)img.width * img.height * img.channels <= ((size_t)1 << 20) &&
-        tn_image_save_memory(&img, NULL, (tn_format)(1 + (data[0] / 14) % 6), &enc, &n) == TN_OK) {
+        tn_image_save_memory(&enc, &n, &img, (tn_format)(1 + (data[0] / 14) % 6), NULL) == TN_OK) {
         memset(&o, 0, sizeof o);
         o.format = (tn_format)(1 + (data[0] / 14) % 6);
         if (o.format == TN_FORMAT_R16) { o.raw_width = img.width; o.raw_height = img.height; }
-        if (tn_image_load_memory(enc, n, NULL, &back, NULL, &o) == TN_OK) tn_image_free(&back);
+        if (tn_image_load_memory(&back, enc, n, NULL, &o, NULL) == TN_OK) tn_image_free(&back);
         tn_free(enc);
     }
     tn_image_free(&img);

@@ -36,17 +36,17 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     {
         tn_gnn m;
         tn_contour_set parts = {0, 0, 0, NULL};
-        if (tn_gnn_load(in, &m) == TN_OK) {
-            if (tn_gnn_parts(&m, &parts) != TN_OK || parts.count != m.parts) abort();
+        if (tn_gnn_load(&m, in) == TN_OK) {
+            if (tn_gnn_parts(&parts, &m) != TN_OK || parts.count != m.parts) abort();
             tn_contour_set_free(&parts);
             tn_gnn_free(&m);
         }
     }
     {
         tn_singan m;
-        if (tn_singan_load(in, &m) == TN_OK) {
+        if (tn_singan_load(&m, in) == TN_OK) {
             tn_clear_error();
-            if ((st = tn_singan_sample(&m, 0, 0, 16, 16, NULL, &out)) != TN_OK && !tn_last_error()[0]) abort();
+            if ((st = tn_singan_sample(&out, &m, 0, 0, 16, 16, NULL)) != TN_OK && !tn_last_error()[0]) abort();
             tn_image_free(&out);
             tn_singan_free(&m);
         }
@@ -55,14 +55,14 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         tn_texgan m;
         if (tn_texgan_load(&m, in) == TN_OK) {
             tn_clear_error();
-            if ((st = tn_texgan_synthesize(&m, 1, 16, 16, &out)) != TN_OK && !tn_last_error()[0]) abort();
+            if ((st = tn_texgan_synthesize(&out, &m, 1, 16, 16)) != TN_OK && !tn_last_error()[0]) abort();
             tn_image_free(&out);
             tn_texgan_free(&m);
         }
     }
     {
         tn_kpd m;
-        if (tn_kpd_load(in, &m) == TN_OK) tn_kpd_free(&m);
+        if (tn_kpd_load(&m, in) == TN_OK) tn_kpd_free(&m);
     }
     return 0;
 }

@@ -45,12 +45,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         (void)sum;
         tn_image_free(&img);
     }
-    if (tn_zlib_inflate(data, size, &out, &out_n, (size_t)1 << 24) == TN_OK) TN_FREE(out);
+    if (tn_zlib_inflate(&out, &out_n, data, size, (size_t)1 << 24) == TN_OK) TN_FREE(out);
     out = NULL;
-    if (tn_zlib_deflate(data, size, data[0] % 10, &out, &out_n) == TN_OK) {
+    if (tn_zlib_deflate(&out, &out_n, data, size, data[0] % 10) == TN_OK) {
         uint8_t *back = NULL;
         size_t back_n = 0;
-        if (tn_zlib_inflate(out, out_n, &back, &back_n, 0) != TN_OK || back_n != size || memcmp(back, data, size) != 0) {
+        if (tn_zlib_inflate(&back, &back_n, out, out_n, 0) != TN_OK || back_n != size || memcmp(back, data, size) != 0) {
             fprintf(stderr, "fuzz_png: deflate round trip failed (%zu bytes, level %d): %s\n", size, data[0] % 10, tn_last_error());
             abort();
         }

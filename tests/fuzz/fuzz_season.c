@@ -49,9 +49,9 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_season_data d;
     int i;
     size_t k;
-    if (tn_climate_parse((const char *)data, size, "fuzz", &c) == TN_OK && tn_climate_check(&c) != TN_OK) abort();
+    if (tn_climate_parse(&c, (const char *)data, size, "fuzz") == TN_OK && tn_climate_check(&c) != TN_OK) abort();
     if (!fixtures() || !fuzz_write(list, data, size)) return 0;
-    if (tn_season_data_load(list, &d) == TN_OK) {
+    if (tn_season_data_load(&d, list) == TN_OK) {
         for (i = 0; i < d.count; i++) {
             const tn_image *t = d.samples[i].target;
             if (!t || !t->data || !isfinite(d.samples[i].time)) abort();

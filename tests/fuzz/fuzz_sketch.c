@@ -21,18 +21,18 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char *text = NULL;
     size_t n = 0;
     int i, *match;
-    if (tn_sketch_parse((const char *)data, size, "fuzz", &s) != TN_OK) return 0;
-    if (tn_sketch_format(&s, &text, &n) != TN_OK || tn_sketch_parse(text, n, "again", &t) != TN_OK || t.count != s.count) abort();
+    if (tn_sketch_parse(&s, (const char *)data, size, "fuzz") != TN_OK) return 0;
+    if (tn_sketch_format(&text, &n, &s) != TN_OK || tn_sketch_parse(&t, text, n, "again") != TN_OK || t.count != s.count) abort();
     for (i = 0; i < s.count; i++)
         if (t.items[i].npoints != s.items[i].npoints ||
             memcmp(t.items[i].points, s.items[i].points, (size_t)s.items[i].npoints * 3 * sizeof(float)))
             abort();
     /* the pixel-chain stages only on small canvases (a chain can be as long as the canvas) */
-    if (s.width <= 512 && s.height <= 512 && tn_sketch_densify(&s, &d) == TN_OK && tn_contour_parts_make(&d, 1, &p) == TN_OK &&
+    if (s.width <= 512 && s.height <= 512 && tn_sketch_densify(&d, &s) == TN_OK && tn_contour_parts_make(&p, &d, 1) == TN_OK &&
         p.count > 0 && p.count <= 4096 && (match = (int *)malloc((size_t)p.count * sizeof(int)))) {
         /* parts can draw more than their set (each starts a polyline; the graph walk may repeat
            junctions), so near the strokes' limit they may pass it */
-        tn_status st = tn_sketch_align(&p, &p, NULL, match);
+        tn_status st = tn_sketch_align(match, &p, &p, NULL);
         if (st != TN_OK && st != TN_ERR_TOO_LARGE) abort();
         for (i = 0; !st && i < p.count; i++)
             if (match[i] < 0 || match[i] >= p.count) abort();

@@ -37,15 +37,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (len > sizeof out) abort();
     memset(&o, 0, sizeof o);
     o.format = TN_FORMAT_TIFF;
-    if (tn_image_load_memory(data, size, "fuzz.tif", &img, &info, &o) != TN_OK) return 0;
+    if (tn_image_load_memory(&img, data, size, "fuzz.tif", &o, &info) != TN_OK) return 0;
     if ((size_t)img.width * img.height * img.channels <= ((size_t)1 << 20)) {
         tn_save_opts so;
         uint8_t *enc = NULL;
         size_t n = 0;
         memset(&so, 0, sizeof so);
         so.georef = &info.georef;
-        if (tn_image_save_memory(&img, &so, TN_FORMAT_TIFF, &enc, &n) == TN_OK) {
-            if (tn_image_load_memory(enc, n, "fuzz2.tif", &back, &info2, &o) != TN_OK) abort(); /* our own file must load */
+        if (tn_image_save_memory(&enc, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK) {
+            if (tn_image_load_memory(&back, enc, n, "fuzz2.tif", &o, &info2) != TN_OK) abort(); /* our own file must load */
             if (back.width != img.width || back.height != img.height || back.channels != img.channels ||
                 memcmp(back.data, img.data, (size_t)img.width * img.height * img.channels * sizeof(float)) != 0)
                 abort();

@@ -26,7 +26,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     memcpy(text, data, size);
     text[size] = 0;
     memset(&w, 0, sizeof w);
-    if (tn_world_parse(text, NULL, &w) == TN_OK) {
+    if (tn_world_parse(&w, text, NULL) == TN_OK) {
         tn_rect r = tn_world_tile_rect(&w, w.rows - 1, w.cols - 1);
         if (w.rows < 1 || w.cols < 1 || r.x + r.w != w.out_width || r.y + r.h != w.out_height) abort();
         tn_world_free(&w);

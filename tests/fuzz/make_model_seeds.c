@@ -46,8 +46,8 @@ int main(int argc, char **argv)
         o.train.max_iters = 2;
         o.train.minutes = 5;
         snprintf(path, sizeof path, "%s/gnn.tnw", dir);
-        if (!(bad |= done(tn_gnn_train(&dem, &o, &m, NULL), "gnn train"))) {
-            bad |= done(tn_gnn_save(&m, path), path);
+        if (!(bad |= done(tn_gnn_train(&m, &dem, &o, NULL), "gnn train"))) {
+            bad |= done(tn_gnn_save(path, &m), path);
             tn_gnn_free(&m);
         }
     }
@@ -61,8 +61,8 @@ int main(int argc, char **argv)
         o.train.max_iters = 2;
         o.train.minutes = 5;
         snprintf(path, sizeof path, "%s/singan.tnw", dir);
-        if (!(bad |= done(tn_singan_train(&dem, &o, &m, NULL), "singan train"))) {
-            bad |= done(tn_singan_save(&m, path), path);
+        if (!(bad |= done(tn_singan_train(&m, &dem, &o, NULL), "singan train"))) {
+            bad |= done(tn_singan_save(path, &m), path);
             tn_singan_free(&m);
         }
     }
@@ -83,7 +83,7 @@ int main(int argc, char **argv)
         for (i = 0; i < (size_t)32 * 32 * 3; i++) tex.data[i] = dem.data[i % ((size_t)48 * 48)] * 0.001f;
         snprintf(path, sizeof path, "%s/texgan.tnw", dir);
         if (!(bad |= done(tn_texgan_train(&m, &tex, &o, NULL), "texgan train"))) {
-            bad |= done(tn_texgan_save(&m, path), path);
+            bad |= done(tn_texgan_save(path, &m), path);
             tn_texgan_free(&m);
         }
     }
@@ -105,7 +105,7 @@ int main(int argc, char **argv)
         o.train.max_iters = 1;
         o.train.minutes = 5;
         memset(s, 0, sizeof s);
-        if (tn_climate_koppen("Dfb", &c) || tn_insolation(&dem, 55.8, &io, &ins) || tn_season_texture(&dem, &c, 55.8, &ins, times, 2, NULL, t, NULL))
+        if (tn_climate_koppen(&c, "Dfb") || tn_insolation(&ins, &dem, 55.8, &io) || tn_season_texture(t, &dem, &c, 55.8, &ins, times, 2, NULL, NULL))
             return 1;
         for (i = 0; i < 2; i++) {
             s[i].dem = &dem;
@@ -115,8 +115,8 @@ int main(int argc, char **argv)
             s[i].target = &t[i];
         }
         snprintf(path, sizeof path, "%s/kpd.tnw", dir);
-        if (!(bad |= done(tn_kpd_train(s, 2, &o, &m, NULL), "kpd train"))) {
-            bad |= done(tn_kpd_save(&m, path), path);
+        if (!(bad |= done(tn_kpd_train(&m, s, 2, &o, NULL), "kpd train"))) {
+            bad |= done(tn_kpd_save(path, &m), path);
             tn_kpd_free(&m);
         }
         tn_image_free(&ins);
