@@ -2983,6 +2983,31 @@ TN_API double tn_time_seconds(void)
 TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+/* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails
+   on its own, and its message names the option and the range it allows, so a user knows which
+   field to fix ("gnn: option lr = -0.5, allowed (0, 10)"). */
+TN__SHARED tn_status tn__opt_int(const char *who, const char *name, int v, int lo, int hi)
+{
+    if (v >= lo && v <= hi) return TN_OK;
+    if (lo == INT_MIN) return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed <= %d", who, name, v, hi);
+    if (hi == INT_MAX) return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed >= %d", who, name, v, lo);
+    return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed %d .. %d", who, name, v, lo, hi);
+}
+
+/* A finite value in an interval whose ends are open or closed as `ends` says ("[]", "[)", "(]",
+   "()"); -HUGE_VAL or HUGE_VAL for no bound. NaN and infinities always fail. */
+TN__SHARED tn_status tn__opt_float(const char *who, const char *name, double v, const char *ends, double lo, double hi)
+{
+    char range[64];
+    int lo_open = ends[0] == '(', hi_open = ends[1] == ')';
+    if (isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi)) return TN_OK;
+    if (isfinite(lo) && isfinite(hi)) snprintf(range, sizeof range, "%c%g, %g%c", ends[0], lo, hi, ends[1]);
+    else if (isfinite(hi)) snprintf(range, sizeof range, "%s %g", hi_open ? "<" : "<=", hi);
+    else if (isfinite(lo)) snprintf(range, sizeof range, "%s %g", lo_open ? ">" : ">=", lo);
+    else snprintf(range, sizeof range, "finite");
+    return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %g, allowed %s", who, name, v, range);
+}
+
 /* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
 static void tn__duration_text(char out[8], double s)
 {
@@ -20711,7 +20736,7 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->max_channels < o->channels) o->max_channels = o->channels;
     if (o->disc_layers <= 0) o->disc_layers = 2;
     if (o->patch == 0) o->patch = 64;
-    if (o->lr <= 0) o->lr = 5e-4f;
+    if (o->lr == 0) o->lr = 5e-4f;
     if (o->rec_weight == 0) o->rec_weight = 10.0f;
     if (o->noise_amp == 0) o->noise_amp = 0.5f;
     if (o->adv_weight == 0) o->adv_weight = 1.0f;
@@ -20720,6 +20745,25 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->curv_weight == 0) o->curv_weight = 10.0f;
     if (o->curv_weight < 0) o->curv_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_singan_opts after tn_singan_defaults, one message each. */
+static tn_status tn__sg_validate(const tn_singan_opts *o)
+{
+    const char *w = "singan";
+    tn_status st;
+    if ((st = tn__opt_float(w, "factor", o->factor, "[]", 0.5, 0.9)) || (st = tn__opt_int(w, "coarsest", o->coarsest, 4, INT_MAX)) ||
+        (st = tn__opt_int(w, "channels", o->channels, 1, 256)) || (st = tn__opt_int(w, "max_channels", o->max_channels, 1, 256)) ||
+        (st = tn__opt_int(w, "disc_layers", o->disc_layers, 1, 4)))
+        return st;
+    if (o->patch > 0 && o->patch < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: option patch = %d, allowed >= 16 (< 0: whole scales)", o->patch);
+    if ((st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) || (st = tn__opt_float(w, "rec_weight", o->rec_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
+        (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
+        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)))
+        return st;
+    return TN_OK;
 }
 
 TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
@@ -21657,12 +21701,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
     memset(&s, 0, sizeof s);
     if (opts_in) s.o = *opts_in;
     tn_singan_defaults(&s.o);
-    if (!(s.o.factor >= 0.5f && s.o.factor <= 0.9f) || s.o.coarsest < 4 || s.o.channels > 256 || s.o.max_channels > 256 ||
-        s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0 ||
-        !(s.o.adv_weight <= 1e6f) || s.o.d_steps > 100 || !(s.o.curv_weight <= 1e6f))
-        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad option (factor %g in 0.5..0.9, coarsest %d >= 4, channels %d and %d <= 256, "
-                        "discriminator layers %d <= 4, patch >= 16, lr %g < 10, finite weights, noise amplitude %g in 0..100, iterations >= 0)",
-                        (double)s.o.factor, s.o.coarsest, s.o.channels, s.o.max_channels, s.o.disc_layers, (double)s.o.lr, (double)s.o.noise_amp);
+    if ((st = tn__sg_validate(&s.o))) return st;
     if ((st = tn__sg_check_dem(dem, s.o.coarsest, &lo, &hi))) return st;
     if (dem->channels > 1) { /* channel 0 only, as every DEM function */
         if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;
@@ -22486,7 +22525,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
        network for other terrain the phase trains everything for the example alone, so half
        (docs/gnn.md, "Embedding phase") */
     if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
-    if (o->lr <= 0) o->lr = 2e-3f;
+    if (o->lr == 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
     if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
     if (o->grad_weight == 0) o->grad_weight = 0.1f;
@@ -22496,6 +22535,32 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
     if (o->holdout_every <= 0) o->holdout_every = 150;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_gnn_opts after tn_gnn_defaults, one message each (negative rates and shares
+   mean "none" where the field says so). */
+static tn_status tn__gnn_validate(const tn_gnn_opts *o)
+{
+    const char *w = "gnn";
+    tn_status st;
+    if ((st = tn__opt_int(w, "hidden", o->hidden, 1, TN__GNN_MAXH)) || (st = tn__opt_int(w, "rounds", o->rounds, 1, 16)) ||
+        (st = tn__opt_int(w, "k", o->k, 1, 64)) || (st = tn__opt_float(w, "radius", o->radius, "(]", 0, 4096)) ||
+        (st = tn__opt_int(w, "embed", o->embed, 1, 256)) || (st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) ||
+        (st = tn__opt_float(w, "mask", o->mask, "()", -HUGE_VAL, 1)) || (st = tn__opt_float(w, "embed_drop", o->embed_drop, "()", -HUGE_VAL, 1)) ||
+        (st = tn__opt_float(w, "thin", o->thin, "()", -HUGE_VAL, 1)) || (st = tn__opt_float(w, "embed_phase", o->embed_phase, "()", -HUGE_VAL, 1)) ||
+        (st = tn__opt_float(w, "edge_noise", o->edge_noise, "[]", 0, 100)) || (st = tn__opt_float(w, "part_noise", o->part_noise, "[]", 0, 100)) ||
+        (st = tn__opt_float(w, "mse_weight", o->mse_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "ssim_weight", o->ssim_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "grad_weight", o->grad_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_int(w, "random_edges", o->random_edges, INT_MIN, 1 << 24)) ||
+        (st = tn__opt_float(w, "sketch_weight", o->sketch_weight, "[]", 0, 1e6)) ||
+        (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "further_weight", o->further_weight, "[]", 0, 1e6)) ||
+        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)))
+        return st;
+    if (o->holdout_count > 0 && !o->holdout)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: option holdout_count = %d, allowed 0 while holdout is NULL", o->holdout_count);
+    return TN_OK;
 }
 
 TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max)
@@ -24492,14 +24557,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
     if (opts_in) s.o = *opts_in;
     tn_gnn_defaults(&s.o);
     if ((st = tn__gnn_check_dem(dem, "the DEM", &lo, &hi, &mean, &std))) return st;
-    if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
-        s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.embed_phase < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
-        !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24) || !(s.o.sketch_weight >= 0 && s.o.sketch_weight <= 1e6) ||
-        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6) || s.o.holdout_count < 0 || s.o.holdout_count > 64 ||
-        (s.o.holdout_count > 0 && !s.o.holdout))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
-                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24, 0 .. 64 holdouts)", s.o.hidden,
-                        TN__GNN_MAXH, s.o.rounds, s.o.k, s.o.embed, (double)s.o.mask, s.o.random_edges);
+    if ((st = tn__gnn_validate(&s.o))) return st;
     if ((size_t)dem->width * dem->height * (size_t)s.o.k + (size_t)(s.o.random_edges > 0 ? s.o.random_edges : 0) > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn: %d x %d pixels with %d edges each exceed %d edges; train on a crop", dem->width, dem->height,
                         s.o.k, TN__GNN_MAX_EDGES);
@@ -25532,6 +25590,23 @@ static tn_status tn__gnn_detail_index(const tn_gnn *model, tn__gnn_gen *G)
     return tn__fd_build(&ex, NULL, &G->fd);
 }
 
+/* The rules of tn_gnn_generate_opts (zero = default throughout), one message each. */
+static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
+{
+    const char *w = "gnn generate";
+    tn_status st;
+    if ((st = tn__opt_int(w, "heights", o->heights, TN_GNN_HEIGHTS_AUTO, TN_GNN_HEIGHTS_UNIT)) ||
+        (st = tn__opt_int(w, "embeddings", o->embeddings, TN_GNN_EMBED_AUTO, TN_GNN_EMBED_NONE)) ||
+        (st = tn__opt_int(w, "finetune", o->finetune, 0, INT_MAX)) || (st = tn__opt_int(w, "align_choices", o->align_choices, 0, INT_MAX)) ||
+        (st = tn__opt_int(w, "random_nodes", o->random_nodes, 0, 8192)) || (st = tn__opt_int(w, "grow", o->grow, -1, 1)) ||
+        (st = tn__opt_int(w, "detail", o->detail, -1, 1)) || (st = tn__opt_float(w, "finetune_lr", o->finetune_lr, "[)", 0, 10)) ||
+        (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "order_weight", o->order_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "gain", o->gain, "(]", -HUGE_VAL, 1e6)))
+        return st;
+    return TN_OK;
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -25549,11 +25624,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
     if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
-    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 || o.detail < -1 || o.detail > 1 ||
-        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
-                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if ((st = tn__gnn_generate_validate(&o))) return st;
     if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
     if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
         tn_sketch_random_opts ro;
@@ -27293,13 +27364,35 @@ TN_API void tn_kpd_defaults(tn_kpd_opts *o)
     if (o->width <= 0) o->width = 32;
     if (o->crop <= 0) o->crop = 64;
     if (o->batch <= 0) o->batch = 4;
-    if (o->lr <= 0) o->lr = 2e-4f;
+    if (o->lr == 0) o->lr = 2e-4f;
     if (o->l1_weight == 0) o->l1_weight = 10.0f;
     if (o->fm_weight == 0) o->fm_weight = 10.0f;
     if (o->gan_weight == 0) o->gan_weight = 1.0f;
     if (o->lo == 0 && o->hi == 0) o->hi = 1.0f;
     if (o->lapse_rate == 0) o->lapse_rate = -0.006f;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_kpd_opts after tn_kpd_defaults, one message each. */
+static tn_status tn__kpd_validate(const tn_kpd_opts *o)
+{
+    const char *w = "season-train";
+    tn_status st;
+    if ((st = tn__opt_int(w, "condition", (int)o->condition, 0, TN_KPD_CONDITIONS - 1)) || (st = tn__opt_int(w, "width", o->width, 4, 256)) ||
+        (st = tn__opt_int(w, "crop", o->crop, 16, INT_MAX)))
+        return st;
+    if (o->crop & 7) return tn__fail(TN_ERR_INVALID_ARG, "season-train: option crop = %d, allowed a multiple of 8", o->crop);
+    if ((st = tn__opt_int(w, "batch", o->batch, 1, 64)) || (st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) ||
+        (st = tn__opt_float(w, "l1_weight", o->l1_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "fm_weight", o->fm_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "gan_weight", o->gan_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "lapse_rate", o->lapse_rate, "()", -HUGE_VAL, HUGE_VAL)))
+        return st;
+    if (!(o->hi > o->lo) || !isfinite(o->hi - o->lo))
+        return tn__fail(TN_ERR_INVALID_ARG, "season-train: options lo = %g, hi = %g, allowed finite with lo < hi", (double)o->lo, (double)o->hi);
+    if (o->l1_weight < 0 && o->gan_weight < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "season-train: options l1_weight and gan_weight both < 0 (off), allowed at most one off");
+    return TN_OK;
 }
 
 /* The conditioning maps of the window (wx, wy, ww, wh) for month m (0..11) into dst (C x wh x
@@ -27856,11 +27949,7 @@ TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, in
     memset(&t, 0, sizeof t);
     if (opts) t.o = *opts;
     tn_kpd_defaults(&t.o);
-    if ((int)t.o.condition < 0 || t.o.condition >= TN_KPD_CONDITIONS || t.o.width < 4 || t.o.width > 256 || (t.o.crop & 7) || t.o.crop < 16 ||
-        t.o.batch > 64 || !(t.o.lr < 10) || !isfinite(t.o.l1_weight) || !isfinite(t.o.fm_weight) || !isfinite(t.o.gan_weight) ||
-        !(t.o.hi > t.o.lo) || !isfinite(t.o.hi - t.o.lo) || !isfinite(t.o.lapse_rate) || (t.o.l1_weight < 0 && t.o.gan_weight < 0))
-        return tn__fail(TN_ERR_INVALID_ARG, "season-train: bad option (condition 0..4, width 4..256, crop a multiple of 8 >= 16, batch <= 64, "
-                        "lr < 10, finite weights with L1 or GAN on, lo < hi)");
+    if ((st = tn__kpd_validate(&t.o))) return st;
     if ((st = tn__kpd_check_samples(samples, count, t.o.condition, &t.A.out_channels))) return st;
     if (t.A.out_channels > 16) return tn__fail(TN_ERR_INVALID_ARG, "season-train: %d target channels (at most 16)", t.A.out_channels);
     for (i = 0; i < count; i++) {

@@ -529,6 +529,31 @@ TN_API double tn_time_seconds(void)
 TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+/* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails
+   on its own, and its message names the option and the range it allows, so a user knows which
+   field to fix ("gnn: option lr = -0.5, allowed (0, 10)"). */
+TN__SHARED tn_status tn__opt_int(const char *who, const char *name, int v, int lo, int hi)
+{
+    if (v >= lo && v <= hi) return TN_OK;
+    if (lo == INT_MIN) return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed <= %d", who, name, v, hi);
+    if (hi == INT_MAX) return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed >= %d", who, name, v, lo);
+    return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %d, allowed %d .. %d", who, name, v, lo, hi);
+}
+
+/* A finite value in an interval whose ends are open or closed as `ends` says ("[]", "[)", "(]",
+   "()"); -HUGE_VAL or HUGE_VAL for no bound. NaN and infinities always fail. */
+TN__SHARED tn_status tn__opt_float(const char *who, const char *name, double v, const char *ends, double lo, double hi)
+{
+    char range[64];
+    int lo_open = ends[0] == '(', hi_open = ends[1] == ')';
+    if (isfinite(v) && (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi)) return TN_OK;
+    if (isfinite(lo) && isfinite(hi)) snprintf(range, sizeof range, "%c%g, %g%c", ends[0], lo, hi, ends[1]);
+    else if (isfinite(hi)) snprintf(range, sizeof range, "%s %g", hi_open ? "<" : "<=", hi);
+    else if (isfinite(lo)) snprintf(range, sizeof range, "%s %g", lo_open ? ">" : ">=", lo);
+    else snprintf(range, sizeof range, "finite");
+    return tn__fail(TN_ERR_INVALID_ARG, "%s: option %s = %g, allowed %s", who, name, v, range);
+}
+
 /* A duration in at most 6 characters: "12.3s", "4m05s", "2h07m", "999h+" or "--". */
 static void tn__duration_text(char out[8], double s)
 {

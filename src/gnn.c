@@ -334,7 +334,7 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
        network for other terrain the phase trains everything for the example alone, so half
        (docs/gnn.md, "Embedding phase") */
     if (o->embed_phase == 0) o->embed_phase = o->holdout && o->holdout_count > 0 && o->phase_network >= 0 ? 0.5f : 0.25f;
-    if (o->lr <= 0) o->lr = 2e-3f;
+    if (o->lr == 0) o->lr = 2e-3f;
     if (o->mse_weight == 0) o->mse_weight = 1.0f;
     if (o->ssim_weight == 0) o->ssim_weight = 0.1f;
     if (o->grad_weight == 0) o->grad_weight = 0.1f;
@@ -344,6 +344,32 @@ TN_API void tn_gnn_defaults(tn_gnn_opts *o)
     if (o->smooth_weight == 0) o->smooth_weight = 0.1f;
     if (o->holdout_every <= 0) o->holdout_every = 150;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_gnn_opts after tn_gnn_defaults, one message each (negative rates and shares
+   mean "none" where the field says so). */
+static tn_status tn__gnn_validate(const tn_gnn_opts *o)
+{
+    const char *w = "gnn";
+    tn_status st;
+    if ((st = tn__opt_int(w, "hidden", o->hidden, 1, TN__GNN_MAXH)) || (st = tn__opt_int(w, "rounds", o->rounds, 1, 16)) ||
+        (st = tn__opt_int(w, "k", o->k, 1, 64)) || (st = tn__opt_float(w, "radius", o->radius, "(]", 0, 4096)) ||
+        (st = tn__opt_int(w, "embed", o->embed, 1, 256)) || (st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) ||
+        (st = tn__opt_float(w, "mask", o->mask, "()", -HUGE_VAL, 1)) || (st = tn__opt_float(w, "embed_drop", o->embed_drop, "()", -HUGE_VAL, 1)) ||
+        (st = tn__opt_float(w, "thin", o->thin, "()", -HUGE_VAL, 1)) || (st = tn__opt_float(w, "embed_phase", o->embed_phase, "()", -HUGE_VAL, 1)) ||
+        (st = tn__opt_float(w, "edge_noise", o->edge_noise, "[]", 0, 100)) || (st = tn__opt_float(w, "part_noise", o->part_noise, "[]", 0, 100)) ||
+        (st = tn__opt_float(w, "mse_weight", o->mse_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "ssim_weight", o->ssim_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "grad_weight", o->grad_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_int(w, "random_edges", o->random_edges, INT_MIN, 1 << 24)) ||
+        (st = tn__opt_float(w, "sketch_weight", o->sketch_weight, "[]", 0, 1e6)) ||
+        (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "further_weight", o->further_weight, "[]", 0, 1e6)) ||
+        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)))
+        return st;
+    if (o->holdout_count > 0 && !o->holdout)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn: option holdout_count = %d, allowed 0 while holdout is NULL", o->holdout_count);
+    return TN_OK;
 }
 
 TN_API int tn_gnn_holdout_windows(tn_image *out, const tn_image *dem, int x, int y, int w, int h, int max)
@@ -2340,14 +2366,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
     if (opts_in) s.o = *opts_in;
     tn_gnn_defaults(&s.o);
     if ((st = tn__gnn_check_dem(dem, "the DEM", &lo, &hi, &mean, &std))) return st;
-    if (s.o.hidden > TN__GNN_MAXH || s.o.rounds > 16 || s.o.k > 64 || !(s.o.radius <= 4096) || s.o.embed > 256 || !(s.o.lr < 10) || !isfinite(s.o.mask) ||
-        s.o.mask >= 1 || !(s.o.embed_drop < 1) || !(s.o.thin < 1) || !(s.o.embed_phase < 1) || !(s.o.edge_noise <= 100) || !(s.o.part_noise <= 100) || !isfinite(s.o.mse_weight) ||
-        !isfinite(s.o.ssim_weight) || !isfinite(s.o.grad_weight) || s.o.random_edges > (1 << 24) || !(s.o.sketch_weight >= 0 && s.o.sketch_weight <= 1e6) ||
-        !(s.o.smooth_weight <= 1e6) || !(s.o.further_weight >= 0 && s.o.further_weight <= 1e6) || s.o.holdout_count < 0 || s.o.holdout_count > 64 ||
-        (s.o.holdout_count > 0 && !s.o.holdout))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn: bad option (hidden %d <= %d, rounds %d <= 16, k %d <= 64, embed %d <= 256, "
-                        "mask %g < 1, finite weights and noise, shape-loss weights 0 .. 1e6, random edges <= 2^24, 0 .. 64 holdouts)", s.o.hidden,
-                        TN__GNN_MAXH, s.o.rounds, s.o.k, s.o.embed, (double)s.o.mask, s.o.random_edges);
+    if ((st = tn__gnn_validate(&s.o))) return st;
     if ((size_t)dem->width * dem->height * (size_t)s.o.k + (size_t)(s.o.random_edges > 0 ? s.o.random_edges : 0) > TN__GNN_MAX_EDGES)
         return tn__fail(TN_ERR_TOO_LARGE, "gnn: %d x %d pixels with %d edges each exceed %d edges; train on a crop", dem->width, dem->height,
                         s.o.k, TN__GNN_MAX_EDGES);
@@ -3380,6 +3399,23 @@ static tn_status tn__gnn_detail_index(const tn_gnn *model, tn__gnn_gen *G)
     return tn__fd_build(&ex, NULL, &G->fd);
 }
 
+/* The rules of tn_gnn_generate_opts (zero = default throughout), one message each. */
+static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
+{
+    const char *w = "gnn generate";
+    tn_status st;
+    if ((st = tn__opt_int(w, "heights", o->heights, TN_GNN_HEIGHTS_AUTO, TN_GNN_HEIGHTS_UNIT)) ||
+        (st = tn__opt_int(w, "embeddings", o->embeddings, TN_GNN_EMBED_AUTO, TN_GNN_EMBED_NONE)) ||
+        (st = tn__opt_int(w, "finetune", o->finetune, 0, INT_MAX)) || (st = tn__opt_int(w, "align_choices", o->align_choices, 0, INT_MAX)) ||
+        (st = tn__opt_int(w, "random_nodes", o->random_nodes, 0, 8192)) || (st = tn__opt_int(w, "grow", o->grow, -1, 1)) ||
+        (st = tn__opt_int(w, "detail", o->detail, -1, 1)) || (st = tn__opt_float(w, "finetune_lr", o->finetune_lr, "[)", 0, 10)) ||
+        (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "order_weight", o->order_weight, "(]", -HUGE_VAL, 1e6)) ||
+        (st = tn__opt_float(w, "gain", o->gain, "(]", -HUGE_VAL, 1e6)))
+        return st;
+    return TN_OK;
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -3397,11 +3433,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     if ((st = tn__cset_check(sketch, "gnn generate"))) return st;
     if (width < 16 || height < 16 || width > TN_SKETCH_MAX_SIDE || height > TN_SKETCH_MAX_SIDE)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: size %d x %d (16 .. %d a side)", width, height, TN_SKETCH_MAX_SIDE);
-    if (o.heights < TN_GNN_HEIGHTS_AUTO || o.heights > TN_GNN_HEIGHTS_UNIT || o.embeddings < TN_GNN_EMBED_AUTO ||
-        o.embeddings > TN_GNN_EMBED_NONE || o.finetune < 0 || o.align_choices < 0 || o.random_nodes < 0 || o.random_nodes > 8192 || o.grow < -1 || o.grow > 1 || o.detail < -1 || o.detail > 1 ||
-        !(o.finetune_lr >= 0 && o.finetune_lr < 10) || !(o.smooth_weight <= 1e6) || !(o.order_weight <= 1e6) || !(o.gain <= 1e6))
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: bad option (heights %d, finetune %d, align_choices %d, random_nodes %d <= 8192, "
-                        "finite gain)", o.heights, o.finetune, o.align_choices, o.random_nodes);
+    if ((st = tn__gnn_generate_validate(&o))) return st;
     if ((st = tn__gnn_sketch_units(&G->A, sketch, width, height, o.heights, &sk))) goto done;
     if (o.random_nodes > 0) { /* 5.2: random ridges and valleys around the user's lines, in the example's range */
         tn_sketch_random_opts ro;

@@ -1213,13 +1213,35 @@ TN_API void tn_kpd_defaults(tn_kpd_opts *o)
     if (o->width <= 0) o->width = 32;
     if (o->crop <= 0) o->crop = 64;
     if (o->batch <= 0) o->batch = 4;
-    if (o->lr <= 0) o->lr = 2e-4f;
+    if (o->lr == 0) o->lr = 2e-4f;
     if (o->l1_weight == 0) o->l1_weight = 10.0f;
     if (o->fm_weight == 0) o->fm_weight = 10.0f;
     if (o->gan_weight == 0) o->gan_weight = 1.0f;
     if (o->lo == 0 && o->hi == 0) o->hi = 1.0f;
     if (o->lapse_rate == 0) o->lapse_rate = -0.006f;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_kpd_opts after tn_kpd_defaults, one message each. */
+static tn_status tn__kpd_validate(const tn_kpd_opts *o)
+{
+    const char *w = "season-train";
+    tn_status st;
+    if ((st = tn__opt_int(w, "condition", (int)o->condition, 0, TN_KPD_CONDITIONS - 1)) || (st = tn__opt_int(w, "width", o->width, 4, 256)) ||
+        (st = tn__opt_int(w, "crop", o->crop, 16, INT_MAX)))
+        return st;
+    if (o->crop & 7) return tn__fail(TN_ERR_INVALID_ARG, "season-train: option crop = %d, allowed a multiple of 8", o->crop);
+    if ((st = tn__opt_int(w, "batch", o->batch, 1, 64)) || (st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) ||
+        (st = tn__opt_float(w, "l1_weight", o->l1_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "fm_weight", o->fm_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "gan_weight", o->gan_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "lapse_rate", o->lapse_rate, "()", -HUGE_VAL, HUGE_VAL)))
+        return st;
+    if (!(o->hi > o->lo) || !isfinite(o->hi - o->lo))
+        return tn__fail(TN_ERR_INVALID_ARG, "season-train: options lo = %g, hi = %g, allowed finite with lo < hi", (double)o->lo, (double)o->hi);
+    if (o->l1_weight < 0 && o->gan_weight < 0)
+        return tn__fail(TN_ERR_INVALID_ARG, "season-train: options l1_weight and gan_weight both < 0 (off), allowed at most one off");
+    return TN_OK;
 }
 
 /* The conditioning maps of the window (wx, wy, ww, wh) for month m (0..11) into dst (C x wh x
@@ -1776,11 +1798,7 @@ TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, in
     memset(&t, 0, sizeof t);
     if (opts) t.o = *opts;
     tn_kpd_defaults(&t.o);
-    if ((int)t.o.condition < 0 || t.o.condition >= TN_KPD_CONDITIONS || t.o.width < 4 || t.o.width > 256 || (t.o.crop & 7) || t.o.crop < 16 ||
-        t.o.batch > 64 || !(t.o.lr < 10) || !isfinite(t.o.l1_weight) || !isfinite(t.o.fm_weight) || !isfinite(t.o.gan_weight) ||
-        !(t.o.hi > t.o.lo) || !isfinite(t.o.hi - t.o.lo) || !isfinite(t.o.lapse_rate) || (t.o.l1_weight < 0 && t.o.gan_weight < 0))
-        return tn__fail(TN_ERR_INVALID_ARG, "season-train: bad option (condition 0..4, width 4..256, crop a multiple of 8 >= 16, batch <= 64, "
-                        "lr < 10, finite weights with L1 or GAN on, lo < hi)");
+    if ((st = tn__kpd_validate(&t.o))) return st;
     if ((st = tn__kpd_check_samples(samples, count, t.o.condition, &t.A.out_channels))) return st;
     if (t.A.out_channels > 16) return tn__fail(TN_ERR_INVALID_ARG, "season-train: %d target channels (at most 16)", t.A.out_channels);
     for (i = 0; i < count; i++) {

@@ -200,7 +200,7 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->max_channels < o->channels) o->max_channels = o->channels;
     if (o->disc_layers <= 0) o->disc_layers = 2;
     if (o->patch == 0) o->patch = 64;
-    if (o->lr <= 0) o->lr = 5e-4f;
+    if (o->lr == 0) o->lr = 5e-4f;
     if (o->rec_weight == 0) o->rec_weight = 10.0f;
     if (o->noise_amp == 0) o->noise_amp = 0.5f;
     if (o->adv_weight == 0) o->adv_weight = 1.0f;
@@ -209,6 +209,25 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->curv_weight == 0) o->curv_weight = 10.0f;
     if (o->curv_weight < 0) o->curv_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
+}
+
+/* The rules of tn_singan_opts after tn_singan_defaults, one message each. */
+static tn_status tn__sg_validate(const tn_singan_opts *o)
+{
+    const char *w = "singan";
+    tn_status st;
+    if ((st = tn__opt_float(w, "factor", o->factor, "[]", 0.5, 0.9)) || (st = tn__opt_int(w, "coarsest", o->coarsest, 4, INT_MAX)) ||
+        (st = tn__opt_int(w, "channels", o->channels, 1, 256)) || (st = tn__opt_int(w, "max_channels", o->max_channels, 1, 256)) ||
+        (st = tn__opt_int(w, "disc_layers", o->disc_layers, 1, 4)))
+        return st;
+    if (o->patch > 0 && o->patch < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: option patch = %d, allowed >= 16 (< 0: whole scales)", o->patch);
+    if ((st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) || (st = tn__opt_float(w, "rec_weight", o->rec_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
+        (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
+        (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
+        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)))
+        return st;
+    return TN_OK;
 }
 
 TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
@@ -1146,12 +1165,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
     memset(&s, 0, sizeof s);
     if (opts_in) s.o = *opts_in;
     tn_singan_defaults(&s.o);
-    if (!(s.o.factor >= 0.5f && s.o.factor <= 0.9f) || s.o.coarsest < 4 || s.o.channels > 256 || s.o.max_channels > 256 ||
-        s.o.disc_layers > 4 || (s.o.patch > 0 && s.o.patch < 16) || !(s.o.lr < 10) || !isfinite(s.o.rec_weight) || !(s.o.noise_amp >= 0 && s.o.noise_amp <= 100) || s.o.iters < 0 ||
-        !(s.o.adv_weight <= 1e6f) || s.o.d_steps > 100 || !(s.o.curv_weight <= 1e6f))
-        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad option (factor %g in 0.5..0.9, coarsest %d >= 4, channels %d and %d <= 256, "
-                        "discriminator layers %d <= 4, patch >= 16, lr %g < 10, finite weights, noise amplitude %g in 0..100, iterations >= 0)",
-                        (double)s.o.factor, s.o.coarsest, s.o.channels, s.o.max_channels, s.o.disc_layers, (double)s.o.lr, (double)s.o.noise_amp);
+    if ((st = tn__sg_validate(&s.o))) return st;
     if ((st = tn__sg_check_dem(dem, s.o.coarsest, &lo, &hi))) return st;
     if (dem->channels > 1) { /* channel 0 only, as every DEM function */
         if ((st = tn_image_create(&one, dem->width, dem->height, 1))) return st;

@@ -435,6 +435,20 @@ TN_TEST(bad_inputs_fail_cleanly)
     dem.data[77] = 1500.0f;
     o.hidden = 1000;
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strcmp(tn_last_error(), "gnn: option hidden = 1000, allowed 1 .. 256") == 0);
+    /* one message per rule: each names its option and range */
+    tiny_opts(&o, 2);
+    o.lr = -0.001f; /* zero is the default; a negative rate is an error, not the default */
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strcmp(tn_last_error(), "gnn: option lr = -0.001, allowed (0, 10)") == 0);
+    tiny_opts(&o, 2);
+    o.ssim_weight = NAN;
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strcmp(tn_last_error(), "gnn: option ssim_weight = nan, allowed finite") == 0);
+    tiny_opts(&o, 2);
+    o.holdout_count = 2; /* and no holdout */
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "holdout_count = 2") != NULL);
     tiny_opts(&o, 2);
     o.train.resume = 1;
     o.train.checkpoint = "build/test/no_such_gnn.ckpt";
@@ -462,12 +476,14 @@ TN_TEST(bad_inputs_fail_cleanly)
         memset(&go, 0, sizeof go);
         go.random_nodes = 9000;
         TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
+        TN_CHECK(strcmp(tn_last_error(), "gnn generate: option random_nodes = 9000, allowed 0 .. 8192") == 0);
         go.random_nodes = 0;
         go.grow = 2;
         TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
         go.grow = 0;
         go.order_weight = NAN;
         TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, &go) == TN_ERR_INVALID_ARG);
+        TN_CHECK(strcmp(tn_last_error(), "gnn generate: option order_weight = nan, allowed <= 1e+06") == 0);
     }
     TN_CHECK(out.data == NULL);
     /* model files: another method's model, another .tnw, a damaged byte, a damaged config */

@@ -602,6 +602,7 @@ TN_TEST(test_kpd_bad_input)
     k.s[3].insolation = &k.ins;
     o.crop = 20; /* not a multiple of 8 */
     TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strcmp(tn_last_error(), "season-train: option crop = 20, allowed a multiple of 8") == 0);
     if (m.weights) {
         TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, NULL, 2.0f, 0, 0, 40, 40) == TN_ERR_SHAPE);
         TN_CHECK(tn_kpd_generate(&out, &m, &k.dem, &k.c, &k.ins, NAN, 0, 0, 40, 40) == TN_ERR_NUMERIC);
