@@ -35,7 +35,10 @@ TN_API float    tn_rng_uniform(tn_rng *r);            /* uniform in [0, 1), 24 r
 TN_API float    tn_rng_normal(tn_rng *r);             /* standard normal (Box-Muller) */
 
 /* Progress: long operations call the hook with a stage name and a fraction in [0, 1].
-   Return non-zero from the hook to cancel; the operation then fails with TN_ERR_CANCELLED. */
+   Return non-zero from the hook to cancel; the operation then fails with TN_ERR_CANCELLED.
+   The hook is the calling thread's (as tn_last_error): set it in the thread that runs the
+   operation; two threads running methods side by side each report to their own. Built without
+   thread-local storage (TN_NO_TLS, or a compiler without it) it is one for the process. */
 typedef int (*tn_progress_fn)(void *user, const char *stage, double fraction);
 TN_API void tn_set_progress(tn_progress_fn fn, void *user);
 
@@ -490,8 +493,15 @@ TN__SHARED char *tn__strndup(const char *s, size_t n)
     return d;
 }
 
+/* Per thread where the compiler has thread-local storage (TN__TLS above): only the thread that
+   called the operation reports (the pool's workers never do), so its hook is the one it set. */
+#ifdef TN__TLS
+static TN__TLS tn_progress_fn tn__progress_fn;
+static TN__TLS void *tn__progress_user;
+#else
 static tn_progress_fn tn__progress_fn;
 static void *tn__progress_user;
+#endif
 
 TN_API void tn_set_progress(tn_progress_fn fn, void *user)
 {

@@ -91,7 +91,7 @@ TN_API int tn_train_checkpoint_failures(const tn_train *run, const char **messag
 TN_API tn_status tn_train_checkpoint(tn_train *run, const char *path);
 
 /* Seconds left in the operation now reporting progress (from inside a progress hook), < 0 when
-   unknown. Training runs keep it current. */
+   unknown. Training runs keep it current; per thread, as the hook. */
 TN_API double tn_progress_eta(void);
 
 /* Model files: tn_model_stamp writes the metadata every model carries; tn_model_check refuses a
@@ -207,7 +207,11 @@ static tn_status tn__train_try_checkpoint(tn_train *run)
     return TN_OK;
 }
 
+#ifdef TN__TLS
+static TN__TLS double tn__progress_eta_s = -1.0;
+#else
 static double tn__progress_eta_s = -1.0;
+#endif
 
 TN_API double tn_progress_eta(void) { return tn__progress_eta_s; }
 

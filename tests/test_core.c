@@ -260,6 +260,41 @@ TN_TEST(progress_hook_can_cancel)
     TN_CHECK(tn__progress("stage", 0.75) == TN_OK);
 }
 
+#if !defined(TN_NO_THREADS) && defined(TN__TLS)
+static int count_reports(void *user, const char *stage, double f)
+{
+    (void)stage;
+    (void)f;
+    ++*(int *)user;
+    return 0;
+}
+
+static void *progress_thread_main(void *arg)
+{
+    (void)tn__progress("other thread", 0.5); /* no hook of its own yet: reaches nobody */
+    tn_set_progress(count_reports, arg);
+    (void)tn__progress("other thread", 0.5);
+    (void)tn__progress("other thread", 1.0);
+    return NULL; /* its hook ends with it; the main thread's was never replaced */
+}
+#endif
+
+TN_TEST(progress_hook_is_per_thread)
+{
+#if defined(TN_NO_THREADS) || !defined(TN__TLS)
+    TN_SKIP("no thread-local storage: one hook for the process");
+#else
+    int mine = 0, theirs = 0;
+    pthread_t tid;
+    tn_set_progress(count_reports, &mine);
+    TN_CHECK(pthread_create(&tid, NULL, progress_thread_main, &theirs) == 0);
+    pthread_join(tid, NULL);
+    TN_CHECK(tn__progress("main thread", 1.0) == TN_OK);
+    TN_CHECK(mine == 1 && theirs == 2);
+    tn_set_progress(NULL, NULL);
+#endif
+}
+
 TN_TEST(time_is_wall_time)
 {
     /* training budgets, checkpoints and ETAs run on tn_time_seconds: a second asleep is a
@@ -296,6 +331,7 @@ int main(void)
     TN_RUN(last_error_is_per_thread);
     TN_RUN(worker_failure_reaches_the_caller);
     TN_RUN(progress_hook_can_cancel);
+    TN_RUN(progress_hook_is_per_thread);
     TN_RUN(size_checks_overflow);
     TN_RUN(time_is_wall_time);
     return tn_test_summary("test_core");
