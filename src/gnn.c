@@ -2740,6 +2740,10 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+/* The ground tn__gnn_grow adds falls away from a user ridge (rises away from a user valley) by
+   TN__GNN_FALL x the example lines' local relief over TN__GNN_FALL_REACH px (tn__gnn_grow_fall) */
+#define TN__GNN_FALL 2.0f
+#define TN__GNN_FALL_REACH 48
 
 /* What every window of one generation shares: the sketch's parts, cut once from the whole
    sketch so that every window sees the same parts in the same order, their embeddings and
@@ -3462,7 +3466,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
             if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
-                G->side = relief / 16 / G->A.std; /* the fall added lines keep near a stroke */
+                G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the fall of the added lines */
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);
@@ -3555,8 +3559,9 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
 #define TN__GNN_NOTCH 7 /* px: half-width of the notch that deepens a valley or raises a ridge */
 
 /* A grown sketch's user lines stay the lowest (valley) or highest (ridge) ground across them:
-   where a bank (the output 4 px from a stroke pixel, off the strokes) is not at least `side` per
-   px above a valley pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
+   where a bank (the output 4 px from a stroke pixel and 3 px or more from every stroke: across it,
+   not along it) is not at least `side` per px (the added lines' fall, TN__GNN_FALL) above a valley
+   pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
    in a notch of (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the
    network leave a stroke on a hillside where the land around it tilts more than the stroke's own
    profile (a tributary above a main valley); lifting the low bank instead left levees at a fixed
@@ -3580,7 +3585,7 @@ static void tn__gnn_incise(const tn__gnn_gen *G, const float *val, int ax, int a
                 for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
                     float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
                     if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah ||
-                        G->pin_d[(size_t)b * G->W + a] < 2)
+                        G->pin_d[(size_t)b * G->W + a] < Bk - 1)
                         continue;
                     q = val[(size_t)(b - ay) * aw + (a - ax)];
                     m = t == 1 ? fmaxf(m, q) : fminf(m, q);

@@ -74,14 +74,14 @@ static int tn__gnn_grow_blur(const uint8_t *placed, const int8_t *ptype, int wid
 }
 
 /* What the ground between the strokes takes from their kind: it falls away from a user ridge and
-   rises away from a user valley, by `relief` x TN__GNN_FALL over 48 px, so a stroke stays the main
-   line around it rather than one line among the example's; between a ridge and a valley the two
-   cancel (the membrane already slopes from one to the other). dr, dv: px to the nearest user ridge
-   and valley, FLT_MAX when the drawing has none. */
-#define TN__GNN_FALL 2.0f
+   rises away from a user valley, by `relief` x TN__GNN_FALL over TN__GNN_FALL_REACH px, so a stroke
+   stays the main line around it rather than one line among the example's; between a ridge and a
+   valley the two cancel (the membrane already slopes from one to the other). dr, dv: px to the
+   nearest user ridge and valley, FLT_MAX when the drawing has none. */
 static float tn__gnn_grow_fall(float dr, float dv, float relief)
 {
-    float fr = dr < 48 ? dr / 48 : 1, fv = dv < 48 ? dv / 48 : 1, wr;
+    const float R = TN__GNN_FALL_REACH;
+    float fr = dr < R ? dr / R : 1, fv = dv < R ? dv / R : 1, wr;
     if (dr == FLT_MAX && dv == FLT_MAX) return 0;
     if (dv == FLT_MAX) return -TN__GNN_FALL * relief * fr;
     if (dr == FLT_MAX) return TN__GNN_FALL * relief * fv;

@@ -1167,6 +1167,8 @@ TN_TEST(grown_generation)
     int before = tn_get_threads();
     size_t q, n = 0;
     double err = 0;
+    float dlo = 0, dhi = 0;
+    tn_image_range(&dem, &dlo, &dhi);
     tiny_opts(&o, 3);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     user = two_strokes(240, 180, rp, vp);
@@ -1208,8 +1210,8 @@ TN_TEST(grown_generation)
             for (k = 0; r.data && k < (size_t)240 * 180; k++)
                 if (r.data[3 * k] > 0 || r.data[3 * k + 1] > 0)
                     ea += fabs(a.data[k] - r.data[3 * k + 2]), ep += fabs(plain.data[k] - r.data[3 * k + 2]), nk++;
-            printf("  strokes' height error with / without the detail: %.2f / %.2f m\n", ea / (double)nk, ep / (double)nk);
-            TN_CHECK(nk > 0 && ea <= 1.25 * ep); /* 1.05 x; 1.55 x when the detail's low-pass lowered them */
+            printf("  strokes' height error with / without the detail: %.2f / %.2f m (example range %.0f m)\n", ea / (double)nk, ep / (double)nk, (double)(dhi - dlo));
+            TN_CHECK(nk > 0 && ea <= ep + 0.02 * (dhi - dlo) * (double)nk);
             tn_image_free(&r);
         }
         { /* a valley drawn across a steep hillside (at the height the slope has there) is still the
@@ -1241,6 +1243,30 @@ TN_TEST(grown_generation)
             TN_CHECK(tn_gnn_ordering(&share, &hill, &hi, 4, NULL) == TN_OK);
             printf("  a valley across a hillside: %.1f %% of its points below both sides 4 px across\n", 100 * share);
             TN_CHECK(share >= 0.95);
+            { /* a lone ridge or valley on open ground keeps its height: the grown ground's fall
+                 already gives it banks, so the notch cuts nothing (-21 m, 2 % of the range, when
+                 it asked for more than that fall) */
+                int s2;
+                for (s2 = 0; s2 < 2; s2++) {
+                    tn_contour_set one = user;
+                    tn_image r = {0, 0, 0, NULL}, o1 = {0, 0, 0, NULL};
+                    double e = 0, sh = 0;
+                    size_t k2, nk = 0;
+                    one.count = 1;
+                    one.items = user.items + s2;
+                    go.grow = 1;
+                    TN_CHECK(tn_gnn_generate(&m, &one, 240, 180, &go, &o1) == TN_OK);
+                    go.grow = 0;
+                    TN_CHECK(tn_sketch_rasterise(&one, 240, 180, &r) == TN_OK);
+                    for (k2 = 0; r.data && k2 < (size_t)240 * 180; k2++)
+                        if (r.data[3 * k2] > 0 || r.data[3 * k2 + 1] > 0) e += o1.data[k2] - r.data[3 * k2 + 2], nk++;
+                    TN_CHECK(tn_gnn_ordering(&one, &o1, 4, &sh, NULL) == TN_OK);
+                    printf("  lone %s: bias %.1f m, follow %.1f %%\n", s2 ? "valley" : "ridge", e / (double)(nk ? nk : 1), 100 * sh);
+                    TN_CHECK(nk > 0 && fabs(e / (double)nk) <= 0.01 * (dhi - dlo) && sh >= 0.95);
+                    tn_image_free(&r);
+                    tn_image_free(&o1);
+                }
+            }
             tn_image_free(&hi);
         }
         /* a model without the example's heights (trained before them): auto skips, 1 fails */
