@@ -1168,7 +1168,7 @@ TN_TEST(grown_generation)
     size_t q, n = 0;
     double err = 0;
     float dlo = 0, dhi = 0;
-    tn_image_range(&dem, &dlo, &dhi);
+    tn_image_range(&dlo, &dhi, &dem);
     tiny_opts(&o, 3);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     user = two_strokes(240, 180, rp, vp);
@@ -1255,12 +1255,12 @@ TN_TEST(grown_generation)
                     one.count = 1;
                     one.items = user.items + s2;
                     go.grow = 1;
-                    TN_CHECK(tn_gnn_generate(&m, &one, 240, 180, &go, &o1) == TN_OK);
+                    TN_CHECK(tn_gnn_generate(&o1, &m, &one, 240, 180, &go) == TN_OK);
                     go.grow = 0;
-                    TN_CHECK(tn_sketch_rasterise(&one, 240, 180, &r) == TN_OK);
+                    TN_CHECK(tn_sketch_rasterise(&r, &one, 240, 180) == TN_OK);
                     for (k2 = 0; r.data && k2 < (size_t)240 * 180; k2++)
                         if (r.data[3 * k2] > 0 || r.data[3 * k2 + 1] > 0) e += o1.data[k2] - r.data[3 * k2 + 2], nk++;
-                    TN_CHECK(tn_gnn_ordering(&one, &o1, 4, &sh, NULL) == TN_OK);
+                    TN_CHECK(tn_gnn_ordering(&sh, &one, &o1, 4, NULL) == TN_OK);
                     printf("  lone %s: bias %.1f m, follow %.1f %%\n", s2 ? "valley" : "ridge", e / (double)(nk ? nk : 1), 100 * sh);
                     TN_CHECK(nk > 0 && fabs(e / (double)nk) <= 0.01 * (dhi - dlo) && sh >= 0.95);
                     tn_image_free(&r);
