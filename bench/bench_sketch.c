@@ -18,7 +18,8 @@
      128 crop, metres, its pixel spacing; nothing resized), each divided by the mean distance of
      three real 256 crops of the same DEM (the corners of <region>_full.png farthest from the
      example) to the example: <= 1.5 is the issue's target;
-   - seconds: generation time (gain test included).
+   - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
+     tn_gnn_membrane alone at 256 and 1024 px.
    Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...]
    from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
@@ -198,6 +199,13 @@ int main(int argc, char **argv)
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
+            else { /* the membrane alone, at 256 and 1024 px (its blocks of 128 + 64 px) */
+                tn_image big = {0, 0, 0, NULL};
+                double t1 = tn_time_seconds();
+                printf("%s_membrane_seconds: %.4f s\n", all[d], secs);
+                if (!tn_gnn_membrane(&asked, 1024, 1024, &big)) printf("%s_membrane_1024_seconds: %.3f s\n", all[d], tn_time_seconds() - t1);
+                tn_image_free(&big);
+            }
             fflush(stdout);
         }
         if (pictures && out[1].data && out[3].data && !tn_sketch_preview(&drawing, &asked, NULL, 256, 256)) {

@@ -135,18 +135,22 @@ TN__SHARED void tn__fd_free(tn__fd *d)
     memset(d, 0, sizeof *d);
 }
 
-/* Squared distances of q to the LANES keys of a block (lanes are keys: no reduction to reorder). */
+/* Squared distances of q to the LANES keys of a block (lanes are keys: no reduction to reorder).
+   The lanes are the inner loop, so that a compiler vectorises it where tn__vf is one float (the
+   WebAssembly build) and the vectors' sums run side by side; each lane's sum is the same. */
 static void tn__fd_dist(const float *q, const float *blk, int D, float *out)
 {
+    tn__vf acc[TN__FD_LANES / TN__VF_N];
     int i, l;
-    for (l = 0; l < TN__FD_LANES; l += TN__VF_N) {
-        tn__vf acc = tn__vf_set1(0.0f);
-        for (i = 0; i < D; i++) {
-            tn__vf e = tn__vf_sub(tn__vf_set1(q[i]), tn__vf_load(blk + i * TN__FD_LANES + l));
-            acc = tn__vf_madd(e, e, acc);
+    for (l = 0; l < TN__FD_LANES / TN__VF_N; l++) acc[l] = tn__vf_set1(0.0f);
+    for (i = 0; i < D; i++) {
+        tn__vf qi = tn__vf_set1(q[i]);
+        for (l = 0; l < TN__FD_LANES / TN__VF_N; l++) {
+            tn__vf e = tn__vf_sub(qi, tn__vf_load(blk + i * TN__FD_LANES + l * TN__VF_N));
+            acc[l] = tn__vf_madd(e, e, acc[l]);
         }
-        tn__vf_store(out + l, acc);
     }
+    for (l = 0; l < TN__FD_LANES / TN__VF_N; l++) tn__vf_store(out + l * TN__VF_N, acc[l]);
 }
 
 /* The values of src (w x h, rows of `stride`) every `step` px from (x - r, y - r) to (x + r,
