@@ -203,7 +203,7 @@ int main(int argc, char **argv)
                 tn_image big = {0, 0, 0, NULL};
                 double t1 = tn_time_seconds();
                 printf("%s_membrane_seconds: %.4f s\n", all[d], secs);
-                if (!tn_gnn_membrane(&asked, 1024, 1024, &big)) printf("%s_membrane_1024_seconds: %.3f s\n", all[d], tn_time_seconds() - t1);
+                if (!tn_gnn_membrane(&big, &asked, 1024, 1024)) printf("%s_membrane_1024_seconds: %.3f s\n", all[d], tn_time_seconds() - t1);
                 tn_image_free(&big);
             }
             fflush(stdout);
