@@ -25391,7 +25391,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
             if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
-                G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the fall of the added lines */
+                G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);
@@ -26429,7 +26429,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, fall = 0, relief = 0;
+    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
     double *sum = NULL, *cnt = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
@@ -26517,7 +26517,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             goto done;
         }
         relief = (float)(rel_sum / (double)nline) + 1e-6f;
-        fall = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
+        near_slope = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
     }
     (void)tn__gnn_grow_blur(NULL, etype, Wx, Hx, 0, 0, Wx, Hx, ebl);
     /* quilting: blocks in raster order, each the best of the candidates */
@@ -26596,7 +26596,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                 float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], Dv[p], relief) + prel[p], d = D[p];
                 if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
                     float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
-                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - fall * d) : fmaxf(h, hs + fall * d);
+                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - near_slope * d) : fmaxf(h, hs + near_slope * d);
                     h = w * h + (1 - w) * b;
                 }
                 st = tn__pts_push(&pts, (float)(p % (size_t)width), (float)(p / (size_t)width), h);

@@ -3172,7 +3172,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
             if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
-                G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the fall of the added lines */
+                G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);

@@ -102,7 +102,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, fall = 0, relief = 0;
+    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
     double *sum = NULL, *cnt = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
@@ -190,7 +190,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             goto done;
         }
         relief = (float)(rel_sum / (double)nline) + 1e-6f;
-        fall = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
+        near_slope = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
     }
     (void)tn__gnn_grow_blur(NULL, etype, Wx, Hx, 0, 0, Wx, Hx, ebl);
     /* quilting: blocks in raster order, each the best of the candidates */
@@ -269,7 +269,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                 float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], Dv[p], relief) + prel[p], d = D[p];
                 if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
                     float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
-                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - fall * d) : fmaxf(h, hs + fall * d);
+                    b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - near_slope * d) : fmaxf(h, hs + near_slope * d);
                     h = w * h + (1 - w) * b;
                 }
                 st = tn__pts_push(&pts, (float)(p % (size_t)width), (float)(p / (size_t)width), h);
