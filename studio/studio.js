@@ -8,24 +8,44 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 
 // ---- the worker ------------------------------------------------------------------------------
-const worker = new Worker('worker.js');
+// Cancel ends the worker (a C call cannot be interrupted) and starts a fresh one with the style
+// loaded again, so every command in flight fails with 'cancelled'.
+let worker = null;
 let nextId = 1;
 const pending = new Map();
 let onProgress = null;
-worker.onmessage = (e) => {
-    const m = e.data;
-    if (m.progress !== undefined) { if (onProgress) onProgress(m.stage, m.progress); return; }
-    const p = pending.get(m.id);
-    pending.delete(m.id);
-    if (m.ok) p.resolve(m); else p.reject(new Error(m.error));
-};
-worker.onerror = (e) => { status('worker error: ' + (e.message || e)); };
+function startWorker() {
+    worker = new Worker('worker.js');
+    worker.onmessage = (e) => {
+        const m = e.data;
+        if (m.progress !== undefined) { if (onProgress) onProgress(m.stage, m.progress); return; }
+        const p = pending.get(m.id);
+        pending.delete(m.id);
+        if (m.ok) p.resolve(m); else p.reject(new Error(m.error));
+    };
+    worker.onerror = (e) => { status('worker error: ' + (e.message || e)); };
+}
+startWorker();
 function ask(cmd, args, transfer) {
     const id = nextId++;
     return new Promise((resolve, reject) => {
         pending.set(id, { resolve, reject });
         worker.postMessage(Object.assign({ id: id, cmd: cmd }, args), transfer || []);
     });
+}
+let busy = 0; // commands the Cancel button can stop (generate, learn)
+function setBusy(delta) {
+    busy += delta;
+    $('cancel').disabled = busy <= 0;
+}
+async function cancel() {
+    worker.terminate();
+    for (const p of pending.values()) p.reject(new Error('cancelled'));
+    pending.clear();
+    onProgress = null;
+    startWorker();
+    if (styleBytes) await loadStyle(style, styleBytes.slice().buffer);
+    await warmup();
 }
 
 function status(text) { $('status').textContent = text; }
@@ -199,11 +219,14 @@ $('load-sketch').onchange = async (e) => {
 // ---- styles ----------------------------------------------------------------------------------
 let styles = [];
 let style = null;        // the loaded style's entry in styles.json (or the user's file)
+let styleBytes = null;   // its model file, kept to load it again into a fresh worker (cancel)
 async function loadStyle(entry, bytes) {
     status(`loading style ${entry.label}...`);
     if (!bytes) bytes = await (await fetch('styles/' + entry.file)).arrayBuffer();
+    const copy = new Uint8Array(bytes.slice(0));
     await ask('loadModel', { bytes: bytes }, [bytes]);
     style = entry;
+    styleBytes = copy;
     status(`style: ${entry.label} (${entry.region || 'your model'})`);
 }
 // styles that are not bundled (a user's file, one learnt in the page) follow the bundled ones in the list
@@ -249,6 +272,7 @@ async function generate() {
     if (!sketch.strokes.length) { status('draw a ridge or a valley first'); return null; }
     const size = +$('size').value, seed = +$('seed').value || 0;
     $('generate').disabled = true;
+    setBusy(1);
     const t0 = performance.now(), expected = expectedMsPerPixel * size * size;
     let libFraction = 0, stage = 'gnn-generate';
     onProgress = (st, f) => { stage = st; libFraction = f; };
@@ -275,9 +299,14 @@ async function generate() {
         clearInterval(tick);
         onProgress = null;
         $('generate').disabled = false;
+        setBusy(-1);
     }
 }
 $('generate').onclick = () => generate().catch(() => {});
+$('cancel').onclick = () => {
+    status('cancelling: starting a fresh worker...');
+    cancel().then(() => status('cancelled; the style is loaded again'), (err) => status('cancel: ' + err.message));
+};
 
 for (const b of document.querySelectorAll('button[data-kind]')) {
     b.onclick = async () => {
@@ -308,6 +337,7 @@ $('learn').onclick = async () => {
     if (!f) { status('choose a DEM file to learn from first'); return; }
     const minutes = Math.max(0.2, +$('learn-minutes').value || 2), lo = +$('learn-lo').value || 0, hi = +$('learn-hi').value || 0;
     $('learn').disabled = $('generate').disabled = true;
+    setBusy(1);
     const t0 = performance.now();
     let fraction = 0;
     onProgress = (st, fr) => { fraction = fr; };
@@ -329,6 +359,7 @@ $('learn').onclick = async () => {
         clearInterval(tick);
         onProgress = null;
         $('learn').disabled = $('generate').disabled = false;
+        setBusy(-1);
     }
 };
 $('save-style').onclick = () => { if (learnt) download(learnt.bytes, learnt.name); };
@@ -374,10 +405,18 @@ async function selftest() {
             files.push(`${e.ext.slice(1)}:${b.length}${good ? '' : '(bad)'}`);
             window.studioExports[e.ext] = Array.from(b);
         }
-        const ok = c.maxdiff <= 1e-4 && exportsOk;
+        // Cancel: a 512^2 generation stopped after 0.3 s fails with 'cancelled', and the fresh
+        // worker, with the style loaded again, generates
+        let cancelOk = false;
+        const big = ask('generate', { tns: r0.tns, width: 512, height: 512, seed: spec.seed }).then(() => 'finished', (e) => e.message);
+        await new Promise((res) => setTimeout(res, 300));
+        await cancel();
+        const after = await ask('generate', { tns: r0.tns, width: 128, height: 128, seed: spec.seed });
+        cancelOk = (await big) === 'cancelled' && after.width === 128;
+        const ok = c.maxdiff <= 1e-4 && exportsOk && cancelOk;
         out.textContent = `selftest: ${ok ? 'ok' : 'FAIL'} ms=${Math.round(r.seconds * 1000)} maxdiff=${c.maxdiff.toExponential(3)}` +
             ` identical=${c.identical ? 'yes' : 'no'} size=${r.width}x${r.height} style=${spec.style} wall_ms=${Math.round(wall)}` +
-            ` warmup_ms=${Math.round(warmMs)} exports=${files.join(',')}`;
+            ` warmup_ms=${Math.round(warmMs)} exports=${files.join(',')} cancel=${cancelOk ? 'ok' : 'FAIL'}`;
         status(`self-test: ${r.width} x ${r.height} in ${r.seconds.toFixed(2)} s`);
     } catch (err) {
         out.textContent = 'selftest: FAIL ' + err.message;
