@@ -92,6 +92,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@singan    multi-scale single-image GAN (SinGAN): random terrain of any size, refinement, upscaling
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
     @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures, KPD network
+    @@method    one interface for the learned methods: a descriptor each (train, save/load, windows), by name
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
     @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest
