@@ -40,7 +40,8 @@ CONFIGURATION (define before including the implementation)
                         with #error naming it: @@world needs every generator and @@export;
                         @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
                         @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
-                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail; @@method
+                        (in with the engine) lists the learned methods compiled in. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on
@@ -2254,7 +2255,7 @@ TN_API float tn_season_time_of(const char *when);
    Each learned method (texgan, singan, gnn, kpd) registers one tn_method: its name (the
    method= metadata of its model files), its training options and their defaults, train,
    save/load/free, and the window of a whole-map output with the halo of input it reads. The
-   world's learned stages, the CLI's `info` and the benches reach a model through it, so a new
+   world's learned stages, the CLI's `info` and bench_singan reach a model through it, so a new
    method is its own section file plus its descriptor here (docs/train.md, "Adding a learned
    method"). A field a method cannot support is NULL, and its comment says why.
    ============================================================================================ */
@@ -2296,7 +2297,7 @@ typedef struct tn_method {
     /* Trains a new *model on ex with opts (the method's options struct, NULL = defaults); stats is
        the method's stats struct or NULL. */
     tn_status (*train)(void **model, const tn_method_example *ex, const void *opts, void *stats);
-    tn_status (*save)(const void *model, const char *path);
+    tn_status (*save)(const char *path, const void *model);  /* the file first, as tn_x_save */
     /* A new *model from path; a file of another method or a checkpoint fails with TN_ERR_FORMAT. */
     tn_status (*load)(void **model, const char *path);
     void (*free)(void *model);  /* the model and its struct; NULL is fine */
@@ -28910,7 +28911,7 @@ TN__SHARED tn_status tn__method_keep(void **model, void *m, tn_status st)
         TYPE *m = (TYPE *)tn__calloc(sizeof(TYPE));                                             \
         return tn__method_keep(model, m, m ? tn_##P##_load(m, path) : tn__oom());               \
     }                                                                                           \
-    static tn_status tn__method_##P##_save(const void *model, const char *path)                 \
+    static tn_status tn__method_##P##_save(const char *path, const void *model)                 \
     {                                                                                           \
         return tn_##P##_save(path, (const TYPE *)model);                                        \
     }                                                                                           \

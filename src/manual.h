@@ -40,7 +40,8 @@ CONFIGURATION (define before including the implementation)
                         with #error naming it: @@world needs every generator and @@export;
                         @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
                         @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
-                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail; @@method
+                        (in with the engine) lists the learned methods compiled in. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on

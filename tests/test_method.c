@@ -64,7 +64,7 @@ static void round_trip(const char *name, const tn_method_example *ex, const void
     if (!m) return;
     TN_CHECK(m->train(&model, ex, opts, NULL) == TN_OK);
     if (!model) return;
-    TN_CHECK(m->save(model, path) == TN_OK);
+    TN_CHECK(m->save(path, model) == TN_OK);
     TN_CHECK(tn_method_load_any(&back, &loaded, path) == TN_OK);
     TN_CHECK(back == m && loaded != NULL);
     if (loaded) {
@@ -188,14 +188,6 @@ TN_TEST(kpd_round_trip)
     tn_test_kpd_set_free(&k);
 }
 
-static int write_bytes(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "wb");
-    int ok = f && fputs(text, f) >= 0;
-    if (f) ok &= fclose(f) == 0;
-    return ok;
-}
-
 /* Fails with `code` and a message naming the file; nothing is handed out. */
 static void load_fails(const char *path, tn_status code)
 {
@@ -213,7 +205,7 @@ TN_TEST(unknown_methods_and_non_models_fail_with_a_message)
                *other = tn_test_tmp_path("method", "other.tnw");
     tn_params *p = tn_params_create();
     int shape[1] = {3};
-    TN_CHECK(write_bytes(text, "elevation,42\n"));
+    TN_CHECK(tn_test_write_text(text, "elevation,42\n"));
     load_fails(text, TN_ERR_FORMAT);
     load_fails(tn_test_tmp_path("method", "missing.tnw"), TN_ERR_IO);
     /* weights without a method: not a model */

@@ -321,14 +321,6 @@ TN_TEST(test_season_real_dem)
 
 /* ---- KPD generator ---- */
 
-static int write_text(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "w");
-    int ok = f && fputs(text, f) >= 0;
-    if (f) ok &= fclose(f) == 0;
-    return ok;
-}
-
 static int same_image(const tn_image *a, const tn_image *b)
 {
     return a->data && b->data && a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -574,7 +566,7 @@ TN_TEST(test_kpd_bad_input)
         TN_CHECK(m.weights == NULL);
     }
     /* data files: a climate of 11 months, an unknown row, a mask of the wrong size */
-    TN_CHECK(write_text(p, "dem,nothing_here.pfm\n"));
+    TN_CHECK(tn_test_write_text(p, "dem,nothing_here.pfm\n"));
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_IO);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "d.pfm"), &k.dem, NULL) == TN_OK);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "m.pgm"), &small, NULL) == TN_OK);
@@ -584,16 +576,16 @@ TN_TEST(test_kpd_bad_input)
         for (mth = 1; mth <= 11; mth++) fprintf(f, "%d,%d,50\n", mth, mth);
         fclose(f);
     }
-    write_text(p, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
     printf("# %s\n", tn_last_error());
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_SHAPE);
-    write_text(p, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
+    tn_test_write_text(p, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_OK);
     if (!d.count) fprintf(stderr, "%s\n", tn_last_error());
     TN_CHECK(d.count == 2 && d.sites == 1 && d.samples[1].time == 4.5f && d.insolation[0].channels == 12);

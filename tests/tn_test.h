@@ -51,6 +51,7 @@ static const char *tn_test_cur_name;
 static const char *tn_test_data(const char *rel);
 static const char *tn_test_ref(const char *rel);
 static unsigned char *tn_test_read_file(const char *path, size_t *n);
+static int tn_test_write_text(const char *path, const char *text);
 #ifdef TERRAINNET_H
 static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
 #ifndef TN_NO_ENGINE
@@ -94,6 +95,7 @@ static int tn_test_summary(const char *file)
     (void)tn_test_tmp_path;
     (void)tn_test_ref;
     (void)tn_test_read_file;
+    (void)tn_test_write_text;
 #ifdef TERRAINNET_H
     (void)tn_test_exemplar;
 #ifndef TN_NO_ENGINE
@@ -157,6 +159,15 @@ static unsigned char *tn_test_read_file(const char *path, size_t *n)
     }
     fclose(f);
     return b;
+}
+
+/* Writes text to path; 1 when it was written whole. */
+static int tn_test_write_text(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "w");
+    int ok = f && fputs(text, f) >= 0;
+    if (f) ok &= fclose(f) == 0;
+    return ok;
 }
 
 #ifdef TERRAINNET_H
