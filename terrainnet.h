@@ -40,7 +40,8 @@ CONFIGURATION (define before including the implementation)
                         with #error naming it: @@world needs every generator and @@export;
                         @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
                         @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
-                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail; @@method
+                        (in with the engine) lists the learned methods compiled in. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on
@@ -92,6 +93,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@singan    multi-scale single-image GAN (SinGAN): random terrain of any size, refinement, upscaling
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
     @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures, KPD network
+    @@method    one interface for the learned methods: a descriptor each (train, save/load, windows), by name
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
     @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest
@@ -2247,6 +2249,76 @@ TN_API void tn_season_data_free(tn_season_data *d);
 /* Months from mid-January of a date "YYYY-MM-DD" (or a plain number of months); -1 if malformed. */
 TN_API float tn_season_time_of(const char *when);
 #endif /* TN_NO_SEASON */
+
+/* ============================================================================================
+   @@method  one interface for the learned methods: a descriptor each, found by name
+   Each learned method (texgan, singan, gnn, kpd) registers one tn_method: its name (the
+   method= metadata of its model files), its training options and their defaults, train,
+   save/load/free, and the window of a whole-map output with the halo of input it reads. The
+   world's learned stages, the CLI's `info` and bench_singan reach a model through it, so a new
+   method is its own section file plus its descriptor here (docs/train.md, "Adding a learned
+   method"). A field a method cannot support is NULL, and its comment says why.
+   ============================================================================================ */
+#ifndef TN_NO_ENGINE
+
+/* What a method trains on. Nothing is owned. */
+typedef struct tn_method_example {
+    const tn_image *image;                  /* texgan, singan, gnn: the one example */
+    const struct tn_season_sample *samples; /* kpd: dated pictures of heightfields */
+    int count;                              /* of samples */
+} tn_method_example;
+
+/* What a window is generated from besides the model. Nothing is owned. */
+typedef struct tn_method_input {
+    uint64_t seed;                          /* the sample (texgan, singan, gnn); wins over the seed
+                                               of opts */
+    int width, height;                      /* gnn: the whole map (the sketch's canvas is scaled to
+                                               it). texgan and singan sample an infinite plane and
+                                               kpd the whole of dem: they ignore them */
+    const struct tn_contour_set *sketch;    /* gnn */
+    const tn_image *dem;                    /* kpd: heights in metres */
+    const tn_image *insolation;             /* kpd: dem's 12-channel tn_insolation */
+    const struct tn_climate *climate;       /* kpd */
+    float time;                             /* kpd: months from mid-January */
+    const void *opts;                       /* the method's generation options (tn_singan_gen_opts,
+                                               tn_gnn_generate_opts); NULL = defaults. texgan and
+                                               kpd have none */
+} tn_method_input;
+
+/* A learned method. Models are opaque here (void *): a tn_texgan, tn_singan, tn_gnn or tn_kpd
+   allocated by train or load and released by free; a caller that knows the method may cast. */
+typedef struct tn_method {
+    const char *name;          /* "texgan", "singan", "gnn", "kpd": the model files' method= */
+    const char *summary;       /* one line: what it learns and generates from what */
+    const char *legacy_tensor; /* a tensor that names this method's files written before metadata
+                                  (NULL = none) */
+    size_t opts_size;          /* sizeof the method's training options (tn_gnn_opts, ...) */
+    void (*defaults)(void *opts);  /* the method's own tn_x_defaults: what zero fields mean */
+    /* Trains a new *model on ex with opts (the method's options struct, NULL = defaults); stats is
+       the method's stats struct or NULL. */
+    tn_status (*train)(void **model, const tn_method_example *ex, const void *opts, void *stats);
+    tn_status (*save)(const char *path, const void *model);  /* the file first, as tn_x_save */
+    /* A new *model from path; a file of another method or a checkpoint fails with TN_ERR_FORMAT. */
+    tn_status (*load)(void **model, const char *path);
+    void (*free)(void *model);  /* the model and its struct; NULL is fine */
+    int (*channels)(const void *model);  /* of every generated window */
+    /* Pixels of in->dem around a window that its pixels depend on (kpd); 0 when the method reads
+       no input raster (texgan and singan sample a plane; gnn reads its whole sketch). */
+    int (*halo)(const void *model);
+    /* The pixels `window` of the whole-map output: equal to the same pixels of any larger window
+       or of the whole map. *out is allocated here. */
+    tn_status (*generate_window)(tn_image *out, const void *model, const tn_method_input *in, tn_rect window);
+} tn_method;
+
+/* The method called name, or NULL (unknown, or compiled out). */
+TN_API const tn_method *tn_method_find(const char *name);
+/* Method i of those compiled in (0, 1, ...), NULL past the end. */
+TN_API const tn_method *tn_method_at(int i);
+/* Loads the model at path with the method its method= metadata (or its legacy tensor) names:
+   *m the method, *model the model (free with (*m)->free). A file that is not a model, or a model
+   of a method this build does not have, fails with TN_ERR_FORMAT and says which. */
+TN_API tn_status tn_method_load_any(const tn_method **m, void **model, const char *path);
+#endif /* TN_NO_ENGINE */
 
 /* ============================================================================================
    @@render  previews: hillshaded colour map and 3D perspective view
@@ -28811,6 +28883,227 @@ TN_API tn_status tn_season_data_load(tn_season_data *out, const char *path)
 #endif /* TN_NO_SEASON */
 
 /* --------------------------------------------------------------------------------------------
+   >>method  (@@method implementation)
+   Each descriptor wraps its method's own calls: a model struct allocated here around the
+   method's load/train, which fill it in place; options passed through untouched, so each
+   method's defaults stay in its own tn_x_defaults.
+   -------------------------------------------------------------------------------------------- */
+#ifndef TN_NO_ENGINE
+
+/* Hands a model filled by a method's load or train to the caller, or frees its struct when
+   that failed (the method left nothing else allocated). */
+TN__SHARED tn_status tn__method_keep(void **model, void *m, tn_status st)
+{
+    if (st) {
+        TN_FREE(m);
+        m = NULL;
+    }
+    *model = m;
+    return st;
+}
+
+/* The defaults, load, save and free adapters of a method whose calls are tn_P_defaults(opts),
+   tn_P_load(model, path), tn_P_save(path, model) and tn_P_free(model) on a model of TYPE. */
+#define TN__METHOD_MODEL_OPS(P, TYPE, OPTS)                                                    \
+    static void tn__method_##P##_defaults(void *o) { tn_##P##_defaults((OPTS *)o); }            \
+    static tn_status tn__method_##P##_load(void **model, const char *path)                      \
+    {                                                                                           \
+        TYPE *m = (TYPE *)tn__calloc(sizeof(TYPE));                                             \
+        return tn__method_keep(model, m, m ? tn_##P##_load(m, path) : tn__oom());               \
+    }                                                                                           \
+    static tn_status tn__method_##P##_save(const char *path, const void *model)                 \
+    {                                                                                           \
+        return tn_##P##_save(path, (const TYPE *)model);                                        \
+    }                                                                                           \
+    static void tn__method_##P##_free(void *model)                                              \
+    {                                                                                           \
+        if (model) tn_##P##_free((TYPE *)model);                                                \
+        TN_FREE(model);                                                                         \
+    }
+
+/* The descriptor's fields from defaults to free, as the macros here and a method's own train
+   (kpd) name them. */
+#define TN__METHOD_OPS(P) tn__method_##P##_defaults, tn__method_##P##_train, tn__method_##P##_save, tn__method_##P##_load, tn__method_##P##_free
+
+/* TN__METHOD_MODEL_OPS and train for a method that learns one example image:
+   tn_P_train(model, image, opts, stats). */
+#define TN__METHOD_IMAGE_OPS(P, TYPE, OPTS, STATS)                                              \
+    TN__METHOD_MODEL_OPS(P, TYPE, OPTS)                                                         \
+    static tn_status tn__method_##P##_train(void **model, const tn_method_example *ex, const void *opts, void *stats) \
+    {                                                                                           \
+        TYPE *m;                                                                                \
+        *model = NULL;                                                                          \
+        if (!ex || !ex->image) return tn__fail(TN_ERR_INVALID_ARG, #P " train: needs one example image (tn_method_example.image)"); \
+        if (!(m = (TYPE *)tn__calloc(sizeof(TYPE)))) return tn__oom();                          \
+        return tn__method_keep(model, m, tn_##P##_train(m, ex->image, (const OPTS *)opts, (STATS *)stats)); \
+    }
+
+/* *opts = the caller's generation options, or zeros (the method's defaults). */
+TN__SHARED void tn__method_gen_opts(void *opts, size_t size, const void *given)
+{
+    if (given) memcpy(opts, given, size);
+    else memset(opts, 0, size);
+}
+
+TN__SHARED int tn__method_no_halo(const void *model)
+{
+    (void)model;
+    return 0;
+}
+
+TN__SHARED int tn__method_one_channel(const void *model)
+{
+    (void)model;
+    return 1;
+}
+
+#ifndef TN_NO_TEXGAN
+TN__METHOD_IMAGE_OPS(texgan, tn_texgan, tn_texgan_opts, tn_texgan_stats)
+
+static int tn__method_texgan_channels(const void *model) { return ((const tn_texgan *)model)->channels; }
+
+/* One generator pass holds the window's whole feature maps, so bands of 256 rows bound the
+   memory; windows are exact, so the bands join seamlessly. */
+static tn_status tn__method_texgan_window(tn_image *out, const void *model, const tn_method_input *in, tn_rect r)
+{
+    const tn_texgan *m = (const tn_texgan *)model;
+    tn_image img = {0, 0, 0, NULL}, band = {0, 0, 0, NULL};
+    tn_status st;
+    int y0;
+    if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
+    for (y0 = 0; y0 < r.h && !st; y0 += 256) {
+        int bh = r.h - y0 < 256 ? r.h - y0 : 256;
+        st = tn_texgan_synthesize_window(&band, m, in->seed, r.x, r.y + y0, r.w, bh);
+        if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
+        tn_image_free(&band);
+    }
+    if (st) tn_image_free(&img);
+    else *out = img;
+    return st;
+}
+
+static const tn_method tn__method_texgan = {"texgan", "spatial GAN of one texture or heightfield: windows of an infinite texture per seed",
+    "texgan.config", sizeof(tn_texgan_opts), TN__METHOD_OPS(texgan), tn__method_texgan_channels, tn__method_no_halo, tn__method_texgan_window};
+#endif
+
+#ifndef TN_NO_SINGAN
+TN__METHOD_IMAGE_OPS(singan, tn_singan, tn_singan_opts, tn_singan_stats)
+
+static tn_status tn__method_singan_window(tn_image *out, const void *model, const tn_method_input *in, tn_rect r)
+{
+    tn_singan_gen_opts go;
+    tn__method_gen_opts(&go, sizeof go, in->opts);
+    go.seed = in->seed;
+    return tn_singan_sample(out, (const tn_singan *)model, r.x, r.y, r.w, r.h, &go);
+}
+
+static const tn_method tn__method_singan = {"singan", "multi-scale GAN of one DEM: windows of an infinite terrain per seed, in the example's metres",
+    NULL, sizeof(tn_singan_opts), TN__METHOD_OPS(singan), tn__method_one_channel, tn__method_no_halo, tn__method_singan_window};
+#endif
+
+#ifndef TN_NO_GNN
+TN__METHOD_IMAGE_OPS(gnn, tn_gnn, tn_gnn_opts, tn_gnn_stats)
+
+static tn_status tn__method_gnn_window(tn_image *out, const void *model, const tn_method_input *in, tn_rect r)
+{
+    tn_gnn_generate_opts go;
+    if (!in->sketch) return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: needs a sketch (tn_method_input.sketch)");
+    tn__method_gen_opts(&go, sizeof go, in->opts);
+    go.seed = in->seed;
+    return tn_gnn_generate_window(out, (const tn_gnn *)model, in->sketch, in->width, in->height, r.x, r.y, r.w, r.h, &go);
+}
+
+static const tn_method tn__method_gnn = {"gnn", "sketch-to-terrain graph network of one DEM: terrain following a sketch, in the example's metres",
+    NULL, sizeof(tn_gnn_opts), TN__METHOD_OPS(gnn), tn__method_one_channel, tn__method_no_halo, tn__method_gnn_window};
+#endif
+
+#ifndef TN_NO_SEASON
+TN__METHOD_MODEL_OPS(kpd, tn_kpd, tn_kpd_opts)
+
+static tn_status tn__method_kpd_train(void **model, const tn_method_example *ex, const void *opts, void *stats)
+{
+    tn_kpd *m;
+    *model = NULL;
+    if (!ex || !ex->samples || ex->count < 1)
+        return tn__fail(TN_ERR_INVALID_ARG, "kpd train: needs dated samples (tn_method_example.samples, count)");
+    if (!(m = (tn_kpd *)tn__calloc(sizeof *m))) return tn__oom();
+    return tn__method_keep(model, m, tn_kpd_train(m, ex->samples, ex->count, (const tn_kpd_opts *)opts, (tn_kpd_stats *)stats));
+}
+
+static int tn__method_kpd_channels(const void *model) { return ((const tn_kpd *)model)->out_channels; }
+
+static int tn__method_kpd_halo(const void *model)
+{
+    (void)model;
+    return TN_KPD_HALO;
+}
+
+static tn_status tn__method_kpd_window(tn_image *out, const void *model, const tn_method_input *in, tn_rect r)
+{
+    if (!in->dem || !in->climate) return tn__fail(TN_ERR_INVALID_ARG, "kpd generate: needs a dem and a climate (tn_method_input)");
+    return tn_kpd_generate(out, (const tn_kpd *)model, in->dem, in->climate, in->insolation, in->time, r.x, r.y, r.w, r.h);
+}
+
+static const tn_method tn__method_kpd = {"kpd", "seasonal texture network (KPD) of dated pictures: a DEM's texture under a climate at a time of the year",
+    NULL, sizeof(tn_kpd_opts), TN__METHOD_OPS(kpd), tn__method_kpd_channels, tn__method_kpd_halo, tn__method_kpd_window};
+#endif
+
+/* The registry: one line a method (NULL ends it, so it may be empty when all are compiled out). */
+static const tn_method *const tn__methods[] = {
+#ifndef TN_NO_TEXGAN
+    &tn__method_texgan,
+#endif
+#ifndef TN_NO_SINGAN
+    &tn__method_singan,
+#endif
+#ifndef TN_NO_GNN
+    &tn__method_gnn,
+#endif
+#ifndef TN_NO_SEASON
+    &tn__method_kpd,
+#endif
+    NULL};
+
+TN_API const tn_method *tn_method_at(int i)
+{
+    int k;
+    for (k = 0; tn__methods[k] && k < i; k++) {}
+    return i >= 0 ? tn__methods[k] : NULL;
+}
+
+TN_API const tn_method *tn_method_find(const char *name)
+{
+    int k;
+    for (k = 0; name && tn__methods[k]; k++)
+        if (!strcmp(tn__methods[k]->name, name)) return tn__methods[k];
+    return NULL;
+}
+
+TN_API tn_status tn_method_load_any(const tn_method **m, void **model, const char *path)
+{
+    tn_params *f = NULL;
+    const tn_method *found = NULL;
+    const char *name;
+    tn_status st;
+    int k;
+    TN_ASSERT(m && model);
+    *m = NULL;
+    *model = NULL;
+    if ((st = tn_params_open(&f, path))) return st;
+    name = tn_params_meta(f, "method");
+    if (name) found = tn_method_find(name);
+    for (k = 0; !name && tn__methods[k]; k++)
+        if (tn__methods[k]->legacy_tensor && tn_params_find(f, tn__methods[k]->legacy_tensor)) found = tn__methods[k];
+    if (!found && name) st = tn__fail(TN_ERR_FORMAT, "%s: a model of method '%s', which this build does not have", path, name);
+    else if (!found) st = tn__fail(TN_ERR_FORMAT, "%s: not a model (the file names no method)", path);
+    tn_params_free(f);
+    if (st) return st;
+    if ((st = found->load(model, path))) return st;
+    *m = found;
+    return TN_OK;
+}
+#endif /* TN_NO_ENGINE */
+/* --------------------------------------------------------------------------------------------
    >>render  (@@render implementation)
    The preview multiplies a hypsometric colour ramp by a hillshade. The ramp is a land ramp unless
    the caller says where the sea is: a range mapped to [0, 1] cannot tell an inland valley floor
@@ -29551,10 +29844,11 @@ typedef struct tn__world_stage {
     int out_w, out_h, out_c, out_heights; /* this stage's raster */
     float p[8];                           /* method parameters */
     int np;                               /* explicit noise: how many sigmas in p[2..] */
-    tn_texgan *model;
-    tn_singan *singan;
+    const tn_method *method;              /* a learned stage's (texgan, singan, gnn, singan-refine) */
+    void *model;                          /* its model (method->free) */
+    tn_method_input input;                /* a learned generator's: the world's seed and size */
+    tn_gnn_generate_opts gnn_go;          /* gnn: resolved at setup, the gain included */
     tn_climate *climate;                  /* season */
-    tn_gnn *gnn;
     tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
 } tn__world_stage;
 
@@ -29805,98 +30099,71 @@ static char *tn__world_join(const char *dir, const char *path)
     return p;
 }
 
-static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+/* A learned stage's model=FILE.tnw, loaded by the method of that name (@@method), which refuses
+   another method's file. A generator's raster is the world's, one channel of heights unless the
+   setup says otherwise. */
+static tn_status tn__world_model(tn__world_stage *s, const tn_world *w, const char *base_dir, const char *method)
 {
     int k = tn__world_find(s, "model");
     char *path;
     tn_status st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan needs model=FILE.tnw", s->line);
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs model=FILE.tnw", s->line, s->m->name);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->model = (tn_texgan *)tn__calloc(sizeof *s->model);
-    st = s->model ? tn_texgan_load(s->model, path) : TN_ERR_OUT_OF_MEMORY;
+    s->method = tn_method_find(method);
+    st = s->method->load(&s->model, path);
     TN_FREE(path);
-    if (st) {
-        TN_FREE(s->model);
-        s->model = NULL;
-        return st;
-    }
-    if (s->model->channels > 4)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan model with %d channels; a tile holds at most 4", s->line,
-                        s->model->channels);
+    if (st) return st;
+    s->input.seed = w->seed;
+    s->input.width = w->width;
+    s->input.height = w->height;
     s->out_w = w->width;
     s->out_h = w->height;
-    s->out_c = s->model->channels;
-    s->out_heights = s->out_c == 1; /* a one-channel model learnt a heightfield */
-    return TN_OK;
-}
-
-/* The texture GAN's windows are already exact (a window of z cells [a, a + T + 8) gives exactly
-   its output pixels): bands of 256 rows bound the generator's memory. Values map from the
-   model's range to metres (one channel) or to [0, 1]. */
-static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                      tn_image *out)
-{
-    tn_image img = {0, 0, 0, NULL}, band = {0, 0, 0, NULL};
-    const tn_texgan *m = s->model;
-    float span = m->hi > m->lo ? m->hi - m->lo : 1.0f;
-    tn_status st;
-    int y0;
-    size_t i, n;
-    (void)in;
-    (void)in_r;
-    if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
-    for (y0 = 0; y0 < r.h && !st; y0 += 256) {
-        int bh = r.h - y0 < 256 ? r.h - y0 : 256;
-        st = tn_texgan_synthesize_window(&band, m, w->seed, r.x, r.y + y0, r.w, bh);
-        if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
-        tn_image_free(&band);
-    }
-    if (st) {
-        tn_image_free(&img);
-        return st;
-    }
-    n = (size_t)r.w * r.h * m->channels;
-    for (i = 0; i < n; i++) {
-        float v = (img.data[i] - m->lo) / span;
-        img.data[i] = s->out_heights ? tn__world_metres(w, v) : v;
-    }
-    *out = img;
-    return TN_OK;
-}
-
-static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
-{
-    int k = tn__world_find(s, "model");
-    char *path;
-    tn_status st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->singan);
-        s->singan = NULL;
-        return st;
-    }
-    s->out_w = w->width;
-    s->out_h = w->height;
-    s->out_c = 1;
+    s->out_c = s->method->channels(s->model);
     s->out_heights = 1;
     return TN_OK;
 }
 
-/* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
-   in the model's metres; the world's height range clips them. */
-static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                      tn_image *out)
+/* A learned generator's windows are exact (tn_method.generate_window): a tile is its own window
+   of the world-sized map, at the world's seed. */
+static tn_status tn__world_learned_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                       tn_image *out)
 {
-    tn_singan_gen_opts go;
+    (void)w;
     (void)in;
     (void)in_r;
-    memset(&go, 0, sizeof go);
-    go.seed = w->seed;
-    return tn_singan_sample(out, s->singan, r.x, r.y, r.w, r.h, &go);
+    return s->method->generate_window(out, s->model, &s->input, r);
+}
+
+static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    tn_status st = tn__world_model(s, w, base_dir, "texgan");
+    if (st) return st;
+    if (s->out_c > 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan model with %d channels; a tile holds at most 4", s->line, s->out_c);
+    s->out_heights = s->out_c == 1; /* a one-channel model learnt a heightfield */
+    return TN_OK;
+}
+
+/* Values map from the texture GAN's range to metres (one channel) or to [0, 1]. */
+static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    const tn_texgan *m = (const tn_texgan *)s->model;
+    float span = m->hi > m->lo ? m->hi - m->lo : 1.0f;
+    tn_status st = tn__world_learned_run(s, w, r, in, in_r, out);
+    size_t i, n = (size_t)r.w * r.h * m->channels;
+    for (i = 0; !st && i < n; i++) {
+        float v = (out->data[i] - m->lo) / span;
+        out->data[i] = s->out_heights ? tn__world_metres(w, v) : v;
+    }
+    return st;
+}
+
+/* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
+   in the model's metres; the world's height range clips them. */
+static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    return tn__world_model(s, w, base_dir, "singan");
 }
 
 /* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
@@ -29907,44 +30174,26 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
    The residual gain (tn_gnn_gain) is tested once, at setup, and every tile uses it. */
 #define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
 
-static void tn__world_gnn_opts(const tn__world_stage *s, const tn_world *w, tn_gnn_generate_opts *go)
-{
-    memset(go, 0, sizeof *go);
-    go->seed = w->seed;
-    go->heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
-    go->embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
-}
-
 static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
     static const char *hname[3] = {"auto", "example", "unit"}, *ename[3] = {"auto", "aligned", "none"};
-    int km = tn__world_find(s, "model"), ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
-    int i;
+    int ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
+    int i, hv = 0, ev = 0;
     char *path;
     tn_status st;
-    if (km < 0 || ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
+    if (ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
     if ((long long)w->width * w->height > TN__WORLD_GNN_MAX_PX || w->width < 16 || w->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn worlds are 16 .. 4096 x 4096 pixels (this one %d x %d): GNN generation "
                         "rasterises the whole sketch at the world's size for every tile (~21 bytes per world pixel), so its memory "
                         "follows the world, not the tile", s->line, w->width, w->height);
-    s->p[0] = s->p[1] = 0.0f;
     for (i = 0; i < 3; i++) {
-        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) s->p[0] = (float)i + 1;
-        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) s->p[1] = (float)i + 1;
+        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) hv = i + 1;
+        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) ev = i + 1;
     }
-    if ((kh >= 0 && s->p[0] == 0) || (ke >= 0 && s->p[1] == 0))
+    if ((kh >= 0 && !hv) || (ke >= 0 && !ev))
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
-    s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
-    s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
-    if (!s->gnn || !s->sketch) return tn__oom();
-    if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
-    st = tn_gnn_load(s->gnn, path);
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->gnn);
-        s->gnn = NULL;
-        return st;
-    }
+    if ((st = tn__world_model(s, w, base_dir, "gnn"))) return st;
+    if (!(s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch))) return tn__oom();
     if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
     st = tn_sketch_load(s->sketch, path);
     TN_FREE(path);
@@ -29953,27 +30202,15 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         s->sketch = NULL;
         return st;
     }
-    {
-        tn_gnn_generate_opts go;
-        tn__world_gnn_opts(s, w, &go);
-        if ((st = tn_gnn_gain(&s->p[2], s->gnn, s->sketch, w->width, w->height, &go))) return st;
-    }
-    s->out_w = w->width;
-    s->out_h = w->height;
-    s->out_c = 1;
-    s->out_heights = 1;
+    memset(&s->gnn_go, 0, sizeof s->gnn_go);
+    s->gnn_go.seed = w->seed;
+    s->gnn_go.heights = hv ? hv - 1 : TN_GNN_HEIGHTS_AUTO;
+    s->gnn_go.embeddings = ev ? ev - 1 : TN_GNN_EMBED_AUTO;
+    if ((st = tn_gnn_gain(&s->gnn_go.gain, (const tn_gnn *)s->model, s->sketch, w->width, w->height, &s->gnn_go))) return st;
+    if (!(s->gnn_go.gain > 0)) s->gnn_go.gain = -1.0f; /* 0 would test the gain again in every tile */
+    s->input.sketch = s->sketch;
+    s->input.opts = &s->gnn_go;
     return TN_OK;
-}
-
-static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                   tn_image *out)
-{
-    tn_gnn_generate_opts go;
-    (void)in;
-    (void)in_r;
-    tn__world_gnn_opts(s, w, &go);
-    go.gain = s->p[2] > 0 ? s->p[2] : -1.0f;
-    return tn_gnn_generate_window(out, s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go);
 }
 
 /* ---- local operations ---- */
@@ -29991,23 +30228,12 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
 {
     tn__sg_arch A;
     double from, noise;
-    int k = tn__world_find(s, "model"), K, n, mw, mh, level;
-    char *path;
+    int K, n, mw, mh, level;
     float e = 0.0f, sc;
     tn_status st;
-    (void)w;
     if ((st = tn__world_need_heights(s))) return st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->singan);
-        s->singan = NULL;
-        return st;
-    }
-    if ((st = tn__sg_arch_of(s->singan, &A))) return st;
+    if ((st = tn__world_model(s, w, base_dir, "singan"))) return st;
+    if ((st = tn__sg_arch_of((const tn_singan *)s->model, &A))) return st;
     if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: the model has one scale only", s->line);
     if ((st = tn__world_num(s, "from_scale", A.scales - 3 > 1 ? A.scales - 3 : 1, 1, A.scales - 1, &from)) ||
         (st = tn__world_num(s, "noise", 1, 0, 100, &noise)))
@@ -30077,7 +30303,7 @@ static int tn__world_sub_taps(const tn__taps *full, long a, long b, int i0, int 
 static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
                                       tn_image *out)
 {
-    const tn_singan *m = s->singan;
+    const tn_singan *m = (const tn_singan *)s->model;
     tn__sg_arch A;
     tn_singan_gen_opts go, o;
     tn__sg_gen_run run;
@@ -30402,10 +30628,10 @@ static const tn__world_method tn__world_methods[] = {
     {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
-                        "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
+                        "the world's height range clips them)", tn__world_singan_setup, tn__world_learned_run},
     {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_generate_window), worlds up to 4096 x 4096: "
                      "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
-     tn__world_gnn_setup, tn__world_gnn_run},
+     tn__world_gnn_setup, tn__world_learned_run},
     {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
                                "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
     {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
@@ -30460,19 +30686,8 @@ static void tn__world_release(tn__world_impl *im)
     int k;
     if (!im) return;
     for (k = 0; k < im->n; k++) {
-        if (im->st[k].model) {
-            tn_texgan_free(im->st[k].model);
-            TN_FREE(im->st[k].model);
-        }
-        if (im->st[k].singan) {
-            tn_singan_free(im->st[k].singan);
-            TN_FREE(im->st[k].singan);
-        }
+        if (im->st[k].method) im->st[k].method->free(im->st[k].model);
         TN_FREE(im->st[k].climate);
-        if (im->st[k].gnn) {
-            tn_gnn_free(im->st[k].gnn);
-            TN_FREE(im->st[k].gnn);
-        }
         if (im->st[k].sketch) {
             tn_contour_set_free(im->st[k].sketch);
             TN_FREE(im->st[k].sketch);

@@ -447,23 +447,25 @@ int main(int argc, char **argv)
     if (getenv("TN_DATA")) g_root = getenv("TN_DATA");
     for (i = 1; i < argc; i++)
         if (!strcmp(argv[i], "--threads") && i + 1 < argc) threads = atoi(argv[i + 1]);
-    if (argc >= 4 && !strcmp(argv[argc - 3], "--sample2048")) { /* child mode: MODEL NAME */
-        tn_singan mm;
-        tn_singan_gen_opts g;
+    if (argc >= 4 && !strcmp(argv[argc - 3], "--sample2048")) { /* child mode: MODEL NAME (any model that samples a plane) */
+        const tn_method *m;
+        void *mm;
+        tn_method_input in;
+        tn_rect r = {0, 0, 2048, 2048};
         tn_image s = {0, 0, 0, NULL};
         struct rusage ru;
         double t;
         tn_set_threads(threads);
-        if (tn_singan_load(&mm, argv[argc - 2])) return 1;
-        memset(&g, 0, sizeof g);
+        if (tn_method_load_any(&m, &mm, argv[argc - 2])) return 1;
+        memset(&in, 0, sizeof in);
         t = tn_time_seconds();
-        if (tn_singan_sample(&s, &mm, 0, 0, 2048, 2048, &g)) return 1;
+        if (m->generate_window(&s, mm, &in, r)) return 1;
         t = tn_time_seconds() - t;
         getrusage(RUSAGE_SELF, &ru);
         printf("%s_sample_2048_seconds: %.2f s\n%s_sample_2048_peak_memory: %.0f MB (whole process; the output alone is 16 MB)\n", argv[argc - 1], t,
                argv[argc - 1], ru.ru_maxrss / 1024.0);
         tn_image_free(&s);
-        tn_singan_free(&mm);
+        m->free(mm);
         return 0;
     }
     for (i = 1; i < argc; i++) {

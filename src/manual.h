@@ -40,7 +40,8 @@ CONFIGURATION (define before including the implementation)
                         with #error naming it: @@world needs every generator and @@export;
                         @@style, @@texgan, @@singan, @@gnn and @@season need the engine;
                         @@style, @@texgan and @@season need @@noise; @@style and @@gnn need
-                        @@extract, which needs @@sketch; @@gnn needs @@finedetail. @@core,
+                        @@extract, which needs @@sketch; @@gnn needs @@finedetail; @@method
+                        (in with the engine) lists the learned methods compiled in. @@core,
                         @@thread, @@image, @@io and @@metrics are always in.
                         All of them but RENDER: about a fifth of the full size.
     TN_MAX_ALLOC        largest single allocation sized from user data (default 8 GiB; 2 GiB on
@@ -92,6 +93,7 @@ TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once
     @@singan    multi-scale single-image GAN (SinGAN): random terrain of any size, refinement, upscaling
     @@gnn       sketch-to-terrain graph network: example parts, bipartite graph, attention, membrane residual
     @@season    seasonal terrain: insolation with terrain shadows, climate (CSV, Koppen), seasonal textures, KPD network
+    @@method    one interface for the learned methods: a descriptor each (train, save/load, windows), by name
     @@render    previews: hillshaded colour map and 3D perspective view
     @@export    for engines and 3D tools: .glb and OBJ meshes, normal maps, Unity RAW, splat maps
     @@world     worlds in tiles equal to a whole-map run: SPEC pipelines, halos, PNG tiles, GDAL VRT, manifest

@@ -122,10 +122,11 @@ typedef struct tn__world_stage {
     int out_w, out_h, out_c, out_heights; /* this stage's raster */
     float p[8];                           /* method parameters */
     int np;                               /* explicit noise: how many sigmas in p[2..] */
-    tn_texgan *model;
-    tn_singan *singan;
+    const tn_method *method;              /* a learned stage's (texgan, singan, gnn, singan-refine) */
+    void *model;                          /* its model (method->free) */
+    tn_method_input input;                /* a learned generator's: the world's seed and size */
+    tn_gnn_generate_opts gnn_go;          /* gnn: resolved at setup, the gain included */
     tn_climate *climate;                  /* season */
-    tn_gnn *gnn;
     tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
 } tn__world_stage;
 
@@ -376,98 +377,71 @@ static char *tn__world_join(const char *dir, const char *path)
     return p;
 }
 
-static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+/* A learned stage's model=FILE.tnw, loaded by the method of that name (@@method), which refuses
+   another method's file. A generator's raster is the world's, one channel of heights unless the
+   setup says otherwise. */
+static tn_status tn__world_model(tn__world_stage *s, const tn_world *w, const char *base_dir, const char *method)
 {
     int k = tn__world_find(s, "model");
     char *path;
     tn_status st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan needs model=FILE.tnw", s->line);
+    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs model=FILE.tnw", s->line, s->m->name);
     if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->model = (tn_texgan *)tn__calloc(sizeof *s->model);
-    st = s->model ? tn_texgan_load(s->model, path) : TN_ERR_OUT_OF_MEMORY;
+    s->method = tn_method_find(method);
+    st = s->method->load(&s->model, path);
     TN_FREE(path);
-    if (st) {
-        TN_FREE(s->model);
-        s->model = NULL;
-        return st;
-    }
-    if (s->model->channels > 4)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan model with %d channels; a tile holds at most 4", s->line,
-                        s->model->channels);
+    if (st) return st;
+    s->input.seed = w->seed;
+    s->input.width = w->width;
+    s->input.height = w->height;
     s->out_w = w->width;
     s->out_h = w->height;
-    s->out_c = s->model->channels;
-    s->out_heights = s->out_c == 1; /* a one-channel model learnt a heightfield */
-    return TN_OK;
-}
-
-/* The texture GAN's windows are already exact (a window of z cells [a, a + T + 8) gives exactly
-   its output pixels): bands of 256 rows bound the generator's memory. Values map from the
-   model's range to metres (one channel) or to [0, 1]. */
-static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                      tn_image *out)
-{
-    tn_image img = {0, 0, 0, NULL}, band = {0, 0, 0, NULL};
-    const tn_texgan *m = s->model;
-    float span = m->hi > m->lo ? m->hi - m->lo : 1.0f;
-    tn_status st;
-    int y0;
-    size_t i, n;
-    (void)in;
-    (void)in_r;
-    if ((st = tn_image_create(&img, r.w, r.h, m->channels))) return st;
-    for (y0 = 0; y0 < r.h && !st; y0 += 256) {
-        int bh = r.h - y0 < 256 ? r.h - y0 : 256;
-        st = tn_texgan_synthesize_window(&band, m, w->seed, r.x, r.y + y0, r.w, bh);
-        if (!st) memcpy(img.data + (size_t)y0 * r.w * m->channels, band.data, (size_t)bh * r.w * m->channels * sizeof(float));
-        tn_image_free(&band);
-    }
-    if (st) {
-        tn_image_free(&img);
-        return st;
-    }
-    n = (size_t)r.w * r.h * m->channels;
-    for (i = 0; i < n; i++) {
-        float v = (img.data[i] - m->lo) / span;
-        img.data[i] = s->out_heights ? tn__world_metres(w, v) : v;
-    }
-    *out = img;
-    return TN_OK;
-}
-
-static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
-{
-    int k = tn__world_find(s, "model");
-    char *path;
-    tn_status st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->singan);
-        s->singan = NULL;
-        return st;
-    }
-    s->out_w = w->width;
-    s->out_h = w->height;
-    s->out_c = 1;
+    s->out_c = s->method->channels(s->model);
     s->out_heights = 1;
     return TN_OK;
 }
 
-/* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
-   in the model's metres; the world's height range clips them. */
-static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                      tn_image *out)
+/* A learned generator's windows are exact (tn_method.generate_window): a tile is its own window
+   of the world-sized map, at the world's seed. */
+static tn_status tn__world_learned_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                       tn_image *out)
 {
-    tn_singan_gen_opts go;
+    (void)w;
     (void)in;
     (void)in_r;
-    memset(&go, 0, sizeof go);
-    go.seed = w->seed;
-    return tn_singan_sample(out, s->singan, r.x, r.y, r.w, r.h, &go);
+    return s->method->generate_window(out, s->model, &s->input, r);
+}
+
+static tn_status tn__world_texgan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    tn_status st = tn__world_model(s, w, base_dir, "texgan");
+    if (st) return st;
+    if (s->out_c > 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: texgan model with %d channels; a tile holds at most 4", s->line, s->out_c);
+    s->out_heights = s->out_c == 1; /* a one-channel model learnt a heightfield */
+    return TN_OK;
+}
+
+/* Values map from the texture GAN's range to metres (one channel) or to [0, 1]. */
+static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    const tn_texgan *m = (const tn_texgan *)s->model;
+    float span = m->hi > m->lo ? m->hi - m->lo : 1.0f;
+    tn_status st = tn__world_learned_run(s, w, r, in, in_r, out);
+    size_t i, n = (size_t)r.w * r.h * m->channels;
+    for (i = 0; !st && i < n; i++) {
+        float v = (out->data[i] - m->lo) / span;
+        out->data[i] = s->out_heights ? tn__world_metres(w, v) : v;
+    }
+    return st;
+}
+
+/* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
+   in the model's metres; the world's height range clips them. */
+static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    return tn__world_model(s, w, base_dir, "singan");
 }
 
 /* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
@@ -478,44 +452,26 @@ static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *
    The residual gain (tn_gnn_gain) is tested once, at setup, and every tile uses it. */
 #define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
 
-static void tn__world_gnn_opts(const tn__world_stage *s, const tn_world *w, tn_gnn_generate_opts *go)
-{
-    memset(go, 0, sizeof *go);
-    go->seed = w->seed;
-    go->heights = s->p[0] > 0 ? (int)s->p[0] - 1 : TN_GNN_HEIGHTS_AUTO;
-    go->embeddings = s->p[1] > 0 ? (int)s->p[1] - 1 : TN_GNN_EMBED_AUTO;
-}
-
 static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
     static const char *hname[3] = {"auto", "example", "unit"}, *ename[3] = {"auto", "aligned", "none"};
-    int km = tn__world_find(s, "model"), ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
-    int i;
+    int ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
+    int i, hv = 0, ev = 0;
     char *path;
     tn_status st;
-    if (km < 0 || ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
+    if (ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
     if ((long long)w->width * w->height > TN__WORLD_GNN_MAX_PX || w->width < 16 || w->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn worlds are 16 .. 4096 x 4096 pixels (this one %d x %d): GNN generation "
                         "rasterises the whole sketch at the world's size for every tile (~21 bytes per world pixel), so its memory "
                         "follows the world, not the tile", s->line, w->width, w->height);
-    s->p[0] = s->p[1] = 0.0f;
     for (i = 0; i < 3; i++) {
-        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) s->p[0] = (float)i + 1;
-        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) s->p[1] = (float)i + 1;
+        if (kh >= 0 && !strcmp(s->val[kh], hname[i])) hv = i + 1;
+        if (ke >= 0 && !strcmp(s->val[ke], ename[i])) ev = i + 1;
     }
-    if ((kh >= 0 && s->p[0] == 0) || (ke >= 0 && s->p[1] == 0))
+    if ((kh >= 0 && !hv) || (ke >= 0 && !ev))
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
-    s->gnn = (tn_gnn *)tn__calloc(sizeof *s->gnn);
-    s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch);
-    if (!s->gnn || !s->sketch) return tn__oom();
-    if (!(path = tn__world_join(base_dir, s->val[km]))) return tn__oom();
-    st = tn_gnn_load(s->gnn, path);
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->gnn);
-        s->gnn = NULL;
-        return st;
-    }
+    if ((st = tn__world_model(s, w, base_dir, "gnn"))) return st;
+    if (!(s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch))) return tn__oom();
     if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
     st = tn_sketch_load(s->sketch, path);
     TN_FREE(path);
@@ -524,27 +480,15 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
         s->sketch = NULL;
         return st;
     }
-    {
-        tn_gnn_generate_opts go;
-        tn__world_gnn_opts(s, w, &go);
-        if ((st = tn_gnn_gain(&s->p[2], s->gnn, s->sketch, w->width, w->height, &go))) return st;
-    }
-    s->out_w = w->width;
-    s->out_h = w->height;
-    s->out_c = 1;
-    s->out_heights = 1;
+    memset(&s->gnn_go, 0, sizeof s->gnn_go);
+    s->gnn_go.seed = w->seed;
+    s->gnn_go.heights = hv ? hv - 1 : TN_GNN_HEIGHTS_AUTO;
+    s->gnn_go.embeddings = ev ? ev - 1 : TN_GNN_EMBED_AUTO;
+    if ((st = tn_gnn_gain(&s->gnn_go.gain, (const tn_gnn *)s->model, s->sketch, w->width, w->height, &s->gnn_go))) return st;
+    if (!(s->gnn_go.gain > 0)) s->gnn_go.gain = -1.0f; /* 0 would test the gain again in every tile */
+    s->input.sketch = s->sketch;
+    s->input.opts = &s->gnn_go;
     return TN_OK;
-}
-
-static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
-                                   tn_image *out)
-{
-    tn_gnn_generate_opts go;
-    (void)in;
-    (void)in_r;
-    tn__world_gnn_opts(s, w, &go);
-    go.gain = s->p[2] > 0 ? s->p[2] : -1.0f;
-    return tn_gnn_generate_window(out, s->gnn, s->sketch, w->width, w->height, r.x, r.y, r.w, r.h, &go);
 }
 
 /* ---- local operations ---- */
@@ -562,23 +506,12 @@ static tn_status tn__world_refine_setup(tn__world_stage *s, const tn_world *w, c
 {
     tn__sg_arch A;
     double from, noise;
-    int k = tn__world_find(s, "model"), K, n, mw, mh, level;
-    char *path;
+    int K, n, mw, mh, level;
     float e = 0.0f, sc;
     tn_status st;
-    (void)w;
     if ((st = tn__world_need_heights(s))) return st;
-    if (k < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine needs model=FILE.tnw", s->line);
-    if (!(path = tn__world_join(base_dir, s->val[k]))) return tn__oom();
-    s->singan = (tn_singan *)tn__calloc(sizeof *s->singan);
-    st = s->singan ? tn_singan_load(s->singan, path) : TN_ERR_OUT_OF_MEMORY;
-    TN_FREE(path);
-    if (st) {
-        TN_FREE(s->singan);
-        s->singan = NULL;
-        return st;
-    }
-    if ((st = tn__sg_arch_of(s->singan, &A))) return st;
+    if ((st = tn__world_model(s, w, base_dir, "singan"))) return st;
+    if ((st = tn__sg_arch_of((const tn_singan *)s->model, &A))) return st;
     if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan-refine: the model has one scale only", s->line);
     if ((st = tn__world_num(s, "from_scale", A.scales - 3 > 1 ? A.scales - 3 : 1, 1, A.scales - 1, &from)) ||
         (st = tn__world_num(s, "noise", 1, 0, 100, &noise)))
@@ -648,7 +581,7 @@ static int tn__world_sub_taps(const tn__taps *full, long a, long b, int i0, int 
 static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
                                       tn_image *out)
 {
-    const tn_singan *m = s->singan;
+    const tn_singan *m = (const tn_singan *)s->model;
     tn__sg_arch A;
     tn_singan_gen_opts go, o;
     tn__sg_gen_run run;
@@ -973,10 +906,10 @@ static const tn__world_method tn__world_methods[] = {
     {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
-                        "the world's height range clips them)", tn__world_singan_setup, tn__world_singan_run},
+                        "the world's height range clips them)", tn__world_singan_setup, tn__world_learned_run},
     {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_generate_window), worlds up to 4096 x 4096: "
                      "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
-     tn__world_gnn_setup, tn__world_gnn_run},
+     tn__world_gnn_setup, tn__world_learned_run},
     {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
                                "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
     {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
@@ -1031,19 +964,8 @@ static void tn__world_release(tn__world_impl *im)
     int k;
     if (!im) return;
     for (k = 0; k < im->n; k++) {
-        if (im->st[k].model) {
-            tn_texgan_free(im->st[k].model);
-            TN_FREE(im->st[k].model);
-        }
-        if (im->st[k].singan) {
-            tn_singan_free(im->st[k].singan);
-            TN_FREE(im->st[k].singan);
-        }
+        if (im->st[k].method) im->st[k].method->free(im->st[k].model);
         TN_FREE(im->st[k].climate);
-        if (im->st[k].gnn) {
-            tn_gnn_free(im->st[k].gnn);
-            TN_FREE(im->st[k].gnn);
-        }
         if (im->st[k].sketch) {
             tn_contour_set_free(im->st[k].sketch);
             TN_FREE(im->st[k].sketch);

@@ -220,9 +220,11 @@ if command -v node > /dev/null && [ -d build/gv/node_modules/gltf-validator ]; t
     if NODE_PATH=build/gv/node_modules node tests/gltf_validate.js "$W/m.glb" > "$W/gv.txt" 2>&1 && grep -q "errors 0 warnings 0" "$W/gv.txt"; then ok;
     else bad "glTF validator: $(head -c 400 "$W/gv.txt")"; fi
 else skipped "glTF validator not installed (npm install --prefix build/gv gltf-validator)"; fi
-# a model says what it is; a checkpoint too; a model from before metadata still reads
+# a model says what it is (loaded by its method: @@method); a checkpoint too; a model from before metadata still reads
 if $T info "$W/tg.tnw" > "$W/tgi.txt" 2>&1 && grep -q "method: texgan" "$W/tgi.txt" && grep -q "iterations: 4" "$W/tgi.txt" &&
     grep -q "example: 96x64x1:" "$W/tgi.txt" && grep -q "kind: model" "$W/tgi.txt" &&
+    grep -q "^summary: spatial GAN" "$W/tgi.txt" && grep -q "^channels: 1$" "$W/tgi.txt" &&
+    $T info tests/refs/texgan_v1_checkpoint.tnw | grep -q "^loads: no: .*holds 41 tensors" &&
     $T info "$W/tg.tnw.ckpt" --tensors > "$W/tgc.txt" 2>&1 && grep -q "kind: checkpoint" "$W/tgc.txt" && grep -q "iteration: 4" "$W/tgc.txt" &&
     grep -q "tensor: am.g.w0 " "$W/tgc.txt" &&
     $T info tests/refs/texgan_v1_model.tnw | grep -q "before metadata"; then ok; else bad "info on models: $(head -c 400 "$W/tgi.txt")"; fi

@@ -6,17 +6,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-static void tiny_opts(tn_gnn_opts *o, long iters)
-{
-    memset(o, 0, sizeof *o);
-    o->hidden = 16;
-    o->embed = 8;
-    o->k = 6;
-    o->random_edges = 300;
-    o->train.max_iters = iters;
-    o->train.seed = 7;
-}
-
 static int same_image(const tn_image *a, const tn_image *b)
 {
     return a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -155,11 +144,11 @@ TN_TEST(training_lowers_the_loss_and_generates_metres)
     tn_contour_set sk = own_sketch(&dem);
     tn_metrics a0, a, b;
     /* the loss, on the example's own network alone (the sparse levels have other losses) */
-    tiny_opts(&o, 1);
+    tn_test_tiny_gnn_opts(&o, 1);
     o.sparse_levels = -1;
     TN_CHECK(tn_gnn_train(&m0, &dem, &o, &s0) == TN_OK);
     tn_gnn_free(&m0);
-    tiny_opts(&o, 80);
+    tn_test_tiny_gnn_opts(&o, 80);
     o.sparse_levels = -1;
     o.lr = 5e-3f;
     TN_CHECK(tn_gnn_train(&m, &dem, &o, &s) == TN_OK);
@@ -167,9 +156,9 @@ TN_TEST(training_lowers_the_loss_and_generates_metres)
     tn_gnn_free(&m);
     /* the default run: its reconstruction improves on the first step's and on the membrane
        (without the embedding phase, which 60 steps are too few for; its own test below) */
-    tiny_opts(&o, 1);
+    tn_test_tiny_gnn_opts(&o, 1);
     TN_CHECK(tn_gnn_train(&m0, &dem, &o, &s0) == TN_OK);
-    tiny_opts(&o, 60);
+    tn_test_tiny_gnn_opts(&o, 60);
     o.lr = 5e-3f;
     o.embed_phase = -1;
     TN_CHECK(tn_gnn_train(&m, &dem, &o, &s) == TN_OK);
@@ -249,7 +238,7 @@ TN_TEST(shape_losses)
     double sh0 = 0, sh1 = 0;
     int x, y;
     float g0 = 0, g1 = 0;
-    tiny_opts(&o, 40);
+    tn_test_tiny_gnn_opts(&o, 40);
     o.lr = 5e-3f;
     o.smooth_weight = -1; /* each term alone */
     TN_CHECK(train_and_generate(&dem, &o, &sk, &a));
@@ -287,7 +276,7 @@ TN_TEST(save_load_round_trip)
     tn_gnn m, l;
     tn_gnn_generate_opts go;
     tn_contour_set sk = own_sketch(&dem), p1, p2;
-    tiny_opts(&o, 5);
+    tn_test_tiny_gnn_opts(&o, 5);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     TN_CHECK(tn_gnn_save(path, &m) == TN_OK);
     TN_CHECK(tn_gnn_load(&l, path) == TN_OK);
@@ -346,7 +335,7 @@ TN_TEST(part_overhang)
     tn__gnn_parts_free(&P);
     /* the model records the choice; it changes what a sketch of other terrain gives and leaves
        the example's own network (every part with an embedding) as it was */
-    tiny_opts(&o, 20);
+    tn_test_tiny_gnn_opts(&o, 20);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     cfg = tn_params_find(m.weights, "gnn.config");
     TN_CHECK(cfg && cfg->data[17] == 1.0f);
@@ -389,11 +378,11 @@ TN_TEST(embedding_phase)
     tn_gnn_stats st;
     tn_metrics ma, mb;
     int i, emb_differs = 0, others_same = 1;
-    tiny_opts(&o, 40);
+    tn_test_tiny_gnn_opts(&o, 40);
     o.lr = 5e-3f;
     TN_CHECK(tn_gnn_train(&with, &dem, &o, &st) == TN_OK);
     TN_CHECK(st.embed_phase_from == 30);
-    tiny_opts(&o, 30);
+    tn_test_tiny_gnn_opts(&o, 30);
     o.lr = 5e-3f;
     o.embed_phase = -1;
     TN_CHECK(tn_gnn_train(&stop, &dem, &o, &st) == TN_OK);
@@ -429,12 +418,12 @@ TN_TEST(resume_is_bit_identical)
     tn_gnn_opts o;
     tn_gnn full, part, res;
     tn_gnn_stats st;
-    tiny_opts(&o, 8);
+    tn_test_tiny_gnn_opts(&o, 8);
     TN_CHECK(tn_gnn_train(&full, &dem, &o, NULL) == TN_OK);
-    tiny_opts(&o, 3);
+    tn_test_tiny_gnn_opts(&o, 3);
     o.train.checkpoint = ck;
     TN_CHECK(tn_gnn_train(&part, &dem, &o, NULL) == TN_OK);
-    tiny_opts(&o, 8);
+    tn_test_tiny_gnn_opts(&o, 8);
     o.train.checkpoint = ck;
     o.train.resume = 1;
     o.train.seed = 999; /* the checkpoint's seed wins */
@@ -464,7 +453,7 @@ TN_TEST(same_results_for_1_and_2_threads)
     tn_gnn_generate_opts go;
     tn_contour_set sk = own_sketch(&dem);
     int before = tn_get_threads();
-    tiny_opts(&o, 4);
+    tn_test_tiny_gnn_opts(&o, 4);
     memset(&go, 0, sizeof go);
     go.finetune = 2;
     go.order_weight = 1;
@@ -497,7 +486,7 @@ TN_TEST(bad_inputs_fail_cleanly)
     uint8_t *buf = NULL;
     size_t n = 0;
     FILE *f;
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     /* DEMs */
     TN_CHECK(tn_gnn_train(&m, &empty, &o, NULL) == TN_ERR_EMPTY);
     tn_image_create(&small, 10, 10, 1);
@@ -514,23 +503,23 @@ TN_TEST(bad_inputs_fail_cleanly)
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strcmp(tn_last_error(), "gnn: option hidden = 1000, allowed 1 .. 256") == 0);
     /* one message per rule: each names its option and range */
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     o.lr = -0.001f; /* zero is the default; a negative rate is an error, not the default */
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strcmp(tn_last_error(), "gnn: option lr = -0.001, allowed (0, 10)") == 0);
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     o.ssim_weight = NAN;
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strcmp(tn_last_error(), "gnn: option ssim_weight = nan, allowed finite") == 0);
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     o.holdout_count = 2; /* and no holdout */
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "holdout_count = 2") != NULL);
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     o.train.resume = 1;
     o.train.checkpoint = "build/test/no_such_gnn.ckpt";
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_IO);
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     /* sketches */
     memset(&none, 0, sizeof none);
@@ -607,7 +596,7 @@ static int radius6_model_and_sketch(const tn_image *dem, uint64_t seed, int node
 {
     tn_gnn_opts o;
     tn_sketch_random_opts ro;
-    tiny_opts(&o, 3);
+    tn_test_tiny_gnn_opts(&o, 3);
     o.radius = 6;
     memset(&ro, 0, sizeof ro);
     ro.seed = seed;
@@ -706,7 +695,7 @@ TN_TEST(residual_gain)
     float g = -1, ga = -1;
     size_t i, n = (size_t)48 * 48;
     int lin = 1;
-    tiny_opts(&o, 20);
+    tn_test_tiny_gnn_opts(&o, 20);
     TN_CHECK(own.count >= 8); /* enough lines for the test (fewer keep gain 1) */
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     memset(&go, 0, sizeof go);
@@ -801,7 +790,7 @@ static int same_learned(const tn_gnn *a, int early, const tn_gnn *b, int no_emb)
 
 static void holdout_opts(tn_gnn_opts *o, long iters, tn_image *hold)
 {
-    tiny_opts(o, iters);
+    tn_test_tiny_gnn_opts(o, iters);
     o->lr = 5e-3f;
     o->embed_phase = -1;
     o->holdout = hold;
@@ -912,7 +901,7 @@ TN_TEST(holdout_early_stopping)
         tn_image_free(&flat[1]);
     }
     /* bad holdouts */
-    tiny_opts(&o, 2);
+    tn_test_tiny_gnn_opts(&o, 2);
     o.holdout_count = 1;
     TN_CHECK(tn_gnn_train(&res, &dem, &o, NULL) == TN_ERR_INVALID_ARG); /* none given */
     TN_CHECK(tn_image_create(&bad, 40, 40, 1) == TN_OK);
@@ -980,7 +969,7 @@ TN_TEST(gain_scale_from_holdouts)
     hold[1] = tn_test_dem(48, 22);
     sk = own_sketch(&hold[0]);
     TN_CHECK(sk.count >= 8);
-    tiny_opts(&o, 20);
+    tn_test_tiny_gnn_opts(&o, 20);
     o.holdout = hold;
     o.holdout_count = 2;
     o.holdout_every = 4;
@@ -1246,7 +1235,7 @@ TN_TEST(grown_generation)
     double err = 0;
     float dlo = 0, dhi = 0;
     tn_image_range(&dlo, &dhi, &dem);
-    tiny_opts(&o, 3);
+    tn_test_tiny_gnn_opts(&o, 3);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     user = two_strokes(240, 180, rp, vp);
     memset(&go, 0, sizeof go);

@@ -321,68 +321,6 @@ TN_TEST(test_season_real_dem)
 
 /* ---- KPD generator ---- */
 
-/* A small paired set: the procedural texturer's pictures of a Perlin DEM at four months. */
-typedef struct kpd_set {
-    tn_image dem, ins, tex[4], mask;
-    tn_climate c;
-    tn_season_sample s[4];
-} kpd_set;
-
-static int kpd_set_make(kpd_set *k, int n)
-{
-    tn_insolation_opts io;
-    float times[4] = {0.0f, 3.0f, 6.0f, 9.0f};
-    int i;
-    size_t p;
-    memset(k, 0, sizeof *k);
-    k->dem = tn_test_dem(n, 5);
-    memset(&io, 0, sizeof io);
-    io.dx = 30.0f;
-    io.step_minutes = 60.0f;
-    io.directions = 8;
-    if (!k->dem.data || tn_climate_koppen(&k->c, "Dfb") || tn_insolation(&k->ins, &k->dem, 55.8, &io)) return 0;
-    if (tn_season_texture(k->tex, &k->dem, &k->c, 55.8, &k->ins, times, 4, NULL, NULL)) return 0;
-    if (tn_image_create(&k->mask, n, n, 1)) return 0;
-    for (p = 0; p < (size_t)n * n; p++) k->mask.data[p] = (p % 7) != 0; /* every 7th pixel unusable */
-    for (i = 0; i < 4; i++) {
-        k->s[i].dem = &k->dem;
-        k->s[i].insolation = &k->ins;
-        k->s[i].climate = &k->c;
-        k->s[i].time = times[i];
-        k->s[i].target = &k->tex[i];
-        k->s[i].mask = &k->mask;
-    }
-    return 1;
-}
-
-static void kpd_set_free(kpd_set *k)
-{
-    int i;
-    tn_image_free(&k->dem);
-    tn_image_free(&k->ins);
-    tn_image_free(&k->mask);
-    for (i = 0; i < 4; i++) tn_image_free(&k->tex[i]);
-}
-
-static void kpd_small_opts(tn_kpd_opts *o, long iters)
-{
-    memset(o, 0, sizeof *o);
-    o->width = 8;
-    o->crop = 32;
-    o->batch = 2;
-    o->train.max_iters = iters;
-    o->train.minutes = 5;
-    o->train.seed = 3;
-}
-
-static int write_text(const char *path, const char *text)
-{
-    FILE *f = fopen(path, "w");
-    int ok = f && fputs(text, f) >= 0;
-    if (f) ok &= fclose(f) == 0;
-    return ok;
-}
-
 static int same_image(const tn_image *a, const tn_image *b)
 {
     return a->data && b->data && a->width == b->width && a->height == b->height && a->channels == b->channels &&
@@ -393,16 +331,16 @@ static int same_image(const tn_image *a, const tn_image *b)
    and 2 threads; the file round trip keeps every weight. */
 TN_TEST(test_kpd_window_equals_whole_map)
 {
-    kpd_set k;
+    tn_test_kpd_set k;
     tn_kpd_opts o;
     tn_kpd m, m2;
     tn_image whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, whole2 = {0, 0, 0, NULL}, between = {0, 0, 0, NULL};
     int x, y, c, ok = 1, moved = 0;
     const char *path = tn_test_tmp_path("season", "kpd.tnw");
-    TN_CHECK(kpd_set_make(&k, 72));
-    kpd_small_opts(&o, 4);
+    TN_CHECK(tn_test_kpd_set_make(&k, 72));
+    tn_test_small_kpd_opts(&o, 4);
     TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_OK);
-    if (!m.weights) { kpd_set_free(&k); return; }
+    if (!m.weights) { tn_test_kpd_set_free(&k); return; }
     TN_CHECK(m.out_channels == 3 && m.cond_channels == 39 && m.iterations == 4);
     tn_set_threads(2);
     TN_CHECK(tn_kpd_generate(&whole, &m, &k.dem, &k.c, &k.ins, 4.0f, 0, 0, 72, 72) == TN_OK);
@@ -442,29 +380,29 @@ TN_TEST(test_kpd_window_equals_whole_map)
     tn_image_free(&win);
     tn_image_free(&between);
     tn_kpd_free(&m);
-    kpd_set_free(&k);
+    tn_test_kpd_set_free(&k);
     remove(path);
 }
 
 /* Training lowers the masked L1, and an interrupted run resumes bit-identically. */
 TN_TEST(test_kpd_learns_and_resumes)
 {
-    kpd_set k;
+    tn_test_kpd_set k;
     tn_kpd_opts o;
     tn_kpd a, b;
     tn_kpd_stats st;
     const char *ck = tn_test_tmp_path("season", "kpd_ck.tnw");
-    TN_CHECK(kpd_set_make(&k, 48));
-    kpd_small_opts(&o, 40);
+    TN_CHECK(tn_test_kpd_set_make(&k, 48));
+    tn_test_small_kpd_opts(&o, 40);
     o.gan_weight = -1; /* L1 only: a quick, steady descent */
     TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, &st) == TN_OK);
     printf("# kpd L1 first %.4f, last 50 mean %.4f\n", st.loss_l1_first, st.loss_l1);
     TN_CHECK(st.loss_l1 < 0.7f * st.loss_l1_first);
     tn_kpd_free(&a);
-    kpd_small_opts(&o, 6);
+    tn_test_small_kpd_opts(&o, 6);
     TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, NULL) == TN_OK);
     remove(ck);
-    kpd_small_opts(&o, 3);
+    tn_test_small_kpd_opts(&o, 3);
     o.train.checkpoint = ck;
     TN_CHECK(tn_kpd_train(&b, k.s, 4, &o, NULL) == TN_OK);
     tn_kpd_free(&b);
@@ -479,17 +417,17 @@ TN_TEST(test_kpd_learns_and_resumes)
     TN_CHECK(tn_kpd_train(&a, k.s, 4, &o, NULL) == TN_ERR_SHAPE);
     tn_kpd_free(&a);
     tn_kpd_free(&b);
-    kpd_set_free(&k);
+    tn_test_kpd_set_free(&k);
     remove(ck);
 }
 
-/* Resumes season-train from ck (3 more iterations of kpd_small_opts on k). */
-static tn_status kpd_resume(kpd_set *k, const char *ck)
+/* Resumes season-train from ck (3 more iterations of tn_test_small_kpd_opts on k). */
+static tn_status kpd_resume(tn_test_kpd_set *k, const char *ck)
 {
     tn_kpd_opts o;
     tn_kpd m;
     tn_status st;
-    kpd_small_opts(&o, 6);
+    tn_test_small_kpd_opts(&o, 6);
     o.train.checkpoint = ck;
     o.train.resume = 1;
     st = tn_kpd_train(&m, k->s, 4, &o, NULL);
@@ -499,7 +437,7 @@ static tn_status kpd_resume(kpd_set *k, const char *ck)
 
 /* Writes a fresh 3-iteration checkpoint of k to ck, then changes kpd.config[index] (CRC valid)
    or, with index < 0, the metadata entry named ...`key`. */
-static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float value, const char *key, const char *text)
+static int kpd_patched_checkpoint(tn_test_kpd_set *k, const char *ck, int index, float value, const char *key, const char *text)
 {
     tn_kpd_opts o;
     tn_kpd m;
@@ -507,7 +445,7 @@ static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float v
     tn_tensor *c;
     int ok, i;
     remove(ck);
-    kpd_small_opts(&o, 3);
+    tn_test_small_kpd_opts(&o, 3);
     o.train.checkpoint = ck;
     if (tn_kpd_train(&m, k->s, 4, &o, NULL)) return 0;
     tn_kpd_free(&m);
@@ -532,7 +470,7 @@ static int kpd_patched_checkpoint(kpd_set *k, const char *ck, int index, float v
    tensors before anything is built from the config, at once, under a 64 MB budget, nothing left
    allocated. Before, the 256-wide generator (66 MB with its Adam moments and critic) was built
    first and the budget stopped it with "out of memory". */
-static int kpd_resume_refused(kpd_set *k, const char *ck, const char *why)
+static int kpd_resume_refused(tn_test_kpd_set *k, const char *ck, const char *why)
 {
     double t0 = tn_time_seconds();
     size_t base = tn_memory_in_use();
@@ -547,9 +485,9 @@ static int kpd_resume_refused(kpd_set *k, const char *ck, const char *why)
 
 TN_TEST(test_kpd_resume_config_sizes)
 {
-    kpd_set k;
+    tn_test_kpd_set k;
     const char *ck = tn_test_tmp_path("season", "kpd_resume.ckpt");
-    TN_CHECK(kpd_set_make(&k, 48));
+    TN_CHECK(tn_test_kpd_set_make(&k, 48));
     /* the checkpoint as written resumes */
     TN_CHECK(kpd_patched_checkpoint(&k, ck, 4, 8.0f, NULL, NULL) && kpd_resume(&k, ck) == TN_OK);
     /* the widest generator over the 8-wide one's tensors */
@@ -568,13 +506,13 @@ TN_TEST(test_kpd_resume_config_sizes)
     }
     /* training windows that do not pool by 8 */
     TN_CHECK(kpd_patched_checkpoint(&k, ck, -1, 0, "crop", "36") && kpd_resume_refused(&k, ck, "bad crop 36"));
-    kpd_set_free(&k);
+    tn_test_kpd_set_free(&k);
     remove(ck);
 }
 
 TN_TEST(test_kpd_bad_input)
 {
-    kpd_set k;
+    tn_test_kpd_set k;
     tn_kpd_opts o;
     tn_kpd m;
     tn_image out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -584,8 +522,8 @@ TN_TEST(test_kpd_bad_input)
     float keep;
     snprintf(p, sizeof p, "%s", tn_test_tmp_path("season", "bad.csv"));
     snprintf(other, sizeof other, "%s", tn_test_tmp_path("season", "other.tnw"));
-    TN_CHECK(kpd_set_make(&k, 40));
-    kpd_small_opts(&o, 1);
+    TN_CHECK(tn_test_kpd_set_make(&k, 40));
+    tn_test_small_kpd_opts(&o, 1);
     TN_CHECK(tn_kpd_train(&m, NULL, 0, &o, NULL) == TN_ERR_EMPTY);
     keep = k.tex[1].data[5];
     k.tex[1].data[5] = NAN; /* pixel 5 is valid */
@@ -628,7 +566,7 @@ TN_TEST(test_kpd_bad_input)
         TN_CHECK(m.weights == NULL);
     }
     /* data files: a climate of 11 months, an unknown row, a mask of the wrong size */
-    TN_CHECK(write_text(p, "dem,nothing_here.pfm\n"));
+    TN_CHECK(tn_test_write_text(p, "dem,nothing_here.pfm\n"));
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_IO);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "d.pfm"), &k.dem, NULL) == TN_OK);
     TN_CHECK(tn_image_save(tn_test_tmp_path("season", "m.pgm"), &small, NULL) == TN_OK);
@@ -638,16 +576,16 @@ TN_TEST(test_kpd_bad_input)
         for (mth = 1; mth <= 11; mth++) fprintf(f, "%d,%d,50\n", mth, mth);
         fclose(f);
     }
-    write_text(p, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nclimate,tn_test_season_c.csv\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
     printf("# %s\n", tn_last_error());
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nsnow,1\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-30,tn_test_season_t.pfm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_FORMAT);
-    write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
+    tn_test_write_text(p, "dem,tn_test_season_d.pfm\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm,tn_test_season_m.pgm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_ERR_SHAPE);
-    write_text(p, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
+    tn_test_write_text(p, "range,0,1\ndem,tn_test_season_d.pfm\nspacing,30\nkoppen,Dfb\nframe,2017-02-03,tn_test_season_t.pfm\nframe,4.5,tn_test_season_t.pfm\n");
     TN_CHECK(tn_season_data_load(&d, p) == TN_OK);
     if (!d.count) fprintf(stderr, "%s\n", tn_last_error());
     TN_CHECK(d.count == 2 && d.sites == 1 && d.samples[1].time == 4.5f && d.insolation[0].channels == 12);
@@ -660,7 +598,7 @@ TN_TEST(test_kpd_bad_input)
     remove(tn_test_tmp_path("season", "t.pfm"));
     remove(tn_test_tmp_path("season", "c.csv"));
     tn_image_free(&small);
-    kpd_set_free(&k);
+    tn_test_kpd_set_free(&k);
 }
 
 /* The real Sentinel-2 set: cloudy frames are left out, dates become times of the year. */

@@ -7,17 +7,6 @@
 #include "terrainnet.h"
 #include "tn_test.h"
 
-static void tiny_opts(tn_singan_opts *o, int iters)
-{
-    memset(o, 0, sizeof *o);
-    o->coarsest = 12;
-    o->factor = 0.7f;
-    o->channels = 8;
-    o->max_channels = 8;
-    o->iters = iters;
-    o->train.seed = 3;
-}
-
 static tn_singan trained;   /* shared by the generation tests */
 static int have_trained;
 
@@ -26,7 +15,7 @@ TN_TEST(training_lowers_the_reconstruction_loss)
     tn_image dem = tn_test_dem(24, 1);
     tn_singan_opts o;
     tn_singan_stats st;
-    tiny_opts(&o, 40);
+    tn_test_tiny_singan_opts(&o, 40);
     TN_CHECK(tn_singan_train(&trained, &dem, &o, &st) == TN_OK);
     have_trained = 1;
     TN_CHECK(trained.scales == 3 && st.scales == 3 && trained.trained == 3);
@@ -198,7 +187,7 @@ TN_TEST(resume_is_bit_identical)
     tn_singan_opts o;
     tn_singan a, b;
     tn_singan_stats st;
-    tiny_opts(&o, 6);
+    tn_test_tiny_singan_opts(&o, 6);
     TN_CHECK(tn_singan_train(&a, &dem, &o, NULL) == TN_OK);
     o.train.checkpoint = ck;
     o.train.max_iters = 8; /* stops in the middle of scale 2 */
@@ -230,7 +219,7 @@ TN_TEST(bad_inputs)
     tn_singan m;
     tn_image out = {0, 0, 0, NULL};
     const char *path = tn_test_tmp_path("singan", "other.tnw");
-    tiny_opts(&o, 2);
+    tn_test_tiny_singan_opts(&o, 2);
     TN_CHECK(tn_singan_train(&m, &small, &o, NULL) == TN_ERR_INVALID_ARG);
     TN_CHECK(strstr(tn_last_error(), "smaller than the coarsest") != NULL);
     tn_image_create(&flat, 24, 24, 1);
@@ -327,7 +316,7 @@ TN_TEST(curvature_loss)
     for (v = 0; v < 2; v++) {
         tn_singan m;
         tn_singan_opts o;
-        tiny_opts(&o, 40);
+        tn_test_tiny_singan_opts(&o, 40);
         o.curv_weight = v ? 0.0f : -1.0f; /* v = 1: the default weight */
         TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_OK);
         for (k = 0; k < 4; k++) {

@@ -5,17 +5,8 @@
 
 static void tiny_opts(tn_texgan_opts *o)
 {
-    memset(o, 0, sizeof *o);
-    o->noise_local = 4;
-    o->stages = 2;
-    o->gen_width = 16;
-    o->disc_width = 8;
-    o->disc_layers = 2;
-    o->patch = 16;
-    o->batch = 2;
+    tn_test_tiny_texgan_opts(o);
     o->lr = 1e-3f;
-    o->train.minutes = 100;
-    o->train.seed = 5;
 }
 
 static float m_mean(const tn_image *im, int c)

@@ -133,17 +133,8 @@ static void tiny_texgan(tn_texgan *m, int channels)
 {
     tn_image ex = tn_test_exemplar(40, 36, channels, 3);
     tn_texgan_opts o;
-    memset(&o, 0, sizeof o);
-    o.noise_local = 4;
-    o.stages = 2;
-    o.gen_width = 16;
-    o.disc_width = 8;
-    o.disc_layers = 2;
-    o.patch = 16;
-    o.batch = 2;
+    tn_test_tiny_texgan_opts(&o);
     o.noise_global = 2;
-    o.train.minutes = 100;
-    o.train.seed = 5;
     o.train.max_iters = 2;
     TN_CHECK(tn_texgan_train(m, &ex, &o, NULL) == TN_OK);
     tn_image_free(&ex);
@@ -226,12 +217,8 @@ static int refused(const char *spec, const char *words)
 static int tiny_singan(const tn_image *dem, int coarsest, int iters, uint64_t seed, const char *path, tn_singan *m)
 {
     tn_singan_opts o;
-    memset(&o, 0, sizeof o);
+    tn_test_tiny_singan_opts(&o, iters);
     o.coarsest = coarsest;
-    o.factor = 0.7f;
-    o.channels = 8;
-    o.max_channels = 8;
-    o.iters = iters;
     o.train.seed = seed;
     memset(m, 0, sizeof *m);
     return dem->data && tn_singan_train(m, dem, &o, NULL) == TN_OK && tn_singan_save(path, m) == TN_OK;
@@ -376,14 +363,8 @@ TN_TEST(gnn_tiles_equal_the_whole_map)
     char spec[1024], m_path[512];
     const char *sk_path;
     int bits = 0;
-    memset(&o, 0, sizeof o);
-    o.hidden = 16;
-    o.embed = 8;
-    o.k = 6;
+    tn_test_tiny_gnn_opts(&o, 3);
     o.radius = 6;
-    o.random_edges = 300;
-    o.train.max_iters = 3;
-    o.train.seed = 7;
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     snprintf(m_path, sizeof m_path, "%s", tn_test_tmp_path("world", "gnn.tnw"));
     sk_path = tn_test_tmp_path("world", "gnn.tns");

@@ -51,6 +51,7 @@ static const char *tn_test_cur_name;
 static const char *tn_test_data(const char *rel);
 static const char *tn_test_ref(const char *rel);
 static unsigned char *tn_test_read_file(const char *path, size_t *n);
+static int tn_test_write_text(const char *path, const char *text);
 #ifdef TERRAINNET_H
 static tn_image tn_test_exemplar(int w, int h, int channels, uint64_t seed);
 #ifndef TN_NO_ENGINE
@@ -58,6 +59,21 @@ static int tn_test_same_params(const tn_params *a, const tn_params *b, int skip)
 #endif
 #ifndef TN_NO_NOISE
 static tn_image tn_test_dem(int n, uint64_t seed);
+#endif
+#ifndef TN_NO_TEXGAN
+static void tn_test_tiny_texgan_opts(tn_texgan_opts *o);
+#endif
+#ifndef TN_NO_GNN
+static void tn_test_tiny_gnn_opts(tn_gnn_opts *o, long iters);
+#endif
+#ifndef TN_NO_SINGAN
+static void tn_test_tiny_singan_opts(tn_singan_opts *o, int iters);
+#endif
+#ifndef TN_NO_SEASON
+typedef struct tn_test_kpd_set tn_test_kpd_set;
+static int tn_test_kpd_set_make(tn_test_kpd_set *k, int n);
+static void tn_test_kpd_set_free(tn_test_kpd_set *k);
+static void tn_test_small_kpd_opts(tn_kpd_opts *o, long iters);
 #endif
 #endif
 
@@ -79,6 +95,7 @@ static int tn_test_summary(const char *file)
     (void)tn_test_tmp_path;
     (void)tn_test_ref;
     (void)tn_test_read_file;
+    (void)tn_test_write_text;
 #ifdef TERRAINNET_H
     (void)tn_test_exemplar;
 #ifndef TN_NO_ENGINE
@@ -86,6 +103,20 @@ static int tn_test_summary(const char *file)
 #endif
 #ifndef TN_NO_NOISE
     (void)tn_test_dem;
+#endif
+#ifndef TN_NO_TEXGAN
+    (void)tn_test_tiny_texgan_opts;
+#endif
+#ifndef TN_NO_GNN
+    (void)tn_test_tiny_gnn_opts;
+#endif
+#ifndef TN_NO_SINGAN
+    (void)tn_test_tiny_singan_opts;
+#endif
+#ifndef TN_NO_SEASON
+    (void)tn_test_kpd_set_make;
+    (void)tn_test_kpd_set_free;
+    (void)tn_test_small_kpd_opts;
 #endif
 #endif
     printf("%s: %d passed, %d failed, %d skipped\n", file, tn_test_passed, tn_test_failed, tn_test_skipped);
@@ -130,6 +161,15 @@ static unsigned char *tn_test_read_file(const char *path, size_t *n)
     return b;
 }
 
+/* Writes text to path; 1 when it was written whole. */
+static int tn_test_write_text(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "w");
+    int ok = f && fputs(text, f) >= 0;
+    if (f) ok &= fclose(f) == 0;
+    return ok;
+}
+
 #ifdef TERRAINNET_H
 /* The texture-GAN tests' exemplar: stripes, blobs and noise in [0, 1] (also the recipe of
    tests/refs/texgan_v1_*.tnw, made with w 40, h 36, 3 channels, seed 1). */
@@ -163,6 +203,108 @@ static tn_image tn_test_dem(int n, uint64_t seed)
     for (i = 0; i < (size_t)d.width * d.height; i++) d.data[i] = 1000.0f + 1000.0f * d.data[i];
     return d;
 }
+#endif
+
+/* A texture GAN small enough to train in a second under the sanitizers (set train.max_iters). */
+#ifndef TN_NO_TEXGAN
+static void tn_test_tiny_texgan_opts(tn_texgan_opts *o)
+{
+    memset(o, 0, sizeof *o);
+    o->noise_local = 4;
+    o->stages = 2;
+    o->gen_width = 16;
+    o->disc_width = 8;
+    o->disc_layers = 2;
+    o->patch = 16;
+    o->batch = 2;
+    o->train.minutes = 100;
+    o->train.seed = 5;
+}
+#endif
+
+/* A sketch-to-terrain network of a few thousand weights, trained for `iters` iterations. */
+#ifndef TN_NO_GNN
+static void tn_test_tiny_gnn_opts(tn_gnn_opts *o, long iters)
+{
+    memset(o, 0, sizeof *o);
+    o->hidden = 16;
+    o->embed = 8;
+    o->k = 6;
+    o->random_edges = 300;
+    o->train.max_iters = iters;
+    o->train.seed = 7;
+}
+#endif
+
+/* A SinGAN of 3 scales of 12..24 px on tn_test_dem(24, ...), 8 channels, `iters` per scale. */
+#ifndef TN_NO_SINGAN
+static void tn_test_tiny_singan_opts(tn_singan_opts *o, int iters)
+{
+    memset(o, 0, sizeof *o);
+    o->coarsest = 12;
+    o->factor = 0.7f;
+    o->channels = 8;
+    o->max_channels = 8;
+    o->iters = iters;
+    o->train.seed = 3;
+}
+#endif
+
+#ifndef TN_NO_SEASON
+/* A small paired set: the procedural texturer's pictures of a Perlin DEM at four months. */
+struct tn_test_kpd_set {
+    tn_image dem, ins, tex[4], mask;
+    tn_climate c;
+    tn_season_sample s[4];
+};
+
+static int tn_test_kpd_set_make(tn_test_kpd_set *k, int n)
+{
+    tn_insolation_opts io;
+    float times[4] = {0.0f, 3.0f, 6.0f, 9.0f};
+    int i;
+    size_t p;
+    memset(k, 0, sizeof *k);
+    k->dem = tn_test_dem(n, 5);
+    memset(&io, 0, sizeof io);
+    io.dx = 30.0f;
+    io.step_minutes = 60.0f;
+    io.directions = 8;
+    if (!k->dem.data || tn_climate_koppen(&k->c, "Dfb") || tn_insolation(&k->ins, &k->dem, 55.8, &io)) return 0;
+    if (tn_season_texture(k->tex, &k->dem, &k->c, 55.8, &k->ins, times, 4, NULL, NULL)) return 0;
+    if (tn_image_create(&k->mask, n, n, 1)) return 0;
+    for (p = 0; p < (size_t)n * n; p++) k->mask.data[p] = (p % 7) != 0; /* every 7th pixel unusable */
+    for (i = 0; i < 4; i++) {
+        k->s[i].dem = &k->dem;
+        k->s[i].insolation = &k->ins;
+        k->s[i].climate = &k->c;
+        k->s[i].time = times[i];
+        k->s[i].target = &k->tex[i];
+        k->s[i].mask = &k->mask;
+    }
+    return 1;
+}
+
+static void tn_test_kpd_set_free(tn_test_kpd_set *k)
+{
+    int i;
+    tn_image_free(&k->dem);
+    tn_image_free(&k->ins);
+    tn_image_free(&k->mask);
+    for (i = 0; i < 4; i++) tn_image_free(&k->tex[i]);
+}
+
+static void tn_test_small_kpd_opts(tn_kpd_opts *o, long iters)
+{
+    memset(o, 0, sizeof *o);
+    o->width = 8;
+    o->crop = 32;
+    o->batch = 2;
+    o->train.max_iters = iters;
+    o->train.minutes = 5;
+    o->train.seed = 3;
+}
+
 #endif
 
 /* 1 when two parameter sets hold the same tensors bit for bit (names, sizes, values), from the

@@ -467,23 +467,35 @@ static int is_tnw(const char *path)
     return n == 4 && !memcmp(magic, "TNW1", 4);
 }
 
-/* A .tnw: what it is (its metadata), its tensors, and a digest of all their values. */
+/* A .tnw: what it is (its metadata; a model is loaded by its method, which checks it whole), its
+   tensors, and a digest of all their values. */
 static int info_tnw(const char *path, int list)
 {
     tn_params *p = NULL;
     tn_status st = tn_params_open(&p, path);
+    const tn_method *m = NULL, *legacy = NULL;
+    void *model = NULL;
     const char *kind, *method;
+    char why[512] = "";
     size_t learned = 0, buffers = 0, k;
     uint64_t h = 0xcbf29ce484222325ULL;
     int i, d;
     if (st) return fail_status(st);
     method = tn_params_meta(p, "method");
     kind = tn_params_meta(p, "kind");
-    printf("file: %s\nkind: %s\n", path, kind ? kind : method ? "model" : tn_params_find(p, "texgan.config") ? "model (texgan, before metadata)" : "weights");
+    for (i = 0; !method && tn_method_at(i); i++)
+        if (tn_method_at(i)->legacy_tensor && tn_params_find(p, tn_method_at(i)->legacy_tensor)) legacy = tn_method_at(i);
+    if (!kind && tn_method_load_any(&m, &model, path)) snprintf(why, sizeof why, "%s", tn_last_error());
+    printf("file: %s\nkind: %s", path, kind ? kind : method || legacy ? "model" : "weights");
+    if (legacy && !kind) printf(" (%s, before metadata)", legacy->name);
+    printf("\n");
     for (i = 0; i < tn_params_meta_count(p); i++) {
         const char *v, *key = tn_params_meta_key(p, i, &v);
         if (strcmp(key, "kind") != 0) printf("%s: %s\n", key, v);
     }
+    if (m) printf("summary: %s\nchannels: %d\n", m->summary, m->channels(model));
+    else if ((method || legacy) && !kind) printf("loads: no: %s\n", why);
+    if (m) m->free(model);
     for (i = 0; i < tn_params_count(p); i++) {
         const tn_tensor *t = tn_params_get(p, i);
         if (t->requires_grad) learned += t->numel;
@@ -544,7 +556,8 @@ static int run_info(void)
 static const cli_command info_cmd = {"info", CLI_CMD(info), "describe an image, heightmap, model or checkpoint",
     "Prints the format, size, channels, bit depth, height range (metres when the file records them) and value statistics "
     "of an image or heightmap. For a .tnw model or checkpoint: its method, format, library version and provenance (seed, "
-    "iterations, training seconds, the example's size and digest), its tensors and a digest of their values."};
+    "iterations, training seconds, the example's size and digest), its tensors and a digest of their values; a model is "
+    "loaded by its method, which says what it generates and how many channels (or why the file does not load)."};
 
 /* ---- convert ----------------------------------------------------------------------------- */
 
