@@ -1991,10 +1991,12 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
    into blocks, and each copies the example's network from a window of the example under one of
    the 8 rotations and mirrors, the best of `candidates` random placements by how well its lines
    lie on the user's lines nearby (ridge on ridge, valley on valley) and continue the blocks
-   placed before it across their overlap (image quilting, on the network). So line spacing,
-   branch angles, segment lengths and ridge/valley alternation are the example's. Added lines keep
-   `gap` px from every user line, so none crosses or touches one; they are thinned and traced
-   into polylines of 5+ px. Their heights: the membrane of the user's lines, falling away from
+   placed before it across their overlap (image quilting, on the network; the new block starts
+   along the overlap's minimum-error boundary). So line spacing, branch angles, segment lengths
+   and ridge/valley alternation are the example's. Added lines keep `gap` px from every user line,
+   so none crosses one; they are thinned and traced into polylines of 5+ px, and a line that ends
+   heading for a user line of its own kind within 3 gaps runs on to it (a spur joins a drawn
+   crest, a tributary a drawn valley). Their heights: the membrane of the user's lines, falling away from
    a user ridge and rising away from a user valley by twice the example's mean local relief over
    48 px (so a stroke stays the main line around it), plus the example line's own height above
    the mean of the example's lines within 48 px (its local relief; the quilting also matches
@@ -26256,8 +26258,8 @@ static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, 
 /* The membrane with bounded influence, so that a window of a map can be computed alone (tiled
    generation): the map is cut into blocks of B = 128 px; each block's membrane is solved on the
    block grown by a halo of 64 px (clipped to the map; grown further, step by step, while it holds
-   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it bilinearly by its
-   distance to their centres. A pixel therefore depends only on sketch pixels within ~256 px, on
+   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it by its distance
+   to their centres (a smoothstep each way). A pixel therefore depends only on sketch pixels within ~256 px, on
    any map size, and the result is continuous. Maps whose every block would see the whole map
    (up to 128 + 64 px a side, the training crops) take one plain solve: the global membrane. */
 #define TN__GNN_MB 128
@@ -26311,12 +26313,14 @@ static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
     }
 }
 
-/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t. */
+/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t,
+   a smoothstep of the distance: a linear weight left a kink where it starts, at every block
+   centre, which a hillshade shows as a line across the map. */
 static void tn__gnn_mblend(int x, int n, int *a, int *b, float *t)
 {
     float u = ((float)x + 0.5f) / (float)TN__GNN_MB - 0.5f, fl = floorf(u);
     *a = (int)fl;
-    *t = u - fl;
+    *t = (u - fl) * (u - fl) * (3 - 2 * (u - fl));
     *b = *a + 1;
     if (*a < 0) *a = 0;
     if (*b < 0) *b = 0;
@@ -26488,6 +26492,84 @@ static float tn__gnn_grow_fall(float dr, float dv, float relief)
     return TN__GNN_FALL * relief * (fv * (1 - wr) - fr * wr);
 }
 
+/* The minimum-error boundary cut of image quilting, on the blurred line types: in the block's left
+   and top overlaps (mg px wide), the path (a column per row, a row per column, steps of at most
+   1 px) along which the placed network and the new block's agree best; the new block covers the
+   overlap from there on. Pasting only the block's core left every line cut at a 48 px grid, which
+   the membrane showed as seams (curvature 2.5x the rest along them). cutc[v + mg] (cutr[u + mg]):
+   the first new column (row) of row v (column u); E: (B + mg) x mg scratch. */
+static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const float *ebl, int width, int height, int x0, int y0, int B, int mg,
+                             int t, int ox, int oy, int Wx, int *cutc, int *cutr, double *E)
+{
+    const int S = B + 2 * mg, n = B + mg;
+    int pass, a, b, k;
+    for (pass = 0; pass < 2; pass++) { /* 0: the left seam, 1: the top one */
+        int *cut = pass ? cutr : cutc, bb = 0;
+        if (pass ? y0 == 0 : x0 == 0) { /* no overlap there: the map's edge */
+            for (a = 0; a < n; a++) cut[a] = -mg;
+            continue;
+        }
+        for (a = 0; a < n; a++)        /* along the seam */
+            for (b = 0; b < mg; b++) { /* across it, in the overlap */
+                int u = pass ? a - mg : b - mg, v = pass ? b - mg : a - mg, X = x0 + u, Y = y0 + v;
+                double e = 0, best = a ? DBL_MAX : 0;
+                if (X >= 0 && Y >= 0 && X < width && Y < height && placed[(size_t)Y * width + X]) {
+                    float d = ebl[tn__gnn_grow_at(u + mg, v + mg, S, t, ox, oy, Wx)] - pbl[(size_t)(v + mg) * S + u + mg];
+                    e = (double)d * d;
+                }
+                for (k = b - 1; a && k <= b + 1; k++)
+                    if (k >= 0 && k < mg && E[(size_t)(a - 1) * mg + k] < best) best = E[(size_t)(a - 1) * mg + k];
+                E[(size_t)a * mg + b] = e + best;
+            }
+        for (b = 1; b < mg; b++)
+            if (E[(size_t)(n - 1) * mg + b] < E[(size_t)(n - 1) * mg + bb]) bb = b;
+        for (a = n - 1; a >= 0; a--) { /* back along the cheapest path */
+            int nb = bb;
+            cut[a] = bb - mg;
+            for (k = bb - 1; a && k <= bb + 1; k++)
+                if (k >= 0 && k < mg && E[(size_t)(a - 1) * mg + k] < E[(size_t)(a - 1) * mg + nb]) nb = k;
+            bb = nb;
+        }
+    }
+}
+
+/* An added line whose last point heads for a user line of its own kind within `reach` px runs on
+   to it, as the example's network joins its lines: a spur up to a drawn crest, a tributary down
+   to a drawn valley, rather than stopping at the gap (the drawn line then stood alone in a bare
+   band). Its heights run linearly to the user line's there. b: the line's points (x, y, h). */
+static tn_status tn__gnn_grow_join(tn__pts *b, int ridge, const tn_image *ur, const float *D, const int *near, int width, float reach)
+{
+    int n = b->n, s, steps;
+    size_t p, back, q;
+    float x, y, h, qx, qy, hs;
+    tn_status st = TN_OK;
+    if (n < 5) return TN_OK;
+    x = b->p[3 * (n - 1)], y = b->p[3 * (n - 1) + 1], h = b->p[3 * (n - 1) + 2];
+    p = (size_t)y * (size_t)width + (size_t)x;
+    back = (size_t)b->p[3 * (n - 5) + 1] * (size_t)width + (size_t)b->p[3 * (n - 5)];
+    if (near[p] < 0 || !(D[p] < reach) || !(D[p] < D[back] - 1.5f)) return TN_OK; /* near, and heading for it */
+    q = (size_t)near[p];
+    if ((ur->data[3 * q] > 0) != ridge) return TN_OK;
+    qx = (float)(q % (size_t)width), qy = (float)(q / (size_t)width), hs = ur->data[3 * q + 2];
+    steps = (int)ceilf(fmaxf(fabsf(qx - x), fabsf(qy - y)));
+    for (s = 1; !st && s <= steps; s++) {
+        float f = (float)s / (float)steps;
+        st = tn__pts_push(b, floorf(x + f * (qx - x) + 0.5f), floorf(y + f * (qy - y) + 0.5f), h + f * (hs - h));
+    }
+    return st;
+}
+
+static void tn__gnn_pts_reverse(tn__pts *b)
+{
+    int i, j, k;
+    for (i = 0, j = b->n - 1; i < j; i++, j--)
+        for (k = 0; k < 3; k++) {
+            float t = b->p[3 * i + k];
+            b->p[3 * i + k] = b->p[3 * j + k];
+            b->p[3 * j + k] = t;
+        }
+}
+
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
@@ -26502,7 +26584,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
-    double *sum = NULL, *cnt = NULL, rel_sum = 0;
+    int *cutc = NULL, *cutr = NULL;
+    double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
     tn_rng rng;
     tn_status st;
     TN_ASSERT(out);
@@ -26550,7 +26633,11 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     cnt = (double *)tn__calloc((nx + (size_t)Hx + (size_t)Wx + 2) * sizeof(double));
     ebl = (float *)tn__alloc(nx * sizeof(float));
     pbl = (float *)tn__alloc((size_t)S * S * sizeof(float));
-    if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl) {
+    cutc = (int *)tn__alloc((size_t)S * sizeof(int));
+    cutr = (int *)tn__alloc((size_t)S * sizeof(int));
+    cutE = (double *)tn__alloc((size_t)S * mg * sizeof(double));
+    if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
+        !cutc || !cutr || !cutE) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -26624,11 +26711,12 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                 if (sxx > 0 && syy > 0) score += nl * sxy / sqrt(sxx * syy);
                 if (score > best) best = score, bt = t, box = ox, boy = oy;
             }
-            for (v = 0; v < B; v++)
-                for (u = 0; u < B; u++) {
+            tn__gnn_grow_cut(placed, pbl, ebl, width, height, x0, y0, B, mg, bt, box, boy, Wx, cutc, cutr, cutE);
+            for (v = -mg; v < B; v++)
+                for (u = -mg; u < B; u++) {
                     int X = x0 + u, Y = y0 + v;
                     size_t p, q;
-                    if (X >= width || Y >= height) continue;
+                    if (X < 0 || Y < 0 || X >= width || Y >= height || (u < 0 && u < cutc[v + mg]) || (v < 0 && v < cutr[u + mg])) continue;
                     p = (size_t)Y * width + X;
                     q = tn__gnn_grow_at(u + mg, v + mg, S, bt, box, boy, Wx);
                     placed[p] = 1;
@@ -26673,6 +26761,9 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                 }
                 st = tn__pts_push(&pts, (float)(p % (size_t)width), (float)(p / (size_t)width), h);
             }
+            if (!st) st = tn__gnn_grow_join(&pts, type == TN_RIDGE, &ur, D, near, width, 3 * o.gap);
+            tn__gnn_pts_reverse(&pts);
+            if (!st) st = tn__gnn_grow_join(&pts, type == TN_RIDGE, &ur, D, near, width, 3 * o.gap);
             if (!st) st = tn__cset_add(&set, &cap, (tn_contour_type)type, 0, 0.0f, pts.p, pts.n);
             nl++;
         }
@@ -26699,6 +26790,9 @@ done:
     TN_FREE(cnt);
     TN_FREE(ebl);
     TN_FREE(pbl);
+    TN_FREE(cutc);
+    TN_FREE(cutr);
+    TN_FREE(cutE);
     TN_FREE(pts.p);
     if (st) {
         tn_contour_set_free(&set);

@@ -353,8 +353,8 @@ static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, 
 /* The membrane with bounded influence, so that a window of a map can be computed alone (tiled
    generation): the map is cut into blocks of B = 128 px; each block's membrane is solved on the
    block grown by a halo of 64 px (clipped to the map; grown further, step by step, while it holds
-   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it bilinearly by its
-   distance to their centres. A pixel therefore depends only on sketch pixels within ~256 px, on
+   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it by its distance
+   to their centres (a smoothstep each way). A pixel therefore depends only on sketch pixels within ~256 px, on
    any map size, and the result is continuous. Maps whose every block would see the whole map
    (up to 128 + 64 px a side, the training crops) take one plain solve: the global membrane. */
 #define TN__GNN_MB 128
@@ -408,12 +408,14 @@ static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
     }
 }
 
-/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t. */
+/* Block a pixel coordinate blends: blocks *a and *b (clamped to 0 .. n - 1), weight of b in *t,
+   a smoothstep of the distance: a linear weight left a kink where it starts, at every block
+   centre, which a hillshade shows as a line across the map. */
 static void tn__gnn_mblend(int x, int n, int *a, int *b, float *t)
 {
     float u = ((float)x + 0.5f) / (float)TN__GNN_MB - 0.5f, fl = floorf(u);
     *a = (int)fl;
-    *t = u - fl;
+    *t = (u - fl) * (u - fl) * (3 - 2 * (u - fl));
     *b = *a + 1;
     if (*a < 0) *a = 0;
     if (*b < 0) *b = 0;
