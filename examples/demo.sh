@@ -2,7 +2,8 @@
 # make demo: learn from one real DEM (examples/data/alps_n47e009_256.png, an SRTM crop of the Alps)
 # and write a one-page demo/index.html: each picture beside the command that made it.
 #
-#   sh examples/demo.sh                 minutes on 2 cores (GNN, SinGAN, texture GAN: DEMO_MINUTES=2 each)
+#   sh examples/demo.sh                 minutes on 2 cores (GNN, texture GAN: DEMO_MINUTES=2 each;
+#                                       SinGAN: SINGAN_MINUTES=10, its default budget)
 #   DEMO_FAST=1 sh examples/demo.sh     seconds-long budgets, for tests (pictures are rough)
 #   DEMO_DIR=out DEM=my.png DEM_SPACING="30 30" sh examples/demo.sh   another place, another example
 #   KPD=slo.tnw sh examples/demo.sh    adds the seasons of a KPD network from season-train
@@ -28,7 +29,7 @@ if [ -n "${DEMO_FAST:-}" ]; then
     VIEW_SIZE="320 180"; DETAIL_SIZE=256x256; GNN_ARGS="--iters 3"; SINGAN_ARGS="--channels 8 --scale-iters 1 --iters 9"
 else
     STYLE_ARGS=""; TEXGAN_ARGS="--minutes ${DEMO_MINUTES:-2}"; VIEW_SIZE="960 540"; DETAIL_SIZE=1024x1024
-    GNN_ARGS="--minutes ${DEMO_MINUTES:-2}"; SINGAN_ARGS="--minutes ${DEMO_MINUTES:-2}"
+    GNN_ARGS="--minutes ${DEMO_MINUTES:-2}"; SINGAN_ARGS="--minutes ${SINGAN_MINUTES:-10}"
 fi
 
 # One line per picture, in page order: `name  title`.
