@@ -9,9 +9,13 @@ LDLIBS   = -lm -pthread
 SAN      = -fsanitize=address,undefined,float-cast-overflow -fno-omit-frame-pointer -fno-sanitize-recover=undefined,float-cast-overflow
 
 # terrainnet.h is generated from src/ (src/amalgamate.sh); edit src/, then `make header`.
-FRAGMENTS := src/amalgamate.sh src/manual.h src/impl_begin.h src/impl_end.h $(filter-out src/terrainnet.c,$(wildcard src/*.c))
-# The implementation is compiled once per configuration and linked; a program that defines
-# TERRAINNET_IMPLEMENTATION itself (white-box tests, which reach private tn__ code) builds alone.
+FRAGMENTS := src/amalgamate.sh src/manual.h src/internal.h src/impl_begin.h src/impl_end.h $(filter-out src/terrainnet.c,$(wildcard src/*.c))
+# The implementation is compiled once per configuration, with TN_INTERNALS so that it exports the
+# private code of the header's internals block, and linked. White-box tests and benches define
+# TN_INTERNALS and link it too. A program that defines TERRAINNET_IMPLEMENTATION itself builds
+# alone: only where it must compile the implementation differently, namely test_png and test_io
+# (their own TN_MALLOC, counting allocations), test_robust (TN_MAX_ALLOC of 256 MiB) and
+# test_bf16_amx (a model of the AMX tile unit in place of its intrinsics).
 LIB      = build/terrainnet.o
 LIB_SAN  = build/terrainnet_san.o
 SELF     = $(shell grep -l '^\#define TERRAINNET_IMPLEMENTATION' $(1))
@@ -39,7 +43,7 @@ check-header:
 	  { echo "FAIL check_header: terrainnet.h differs from src/ (run make header)"; echo "check_header: 0 passed, 1 failed, 0 skipped"; exit 1; }
 
 $(LIB): src/terrainnet.c terrainnet.h | build
-	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -c $< -o $@
+	$(CC) $(WARN) $(OPT) $(ARCH) $(CFLAGS) -DTN_INTERNALS -c $< -o $@
 
 # Examples keep their own #define TERRAINNET_IMPLEMENTATION (each is a standalone program for
 # `cc app.c -lm -pthread`); here they link the shared object instead.
@@ -61,15 +65,16 @@ bin build build/test build/fuzz build/check build/test/fuzz:
 
 # Tests run under AddressSanitizer + UndefinedBehaviorSanitizer.
 $(LIB_SAN): src/terrainnet.c terrainnet.h | build
-	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -c $< -o $@
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -DTN_INTERNALS -c $< -o $@
 
 build/test/%: tests/%.c $(LIB_SAN) tests/tn_test.h | build/test
 	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB_SAN)) -o $@ $(LDLIBS)
 
-# A fuzz driver that reaches private tn__ code builds alone; the others link the sanitised
-# implementation. Run without arguments, each replays tests/fuzz/seeds and tests/fuzz/corpus/NAME.
+# Each fuzz driver links the sanitised implementation (its own TERRAINNET_IMPLEMENTATION is for
+# the standalone libFuzzer build). Run without arguments, each replays tests/fuzz/seeds and
+# tests/fuzz/corpus/NAME.
 build/test/fuzz/%: tests/fuzz/%.c tests/fuzz/fuzz_replay.h tests/fuzz/fuzz_files.h $(LIB_SAN) | build/test/fuzz
-	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -DTN_FUZZ_MAIN -I. $< $(if $(shell grep -l 'tn__' $<),,-DTN_IMPLEMENTATION_LINKED $(LIB_SAN)) -o $@ $(LDLIBS)
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -DTN_FUZZ_MAIN -I. $< -DTN_IMPLEMENTATION_LINKED $(LIB_SAN) -o $@ $(LDLIBS)
 
 # The header must compile warning-free as C99 with gcc and clang, as C++, and without threads.
 check-compile: | build/check
@@ -108,15 +113,14 @@ bench: $(BENCHES)
 # Fuzzing runs of every driver, FUZZ_SECONDS each, at the library's default limits (`make test`
 # only replays the committed corpus). Needs clang with libFuzzer (Debian: clang, libclang-rt-14-dev).
 # New inputs go to build/fuzz/corpus-NAME; tests/fuzz/corpus/NAME is the committed regression corpus.
-# As in make test, a driver that reaches private tn__ code builds alone; the others link the
-# implementation instrumented once.
+# As in make test, every driver links the implementation instrumented once.
 FUZZ_SECONDS ?= 30
 FUZZ_CC   = clang -std=c99 -g -O1
 LIB_FUZZ  = build/fuzz/terrainnet.o
 $(LIB_FUZZ): src/terrainnet.c terrainnet.h | build/fuzz
-	$(FUZZ_CC) -fsanitize=fuzzer-no-link,address,undefined -c $< -o $@
+	$(FUZZ_CC) -fsanitize=fuzzer-no-link,address,undefined -DTN_INTERNALS -c $< -o $@
 build/fuzz/%: tests/fuzz/%.c tests/fuzz/fuzz_replay.h tests/fuzz/fuzz_files.h terrainnet.h $(LIB_FUZZ) | build/fuzz
-	$(FUZZ_CC) -fsanitize=fuzzer,address,undefined -I. $< $(if $(shell grep -l 'tn__' $<),,-DTN_IMPLEMENTATION_LINKED $(LIB_FUZZ)) -o $@ -lm -pthread
+	$(FUZZ_CC) -fsanitize=fuzzer,address,undefined -I. $< -DTN_IMPLEMENTATION_LINKED $(LIB_FUZZ) -o $@ -lm -pthread
 
 fuzz: $(FUZZERS)
 	@for f in $(FUZZERS); do n=$$(basename $$f); echo "== $$f ($(FUZZ_SECONDS) s)"; \
@@ -137,7 +141,7 @@ m32: | build
 	@if ! printf 'int main(void) { return 0; }\n' | $(CC) $(M32) -x c - -o build/m32_probe > /dev/null 2>&1; then \
 	  echo "skipped m32: $(CC) -m32 cannot link (Debian: apt-get install gcc-multilib)"; echo "m32: 0 passed, 0 failed, 1 skipped"; exit 0; fi; \
 	mkdir -p build/m32 build/test; \
-	$(CC) $(M32) $(WARN) -O2 $(CFLAGS) -c src/terrainnet.c -o build/m32/terrainnet.o || \
+	$(CC) $(M32) $(WARN) -O2 $(CFLAGS) -DTN_INTERNALS -c src/terrainnet.c -o build/m32/terrainnet.o || \
 	  { echo "FAIL m32: the implementation does not compile"; echo "m32: 0 passed, 1 failed, 0 skipped"; exit 1; }; \
 	pass=0; fail=0; for t in $(M32_TESTS); do \
 	  if grep -q '^#define TERRAINNET_IMPLEMENTATION' tests/$$t.c; then lib=; else lib=build/m32/terrainnet.o; fi; \

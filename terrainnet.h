@@ -32,6 +32,10 @@ CONFIGURATION (define before including the implementation)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_IMPLEMENTATION_LINKED  ignore TERRAINNET_IMPLEMENTATION in this file: the program links a
                         separately compiled implementation (how the repository builds its examples)
+    TN_INTERNALS        for the repository's tests and benches, not the API: declares the private
+                        tn__ code of the internals block (after "end header file"), and makes
+                        the implementation export it; define it both in the program and where
+                        the implementation it links is compiled. Without it nothing changes.
     TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
                         TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
                         TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,
@@ -2523,6 +2527,224 @@ TN_API const char *tn_world_method_help(int i);
 
 /* //// end header file ////////////////////////////////////////////////////////////////////// */
 
+/* ==== internals (TN_INTERNALS) ================================================================
+   Not the API: private tn__ code that the repository's white-box tests and benches reach, with no
+   promise that any of it stays. A program sees this block when it defines TN_INTERNALS before
+   including the header (and links an implementation compiled with TN_INTERNALS, whose TN__INTERNAL
+   functions and variables are then external instead of static); the implementation itself sees
+   the types. Any other program sees none of it. Listed by section, in table-of-contents order;
+   add a name only when a test cannot reach the behaviour through the public API. */
+#if (defined(TN_INTERNALS) || (defined(TERRAINNET_IMPLEMENTATION) && !defined(TN_IMPLEMENTATION_LINKED))) && \
+    !defined(TN__INTERNALS_H)
+#define TN__INTERNALS_H
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- types and constants (the implementation uses these too) ---- */
+/* core: thread-local storage class, where the compiler has one (test_core: progress hooks) */
+#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
+#if defined(_MSC_VER)
+#define TN__TLS __declspec(thread)
+#elif defined(__cplusplus) && __cplusplus >= 201103L
+#define TN__TLS thread_local
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
+#define TN__TLS _Thread_local
+#elif defined(__GNUC__) || defined(__clang__)
+#define TN__TLS __thread
+#endif
+#endif
+#define TN__TIF_CLASSIC_MAX 0xffffff00u /* io_formats: files past this are written as BigTIFF */
+#ifndef TN_NO_ENGINE
+/* gemm: the micro-tile of the kernel the compiler targets (MR rows x two vectors of VW floats;
+   portable: 8x16 measured best over gcc and clang at -O2, SSE2) and the K block (see gemm.c's
+   block sizes). A test sees the library's values when compiled with the same -m flags. */
+#if defined(__AVX512F__)
+#define TN__GEMM_MR 8
+#define TN__GEMM_VW 16
+#elif defined(__AVX2__) && defined(__FMA__)
+#define TN__GEMM_MR 6
+#define TN__GEMM_VW 8
+#else
+#define TN__GEMM_MR 8
+#define TN__GEMM_VW 8
+#endif
+#define TN__GEMM_NR (2 * TN__GEMM_VW)
+#define TN__GEMM_KC 384
+/* gemm: the product's kernels, float32 and the bf16 ones of >>gemm_bf16 */
+enum { TN__KERN_FP32 = 0, TN__KERN_EMU, TN__KERN_AVX512BF16, TN__KERN_AMX };
+#endif
+#ifndef TN_NO_EXTRACT
+/* extract: min-heap of (priority, cell) for the cells of depressions: 4-ary, items of 16 bytes,
+   so a node's children share one cache line. */
+typedef struct tn__pheap_item { uint64_t pri; uint32_t cell, pad; } tn__pheap_item;
+typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap in bytes */
+#endif
+#ifndef TN_NO_GNN
+#define TN__GNN_DIST 16.0f /* gnn: distance scale of the edge features (px) */
+/* gnn: the parts of a sketch as flat arrays */
+typedef struct tn__gnn_parts {
+    int n, npts;
+    int *start;        /* n + 1 offsets into pts */
+    int *of;           /* npts: part of each point */
+    float *pts;        /* npts x 3: x, y, normalised height */
+    float *sign;       /* n: +1 ridge, -1 valley */
+} tn__gnn_parts;
+#endif
+#ifndef TN_NO_TEXGAN
+#define TN__TG_FEATS 32 /* texgan: fixed random filters of the feature-statistics term */
+/* texgan: the training state */
+typedef struct tn__tg_train {
+    tn_texgan m;            /* EMA generator = m.weights "g.*" */
+    tn_params *g, *d;
+    tn_patch_disc disc;     /* over d */
+    tn_optim *og, *od;
+    tn_rng rng;
+    tn_train *run;
+    int disc_width, disc_layers, patch, batch, augment;
+    float lr, ema, feat_weight;
+    float *filt;            /* TN__TG_FEATS random 5x5 filters over the channels (fixed seed) */
+    double *ref;            /* exemplar feature means + covariances, per scale */
+} tn__tg_train;
+#endif
+#ifndef TN_NO_STYLE
+/* style: the feature network, one pyramid level (or one tile of it), the transfer's settings */
+#define TN__STYLE_MAXL 5
+typedef struct tn__style_net {
+    int vgg;
+    int nconv;
+    tn_tensor *w[16], *b[16];
+    tn_params *own; /* the built-in net's weights; VGG weights are borrowed */
+} tn__style_net;
+#define TN__STYLE_ABINS 32    /* drainage bins: floor(log2(flow accumulation)) */
+typedef struct tn__style_level {
+    const tn__style_net *net;
+    tn_ctx *ctx;
+    int w, h;                 /* size of the optimised map */
+    float wc, wg, wsw, wh, wtv;
+    int nstyle;
+    float *gram[TN__STYLE_MAXL];  /* C x C source Grams */
+    double gnorm[TN__STYLE_MAXL]; /* their squared Frobenius norms */
+    float *dirs[TN__STYLE_MAXL];  /* C x C random unit directions (rows) */
+    float *sorted[TN__STYLE_MAXL];/* C x snt sorted source projections */
+    size_t snt[TN__STYLE_MAXL];
+    double svar[TN__STYLE_MAXL];  /* mean square of the sorted projections */
+    int ch[TN__STYLE_MAXL];
+    float *content;           /* content-layer features of the anchor map */
+    int cshape[4];
+    double cnorm;
+    float *hsorted, *ssorted; /* sorted source heights and slopes */
+    size_t hn, sn;
+    float wdep, wrel;
+    float *dsorted;           /* sorted source depression depths (filled - height) */
+    size_t dn;
+    float relief_t[TN__STYLE_ABINS + 1]; /* source's mean relief per accumulation bin; the edge */
+    double relief2;           /* source's mean squared relief */
+    double s2;
+    tn_status status;
+} tn__style_level;
+typedef struct tn__style_cfg {
+    tn_style_opts o;
+    tn__style_net net;
+    double work_done, work_total; /* progress in pixel-iterations */
+    tn_progress_fn user_fn;
+    void *user_data;
+    double span, frac;            /* work of the tile being optimised, and the fraction done */
+    int level;                    /* pyramid level being optimised (0 = full size) */
+} tn__style_cfg;
+#endif
+
+#ifdef TN_INTERNALS
+/* ---- src/core.c ---- */
+tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out);
+tn_status tn__progress(const char *stage, double fraction);
+float tn__clampf(float v, float lo, float hi);
+/* ---- src/io.c ---- */
+uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n);
+uint32_t tn__png_be32(const uint8_t *p);
+void tn__png_put_be32(uint8_t *p, uint32_t v);
+tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, tn_image *img, tn_image_info *info);
+tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
+                         int level, uint8_t **out, size_t *out_size);
+/* ---- src/io_formats.c ---- */
+extern double tn__tif_classic_max; /* lowered by tests to reach BigTIFF */
+tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size);
+tn_status tn__tif_packbits(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len);
+tn_status tn__tif_lzw(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len,
+                      size_t *tab, uint16_t *lens);
+#ifndef TN_NO_ENGINE
+/* ---- src/gemm.c ---- */
+extern int tn__gemm_bf16_force; /* run bf16 products on this kernel instead of the best; 0 = the best */
+void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, int k0, int kc, float *pa);
+size_t tn__gemm_b_stride(int kc);
+void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, int j0, int nc, float *pb);
+float tn__bf16_round(float f);
+void tn__bf16_round_n(float *x, size_t n);
+uint32_t tn__bf16_bits(float f);
+void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+#endif
+#ifndef TN_NO_SKETCH
+/* ---- src/sketch.c ---- */
+extern const int tn__d8x[8], tn__d8y[8];
+tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
+                       const float *pts, int npts);
+void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8]);
+int tn__yokoi8(const int p[8]);
+#endif
+#ifndef TN_NO_EXTRACT
+/* ---- src/extract.c ---- */
+tn_status tn__channel0_image(const tn_image *src, tn_image *dst);
+tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell);
+uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it);
+uint32_t tn__pheap_pop(tn__pheap *h);
+#endif
+#ifndef TN_NO_GNN
+/* ---- src/gnn.c, src/gnn_membrane.c ---- */
+tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p);
+void tn__gnn_parts_free(tn__gnn_parts *p);
+int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2);
+float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y);
+tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out);
+#endif
+#ifndef TN_NO_TEXGAN
+/* ---- src/texgan.c ---- */
+int tn__tg_zdim(const tn_texgan *m);
+int tn__tg_out_size(const tn_texgan *m, int cells);
+void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0);
+void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, long cy0, int h, int w);
+tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x);
+tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z,
+                           const uint64_t *seeds, long cx0, long cy0);
+tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z, uint64_t seed, long cx0, long cy0);
+void tn__tg_make_filters(tn__tg_train *s);
+tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H);
+tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x);
+tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band);
+void tn__dm_seamless(const tn_image *h, float *out, int axis);
+#endif
+#ifndef TN_NO_STYLE
+/* ---- src/style.c ---- */
+void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch);
+tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);
+void tn__style_band_outflow(tn_flow *f);
+tn_status tn__style_content_target(tn__style_level *L, const float *anchor);
+tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin);
+float tn__style_eval(void *user, const float *xd, float *grad);
+tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h);
+void tn__style_level_free(tn__style_level *L);
+void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h);
+void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale);
+tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c);
+tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts);
+tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed);
+#endif
+#endif /* TN_INTERNALS */
+
+#ifdef __cplusplus
+}
+#endif
+#endif /* TN__INTERNALS_H */
+
 #if defined(TERRAINNET_IMPLEMENTATION) && !defined(TN_IMPLEMENTATION_LINKED)
 #ifndef TERRAINNET_IMPLEMENTATION_DONE
 #define TERRAINNET_IMPLEMENTATION_DONE
@@ -2592,6 +2814,15 @@ TN_API const char *tn_world_method_help(int i);
 #else
 #define TN__SHARED static
 #endif
+/* Private code that tests reach through the internals block (src/internal.h): static, unless the
+   implementation is compiled with TN_INTERNALS for programs that link it (the Makefile's objects). */
+#ifdef TN_INTERNALS
+#define TN__INTERNAL
+#define TN__INTERNAL_SHARED
+#else
+#define TN__INTERNAL static
+#define TN__INTERNAL_SHARED TN__SHARED
+#endif
 
 #ifdef __cplusplus
 extern "C" {
@@ -2614,17 +2845,7 @@ typedef struct tn__error_state {
     int msg_over_limit;  /* msg is about the memory budget */
 } tn__error_state;
 
-#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
-#if defined(_MSC_VER)
-#define TN__TLS __declspec(thread)
-#elif defined(__cplusplus) && __cplusplus >= 201103L
-#define TN__TLS thread_local
-#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
-#define TN__TLS _Thread_local
-#elif defined(__GNUC__) || defined(__clang__)
-#define TN__TLS __thread
-#endif
-#endif
+/* TN__TLS, the storage class of thread-locals where there is one: in src/internal.h */
 
 #if defined(TN_NO_THREADS)
 static tn__error_state tn__error_static;
@@ -2926,7 +3147,7 @@ static int tn__mul_size(size_t a, size_t b, size_t *out)
 }
 
 /* a * b * c * d bytes, checked against overflow and TN_MAX_ALLOC. */
-static tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out)
+TN__INTERNAL tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out)
 {
     size_t t;
     if (!tn__mul_size(a, b, &t) || !tn__mul_size(t, c, &t) || !tn__mul_size(t, d, &t) || t > TN_MAX_ALLOC)
@@ -3043,7 +3264,7 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
 }
 
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
-TN__SHARED tn_status tn__progress(const char *stage, double fraction)
+TN__INTERNAL_SHARED tn_status tn__progress(const char *stage, double fraction)
 {
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
@@ -3069,7 +3290,7 @@ TN_API double tn_time_seconds(void)
 #endif
 }
 
-TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails
@@ -4417,12 +4638,12 @@ TN_API tn_rect tn_rect_halo(tn_rect r, int halo, int width, int height)
 
 /* ---- byte helpers ---- */
 
-static uint32_t tn__png_be32(const uint8_t *p)
+TN__INTERNAL uint32_t tn__png_be32(const uint8_t *p)
 {
     return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | (uint32_t)p[3];
 }
 
-static void tn__png_put_be32(uint8_t *p, uint32_t v)
+TN__INTERNAL void tn__png_put_be32(uint8_t *p, uint32_t v)
 {
     p[0] = (uint8_t)(v >> 24);
     p[1] = (uint8_t)(v >> 16);
@@ -4488,7 +4709,7 @@ static int tn__crc_ready;
 #endif
 
 /* Standard CRC-32 as zlib's crc32(): start with crc = 0, chain calls over consecutive pieces. */
-static uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n)
+TN__INTERNAL uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n)
 {
 #ifndef TN_NO_THREADS
     pthread_once(&tn__crc_once, tn__crc_build);
@@ -5731,7 +5952,7 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
    Errors: TN_ERR_FORMAT (signature, unknown critical chunk), TN_ERR_CORRUPT (CRC naming the
    chunk, IHDR, chunk order, truncation, zlib, pixel data size, palette index),
    TN_ERR_TOO_LARGE (sides > 2^24 or buffers beyond TN_MAX_ALLOC, checked before allocating). */
-static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, tn_image *img, tn_image_info *info)
+TN__INTERNAL tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, tn_image *img, tn_image_info *info)
 {
     tn__png *p;
     size_t pos = 8, idat_total = 0, nidat = 0, first_idat = 0;
@@ -5911,7 +6132,7 @@ static void tn__png_put_chunk(uint8_t *o, const char *type, const uint8_t *data,
    "terrainnet.range" = "<lo> <hi>" (shortest round-trip text) so decoding restores v exactly up to quantisation. level
    0-9 (0 = 6). *out is TN_MALLOC'ed (caller frees with TN_FREE). Fails with TN_ERR_INVALID_ARG
    on bad image/depth/range. */
-static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
+TN__INTERNAL tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
                                 int level, uint8_t **out, size_t *out_size)
 {
     static const uint8_t ctypes[5] = {0, 0, 4, 2, 6};
@@ -6997,7 +7218,7 @@ static tn_status tn__tif_ifd(tn__tif *t, uint64_t off, uint64_t *next)
 
 /* ---- chunk codecs: each writes at most cap bytes and reports how many in *len ---- */
 
-static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len)
+TN__INTERNAL tn_status tn__tif_packbits(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len)
 {
     size_t i = 0, o = 0, L;
     while (o < cap && i < n) {
@@ -7005,14 +7226,14 @@ static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, 
         i++;
         if (c >= 0) {
             L = (size_t)c + 1;
-            if (L > n - i) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits literal run past the end of its strip/tile", t->name);
+            if (L > n - i) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits literal run past the end of its strip/tile", name);
             if (L > cap - o) L = cap - o;
             memcpy(out + o, s + i, L);
             i += (size_t)c + 1;
             o += L;
         } else if (c != -128) {
             L = (size_t)(1 - c);
-            if (i >= n) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits repeat run past the end of its strip/tile", t->name);
+            if (i >= n) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits repeat run past the end of its strip/tile", name);
             if (L > cap - o) L = cap - o;
             memset(out + o, s[i++], L);
             o += L;
@@ -7024,7 +7245,7 @@ static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, 
 
 /* TIFF LZW (MSB-first codes of 9..12 bits, "early change"); tab holds 4096 entry starts and
    lens their lengths. Output beyond cap ends the decoding (as libtiff, which reads what it needs). */
-static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len,
+TN__INTERNAL tn_status tn__tif_lzw(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len,
                              size_t *tab, uint16_t *lens)
 {
     size_t o = 0, bit = 0, total = n * 8, prev_start = 0, L, src;
@@ -7032,7 +7253,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
     int have_prev = 0;
     *len = 0;
     if (n >= 2 && s[0] == 0 && (s[1] & 1))
-        return tn__fail(TN_ERR_FORMAT, "%s: old-style (pre-1991) TIFF LZW is not supported", t->name);
+        return tn__fail(TN_ERR_FORMAT, "%s: old-style (pre-1991) TIFF LZW is not supported", name);
     while (o < cap && bit + width <= total) {
         size_t i = bit >> 3;
         uint32_t v = (uint32_t)s[i] << 16;
@@ -7048,7 +7269,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
         }
         if (code == 257) break; /* end of information */
         if (!have_prev) {
-            if (code > 255) return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u right after a clear", t->name, code);
+            if (code > 255) return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u right after a clear", name, code);
             out[o] = (uint8_t)code;
             prev_start = o++;
             prev_len = 1;
@@ -7056,7 +7277,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
             continue;
         }
         if (code > next || (code == next && next >= 4096))
-            return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u beyond the %u-entry table", t->name, code, next);
+            return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u beyond the %u-entry table", name, code, next);
         if (code < 256) {
             out[o] = (uint8_t)code;
             L = 1;
@@ -7233,8 +7454,8 @@ static tn_status tn__tif_chunk(const tn__tif *t, size_t k, tn__tif_scratch *sc)
         memcpy(sc->raw, src, need);
         got = need;
         break;
-    case 32773: st = tn__tif_packbits(t, src, srcn, sc->raw, t->chunk_bytes, &got); break;
-    case 5: st = tn__tif_lzw(t, src, srcn, sc->raw, t->chunk_bytes, &got, sc->lzw_tab, sc->lzw_len); break;
+    case 32773: st = tn__tif_packbits(t->name, src, srcn, sc->raw, t->chunk_bytes, &got); break;
+    case 5: st = tn__tif_lzw(t->name, src, srcn, sc->raw, t->chunk_bytes, &got, sc->lzw_tab, sc->lzw_len); break;
     default: {
         char what[96];
         snprintf(what, sizeof what, "%s: %s %zu", t->name, t->tiled ? "tile" : "strip", k);
@@ -7743,8 +7964,7 @@ static tn_status tn__tif_decode(const uint8_t *p, size_t n, const char *name, tn
 
 /* ---- TIFF writer ---- */
 
-#define TN__TIF_CLASSIC_MAX 0xffffff00u /* files past this are written as BigTIFF */
-static double tn__tif_classic_max = TN__TIF_CLASSIC_MAX; /* lowered by tests to reach BigTIFF */
+TN__INTERNAL double tn__tif_classic_max = TN__TIF_CLASSIC_MAX; /* lowered by tests to reach BigTIFF */
 
 typedef struct tn__tif_enc {
     const tn_image *img;
@@ -8084,7 +8304,7 @@ TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t si
 #include <errno.h> /* ENOENT: "no such file" */
 
 /* Reads a whole file with one fread. *out is TN_MALLOC'd. */
-static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
+TN__INTERNAL tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
 {
     FILE *f;
     long end = -1;
@@ -8738,9 +8958,9 @@ TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_ENGINE
 
+/* The micro-tile, TN__GEMM_MR x TN__GEMM_NR (two vectors of TN__GEMM_VW), and the K block
+   TN__GEMM_KC are in src/internal.h, where test_bf16 sees them too. */
 #if defined(__AVX512F__)
-#define TN__GEMM_MR 8
-#define TN__GEMM_VW 16
 #define TN__GEMM_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5) X(6) X(7)
 #define TN__V __m512
 #define TN__VZERO() _mm512_setzero_ps()
@@ -8751,8 +8971,6 @@ TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image
 #define TN__VMUL(a, b) _mm512_mul_ps(a, b)
 #define TN__VFMA(a, b, c) _mm512_fmadd_ps(a, b, c)
 #elif defined(__AVX2__) && defined(__FMA__)
-#define TN__GEMM_MR 6
-#define TN__GEMM_VW 8
 #define TN__GEMM_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5)
 #define TN__V __m256
 #define TN__VZERO() _mm256_setzero_ps()
@@ -8762,17 +8980,13 @@ TN_API tn_status tn_compare(tn_metrics *out, const tn_image *ref, const tn_image
 #define TN__VSTOREU(p, v) _mm256_storeu_ps(p, v)
 #define TN__VMUL(a, b) _mm256_mul_ps(a, b)
 #define TN__VFMA(a, b, c) _mm256_fmadd_ps(a, b, c)
-#else /* portable: 8x16 measured best over gcc and clang at -O2 (SSE2) */
-#define TN__GEMM_MR 8
-#define TN__GEMM_VW 8
 #endif
-#define TN__GEMM_NR (2 * TN__GEMM_VW)
 
 /* Block sizes (floats) for Zen 4 (32K L1D, 1M L2): an A micro-panel (MR x KC, 12 KiB) fits in
    L1, the packed B block (KC x NC, 384 KiB) in L2, the packed A block (MC x KC) in L2/L3.
    Measured KC 256..576, NC 192..512, MC 256..2048: all within ~3% of each other; KC 256 or
    NC 512 lose a little on the convolution shape. */
-#define TN__GEMM_KC 384
+/* TN__GEMM_KC 384: src/internal.h */
 #define TN__GEMM_MC 768
 #define TN__GEMM_NC 256
 /* Below this many multiply-adds the pool's wake-up costs more than a second thread saves
@@ -8886,7 +9100,7 @@ static void tn__gemm_tr8x8(const float *src, int ld, float *dst, int dstride)
 
 /* Packs op(A)[i0 .. i0+mc) x [k0 .. k0+kc) as MR-row micro-panels, k-major inside a panel
    (pa[p*kc*MR + k*MR + r]); rows past mc are zero. */
-static void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, int k0, int kc, float *pa)
+TN__INTERNAL void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, int k0, int kc, float *pa)
 {
     int p, r, k;
     for (p = 0; p < mc; p += TN__GEMM_MR, pa += (size_t)kc * TN__GEMM_MR) {
@@ -8916,12 +9130,12 @@ static void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, 
 
 /* Distance between packed B micro-panels: one cache line more than the panel, so that the
    row-by-row packing does not write every panel at the same L1 set (4 KiB aliasing). */
-static size_t tn__gemm_b_stride(int kc) { return (size_t)kc * TN__GEMM_NR + 16; }
+TN__INTERNAL size_t tn__gemm_b_stride(int kc) { return (size_t)kc * TN__GEMM_NR + 16; }
 
 /* Packs op(B)[k0 .. k0+kc) x [j0 .. j0+nc) as NR-column micro-panels (panel q/NR starts at
    pb + (q/NR) * tn__gemm_b_stride(kc), element (k, j) at k*NR + j); columns past nc are zero.
    Source rows are read whole, so the hardware prefetcher streams them. */
-static void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, int j0, int nc, float *pb)
+TN__INTERNAL void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, int j0, int nc, float *pb)
 {
     size_t panel = tn__gemm_b_stride(kc);
     int q, j, k;
@@ -8975,12 +9189,11 @@ typedef struct tn__gemm_job {
 } tn__gemm_job;
 
 /* The product's kernels: float32, and the bf16 ones of >>gemm_bf16 (below), which the driver
-   reaches through these few functions. */
-enum { TN__KERN_FP32 = 0, TN__KERN_EMU, TN__KERN_AVX512BF16, TN__KERN_AMX };
+   reaches through these few functions (their TN__KERN_ names: src/internal.h). */
 typedef void (*tn__gemm_kernel_fn)(int kc, const float *pa, const float *pb, float *c, int ldc, float alpha, float beta);
 static int tn__gemm_kern(tn_precision p);
-static float tn__bf16_round(float f);
-static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+TN__INTERNAL float tn__bf16_round(float f);
+TN__INTERNAL void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
 static tn__gemm_kernel_fn tn__gemm_bf16_kernel_fn(int kern);
 #ifdef TN__BF16_HW
 /* AMX scratch per slot, in bf16 halves: the A block as rows of KP, then the B block */
@@ -9313,7 +9526,7 @@ static unsigned tn__cpu_flags;
 static int tn__cpu_probed;
 /* Tests: run bf16 products on this kernel (TN__KERN_EMU ...) instead of the best one, when the
    CPU has it; 0 = the best. */
-static int tn__gemm_bf16_force;
+TN__INTERNAL int tn__gemm_bf16_force;
 
 #ifdef TN__X86_CPUID
 static unsigned long long tn__xgetbv0(void)
@@ -9430,7 +9643,7 @@ static int tn__gemm_kern(tn_precision p)
 
 /* The bf16 nearest to f (ties to even), as the upper half of float32 bits; subnormals become
    zeros of their sign (the matrix units treat bf16 subnormals as zero), NaN stays a quiet NaN. */
-static uint32_t tn__bf16_bits(float f)
+TN__INTERNAL uint32_t tn__bf16_bits(float f)
 {
     uint32_t u, r;
     memcpy(&u, &f, sizeof u);
@@ -9439,7 +9652,7 @@ static uint32_t tn__bf16_bits(float f)
     return (u & 0x7fffffffu) > 0x7f800000u ? (u | 0x00400000u) & 0xffff0000u : r; /* selects: vectorises */
 }
 
-static float tn__bf16_round(float f)
+TN__INTERNAL float tn__bf16_round(float f)
 {
     uint32_t u = tn__bf16_bits(f);
     memcpy(&f, &u, sizeof f);
@@ -9461,7 +9674,7 @@ static __m256i tn__bf16_bits8(__m256 x)
 #endif
 
 /* x[0 .. n) rounded to bf16 in place. */
-static void tn__bf16_round_n(float *x, size_t n)
+TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
 {
     size_t i = 0;
 #ifdef __AVX2__
@@ -9492,7 +9705,7 @@ static void tn__bf16_pair_words(const float *r0, const float *r1, void *out, int
    emulated, rows rounded and each k pair swapped; AVX512-BF16, k pairs as 32-bit words (row
    k/2 of w words at the panel's start; a pair is read before its words are written, and later
    pairs lie further on). */
-static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w)
+TN__INTERNAL void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w)
 {
     int q, k, j;
     TN_ASSERT(w == TN__GEMM_MR || w == TN__GEMM_NR);
@@ -14352,7 +14565,7 @@ TN_API void tn_contour_set_free(tn_contour_set *set) {
 /* ---- small builders shared by the sketch code ---- */
 
 /* Appends a polyline (points copied) to *s, whose items array has capacity *cap bytes. */
-static tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
+TN__INTERNAL tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                               const float *pts, int npts)
 {
     tn_contour *c;
@@ -14740,7 +14953,7 @@ TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path)
 
 
 /* The 8 neighbours of (x, y) clockwise from north, P2..P9 in the thinning papers' naming; 0 outside. */
-static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
+TN__INTERNAL void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
 {
     static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
     int k;
@@ -14752,7 +14965,7 @@ static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
 
 /* Removing a set pixel keeps the 8-connected topology iff exactly one of the four "north, east,
    south, west" corners starts a run of foreground (Yokoi's 8-connectivity number == 1). */
-static int tn__yokoi8(const int p[8])
+TN__INTERNAL int tn__yokoi8(const int p[8])
 {
     int k, c = 0;
     for (k = 0; k < 8; k += 2) {
@@ -14924,8 +15137,8 @@ TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
 }
 
 /* D8 neighbour offsets: E, SE, S, SW, W, NW, N, NE (flow directions in >>extract too). */
-static const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
-static const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+TN__INTERNAL const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
+TN__INTERNAL const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
 
 /* Number of set 8-neighbours. */
 static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)
@@ -16194,7 +16407,7 @@ static void tn__rheap_free(tn__rheap *h)
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
-static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
+TN__INTERNAL tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
 {
     size_t i, n = (size_t)src->width * src->height;
     tn_status st = tn__image_alloc(dst, src->width, src->height, 1);
@@ -16203,12 +16416,10 @@ static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
     return TN_OK;
 }
 
-/* Min-heap of (priority, cell) for the cells of depressions: 4-ary, items of 16 bytes,
-   so a node's children share one cache line. */
-typedef struct tn__pheap_item { uint64_t pri; uint32_t cell, pad; } tn__pheap_item;
-typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap in bytes */
+/* Min-heap of (priority, cell) for the cells of depressions (tn__pheap, in src/internal.h for
+   test_fill). */
 
-static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
+TN__INTERNAL tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
 {
     size_t i;
     tn_status st = tn__reserve((void **)&h->a, &h->cap, (h->n + 1) * sizeof(tn__pheap_item));
@@ -16233,7 +16444,7 @@ static size_t tn__pheap_minchild(const tn__pheap_item *a, size_t c, size_t n)
 }
 
 /* Replaces the top by `it` (sifted down); returns the old top's cell. */
-static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
+TN__INTERNAL uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
 {
     uint32_t top = h->a[0].cell;
     size_t i = 0, c, b;
@@ -16248,7 +16459,7 @@ static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
 /* Pops the top. The last item came from the bottom, so the hole goes down to a leaf along the
    smaller children and the item climbs back from there: fewer comparisons than testing it on
    the way down. */
-static uint32_t tn__pheap_pop(tn__pheap *h)
+TN__INTERNAL uint32_t tn__pheap_pop(tn__pheap *h)
 {
     uint32_t top = h->a[0].cell;
     tn__pheap_item last = h->a[--h->n];
@@ -17545,7 +17756,7 @@ static uint32_t tn__float_key(float f)
 /* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
    (float keys are exact, so ties keep index order and the result is deterministic).
    scratch holds 3 * n uint32. */
-static void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
+TN__INTERNAL void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
 {
     uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
     size_t cnt[2048], i;
@@ -17675,16 +17886,10 @@ static tn_tensor *tn__sorted_match(tn_ctx *ctx, tn_tensor *x, const float *targe
 
 /* ---- feature networks ---- */
 
-#define TN__STYLE_MAXL 5
 static const int tn__sn_ch[4] = {24, 32, 48, 64}, tn__sn_k[4] = {5, 3, 3, 3};
 static const int tn__vgg_groups[5] = {2, 2, 4, 4, 4}, tn__vgg_ch[5] = {64, 128, 256, 512, 512};
 
-typedef struct tn__style_net {
-    int vgg;
-    int nconv;
-    tn_tensor *w[16], *b[16];
-    tn_params *own; /* the built-in net's weights; VGG weights are borrowed */
-} tn__style_net;
+/* tn__style_net: in src/internal.h, with the pyramid level and the configuration */
 
 static tn_status tn__style_net_builtin(tn__style_net *net, uint64_t seed)
 {
@@ -17828,36 +18033,9 @@ static int tn__style_forward(tn_ctx *ctx, const tn__style_net *net, tn_tensor *x
 
 /* ---- one pyramid level (or one tile of it): targets, loss, gradient ---- */
 
-#define TN__STYLE_ABINS 32    /* drainage bins: floor(log2(flow accumulation)) */
+/* tn__style_level: in src/internal.h (test_style and bench_style run one level) */
 
-typedef struct tn__style_level {
-    const tn__style_net *net;
-    tn_ctx *ctx;
-    int w, h;                 /* size of the optimised map */
-    float wc, wg, wsw, wh, wtv;
-    int nstyle;
-    float *gram[TN__STYLE_MAXL];  /* C x C source Grams */
-    double gnorm[TN__STYLE_MAXL]; /* their squared Frobenius norms */
-    float *dirs[TN__STYLE_MAXL];  /* C x C random unit directions (rows) */
-    float *sorted[TN__STYLE_MAXL];/* C x snt sorted source projections */
-    size_t snt[TN__STYLE_MAXL];
-    double svar[TN__STYLE_MAXL];  /* mean square of the sorted projections */
-    int ch[TN__STYLE_MAXL];
-    float *content;           /* content-layer features of the anchor map */
-    int cshape[4];
-    double cnorm;
-    float *hsorted, *ssorted; /* sorted source heights and slopes */
-    size_t hn, sn;
-    float wdep, wrel;
-    float *dsorted;           /* sorted source depression depths (filled - height) */
-    size_t dn;
-    float relief_t[TN__STYLE_ABINS + 1]; /* source's mean relief per accumulation bin; the edge */
-    double relief2;           /* source's mean squared relief */
-    double s2;
-    tn_status status;
-} tn__style_level;
-
-static void tn__style_level_free(tn__style_level *L)
+TN__INTERNAL void tn__style_level_free(tn__style_level *L)
 {
     int l;
     for (l = 0; l < TN__STYLE_MAXL; l++) {
@@ -17914,7 +18092,7 @@ static tn_status tn__style_sort_rows(const float *x, size_t rows, size_t n, floa
 /* Source statistics from `ncrop` source tiles (each L->w x L->h; the optimised tiles may differ
    in size): Grams are averaged; each crop's sorted projections are resampled to n / ncrop
    values (at least 1), pooled and sorted. */
-static tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
+TN__INTERNAL tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
 {
     tn_ctx *ctx = L->ctx;
     tn_rng rng;
@@ -18045,7 +18223,7 @@ static int tn__style_edge_dist(int x, int y, int w, int h)
    to it and runs it along the edge, and the relief term then cuts a channel parallel to the
    border. In their own bin, the band's cells are neither carved nor raised into a rim (as
    cells draining only themselves would be), so flow leaves the map at any angle. */
-static void tn__style_band_outflow(tn_flow *f)
+TN__INTERNAL void tn__style_band_outflow(tn_flow *f)
 {
     int w = f->width, h = f->height, x, y;
     for (y = 0; y < h; y++)
@@ -18065,7 +18243,7 @@ static void tn__style_band_outflow(tn_flow *f)
 /* Drainage bin of every cell of a w x h map v: floor(log2(D8 flow accumulation)) on its filled
    copy, capped at TN__STYLE_ABINS - 1; TN__STYLE_LAKE inside depressions (filled > v), where
    the flow crosses flats in straight lines that should not be carved, and near the edge. */
-static tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin)
+TN__INTERNAL tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin)
 {
     tn_image m;
     tn_flow f;
@@ -18123,7 +18301,7 @@ static tn_status tn__style_relief_targets(tn__style_level *L, tn_tensor *x, cons
 }
 
 /* Sorted heights and slopes of the whole source level (w x h). */
-static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
+TN__INTERNAL tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
 {
     tn_ctx *ctx = L->ctx;
     tn_tensor *x, *s;
@@ -18158,7 +18336,7 @@ static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, in
 }
 
 /* Content-layer features of the anchor map (w x h). */
-static tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
+TN__INTERNAL tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
 {
     tn_ctx *ctx = L->ctx;
     tn_tensor *x, *sf[TN__STYLE_MAXL], *cf = NULL;
@@ -18264,7 +18442,7 @@ static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
 }
 
 /* Loss and gradient at xd (the tn_lbfgs callback). Failures are kept in L->status; NaN is returned. */
-static float tn__style_eval(void *user, const float *xd, float *grad)
+TN__INTERNAL float tn__style_eval(void *user, const float *xd, float *grad)
 {
     tn__style_level *L = (tn__style_level *)user;
     tn_ctx *ctx = L->ctx;
@@ -18293,15 +18471,7 @@ static float tn__style_eval(void *user, const float *xd, float *grad)
 
 /* ---- optimisation ---- */
 
-typedef struct tn__style_cfg {
-    tn_style_opts o;
-    tn__style_net net;
-    double work_done, work_total; /* progress in pixel-iterations */
-    tn_progress_fn user_fn;
-    void *user_data;
-    double span, frac;            /* work of the tile being optimised, and the fraction done */
-    int level;                    /* pyramid level being optimised (0 = full size) */
-} tn__style_cfg;
+/* tn__style_cfg: in src/internal.h */
 
 /* Reports the fraction f of the tile being optimised as progress of the whole transfer. */
 static int tn__style_report(tn__style_cfg *c, double f)
@@ -18320,7 +18490,7 @@ static int tn__style_progress_fwd(void *user, const char *stage, double f)
     return tn__style_report(c, strcmp(stage, "lbfgs") ? c->frac : f);
 }
 
-static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
+TN__INTERNAL tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
 {
     size_t n = (size_t)L->w * L->h;
     int it, iters = c->o.iters;
@@ -18419,7 +18589,7 @@ static int tn__style_tile_len(int size, int t)
 }
 
 /* A level optimising w x h maps with the configured net and weights (targets still empty). */
-static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
+TN__INTERNAL void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
 {
     memset(L, 0, sizeof *L);
     L->net = &c->net;
@@ -18497,7 +18667,7 @@ done:
 
 /* Affine normalisation of a map to the net's input space: standardised (built-in) or [0, 1]
    (VGG). Returns the offset and scale so that v = z * scale + offset. */
-static void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
+TN__INTERNAL void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
 {
     size_t i, n = (size_t)m->width * m->height;
     double a, b;
@@ -18582,7 +18752,7 @@ static tn_status tn__style_opts_check(const tn_style_opts *o)
 }
 
 /* Resolves and checks the options, and builds the network. */
-static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
+TN__INTERNAL tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
 {
     tn_status st;
     memset(c, 0, sizeof *c);
@@ -18635,7 +18805,7 @@ static tn_status tn__style_level_margin(tn__style_cfg *c, const tn_image *s, tn_
    5 % of it lies in closed basins deeper than 0.1 % of its range, i.e. water leaves it through
    valleys (mountains, canyons; the shallow flats of 8-bit DEMs do not count); off for dunes,
    craters and karst, whose closed basins the valley term would cut open. */
-static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
+TN__INTERNAL tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
 {
     size_t i, n = (size_t)s->width * s->height, deep = 0;
     float lo, hi, *f;
@@ -18856,7 +19026,7 @@ TN_API void tn_texgan_defaults(tn_texgan_opts *o)
     tn_train_defaults(&o->train, 15.0);
 }
 
-static int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
+TN__INTERNAL int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
 
 /* Output channels of generator stage i. */
 static int tn__tg_gen_out(const tn_texgan *m, int i)
@@ -18872,7 +19042,7 @@ static int tn__tg_gen_out(const tn_texgan *m, int i)
 static int tn__tg_k(const tn_texgan *m) { return 5 + 2 * m->smooth; }
 
 /* Output pixels of a generator run on `cells` cells. */
-static int tn__tg_out_size(const tn_texgan *m, int cells)
+TN__INTERNAL int tn__tg_out_size(const tn_texgan *m, int cells)
 {
     int r = cells, i;
     for (i = 0; i < m->stages; i++) r = 2 * r - (tn__tg_k(m) - 1);
@@ -19089,7 +19259,7 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
 /* Fills batch item `item` of z (N x Cz x s x s) for the cell window starting at (cx0, cy0):
    local dims hash (seed, cell), so a cell's noise never depends on the window; global dims and
    the periodic phases come from the image seed. */
-static void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0)
+TN__INTERNAL void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0)
 {
     int cz = tn__tg_zdim(m), sh = z->shape[2], sw = z->shape[3], x, y, c;
     size_t plane = (size_t)sh * sw;
@@ -19126,7 +19296,7 @@ static float tn__tg_pixel_noise(uint64_t sseed, long gx, long gy)
 }
 
 /* h x w noise plane of stage i for the window at cell (cx0, cy0). */
-static void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, long cy0, int h, int w)
+TN__INTERNAL void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, long cy0, int h, int w)
 {
     uint64_t ss = tn__tg_stage_seed(seed, stage);
     long gx0 = cx0 << (stage + 1), gy0 = cy0 << (stage + 1);
@@ -19139,7 +19309,7 @@ static void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, l
 
 /* Pixel norm (ProGAN): x / sqrt(mean over channels of x^2 + eps). Per location, so it keeps the
    generator local (tiling stays exact) and behaves the same in training and synthesis. */
-static tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
+TN__INTERNAL tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
 {
     tn_tensor *r = tn_pow_abs(ctx, tn_scale_shift(ctx, tn_mean_axis(ctx, tn_square(ctx, x), 1), 1.0f, 1e-8f), 0.5f);
     return tn_div(ctx, x, r);
@@ -19193,7 +19363,7 @@ static tn_tensor *tn__tg_param(tn_params *p, const char *prefix, char kind, int 
 
 /* The training graph of the generator on z (N items, item n with image seed seeds[n], the
    window starting at cell (cx0, cy0)). */
-static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z,
+TN__INTERNAL tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z,
                                   const uint64_t *seeds, long cx0, long cy0)
 {
     tn_tensor *x = z;
@@ -19215,18 +19385,7 @@ static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p,
 
 /* ---- training ---- */
 
-typedef struct tn__tg_train {
-    tn_texgan m;            /* EMA generator = m.weights "g.*" */
-    tn_params *g, *d;
-    tn_patch_disc disc;     /* over d */
-    tn_optim *og, *od;
-    tn_rng rng;
-    tn_train *run;
-    int disc_width, disc_layers, patch, batch, augment;
-    float lr, ema, feat_weight;
-    float *filt;            /* TN__TG_FEATS random 5x5 filters over the channels (fixed seed) */
-    double *ref;            /* exemplar feature means + covariances, per scale */
-} tn__tg_train;
+/* tn__tg_train, the training state: in src/internal.h (test_texgan checks the feature term) */
 
 /* ---- feature statistics (the anti-collapse term) ----
    A GAN on a small exemplar can collapse to a flat colour: the discriminator separates it
@@ -19234,10 +19393,10 @@ typedef struct tn__tg_train {
    matches, on its fake batch, the means and centred covariances of TN__TG_FEATS fixed random
    5x5 filters (ReLU) at scales 1, 2, 4 to the exemplar's: a flat output has zero covariance,
    so this term pulls it back towards the exemplar's variety whatever the discriminator does. */
-#define TN__TG_FEATS 32
+/* TN__TG_FEATS (32): in src/internal.h */
 #define TN__TG_FSCALES 3
 
-static void tn__tg_make_filters(tn__tg_train *s)
+TN__INTERNAL void tn__tg_make_filters(tn__tg_train *s)
 {
     tn_rng r;
     size_t k, n = (size_t)TN__TG_FEATS * s->m.channels * 25;
@@ -19264,7 +19423,7 @@ static tn_tensor *tn__tg_feats(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x, int l
 
 /* Reference statistics of the whole exemplar (planar, 1 x C x H x W in [-1, 1]), accumulated over
    256 px crops so memory stays small: per level F means, then the F x F covariance. */
-static tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H)
+TN__INTERNAL tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H)
 {
     const int F = TN__TG_FEATS, per = F + F * F, C = s->m.channels;
     double *acc = (double *)tn__calloc((size_t)TN__TG_FSCALES * per * sizeof(double)), cnt[TN__TG_FSCALES] = {0};
@@ -19315,7 +19474,7 @@ static tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, 
 }
 
 /* Sum over levels of |mean - ref|^2 / |ref mean|^2 + |cov - ref|^2 / |ref cov|^2. */
-static tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x)
+TN__INTERNAL tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x)
 {
     const int F = TN__TG_FEATS, per = F + F * F;
     tn_tensor *loss = NULL;
@@ -19802,7 +19961,7 @@ static tn_tensor *tn__tg_phase_weights(tn_ctx *ctx, const tn_texgan *m, const tn
     return p;
 }
 
-static tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z, uint64_t seed, long cx0, long cy0)
+TN__INTERNAL tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z, uint64_t seed, long cx0, long cy0)
 {
     tn_tensor *x = z;
     int i;
@@ -20024,7 +20183,7 @@ TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t se
     return st;
 }
 
-static tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
+TN__INTERNAL tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
 {
     tn_image *img = (tn_image *)user;
     memcpy(img->data + (size_t)y0 * img->width * img->channels, band->data,
@@ -20296,7 +20455,7 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
    (continuous across the wrap) takes over, at the centre h (where the copy's own seam lies);
    sin^2 + cos^2 = 1 keeps the energy of uncorrelated detail. Exemplars are rarely seamless, and
    the high map is tiled, so without this its edge shows as a line every exemplar width. */
-static void tn__dm_seamless(const tn_image *h, float *out, int axis)
+TN__INTERNAL void tn__dm_seamless(const tn_image *h, float *out, int axis)
 {
     int w = h->width, ht = h->height, ch = h->channels, side = axis ? ht : w, x, y, c;
     double wrap = 0, inner = 0;
@@ -22593,7 +22752,7 @@ done:
 #define TN__GNN_CONFIG 24
 #define TN__GNN_F 5          /* edge features: projection index (or overhang), distance, closeness, height difference, noise */
 #define TN__GNN_MAXH 256
-#define TN__GNN_DIST 16.0f   /* distance scale of the edge features (px) */
+/* TN__GNN_DIST, the distance scale of the edge features: in src/internal.h */
 #define TN__GNN_MAX_LEVELS 4 /* sketch densities in training */
 #define TN__GNN_MAX_EDGES (1 << 25) /* ~1800^2 pixels at k = 10: ~2.5 GB of graph in training */
 
@@ -22712,15 +22871,9 @@ static void tn__gnn_across(const tn_contour *c, int i, int W, int H, float d, in
 
 /* ---- parts as flat arrays ---- */
 
-typedef struct tn__gnn_parts {
-    int n, npts;
-    int *start;        /* n + 1 offsets into pts */
-    int *of;           /* npts: part of each point */
-    float *pts;        /* npts x 3: x, y, normalised height */
-    float *sign;       /* n: +1 ridge, -1 valley */
-} tn__gnn_parts;
+/* tn__gnn_parts: in src/internal.h (test_gnn checks the projections). */
 
-static void tn__gnn_parts_free(tn__gnn_parts *p)
+TN__INTERNAL void tn__gnn_parts_free(tn__gnn_parts *p)
 {
     TN_FREE(p->start);
     TN_FREE(p->of);
@@ -22730,7 +22883,7 @@ static void tn__gnn_parts_free(tn__gnn_parts *p)
 }
 
 /* Heights become (h - mean) / std. */
-static tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p)
+TN__INTERNAL tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p)
 {
     int i, j, k = 0;
     memset(p, 0, sizeof *p);
@@ -22773,7 +22926,7 @@ static void tn__gnn_edge_features(const tn__gnn_parts *P, int part, int j, float
 }
 
 /* Nearest point of a part to (x, y): index within the part (lowest on ties) and squared distance. */
-static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2)
+TN__INTERNAL int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2)
 {
     int a = P->start[part], b = P->start[part + 1], j, best = 0;
     float bd = FLT_MAX;
@@ -22788,7 +22941,7 @@ static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, f
 /* Edge feature 0 of a part without an embedding (A.overhang): how far (x, y) lies beyond the
    part's end along its direction, 0 beside it. The projection index (f0, as computed) only says
    where a random cut fell on such a part; this does not depend on the cut. */
-static float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
+TN__INTERNAL float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
 {
     int a = P->start[part], n = P->start[part + 1] - a, j, o;
     float tx, ty, tl, v;
@@ -26175,7 +26328,7 @@ static tn_status tn__gnn_mg_make(const uint8_t *fixed, int W, int H, double *e0,
     return TN_OK;
 }
 
-static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out)
+TN__INTERNAL tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out)
 {
     tn__gnn_mgrid G;
     const tn__gnn_mlevel *L = &G.lv[0];

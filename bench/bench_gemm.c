@@ -8,7 +8,7 @@
    Prints: sgemm_<case>_t<N>: X GFLOP/s (min a max b, runs r)
            gemm_bf16[_<kernel>]_<case>_t<N>: X GFLOP/s (...; kernel, Y x fp32)
    bench/gemm_bf16_vs_torch.sh runs PyTorch's bf16 matmul (the peer) and this in one go. */
-#define TERRAINNET_IMPLEMENTATION /* private tn__ code: the bf16 kernels one by one */
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include <string.h>
 #include <stdlib.h>

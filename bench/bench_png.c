@@ -3,20 +3,7 @@
    decoded pixel data, i.e. width * height * channels * bit_depth / 8) and the encoded size
    relative to the input file. Built with -DTN_BENCH_ZLIB -lz it also compresses the very same
    filtered rows with zlib at level 6 and prints both sizes. */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_NOISE
-#define TN_NO_SKETCH
-#define TN_NO_EXTRACT
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>
@@ -83,7 +70,7 @@ static void bench_file(const char *rel, const char *what)
     /* encode at levels 1, 6 (default), 9 */
     for (level = 1; level <= 9; level += level == 1 ? 5 : 3) {
         for (reps = 0, best = 1e30, t0 = tn_time_seconds(); tn_time_seconds() - t0 < 1.0 || reps < 2; reps++) {
-            TN_FREE(out);
+            tn_free(out);
             t = tn_time_seconds();
             tn__png_encode(&img, info.bit_depth, 0.0, 1.0, 0, level, &out, &out_n);
             t = tn_time_seconds() - t;
@@ -110,14 +97,14 @@ static void bench_file(const char *rel, const char *what)
                    what, mn, (unsigned long)zl, (double)mn / (double)zl, rn / tz / 1e6);
             free(zb);
             free(z);
-            TN_FREE(rows);
-            TN_FREE(mine);
+            tn_free(rows);
+            tn_free(mine);
         }
 #else
         (void)bench_idat;
 #endif
     }
-    TN_FREE(out);
+    tn_free(out);
     tn_image_free(&img);
     free(buf);
 }

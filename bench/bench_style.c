@@ -13,7 +13,7 @@
    the layout is not the source's. The drainage terms are at their default (on for fluvial
    sources); --drain forces them on for every source (drain_weight 10, valley_weight 1),
    --no-drain off. Times are wall clock, with the process CPU time beside them. */
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include <stdio.h>
 #include <stdlib.h>

@@ -20,6 +20,7 @@ part() { # part api|impl FILE
 }
 cat "$src/manual.h"
 for s in $SECTIONS; do part api "$src/$s.c"; done
-cat "$src/impl_begin.h"
+# the internals block (TN_INTERNALS) right after "end header file", before the implementation
+awk -v f="$src/internal.h" '{ print } /^\/\* \/\/\/\/ end header file/ { print ""; while ((getline l < f) > 0) print l }' "$src/impl_begin.h"
 for s in $SECTIONS; do part impl "$src/$s.c"; done
 cat "$src/impl_end.h"

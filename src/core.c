@@ -81,17 +81,7 @@ typedef struct tn__error_state {
     int msg_over_limit;  /* msg is about the memory budget */
 } tn__error_state;
 
-#if !defined(TN_NO_THREADS) && !defined(TN_NO_TLS)
-#if defined(_MSC_VER)
-#define TN__TLS __declspec(thread)
-#elif defined(__cplusplus) && __cplusplus >= 201103L
-#define TN__TLS thread_local
-#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 201112L
-#define TN__TLS _Thread_local
-#elif defined(__GNUC__) || defined(__clang__)
-#define TN__TLS __thread
-#endif
-#endif
+/* TN__TLS, the storage class of thread-locals where there is one: in src/internal.h */
 
 #if defined(TN_NO_THREADS)
 static tn__error_state tn__error_static;
@@ -393,7 +383,7 @@ static int tn__mul_size(size_t a, size_t b, size_t *out)
 }
 
 /* a * b * c * d bytes, checked against overflow and TN_MAX_ALLOC. */
-static tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out)
+TN__INTERNAL tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out)
 {
     size_t t;
     if (!tn__mul_size(a, b, &t) || !tn__mul_size(t, c, &t) || !tn__mul_size(t, d, &t) || t > TN_MAX_ALLOC)
@@ -510,7 +500,7 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
 }
 
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
-TN__SHARED tn_status tn__progress(const char *stage, double fraction)
+TN__INTERNAL_SHARED tn_status tn__progress(const char *stage, double fraction)
 {
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
@@ -536,7 +526,7 @@ TN_API double tn_time_seconds(void)
 #endif
 }
 
-TN__SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails

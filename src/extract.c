@@ -248,7 +248,7 @@ static void tn__rheap_free(tn__rheap *h)
 }
 
 /* Channel 0 of src as a new one-channel image (D8 and the metrics read plain height grids). */
-static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
+TN__INTERNAL tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
 {
     size_t i, n = (size_t)src->width * src->height;
     tn_status st = tn__image_alloc(dst, src->width, src->height, 1);
@@ -257,12 +257,10 @@ static tn_status tn__channel0_image(const tn_image *src, tn_image *dst)
     return TN_OK;
 }
 
-/* Min-heap of (priority, cell) for the cells of depressions: 4-ary, items of 16 bytes,
-   so a node's children share one cache line. */
-typedef struct tn__pheap_item { uint64_t pri; uint32_t cell, pad; } tn__pheap_item;
-typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap in bytes */
+/* Min-heap of (priority, cell) for the cells of depressions (tn__pheap, in src/internal.h for
+   test_fill). */
 
-static tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
+TN__INTERNAL tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell)
 {
     size_t i;
     tn_status st = tn__reserve((void **)&h->a, &h->cap, (h->n + 1) * sizeof(tn__pheap_item));
@@ -287,7 +285,7 @@ static size_t tn__pheap_minchild(const tn__pheap_item *a, size_t c, size_t n)
 }
 
 /* Replaces the top by `it` (sifted down); returns the old top's cell. */
-static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
+TN__INTERNAL uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
 {
     uint32_t top = h->a[0].cell;
     size_t i = 0, c, b;
@@ -302,7 +300,7 @@ static uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it)
 /* Pops the top. The last item came from the bottom, so the hole goes down to a leaf along the
    smaller children and the item climbs back from there: fewer comparisons than testing it on
    the way down. */
-static uint32_t tn__pheap_pop(tn__pheap *h)
+TN__INTERNAL uint32_t tn__pheap_pop(tn__pheap *h)
 {
     uint32_t top = h->a[0].cell;
     tn__pheap_item last = h->a[--h->n];

@@ -63,9 +63,9 @@ TN_API void tn_gemm(tn_precision precision, int trans_a, int trans_b, int M, int
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_ENGINE
 
+/* The micro-tile, TN__GEMM_MR x TN__GEMM_NR (two vectors of TN__GEMM_VW), and the K block
+   TN__GEMM_KC are in src/internal.h, where test_bf16 sees them too. */
 #if defined(__AVX512F__)
-#define TN__GEMM_MR 8
-#define TN__GEMM_VW 16
 #define TN__GEMM_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5) X(6) X(7)
 #define TN__V __m512
 #define TN__VZERO() _mm512_setzero_ps()
@@ -76,8 +76,6 @@ TN_API void tn_gemm(tn_precision precision, int trans_a, int trans_b, int M, int
 #define TN__VMUL(a, b) _mm512_mul_ps(a, b)
 #define TN__VFMA(a, b, c) _mm512_fmadd_ps(a, b, c)
 #elif defined(__AVX2__) && defined(__FMA__)
-#define TN__GEMM_MR 6
-#define TN__GEMM_VW 8
 #define TN__GEMM_ROWS(X) X(0) X(1) X(2) X(3) X(4) X(5)
 #define TN__V __m256
 #define TN__VZERO() _mm256_setzero_ps()
@@ -87,17 +85,13 @@ TN_API void tn_gemm(tn_precision precision, int trans_a, int trans_b, int M, int
 #define TN__VSTOREU(p, v) _mm256_storeu_ps(p, v)
 #define TN__VMUL(a, b) _mm256_mul_ps(a, b)
 #define TN__VFMA(a, b, c) _mm256_fmadd_ps(a, b, c)
-#else /* portable: 8x16 measured best over gcc and clang at -O2 (SSE2) */
-#define TN__GEMM_MR 8
-#define TN__GEMM_VW 8
 #endif
-#define TN__GEMM_NR (2 * TN__GEMM_VW)
 
 /* Block sizes (floats) for Zen 4 (32K L1D, 1M L2): an A micro-panel (MR x KC, 12 KiB) fits in
    L1, the packed B block (KC x NC, 384 KiB) in L2, the packed A block (MC x KC) in L2/L3.
    Measured KC 256..576, NC 192..512, MC 256..2048: all within ~3% of each other; KC 256 or
    NC 512 lose a little on the convolution shape. */
-#define TN__GEMM_KC 384
+/* TN__GEMM_KC 384: src/internal.h */
 #define TN__GEMM_MC 768
 #define TN__GEMM_NC 256
 /* Below this many multiply-adds the pool's wake-up costs more than a second thread saves
@@ -211,7 +205,7 @@ static void tn__gemm_tr8x8(const float *src, int ld, float *dst, int dstride)
 
 /* Packs op(A)[i0 .. i0+mc) x [k0 .. k0+kc) as MR-row micro-panels, k-major inside a panel
    (pa[p*kc*MR + k*MR + r]); rows past mc are zero. */
-static void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, int k0, int kc, float *pa)
+TN__INTERNAL void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, int k0, int kc, float *pa)
 {
     int p, r, k;
     for (p = 0; p < mc; p += TN__GEMM_MR, pa += (size_t)kc * TN__GEMM_MR) {
@@ -241,12 +235,12 @@ static void tn__gemm_pack_a(int trans, const float *A, int lda, int i0, int mc, 
 
 /* Distance between packed B micro-panels: one cache line more than the panel, so that the
    row-by-row packing does not write every panel at the same L1 set (4 KiB aliasing). */
-static size_t tn__gemm_b_stride(int kc) { return (size_t)kc * TN__GEMM_NR + 16; }
+TN__INTERNAL size_t tn__gemm_b_stride(int kc) { return (size_t)kc * TN__GEMM_NR + 16; }
 
 /* Packs op(B)[k0 .. k0+kc) x [j0 .. j0+nc) as NR-column micro-panels (panel q/NR starts at
    pb + (q/NR) * tn__gemm_b_stride(kc), element (k, j) at k*NR + j); columns past nc are zero.
    Source rows are read whole, so the hardware prefetcher streams them. */
-static void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, int j0, int nc, float *pb)
+TN__INTERNAL void tn__gemm_pack_b(int trans, const float *B, int ldb, int k0, int kc, int j0, int nc, float *pb)
 {
     size_t panel = tn__gemm_b_stride(kc);
     int q, j, k;
@@ -300,12 +294,11 @@ typedef struct tn__gemm_job {
 } tn__gemm_job;
 
 /* The product's kernels: float32, and the bf16 ones of >>gemm_bf16 (below), which the driver
-   reaches through these few functions. */
-enum { TN__KERN_FP32 = 0, TN__KERN_EMU, TN__KERN_AVX512BF16, TN__KERN_AMX };
+   reaches through these few functions (their TN__KERN_ names: src/internal.h). */
 typedef void (*tn__gemm_kernel_fn)(int kc, const float *pa, const float *pb, float *c, int ldc, float alpha, float beta);
 static int tn__gemm_kern(tn_precision p);
-static float tn__bf16_round(float f);
-static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+TN__INTERNAL float tn__bf16_round(float f);
+TN__INTERNAL void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
 static tn__gemm_kernel_fn tn__gemm_bf16_kernel_fn(int kern);
 #ifdef TN__BF16_HW
 /* AMX scratch per slot, in bf16 halves: the A block as rows of KP, then the B block */
@@ -638,7 +631,7 @@ static unsigned tn__cpu_flags;
 static int tn__cpu_probed;
 /* Tests: run bf16 products on this kernel (TN__KERN_EMU ...) instead of the best one, when the
    CPU has it; 0 = the best. */
-static int tn__gemm_bf16_force;
+TN__INTERNAL int tn__gemm_bf16_force;
 
 #ifdef TN__X86_CPUID
 static unsigned long long tn__xgetbv0(void)
@@ -755,7 +748,7 @@ static int tn__gemm_kern(tn_precision p)
 
 /* The bf16 nearest to f (ties to even), as the upper half of float32 bits; subnormals become
    zeros of their sign (the matrix units treat bf16 subnormals as zero), NaN stays a quiet NaN. */
-static uint32_t tn__bf16_bits(float f)
+TN__INTERNAL uint32_t tn__bf16_bits(float f)
 {
     uint32_t u, r;
     memcpy(&u, &f, sizeof u);
@@ -764,7 +757,7 @@ static uint32_t tn__bf16_bits(float f)
     return (u & 0x7fffffffu) > 0x7f800000u ? (u | 0x00400000u) & 0xffff0000u : r; /* selects: vectorises */
 }
 
-static float tn__bf16_round(float f)
+TN__INTERNAL float tn__bf16_round(float f)
 {
     uint32_t u = tn__bf16_bits(f);
     memcpy(&f, &u, sizeof f);
@@ -786,7 +779,7 @@ static __m256i tn__bf16_bits8(__m256 x)
 #endif
 
 /* x[0 .. n) rounded to bf16 in place. */
-static void tn__bf16_round_n(float *x, size_t n)
+TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
 {
     size_t i = 0;
 #ifdef __AVX2__
@@ -817,7 +810,7 @@ static void tn__bf16_pair_words(const float *r0, const float *r1, void *out, int
    emulated, rows rounded and each k pair swapped; AVX512-BF16, k pairs as 32-bit words (row
    k/2 of w words at the panel's start; a pair is read before its words are written, and later
    pairs lie further on). */
-static void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w)
+TN__INTERNAL void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w)
 {
     int q, k, j;
     TN_ASSERT(w == TN__GEMM_MR || w == TN__GEMM_NR);

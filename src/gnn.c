@@ -300,7 +300,7 @@ TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn
 #define TN__GNN_CONFIG 24
 #define TN__GNN_F 5          /* edge features: projection index (or overhang), distance, closeness, height difference, noise */
 #define TN__GNN_MAXH 256
-#define TN__GNN_DIST 16.0f   /* distance scale of the edge features (px) */
+/* TN__GNN_DIST, the distance scale of the edge features: in src/internal.h */
 #define TN__GNN_MAX_LEVELS 4 /* sketch densities in training */
 #define TN__GNN_MAX_EDGES (1 << 25) /* ~1800^2 pixels at k = 10: ~2.5 GB of graph in training */
 
@@ -419,15 +419,9 @@ static void tn__gnn_across(const tn_contour *c, int i, int W, int H, float d, in
 
 /* ---- parts as flat arrays ---- */
 
-typedef struct tn__gnn_parts {
-    int n, npts;
-    int *start;        /* n + 1 offsets into pts */
-    int *of;           /* npts: part of each point */
-    float *pts;        /* npts x 3: x, y, normalised height */
-    float *sign;       /* n: +1 ridge, -1 valley */
-} tn__gnn_parts;
+/* tn__gnn_parts: in src/internal.h (test_gnn checks the projections). */
 
-static void tn__gnn_parts_free(tn__gnn_parts *p)
+TN__INTERNAL void tn__gnn_parts_free(tn__gnn_parts *p)
 {
     TN_FREE(p->start);
     TN_FREE(p->of);
@@ -437,7 +431,7 @@ static void tn__gnn_parts_free(tn__gnn_parts *p)
 }
 
 /* Heights become (h - mean) / std. */
-static tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p)
+TN__INTERNAL tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p)
 {
     int i, j, k = 0;
     memset(p, 0, sizeof *p);
@@ -480,7 +474,7 @@ static void tn__gnn_edge_features(const tn__gnn_parts *P, int part, int j, float
 }
 
 /* Nearest point of a part to (x, y): index within the part (lowest on ties) and squared distance. */
-static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2)
+TN__INTERNAL int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2)
 {
     int a = P->start[part], b = P->start[part + 1], j, best = 0;
     float bd = FLT_MAX;
@@ -495,7 +489,7 @@ static int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, f
 /* Edge feature 0 of a part without an embedding (A.overhang): how far (x, y) lies beyond the
    part's end along its direction, 0 beside it. The projection index (f0, as computed) only says
    where a random cut fell on such a part; this does not depend on the cut. */
-static float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
+TN__INTERNAL float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y)
 {
     int a = P->start[part], n = P->start[part + 1] - a, j, o;
     float tx, ty, tl, v;

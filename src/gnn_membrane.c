@@ -270,7 +270,7 @@ static tn_status tn__gnn_mg_make(const uint8_t *fixed, int W, int H, double *e0,
     return TN_OK;
 }
 
-static tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out)
+TN__INTERNAL tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out)
 {
     tn__gnn_mgrid G;
     const tn__gnn_mlevel *L = &G.lv[0];

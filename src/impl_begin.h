@@ -74,6 +74,15 @@
 #else
 #define TN__SHARED static
 #endif
+/* Private code that tests reach through the internals block (src/internal.h): static, unless the
+   implementation is compiled with TN_INTERNALS for programs that link it (the Makefile's objects). */
+#ifdef TN_INTERNALS
+#define TN__INTERNAL
+#define TN__INTERNAL_SHARED
+#else
+#define TN__INTERNAL static
+#define TN__INTERNAL_SHARED TN__SHARED
+#endif
 
 #ifdef __cplusplus
 extern "C" {

@@ -135,12 +135,12 @@ TN_API void tn_free(void *p);
 
 /* ---- byte helpers ---- */
 
-static uint32_t tn__png_be32(const uint8_t *p)
+TN__INTERNAL uint32_t tn__png_be32(const uint8_t *p)
 {
     return ((uint32_t)p[0] << 24) | ((uint32_t)p[1] << 16) | ((uint32_t)p[2] << 8) | (uint32_t)p[3];
 }
 
-static void tn__png_put_be32(uint8_t *p, uint32_t v)
+TN__INTERNAL void tn__png_put_be32(uint8_t *p, uint32_t v)
 {
     p[0] = (uint8_t)(v >> 24);
     p[1] = (uint8_t)(v >> 16);
@@ -206,7 +206,7 @@ static int tn__crc_ready;
 #endif
 
 /* Standard CRC-32 as zlib's crc32(): start with crc = 0, chain calls over consecutive pieces. */
-static uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n)
+TN__INTERNAL uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n)
 {
 #ifndef TN_NO_THREADS
     pthread_once(&tn__crc_once, tn__crc_build);
@@ -1449,7 +1449,7 @@ static tn_status tn__png_pixels(tn__png *p, const uint8_t *z, size_t zn, tn_imag
    Errors: TN_ERR_FORMAT (signature, unknown critical chunk), TN_ERR_CORRUPT (CRC naming the
    chunk, IHDR, chunk order, truncation, zlib, pixel data size, palette index),
    TN_ERR_TOO_LARGE (sides > 2^24 or buffers beyond TN_MAX_ALLOC, checked before allocating). */
-static tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, tn_image *img, tn_image_info *info)
+TN__INTERNAL tn_status tn__png_decode(const uint8_t *buf, size_t n, const char *name, tn_image *img, tn_image_info *info)
 {
     tn__png *p;
     size_t pos = 8, idat_total = 0, nidat = 0, first_idat = 0;
@@ -1629,7 +1629,7 @@ static void tn__png_put_chunk(uint8_t *o, const char *type, const uint8_t *data,
    "terrainnet.range" = "<lo> <hi>" (shortest round-trip text) so decoding restores v exactly up to quantisation. level
    0-9 (0 = 6). *out is TN_MALLOC'ed (caller frees with TN_FREE). Fails with TN_ERR_INVALID_ARG
    on bad image/depth/range. */
-static tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
+TN__INTERNAL tn_status tn__png_encode(const tn_image *img, int bit_depth, double lo, double hi, int record_range,
                                 int level, uint8_t **out, size_t *out_size)
 {
     static const uint8_t ctypes[5] = {0, 0, 4, 2, 6};

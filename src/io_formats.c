@@ -992,7 +992,7 @@ static tn_status tn__tif_ifd(tn__tif *t, uint64_t off, uint64_t *next)
 
 /* ---- chunk codecs: each writes at most cap bytes and reports how many in *len ---- */
 
-static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len)
+TN__INTERNAL tn_status tn__tif_packbits(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len)
 {
     size_t i = 0, o = 0, L;
     while (o < cap && i < n) {
@@ -1000,14 +1000,14 @@ static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, 
         i++;
         if (c >= 0) {
             L = (size_t)c + 1;
-            if (L > n - i) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits literal run past the end of its strip/tile", t->name);
+            if (L > n - i) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits literal run past the end of its strip/tile", name);
             if (L > cap - o) L = cap - o;
             memcpy(out + o, s + i, L);
             i += (size_t)c + 1;
             o += L;
         } else if (c != -128) {
             L = (size_t)(1 - c);
-            if (i >= n) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits repeat run past the end of its strip/tile", t->name);
+            if (i >= n) return tn__fail(TN_ERR_CORRUPT, "%s: PackBits repeat run past the end of its strip/tile", name);
             if (L > cap - o) L = cap - o;
             memset(out + o, s[i++], L);
             o += L;
@@ -1019,7 +1019,7 @@ static tn_status tn__tif_packbits(const tn__tif *t, const uint8_t *s, size_t n, 
 
 /* TIFF LZW (MSB-first codes of 9..12 bits, "early change"); tab holds 4096 entry starts and
    lens their lengths. Output beyond cap ends the decoding (as libtiff, which reads what it needs). */
-static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len,
+TN__INTERNAL tn_status tn__tif_lzw(const char *name, const uint8_t *s, size_t n, uint8_t *out, size_t cap, size_t *len,
                              size_t *tab, uint16_t *lens)
 {
     size_t o = 0, bit = 0, total = n * 8, prev_start = 0, L, src;
@@ -1027,7 +1027,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
     int have_prev = 0;
     *len = 0;
     if (n >= 2 && s[0] == 0 && (s[1] & 1))
-        return tn__fail(TN_ERR_FORMAT, "%s: old-style (pre-1991) TIFF LZW is not supported", t->name);
+        return tn__fail(TN_ERR_FORMAT, "%s: old-style (pre-1991) TIFF LZW is not supported", name);
     while (o < cap && bit + width <= total) {
         size_t i = bit >> 3;
         uint32_t v = (uint32_t)s[i] << 16;
@@ -1043,7 +1043,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
         }
         if (code == 257) break; /* end of information */
         if (!have_prev) {
-            if (code > 255) return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u right after a clear", t->name, code);
+            if (code > 255) return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u right after a clear", name, code);
             out[o] = (uint8_t)code;
             prev_start = o++;
             prev_len = 1;
@@ -1051,7 +1051,7 @@ static tn_status tn__tif_lzw(const tn__tif *t, const uint8_t *s, size_t n, uint8
             continue;
         }
         if (code > next || (code == next && next >= 4096))
-            return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u beyond the %u-entry table", t->name, code, next);
+            return tn__fail(TN_ERR_CORRUPT, "%s: LZW code %u beyond the %u-entry table", name, code, next);
         if (code < 256) {
             out[o] = (uint8_t)code;
             L = 1;
@@ -1228,8 +1228,8 @@ static tn_status tn__tif_chunk(const tn__tif *t, size_t k, tn__tif_scratch *sc)
         memcpy(sc->raw, src, need);
         got = need;
         break;
-    case 32773: st = tn__tif_packbits(t, src, srcn, sc->raw, t->chunk_bytes, &got); break;
-    case 5: st = tn__tif_lzw(t, src, srcn, sc->raw, t->chunk_bytes, &got, sc->lzw_tab, sc->lzw_len); break;
+    case 32773: st = tn__tif_packbits(t->name, src, srcn, sc->raw, t->chunk_bytes, &got); break;
+    case 5: st = tn__tif_lzw(t->name, src, srcn, sc->raw, t->chunk_bytes, &got, sc->lzw_tab, sc->lzw_len); break;
     default: {
         char what[96];
         snprintf(what, sizeof what, "%s: %s %zu", t->name, t->tiled ? "tile" : "strip", k);
@@ -1738,8 +1738,7 @@ static tn_status tn__tif_decode(const uint8_t *p, size_t n, const char *name, tn
 
 /* ---- TIFF writer ---- */
 
-#define TN__TIF_CLASSIC_MAX 0xffffff00u /* files past this are written as BigTIFF */
-static double tn__tif_classic_max = TN__TIF_CLASSIC_MAX; /* lowered by tests to reach BigTIFF */
+TN__INTERNAL double tn__tif_classic_max = TN__TIF_CLASSIC_MAX; /* lowered by tests to reach BigTIFF */
 
 typedef struct tn__tif_enc {
     const tn_image *img;
@@ -2079,7 +2078,7 @@ TN_API tn_status tn_image_load_memory(tn_image *img, const void *data, size_t si
 #include <errno.h> /* ENOENT: "no such file" */
 
 /* Reads a whole file with one fread. *out is TN_MALLOC'd. */
-static tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
+TN__INTERNAL tn_status tn__io_read_file(const char *path, uint8_t **out, size_t *out_size)
 {
     FILE *f;
     long end = -1;

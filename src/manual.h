@@ -32,6 +32,10 @@ CONFIGURATION (define before including the implementation)
     TN_API              linkage of every public function (default extern; `static` for private use)
     TN_IMPLEMENTATION_LINKED  ignore TERRAINNET_IMPLEMENTATION in this file: the program links a
                         separately compiled implementation (how the repository builds its examples)
+    TN_INTERNALS        for the repository's tests and benches, not the API: declares the private
+                        tn__ code of the internals block (after "end header file"), and makes
+                        the implementation export it; define it both in the program and where
+                        the implementation it links is compiled. Without it nothing changes.
     TN_NO_<PART>        compile a part out (declarations and code), as stb_image's STBI_NO_PNG:
                         TN_NO_STYLE, TN_NO_TEXGAN, TN_NO_SINGAN, TN_NO_GNN, TN_NO_SEASON,
                         TN_NO_WORLD, TN_NO_EXPORT, TN_NO_RENDER, TN_NO_EXTRACT, TN_NO_SKETCH,

@@ -183,7 +183,7 @@ TN_API void tn_contour_set_free(tn_contour_set *set) {
 /* ---- small builders shared by the sketch code ---- */
 
 /* Appends a polyline (points copied) to *s, whose items array has capacity *cap bytes. */
-static tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
+TN__INTERNAL tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                               const float *pts, int npts)
 {
     tn_contour *c;
@@ -571,7 +571,7 @@ TN_API tn_status tn_sketch_load(tn_contour_set *out, const char *path)
 
 
 /* The 8 neighbours of (x, y) clockwise from north, P2..P9 in the thinning papers' naming; 0 outside. */
-static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
+TN__INTERNAL void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
 {
     static const int ox[8] = {0, 1, 1, 1, 0, -1, -1, -1}, oy[8] = {-1, -1, 0, 1, 1, 1, 0, -1};
     int k;
@@ -583,7 +583,7 @@ static void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8])
 
 /* Removing a set pixel keeps the 8-connected topology iff exactly one of the four "north, east,
    south, west" corners starts a run of foreground (Yokoi's 8-connectivity number == 1). */
-static int tn__yokoi8(const int p[8])
+TN__INTERNAL int tn__yokoi8(const int p[8])
 {
     int k, c = 0;
     for (k = 0; k < 8; k += 2) {
@@ -755,8 +755,8 @@ TN_API tn_status tn_skeletonize(uint8_t *m, int w, int h)
 }
 
 /* D8 neighbour offsets: E, SE, S, SW, W, NW, N, NE (flow directions in >>extract too). */
-static const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
-static const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
+TN__INTERNAL const int tn__d8x[8] = {1, 1, 0, -1, -1, -1, 0, 1};
+TN__INTERNAL const int tn__d8y[8] = {0, 1, 1, 1, 0, -1, -1, -1};
 
 /* Number of set 8-neighbours. */
 static int tn__skel_degree(const uint8_t *m, int w, int h, int x, int y)

@@ -123,7 +123,7 @@ static uint32_t tn__float_key(float f)
 /* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
    (float keys are exact, so ties keep index order and the result is deterministic).
    scratch holds 3 * n uint32. */
-static void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
+TN__INTERNAL void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
 {
     uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
     size_t cnt[2048], i;
@@ -253,16 +253,10 @@ static tn_tensor *tn__sorted_match(tn_ctx *ctx, tn_tensor *x, const float *targe
 
 /* ---- feature networks ---- */
 
-#define TN__STYLE_MAXL 5
 static const int tn__sn_ch[4] = {24, 32, 48, 64}, tn__sn_k[4] = {5, 3, 3, 3};
 static const int tn__vgg_groups[5] = {2, 2, 4, 4, 4}, tn__vgg_ch[5] = {64, 128, 256, 512, 512};
 
-typedef struct tn__style_net {
-    int vgg;
-    int nconv;
-    tn_tensor *w[16], *b[16];
-    tn_params *own; /* the built-in net's weights; VGG weights are borrowed */
-} tn__style_net;
+/* tn__style_net: in src/internal.h, with the pyramid level and the configuration */
 
 static tn_status tn__style_net_builtin(tn__style_net *net, uint64_t seed)
 {
@@ -406,36 +400,9 @@ static int tn__style_forward(tn_ctx *ctx, const tn__style_net *net, tn_tensor *x
 
 /* ---- one pyramid level (or one tile of it): targets, loss, gradient ---- */
 
-#define TN__STYLE_ABINS 32    /* drainage bins: floor(log2(flow accumulation)) */
+/* tn__style_level: in src/internal.h (test_style and bench_style run one level) */
 
-typedef struct tn__style_level {
-    const tn__style_net *net;
-    tn_ctx *ctx;
-    int w, h;                 /* size of the optimised map */
-    float wc, wg, wsw, wh, wtv;
-    int nstyle;
-    float *gram[TN__STYLE_MAXL];  /* C x C source Grams */
-    double gnorm[TN__STYLE_MAXL]; /* their squared Frobenius norms */
-    float *dirs[TN__STYLE_MAXL];  /* C x C random unit directions (rows) */
-    float *sorted[TN__STYLE_MAXL];/* C x snt sorted source projections */
-    size_t snt[TN__STYLE_MAXL];
-    double svar[TN__STYLE_MAXL];  /* mean square of the sorted projections */
-    int ch[TN__STYLE_MAXL];
-    float *content;           /* content-layer features of the anchor map */
-    int cshape[4];
-    double cnorm;
-    float *hsorted, *ssorted; /* sorted source heights and slopes */
-    size_t hn, sn;
-    float wdep, wrel;
-    float *dsorted;           /* sorted source depression depths (filled - height) */
-    size_t dn;
-    float relief_t[TN__STYLE_ABINS + 1]; /* source's mean relief per accumulation bin; the edge */
-    double relief2;           /* source's mean squared relief */
-    double s2;
-    tn_status status;
-} tn__style_level;
-
-static void tn__style_level_free(tn__style_level *L)
+TN__INTERNAL void tn__style_level_free(tn__style_level *L)
 {
     int l;
     for (l = 0; l < TN__STYLE_MAXL; l++) {
@@ -492,7 +459,7 @@ static tn_status tn__style_sort_rows(const float *x, size_t rows, size_t n, floa
 /* Source statistics from `ncrop` source tiles (each L->w x L->h; the optimised tiles may differ
    in size): Grams are averaged; each crop's sorted projections are resampled to n / ncrop
    values (at least 1), pooled and sorted. */
-static tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
+TN__INTERNAL tn_status tn__style_targets(tn__style_level *L, const float *const *crops, int ncrop, uint64_t seed)
 {
     tn_ctx *ctx = L->ctx;
     tn_rng rng;
@@ -623,7 +590,7 @@ static int tn__style_edge_dist(int x, int y, int w, int h)
    to it and runs it along the edge, and the relief term then cuts a channel parallel to the
    border. In their own bin, the band's cells are neither carved nor raised into a rim (as
    cells draining only themselves would be), so flow leaves the map at any angle. */
-static void tn__style_band_outflow(tn_flow *f)
+TN__INTERNAL void tn__style_band_outflow(tn_flow *f)
 {
     int w = f->width, h = f->height, x, y;
     for (y = 0; y < h; y++)
@@ -643,7 +610,7 @@ static void tn__style_band_outflow(tn_flow *f)
 /* Drainage bin of every cell of a w x h map v: floor(log2(D8 flow accumulation)) on its filled
    copy, capped at TN__STYLE_ABINS - 1; TN__STYLE_LAKE inside depressions (filled > v), where
    the flow crosses flats in straight lines that should not be carved, and near the edge. */
-static tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin)
+TN__INTERNAL tn_status tn__style_drain_bins(const float *filled, const float *v, int w, int h, uint8_t *bin)
 {
     tn_image m;
     tn_flow f;
@@ -701,7 +668,7 @@ static tn_status tn__style_relief_targets(tn__style_level *L, tn_tensor *x, cons
 }
 
 /* Sorted heights and slopes of the whole source level (w x h). */
-static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
+TN__INTERNAL tn_status tn__style_hist_targets(tn__style_level *L, const float *src, int w, int h)
 {
     tn_ctx *ctx = L->ctx;
     tn_tensor *x, *s;
@@ -736,7 +703,7 @@ static tn_status tn__style_hist_targets(tn__style_level *L, const float *src, in
 }
 
 /* Content-layer features of the anchor map (w x h). */
-static tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
+TN__INTERNAL tn_status tn__style_content_target(tn__style_level *L, const float *anchor)
 {
     tn_ctx *ctx = L->ctx;
     tn_tensor *x, *sf[TN__STYLE_MAXL], *cf = NULL;
@@ -842,7 +809,7 @@ static tn_tensor *tn__style_loss(tn__style_level *L, tn_tensor *x)
 }
 
 /* Loss and gradient at xd (the tn_lbfgs callback). Failures are kept in L->status; NaN is returned. */
-static float tn__style_eval(void *user, const float *xd, float *grad)
+TN__INTERNAL float tn__style_eval(void *user, const float *xd, float *grad)
 {
     tn__style_level *L = (tn__style_level *)user;
     tn_ctx *ctx = L->ctx;
@@ -871,15 +838,7 @@ static float tn__style_eval(void *user, const float *xd, float *grad)
 
 /* ---- optimisation ---- */
 
-typedef struct tn__style_cfg {
-    tn_style_opts o;
-    tn__style_net net;
-    double work_done, work_total; /* progress in pixel-iterations */
-    tn_progress_fn user_fn;
-    void *user_data;
-    double span, frac;            /* work of the tile being optimised, and the fraction done */
-    int level;                    /* pyramid level being optimised (0 = full size) */
-} tn__style_cfg;
+/* tn__style_cfg: in src/internal.h */
 
 /* Reports the fraction f of the tile being optimised as progress of the whole transfer. */
 static int tn__style_report(tn__style_cfg *c, double f)
@@ -898,7 +857,7 @@ static int tn__style_progress_fwd(void *user, const char *stage, double f)
     return tn__style_report(c, strcmp(stage, "lbfgs") ? c->frac : f);
 }
 
-static tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
+TN__INTERNAL tn_status tn__style_optimise(tn__style_level *L, float *x, tn__style_cfg *c)
 {
     size_t n = (size_t)L->w * L->h;
     int it, iters = c->o.iters;
@@ -997,7 +956,7 @@ static int tn__style_tile_len(int size, int t)
 }
 
 /* A level optimising w x h maps with the configured net and weights (targets still empty). */
-static void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
+TN__INTERNAL void tn__style_level_init(tn__style_level *L, const tn__style_cfg *c, int w, int h)
 {
     memset(L, 0, sizeof *L);
     L->net = &c->net;
@@ -1075,7 +1034,7 @@ done:
 
 /* Affine normalisation of a map to the net's input space: standardised (built-in) or [0, 1]
    (VGG). Returns the offset and scale so that v = z * scale + offset. */
-static void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
+TN__INTERNAL void tn__style_normalise(tn_image *m, int unit_range, double *offset, double *scale)
 {
     size_t i, n = (size_t)m->width * m->height;
     double a, b;
@@ -1160,7 +1119,7 @@ static tn_status tn__style_opts_check(const tn_style_opts *o)
 }
 
 /* Resolves and checks the options, and builds the network. */
-static tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
+TN__INTERNAL tn_status tn__style_setup(tn__style_cfg *c, const tn_style_opts *opts)
 {
     tn_status st;
     memset(c, 0, sizeof *c);
@@ -1213,7 +1172,7 @@ static tn_status tn__style_level_margin(tn__style_cfg *c, const tn_image *s, tn_
    5 % of it lies in closed basins deeper than 0.1 % of its range, i.e. water leaves it through
    valleys (mountains, canyons; the shallow flats of 8-bit DEMs do not count); off for dunes,
    craters and karst, whose closed basins the valley term would cut open. */
-static tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
+TN__INTERNAL tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s)
 {
     size_t i, n = (size_t)s->width * s->height, deep = 0;
     float lo, hi, *f;

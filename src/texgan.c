@@ -197,7 +197,7 @@ TN_API void tn_texgan_defaults(tn_texgan_opts *o)
     tn_train_defaults(&o->train, 15.0);
 }
 
-static int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
+TN__INTERNAL int tn__tg_zdim(const tn_texgan *m) { return m->noise_local + m->noise_global + m->noise_periodic; }
 
 /* Output channels of generator stage i. */
 static int tn__tg_gen_out(const tn_texgan *m, int i)
@@ -213,7 +213,7 @@ static int tn__tg_gen_out(const tn_texgan *m, int i)
 static int tn__tg_k(const tn_texgan *m) { return 5 + 2 * m->smooth; }
 
 /* Output pixels of a generator run on `cells` cells. */
-static int tn__tg_out_size(const tn_texgan *m, int cells)
+TN__INTERNAL int tn__tg_out_size(const tn_texgan *m, int cells)
 {
     int r = cells, i;
     for (i = 0; i < m->stages; i++) r = 2 * r - (tn__tg_k(m) - 1);
@@ -430,7 +430,7 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
 /* Fills batch item `item` of z (N x Cz x s x s) for the cell window starting at (cx0, cy0):
    local dims hash (seed, cell), so a cell's noise never depends on the window; global dims and
    the periodic phases come from the image seed. */
-static void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0)
+TN__INTERNAL void tn__tg_noise(const tn_texgan *m, const float *waves, tn_tensor *z, int item, uint64_t seed, long cx0, long cy0)
 {
     int cz = tn__tg_zdim(m), sh = z->shape[2], sw = z->shape[3], x, y, c;
     size_t plane = (size_t)sh * sw;
@@ -467,7 +467,7 @@ static float tn__tg_pixel_noise(uint64_t sseed, long gx, long gy)
 }
 
 /* h x w noise plane of stage i for the window at cell (cx0, cy0). */
-static void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, long cy0, int h, int w)
+TN__INTERNAL void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, long cy0, int h, int w)
 {
     uint64_t ss = tn__tg_stage_seed(seed, stage);
     long gx0 = cx0 << (stage + 1), gy0 = cy0 << (stage + 1);
@@ -480,7 +480,7 @@ static void tn__tg_noise_plane(float *dst, uint64_t seed, int stage, long cx0, l
 
 /* Pixel norm (ProGAN): x / sqrt(mean over channels of x^2 + eps). Per location, so it keeps the
    generator local (tiling stays exact) and behaves the same in training and synthesis. */
-static tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
+TN__INTERNAL tn_tensor *tn__tg_pixel_norm(tn_ctx *ctx, tn_tensor *x)
 {
     tn_tensor *r = tn_pow_abs(ctx, tn_scale_shift(ctx, tn_mean_axis(ctx, tn_square(ctx, x), 1), 1.0f, 1e-8f), 0.5f);
     return tn_div(ctx, x, r);
@@ -534,7 +534,7 @@ static tn_tensor *tn__tg_param(tn_params *p, const char *prefix, char kind, int 
 
 /* The training graph of the generator on z (N items, item n with image seed seeds[n], the
    window starting at cell (cx0, cy0)). */
-static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z,
+TN__INTERNAL tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p, const char *prefix, tn_tensor *z,
                                   const uint64_t *seeds, long cx0, long cy0)
 {
     tn_tensor *x = z;
@@ -556,18 +556,7 @@ static tn_tensor *tn__tg_generate(tn_ctx *ctx, const tn_texgan *m, tn_params *p,
 
 /* ---- training ---- */
 
-typedef struct tn__tg_train {
-    tn_texgan m;            /* EMA generator = m.weights "g.*" */
-    tn_params *g, *d;
-    tn_patch_disc disc;     /* over d */
-    tn_optim *og, *od;
-    tn_rng rng;
-    tn_train *run;
-    int disc_width, disc_layers, patch, batch, augment;
-    float lr, ema, feat_weight;
-    float *filt;            /* TN__TG_FEATS random 5x5 filters over the channels (fixed seed) */
-    double *ref;            /* exemplar feature means + covariances, per scale */
-} tn__tg_train;
+/* tn__tg_train, the training state: in src/internal.h (test_texgan checks the feature term) */
 
 /* ---- feature statistics (the anti-collapse term) ----
    A GAN on a small exemplar can collapse to a flat colour: the discriminator separates it
@@ -575,10 +564,10 @@ typedef struct tn__tg_train {
    matches, on its fake batch, the means and centred covariances of TN__TG_FEATS fixed random
    5x5 filters (ReLU) at scales 1, 2, 4 to the exemplar's: a flat output has zero covariance,
    so this term pulls it back towards the exemplar's variety whatever the discriminator does. */
-#define TN__TG_FEATS 32
+/* TN__TG_FEATS (32): in src/internal.h */
 #define TN__TG_FSCALES 3
 
-static void tn__tg_make_filters(tn__tg_train *s)
+TN__INTERNAL void tn__tg_make_filters(tn__tg_train *s)
 {
     tn_rng r;
     size_t k, n = (size_t)TN__TG_FEATS * s->m.channels * 25;
@@ -605,7 +594,7 @@ static tn_tensor *tn__tg_feats(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x, int l
 
 /* Reference statistics of the whole exemplar (planar, 1 x C x H x W in [-1, 1]), accumulated over
    256 px crops so memory stays small: per level F means, then the F x F covariance. */
-static tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H)
+TN__INTERNAL tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, int W, int H)
 {
     const int F = TN__TG_FEATS, per = F + F * F, C = s->m.channels;
     double *acc = (double *)tn__calloc((size_t)TN__TG_FSCALES * per * sizeof(double)), cnt[TN__TG_FSCALES] = {0};
@@ -656,7 +645,7 @@ static tn_status tn__tg_feat_ref(tn__tg_train *s, tn_ctx *ctx, const float *ex, 
 }
 
 /* Sum over levels of |mean - ref|^2 / |ref mean|^2 + |cov - ref|^2 / |ref cov|^2. */
-static tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x)
+TN__INTERNAL tn_tensor *tn__tg_feat_loss(tn_ctx *ctx, tn__tg_train *s, tn_tensor *x)
 {
     const int F = TN__TG_FEATS, per = F + F * F;
     tn_tensor *loss = NULL;
@@ -1143,7 +1132,7 @@ static tn_tensor *tn__tg_phase_weights(tn_ctx *ctx, const tn_texgan *m, const tn
     return p;
 }
 
-static tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z, uint64_t seed, long cx0, long cy0)
+TN__INTERNAL tn_tensor *tn__tg_generate_fast(tn_ctx *ctx, const tn_texgan *m, tn_tensor *z, uint64_t seed, long cx0, long cy0)
 {
     tn_tensor *x = z;
     int i;
@@ -1365,7 +1354,7 @@ TN_API tn_status tn_texgan_synthesize_stream(const tn_texgan *model, uint64_t se
     return st;
 }
 
-static tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
+TN__INTERNAL tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band)
 {
     tn_image *img = (tn_image *)user;
     memcpy(img->data + (size_t)y0 * img->width * img->channels, band->data,
@@ -1637,7 +1626,7 @@ static tn_status tn__dm_begin(tn__dm_acc *a, const tn_detail_opts *o, int width,
    (continuous across the wrap) takes over, at the centre h (where the copy's own seam lies);
    sin^2 + cos^2 = 1 keeps the energy of uncorrelated detail. Exemplars are rarely seamless, and
    the high map is tiled, so without this its edge shows as a line every exemplar width. */
-static void tn__dm_seamless(const tn_image *h, float *out, int axis)
+TN__INTERNAL void tn__dm_seamless(const tn_image *h, float *out, int axis)
 {
     int w = h->width, ht = h->height, ch = h->channels, side = axis ? ht : w, x, y, c;
     double wrap = 0, inner = 0;

@@ -37,11 +37,20 @@ methods="-DTN_NO_STYLE -DTN_NO_TEXGAN -DTN_NO_SINGAN -DTN_NO_GNN -DTN_NO_SEASON 
 base="$methods -DTN_NO_ENGINE -DTN_NO_NOISE -DTN_NO_FINEDETAIL -DTN_NO_SKETCH -DTN_NO_EXTRACT -DTN_NO_EXPORT"
 run no_methods  gcc   -std=c99 -Wall -Wextra -pedantic -O2 $methods -I. -c "$tu" -o build/check/nomethods.o
 run io_render   gcc   -std=c99 -Wall -Wextra -pedantic -O2 $base -I. -c "$tu" -o build/check/iorender.o
+# TN_INTERNALS (the internals block, exported): whole and reduced, as C and C++.
+run internals   gcc   -std=c99 -Wall -Wextra -pedantic -fsyntax-only -DTN_INTERNALS -I. "$tu"
+run internals_cxx g++ -x c++ -Wall -Wextra -pedantic -fsyntax-only -DTN_INTERNALS -I. "$tu"
+run internals_io_render gcc -std=c99 -Wall -Wextra -pedantic -fsyntax-only $base -DTN_INTERNALS -I. "$tu"
 report
 # A part whose dependency is compiled out stops with an #error that names the switch to add.
 if out=$(gcc -std=c99 -DTN_NO_ENGINE -DTN_NO_STYLE -DTN_NO_TEXGAN -DTN_NO_SINGAN -DTN_NO_SEASON -DTN_NO_WORLD -I. \
         -fsyntax-only "$tu" 2>&1); then echo "compile_switch_error: FAIL (TN_NO_ENGINE without TN_NO_GNN compiled)"; fail=$((fail + 1))
 elif echo "$out" | grep -q '@@gnn needs the tensor engine.*define TN_NO_GNN'; then echo "compile_switch_error: ok"; pass=$((pass + 1))
 else echo "compile_switch_error: FAIL"; echo "$out" | head -n 5; fail=$((fail + 1)); fi
+# A program without TN_INTERNALS sees none of the internals block.
+printf '#include "terrainnet.h"\n#if defined(TN__INTERNALS_H) || defined(TN__TLS) || defined(TN__GNN_DIST)\n#error internals visible\n#endif\nint main(void) { return tn_get_threads() > 0 ? 0 : 1; }\n' > build/check/public.c
+if out=$(gcc -std=c99 -Wall -Wextra -pedantic -fsyntax-only -I. build/check/public.c 2>&1) && [ -z "$out" ]; then
+    echo "compile_no_internals: ok"; pass=$((pass + 1))
+else echo "compile_no_internals: FAIL"; echo "$out" | head -n 5; fail=$((fail + 1)); fi
 echo "check_compile: $pass passed, $fail failed, 0 skipped"
 [ "$fail" -eq 0 ]

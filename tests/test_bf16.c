@@ -9,21 +9,10 @@
      of VDPBF16PS: fmaf with the odd k of each pair first, float32 K blocks added in order;
    - conv2d and linear layers: bf16 results and gradients within 2^-7 of the float32 ones in
      relative L2 norm, bit-identical between 1, 2 and 3 threads. */
-/* Its own implementation (private tn__ code), with only @@core ... @@train compiled in. */
-#define TN_NO_NOISE
-#define TN_NO_SKETCH
-#define TN_NO_EXTRACT
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
+#include <float.h>
 
 static double get_op(const float *X, int ld, int trans, int r, int c)
 {

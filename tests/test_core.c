@@ -1,23 +1,13 @@
 /* Tests of @@core and @@thread: status strings, errors (per thread, forwarded from pool workers),
    size checks, RNG, pool, progress. */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_NOISE
-#define TN_NO_SKETCH
-#define TN_NO_EXTRACT
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 #if defined(__unix__) || defined(__APPLE__)
 #include <unistd.h>
+#endif
+#ifndef TN_NO_THREADS
+#include <pthread.h>
 #endif
 
 TN_TEST(status_strings_are_distinct)

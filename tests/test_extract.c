@@ -1,18 +1,7 @@
 /* Tests for @@extract: depression filling, D8, accumulation, Strahler order, skeletonisation,
    contour tracing, contour parts, the preview and the realism report, on hand-built DEMs with
    known answers and on the real DEMs in ../shared/data (skipped when absent). */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics, @@noise, @@sketch
-   and @@extract compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 

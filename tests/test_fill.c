@@ -2,18 +2,7 @@
    threads, and drainage (every interior cell reaches the border along D8 pointers through
    strictly lower filled heights, with no cycles and no sinks) on a synthetic DEM full of
    depressions and flats and on real DEM crops (skipped when ../shared/data is absent). */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics, @@noise, @@sketch
-   and @@extract compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -55,7 +44,7 @@ TN_TEST(test_pheap_order)
     }
     TN_CHECK(bad == 0);
     TN_CHECK(seq > 20000);
-    TN_FREE(h.a);
+    tn_free(h.a);
 }
 
 /* Every interior cell drains: its D8 pointer leads to a strictly lower filled cell and, followed

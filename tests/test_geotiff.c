@@ -5,20 +5,7 @@
    (float32 exact, int16 rounded, uint8 RGB pictures, the georeference carried over verbatim,
    PixelIsPoint and rotated transforms, BigTIFF) and its refusals; overviews skipped; the real
    SRTM tile as GDAL wrote it equals terrainnet's own .hgt reading. */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_NOISE
-#define TN_NO_SKETCH
-#define TN_NO_EXTRACT
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <float.h>

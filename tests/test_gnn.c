@@ -2,7 +2,7 @@
    terrain in metres): training lowers the loss, the membrane baseline, save/load, bit-identical
    resume, early stopping on holdouts, same results for 1 and 2 threads, and bad inputs (empty sketch, no part of 5 px, NaN
    DEM, flat DEM, another method's model, a checkpoint as a model, damaged files). */
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -574,7 +574,7 @@ TN_TEST(bad_inputs_fail_cleanly)
     fwrite(buf, 1, n, f);
     fclose(f);
     TN_CHECK(tn_gnn_load(&l, path) == TN_ERR_CORRUPT);
-    TN_FREE(buf);
+    tn_free(buf);
     tn_params_find(m.weights, "gnn.config")->data[3] = 1000.0f; /* k */
     TN_CHECK(tn_gnn_save(path, &m) == TN_ERR_CORRUPT);           /* refused before writing */
     TN_CHECK(tn_gnn_generate(&out, &m, &sk, 40, 40, NULL) == TN_ERR_CORRUPT);

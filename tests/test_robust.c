@@ -2030,22 +2030,19 @@ TN_TEST(test_tiff_hostile)
    a table that fills without a clear (it stops growing), an old-style stream. */
 TN_TEST(test_tiff_lzw_streams)
 {
-    tn__tif t;
     uint8_t s[8192], out[70000];
     size_t tab[4096], len = 0, bit, i;
     uint16_t lens[4096];
-    memset(&t, 0, sizeof t);
-    t.name = "lzw";
     memset(s, 0, sizeof s);
     /* clear, 'A', then code 300 (table has 258 entries) */
 #define PUT(code, width) do { unsigned c_ = (code); int w_; for (w_ = (width) - 1; w_ >= 0; w_--, bit++) if ((c_ >> w_) & 1u) s[bit >> 3] |= (uint8_t)(0x80u >> (bit & 7)); } while (0)
     bit = 0;
     PUT(256, 9); PUT(65, 9); PUT(300, 9);
-    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
+    TN_CHECK(tn__tif_lzw("lzw", s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
     memset(s, 0, sizeof s);
     bit = 0;
     PUT(256, 9); PUT(258, 9);
-    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
+    TN_CHECK(tn__tif_lzw("lzw", s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_ERR_CORRUPT);
     /* 5000 literals and no clear: the table fills at 4096 entries and decoding goes on */
     memset(s, 0, sizeof s);
     bit = 0;
@@ -2058,14 +2055,14 @@ TN_TEST(test_tiff_lzw_streams)
         PUT((unsigned)(i * 7) & 255u, w);
     }
     PUT(257, 12);
-    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_OK);
+    TN_CHECK(tn__tif_lzw("lzw", s, (bit + 7) / 8, out, sizeof out, &len, tab, lens) == TN_OK);
     TN_CHECK(len == 5000);
     for (i = 0; i < 5000 && len == 5000; i++) TN_CHECK(out[i] == (uint8_t)((i * 7) & 255u));
     /* the output buffer bounds decoding: a long stream into 10 bytes */
-    TN_CHECK(tn__tif_lzw(&t, s, (bit + 7) / 8, out, 10, &len, tab, lens) == TN_OK && len == 10);
+    TN_CHECK(tn__tif_lzw("lzw", s, (bit + 7) / 8, out, 10, &len, tab, lens) == TN_OK && len == 10);
     /* pre-1991 LZW (LSB-first) is named, not misread */
     s[0] = 0; s[1] = 1;
-    TN_CHECK(tn__tif_lzw(&t, s, 16, out, sizeof out, &len, tab, lens) == TN_ERR_FORMAT);
+    TN_CHECK(tn__tif_lzw("lzw", s, 16, out, sizeof out, &len, tab, lens) == TN_ERR_FORMAT);
 #undef PUT
 }
 

@@ -1,19 +1,7 @@
 /* Tests of @@sketch: .tns round trip and every error path, drawn (PNG) sketches, densify and
    rasterisation, MST and Delaunay, random sketches (no crossings, determinism), contour parts
    and alignment (a planted rotated copy aligns to its source). */
-/* Its own implementation (private tn__ code), with only @@core ... @@metrics and @@sketch compiled in. */
-#define TN_NO_ENGINE
-#define TN_NO_NOISE
-#define TN_NO_EXTRACT
-#define TN_NO_STYLE
-#define TN_NO_TEXGAN
-#define TN_NO_SINGAN
-#define TN_NO_GNN
-#define TN_NO_SEASON
-#define TN_NO_RENDER
-#define TN_NO_EXPORT
-#define TN_NO_WORLD
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 #include <locale.h>

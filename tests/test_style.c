@@ -1,6 +1,6 @@
 /* test_style: terrain style transfer (@@style) - loss decrease, finite-difference gradients of the
    style terms, determinism across thread counts, bad input, VGG-19 .tnw loading and the VGG path. */
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 

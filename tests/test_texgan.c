@@ -1,5 +1,5 @@
 /* test_texgan.c - @@texgan: spatial GAN training, checkpoints, tiled synthesis, detail maps. */
-#define TERRAINNET_IMPLEMENTATION
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -589,7 +589,7 @@ TN_TEST(bad_inputs_fail_cleanly)
     fwrite(buf, 1, 40, f);
     fclose(f);
     TN_CHECK(tn_texgan_load(&l, "build/test/texgan_bad.tnw") != TN_OK);
-    TN_FREE(buf);
+    tn_free(buf);
     {
         tn_params *p = tn_params_create();
         int two = 2;

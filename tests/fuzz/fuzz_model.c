@@ -8,6 +8,7 @@
      no libFuzzer: cc -DTN_FUZZ_MAIN -fsanitize=address,undefined -I. fuzz_model.c -lm -pthread
                    ./a.out [files...]   (runs each file as one input; no files: the committed corpus)
    Seeds: tests/fuzz/corpus/fuzz_model (tiny models of each method, tests/fuzz/make_model_seeds.c). */
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "fuzz_files.h"

@@ -6,6 +6,7 @@
    almost never pass the CRC check, and the decoder behind it deserves the mutations. Every input
    is also fed to the bare zlib inflater, and deflated (level from the first byte) and inflated
    back, which must reproduce it exactly. */
+#define TN_INTERNALS /* private tn__ code: the header's internals block */
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include <stdio.h>
@@ -45,7 +46,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         (void)sum;
         tn_image_free(&img);
     }
-    if (tn_zlib_inflate(&out, &out_n, data, size, (size_t)1 << 24) == TN_OK) TN_FREE(out);
+    if (tn_zlib_inflate(&out, &out_n, data, size, (size_t)1 << 24) == TN_OK) tn_free(out);
     out = NULL;
     if (tn_zlib_deflate(&out, &out_n, data, size, data[0] % 10) == TN_OK) {
         uint8_t *back = NULL;
@@ -54,8 +55,8 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             fprintf(stderr, "fuzz_png: deflate round trip failed (%zu bytes, level %d): %s\n", size, data[0] % 10, tn_last_error());
             abort();
         }
-        TN_FREE(back);
-        TN_FREE(out);
+        tn_free(back);
+        tn_free(out);
     }
     free(copy);
     return 0;
