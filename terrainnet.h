@@ -7675,7 +7675,7 @@ static void tn__tif_georef(const tn__tif *t, tn_georef *g)
 }
 
 /* Byte ranges of strips or tiles that overlap or repeat let a few KB of deflate decode again and
-   again into gigabytes (issue 33: a 17 KB file gave 6.26 GB); every chunk must own its bytes. The
+   again into gigabytes; every chunk must own its bytes. The
    (offset, count) pairs are sorted by offset and each must end before the next starts. */
 static tn_status tn__tif_disjoint(const tn__tif *t, const char *what)
 {
@@ -8440,8 +8440,8 @@ static unsigned long tn__io_tmp_counter;
 /* Atomic saves, with <stdio.h> and <unistd.h> only. A save of PATH writes "PATH.tmp", flushes it
    to disk (fsync where POSIX has it) and renames it over PATH, so a failed or killed save never
    leaves PATH torn. The temporary's name is the same for every save of PATH, so a killed save
-   leaves at most one and the next save replaces it (issue 33 found 20-126 MB leftovers with
-   per-process names, there for good). A save holds its temporary: in this process through the
+   leaves at most one and the next save replaces it (per-process names left one behind for
+   good per killed save). A save holds its temporary: in this process through the
    list of targets being saved, across processes through a lockf lock, which the system drops
    with a killed process. A save that finds the temporary held writes "PATH.tmp.PID.N" instead;
    only a kill during such an overlap leaves one of those. */
@@ -19164,7 +19164,7 @@ static tn_status tn__tg_add_gen(tn_params *p, const tn_texgan *m, const char *pr
 
 /* Whether a model file holds the generator its config names, shape for shape, checked on the
    file's own tensors before the model is allocated: a config naming a wide, deep generator over
-   a few small tensors would otherwise allocate its size first (issue 33, item 1). */
+   a few small tensors would otherwise allocate its size first. */
 static tn_status tn__tg_file_matches(const tn_texgan *m, const tn_params *f, const char *name)
 {
     int i, cin = tn__tg_zdim(m);
@@ -24064,7 +24064,7 @@ static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int np
 
 #define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
 #define TN__GNN_ALONE_RATE 4.0f  /* the phase for the example alone: rate and SSIM weight factors */
-#define TN__GNN_ALONE_SSIM 10.0f /* (Sahara 10 minutes: 0.959 at 2.5 x, 0.964 at 4 x, 0.973 with SSIM x 10; docs/gnn.md) */
+#define TN__GNN_ALONE_SSIM 10.0f /* (chosen on the Sahara, the hardest to rebuild: docs/gnn.md) */
 #define TN__GNN_ALONE_RAMP 100.0f /* iterations over which both rise from 1 x: a jump let Adam, whose second
                                      moments lag, take steps that left Grand Canyon's network dead (docs/gnn.md) */
 #define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */
@@ -28895,10 +28895,10 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
     return TN_OK;
 }
 
-/* Refuses up front a site whose frame rows cannot fit in memory (issue 33: 20,000 rows naming
-   one 512 x 512 frame wanted about 40 GB): each frame keeps a picture of at least one channel
-   and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the next dem
-   row must stay within what the memory budget has left. */
+/* Refuses up front a site whose frame rows cannot fit in memory (a few KB of rows naming one
+   large frame again and again would ask for tens of GB): each frame keeps a picture of at least
+   one channel and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the
+   next dem row must stay within what the memory budget has left. */
 static tn_status tn__season_frames_fit(const char *s, size_t from, size_t n, const tn_image *dem, const char *name)
 {
     size_t i = from, rows = 0, left, limit = tn_get_memory_limit(), used = tn_memory_in_use();
@@ -31284,8 +31284,8 @@ static tn_status tn__world_save_tile(const tn_world *w, tn_image *img, const cha
 }
 
 /* The tiles DIR/manifest.txt lists, by (row, col): digest and size of each file. A resumed run
-   trusts a tile on disk only when it matches its line (issue 33: a 0-byte r0_c0.png counted as
-   present and went into the manifest); an unlisted tile must decode as this world's tile. */
+   trusts a tile on disk only when it matches its line (an empty or damaged file must not count
+   as present or reach the manifest); an unlisted tile must decode as this world's tile. */
 typedef struct tn__world_listed { int row, col; uint64_t digest; long long size; } tn__world_listed;
 typedef struct tn__world_manifest { tn__world_listed *slot; size_t cap; } tn__world_manifest;
 

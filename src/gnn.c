@@ -1612,7 +1612,7 @@ static tn_tensor *tn__gnn_part_states(tn_ctx *ctx, const tn__gnn_arch *A, int np
 
 #define TN__GNN_SAMPLES 4096 /* pixels (pairs) a step's sketch, smooth and further terms look at */
 #define TN__GNN_ALONE_RATE 4.0f  /* the phase for the example alone: rate and SSIM weight factors */
-#define TN__GNN_ALONE_SSIM 10.0f /* (Sahara 10 minutes: 0.959 at 2.5 x, 0.964 at 4 x, 0.973 with SSIM x 10; docs/gnn.md) */
+#define TN__GNN_ALONE_SSIM 10.0f /* (chosen on the Sahara, the hardest to rebuild: docs/gnn.md) */
 #define TN__GNN_ALONE_RAMP 100.0f /* iterations over which both rise from 1 x: a jump let Adam, whose second
                                      moments lag, take steps that left Grand Canyon's network dead (docs/gnn.md) */
 #define TN__GNN_TAU 0.05f    /* sketch-loss temperature, in normalised height units */

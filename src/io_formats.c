@@ -1449,7 +1449,7 @@ static void tn__tif_georef(const tn__tif *t, tn_georef *g)
 }
 
 /* Byte ranges of strips or tiles that overlap or repeat let a few KB of deflate decode again and
-   again into gigabytes (issue 33: a 17 KB file gave 6.26 GB); every chunk must own its bytes. The
+   again into gigabytes; every chunk must own its bytes. The
    (offset, count) pairs are sorted by offset and each must end before the next starts. */
 static tn_status tn__tif_disjoint(const tn__tif *t, const char *what)
 {
@@ -2214,8 +2214,8 @@ static unsigned long tn__io_tmp_counter;
 /* Atomic saves, with <stdio.h> and <unistd.h> only. A save of PATH writes "PATH.tmp", flushes it
    to disk (fsync where POSIX has it) and renames it over PATH, so a failed or killed save never
    leaves PATH torn. The temporary's name is the same for every save of PATH, so a killed save
-   leaves at most one and the next save replaces it (issue 33 found 20-126 MB leftovers with
-   per-process names, there for good). A save holds its temporary: in this process through the
+   leaves at most one and the next save replaces it (per-process names left one behind for
+   good per killed save). A save holds its temporary: in this process through the
    list of targets being saved, across processes through a lockf lock, which the system drops
    with a killed process. A save that finds the temporary held writes "PATH.tmp.PID.N" instead;
    only a kill during such an overlap leaves one of those. */

@@ -2164,10 +2164,10 @@ static tn_status tn__season_grow(tn_season_data *d, int need_sites, int need_fra
     return TN_OK;
 }
 
-/* Refuses up front a site whose frame rows cannot fit in memory (issue 33: 20,000 rows naming
-   one 512 x 512 frame wanted about 40 GB): each frame keeps a picture of at least one channel
-   and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the next dem
-   row must stay within what the memory budget has left. */
+/* Refuses up front a site whose frame rows cannot fit in memory (a few KB of rows naming one
+   large frame again and again would ask for tens of GB): each frame keeps a picture of at least
+   one channel and a mask, 8 bytes per DEM pixel, and their total for the rows from `from` to the
+   next dem row must stay within what the memory budget has left. */
 static tn_status tn__season_frames_fit(const char *s, size_t from, size_t n, const tn_image *dem, const char *name)
 {
     size_t i = from, rows = 0, left, limit = tn_get_memory_limit(), used = tn_memory_in_use();

@@ -335,7 +335,7 @@ static tn_status tn__tg_add_gen(tn_params *p, const tn_texgan *m, const char *pr
 
 /* Whether a model file holds the generator its config names, shape for shape, checked on the
    file's own tensors before the model is allocated: a config naming a wide, deep generator over
-   a few small tensors would otherwise allocate its size first (issue 33, item 1). */
+   a few small tensors would otherwise allocate its size first. */
 static tn_status tn__tg_file_matches(const tn_texgan *m, const tn_params *f, const char *name)
 {
     int i, cin = tn__tg_zdim(m);

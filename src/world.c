@@ -1315,8 +1315,8 @@ static tn_status tn__world_save_tile(const tn_world *w, tn_image *img, const cha
 }
 
 /* The tiles DIR/manifest.txt lists, by (row, col): digest and size of each file. A resumed run
-   trusts a tile on disk only when it matches its line (issue 33: a 0-byte r0_c0.png counted as
-   present and went into the manifest); an unlisted tile must decode as this world's tile. */
+   trusts a tile on disk only when it matches its line (an empty or damaged file must not count
+   as present or reach the manifest); an unlisted tile must decode as this world's tile. */
 typedef struct tn__world_listed { int row, col; uint64_t digest; long long size; } tn__world_listed;
 typedef struct tn__world_manifest { tn__world_listed *slot; size_t cap; } tn__world_manifest;
 
