@@ -14704,11 +14704,18 @@ static tn_status tn__tns_err(tn__tns_parser *p, tn_status s, const char *fmt, ..
     return tn__fail(s, "%s:%d: %s", p->name, p->line, msg);
 }
 
+/* Whether a number read as a double rounds to a finite float: below FLT_MAX plus half its ulp
+   (2^103; the tie rounds up, to Inf). So every float the writer writes reads back, FLT_MAX too. */
+static int tn__tns_float_ok(double v)
+{
+    return fabs(v) < (double)FLT_MAX + ldexp(1.0, 103);
+}
+
 /* Reads a number token for field `what`; NaN/Inf -> TN_ERR_NUMERIC, text -> TN_ERR_CORRUPT. */
 static tn_status tn__tns_num(tn__tns_parser *p, const char *tok, const char *what, double *v)
 {
     if (!tn__io_number(tok, strlen(tok), v)) return tn__tns_err(p, TN_ERR_CORRUPT, "%s is not a number", what);
-    if (!isfinite(*v) || fabs(*v) > 3.0e38) return tn__tns_err(p, TN_ERR_NUMERIC, "%s is NaN, Inf or out of float range", what);
+    if (!tn__tns_float_ok(*v)) return tn__tns_err(p, TN_ERR_NUMERIC, "%s is NaN, Inf or out of float range", what);
     return TN_OK;
 }
 
@@ -14809,7 +14816,7 @@ static tn_status tn__tns_parse_lines(tn__tns_parser *p, char *buf)
                 if ((st = tn__tns_num(p, tok[2], "height", &h))) return st;
             } else if (has_start) h = start + rate * arc;
             else return tn__tns_err(p, TN_ERR_CORRUPT, "point without a height in a polyline without 'start H'");
-            if (!isfinite(h) || fabs(h) > 3.0e38) return tn__tns_err(p, TN_ERR_NUMERIC, "height out of float range");
+            if (!tn__tns_float_ok(h)) return tn__tns_err(p, TN_ERR_NUMERIC, "height out of float range");
             if (++p->total_points > TN_SKETCH_MAX_POINTS)
                 return tn__tns_err(p, TN_ERR_TOO_LARGE, "more than %d points", TN_SKETCH_MAX_POINTS);
             if ((st = tn__pts_push(&p->pts, (float)x, (float)y, (float)h))) return st;

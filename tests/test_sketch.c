@@ -4,6 +4,7 @@
 #define TN_INTERNALS /* private tn__ code: the header's internals block */
 #include "terrainnet.h"
 #include "tn_test.h"
+#include <float.h>
 #include <locale.h>
 
 static const char *demo_tns =
@@ -96,10 +97,12 @@ static tn_status random_float_set(tn_contour_set *s, int n, uint64_t seed)
         uint32_t u = tn_rng_u32(&r);
         float f;
         if (i % 3 < 2) u = (u & 0x007fffffu) | ((uint32_t)(120 + (u >> 27) % 6) << 23); /* 2^-7..2^-2 times 64 below */
-        else if (((u >> 23) & 0xffu) >= 0xfeu) u &= ~0x01000000u; /* |h| < 2^127: no NaN/Inf, in the reader's range */
+        else if (((u >> 23) & 0xffu) == 0xffu) u &= ~0x00800000u; /* every finite float: no NaN/Inf */
         memcpy(&f, &u, sizeof f);
         pts[i] = i % 3 < 2 ? f * 64.0f : f;
     }
+    pts[5] = FLT_MAX; /* its shortest text, 3.4028235e+38, is above FLT_MAX as a double */
+    pts[8] = -FLT_MAX;
     memset(s, 0, sizeof *s);
     s->width = s->height = 256; /* its jumps of up to 16 px stay within the strokes' limit */
     st = tn__cset_add(s, &cap, TN_RIDGE, 3, pts[2], pts, n);
