@@ -2006,7 +2006,9 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
    the mean of the example's lines within 48 px (its local relief; the quilting also matches
    these heights across the overlap),
    then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
-   user valley (the nearest user line) by the example's mean local relief / 16 px per px. */
+   user valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
+   when the lines' membrane holds far more closed basins than the example's own, each basin drains
+   by a valley over its lowest saddle (tn__gnn_grow_drain). */
 typedef struct tn_gnn_grow_opts {
     uint64_t seed;
     float gap;            /* px between an added line and every user line; 0 = 4 */
@@ -26693,30 +26695,39 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
     }
 }
 
+/* A straight run from the line's last point on to user pixel q of the ur raster (width px a row),
+   its heights linear to the user line's there; it ends on the first user pixel it meets, at that
+   pixel's height (the later line wins a pixel, and a user pixel keeps its height). */
+static tn_status tn__gnn_grow_run_on(tn__pts *b, size_t q, const tn_image *ur, int width)
+{
+    float x = b->p[3 * (b->n - 1)], y = b->p[3 * (b->n - 1) + 1], h = b->p[3 * (b->n - 1) + 2];
+    float qx = (float)(q % (size_t)width), qy = (float)(q / (size_t)width), hs = ur->data[3 * q + 2];
+    int s, steps = (int)ceilf(fmaxf(fabsf(qx - x), fabsf(qy - y)));
+    tn_status st = TN_OK;
+    for (s = 1; !st && s <= steps; s++) {
+        float f = (float)s / (float)steps, px = floorf(x + f * (qx - x) + 0.5f), py = floorf(y + f * (qy - y) + 0.5f);
+        size_t p = (size_t)py * (size_t)width + (size_t)px;
+        if (ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0) return tn__pts_push(b, px, py, ur->data[3 * p + 2]);
+        st = tn__pts_push(b, px, py, h + f * (hs - h));
+    }
+    return st;
+}
+
 /* An added line whose last point heads for a user line of its own kind within `reach` px runs on
    to it, as the example's network joins its lines: a spur up to a drawn crest, a tributary down
    to a drawn valley, rather than stopping at the gap (the drawn line then stood alone in a bare
    band). Its heights run linearly to the user line's there. b: the line's points (x, y, h). */
 static tn_status tn__gnn_grow_join(tn__pts *b, int ridge, const tn_image *ur, const float *D, const int *near, int width, float reach)
 {
-    int n = b->n, s, steps;
+    int n = b->n;
     size_t p, back, q;
-    float x, y, h, qx, qy, hs;
-    tn_status st = TN_OK;
     if (n < 5) return TN_OK;
-    x = b->p[3 * (n - 1)], y = b->p[3 * (n - 1) + 1], h = b->p[3 * (n - 1) + 2];
-    p = (size_t)y * (size_t)width + (size_t)x;
+    p = (size_t)b->p[3 * (n - 1) + 1] * (size_t)width + (size_t)b->p[3 * (n - 1)];
     back = (size_t)b->p[3 * (n - 5) + 1] * (size_t)width + (size_t)b->p[3 * (n - 5)];
     if (near[p] < 0 || !(D[p] < reach) || !(D[p] < D[back] - 1.5f)) return TN_OK; /* near, and heading for it */
     q = (size_t)near[p];
     if ((ur->data[3 * q] > 0) != ridge) return TN_OK;
-    qx = (float)(q % (size_t)width), qy = (float)(q / (size_t)width), hs = ur->data[3 * q + 2];
-    steps = (int)ceilf(fmaxf(fabsf(qx - x), fabsf(qy - y)));
-    for (s = 1; !st && s <= steps; s++) {
-        float f = (float)s / (float)steps;
-        st = tn__pts_push(b, floorf(x + f * (qx - x) + 0.5f), floorf(y + f * (qy - y) + 0.5f), h + f * (hs - h));
-    }
-    return st;
+    return tn__gnn_grow_run_on(b, q, ur, width);
 }
 
 static void tn__gnn_pts_reverse(tn__pts *b)
@@ -26728,6 +26739,173 @@ static void tn__gnn_pts_reverse(tn__pts *b)
             b->p[3 * i + k] = b->p[3 * j + k];
             b->p[3 * j + k] = t;
         }
+}
+
+/* Pits of the membrane, lowest first (ties by position). */
+typedef struct tn__gnn_pit { float z; uint32_t cell; } tn__gnn_pit;
+
+static int tn__gnn_pit_cmp(const void *a, const void *b)
+{
+    const tn__gnn_pit *p = (const tn__gnn_pit *)a, *q = (const tn__gnn_pit *)b;
+    if (p->z != q->z) return p->z < q->z ? -1 : 1;
+    return p->cell < q->cell ? -1 : p->cell > q->cell;
+}
+
+/* The share of a map's pixels that its depression filling raises by more than thr. */
+static tn_status tn__gnn_pit_share(const tn_image *z, float thr, tn_image *filled, double *share)
+{
+    size_t i, n = (size_t)z->width * z->height, k = 0;
+    tn_status st = tn_fill_depressions(filled, z);
+    if (st) return st;
+    for (i = 0; i < n; i++) k += filled->data[i] - z->data[i] > thr;
+    *share = (double)k / (double)n;
+    return TN_OK;
+}
+
+/* Densified lines drain as the example's do. Blocks of the example's network, each with its own
+   line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
+   sketch then holds closed basins (a tenth of a mountain map, against almost none in the example's
+   own network), and the terrain looks like separate cones rather than ridges between valleys.
+   When the grown membrane has more than twice the example's share of basins, each basin's lowest
+   point gets a valley down its outlet path (the flood's path over the lowest saddle, tn_flow_compute)
+   to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
+   alone made the ground steeper than the example's (the Alps' slope distance up to 1.9x a real
+   crop's), so the basin's added valleys rise halfway to its brim and the path starts there. A
+   path that comes within `gap` of a user valley as low as itself runs on to it; one that meets
+   any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
+   to set (nuser user lines first) and counts them in *drained. */
+static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser, const tn_contour_set *example, const tn_image *ur,
+                                    const float *D, const int *unear, float gap, float relief, int *drained)
+{
+    const int W = set->width, H = set->height;
+    const size_t n = (size_t)W * H;
+    tn_image z = {0, 0, 0, NULL}, f = {0, 0, 0, NULL}, ze = {0, 0, 0, NULL}, fe = {0, 0, 0, NULL};
+    tn_flow flow;
+    tn_contour_set out;
+    tn__gnn_pit *pit = NULL;
+    tn__pts pts = {NULL, 0, 0};
+    uint8_t *on = NULL;
+    float *dc = NULL, thr, lo = FLT_MAX, hi = -FLT_MAX, step = relief / 64;
+    int *near = NULL, c;
+    size_t i, np = 0, ocap = 0;
+    double share, share_ex;
+    tn_status st;
+    memset(&flow, 0, sizeof flow);
+    memset(&out, 0, sizeof out);
+    *drained = 0;
+    if ((st = tn_gnn_membrane(&ze, example, example->width, example->height))) return st;
+    for (i = 0; i < (size_t)ze.width * ze.height; i++) lo = fminf(lo, ze.data[i]), hi = fmaxf(hi, ze.data[i]);
+    thr = 0.01f * (hi - lo);
+    if ((st = tn__gnn_pit_share(&ze, thr, &fe, &share_ex)) || (st = tn_gnn_membrane(&z, set, W, H)) ||
+        (st = tn__gnn_pit_share(&z, thr, &f, &share)))
+        goto done;
+    if (!(share > 2 * share_ex)) goto done;
+    if ((st = tn_flow_compute(&flow, &z, 0))) goto done;
+    pit = (tn__gnn_pit *)tn__alloc(n * sizeof(tn__gnn_pit));
+    on = (uint8_t *)tn__calloc(n);
+    if (!pit || !on) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    for (i = 0; i < n; i++) { /* a basin's lowest points: no lower neighbour, well below the filled level */
+        int x = (int)(i % (size_t)W), y = (int)(i / (size_t)W), k, low = 0;
+        if (!(f.data[i] - z.data[i] > thr)) continue;
+        for (k = 0; k < 8 && !low; k++) {
+            int qx = x + tn__d8x[k], qy = y + tn__d8y[k];
+            low = qx >= 0 && qy >= 0 && qx < W && qy < H && z.data[(size_t)qy * W + qx] < z.data[i];
+        }
+        if (!low) pit[np].z = z.data[i], pit[np++].cell = (uint32_t)i;
+    }
+    qsort(pit, np, sizeof *pit, tn__gnn_pit_cmp);
+    for (c = nuser; c < set->count; c++) { /* the added valleys in a basin rise halfway to its brim */
+        tn_contour *l = &set->items[c];
+        int a;
+        for (a = 0; l->type == TN_VALLEY && a < l->npoints; a++) {
+            size_t q = (size_t)l->points[3 * a + 1] * W + (size_t)l->points[3 * a];
+            if (f.data[q] - z.data[q] > thr && !(ur->data[3 * q] > 0 || ur->data[3 * q + 1] > 0)) /* a join's end keeps the user's height */
+                l->points[3 * a + 2] += 0.5f * (f.data[q] - z.data[q]);
+        }
+    }
+    for (i = 0; i < np && !st; i++) {
+        size_t k = pit[i].cell;
+        float L = pit[i].z + 0.5f * (f.data[k] - pit[i].z), cut = 0;
+        int ok = 1, m;
+        if (on[k] || D[k] < gap) continue;
+        pts.n = 0;
+        st = tn__pts_push(&pts, (float)(k % (size_t)W), (float)(k / (size_t)W), L);
+        for (m = 0; !st && m < W + H + (int)(n / 8) && flow.dir[k] != TN_FLOW_OUTLET; m++) {
+            size_t q = (size_t)((ptrdiff_t)k + (ptrdiff_t)tn__d8y[flow.dir[k]] * W + tn__d8x[flow.dir[k]]);
+            float zq = z.data[q];
+            L -= step;
+            if (D[q] < gap) { /* a user valley as low takes the flow (the path runs on to it); other user lines close the basin */
+                size_t u = (size_t)unear[q];
+                if (ur->data[3 * u + 1] > 0 && ur->data[3 * u + 2] <= L) st = tn__gnn_grow_run_on(&pts, u, ur, W);
+                else ok = 0;
+                break;
+            }
+            if (on[q] || zq <= L) { /* an earlier path, or lower ground: the end */
+                if (!on[q] && f.data[q] - zq > thr) { /* lower, but still in the basin: follow it down */
+                    L = fminf(L, zq + 0.5f * (f.data[q] - zq));
+                    k = q;
+                    st = tn__pts_push(&pts, (float)(q % (size_t)W), (float)(q / (size_t)W), L);
+                    continue;
+                }
+                if (!on[q]) st = tn__pts_push(&pts, (float)(q % (size_t)W), (float)(q / (size_t)W), zq);
+                break;
+            }
+            cut = fmaxf(cut, zq - L);
+            k = q;
+            st = tn__pts_push(&pts, (float)(q % (size_t)W), (float)(q / (size_t)W), L);
+        }
+        if (st || !ok || pts.n < 5 || !(cut > thr)) continue;
+        for (m = 0; m < pts.n; m++) on[(size_t)pts.p[3 * m + 1] * W + (size_t)pts.p[3 * m]] = 1;
+        if ((st = tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts.p, pts.n))) goto done;
+        (*drained)++;
+    }
+    if (st || !*drained) goto done;
+    /* added ridges give way around the new valleys */
+    dc = (float *)tn__alloc(n * sizeof(float));
+    near = (int *)tn__alloc(n * sizeof(int));
+    if (!dc || !near) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    tn__gnn_chamfer(on, W, H, dc, near);
+    out.width = W;
+    out.height = H;
+    for (c = 0; c < set->count && !st; c++) {
+        const tn_contour *l = &set->items[c];
+        int a = 0, b;
+        if (c < nuser || l->type != TN_RIDGE) {
+            st = tn__cset_add(&out, &ocap, l->type, l->order, l->mean_gradient, l->points, l->npoints);
+            continue;
+        }
+        while (a < l->npoints && !st) { /* the runs of points 2 px or more from every new valley */
+            while (a < l->npoints && dc[(size_t)l->points[3 * a + 1] * W + (size_t)l->points[3 * a]] < 2) a++;
+            for (b = a; b < l->npoints && !(dc[(size_t)l->points[3 * b + 1] * W + (size_t)l->points[3 * b]] < 2); b++) {}
+            if (b - a >= 5) st = tn__cset_add(&out, &ocap, l->type, l->order, l->mean_gradient, l->points + 3 * a, b - a);
+            a = b;
+        }
+    }
+    if (!st) {
+        tn_contour_set_free(set);
+        *set = out;
+        *cap = ocap;
+        memset(&out, 0, sizeof out);
+    }
+done:
+    tn_image_free(&z);
+    tn_image_free(&f);
+    tn_image_free(&ze);
+    tn_image_free(&fe);
+    tn_flow_free(&flow);
+    tn_contour_set_free(&out);
+    TN_FREE(pit);
+    TN_FREE(on);
+    TN_FREE(dc);
+    TN_FREE(near);
+    TN_FREE(pts.p);
+    return st;
 }
 
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
@@ -26930,6 +27108,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         tn__trace_free(&t);
         if (st) goto done;
     }
+    if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
+    nl = (size_t)(set.count - user->count);
 done:
     tn_image_free(&ur);
     tn_image_free(&er);

@@ -1178,6 +1178,76 @@ TN_TEST(grow_by_example)
     tn_image_free(&dem);
 }
 
+/* The share of the pixels of a membrane that depression filling raises by more than 1 % of
+   `range`. */
+static double basin_share(const tn_image *m, double range)
+{
+    tn_image f = {0, 0, 0, NULL};
+    size_t i, n = (size_t)m->width * m->height, k = 0;
+    if (tn_fill_depressions(&f, m) != TN_OK) return 1;
+    for (i = 0; i < n; i++) k += f.data[i] - m->data[i] > 0.01 * range;
+    tn_image_free(&f);
+    return (double)k / (double)n;
+}
+
+TN_TEST(grown_sketch_drains)
+{
+    /* blocks of the example's network leave neighbouring blocks' valleys unconnected: the grown
+       sketch's membrane held closed basins over 10 % of a map whose example network has about
+       1 % (Alps); now each basin drains over its lowest saddle. A ring the user drew stays a
+       closed basin: no added valley cuts a user ridge */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, m = {0, 0, 0, NULL}, me = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float rp[30], vp[30], ring[3 * 41];
+    double range, share, share_ex;
+    tn_contour c;
+    int i;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    TN_CHECK(tn_gnn_membrane(&me, &ex, 128, 128) == TN_OK);
+    {
+        float lo = 1e30f, hi = -1e30f;
+        for (i = 0; i < 128 * 128; i++) lo = fminf(lo, me.data[i]), hi = fmaxf(hi, me.data[i]);
+        range = hi - lo;
+    }
+    share_ex = basin_share(&me, range);
+    user = two_strokes(256, 256, rp, vp);
+    TN_CHECK(tn_gnn_grow(&g, &user, &ex, 256, 256, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+    share = basin_share(&m, range);
+    printf("  closed basins: %.1f %% of the grown membrane, %.1f %% of the example network's\n", 100 * share, 100 * share_ex);
+    TN_CHECK(share < 2 * share_ex + 0.01);
+    tn_image_free(&m);
+    tn_contour_set_free(&g);
+    /* a drawn ring of ridge: its inside stays lower than the ring all round */
+    for (i = 0; i <= 40; i++) {
+        ring[3 * i] = 128 + 60 * cosf(6.2831853f * (float)i / 40);
+        ring[3 * i + 1] = 128 + 60 * sinf(6.2831853f * (float)i / 40);
+        ring[3 * i + 2] = 3000.0f; /* above the example's 431-2908 m */
+    }
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.points = ring;
+    c.npoints = 41;
+    user.items = &c;
+    user.count = 1;
+    TN_CHECK(tn_gnn_grow(&g, &user, &ex, 256, 256, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+    {
+        tn_image f = {0, 0, 0, NULL};
+        TN_CHECK(tn_fill_depressions(&f, &m) == TN_OK);
+        TN_CHECK(f.data[(size_t)128 * 256 + 128] > m.data[(size_t)128 * 256 + 128] + 100); /* the inside is still a basin */
+        tn_image_free(&f);
+    }
+    tn_image_free(&m);
+    tn_image_free(&me);
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grow_without_block_grid)
 {
     /* the quilted blocks (48 px) must not show: line pixels are as dense at every phase of the
@@ -1458,6 +1528,7 @@ int main(void)
     TN_RUN(ordering_share);
     TN_RUN(grow_by_example);
     TN_RUN(grow_without_block_grid);
+    TN_RUN(grown_sketch_drains);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     return tn_test_summary("test_gnn");
