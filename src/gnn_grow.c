@@ -15,8 +15,8 @@
    so none crosses one; they are thinned and traced into polylines of 5+ px, and a line that ends
    heading for a user line of its own kind within 3 gaps runs on to it (a spur joins a drawn
    crest, a tributary a drawn valley). Their heights: the membrane of the user's lines, falling away from
-   a user ridge and rising away from a user valley by twice the example's mean local relief over
-   48 px (so a stroke stays the main line around it), plus the example line's own height above
+   a user ridge and rising away from a user valley as the example's lines do from its main ridges
+   and valleys (so a stroke stays the main line around it), plus the example line's own height above
    the mean of the example's lines within 48 px (its local relief; the quilting also matches
    these heights across the overlap),
    then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
@@ -77,20 +77,91 @@ static int tn__gnn_grow_blur(const uint8_t *placed, const int8_t *ptype, int wid
     return n;
 }
 
-/* What the ground between the strokes takes from their kind: it falls away from a user ridge and
-   rises away from a user valley, by `relief` x TN__GNN_FALL over TN__GNN_FALL_REACH px, so a stroke
-   stays the main line around it rather than one line among the example's; between a ridge and a
-   valley the two cancel (the membrane already slopes from one to the other). dr, dv: px to the
-   nearest user ridge and valley, FLT_MAX when the drawing has none. */
-static float tn__gnn_grow_fall(float dr, float dv, float relief)
+/* prof (TN__GNN_PROFILE + 1 values at 0, 1, ... px) at distance x >= 0, linear between, held beyond. */
+static float tn__gnn_grow_table(const float *prof, float x)
 {
-    const float R = TN__GNN_FALL_REACH;
-    float fr = dr < R ? dr / R : 1, fv = dv < R ? dv / R : 1, wr;
+    int i;
+    if (!(x < TN__GNN_PROFILE)) return prof[TN__GNN_PROFILE];
+    i = (int)x;
+    return prof[i] + (x - (float)i) * (prof[i + 1] - prof[i]);
+}
+
+/* What the ground between the strokes takes from their kind: a drawn stroke is one of the
+   example's main lines, so the ground falls away from a user ridge (rises away from a user
+   valley) as the example's lines do from its main ridges (valleys): pr[d] (pv[d]) at distance
+   d px, 0 .. TN__GNN_PROFILE (tn__gnn_grow_profile). So a stroke stays the main line around it
+   rather than one line among the example's; between a ridge and a valley the two are blended
+   by distance (the membrane already slopes from one to the other). dr, dv: px to the nearest
+   user ridge and valley, FLT_MAX when the drawing has none. */
+static float tn__gnn_grow_fall(float dr, float dv, const float *pr, const float *pv)
+{
+    float fr, fv, wr;
     if (dr == FLT_MAX && dv == FLT_MAX) return 0;
-    if (dv == FLT_MAX) return -TN__GNN_FALL * relief * fr;
-    if (dr == FLT_MAX) return TN__GNN_FALL * relief * fv;
+    fr = dr == FLT_MAX ? 0 : tn__gnn_grow_table(pr, dr);
+    fv = dv == FLT_MAX ? 0 : tn__gnn_grow_table(pv, dv);
+    if (dv == FLT_MAX) return -fr;
+    if (dr == FLT_MAX) return fv;
     wr = dv / (dr + dv);
-    return TN__GNN_FALL * relief * (fv * (1 - wr) - fr * wr);
+    return fv * (1 - wr) - fr * wr;
+}
+
+/* The example's profile away from its main lines of one kind (those of the highest Strahler
+   order among its lines of that kind): prof[d], d = 0 .. TN__GNN_PROFILE, the mean over the
+   example's lines of the same kind, at chamfer distance d (rounded) from the nearest main-line
+   pixel, of how far they lie below it (ridges) or above it (valleys). Lines of the same kind
+   only: the alternation of ridges and valleys is the added lines' own relief (tn__gnn_grow's
+   prel), so this is the trend under it, and a dune field's crests, all alike, give almost none.
+   Averaged over 13 px (5 px let the Sahara's crests jump to their full fall within 12 px, its
+   spectrum 1.58x) and never below the distance before; distances no pixel reaches hold the last
+   value. er: the example's raster (tn_sketch_rasterise); W x H scratch in mask, dist, near.
+   prof is untouched when the example has no line of that kind. */
+TN__INTERNAL tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask,
+                                            float *dist, int *near)
+{
+    const int W = er->width, H = er->height, P = TN__GNN_PROFILE;
+    const size_t n = (size_t)W * H;
+    tn_contour_set mains;
+    tn_image mr = {0, 0, 0, NULL};
+    double sum[TN__GNN_PROFILE + 1], cnt[TN__GNN_PROFILE + 1];
+    float raw[TN__GNN_PROFILE + 1], last = 0, sign = kind == TN_VALLEY ? 1.0f : -1.0f;
+    int c, d, top = -1, k = 0;
+    size_t i;
+    tn_status st;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order > top) top = example->items[c].order;
+    if (top < 0) return TN_OK;
+    mains = *example;
+    mains.items = (tn_contour *)tn__alloc((size_t)example->count * sizeof(tn_contour));
+    if (!mains.items) return TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order == top) mains.items[k++] = example->items[c];
+    mains.count = k;
+    st = tn_sketch_rasterise(&mr, &mains, W, H);
+    TN_FREE(mains.items);
+    if (st) return st;
+    for (i = 0; i < n; i++) mask[i] = (uint8_t)(mr.data[3 * i + (kind == TN_VALLEY)] > 0);
+    tn__gnn_chamfer(mask, W, H, dist, near);
+    memset(sum, 0, sizeof sum);
+    memset(cnt, 0, sizeof cnt);
+    for (i = 0; i < n; i++) {
+        if (!(er->data[3 * i + (kind == TN_VALLEY)] > 0) || near[i] < 0 || !(dist[i] < P + 0.5f)) continue;
+        d = (int)(dist[i] + 0.5f);
+        sum[d] += sign * (er->data[3 * i + 2] - mr.data[3 * (size_t)near[i] + 2]);
+        cnt[d]++;
+    }
+    tn_image_free(&mr);
+    for (d = 0; d <= P; d++) {
+        if (cnt[d] > 0) last = (float)(sum[d] / cnt[d]);
+        raw[d] = last;
+    }
+    for (d = 0, last = 0; d <= P; d++) {
+        int a = d < 6 ? 0 : d - 6, b = d + 6 > P ? P : d + 6, j;
+        float s = 0;
+        for (j = a; j <= b; j++) s += raw[j];
+        last = fmaxf(last, s / (float)(b - a + 1));
+        prof[d] = last;
+    }
+    return TN_OK;
 }
 
 /* The minimum-error boundary cut of image quilting, on the blurred line types: in the block's left
@@ -361,6 +432,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1];
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
     tn_rng rng;
@@ -455,6 +527,18 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         relief = (float)(rel_sum / (double)nline) + 1e-6f;
         near_slope = relief / 16; /* a third of the relief over the radius it is measured on (docs/gnn.md) */
     }
+    { /* the ground's fall from the strokes: the example's own from its main lines (without lines of a kind:
+         TN__GNN_FALL x relief over TN__GNN_FALL_REACH px) */
+        float *edist = (float *)tn__alloc(nx * sizeof(float));
+        int *enear = (int *)tn__alloc(nx * sizeof(int)), d;
+        for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
+        if (!edist || !enear) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st) st = tn__gnn_grow_profile(example, &er, TN_RIDGE, pr, emask, edist, enear);
+        if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
+        TN_FREE(edist);
+        TN_FREE(enear);
+        if (st) goto done;
+    }
     (void)tn__gnn_grow_blur(NULL, etype, Wx, Hx, 0, 0, Wx, Hx, ebl);
     /* quilting: blocks in raster order, each the best of the candidates */
     tn_rng_seed(&rng, o.seed, 0x67726f77ULL);
@@ -530,7 +614,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             pts.n = 0;
             for (k = 0; !st && (size_t)k < t.starts[l + 1] - t.starts[l]; k++) {
                 size_t p = t.cells[t.starts[l] + (size_t)k];
-                float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], Dv[p], relief) + prel[p], d = D[p];
+                float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], Dv[p], pr, pv) + prel[p], d = D[p];
                 if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
                     float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
                     b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - near_slope * d) : fmaxf(h, hs + near_slope * d);

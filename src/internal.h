@@ -53,6 +53,7 @@ typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap
 #endif
 #ifndef TN_NO_GNN
 #define TN__GNN_DIST 16.0f /* gnn: distance scale of the edge features (px) */
+#define TN__GNN_PROFILE 48 /* gnn grow: how far the main lines' profiles reach (px) */
 /* gnn: the parts of a sketch as flat arrays */
 typedef struct tn__gnn_parts {
     int n, npts;
@@ -170,12 +171,14 @@ uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it);
 uint32_t tn__pheap_pop(tn__pheap *h);
 #endif
 #ifndef TN_NO_GNN
-/* ---- src/gnn.c, src/gnn_membrane.c ---- */
+/* ---- src/gnn.c, src/gnn_membrane.c, src/gnn_grow.c ---- */
 tn_status tn__gnn_parts_make(const tn_contour_set *set, float mean, float std, tn__gnn_parts *p);
 void tn__gnn_parts_free(tn__gnn_parts *p);
 int tn__gnn_project(const tn__gnn_parts *P, int part, float x, float y, float *d2);
 float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, float y);
 tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out);
+tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
+                               int *near);
 #endif
 #ifndef TN_NO_TEXGAN
 /* ---- src/texgan.c ---- */

@@ -1248,6 +1248,51 @@ TN_TEST(grown_sketch_drains)
     tn_image_free(&full);
 }
 
+TN_TEST(grow_fall_follows_the_example)
+{
+    /* the ground falls from a drawn ridge as the example's ridges do from its main ridge: an
+       example of parallel ridges whose heights fall 10 m per px from the main one (order 3) gives
+       that trend, smoothed over 13 px and never falling back; its valleys, all of one order and
+       all alike, give none; a kind the example lacks leaves the profile as it was */
+    float pts[15][6], prof[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1];
+    tn_contour items[15];
+    tn_contour_set ex;
+    tn_image er = {0, 0, 0, NULL};
+    uint8_t mask[128 * 128];
+    float dist[128 * 128];
+    int near[128 * 128], i, k = 0, dy;
+    memset(items, 0, sizeof items);
+    for (dy = -56; dy <= 56; dy += 8) { /* ridges at 0, +-16, +-32, +-48 px from y = 64; valleys between */
+        int ridge = dy % 16 == 0;
+        float h = 1000.0f - 10.0f * (float)abs(dy) - (ridge ? 0.0f : 100.0f);
+        pts[k][0] = 0, pts[k][1] = (float)(64 + dy), pts[k][2] = h;
+        pts[k][3] = 127, pts[k][4] = (float)(64 + dy), pts[k][5] = h;
+        items[k].type = ridge ? TN_RIDGE : TN_VALLEY;
+        items[k].order = dy == 0 ? 3 : 1;
+        items[k].points = pts[k];
+        items[k].npoints = 2;
+        k++;
+    }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128;
+    ex.items = items;
+    ex.count = k;
+    TN_CHECK(tn_sketch_rasterise(&er, &ex, 128, 128) == TN_OK);
+    TN_CHECK(tn__gnn_grow_profile(&ex, &er, TN_RIDGE, prof, mask, dist, near) == TN_OK);
+    TN_CHECK(tn__gnn_grow_profile(&ex, &er, TN_VALLEY, pv, mask, dist, near) == TN_OK);
+    printf("  ridge profile at 0 / 10 / 22 / 40 px: %.1f / %.1f / %.1f / %.1f m; valleys' largest %.1f m\n", (double)prof[0], (double)prof[10],
+           (double)prof[22], (double)prof[40], (double)pv[TN__GNN_PROFILE]);
+    TN_CHECK(prof[0] == 0 && fabsf(prof[22] - 160) < 1 && fabsf(prof[40] - 320) < 1);
+    for (i = 1; i <= TN__GNN_PROFILE; i++) TN_CHECK(prof[i] >= prof[i - 1] && pv[i] < 1);
+    for (i = 0; i < k; i++) items[i].type = TN_RIDGE; /* no valleys now */
+    tn_image_free(&er);
+    TN_CHECK(tn_sketch_rasterise(&er, &ex, 128, 128) == TN_OK);
+    for (i = 0; i <= TN__GNN_PROFILE; i++) pv[i] = -1;
+    TN_CHECK(tn__gnn_grow_profile(&ex, &er, TN_VALLEY, pv, mask, dist, near) == TN_OK);
+    for (i = 0; i <= TN__GNN_PROFILE; i++) TN_CHECK(pv[i] == -1);
+    tn_image_free(&er);
+}
+
 TN_TEST(grow_without_block_grid)
 {
     /* the quilted blocks (48 px) must not show: line pixels are as dense at every phase of the
@@ -1529,6 +1574,7 @@ int main(void)
     TN_RUN(grow_by_example);
     TN_RUN(grow_without_block_grid);
     TN_RUN(grown_sketch_drains);
+    TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     return tn_test_summary("test_gnn");
