@@ -49,6 +49,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_season_data d;
     int i;
     size_t k;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (tn_climate_parse(&c, (const char *)data, size, "fuzz") == TN_OK && tn_climate_check(&c) != TN_OK) abort();
     if (!fixtures() || !fuzz_write(list, data, size)) return 0;
     if (tn_season_data_load(&d, list) == TN_OK) {

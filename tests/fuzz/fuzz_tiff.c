@@ -29,6 +29,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_image img = {0, 0, 0, NULL}, back = {0, 0, 0, NULL};
     tn_image_info info, info2;
     size_t len = 0;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     (void)tn__tif_lzw("fuzz", data, size, out, sizeof out, &len, tab, lens);
     if (len > sizeof out) abort();
     (void)tn__tif_packbits("fuzz", data, size, out, sizeof out, &len);
