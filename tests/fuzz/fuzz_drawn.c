@@ -24,6 +24,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char *text = NULL;
     size_t n = 0;
     int i;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (tn_image_load_memory(&img, data, size, "fuzz.png", NULL, NULL) != TN_OK) return 0;
     if (img.width <= 512 && img.height <= 512 && tn_sketch_from_image(&s, &img) == TN_OK) {
         if (s.width != img.width || s.height != img.height || s.count < 1) abort();

@@ -28,6 +28,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_image_info info;
     uint8_t *enc = NULL;
     size_t n = 0;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (size < 1) return 0;
     memset(&o, 0, sizeof o);
     o.format = (tn_format)(data[0] % 7);

@@ -1,6 +1,6 @@
 /* fuzz_season.c - fuzz driver for the @@season CSV readers, at the library's default limits: the
    input is parsed as a climate (tn_climate_parse) and, written to a scratch directory that holds
-   a 16 x 16 DEM "dem.pgm", a picture "frame.ppm", a mask "mask.pgm" and a climate "climate.csv",
+   an 8 x 8 DEM "dem.pgm", a picture "frame.ppm", a mask "mask.pgm" and a climate "climate.csv",
    loaded as a season data list (tn_season_data_load), whose paths start at that directory. A
    climate that parses must pass tn_climate_check; a list that loads must hold finite samples.
      libFuzzer:  clang -g -O1 -fsanitize=fuzzer,address,undefined -I. fuzz_season.c -lm -pthread
@@ -17,7 +17,9 @@ extern "C"
 #endif
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-/* The files a list may name, written once. */
+/* The files a list may name, written once; SIDE x SIDE pixels (each site's insolation, most of
+   an input's time, grows with them). */
+#define SIDE 8
 static int fixtures(void)
 {
     static int made;
@@ -26,12 +28,12 @@ static int fixtures(void)
     tn_image dem = {0, 0, 0, NULL}, fr = {0, 0, 0, NULL}, mask = {0, 0, 0, NULL};
     int x, y, ok;
     if (made) return made > 0;
-    ok = !tn_image_create(&dem, 16, 16, 1) && !tn_image_create(&fr, 16, 16, 3) && !tn_image_create(&mask, 16, 16, 1);
-    for (y = 0; ok && y < 16; y++)
-        for (x = 0; x < 16; x++) {
-            dem.data[y * 16 + x] = (float)(0.5 + 0.4 * sin(x * 0.5) * cos(y * 0.4));
-            fr.data[3 * (y * 16 + x)] = fr.data[3 * (y * 16 + x) + 1] = fr.data[3 * (y * 16 + x) + 2] = (float)((x + y) / 32.0);
-            mask.data[y * 16 + x] = (float)((x * y) % 5 == 0);
+    ok = !tn_image_create(&dem, SIDE, SIDE, 1) && !tn_image_create(&fr, SIDE, SIDE, 3) && !tn_image_create(&mask, SIDE, SIDE, 1);
+    for (y = 0; ok && y < SIDE; y++)
+        for (x = 0; x < SIDE; x++) {
+            dem.data[y * SIDE + x] = (float)(0.5 + 0.4 * sin(x * 0.5) * cos(y * 0.4));
+            fr.data[3 * (y * SIDE + x)] = fr.data[3 * (y * SIDE + x) + 1] = fr.data[3 * (y * SIDE + x) + 2] = (float)((x + y) / (2.0 * SIDE));
+            mask.data[y * SIDE + x] = (float)((x * y) % 5 == 0);
         }
     ok = ok && !tn_image_save(fuzz_path("dem.pgm"), &dem, NULL) && !tn_image_save(fuzz_path("frame.ppm"), &fr, NULL) &&
          !tn_image_save(fuzz_path("mask.pgm"), &mask, NULL) && fuzz_write(fuzz_path("climate.csv"), climate, sizeof climate - 1);
@@ -49,6 +51,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_season_data d;
     int i;
     size_t k;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (tn_climate_parse(&c, (const char *)data, size, "fuzz") == TN_OK && tn_climate_check(&c) != TN_OK) abort();
     if (!fixtures() || !fuzz_write(list, data, size)) return 0;
     if (tn_season_data_load(&d, list) == TN_OK) {

@@ -21,6 +21,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     char *text = NULL;
     size_t n = 0;
     int i, *match;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (tn_sketch_parse(&s, (const char *)data, size, "fuzz") != TN_OK) return 0;
     if (tn_sketch_format(&text, &n, &s) != TN_OK || tn_sketch_parse(&t, text, n, "again") != TN_OK || t.count != s.count) abort();
     for (i = 0; i < s.count; i++)

@@ -29,6 +29,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     tn_image img = {0, 0, 0, NULL}, back = {0, 0, 0, NULL};
     tn_image_info info, info2;
     size_t len = 0;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     (void)tn__tif_lzw("fuzz", data, size, out, sizeof out, &len, tab, lens);
     if (len > sizeof out) abort();
     (void)tn__tif_packbits("fuzz", data, size, out, sizeof out, &len);
@@ -42,6 +43,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         size_t n = 0;
         memset(&so, 0, sizeof so);
         so.georef = &info.georef;
+        so.compression = 1; /* the fastest deflate: the round trip is about the TIFF layer (fuzz_png runs every level) */
         if (tn_image_save_memory(&enc, &n, &img, TN_FORMAT_TIFF, &so) == TN_OK) {
             if (tn_image_load_memory(&back, enc, n, "fuzz2.tif", &o, &info2) != TN_OK) abort(); /* our own file must load */
             if (back.width != img.width || back.height != img.height || back.channels != img.channels ||

@@ -22,6 +22,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
 {
     char *text = (char *)malloc(size + 1);
     tn_world w;
+    tn_set_threads(1); /* one thread: a fuzzing run keeps to one core (the pool's idle workers spin) */
     if (!text) return 0;
     memcpy(text, data, size);
     text[size] = 0;
