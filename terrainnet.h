@@ -26675,9 +26675,8 @@ static float tn__gnn_grow_fall(float dr, float dv, const float *pr, const float 
    pixel, of how far they lie below it (ridges) or above it (valleys). Lines of the same kind
    only: the alternation of ridges and valleys is the added lines' own relief (tn__gnn_grow's
    prel), so this is the trend under it, and a dune field's crests, all alike, give almost none.
-   Averaged over 13 px (5 px let the Sahara's crests jump to their full fall within 12 px, its
-   spectrum 1.58x) and never below the distance before; distances no pixel reaches hold the last
-   value. er: the example's raster (tn_sketch_rasterise); W x H scratch in mask, dist, near.
+   Averaged over 13 px, so a dune field's few crests do not take their whole fall within a few
+   px, and never below the distance before; distances no pixel reaches hold the last value. er: the example's raster (tn_sketch_rasterise); W x H scratch in mask, dist, near.
    prof is untouched when the example has no line of that kind. */
 TN__INTERNAL tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask,
                                             float *dist, int *near)
@@ -26838,13 +26837,13 @@ static tn_status tn__gnn_pit_share(const tn_image *z, float thr, tn_image *fille
 
 /* Densified lines drain as the example's do. Blocks of the example's network, each with its own
    line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
-   sketch then holds closed basins (a tenth of a mountain map, against almost none in the example's
-   own network), and the terrain looks like separate cones rather than ridges between valleys.
+   sketch then holds closed basins that the example's own network does not have, and the terrain
+   looks like separate cones rather than ridges between valleys.
    When the grown membrane has more than twice the example's share of basins, each basin's lowest
    point gets a valley down its outlet path (the flood's path over the lowest saddle, tn_flow_compute)
    to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
-   alone made the ground steeper than the example's (the Alps' slope distance up to 1.9x a real
-   crop's), so the basin's added valleys rise halfway to its brim and the path starts there. A
+   alone steepens the ground past the example's, so the basin's added valleys first rise halfway
+   to its brim and the path starts there. A
    path that comes within `gap` of a user valley as low as itself runs on to it; one that meets
    any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
    to set (nuser user lines first) and counts them in *drained. */
