@@ -4,7 +4,9 @@
      - the reference: another 256 px crop of REGION_full.png (the window that overlaps the
        example least, then the one of highest height std-dev, as the example was picked); its
        slope, curvature and spectrum distances (tn_realism_compare, at the DEM's pixel size)
-       to the example,
+       to the example, which the ratios and the targets divide by; beside it, for the spread of
+       the DEM's own ground, the three 256 px crops at its corners farthest from the example
+       (bench_sketch's reference): their mean distances and range, and the ratios to the mean,
      - SinGAN trained for the budget: the same three distances of 3 samples (seeds 100..102,
        256 x 256, mean) and their ratios to the reference's; the samples' height range against
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
@@ -181,18 +183,50 @@ static void other_crop(const tn_image *full, int ex, int ey, int S, int *ox, int
             }
 }
 
+/* The three 256 crops at the DEM's corners farthest from the example (bench_sketch's rule): their
+   mean distance to the example, and the least and greatest in lo, hi. How far the DEM's other
+   ground lies from the example: the reference crop, picked as the example was, can lie far closer. */
+static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi)
+{
+    int cx[4] = {0, full->width - 256, 0, full->width - 256}, cy[4] = {0, 0, full->height - 256, full->height - 256}, used[4] = {0, 0, 0, 0};
+    int k, n = 0;
+    dists mean = {0, 0, 0};
+    lo->slope = lo->curv = lo->spec = DBL_MAX;
+    hi->slope = hi->curv = hi->spec = 0;
+    for (k = 0; k < 3; k++) {
+        int i, best = 0;
+        double bd = -1;
+        tn_image c = {0, 0, 0, NULL};
+        dists d;
+        for (i = 0; i < 4; i++) {
+            double dd = hypot(cx[i] + 128 - (ex_x + ex->width / 2), cy[i] + 128 - (ex_y + ex->height / 2));
+            if (!used[i] && dd > bd) bd = dd, best = i;
+        }
+        used[best] = 1;
+        if (tn_image_crop(&c, full, cx[best], cy[best], 256, 256)) continue;
+        d = dist3(ex, &c, dx, dy);
+        tn_image_free(&c);
+        mean.slope += d.slope, mean.curv += d.curv, mean.spec += d.spec, n++;
+        lo->slope = fmin(lo->slope, d.slope), lo->curv = fmin(lo->curv, d.curv), lo->spec = fmin(lo->spec, d.spec);
+        hi->slope = fmax(hi->slope, d.slope), hi->curv = fmax(hi->curv, d.curv), hi->spec = fmax(hi->spec, d.spec);
+    }
+    if (n) mean.slope /= n, mean.curv /= n, mean.spec /= n;
+    return mean;
+}
+
 /* Measures 3 samples against the example and the reference distances; prints one line. */
 typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff; } measured;
 
-static void report(const char *name, const char *what, const measured *m, const dists *ref, float elo, float ehi)
+static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
     float band = 0.1f * (ehi - elo);
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | heights %.0f..%.0f (%s the example +-10 %%) | "
-           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|)%s\n",
+           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, (double)m->lo, (double)m->hi, ok_h ? "within" : "OUTSIDE",
-           m->best_ssim, m->seed_diff, rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
+           m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
+           rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
 }
 
 static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy, measured *m)
@@ -269,7 +303,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     tn_singan_stats st;
     tn_singan_gen_opts g;
     measured ms, mg, ml;
-    dists ref;
+    dists ref, corners, lo, hi;
     double t0;
     float dx, dy, fdx, fdy, elo, ehi;
     int i, exx, exy, ox = 0, oy = 0;
@@ -288,9 +322,12 @@ static void bench_region(const region *rg, double minutes, int threads)
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);
     ref = dist3(&ex, &other, dx, dy);
+    corners = corner_crops(&full, &ex, exx, exy, dx, dy, &lo, &hi);
     printf("%s (%s): example %.0f..%.0f m at (%d, %d) of the full DEM; reference crop at (%d, %d) (overlap %ld px), pixel %.1f x %.1f m\n", n,
            rg->tuned ? "tuned on" : "held out", (double)elo, (double)ehi, exx, exy, ox, oy, ov, (double)dx, (double)dy);
     printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f\n", n, ref.slope, ref.curv, ref.spec);
+    printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f)\n", n, corners.slope,
+           corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec);
     fflush(stdout);
     if (g_singan) {
         o = g_opts;
@@ -323,7 +360,7 @@ static void bench_region(const region *rg, double minutes, int threads)
             }
             if (sg[0].data && sg[1].data && sg[2].data) {
                 measure(&ex, sg, dx, dy, &ms);
-                report(n, "singan", &ms, &ref, elo, ehi);
+                report(n, "singan", &ms, &ref, &corners, elo, ehi);
             }
         }
     }
@@ -340,7 +377,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         printf("%s_layout_seconds: %.2f s per sample (layout %d)\n", n, (tn_time_seconds() - t0) / 3.0, g_layout);
         if (sl[0].data && sl[1].data && sl[2].data) {
             measure(&ex, sl, dx, dy, &ml);
-            report(n, "singan_layout", &ml, &ref, elo, ehi);
+            report(n, "singan_layout", &ml, &ref, &corners, elo, ehi);
         }
     }
     fflush(stdout);
@@ -354,7 +391,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         printf("%s_gpnn_seconds: %.2f s per sample\n", n, (tn_time_seconds() - t0) / 3.0);
         if (gp[0].data && gp[1].data && gp[2].data) {
             measure(&ex, gp, dx, dy, &mg);
-            report(n, "gpnn", &mg, &ref, elo, ehi);
+            report(n, "gpnn", &mg, &ref, &corners, elo, ehi);
         }
     }
     if (g_pictures) {
