@@ -1897,6 +1897,11 @@ typedef struct tn_gnn_generate_opts {
                                 matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
                                 network gives its layout, not the example's roughness), when the model
                                 holds its example; 1 = always (fails without the example); -1 = never */
+    int map_scale;           /* a grown drawing larger than its example (tn_gnn_plan.map_scale): 0 = by
+                                its size, -1 or 1 = never, N >= 2 = this factor. The drawing is also
+                                generated N times smaller; that map, upsampled, gives the large
+                                scales, this one the detail, which fades on the drawn valleys' floors
+                                as on the example's main valleys */
 } tn_gnn_generate_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -1967,6 +1972,9 @@ typedef struct tn_gnn_plan {
     const char *gain_why; /* one line: why the gain is what it is (static text) */
     int detail;           /* 1: the fine detail by example is added (tn_gnn_generate_opts.detail) */
     const char *detail_why; /* one line: why it is or is not (static text) */
+    int map_scale;        /* 1, or the factor N of the map-scale level (tn_gnn_generate_opts.map_scale) */
+    float floor_detail;   /* with it: the share of the detail left on a drawn valley's floor */
+    const char *map_scale_why; /* one line: why (static text) */
 } tn_gnn_plan;
 /* Fills *plan for tn_gnn_generate with the same arguments (without running the network
    beyond the gain test). */
@@ -25567,6 +25575,8 @@ static tn_status tn__gnn_detail_index(const tn_gnn *model, tn__gnn_gen *G)
     return tn__fd_build(&ex, NULL, &G->fd);
 }
 
+#define TN__GNN_SCALE_MAX 64 /* the largest map-scale factor (tn_gnn_generate_opts.map_scale) */
+
 /* The rules of tn_gnn_generate_opts (zero = default throughout), one message each. */
 static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
 {
@@ -25576,7 +25586,8 @@ static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
         (st = tn__opt_int(w, "embeddings", o->embeddings, TN_GNN_EMBED_AUTO, TN_GNN_EMBED_NONE)) ||
         (st = tn__opt_int(w, "finetune", o->finetune, 0, INT_MAX)) || (st = tn__opt_int(w, "align_choices", o->align_choices, 0, INT_MAX)) ||
         (st = tn__opt_int(w, "random_nodes", o->random_nodes, 0, 8192)) || (st = tn__opt_int(w, "grow", o->grow, -1, 1)) ||
-        (st = tn__opt_int(w, "detail", o->detail, -1, 1)) || (st = tn__opt_float(w, "finetune_lr", o->finetune_lr, "[)", 0, 10)) ||
+        (st = tn__opt_int(w, "detail", o->detail, -1, 1)) || (st = tn__opt_int(w, "map_scale", o->map_scale, -1, TN__GNN_SCALE_MAX)) ||
+        (st = tn__opt_float(w, "finetune_lr", o->finetune_lr, "[)", 0, 10)) ||
         (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
         (st = tn__opt_float(w, "order_weight", o->order_weight, "(]", -HUGE_VAL, 1e6)) ||
         (st = tn__opt_float(w, "gain", o->gain, "(]", -HUGE_VAL, 1e6)))
@@ -25724,7 +25735,8 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
 
 /* A grown sketch's user lines stay the lowest (valley) or highest (ridge) ground across them:
    where a bank (the output 4 px from a stroke pixel and 3 px or more from every stroke: across it,
-   not along it) is not at least `side` per px (the added lines' fall, TN__GNN_FALL) above a valley
+   not along it) is not at least side per px (G->side, the added lines' fall, TN__GNN_FALL; less at
+   the map-scale level, whose floors are broader) above a valley
    pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
    in a notch of (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the
    network leave a stroke on a hillside where the land around it tilts more than the stroke's own
@@ -25732,8 +25744,8 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
    distance. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which holds every
    pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def: aw x ah
    scratch; the result goes into out (ww x wh). */
-static void tn__gnn_incise(const tn__gnn_gen *G, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww, int wh,
-                           float *def, float *out)
+static void tn__gnn_incise(const tn__gnn_gen *G, float side, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww,
+                           int wh, float *def, float *out)
 {
     const int Wn = TN__GNN_NOTCH, Bk = TN__GNN_BANK;
     const float keep = 1 - (1 - (float)Bk / Wn) * (1 - (float)Bk / Wn); /* what the notch leaves of a bank-to-stroke difference */
@@ -25756,7 +25768,7 @@ static void tn__gnn_incise(const tn__gnn_gen *G, const float *val, int ax, int a
                     any = 1;
                 }
             if (!any) continue;
-            need = t == 1 ? m + G->side * Bk - h : h - (m - G->side * Bk);
+            need = t == 1 ? m + side * Bk - h : h - (m - side * Bk);
             if (need > 0) def[(size_t)v * aw + u] = (t == 1 ? need : -need) / keep;
         }
     for (v = 0; v < wh; v++)
@@ -25811,7 +25823,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
             float r = pred[i] - (corr ? corr[j] : 0.0f);
             val[j] = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]);
         }
-    if (!st && inc) tn__gnn_incise(G, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
+    if (!st && inc) tn__gnn_incise(G, G->side, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
     for (v = 0; !st && v < wh; v++)
         for (u = 0; u < ww; u++) {
             size_t i = (size_t)(y - ry + v) * R.rw + (x - rx + u);
@@ -25890,21 +25902,288 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
     return st;
 }
 
+/* ---- the map-scale level: a drawing larger than its example ---- */
+
+#define TN__GNN_SCALE_SPAN 2   /* a drawing whose lines span more than this many example sides draws a larger landscape */
+#define TN__GNN_SCALE_SIGMA 2  /* px per factor: the Gaussian that parts the small map's scales from this map's detail */
+#define TN__GNN_FLOOR_REACH 12 /* px per factor: a drawn valley's floor, across which the detail fades in */
+#define TN__GNN_FLOOR_NEAR 4   /* px: the example's floor, within this of its main valleys */
+
+/* The map-scale factor of a grown drawing: its lines' extent on the map (bounding box, longer
+   side) over TN__GNN_SCALE_SPAN example sides, rounded (1: none, below 1.5). A DEM's network or a
+   dense sketch is not grown and keeps 1: its lines are the example's size already. */
+static int tn__gnn_map_factor(const tn__gnn_gen *G, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *o,
+                              const char **why)
+{
+    float x0 = FLT_MAX, y0 = FLT_MAX, x1 = -FLT_MAX, y1 = -FLT_MAX, side = (float)(G->A.width > G->A.height ? G->A.width : G->A.height), s;
+    int c, j;
+    if (o->map_scale < 0 || o->map_scale == 1) return *why = "off (--map-scale off)", 1;
+    if (!G->grown) return *why = "none: the sketch is not grown (its lines are the example's size)", 1;
+    if (o->map_scale >= 2) return *why = "set by --map-scale", o->map_scale;
+    for (c = 0; c < sketch->count; c++)
+        for (j = 0; j < sketch->items[c].npoints; j++) {
+            const float *q = sketch->items[c].points + 3 * (size_t)j;
+            x0 = fminf(x0, q[0]), x1 = fmaxf(x1, q[0]), y0 = fminf(y0, q[1]), y1 = fmaxf(y1, q[1]);
+        }
+    s = fmaxf((x1 - x0) * (float)width / (float)sketch->width, (y1 - y0) * (float)height / (float)sketch->height) / (TN__GNN_SCALE_SPAN * side);
+    if (!(s >= 1.5f)) return *why = "none: the drawing spans at most twice the example", 1;
+    *why = "the drawing spans more than twice the example, so its lines are larger than the example's: the large scales come "
+           "from the drawing generated this many times smaller";
+    return s >= TN__GNN_SCALE_MAX ? TN__GNN_SCALE_MAX : (int)(s + 0.5f);
+}
+
+static int tn__gnn_float_cmp(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The share of the example's detail (|heights - their Gaussian of 2 px|, median) within
+   TN__GNN_FLOOR_NEAR px of its main valleys (the highest Strahler order) against the whole
+   example's, clamped to 0..1: how much smoother its valley floors are than the rest. 1 when the
+   model holds no example heights or its network no valley. */
+static tn_status tn__gnn_floor_detail(const tn_gnn *model, const tn__gnn_gen *G, float *share)
+{
+    const tn_tensor *e = tn_params_find(model->weights, "detail.example");
+    const int W = G->A.width, H = G->A.height;
+    const size_t n = (size_t)W * H;
+    tn_contour_set ex, mains;
+    tn_image z = {0, 0, 0, NULL}, b = {0, 0, 0, NULL}, r = {0, 0, 0, NULL};
+    float *all = NULL, *floor_px = NULL, *d = NULL;
+    int *nearest = NULL, c, top = -1, k = 0;
+    uint8_t *mask = NULL;
+    size_t i, m = 0;
+    tn_status st;
+    *share = 1;
+    if (!e) return TN_OK;
+    memset(&ex, 0, sizeof ex);
+    if ((st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &ex))) return st;
+    for (c = 0; c < ex.count; c++)
+        if (ex.items[c].type == TN_VALLEY && ex.items[c].order > top) top = ex.items[c].order;
+    mains = ex;
+    mains.items = top < 0 ? NULL : (tn_contour *)tn__alloc((size_t)ex.count * sizeof(tn_contour));
+    if (top >= 0 && !mains.items) st = TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; !st && top >= 0 && c < ex.count; c++)
+        if (ex.items[c].type == TN_VALLEY && ex.items[c].order == top) mains.items[k++] = ex.items[c];
+    mains.count = k;
+    z.width = W, z.height = H, z.channels = 1, z.data = e->data;
+    if (!st && top >= 0 && !(st = tn_sketch_rasterise(&r, &mains, W, H)) && !(st = tn_image_blur(&b, &z, 2.0f))) {
+        all = (float *)tn__alloc(n * sizeof(float));
+        floor_px = (float *)tn__alloc(n * sizeof(float));
+        d = (float *)tn__alloc(n * sizeof(float));
+        nearest = (int *)tn__alloc(n * sizeof(int));
+        mask = (uint8_t *)tn__alloc(n);
+        if (!all || !floor_px || !d || !nearest || !mask) st = TN_ERR_OUT_OF_MEMORY;
+    }
+    if (!st && mask) {
+        for (i = 0; i < n; i++) mask[i] = (uint8_t)(r.data[3 * i + 1] > 0);
+        tn__gnn_chamfer(mask, W, H, d, nearest);
+        for (i = 0; i < n; i++) {
+            all[i] = fabsf(z.data[i] - b.data[i]);
+            if (d[i] <= TN__GNN_FLOOR_NEAR) floor_px[m++] = all[i];
+        }
+        qsort(all, n, sizeof(float), tn__gnn_float_cmp);
+        qsort(floor_px, m, sizeof(float), tn__gnn_float_cmp);
+        if (m && all[n / 2] > 0) *share = tn__clampf(floor_px[m / 2] / all[n / 2], 0.0f, 1.0f);
+    }
+    TN_FREE(mains.items);
+    tn_contour_set_free(&ex);
+    tn_image_free(&b);
+    tn_image_free(&r);
+    TN_FREE(all);
+    TN_FREE(floor_px);
+    TN_FREE(d);
+    TN_FREE(nearest);
+    TN_FREE(mask);
+    return st;
+}
+
+/* Window (x, y, w, h) of one level of generation (G's map) into dst, w floats a row. */
+static tn_status tn__gnn_level_run(const tn_gnn *model, tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int w, int h, float *dst)
+{
+    tn_status st;
+    if (G->detail && !G->fd.low && (st = tn__gnn_detail_index(model, G))) return st;
+    return G->detail ? tn__gnn_gen_detailed(G, ctx, x, y, w, h, dst) : tn__gnn_gen_run(G, G->w, ctx, x, y, w, h, dst, NULL, "gnn-generate");
+}
+
+/* Catmull-Rom weights at fraction t. */
+static void tn__gnn_cubic(float t, float *k)
+{
+    float t2 = t * t, t3 = t2 * t;
+    k[0] = -0.5f * t3 + t2 - 0.5f * t;
+    k[1] = 1.5f * t3 - 2.5f * t2 + 1;
+    k[2] = -1.5f * t3 + 2 * t2 + 0.5f * t;
+    k[3] = 0.5f * t3 - 0.5f * t2;
+}
+
+/* The Gaussian kern (2K + 1 taps) of src (g's layout, g within the W x H map) over r (within g
+   grown by K), rows and columns clamped to the map, into out (r's layout); tmp: g.w x r.h. */
+static void tn__gnn_gauss_rect(const float *src, tn_rect g, tn_rect r, int W, int H, const float *kern, int K, float *tmp, float *out)
+{
+    int u, v, k;
+    for (v = 0; v < r.h; v++) /* down the columns */
+        for (u = 0; u < g.w; u++) {
+            double acc = 0;
+            for (k = -K; k <= K; k++) {
+                int Y = r.y + v + k;
+                Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+                acc += kern[k + K] * src[(size_t)(Y - g.y) * g.w + u];
+            }
+            tmp[(size_t)v * g.w + u] = (float)acc;
+        }
+    for (v = 0; v < r.h; v++) /* along the rows */
+        for (u = 0; u < r.w; u++) {
+            double acc = 0;
+            for (k = -K; k <= K; k++) {
+                int X = r.x + u + k;
+                X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
+                acc += kern[k + K] * tmp[(size_t)v * g.w + (X - g.x)];
+            }
+            out[(size_t)v * r.w + u] = (float)acc;
+        }
+}
+
+/* The map-scale level, window (x, y, w, h) into dst (w floats a row). Large scales: the drawing
+   generated on a map f times smaller (without its fine detail), upsampled (Catmull-Rom at pixel
+   centres) and low-passed; detail: this map's generation G minus its low-pass, times
+   a(d) = a0 + (1 - a0) smoothstep(d / (TN__GNN_FLOOR_REACH f)), d the distance to the nearest
+   drawn valley pixel, a0 the example's floor detail (tn__gnn_floor_detail). The low-pass is a
+   Gaussian of TN__GNN_SCALE_SIGMA f px, the map's edges clamped. Then the strokes are pinned to
+   G's heights again (tn__gnn_pin: the upsampling smooths the small map's) and notched again
+   (tn__gnn_incise, asking for 1/f of the fall: the fade takes the valleys' notch with the detail). Each part is computed on
+   the window grown by what the next reads, so windows equal the whole map. */
+static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const tn_contour_set *sketch, int f, float a0,
+                                    const tn_gnn_generate_opts *o, tn_ctx *ctx, int x, int y, int w, int h, float *dst)
+{
+    const int W = G->W, H = G->H, Wc = (W + f - 1) / f, Hc = (H + f - 1) / f, K = 3 * TN__GNN_SCALE_SIGMA * f;
+    const float sigma = (float)(TN__GNN_SCALE_SIGMA * f), reach = (float)(TN__GNN_FLOOR_REACH * f);
+    tn_gnn_generate_opts oc = *o;
+    tn_rect win, A, r, g;
+    tn__gnn_gen Gc;
+    tn_image rast = {0, 0, 0, NULL};
+    float *F = NULL, *B = NULL, *C = NULL, *lowF = NULL, *lowB = NULL, *M = NULL, *tmp = NULL, *dist = NULL, *kern = NULL, *corr = NULL,
+          *val = NULL, *def = NULL, *res = NULL, sum = 0;
+    int *nearest = NULL, cx0, cy0, cx1, cy1, cw, u, v, k;
+    uint8_t *mask = NULL;
+    size_t i, n = (size_t)W * H;
+    tn_status st;
+    memset(&Gc, 0, sizeof Gc);
+    if (Wc < 16 || Hc < 16)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: map scale %d leaves a %d x %d map for the large scales (16 a side at least)", f, Wc, Hc);
+    win.x = x, win.y = y, win.w = w, win.h = h;
+    A = tn_rect_halo(win, TN__GNN_NOTCH + TN__GNN_BANK + 1, W, H); /* what the notch reads */
+    r = tn_rect_halo(A, TN__GNN_PIN, W, H);                       /* what the pinning reads */
+    g = tn_rect_halo(r, K, W, H);                                 /* what the low-pass reads */
+    cx0 = (int)floorf(((float)g.x + 0.5f) / (float)f - 0.5f) - 1, cy0 = (int)floorf(((float)g.y + 0.5f) / (float)f - 0.5f) - 1;
+    cx1 = (int)floorf(((float)(g.x + g.w) - 0.5f) / (float)f - 0.5f) + 2, cy1 = (int)floorf(((float)(g.y + g.h) - 0.5f) / (float)f - 0.5f) + 2;
+    cx0 = cx0 < 0 ? 0 : cx0, cy0 = cy0 < 0 ? 0 : cy0, cx1 = cx1 > Wc - 1 ? Wc - 1 : cx1, cy1 = cy1 > Hc - 1 ? Hc - 1 : cy1;
+    cw = cx1 - cx0 + 1;
+    kern = (float *)tn__alloc((size_t)(2 * K + 1) * sizeof(float));
+    F = (float *)tn__alloc((size_t)g.w * g.h * sizeof(float));
+    B = (float *)tn__alloc((size_t)g.w * g.h * sizeof(float));
+    C = (float *)tn__alloc((size_t)cw * (cy1 - cy0 + 1) * sizeof(float));
+    lowF = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float));
+    lowB = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float));
+    M = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float));
+    tmp = (float *)tn__alloc((size_t)g.w * r.h * sizeof(float));
+    corr = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
+    val = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
+    def = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
+    res = (float *)tn__alloc((size_t)w * h * sizeof(float));
+    dist = (float *)tn__alloc(n * sizeof(float));
+    nearest = (int *)tn__alloc(n * sizeof(int));
+    mask = (uint8_t *)tn__alloc(n);
+    if (!kern || !F || !B || !C || !lowF || !lowB || !M || !tmp || !corr || !val || !def || !res || !dist || !nearest || !mask) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    for (k = -K; k <= K; k++) sum += kern[k + K] = expf(-0.5f * (float)(k * k) / (sigma * sigma));
+    for (k = 0; k <= 2 * K; k++) kern[k] /= sum;
+    oc.detail = -1; /* below the low-pass */
+    if ((st = tn__gnn_level_run(model, G, ctx, g.x, g.y, g.w, g.h, F)) || (st = tn__gnn_gen_make(model, sketch, Wc, Hc, &oc, &Gc)) ||
+        (st = tn__gnn_level_run(model, &Gc, ctx, cx0, cy0, cw, cy1 - cy0 + 1, C)) || (st = tn_sketch_rasterise(&rast, sketch, W, H)))
+        goto done;
+    for (v = 0; v < g.h; v++) /* the small map upsampled */
+        for (u = 0; u < g.w; u++) {
+            float kx[4], ky[4], fx = ((float)(g.x + u) + 0.5f) / (float)f - 0.5f, fy = ((float)(g.y + v) + 0.5f) / (float)f - 0.5f;
+            int ix = (int)floorf(fx), iy = (int)floorf(fy), j, l;
+            double up = 0;
+            tn__gnn_cubic(fx - (float)ix, kx);
+            tn__gnn_cubic(fy - (float)iy, ky);
+            for (j = 0; j < 4; j++)
+                for (l = 0; l < 4; l++) {
+                    int cx = ix - 1 + l, cy = iy - 1 + j;
+                    cx = cx < 0 ? 0 : cx > Wc - 1 ? Wc - 1 : cx;
+                    cy = cy < 0 ? 0 : cy > Hc - 1 ? Hc - 1 : cy;
+                    up += ky[j] * kx[l] * C[(size_t)(cy - cy0) * cw + (cx - cx0)];
+                }
+            B[(size_t)v * g.w + u] = (float)up;
+        }
+    tn__gnn_gauss_rect(F, g, r, W, H, kern, K, tmp, lowF);
+    tn__gnn_gauss_rect(B, g, r, W, H, kern, K, tmp, lowB);
+    for (i = 0; i < n; i++) mask[i] = (uint8_t)(rast.data[3 * i + 1] > 0);
+    tn__gnn_chamfer(mask, W, H, dist, nearest);
+    for (v = 0; v < r.h; v++)
+        for (u = 0; u < r.w; u++) {
+            size_t q = (size_t)v * r.w + u, p = (size_t)(r.y + v) * W + (r.x + u);
+            float t = fminf(dist[p] / reach, 1.0f), a = a0 + (1 - a0) * t * t * (3 - 2 * t);
+            M[q] = lowB[q] + a * (F[(size_t)(r.y + v - g.y) * g.w + (r.x + u - g.x)] - lowF[q]);
+        }
+    for (v = 0; v < r.h; v++) /* the pinning reads both on one layout: G's output over r into lowF */
+        for (u = 0; u < r.w; u++) lowF[(size_t)v * r.w + u] = F[(size_t)(r.y + v - g.y) * g.w + (r.x + u - g.x)];
+    tn__gnn_pin(G, M, lowF, r.x, r.y, r.w, A.x, A.y, A.w, A.h, corr);
+    for (v = 0; v < A.h; v++) /* the notch works in the network's units */
+        for (u = 0; u < A.w; u++) {
+            size_t q = (size_t)v * A.w + u;
+            val[q] = (M[(size_t)(A.y + v - r.y) * r.w + (A.x + u - r.x)] - corr[q] - G->A.mean) / G->A.std;
+        }
+    tn__gnn_incise(G, G->side / (float)f, val, A.x, A.y, A.w, A.h, x, y, w, h, def, res); /* a larger line's banks fall as much over f x the px */
+    for (i = 0; i < (size_t)w * h; i++) dst[i] = G->A.mean + G->A.std * res[i];
+done:
+    tn__gnn_gen_free(&Gc);
+    tn_image_free(&rast);
+    TN_FREE(kern);
+    TN_FREE(F);
+    TN_FREE(B);
+    TN_FREE(C);
+    TN_FREE(lowF);
+    TN_FREE(lowB);
+    TN_FREE(M);
+    TN_FREE(tmp);
+    TN_FREE(corr);
+    TN_FREE(val);
+    TN_FREE(def);
+    TN_FREE(res);
+    TN_FREE(dist);
+    TN_FREE(nearest);
+    TN_FREE(mask);
+    return st;
+}
+
 TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width, int height, int x, int y,
                                         int w, int h, const tn_gnn_generate_opts *opts)
 {
     tn__gnn_gen G;
+    tn_gnn_generate_opts o;
     tn_image res = {0, 0, 0, NULL};
     tn_ctx *ctx = NULL;
+    const char *why;
+    int f;
     tn_status st;
     TN_ASSERT(out);
     if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
-    if ((st = tn__gnn_gen_make(model, sketch, width, height, opts, &G))) return st;
+    memset(&o, 0, sizeof o);
+    if (opts) o = *opts;
+    if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &G))) return st;
+    f = tn__gnn_map_factor(&G, sketch, width, height, &o, &why);
     if ((st = tn_image_create(&res, w, h, 1))) goto done;
     if (!(ctx = tn_ctx_create())) { st = tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory"); goto done; }
-    if (G.detail && (st = tn__gnn_detail_index(model, &G))) goto done;
-    st = G.detail ? tn__gnn_gen_detailed(&G, ctx, x, y, w, h, res.data) : tn__gnn_gen_run(&G, G.w, ctx, x, y, w, h, res.data, NULL, "gnn-generate");
+    if (f > 1) {
+        float a0;
+        if (!(st = tn__gnn_floor_detail(model, &G, &a0))) st = tn__gnn_map_scaled(model, &G, sketch, f, a0, &o, ctx, x, y, w, h, res.data);
+    } else
+        st = tn__gnn_level_run(model, &G, ctx, x, y, w, h, res.data);
     if (!st) {
         *out = res;
         res.data = NULL;
@@ -26028,7 +26307,11 @@ TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn
     else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
     plan->detail = G.detail;
     plan->detail_why = G.detail_why;
+    plan->map_scale = tn__gnn_map_factor(&G, sketch, width, height, &o, &plan->map_scale_why);
+    plan->floor_detail = 1;
+    st = plan->map_scale > 1 ? tn__gnn_floor_detail(model, &G, &plan->floor_detail) : TN_OK;
     tn__gnn_gen_free(&G);
+    if (st) return st;
     return TN_OK;
 }
 

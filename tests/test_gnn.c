@@ -1405,6 +1405,112 @@ TN_TEST(grown_strokes_stay_main_lines)
     tn_image_free(&full);
 }
 
+/* Mean |terrain - asked height| over the strokes' pixels, and the share of their points that keep
+   ridges above and valleys below the land 4 px across (tn_gnn_ordering). */
+static void stroke_fit(const tn_contour_set *sk, const tn_image *t, double *err, double *follow)
+{
+    tn_image r = {0, 0, 0, NULL};
+    size_t k, nk = 0;
+    *err = 0;
+    if (tn_sketch_rasterise(&r, sk, t->width, t->height) == TN_OK)
+        for (k = 0; k < (size_t)t->width * t->height; k++)
+            if (r.data[3 * k] > 0 || r.data[3 * k + 1] > 0) *err += fabs(t->data[k] - r.data[3 * k + 2]), nk++;
+    *err = nk ? *err / (double)nk : 1e30;
+    if (tn_gnn_ordering(follow, sk, t, 4, NULL) != TN_OK) *follow = 0;
+    tn_image_free(&r);
+}
+
+/* Median |img - its Gaussian of 2 px| within 4 px of the sketch's valley pixels. */
+static double floor_detail(const tn_contour_set *sk, const tn_image *img)
+{
+    tn_image r = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    double *v = (double *)malloc((size_t)img->width * img->height * sizeof(double)), med = -1;
+    size_t k, n = 0;
+    int x, y, dx, dy;
+    if (v && tn_sketch_rasterise(&r, sk, img->width, img->height) == TN_OK && tn_image_blur(&b, img, 2.0f) == TN_OK) {
+        for (y = 0; y < img->height; y++)
+            for (x = 0; x < img->width; x++) {
+                int near_valley = 0;
+                for (dy = -4; dy <= 4 && !near_valley; dy++)
+                    for (dx = -4; dx <= 4 && !near_valley; dx++)
+                        if (x + dx >= 0 && y + dy >= 0 && x + dx < img->width && y + dy < img->height)
+                            near_valley = r.data[3 * ((size_t)(y + dy) * img->width + x + dx) + 1] > 0;
+                k = (size_t)y * img->width + x;
+                if (near_valley) v[n++] = fabs(img->data[k] - b.data[k]);
+            }
+        for (k = 1; k < n; k++) { /* insertion sort: a few thousand values */
+            double t = v[k];
+            size_t j = k;
+            while (j > 0 && v[j - 1] > t) v[j] = v[j - 1], j--;
+            v[j] = t;
+        }
+        if (n) med = v[n / 2];
+    }
+    free(v);
+    tn_image_free(&r);
+    tn_image_free(&b);
+    return med;
+}
+
+TN_TEST(map_scale_level)
+{
+    /* a drawing over three times the example's side gets the map-scale level: the large scales
+       from the drawing generated twice smaller, the detail faded on the drawn valley's floor as on
+       the example's main valleys. Windows still equal the whole map, the strokes still hold
+       (the issue's bounds: heights within 10 % of the range, 90 % followed), the output is not
+       the one-level one, and a drawing within twice the example does not get the level */
+    tn_image dem = tn_test_dem(64, 22), a = {0, 0, 0, NULL}, one = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, want = {0, 0, 0, NULL};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_gnn_plan plan;
+    tn_contour_set user;
+    float rp[30], vp[30], lo = 0, hi = 0;
+    double err = 0, follow = 0, fa, fo;
+    tn_image_range(&lo, &hi, &dem);
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    user = two_strokes(240, 180, rp, vp);
+    memset(&go, 0, sizeof go);
+    go.seed = 2;
+    TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.map_scale == 2);
+    TN_CHECK(plan.floor_detail >= 0 && plan.floor_detail <= 1);
+    printf("  map scale %d, floor detail %.2f\n", plan.map_scale, (double)plan.floor_detail);
+    TN_CHECK(tn_gnn_generate(&a, &m, &user, 240, 180, &go) == TN_OK);
+    TN_CHECK(tn_gnn_generate_window(&win, &m, &user, 240, 180, 150, 100, 60, 50, &go) == TN_OK);
+    TN_CHECK(tn_image_crop(&want, &a, 150, 100, 60, 50) == TN_OK && same_image(&win, &want));
+    tn_image_free(&win);
+    tn_image_free(&want);
+    TN_CHECK(tn_gnn_generate_window(&win, &m, &user, 240, 180, 0, 0, 37, 180, &go) == TN_OK); /* at the map's edge */
+    TN_CHECK(tn_image_crop(&want, &a, 0, 0, 37, 180) == TN_OK && same_image(&win, &want));
+    stroke_fit(&user, &a, &err, &follow);
+    printf("  strokes: %.1f m from their heights (range %.0f m), %.1f %% followed\n", err, (double)(hi - lo), 100 * follow);
+    TN_CHECK(err <= 0.1 * (hi - lo) && follow >= 0.9);
+    go.map_scale = -1;
+    TN_CHECK(tn_gnn_generate(&one, &m, &user, 240, 180, &go) == TN_OK && !same_image(&a, &one));
+    fa = floor_detail(&user, &a), fo = floor_detail(&user, &one);
+    printf("  detail on the valley's floor: %.2f m, one level %.2f m\n", fa, fo);
+    if (plan.floor_detail < 0.9f) TN_CHECK(fa >= 0 && fa < fo);
+    go.map_scale = 0;
+    { /* the same strokes 100 px long on the same map: grown, within twice the example */
+        int k;
+        for (k = 0; k < 10; k++) rp[3 * k] = vp[3 * k] = 70.0f + 100.0f * (float)k / 9.0f;
+        TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK);
+        TN_CHECK(plan.grown_lines > 0 && plan.map_scale == 1 && strstr(plan.map_scale_why, "at most"));
+        user = two_strokes(240, 180, rp, vp);
+    }
+    go.map_scale = 12; /* 20 x 15 for the large scales: refused */
+    TN_CHECK(tn_gnn_generate(&one, &m, &user, 240, 180, &go) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "map scale 12"));
+    go.map_scale = 65;
+    TN_CHECK(tn_gnn_generate(&one, &m, &user, 240, 180, &go) == TN_ERR_INVALID_ARG);
+    tn_image_free(&a);
+    tn_image_free(&one);
+    tn_image_free(&win);
+    tn_image_free(&want);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 TN_TEST(grown_generation)
 {
     /* gnn generation of a drawing of two strokes: grown by default (the plan says how much and
@@ -1431,6 +1537,8 @@ TN_TEST(grown_generation)
     TN_CHECK(plan.grown_lines > 0 && plan.user_lines == 2 && plan.gain_why && strstr(plan.gain_why, "fewer than 8") && plan.gain == 1.0f);
     TN_CHECK(plan.user_density > 0 && plan.user_density < plan.example_density / 6);
     TN_CHECK(plan.detail == 1 && plan.detail_why && strstr(plan.detail_why, "fine detail"));
+    TN_CHECK(plan.map_scale == 2 && strstr(plan.map_scale_why, "twice")); /* strokes 230 px long, the example 64 */
+    go.map_scale = -1; /* the one-level generation from here on (map_scale_level tests the other) */
     go.grow = -1;
     TN_CHECK(tn_gnn_plan_of(&plan, &m, &user, 240, 180, &go) == TN_OK && plan.grown_lines == 0);
     TN_CHECK(plan.detail == 0 && strstr(plan.detail_why, "not grown"));
@@ -1577,5 +1685,6 @@ int main(void)
     TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
+    TN_RUN(map_scale_level);
     return tn_test_summary("test_gnn");
 }

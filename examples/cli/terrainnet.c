@@ -1881,6 +1881,10 @@ static const cli_opt gnn_generate_opts[] = {
      "auto: by example on a grown sketch (a drawing of a few strokes)"},
     {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
      "with --detail SINGAN.tnw: first SinGAN scale that runs on the terrain (higher = finer detail only)", "scales - 3"},
+    {"map-scale", 0, ARG_INT, 0, &gnn_generate_arg.o.map_scale, NULL, -1, 64, "N",
+     "a grown drawing larger than twice the example is also generated N times smaller for the large scales (broad valleys "
+     "and massifs), and the detail fades on its drawn valleys' floors as on the example's main valleys (-1 = off)",
+     "0 = by the drawing's size"},
     {"preview", 0, ARG_STR, 0, &gnn_generate_arg.preview, NULL, 0, 0, "PNG", "hillshaded colour preview of the terrain", NULL},
 };
 
@@ -2001,6 +2005,8 @@ static int run_gnn_generate(void)
         printf("residual_gain: %.3f\nresidual_gain_why: %s", a->o.gain > 0 ? a->o.gain : 0.0, plan.gain_why);
         if (isfinite(plan.gain_raw)) printf(" (estimate %.3f x scale %.2f, clamped to 0..1)", plan.gain_raw, plan.gain_scale);
         printf("\ndetail: %s", a->detail ? "singan-refine with the given model" : plan.detail_why);
+        printf("\nmap_scale: %d (%s)", plan.map_scale, plan.map_scale_why);
+        if (plan.map_scale > 1) printf("\nfloor_detail: %.2f (of the detail left on a drawn valley's floor, as on the example's main valleys)", plan.floor_detail);
         printf("\nfinetune_steps: %d\nseconds: %.2f\nheight_range: %.6g %.6g\noutput: %s\n", a->o.finetune, tn_time_seconds() - t0, lo, hi, a->out);
     }
     tn_image_free(&terrain);
