@@ -2449,8 +2449,9 @@ TN_API tn_status tn_export_splat(tn_image *out, const tn_image *dem, const tn_sp
    any rectangle from global pixel positions and the seed; an operation of halo h computes a
    rectangle from its input grown by h (tn_rect_halo), so a tile needs the sum of the halos
    around it. What cannot be local (style transfer, depression filling, flow accumulation,
-   colour correction) is refused with the reason; seasonal texturing is local with its horizon
-   search bounded (distance=). docs/world.md lists each method's halo.
+   colour correction) is refused with the reason; seasonal texturing (procedural, or the KPD
+   network) is local with its horizon search bounded (distance=). docs/world.md lists each
+   method's halo.
    SPEC text, one setting or stage a line ('#' starts a comment):
        world 16384 16384         size of the generator's raster in pixels (width height)
        seed 42
@@ -30647,11 +30648,11 @@ typedef struct tn__world_stage {
     int out_w, out_h, out_c, out_heights; /* this stage's raster */
     float p[8];                           /* method parameters */
     int np;                               /* explicit noise: how many sigmas in p[2..] */
-    const tn_method *method;              /* a learned stage's (texgan, singan, gnn, singan-refine) */
+    const tn_method *method;              /* a learned stage's (texgan, singan, gnn, singan-refine, kpd) */
     void *model;                          /* its model (method->free) */
     tn_method_input input;                /* a learned generator's: the world's seed and size */
     tn_gnn_generate_opts gnn_go;          /* gnn: resolved at setup, the gain included */
-    tn_climate *climate;                  /* season */
+    tn_climate *climate;                  /* season, kpd */
     tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
 } tn__world_stage;
 
@@ -30915,7 +30916,11 @@ static tn_status tn__world_model(tn__world_stage *s, const tn_world *w, const ch
     s->method = tn_method_find(method);
     st = s->method->load(&s->model, path);
     TN_FREE(path);
-    if (st) return st;
+    if (st) {
+        char where[64];
+        snprintf(where, sizeof where, "world: line %d: %s", s->line, s->m->name);
+        return tn__fail_context(st, where);
+    }
     s->input.seed = w->seed;
     s->input.width = w->width;
     s->input.height = w->height;
@@ -31188,27 +31193,25 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
 }
 
 
-/* Seasonal texture (tn_season_texture, procedural) of the heights before it at one time of the
-   year. Insolation casts horizons: over the whole map a pixel's shadow may come from any
-   distance, which no tile can see, so the world bounds the horizon search by `distance` metres
-   (tn_insolation_opts.max_distance) and that is the halo: ceil(distance / spacing) px, + 1 for
-   the bilinear horizon samples and + 1 for the slopes. The rest is per pixel (climate, snow and
-   vegetation year, slope, hillshade: halo 1). Two whole-map steps are left out: the detail noise
-   (tn_noise_perlin of the whole map, stretched to its own min..max; detail = none) and the
-   downsampled insolation of maps over 1024 px (the world computes it at full size). The ray's
-   early stop uses the grown rectangle's highest point instead of the map's, a bound as valid
-   for every sample the ray reaches there, so the horizons are the same. */
-static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+/* The seasonal rows' shared settings (season, kpd): the climate (koppen= or climate=), latitude=,
+   time= and the insolation's bounded horizon. Insolation casts horizons: over the whole map a
+   pixel's shadow may come from any distance, which no tile can see, so the world bounds the
+   horizon search by `distance` metres (tn_insolation_opts.max_distance) and that is the
+   insolation's halo, *ins_halo: ceil(distance / spacing) px, + 1 for the bilinear horizon
+   samples and + 1 for the slopes. The ray's early stop uses the grown rectangle's highest point
+   instead of the map's, a bound as valid for every sample the ray reaches there, so the
+   horizons are the same. p[0] latitude, p[1] time, p[2] distance, p[3] directions, p[5] spacing. */
+static tn_status tn__world_climate_setup(tn__world_stage *s, const tn_world *w, const char *base_dir, int *ins_halo)
 {
     int kc = tn__world_find(s, "climate"), kk = tn__world_find(s, "koppen");
-    double lat, tm, dist, dirs, shade;
+    double lat, tm, dist, dirs;
     float spacing;
     tn_status st;
-    if ((st = tn__world_need_heights(s))) return st;
-    if ((kc < 0) == (kk < 0)) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs climate=FILE.csv or koppen=CODE (one)", s->line);
+    if ((kc < 0) == (kk < 0))
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs climate=FILE.csv or koppen=CODE (one)", s->line, s->m->name);
     if (w->cellsize <= 0)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs `cellsize METRES`: insolation, slopes and the horizon distance "
-                        "are in metres", s->line);
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs `cellsize METRES`: insolation, slopes and the horizon distance "
+                        "are in metres", s->line, s->m->name);
     if (!(s->climate = (tn_climate *)tn__calloc(sizeof *s->climate))) return tn__oom();
     if (kk >= 0) st = tn_climate_koppen(s->climate, s->val[kk]);
     else {
@@ -31219,25 +31222,51 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
     if (st) return st;
     if ((st = tn__world_num(s, "latitude", s->climate->has_latitude ? s->climate->latitude : 1e9, -90, 90, &lat)) ||
         (st = tn__world_num(s, "time", 6, 0, 12, &tm)) || (st = tn__world_num(s, "distance", 3000, 1e-3, 1e7, &dist)) ||
-        (st = tn__world_num(s, "directions", 32, 4, 1024, &dirs)) || (st = tn__world_num(s, "shade", 0, 0, 1, &shade)))
+        (st = tn__world_num(s, "directions", 32, 4, 1024, &dirs)))
         return st;
-    if (lat > 90) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs latitude= (the climate has none)", s->line);
+    if (lat > 90) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs latitude= (the climate has none)", s->line, s->m->name);
     spacing = tn__world_spacing(s, w);
     s->p[0] = (float)lat;
     s->p[1] = (float)tm;
     s->p[2] = (float)dist;
     s->p[3] = (float)(int)dirs;
-    s->p[4] = (float)shade;
     s->p[5] = spacing;
     if (ceil(dist / spacing) + 2 > (double)INT_MAX / 4)
-        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season distance=%g m is %g px", s->line, dist, dist / spacing);
-    s->halo = (int)ceil(dist / spacing) + 2;
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s distance=%g m is %g px", s->line, s->m->name, dist, dist / spacing);
+    *ins_halo = (int)ceil(dist / spacing) + 2;
+    if (s->in_w < 2 || s->in_h < 2)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s needs a raster of at least 2 x 2", s->line, s->m->name);
+    return TN_OK;
+}
+
+/* The insolation options of a seasonal row: its spacing and bounded horizon (tn__world_climate_setup). */
+static void tn__world_insolation_opts(tn_insolation_opts *io, const tn__world_stage *s)
+{
+    memset(io, 0, sizeof *io);
+    io->dx = io->dy = s->p[5];
+    io->max_distance = s->p[2];
+    io->directions = (int)s->p[3];
+}
+
+/* Seasonal texture (tn_season_texture, procedural) of the heights before it at one time of the
+   year, its insolation's horizon bounded (tn__world_climate_setup). The rest is per pixel
+   (climate, snow and vegetation year, slope, hillshade: halo 1). Two whole-map steps are left
+   out: the detail noise (tn_noise_perlin of the whole map, stretched to its own min..max;
+   detail = none) and the downsampled insolation of maps over 1024 px (the world computes it at
+   full size). */
+static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    double shade;
+    tn_status st;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((st = tn__world_climate_setup(s, w, base_dir, &s->halo))) return st;
+    if ((st = tn__world_num(s, "shade", 0, 0, 1, &shade))) return st;
+    s->p[4] = (float)shade;
     s->factor = 1;
     s->out_w = s->in_w;
     s->out_h = s->in_h;
     s->out_c = 3;
     s->out_heights = 0;
-    if (s->in_w < 2 || s->in_h < 2) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: season needs a raster of at least 2 x 2", s->line);
     return TN_OK;
 }
 
@@ -31250,9 +31279,7 @@ static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *
     tn_status st;
     (void)w;
     memset(&so, 0, sizeof so);
-    so.insolation.dx = so.insolation.dy = s->p[5];
-    so.insolation.max_distance = s->p[2];
-    so.insolation.directions = (int)s->p[3];
+    tn__world_insolation_opts(&so.insolation, s);
     so.shade = s->p[4];
     so.detail = -1.0f; /* the detail noise is a whole-map Perlin map stretched to its min..max */
     st = tn_insolation(&ins, in, s->p[0], &so.insolation);
@@ -31260,6 +31287,93 @@ static tn_status tn__world_season_run(const tn__world_stage *s, const tn_world *
     if (!st) st = tn__world_crop(&tex, in_r, r, out);
     tn_image_free(&ins);
     tn_image_free(&tex);
+    return st;
+}
+
+/* tn_kpd_generate average-pools the map it is given to 1/2 and 1/4, so its windows start at
+   multiples of 4 of that map: the map the kpd row hands it must start at a multiple of 4 of the
+   row's raster for its pooled cells to be the whole map's. */
+#define TN__WORLD_KPD_ALIGN 4
+
+/* The KPD seasonal network (tn_kpd_generate through the "kpd" method) on the heights before it,
+   at one time of the year, its values mapped from the model's range to [0, 1]. Its windows are
+   exact (a pixel depends on the map within the model's halo) once the map it is given starts on
+   the same 4 px grid as the whole map: the run hands it r grown by the halo and one pooled cell
+   (so no window it computes reads the map's clamped edge) and aligned outward in the row's own
+   coordinates, and the insolation (models of condition "ours") is computed around that map
+   with the season row's bounded horizon. p[6]: the growth before alignment. */
+static tn_status tn__world_kpd_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
+{
+    const tn_kpd *m;
+    int ins_halo;
+    tn_status st;
+    if ((st = tn__world_need_heights(s))) return st;
+    if ((st = tn__world_climate_setup(s, w, base_dir, &ins_halo))) return st;
+    if ((st = tn__world_model(s, w, base_dir, "kpd"))) return st;
+    m = (const tn_kpd *)s->model;
+    if (s->out_c > 4)
+        return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: kpd model with %d channels; a tile holds at most 4", s->line, s->out_c);
+    s->climate->latitude = s->p[0]; /* the row's latitude=, which the insolation used too (condition cond3 reads it) */
+    s->climate->has_latitude = 1;
+    s->p[6] = (float)(s->method->halo(s->model) + TN__WORLD_KPD_ALIGN);
+    s->halo = (int)s->p[6] + TN__WORLD_KPD_ALIGN - 1 + (m->condition == TN_KPD_OURS ? ins_halo : 0);
+    s->factor = 1;
+    s->out_w = s->in_w;
+    s->out_h = s->in_h;
+    s->out_heights = 0;
+    return TN_OK;
+}
+
+/* Axis [*a, *b) grown by g and aligned outward to TN__WORLD_KPD_ALIGN, clipped to [0, n). */
+static void tn__world_kpd_axis(long *a, long *b, int g, int n)
+{
+    *a -= g;
+    *b += g;
+    *a = *a < 0 ? 0 : *a / TN__WORLD_KPD_ALIGN * TN__WORLD_KPD_ALIGN;
+    *b = (*b + TN__WORLD_KPD_ALIGN - 1) / TN__WORLD_KPD_ALIGN * TN__WORLD_KPD_ALIGN;
+    if (*b > n) *b = n;
+}
+
+static tn_status tn__world_kpd_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                   tn_image *out)
+{
+    const tn_kpd *m = (const tn_kpd *)s->model;
+    tn_method_input mi;
+    tn_image ins = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, dins = {0, 0, 0, NULL};
+    long ax = r.x, bx = (long)r.x + r.w, ay = r.y, by = (long)r.y + r.h;
+    tn_rect d, win;
+    float span = m->hi - m->lo;
+    size_t i, n;
+    tn_status st;
+    (void)w;
+    tn__world_kpd_axis(&ax, &bx, (int)s->p[6], s->in_w);
+    tn__world_kpd_axis(&ay, &by, (int)s->p[6], s->in_h);
+    d.x = (int)ax;
+    d.y = (int)ay;
+    d.w = (int)(bx - ax);
+    d.h = (int)(by - ay);
+    memset(&mi, 0, sizeof mi);
+    st = tn__world_crop(in, in_r, d, &dem);
+    if (!st && m->condition == TN_KPD_OURS) {
+        tn_insolation_opts io;
+        tn__world_insolation_opts(&io, s);
+        st = tn_insolation(&ins, in, s->p[0], &io);
+        if (!st) st = tn__world_crop(&ins, in_r, d, &dins);
+        mi.insolation = &dins;
+    }
+    mi.dem = &dem;
+    mi.climate = s->climate;
+    mi.time = s->p[1];
+    win.x = r.x - d.x;
+    win.y = r.y - d.y;
+    win.w = r.w;
+    win.h = r.h;
+    if (!st) st = s->method->generate_window(out, s->model, &mi, win);
+    n = (size_t)r.w * r.h * s->out_c;
+    for (i = 0; !st && i < n; i++) out->data[i] = (out->data[i] - m->lo) / span;
+    tn_image_free(&ins);
+    tn_image_free(&dins);
+    tn_image_free(&dem);
     return st;
 }
 
@@ -31440,6 +31554,9 @@ static const tn__world_method tn__world_methods[] = {
     {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
                         "latitude=(the climate's) time=6 (months from mid-January) distance=3000 (horizon metres) directions=32 shade=0 "
                         "(no detail noise)", tn__world_season_setup, tn__world_season_run},
+    {"kpd", 0, NULL, "operation on heights, the model's channels in [0, 1] out, halo the model's (64) + 7 (4 px alignment) + "
+                     "ceil(distance / cellsize) + 2 (insolation, condition ours): model=FILE.tnw climate=FILE.csv or koppen=CODE "
+                     "latitude=(the climate's) time=6 distance=3000 directions=32", tn__world_kpd_setup, tn__world_kpd_run},
     {"blur", 0, NULL, "operation, halo round(4 sigma): sigma=1", tn__world_blur_setup, tn__world_blur_run},
     {"hillshade", 0, NULL, "operation on heights, halo 1: azimuth=315 altitude=45 z=1 (spacing: cellsize)", tn__world_hillshade_setup,
      tn__world_hillshade_run},
@@ -31593,7 +31710,7 @@ static tn_status tn__world_parse(tn_world *w, tn__world_impl *im, char *text, co
                 if (!strcmp(word[0], tn__world_methods[k].name)) m = &tn__world_methods[k];
             if (!m)
                 return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: unknown setting or method '%s' (settings: world seed height "
-                                "cellsize tile; methods: perlin explicit texgan singan gnn singan-refine season blur hillshade normalmap detail)", ln, word[0]);
+                                "cellsize tile; methods: perlin explicit texgan singan gnn singan-refine season kpd blur hillshade normalmap detail)", ln, word[0]);
             if (m->refuse) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: %s cannot be computed tile by tile: %s", ln, m->name, m->refuse);
             if (im->n == TN__WORLD_MAX_STAGES) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d stages", ln, TN__WORLD_MAX_STAGES);
             if (nw > TN__WORLD_MAX_KV + 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: more than %d parameters", ln, TN__WORLD_MAX_KV);

@@ -398,6 +398,74 @@ TN_TEST(gnn_tiles_equal_the_whole_map)
     remove(sk_path);
 }
 
+/* The KPD network on Perlin heights: tiles (whose maps start anywhere) equal the whole map,
+   which is tn_kpd_generate of the whole map with its insolation of the same bounded horizon, in
+   the model's range mapped to [0, 1]. A row without a model, with another method's model,
+   without a climate or without cellsize fails at setup, naming its line. */
+TN_TEST(kpd_tiles_equal_the_whole_map)
+{
+    const char *heights = "world 190 130\nseed 4\nheight 200 2600\ncellsize 30\nperlin frequency=3 octaves=6 contrast=1.5\n";
+    tn_test_kpd_set k;
+    tn_kpd_opts o;
+    tn_kpd m;
+    tn_world w, p;
+    tn_image whole = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, ins = {0, 0, 0, NULL}, ref = {0, 0, 0, NULL};
+    tn_insolation_opts io;
+    tn_climate c;
+    tn_rect all = {0, 0, 190, 130};
+    char spec[1024], m_path[512];
+    size_t i, n = (size_t)190 * 130 * 3;
+    int bits = 0, same = 1;
+    TN_CHECK(tn_test_kpd_set_make(&k, 40));
+    tn_test_small_kpd_opts(&o, 2);
+    TN_CHECK(tn_kpd_train(&m, k.s, 4, &o, NULL) == TN_OK);
+    tn_test_kpd_set_free(&k);
+    if (!m.weights) return;
+    snprintf(m_path, sizeof m_path, "%s", tn_test_tmp_path("world", "kpd.tnw"));
+    TN_CHECK(tn_kpd_save(m_path, &m) == TN_OK);
+    snprintf(spec, sizeof spec, "%skpd model=%s koppen=Dfb latitude=46 time=4.5 distance=450 directions=8\n", heights, m_path);
+    /* tiles of 45 and 62 px: maps the row hands the model start off the 4 px grid before it aligns them */
+    TN_CHECK(tiles_vs_whole(spec, 45, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tiles_vs_whole(spec, 62, 2, 1, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
+    TN_CHECK(w.halo == TN_KPD_HALO + 4 + 3 + 15 + 2 && w.out_channels == 3 && !w.out_heights);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
+    TN_CHECK(tn_world_parse(&p, heights, NULL) == TN_OK);
+    TN_CHECK(tn_world_rect(&dem, &p, all) == TN_OK);
+    TN_CHECK(tn_climate_koppen(&c, "Dfb") == TN_OK);
+    c.latitude = 46.0f;
+    c.has_latitude = 1;
+    memset(&io, 0, sizeof io);
+    io.dx = io.dy = 30.0f;
+    io.max_distance = 450.0f;
+    io.directions = 8;
+    TN_CHECK(tn_insolation(&ins, &dem, 46.0, &io) == TN_OK);
+    TN_CHECK(tn_kpd_generate(&ref, &m, &dem, &c, &ins, 4.5f, 0, 0, 190, 130) == TN_OK);
+    for (i = 0; i < n && whole.data && ref.data; i++) {
+        float v = (ref.data[i] - m.lo) / (m.hi - m.lo);
+        same &= !memcmp(&v, &whole.data[i], sizeof v);
+    }
+    TN_CHECK(whole.data && ref.data && same);
+    tn_world_free(&w);
+    tn_world_free(&p);
+    tn_image_free(&whole);
+    tn_image_free(&dem);
+    tn_image_free(&ins);
+    tn_image_free(&ref);
+    TN_CHECK(refused("world 150 110\ncellsize 30\nperlin\nkpd koppen=Dfb\n", "line 4: kpd needs model=FILE.tnw"));
+    snprintf(spec, sizeof spec, "world 150 110\ncellsize 30\nperlin\nkpd model=%s\n", m_path);
+    TN_CHECK(refused(spec, "line 4: kpd needs climate=FILE.csv or koppen=CODE"));
+    snprintf(spec, sizeof spec, "world 150 110\nperlin\nkpd model=%s koppen=Dfb\n", m_path);
+    TN_CHECK(refused(spec, "line 3: kpd needs `cellsize"));
+    snprintf(spec, sizeof spec, "world 150 110\ncellsize 30\nperlin\nhillshade\nkpd model=%s koppen=Dfb\n", m_path);
+    TN_CHECK(refused(spec, "line 5: kpd needs heights"));
+    snprintf(spec, sizeof spec, "world 150 110\ncellsize 30\nperlin\nkpd model=%s koppen=Dfb\n", tn_test_ref("texgan_v1_model.tnw"));
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_ERR_FORMAT);
+    TN_CHECK(strstr(tn_last_error(), "line 4: kpd") != NULL);
+    tn_kpd_free(&m);
+    remove(m_path);
+}
+
 TN_TEST(non_local_methods_and_bad_specs_are_refused)
 {
     int i;
@@ -667,6 +735,7 @@ int main(void)
     TN_RUN(perlin_then_singan_refine_tiles_equal_the_whole_map);
     TN_RUN(season_tiles_equal_the_whole_map_with_a_bounded_horizon);
     TN_RUN(gnn_tiles_equal_the_whole_map);
+    TN_RUN(kpd_tiles_equal_the_whole_map);
     TN_RUN(non_local_methods_and_bad_specs_are_refused);
     TN_RUN(tiles_on_disk_resume_and_index);
     TN_RUN(huge_worlds_bounded);
