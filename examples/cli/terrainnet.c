@@ -1534,7 +1534,8 @@ static int run_world(void)
 static const cli_command world_cmd = {"world", CLI_CMD(world), "a world of any size in tiles equal to a whole-map run (PNG tiles + GDAL VRT)",
     "SPEC lines: `world W H` (pixels), `seed N`, `height LO HI` (metres of value 0 and 1; the 16-bit range of every tile), "
     "`cellsize M`, `tile N`, then a generator (perlin, explicit, texgan model=F.tnw, singan model=F.tnw, gnn model=F.tnw sketch=S.tns) "
-    "and local operations (singan-refine model=F.tnw, season koppen=CODE|climate=F.csv distance=M, blur, hillshade, normalmap, detail), "
+    "and local operations (singan-refine model=F.tnw, season koppen=CODE|climate=F.csv distance=M, kpd model=F.tnw koppen=CODE|climate=F.csv, "
+    "blur, hillshade, normalmap, detail), "
     "each `name key=value ...`. Every tile is exactly the pixels a whole-map run has there, so any subset "
     "can be computed alone, in any order, on any machine; tiles already in DIR are skipped (resume), files appear atomically. "
     "Methods that are not local (style, fill, flow, extract) are refused with the reason. See docs/world.md."};
