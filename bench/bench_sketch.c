@@ -22,7 +22,11 @@
      could not leave them), beside the real crops' (real_crop_K lines);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
-   Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...]
+   With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
+   (map_scale: its factor, 1 = none) and without it (one_level): seconds, follow, height_error, and
+   floor_detail: the median |terrain - its Gaussian of 2 px| within 4 px of the drawn valleys over
+   the median elsewhere (the example's own: the plan's floor_detail).
+   Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...] [big=N]
    from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
    range. */
@@ -90,6 +94,75 @@ static void save_strip(const char *path, const tn_image *const *img, int n, floa
     tn_image_free(&strip);
 }
 
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Median |t - its Gaussian of 2 px| within 4 px of rast's valley pixels over the median elsewhere
+   (-1 without valleys). */
+static double floor_detail(const tn_image *t, const tn_image *rast)
+{
+    tn_image b = {0, 0, 0, NULL};
+    size_t n = (size_t)t->width * t->height, nf = 0, ne = 0, k;
+    double *fl = (double *)malloc(n * sizeof(double)), *el = (double *)malloc(n * sizeof(double)), r = -1;
+    int x, y, dx, dy;
+    if (fl && el && !tn_image_blur(&b, t, 2.0f)) {
+        for (y = 0; y < t->height; y++)
+            for (x = 0; x < t->width; x++) {
+                int nv = 0;
+                for (dy = -4; dy <= 4 && !nv; dy++)
+                    for (dx = -4; dx <= 4 && !nv; dx++)
+                        if (x + dx >= 0 && y + dy >= 0 && x + dx < t->width && y + dy < t->height)
+                            nv = rast->data[3 * ((size_t)(y + dy) * t->width + x + dx) + 1] > 0;
+                k = (size_t)y * t->width + x;
+                if (nv) fl[nf++] = fabs(t->data[k] - b.data[k]);
+                else el[ne++] = fabs(t->data[k] - b.data[k]);
+            }
+        qsort(fl, nf, sizeof(double), cmp_double);
+        qsort(el, ne, sizeof(double), cmp_double);
+        if (nf && ne && el[ne / 2] > 0) r = fl[nf / 2] / el[ne / 2];
+    }
+    tn_image_free(&b);
+    free(fl);
+    free(el);
+    return r;
+}
+
+/* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
+static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N)
+{
+    tn_image rast = {0, 0, 0, NULL};
+    int level;
+    if (tn_sketch_rasterise(&rast, asked, N, N)) return;
+    for (level = 0; level < 2; level++) {
+        tn_gnn_generate_opts o;
+        tn_gnn_plan plan;
+        tn_image t = {0, 0, 0, NULL};
+        const char *lv = level ? "one_level" : "map_scale";
+        double t0 = tn_time_seconds(), share = 0, err = 0, secs;
+        size_t q, nq = 0;
+        memset(&o, 0, sizeof o);
+        o.seed = 1;
+        o.map_scale = level ? -1 : 0;
+        if (tn_gnn_plan_of(&plan, model, sk, N, N, &o) || tn_gnn_generate(&t, model, sk, N, N, &o)) {
+            printf("%s_%d_%s: failed (%s)\n", name, N, lv, tn_last_error());
+            continue;
+        }
+        secs = tn_time_seconds() - t0;
+        tn_gnn_ordering(&share, sk, &t, 4, NULL);
+        for (q = 0; q < (size_t)N * N; q++)
+            if (rast.data[3 * q] > 0 || rast.data[3 * q + 1] > 0) err += fabs(t.data[q] - rast.data[3 * q + 2]), nq++;
+        printf("%s_%d_%s: factor %d (example floor_detail %.2f); seconds %.2f; follow %.1f %%; height_error %.2f %% of range; floor_detail %.2f\n",
+               name, N, lv, plan.map_scale, (double)plan.floor_detail, secs, 100 * share, 100 * err / (nq ? nq : 1) / (model->hi - model->lo),
+               floor_detail(&t, &rast));
+        fflush(stdout);
+        tn_image_free(&t);
+    }
+    tn_image_free(&rast);
+}
+
 int main(int argc, char **argv)
 {
     static const char *all[] = {"valley", "summit", "ring", "cross"};
@@ -98,9 +171,9 @@ int main(int argc, char **argv)
     double dxy[2], h0, h1, real[3] = {0, 0, 0};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
-    int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k;
+    int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
     if (argc < 3) {
-        fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b]\n");
+        fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [big=N]\n");
         return 2;
     }
     region = argv[1];
@@ -109,6 +182,7 @@ int main(int argc, char **argv)
         if (!strncmp(argv[a], "finetune=", 9)) finetune = atoi(argv[a] + 9);
         else if (!strncmp(argv[a], "pictures=", 9)) pictures = argv[a] + 9;
         else if (!strncmp(argv[a], "drawings=", 9)) only = argv[a] + 9;
+        else if (!strncmp(argv[a], "big=", 4)) big = atoi(argv[a] + 4);
         else threads = atoi(argv[a]);
     }
     tn_set_threads(threads);
@@ -234,6 +308,7 @@ int main(int argc, char **argv)
             snprintf(path, sizeof path, "%s/sketch_%s_%s.png", pictures, region, all[d]);
             save_strip(path, panel, out[5].data ? 5 : 4, model.lo, model.hi, dxy);
         }
+        if (big >= 16) big_map(all[d], &model, &sk, &asked, big);
         for (w = 0; w < 6; w++) tn_image_free(&out[w]);
         tn_image_free(&rast);
         tn_image_free(&drawing);
