@@ -3596,7 +3596,6 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
     tn_gnn_generate_opts oc = *o;
     tn_rect win, A, r, g;
     tn__gnn_gen Gc;
-    tn_image rast = {0, 0, 0, NULL};
     float *F = NULL, *B = NULL, *C = NULL, *lowF = NULL, *lowB = NULL, *M = NULL, *tmp = NULL, *dist = NULL, *kern = NULL, *corr = NULL,
           *val = NULL, *def = NULL, *res = NULL, sum = 0;
     int *nearest = NULL, cx0, cy0, cx1, cy1, cw, u, v, k;
@@ -3606,6 +3605,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
     memset(&Gc, 0, sizeof Gc);
     if (Wc < 16 || Hc < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: map scale %d leaves a %d x %d map for the large scales (16 a side at least)", f, Wc, Hc);
+    TN_ASSERT(G->pin); /* a grown sketch's (tn__gnn_map_factor) */
     win.x = x, win.y = y, win.w = w, win.h = h;
     A = tn_rect_halo(win, TN__GNN_NOTCH + TN__GNN_BANK + 1, W, H); /* what the notch reads */
     r = tn_rect_halo(A, TN__GNN_PIN, W, H);                       /* what the pinning reads */
@@ -3637,7 +3637,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
     for (k = 0; k <= 2 * K; k++) kern[k] /= sum;
     oc.detail = -1; /* below the low-pass */
     if ((st = tn__gnn_level_run(model, G, ctx, g.x, g.y, g.w, g.h, F)) || (st = tn__gnn_gen_make(model, sketch, Wc, Hc, &oc, &Gc)) ||
-        (st = tn__gnn_level_run(model, &Gc, ctx, cx0, cy0, cw, cy1 - cy0 + 1, C)) || (st = tn_sketch_rasterise(&rast, sketch, W, H)))
+        (st = tn__gnn_level_run(model, &Gc, ctx, cx0, cy0, cw, cy1 - cy0 + 1, C)))
         goto done;
     for (v = 0; v < g.h; v++) /* the small map upsampled */
         for (u = 0; u < g.w; u++) {
@@ -3657,7 +3657,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
         }
     tn__gnn_gauss_rect(F, g, r, W, H, kern, K, tmp, lowF);
     tn__gnn_gauss_rect(B, g, r, W, H, kern, K, tmp, lowB);
-    for (i = 0; i < n; i++) mask[i] = (uint8_t)(rast.data[3 * i + 1] > 0);
+    for (i = 0; i < n; i++) mask[i] = (uint8_t)(G->pin[i] == 2);
     tn__gnn_chamfer(mask, W, H, dist, nearest);
     for (v = 0; v < r.h; v++)
         for (u = 0; u < r.w; u++) {
@@ -3677,7 +3677,6 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
     for (i = 0; i < (size_t)w * h; i++) dst[i] = G->A.mean + G->A.std * res[i];
 done:
     tn__gnn_gen_free(&Gc);
-    tn_image_free(&rast);
     TN_FREE(kern);
     TN_FREE(F);
     TN_FREE(B);
