@@ -67,8 +67,12 @@ bin build build/test build/fuzz build/check build/test/fuzz:
 $(LIB_SAN): src/terrainnet.c terrainnet.h | build
 	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -DTN_INTERNALS -c $< -o $@
 
-build/test/%: tests/%.c $(LIB_SAN) tests/tn_test.h | build/test
-	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< $(if $(call SELF,$<),,$(LIB_SAN)) -o $@ $(LDLIBS)
+# The tests with their own implementation do not wait for the shared one.
+TESTS_SELF := $(patsubst tests/%.c,build/test/%,$(call SELF,$(wildcard tests/test_*.c)))
+$(TESTS_SELF): build/test/%: tests/%.c terrainnet.h tests/tn_test.h | build/test
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< -o $@ $(LDLIBS)
+$(filter-out $(TESTS_SELF),$(TESTS)): build/test/%: tests/%.c $(LIB_SAN) tests/tn_test.h | build/test
+	$(CC) $(WARN) -O1 -g $(ARCH) $(SAN) $(CFLAGS) -I. $< $(LIB_SAN) -o $@ $(LDLIBS)
 
 # Each fuzz driver links the sanitised implementation (its own TERRAINNET_IMPLEMENTATION is for
 # the standalone libFuzzer build). Run without arguments, each replays tests/fuzz/seeds and
@@ -86,11 +90,39 @@ check-layout: | build/check
 	./build/check/check_layout terrainnet.h
 build/test/test_layout: tests/check_layout.c
 
-# Test binaries build two at a time even from a plain `make test`: each is a full sanitised
-# compile of the header, so a serial build would dominate the run.
-test: bin/terrainnet | build/check build/test
-	@$(MAKE) --no-print-directory -j2 $(TESTS) $(FUZZ_REPLAY)
-	@sh tests/run_tests.sh $(TESTS) $(FUZZ_REPLAY)
+# `make test` runs as jobs two at a time, even from a plain `make test`: first the two whole
+# sanitised compiles of the implementation (the shared one and test_robust's own), side by side;
+# then one `make -j2` of the rest, each job the build and the run of one test program or CLI
+# script, or one check_compile configuration. A job writes the program's output, exit status and
+# times to build/test/par/NAME.*; tests/run_tests.sh then reads them back in order and sums them.
+# The jobs start in the order of RUNS, the longest first, so that the two slots finish together
+# (build/test/times.txt after a run lists each job's CPU and wall seconds).
+TEST_FIRST := test_gnn readme_runs test_cli test_style compile_portable test_bf16_amx test_world test_singan \
+  test_png test_finedetail test_robust test_io test_season test_bf16 compile_gcc_c99 compile_no_threads \
+  compile_no_tls compile_io_render test_gemm
+TEST_NAMES = check_header $(addprefix compile_,$(shell sh tests/check_compile.sh --list)) test_cli readme_runs \
+  $(notdir $(TESTS) $(FUZZ_REPLAY))
+RUNS = $(addprefix build/test/par/,$(addsuffix .rc,$(TEST_FIRST) $(filter-out $(TEST_FIRST),$(TEST_NAMES))))
+RUN = @sh tests/run_tests.sh --run
+test: bin/terrainnet | build/check build/test build/test/fuzz
+	@rm -rf build/test/par && mkdir -p build/test/par
+	@$(MAKE) --no-print-directory -k -j2 $(LIB_SAN) build/test/test_robust || true
+	@$(MAKE) --no-print-directory -k -j2 $(RUNS) || true
+	@sh tests/run_tests.sh $(TEST_NAMES)
+build/test/par/test_%.rc:
+	@$(MAKE) --no-print-directory build/test/test_$*
+	$(RUN) test_$* build/test/test_$*
+build/test/par/fuzz_%.rc:
+	@$(MAKE) --no-print-directory build/test/fuzz/fuzz_$*
+	$(RUN) fuzz_$* build/test/fuzz/fuzz_$*
+build/test/par/compile_%.rc:
+	$(RUN) compile_$* env ARCH="$(ARCH)" sh tests/check_compile.sh $*
+build/test/par/check_header.rc:
+	$(RUN) check_header $(MAKE) --no-print-directory check-header
+build/test/par/test_cli.rc:
+	$(RUN) test_cli sh tests/test_cli.sh
+build/test/par/readme_runs.rc:
+	$(RUN) readme_runs sh tests/readme_runs.sh
 
 # examples/world_mpi.c with OpenMPI (Debian: openmpi-bin libopenmpi-dev); skipped without mpicc.
 MPICC ?= mpicc

@@ -87,6 +87,19 @@ static void model_dpbf16ps(int c, int a, int b)
 #define _tile_release() (model_configured = 0)
 #endif
 
+/* Only @@core ... @@train compiled in (the engine): the tile path of @@gemm is all this tests. */
+#define TN_NO_NOISE
+#define TN_NO_SKETCH
+#define TN_NO_EXTRACT
+#define TN_NO_FINEDETAIL
+#define TN_NO_STYLE
+#define TN_NO_TEXGAN
+#define TN_NO_SINGAN
+#define TN_NO_GNN
+#define TN_NO_SEASON
+#define TN_NO_RENDER
+#define TN_NO_EXPORT
+#define TN_NO_WORLD
 #define TERRAINNET_IMPLEMENTATION
 #include "terrainnet.h"
 #include "tn_test.h"
