@@ -3305,6 +3305,13 @@ TN_API double tn_time_seconds(void)
 }
 
 TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* qsort's order of floats, ascending. */
+TN__SHARED int tn__cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return x < y ? -1 : x > y;
+}
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails
@@ -21554,12 +21561,6 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
 /* The 5-point Laplacian at q, rows `stride` floats apart. */
 static float tn__sg_lap5(const float *q, int stride) { return q[1] + q[-1] + q[stride] + q[-stride] - 4.0f * q[0]; }
 
-static int tn__sg_cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return x < y ? -1 : x > y;
-}
-
 static int tn__sg_cmp_ranked(const void *a, const void *b)
 {
     const tn__sg_ranked *x = (const tn__sg_ranked *)a, *y = (const tn__sg_ranked *)b;
@@ -21656,7 +21657,7 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
             }
         s->nlapq = k;
         s->lapms = s->lapms / (double)k + 1e-20;
-        qsort(s->lapq, k, sizeof(float), tn__sg_cmp_float);
+        qsort(s->lapq, k, sizeof(float), tn__cmp_float);
     }
     /* the reconstruction's input: the fixed noise map at scale 0; above it the EXAMPLE's coarser
        scale upsampled (teacher forcing), not the coarser generators' reconstruction: that one's
@@ -25933,12 +25934,6 @@ static int tn__gnn_map_factor(const tn__gnn_gen *G, const tn_contour_set *sketch
     return s >= TN__GNN_SCALE_MAX ? TN__GNN_SCALE_MAX : (int)(s + 0.5f);
 }
 
-static int tn__gnn_float_cmp(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 /* The share of the example's detail (|heights - their Gaussian of 2 px|, median) within
    TN__GNN_FLOOR_NEAR px of its main valleys (the highest Strahler order) against the whole
    example's, clamped to 0..1: how much smoother its valley floors are than the rest. 1 when the
@@ -25983,8 +25978,8 @@ static tn_status tn__gnn_floor_detail(const tn_gnn *model, const tn__gnn_gen *G,
             all[i] = fabsf(z.data[i] - b.data[i]);
             if (d[i] <= TN__GNN_FLOOR_NEAR) floor_px[m++] = all[i];
         }
-        qsort(all, n, sizeof(float), tn__gnn_float_cmp);
-        qsort(floor_px, m, sizeof(float), tn__gnn_float_cmp);
+        qsort(all, n, sizeof(float), tn__cmp_float);
+        qsort(floor_px, m, sizeof(float), tn__cmp_float);
         if (m && all[n / 2] > 0) *share = tn__clampf(floor_px[m / 2] / all[n / 2], 0.0f, 1.0f);
     }
     TN_FREE(mains.items);
@@ -26005,16 +26000,6 @@ static tn_status tn__gnn_level_run(const tn_gnn *model, tn__gnn_gen *G, tn_ctx *
     tn_status st;
     if (G->detail && !G->fd.low && (st = tn__gnn_detail_index(model, G))) return st;
     return G->detail ? tn__gnn_gen_detailed(G, ctx, x, y, w, h, dst) : tn__gnn_gen_run(G, G->w, ctx, x, y, w, h, dst, NULL, "gnn-generate");
-}
-
-/* Catmull-Rom weights at fraction t. */
-static void tn__gnn_cubic(float t, float *k)
-{
-    float t2 = t * t, t3 = t2 * t;
-    k[0] = -0.5f * t3 + t2 - 0.5f * t;
-    k[1] = 1.5f * t3 - 2.5f * t2 + 1;
-    k[2] = -1.5f * t3 + 2 * t2 + 0.5f * t;
-    k[3] = 0.5f * t3 - 0.5f * t2;
 }
 
 /* The Gaussian kern (2K + 1 taps) of src (g's layout, g within the W x H map) over r (within g
@@ -26109,8 +26094,8 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
             float kx[4], ky[4], fx = ((float)(g.x + u) + 0.5f) / (float)f - 0.5f, fy = ((float)(g.y + v) + 0.5f) / (float)f - 0.5f;
             int ix = (int)floorf(fx), iy = (int)floorf(fy), j, l;
             double up = 0;
-            tn__gnn_cubic(fx - (float)ix, kx);
-            tn__gnn_cubic(fy - (float)iy, ky);
+            for (j = 0; j < 4; j++) /* Catmull-Rom: tn_image_resize's bicubic kernel */
+                kx[j] = tn__keys_cubic(fx - (float)ix - (float)(j - 1)), ky[j] = tn__keys_cubic(fy - (float)iy - (float)(j - 1));
             for (j = 0; j < 4; j++)
                 for (l = 0; l < 4; l++) {
                     int cx = ix - 1 + l, cy = iy - 1 + j;

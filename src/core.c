@@ -527,6 +527,13 @@ TN_API double tn_time_seconds(void)
 }
 
 TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* qsort's order of floats, ascending. */
+TN__SHARED int tn__cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return x < y ? -1 : x > y;
+}
 static int tn__clampi(int v, int lo, int hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
 /* Option rules for the tn__X_validate functions, which run after tn_X_defaults: each rule fails

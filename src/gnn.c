@@ -3468,12 +3468,6 @@ static int tn__gnn_map_factor(const tn__gnn_gen *G, const tn_contour_set *sketch
     return s >= TN__GNN_SCALE_MAX ? TN__GNN_SCALE_MAX : (int)(s + 0.5f);
 }
 
-static int tn__gnn_float_cmp(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
 /* The share of the example's detail (|heights - their Gaussian of 2 px|, median) within
    TN__GNN_FLOOR_NEAR px of its main valleys (the highest Strahler order) against the whole
    example's, clamped to 0..1: how much smoother its valley floors are than the rest. 1 when the
@@ -3518,8 +3512,8 @@ static tn_status tn__gnn_floor_detail(const tn_gnn *model, const tn__gnn_gen *G,
             all[i] = fabsf(z.data[i] - b.data[i]);
             if (d[i] <= TN__GNN_FLOOR_NEAR) floor_px[m++] = all[i];
         }
-        qsort(all, n, sizeof(float), tn__gnn_float_cmp);
-        qsort(floor_px, m, sizeof(float), tn__gnn_float_cmp);
+        qsort(all, n, sizeof(float), tn__cmp_float);
+        qsort(floor_px, m, sizeof(float), tn__cmp_float);
         if (m && all[n / 2] > 0) *share = tn__clampf(floor_px[m / 2] / all[n / 2], 0.0f, 1.0f);
     }
     TN_FREE(mains.items);
@@ -3540,16 +3534,6 @@ static tn_status tn__gnn_level_run(const tn_gnn *model, tn__gnn_gen *G, tn_ctx *
     tn_status st;
     if (G->detail && !G->fd.low && (st = tn__gnn_detail_index(model, G))) return st;
     return G->detail ? tn__gnn_gen_detailed(G, ctx, x, y, w, h, dst) : tn__gnn_gen_run(G, G->w, ctx, x, y, w, h, dst, NULL, "gnn-generate");
-}
-
-/* Catmull-Rom weights at fraction t. */
-static void tn__gnn_cubic(float t, float *k)
-{
-    float t2 = t * t, t3 = t2 * t;
-    k[0] = -0.5f * t3 + t2 - 0.5f * t;
-    k[1] = 1.5f * t3 - 2.5f * t2 + 1;
-    k[2] = -1.5f * t3 + 2 * t2 + 0.5f * t;
-    k[3] = 0.5f * t3 - 0.5f * t2;
 }
 
 /* The Gaussian kern (2K + 1 taps) of src (g's layout, g within the W x H map) over r (within g
@@ -3644,8 +3628,8 @@ static tn_status tn__gnn_map_scaled(const tn_gnn *model, tn__gnn_gen *G, const t
             float kx[4], ky[4], fx = ((float)(g.x + u) + 0.5f) / (float)f - 0.5f, fy = ((float)(g.y + v) + 0.5f) / (float)f - 0.5f;
             int ix = (int)floorf(fx), iy = (int)floorf(fy), j, l;
             double up = 0;
-            tn__gnn_cubic(fx - (float)ix, kx);
-            tn__gnn_cubic(fy - (float)iy, ky);
+            for (j = 0; j < 4; j++) /* Catmull-Rom: tn_image_resize's bicubic kernel */
+                kx[j] = tn__keys_cubic(fx - (float)ix - (float)(j - 1)), ky[j] = tn__keys_cubic(fy - (float)iy - (float)(j - 1));
             for (j = 0; j < 4; j++)
                 for (l = 0; l < 4; l++) {
                     int cx = ix - 1 + l, cy = iy - 1 + j;

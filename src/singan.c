@@ -741,12 +741,6 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
 /* The 5-point Laplacian at q, rows `stride` floats apart. */
 static float tn__sg_lap5(const float *q, int stride) { return q[1] + q[-1] + q[stride] + q[-stride] - 4.0f * q[0]; }
 
-static int tn__sg_cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return x < y ? -1 : x > y;
-}
-
 static int tn__sg_cmp_ranked(const void *a, const void *b)
 {
     const tn__sg_ranked *x = (const tn__sg_ranked *)a, *y = (const tn__sg_ranked *)b;
@@ -843,7 +837,7 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
             }
         s->nlapq = k;
         s->lapms = s->lapms / (double)k + 1e-20;
-        qsort(s->lapq, k, sizeof(float), tn__sg_cmp_float);
+        qsort(s->lapq, k, sizeof(float), tn__cmp_float);
     }
     /* the reconstruction's input: the fixed noise map at scale 0; above it the EXAMPLE's coarser
        scale upsampled (teacher forcing), not the coarser generators' reconstruction: that one's
