@@ -6,7 +6,7 @@
 set -eu
 src=$(dirname "$0")
 SECTIONS="core thread image io io_formats metrics gemm tensor ops loss optim train noise finedetail sketch
-extract style texgan singan gnn gnn_membrane gnn_grow season method render export world"
+extract style texgan singan gnn gnn_membrane gnn_grow gnn_scale season method render export world"
 part() { # part api|impl FILE
     awk -v part="$1" '
         { line[NR] = $0 }

@@ -352,17 +352,22 @@ TN__INTERNAL tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *f
 
 /* The membrane with bounded influence, so that a window of a map can be computed alone (tiled
    generation): the map is cut into blocks of B = 128 px; each block's membrane is solved on the
-   block grown by a halo of 64 px (clipped to the map; grown further, step by step, while it holds
-   no sketch pixel), and a pixel blends the solutions of the 4 blocks around it by its distance
-   to their centres (a smoothstep each way). A pixel therefore depends only on sketch pixels within ~256 px, on
-   any map size, and the result is continuous. Maps whose every block would see the whole map
-   (up to 128 + 64 px a side, the training crops) take one plain solve: the global membrane. */
+   block grown by a halo of 64 px (clipped to the map; doubled while it holds no sketch pixel), and
+   a pixel blends the solutions of the 4 blocks around it by its distance to their centres (a
+   smoothstep each way), so the result is continuous and a block keeps only itself and half a
+   block around it. A domain of more than TN__GNN_MSOLVE pixels, a block far from every stroke,
+   is solved on a grid coarsened by 2, 4, ... (a cell fixed at the mean of its sketch pixels) and
+   interpolated: what it keeps holds no sketch pixel and is smooth, and the cost of a block stays
+   bounded on any map. Maps whose every block would see the whole map (up to 128 + 64 px a side,
+   the training crops) take one plain solve: the global membrane. */
 #define TN__GNN_MB 128
 #define TN__GNN_MHALO 64
+#define TN__GNN_MSOLVE (256 * 256)
 
 typedef struct tn__gnn_mblock {
     int x0, y0, w, h;         /* solved domain */
-    float *sol;               /* w x h */
+    int sx, sy, sw, sh;       /* kept: the block and B / 2 around it (what the blend reads) */
+    float *sol;               /* sw x sh */
     tn_status st;
 } tn__gnn_mblock;
 
@@ -373,15 +378,34 @@ typedef struct tn__gnn_mjob {
     tn__gnn_mblock *b;
 } tn__gnn_mjob;
 
+/* Block B's domain (x0, y0, w, h) as a grid of cells of c x c px: v, f (cw x ch) the mean of the
+   fixed values in a cell and whether it holds one; cnt: cw x ch scratch. */
+static void tn__gnn_mblock_cells(const tn__gnn_mjob *J, const tn__gnn_mblock *B, int c, int cw, float *v, uint8_t *f, int *cnt)
+{
+    int x, y;
+    size_t i, nc = (size_t)cw * ((B->h + c - 1) / c);
+    for (i = 0; i < nc; i++) v[i] = 0, cnt[i] = 0;
+    for (y = 0; y < B->h; y++)
+        for (x = 0; x < B->w; x++) {
+            size_t p = (size_t)(B->y0 + y) * J->W + B->x0 + x, q = (size_t)(y / c) * cw + x / c;
+            if (J->fixed[p]) v[q] += J->val[p], cnt[q]++;
+        }
+    for (i = 0; i < nc; i++) {
+        f[i] = (uint8_t)(cnt[i] > 0);
+        if (cnt[i]) v[i] /= (float)cnt[i];
+    }
+}
+
 static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
 {
     tn__gnn_mjob *J = (tn__gnn_mjob *)vj;
     size_t bi;
     for (bi = b0; bi < b1; bi++) {
         tn__gnn_mblock *B = &J->b[bi];
-        int bx = B->x0, by = B->y0, halo = TN__GNN_MHALO, x, y, any = 0;
-        float *v = NULL;
+        int bx = B->x0, by = B->y0, halo = TN__GNN_MHALO, x, y, any = 0, c = 1, cw, ch;
+        float *v = NULL, *sol = NULL;
         uint8_t *f = NULL;
+        int *cnt = NULL;
         for (;;) { /* the domain: block + halo, grown until it holds a fixed pixel */
             B->x0 = bx - halo > 0 ? bx - halo : 0;
             B->y0 = by - halo > 0 ? by - halo : 0;
@@ -392,19 +416,39 @@ static void tn__gnn_mblock_task(void *vj, size_t b0, size_t b1)
             if (any || (B->w == J->W && B->h == J->H)) break;
             halo *= 2;
         }
-        v = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
-        f = (uint8_t *)tn__alloc((size_t)B->w * B->h);
-        B->sol = (float *)tn__alloc((size_t)B->w * B->h * sizeof(float));
-        if (!v || !f || !B->sol) B->st = TN_ERR_OUT_OF_MEMORY;
+        B->sx = bx - TN__GNN_MB / 2 > 0 ? bx - TN__GNN_MB / 2 : 0;
+        B->sy = by - TN__GNN_MB / 2 > 0 ? by - TN__GNN_MB / 2 : 0;
+        B->sw = (bx + TN__GNN_MB + TN__GNN_MB / 2 < J->W ? bx + TN__GNN_MB + TN__GNN_MB / 2 : J->W) - B->sx;
+        B->sh = (by + TN__GNN_MB + TN__GNN_MB / 2 < J->H ? by + TN__GNN_MB + TN__GNN_MB / 2 : J->H) - B->sy;
+        while ((size_t)((B->w + c - 1) / c) * (size_t)((B->h + c - 1) / c) > TN__GNN_MSOLVE) c *= 2;
+        cw = (B->w + c - 1) / c;
+        ch = (B->h + c - 1) / c;
+        v = (float *)tn__alloc((size_t)cw * ch * sizeof(float));
+        f = (uint8_t *)tn__alloc((size_t)cw * ch);
+        cnt = (int *)tn__alloc((size_t)cw * ch * sizeof(int));
+        sol = (float *)tn__alloc((size_t)cw * ch * sizeof(float));
+        B->sol = (float *)tn__alloc((size_t)B->sw * B->sh * sizeof(float));
+        if (!v || !f || !cnt || !sol || !B->sol) B->st = TN_ERR_OUT_OF_MEMORY;
         else {
-            for (y = 0; y < B->h; y++) {
-                memcpy(v + (size_t)y * B->w, J->val + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w * sizeof(float));
-                memcpy(f + (size_t)y * B->w, J->fixed + (size_t)(B->y0 + y) * J->W + B->x0, (size_t)B->w);
-            }
-            B->st = tn__gnn_membrane_solve(v, f, B->w, B->h, B->sol);
+            tn__gnn_mblock_cells(J, B, c, cw, v, f, cnt);
+            B->st = tn__gnn_membrane_solve(v, f, cw, ch, sol);
         }
+        for (y = 0; !B->st && y < B->sh; y++) /* the kept pixels: the cells' values, bilinear at their centres */
+            for (x = 0; x < B->sw; x++) {
+                float u = ((float)(B->sx + x - B->x0) + 0.5f) / (float)c - 0.5f, t = ((float)(B->sy + y - B->y0) + 0.5f) / (float)c - 0.5f;
+                int i0, j0, i1, j1;
+                u = tn__clampf(u, 0.0f, (float)(cw - 1));
+                t = tn__clampf(t, 0.0f, (float)(ch - 1));
+                i0 = (int)u, j0 = (int)t;
+                i1 = i0 + 1 < cw ? i0 + 1 : i0, j1 = j0 + 1 < ch ? j0 + 1 : j0;
+                u -= (float)i0, t -= (float)j0;
+                B->sol[(size_t)y * B->sw + x] = (1 - t) * ((1 - u) * sol[(size_t)j0 * cw + i0] + u * sol[(size_t)j0 * cw + i1]) +
+                                                t * ((1 - u) * sol[(size_t)j1 * cw + i0] + u * sol[(size_t)j1 * cw + i1]);
+            }
         TN_FREE(v);
         TN_FREE(f);
+        TN_FREE(cnt);
+        TN_FREE(sol);
     }
 }
 
@@ -475,7 +519,7 @@ static tn_status tn__gnn_membrane_rect(const float *val, const uint8_t *fixed, i
             w[1] = tx * (1 - ty);
             w[2] = (1 - tx) * ty;
             w[3] = tx * ty;
-            for (q = 0; q < 4; q++) v += w[q] * bl[q]->sol[(size_t)(gy - bl[q]->y0) * bl[q]->w + gx - bl[q]->x0];
+            for (q = 0; q < 4; q++) v += w[q] * bl[q]->sol[(size_t)(gy - bl[q]->sy) * bl[q]->sw + gx - bl[q]->sx];
             out[(size_t)y * rw + x] = v;
         }
     for (i = 0; i < nb; i++) TN_FREE(J.b[i].sol);

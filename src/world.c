@@ -126,9 +126,8 @@ typedef struct tn__world_stage {
     const tn_method *method;              /* a learned stage's (texgan, singan, gnn, singan-refine, kpd) */
     void *model;                          /* its model (method->free) */
     tn_method_input input;                /* a learned generator's: the world's seed and size */
-    tn_gnn_generate_opts gnn_go;          /* gnn: resolved at setup, the gain included */
     tn_climate *climate;                  /* season, kpd */
-    tn_contour_set *sketch;               /* gnn: in its own canvas, scaled to the world */
+    tn_gnn_prepared *gnn;                 /* gnn: the generation prepared at setup (the gain tested once) */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -449,12 +448,12 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     return tn__world_model(s, w, base_dir, "singan");
 }
 
-/* GNN terrain of a sketch (tn_gnn_generate_window, exact windows: a pixel depends on the sketch
-   within 2 rounds (radius + 13) px and the membrane's blocks). The sketch's canvas is scaled to
-   the world. Each call cuts the whole sketch into parts and rasterises it at the world's size
-   (~21 bytes per world pixel), so a tile's memory and time follow the world, not the tile: the
-   row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map optimisation) is not offered.
-   The residual gain (tn_gnn_gain) is tested once, at setup, and every tile uses it. */
+/* GNN terrain of a sketch: tn_gnn_prepare once at setup (the sketch, its canvas scaled to the
+   world, grown, cut into parts and rasterised at the world's size, the gain tested), then each
+   tile is a tn_gnn_prepared_window (exact windows: a pixel depends on the sketch within 2 rounds
+   (radius + 13) px and the membrane's blocks). The prepared generation holds about 20 bytes per
+   world pixel, so the row is capped at TN__WORLD_GNN_MAX_PX. The fine-tune (a whole-map
+   optimisation) is not offered. */
 #define TN__WORLD_GNN_MAX_PX (4096LL * 4096LL)
 
 static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
@@ -462,13 +461,15 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     static const char *hname[3] = {"auto", "example", "unit"}, *ename[3] = {"auto", "aligned", "none"};
     int ks = tn__world_find(s, "sketch"), kh = tn__world_find(s, "heights"), ke = tn__world_find(s, "embed");
     int i, hv = 0, ev = 0;
+    tn_contour_set sketch;
+    tn_gnn_generate_opts go;
     char *path;
     tn_status st;
     if (ks < 0) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn needs model=FILE.tnw and sketch=FILE.tns", s->line);
     if ((long long)w->width * w->height > TN__WORLD_GNN_MAX_PX || w->width < 16 || w->height < 16)
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn worlds are 16 .. 4096 x 4096 pixels (this one %d x %d): GNN generation "
-                        "rasterises the whole sketch at the world's size for every tile (~21 bytes per world pixel), so its memory "
-                        "follows the world, not the tile", s->line, w->width, w->height);
+                        "prepares the whole sketch at the world's size (~20 bytes per world pixel), so its memory follows the world, "
+                        "not the tile", s->line, w->width, w->height);
     for (i = 0; i < 3; i++) {
         if (kh >= 0 && !strcmp(s->val[kh], hname[i])) hv = i + 1;
         if (ke >= 0 && !strcmp(s->val[ke], ename[i])) ev = i + 1;
@@ -476,24 +477,25 @@ static tn_status tn__world_gnn_setup(tn__world_stage *s, const tn_world *w, cons
     if ((kh >= 0 && !hv) || (ke >= 0 && !ev))
         return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: gnn heights=auto|example|unit, embed=auto|aligned|none", s->line);
     if ((st = tn__world_model(s, w, base_dir, "gnn"))) return st;
-    if (!(s->sketch = (tn_contour_set *)tn__calloc(sizeof *s->sketch))) return tn__oom();
     if (!(path = tn__world_join(base_dir, s->val[ks]))) return tn__oom();
-    st = tn_sketch_load(s->sketch, path);
+    st = tn_sketch_load(&sketch, path);
     TN_FREE(path);
-    if (st) {
-        TN_FREE(s->sketch);
-        s->sketch = NULL;
-        return st;
-    }
-    memset(&s->gnn_go, 0, sizeof s->gnn_go);
-    s->gnn_go.seed = w->seed;
-    s->gnn_go.heights = hv ? hv - 1 : TN_GNN_HEIGHTS_AUTO;
-    s->gnn_go.embeddings = ev ? ev - 1 : TN_GNN_EMBED_AUTO;
-    if ((st = tn_gnn_gain(&s->gnn_go.gain, (const tn_gnn *)s->model, s->sketch, w->width, w->height, &s->gnn_go))) return st;
-    if (!(s->gnn_go.gain > 0)) s->gnn_go.gain = -1.0f; /* 0 would test the gain again in every tile */
-    s->input.sketch = s->sketch;
-    s->input.opts = &s->gnn_go;
-    return TN_OK;
+    if (st) return st;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    go.heights = hv ? hv - 1 : TN_GNN_HEIGHTS_AUTO;
+    go.embeddings = ev ? ev - 1 : TN_GNN_EMBED_AUTO;
+    st = tn_gnn_prepare(&s->gnn, (const tn_gnn *)s->model, &sketch, w->width, w->height, &go);
+    tn_contour_set_free(&sketch);
+    return st;
+}
+
+static tn_status tn__world_gnn_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r, tn_image *out)
+{
+    (void)w;
+    (void)in;
+    (void)in_r;
+    return tn_gnn_prepared_window(out, s->gnn, r.x, r.y, r.w, r.h);
 }
 
 /* ---- local operations ---- */
@@ -1021,9 +1023,9 @@ static const tn__world_method tn__world_methods[] = {
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
                         "the world's height range clips them)", tn__world_singan_setup, tn__world_learned_run},
-    {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_generate_window), worlds up to 4096 x 4096: "
+    {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_prepared_window), worlds up to 4096 x 4096: "
                      "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
-     tn__world_gnn_setup, tn__world_learned_run},
+     tn__world_gnn_setup, tn__world_gnn_run},
     {"singan-refine", 0, NULL, "operation on heights, halo from the model's scales (tn_singan_refine: the input in the model's "
                                "metres): model=FILE.tnw from_scale=scales-3 noise=1", tn__world_refine_setup, tn__world_refine_run},
     {"season", 0, NULL, "operation on heights, RGB out, halo ceil(distance / cellsize) + 2: climate=FILE.csv or koppen=CODE "
@@ -1083,10 +1085,7 @@ static void tn__world_release(tn__world_impl *im)
     for (k = 0; k < im->n; k++) {
         if (im->st[k].method) im->st[k].method->free(im->st[k].model);
         TN_FREE(im->st[k].climate);
-        if (im->st[k].sketch) {
-            tn_contour_set_free(im->st[k].sketch);
-            TN_FREE(im->st[k].sketch);
-        }
+        tn_gnn_prepared_free(im->st[k].gnn);
     }
     TN_FREE(im);
 }

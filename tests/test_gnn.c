@@ -1087,6 +1087,45 @@ TN_TEST(membrane_blocks_leave_no_seams)
     tn_image_free(&m);
 }
 
+TN_TEST(membrane_far_blocks_stay_bounded)
+{
+    /* blocks far from every stroke grow their domain until it holds one; past 256 x 256 px it is
+       solved on a coarser grid (so a sparse drawing on a large map stays fast). The far field must
+       still be the membrane's: within the strokes' heights, within 1 % of the range of the plain
+       solve of the whole map, and without a jump where blocks meet */
+    float rp[30], vp[30], *val, *plain;
+    uint8_t *fixed;
+    tn_contour_set user = two_strokes(120, 200, rp, vp);
+    tn_image m = {0, 0, 0, NULL}, r = {0, 0, 0, NULL};
+    const int W = 1400, H = 200;
+    double worst = 0, jump = 0;
+    int x, y, i;
+    user.width = W; /* the strokes keep to the map's left 120 px */
+    TN_CHECK(tn_gnn_membrane(&m, &user, W, H) == TN_OK && tn_sketch_rasterise(&r, &user, W, H) == TN_OK);
+    val = (float *)malloc((size_t)W * H * sizeof(float));
+    plain = (float *)malloc((size_t)W * H * sizeof(float));
+    fixed = (uint8_t *)malloc((size_t)W * H);
+    for (i = 0; i < W * H; i++) {
+        fixed[i] = (uint8_t)(r.data[3 * i] > 0 || r.data[3 * i + 1] > 0);
+        val[i] = r.data[3 * i + 2];
+    }
+    TN_CHECK(tn__gnn_membrane_solve(val, fixed, W, H, plain) == TN_OK);
+    for (y = 0; y < H; y++)
+        for (x = 400; x < W; x++) {
+            float v = m.data[(size_t)y * W + x];
+            TN_CHECK(v >= 1200 - 1e-2f && v <= 1790 + 1e-2f);
+            worst = fmax(worst, fabs((double)v - plain[(size_t)y * W + x]));
+            if (x > 400) jump = fmax(jump, fabs((double)v - m.data[(size_t)y * W + x - 1]));
+        }
+    printf("  far field (x >= 400 of 1400 px): %.2f m from the plain solve at worst, steps of %.3f m at most (range 590 m)\n", worst, jump);
+    TN_CHECK(worst <= 0.01 * 590 && jump <= 0.5);
+    free(val);
+    free(plain);
+    free(fixed);
+    tn_image_free(&m);
+    tn_image_free(&r);
+}
+
 TN_TEST(grow_by_example)
 {
     /* densify by example: the user's lines come first and unchanged; added lines are 8-connected
@@ -1483,6 +1522,17 @@ TN_TEST(map_scale_level)
     tn_image_free(&want);
     TN_CHECK(tn_gnn_generate_window(&win, &m, &user, 240, 180, 0, 0, 37, 180, &go) == TN_OK); /* at the map's edge */
     TN_CHECK(tn_image_crop(&want, &a, 0, 0, 37, 180) == TN_OK && same_image(&win, &want));
+    { /* one prepared generation: its windows are the same pixels */
+        tn_gnn_prepared *P = NULL;
+        TN_CHECK(tn_gnn_prepare(&P, &m, &user, 240, 180, &go) == TN_OK);
+        tn_image_free(&win);
+        tn_image_free(&want);
+        TN_CHECK(tn_gnn_prepared_window(&win, P, 100, 20, 90, 70) == TN_OK);
+        TN_CHECK(tn_image_crop(&want, &a, 100, 20, 90, 70) == TN_OK && same_image(&win, &want));
+        TN_CHECK(tn_gnn_prepared_window(&one, P, 200, 0, 41, 10) == TN_ERR_INVALID_ARG && strstr(tn_last_error(), "not inside"));
+        tn_gnn_prepared_free(P);
+        tn_gnn_prepared_free(NULL);
+    }
     stroke_fit(&user, &a, &err, &follow);
     printf("  strokes: %.1f m from their heights (range %.0f m), %.1f %% followed\n", err, (double)(hi - lo), 100 * follow);
     TN_CHECK(err <= 0.1 * (hi - lo) && follow >= 0.9);
@@ -1664,6 +1714,7 @@ int main(void)
     TN_RUN(membrane_interpolates_between_lines);
     TN_RUN(membrane_solver_is_the_laplace_solution);
     TN_RUN(membrane_blocks_leave_no_seams);
+    TN_RUN(membrane_far_blocks_stay_bounded);
     TN_RUN(training_lowers_the_loss_and_generates_metres);
     TN_RUN(shape_losses);
     TN_RUN(save_load_round_trip);

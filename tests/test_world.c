@@ -386,7 +386,7 @@ TN_TEST(gnn_tiles_equal_the_whole_map)
     TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)200 * 150 * sizeof(float)));
     tn_world_free(&w);
     snprintf(spec, sizeof spec, "world 5000 4000\ngnn model=%s sketch=%s\n", m_path, sk_path);
-    TN_CHECK(refused(spec, "rasterises the whole sketch"));
+    TN_CHECK(refused(spec, "prepares the whole sketch"));
     snprintf(spec, sizeof spec, "world 200 150\ngnn model=%s sketch=%s embed=some\n", m_path, sk_path);
     TN_CHECK(refused(spec, "embed=auto|aligned|none"));
     tn_image_free(&whole);
