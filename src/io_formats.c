@@ -14,7 +14,9 @@
    the known cells (each void cell next to known ones takes the mean of its known 8-neighbours,
    weights 1 orthogonal, 1/2 diagonal; order-independent), then SOR sweeps of the 4-neighbour
    Laplace equation over the filled cells, so holes get the smooth harmonic surface spanning
-   their rim (a plane is reproduced). info->voids_filled counts the cells; a grid with no
+   their rim (a plane is reproduced). More void cells than 1/16 of the relaxation's budget of
+   2e8 updates take a push-pull pyramid instead (means up the levels, bilinear down), in
+   O(cells). info->voids_filled counts the cells; a grid with no
    valid cell fails with TN_ERR_EMPTY. Single-threaded and deterministic.
    -------------------------------------------------------------------------------------------- */
 
@@ -207,6 +209,77 @@ static float tn__io_uncode(unsigned code, unsigned maxcode, int has_range, doubl
 
 /* ---- void filling (.hgt, .asc) ---- */
 
+#define TN__IO_FILL_UPDATES 2e8 /* the relaxation's budget of cell updates, at least 16 a void cell */
+
+/* Voids of more cells than the relaxation covers 16 times (TN__IO_FILL_UPDATES): a push-pull
+   pyramid in O(cells), where onion peeling took a minute (a 1 MB TIFF of 16384^2 NODATA with
+   one known row). Up: each level halves the grid (rounded up), a cell the mean of its known
+   children (known if one is); down: an unknown cell takes the bilinear value of the level above
+   at its centre. z: w x h, its voids (mask 1) written. */
+static tn_status tn__io_fill_pyramid(float *z, const uint8_t *mask, size_t w, size_t h)
+{
+    float *lv[64];
+    uint8_t *kn[64];
+    size_t lw[64], lh[64], x, y;
+    int L = 0, l, unknown = 1, i, j;
+    tn_status st = TN_OK;
+    lv[0] = z, lw[0] = w, lh[0] = h, kn[0] = NULL;
+    while (unknown && L < 63 && !st) { /* up */
+        const size_t cw = (lw[L] + 1) / 2, ch = (lh[L] + 1) / 2;
+        lv[L + 1] = (float *)tn__alloc(cw * ch * sizeof(float));
+        kn[L + 1] = (uint8_t *)tn__alloc(cw * ch);
+        if (!lv[L + 1] || !kn[L + 1]) {
+            TN_FREE(lv[L + 1]);
+            TN_FREE(kn[L + 1]);
+            st = tn__oom();
+            break;
+        }
+        unknown = 0;
+        for (y = 0; y < ch; y++)
+            for (x = 0; x < cw; x++) {
+                double sum = 0;
+                int cnt = 0;
+                for (j = 0; j < 2; j++)
+                    for (i = 0; i < 2; i++) {
+                        size_t fx = 2 * x + (size_t)i, fy = 2 * y + (size_t)j, f = fy * lw[L] + fx;
+                        if (fx < lw[L] && fy < lh[L] && (L ? kn[L][f] : !mask[f])) sum += lv[L][f], cnt++;
+                    }
+                lv[L + 1][y * cw + x] = cnt ? (float)(sum / cnt) : 0.0f;
+                kn[L + 1][y * cw + x] = (uint8_t)(cnt > 0);
+                unknown |= !cnt;
+            }
+        lw[L + 1] = cw, lh[L + 1] = ch;
+        L++;
+    }
+    for (l = L - 1; l >= 0 && !st; l--) { /* down: level l + 1 is whole */
+        const size_t cw = lw[l + 1], ch = lh[l + 1];
+        for (y = 0; y < lh[l]; y++) {
+            float t = ((float)y + 0.5f) / 2 - 0.5f;
+            size_t y0, y1;
+            const float *ra, *rb;
+            t = t < 0 ? 0 : t > (float)(ch - 1) ? (float)(ch - 1) : t;
+            y0 = (size_t)t, y1 = y0 + 1 < ch ? y0 + 1 : y0;
+            t -= (float)y0;
+            ra = lv[l + 1] + y0 * cw, rb = lv[l + 1] + y1 * cw;
+            for (x = 0; x < lw[l]; x++) {
+                size_t f = y * lw[l] + x, x0, x1;
+                float u;
+                if (l ? kn[l][f] : !mask[f]) continue;
+                u = ((float)x + 0.5f) / 2 - 0.5f;
+                u = u < 0 ? 0 : u > (float)(cw - 1) ? (float)(cw - 1) : u;
+                x0 = (size_t)u, x1 = x0 + 1 < cw ? x0 + 1 : x0;
+                u -= (float)x0;
+                lv[l][f] = (1 - t) * ((1 - u) * ra[x0] + u * ra[x1]) + t * ((1 - u) * rb[x0] + u * rb[x1]);
+            }
+        }
+    }
+    for (l = 1; l <= L; l++) {
+        TN_FREE(lv[l]);
+        TN_FREE(kn[l]);
+    }
+    return st;
+}
+
 /* Fills the cells of a w x h grid whose mask byte is 1 (see the banner); mask is scratch.
    *filled gets the number of void cells. */
 static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, const char *name, size_t *filled)
@@ -220,6 +293,11 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
     for (i = 0; i < n; i++) nv += mask[i] != 0;
     if (nv == 0) return TN_OK;
     if (nv == n) return tn__fail(TN_ERR_EMPTY, "%s: every cell is void / NODATA", name);
+    if ((double)nv * 16 > TN__IO_FILL_UPDATES) {
+        tn_status st = tn__io_fill_pyramid(z, mask, w, h);
+        if (!st) *filled = nv;
+        return st;
+    }
     if (tn__size4(nv, sizeof(size_t), 1, 1, &bytes)) return TN_ERR_TOO_LARGE;
     q = (size_t *)tn__alloc(bytes);
     if (!q) return tn__oom();
@@ -260,7 +338,7 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
         rings++;
     }
     /* SOR with the optimal factor for a hole about 2*rings+1 cells wide; passes grow with the
-       hole size, capped at about 2e8 cell updates. mask now holds each void cell's in-image
+       hole size, capped at about TN__IO_FILL_UPDATES cell updates. mask now holds each void cell's in-image
        4-neighbours (bits left, right, up, down) so the sweeps need no divisions. Sweeping in
        ring order (rim inwards) converged faster than memory order in tests. */
     for (k = 0; k < tail; k++) {
@@ -270,7 +348,7 @@ static tn_status tn__io_fill_voids(float *z, uint8_t *mask, size_t w, size_t h, 
     omega = 2.0 / (1.0 + sin(3.141592653589793 / (2.0 * (double)rings + 2.0)));
     if (omega > 1.95) omega = 1.95;
     passes = 32.0 + 4.0 * (double)rings;
-    if (passes * (double)nv > 2e8) passes = 2e8 / (double)nv;
+    if (passes * (double)nv > TN__IO_FILL_UPDATES) passes = TN__IO_FILL_UPDATES / (double)nv;
     if (passes < 16) passes = 16;
     for (pass = 0; pass < (int)passes; pass++) {
         double change = 0.0, scale = 0.0;
