@@ -2048,6 +2048,8 @@ TN_API tn_status tn_gnn_prepare(tn_gnn_prepared **out, const tn_gnn *model, cons
 /* *out = the window (x, y, w, h) of p's map (one channel, the example's units), allocated here.
    p is only read. */
 TN_API tn_status tn_gnn_prepared_window(tn_image *out, const tn_gnn_prepared *p, int x, int y, int w, int h);
+/* The plan of p's generation (tn_gnn_plan_of's fields), owned by p. */
+TN_API const tn_gnn_plan *tn_gnn_prepared_plan(const tn_gnn_prepared *p);
 TN_API void tn_gnn_prepared_free(tn_gnn_prepared *p); /* NULL is fine */
 #endif /* TN_NO_GNN */
 
@@ -27423,6 +27425,7 @@ struct tn_gnn_prepared {
     float a0;       /* f > 1: the example's floor detail (tn__gnn_floor_detail) */
     tn__gnn_gen Gc; /* f > 1: the drawing on the map f times smaller, without fine detail */
     float *floor_d; /* f > 1: W x H, px to the nearest drawn valley pixel */
+    tn_gnn_plan plan;
 };
 
 /* The Gaussian kern (2K + 1 taps) of src (g's layout, g within the W x H map) over r (within g
@@ -27549,6 +27552,35 @@ done:
     return st;
 }
 
+/* *plan from G, the generation of sketch on a width x height map with options o. */
+static tn_status tn__gnn_plan_fill(tn_gnn_plan *plan, const tn_gnn *model, const tn__gnn_gen *G, const tn_contour_set *sketch, int width,
+                                   int height, const tn_gnn_generate_opts *o)
+{
+    memset(plan, 0, sizeof *plan);
+    plan->user_lines = sketch->count;
+    plan->grown_lines = G->grown;
+    plan->user_density = G->user_density;
+    plan->example_density = G->example_density;
+    plan->gain = G->gain;
+    plan->gain_raw = G->gain_raw;
+    plan->gain_scale = tn__gnn_gain_scale(G->w);
+    if (o->gain > 0) plan->gain_why = "set by --gain";
+    else if (o->gain < 0) plan->gain_why = "set to none: the membrane of the sketch alone";
+    else if (!G->A.membrane) plan->gain_why = "the model predicts heights directly (no membrane): gain 1";
+    else if (isfinite(G->gain_raw))
+        plan->gain_why = G->gain <= 0 ? "tested on the sketch: the network's relief did not fit the held-out lines, so the output is the membrane "
+                                        "of the lines (smooth between them); --gain 1 forces the relief"
+                                      : "tested on the sketch: held-out lines predicted from the rest";
+    else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
+        plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
+    else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
+    plan->detail = G->detail;
+    plan->detail_why = G->detail_why;
+    plan->map_scale = tn__gnn_map_factor(G, sketch, width, height, o, &plan->map_scale_why);
+    plan->floor_detail = 1;
+    return plan->map_scale > 1 ? tn__gnn_floor_detail(model, G, &plan->floor_detail) : TN_OK;
+}
+
 /* G's whole-map membrane, solved once for all its windows (their regions overlap by the halo). */
 static tn_status tn__gnn_prepare_base(tn__gnn_gen *G)
 {
@@ -27556,6 +27588,8 @@ static tn_status tn__gnn_prepare_base(tn__gnn_gen *G)
     if (!(G->base = (float *)tn__alloc((size_t)G->W * G->H * sizeof(float)))) return tn__oom();
     return tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, 0, 0, G->W, G->H, G->base);
 }
+
+TN_API const tn_gnn_plan *tn_gnn_prepared_plan(const tn_gnn_prepared *p) { return &p->plan; }
 
 TN_API void tn_gnn_prepared_free(tn_gnn_prepared *p)
 {
@@ -27571,7 +27605,6 @@ TN_API tn_status tn_gnn_prepare(tn_gnn_prepared **out, const tn_gnn *model, cons
 {
     tn_gnn_prepared *P;
     tn_gnn_generate_opts o;
-    const char *why;
     tn_status st;
     TN_ASSERT(out);
     *out = NULL;
@@ -27580,7 +27613,9 @@ TN_API tn_status tn_gnn_prepare(tn_gnn_prepared **out, const tn_gnn *model, cons
     if (!(P = (tn_gnn_prepared *)tn__calloc(sizeof *P))) return tn__oom();
     if ((st = tn__gnn_gen_make(model, sketch, width, height, &o, &P->G)) || (P->G.detail && (st = tn__gnn_detail_index(model, &P->G)))) goto done;
     if ((st = tn__gnn_prepare_base(&P->G))) goto done;
-    P->f = tn__gnn_map_factor(&P->G, sketch, width, height, &o, &why);
+    if ((st = tn__gnn_plan_fill(&P->plan, model, &P->G, sketch, width, height, &o))) goto done;
+    P->f = P->plan.map_scale;
+    P->a0 = P->plan.floor_detail;
     if (P->f > 1) {
         tn_gnn_generate_opts oc = o;
         const int Wc = (width + P->f - 1) / P->f, Hc = (height + P->f - 1) / P->f;
@@ -27593,7 +27628,7 @@ TN_API tn_status tn_gnn_prepare(tn_gnn_prepared **out, const tn_gnn *model, cons
             st = tn__fail(TN_ERR_INVALID_ARG, "gnn generate: map scale %d leaves a %d x %d map for the large scales (16 a side at least)", P->f, Wc,
                           Hc);
         else if (!mask || !nearest || !(P->floor_d = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-        else if (!(st = tn__gnn_floor_detail(model, &P->G, &P->a0)) && !(st = tn__gnn_gen_make(model, sketch, Wc, Hc, &oc, &P->Gc)) &&
+        else if (!(st = tn__gnn_gen_make(model, sketch, Wc, Hc, &oc, &P->Gc)) &&
                  !(st = tn__gnn_prepare_base(&P->Gc))) {
             for (i = 0; i < n; i++) mask[i] = (uint8_t)(P->G.pin[i] == 2);
             tn__gnn_chamfer(mask, width, height, P->floor_d, nearest);
@@ -27671,31 +27706,9 @@ TN_API tn_status tn_gnn_plan_of(tn_gnn_plan *plan, const tn_gnn *model, const tn
     TN_ASSERT(plan);
     memset(plan, 0, sizeof *plan);
     if ((st = tn__gnn_gen_plan(model, sketch, width, height, opts, &o, &G))) return st;
-    plan->user_lines = sketch->count;
-    plan->grown_lines = G.grown;
-    plan->user_density = G.user_density;
-    plan->example_density = G.example_density;
-    plan->gain = G.gain;
-    plan->gain_raw = G.gain_raw;
-    plan->gain_scale = tn__gnn_gain_scale(G.w);
-    if (o.gain > 0) plan->gain_why = "set by --gain";
-    else if (o.gain < 0) plan->gain_why = "set to none: the membrane of the sketch alone";
-    else if (!G.A.membrane) plan->gain_why = "the model predicts heights directly (no membrane): gain 1";
-    else if (isfinite(G.gain_raw))
-        plan->gain_why = G.gain <= 0 ? "tested on the sketch: the network's relief did not fit the held-out lines, so the output is the membrane "
-                                       "of the lines (smooth between them); --gain 1 forces the relief"
-                                     : "tested on the sketch: held-out lines predicted from the rest";
-    else if (sketch->count < TN__GNN_GAIN_MIN_LINES)
-        plan->gain_why = "untested: fewer than 8 lines in the sketch (a held-out stroke says little about the rest), gain 1";
-    else plan->gain_why = "untested (every part the example's own, or nothing left to hold out): gain 1";
-    plan->detail = G.detail;
-    plan->detail_why = G.detail_why;
-    plan->map_scale = tn__gnn_map_factor(&G, sketch, width, height, &o, &plan->map_scale_why);
-    plan->floor_detail = 1;
-    st = plan->map_scale > 1 ? tn__gnn_floor_detail(model, &G, &plan->floor_detail) : TN_OK;
+    st = tn__gnn_plan_fill(plan, model, &G, sketch, width, height, &o);
     tn__gnn_gen_free(&G);
-    if (st) return st;
-    return TN_OK;
+    return st;
 }
 
 TN_API tn_status tn_gnn_generate(tn_image *out, const tn_gnn *model, const tn_contour_set *sketch, int width,

@@ -1525,6 +1525,11 @@ TN_TEST(map_scale_level)
     { /* one prepared generation: its windows are the same pixels */
         tn_gnn_prepared *P = NULL;
         TN_CHECK(tn_gnn_prepare(&P, &m, &user, 240, 180, &go) == TN_OK);
+        { /* its plan is tn_gnn_plan_of's */
+            const tn_gnn_plan *pp = tn_gnn_prepared_plan(P);
+            TN_CHECK(pp->map_scale == plan.map_scale && pp->floor_detail == plan.floor_detail && pp->grown_lines == plan.grown_lines &&
+                     pp->gain == plan.gain && pp->user_lines == plan.user_lines && !strcmp(pp->gain_why, plan.gain_why));
+        }
         tn_image_free(&win);
         tn_image_free(&want);
         TN_CHECK(tn_gnn_prepared_window(&win, P, 100, 20, 90, 70) == TN_OK);

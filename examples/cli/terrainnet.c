@@ -1939,6 +1939,7 @@ static int run_gnn_generate(void)
     struct gnn_generate_args *a = &gnn_generate_arg;
     tn_gnn model;
     tn_gnn_plan plan;
+    tn_gnn_prepared *prep = NULL;
     tn_singan detail;
     tn_contour_set sk;
     tn_image terrain = {0, 0, 0, NULL};
@@ -1969,14 +1970,23 @@ static int run_gnn_generate(void)
     a->o.grow = a->grow == 1 ? 1 : a->grow == 2 ? -1 : 0;
     t0 = tn_time_seconds();
     memset(&plan, 0, sizeof plan);
-    /* the gain is tested once here and then fixed, so it can be printed with its reason */
-    if (!(st = tn_gnn_plan_of(&plan, &model, &sk, a->w, a->h, &a->o)) && a->o.gain == 0) a->o.gain = plan.gain > 0 ? plan.gain : -1.0f;
+    { /* prepared once without the fine-tune: its plan (the gain, tested once, with its reason) decides the fine-tune's
+         default, and without one the same preparation generates the map */
+        tn_gnn_generate_opts o0 = a->o;
+        o0.finetune = 0;
+        if (!(st = tn_gnn_prepare(&prep, &model, &sk, a->w, a->h, &o0))) plan = *tn_gnn_prepared_plan(prep);
+    }
     if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md); a grown
                               one has the example's network around its strokes instead, and the fine-tune would cost 10 x */
         a->o.finetune = relative_heights(&sk) && !plan.grown_lines ? 30 : 0;
     if (!st && plan.gain <= 0)
         fprintf(stderr, "terrainnet: gnn-generate: residual gain 0: %s\n", plan.gain_why);
-    if (!st) st = tn_gnn_generate(&terrain, &model, &sk, a->w, a->h, &a->o);
+    if (!st && a->o.finetune == 0) st = tn_gnn_prepared_window(&terrain, prep, 0, 0, a->w, a->h);
+    else if (!st) { /* the fine-tune changes the parts' embeddings: a generation of its own, at the tested gain */
+        if (a->o.gain == 0) a->o.gain = plan.gain > 0 ? plan.gain : -1.0f;
+        st = tn_gnn_generate(&terrain, &model, &sk, a->w, a->h, &a->o);
+    }
+    tn_gnn_prepared_free(prep);
     if (!st && a->detail) { /* SinGAN adds the fine detail the graph network cannot rebuild (paper 000) */
         tn_image refined = {0, 0, 0, NULL};
         a->detail_opts.seed = a->o.seed;
@@ -2003,7 +2013,7 @@ static int run_gnn_generate(void)
         printf("sketch: %s, %d polylines on %d x %d\nsize: %d x %d\n", kind, sk.count, sk.width, sk.height, a->w, a->h);
         printf("line_density: %.4f (the example's network: %.4f)\ngrown_lines: %d%s\n", plan.user_density, plan.example_density,
                plan.grown_lines, plan.grown_lines ? " (densified by example: blocks of the example's network between the lines)" : "");
-        printf("residual_gain: %.3f\nresidual_gain_why: %s", a->o.gain > 0 ? a->o.gain : 0.0, plan.gain_why);
+        printf("residual_gain: %.3f\nresidual_gain_why: %s", plan.gain > 0 ? plan.gain : 0.0, plan.gain_why);
         if (isfinite(plan.gain_raw)) printf(" (estimate %.3f x scale %.2f, clamped to 0..1)", plan.gain_raw, plan.gain_scale);
         printf("\ndetail: %s", a->detail ? "singan-refine with the given model" : plan.detail_why);
         printf("\nmap_scale: %d (%s)", plan.map_scale, plan.map_scale_why);
