@@ -12578,21 +12578,22 @@ static tn_status tn__meta_parse(tn_params *p, const uint8_t *b, size_t n, const 
     return TN_OK;
 }
 
-/* Reads a .tnw image into a new set: every tensor with its name, shape and flag, the metadata.
-   Everything is bounds-checked before it is allocated; NaN/Inf data is refused. */
-static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_params **out)
+/* Reads a .tnw image's header and metadata into a new set (no tensors yet); *off is where the
+   tensors start. With check_crc 0 the CRC-32 is not checked: tn__tnw_peek. */
+static tn_status tn__tnw_read_head(const uint8_t *b, size_t n, const char *name, int check_crc, tn_params **out, size_t *off)
 {
-    size_t off = 12, k;
-    uint32_t count, i, version;
+    uint32_t count, version;
     tn_params *p;
     tn_status st = TN_OK;
     *out = NULL;
+    *off = 12;
     if (n < 16 || memcmp(b, "TNW1", 4) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a terrainnet weights (.tnw) file", name);
     version = tn__get_u32(b + 4);
     if (version < 1 || version > TN__TNW_VERSION)
         return tn__fail(TN_ERR_FORMAT, "%s: .tnw version %u is not supported (this library reads 1..%d; a newer terrainnet wrote it?)", name,
                         (unsigned)version, TN__TNW_VERSION);
-    if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
+    if (check_crc && tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4))
+        return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
     count = tn__get_u32(b + 8);
     if (count > (n - 16) / 9) return tn__fail(TN_ERR_CORRUPT, "%s: %u tensors cannot fit in %zu bytes", name, (unsigned)count, n);
     if (count > TN__TNW_MAX_TENSORS)
@@ -12600,11 +12601,37 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     if (!(p = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", name);
     if (version >= 2) {
         size_t ml = tn__get_u32(b + 12);
-        off = 16;
-        if (ml > TN__META_MAX || ml > n - 4 - off) st = tn__fail(TN_ERR_CORRUPT, "%s: bad metadata size", name);
-        if (!st) st = tn__meta_parse(p, b + off, ml, name);
-        off += ml;
+        *off = 16;
+        if (ml > TN__META_MAX || ml > n - 4 - *off) st = tn__fail(TN_ERR_CORRUPT, "%s: bad metadata size", name);
+        if (!st) st = tn__meta_parse(p, b + *off, ml, name);
+        *off += ml;
     }
+    if (st) {
+        tn_params_free(p);
+        return st;
+    }
+    *out = p;
+    return TN_OK;
+}
+
+/* The metadata of a .tnw image, read without checking the CRC-32 or parsing any tensor: how a
+   model loader learns the file's method before it pays for the rest (tn__model_open). */
+TN__SHARED tn_status tn__tnw_peek(const uint8_t *b, size_t n, const char *name, tn_params **out)
+{
+    size_t off;
+    return tn__tnw_read_head(b, n, name, 0, out, &off);
+}
+
+/* Reads a .tnw image into a new set: every tensor with its name, shape and flag, the metadata.
+   Everything is bounds-checked before it is allocated; NaN/Inf data is refused. */
+static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_params **out)
+{
+    size_t off, k;
+    uint32_t count, i;
+    tn_params *p;
+    tn_status st;
+    if ((st = tn__tnw_read_head(b, n, name, 1, &p, &off))) return st;
+    count = tn__get_u32(b + 8);
     for (i = 0; i < count && !st; i++) {
         char tname[64];
         size_t nl, numel = 1;
@@ -13528,6 +13555,32 @@ TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_
     if (f > max_format)
         return tn__fail(TN_ERR_FORMAT, "%s: %s model format %.0f is newer than this library's (%d): update terrainnet", name, method, f, max_format);
     return TN_OK;
+}
+
+/* Opens a model file for a loader: tn_params_open, then tn_model_check. A file that names another
+   method (or is a checkpoint, or a newer format) is refused from its metadata alone, before the
+   CRC-32 and the tensors are read: a wrong loader costs a peek, not a parse. */
+TN__SHARED tn_status tn__model_open(tn_params **out, const char *path, const char *method, int max_format, const char *legacy_tensor)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    tn_params *head = NULL;
+    tn_status st;
+    *out = NULL;
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    if (tn__tnw_peek(buf, n, path, &head) == TN_OK && tn_params_meta(head, "method"))
+        st = tn_model_check(head, method, max_format, legacy_tensor, path);
+    else
+        tn_clear_error(); /* a damaged header: the full read below says what is wrong */
+    tn_params_free(head);
+    if (!st) st = tn_params_open_memory(out, buf, n, path);
+    if (!st) st = tn_model_check(*out, method, max_format, legacy_tensor, path);
+    if (st) {
+        tn_params_free(*out);
+        *out = NULL;
+    }
+    TN_FREE(buf);
+    return st;
 }
 
 /* Every value of a loaded model's weights is finite, else TN_ERR_CORRUPT naming the tensor. */
@@ -19358,10 +19411,9 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
+    if ((st = tn__model_open(&f, path, "texgan", TN__TG_FORMAT, "texgan.config"))) return st;
     memset(&m, 0, sizeof m);
-    st = tn_model_check(f, "texgan", TN__TG_FORMAT, "texgan.config", path);
-    if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
+    if (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
     if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
     if (!st && m.train_seconds == 0 && tn_params_meta(f, "train_seconds")) { /* models since the config's field is 0 */
@@ -22359,16 +22411,15 @@ TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
-    st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
-    if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
+    if ((st = tn__model_open(&f, path, "singan", TN__SG_FORMAT, NULL))) return st;
+    if ((cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
-    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
+    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 2 (before issue 31's smoothed coarsest noise): train it again", path);
-    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
+    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 3 (before issue 31's layout: it lacks the example's coarsest scale): train it again",
                       path);
-    else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
+    else if (!cfg || cfg->numel != TN__SG_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
     if (!st) st = tn__sg_file_matches(f, &A, path);
@@ -24883,10 +24934,9 @@ TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
+    if ((st = tn__model_open(&f, path, "gnn", TN__GNN_FORMAT, NULL))) return st;
     memset(&parts, 0, sizeof parts);
-    st = tn_model_check(f, "gnn", TN__GNN_FORMAT, NULL, path);
-    if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
+    if (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
     if (!st) st = tn__gnn_file_matches(f, &A, path);
@@ -29449,9 +29499,8 @@ TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path)
     TN_ASSERT(model);
     memset(&m, 0, sizeof m);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
-    st = tn_model_check(f, "kpd", TN__KPD_FORMAT, NULL, path);
-    if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
+    if ((st = tn__model_open(&f, path, "kpd", TN__KPD_FORMAT, NULL))) return st;
+    if (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
     if (!st) st = tn__kpd_read_config(cfg->data, &m, path);
     if (!st) st = tn__kpd_file_matches(f, &m, path);

@@ -2318,10 +2318,9 @@ TN_API tn_status tn_gnn_load(tn_gnn *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "gnn load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
+    if ((st = tn__model_open(&f, path, "gnn", TN__GNN_FORMAT, NULL))) return st;
     memset(&parts, 0, sizeof parts);
-    st = tn_model_check(f, "gnn", TN__GNN_FORMAT, NULL, path);
-    if (!st && (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG))
+    if (!(cfg = tn_params_find(f, "gnn.config")) || cfg->numel != TN__GNN_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a gnn model (no gnn.config)", path);
     if (!st) st = tn__gnn_read_config(cfg->data, &A, path);
     if (!st) st = tn__gnn_file_matches(f, &A, path);

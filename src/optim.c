@@ -459,21 +459,22 @@ static tn_status tn__meta_parse(tn_params *p, const uint8_t *b, size_t n, const 
     return TN_OK;
 }
 
-/* Reads a .tnw image into a new set: every tensor with its name, shape and flag, the metadata.
-   Everything is bounds-checked before it is allocated; NaN/Inf data is refused. */
-static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_params **out)
+/* Reads a .tnw image's header and metadata into a new set (no tensors yet); *off is where the
+   tensors start. With check_crc 0 the CRC-32 is not checked: tn__tnw_peek. */
+static tn_status tn__tnw_read_head(const uint8_t *b, size_t n, const char *name, int check_crc, tn_params **out, size_t *off)
 {
-    size_t off = 12, k;
-    uint32_t count, i, version;
+    uint32_t count, version;
     tn_params *p;
     tn_status st = TN_OK;
     *out = NULL;
+    *off = 12;
     if (n < 16 || memcmp(b, "TNW1", 4) != 0) return tn__fail(TN_ERR_FORMAT, "%s: not a terrainnet weights (.tnw) file", name);
     version = tn__get_u32(b + 4);
     if (version < 1 || version > TN__TNW_VERSION)
         return tn__fail(TN_ERR_FORMAT, "%s: .tnw version %u is not supported (this library reads 1..%d; a newer terrainnet wrote it?)", name,
                         (unsigned)version, TN__TNW_VERSION);
-    if (tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4)) return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
+    if (check_crc && tn__crc32(0, b, n - 4) != tn__get_u32(b + n - 4))
+        return tn__fail(TN_ERR_CORRUPT, "%s: CRC-32 mismatch (the file is damaged)", name);
     count = tn__get_u32(b + 8);
     if (count > (n - 16) / 9) return tn__fail(TN_ERR_CORRUPT, "%s: %u tensors cannot fit in %zu bytes", name, (unsigned)count, n);
     if (count > TN__TNW_MAX_TENSORS)
@@ -481,11 +482,37 @@ static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_p
     if (!(p = tn_params_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "%s: out of memory", name);
     if (version >= 2) {
         size_t ml = tn__get_u32(b + 12);
-        off = 16;
-        if (ml > TN__META_MAX || ml > n - 4 - off) st = tn__fail(TN_ERR_CORRUPT, "%s: bad metadata size", name);
-        if (!st) st = tn__meta_parse(p, b + off, ml, name);
-        off += ml;
+        *off = 16;
+        if (ml > TN__META_MAX || ml > n - 4 - *off) st = tn__fail(TN_ERR_CORRUPT, "%s: bad metadata size", name);
+        if (!st) st = tn__meta_parse(p, b + *off, ml, name);
+        *off += ml;
     }
+    if (st) {
+        tn_params_free(p);
+        return st;
+    }
+    *out = p;
+    return TN_OK;
+}
+
+/* The metadata of a .tnw image, read without checking the CRC-32 or parsing any tensor: how a
+   model loader learns the file's method before it pays for the rest (tn__model_open). */
+TN__SHARED tn_status tn__tnw_peek(const uint8_t *b, size_t n, const char *name, tn_params **out)
+{
+    size_t off;
+    return tn__tnw_read_head(b, n, name, 0, out, &off);
+}
+
+/* Reads a .tnw image into a new set: every tensor with its name, shape and flag, the metadata.
+   Everything is bounds-checked before it is allocated; NaN/Inf data is refused. */
+static tn_status tn__tnw_read(const uint8_t *b, size_t n, const char *name, tn_params **out)
+{
+    size_t off, k;
+    uint32_t count, i;
+    tn_params *p;
+    tn_status st;
+    if ((st = tn__tnw_read_head(b, n, name, 1, &p, &off))) return st;
+    count = tn__get_u32(b + 8);
     for (i = 0; i < count && !st; i++) {
         char tname[64];
         size_t nl, numel = 1;

@@ -1964,9 +1964,8 @@ TN_API tn_status tn_kpd_load(tn_kpd *model, const char *path)
     TN_ASSERT(model);
     memset(&m, 0, sizeof m);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "kpd load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
-    st = tn_model_check(f, "kpd", TN__KPD_FORMAT, NULL, path);
-    if (!st && (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG))
+    if ((st = tn__model_open(&f, path, "kpd", TN__KPD_FORMAT, NULL))) return st;
+    if (!(cfg = tn_params_find(f, "kpd.config")) || cfg->numel != TN__KPD_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a kpd model (no kpd.config)", path);
     if (!st) st = tn__kpd_read_config(cfg->data, &m, path);
     if (!st) st = tn__kpd_file_matches(f, &m, path);

@@ -1440,16 +1440,15 @@ TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
-    st = tn_model_check(f, "singan", TN__SG_FORMAT, NULL, path);
-    if (!st && (cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
+    if ((st = tn__model_open(&f, path, "singan", TN__SG_FORMAT, NULL))) return st;
+    if ((cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
-    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
+    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 2 (before issue 31's smoothed coarsest noise): train it again", path);
-    else if (!st && tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
+    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
         st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 3 (before issue 31's layout: it lacks the example's coarsest scale): train it again",
                       path);
-    else if (!st && (!cfg || cfg->numel != TN__SG_CONFIG))
+    else if (!cfg || cfg->numel != TN__SG_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
     if (!st) st = tn__sg_file_matches(f, &A, path);

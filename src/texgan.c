@@ -402,10 +402,9 @@ TN_API tn_status tn_texgan_load(tn_texgan *model, const char *path)
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "texgan load: empty path");
-    if ((st = tn_params_open(&f, path))) return st;
+    if ((st = tn__model_open(&f, path, "texgan", TN__TG_FORMAT, "texgan.config"))) return st;
     memset(&m, 0, sizeof m);
-    st = tn_model_check(f, "texgan", TN__TG_FORMAT, "texgan.config", path);
-    if (!st && (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG))
+    if (!(cfg = tn_params_find(f, "texgan.config")) || cfg->numel != TN__TG_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a texgan model (no texgan.config)", path);
     if (!st) st = tn__tg_read_config(&m, NULL, NULL, cfg->data, path);
     if (!st && m.train_seconds == 0 && tn_params_meta(f, "train_seconds")) { /* models since the config's field is 0 */

@@ -724,6 +724,32 @@ TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_
     return TN_OK;
 }
 
+/* Opens a model file for a loader: tn_params_open, then tn_model_check. A file that names another
+   method (or is a checkpoint, or a newer format) is refused from its metadata alone, before the
+   CRC-32 and the tensors are read: a wrong loader costs a peek, not a parse. */
+TN__SHARED tn_status tn__model_open(tn_params **out, const char *path, const char *method, int max_format, const char *legacy_tensor)
+{
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    tn_params *head = NULL;
+    tn_status st;
+    *out = NULL;
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    if (tn__tnw_peek(buf, n, path, &head) == TN_OK && tn_params_meta(head, "method"))
+        st = tn_model_check(head, method, max_format, legacy_tensor, path);
+    else
+        tn_clear_error(); /* a damaged header: the full read below says what is wrong */
+    tn_params_free(head);
+    if (!st) st = tn_params_open_memory(out, buf, n, path);
+    if (!st) st = tn_model_check(*out, method, max_format, legacy_tensor, path);
+    if (st) {
+        tn_params_free(*out);
+        *out = NULL;
+    }
+    TN_FREE(buf);
+    return st;
+}
+
 /* Every value of a loaded model's weights is finite, else TN_ERR_CORRUPT naming the tensor. */
 TN__SHARED tn_status tn__model_check_finite(const tn_params *p, const char *name)
 {

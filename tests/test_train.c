@@ -377,6 +377,53 @@ TN_TEST(texgan_refuses_other_methods)
     remove(path);
 }
 
+/* Loads path with the loader of methods[i]; a model that loads is freed. */
+static tn_status load_with(int i, const char *path)
+{
+    tn_gnn g;
+    tn_singan s;
+    tn_texgan t;
+    tn_kpd k;
+    tn_status st;
+    switch (i) {
+    case 0: if (!(st = tn_gnn_load(&g, path))) tn_gnn_free(&g); break;
+    case 1: if (!(st = tn_singan_load(&s, path))) tn_singan_free(&s); break;
+    case 2: if (!(st = tn_texgan_load(&t, path))) tn_texgan_free(&t); break;
+    default: if (!(st = tn_kpd_load(&k, path))) tn_kpd_free(&k); break;
+    }
+    return st;
+}
+
+/* A loader refuses another method's file from its metadata, before the CRC-32 and the tensors:
+   a damaged file of another method is refused for its method, while a damaged file of the
+   loader's own method fails on the CRC. */
+TN_TEST(loaders_check_the_method_before_the_crc)
+{
+    static const char *const methods[4] = {"gnn", "singan", "texgan", "kpd"};
+    const char *path = tn_test_tmp_path("train", "damaged.tnw");
+    int i, j, n = 40;
+    for (i = 0; i < 4; i++) {
+        tn_params *p = tn_params_create();
+        FILE *f;
+        TN_CHECK(p && tn_params_add(p, "w", 1, &n) != NULL);
+        TN_CHECK(tn_model_stamp(p, methods[i], 1, NULL) == TN_OK && tn_params_save(path, p) == TN_OK);
+        tn_params_free(p);
+        f = fopen(path, "r+b"); /* the last value (before the CRC) becomes a tiny nonzero float */
+        TN_CHECK(f && fseek(f, -6, SEEK_END) == 0 && fputc(1, f) == 1 && fclose(f) == 0);
+        for (j = 0; j < 4; j++) {
+            char want[64];
+            tn_clear_error();
+            if (j == i) {
+                TN_CHECK(load_with(j, path) == TN_ERR_CORRUPT && strstr(tn_last_error(), "CRC-32 mismatch") != NULL);
+                continue;
+            }
+            snprintf(want, sizeof want, "a %s model, not a %s model", methods[i], methods[j]);
+            TN_CHECK(load_with(j, path) == TN_ERR_FORMAT && strstr(tn_last_error(), want) != NULL);
+        }
+    }
+    remove(path);
+}
+
 /* ---- texgan files written before @@train (tests/refs, made by the code at 35647d3) ---- */
 
 static void refs_opts(tn_texgan_opts *o)
@@ -538,6 +585,7 @@ int main(void)
     TN_RUN(sigkill_then_resume);
     TN_RUN(metadata_round_trip_and_checks);
     TN_RUN(texgan_refuses_other_methods);
+    TN_RUN(loaders_check_the_method_before_the_crc);
     TN_RUN(texgan_v1_files_load_and_reproduce);
     TN_RUN(blocks_shapes_and_gradients);
     TN_RUN(ema_and_best_k);

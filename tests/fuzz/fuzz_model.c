@@ -1,8 +1,8 @@
 /* fuzz_model.c - fuzz driver for the .tnw model loaders of every method (@@gnn tn_gnn_load,
    @@singan tn_singan_load, @@texgan tn_texgan_load, @@season tn_kpd_load), at the library's
    default limits. Each input, its CRC-32 repaired so that mutations reach the parsers, is written
-   to a scratch file and loaded by all four (a file names its method, so three refuse it at
-   once). A model that loads must be usable (gnn: its parts; singan and texgan: a 16 x 16 sample;
+   to a scratch file and loaded by all four (a file names its method, so three refuse it from its
+   metadata, before its CRC-32 and tensors are read). A model that loads must be usable (gnn: its parts; singan and texgan: a 16 x 16 sample;
    a failure there must say why).
      libFuzzer:  clang -g -O1 -fsanitize=fuzzer,address,undefined -I. fuzz_model.c -lm -pthread
      no libFuzzer: cc -DTN_FUZZ_MAIN -fsanitize=address,undefined -I. fuzz_model.c -lm -pthread
