@@ -30133,14 +30133,24 @@ TN_API tn_status tn_method_load_any(const tn_method **m, void **model, const cha
 {
     tn_params *f = NULL;
     const tn_method *found = NULL;
-    const char *name;
+    const char *name = NULL;
+    uint8_t *buf = NULL;
+    size_t n = 0;
     tn_status st;
     int k;
     TN_ASSERT(m && model);
     *m = NULL;
     *model = NULL;
-    if ((st = tn_params_open(&f, path))) return st;
-    name = tn_params_meta(f, "method");
+    if ((st = tn__io_read_file(path, &buf, &n))) return st;
+    if (tn__tnw_peek(buf, n, path, &f) == TN_OK) name = tn_params_meta(f, "method"); /* the method's loader does the full read */
+    if (!name) { /* a file of before the metadata (its legacy tensor names the method), or a damaged header: read it all */
+        tn_params_free(f);
+        f = NULL;
+        tn_clear_error();
+        st = tn_params_open_memory(&f, buf, n, path);
+    }
+    TN_FREE(buf);
+    if (st) return st;
     if (name) found = tn_method_find(name);
     for (k = 0; !name && tn__methods[k]; k++)
         if (tn__methods[k]->legacy_tensor && tn_params_find(f, tn__methods[k]->legacy_tensor)) found = tn__methods[k];

@@ -218,6 +218,13 @@ TN_TEST(unknown_methods_and_non_models_fail_with_a_message)
     TN_CHECK(tn_params_save(other, p) == TN_OK);
     load_fails(other, TN_ERR_FORMAT);
     TN_CHECK(strstr(tn_last_error(), "hydrogan") != NULL);
+    { /* its tensors damaged: the method is read from the metadata before the CRC-32 and the tensors */
+        FILE *fp = fopen(other, "r+b");
+        TN_CHECK(fp && fseek(fp, -6, SEEK_END) == 0 && fputc(0x5a, fp) != EOF);
+        if (fp) fclose(fp);
+        load_fails(other, TN_ERR_FORMAT);
+        TN_CHECK(strstr(tn_last_error(), "hydrogan") != NULL);
+    }
     tn_params_free(p);
     remove(text);
     remove(plain);
