@@ -25,7 +25,9 @@
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
    (map_scale: its factor, 1 = none) and without it (one_level): seconds, follow, height_error, and
    floor_detail: the median |terrain - its Gaussian of 2 px| within 4 px of the drawn valleys over
-   the median elsewhere (the example's own: the plan's floor_detail).
+   the median elsewhere (the example's own: the plan's floor_detail); for N >= 512, _windows: the
+   three distances of 9 windows of 256 px of the big map (a 3 x 3 grid over its middle 3/4) to
+   the example, their mean, against the real crops' mean.
    Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...] [big=N]
    from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
@@ -131,7 +133,8 @@ static double floor_detail(const tn_image *t, const tn_image *rast)
 }
 
 /* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
-static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N)
+static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N, const tn_image *ex,
+                    const double *real)
 {
     tn_image rast = {0, 0, 0, NULL};
     int level;
@@ -157,6 +160,21 @@ static void big_map(const char *name, const tn_gnn *model, const tn_contour_set 
         printf("%s_%d_%s: factor %d (example floor_detail %.2f); seconds %.2f; follow %.1f %%; height_error %.2f %% of range; floor_detail %.2f\n",
                name, N, lv, plan.map_scale, (double)plan.floor_detail, secs, 100 * share, 100 * err / (nq ? nq : 1) / (model->hi - model->lo),
                floor_detail(&t, &rast));
+        if (N >= 512) { /* 9 windows of 256 px inside the map's middle 3/4, as the real crops are measured */
+            double m[3] = {0, 0, 0}, dist[3];
+            int i, j, nw = 0, span = N * 3 / 4 - 256;
+            for (j = 0; j < 3; j++)
+                for (i = 0; i < 3; i++) {
+                    tn_image c = {0, 0, 0, NULL};
+                    if (tn_image_crop(&c, &t, N / 8 + i * span / 2, N / 8 + j * span / 2, 256, 256)) continue;
+                    distances(ex, &c, dist);
+                    m[0] += dist[0], m[1] += dist[1], m[2] += dist[2], nw++;
+                    tn_image_free(&c);
+                }
+            for (i = 0; i < 3 && nw; i++) m[i] /= nw;
+            printf("%s_%d_%s_windows: slope %.4f (%.2f x real) curvature %.4f (%.2f x real) spectrum %.4f (%.2f x real)\n", name, N, lv, m[0],
+                   m[0] / real[0], m[1], m[1] / real[1], m[2], m[2] / real[2]);
+        }
         fflush(stdout);
         tn_image_free(&t);
     }
@@ -308,7 +326,7 @@ int main(int argc, char **argv)
             snprintf(path, sizeof path, "%s/sketch_%s_%s.png", pictures, region, all[d]);
             save_strip(path, panel, out[5].data ? 5 : 4, model.lo, model.hi, dxy);
         }
-        if (big >= 16) big_map(all[d], &model, &sk, &asked, big);
+        if (big >= 16) big_map(all[d], &model, &sk, &asked, big, &ex, real);
         for (w = 0; w < 6; w++) tn_image_free(&out[w]);
         tn_image_free(&rast);
         tn_image_free(&drawing);
