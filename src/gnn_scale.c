@@ -348,14 +348,21 @@ done:
     return st;
 }
 
+/* TN_OK when the window (x, y, w, h) lies inside the W x H map. */
+static tn_status tn__gnn_window_check(int x, int y, int w, int h, int W, int H)
+{
+    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > W - w || y > H - h)
+        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, W, H);
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_prepared_window(tn_image *out, const tn_gnn_prepared *p, int x, int y, int w, int h)
 {
     tn_image res = {0, 0, 0, NULL};
     tn_ctx *ctx = NULL;
     tn_status st;
     TN_ASSERT(out && p);
-    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > p->G.W - w || y > p->G.H - h)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, p->G.W, p->G.H);
+    if ((st = tn__gnn_window_check(x, y, w, h, p->G.W, p->G.H))) return st;
     if ((st = tn_image_create(&res, w, h, 1))) return st;
     if (!(ctx = tn_ctx_create())) st = tn__oom();
     else st = p->f > 1 ? tn__gnn_map_scaled(p, ctx, x, y, w, h, res.data) : tn__gnn_level_run(&p->G, ctx, x, y, w, h, res.data);
@@ -371,8 +378,7 @@ TN_API tn_status tn_gnn_generate_window(tn_image *out, const tn_gnn *model, cons
     tn_gnn_prepared *P;
     tn_status st;
     TN_ASSERT(out);
-    if (w <= 0 || h <= 0 || x < 0 || y < 0 || x > width - w || y > height - h)
-        return tn__fail(TN_ERR_INVALID_ARG, "gnn generate: window %d x %d at (%d, %d) is not inside the %d x %d map", w, h, x, y, width, height);
+    if ((st = tn__gnn_window_check(x, y, w, h, width, height))) return st; /* before the preparation's cost */
     if ((st = tn_gnn_prepare(&P, model, sketch, width, height, opts))) return st;
     st = tn_gnn_prepared_window(out, P, x, y, w, h);
     tn_gnn_prepared_free(P);

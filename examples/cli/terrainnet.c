@@ -1974,7 +1974,8 @@ static int run_gnn_generate(void)
          default, and without one the same preparation generates the map */
         tn_gnn_generate_opts o0 = a->o;
         o0.finetune = 0;
-        if (!(st = tn_gnn_prepare(&prep, &model, &sk, a->w, a->h, &o0))) plan = *tn_gnn_prepared_plan(prep);
+        if (a->o.finetune > 0) st = tn_gnn_plan_of(&plan, &model, &sk, a->w, a->h, &o0); /* the fine-tune generates on its own */
+        else if (!(st = tn_gnn_prepare(&prep, &model, &sk, a->w, a->h, &o0))) plan = *tn_gnn_prepared_plan(prep);
     }
     if (a->o.finetune < 0) /* a drawing keeps its ridges above and valleys below the land beside them (docs/gnn.md); a grown
                               one has the example's network around its strokes instead, and the fine-tune would cost 10 x */
