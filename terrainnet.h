@@ -1548,8 +1548,9 @@ TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *maps, co
    scales' errors: ripples of 4-11x the example's detail RMS.
    Adam 5e-4 (0.5, 0.999), reset at every scale; a scale starts from the coarser one's weights
    when the widths match, with the tail at zero (the identity). Scales larger than 64 px train on
-   random 64 px windows. The time budget gives the scales equal iteration counts, estimated from
-   each scale's measured speed.
+   random 64 px windows, each on a window of one of 4 fake bases of the whole scale made when the
+   scale starts (the coarser generators are frozen by then). The time budget gives the scales
+   equal iteration counts, estimated from each scale's measured speed.
    Everything is defined on the infinite integer grid of each scale: noise is a hash of the seed,
    the scale and the GLOBAL pixel position, upsampling is bilinear between global positions, the
    convolutions are valid and the norms use their running statistics when sampling. So any
@@ -21155,6 +21156,9 @@ done:
 #define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
 #define TN__SG_M 5 /* context of 5 valid 3 x 3 convolutions */
+#define TN__SG_BANK 4 /* fake bases per scale (tn__sg_bank_fill) */
+#define TN__SG_BANK_PX (1 << 20) /* scales with more pixels (grown by the context) make each base anew */
+#define TN__SG_BANK_TILE 256
 
 TN_API void tn_singan_defaults(tn_singan_opts *o)
 {
@@ -21606,6 +21610,8 @@ typedef struct tn__sg_train {
     double lapms;              /* its mean square */
     float *lapc;               /* the curvature loss's gradient on the fake patch */
     tn__sg_ranked *lapv;       /* the fake patch's Laplacian values and their pixels */
+    float *bank;               /* TN__SG_BANK fake bases of the whole scale, grown by the context */
+    int bank_w, bank_h;        /* their size; 0 = none (scale 0, or a scale too large to hold) */
     double budget;             /* seconds */
 } tn__sg_train;
 
@@ -21626,6 +21632,7 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->fake);
     TN_FREE(s->fcond);
     TN_FREE(s->realbase);
+    TN_FREE(s->bank);
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
@@ -21648,19 +21655,41 @@ static double tn__sg_weight(const tn__sg_train *s, int k)
     return w < 1 ? 1 : w > 4 ? 4 : w;
 }
 
-/* Relative cost of one iteration at scale sc: G forward + backward on the fake and the
-   reconstruction, and the forward passes of the coarser scales that make the random base. */
-static double tn__sg_cost(const tn__sg_train *s, int sc)
+/* Whether scale sc draws its fake bases from a bank (tn__sg_bank_fill). */
+static int tn__sg_banked(const tn__sg_train *s, int sc)
+{
+    return sc > 0 && (double)(s->real[sc].width + 2 * TN__SG_M) * (s->real[sc].height + 2 * TN__SG_M) <= TN__SG_BANK_PX;
+}
+
+/* Relative cost of the forward passes of scales sc - 1 .. 0 that make a w x h base at scale sc. */
+static double tn__sg_base_cost(const tn__sg_train *s, int sc, double w, double h)
 {
     double c = 0, f = 1;
-    int k, pw, ph;
-    tn__sg_patch_size(s, sc, &pw, &ph);
-    for (k = sc; k >= 0; k--, f *= s->A.factor) {
-        double w = pw * f < s->real[k].width ? pw * f : s->real[k].width, hh = ph * f < s->real[k].height ? ph * f : s->real[k].height;
-        double px = (w + 2 * TN__SG_M) * (hh + 2 * TN__SG_M) * ((double)s->A.ch[k] * s->A.ch[k] + 1);
-        c += k == sc ? 6.0 * px : px;
+    int k;
+    for (k = sc - 1; k >= 0; k--) {
+        f *= s->A.factor;
+        c += (w * f < s->real[k].width ? w * f : s->real[k].width) * (h * f < s->real[k].height ? h * f : s->real[k].height) *
+             ((double)s->A.ch[k] * s->A.ch[k] + 1);
     }
     return c;
+}
+
+/* Relative cost of one iteration at scale sc: G forward + backward on the fake and the
+   reconstruction, and, without a bank, the coarser passes that make the random base. */
+static double tn__sg_cost(const tn__sg_train *s, int sc)
+{
+    int pw, ph;
+    double pew, peh;
+    tn__sg_patch_size(s, sc, &pw, &ph);
+    pew = pw + 2.0 * TN__SG_M;
+    peh = ph + 2.0 * TN__SG_M;
+    return 6.0 * pew * peh * ((double)s->A.ch[sc] * s->A.ch[sc] + 1) + (tn__sg_banked(s, sc) ? 0 : tn__sg_base_cost(s, sc, pew, peh));
+}
+
+/* Relative cost of filling scale sc's bank (0 without one). */
+static double tn__sg_bank_cost(const tn__sg_train *s, int sc)
+{
+    return tn__sg_banked(s, sc) ? TN__SG_BANK * tn__sg_base_cost(s, sc, s->real[sc].width + 2.0 * TN__SG_M, s->real[sc].height + 2.0 * TN__SG_M) : 0;
 }
 
 static tn__sg_gen_run tn__sg_train_gen(tn__sg_train *s, tn_ctx *ctx, int rec, uint64_t seed)
@@ -21753,6 +21782,56 @@ static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph
         c[-pw] += g;
     }
     return s->o.curv_weight * loss / ((double)n * s->lapms);
+}
+
+/* Scale sc's bank: TN__SG_BANK fake bases of the whole scale (the coarser generators, frozen
+   now, on seeds of the run's seed, the scale and the entry), grown by the context. Each step
+   takes its window from one of them instead of running the coarser scales on it anew: those
+   passes were 35-40 % of a step at the fine scales (docs/singan.md). */
+static tn_status tn__sg_bank_fill(tn__sg_train *s, tn_ctx *ctx, int sc)
+{
+    const int M = TN__SG_M;
+    size_t n;
+    int e, tx, ty;
+    float *tile = NULL;
+    tn_status st = TN_OK;
+    TN_FREE(s->bank);
+    s->bank_w = s->bank_h = 0;
+    if (!tn__sg_banked(s, sc)) return TN_OK;
+    s->bank_w = s->real[sc].width + 2 * M;
+    s->bank_h = s->real[sc].height + 2 * M;
+    n = (size_t)s->bank_w * s->bank_h;
+    if (!(s->bank = (float *)tn__alloc(TN__SG_BANK * n * sizeof(float))) ||
+        !(tile = (float *)tn__alloc((size_t)TN__SG_BANK_TILE * TN__SG_BANK_TILE * sizeof(float))))
+        return TN_ERR_OUT_OF_MEMORY;
+    for (e = 0; e < TN__SG_BANK && !st; e++) {
+        tn__sg_gen_run r = tn__sg_train_gen(s, ctx, 0, tn__splitmix64(tn_train_seed(s->run) ^ (0x62616e6bULL + 0x9E3779B97F4A7C15ULL * (uint64_t)(sc * TN__SG_BANK + e + 1))));
+        /* in tiles, so the coarser scales' activations stay small (a window is the same pixels
+           of any larger one) */
+        for (ty = 0; ty < s->bank_h && !st; ty += TN__SG_BANK_TILE)
+            for (tx = 0; tx < s->bank_w && !st; tx += TN__SG_BANK_TILE) {
+                int tw = s->bank_w - tx < TN__SG_BANK_TILE ? s->bank_w - tx : TN__SG_BANK_TILE;
+                int th = s->bank_h - ty < TN__SG_BANK_TILE ? s->bank_h - ty : TN__SG_BANK_TILE, y;
+                if ((st = tn__sg_base(&r, sc, tx - M, ty - M, tw, th, tile))) break;
+                for (y = 0; y < th; y++)
+                    memcpy(s->bank + (size_t)e * n + (size_t)(ty + y) * s->bank_w + tx, tile + (size_t)y * tw, (size_t)tw * sizeof(float));
+            }
+    }
+    TN_FREE(tile);
+    return st;
+}
+
+/* The fake base of a step on the window (ox - M, oy - M, pew, peh) into s->base: from the bank
+   entry the step's seed picks, or made anew. */
+static tn_status tn__sg_fake_base(tn__sg_train *s, const tn__sg_gen_run *r, int sc, int ox, int oy, int pew, int peh)
+{
+    const int M = TN__SG_M;
+    int y;
+    if (!s->bank) return tn__sg_base(r, sc, ox - M, oy - M, pew, peh, s->base);
+    for (y = 0; y < peh; y++)
+        memcpy(s->base + (size_t)y * pew, s->bank + (size_t)(r->seed % TN__SG_BANK) * s->bank_w * s->bank_h + (size_t)(oy + y) * s->bank_w + ox,
+               (size_t)pew * sizeof(float));
+    return TN_OK;
 }
 
 /* Enters scale sc: progress name, the reconstruction's base and noise amplitude, the starting
@@ -21868,7 +21947,7 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
         sch[2] = 0; /* this scale's iteration count: set once its speed is measured */
         tn__sg_write_config(&s->A, tn_params_find(s->g, "singan.config")->data);
     }
-    return TN_OK;
+    return tn__sg_bank_fill(s, ctx, sc);
 }
 
 /* A 1 x 1 x h x w tensor holding the window (x0, y0, w, h) of a buffer of width bw. */
@@ -21950,7 +22029,7 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1)); /* the D step's real patch */
     ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
     r = tn__sg_train_gen(s, ctx, 0, seed);
-    if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
+    if ((st = tn__sg_fake_base(s, &r, sc, ox, oy, pew, peh))) return st;
     memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
     tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
     tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
@@ -21998,7 +22077,7 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
             rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
             ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
             r = tn__sg_train_gen(s, ctx, 0, seed);
-            if ((st = tn__sg_base(&r, sc, ox - M, oy - M, pew, peh, s->base))) return st;
+            if ((st = tn__sg_fake_base(s, &r, sc, ox, oy, pew, peh))) return st;
             memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
             tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
             tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
@@ -22261,7 +22340,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
             for (k = sc; k < s.A.scales; k++) {
                 double pk = per * tn__sg_cost(&s, k) / tn__sg_cost(&s, sc);
                 need += pk * tn__sg_weight(&s, k);
-                fixed += 5.0 * pk;
+                fixed += 5.0 * pk + (k > sc ? per * tn__sg_bank_cost(&s, k) / tn__sg_cost(&s, sc) : 0);
             }
             nit = (rem - fixed) / need * tn__sg_weight(&s, sc) + 3;
             sch[2] = (float)(nit < 3 ? 3 : nit > s.o.iters ? s.o.iters : floor(nit));
