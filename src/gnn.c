@@ -2447,6 +2447,7 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
 /* The ground tn__gnn_grow adds falls away from a user ridge (rises away from a user valley) by
    TN__GNN_FALL x the example lines' local relief over TN__GNN_FALL_REACH px (tn__gnn_grow_fall) */
 #define TN__GNN_FALL 2.0f
@@ -3178,7 +3179,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             tn_gnn_grow_opts go;
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
-            if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
+            if (!(st = tn_sketch_densify(&rnd, &sk))) { /* the drawn ridges' peaks and saddles, before the ground grows around them */
+                tn_contour_set_free(&sk);
+                sk = rnd;
+                memset(&rnd, 0, sizeof rnd);
+                st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
+            }
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;

@@ -666,6 +666,167 @@ done:
     return TN_OK;
 }
 
+#define TN__GNN_CREST_HALF 8   /* px: an example line shorter than 2 x 8 + 1 px has no peak to give */
+#define TN__GNN_CREST_CHUNK 32 /* px of relief copied at once from one example line */
+#define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
+#define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
+
+/* Heights along a polyline of n points (x, y, h) every px of its length into h (at most
+   floor(length) + 1 values); returns how many. */
+static int tn__gnn_crest_sample(const float *p, int n, float *h)
+{
+    int j, m = 0;
+    float carry = 0;
+    for (j = 1; j < n; j++) {
+        float dx = p[3 * j] - p[3 * j - 3], dy = p[3 * j + 1] - p[3 * j - 2], sl = sqrtf(dx * dx + dy * dy), t;
+        for (t = carry; t < sl; t += 1) h[m++] = p[3 * j - 1] + (p[3 * j + 2] - p[3 * j - 1]) * t / sl;
+        carry = t - sl;
+    }
+    return m;
+}
+
+/* The example's heights along its main lines of one kind (the highest Strahler order among
+   them; parts that continue one another, an end beside the next one's start, are one line),
+   sampled every px: the pool tn__gnn_grow_crest copies from. *pool (tn__alloc'd, NULL when
+   empty) holds *runs runs of at least 2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k]
+   (TN__GNN_CREST_MAX_RUNS at most) to off[k + 1]. */
+#define TN__GNN_CREST_MAX_RUNS 256
+static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, int *off, int *runs)
+{
+    int c, top = -1, n = 0, np = 0, total = 0;
+    float *pts = NULL, *h = NULL;
+    tn_status st = TN_OK;
+    *pool = NULL;
+    *runs = 0;
+    off[0] = 0;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order > top) top = example->items[c].order;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order == top) total += example->items[c].npoints;
+    if (top < 0 || total == 0) return TN_OK;
+    pts = (float *)tn__alloc((size_t)total * 3 * sizeof(float));
+    h = (float *)tn__alloc((size_t)total * 2 * sizeof(float)); /* a chain's length is under 1.5 px a point */
+    if (!pts || !h) st = TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; !st && c <= example->count; c++) {
+        const tn_contour *l = c < example->count ? &example->items[c] : NULL;
+        int main_line = l && (int)l->type == kind && l->order == top, m;
+        if (main_line && np > 0 && fabsf(l->points[0] - pts[3 * np - 3]) <= 1.5f && fabsf(l->points[1] - pts[3 * np - 2]) <= 1.5f) {
+            memcpy(pts + 3 * np, l->points, (size_t)l->npoints * 3 * sizeof(float)); /* the chain goes on */
+            np += l->npoints;
+            continue;
+        }
+        m = np > 1 ? tn__gnn_crest_sample(pts, np, h + n) : 0; /* the chain so far ends here */
+        if (m > 2 * TN__GNN_CREST_HALF && *runs < TN__GNN_CREST_MAX_RUNS) {
+            n += m;
+            off[++*runs] = n;
+        }
+        np = 0;
+        if (main_line) {
+            memcpy(pts, l->points, (size_t)l->npoints * 3 * sizeof(float));
+            np = l->npoints;
+        }
+    }
+    TN_FREE(pts);
+    if (st || n == 0) {
+        TN_FREE(h);
+        *runs = 0;
+        return st;
+    }
+    *pool = h;
+    return TN_OK;
+}
+
+/* h[0..n) (backwards with rev) less its least-squares line into out: what lies above and below
+   the trend, the trend being the sketch's. */
+static void tn__gnn_crest_detrend(const float *h, int n, int rev, float *out)
+{
+    double xm = 0.5 * (n - 1), ym = 0, sxy = 0, sxx = 0, b;
+    int i;
+    for (i = 0; i < n; i++) out[i] = h[rev ? n - 1 - i : i], ym += out[i];
+    ym /= n;
+    for (i = 0; i < n; i++) sxy += (i - xm) * (out[i] - ym), sxx += (i - xm) * (i - xm);
+    b = sxx > 0 ? sxy / sxx : 0;
+    for (i = 0; i < n; i++) out[i] = (float)(out[i] - ym - b * (i - xm));
+}
+
+/* A drawn line of `kind` takes the example's along-line relief: the peaks and saddles of its main
+   ridges (the floor's rises and falls along its main valleys), copied in chunks of
+   TN__GNN_CREST_CHUNK px from random places of its main lines (tn__gnn_crest_pool), forwards or
+   backwards, less each chunk's own straight trend, cross-faded at equal power over
+   TN__GNN_CREST_BLEND px, and added to the asked heights. The sketch gives the trend along a
+   stroke; a smooth one made a levee. The relief fades in over TN__GNN_CREST_FADE px from every
+   other stroke, so strokes that meet keep one height; a closed line's relief closes on itself.
+   set: lines drawn pixel by pixel
+   (tn_sketch_densify), heights in the example's units; its first nuser lines are the user's. */
+TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed)
+{
+    const int C = TN__GNN_CREST_CHUNK, Bl = TN__GNN_CREST_BLEND;
+    int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j;
+    float *pool = NULL, *g = NULL, *w2 = NULL, chunk[TN__GNN_CREST_CHUNK];
+    tn_rng rng;
+    tn_status st = tn__gnn_crest_pool(example, kind, &pool, off, &runs);
+    if (st || !pool) return st;
+    tn_rng_seed(&rng, seed, 0x6372657374ULL + (uint64_t)kind);
+    for (c = 0; !st && c < nuser && c < set->count; c++) {
+        tn_contour *l = &set->items[c];
+        float *p = l->points, len = 0, *s;
+        int n = l->npoints, closed, m, at, i;
+        if ((int)l->type != kind || n < 2) continue;
+        closed = n > 2 && fabsf(p[0] - p[3 * n - 3]) <= 1.5f && fabsf(p[1] - p[3 * n - 2]) <= 1.5f;
+        if (!(s = (float *)tn__alloc((size_t)n * sizeof(float)))) {
+            st = TN_ERR_OUT_OF_MEMORY;
+            break;
+        }
+        for (j = 0; j < n; j++) {
+            if (j) len += sqrtf((p[3 * j] - p[3 * j - 3]) * (p[3 * j] - p[3 * j - 3]) + (p[3 * j + 1] - p[3 * j - 2]) * (p[3 * j + 1] - p[3 * j - 2]));
+            s[j] = len;
+        }
+        m = (int)len + C + 2;
+        g = (float *)tn__calloc((size_t)m * sizeof(float));
+        w2 = (float *)tn__calloc((size_t)m * sizeof(float));
+        if (!g || !w2) st = TN_ERR_OUT_OF_MEMORY;
+        for (at = 0; !st && at < m;) { /* chunks laid end to end, each overlapping the last by Bl px */
+            uint32_t pick = tn_rng_below(&rng, (uint32_t)off[runs]), rev = tn_rng_below(&rng, 2);
+            int k = 0, len_k, from;
+            while (off[k + 1] <= (int)pick) k++;
+            len_k = off[k + 1] - off[k] < C ? off[k + 1] - off[k] : C;
+            from = (int)pick + len_k > off[k + 1] ? off[k + 1] - len_k : (int)pick;
+            tn__gnn_crest_detrend(pool + from, len_k, rev, chunk);
+            for (i = 0; i < len_k && at + i < m; i++) {
+                float e = fminf(1.0f, fminf((float)(i + 1), (float)(len_k - i)) / (Bl + 1)); /* ramps at both ends */
+                g[at + i] += e * chunk[i];
+                w2[at + i] += e * e;
+            }
+            at += len_k > Bl + 1 ? len_k - Bl : 1;
+        }
+        for (i = 0; !st && i < m; i++) g[i] = w2[i] > 0 ? g[i] / sqrtf(w2[i]) : 0;
+        for (j = 0; !st && j < n; j++) {
+            int a = (int)s[j];
+            float f = s[j] - a, r = g[a] + f * (g[a + 1] - g[a]), fade = 1, dmin = FLT_MAX;
+            int o, q;
+            if (closed && s[j] < Bl) { /* the closing stretch mixes in the relief past the line's end */
+                float t = s[j] / Bl, e = len + s[j];
+                int b = (int)e;
+                float r2 = g[b] + (e - b) * (g[b + 1] - g[b]);
+                r = (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
+            }
+            for (o = 0; o < nuser && o < set->count; o++) /* the nearest point of another stroke */
+                for (q = 0; o != c && q < set->items[o].npoints; q++) {
+                    float dx = set->items[o].points[3 * q] - p[3 * j], dy = set->items[o].points[3 * q + 1] - p[3 * j + 1];
+                    dmin = fminf(dmin, dx * dx + dy * dy);
+                }
+            fade = fminf(fade, fmaxf(0.0f, sqrtf(dmin) - 1.5f) / TN__GNN_CREST_FADE); /* none on a neighbour of another stroke's pixel */
+            fade = fade >= 1 ? 1 : fade * fade * (3 - 2 * fade);
+            p[3 * j + 2] += fade * r;
+        }
+        TN_FREE(s);
+        TN_FREE(g);
+        TN_FREE(w2);
+    }
+    TN_FREE(pool);
+    return st;
+}
+
 TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
                              int height, const tn_gnn_grow_opts *opts, int *added)
 {
