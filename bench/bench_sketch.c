@@ -20,6 +20,11 @@
      example) to the example: <= 1.5 is the issue's target;
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
+   - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
+     the terrain along them (every px of their length) minus its running mean over 17 px, against
+     the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
+     lines of the 128 crop; example_crest_relief, example_floor_relief lines); crest_flank_relief,
+     floor_flank_relief: the same 6 px across the lines on both sides (gullies and spurs);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
