@@ -2451,6 +2451,8 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
+                                           float *field); /* >>gnn_grow */
 /* The ground tn__gnn_grow adds falls away from a user ridge (rises away from a user valley) by
    TN__GNN_FALL x the example lines' local relief over TN__GNN_FALL_REACH px (tn__gnn_grow_fall) */
 #define TN__GNN_FALL 2.0f
@@ -2466,6 +2468,7 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
@@ -2507,6 +2510,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->base);
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
+    TN_FREE(G->flank);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
@@ -3215,6 +3219,16 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
+        if (!st && tn_params_find(model->weights, "detail.example") && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
+            /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
+            tn_image ex;
+            ex.width = G->A.width, ex.height = G->A.height, ex.channels = 1;
+            ex.data = tn_params_find(model->weights, "detail.example")->data;
+            if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &ex, o.seed, G->flank);
+            for (q = 0; !st && q < n; q++) G->flank[q] /= G->A.std;
+            tn_contour_set_free(&rnd);
+        }
         if (st) goto done;
     }
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
@@ -3370,6 +3384,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
             size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
             float r = pred[i] - (corr ? corr[j] : 0.0f);
             val[j] = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]);
+            if (G->flank) val[j] += G->flank[(size_t)(ay + v) * G->W + ax + u];
         }
     if (!st && inc) tn__gnn_incise(G, G->side, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
     for (v = 0; !st && v < wh; v++)
