@@ -1892,9 +1892,9 @@ typedef struct tn_gnn_generate_opts {
                                 example network's (a drawing of a few strokes: 6-10 % of it; an
                                 extracted network at 500 cells, 30 %, is not grown) and random_nodes
                                 is 0; 1 = always; -1 = never. A grown sketch's drawn ridges also
-                                take the peaks and saddles of the example's main ridges along them
-                                (docs/gnn.md, stop 46), so their heights differ from the asked ones
-                                by about that relief */
+                                take the peaks and saddles of the example's main ridges along them,
+                                and the gullies and spurs of their flanks (docs/gnn.md, stop 46), so
+                                their heights differ from the asked ones by about that relief */
     int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
                                 detail of the example heights the model holds (gnn-train stores them),
                                 matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
