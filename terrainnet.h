@@ -1892,7 +1892,10 @@ typedef struct tn_gnn_generate_opts {
                                 the sketch's line pixels per map pixel are under a sixth of the
                                 example network's (a drawing of a few strokes: 6-10 % of it; an
                                 extracted network at 500 cells, 30 %, is not grown) and random_nodes
-                                is 0; 1 = always; -1 = never */
+                                is 0; 1 = always; -1 = never. A grown sketch's drawn ridges also
+                                take the peaks and saddles of the example's main ridges along them,
+                                and the gullies and spurs of their flanks (docs/gnn.md, stop 46), so
+                                their heights differ from the asked ones by about that relief */
     int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
                                 detail of the example heights the model holds (gnn-train stores them),
                                 matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
@@ -2741,6 +2744,8 @@ float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, floa
 tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out);
 tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
                                int *near);
+tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
+tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif
 #ifndef TN_NO_TEXGAN
 /* ---- src/texgan.c ---- */
@@ -3856,6 +3861,22 @@ static int tn__reflect_whole(long long i, int n)
 }
 
 /* ---- crop / pad ---------------------------------------------------------------------------- */
+
+/* Bilinear sample of channel c at (x, y), clamped to the image. */
+static float tn__sample_bilinear(const tn_image *im, float x, float y, int c)
+{
+    int x0, y0, x1, y1;
+    float fx, fy, a, b;
+    x = tn__clampf(x, 0.0f, (float)(im->width - 1));
+    y = tn__clampf(y, 0.0f, (float)(im->height - 1));
+    x0 = (int)x; y0 = (int)y;
+    x1 = x0 + 1 < im->width ? x0 + 1 : x0;
+    y1 = y0 + 1 < im->height ? y0 + 1 : y0;
+    fx = x - (float)x0; fy = y - (float)y0;
+    a = TN_PIXEL(im, x0, y0, c) + fx * (TN_PIXEL(im, x1, y0, c) - TN_PIXEL(im, x0, y0, c));
+    b = TN_PIXEL(im, x0, y1, c) + fx * (TN_PIXEL(im, x1, y1, c) - TN_PIXEL(im, x0, y1, c));
+    return a + fy * (b - a);
+}
 
 TN_API tn_status tn_image_crop(tn_image *dst, const tn_image *src, int x, int y, int w, int h)
 {
@@ -25142,6 +25163,9 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
+                                           float *field); /* >>gnn_grow */
 /* The ground tn__gnn_grow adds falls away from a user ridge (rises away from a user valley) by
    TN__GNN_FALL x the example lines' local relief over TN__GNN_FALL_REACH px (tn__gnn_grow_fall) */
 #define TN__GNN_FALL 2.0f
@@ -25157,6 +25181,7 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
@@ -25198,6 +25223,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->base);
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
+    TN_FREE(G->flank);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
@@ -25873,7 +25899,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             tn_gnn_grow_opts go;
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
-            if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
+            if (!(st = tn_sketch_densify(&rnd, &sk))) { /* the drawn ridges' peaks and saddles, before the ground grows around them */
+                tn_contour_set_free(&sk);
+                sk = rnd;
+                memset(&rnd, 0, sizeof rnd);
+                st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
+            }
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
@@ -25900,6 +25932,16 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
+        if (!st && tn_params_find(model->weights, "detail.example") && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
+            /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
+            tn_image ex;
+            ex.width = G->A.width, ex.height = G->A.height, ex.channels = 1;
+            ex.data = tn_params_find(model->weights, "detail.example")->data;
+            if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &ex, o.seed, G->flank);
+            for (q = 0; !st && q < n; q++) G->flank[q] /= G->A.std;
+            tn_contour_set_free(&rnd);
+        }
         if (st) goto done;
     }
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
@@ -26055,6 +26097,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
             size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
             float r = pred[i] - (corr ? corr[j] : 0.0f);
             val[j] = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]);
+            if (G->flank) val[j] += G->flank[(size_t)(ay + v) * G->W + ax + u];
         }
     if (!st && inc) tn__gnn_incise(G, G->side, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
     for (v = 0; !st && v < wh; v++)
@@ -27434,6 +27477,313 @@ done:
     if (added) *added = (int)nl;
     if (relief_out) *relief_out = relief;
     return TN_OK;
+}
+
+#define TN__GNN_CREST_HALF 8   /* px: an example line shorter than 2 x 8 + 1 px has no peak to give */
+#define TN__GNN_CREST_CHUNK 32 /* px of relief copied at once from one example line */
+#define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
+#define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
+
+/* Heights along a polyline of n points (x, y, h) every px of its length into h (at most
+   floor(length) + 1 values), and their places into xy (may be NULL); returns how many. */
+static int tn__gnn_crest_sample(const float *p, int n, float *h, float *xy)
+{
+    int j, m = 0;
+    float carry = 0;
+    for (j = 1; j < n; j++) {
+        float dx = p[3 * j] - p[3 * j - 3], dy = p[3 * j + 1] - p[3 * j - 2], sl = sqrtf(dx * dx + dy * dy), t;
+        for (t = carry; t < sl; t += 1, m++) {
+            h[m] = p[3 * j - 1] + (p[3 * j + 2] - p[3 * j - 1]) * t / sl;
+            if (xy) xy[2 * m] = p[3 * j - 3] + dx * t / sl, xy[2 * m + 1] = p[3 * j - 2] + dy * t / sl;
+        }
+        carry = t - sl;
+    }
+    return m;
+}
+
+/* The example's heights along its main lines of one kind (the highest Strahler order among
+   them; parts that continue one another, an end beside the next one's start, are one line),
+   sampled every px: the pool tn__gnn_grow_crest copies from. *pool (tn__alloc'd, NULL when
+   empty) holds *runs runs of at least 2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k]
+   (TN__GNN_CREST_MAX_RUNS at most) to off[k + 1]; *xy (may be NULL; tn__alloc'd) their places. */
+#define TN__GNN_CREST_MAX_RUNS 256
+static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, float **xy, int *off, int *runs)
+{
+    int c, top = -1, n = 0, np = 0, total = 0;
+    float *pts = NULL, *h = NULL, *at = NULL;
+    tn_status st = TN_OK;
+    *pool = NULL;
+    *runs = 0;
+    off[0] = 0;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order > top) top = example->items[c].order;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order == top) total += example->items[c].npoints;
+    if (top < 0 || total == 0) return TN_OK;
+    pts = (float *)tn__alloc((size_t)total * 3 * sizeof(float));
+    h = (float *)tn__alloc((size_t)total * 2 * sizeof(float)); /* a chain's length is under 1.5 px a point */
+    if (xy && !(at = (float *)tn__alloc((size_t)total * 4 * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!pts || !h) st = TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; !st && c <= example->count; c++) {
+        const tn_contour *l = c < example->count ? &example->items[c] : NULL;
+        int main_line = l && (int)l->type == kind && l->order == top, m;
+        if (main_line && np > 0 && fabsf(l->points[0] - pts[3 * np - 3]) <= 1.5f && fabsf(l->points[1] - pts[3 * np - 2]) <= 1.5f) {
+            memcpy(pts + 3 * np, l->points, (size_t)l->npoints * 3 * sizeof(float)); /* the chain goes on */
+            np += l->npoints;
+            continue;
+        }
+        m = np > 1 ? tn__gnn_crest_sample(pts, np, h + n, at ? at + 2 * n : NULL) : 0; /* the chain so far ends here */
+        if (m > 2 * TN__GNN_CREST_HALF && *runs < TN__GNN_CREST_MAX_RUNS) {
+            n += m;
+            off[++*runs] = n;
+        }
+        np = 0;
+        if (main_line) {
+            memcpy(pts, l->points, (size_t)l->npoints * 3 * sizeof(float));
+            np = l->npoints;
+        }
+    }
+    TN_FREE(pts);
+    if (st || n == 0) {
+        TN_FREE(h);
+        TN_FREE(at);
+        *runs = 0;
+        return st;
+    }
+    *pool = h;
+    if (xy) *xy = at;
+    return TN_OK;
+}
+
+/* h[0..n) (backwards with rev) less its least-squares line into out: what lies above and below
+   the trend, the trend being the sketch's. */
+static void tn__gnn_crest_detrend(const float *h, int n, int rev, float *out)
+{
+    double xm = 0.5 * (n - 1), ym = 0, sxy = 0, sxx = 0, b;
+    int i;
+    for (i = 0; i < n; i++) out[i] = h[rev ? n - 1 - i : i], ym += out[i];
+    ym /= n;
+    for (i = 0; i < n; i++) sxy += (i - xm) * (out[i] - ym), sxx += (i - xm) * (i - xm);
+    b = sxx > 0 ? sxy / sxx : 0;
+    for (i = 0; i < n; i++) out[i] = (float)(out[i] - ym - b * (i - xm));
+}
+
+/* Relief along a line of m px into g (m x R, zeroed by the caller): chunks of TN__GNN_CREST_CHUNK
+   px from random places of pool (R values a px: a strip across the example's line, or its heights
+   alone), forwards or backwards (the sides of a strip swap), each row less its straight trend along
+   the chunk (tn__gnn_crest_detrend), laid end to end and cross-faded at equal power over
+   TN__GNN_CREST_BLEND px. w2 (m), col (2 x TN__GNN_CREST_CHUNK): scratch. */
+static void tn__gnn_crest_synth(const float *pool, int R, const int *off, int runs, int m, tn_rng *rng, float *g, float *w2, float *col)
+{
+    const int C = TN__GNN_CREST_CHUNK, Bl = TN__GNN_CREST_BLEND;
+    int at, i, r;
+    memset(w2, 0, (size_t)m * sizeof(float));
+    for (at = 0; at < m;) {
+        uint32_t pick = tn_rng_below(rng, (uint32_t)off[runs]), rev = tn_rng_below(rng, 2);
+        int k = 0, len_k, from;
+        while (off[k + 1] <= (int)pick) k++;
+        len_k = off[k + 1] - off[k] < C ? off[k + 1] - off[k] : C;
+        from = (int)pick + len_k > off[k + 1] ? off[k + 1] - len_k : (int)pick;
+        for (r = 0; r < R; r++) {
+            for (i = 0; i < len_k; i++) col[C + i] = pool[(size_t)(from + i) * R + r];
+            tn__gnn_crest_detrend(col + C, len_k, (int)rev, col);
+            for (i = 0; i < len_k && at + i < m; i++) {
+                float e = fminf(1.0f, fminf((float)(i + 1), (float)(len_k - i)) / (Bl + 1)); /* ramps at both ends */
+                g[(size_t)(at + i) * R + (rev ? R - 1 - r : r)] += e * col[i];
+                if (r == 0) w2[at + i] += e * e;
+            }
+        }
+        at += len_k > Bl + 1 ? len_k - Bl : 1;
+    }
+    for (i = 0; i < m; i++)
+        for (r = 0; r < R; r++) g[(size_t)i * R + r] = w2[i] > 0 ? g[(size_t)i * R + r] / sqrtf(w2[i]) : 0;
+}
+
+/* How much of the relief point j of the user's line c takes: none within 1.5 px of another of the
+   first nuser lines, all from TN__GNN_CREST_FADE px on (a smoothstep), so strokes that meet keep
+   one height. */
+static float tn__gnn_crest_fade(const tn_contour_set *set, int nuser, int c, int j)
+{
+    const float *p = set->items[c].points + 3 * j;
+    float dmin = FLT_MAX, f;
+    int o, q;
+    for (o = 0; o < nuser && o < set->count; o++)
+        for (q = 0; o != c && q < set->items[o].npoints; q++) {
+            float dx = set->items[o].points[3 * q] - p[0], dy = set->items[o].points[3 * q + 1] - p[1];
+            dmin = fminf(dmin, dx * dx + dy * dy);
+        }
+    f = fminf(1.0f, fmaxf(0.0f, sqrtf(dmin) - 1.5f) / TN__GNN_CREST_FADE);
+    return f * f * (3 - 2 * f);
+}
+
+/* A drawn line of `kind` takes the example's along-line relief: the peaks and saddles of its main
+   ridges (the floor's rises and falls along its main valleys), copied in chunks of
+   TN__GNN_CREST_CHUNK px from random places of its main lines (tn__gnn_crest_pool), forwards or
+   backwards, less each chunk's own straight trend, cross-faded at equal power over
+   TN__GNN_CREST_BLEND px, and added to the asked heights. The sketch gives the trend along a
+   stroke; a smooth one made a levee. The relief fades in over TN__GNN_CREST_FADE px from every
+   other stroke, so strokes that meet keep one height; a closed line's relief closes on itself.
+   set: lines drawn pixel by pixel
+   (tn_sketch_densify), heights in the example's units; its first nuser lines are the user's. */
+TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed)
+{
+    const int Bl = TN__GNN_CREST_BLEND;
+    int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j;
+    float *pool = NULL, *g = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
+    tn_rng rng;
+    tn_status st = tn__gnn_crest_pool(example, kind, &pool, NULL, off, &runs);
+    if (st || !pool) return st;
+    tn_rng_seed(&rng, seed, 0x6372657374ULL + (uint64_t)kind);
+    for (c = 0; !st && c < nuser && c < set->count; c++) {
+        tn_contour *l = &set->items[c];
+        float *p = l->points, len = 0, *s;
+        int n = l->npoints, closed, m;
+        if ((int)l->type != kind || n < 2) continue;
+        closed = n > 2 && fabsf(p[0] - p[3 * n - 3]) <= 1.5f && fabsf(p[1] - p[3 * n - 2]) <= 1.5f;
+        if (!(s = (float *)tn__alloc((size_t)n * sizeof(float)))) {
+            st = TN_ERR_OUT_OF_MEMORY;
+            break;
+        }
+        for (j = 0; j < n; j++) {
+            if (j) len += sqrtf((p[3 * j] - p[3 * j - 3]) * (p[3 * j] - p[3 * j - 3]) + (p[3 * j + 1] - p[3 * j - 2]) * (p[3 * j + 1] - p[3 * j - 2]));
+            s[j] = len;
+        }
+        m = (int)len + TN__GNN_CREST_CHUNK + 2;
+        g = (float *)tn__calloc((size_t)m * sizeof(float));
+        w2 = (float *)tn__alloc((size_t)m * sizeof(float));
+        if (!g || !w2) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st) tn__gnn_crest_synth(pool, 1, off, runs, m, &rng, g, w2, col);
+        for (j = 0; !st && j < n; j++) {
+            int a = (int)s[j];
+            float f = s[j] - a, r = g[a] + f * (g[a + 1] - g[a]);
+            if (closed && s[j] < Bl) { /* the closing stretch mixes in the relief past the line's end */
+                float t = s[j] / Bl, e = len + s[j];
+                int b = (int)e;
+                float r2 = g[b] + (e - b) * (g[b + 1] - g[b]);
+                r = (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
+            }
+            p[3 * j + 2] += tn__gnn_crest_fade(set, nuser, c, j) * r;
+        }
+        TN_FREE(s);
+        TN_FREE(g);
+        TN_FREE(w2);
+    }
+    TN_FREE(pool);
+    return st;
+}
+
+#define TN__GNN_FLANK 16 /* px across a drawn ridge that take the example's flanks */
+
+/* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
+static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
+{
+    int a = i - 2 < 0 ? 0 : i - 2, b = i + 2 >= n ? n - 1 : i + 2;
+    float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
+    *nx = l > 0 ? -dy / l : 0;
+    *ny = l > 0 ? dx / l : 0;
+}
+
+/* The flanks of the drawn ridges by example: field (W x H, the example's units, zero elsewhere)
+   gets, within TN__GNN_FLANK px of a drawn ridge, what the example's main ridges have on their
+   flanks: strips across them (heights at -16 .. 16 px along their normals, every px of their
+   length), each offset's row less its straight trend along the chunk, copied in chunks along the
+   drawn ridge as tn__gnn_grow_crest copies the crest, and laid by each pixel's nearest stroke point
+   and its offset across. Nothing on the stroke (the crest has its own), full from 4 to 8 px, gone
+   by 16 px; faded near other strokes as the crest is. dem: the example's heights. */
+TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
+                                           float *field)
+{
+    const int T = TN__GNN_FLANK, R = 2 * TN__GNN_FLANK + 1;
+    const int W = set->width, H = set->height;
+    const size_t np = (size_t)W * H;
+    int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j, i, k, r, npts = 0;
+    float *pool = NULL, *xy = NULL, *strip = NULL, **g = NULL, *dist = NULL, *fade = NULL, *sarc = NULL, *nrm = NULL, col[2 * TN__GNN_CREST_CHUNK];
+    int *near = NULL, *ptc = NULL, *ptj = NULL, *idx = NULL;
+    uint8_t *mask = NULL;
+    tn_rng rng;
+    tn_status st;
+    memset(field, 0, np * sizeof(float));
+    if ((st = tn__gnn_crest_pool(example, TN_RIDGE, &pool, &xy, off, &runs)) || !pool) return st;
+    for (c = 0; c < nuser && c < set->count; c++)
+        if (set->items[c].type == TN_RIDGE) npts += set->items[c].npoints;
+    strip = (float *)tn__alloc((size_t)off[runs] * R * sizeof(float));
+    g = (float **)tn__calloc((size_t)(nuser > 0 ? nuser : 1) * sizeof(float *));
+    dist = (float *)tn__alloc(np * sizeof(float));
+    near = (int *)tn__alloc(np * sizeof(int));
+    idx = (int *)tn__alloc(np * sizeof(int));
+    mask = (uint8_t *)tn__calloc(np);
+    ptc = (int *)tn__alloc((size_t)(npts + 1) * sizeof(int));
+    ptj = (int *)tn__alloc((size_t)(npts + 1) * sizeof(int));
+    fade = (float *)tn__alloc((size_t)(npts + 1) * sizeof(float));
+    sarc = (float *)tn__alloc((size_t)(npts + 1) * sizeof(float));
+    nrm = (float *)tn__alloc((size_t)(npts + 1) * 2 * sizeof(float));
+    if (!strip || !g || !dist || !near || !idx || !mask || !ptc || !ptj || !fade || !sarc || !nrm) {
+        st = TN_ERR_OUT_OF_MEMORY;
+        goto done;
+    }
+    for (k = 0; k < runs; k++) /* the strips across the example's main ridges */
+        for (i = off[k]; i < off[k + 1]; i++) {
+            float nx, ny;
+            tn__gnn_normal(xy + 2 * (size_t)off[k], 2, off[k + 1] - off[k], i - off[k], &nx, &ny);
+            for (r = 0; r < R; r++) strip[(size_t)i * R + r] = tn__sample_bilinear(dem, xy[2 * i] + (float)(r - T) * nx, xy[2 * i + 1] + (float)(r - T) * ny, 0);
+        }
+    tn_rng_seed(&rng, seed, 0x666c616e6bULL);
+    for (i = 0; i < (int)np; i++) idx[i] = -1;
+    for (c = 0, k = 0; c < nuser && c < set->count; c++) {
+        const tn_contour *l = &set->items[c];
+        const float *p = l->points;
+        float len = 0, *w2;
+        int m, n = l->npoints;
+        if (l->type != TN_RIDGE || n < 2) continue;
+        for (j = 0; j < n; j++, k++) {
+            int X = (int)floorf(p[3 * j] + 0.5f), Y = (int)floorf(p[3 * j + 1] + 0.5f);
+            if (j) len += sqrtf((p[3 * j] - p[3 * j - 3]) * (p[3 * j] - p[3 * j - 3]) + (p[3 * j + 1] - p[3 * j - 2]) * (p[3 * j + 1] - p[3 * j - 2]));
+            ptc[k] = c, ptj[k] = j, sarc[k] = len;
+            tn__gnn_normal(p, 3, n, j, &nrm[2 * k], &nrm[2 * k + 1]);
+            fade[k] = tn__gnn_crest_fade(set, nuser, c, j);
+            if (X >= 0 && Y >= 0 && X < W && Y < H) {
+                mask[(size_t)Y * W + X] = 1;
+                idx[(size_t)Y * W + X] = k;
+            }
+        }
+        m = (int)len + TN__GNN_CREST_CHUNK + 2;
+        g[c] = (float *)tn__calloc((size_t)m * R * sizeof(float));
+        w2 = (float *)tn__alloc((size_t)m * sizeof(float));
+        if (g[c] && w2) tn__gnn_crest_synth(strip, R, off, runs, m, &rng, g[c], w2, col);
+        TN_FREE(w2);
+        if (!g[c]) {
+            st = TN_ERR_OUT_OF_MEMORY;
+            goto done;
+        }
+    }
+    tn__gnn_chamfer(mask, W, H, dist, near);
+    for (i = 0; i < (int)np; i++) {
+        float d = dist[i], t, a, b;
+        int q = near[i] >= 0 ? idx[near[i]] : -1;
+        if (q < 0 || !(d < (float)T)) continue;
+        t = ((float)(i % W) - set->items[ptc[q]].points[3 * ptj[q]]) * nrm[2 * q] + ((float)(i / W) - set->items[ptc[q]].points[3 * ptj[q] + 1]) * nrm[2 * q + 1];
+        r = (int)floorf(t + 0.5f) + T;
+        r = r < 0 ? 0 : r >= R ? R - 1 : r;
+        a = tn__clampf(d / 4, 0, 1);
+        b = tn__clampf((d - 8) / 8, 0, 1);
+        field[i] = a * a * (3 - 2 * a) * (1 - b * b * (3 - 2 * b)) * fade[q] * g[ptc[q]][(size_t)(int)sarc[q] * R + r];
+    }
+done:
+    for (c = 0; g && c < nuser; c++) TN_FREE(g[c]);
+    TN_FREE(g);
+    TN_FREE(pool);
+    TN_FREE(xy);
+    TN_FREE(strip);
+    TN_FREE(dist);
+    TN_FREE(near);
+    TN_FREE(idx);
+    TN_FREE(mask);
+    TN_FREE(ptc);
+    TN_FREE(ptj);
+    TN_FREE(fade);
+    TN_FREE(sarc);
+    TN_FREE(nrm);
+    return st;
 }
 
 TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
@@ -30333,22 +30683,6 @@ typedef struct tn__view_job {
     float yaw, pitch, fov;      /* radians */
     float far_dist, focal;
 } tn__view_job;
-
-/* Bilinear sample of channel c at (x, y), clamped to the image. */
-static float tn__sample_bilinear(const tn_image *im, float x, float y, int c)
-{
-    int x0, y0, x1, y1;
-    float fx, fy, a, b;
-    x = tn__clampf(x, 0.0f, (float)(im->width - 1));
-    y = tn__clampf(y, 0.0f, (float)(im->height - 1));
-    x0 = (int)x; y0 = (int)y;
-    x1 = x0 + 1 < im->width ? x0 + 1 : x0;
-    y1 = y0 + 1 < im->height ? y0 + 1 : y0;
-    fx = x - (float)x0; fy = y - (float)y0;
-    a = TN_PIXEL(im, x0, y0, c) + fx * (TN_PIXEL(im, x1, y0, c) - TN_PIXEL(im, x0, y0, c));
-    b = TN_PIXEL(im, x0, y1, c) + fx * (TN_PIXEL(im, x1, y1, c) - TN_PIXEL(im, x0, y1, c));
-    return a + fy * (b - a);
-}
 
 static void tn__view_columns(void *ctx, size_t b, size_t e)
 {

@@ -20,6 +20,11 @@
      example) to the example: <= 1.5 is the issue's target;
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
+   - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
+     the terrain along them (every px of their length) minus its running mean over 17 px, against
+     the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
+     lines of the 128 crop; example_crest_relief, example_floor_relief lines); crest_flank_relief,
+     floor_flank_relief: the same 6 px across the lines on both sides (gullies and spurs);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
@@ -132,6 +137,61 @@ static double floor_detail(const tn_image *t, const tn_image *rast)
     return r;
 }
 
+#define RELIEF_HALF 8 /* px: the running mean along a line spans 2 x 8 + 1 px */
+#define FLANK 6       /* px: a line's flanks are measured this far across it */
+
+/* Bilinear height of img at (x, y), clamped to the map. */
+static double height_at(const tn_image *img, double x, double y)
+{
+    int x0, y0, x1, y1;
+    double fx, fy;
+    x = x < 0 ? 0 : x > img->width - 1 ? img->width - 1 : x;
+    y = y < 0 ? 0 : y > img->height - 1 ? img->height - 1 : y;
+    x0 = (int)x, y0 = (int)y;
+    x1 = x0 + 1 < img->width ? x0 + 1 : x0, y1 = y0 + 1 < img->height ? y0 + 1 : y0;
+    fx = x - x0, fy = y - y0;
+    return (1 - fy) * ((1 - fx) * img->data[(size_t)y0 * img->width + x0] + fx * img->data[(size_t)y0 * img->width + x1]) +
+           fy * ((1 - fx) * img->data[(size_t)y1 * img->width + x0] + fx * img->data[(size_t)y1 * img->width + x1]);
+}
+
+/* Along-line relief: the std of img along set's lines of one kind (sampled every px of their
+   length; with off > 0, on both sides of them, off px across: their flanks) minus its running
+   mean over 2 x RELIEF_HALF + 1 px along the same path; with mains, only the lines of the highest
+   Strahler order of that kind. NAN without such lines. */
+static double line_relief(const tn_image *img, const tn_contour_set *set, int kind, int mains, double off)
+{
+    int c, j, top = -1;
+    double s1 = 0, s2 = 0, n = 0;
+    for (c = 0; c < set->count; c++)
+        if ((int)set->items[c].type == kind && set->items[c].order > top) top = set->items[c].order;
+    for (c = 0; c < set->count; c++) {
+        const tn_contour *l = &set->items[c];
+        double *h, len = 0;
+        int m = 0, cap, i, k, side;
+        if ((int)l->type != kind || (mains && l->order != top) || l->npoints < 2) continue;
+        for (j = 1; j < l->npoints; j++) len += hypot(l->points[3 * j] - l->points[3 * j - 3], l->points[3 * j + 1] - l->points[3 * j - 2]);
+        cap = (int)len + 2;
+        if (!(h = (double *)malloc((size_t)cap * sizeof(double)))) continue;
+        for (side = off > 0 ? -1 : 1; side <= 1; side += 2) {
+            m = 0;
+            for (j = 1, len = 0; j < l->npoints; j++) { /* a sample every px of the length; len carries the step over */
+                double ax = l->points[3 * j - 3], ay = l->points[3 * j - 2], dx = l->points[3 * j] - ax, dy = l->points[3 * j + 1] - ay;
+                double sl = hypot(dx, dy), t, nx = sl > 0 ? -dy / sl * side * off : 0, ny = sl > 0 ? dx / sl * side * off : 0;
+                for (t = len; t < sl && m < cap; t += 1) h[m++] = height_at(img, ax + dx * t / sl + nx, ay + dy * t / sl + ny);
+                len = t - sl;
+            }
+            for (i = RELIEF_HALF; i + RELIEF_HALF < m; i++) { /* whole windows only: a cut one is off-centre on a slope */
+                double mean = 0;
+                for (k = i - RELIEF_HALF; k <= i + RELIEF_HALF; k++) mean += h[k];
+                mean = h[i] - mean / (2 * RELIEF_HALF + 1);
+                s1 += mean, s2 += mean * mean, n++;
+            }
+        }
+        free(h);
+    }
+    return n > 1 ? sqrt(s2 / n - (s1 / n) * (s1 / n)) : NAN;
+}
+
 /* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
 static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N, const tn_image *ex,
                     const double *real)
@@ -186,7 +246,8 @@ int main(int argc, char **argv)
     static const char *all[] = {"valley", "summit", "ring", "cross"};
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *only = NULL;
-    double dxy[2], h0, h1, real[3] = {0, 0, 0};
+    double dxy[2], h0, h1, real[3] = {0, 0, 0}, ex_relief[4] = {NAN, NAN, NAN, NAN};
+    static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
     int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
@@ -243,6 +304,14 @@ int main(int argc, char **argv)
         }
         for (k = 0; k < 3; k++) real[k] /= nreal;
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
+    }
+    { /* the example's own along-line relief on its main ridges and valleys (tn_extract) */
+        tn_extraction e;
+        if (!tn_extract(&e, &ex, NULL)) {
+            for (k = 0; k < 4; k++) ex_relief[k] = line_relief(&ex, &e.contours, k & 1 ? TN_VALLEY : TN_RIDGE, 1, k < 2 ? 0 : FLANK);
+            tn_extraction_free(&e);
+        }
+        for (k = 0; k < 4; k++) printf("example_%s_relief: %.2f m (main %s)\n", relief_name[k], ex_relief[k], k & 1 ? "valleys" : "ridges");
     }
     for (d = 0; d < 4; d++) {
         char path[512];
@@ -306,6 +375,10 @@ int main(int argc, char **argv)
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
             printf("%s_%s_basins: %.1f %% of the map\n", all[d], way[w], 100 * basins(&out[w], model.lo, model.hi));
+            for (k = 0; k < 4; k++) {
+                double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
+                if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);
+            }
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             else { /* the membrane alone, at 256 and 1024 px (its blocks of 128 + 64 px) */
                 tn_image big = {0, 0, 0, NULL};

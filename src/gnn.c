@@ -194,7 +194,10 @@ typedef struct tn_gnn_generate_opts {
                                 the sketch's line pixels per map pixel are under a sixth of the
                                 example network's (a drawing of a few strokes: 6-10 % of it; an
                                 extracted network at 500 cells, 30 %, is not grown) and random_nodes
-                                is 0; 1 = always; -1 = never */
+                                is 0; 1 = always; -1 = never. A grown sketch's drawn ridges also
+                                take the peaks and saddles of the example's main ridges along them,
+                                and the gullies and spurs of their flanks (docs/gnn.md, stop 46), so
+                                their heights differ from the asked ones by about that relief */
     int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
                                 detail of the example heights the model holds (gnn-train stores them),
                                 matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
@@ -2447,6 +2450,9 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 
 static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
+                                           float *field); /* >>gnn_grow */
 /* The ground tn__gnn_grow adds falls away from a user ridge (rises away from a user valley) by
    TN__GNN_FALL x the example lines' local relief over TN__GNN_FALL_REACH px (tn__gnn_grow_fall) */
 #define TN__GNN_FALL 2.0f
@@ -2462,6 +2468,7 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
@@ -2503,6 +2510,7 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->base);
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
+    TN_FREE(G->flank);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
@@ -3178,7 +3186,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             tn_gnn_grow_opts go;
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
-            if (!(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
+            if (!(st = tn_sketch_densify(&rnd, &sk))) { /* the drawn ridges' peaks and saddles, before the ground grows around them */
+                tn_contour_set_free(&sk);
+                sk = rnd;
+                memset(&rnd, 0, sizeof rnd);
+                st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
+            }
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
@@ -3205,6 +3219,16 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
+        if (!st && tn_params_find(model->weights, "detail.example") && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
+            /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
+            tn_image ex;
+            ex.width = G->A.width, ex.height = G->A.height, ex.channels = 1;
+            ex.data = tn_params_find(model->weights, "detail.example")->data;
+            if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &ex, o.seed, G->flank);
+            for (q = 0; !st && q < n; q++) G->flank[q] /= G->A.std;
+            tn_contour_set_free(&rnd);
+        }
         if (st) goto done;
     }
     if (o.gain != 0) G->gain = o.gain > 0 ? o.gain : 0.0f;
@@ -3360,6 +3384,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
             size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
             float r = pred[i] - (corr ? corr[j] : 0.0f);
             val[j] = G->gain == 1.0f && !corr ? pred[i] : R.base[i] + G->gain * (r - R.base[i]);
+            if (G->flank) val[j] += G->flank[(size_t)(ay + v) * G->W + ax + u];
         }
     if (!st && inc) tn__gnn_incise(G, G->side, val, ax, ay, aw, ah, x, y, ww, wh, corr, inc); /* corr is free by now: the notch's scratch */
     for (v = 0; !st && v < wh; v++)

@@ -277,6 +277,22 @@ static int tn__reflect_whole(long long i, int n)
 
 /* ---- crop / pad ---------------------------------------------------------------------------- */
 
+/* Bilinear sample of channel c at (x, y), clamped to the image. */
+static float tn__sample_bilinear(const tn_image *im, float x, float y, int c)
+{
+    int x0, y0, x1, y1;
+    float fx, fy, a, b;
+    x = tn__clampf(x, 0.0f, (float)(im->width - 1));
+    y = tn__clampf(y, 0.0f, (float)(im->height - 1));
+    x0 = (int)x; y0 = (int)y;
+    x1 = x0 + 1 < im->width ? x0 + 1 : x0;
+    y1 = y0 + 1 < im->height ? y0 + 1 : y0;
+    fx = x - (float)x0; fy = y - (float)y0;
+    a = TN_PIXEL(im, x0, y0, c) + fx * (TN_PIXEL(im, x1, y0, c) - TN_PIXEL(im, x0, y0, c));
+    b = TN_PIXEL(im, x0, y1, c) + fx * (TN_PIXEL(im, x1, y1, c) - TN_PIXEL(im, x0, y1, c));
+    return a + fy * (b - a);
+}
+
 TN_API tn_status tn_image_crop(tn_image *dst, const tn_image *src, int x, int y, int w, int h)
 {
     tn_image out;

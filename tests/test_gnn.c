@@ -1332,6 +1332,125 @@ TN_TEST(grow_fall_follows_the_example)
     tn_image_free(&er);
 }
 
+/* std of h[a..b) less its running mean over 17 values */
+static double crest_relief_of(const float *pts, int a, int b)
+{
+    double s1 = 0, s2 = 0;
+    int i, k, n = 0;
+    for (i = a; i < b; i++, n++) {
+        double m = 0;
+        for (k = i - 8; k <= i + 8; k++) m += pts[3 * k + 2];
+        m = pts[3 * i + 2] - m / 17;
+        s1 += m, s2 += m * m;
+    }
+    return sqrt(s2 / n - (s1 / n) * (s1 / n));
+}
+
+TN_TEST(grow_crest_copies_the_example_relief)
+{
+    /* a drawn ridge of constant height takes the along-line relief of the example's main ridge (a
+       chain of 8 px parts whose heights swing 40 m with a 24 px period), not that of its
+       lower-order ridge (400 m); a drawn valley keeps its heights, and so does the ridge where the
+       valley starts beside it; the seed decides */
+    float ep[2][128 * 3], up[2][201 * 3], before[201 * 3], first[201 * 3];
+    tn_contour items[40], user[2];
+    tn_contour_set ex, sk;
+    double want, got;
+    int i, k = 0, x, seed;
+    for (x = 0; x < 128; x++) {
+        ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
+        ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
+    }
+    memset(items, 0, sizeof items);
+    for (i = 0; i < 2; i++)
+        for (x = 0; x < 128; x += 8, k++) {
+            items[k].type = TN_RIDGE;
+            items[k].order = i ? 1 : 2;
+            items[k].npoints = 8;
+            items[k].points = ep[i] + 3 * x;
+        }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    want = crest_relief_of(ep[0], 8, 120);
+    for (x = 0; x <= 200; x++) {
+        up[0][3 * x] = (float)(20 + x), up[0][3 * x + 1] = 100, up[0][3 * x + 2] = 500;
+        up[1][3 * x] = 120, up[1][3 * x + 1] = (float)(101 + x / 2), up[1][3 * x + 2] = 500; /* runs down from the ridge's middle */
+    }
+    memcpy(before, up[0], sizeof before);
+    memset(user, 0, sizeof user);
+    user[0].type = TN_RIDGE, user[1].type = TN_VALLEY;
+    user[0].npoints = user[1].npoints = 201;
+    user[0].points = up[0], user[1].points = up[1];
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 256, sk.items = user, sk.count = 2;
+    for (seed = 1; seed <= 2; seed++) {
+        if (seed == 2) memcpy(up[0], before, sizeof before);
+        TN_CHECK(tn__gnn_grow_crest(&sk, 2, &ex, TN_RIDGE, (uint64_t)seed) == TN_OK);
+        got = crest_relief_of(up[0], 20, 80);
+        printf("  seed %d: drawn ridge's relief %.1f m, the example main ridge's %.1f m\n", seed, got, want);
+        TN_CHECK(got > 0.6 * want && got < 1.4 * want);
+        TN_CHECK(fabsf(up[0][3 * 100 + 2] - 500) < 1e-3f);
+        for (x = 0; x <= 200; x++) TN_CHECK(fabsf(up[0][3 * x + 2] - 500) < 60 && up[1][3 * x + 2] == 500);
+        if (seed == 1) memcpy(first, up[0], sizeof first);
+    }
+    TN_CHECK(memcmp(first, up[0], sizeof first) != 0);
+    memcpy(up[0], before, sizeof before);
+    TN_CHECK(tn__gnn_grow_crest(&sk, 2, &ex, TN_RIDGE, 1) == TN_OK);
+    TN_CHECK(memcmp(first, up[0], sizeof first) == 0);
+}
+
+TN_TEST(grow_flanks_copy_the_example_flanks)
+{
+    /* the flanks of a drawn ridge take the example's: its main ridge (8 px parts along y = 64) has
+       gullies and spurs swinging 40 m with a 20 px period on its flanks; 6 px across a drawn
+       straight ridge the field swings as much, nothing is added on the stroke or 16 px or more
+       away from it, and the same seed gives the same field */
+    tn_image dem = {0, 0, 0, NULL};
+    float ep[128 * 3], up[201 * 3], fl[6 * 17 * 3], *field = (float *)malloc(256 * 256 * sizeof(float)),
+          *again = (float *)malloc(256 * 256 * sizeof(float));
+    tn_contour items[16], user;
+    tn_contour_set ex, sk;
+    double want, got;
+    int x, y, k = 0;
+    TN_CHECK(field && again && tn_image_create(&dem, 128, 128, 1) == TN_OK);
+    for (y = 0; y < 128; y++)
+        for (x = 0; x < 128; x++) {
+            float dy = fabsf((float)(y - 64));
+            dem.data[y * 128 + x] = 1000 - 15 * dy + 40 * sinf(6.2831853f * x / 20) * fminf(1.0f, dy / 4);
+        }
+    for (x = 0; x < 128; x++) ep[3 * x] = (float)x, ep[3 * x + 1] = 64, ep[3 * x + 2] = 1000;
+    memset(items, 0, sizeof items);
+    for (x = 0; x < 128; x += 8, k++) {
+        items[k].type = TN_RIDGE;
+        items[k].order = 2;
+        items[k].npoints = 8;
+        items[k].points = ep + 3 * x;
+    }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    for (x = 0; x < 96; x++) fl[3 * x + 2] = dem.data[70 * 128 + 16 + x]; /* the example's flank, 6 px across */
+    want = crest_relief_of(fl, 8, 88);
+    for (x = 0; x <= 200; x++) up[3 * x] = (float)(28 + x), up[3 * x + 1] = 128, up[3 * x + 2] = 500;
+    memset(&user, 0, sizeof user);
+    user.type = TN_RIDGE, user.npoints = 201, user.points = up;
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 256, sk.items = &user, sk.count = 1;
+    TN_CHECK(tn__gnn_grow_flanks(&sk, 1, &ex, &dem, 1, field) == TN_OK);
+    TN_CHECK(tn__gnn_grow_flanks(&sk, 1, &ex, &dem, 1, again) == TN_OK);
+    TN_CHECK(memcmp(field, again, 256 * 256 * sizeof(float)) == 0);
+    for (x = 40; x < 220; x++) TN_CHECK(field[128 * 256 + x] == 0 && field[(128 + 17) * 256 + x] == 0 && field[(128 - 17) * 256 + x] == 0);
+    for (y = 0; y < 2; y++) {
+        float row[140 * 3];
+        for (x = 0; x < 140; x++) row[3 * x + 2] = field[(128 + (y ? 6 : -6)) * 256 + 60 + x];
+        got = crest_relief_of(row, 8, 132);
+        printf("  flank %s: %.1f m, the example's %.1f m\n", y ? "below" : "above", got, want);
+        TN_CHECK(got > 0.6 * want && got < 1.4 * want);
+    }
+    tn_image_free(&dem);
+    free(field);
+    free(again);
+}
+
 TN_TEST(grow_without_block_grid)
 {
     /* the quilted blocks (48 px) must not show: line pixels are as dense at every phase of the
@@ -1739,6 +1858,8 @@ int main(void)
     TN_RUN(grow_without_block_grid);
     TN_RUN(grown_sketch_drains);
     TN_RUN(grow_fall_follows_the_example);
+    TN_RUN(grow_crest_copies_the_example_relief);
+    TN_RUN(grow_flanks_copy_the_example_flanks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     TN_RUN(map_scale_level);
