@@ -27481,6 +27481,9 @@ done:
 
 #define TN__GNN_CREST_HALF 8   /* px: an example line shorter than 2 x 8 + 1 px has no peak to give */
 #define TN__GNN_CREST_CHUNK 32 /* px of relief copied at once from one example line */
+#define TN__GNN_CREST_POOL 64  /* px: less of the example's main lines are not copied (one short
+                                  line, copied again and again, drew a comb of spurs at its own
+                                  period along a drawn ridge) */
 #define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
 #define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
 
@@ -27504,7 +27507,8 @@ static int tn__gnn_crest_sample(const float *p, int n, float *h, float *xy)
 /* The example's heights along its main lines of one kind (the highest Strahler order among
    them; parts that continue one another, an end beside the next one's start, are one line),
    sampled every px: the pool tn__gnn_grow_crest copies from. *pool (tn__alloc'd, NULL when
-   empty) holds *runs runs of at least 2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k]
+   empty, and when they add up to less than TN__GNN_CREST_POOL px) holds *runs runs of at least
+   2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k]
    (TN__GNN_CREST_MAX_RUNS at most) to off[k + 1]; *xy (may be NULL; tn__alloc'd) their places. */
 #define TN__GNN_CREST_MAX_RUNS 256
 static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, float **xy, int *off, int *runs)
@@ -27544,7 +27548,7 @@ static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, flo
         }
     }
     TN_FREE(pts);
-    if (st || n == 0) {
+    if (st || n < TN__GNN_CREST_POOL) {
         TN_FREE(h);
         TN_FREE(at);
         *runs = 0;
