@@ -3863,7 +3863,7 @@ static int tn__reflect_whole(long long i, int n)
 /* ---- crop / pad ---------------------------------------------------------------------------- */
 
 /* Bilinear sample of channel c at (x, y), clamped to the image. */
-static float tn__sample_bilinear(const tn_image *im, float x, float y, int c)
+TN__SHARED float tn__sample_bilinear(const tn_image *im, float x, float y, int c)
 {
     int x0, y0, x1, y1;
     float fx, fy, a, b;
