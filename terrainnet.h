@@ -27539,10 +27539,11 @@ static void tn__gnn_crest_rms(const float *h, int n, double *s2, int *nw, float 
    RMS of tn__gnn_crest_rms): their relief meets the top order's halfway (geometric mean), so
    they vary the pool without raising its relief much (the Sahara's second order has 2.5 x its
    main ridges' relief: the two orders unscaled made its summit's heights miss by 15.8 %; the
-   full ratio left its spectrum at 1.53 x). *pool (tn__alloc'd, NULL when empty, and when all orders together add
-   up to less than TN__GNN_CREST_POOL px) holds *runs runs of at least 2 x TN__GNN_CREST_HALF + 1
-   px, run k from offset off[k] (TN__GNN_CREST_MAX_RUNS at most) to off[k + 1], to be multiplied
-   by sc[k]; grp[k] (grp may be NULL): its order; *xy (may be NULL; tn__alloc'd) their places. */
+   full ratio left its spectrum at 1.53 x). *pool (tn__alloc'd, NULL when empty, and when all
+   orders together add up to less than TN__GNN_CREST_POOL px) holds *runs runs of at least
+   2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k] (TN__GNN_CREST_MAX_RUNS at most) to
+   off[k + 1], to be multiplied by sc[k]; grp[k] (grp may be NULL): its order; *xy (may be NULL;
+   tn__alloc'd) their places. */
 #define TN__GNN_CREST_MAX_RUNS 256
 static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, float **xy, int *off, float *sc, int *grp, int *runs)
 {
