@@ -691,61 +691,6 @@ static int tn__gnn_crest_sample(const float *p, int n, float *h, float *xy)
     return m;
 }
 
-/* The example's heights along its main lines of one kind (the highest Strahler order among
-   them; parts that continue one another, an end beside the next one's start, are one line),
-   sampled every px: the pool tn__gnn_grow_crest copies from. *pool (tn__alloc'd, NULL when
-   empty, and when they add up to less than TN__GNN_CREST_POOL px) holds *runs runs of at least
-   2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k]
-   (TN__GNN_CREST_MAX_RUNS at most) to off[k + 1]; *xy (may be NULL; tn__alloc'd) their places. */
-#define TN__GNN_CREST_MAX_RUNS 256
-static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, float **xy, int *off, int *runs)
-{
-    int c, top = -1, n = 0, np = 0, total = 0;
-    float *pts = NULL, *h = NULL, *at = NULL;
-    tn_status st = TN_OK;
-    *pool = NULL;
-    *runs = 0;
-    off[0] = 0;
-    for (c = 0; c < example->count; c++)
-        if ((int)example->items[c].type == kind && example->items[c].order > top) top = example->items[c].order;
-    for (c = 0; c < example->count; c++)
-        if ((int)example->items[c].type == kind && example->items[c].order == top) total += example->items[c].npoints;
-    if (top < 0 || total == 0) return TN_OK;
-    pts = (float *)tn__alloc((size_t)total * 3 * sizeof(float));
-    h = (float *)tn__alloc((size_t)total * 2 * sizeof(float)); /* a chain's length is under 1.5 px a point */
-    if (xy && !(at = (float *)tn__alloc((size_t)total * 4 * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-    if (!pts || !h) st = TN_ERR_OUT_OF_MEMORY;
-    for (c = 0; !st && c <= example->count; c++) {
-        const tn_contour *l = c < example->count ? &example->items[c] : NULL;
-        int main_line = l && (int)l->type == kind && l->order == top, m;
-        if (main_line && np > 0 && fabsf(l->points[0] - pts[3 * np - 3]) <= 1.5f && fabsf(l->points[1] - pts[3 * np - 2]) <= 1.5f) {
-            memcpy(pts + 3 * np, l->points, (size_t)l->npoints * 3 * sizeof(float)); /* the chain goes on */
-            np += l->npoints;
-            continue;
-        }
-        m = np > 1 ? tn__gnn_crest_sample(pts, np, h + n, at ? at + 2 * n : NULL) : 0; /* the chain so far ends here */
-        if (m > 2 * TN__GNN_CREST_HALF && *runs < TN__GNN_CREST_MAX_RUNS) {
-            n += m;
-            off[++*runs] = n;
-        }
-        np = 0;
-        if (main_line) {
-            memcpy(pts, l->points, (size_t)l->npoints * 3 * sizeof(float));
-            np = l->npoints;
-        }
-    }
-    TN_FREE(pts);
-    if (st || n < TN__GNN_CREST_POOL) {
-        TN_FREE(h);
-        TN_FREE(at);
-        *runs = 0;
-        return st;
-    }
-    *pool = h;
-    if (xy) *xy = at;
-    return TN_OK;
-}
-
 /* h[0..n) (backwards with rev) less its least-squares line into out: what lies above and below
    the trend, the trend being the sketch's. */
 static void tn__gnn_crest_detrend(const float *h, int n, int rev, float *out)
@@ -759,12 +704,102 @@ static void tn__gnn_crest_detrend(const float *h, int n, int rev, float *out)
     for (i = 0; i < n; i++) out[i] = (float)(out[i] - ym - b * (i - xm));
 }
 
+/* The RMS of h[0..n) less its least-squares line over windows of min(n, TN__GNN_CREST_CHUNK) px
+   every TN__GNN_CREST_HALF px (what tn__gnn_crest_synth copies) into *s2, the windows' count into
+   *nw; out: scratch of TN__GNN_CREST_CHUNK. */
+static void tn__gnn_crest_rms(const float *h, int n, double *s2, int *nw, float *out)
+{
+    int w = n < TN__GNN_CREST_CHUNK ? n : TN__GNN_CREST_CHUNK, a, i;
+    for (a = 0; a + w <= n; a += TN__GNN_CREST_HALF) {
+        tn__gnn_crest_detrend(h + a, w, 0, out);
+        for (i = 0; i < w; i++) *s2 += (double)out[i] * out[i] / w;
+        ++*nw;
+    }
+}
+
+/* The example's heights along its main lines of one kind (the highest Strahler order among
+   them; parts that continue one another, an end beside the next one's start, are one line),
+   sampled every px: the pool tn__gnn_grow_crest copies from. When those add up to less than
+   TN__GNN_CREST_POOL px the next orders down join, a whole order at a time, until the pool holds
+   that much: one short line, copied again and again, drew a comb of spurs at its own period. A
+   lower order's lines are scaled by sc[k] = min(1, sqrt(the top order's relief / theirs)) (the
+   RMS of tn__gnn_crest_rms): their relief meets the top order's halfway (geometric mean), so
+   they vary the pool without raising its relief much (the Sahara's second order has 2.5 x its
+   main ridges' relief: the two orders unscaled made its summit's heights miss by 15.8 %; the
+   full ratio left its spectrum at 1.53 x). *pool (tn__alloc'd, NULL when empty, and when all
+   orders together add up to less than TN__GNN_CREST_POOL px) holds *runs runs of at least
+   2 x TN__GNN_CREST_HALF + 1 px, run k from offset off[k] (TN__GNN_CREST_MAX_RUNS at most) to
+   off[k + 1], to be multiplied by sc[k]; grp[k] (grp may be NULL): its order; *xy (may be NULL;
+   tn__alloc'd) their places. */
+#define TN__GNN_CREST_MAX_RUNS 256
+static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, float **pool, float **xy, int *off, float *sc, int *grp, int *runs)
+{
+    int c, top = -1, low = 0, ord, n = 0, np = 0, total = 0, nw, k0;
+    float *pts = NULL, *h = NULL, *at = NULL, scr[TN__GNN_CREST_CHUNK];
+    double s2, rel, rel_top = 0;
+    tn_status st = TN_OK;
+    *pool = NULL;
+    *runs = 0;
+    off[0] = 0;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind) {
+            if (example->items[c].order > top) top = example->items[c].order;
+            total += example->items[c].npoints;
+        }
+    if (top < 0 || total == 0) return TN_OK;
+    for (c = 0; c < example->count; c++)
+        if ((int)example->items[c].type == kind && example->items[c].order < low) low = example->items[c].order;
+    pts = (float *)tn__alloc((size_t)total * 3 * sizeof(float));
+    h = (float *)tn__alloc((size_t)total * 2 * sizeof(float)); /* a chain's length is under 1.5 px a point */
+    if (xy && !(at = (float *)tn__alloc((size_t)total * 4 * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!pts || !h) st = TN_ERR_OUT_OF_MEMORY;
+    for (ord = top; !st && ord >= low && (ord == top || n < TN__GNN_CREST_POOL); ord--) {
+        k0 = *runs;
+        np = 0;
+        for (c = 0; c <= example->count; c++) {
+            const tn_contour *l = c < example->count ? &example->items[c] : NULL;
+            int main_line = l && (int)l->type == kind && l->order == ord, m;
+            if (main_line && np > 0 && fabsf(l->points[0] - pts[3 * np - 3]) <= 1.5f && fabsf(l->points[1] - pts[3 * np - 2]) <= 1.5f) {
+                memcpy(pts + 3 * np, l->points, (size_t)l->npoints * 3 * sizeof(float)); /* the chain goes on */
+                np += l->npoints;
+                continue;
+            }
+            m = np > 1 ? tn__gnn_crest_sample(pts, np, h + n, at ? at + 2 * n : NULL) : 0; /* the chain so far ends here */
+            if (m > 2 * TN__GNN_CREST_HALF && *runs < TN__GNN_CREST_MAX_RUNS) {
+                if (grp) grp[*runs] = ord;
+                n += m;
+                off[++*runs] = n;
+            }
+            np = 0;
+            if (main_line) {
+                memcpy(pts, l->points, (size_t)l->npoints * 3 * sizeof(float));
+                np = l->npoints;
+            }
+        }
+        for (c = k0, s2 = 0, nw = 0; c < *runs; c++) tn__gnn_crest_rms(h + off[c], off[c + 1] - off[c], &s2, &nw, scr);
+        rel = nw ? sqrt(s2 / nw) : 0;
+        for (c = k0; c < *runs; c++) sc[c] = ord < top && rel > 0 ? (float)fmin(1.0, sqrt(rel_top / rel)) : 1.0f;
+        if (ord == top) rel_top = rel;
+        if (!(rel_top > 0)) break; /* no main line of 2 x TN__GNN_CREST_HALF + 1 px (or a flat one): nothing to size the others by */
+    }
+    TN_FREE(pts);
+    if (st || n < TN__GNN_CREST_POOL) {
+        TN_FREE(h);
+        TN_FREE(at);
+        *runs = 0;
+        return st;
+    }
+    *pool = h;
+    if (xy) *xy = at;
+    return TN_OK;
+}
+
 /* Relief along a line of m px into g (m x R, zeroed by the caller): chunks of TN__GNN_CREST_CHUNK
    px from random places of pool (R values a px: a strip across the example's line, or its heights
    alone), forwards or backwards (the sides of a strip swap), each row less its straight trend along
    the chunk (tn__gnn_crest_detrend), laid end to end and cross-faded at equal power over
    TN__GNN_CREST_BLEND px. w2 (m), col (2 x TN__GNN_CREST_CHUNK): scratch. */
-static void tn__gnn_crest_synth(const float *pool, int R, const int *off, int runs, int m, tn_rng *rng, float *g, float *w2, float *col)
+static void tn__gnn_crest_synth(const float *pool, int R, const int *off, const float *sc, int runs, int m, tn_rng *rng, float *g, float *w2, float *col)
 {
     const int C = TN__GNN_CREST_CHUNK, Bl = TN__GNN_CREST_BLEND;
     int at, i, r;
@@ -776,7 +811,7 @@ static void tn__gnn_crest_synth(const float *pool, int R, const int *off, int ru
         len_k = off[k + 1] - off[k] < C ? off[k + 1] - off[k] : C;
         from = (int)pick + len_k > off[k + 1] ? off[k + 1] - len_k : (int)pick;
         for (r = 0; r < R; r++) {
-            for (i = 0; i < len_k; i++) col[C + i] = pool[(size_t)(from + i) * R + r];
+            for (i = 0; i < len_k; i++) col[C + i] = sc[k] * pool[(size_t)(from + i) * R + r];
             tn__gnn_crest_detrend(col + C, len_k, (int)rev, col);
             for (i = 0; i < len_k && at + i < m; i++) {
                 float e = fminf(1.0f, fminf((float)(i + 1), (float)(len_k - i)) / (Bl + 1)); /* ramps at both ends */
@@ -820,9 +855,10 @@ TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const 
 {
     const int Bl = TN__GNN_CREST_BLEND;
     int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j;
+    float sc[TN__GNN_CREST_MAX_RUNS];
     float *pool = NULL, *g = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
     tn_rng rng;
-    tn_status st = tn__gnn_crest_pool(example, kind, &pool, NULL, off, &runs);
+    tn_status st = tn__gnn_crest_pool(example, kind, &pool, NULL, off, sc, NULL, &runs);
     if (st || !pool) return st;
     tn_rng_seed(&rng, seed, 0x6372657374ULL + (uint64_t)kind);
     for (c = 0; !st && c < nuser && c < set->count; c++) {
@@ -843,7 +879,7 @@ TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const 
         g = (float *)tn__calloc((size_t)m * sizeof(float));
         w2 = (float *)tn__alloc((size_t)m * sizeof(float));
         if (!g || !w2) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st) tn__gnn_crest_synth(pool, 1, off, runs, m, &rng, g, w2, col);
+        if (!st) tn__gnn_crest_synth(pool, 1, off, sc, runs, m, &rng, g, w2, col);
         for (j = 0; !st && j < n; j++) {
             int a = (int)s[j];
             float f = s[j] - a, r = g[a] + f * (g[a + 1] - g[a]);
@@ -887,17 +923,20 @@ TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser,
     const int T = TN__GNN_FLANK, R = 2 * TN__GNN_FLANK + 1;
     const int W = set->width, H = set->height;
     const size_t np = (size_t)W * H;
-    int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j, i, k, r, npts = 0;
-    float *pool = NULL, *xy = NULL, *strip = NULL, **g = NULL, *dist = NULL, *fade = NULL, *sarc = NULL, *nrm = NULL, col[2 * TN__GNN_CREST_CHUNK];
+    int off[TN__GNN_CREST_MAX_RUNS + 1], grp[TN__GNN_CREST_MAX_RUNS], runs, c, j, i, k, r, npts = 0;
+    float sc[TN__GNN_CREST_MAX_RUNS];
+    float *pool = NULL, *xy = NULL, *strip = NULL, *row = NULL, **g = NULL, *dist = NULL, *fade = NULL, *sarc = NULL, *nrm = NULL, col[2 * TN__GNN_CREST_CHUNK];
     int *near = NULL, *ptc = NULL, *ptj = NULL, *idx = NULL;
     uint8_t *mask = NULL;
+    double rel_top = 0;
     tn_rng rng;
     tn_status st;
     memset(field, 0, np * sizeof(float));
-    if ((st = tn__gnn_crest_pool(example, TN_RIDGE, &pool, &xy, off, &runs)) || !pool) return st;
+    if ((st = tn__gnn_crest_pool(example, TN_RIDGE, &pool, &xy, off, sc, grp, &runs)) || !pool) return st;
     for (c = 0; c < nuser && c < set->count; c++)
         if (set->items[c].type == TN_RIDGE) npts += set->items[c].npoints;
     strip = (float *)tn__alloc((size_t)off[runs] * R * sizeof(float));
+    row = (float *)tn__alloc((size_t)off[runs] * sizeof(float));
     g = (float **)tn__calloc((size_t)(nuser > 0 ? nuser : 1) * sizeof(float *));
     dist = (float *)tn__alloc(np * sizeof(float));
     near = (int *)tn__alloc(np * sizeof(int));
@@ -908,7 +947,7 @@ TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser,
     fade = (float *)tn__alloc((size_t)(npts + 1) * sizeof(float));
     sarc = (float *)tn__alloc((size_t)(npts + 1) * sizeof(float));
     nrm = (float *)tn__alloc((size_t)(npts + 1) * 2 * sizeof(float));
-    if (!strip || !g || !dist || !near || !idx || !mask || !ptc || !ptj || !fade || !sarc || !nrm) {
+    if (!strip || !row || !g || !dist || !near || !idx || !mask || !ptc || !ptj || !fade || !sarc || !nrm) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -918,6 +957,24 @@ TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser,
             tn__gnn_normal(xy + 2 * (size_t)off[k], 2, off[k + 1] - off[k], i - off[k], &nx, &ny);
             for (r = 0; r < R; r++) strip[(size_t)i * R + r] = tn__sample_bilinear(dem, xy[2 * i] + (float)(r - T) * nx, xy[2 * i + 1] + (float)(r - T) * ny, 0);
         }
+    for (k = 0; grp[runs - 1] != grp[0] && k < runs;) {
+        /* lower orders joined the pool: their flanks meet the top order's halfway by the flanks'
+           own relief (rows 4-8 px across, where the field is laid whole), as their crests do by
+           the crests' (the Sahara's lower dune ridges have the rougher crests, not flanks) */
+        double s2 = 0, rel;
+        int k1 = k, nw = 0;
+        while (k1 < runs && grp[k1] == grp[k]) k1++;
+        for (j = k; j < k1; j++)
+            for (r = 0; r < R; r++) {
+                if (abs(r - T) < 4 || abs(r - T) > 8) continue;
+                for (i = off[j]; i < off[j + 1]; i++) row[i - off[j]] = strip[(size_t)i * R + r];
+                tn__gnn_crest_rms(row, off[j + 1] - off[j], &s2, &nw, col);
+            }
+        rel = nw ? sqrt(s2 / nw) : 0;
+        for (j = k; j < k1; j++) sc[j] = k > 0 && rel > 0 ? (float)fmin(1.0, sqrt(rel_top / rel)) : 1.0f;
+        if (k == 0) rel_top = rel;
+        k = k1;
+    }
     tn_rng_seed(&rng, seed, 0x666c616e6bULL);
     for (i = 0; i < (int)np; i++) idx[i] = -1;
     for (c = 0, k = 0; c < nuser && c < set->count; c++) {
@@ -940,7 +997,7 @@ TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser,
         m = (int)len + TN__GNN_CREST_CHUNK + 2;
         g[c] = (float *)tn__calloc((size_t)m * R * sizeof(float));
         w2 = (float *)tn__alloc((size_t)m * sizeof(float));
-        if (g[c] && w2) tn__gnn_crest_synth(strip, R, off, runs, m, &rng, g[c], w2, col);
+        if (g[c] && w2) tn__gnn_crest_synth(strip, R, off, sc, runs, m, &rng, g[c], w2, col);
         TN_FREE(w2);
         if (!g[c]) {
             st = TN_ERR_OUT_OF_MEMORY;
@@ -965,6 +1022,7 @@ done:
     TN_FREE(pool);
     TN_FREE(xy);
     TN_FREE(strip);
+    TN_FREE(row);
     TN_FREE(dist);
     TN_FREE(near);
     TN_FREE(idx);

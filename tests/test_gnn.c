@@ -1399,6 +1399,55 @@ TN_TEST(grow_crest_copies_the_example_relief)
     TN_CHECK(memcmp(first, up[0], sizeof first) == 0);
 }
 
+TN_TEST(grow_crest_widens_a_short_pool)
+{
+    /* an example whose main ridge is one line of 24 px (under TN__GNN_CREST_POOL: copied again
+       and again it is a comb) takes its next order down too (128 px), scaled to meet the main
+       ridge's relief halfway: a swing of 40 m and one of 400 m give a drawn ridge the relief of
+       about sqrt(40 x 400) m, well under the lower order's own; with no main line long enough to
+       size it by (one 8 px part), the drawn ridge keeps its heights */
+    float ep[2][128 * 3], up[201 * 3], before[201 * 3];
+    tn_contour items[40], user;
+    tn_contour_set ex, sk;
+    double want_top, want_low, got;
+    int i, k = 0, x, seed;
+    for (x = 0; x < 128; x++) {
+        ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
+        ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
+    }
+    memset(items, 0, sizeof items);
+    for (i = 0; i < 2; i++)
+        for (x = 0; x < (i ? 128 : 24); x += 8, k++) {
+            items[k].type = TN_RIDGE;
+            items[k].order = i ? 1 : 2;
+            items[k].npoints = 8;
+            items[k].points = ep[i] + 3 * x;
+        }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    want_top = crest_relief_of(ep[0], 8, 120);
+    want_low = crest_relief_of(ep[1], 8, 120);
+    for (x = 0; x <= 200; x++) up[3 * x] = (float)(20 + x), up[3 * x + 1] = 100, up[3 * x + 2] = 500;
+    memcpy(before, up, sizeof before);
+    memset(&user, 0, sizeof user);
+    user.type = TN_RIDGE, user.npoints = 201, user.points = up;
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 256, sk.items = &user, sk.count = 1;
+    for (seed = 1; seed <= 2; seed++) {
+        memcpy(up, before, sizeof before);
+        TN_CHECK(tn__gnn_grow_crest(&sk, 1, &ex, TN_RIDGE, (uint64_t)seed) == TN_OK);
+        got = crest_relief_of(up, 20, 180);
+        printf("  seed %d: drawn ridge's relief %.1f m; main ridge %.1f m, next order %.1f m, their geometric mean %.1f m\n", seed, got, want_top, want_low,
+               sqrt(want_top * want_low));
+        TN_CHECK(got > 0.6 * sqrt(want_top * want_low) && got < 1.4 * sqrt(want_top * want_low) && got < 0.5 * want_low);
+    }
+    ex.count = 1 + 16; /* the main ridge's first part alone: 8 px */
+    memmove(items + 1, items + 3, 16 * sizeof items[0]);
+    memcpy(up, before, sizeof before);
+    TN_CHECK(tn__gnn_grow_crest(&sk, 1, &ex, TN_RIDGE, 1) == TN_OK);
+    TN_CHECK(memcmp(up, before, sizeof before) == 0);
+}
+
 TN_TEST(grow_flanks_copy_the_example_flanks)
 {
     /* the flanks of a drawn ridge take the example's: its main ridge (8 px parts along y = 64) has
@@ -1859,6 +1908,7 @@ int main(void)
     TN_RUN(grown_sketch_drains);
     TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grow_crest_copies_the_example_relief);
+    TN_RUN(grow_crest_widens_a_short_pool);
     TN_RUN(grow_flanks_copy_the_example_flanks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
