@@ -1346,6 +1346,28 @@ static double crest_relief_of(const float *pts, int a, int b)
     return sqrt(s2 / n - (s1 / n) * (s1 / n));
 }
 
+/* An example of two ridge orders along x, cut into 8 px parts: a main ridge (order 2, its first
+   top_len px) at y 64 swinging 40 m and a lower order (128 px) at y 20 swinging 400 m, both with a
+   24 px period. */
+static void two_ridge_orders(float ep[2][128 * 3], tn_contour *items, int top_len, tn_contour_set *ex)
+{
+    int i, k = 0, x;
+    for (x = 0; x < 128; x++) {
+        ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
+        ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
+    }
+    for (i = 0; i < 2; i++)
+        for (x = 0; x < (i ? 128 : top_len); x += 8, k++) {
+            memset(&items[k], 0, sizeof items[k]);
+            items[k].type = TN_RIDGE;
+            items[k].order = i ? 1 : 2;
+            items[k].npoints = 8;
+            items[k].points = ep[i] + 3 * x;
+        }
+    memset(ex, 0, sizeof *ex);
+    ex->width = ex->height = 128, ex->items = items, ex->count = k;
+}
+
 TN_TEST(grow_crest_copies_the_example_relief)
 {
     /* a drawn ridge of constant height takes the along-line relief of the example's main ridge (a
@@ -1356,21 +1378,8 @@ TN_TEST(grow_crest_copies_the_example_relief)
     tn_contour items[40], user[2];
     tn_contour_set ex, sk;
     double want, got;
-    int i, k = 0, x, seed;
-    for (x = 0; x < 128; x++) {
-        ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
-        ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
-    }
-    memset(items, 0, sizeof items);
-    for (i = 0; i < 2; i++)
-        for (x = 0; x < 128; x += 8, k++) {
-            items[k].type = TN_RIDGE;
-            items[k].order = i ? 1 : 2;
-            items[k].npoints = 8;
-            items[k].points = ep[i] + 3 * x;
-        }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    int x, seed;
+    two_ridge_orders(ep, items, 128, &ex);
     want = crest_relief_of(ep[0], 8, 120);
     for (x = 0; x <= 200; x++) {
         up[0][3 * x] = (float)(20 + x), up[0][3 * x + 1] = 100, up[0][3 * x + 2] = 500;
@@ -1410,21 +1419,8 @@ TN_TEST(grow_crest_widens_a_short_pool)
     tn_contour items[40], user;
     tn_contour_set ex, sk;
     double want_top, want_low, got;
-    int i, k = 0, x, seed;
-    for (x = 0; x < 128; x++) {
-        ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
-        ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
-    }
-    memset(items, 0, sizeof items);
-    for (i = 0; i < 2; i++)
-        for (x = 0; x < (i ? 128 : 24); x += 8, k++) {
-            items[k].type = TN_RIDGE;
-            items[k].order = i ? 1 : 2;
-            items[k].npoints = 8;
-            items[k].points = ep[i] + 3 * x;
-        }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    int x, seed;
+    two_ridge_orders(ep, items, 24, &ex);
     want_top = crest_relief_of(ep[0], 8, 120);
     want_low = crest_relief_of(ep[1], 8, 120);
     for (x = 0; x <= 200; x++) up[3 * x] = (float)(20 + x), up[3 * x + 1] = 100, up[3 * x + 2] = 500;
