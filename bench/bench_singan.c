@@ -10,9 +10,12 @@
      - SinGAN trained for the budget: the same three distances of 3 samples (seeds 100..102,
        256 x 256, mean) and their ratios to the reference's; the samples' height range against
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
-       every 128 px crop of the example (stride 4; copy check); whether two seeds differ,
-     - with --layout 1: the same model's samples laid out by GPNN on the example's coarsest scale
-       (tn_singan_gen_opts.layout; --layout-noise S its GPNN noise), the same lines,
+       every 128 px crop of the example (stride 4; copy check); whether two seeds differ; the
+       depth of the main valleys (valley_depth: the arrangement the distances miss) against the
+       example's, and the reference crop's,
+     - with --layout 1: the same model's samples laid out (tn_singan_gen_opts.layout: GPNN on the
+       example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
+       GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
      - GPNN (no training): the same lines,
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
@@ -21,8 +24,8 @@
      - with --model DIR: the models an earlier --pictures DIR run saved, instead of training,
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
-   Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--layout 1] [--layout-noise S] [--extras] [--peer]
-                       [--no-singan] [--no-gpnn]
+   Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
+                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but the second tuning set, M = 10, 2 threads) */
@@ -216,8 +219,39 @@ static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, in
     return mean;
 }
 
+/* How deep the main valleys are cut (the arrangement the three distances miss): the mean of
+   (the map blurred with a Gaussian of 8 px) - (the map) over the cells that drain at least 1/64
+   of the map (tn_flow_compute), 8 px or more from the border; metres. A sample of scattered hills
+   has main drainage lines too, but along the flat ground between them. */
+static double valley_depth(const tn_image *dem)
+{
+    tn_flow f;
+    tn_image b = {0, 0, 0, NULL};
+    double sum = 0;
+    long cnt = 0;
+    uint32_t main_acc = (uint32_t)((size_t)dem->width * dem->height / 64);
+    int x, y;
+    memset(&f, 0, sizeof f);
+    if (tn_flow_compute(&f, dem, 0) || tn_image_blur(&b, dem, 8.0f)) {
+        tn_flow_free(&f);
+        return NAN;
+    }
+    for (y = 8; y < dem->height - 8; y++)
+        for (x = 8; x < dem->width - 8; x++) {
+            size_t i = (size_t)y * dem->width + x;
+            if (f.acc[i] < main_acc) continue;
+            sum += b.data[i] - dem->data[i];
+            cnt++;
+        }
+    tn_flow_free(&f);
+    tn_image_free(&b);
+    return cnt ? sum / (double)cnt : 0;
+}
+
 /* Measures 3 samples against the example and the reference distances; prints one line. */
-typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff; } measured;
+typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff, valleys; } measured;
+
+static double g_valleys_ex; /* valley_depth of the current region's example */
 
 static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
@@ -225,9 +259,10 @@ static void report(const char *name, const char *what, const measured *m, const 
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | heights %.0f..%.0f (%s the example +-10 %%) | "
-           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx%s\n",
+           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx)%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, (double)m->lo, (double)m->hi, ok_h ? "within" : "OUTSIDE",
            m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
+           m->valleys, m->valleys / g_valleys_ex,
            rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
 }
 
@@ -246,6 +281,7 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         m->d.slope += d.slope / 3;
         m->d.curv += d.curv / 3;
         m->d.spec += d.spec / 3;
+        m->valleys += valley_depth(&s[i]) / 3;
         tn_image_range(&lo, &hi, &s[i]);
         if (lo < m->lo) m->lo = lo;
         if (hi > m->hi) m->hi = hi;
@@ -288,8 +324,8 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
 }
 
 static const char *g_argv0, *g_pictures, *g_model_dir;
-static int g_layout;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
-static float g_layout_noise;
+static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
+static float g_layout_noise, g_layout_warp, g_layout_smooth;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
 static tn_gpnn_opts g_gopts;
@@ -327,7 +363,9 @@ static void bench_region(const region *rg, double minutes, int threads)
     corners = corner_crops(&full, &ex, exx, exy, dx, dy, &lo, &hi);
     printf("%s (%s): example %.0f..%.0f m at (%d, %d) of the full DEM; reference crop at (%d, %d) (overlap %ld px), pixel %.1f x %.1f m\n", n,
            rg->tuned == 2 ? "tuning set 2" : rg->tuned ? "tuned on" : "held out", (double)elo, (double)ehi, exx, exy, ox, oy, ov, (double)dx, (double)dy);
-    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f\n", n, ref.slope, ref.curv, ref.spec);
+    g_valleys_ex = valley_depth(&ex);
+    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f | valleys %.1f m (%.2fx the example's %.1f m)\n", n, ref.slope, ref.curv,
+           ref.spec, valley_depth(&other), valley_depth(&other) / g_valleys_ex, g_valleys_ex);
     printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f)\n", n, corners.slope,
            corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec);
     fflush(stdout);
@@ -371,6 +409,9 @@ static void bench_region(const region *rg, double minutes, int threads)
         memset(&g, 0, sizeof g);
         g.layout = g_layout;
         g.layout_noise = g_layout_noise;
+        g.layout_warp = g_layout_warp;
+        g.layout_smooth = g_layout_smooth;
+        g.layout_scale = g_layout_scale;
         t0 = tn_time_seconds();
         for (i = 0; i < 3; i++) {
             g.seed = 100 + (uint64_t)i;
@@ -527,6 +568,9 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
         else if (!strcmp(a, "--layout") && v) g_layout = atoi(argv[++i]);
         else if (!strcmp(a, "--layout-noise") && v) g_layout_noise = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--layout-warp") && v) g_layout_warp = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--layout-scale") && v) g_layout_scale = atoi(argv[++i]);
+        else if (!strcmp(a, "--layout-smooth") && v) g_layout_smooth = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-coarsest") && v) g_gopts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-noise") && v) g_gopts.noise = (float)atof(argv[++i]);

@@ -100,10 +100,15 @@ typedef struct tn_singan_gen_opts {
                               for + 1 (1..scales; 0 = the output at the example's pixel size) */
     float noise;           /* multiplier of the trained noise amplitudes; 0 = 1, < 0 = no noise */
     int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
-    int layout;            /* sample: 1 = the coarsest scale is the example's coarsest scale rearranged by patch
-                              nearest neighbours (GPNN), the finer scales add SinGAN's detail; the map is then
-                              finite (origin (0, 0) only). 0 = the coarsest generator (infinite terrain) */
-    float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 5 */
+    int layout;            /* sample: 1 = the example itself, rearranged by patch nearest neighbours (GPNN) and
+                              bent by a random smooth warp on the grid of scale layout_scale - 1, is that scale's
+                              output; the finer scales add SinGAN's detail; the map is then finite (origin (0, 0)
+                              only). 0 = the coarsest generator (infinite terrain) */
+    int layout_scale;      /* the first scale that runs on the layout, 1..scales-1 (1: the layout replaces the
+                              coarsest scale); 0 = 3, at most scales - 1 */
+    float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
+    float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
+    float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
 } tn_singan_gen_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -178,9 +183,14 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_SINGAN
 
-#define TN__SG_FORMAT 4 /* 2: the per-scale output gain (issue 31); 3: the smoothed coarsest
+#define TN__SG_FORMAT 5 /* 2: the per-scale output gain (issue 31); 3: the smoothed coarsest
                            noise (its third round); 4: the example's coarsest scale for the
-                           layout (its fourth). Older models are refused */
+                           layout (its fourth); 5: the whole example for the layout (its
+                           seventh). Older models are refused */
+/* What each older format lacks, for the message that refuses it. */
+static const char *const tn__sg_format_why[TN__SG_FORMAT] = {
+    "", "per-scale output gain", "smoothed coarsest noise", "layout: it lacks the example's coarsest scale",
+    "layout at any scale: it holds only the example's coarsest scale"};
 #define TN__SG_CONFIG (8 + 3 * TN_SINGAN_MAX_SCALES)
 #define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
@@ -240,7 +250,10 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->noise == 0) o->noise = 1.0f;
     if (o->noise < 0) o->noise = 0.0f;
     if (o->tile <= 0) o->tile = 256;
-    if (o->layout_noise == 0) o->layout_noise = 5.0f;
+    if (o->layout_noise == 0) o->layout_noise = 2.0f;
+    if (o->layout_warp == 0) o->layout_warp = 16.0f;
+    if (o->layout_warp < 0) o->layout_warp = 0.0f;
+    if (o->layout_smooth == 0) o->layout_smooth = 96.0f;
 }
 
 /* ---- sizes and config ---- */
@@ -350,11 +363,11 @@ static tn_status tn__sg_model_params(const tn__sg_arch *A, tn_rng *rng, tn_param
     *out = NULL;
     if (!p) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     int ls[2];
-    ls[0] = tn__sg_size(A->height, A->factor, A->scales - 1);
-    ls[1] = tn__sg_size(A->width, A->factor, A->scales - 1);
+    ls[0] = A->height;
+    ls[1] = A->width;
     if (!(cfg = tn_params_add_buffer(p, "singan.config", 1, &n))) st = TN_ERR_OUT_OF_MEMORY;
     else tn__sg_write_config(A, cfg->data);
-    /* the example's coarsest scale (network units): what a laid-out sample rearranges */
+    /* the example (network units): what a laid-out sample rearranges */
     if (!st && !tn_params_add_buffer(p, "singan.layout", 2, ls)) st = TN_ERR_OUT_OF_MEMORY;
     for (s = 0; s < A->scales && !st; s++) st = tn__sg_gen_add(p, s, A->ch[s], rng);
     if (st) {
@@ -1333,7 +1346,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         TN_FREE(b);
     }
     if ((st = tn__sg_train_nets(&s))) goto done;
-    memcpy(tn_params_find(s.g, "singan.layout")->data, s.real[0].data, (size_t)s.real[0].width * s.real[0].height * sizeof(float));
+    memcpy(tn_params_find(s.g, "singan.layout")->data, s.real[s.A.scales - 1].data, (size_t)s.A.width * s.A.height * sizeof(float));
     if ((st = tn_train_add_net(s.run, "g", s.g, s.og)) || (st = tn_train_add_net(s.run, "d", s.d, s.od)) ||
         (st = tn_train_add_params(s.run, "", s.sched)) || (st = tn_train_add_rng(s.run, "main", &s.rng)))
         goto done;
@@ -1516,17 +1529,15 @@ TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
     tn_tensor *cfg = NULL;
     tn__sg_arch A;
     tn_singan m;
+    int fmt;
     tn_status st;
     TN_ASSERT(model);
     if (!path || !path[0]) return tn__fail(TN_ERR_INVALID_ARG, "singan load: empty path");
     if ((st = tn__model_open(&f, path, "singan", TN__SG_FORMAT, NULL))) return st;
-    if ((cfg = tn_params_find(f, "singan.config")) && cfg->numel == TN__SG_CONFIG1)
-        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 1 (before issue 31's per-scale output gain): train it again", path);
-    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 2)
-        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 2 (before issue 31's smoothed coarsest noise): train it again", path);
-    else if (tn_params_meta(f, "format") && atoi(tn_params_meta(f, "format")) == 3)
-        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format 3 (before issue 31's layout: it lacks the example's coarsest scale): train it again",
-                      path);
+    cfg = tn_params_find(f, "singan.config");
+    fmt = cfg && cfg->numel == TN__SG_CONFIG1 ? 1 : tn_params_meta(f, "format") ? atoi(tn_params_meta(f, "format")) : TN__SG_FORMAT;
+    if (fmt >= 1 && fmt < TN__SG_FORMAT)
+        st = tn__fail(TN_ERR_FORMAT, "%s: a singan model of format %d (before issue 31's %s): train it again", path, fmt, tn__sg_format_why[fmt]);
     else if (!cfg || cfg->numel != TN__SG_CONFIG)
         st = tn__fail(TN_ERR_FORMAT, "%s: not a singan model (no singan.config)", path);
     if (!st) st = tn__sg_read_config(cfg->data, &A, path);
@@ -1566,9 +1577,11 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if (opts) *o = *opts;
     tn_singan_gen_defaults(o);
     if ((st = tn__sg_arch_of(model, A))) return st;
-    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100))
-        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, layout noise %g <= 100)",
-                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise);
+    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
+        o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096))
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, layout noise %g <= 100, "
+                        "layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px)",
+                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
@@ -1577,34 +1590,89 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     return TN_OK;
 }
 
-/* The layout of a w x h sample on the coarsest scale's grid (*mw x *mh, network units, allocated
-   here): GPNN on the example's coarsest scale. The coarsest generator, 5 layers on noise with
-   an 11 px view, made a field of features without the example's arrangement (no cone, no rim,
-   no massif); the example's own coarsest scale rearranged by patches keeps it, and SinGAN's
-   finer scales with their noise on top keep samples from being copies (docs/singan.md). */
-static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const tn_singan_gen_opts *o, int w, int h, float **map, int *mw, int *mh)
+/* x reflected into [0, n - 1] (mirror at the border, no repeated edge). */
+static float tn__sg_reflect(float x, int n)
+{
+    float p = 2.0f * (float)(n - 1);
+    if (n < 2) return 0;
+    x = fmodf(fabsf(x), p);
+    return x > (float)(n - 1) ? p - x : x;
+}
+
+/* Bends map by a random smooth warp: each pixel takes the map (mirrored at its border) at itself
+   plus a displacement of Gaussian-blurred noise (sigma `smooth` px), scaled to RMS `amp` px. */
+static tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed)
+{
+    tn_image d = {0, 0, 0, NULL}, src = {0, 0, 0, NULL};
+    size_t n = (size_t)map->width * map->height, i;
+    double rms[2] = {0, 0};
+    int x, y, c;
+    tn_rng rng;
+    tn_status st;
+    if (amp <= 0) return TN_OK;
+    if ((st = tn_image_create(&d, map->width, map->height, 2)) || (st = tn_image_create(&src, map->width, map->height, 1))) goto done;
+    tn_rng_seed(&rng, seed, 0x77617270ULL);
+    for (i = 0; i < 2 * n; i++) d.data[i] = tn_rng_normal(&rng);
+    if ((st = tn_image_blur(&d, &d, smooth))) goto done;
+    for (i = 0; i < 2 * n; i++) rms[i & 1] += (double)d.data[i] * d.data[i];
+    for (c = 0; c < 2; c++) rms[c] = rms[c] > 0 ? amp / sqrt(rms[c] / (double)n) : 0;
+    memcpy(src.data, map->data, n * sizeof(float));
+    for (y = 0; y < map->height; y++)
+        for (x = 0; x < map->width; x++) {
+            const float *v = &TN_PIXEL(&d, x, y, 0);
+            float sx = tn__sg_reflect((float)x + (float)rms[0] * v[0], map->width), sy = tn__sg_reflect((float)y + (float)rms[1] * v[1], map->height);
+            TN_PIXEL(map, x, y, 0) = tn__sample_bilinear(&src, sx, sy, 0);
+        }
+done:
+    tn_image_free(&d);
+    tn_image_free(&src);
+    return st;
+}
+
+/* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
+   allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up)
+   and bent by a random smooth warp. The coarsest generator, 5 layers on noise, made features
+   without the example's arrangement (no cone, no massif, no main valleys); the example's own
+   scale rearranged by patches keeps them, the warp and SinGAN's finer scales with their noise on
+   top keep samples from being copies (docs/singan.md). */
+static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const tn_singan_gen_opts *o, int K, int w, int h, float **map, int *mw,
+                               int *mh)
 {
     const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
-    tn_image ex, lay = {0, 0, 0, NULL};
+    tn_image ex, exl = {0, 0, 0, NULL}, lay = {0, 0, 0, NULL};
     tn_gpnn_opts go;
+    int down = A->scales - K, ew = tn__sg_size(A->width, A->factor, down), eh = tn__sg_size(A->height, A->factor, down);
+    int cw = tn__sg_size(A->width, A->factor, A->scales - 1), ch = tn__sg_size(A->height, A->factor, A->scales - 1);
+    float px;
     tn_status st;
     *map = NULL;
-    *mw = tn__sg_size(w, A->factor, A->scales - 1);
-    *mh = tn__sg_size(h, A->factor, A->scales - 1);
-    if (!t || t->ndim != 2) return tn__fail(TN_ERR_INVALID_ARG, "singan sample: the model holds no layout");
-    ex.width = t->shape[1];
-    ex.height = t->shape[0];
+    *mw = tn__sg_size(w, A->factor, down);
+    *mh = tn__sg_size(h, A->factor, down);
+    if (!t || t->ndim != 2 || t->shape[0] != A->height || t->shape[1] != A->width)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: the model holds no layout");
+    if (ew < 7 || eh < 7 || *mw < 7 || *mh < 7)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a layout needs the example and the map at least 7 px on scale %d's grid "
+                        "(%d x %d and %d x %d)", K - 1, ew, eh, *mw, *mh);
+    ex.width = A->width;
+    ex.height = A->height;
     ex.channels = 1;
     ex.data = t->data;
+    if ((st = tn_image_resize(&exl, &ex, ew, eh, TN_RESIZE_AREA))) return st;
     memset(&go, 0, sizeof go);
     go.seed = o->seed;
     go.noise = o->layout_noise;
-    go.coarsest = ex.width < ex.height ? ex.width : ex.height; /* one GPNN scale: the coarsest */
-    if (go.coarsest < 7 || *mw < 7 || *mh < 7)
-        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a layout needs the coarsest scale of the example and of the map at least 7 px "
-                        "(%d x %d and %d x %d)", ex.width, ex.height, *mw, *mh);
-    if (!(st = tn_gpnn_sample(&lay, &ex, *mw, *mh, &go))) *map = lay.data;
-    return st;
+    go.coarsest = cw < ch ? cw : ch;
+    if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
+    st = tn_gpnn_sample(&lay, &exl, *mw, *mh, &go);
+    tn_image_free(&exl);
+    if (st) return st;
+    px = (float)*mw / (float)w; /* the layout's px per sample px */
+    if ((st = tn__sg_warp(&lay, o->layout_warp * px, o->layout_smooth * px, o->seed))) {
+        tn_image_free(&lay);
+        return st;
+    }
+    *map = lay.data;
+    return TN_OK;
 }
 
 TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts)
@@ -1621,10 +1689,13 @@ TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0,
     if (o.layout && (x0 || y0))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a laid-out map is finite: its origin must be (0, 0), not (%d, %d)", x0, y0);
     r.limit = 1;
-    if (o.layout) { /* the layout is the coarsest scale's output */
-        if ((st = tn__sg_layout(model, &A, &o, w, h, &map, &r.mw, &r.mh))) return st;
+    if (o.layout) { /* the layout is the output of scale K - 1 */
+        int K = o.layout_scale ? o.layout_scale : (A.scales - 1 < 3 ? A.scales - 1 : 3);
+        if (K < 1 || K > A.scales - 1)
+            return tn__fail(TN_ERR_INVALID_ARG, "singan sample: layout scale %d outside 1..%d", o.layout_scale, A.scales - 1);
+        if ((st = tn__sg_layout(model, &A, &o, K, w, h, &map, &r.mw, &r.mh))) return st;
         r.map = map;
-        r.map_level = 0;
+        r.map_level = K - 1;
         r.map_is_output = 1;
     }
     st = tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);

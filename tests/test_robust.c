@@ -1523,7 +1523,7 @@ TN_TEST(test_model_config_sizes)
         sg[8 + 16 + s] = 512;
         sg[8 + 32 + s] = 1;
     }
-    TN_CHECK(refused_up_front(load_singan, write_model_config("s1.tnw", "singan", 4, "singan.config", sg, 8 + 3 * 16, NULL, 0, 0), "generator"));
+    TN_CHECK(refused_up_front(load_singan, write_model_config("s1.tnw", "singan", 5, "singan.config", sg, 8 + 3 * 16, NULL, 0, 0), "generator"));
     /* kpd: the widest generator, 16 outputs */
     TN_CHECK(refused_up_front(load_kpd, write_model_config("k1.tnw", "kpd", 1, "kpd.config", k, 12, NULL, 0, 0), "generator"));
 }

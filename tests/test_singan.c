@@ -99,10 +99,11 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
     tn_image_free(&other);
 }
 
-/* Issue 31's fourth round: a laid-out sample's coarsest scale is GPNN on the example's coarsest
-   scale (stored in the model). Its tiles still equal the whole map, seeds differ, heights stay in
-   the band; without any noise it rebuilds the example, which a sample of the coarsest generator
-   does not (the stored scale is the example's, and it is the one used). */
+/* Issue 31's fourth and seventh rounds: a laid-out sample's scale K - 1 is GPNN on the example
+   (stored in the model) at that scale, bent by a warp. Its tiles still equal the whole map, seeds
+   differ, heights stay in the band; without any noise or warp it rebuilds the example, which a
+   sample of the coarsest generator does not (the stored map is the example's, and it is the one
+   used); the warp moves it off the example; a layout scale past the model's is refused. */
 TN_TEST(layout_from_the_example)
 {
     tn_image ex = tn_test_dem(24, 1), whole = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, other = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
@@ -129,6 +130,7 @@ TN_TEST(layout_from_the_example)
     tn_image_free(&whole);
     g.noise = -1;
     g.layout_noise = -1;
+    g.layout_warp = -1;
     TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 24, 24, &g) == TN_OK);
     g.layout = 0;
     TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_OK);
@@ -141,7 +143,22 @@ TN_TEST(layout_from_the_example)
     g.layout = 2;
     TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
     g.layout = 1;
-    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 8, 8, &g) == TN_ERR_INVALID_ARG); /* coarsest scale of 4 px: smaller than a patch */
+    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 8, 8, &g) == TN_ERR_INVALID_ARG); /* scale 1's grid of 6 px: smaller than a patch */
+    g.layout_scale = 3; /* the model has scales 0..2 */
+    TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "layout scale 3") != NULL);
+    { /* the warp bends the layout: without any noise, the laid-out map moves off the example */
+        tn_image bent = {0, 0, 0, NULL};
+        double s_bent = 0;
+        g.layout_scale = 0;
+        g.layout_warp = 3;
+        g.layout_smooth = 6;
+        TN_CHECK(tn_singan_sample(&bent, &trained, 0, 0, 24, 24, &g) == TN_OK);
+        TN_CHECK(tn_ssim(&s_bent, &ex, &bent, ehi - elo) == TN_OK);
+        printf("# layout bent by a warp of 3 px: SSIM to the example %.3f\n", s_bent);
+        TN_CHECK(s_bent < s_layout - 0.1);
+        tn_image_free(&bent);
+    }
     tn_image_free(&whole);
     tn_image_free(&tiled);
     tn_image_free(&other);
@@ -265,31 +282,24 @@ TN_TEST(bad_inputs)
         TN_CHECK(strstr(tn_last_error(), "format 1") != NULL);
         remove(path);
     }
-    { /* format 2 (white noise at the coarsest scale, before issue 31's third round): refused by name */
-        tn_params *p = tn_params_create();
-        tn_model_provenance pv;
-        int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
-        memset(&pv, 0, sizeof pv);
-        tn_params_add_buffer(p, "singan.config", 1, &n);
-        TN_CHECK(tn_model_stamp(p, "singan", 2, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(path, p) == TN_OK);
-        tn_params_free(p);
-        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
-        TN_CHECK(strstr(tn_last_error(), "format 2") != NULL);
-        remove(path);
-    }
-    { /* format 3 (no example's coarsest scale to lay out, before issue 31's fourth round): refused by name */
-        tn_params *p = tn_params_create();
-        tn_model_provenance pv;
-        int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
-        memset(&pv, 0, sizeof pv);
-        tn_params_add_buffer(p, "singan.config", 1, &n);
-        TN_CHECK(tn_model_stamp(p, "singan", 3, &pv) == TN_OK);
-        TN_CHECK(tn_params_save(path, p) == TN_OK);
-        tn_params_free(p);
-        TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
-        TN_CHECK(strstr(tn_last_error(), "format 3") != NULL);
-        remove(path);
+    { /* formats 2 (white noise at the coarsest scale), 3 (no example to lay out) and 4 (only its
+         coarsest scale), before issue 31's third, fourth and seventh rounds: refused by name */
+        int f;
+        for (f = 2; f <= 4; f++) {
+            tn_params *p = tn_params_create();
+            tn_model_provenance pv;
+            int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
+            char want[16];
+            memset(&pv, 0, sizeof pv);
+            tn_params_add_buffer(p, "singan.config", 1, &n);
+            TN_CHECK(tn_model_stamp(p, "singan", f, &pv) == TN_OK);
+            TN_CHECK(tn_params_save(path, p) == TN_OK);
+            tn_params_free(p);
+            TN_CHECK(tn_singan_load(&m, path) == TN_ERR_FORMAT);
+            snprintf(want, sizeof want, "format %d", f);
+            TN_CHECK(strstr(tn_last_error(), want) != NULL);
+            remove(path);
+        }
     }
     if (have_trained) {
         tn_singan_gen_opts g;

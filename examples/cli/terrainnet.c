@@ -1616,7 +1616,12 @@ static const cli_opt singan_sample_opts[] = {
     {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
     {"layout", 0, ARG_FLAG, 0, &singan_gen_arg.g.layout, NULL, 0, 0, NULL,
-     "the coarsest scale is the example's own, rearranged by patches (GPNN): its layout; a finite map (origin 0 0)", NULL},
+     "the example's own arrangement, rearranged by patches (GPNN) and bent by a smooth warp, under SinGAN's finer scales; "
+     "a finite map (origin 0 0)", NULL},
+    {"layout-scale", 0, ARG_INT, 0, &singan_gen_arg.g.layout_scale, NULL, 1, 64, "K",
+     "with --layout: the first scale that runs on the layout (1: the layout replaces the coarsest scale; higher keeps more of the example)", "3"},
+    {"layout-warp", 0, ARG_FLOAT, 0, &singan_gen_arg.g.layout_warp, NULL, -1, 4096, "PX",
+     "with --layout: RMS displacement of the warp in output px (< 0: none)", "16"},
 };
 static const cli_opt singan_refine_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
