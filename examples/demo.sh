@@ -39,7 +39,7 @@ ridges   Its ridges (yellow) and valleys (blue), extracted
 noise    Input for style transfer: Perlin noise (no learning)
 style    Style transfer: that noise restyled by the example
 gnn      Sketch to terrain: the letter A ridge in a circular valley (examples/data/sketch_a.tns), in the style of the example (densified by example, with its fine detail)
-singan   SinGAN: new terrain like the example, 1.5 times its size (a new sample, not a copy)
+singan   SinGAN: new terrain like the example, 1.5 times its size, laid out by the example (a new sample, not a copy)
 texture  Texture GAN: grass learnt from one photo over the example; left tiled, right detail-mapped; top far, bottom near
 splat    Splat map: vegetation, bare ground, rock, snow weights
 view3d   3D preview of the example
@@ -77,7 +77,7 @@ step_gnn() {
 }
 step_singan() {
     run $T singan-train "$DEM" -o "$OUT/singan.tnw" $SINGAN_ARGS
-    run $T singan-sample "$OUT/singan.tnw" -o "$OUT/singan_sample.png" --size 384x384 --seed 7
+    run $T singan-sample "$OUT/singan.tnw" -o "$OUT/singan_sample.png" --size 384x384 --seed 7 --layout
     run $T render "$OUT/singan_sample.png" -o "$OUT/singan_preview.png"
     PIC=singan_preview.png; LINK=singan_sample.png
 }
