@@ -165,6 +165,9 @@ typedef struct tn_gpnn_opts {
     float alpha;           /* > 0: GPNN's completeness normalisation, alpha in units of the distance of
                               the example's patches to themselves shifted by 1 px (GPNN: 0.005);
                               0 = none (plain nearest neighbours) */
+    int extend;            /* an output larger than the example starts from: 0 = the example's coarsest scale
+                              stretched to it (GPNN's retargeting: features grow with the output); 1 = blocks
+                              of it at random places (features keep the example's size) */
 } tn_gpnn_opts;
 
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
@@ -1661,6 +1664,7 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     memset(&go, 0, sizeof go);
     go.seed = o->seed;
     go.noise = o->layout_noise;
+    go.extend = 1;
     go.coarsest = cw < ch ? cw : ch;
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
     st = tn_gpnn_sample(&lay, &exl, *mw, *mh, &go);
@@ -1921,6 +1925,28 @@ static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, 
     for (p = 0; p < n; p++) img[p] /= cnt[p];
 }
 
+/* *y = a w x h map of blocks of ex (its smaller side) taken at random places, mirrored at
+   ex's border: GPNN's start for an output larger than the example, at the example's scale. */
+static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, tn_rng *rng)
+{
+    int B = ex->width < ex->height ? ex->width : ex->height, bx, by, x, y0, nbx, nby;
+    tn_status st = tn_image_create(y, w, h, 1);
+    if (st) return st;
+    if (B < 1) B = 1;
+    nbx = (w + B - 1) / B;
+    nby = (h + B - 1) / B;
+    for (by = 0; by < nby; by++)
+        for (bx = 0; bx < nbx; bx++) {
+            int ox = (int)tn_rng_below(rng, (uint32_t)ex->width), oy = (int)tn_rng_below(rng, (uint32_t)ex->height);
+            for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
+                for (x = bx * B; x < w && x < (bx + 1) * B; x++) {
+                    int sx = (int)tn__sg_reflect((float)(x - bx * B + ox), ex->width), sy = (int)tn__sg_reflect((float)(y0 - by * B + oy), ex->height);
+                    y->data[(size_t)y0 * w + x] = ex->data[(size_t)sy * ex->width + sx];
+                }
+        }
+    return TN_OK;
+}
+
 TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts)
 {
     tn_gpnn_opts o;
@@ -1942,9 +1968,10 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
     if (o.noise < 0) o.noise = 0;
     P = o.patch;
     if (P < 3 || P > 15 || !(P & 1) || o.coarsest < P || o.coarsest > 4096 || !(o.factor >= 0.5f && o.factor <= 0.9f) || o.iters < 1 ||
-        o.iters > 1000 || !(o.noise <= 100) || !(o.alpha >= 0 && o.alpha <= 1e6f))
+        o.iters > 1000 || !(o.noise <= 100) || !(o.alpha >= 0 && o.alpha <= 1e6f) || o.extend < 0 || o.extend > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "gpnn: bad option (patch %d odd in 3..15, coarsest %d >= patch, factor %g in 0.5..0.9, iters %d in 1..1000, "
-                        "noise %g <= 100, alpha %g in 0..1e6)", o.patch, o.coarsest, (double)o.factor, o.iters, (double)o.noise, (double)o.alpha);
+                        "noise %g <= 100, alpha %g in 0..1e6, extend %d 0 or 1)", o.patch, o.coarsest, (double)o.factor, o.iters, (double)o.noise,
+                        (double)o.alpha, o.extend);
     if ((st = tn__sg_check_dem(example, o.coarsest, &lo, &hi))) return st;
     if (w < 1 || h < 1 || w > (1 << 14) || h > (1 << 14)) return tn__fail(TN_ERR_INVALID_ARG, "gpnn: output %d x %d (sides 1..16384)", w, h);
     {
@@ -1986,6 +2013,7 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
         int exact = (double)nq * nk * d <= 3e8;
         if (L == 0) { /* the example's coarsest scale at the output's size, plus noise */
             if (ow == kw && oh == kh) st = tn_image_copy(&y, &ex[0]);
+            else if (o.extend && (ow > kw || oh > kh)) st = tn__gp_blocks(&y, &ex[0], ow, oh, &rng);
             else st = tn_image_resize(&y, &ex[0], ow, oh, TN_RESIZE_BICUBIC);
             for (i = 0; !st && i < (size_t)ow * oh; i++) y.data[i] += o.noise * (float)sqrt(var) * tn_rng_normal(&rng);
             if (!st) st = tn_image_copy(&keys, &ex[0]);

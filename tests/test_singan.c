@@ -3,7 +3,8 @@
    loss, save/load, bit-identical resume, a tile equals the same pixels of a whole-map sample,
    two seeds differ, refine and upscale keep sizes and units, and bad inputs (a DEM smaller than
    the coarsest scale, a constant DEM, NaN, another method's model, a checkpoint as a model); the
-   curvature loss brings the samples' Laplacian histogram closer to the example's. */
+   curvature loss brings the samples' Laplacian histogram closer to the example's; GPNN, and its
+   start for an output larger than the example. */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -349,6 +350,45 @@ TN_TEST(curvature_loss)
     tn_image_free(&dem);
 }
 
+static double correlation(const tn_image *a, const tn_image *b)
+{
+    double ma = 0, mb = 0, sab = 0, saa = 0, sbb = 0;
+    size_t i, n = (size_t)a->width * a->height;
+    for (i = 0; i < n; i++) ma += a->data[i] / (double)n, mb += b->data[i] / (double)n;
+    for (i = 0; i < n; i++) {
+        double x = a->data[i] - ma, y = b->data[i] - mb;
+        sab += x * y, saa += x * x, sbb += y * y;
+    }
+    return saa > 0 && sbb > 0 ? sab / sqrt(saa * sbb) : 0;
+}
+
+/* A GPNN output 3x the example's side: stretched from the example's coarsest scale (retargeting),
+   it follows the example stretched; extended (the layout's start), it does not: its features
+   keep the example's size. Little noise, so that the start shows. */
+TN_TEST(gpnn_extend_keeps_the_feature_size)
+{
+    tn_image ex = tn_test_dem(64, 4), st = {0, 0, 0, NULL}, a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    tn_gpnn_opts o;
+    double cs, ce;
+    memset(&o, 0, sizeof o);
+    o.coarsest = 16;
+    o.seed = 1;
+    o.iters = 3;
+    o.noise = 1;
+    TN_CHECK(tn_image_resize(&st, &ex, 192, 192, TN_RESIZE_BICUBIC) == TN_OK);
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 192, 192, &o) == TN_OK);
+    o.extend = 1;
+    TN_CHECK(tn_gpnn_sample(&b, &ex, 192, 192, &o) == TN_OK);
+    cs = a.data ? correlation(&a, &st) : 0;
+    ce = b.data ? correlation(&b, &st) : 1;
+    printf("# correlation with the example stretched 3x: stretched start %.3f, extended %.3f\n", cs, ce);
+    TN_CHECK(cs > 0.3 && ce < 0.15);
+    tn_image_free(&st);
+    tn_image_free(&a);
+    tn_image_free(&b);
+    tn_image_free(&ex);
+}
+
 /* GPNN (no training): shape and units, the example's range, seeds, and what its noise does:
    without noise at the example's size it rebuilds the example, with the default noise it does
    not copy it. */
@@ -403,6 +443,9 @@ TN_TEST(gpnn_sample)
     o.alpha = NAN;
     TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_INVALID_ARG);
     o.alpha = 0;
+    o.extend = 2;
+    TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_INVALID_ARG);
+    o.extend = 0;
     ex.data[100] = NAN;
     TN_CHECK(tn_gpnn_sample(&a, &ex, 64, 64, &o) == TN_ERR_NUMERIC);
     TN_CHECK(a.data == NULL);
@@ -421,6 +464,7 @@ int main(void)
     TN_RUN(bad_inputs);
     TN_RUN(curvature_loss);
     TN_RUN(gpnn_sample);
+    TN_RUN(gpnn_extend_keeps_the_feature_size);
     tn_singan_free(&trained);
     return tn_test_summary("test_singan");
 }
