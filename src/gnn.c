@@ -3439,6 +3439,33 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
     return st;
 }
 
+#define TN__GNN_KEEP 3         /* px from a user line within which its own cross profile is kept through the detail */
+#define TN__GNN_KEEP_FINE 0.5f /* px: the Gaussian below which the example's detail stays there too */
+
+/* A grown sketch's user lines keep their cross profile through the fine detail. The detail keeps
+   the terrain's low-pass (sigma 2 px), which rounds a drawn crest (floor) into a flat band whose
+   highest point the example's texture then decides: a band that reads as two lines in map view.
+   Within TN__GNN_KEEP px of a user line the band between the Gaussians of TN__GNN_KEEP_FINE px
+   and of the low-pass is the terrain's own, not the example's, faded out by a smoothstep of the
+   distance (swapped, not added: the band's power stays). t and d: the terrain and its detail over
+   g (map pixels); d is changed in place. */
+static tn_status tn__gnn_keep_profile(const tn__gnn_gen *G, const tn_image *t, tn_rect g, tn_image *d)
+{
+    tn_image b[4] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    int u, v, k;
+    tn_status st = TN_OK;
+    for (k = 0; !st && k < 4; k++) st = tn_image_blur(&b[k], k < 2 ? t : d, k & 1 ? G->fd.sigma : TN__GNN_KEEP_FINE);
+    for (v = 0; !st && v < g.h; v++)
+        for (u = 0; u < g.w; u++) {
+            float e = G->pin_d[(size_t)(g.y + v) * G->W + g.x + u], w = 1 - e / TN__GNN_KEEP;
+            size_t i = (size_t)v * g.w + u;
+            if (!(w > 0)) continue;
+            d->data[i] += w * w * (3 - 2 * w) * (b[0].data[i] - b[1].data[i] - (b[2].data[i] - b[3].data[i]));
+        }
+    for (k = 0; k < 4; k++) tn_image_free(&b[k]);
+    return st;
+}
+
 #define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
 
 /* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
@@ -3458,7 +3485,7 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             r.h = wh - ty < T ? wh - ty : T;
             g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN : 0), G->W, G->H);
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
-                !(st = tn__fd_apply(&G->fd, &t, &d))) {
+                !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
                 else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, 0, corr); /* the strokes keep their heights through the detail too */
                 for (v = 0; !st && v < r.h; v++) {

@@ -1642,7 +1642,7 @@ TN_TEST(drawn_ridge_is_a_crest)
 {
     /* a lone ridge drawn across the map, grown: in map view a crest, not a thin line or a groove.
        Across it the stroke is the highest ground within 3 px and its flanks fall from it without
-       the network's wall of a pixel on its ground */
+       the network's wall of a pixel on its ground; through the fine detail it keeps a top */
     tn_image dem = tn_test_dem(64, 22), t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
     tn_gnn m;
     tn_gnn_opts o;
@@ -1676,7 +1676,8 @@ TN_TEST(drawn_ridge_is_a_crest)
         if (!t[k].data) continue;
         ridge_shape(&t[k], 12, 20, 148, 100, &top, &spike);
         printf("  drawn ridge %s the detail: highest within 3 px at %.1f %% of its points, spike %.2f\n", k ? "with" : "without", 100 * top, spike);
-        if (!k) TN_CHECK(top >= 0.95 && spike <= 1.0); /* the network's wall: 1.13 */
+        if (k) TN_CHECK(top >= 0.4 && spike >= 0.45); /* the detail's low-pass left a flat band: 20.9 %, 0.30 */
+        else TN_CHECK(top >= 0.95 && spike <= 1.0);   /* the network's wall: 1.13 */
     }
     tn_image_free(&t[0]);
     tn_image_free(&t[1]);
