@@ -3447,8 +3447,9 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
    highest point the example's texture then decides: a band that reads as two lines in map view.
    Within TN__GNN_KEEP px of a user line the band between the Gaussians of TN__GNN_KEEP_FINE px
    and of the low-pass is the terrain's own, not the example's, faded out by a smoothstep of the
-   distance (swapped, not added: the band's power stays). t and d: the terrain and its detail over
-   g (map pixels); d is changed in place. */
+   distance (swapped, not added: the band's power stays). Reads t and d within the low-pass's
+   reach (tn_image_blur: 4 sigma) of the pixels it changes. t and d: the terrain and its detail
+   over g (map pixels); d is changed in place. */
 static tn_status tn__gnn_keep_profile(const tn__gnn_gen *G, const tn_image *t, tn_rect g, tn_image *d)
 {
     tn_image b[4] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}};
@@ -3469,8 +3470,9 @@ static tn_status tn__gnn_keep_profile(const tn__gnn_gen *G, const tn_image *t, t
 #define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
 
 /* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
-   terrain is computed grown by the detail's halo (tn_rect_halo; plus the pinning's reach on a
-   grown sketch, whose strokes are pinned again after the detail), detailed, and cropped. */
+   terrain is computed grown by the detail's halo (tn_rect_halo; plus, on a grown sketch, the
+   pinning's reach, whose strokes are pinned again after the detail, and the low-pass's reach of
+   tn__gnn_keep_profile before that), detailed, and cropped. */
 static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
 {
     int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
@@ -3483,7 +3485,7 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN : 0), G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) : 0), G->W, G->H);
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
                 !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
