@@ -25,6 +25,15 @@
      the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
      lines of the 128 crop; example_crest_relief, example_floor_relief lines); crest_flank_relief,
      floor_flank_relief: the same 6 px across the lines on both sides (gullies and spurs);
+   - crest_top, crest_seam, crest_spike (floor_* for the drawn valleys, heights negated): the
+     cross profiles of the drawn lines (every px of their length, 12 px from their ends and from
+     every other stroke, bilinear every 0.5 px along the normal): top, the share of points that
+     are the highest within 1..3 px across; seam, the share with higher ground on both sides
+     within 6 px (a groove along a ridge); spike, the mean profile's drop 1 px across over a third
+     of its drop 3 px across (1: straight flanks, > 1: a wall of a pixel on its ground, a thin line
+     in map view, < 1: a rounded top); example_crest_top ... lines: the same on the example's main
+     lines (no clearance: its network is dense; its lines are extracted, not drawn, so within a
+     px of the crest: read its top as a floor, its spike as the target);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
@@ -192,6 +201,68 @@ static double line_relief(const tn_image *img, const tn_contour_set *set, int ki
     return n > 1 ? sqrt(s2 / n - (s1 / n) * (s1 / n)) : NAN;
 }
 
+#define ACROSS 8   /* px: the cross profile of a line spans -8 .. +8 px along its normal */
+#define CLEAR 12   /* px: profiles only this far from the line's ends and from every other line */
+
+typedef struct cross_shape {
+    double top, seam, spike; /* shares (0..1) and the profile's ratio; NAN without profiles */
+    int n;
+} cross_shape;
+
+/* The cross profiles of set's lines of one kind (heights negated for valleys, so a floor is a
+   top), sampled every 0.5 px from -ACROSS to +ACROSS px along the normal of each px of their
+   length (tangent over +-2 points of the densified line), CLEAR px from their ends and from every
+   other line of the set; with mains, only the lines of the highest Strahler order of that kind
+   (and no clearance from other lines: an extracted network is dense). top: the share whose line
+   point is the highest of its profile within 1..3 px; seam: the share with higher ground on both
+   sides within 6 px (a groove along a drawn ridge); spike: the mean profile's drop 1 px across
+   over a third of its drop 3 px across (1: straight flanks; > 1: a wall of a pixel or two on its
+   ground, a thin line in map view; < 1: a rounded top). */
+static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set, int kind, int mains)
+{
+    enum { NS = 4 * ACROSS + 1, MID = 2 * ACROSS };
+    tn_contour_set d;
+    cross_shape r;
+    double d1 = 0, d3 = 0;
+    int c, j, k, m, o, top = -1, ntop = 0, nseam = 0;
+    r.top = r.seam = r.spike = NAN;
+    r.n = 0;
+    if (tn_sketch_densify(&d, set)) return r;
+    for (c = 0; c < d.count; c++)
+        if ((int)d.items[c].type == kind && d.items[c].order > top) top = d.items[c].order;
+    for (c = 0; c < d.count; c++) {
+        const tn_contour *l = &d.items[c];
+        const float *pt = l->points;
+        if ((int)l->type != kind || (mains && l->order != top)) continue;
+        for (j = 0; j < l->npoints; j++) {
+            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
+            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty);
+            double h[NS], sg = kind == TN_RIDGE ? 1 : -1, lo = -HUGE_VAL, side[2] = {-HUGE_VAL, -HUGE_VAL};
+            if (!(len > 0) || x < ACROSS || y < ACROSS || x > img->width - 1 - ACROSS || y > img->height - 1 - ACROSS) continue;
+            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
+            for (k = 0; k < d.count && !mains && !near; k++)
+                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
+                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
+            if (near) continue;
+            for (o = 0; o < NS; o++) h[o] = sg * height_at(img, x - ty / len * (o - MID) * 0.5, y + tx / len * (o - MID) * 0.5);
+            for (o = 2; o <= 6; o++) lo = fmax(lo, fmax(h[MID - o], h[MID + o]));
+            for (o = 2; o <= 12; o++) side[0] = fmax(side[0], h[MID - o]), side[1] = fmax(side[1], h[MID + o]);
+            ntop += h[MID] >= lo;
+            nseam += side[0] > h[MID] && side[1] > h[MID];
+            d1 += h[MID] - 0.5 * (h[MID - 2] + h[MID + 2]);
+            d3 += h[MID] - 0.5 * (h[MID - 6] + h[MID + 6]);
+            r.n++;
+        }
+    }
+    tn_contour_set_free(&d);
+    if (r.n) {
+        r.top = (double)ntop / r.n;
+        r.seam = (double)nseam / r.n;
+        r.spike = d3 > 0 ? 3 * d1 / d3 : NAN;
+    }
+    return r;
+}
+
 /* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
 static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N, const tn_image *ex,
                     const double *real)
@@ -247,7 +318,7 @@ int main(int argc, char **argv)
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *only = NULL;
     double dxy[2], h0, h1, real[3] = {0, 0, 0}, ex_relief[4] = {NAN, NAN, NAN, NAN};
-    static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"};
+    static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
     int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
@@ -305,13 +376,20 @@ int main(int argc, char **argv)
         for (k = 0; k < 3; k++) real[k] /= nreal;
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
     }
-    { /* the example's own along-line relief on its main ridges and valleys (tn_extract) */
+    { /* the example's own along-line relief and cross profiles on its main ridges and valleys (tn_extract) */
         tn_extraction e;
+        cross_shape cs[2];
+        cs[0].n = cs[1].n = 0;
         if (!tn_extract(&e, &ex, NULL)) {
             for (k = 0; k < 4; k++) ex_relief[k] = line_relief(&ex, &e.contours, k & 1 ? TN_VALLEY : TN_RIDGE, 1, k < 2 ? 0 : FLANK);
+            for (k = 0; k < 2; k++) cs[k] = cross_profiles(&ex, &e.contours, k ? TN_VALLEY : TN_RIDGE, 1);
             tn_extraction_free(&e);
         }
         for (k = 0; k < 4; k++) printf("example_%s_relief: %.2f m (main %s)\n", relief_name[k], ex_relief[k], k & 1 ? "valleys" : "ridges");
+        for (k = 0; k < 2; k++)
+            if (cs[k].n)
+                printf("example_%s_top: %.1f %%; %s_seam: %.1f %%; %s_spike: %.2f (main %s, %d points)\n", shape_name[k], 100 * cs[k].top, shape_name[k],
+                       100 * cs[k].seam, shape_name[k], cs[k].spike, k ? "valleys" : "ridges", cs[k].n);
     }
     for (d = 0; d < 4; d++) {
         char path[512];
@@ -378,6 +456,12 @@ int main(int argc, char **argv)
             for (k = 0; k < 4; k++) {
                 double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
                 if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);
+            }
+            for (k = 0; k < 2; k++) {
+                cross_shape cs = cross_profiles(&out[w], &asked, k ? TN_VALLEY : TN_RIDGE, 0);
+                if (cs.n)
+                    printf("%s_%s_%s_top: %.1f %%\n%s_%s_%s_seam: %.1f %%\n%s_%s_%s_spike: %.2f\n", all[d], way[w], shape_name[k], 100 * cs.top, all[d], way[w],
+                           shape_name[k], 100 * cs.seam, all[d], way[w], shape_name[k], cs.spike);
             }
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             else { /* the membrane alone, at 256 and 1024 px (its blocks of 128 + 64 px) */

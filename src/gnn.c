@@ -3246,6 +3246,7 @@ done:
    grown by the halo, its graph and one pass without gradients; the membrane plus G->gain times
    the network's residual. base_dst (may be NULL): the membrane there. */
 #define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
+#define TN__GNN_BESIDE 1.5f /* px: the ground beside a stroke (its 8 neighbours) */
 
 /* Weight of a stroke pixel at distance e (< L) in the smooth means along the strokes: the
    nearest ones dominate, and it falls to 0 at L. */
@@ -3259,36 +3260,46 @@ static float tn__gnn_line_kernel(float e, int L)
    (1 - d/L)^2 / (d + 0.5), d < L = TN__GNN_PIN), faded in by a smoothstep of the distance to them.
    The network alone moves the strokes of a weak model (docs/gnn.md) and the detail's low-pass
    lowers a drawn crest; that the land beside a stroke stays
-   below a ridge and above a valley is the notch's work (tn__gnn_incise). Reads a and b (rw
+   below a ridge and above a valley is the notch's work (tn__gnn_incise). With wall > 0 (the
+   network's change): the network keeps a stroke's own pixels and moves the ground beside them,
+   which leaves a drawn ridge a wall of a pixel above its ground (a valley a slot), a thin line in
+   map view; within wall px of the strokes the correction moves linearly from the mean change
+   beside them (their 8 neighbours) to the one on them, so the flanks rise to the stroke, and
+   the banks the notch reads (wall = TN__GNN_BANK) stay where they were. Reads a and b (rw
    floats a row, origin (rx, ry)) within L of the window (x, y, ww, wh), which the caller computed
    exactly; writes the correction of each window pixel into corr (ww x wh). */
-static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, int rx, int ry, int rw, int x, int y, int ww, int wh, float *corr)
+static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, int rx, int ry, int rw, int x, int y, int ww, int wh, int wall,
+                        float *corr)
 {
     const int L = TN__GNN_PIN;
     int u, v, px, py;
     for (v = 0; v < wh; v++)
         for (u = 0; u < ww; u++) {
             int X = x + u, Y = y + v;
-            float d = G->pin_d[(size_t)Y * G->W + X], phi;
-            double num = 0, den = 0;
+            float d = G->pin_d[(size_t)Y * G->W + X], phi, ramp = 0;
+            double num = 0, den = 0, nb = 0, db = 0;
             corr[(size_t)v * ww + u] = 0;
             if (!(d < (float)L)) continue;
+            if (wall > 0 && d > 0 && d < (float)wall) ramp = 1 - d / (float)wall;
             for (py = Y - L + 1; py < Y + L; py++)
                 for (px = X - L + 1; px < X + L; px++) {
-                    float e, k;
+                    float e, k, dq;
                     size_t i;
-                    if (px < 0 || py < 0 || px >= G->W || py >= G->H || !G->pin[(size_t)py * G->W + px]) continue;
+                    if (px < 0 || py < 0 || px >= G->W || py >= G->H) continue;
+                    dq = G->pin_d[(size_t)py * G->W + px];
+                    if (dq > 0 && !(ramp > 0 && dq <= TN__GNN_BESIDE)) continue;
                     e = sqrtf((float)((px - X) * (px - X) + (py - Y) * (py - Y)));
                     if (e >= (float)L) continue;
                     k = tn__gnn_line_kernel(e, L);
                     i = (size_t)(py - ry) * rw + (px - rx);
                     e = a[i] - b[i];
-                    num += k * e;
-                    den += k;
+                    if (dq > 0) nb += k * e, db += k;
+                    else num += k * e, den += k;
                 }
             phi = 1 - d / L;
             phi = phi * phi * (3 - 2 * phi);
-            if (den > 0) corr[(size_t)v * ww + u] = (float)(phi * num / den);
+            num = den > 0 ? num / den : 0;
+            corr[(size_t)v * ww + u] = (float)(phi * num + (db > 0 ? ramp * (nb / db - num) : 0));
         }
 }
 
@@ -3378,7 +3389,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
                           !(inc = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))))
         st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
-    if (!st && corr) tn__gnn_pin(G, pred, R.base, R.rx, R.ry, R.rw, ax, ay, aw, ah, corr);
+    if (!st && corr) tn__gnn_pin(G, pred, R.base, R.rx, R.ry, R.rw, ax, ay, aw, ah, TN__GNN_BANK, corr);
     for (v = 0; !st && v < ah; v++)
         for (u = 0; u < aw; u++) {
             size_t i = (size_t)(ay - ry + v) * R.rw + (ax - rx + u), j = (size_t)v * aw + u;
@@ -3428,11 +3439,40 @@ static tn_status tn__gnn_gen_run(const tn__gnn_gen *G, const tn_params *w, tn_ct
     return st;
 }
 
+#define TN__GNN_KEEP 3         /* px from a user line within which its own cross profile is kept through the detail */
+#define TN__GNN_KEEP_FINE 0.5f /* px: the Gaussian below which the example's detail stays there too */
+
+/* A grown sketch's user lines keep their cross profile through the fine detail. The detail keeps
+   the terrain's low-pass (sigma 2 px), which rounds a drawn crest (floor) into a flat band whose
+   highest point the example's texture then decides: a band that reads as two lines in map view.
+   Within TN__GNN_KEEP px of a user line the band between the Gaussians of TN__GNN_KEEP_FINE px
+   and of the low-pass is the terrain's own, not the example's, faded out by a smoothstep of the
+   distance (swapped, not added: the band's power stays). Reads t and d within the low-pass's
+   reach (tn_image_blur: 4 sigma) of the pixels it changes. t and d: the terrain and its detail
+   over g (map pixels); d is changed in place. */
+static tn_status tn__gnn_keep_profile(const tn__gnn_gen *G, const tn_image *t, tn_rect g, tn_image *d)
+{
+    tn_image b[4] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    int u, v, k;
+    tn_status st = TN_OK;
+    for (k = 0; !st && k < 4; k++) st = tn_image_blur(&b[k], k < 2 ? t : d, k & 1 ? G->fd.sigma : TN__GNN_KEEP_FINE);
+    for (v = 0; !st && v < g.h; v++)
+        for (u = 0; u < g.w; u++) {
+            float e = G->pin_d[(size_t)(g.y + v) * G->W + g.x + u], w = 1 - e / TN__GNN_KEEP;
+            size_t i = (size_t)v * g.w + u;
+            if (!(w > 0)) continue;
+            d->data[i] += w * w * (3 - 2 * w) * (b[0].data[i] - b[1].data[i] - (b[2].data[i] - b[3].data[i]));
+        }
+    for (k = 0; k < 4; k++) tn_image_free(&b[k]);
+    return st;
+}
+
 #define TN__GNN_DETAIL_TILE 1024 /* the fine detail's tiles: the network runs again on their halo (7 %) */
 
 /* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
-   terrain is computed grown by the detail's halo (tn_rect_halo; plus the pinning's reach on a
-   grown sketch, whose strokes are pinned again after the detail), detailed, and cropped. */
+   terrain is computed grown by the detail's halo (tn_rect_halo; plus, on a grown sketch, the
+   pinning's reach, whose strokes are pinned again after the detail, and the low-pass's reach of
+   tn__gnn_keep_profile before that), detailed, and cropped. */
 static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
 {
     int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
@@ -3445,11 +3485,11 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN : 0), G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) : 0), G->W, G->H);
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
-                !(st = tn__fd_apply(&G->fd, &t, &d))) {
+                !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, corr); /* the strokes keep their heights through the detail too */
+                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, 0, corr); /* the strokes keep their heights through the detail too */
                 for (v = 0; !st && v < r.h; v++) {
                     float *o = dst + (size_t)(ty + v) * ww + tx;
                     int u;

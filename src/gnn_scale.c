@@ -234,7 +234,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn_prepared *P, tn_ctx *ctx, int x
         }
     for (v = 0; v < r.h; v++) /* the pinning reads both on one layout: G's output over r into lowF */
         for (u = 0; u < r.w; u++) lowF[(size_t)v * r.w + u] = F[(size_t)(r.y + v - g.y) * g.w + (r.x + u - g.x)];
-    tn__gnn_pin(G, M, lowF, r.x, r.y, r.w, A.x, A.y, A.w, A.h, corr);
+    tn__gnn_pin(G, M, lowF, r.x, r.y, r.w, A.x, A.y, A.w, A.h, 0, corr);
     for (v = 0; v < A.h; v++) /* the notch works in the network's units */
         for (u = 0; u < A.w; u++) {
             size_t q = (size_t)v * A.w + u;

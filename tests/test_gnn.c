@@ -1610,6 +1610,81 @@ TN_TEST(grown_strokes_stay_main_lines)
 
 /* Mean |terrain - asked height| over the strokes' pixels, and the share of their points that keep
    ridges above and valleys below the land 4 px across (tn_gnn_ordering). */
+/* Bilinear height of img at (x, y) (inside the map). */
+static double height_at(const tn_image *img, double x, double y)
+{
+    int x0 = (int)x, y0 = (int)y, x1 = x0 + 1 < img->width ? x0 + 1 : x0, y1 = y0 + 1 < img->height ? y0 + 1 : y0;
+    double fx = x - x0, fy = y - y0;
+    return (1 - fy) * ((1 - fx) * TN_PIXEL(img, x0, y0, 0) + fx * TN_PIXEL(img, x1, y0, 0)) + fy * ((1 - fx) * TN_PIXEL(img, x0, y1, 0) + fx * TN_PIXEL(img, x1, y1, 0));
+}
+
+/* Cross profiles of a straight ridge from (x0, y0) to (x1, y1), 12 px from its ends: top, the
+   share of its points higher than the terrain 1..3 px across on both sides; spike, the mean
+   drop 1 px across over a third of the drop 3 px across (1: straight flanks; 2 or more: a wall
+   of a pixel on its ground). */
+static void ridge_shape(const tn_image *t, double x0, double y0, double x1, double y1, double *top, double *spike)
+{
+    double len = hypot(x1 - x0, y1 - y0), nx = -(y1 - y0) / len, ny = (x1 - x0) / len, d1 = 0, d3 = 0, s;
+    int n = 0, good = 0, o;
+    for (s = 12; s <= len - 12; s += 1) {
+        double x = x0 + (x1 - x0) * s / len, y = y0 + (y1 - y0) * s / len, h0 = height_at(t, x, y), hi = -HUGE_VAL;
+        for (o = 2; o <= 6; o++) hi = fmax(hi, fmax(height_at(t, x + nx * o * 0.5, y + ny * o * 0.5), height_at(t, x - nx * o * 0.5, y - ny * o * 0.5)));
+        good += h0 >= hi;
+        d1 += h0 - 0.5 * (height_at(t, x + nx, y + ny) + height_at(t, x - nx, y - ny));
+        d3 += h0 - 0.5 * (height_at(t, x + 3 * nx, y + 3 * ny) + height_at(t, x - 3 * nx, y - 3 * ny));
+        n++;
+    }
+    *top = n ? (double)good / n : 0;
+    *spike = d3 > 0 ? 3 * d1 / d3 : HUGE_VAL;
+}
+
+TN_TEST(drawn_ridge_is_a_crest)
+{
+    /* a lone ridge drawn across the map, grown: in map view a crest, not a thin line or a groove.
+       Across it the stroke is the highest ground within 3 px and its flanks fall from it without
+       the network's wall of a pixel on its ground; through the fine detail it keeps a top */
+    tn_image dem = tn_test_dem(64, 22), t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_contour c;
+    tn_contour_set sk;
+    float pts[6] = {12, 20, 0, 148, 100, 0};
+    float dlo = 0, dhi = 0;
+    int k;
+    tn_image_range(&dlo, &dhi, &dem);
+    pts[2] = pts[5] = dlo + 0.8f * (dhi - dlo);
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.npoints = 2;
+    c.points = pts;
+    memset(&sk, 0, sizeof sk);
+    sk.width = 160;
+    sk.height = 120;
+    sk.count = 1;
+    sk.items = &c;
+    memset(&go, 0, sizeof go);
+    go.seed = 1;
+    go.grow = 1;
+    go.map_scale = -1;
+    for (k = 0; k < 2; k++) {
+        double top = 0, spike = 0;
+        go.detail = k ? 0 : -1;
+        TN_CHECK(tn_gnn_generate(&t[k], &m, &sk, 160, 120, &go) == TN_OK);
+        if (!t[k].data) continue;
+        ridge_shape(&t[k], 12, 20, 148, 100, &top, &spike);
+        printf("  drawn ridge %s the detail: highest within 3 px at %.1f %% of its points, spike %.2f\n", k ? "with" : "without", 100 * top, spike);
+        if (k) TN_CHECK(top >= 0.4 && spike >= 0.45); /* the detail's low-pass left a flat band: 20.9 %, 0.30 */
+        else TN_CHECK(top >= 0.95 && spike <= 1.0);   /* the network's wall: 1.13 */
+    }
+    tn_image_free(&t[0]);
+    tn_image_free(&t[1]);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 static void stroke_fit(const tn_contour_set *sk, const tn_image *t, double *err, double *follow)
 {
     tn_image r = {0, 0, 0, NULL};
@@ -1908,6 +1983,7 @@ int main(void)
     TN_RUN(grow_flanks_copy_the_example_flanks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
+    TN_RUN(drawn_ridge_is_a_crest);
     TN_RUN(map_scale_level);
     return tn_test_summary("test_gnn");
 }
