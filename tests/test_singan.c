@@ -290,7 +290,7 @@ TN_TEST(bad_inputs)
             tn_params *p = tn_params_create();
             tn_model_provenance pv;
             int n = 8 + 3 * TN_SINGAN_MAX_SCALES;
-            char want[16];
+            char want[32];
             memset(&pv, 0, sizeof pv);
             tn_params_add_buffer(p, "singan.config", 1, &n);
             TN_CHECK(tn_model_stamp(p, "singan", f, &pv) == TN_OK);
