@@ -266,13 +266,22 @@ static int tn__reflect_half(long long i, int n)
 }
 
 /* numpy 'reflect' (whole-sample symmetric, edge not repeated): ... c b | a b c | b a ..., period 2n-2. */
-static int tn__reflect_whole(long long i, int n)
+TN__SHARED int tn__reflect_whole(long long i, int n)
 {
     long long p = 2LL * n - 2, m;
     if (n == 1) return 0;
     m = i % p;
     if (m < 0) m += p;
     return (int)(m >= n ? p - m : m);
+}
+
+/* tn__reflect_whole of a position between samples: x mirrored into [0, n - 1]. */
+TN__SHARED float tn__reflect_whole_f(float x, int n)
+{
+    float p = 2.0f * (float)(n - 1);
+    if (n < 2) return 0;
+    x = fmodf(fabsf(x), p);
+    return x > (float)(n - 1) ? p - x : x;
 }
 
 /* ---- crop / pad ---------------------------------------------------------------------------- */

@@ -1593,15 +1593,6 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     return TN_OK;
 }
 
-/* x reflected into [0, n - 1] (mirror at the border, no repeated edge). */
-static float tn__sg_reflect(float x, int n)
-{
-    float p = 2.0f * (float)(n - 1);
-    if (n < 2) return 0;
-    x = fmodf(fabsf(x), p);
-    return x > (float)(n - 1) ? p - x : x;
-}
-
 /* Bends map by a random smooth warp: each pixel takes the map (mirrored at its border) at itself
    plus a displacement of Gaussian-blurred noise (sigma `smooth` px), scaled to RMS `amp` px. */
 static tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed)
@@ -1623,7 +1614,8 @@ static tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t se
     for (y = 0; y < map->height; y++)
         for (x = 0; x < map->width; x++) {
             const float *v = &TN_PIXEL(&d, x, y, 0);
-            float sx = tn__sg_reflect((float)x + (float)rms[0] * v[0], map->width), sy = tn__sg_reflect((float)y + (float)rms[1] * v[1], map->height);
+            float sx = tn__reflect_whole_f((float)x + (float)rms[0] * v[0], map->width);
+            float sy = tn__reflect_whole_f((float)y + (float)rms[1] * v[1], map->height);
             TN_PIXEL(map, x, y, 0) = tn__sample_bilinear(&src, sx, sy, 0);
         }
 done:
@@ -1940,7 +1932,7 @@ static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, tn
             int ox = (int)tn_rng_below(rng, (uint32_t)ex->width), oy = (int)tn_rng_below(rng, (uint32_t)ex->height);
             for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
                 for (x = bx * B; x < w && x < (bx + 1) * B; x++) {
-                    int sx = (int)tn__sg_reflect((float)(x - bx * B + ox), ex->width), sy = (int)tn__sg_reflect((float)(y0 - by * B + oy), ex->height);
+                    int sx = tn__reflect_whole(x - bx * B + ox, ex->width), sy = tn__reflect_whole(y0 - by * B + oy, ex->height);
                     y->data[(size_t)y0 * w + x] = ex->data[(size_t)sy * ex->width + sx];
                 }
         }
