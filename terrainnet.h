@@ -1661,6 +1661,19 @@ TN_API tn_status tn_singan_load(tn_singan *model, const char *path);
    channel) is allocated here. */
 TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h,
                                   const tn_singan_gen_opts *opts);
+/* A w x h map prepared once for many windows (the tiles of one world): with opts->layout its
+   layout (GPNN and the warp, the part that is not local) is made here, so a laid-out map, finite
+   for tn_singan_sample, can be made tile by tile. A window of it equals the same pixels of
+   tn_singan_sample(0, 0, w, h) with the same model and options. Laid-out maps up to
+   TN_SINGAN_LAYOUT_MAX_PX pixels. The model must outlive *out; opts is copied. Free with
+   tn_singan_prepared_free. */
+#define TN_SINGAN_LAYOUT_MAX_PX (4096L * 4096L)
+typedef struct tn_singan_prepared tn_singan_prepared;
+TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *model, int w, int h, const tn_singan_gen_opts *opts);
+/* *out = the window (x0, y0, w, h) of p's map, which it must lie in (one channel, the example's
+   units), allocated here. p is only read. */
+TN_API tn_status tn_singan_prepared_window(tn_image *out, const tn_singan_prepared *p, int x0, int y0, int w, int h);
+TN_API void tn_singan_prepared_free(tn_singan_prepared *p); /* NULL is fine */
 /* Adds the example's detail to `in` (a smooth map in the example's units and pixel size, e.g.
    a GNN output or a membrane): `in` resized to scale opts->from_scale replaces the upsampled
    coarser output there and the generators of that scale and the finer ones run. *out has in's
@@ -22672,31 +22685,97 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     return TN_OK;
 }
 
+struct tn_singan_prepared {
+    const tn_singan *model;
+    tn__sg_arch A;
+    tn_singan_gen_opts o;   /* defaults resolved */
+    int width, height;      /* the map */
+    float *map;             /* the layout: the output of scale level + 1's input grid (NULL: none) */
+    int mw, mh, level;
+};
+
+TN_API void tn_singan_prepared_free(tn_singan_prepared *p)
+{
+    if (!p) return;
+    TN_FREE(p->map);
+    TN_FREE(p);
+}
+
+TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *model, int w, int h, const tn_singan_gen_opts *opts)
+{
+    tn_singan_prepared *p;
+    tn__sg_gen_run r;
+    tn_status st;
+    TN_ASSERT(out && model);
+    *out = NULL;
+    if (!(p = (tn_singan_prepared *)tn__calloc(sizeof *p))) return tn__oom();
+    p->model = model;
+    p->width = w;
+    p->height = h;
+    if ((st = tn__sg_gen_prepare(model, opts, &p->A, &p->o, &r))) goto fail;
+    if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || (p->o.layout && (long)w * h > TN_SINGAN_LAYOUT_MAX_PX)) {
+        st = tn__fail(TN_ERR_INVALID_ARG, "singan: map %d x %d (sides 1..2^20; a laid-out map at most %ld pixels)", w, h, TN_SINGAN_LAYOUT_MAX_PX);
+        goto fail;
+    }
+    if (p->o.layout) { /* the layout is the output of scale K - 1 */
+        int K = p->o.layout_scale ? p->o.layout_scale : (p->A.scales - 1 < 3 ? p->A.scales - 1 : 3);
+        if (K < 1 || K > p->A.scales - 1) {
+            st = tn__fail(TN_ERR_INVALID_ARG, "singan sample: layout scale %d outside 1..%d", p->o.layout_scale, p->A.scales - 1);
+            goto fail;
+        }
+        if ((st = tn__sg_layout(model, &p->A, &p->o, K, w, h, &p->map, &p->mw, &p->mh))) goto fail;
+        p->level = K - 1;
+    }
+    *out = p;
+    return TN_OK;
+fail:
+    tn_singan_prepared_free(p);
+    return st;
+}
+
+TN_API tn_status tn_singan_prepared_window(tn_image *out, const tn_singan_prepared *p, int x0, int y0, int w, int h)
+{
+    tn__sg_gen_run r;
+    TN_ASSERT(out && p);
+    if (w < 1 || h < 1 || x0 < 0 || y0 < 0 || x0 > p->width - w || y0 > p->height - h)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: window %d x %d at (%d, %d) outside the %d x %d map", w, h, x0, y0, p->width, p->height);
+    memset(&r, 0, sizeof r);
+    r.A = &p->A;
+    r.g = p->model->weights;
+    r.seed = p->o.seed;
+    r.noise = p->o.noise;
+    r.limit = 1;
+    if (p->map) {
+        r.map = p->map;
+        r.mw = p->mw;
+        r.mh = p->mh;
+        r.map_level = p->level;
+        r.map_is_output = 1;
+    }
+    return tn__sg_generate(p->model, &r, p->A.scales - 1, x0, y0, w, h, p->o.tile, out);
+}
+
 TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0, int y0, int w, int h, const tn_singan_gen_opts *opts)
 {
     tn__sg_arch A;
     tn_singan_gen_opts o;
     tn__sg_gen_run r;
-    float *map = NULL;
+    tn_singan_prepared *p;
     tn_status st;
     TN_ASSERT(out);
     if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
-    if (o.layout && (x0 || y0))
-        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a laid-out map is finite: its origin must be (0, 0), not (%d, %d)", x0, y0);
-    r.limit = 1;
-    if (o.layout) { /* the layout is the output of scale K - 1 */
-        int K = o.layout_scale ? o.layout_scale : (A.scales - 1 < 3 ? A.scales - 1 : 3);
-        if (K < 1 || K > A.scales - 1)
-            return tn__fail(TN_ERR_INVALID_ARG, "singan sample: layout scale %d outside 1..%d", o.layout_scale, A.scales - 1);
-        if ((st = tn__sg_layout(model, &A, &o, K, w, h, &map, &r.mw, &r.mh))) return st;
-        r.map = map;
-        r.map_level = K - 1;
-        r.map_is_output = 1;
+    if (!o.layout) {
+        r.limit = 1;
+        return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
     }
-    st = tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
-    TN_FREE(map);
+    if (x0 || y0)
+        return tn__fail(TN_ERR_INVALID_ARG, "singan sample: a laid-out map is finite: its origin must be (0, 0), not (%d, %d) "
+                        "(tn_singan_prepare gives windows of a larger one)", x0, y0);
+    if ((st = tn_singan_prepare(&p, model, w, h, opts))) return st;
+    st = tn_singan_prepared_window(out, p, 0, 0, w, h);
+    tn_singan_prepared_free(p);
     return st;
 }
 
@@ -31530,6 +31609,7 @@ typedef struct tn__world_stage {
     tn_method_input input;                /* a learned generator's: the world's seed and size */
     tn_climate *climate;                  /* season, kpd */
     tn_gnn_prepared *gnn;                 /* gnn: the generation prepared at setup (the gain tested once) */
+    tn_singan_prepared *singan;           /* singan layout=1: the world's layout made at setup */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -31844,10 +31924,28 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
 }
 
 /* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
-   in the model's metres; the world's height range clips them. */
+   in the model's metres; the world's height range clips them. With layout=1 the world is one
+   laid-out map (the example's arrangement, rearranged and bent), its layout made once here for
+   the whole world and its tiles windows of it (tn_singan_prepare). */
 static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
-    return tn__world_model(s, w, base_dir, "singan");
+    tn_singan_gen_opts go;
+    double layout;
+    tn_status st = tn__world_model(s, w, base_dir, "singan");
+    if (st || (st = tn__world_num(s, "layout", 0, 0, 1, &layout))) return st;
+    if (layout != 0 && layout != 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan layout=%g must be 0 or 1", s->line, layout);
+    if (layout == 0) return TN_OK;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    go.layout = 1;
+    return tn_singan_prepare(&s->singan, (const tn_singan *)s->model, w->width, w->height, &go);
+}
+
+static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    if (!s->singan) return tn__world_learned_run(s, w, r, in, in_r, out);
+    return tn_singan_prepared_window(out, s->singan, r.x, r.y, r.w, r.h);
 }
 
 /* GNN terrain of a sketch: tn_gnn_prepare once at setup (the sketch, its canvas scaled to the
@@ -32424,7 +32522,8 @@ static const tn__world_method tn__world_methods[] = {
     {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
-                        "the world's height range clips them)", tn__world_singan_setup, tn__world_learned_run},
+                        "the world's height range clips them) layout=0 (1: the example's arrangement over the whole world, made at "
+                        "setup; worlds up to 4096 x 4096)", tn__world_singan_setup, tn__world_singan_run},
     {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_prepared_window), worlds up to 4096 x 4096: "
                      "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
      tn__world_gnn_setup, tn__world_gnn_run},
@@ -32488,6 +32587,7 @@ static void tn__world_release(tn__world_impl *im)
         if (im->st[k].method) im->st[k].method->free(im->st[k].model);
         TN_FREE(im->st[k].climate);
         tn_gnn_prepared_free(im->st[k].gnn);
+        tn_singan_prepared_free(im->st[k].singan);
     }
     TN_FREE(im);
 }

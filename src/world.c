@@ -128,6 +128,7 @@ typedef struct tn__world_stage {
     tn_method_input input;                /* a learned generator's: the world's seed and size */
     tn_climate *climate;                  /* season, kpd */
     tn_gnn_prepared *gnn;                 /* gnn: the generation prepared at setup (the gain tested once) */
+    tn_singan_prepared *singan;           /* singan layout=1: the world's layout made at setup */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -442,10 +443,28 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
 }
 
 /* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
-   in the model's metres; the world's height range clips them. */
+   in the model's metres; the world's height range clips them. With layout=1 the world is one
+   laid-out map (the example's arrangement, rearranged and bent), its layout made once here for
+   the whole world and its tiles windows of it (tn_singan_prepare). */
 static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
-    return tn__world_model(s, w, base_dir, "singan");
+    tn_singan_gen_opts go;
+    double layout;
+    tn_status st = tn__world_model(s, w, base_dir, "singan");
+    if (st || (st = tn__world_num(s, "layout", 0, 0, 1, &layout))) return st;
+    if (layout != 0 && layout != 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan layout=%g must be 0 or 1", s->line, layout);
+    if (layout == 0) return TN_OK;
+    memset(&go, 0, sizeof go);
+    go.seed = w->seed;
+    go.layout = 1;
+    return tn_singan_prepare(&s->singan, (const tn_singan *)s->model, w->width, w->height, &go);
+}
+
+static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
+                                      tn_image *out)
+{
+    if (!s->singan) return tn__world_learned_run(s, w, r, in, in_r, out);
+    return tn_singan_prepared_window(out, s->singan, r.x, r.y, r.w, r.h);
 }
 
 /* GNN terrain of a sketch: tn_gnn_prepare once at setup (the sketch, its canvas scaled to the
@@ -1022,7 +1041,8 @@ static const tn__world_method tn__world_methods[] = {
     {"texgan", 1, NULL, "generator, halo 0 (4-6 noise cells inside the model's windows): model=FILE.tnw (1 channel: heights)",
      tn__world_texgan_setup, tn__world_texgan_run},
     {"singan", 1, NULL, "generator, halo 0 (exact windows of the model's infinite sample): model=FILE.tnw (heights in its metres; "
-                        "the world's height range clips them)", tn__world_singan_setup, tn__world_learned_run},
+                        "the world's height range clips them) layout=0 (1: the example's arrangement over the whole world, made at "
+                        "setup; worlds up to 4096 x 4096)", tn__world_singan_setup, tn__world_singan_run},
     {"gnn", 1, NULL, "generator, halo 0 outside (2 rounds (radius + 13) px inside tn_gnn_prepared_window), worlds up to 4096 x 4096: "
                      "model=FILE.tnw sketch=FILE.tns (its canvas scaled to the world) heights=auto|example|unit embed=auto|aligned|none",
      tn__world_gnn_setup, tn__world_gnn_run},
@@ -1086,6 +1106,7 @@ static void tn__world_release(tn__world_impl *im)
         if (im->st[k].method) im->st[k].method->free(im->st[k].model);
         TN_FREE(im->st[k].climate);
         tn_gnn_prepared_free(im->st[k].gnn);
+        tn_singan_prepared_free(im->st[k].singan);
     }
     TN_FREE(im);
 }

@@ -417,6 +417,10 @@ if $T singan-sample "$W/sg.tnw" -o "$W/sg_big.pfm" --size 40x30 --seed 2 2>/dev/
     $T info "$W/sg_big.pfm" | grep -q "size: 40 x 30"; then ok; else bad "singan-sample: same seed same bytes, seeds differ, windows"; fi
 if $T singan-sample "$W/sg.tnw" -o "$W/sg_lay.pfm" --size 40x30 --seed 2 --layout 2>/dev/null && [ -s "$W/sg_lay.pfm" ] &&
     $T info "$W/sg_lay.pfm" | grep -q "size: 40 x 30"; then ok; else bad "singan-sample --layout: a file of the size asked"; fi
+if $T singan-sample "$W/sg.tnw" -o "$W/sg_laym.pfm" --seed 2 --layout --map 40x30 2>/dev/null && cmp -s "$W/sg_lay.pfm" "$W/sg_laym.pfm" &&
+    $T singan-sample "$W/sg.tnw" -o "$W/sg_layw.pfm" --seed 2 --layout --map 40x30 --origin 25 10 2>/dev/null &&
+    $T info "$W/sg_layw.pfm" | grep -q "size: 15 x 20"; then ok; else bad "singan-sample --layout --map: the whole map, and a window of it"; fi
+expect_error "singan-sample window outside its --map" "outside the 40 x 30 map" $T singan-sample "$W/sg.tnw" -o "$W/x.pfm" --map 40x30 --origin 30 0 --size 20x10
 if $T singan-refine "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_ref.pfm" --from-scale 1 2>/dev/null && $T info "$W/sg_ref.pfm" | grep -q "size: 32 x 32" &&
     $T singan-upscale "$W/sg.tnw" "$W/sg_dem.pfm" -o "$W/sg_up.pfm" --factor 1.5 --from-scale 2 2>/dev/null &&
     $T info "$W/sg_up.pfm" | grep -q "size: 48 x 48"; then ok; else bad "singan-refine / singan-upscale sizes"; fi

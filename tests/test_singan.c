@@ -167,6 +167,44 @@ TN_TEST(layout_from_the_example)
     tn_image_free(&ex);
 }
 
+/* A laid-out map prepared once gives it tile by tile: its windows equal the same pixels of the
+   whole laid-out sample, at any origin inside it and on any thread count; a window outside
+   the map and a laid-out map past the size limit are refused. Without a layout a prepared map
+   is the infinite sample's window. */
+TN_TEST(prepared_windows_of_a_laid_out_map)
+{
+    tn_image whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
+    tn_singan_prepared *p = NULL;
+    tn_singan_gen_opts g;
+    int y, same = 1, threads = tn_get_threads();
+    if (!have_trained) TN_SKIP("no model");
+    memset(&g, 0, sizeof g);
+    g.seed = 5;
+    g.layout = 1;
+    TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 60, 44, &g) == TN_OK);
+    TN_CHECK(tn_singan_prepare(&p, &trained, 60, 44, &g) == TN_OK && p);
+    tn_set_threads(1);
+    TN_CHECK(tn_singan_prepared_window(&win, p, 23, 9, 31, 35) == TN_OK);
+    tn_set_threads(threads);
+    for (y = 0; y < 35 && win.data && whole.data; y++) same &= !memcmp(win.data + (size_t)y * 31, whole.data + (size_t)(y + 9) * 60 + 23, 31 * sizeof(float));
+    TN_CHECK(same);
+    TN_CHECK(tn_singan_prepared_window(&plain, p, 40, 0, 31, 10) == TN_ERR_INVALID_ARG);
+    TN_CHECK(strstr(tn_last_error(), "outside the 60 x 44 map") != NULL);
+    tn_singan_prepared_free(p);
+    TN_CHECK(tn_singan_prepare(&p, &trained, 8192, 4096, &g) == TN_ERR_INVALID_ARG);
+    TN_CHECK(p == NULL);
+    tn_image_free(&win);
+    tn_image_free(&whole);
+    g.layout = 0;
+    TN_CHECK(tn_singan_sample(&whole, &trained, 7, 3, 20, 20, &g) == TN_OK);
+    TN_CHECK(tn_singan_prepare(&p, &trained, 40, 40, &g) == TN_OK);
+    TN_CHECK(tn_singan_prepared_window(&win, p, 7, 3, 20, 20) == TN_OK);
+    TN_CHECK(whole.data && win.data && !memcmp(whole.data, win.data, 20 * 20 * sizeof(float)));
+    tn_singan_prepared_free(p);
+    tn_image_free(&win);
+    tn_image_free(&whole);
+}
+
 TN_TEST(refine_and_upscale)
 {
     tn_image dem = tn_test_dem(24, 1), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -459,6 +497,7 @@ int main(void)
     TN_RUN(save_load_round_trip);
     TN_RUN(tile_equals_whole_map_and_seeds_differ);
     TN_RUN(layout_from_the_example);
+    TN_RUN(prepared_windows_of_a_laid_out_map);
     TN_RUN(refine_and_upscale);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);

@@ -247,6 +247,22 @@ TN_TEST(singan_tiles_equal_the_whole_map_and_the_sample)
     TN_CHECK(tn_singan_sample(&ref, &m, 0, 0, 120, 90, &go) == TN_OK);
     TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)120 * 90 * sizeof(float)));
     tn_world_free(&w);
+    /* layout=1: the world is one laid-out sample (its layout made at setup), tile by tile */
+    snprintf(spec, sizeof spec, "world 120 90\nseed 9\nheight -5000 10000\nsingan model=%s layout=1\n", path);
+    bits = 0;
+    TN_CHECK(tiles_vs_whole(spec, 40, 1, 2, &bits) == 0.0 && bits);
+    TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_OK);
+    tn_image_free(&whole);
+    tn_image_free(&ref);
+    TN_CHECK(tn_world_rect(&whole, &w, all) == TN_OK);
+    go.layout = 1;
+    TN_CHECK(tn_singan_sample(&ref, &m, 0, 0, 120, 90, &go) == TN_OK);
+    TN_CHECK(whole.data && ref.data && !memcmp(whole.data, ref.data, (size_t)120 * 90 * sizeof(float)));
+    tn_world_free(&w);
+    snprintf(spec, sizeof spec, "world 120 90\nsingan model=%s layout=0.5\n", path);
+    TN_CHECK(refused(spec, "layout=0.5 must be 0 or 1"));
+    snprintf(spec, sizeof spec, "world 8192 4096\nsingan model=%s layout=1\n", path);
+    TN_CHECK(refused(spec, "a laid-out map at most"));
     /* a model of another method is refused when the SPEC is read */
     snprintf(spec, sizeof spec, "world 120 90\nsingan model=%s\n", tn_test_ref("texgan_v1_model.tnw"));
     TN_CHECK(tn_world_parse(&w, spec, NULL) == TN_ERR_FORMAT);

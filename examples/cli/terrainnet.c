@@ -1606,7 +1606,7 @@ static const cli_command singan_train_cmd = {"singan-train", CLI_CMD(singan_trai
     "and progress names the scale being trained. The full training state is saved atomically to the checkpoint every "
     "interval; --resume continues it identically. See docs/singan.md."};
 
-static struct singan_gen_args { const char *model, *in, *out; int w, h, x0, y0; double factor; tn_singan_gen_opts g; } singan_gen_arg;
+static struct singan_gen_args { const char *model, *in, *out; int w, h, x0, y0, mw, mh; double factor; tn_singan_gen_opts g; } singan_gen_arg;
 static const cli_opt singan_sample_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
     {"output", 'o', ARG_STR, REQ, &singan_gen_arg.out, NULL, 0, 0, "OUT", "heightmap to write (the example's units)", NULL},
@@ -1617,7 +1617,10 @@ static const cli_opt singan_sample_opts[] = {
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
     {"layout", 0, ARG_FLAG, 0, &singan_gen_arg.g.layout, NULL, 0, 0, NULL,
      "the example's own arrangement, rearranged by patches (GPNN) and bent by a smooth warp, under SinGAN's finer scales; "
-     "a finite map (origin 0 0)", NULL},
+     "a finite map (origin 0 0, or --map)", NULL},
+    {"map", 0, ARG_WXH, 0, &singan_gen_arg.mw, &singan_gen_arg.mh, 1, 1 << 20, "WxH",
+     "the whole map, of which --origin and --size give a window (a laid-out map is made once, then only the window is generated; "
+     "windows fit together exactly)", "the window"},
     {"layout-scale", 0, ARG_INT, 0, &singan_gen_arg.g.layout_scale, NULL, 1, 64, "K",
      "with --layout: the first scale that runs on the layout (1: the layout replaces the coarsest scale; higher keeps more of the example)", "3"},
     {"layout-warp", 0, ARG_FLOAT, 0, &singan_gen_arg.g.layout_warp, NULL, -1, 4096, "PX",
@@ -1656,7 +1659,12 @@ static int singan_generate(int kind)
         return fail_status(st);
     }
     t0 = tn_time_seconds();
-    if (kind == 0) st = tn_singan_sample(&out, &model, a->x0, a->y0, a->w ? a->w : model.width, a->h ? a->h : model.height, &a->g);
+    if (kind == 0 && a->mw) {
+        tn_singan_prepared *p = NULL;
+        if (!(st = tn_singan_prepare(&p, &model, a->mw, a->mh, &a->g)))
+            st = tn_singan_prepared_window(&out, p, a->x0, a->y0, a->w ? a->w : a->mw - a->x0, a->h ? a->h : a->mh - a->y0);
+        tn_singan_prepared_free(p);
+    } else if (kind == 0) st = tn_singan_sample(&out, &model, a->x0, a->y0, a->w ? a->w : model.width, a->h ? a->h : model.height, &a->g);
     else if (kind == 1) st = tn_singan_refine(&out, &model, &in, &a->g);
     else st = tn_singan_upscale(&out, &model, &in, (float)a->factor, &a->g);
     if (!st) {
