@@ -1996,8 +1996,10 @@ static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, 
     for (p = 0; p < n; p++) img[p] /= cnt[p];
 }
 
-/* *y = a w x h map of blocks of ex (its smaller side) taken at random places, mirrored at
-   ex's border: GPNN's start for an output larger than the example, at the example's scale. */
+/* *y = a w x h map of blocks of ex (its smaller side) taken at random places of ex mirrored
+   about its border (uniform over the mirror period, so every part of ex is drawn as often; a
+   start inside ex only drew its far sides twice): GPNN's start for an output larger than the
+   example, at the example's scale. */
 static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, tn_rng *rng)
 {
     int B = ex->width < ex->height ? ex->width : ex->height, bx, by, x, y0, nbx, nby;
@@ -2008,7 +2010,8 @@ static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, tn
     nby = (h + B - 1) / B;
     for (by = 0; by < nby; by++)
         for (bx = 0; bx < nbx; bx++) {
-            int ox = (int)tn_rng_below(rng, (uint32_t)ex->width), oy = (int)tn_rng_below(rng, (uint32_t)ex->height);
+            int ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
+            int oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
             for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
                 for (x = bx * B; x < w && x < (bx + 1) * B; x++) {
                     int sx = tn__reflect_whole(x - bx * B + ox, ex->width), sy = tn__reflect_whole(y0 - by * B + oy, ex->height);
