@@ -1638,6 +1638,9 @@ typedef struct tn_singan_gen_opts {
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
+    int gate;              /* sample: 1 = each scale's detail is scaled down where the example's own detail is
+                              smaller than the generator's at the same slope of the coarser scale (the
+                              example's plains stay smooth); 0 = 1, < 0 = off */
 } tn_singan_gen_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -21271,6 +21274,8 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->layout_warp == 0) o->layout_warp = 16.0f;
     if (o->layout_warp < 0) o->layout_warp = 0.0f;
     if (o->layout_smooth == 0) o->layout_smooth = 96.0f;
+    if (o->gate == 0) o->gate = 1;
+    if (o->gate < 0) o->gate = 0;
 }
 
 /* ---- sizes and config ---- */
@@ -21450,8 +21455,18 @@ static float tn__sg_noise0(uint64_t key, long gx, long gy)
 
 /* ---- windowed generation ---- */
 
+/* Per scale, the factor on the generator's detail by the slope of the coarser scale upsampled
+   (tn__sg_gate_make): piecewise linear through TN__SG_GATE_BINS (slope, factor) points. */
+#define TN__SG_GATE_BINS 8
+typedef struct tn__sg_gate {
+    float slope[TN_SINGAN_MAX_SCALES][TN__SG_GATE_BINS];
+    float keep[TN_SINGAN_MAX_SCALES][TN__SG_GATE_BINS];
+    int on[TN_SINGAN_MAX_SCALES];
+} tn__sg_gate;
+
 typedef struct tn__sg_gen_run {
     const tn__sg_arch *A;
+    const tn__sg_gate *gate; /* NULL: the detail as generated */
     const tn_params *g;
     tn_ctx *ctx;
     uint64_t seed;
@@ -21568,6 +21583,25 @@ static void tn__sg_add_noise(const tn__sg_gen_run *r, int level, long x0, long y
         for (i = 0; i < w; i++) x[(size_t)j * w + i] += amp * tn__sg_noise(key, x0 + i, y0 + j);
 }
 
+/* The slope at b (central differences; rows `stride` apart). */
+static float tn__sg_slope(const float *b, int stride)
+{
+    float gx = b[1] - b[-1], gy = b[stride] - b[-stride];
+    return 0.5f * sqrtf(gx * gx + gy * gy);
+}
+
+/* The gate's factor at base pixel b of `level`. */
+static float tn__sg_gate_at(const tn__sg_gate *g, int level, const float *b, int stride)
+{
+    const float *sl = g->slope[level], *k = g->keep[level];
+    float v = tn__sg_slope(b, stride);
+    int i;
+    if (v <= sl[0]) return k[0];
+    for (i = 1; i < TN__SG_GATE_BINS; i++)
+        if (v < sl[i]) return k[i - 1] + (k[i] - k[i - 1]) * (v - sl[i - 1]) / (sl[i] - sl[i - 1]);
+    return k[TN__SG_GATE_BINS - 1];
+}
+
 /* Output of `level` on the window (x0, y0, w, h) into out (w * h). */
 static tn_status tn__sg_window(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *out)
 {
@@ -21601,7 +21635,10 @@ static tn_status tn__sg_window(const tn__sg_gen_run *r, int level, long x0, long
         const float *b = base + (size_t)(y + M) * ew + M, *gg = g->data + (size_t)y * w;
         float *o = out + (size_t)y * w;
         int x;
-        for (x = 0; x < w; x++) o[x] = gg[x] + b[x];
+        if (r->gate && r->gate->on[level])
+            for (x = 0; x < w; x++) o[x] = tn__sg_gate_at(r->gate, level, b + x, ew) * gg[x] + b[x];
+        else
+            for (x = 0; x < w; x++) o[x] = gg[x] + b[x];
     }
     TN_FREE(base);
     return TN_OK;
@@ -22638,6 +22675,97 @@ done:
     return st;
 }
 
+/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up: the example's scale s - 1
+   injected as that scale's output, scale s's generator run on it with noise; in 8 bins of equal
+   count by the slope of the upsampled base, the factor is the RMS of the example's own detail
+   (scale s minus the base) over the RMS of the generator's, relative to the median bin's, at
+   most 1: only where the example is smoother than elsewhere, not the generator's overall level. The finest generators,
+   trained for a few hundred iterations, put texture on flat ground where the example has none
+   (docs/singan.md). */
+static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__sg_gate *gt)
+{
+    const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
+    tn_image ex, lc = {0, 0, 0, NULL}, ls = {0, 0, 0, NULL};
+    tn__sg_gen_run r;
+    tn__sg_ranked *rk = NULL;
+    float *base = NULL, *out = NULL;
+    int sc, last = A->trained < A->scales ? A->trained : A->scales;
+    tn_status st = TN_OK;
+    memset(gt, 0, sizeof *gt);
+    if (!t) return TN_OK;
+    ex.width = A->width;
+    ex.height = A->height;
+    ex.channels = 1;
+    ex.data = t->data;
+    memset(&r, 0, sizeof r);
+    r.A = A;
+    r.g = m->weights;
+    r.seed = 0x67617465ULL;
+    r.noise = 1.0f;
+    r.map_is_output = 1;
+    if (!(r.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    for (sc = 1; sc < last && !st; sc++) {
+        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc);
+        int x, y, b, n = 0;
+        float q[TN__SG_GATE_BINS], qs[TN__SG_GATE_BINS], qm;
+        tn_image_free(&lc);
+        tn_image_free(&ls);
+        TN_FREE(base);
+        TN_FREE(out);
+        TN_FREE(rk);
+        if (W < 3 || H < 3) continue;
+        if ((st = tn_image_resize(&lc, &ex, tn__sg_size(A->width, A->factor, A->scales - sc), tn__sg_size(A->height, A->factor, A->scales - sc),
+                                  TN_RESIZE_AREA)) ||
+            (st = W == A->width && H == A->height ? tn_image_copy(&ls, &ex) : tn_image_resize(&ls, &ex, W, H, TN_RESIZE_AREA)))
+            break;
+        base = (float *)tn__alloc((size_t)W * H * sizeof(float));
+        out = (float *)tn__alloc((size_t)W * H * sizeof(float));
+        rk = (tn__sg_ranked *)tn__alloc((size_t)W * H * sizeof(tn__sg_ranked));
+        if (!base || !out || !rk) {
+            st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+            break;
+        }
+        r.map = lc.data;
+        r.mw = lc.width;
+        r.mh = lc.height;
+        r.map_level = sc - 1;
+        if ((st = tn__sg_base(&r, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&r, sc, 0, 0, W, H, out))) break;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                rk[n].v = tn__sg_slope(base + (size_t)y * W + x, W);
+                rk[n++].i = y * W + x;
+            }
+        qsort(rk, (size_t)n, sizeof *rk, tn__sg_cmp_ranked);
+        for (b = 0; b < TN__SG_GATE_BINS; b++) {
+            int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS), i;
+            double se = 0, sg = 0, sv = 0;
+            for (i = i0; i < i1; i++) {
+                int p = rk[i].i;
+                double de = ls.data[p] - base[p], dg = out[p] - base[p];
+                se += de * de;
+                sg += dg * dg;
+                sv += rk[i].v;
+            }
+            gt->slope[sc][b] = i1 > i0 ? (float)(sv / (i1 - i0)) : 0.0f;
+            q[b] = sg > 0 ? (float)sqrt(se / sg) : 1.0f;
+        }
+        memcpy(qs, q, sizeof q); /* relative to the median bin: the generator's overall level is its own */
+        qsort(qs, TN__SG_GATE_BINS, sizeof *qs, tn__cmp_float);
+        qm = 0.5f * (qs[TN__SG_GATE_BINS / 2 - 1] + qs[TN__SG_GATE_BINS / 2]);
+        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm > 0 && q[b] < qm ? q[b] / qm : 1.0f;
+        for (b = 1; b < TN__SG_GATE_BINS; b++) /* increasing, for the interpolation */
+            if (gt->slope[sc][b] <= gt->slope[sc][b - 1]) gt->slope[sc][b] = gt->slope[sc][b - 1] + 1e-9f;
+        gt->on[sc] = n > 0;
+    }
+    tn_ctx_free(r.ctx);
+    tn_image_free(&lc);
+    tn_image_free(&ls);
+    TN_FREE(base);
+    TN_FREE(out);
+    TN_FREE(rk);
+    return st;
+}
+
 /* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
    allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up)
    and bent by a random smooth warp. The coarsest generator, 5 layers on noise, made features
@@ -22692,6 +22820,7 @@ struct tn_singan_prepared {
     int width, height;      /* the map */
     float *map;             /* the layout: the output of scale level + 1's input grid (NULL: none) */
     int mw, mh, level;
+    tn__sg_gate gate;
 };
 
 TN_API void tn_singan_prepared_free(tn_singan_prepared *p)
@@ -22726,6 +22855,7 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         if ((st = tn__sg_layout(model, &p->A, &p->o, K, w, h, &p->map, &p->mw, &p->mh))) goto fail;
         p->level = K - 1;
     }
+    if (p->o.gate && (st = tn__sg_gate_make(model, &p->A, &p->gate))) goto fail;
     *out = p;
     return TN_OK;
 fail:
@@ -22745,6 +22875,7 @@ TN_API tn_status tn_singan_prepared_window(tn_image *out, const tn_singan_prepar
     r.seed = p->o.seed;
     r.noise = p->o.noise;
     r.limit = 1;
+    r.gate = p->o.gate ? &p->gate : NULL;
     if (p->map) {
         r.map = p->map;
         r.mw = p->mw;
@@ -22767,7 +22898,10 @@ TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0,
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
     if (!o.layout) {
+        tn__sg_gate gate;
         r.limit = 1;
+        if (o.gate && (st = tn__sg_gate_make(model, &A, &gate))) return st;
+        r.gate = o.gate ? &gate : NULL;
         return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
     }
     if (x0 || y0)

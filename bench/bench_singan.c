@@ -16,6 +16,8 @@
      - with --layout 1: the same model's samples laid out (tn_singan_gen_opts.layout: GPNN on the
        example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
        GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
+     - --gate -1: SinGAN's samples without the gate (tn_singan_gen_opts.gate: the detail scaled
+       down where the example's is smaller at the same slope; on by default),
      - GPNN (no training): the same lines,
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
@@ -25,7 +27,7 @@
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
-                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX]
+                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but the second tuning set, M = 10, 2 threads) */
@@ -325,6 +327,7 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
 
 static const char *g_argv0, *g_pictures, *g_model_dir;
 static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
+static int g_gate;                          /* tn_singan_gen_opts.gate of every sample (-1: off) */
 static float g_layout_noise, g_layout_warp, g_layout_smooth;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
@@ -394,6 +397,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         }
         if (g_singan > 0) {
             memset(&g, 0, sizeof g);
+            g.gate = g_gate;
             for (i = 0; i < 3; i++) {
                 g.seed = 100 + (uint64_t)i;
                 if (tn_singan_sample(&sg[i], &m, 0, 0, 256, 256, &g)) printf("# %s: sample failed: %s\n", n, tn_last_error());
@@ -412,6 +416,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         g.layout_warp = g_layout_warp;
         g.layout_smooth = g_layout_smooth;
         g.layout_scale = g_layout_scale;
+        g.gate = g_gate;
         t0 = tn_time_seconds();
         for (i = 0; i < 3; i++) {
             g.seed = 100 + (uint64_t)i;
@@ -571,6 +576,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--layout-warp") && v) g_layout_warp = (float)atof(argv[++i]);
         else if (!strcmp(a, "--layout-scale") && v) g_layout_scale = atoi(argv[++i]);
         else if (!strcmp(a, "--layout-smooth") && v) g_layout_smooth = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--gate") && v) g_gate = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-coarsest") && v) g_gopts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-noise") && v) g_gopts.noise = (float)atof(argv[++i]);

@@ -205,6 +205,74 @@ TN_TEST(prepared_windows_of_a_laid_out_map)
     tn_image_free(&whole);
 }
 
+/* The gate: on an example whose left part is flat, the generators' detail is scaled down where
+   the coarser scale is flat as the example's plain is, and nowhere scaled up. Mean |Laplacian|
+   of a 64 px sample, gate on against off, over the tenth of pixels where the ungated sample's
+   coarse slope is least, and over the whole map. */
+TN_TEST(gate_keeps_the_example_plain_smooth)
+{
+    tn_image dem = tn_test_dem(32, 3), on = {0, 0, 0, NULL}, off = {0, 0, 0, NULL}, blur = {0, 0, 0, NULL};
+    tn_singan m;
+    tn_singan_opts o;
+    tn_singan_gen_opts g;
+    float *sl = NULL, cut;
+    double lap_on = 0, lap_off = 0, all_on = 0, all_off = 0;
+    int x, y, n = 0, k;
+    for (y = 0; y < 32; y++)
+        for (x = 0; x < 13; x++) dem.data[y * 32 + x] = 1000.0f;
+    tn_test_tiny_singan_opts(&o, 30);
+    o.coarsest = 16;
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&g, 0, sizeof g);
+    g.seed = 4;
+    TN_CHECK(tn_singan_sample(&on, &m, 0, 0, 64, 64, &g) == TN_OK);
+    g.gate = -1;
+    TN_CHECK(tn_singan_sample(&off, &m, 0, 0, 64, 64, &g) == TN_OK);
+    TN_CHECK(on.data && off.data && tn_image_blur(&blur, &off, 2.0f) == TN_OK);
+    sl = (float *)malloc(62 * 62 * sizeof(float));
+    TN_CHECK(sl != NULL);
+    if (!sl || !on.data || !off.data || !blur.data) goto done;
+    for (y = 1; y < 63; y++)
+        for (x = 1; x < 63; x++) {
+            const float *b = blur.data + y * 64 + x;
+            sl[n++] = fabsf(b[1] - b[-1]) + fabsf(b[64] - b[-64]);
+        }
+    {
+        float *sorted = (float *)malloc((size_t)n * sizeof(float));
+        TN_CHECK(sorted != NULL);
+        if (!sorted) goto done;
+        memcpy(sorted, sl, (size_t)n * sizeof(float));
+        for (k = 0; k < n / 10 + 1; k++) { /* partial selection: the n / 10 smallest */
+            int j, mi = k;
+            float t;
+            for (j = k + 1; j < n; j++)
+                if (sorted[j] < sorted[mi]) mi = j;
+            t = sorted[k], sorted[k] = sorted[mi], sorted[mi] = t;
+        }
+        cut = sorted[n / 10];
+        free(sorted);
+    }
+    for (k = 0, y = 1; y < 63; y++)
+        for (x = 1; x < 63; x++, k++) {
+            const float *a = on.data + y * 64 + x, *b = off.data + y * 64 + x;
+            double la = fabs(a[1] + a[-1] + a[64] + a[-64] - 4 * a[0]), lb = fabs(b[1] + b[-1] + b[64] + b[-64] - 4 * b[0]);
+            all_on += la;
+            all_off += lb;
+            if (sl[k] <= cut) lap_on += la, lap_off += lb;
+        }
+    printf("# gate: mean |Laplacian| on the flattest tenth %.3f (off %.3f), everywhere %.3f (off %.3f)\n", lap_on / (n / 10 + 1), lap_off / (n / 10 + 1),
+           all_on / n, all_off / n);
+    TN_CHECK(lap_on < 0.85 * lap_off);
+    TN_CHECK(all_on <= all_off * 1.02);
+done:
+    free(sl);
+    tn_image_free(&on);
+    tn_image_free(&off);
+    tn_image_free(&blur);
+    tn_image_free(&dem);
+    tn_singan_free(&m);
+}
+
 TN_TEST(refine_and_upscale)
 {
     tn_image dem = tn_test_dem(24, 1), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -498,6 +566,7 @@ int main(void)
     TN_RUN(tile_equals_whole_map_and_seeds_differ);
     TN_RUN(layout_from_the_example);
     TN_RUN(prepared_windows_of_a_laid_out_map);
+    TN_RUN(gate_keeps_the_example_plain_smooth);
     TN_RUN(refine_and_upscale);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);
