@@ -128,7 +128,7 @@ typedef struct tn__world_stage {
     tn_method_input input;                /* a learned generator's: the world's seed and size */
     tn_climate *climate;                  /* season, kpd */
     tn_gnn_prepared *gnn;                 /* gnn: the generation prepared at setup (the gain tested once) */
-    tn_singan_prepared *singan;           /* singan layout=1: the world's layout made at setup */
+    tn_singan_prepared *singan;           /* singan: the world's map prepared at setup (its gate; its layout with layout=1) */
 } tn__world_stage;
 
 typedef struct tn__world_method {
@@ -444,8 +444,9 @@ static tn_status tn__world_texgan_run(const tn__world_stage *s, const tn_world *
 
 /* SinGAN samples are exact windows of one infinite terrain per seed (tn_singan_sample), already
    in the model's metres; the world's height range clips them. With layout=1 the world is one
-   laid-out map (the example's arrangement, rearranged and bent), its layout made once here for
-   the whole world and its tiles windows of it (tn_singan_prepare). */
+   laid-out map (the example's arrangement, rearranged and bent). What every tile shares (the
+   gate, and with layout=1 the layout of the whole world) is made once here (tn_singan_prepare);
+   the tiles are windows of it. */
 static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, const char *base_dir)
 {
     tn_singan_gen_opts go;
@@ -453,17 +454,18 @@ static tn_status tn__world_singan_setup(tn__world_stage *s, const tn_world *w, c
     tn_status st = tn__world_model(s, w, base_dir, "singan");
     if (st || (st = tn__world_num(s, "layout", 0, 0, 1, &layout))) return st;
     if (layout != 0 && layout != 1) return tn__fail(TN_ERR_INVALID_ARG, "world: line %d: singan layout=%g must be 0 or 1", s->line, layout);
-    if (layout == 0) return TN_OK;
     memset(&go, 0, sizeof go);
     go.seed = w->seed;
-    go.layout = 1;
+    go.layout = (int)layout;
     return tn_singan_prepare(&s->singan, (const tn_singan *)s->model, w->width, w->height, &go);
 }
 
 static tn_status tn__world_singan_run(const tn__world_stage *s, const tn_world *w, tn_rect r, const tn_image *in, tn_rect in_r,
                                       tn_image *out)
 {
-    if (!s->singan) return tn__world_learned_run(s, w, r, in, in_r, out);
+    (void)w;
+    (void)in;
+    (void)in_r;
     return tn_singan_prepared_window(out, s->singan, r.x, r.y, r.w, r.h);
 }
 
