@@ -1638,9 +1638,10 @@ typedef struct tn_singan_gen_opts {
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
-    int gate;              /* sample: 1 = each scale's detail is scaled down where the example's own detail is
-                              smaller than the generator's at the same slope of the coarser scale (the
-                              example's plains stay smooth); 0 = 1, < 0 = off */
+    int gate;              /* sample: 1 = each scale's detail is scaled by the example's own detail over the
+                              generator's at the same slope of the coarser scale, relative to the median
+                              slope's, 0..1.5 (the example's plains stay smooth, its crests sharp);
+                              0 = 1, < 0 = off */
 } tn_singan_gen_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -21458,6 +21459,7 @@ static float tn__sg_noise0(uint64_t key, long gx, long gy)
 /* Per scale, the factor on the generator's detail by the slope of the coarser scale upsampled
    (tn__sg_gate_make): piecewise linear through TN__SG_GATE_BINS (slope, factor) points. */
 #define TN__SG_GATE_BINS 8
+#define TN__SG_GATE_MAX 1.5f
 typedef struct tn__sg_gate {
     float slope[TN_SINGAN_MAX_SCALES][TN__SG_GATE_BINS];
     float keep[TN_SINGAN_MAX_SCALES][TN__SG_GATE_BINS];
@@ -22679,7 +22681,8 @@ done:
    injected as that scale's output, scale s's generator run on it with noise; in 8 bins of equal
    count by the slope of the upsampled base, the factor is the RMS of the example's own detail
    (scale s minus the base) over the RMS of the generator's, relative to the median bin's, at
-   most 1: only where the example is smoother than elsewhere, not the generator's overall level. The finest generators,
+   most TN__SG_GATE_MAX: the detail follows the example's from plains to crests, the generator's
+   overall level is its own. The finest generators,
    trained for a few hundred iterations, put texture on flat ground where the example has none
    (docs/singan.md). */
 static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__sg_gate *gt)
@@ -22752,7 +22755,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
         memcpy(qs, q, sizeof q); /* relative to the median bin: the generator's overall level is its own */
         qsort(qs, TN__SG_GATE_BINS, sizeof *qs, tn__cmp_float);
         qm = 0.5f * (qs[TN__SG_GATE_BINS / 2 - 1] + qs[TN__SG_GATE_BINS / 2]);
-        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm > 0 && q[b] < qm ? q[b] / qm : 1.0f;
+        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm <= 0 ? 1.0f : q[b] < TN__SG_GATE_MAX * qm ? q[b] / qm : TN__SG_GATE_MAX;
         for (b = 1; b < TN__SG_GATE_BINS; b++) /* increasing, for the interpolation */
             if (gt->slope[sc][b] <= gt->slope[sc][b - 1]) gt->slope[sc][b] = gt->slope[sc][b - 1] + 1e-9f;
         gt->on[sc] = n > 0;

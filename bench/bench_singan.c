@@ -17,7 +17,7 @@
        example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
        GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
      - --gate -1: SinGAN's samples without the gate (tn_singan_gen_opts.gate: the detail scaled
-       down where the example's is smaller at the same slope; on by default),
+       by the example's own at the same slope, relative to the median slope's; on by default),
      - GPNN (no training): the same lines,
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
