@@ -34,6 +34,20 @@
      in map view, < 1: a rounded top); example_crest_top ... lines: the same on the example's main
      lines (no clearance: its network is dense; its lines are extracted, not drawn, so within a
      px of the crest: read its top as a floor, its spike as the target);
+   - floor_profile (drawn valleys against the example's main valleys, tn_extract's highest
+     Strahler order): at every px of the drawn valleys (12 px from their ends and from every other
+     stroke; the example's main valleys without clearance; both 16 px from the map's edge), the
+     depth below the banks d px across, r(d) = the mean height d px either side along the normal
+     less the height on the line; printed as the mean r at 1, 2, 4, 8 px over the mean r at 16 px
+     (a V rises on: the Alps example 0.04 0.12 0.27 0.52; a trough is full by 8 px: 0.94);
+     floor_profile_distance: the mean over 1, 2, 4, 8 px of |drawn - example| of those ratios
+     (_real: against the mean ratios of the real crops' own main valleys, a larger sample);
+     floor_width_cv, floor_depth_cv: std / mean over the points of the half-depth width (the
+     first d with r(d) >= r(16) / 2) and of the depth r(16); floor_junctions: tributaries per 100
+     px of the lines: tn_extract run on the output itself (the example's threshold, 16 cells),
+     its valleys with one end within 3 px of a drawn valley and the other more than 9 px from all
+     of them; example_floor_* and real_floor_* lines: the same on the example and on the real
+     crops (the mean of their normalised figures);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
