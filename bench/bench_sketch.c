@@ -34,6 +34,20 @@
      in map view, < 1: a rounded top); example_crest_top ... lines: the same on the example's main
      lines (no clearance: its network is dense; its lines are extracted, not drawn, so within a
      px of the crest: read its top as a floor, its spike as the target);
+   - floor_profile (drawn valleys against the example's main valleys, tn_extract's highest
+     Strahler order): at every px of the drawn valleys (12 px from their ends and from every other
+     stroke; the example's main valleys without clearance; both 16 px from the map's edge), the
+     depth below the banks d px across, r(d) = the mean height d px either side along the normal
+     less the height on the line; printed as the mean r at 1, 2, 4, 8 px over the mean r at 16 px
+     (a V rises on: the Alps example 0.04 0.12 0.27 0.52; a trough is full by 8 px: 0.94);
+     floor_profile_distance: the mean over 1, 2, 4, 8 px of |drawn - example| of those ratios
+     (_real: against the mean ratios of the real crops' own main valleys, a larger sample);
+     floor_width_cv, floor_depth_cv: std / mean over the points of the half-depth width (the
+     first d with r(d) >= r(16) / 2) and of the depth r(16); floor_junctions: tributaries per 100
+     px of the lines: tn_extract run on the output itself (the example's threshold, 16 cells),
+     its valleys with one end within 3 px of a drawn valley and the other more than 9 px from all
+     of them; example_floor_* and real_floor_* lines: the same on the example and on the real
+     crops (the mean of their normalised figures);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
@@ -263,6 +277,131 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
     return r;
 }
 
+#define DEEP 16   /* px: a valley's cross profile is read out to its banks this far across */
+#define JOIN 3    /* px: an extracted valley ends on a line within this */
+
+typedef struct valley_shape {
+    double rise[5];          /* mean depth below the banks 1, 2, 4, 8, 16 px across, m */
+    double width_cv, depth_cv; /* along the lines: std / mean of the half-depth width and of the depth 16 px across */
+    double junctions;        /* tributaries ending on the lines, per 100 px of their length */
+    int n;                   /* profiles read; 0: none */
+} valley_shape;
+
+static const int valley_at[5] = {1, 2, 4, 8, 16};
+
+/* The valley figures of set's valleys (drawn valleys; with mains, the example's main valleys, the
+   highest Strahler order, no clearance): at each px of their length (CLEAR px from their ends and
+   from every other line of the set when drawn), the depth below the banks d px across, r(d) = the
+   mean of the heights d px either side along the normal less the height on the line, for d = 0.5
+   .. DEEP px every 0.5 px; rise[] the means of r at 1, 2, 4, 8, 16 px; width: the first d at which
+   r reaches half of r(DEEP) (points with r(DEEP) > 0); depth: r(DEEP). Junctions: the valleys of
+   tn_extract on img itself (the example's threshold in cells, thr) with one end within JOIN px of
+   a line of the set and the other farther than 3 JOIN px from all of them (a tributary, not a piece
+   of the line), per 100 px of the lines' length. */
+static valley_shape valley_profiles(const tn_image *img, const tn_contour_set *set, int mains, int thr)
+{
+    enum { NS = 2 * DEEP + 1 };
+    tn_contour_set d;
+    valley_shape r;
+    double s1w = 0, s2w = 0, s1d = 0, s2d = 0, length = 0;
+    int c, j, k, m, o, top = -1, nw = 0;
+    memset(&r, 0, sizeof r);
+    for (k = 0; k < 5; k++) r.rise[k] = NAN;
+    r.width_cv = r.depth_cv = r.junctions = NAN;
+    if (tn_sketch_densify(&d, set)) return r;
+    for (c = 0; c < d.count; c++)
+        if (d.items[c].type == TN_VALLEY && d.items[c].order > top) top = d.items[c].order;
+    for (k = 0; k < 5; k++) r.rise[k] = 0;
+    for (c = 0; c < d.count; c++) {
+        const tn_contour *l = &d.items[c];
+        const float *pt = l->points;
+        if (l->type != TN_VALLEY || (mains && l->order != top)) continue;
+        for (j = 1; j < l->npoints; j++) length += hypot(pt[3 * j] - pt[3 * j - 3], pt[3 * j + 1] - pt[3 * j - 2]);
+        for (j = 0; j < l->npoints; j++) {
+            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
+            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty);
+            double h0, rr[NS], w = NAN;
+            if (!(len > 0) || x < DEEP || y < DEEP || x > img->width - 1 - DEEP || y > img->height - 1 - DEEP) continue;
+            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
+            for (k = 0; k < d.count && !mains && !near; k++)
+                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
+                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
+            if (near) continue;
+            h0 = height_at(img, x, y);
+            rr[0] = 0;
+            for (o = 1; o < NS; o++) {
+                double t = 0.5 * o;
+                rr[o] = 0.5 * (height_at(img, x - ty / len * t, y + tx / len * t) + height_at(img, x + ty / len * t, y - tx / len * t)) - h0;
+            }
+            for (k = 0; k < 5; k++) r.rise[k] += rr[2 * valley_at[k]];
+            s1d += rr[NS - 1], s2d += rr[NS - 1] * rr[NS - 1];
+            for (o = 1; o < NS && rr[NS - 1] > 0 && w != w; o++)
+                if (rr[o] >= 0.5 * rr[NS - 1]) w = 0.5 * (o - 1) + 0.5 * (0.5 * rr[NS - 1] - rr[o - 1]) / (rr[o] - rr[o - 1]);
+            if (w == w) s1w += w, s2w += w * w, nw++;
+            r.n++;
+        }
+    }
+    if (r.n) {
+        for (k = 0; k < 5; k++) r.rise[k] /= r.n;
+        s1d /= r.n, s2d /= r.n;
+        r.depth_cv = s1d != 0 ? sqrt(fmax(0, s2d - s1d * s1d)) / fabs(s1d) : NAN;
+    } else
+        for (k = 0; k < 5; k++) r.rise[k] = NAN;
+    if (nw > 1) s1w /= nw, s2w /= nw, r.width_cv = sqrt(fmax(0, s2w - s1w * s1w)) / s1w;
+    { /* tributaries from the terrain's own network */
+        tn_extract_opts eo;
+        tn_extraction e;
+        int nj = 0;
+        memset(&eo, 0, sizeof eo);
+        eo.threshold = thr;
+        eo.which = TN_EXTRACT_VALLEYS;
+        if (length > 0 && !tn_extract(&e, img, &eo)) {
+            for (c = 0; c < e.contours.count; c++) {
+                const tn_contour *t = &e.contours.items[c];
+                double dd[2] = {HUGE_VAL, HUGE_VAL};
+                int end;
+                if (t->type != TN_VALLEY || t->npoints < 2) continue;
+                for (end = 0; end < 2; end++) {
+                    const float *q = t->points + (end ? 3 * (t->npoints - 1) : 0);
+                    for (k = 0; k < d.count; k++)
+                        for (m = 0; d.items[k].type == TN_VALLEY && (!mains || d.items[k].order == top) && m < d.items[k].npoints; m++)
+                            dd[end] = fmin(dd[end], hypot(q[0] - d.items[k].points[3 * m], q[1] - d.items[k].points[3 * m + 1]));
+                }
+                nj += (dd[0] <= JOIN && dd[1] > 3 * JOIN) || (dd[1] <= JOIN && dd[0] > 3 * JOIN);
+            }
+            tn_extraction_free(&e);
+            r.junctions = 100.0 * nj / length;
+        }
+    }
+    tn_contour_set_free(&d);
+    return r;
+}
+
+/* The profile distance: the mean over 1, 2, 4, 8 px of |a's rise over its rise at DEEP px - b's|. */
+static double valley_profile_distance(const valley_shape *a, const valley_shape *b)
+{
+    double s = 0;
+    int k;
+    for (k = 0; k < 4; k++) s += fabs(a->rise[k] / a->rise[4] - b->rise[k] / b->rise[4]);
+    return s / 4;
+}
+
+/* who's valley figures (against ex's when ex is not NULL); crops: v is a mean of that many crops' normalised figures. */
+static void valley_print(const char *who, const valley_shape *v, const valley_shape *ex, int crops)
+{
+    printf("%s_floor_profile: %.2f %.2f %.2f %.2f 1 (1, 2, 4, 8, 16 px; ", who, v->rise[0] / v->rise[4], v->rise[1] / v->rise[4], v->rise[2] / v->rise[4],
+           v->rise[3] / v->rise[4]);
+    if (crops) printf("the mean of %d crops)\n", crops);
+    else printf("of %.1f m at 16 px; %d points)\n", v->rise[4], v->n);
+    if (ex) printf("%s_floor_profile_distance: %.3f\n", who, valley_profile_distance(v, ex));
+    printf("%s_floor_width_cv: %.2f%s", who, v->width_cv, ex ? "" : "\n");
+    if (ex) printf(" (%.2f x example)\n", v->width_cv / ex->width_cv);
+    printf("%s_floor_depth_cv: %.2f%s", who, v->depth_cv, ex ? "" : "\n");
+    if (ex) printf(" (%.2f x example)\n", v->depth_cv / ex->depth_cv);
+    printf("%s_floor_junctions: %.2f per 100 px%s", who, v->junctions, ex ? "" : "\n");
+    if (ex) printf(" (%.2f x example)\n", v->junctions / ex->junctions);
+}
+
 /* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
 static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N, const tn_image *ex,
                     const double *real)
@@ -321,7 +460,8 @@ int main(int argc, char **argv)
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
-    int threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
+    valley_shape ex_valley, real_valley;
+    int ex_thr, threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
     if (argc < 3) {
         fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [big=N]\n");
         return 2;
@@ -336,6 +476,8 @@ int main(int argc, char **argv)
         else threads = atoi(argv[a]);
     }
     tn_set_threads(threads);
+    ex_thr = tn_extract_default_threshold(128, 128);
+    memset(&real_valley, 0, sizeof real_valley);
     if (!height_mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &ex) ||
         !locate(&full, &ex, &ex_x, &ex_y)) {
         fprintf(stderr, "bench_sketch: %s: data not found under %s\n", region, data_dir());
@@ -367,6 +509,22 @@ int main(int argc, char **argv)
                 double dist[3];
                 if (tn_image_crop(&c, &full, cx[best], cy[best], 256, 256)) continue;
                 distances(&ex, &c, dist);
+                { /* the crop's own main valleys, a larger sample of the DEM's valleys than the example's 128 px */
+                    tn_extract_opts eo;
+                    tn_extraction e;
+                    memset(&eo, 0, sizeof eo);
+                    eo.threshold = ex_thr;
+                    if (!tn_extract(&e, &c, &eo)) {
+                        valley_shape v = valley_profiles(&c, &e.contours, 1, ex_thr);
+                        int q;
+                        if (v.n) {
+                            for (q = 0; q < 5; q++) real_valley.rise[q] += v.rise[q] / v.rise[4];
+                            real_valley.width_cv += v.width_cv, real_valley.depth_cv += v.depth_cv, real_valley.junctions += v.junctions;
+                            real_valley.n++;
+                        }
+                        tn_extraction_free(&e);
+                    }
+                }
                 printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %%\n", k, cx[best], cy[best], dist[0], dist[1], dist[2],
                        100 * basins(&c, model.lo, model.hi));
                 real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
@@ -374,18 +532,26 @@ int main(int argc, char **argv)
             }
         }
         for (k = 0; k < 3; k++) real[k] /= nreal;
+        if (real_valley.n) { /* the mean over the crops of their normalised profiles and figures */
+            for (k = 0; k < 5; k++) real_valley.rise[k] /= real_valley.n;
+            real_valley.width_cv /= real_valley.n, real_valley.depth_cv /= real_valley.n, real_valley.junctions /= real_valley.n;
+            valley_print("real", &real_valley, NULL, real_valley.n);
+        }
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
     }
     { /* the example's own along-line relief and cross profiles on its main ridges and valleys (tn_extract) */
         tn_extraction e;
         cross_shape cs[2];
         cs[0].n = cs[1].n = 0;
+        ex_valley.n = 0;
         if (!tn_extract(&e, &ex, NULL)) {
             for (k = 0; k < 4; k++) ex_relief[k] = line_relief(&ex, &e.contours, k & 1 ? TN_VALLEY : TN_RIDGE, 1, k < 2 ? 0 : FLANK);
             for (k = 0; k < 2; k++) cs[k] = cross_profiles(&ex, &e.contours, k ? TN_VALLEY : TN_RIDGE, 1);
+            ex_valley = valley_profiles(&ex, &e.contours, 1, ex_thr);
             tn_extraction_free(&e);
         }
         for (k = 0; k < 4; k++) printf("example_%s_relief: %.2f m (main %s)\n", relief_name[k], ex_relief[k], k & 1 ? "valleys" : "ridges");
+        if (ex_valley.n) valley_print("example", &ex_valley, NULL, 0);
         for (k = 0; k < 2; k++)
             if (cs[k].n)
                 printf("example_%s_top: %.1f %%; %s_seam: %.1f %%; %s_spike: %.2f (main %s, %d points)\n", shape_name[k], 100 * cs[k].top, shape_name[k],
@@ -462,6 +628,13 @@ int main(int argc, char **argv)
                 if (cs.n)
                     printf("%s_%s_%s_top: %.1f %%\n%s_%s_%s_seam: %.1f %%\n%s_%s_%s_spike: %.2f\n", all[d], way[w], shape_name[k], 100 * cs.top, all[d], way[w],
                            shape_name[k], 100 * cs.seam, all[d], way[w], shape_name[k], cs.spike);
+            }
+            {
+                valley_shape vs = valley_profiles(&out[w], &asked, 0, ex_thr);
+                char who[64];
+                snprintf(who, sizeof who, "%s_%s", all[d], way[w]);
+                if (vs.n) valley_print(who, &vs, ex_valley.n ? &ex_valley : NULL, 0);
+                if (vs.n && real_valley.n) printf("%s_floor_profile_distance_real: %.3f\n", who, valley_profile_distance(&vs, &real_valley));
             }
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             else { /* the membrane alone, at 256 and 1024 px (its blocks of 128 + 64 px) */

@@ -2448,8 +2448,10 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
     }
 }
 
-static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, int width, int height,
+static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
                               const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, uint8_t *mask, float *dist,
+                                           int *near); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
                                            float *field); /* >>gnn_grow */
@@ -3192,7 +3194,10 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 memset(&rnd, 0, sizeof rnd);
                 st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, width, height, &go, &rnd, &G->grown, &relief))) {
+            tn_image dem = {0, 0, 0, NULL};
+            const tn_tensor *de = tn_params_find(model->weights, "detail.example");
+            if (de) dem.width = G->A.width, dem.height = G->A.height, dem.channels = 1, dem.data = de->data;
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, de ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;

@@ -1685,6 +1685,57 @@ TN_TEST(drawn_ridge_is_a_crest)
     tn_image_free(&dem);
 }
 
+TN_TEST(drawn_valley_widens_downstream)
+{
+    /* a drawn valley is a valley of the example's, not a trough of one width: its ground rises as
+       the example's does from its main valley, over a distance that grows with the drawn valley
+       upstream (narrow at its head, broad at its mouth). An example whose valleys rise 10 m per
+       px from the main one (order 3); a valley drawn down the map: the added lines 10-20 px from
+       it rise above it more near its head than near its mouth */
+    float pts[15][6], up[6] = {128, 8, 1000, 128, 248, 500};
+    tn_contour items[15], drawn;
+    tn_contour_set ex, user, out;
+    double rise[2] = {0, 0}, cnt[2] = {0, 0};
+    int c, j, k = 0, dy;
+    memset(items, 0, sizeof items);
+    for (dy = -56; dy <= 56; dy += 8) { /* valleys at 0, +-16, +-32, +-48 px from y = 64; ridges between */
+        int valley = dy % 16 == 0;
+        float h = 100.0f + 10.0f * (float)abs(dy) + (valley ? 0.0f : 100.0f);
+        pts[k][0] = 0, pts[k][1] = (float)(64 + dy), pts[k][2] = h;
+        pts[k][3] = 127, pts[k][4] = (float)(64 + dy), pts[k][5] = h;
+        items[k].type = valley ? TN_VALLEY : TN_RIDGE;
+        items[k].order = dy == 0 ? 3 : 1;
+        items[k].points = pts[k];
+        items[k].npoints = 2;
+        k++;
+    }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128;
+    ex.items = items;
+    ex.count = k;
+    memset(&drawn, 0, sizeof drawn);
+    drawn.type = TN_VALLEY;
+    drawn.points = up;
+    drawn.npoints = 2;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 256;
+    user.items = &drawn;
+    user.count = 1;
+    TN_CHECK(tn_gnn_grow(&out, &user, &ex, 256, 256, NULL, NULL) == TN_OK);
+    for (c = 1; c < out.count; c++)
+        for (j = 0; j < out.items[c].npoints; j++) {
+            const float *q = out.items[c].points + 3 * j;
+            float d = fabsf(q[0] - 128);
+            int part = q[1] < 90 ? 0 : q[1] > 170 ? 1 : -1;
+            if (part < 0 || d < 10 || d > 20) continue;
+            rise[part] += q[2] - (1000 + (500 - 1000) * (q[1] - 8) / 240), cnt[part]++;
+        }
+    for (k = 0; k < 2; k++) rise[k] = cnt[k] > 0 ? rise[k] / cnt[k] : 0;
+    printf("  added lines 10-20 px from a drawn valley: %.1f m above it near its head, %.1f m near its mouth\n", rise[0], rise[1]);
+    TN_CHECK(cnt[0] > 0 && cnt[1] > 0 && rise[1] > 0 && rise[0] > 1.4 * rise[1]);
+    tn_contour_set_free(&out);
+}
+
 static void stroke_fit(const tn_contour_set *sk, const tn_image *t, double *err, double *follow)
 {
     tn_image r = {0, 0, 0, NULL};
@@ -1984,6 +2035,7 @@ int main(void)
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
+    TN_RUN(drawn_valley_widens_downstream);
     TN_RUN(map_scale_level);
     return tn_test_summary("test_gnn");
 }
