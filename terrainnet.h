@@ -22769,9 +22769,40 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
     return st;
 }
 
+/* Gives map the height distribution of ref, rank for rank (ref's quantile at each pixel's rank,
+   linear between ref's sorted values): GPNN's averaging of overlapping patches lowers the
+   example's summits and raises its floors. */
+static tn_status tn__sg_match_heights(tn_image *map, const tn_image *ref)
+{
+    size_t n = (size_t)map->width * map->height, m = (size_t)ref->width * ref->height, i;
+    tn__sg_ranked *rk = (tn__sg_ranked *)tn__alloc(n * sizeof *rk);
+    float *q = (float *)tn__alloc(m * sizeof *q);
+    if (!rk || !q) {
+        TN_FREE(rk);
+        TN_FREE(q);
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    }
+    memcpy(q, ref->data, m * sizeof *q);
+    qsort(q, m, sizeof *q, tn__cmp_float);
+    for (i = 0; i < n; i++) {
+        rk[i].v = map->data[i];
+        rk[i].i = (int)i;
+    }
+    qsort(rk, n, sizeof *rk, tn__sg_cmp_ranked);
+    for (i = 0; i < n; i++) {
+        double t = n > 1 ? (double)i / (double)(n - 1) * (double)(m - 1) : 0;
+        size_t j = (size_t)t;
+        float f = (float)(t - (double)j);
+        map->data[rk[i].i] = j + 1 < m ? q[j] + f * (q[j + 1] - q[j]) : q[m - 1];
+    }
+    TN_FREE(rk);
+    TN_FREE(q);
+    return TN_OK;
+}
+
 /* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
-   allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up)
-   and bent by a random smooth warp. The coarsest generator, 5 layers on noise, made features
+   allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up),
+   given the example's height distribution at that scale and bent by a random smooth warp. The coarsest generator, 5 layers on noise, made features
    without the example's arrangement (no cone, no massif, no main valleys); the example's own
    scale rearranged by patches keeps them, the warp and SinGAN's finer scales with their noise on
    top keep samples from being copies (docs/singan.md). */
@@ -22805,6 +22836,7 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     go.coarsest = cw < ch ? cw : ch;
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
     st = tn_gpnn_sample(&lay, &exl, *mw, *mh, &go);
+    if (!st) st = tn__sg_match_heights(&lay, &exl);
     tn_image_free(&exl);
     if (st) return st;
     px = (float)*mw / (float)w; /* the layout's px per sample px */

@@ -160,6 +160,17 @@ TN_TEST(layout_from_the_example)
         TN_CHECK(s_bent < s_layout - 0.1);
         tn_image_free(&bent);
     }
+    { /* a map 3x the example's side: the layout keeps the example's heights (GPNN's averaging alone
+         lowers its summits and raises its floors) */
+        tn_image big = {0, 0, 0, NULL};
+        float blo, bhi;
+        g.layout_warp = -1;
+        TN_CHECK(tn_singan_sample(&big, &trained, 0, 0, 72, 72, &g) == TN_OK);
+        tn_image_range(&blo, &bhi, &big);
+        printf("# layout 3x the example: heights %.0f..%.0f (example %.0f..%.0f)\n", blo, bhi, elo, ehi);
+        TN_CHECK(blo < elo + 0.03f * (ehi - elo) && bhi > ehi - 0.03f * (ehi - elo)); /* without the matching: floor 1046 of 1000..2000 */
+        tn_image_free(&big);
+    }
     tn_image_free(&whole);
     tn_image_free(&tiled);
     tn_image_free(&other);
