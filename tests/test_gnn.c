@@ -1287,6 +1287,31 @@ TN_TEST(grown_sketch_drains)
     tn_image_free(&full);
 }
 
+/* A 128 px example of 15 horizontal lines 8 px apart around y = 64: lines of kind `main` at 0,
+   +-16, +-32, +-48 px (order 3 at 0, else 1), the other kind between; heights h0 + slope |dy|,
+   the other kind's 10 slope more (lower between ridges, higher between valleys). pts holds
+   15 x 6 floats. */
+static void tn_test_stripes(tn_contour_set *ex, tn_contour *items, float (*pts)[6], int main, float h0, float slope)
+{
+    int k = 0, dy;
+    memset(items, 0, 15 * sizeof *items);
+    for (dy = -56; dy <= 56; dy += 8) {
+        int on = dy % 16 == 0;
+        float h = h0 + slope * (float)abs(dy) + (on ? 0.0f : 10.0f * slope);
+        pts[k][0] = 0, pts[k][1] = (float)(64 + dy), pts[k][2] = h;
+        pts[k][3] = 127, pts[k][4] = (float)(64 + dy), pts[k][5] = h;
+        items[k].type = on ? main : (main == TN_RIDGE ? TN_VALLEY : TN_RIDGE);
+        items[k].order = dy == 0 ? 3 : 1;
+        items[k].points = pts[k];
+        items[k].npoints = 2;
+        k++;
+    }
+    memset(ex, 0, sizeof *ex);
+    ex->width = ex->height = 128;
+    ex->items = items;
+    ex->count = k;
+}
+
 TN_TEST(grow_fall_follows_the_example)
 {
     /* the ground falls from a drawn ridge as the example's ridges do from its main ridge: an
@@ -1299,23 +1324,8 @@ TN_TEST(grow_fall_follows_the_example)
     tn_image er = {0, 0, 0, NULL};
     uint8_t mask[128 * 128];
     float dist[128 * 128];
-    int near[128 * 128], i, k = 0, dy;
-    memset(items, 0, sizeof items);
-    for (dy = -56; dy <= 56; dy += 8) { /* ridges at 0, +-16, +-32, +-48 px from y = 64; valleys between */
-        int ridge = dy % 16 == 0;
-        float h = 1000.0f - 10.0f * (float)abs(dy) - (ridge ? 0.0f : 100.0f);
-        pts[k][0] = 0, pts[k][1] = (float)(64 + dy), pts[k][2] = h;
-        pts[k][3] = 127, pts[k][4] = (float)(64 + dy), pts[k][5] = h;
-        items[k].type = ridge ? TN_RIDGE : TN_VALLEY;
-        items[k].order = dy == 0 ? 3 : 1;
-        items[k].points = pts[k];
-        items[k].npoints = 2;
-        k++;
-    }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128;
-    ex.items = items;
-    ex.count = k;
+    int near[128 * 128], i;
+    tn_test_stripes(&ex, items, pts, TN_RIDGE, 1000.0f, -10.0f);
     TN_CHECK(tn_sketch_rasterise(&er, &ex, 128, 128) == TN_OK);
     TN_CHECK(tn__gnn_grow_profile(&ex, &er, TN_RIDGE, prof, mask, dist, near) == TN_OK);
     TN_CHECK(tn__gnn_grow_profile(&ex, &er, TN_VALLEY, pv, mask, dist, near) == TN_OK);
@@ -1323,7 +1333,7 @@ TN_TEST(grow_fall_follows_the_example)
            (double)prof[22], (double)prof[40], (double)pv[TN__GNN_PROFILE]);
     TN_CHECK(prof[0] == 0 && fabsf(prof[22] - 160) < 1 && fabsf(prof[40] - 320) < 1);
     for (i = 1; i <= TN__GNN_PROFILE; i++) TN_CHECK(prof[i] >= prof[i - 1] && pv[i] < 1);
-    for (i = 0; i < k; i++) items[i].type = TN_RIDGE; /* no valleys now */
+    for (i = 0; i < ex.count; i++) items[i].type = TN_RIDGE; /* no valleys now */
     tn_image_free(&er);
     TN_CHECK(tn_sketch_rasterise(&er, &ex, 128, 128) == TN_OK);
     for (i = 0; i <= TN__GNN_PROFILE; i++) pv[i] = -1;
@@ -1696,23 +1706,8 @@ TN_TEST(drawn_valley_widens_downstream)
     tn_contour items[15], drawn;
     tn_contour_set ex, user, out;
     double rise[2] = {0, 0}, cnt[2] = {0, 0};
-    int c, j, k = 0, dy;
-    memset(items, 0, sizeof items);
-    for (dy = -56; dy <= 56; dy += 8) { /* valleys at 0, +-16, +-32, +-48 px from y = 64; ridges between */
-        int valley = dy % 16 == 0;
-        float h = 100.0f + 10.0f * (float)abs(dy) + (valley ? 0.0f : 100.0f);
-        pts[k][0] = 0, pts[k][1] = (float)(64 + dy), pts[k][2] = h;
-        pts[k][3] = 127, pts[k][4] = (float)(64 + dy), pts[k][5] = h;
-        items[k].type = valley ? TN_VALLEY : TN_RIDGE;
-        items[k].order = dy == 0 ? 3 : 1;
-        items[k].points = pts[k];
-        items[k].npoints = 2;
-        k++;
-    }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128;
-    ex.items = items;
-    ex.count = k;
+    int c, j, k = 0;
+    tn_test_stripes(&ex, items, pts, TN_VALLEY, 100.0f, 10.0f);
     memset(&drawn, 0, sizeof drawn);
     drawn.type = TN_VALLEY;
     drawn.points = up;
