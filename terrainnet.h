@@ -22634,10 +22634,11 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     tn_singan_gen_defaults(o);
     if ((st = tn__sg_arch_of(model, A))) return st;
     if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
-        o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096))
+        o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
+        o->gate > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, layout noise %g <= 100, "
-                        "layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px)",
-                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth);
+                        "layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, gate %d 0 or 1)",
+                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth, o->gate);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
@@ -22677,14 +22678,45 @@ done:
     return st;
 }
 
-/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up: the example's scale s - 1
-   injected as that scale's output, scale s's generator run on it with noise; in 8 bins of equal
-   count by the slope of the upsampled base, the factor is the RMS of the example's own detail
-   (scale s minus the base) over the RMS of the generator's, relative to the median bin's, at
-   most TN__SG_GATE_MAX: the detail follows the example's from plains to crests, the generator's
-   overall level is its own. The finest generators,
-   trained for a few hundred iterations, put texture on flat ground where the example has none
-   (docs/singan.md). */
+/* Scale sc's gate from the example's detail (ls - base) and the generator's (out - base) on the
+   example's own base (W x H): in TN__SG_GATE_BINS bins of equal count by the base's slope, the
+   ratio of their RMS, relative to the median bin's, at most TN__SG_GATE_MAX. rk: W x H scratch. */
+static void tn__sg_gate_scale(tn__sg_gate *gt, int sc, const float *ls, const float *base, const float *out, int W, int H, tn__sg_ranked *rk)
+{
+    float q[TN__SG_GATE_BINS], qs[TN__SG_GATE_BINS], qm;
+    int x, y, b, n = 0;
+    for (y = 1; y + 1 < H; y++)
+        for (x = 1; x + 1 < W; x++) {
+            rk[n].v = tn__sg_slope(base + (size_t)y * W + x, W);
+            rk[n++].i = y * W + x;
+        }
+    qsort(rk, (size_t)n, sizeof *rk, tn__sg_cmp_ranked);
+    for (b = 0; b < TN__SG_GATE_BINS; b++) {
+        int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS), i;
+        double se = 0, sg = 0, sv = 0;
+        for (i = i0; i < i1; i++) {
+            int p = rk[i].i;
+            double de = ls[p] - base[p], dg = out[p] - base[p];
+            se += de * de;
+            sg += dg * dg;
+            sv += rk[i].v;
+        }
+        gt->slope[sc][b] = i1 > i0 ? (float)(sv / (i1 - i0)) : 0.0f;
+        q[b] = sg > 0 ? (float)sqrt(se / sg) : 1.0f;
+    }
+    memcpy(qs, q, sizeof q); /* relative to the median bin: the generator's overall level is its own */
+    qsort(qs, TN__SG_GATE_BINS, sizeof *qs, tn__cmp_float);
+    qm = 0.5f * (qs[TN__SG_GATE_BINS / 2 - 1] + qs[TN__SG_GATE_BINS / 2]);
+    for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm <= 0 ? 1.0f : q[b] < TN__SG_GATE_MAX * qm ? q[b] / qm : TN__SG_GATE_MAX;
+    for (b = 1; b < TN__SG_GATE_BINS; b++) /* increasing, for the interpolation */
+        if (gt->slope[sc][b] <= gt->slope[sc][b - 1]) gt->slope[sc][b] = gt->slope[sc][b - 1] + 1e-9f;
+    gt->on[sc] = n > 0;
+}
+
+/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up, measured on the example
+   the model stores: its scale s - 1 injected as that scale's output, scale s's generator run on
+   it with noise (tn__sg_gate_scale). The finest generators, trained for a few hundred
+   iterations, put texture on flat ground where the example has none (docs/singan.md). */
 static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__sg_gate *gt)
 {
     const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
@@ -22709,8 +22741,6 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
     if (!(r.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     for (sc = 1; sc < last && !st; sc++) {
         int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc);
-        int x, y, b, n = 0;
-        float q[TN__SG_GATE_BINS], qs[TN__SG_GATE_BINS], qm;
         tn_image_free(&lc);
         tn_image_free(&ls);
         TN_FREE(base);
@@ -22733,32 +22763,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
         r.mh = lc.height;
         r.map_level = sc - 1;
         if ((st = tn__sg_base(&r, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&r, sc, 0, 0, W, H, out))) break;
-        for (y = 1; y + 1 < H; y++)
-            for (x = 1; x + 1 < W; x++) {
-                rk[n].v = tn__sg_slope(base + (size_t)y * W + x, W);
-                rk[n++].i = y * W + x;
-            }
-        qsort(rk, (size_t)n, sizeof *rk, tn__sg_cmp_ranked);
-        for (b = 0; b < TN__SG_GATE_BINS; b++) {
-            int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS), i;
-            double se = 0, sg = 0, sv = 0;
-            for (i = i0; i < i1; i++) {
-                int p = rk[i].i;
-                double de = ls.data[p] - base[p], dg = out[p] - base[p];
-                se += de * de;
-                sg += dg * dg;
-                sv += rk[i].v;
-            }
-            gt->slope[sc][b] = i1 > i0 ? (float)(sv / (i1 - i0)) : 0.0f;
-            q[b] = sg > 0 ? (float)sqrt(se / sg) : 1.0f;
-        }
-        memcpy(qs, q, sizeof q); /* relative to the median bin: the generator's overall level is its own */
-        qsort(qs, TN__SG_GATE_BINS, sizeof *qs, tn__cmp_float);
-        qm = 0.5f * (qs[TN__SG_GATE_BINS / 2 - 1] + qs[TN__SG_GATE_BINS / 2]);
-        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm <= 0 ? 1.0f : q[b] < TN__SG_GATE_MAX * qm ? q[b] / qm : TN__SG_GATE_MAX;
-        for (b = 1; b < TN__SG_GATE_BINS; b++) /* increasing, for the interpolation */
-            if (gt->slope[sc][b] <= gt->slope[sc][b - 1]) gt->slope[sc][b] = gt->slope[sc][b - 1] + 1e-9f;
-        gt->on[sc] = n > 0;
+        tn__sg_gate_scale(gt, sc, ls.data, base, out, W, H, rk);
     }
     tn_ctx_free(r.ctx);
     tn_image_free(&lc);

@@ -204,6 +204,10 @@ TN_TEST(prepared_windows_of_a_laid_out_map)
     tn_singan_prepared_free(p);
     TN_CHECK(tn_singan_prepare(&p, &trained, 8192, 4096, &g) == TN_ERR_INVALID_ARG);
     TN_CHECK(p == NULL);
+    g.gate = 2;
+    TN_CHECK(tn_singan_prepare(&p, &trained, 40, 40, &g) == TN_ERR_INVALID_ARG && p == NULL);
+    TN_CHECK(strstr(tn_last_error(), "gate 2 0 or 1") != NULL);
+    g.gate = 0;
     tn_image_free(&win);
     tn_image_free(&whole);
     g.layout = 0;
