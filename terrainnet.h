@@ -22861,6 +22861,7 @@ struct tn_singan_prepared {
     float *map;             /* the layout: the output of scale level + 1's input grid (NULL: none) */
     int mw, mh, level;
     tn__sg_gate gate;
+    tn__sg_gen_run run;     /* what every window runs with (points into this struct) */
 };
 
 TN_API void tn_singan_prepared_free(tn_singan_prepared *p)
@@ -22896,6 +22897,16 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         p->level = K - 1;
     }
     if (p->o.gate && (st = tn__sg_gate_make(model, &p->A, &p->gate))) goto fail;
+    r.limit = 1;
+    r.gate = p->o.gate ? &p->gate : NULL;
+    if (p->map) {
+        r.map = p->map;
+        r.mw = p->mw;
+        r.mh = p->mh;
+        r.map_level = p->level;
+        r.map_is_output = 1;
+    }
+    p->run = r;
     *out = p;
     return TN_OK;
 fail:
@@ -22909,20 +22920,7 @@ TN_API tn_status tn_singan_prepared_window(tn_image *out, const tn_singan_prepar
     TN_ASSERT(out && p);
     if (w < 1 || h < 1 || x0 < 0 || y0 < 0 || x0 > p->width - w || y0 > p->height - h)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: window %d x %d at (%d, %d) outside the %d x %d map", w, h, x0, y0, p->width, p->height);
-    memset(&r, 0, sizeof r);
-    r.A = &p->A;
-    r.g = p->model->weights;
-    r.seed = p->o.seed;
-    r.noise = p->o.noise;
-    r.limit = 1;
-    r.gate = p->o.gate ? &p->gate : NULL;
-    if (p->map) {
-        r.map = p->map;
-        r.mw = p->mw;
-        r.mh = p->mh;
-        r.map_level = p->level;
-        r.map_is_output = 1;
-    }
+    r = p->run; /* a copy: tn__sg_generate sets its context */
     return tn__sg_generate(p->model, &r, p->A.scales - 1, x0, y0, w, h, p->o.tile, out);
 }
 
@@ -27872,8 +27870,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
         if (!edist || !enear) st = TN_ERR_OUT_OF_MEMORY;
         if (!st) st = tn__gnn_grow_profile(example, &er, TN_RIDGE, pr, emask, edist, enear);
-        if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
-        if (!st && dem) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        if (!st && dem && dem->width == Wx && dem->height == Hx) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        else if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
         TN_FREE(edist);
         TN_FREE(enear);
         if (st) goto done;

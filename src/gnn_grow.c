@@ -658,8 +658,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
         if (!edist || !enear) st = TN_ERR_OUT_OF_MEMORY;
         if (!st) st = tn__gnn_grow_profile(example, &er, TN_RIDGE, pr, emask, edist, enear);
-        if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
-        if (!st && dem) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        if (!st && dem && dem->width == Wx && dem->height == Hx) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        else if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
         TN_FREE(edist);
         TN_FREE(enear);
         if (st) goto done;

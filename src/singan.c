@@ -1860,6 +1860,7 @@ struct tn_singan_prepared {
     float *map;             /* the layout: the output of scale level + 1's input grid (NULL: none) */
     int mw, mh, level;
     tn__sg_gate gate;
+    tn__sg_gen_run run;     /* what every window runs with (points into this struct) */
 };
 
 TN_API void tn_singan_prepared_free(tn_singan_prepared *p)
@@ -1895,6 +1896,16 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         p->level = K - 1;
     }
     if (p->o.gate && (st = tn__sg_gate_make(model, &p->A, &p->gate))) goto fail;
+    r.limit = 1;
+    r.gate = p->o.gate ? &p->gate : NULL;
+    if (p->map) {
+        r.map = p->map;
+        r.mw = p->mw;
+        r.mh = p->mh;
+        r.map_level = p->level;
+        r.map_is_output = 1;
+    }
+    p->run = r;
     *out = p;
     return TN_OK;
 fail:
@@ -1908,20 +1919,7 @@ TN_API tn_status tn_singan_prepared_window(tn_image *out, const tn_singan_prepar
     TN_ASSERT(out && p);
     if (w < 1 || h < 1 || x0 < 0 || y0 < 0 || x0 > p->width - w || y0 > p->height - h)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: window %d x %d at (%d, %d) outside the %d x %d map", w, h, x0, y0, p->width, p->height);
-    memset(&r, 0, sizeof r);
-    r.A = &p->A;
-    r.g = p->model->weights;
-    r.seed = p->o.seed;
-    r.noise = p->o.noise;
-    r.limit = 1;
-    r.gate = p->o.gate ? &p->gate : NULL;
-    if (p->map) {
-        r.map = p->map;
-        r.mw = p->mw;
-        r.mh = p->mh;
-        r.map_level = p->level;
-        r.map_is_output = 1;
-    }
+    r = p->run; /* a copy: tn__sg_generate sets its context */
     return tn__sg_generate(p->model, &r, p->A.scales - 1, x0, y0, w, h, p->o.tile, out);
 }
 
