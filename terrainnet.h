@@ -22678,52 +22678,64 @@ done:
     return st;
 }
 
-/* Scale sc's gate from the example's detail (ls - base) and the generator's (out - base) on the
-   example's own base (W x H): in TN__SG_GATE_BINS bins of equal count by the base's slope, the
-   ratio of their RMS, relative to the median bin's, at most TN__SG_GATE_MAX. rk: W x H scratch. */
-static void tn__sg_gate_scale(tn__sg_gate *gt, int sc, const float *ls, const float *base, const float *out, int W, int H, tn__sg_ranked *rk)
+/* Ranks the interior pixels of b (W x H) by slope into rk; returns their count. */
+static int tn__sg_rank_slopes(const float *b, int W, int H, tn__sg_ranked *rk)
 {
-    float q[TN__SG_GATE_BINS], qs[TN__SG_GATE_BINS], qm;
-    int x, y, b, n = 0;
+    int x, y, n = 0;
     for (y = 1; y + 1 < H; y++)
         for (x = 1; x + 1 < W; x++) {
-            rk[n].v = tn__sg_slope(base + (size_t)y * W + x, W);
+            rk[n].v = tn__sg_slope(b + (size_t)y * W + x, W);
             rk[n++].i = y * W + x;
         }
     qsort(rk, (size_t)n, sizeof *rk, tn__sg_cmp_ranked);
-    for (b = 0; b < TN__SG_GATE_BINS; b++) {
-        int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS), i;
-        double se = 0, sg = 0, sv = 0;
-        for (i = i0; i < i1; i++) {
-            int p = rk[i].i;
-            double de = ls[p] - base[p], dg = out[p] - base[p];
-            se += de * de;
-            sg += dg * dg;
-            sv += rk[i].v;
-        }
-        gt->slope[sc][b] = i1 > i0 ? (float)(sv / (i1 - i0)) : 0.0f;
-        q[b] = sg > 0 ? (float)sqrt(se / sg) : 1.0f;
-    }
-    memcpy(qs, q, sizeof q); /* relative to the median bin: the generator's overall level is its own */
-    qsort(qs, TN__SG_GATE_BINS, sizeof *qs, tn__cmp_float);
-    qm = 0.5f * (qs[TN__SG_GATE_BINS / 2 - 1] + qs[TN__SG_GATE_BINS / 2]);
-    for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = qm <= 0 ? 1.0f : q[b] < TN__SG_GATE_MAX * qm ? q[b] / qm : TN__SG_GATE_MAX;
-    for (b = 1; b < TN__SG_GATE_BINS; b++) /* increasing, for the interpolation */
-        if (gt->slope[sc][b] <= gt->slope[sc][b - 1]) gt->slope[sc][b] = gt->slope[sc][b - 1] + 1e-9f;
-    gt->on[sc] = n > 0;
+    return n;
 }
 
-/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up, measured on the example
-   the model stores: its scale s - 1 injected as that scale's output, scale s's generator run on
-   it with noise (tn__sg_gate_scale). The finest generators, trained for a few hundred
-   iterations, put texture on flat ground where the example has none (docs/singan.md). */
-static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__sg_gate *gt)
+/* The mean slope of each of TN__SG_GATE_BINS equal-count bins of rk[0..n), increasing. */
+static void tn__sg_bin_slopes(float *slope, const tn__sg_ranked *rk, int n)
+{
+    int b, i;
+    for (b = 0; b < TN__SG_GATE_BINS; b++) {
+        int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS);
+        double sv = 0;
+        for (i = i0; i < i1; i++) sv += rk[i].v;
+        slope[b] = i1 > i0 ? (float)(sv / (i1 - i0)) : 0.0f;
+        if (b > 0 && slope[b] <= slope[b - 1]) slope[b] = slope[b - 1] + 1e-9f; /* for the interpolation */
+    }
+}
+
+/* The RMS of d - base in each of TN__SG_GATE_BINS equal-count bins of the pixels rk[0..n) ranked
+   by the base's slope. */
+static void tn__sg_bin_rms(float *rms, const float *d, const float *base, const tn__sg_ranked *rk, int n)
+{
+    int b, i;
+    for (b = 0; b < TN__SG_GATE_BINS; b++) {
+        int i0 = (int)((long)n * b / TN__SG_GATE_BINS), i1 = (int)((long)n * (b + 1) / TN__SG_GATE_BINS);
+        double se = 0;
+        for (i = i0; i < i1; i++) {
+            double e = d[rk[i].i] - base[rk[i].i];
+            se += e * e;
+        }
+        rms[b] = i1 > i0 ? (float)sqrt(se / (i1 - i0)) : 0.0f;
+    }
+}
+
+/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up. At scale s, in bins of
+   equal count by the slope of the coarser scale upsampled (the base), the factor is the RMS of
+   the example's detail (its scale s less its scale s - 1 upsampled) over the RMS of the
+   generator's detail on `run`'s window of the example's size at the origin, made scale by scale
+   with the gate; at most TN__SG_GATE_MAX. The finest generators, trained for a few hundred
+   iterations, put texture on flat ground where the example has none, or too much everywhere
+   (docs/singan.md). Each is ranked on its own slopes: a sample rougher than the example would
+   otherwise move its rough ground into the steep bins, where a factor above 1 roughens it
+   further, scale after scale. */
+static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, const tn__sg_gen_run *run, tn__sg_gate *gt)
 {
     const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
     tn_image ex, lc = {0, 0, 0, NULL}, ls = {0, 0, 0, NULL};
-    tn__sg_gen_run r;
+    tn__sg_gen_run r, s;
     tn__sg_ranked *rk = NULL;
-    float *base = NULL, *out = NULL;
+    float *base = NULL, *out = NULL, *sample = NULL;
     int sc, last = A->trained < A->scales ? A->trained : A->scales;
     tn_status st = TN_OK;
     memset(gt, 0, sizeof *gt);
@@ -22734,19 +22746,20 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
     ex.data = t->data;
     memset(&r, 0, sizeof r);
     r.A = A;
-    r.g = m->weights;
-    r.seed = 0x67617465ULL;
-    r.noise = 1.0f;
     r.map_is_output = 1;
-    if (!(r.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    s = *run;
+    s.gate = gt;
+    s.limit = 0;
+    if (!(s.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     for (sc = 1; sc < last && !st; sc++) {
-        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc);
+        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), n, b, x, y;
+        float qe[TN__SG_GATE_BINS], q[TN__SG_GATE_BINS];
         tn_image_free(&lc);
         tn_image_free(&ls);
         TN_FREE(base);
         TN_FREE(out);
         TN_FREE(rk);
-        if (W < 3 || H < 3) continue;
+        if (W < 3 || H < 3 || (run->map && sc <= run->map_level)) continue; /* a laid-out map's scales below its layout are not made */
         if ((st = tn_image_resize(&lc, &ex, tn__sg_size(A->width, A->factor, A->scales - sc), tn__sg_size(A->height, A->factor, A->scales - sc),
                                   TN_RESIZE_AREA)) ||
             (st = W == A->width && H == A->height ? tn_image_copy(&ls, &ex) : tn_image_resize(&ls, &ex, W, H, TN_RESIZE_AREA)))
@@ -22758,19 +22771,41 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, tn__
             st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
             break;
         }
-        r.map = lc.data;
+        r.map = lc.data; /* the example's detail */
         r.mw = lc.width;
         r.mh = lc.height;
         r.map_level = sc - 1;
-        if ((st = tn__sg_base(&r, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&r, sc, 0, 0, W, H, out))) break;
-        tn__sg_gate_scale(gt, sc, ls.data, base, out, W, H, rk);
+        if ((st = tn__sg_base(&r, sc, 0, 0, W, H, base))) break;
+        tn__sg_bin_rms(qe, ls.data, base, rk, tn__sg_rank_slopes(base, W, H, rk));
+        if ((st = tn__sg_base(&s, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&s, sc, 0, 0, W, H, out))) break; /* the generator's */
+        n = tn__sg_rank_slopes(base, W, H, rk);
+        tn__sg_bin_rms(q, out, base, rk, n);
+        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = q[b] <= 0 ? 1.0f : qe[b] < TN__SG_GATE_MAX * q[b] ? qe[b] / q[b] : TN__SG_GATE_MAX;
+        tn__sg_bin_slopes(gt->slope[sc], rk, n);
+        gt->on[sc] = n > 0;
+        for (y = 0; y < H; y++) /* the sample's scale sc gated, the next scale's map (its border takes the factor inside) */
+            for (x = 0; x < W; x++) {
+                int cx = x < 1 ? 1 : x > W - 2 ? W - 2 : x, cy = y < 1 ? 1 : y > H - 2 ? H - 2 : y;
+                size_t i = (size_t)y * W + x;
+                out[i] = base[i] + tn__sg_gate_at(gt, sc, base + (size_t)cy * W + cx, W) * (out[i] - base[i]);
+            }
+        TN_FREE(sample);
+        sample = out;
+        out = NULL;
+        s.map = sample;
+        s.mw = W;
+        s.mh = H;
+        s.mx0 = s.my0 = s.mstride = 0;
+        s.map_level = sc;
+        s.map_is_output = 1;
     }
-    tn_ctx_free(r.ctx);
+    tn_ctx_free(s.ctx);
     tn_image_free(&lc);
     tn_image_free(&ls);
     TN_FREE(base);
     TN_FREE(out);
     TN_FREE(rk);
+    TN_FREE(sample);
     return st;
 }
 
@@ -22896,9 +22931,7 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         if ((st = tn__sg_layout(model, &p->A, &p->o, K, w, h, &p->map, &p->mw, &p->mh))) goto fail;
         p->level = K - 1;
     }
-    if (p->o.gate && (st = tn__sg_gate_make(model, &p->A, &p->gate))) goto fail;
     r.limit = 1;
-    r.gate = p->o.gate ? &p->gate : NULL;
     if (p->map) {
         r.map = p->map;
         r.mw = p->mw;
@@ -22906,6 +22939,8 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         r.map_level = p->level;
         r.map_is_output = 1;
     }
+    if (p->o.gate && (st = tn__sg_gate_make(model, &p->A, &r, &p->gate))) goto fail;
+    r.gate = p->o.gate ? &p->gate : NULL;
     p->run = r;
     *out = p;
     return TN_OK;
@@ -22938,7 +22973,7 @@ TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0,
     if (!o.layout) {
         tn__sg_gate gate;
         r.limit = 1;
-        if (o.gate && (st = tn__sg_gate_make(model, &A, &gate))) return st;
+        if (o.gate && (st = tn__sg_gate_make(model, &A, &r, &gate))) return st;
         r.gate = o.gate ? &gate : NULL;
         return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
     }

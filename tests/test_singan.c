@@ -287,6 +287,53 @@ done:
     tn_singan_free(&m);
 }
 
+/* Mean |Laplacian| over the interior of a single-channel image. */
+static double tn_test_mean_laplacian(const tn_image *a)
+{
+    double s = 0;
+    int x, y, w = a->width;
+    for (y = 1; y + 1 < a->height; y++)
+        for (x = 1; x + 1 < w; x++) {
+            const float *p = a->data + (size_t)y * w + x;
+            s += fabs(p[1] + p[-1] + p[w] + p[-w] - 4 * p[0]);
+        }
+    return s / ((double)(w - 2) * (a->height - 2));
+}
+
+/* The gate measures the sample, not only the example: with 4 times the noise the generators make
+   rougher terrain than the example, and the gate brings its roughness back towards the
+   example's. (A gate measured on the example alone, relative to its median bin, left the
+   overall level as generated.) */
+TN_TEST(gate_follows_a_rougher_sample)
+{
+    tn_image dem = tn_test_dem(32, 5), on = {0, 0, 0, NULL}, off = {0, 0, 0, NULL};
+    tn_singan m;
+    tn_singan_opts o;
+    tn_singan_gen_opts g;
+    double ex, lon, loff;
+    tn_test_tiny_singan_opts(&o, 30);
+    o.coarsest = 16;
+    TN_CHECK(tn_singan_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&g, 0, sizeof g);
+    g.seed = 6;
+    g.noise = 4;
+    TN_CHECK(tn_singan_sample(&on, &m, 0, 0, 32, 32, &g) == TN_OK);
+    g.gate = -1;
+    TN_CHECK(tn_singan_sample(&off, &m, 0, 0, 32, 32, &g) == TN_OK);
+    if (on.data && off.data) {
+        ex = tn_test_mean_laplacian(&dem);
+        lon = tn_test_mean_laplacian(&on);
+        loff = tn_test_mean_laplacian(&off);
+        printf("# gate, noise x4: mean |Laplacian| example %.3f, gate on %.3f, off %.3f\n", ex, lon, loff);
+        TN_CHECK(loff > 1.2 * ex);
+        TN_CHECK(fabs(lon - ex) < 0.5 * fabs(loff - ex));
+    }
+    tn_image_free(&on);
+    tn_image_free(&off);
+    tn_image_free(&dem);
+    tn_singan_free(&m);
+}
+
 TN_TEST(refine_and_upscale)
 {
     tn_image dem = tn_test_dem(24, 1), blur = {0, 0, 0, NULL}, out = {0, 0, 0, NULL}, small = {0, 0, 0, NULL};
@@ -581,6 +628,7 @@ int main(void)
     TN_RUN(layout_from_the_example);
     TN_RUN(prepared_windows_of_a_laid_out_map);
     TN_RUN(gate_keeps_the_example_plain_smooth);
+    TN_RUN(gate_follows_a_rougher_sample);
     TN_RUN(refine_and_upscale);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);
