@@ -1639,9 +1639,9 @@ typedef struct tn_singan_gen_opts {
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
     int gate;              /* sample: 1 = each scale's detail is scaled by the example's own detail over the
-                              generator's at the same slope of the coarser scale, relative to the median
-                              slope's, 0..1.5 (the example's plains stay smooth, its crests sharp);
-                              0 = 1, < 0 = off */
+                              generator's at the same rank of the coarser scale's slope, at most 1.5 (the
+                              example's plains stay smooth, its crests sharp); measured on a reference
+                              sample for free samples, on the example for laid-out maps; 0 = 1, < 0 = off */
 } tn_singan_gen_opts;
 
 /* Fills *o with the defaults (what zero fields mean). */
@@ -22720,15 +22720,35 @@ static void tn__sg_bin_rms(float *rms, const float *d, const float *base, const 
     }
 }
 
-/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up. At scale s, in bins of
-   equal count by the slope of the coarser scale upsampled (the base), the factor is the RMS of
-   the example's detail (its scale s less its scale s - 1 upsampled) over the RMS of the
-   generator's detail on `run`'s window of the example's size at the origin, made scale by scale
-   with the gate; at most TN__SG_GATE_MAX. The finest generators, trained for a few hundred
-   iterations, put texture on flat ground where the example has none, or too much everywhere
-   (docs/singan.md). Each is ranked on its own slopes: a sample rougher than the example would
-   otherwise move its rough ground into the steep bins, where a factor above 1 roughens it
-   further, scale after scale. */
+/* A bin's factor: the example's detail RMS qe over the generator's q, over the median bin's
+   ratio when `relative`, at most TN__SG_GATE_MAX. */
+static void tn__sg_gate_keep(float *keep, const float *qe, const float *q, int relative)
+{
+    float r[TN__SG_GATE_BINS], rs[TN__SG_GATE_BINS], med = 1.0f;
+    int b;
+    for (b = 0; b < TN__SG_GATE_BINS; b++) r[b] = q[b] > 0 ? qe[b] / q[b] : 1.0f;
+    if (relative) {
+        memcpy(rs, r, sizeof r);
+        qsort(rs, TN__SG_GATE_BINS, sizeof *rs, tn__cmp_float);
+        med = 0.5f * (rs[TN__SG_GATE_BINS / 2 - 1] + rs[TN__SG_GATE_BINS / 2]);
+    }
+    for (b = 0; b < TN__SG_GATE_BINS; b++) keep[b] = med <= 0 ? 1.0f : r[b] < TN__SG_GATE_MAX * med ? r[b] / med : TN__SG_GATE_MAX;
+}
+
+/* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up: at scale s, in bins of
+   equal count by the slope of the coarser scale upsampled (the base), the RMS of the example's
+   detail (its scale s less its scale s - 1 upsampled) over the generator's (tn__sg_gate_keep).
+   The finest generators, trained for a few hundred iterations, put texture on flat ground where
+   the example has none, or too much everywhere (docs/singan.md).
+   - A laid-out map (`run` has a layout): the generator runs on the example's own scale s - 1,
+     ranked on the example's slopes, relative to the median bin. The map's coarse scales are the
+     example's arrangement and heights; measured on a sample, the factors rose above 1 and
+     speckled its plains.
+   - A free sample: the generator's detail is its own on `run`'s window of the example's size at
+     the origin, made scale by scale with the gate and ranked on its own slopes, at the
+     example's level. A free sample's ground can be rougher than the example's: ranked on the
+     example's slopes, its rough ground fell into the steep bins, where a factor above 1
+     roughened it further, scale after scale. */
 static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, const tn__sg_gen_run *run, tn__sg_gate *gt)
 {
     const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
@@ -22746,13 +22766,16 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
     ex.data = t->data;
     memset(&r, 0, sizeof r);
     r.A = A;
+    r.g = m->weights;
+    r.seed = 0x67617465ULL;
+    r.noise = 1.0f;
     r.map_is_output = 1;
     s = *run;
     s.gate = gt;
     s.limit = 0;
-    if (!(s.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+    if (!(r.ctx = s.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     for (sc = 1; sc < last && !st; sc++) {
-        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), n, b, x, y;
+        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), n, x, y;
         float qe[TN__SG_GATE_BINS], q[TN__SG_GATE_BINS];
         tn_image_free(&lc);
         tn_image_free(&ls);
@@ -22771,16 +22794,25 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
             st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
             break;
         }
-        r.map = lc.data; /* the example's detail */
+        r.map = lc.data; /* the example's scale s - 1 as the output of s - 1 */
         r.mw = lc.width;
         r.mh = lc.height;
         r.map_level = sc - 1;
         if ((st = tn__sg_base(&r, sc, 0, 0, W, H, base))) break;
-        tn__sg_bin_rms(qe, ls.data, base, rk, tn__sg_rank_slopes(base, W, H, rk));
-        if ((st = tn__sg_base(&s, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&s, sc, 0, 0, W, H, out))) break; /* the generator's */
+        n = tn__sg_rank_slopes(base, W, H, rk);
+        tn__sg_bin_rms(qe, ls.data, base, rk, n);
+        if (run->map) {
+            if ((st = tn__sg_window(&r, sc, 0, 0, W, H, out))) break;
+            tn__sg_bin_rms(q, out, base, rk, n);
+            tn__sg_gate_keep(gt->keep[sc], qe, q, 1);
+            tn__sg_bin_slopes(gt->slope[sc], rk, n);
+            gt->on[sc] = n > 0;
+            continue;
+        }
+        if ((st = tn__sg_base(&s, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&s, sc, 0, 0, W, H, out))) break;
         n = tn__sg_rank_slopes(base, W, H, rk);
         tn__sg_bin_rms(q, out, base, rk, n);
-        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] = q[b] <= 0 ? 1.0f : qe[b] < TN__SG_GATE_MAX * q[b] ? qe[b] / q[b] : TN__SG_GATE_MAX;
+        tn__sg_gate_keep(gt->keep[sc], qe, q, 0);
         tn__sg_bin_slopes(gt->slope[sc], rk, n);
         gt->on[sc] = n > 0;
         for (y = 0; y < H; y++) /* the sample's scale sc gated, the next scale's map (its border takes the factor inside) */
@@ -22799,7 +22831,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
         s.map_level = sc;
         s.map_is_output = 1;
     }
-    tn_ctx_free(s.ctx);
+    tn_ctx_free(r.ctx);
     tn_image_free(&lc);
     tn_image_free(&ls);
     TN_FREE(base);
