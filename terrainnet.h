@@ -28258,8 +28258,8 @@ static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, 
    gets, within TN__GNN_FLANK px of a drawn ridge, what the example's main ridges have on their
    flanks: strips across them (heights at -16 .. 16 px along their normals, every px of their
    length), each offset's row less its straight trend along the chunk, copied in chunks along the
-   drawn ridge as tn__gnn_grow_crest copies the crest, and laid by each pixel's nearest stroke point
-   and its offset across. Nothing on the stroke (the crest has its own), full from 4 to 8 px, gone
+   drawn ridge as tn__gnn_grow_crest copies the crest, and read bilinearly at each pixel's place
+   along and across the stroke (from its nearest stroke point). Nothing on the stroke (the crest has its own), full from 4 to 8 px, gone
    by 16 px; faded near other strokes as the crest is. dem: the example's heights. */
 TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
                                            float *field)
