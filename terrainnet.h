@@ -28307,11 +28307,15 @@ TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const 
 }
 
 #define TN__GNN_FLANK 16 /* px across a drawn ridge that take the example's flanks */
+#define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
+                                staircase turns a shorter chord by up to 45 degrees, and 8 px across
+                                that moves a strip's row along its line by 6 px */
 
 /* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
 static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
 {
-    int a = i - 2 < 0 ? 0 : i - 2, b = i + 2 >= n ? n - 1 : i + 2;
+    const int S = TN__GNN_FLANK_SPAN;
+    int a = i - S < 0 ? 0 : i - S, b = i + S >= n ? n - 1 : i + S;
     float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
     *nx = l > 0 ? -dy / l : 0;
     *ny = l > 0 ? dx / l : 0;
@@ -28321,8 +28325,8 @@ static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, 
    gets, within TN__GNN_FLANK px of a drawn ridge, what the example's main ridges have on their
    flanks: strips across them (heights at -16 .. 16 px along their normals, every px of their
    length), each offset's row less its straight trend along the chunk, copied in chunks along the
-   drawn ridge as tn__gnn_grow_crest copies the crest, and laid by each pixel's nearest stroke point
-   and its offset across. Nothing on the stroke (the crest has its own), full from 4 to 8 px, gone
+   drawn ridge as tn__gnn_grow_crest copies the crest, and read bilinearly at each pixel's place
+   along and across the stroke (from its nearest stroke point). Nothing on the stroke (the crest has its own), full from 4 to 8 px, gone
    by 16 px; faded near other strokes as the crest is. dem: the example's heights. */
 TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
                                            float *field)
@@ -28413,15 +28417,23 @@ TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser,
     }
     tn__gnn_chamfer(mask, W, H, dist, near);
     for (i = 0; i < (int)np; i++) {
-        float d = dist[i], t, a, b;
-        int q = near[i] >= 0 ? idx[near[i]] : -1;
+        float d = dist[i], t, s, a, b, fs, ft, *gr;
+        int q = near[i] >= 0 ? idx[near[i]] : -1, si;
         if (q < 0 || !(d < (float)T)) continue;
-        t = ((float)(i % W) - set->items[ptc[q]].points[3 * ptj[q]]) * nrm[2 * q] + ((float)(i / W) - set->items[ptc[q]].points[3 * ptj[q] + 1]) * nrm[2 * q + 1];
-        r = (int)floorf(t + 0.5f) + T;
-        r = r < 0 ? 0 : r >= R ? R - 1 : r;
+        { /* across and along the line from its nearest point: the nearest pixel of a chain alone
+             steps the along place by a px here and there, a streak across the flank each time */
+            float ex = (float)(i % W) - set->items[ptc[q]].points[3 * ptj[q]], ey = (float)(i / W) - set->items[ptc[q]].points[3 * ptj[q] + 1];
+            t = ex * nrm[2 * q] + ey * nrm[2 * q + 1];
+            s = sarc[q] + ex * nrm[2 * q + 1] - ey * nrm[2 * q];
+        }
+        t = tn__clampf(t + (float)T, 0, (float)(R - 1) - 1e-3f);
+        s = tn__clampf(s, 0, sarc[q] + (float)T);
+        r = (int)t, si = (int)s, ft = t - (float)r, fs = s - (float)si;
+        gr = g[ptc[q]] + (size_t)si * R + r;
         a = tn__clampf(d / 4, 0, 1);
         b = tn__clampf((d - 8) / 8, 0, 1);
-        field[i] = a * a * (3 - 2 * a) * (1 - b * b * (3 - 2 * b)) * fade[q] * g[ptc[q]][(size_t)(int)sarc[q] * R + r];
+        field[i] = a * a * (3 - 2 * a) * (1 - b * b * (3 - 2 * b)) * fade[q] *
+                   ((1 - fs) * ((1 - ft) * gr[0] + ft * gr[1]) + fs * ((1 - ft) * gr[R] + ft * gr[R + 1]));
     }
 done:
     for (c = 0; g && c < nuser; c++) TN_FREE(g[c]);

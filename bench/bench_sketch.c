@@ -34,6 +34,15 @@
      in map view, < 1: a rounded top); example_crest_top ... lines: the same on the example's main
      lines (no clearance: its network is dense; its lines are extracted, not drawn, so within a
      px of the crest: read its top as a floor, its spike as the target);
+   - hatch: the comb of short streaks across a drawn line (issue 30: "no hatching with the 5-10
+     px part period"): along paths 2, 3, 4, 5 and 6 px off the drawn lines on both sides (the line
+     averaged over 7 points, so a pixel chain's staircase does not shake its normal; every px of
+     its length, bilinear), windows of 32 px (12 px from the line's ends and from every other
+     stroke, 8 px inside the map), linear trend removed, Hann weighted: the RMS of their power in
+     periods of 3.2 to 6.4 px (DFT bins 5-10), m, where a streak of a px or two across a flank
+     lands, and that band's share of all their power; against the same on the example's main lines
+     (example_hatch: its ridges and valleys of the two highest Strahler orders of tn_extract,
+     chained end to end, no clearance) and on the three real crops' (real_hatch);
    - floor_profile (drawn valleys against the example's main valleys, tn_extract's highest
      Strahler order): at every px of the drawn valleys (12 px from their ends and from every other
      stroke; the example's main valleys without clearance; both 16 px from the map's edge), the
@@ -277,6 +286,179 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
     return r;
 }
 
+#define HATCH_N 32   /* px: the along-line windows whose spectrum is read (hop HATCH_N / 2) */
+#define HATCH_LO 2   /* px across: the flanks are read from HATCH_LO .. HATCH_HI px off the line, both sides */
+#define HATCH_HI 6
+#define HATCH_PI 3.14159265358979323846
+#define HATCH_BIN_LO 5 /* periods of HATCH_N / 5 = 6.4 px ... */
+#define HATCH_BIN_HI 10 /* ... to 3.2 px: a streak of a px or two across a flank */
+
+typedef struct hatch_power {
+    double band, total; /* along-line power in periods of 3.2 .. 6.4 px (bins HATCH_BIN_LO .. HATCH_BIN_HI of HATCH_N) and in all */
+    double ss;          /* the windows' sum of squared Hann weights, for the band's RMS */
+    int windows;
+} hatch_power;
+
+/* Chains set's segments of one kind and of order >= min_order end to end (an end within 1.5 px of
+   another's), as an extracted network splits its lines at every junction: the chained paths of
+   the densified points go into out (xy pairs; starts[k] .. starts[k + 1] is path k). */
+static int hatch_chain(const tn_contour_set *d, int kind, int min_order, double **out, int **starts)
+{
+    int c, n = 0, np = 0, total = 0, *used = (int *)calloc((size_t)d->count + 1, sizeof(int));
+    for (c = 0; c < d->count; c++) total += d->items[c].npoints;
+    *out = (double *)malloc((size_t)(2 * total + 2) * sizeof(double));
+    *starts = (int *)malloc((size_t)(d->count + 2) * sizeof(int));
+    for (c = 0; c < d->count; c++) {
+        const tn_contour *l = &d->items[c];
+        int k, j, grew = 1, s0 = n;
+        if (used[c] || (int)l->type != kind || l->order < min_order) continue;
+        used[c] = 1;
+        (*starts)[np++] = n;
+        for (j = 0; j < l->npoints; j++) (*out)[2 * n] = l->points[3 * j], (*out)[2 * n + 1] = l->points[3 * j + 1], n++;
+        while (grew) { /* append at the tail, then at the head (the path turned round) */
+            grew = 0;
+            for (k = 0; k < d->count && !grew; k++) {
+                const tn_contour *q = &d->items[k];
+                int e, m = q->npoints;
+                if (used[k] || (int)q->type != kind || q->order < min_order) continue;
+                for (e = 0; e < 2 && !grew; e++) {
+                    const float *qe = q->points + (e ? 3 * (m - 1) : 0);
+                    int r;
+                    if (hypot(qe[0] - (*out)[2 * n - 2], qe[1] - (*out)[2 * n - 1]) > 1.5) continue;
+                    for (j = 1; j < m; j++) r = e ? m - 1 - j : j, (*out)[2 * n] = q->points[3 * r], (*out)[2 * n + 1] = q->points[3 * r + 1], n++;
+                    used[k] = grew = 1;
+                }
+            }
+            if (!grew && s0 >= 0) { /* reverse the path once and grow its other end */
+                int i0 = s0, i1 = n - 1;
+                for (; i0 < i1; i0++, i1--) {
+                    double tx = (*out)[2 * i0], ty = (*out)[2 * i0 + 1];
+                    (*out)[2 * i0] = (*out)[2 * i1], (*out)[2 * i0 + 1] = (*out)[2 * i1 + 1], (*out)[2 * i1] = tx, (*out)[2 * i1 + 1] = ty;
+                }
+                grew = 1;
+                s0 = -1;
+            }
+        }
+    }
+    (*starts)[np] = n;
+    free(used);
+    return np;
+}
+
+/* The along-line spectrum of the flanks of set's lines: the drawn lines (mains 0), or the
+   example's main lines (mains 1: its ridges and valleys of the two highest Strahler orders of
+   each kind, chained end to end, no clearance). Each densified path, its points averaged over 7
+   (a pixel chain's staircase would shake its normal), is resampled every px of its length; at
+   each point HATCH_LO .. HATCH_HI px off it along the normal on both sides, the height
+   (bilinear) makes one sequence per offset. Windows of HATCH_N points (all CLEAR px from the
+   line's ends and from every other line when drawn, and HATCH_HI + 2 px inside the map), linear
+   trend removed, Hann weighted, add their DFT power to p. */
+static void hatch_add(hatch_power *p, const tn_image *img, const tn_contour_set *set, int mains)
+{
+    tn_contour_set d;
+    double *pts = NULL;
+    int *starts = NULL, npath = 0, c, j, k, kind, top[2] = {-1, -1};
+    if (tn_sketch_densify(&d, set)) return;
+    for (c = 0; c < d.count; c++) {
+        int t = d.items[c].type == TN_VALLEY;
+        if (d.items[c].order > top[t]) top[t] = d.items[c].order;
+    }
+    for (kind = 0; kind < 2; kind++) {
+        int tk = kind ? TN_VALLEY : TN_RIDGE;
+        if (mains) npath = hatch_chain(&d, tk, top[kind] - 1, &pts, &starts);
+        else { /* each drawn line its own path */
+            int total = 0;
+            for (c = 0; c < d.count; c++) total += d.items[c].npoints;
+            pts = (double *)malloc((size_t)(2 * total + 2) * sizeof(double));
+            starts = (int *)malloc((size_t)(d.count + 2) * sizeof(int));
+            for (c = 0, npath = 0, total = 0; c < d.count; c++) {
+                if ((int)d.items[c].type != tk) continue;
+                starts[npath++] = total;
+                for (j = 0; j < d.items[c].npoints; j++) pts[2 * total] = d.items[c].points[3 * j], pts[2 * total + 1] = d.items[c].points[3 * j + 1], total++;
+            }
+            starts[npath] = total;
+        }
+        for (c = 0; c < npath; c++) {
+            const double *lp = pts + 2 * starts[c];
+            int n = starts[c + 1] - starts[c], m = 0, i, side, off, cap;
+            double *sx, *sy, *px, *py, *nx, *ny, len = 0;
+            char *ok;
+            if (n < HATCH_N) continue;
+            sx = (double *)malloc((size_t)n * 2 * sizeof(double)), sy = sx + n;
+            for (j = 0; j < n; j++) { /* the chain averaged over 7 points */
+                int a = j - 3 > 0 ? j - 3 : 0, b = j + 3 < n - 1 ? j + 3 : n - 1;
+                sx[j] = sy[j] = 0;
+                for (k = a; k <= b; k++) sx[j] += lp[2 * k], sy[j] += lp[2 * k + 1];
+                sx[j] /= b - a + 1, sy[j] /= b - a + 1;
+            }
+            for (j = 1; j < n; j++) len += hypot(sx[j] - sx[j - 1], sy[j] - sy[j - 1]);
+            cap = (int)len + 2;
+            px = (double *)malloc((size_t)cap * 4 * sizeof(double)), py = px + cap, nx = py + cap, ny = nx + cap;
+            ok = (char *)malloc((size_t)cap);
+            for (j = 1, len = 0; j < n; j++) { /* a point every px of the length, the normal of its segment */
+                double ax = sx[j - 1], ay = sy[j - 1], dx = sx[j] - ax, dy = sy[j] - ay, sl = hypot(dx, dy), t;
+                if (!(sl > 0)) continue;
+                for (t = len; t < sl && m < cap; t += 1) px[m] = ax + dx * t / sl, py[m] = ay + dy * t / sl, nx[m] = -dy / sl, ny[m] = dx / sl, m++;
+                len = t - sl;
+            }
+            for (i = 0; i < m; i++) {
+                int near = px[i] < HATCH_HI + 2 || py[i] < HATCH_HI + 2 || px[i] > img->width - 3 - HATCH_HI || py[i] > img->height - 3 - HATCH_HI;
+                if (!mains) {
+                    near |= i < CLEAR || i >= m - CLEAR;
+                    for (k = 0; k < d.count && !near; k++) {
+                        int q;
+                        const double *own = lp;
+                        if (d.items[k].npoints == n && d.items[k].points[0] == own[0] && d.items[k].points[1] == own[1]) continue; /* the line itself */
+                        for (q = 0; q < d.items[k].npoints && !near; q++) near = hypot(px[i] - d.items[k].points[3 * q], py[i] - d.items[k].points[3 * q + 1]) < CLEAR;
+                    }
+                }
+                ok[i] = !near;
+            }
+            for (i = 0; i + HATCH_N <= m; i += HATCH_N / 2) {
+                int good = 1;
+                for (j = i; j < i + HATCH_N && good; j++) good = ok[j];
+                if (!good) continue;
+                for (side = -1; side <= 1; side += 2)
+                    for (off = HATCH_LO; off <= HATCH_HI; off++) {
+                        double h[HATCH_N], mt = 0, mh = 0, sth = 0, stt = 0, slope;
+                        int f;
+                        for (j = 0; j < HATCH_N; j++) {
+                            h[j] = height_at(img, px[i + j] + side * off * nx[i + j], py[i + j] + side * off * ny[i + j]);
+                            mt += j, mh += h[j];
+                        }
+                        mt /= HATCH_N, mh /= HATCH_N;
+                        for (j = 0; j < HATCH_N; j++) sth += (j - mt) * (h[j] - mh), stt += (j - mt) * (j - mt);
+                        slope = sth / stt;
+                        for (j = 0; j < HATCH_N; j++) {
+                            double w = 0.5 - 0.5 * cos(2 * HATCH_PI * (j + 0.5) / HATCH_N);
+                            h[j] = (h[j] - mh - slope * (j - mt)) * w;
+                            p->ss += w * w;
+                        }
+                        for (f = 1; f <= HATCH_N / 2; f++) {
+                            double re = 0, im = 0, pw;
+                            for (j = 0; j < HATCH_N; j++) {
+                                re += h[j] * cos(2 * HATCH_PI * f * j / HATCH_N);
+                                im -= h[j] * sin(2 * HATCH_PI * f * j / HATCH_N);
+                            }
+                            pw = (re * re + im * im) * (f < HATCH_N / 2 ? 2 : 1) / HATCH_N;
+                            p->total += pw;
+                            if (f >= HATCH_BIN_LO && f <= HATCH_BIN_HI) p->band += pw;
+                        }
+                        p->windows++;
+                    }
+            }
+            free(sx), free(px), free(ok);
+        }
+        free(pts), free(starts);
+        pts = NULL, starts = NULL;
+    }
+    tn_contour_set_free(&d);
+}
+
+/* The share of the flanks' along-line power in periods of 3.2 .. 6.4 px, and that band's RMS. */
+static double hatch_share(const hatch_power *p) { return p->total > 0 ? p->band / p->total : NAN; }
+static double hatch_rms(const hatch_power *p) { return p->ss > 0 ? sqrt(p->band / p->ss) : NAN; }
+
 #define DEEP 16   /* px: a valley's cross profile is read out to its banks this far across */
 #define JOIN 3    /* px: an extracted valley ends on a line within this */
 
@@ -461,6 +643,7 @@ int main(int argc, char **argv)
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
     valley_shape ex_valley, real_valley;
+    hatch_power ex_hatch, real_hatch;
     int ex_thr, threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
     if (argc < 3) {
         fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [big=N]\n");
@@ -478,6 +661,8 @@ int main(int argc, char **argv)
     tn_set_threads(threads);
     ex_thr = tn_extract_default_threshold(128, 128);
     memset(&real_valley, 0, sizeof real_valley);
+    memset(&ex_hatch, 0, sizeof ex_hatch);
+    memset(&real_hatch, 0, sizeof real_hatch);
     if (!height_mapping(region, dxy, &h0, &h1) || !load_metres(region, "full", h0, h1, &full) || !load_metres(region, "128", h0, h1, &ex) ||
         !locate(&full, &ex, &ex_x, &ex_y)) {
         fprintf(stderr, "bench_sketch: %s: data not found under %s\n", region, data_dir());
@@ -516,6 +701,7 @@ int main(int argc, char **argv)
                     eo.threshold = ex_thr;
                     if (!tn_extract(&e, &c, &eo)) {
                         valley_shape v = valley_profiles(&c, &e.contours, 1, ex_thr);
+                        hatch_add(&real_hatch, &c, &e.contours, 1);
                         int q;
                         if (v.n) {
                             for (q = 0; q < 5; q++) real_valley.rise[q] += v.rise[q] / v.rise[4];
@@ -538,6 +724,8 @@ int main(int argc, char **argv)
             valley_print("real", &real_valley, NULL, real_valley.n);
         }
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
+        printf("real_hatch: %.2f m in periods of 3.2-6.4 px along the main lines' flanks (%.1f %% of the power; %d windows)\n",
+               hatch_rms(&real_hatch), 100 * hatch_share(&real_hatch), real_hatch.windows);
     }
     { /* the example's own along-line relief and cross profiles on its main ridges and valleys (tn_extract) */
         tn_extraction e;
@@ -548,10 +736,13 @@ int main(int argc, char **argv)
             for (k = 0; k < 4; k++) ex_relief[k] = line_relief(&ex, &e.contours, k & 1 ? TN_VALLEY : TN_RIDGE, 1, k < 2 ? 0 : FLANK);
             for (k = 0; k < 2; k++) cs[k] = cross_profiles(&ex, &e.contours, k ? TN_VALLEY : TN_RIDGE, 1);
             ex_valley = valley_profiles(&ex, &e.contours, 1, ex_thr);
+            hatch_add(&ex_hatch, &ex, &e.contours, 1);
             tn_extraction_free(&e);
         }
         for (k = 0; k < 4; k++) printf("example_%s_relief: %.2f m (main %s)\n", relief_name[k], ex_relief[k], k & 1 ? "valleys" : "ridges");
         if (ex_valley.n) valley_print("example", &ex_valley, NULL, 0);
+        printf("example_hatch: %.2f m in periods of 3.2-6.4 px along the main lines' flanks (%.1f %% of the power; %d windows)\n",
+               hatch_rms(&ex_hatch), 100 * hatch_share(&ex_hatch), ex_hatch.windows);
         for (k = 0; k < 2; k++)
             if (cs[k].n)
                 printf("example_%s_top: %.1f %%; %s_seam: %.1f %%; %s_spike: %.2f (main %s, %d points)\n", shape_name[k], 100 * cs[k].top, shape_name[k],
@@ -628,6 +819,14 @@ int main(int argc, char **argv)
                 if (cs.n)
                     printf("%s_%s_%s_top: %.1f %%\n%s_%s_%s_seam: %.1f %%\n%s_%s_%s_spike: %.2f\n", all[d], way[w], shape_name[k], 100 * cs.top, all[d], way[w],
                            shape_name[k], 100 * cs.seam, all[d], way[w], shape_name[k], cs.spike);
+            }
+            {
+                hatch_power hp;
+                memset(&hp, 0, sizeof hp);
+                hatch_add(&hp, &out[w], &asked, 0);
+                if (hp.windows)
+                    printf("%s_%s_hatch: %.2f m (%.2f x example, %.2f x real; %.1f %% of the power)\n", all[d], way[w], hatch_rms(&hp),
+                           hatch_rms(&hp) / hatch_rms(&ex_hatch), hatch_rms(&hp) / hatch_rms(&real_hatch), 100 * hatch_share(&hp));
             }
             {
                 valley_shape vs = valley_profiles(&out[w], &asked, 0, ex_thr);

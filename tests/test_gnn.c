@@ -1628,6 +1628,64 @@ static double height_at(const tn_image *img, double x, double y)
     return (1 - fy) * ((1 - fx) * TN_PIXEL(img, x0, y0, 0) + fx * TN_PIXEL(img, x1, y0, 0)) + fy * ((1 - fx) * TN_PIXEL(img, x0, y1, 0) + fx * TN_PIXEL(img, x1, y1, 0));
 }
 
+TN_TEST(grow_flanks_without_streaks)
+{
+    /* a slanted drawn ridge is a staircase of pixels: its flanks must take the example's smooth
+       gullies (a 20 px period, as in grow_flanks_copy_the_example_flanks), not a comb of streaks
+       where the nearest stroke pixel steps or the normal of a short chord turns; 6 px across,
+       along the line, the field's second difference stays small against its own relief (a 20 px
+       sine: 0.10) */
+    tn_image dem = {0, 0, 0, NULL}, fi = {256, 256, 1, NULL};
+    float ep[128 * 3], up[2 * 3];
+    tn_contour items[16], user;
+    tn_contour_set ex, sk, dense;
+    double s1 = 0, s2 = 0, c2 = 0, h[161], ux = 200 / sqrt(200.0 * 200 + 60 * 60), uy = 60 / sqrt(200.0 * 200 + 60 * 60), ratio;
+    int x, y, k = 0, side;
+    TN_CHECK(tn_image_create(&dem, 128, 128, 1) == TN_OK);
+    TN_CHECK((fi.data = (float *)malloc(256 * 256 * sizeof(float))) != NULL);
+    for (y = 0; y < 128; y++)
+        for (x = 0; x < 128; x++) {
+            float dy = fabsf((float)(y - 64));
+            dem.data[y * 128 + x] = 1000 - 15 * dy + 40 * sinf(6.2831853f * x / 20) * fminf(1.0f, dy / 4);
+        }
+    for (x = 0; x < 128; x++) ep[3 * x] = (float)x, ep[3 * x + 1] = 64, ep[3 * x + 2] = 1000;
+    memset(items, 0, sizeof items);
+    for (x = 0; x < 128; x += 8, k++) {
+        items[k].type = TN_RIDGE;
+        items[k].order = 2;
+        items[k].npoints = 8;
+        items[k].points = ep + 3 * x;
+    }
+    memset(&ex, 0, sizeof ex);
+    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    up[0] = 28, up[1] = 90, up[2] = 500, up[3] = 228, up[4] = 150, up[5] = 500;
+    memset(&user, 0, sizeof user);
+    user.type = TN_RIDGE, user.npoints = 2, user.points = up;
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 256, sk.items = &user, sk.count = 1;
+    TN_CHECK(tn_sketch_densify(&dense, &sk) == TN_OK);
+    TN_CHECK(tn__gnn_grow_flanks(&dense, 1, &ex, &dem, 1, fi.data) == TN_OK);
+    for (side = -1; side <= 1; side += 2) {
+        for (k = 0; k < 161; k++) { /* every px along the line, 6 px across it */
+            double s = 20 + k;
+            h[k] = height_at(&fi, 28 + s * ux - side * 6 * uy, 90 + s * uy + side * 6 * ux);
+        }
+        for (k = 8; k < 153; k++) {
+            double m = 0, d2 = h[k + 1] - 2 * h[k] + h[k - 1];
+            int j;
+            for (j = k - 8; j <= k + 8; j++) m += h[j];
+            m = h[k] - m / 17;
+            s1 += m * m, s2 += 1, c2 += d2 * d2;
+        }
+    }
+    ratio = sqrt(c2 / s1);
+    printf("  second difference over relief, 6 px across: %.3f (relief %.1f m)\n", ratio, sqrt(s1 / s2));
+    TN_CHECK(sqrt(s1 / s2) > 10 && ratio < 0.3);
+    tn_contour_set_free(&dense);
+    tn_image_free(&dem);
+    free(fi.data);
+}
+
 /* Cross profiles of a straight ridge from (x0, y0) to (x1, y1), 12 px from its ends: top, the
    share of its points higher than the terrain 1..3 px across on both sides; spike, the mean
    drop 1 px across over a third of the drop 3 px across (1: straight flanks; 2 or more: a wall
@@ -2027,6 +2085,7 @@ int main(void)
     TN_RUN(grow_crest_copies_the_example_relief);
     TN_RUN(grow_crest_widens_a_short_pool);
     TN_RUN(grow_flanks_copy_the_example_flanks);
+    TN_RUN(grow_flanks_without_streaks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
