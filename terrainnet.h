@@ -26386,6 +26386,7 @@ done:
    the network's residual. base_dst (may be NULL): the membrane there. */
 #define TN__GNN_PIN 12 /* px over which the residual of a grown sketch is pinned to 0 on the user's lines */
 #define TN__GNN_BESIDE 1.5f /* px: the ground beside a stroke (its 8 neighbours) */
+#define TN__GNN_PIN_ACROSS -1 /* tn__gnn_pin's wall for the fine detail: its mean change at each distance from the strokes */
 
 /* Weight of a stroke pixel at distance e (< L) in the smooth means along the strokes: the
    nearest ones dominate, and it falls to 0 at L. */
@@ -26404,7 +26405,12 @@ static float tn__gnn_line_kernel(float e, int L)
    which leaves a drawn ridge a wall of a pixel above its ground (a valley a slot), a thin line in
    map view; within wall px of the strokes the correction moves linearly from the mean change
    beside them (their 8 neighbours) to the one on them, so the flanks rise to the stroke, and
-   the banks the notch reads (wall = TN__GNN_BANK) stay where they were. Reads a and b (rw
+   the banks the notch reads (wall = TN__GNN_BANK) stay where they were. With wall =
+   TN__GNN_PIN_ACROSS (the detail's change): each pixel takes back the smooth mean of the change
+   at its own distance from the strokes (kernel (1 - d/L)^2; the strokes and their 8 neighbours
+   pooled, so the detail still rounds the top): the example's detail matched to a drawn crest
+   raises a band 0-3 px wide, and taking back only its mean on the strokes, faded over L, dug a
+   groove along its foot 5-7 px out (an embankment); its texture stays. Reads a and b (rw
    floats a row, origin (rx, ry)) within L of the window (x, y, ww, wh), which the caller computed
    exactly; writes the correction of each window pixel into corr (ww x wh). */
 static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, int rx, int ry, int rw, int x, int y, int ww, int wh, int wall,
@@ -26426,13 +26432,15 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
                     size_t i;
                     if (px < 0 || py < 0 || px >= G->W || py >= G->H) continue;
                     dq = G->pin_d[(size_t)py * G->W + px];
-                    if (dq > 0 && !(ramp > 0 && dq <= TN__GNN_BESIDE)) continue;
+                    if (wall == TN__GNN_PIN_ACROSS ? (d <= TN__GNN_BESIDE ? dq > TN__GNN_BESIDE : fabsf(dq - d) > 0.5f)
+                                                   : dq > 0 && !(ramp > 0 && dq <= TN__GNN_BESIDE))
+                        continue;
                     e = sqrtf((float)((px - X) * (px - X) + (py - Y) * (py - Y)));
                     if (e >= (float)L) continue;
-                    k = tn__gnn_line_kernel(e, L);
+                    k = wall == TN__GNN_PIN_ACROSS && d > 0 ? (1 - e / L) * (1 - e / L) : tn__gnn_line_kernel(e, L);
                     i = (size_t)(py - ry) * rw + (px - rx);
                     e = a[i] - b[i];
-                    if (dq > 0) nb += k * e, db += k;
+                    if (dq > 0 && wall != TN__GNN_PIN_ACROSS) nb += k * e, db += k;
                     else num += k * e, den += k;
                 }
             phi = 1 - d / L;
@@ -26628,7 +26636,7 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
                 !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, 0, corr); /* the strokes keep their heights through the detail too */
+                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, TN__GNN_PIN_ACROSS, corr); /* the strokes keep their heights through the detail too */
                 for (v = 0; !st && v < r.h; v++) {
                     float *o = dst + (size_t)(ty + v) * ww + tx;
                     int u;

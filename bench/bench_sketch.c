@@ -34,6 +34,14 @@
      in map view, < 1: a rounded top); example_crest_top ... lines: the same on the example's main
      lines (no clearance: its network is dense; its lines are extracted, not drawn, so within a
      px of the crest: read its top as a floor, its spike as the target);
+   - crest_profile_left, crest_profile_right, crest_shoulder (drawn ridges against the example's
+     main ridges, tn_extract's highest Strahler order): the mean cross profile of the drawn ridges
+     on each side apart (left and right of the drawing direction: on the ring, its inside and
+     outside; the example's sides pooled), every px of their length (12 px from their ends and
+     from every other stroke, 12 px from the map's edge), the drop below the line d = 1 .. 12 px
+     across over the drop at 12 px; shoulder: the drop from 6 to 12 px over the drop from 0 to 6
+     px (1: a straight flank; the Alps' main ridges 0.70; less: a face of a few px on flatter
+     ground, an embankment; a groove at its foot lowers it further);
    - hatch: the comb of short streaks across a drawn line (issue 30: "no hatching with the 5-10
      px part period"): along paths 2, 3, 4, 5 and 6 px off the drawn lines on both sides (the line
      averaged over 7 points, so a pixel chain's staircase does not shake its normal; every px of
@@ -284,6 +292,72 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
         r.spike = d3 > 0 ? 3 * d1 / d3 : NAN;
     }
     return r;
+}
+
+#define SHOULDER 12 /* px: a drawn ridge's cross profile is read out to this far on each side */
+
+typedef struct crest_sides {
+    double drop[2][SHOULDER + 1]; /* mean drop below the line d = 0 .. SHOULDER px to its left [0] and right [1], m */
+    int n;
+} crest_sides;
+
+/* The mean cross profile of set's ridges on each side apart (drawn ridges: left and right of
+   their drawing direction, on a ring its inside and outside; with mains, the example's main
+   ridges, both sides of a line pooled into each), every px of their length as cross_profiles,
+   SHOULDER px from the map's edge: the drop below the line d px across, d = 0 .. SHOULDER. */
+static crest_sides crest_profile(const tn_image *img, const tn_contour_set *set, int mains)
+{
+    tn_contour_set d;
+    crest_sides r;
+    int c, j, k, m, o, s, top = -1;
+    memset(&r, 0, sizeof r);
+    if (tn_sketch_densify(&d, set)) return r;
+    for (c = 0; c < d.count; c++)
+        if (d.items[c].type == TN_RIDGE && d.items[c].order > top) top = d.items[c].order;
+    for (c = 0; c < d.count; c++) {
+        const tn_contour *l = &d.items[c];
+        const float *pt = l->points;
+        if (l->type != TN_RIDGE || (mains && l->order != top)) continue;
+        for (j = 0; j < l->npoints; j++) {
+            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
+            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty), h0;
+            if (!(len > 0) || x < SHOULDER || y < SHOULDER || x > img->width - 1 - SHOULDER || y > img->height - 1 - SHOULDER) continue;
+            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
+            for (k = 0; k < d.count && !mains && !near; k++)
+                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
+                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
+            if (near) continue;
+            h0 = height_at(img, x, y);
+            for (s = 0; s < 2; s++)
+                for (o = 1; o <= SHOULDER; o++) {
+                    double dr = h0 - height_at(img, x + (s ? ty : -ty) / len * o, y + (s ? -tx : tx) / len * o);
+                    if (mains) r.drop[0][o] += 0.5 * dr, r.drop[1][o] += 0.5 * dr;
+                    else r.drop[s][o] += dr;
+                }
+            r.n++;
+        }
+    }
+    tn_contour_set_free(&d);
+    for (s = 0; s < 2 && r.n; s++)
+        for (o = 1; o <= SHOULDER; o++) r.drop[s][o] /= r.n;
+    return r;
+}
+
+/* The shoulder of a side's mean profile: its drop from 6 to 12 px across over its drop from 0 to 6 px. */
+static double crest_shoulder(const crest_sides *p, int s) { return (p->drop[s][SHOULDER] - p->drop[s][SHOULDER / 2]) / p->drop[s][SHOULDER / 2]; }
+
+/* who's crest profile and shoulder per side (against ex's shoulder when ex is not NULL). */
+static void crest_profile_print(const char *who, const crest_sides *p, const crest_sides *ex)
+{
+    int s, o;
+    for (s = 0; s < 2; s++) {
+        printf("%s_crest_profile_%s:", who, s ? "right" : "left");
+        for (o = 1; o <= SHOULDER; o++) printf(" %.2f", p->drop[s][o] / p->drop[s][SHOULDER]);
+        printf(" (1..12 px, of %.1f m at 12 px; %d points)\n", p->drop[s][SHOULDER], p->n);
+    }
+    printf("%s_crest_shoulder: %.2f %.2f (left, right", who, crest_shoulder(p, 0), crest_shoulder(p, 1));
+    if (ex) printf("; example %.2f)\n", crest_shoulder(ex, 0));
+    else printf(")\n");
 }
 
 #define HATCH_N 32   /* px: the along-line windows whose spectrum is read (hop HATCH_N / 2) */
@@ -644,6 +718,7 @@ int main(int argc, char **argv)
     tn_gnn model;
     valley_shape ex_valley, real_valley;
     hatch_power ex_hatch, real_hatch;
+    crest_sides ex_crest;
     int ex_thr, threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
     if (argc < 3) {
         fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [big=N]\n");
@@ -732,15 +807,18 @@ int main(int argc, char **argv)
         cross_shape cs[2];
         cs[0].n = cs[1].n = 0;
         ex_valley.n = 0;
+        ex_crest.n = 0;
         if (!tn_extract(&e, &ex, NULL)) {
             for (k = 0; k < 4; k++) ex_relief[k] = line_relief(&ex, &e.contours, k & 1 ? TN_VALLEY : TN_RIDGE, 1, k < 2 ? 0 : FLANK);
             for (k = 0; k < 2; k++) cs[k] = cross_profiles(&ex, &e.contours, k ? TN_VALLEY : TN_RIDGE, 1);
             ex_valley = valley_profiles(&ex, &e.contours, 1, ex_thr);
             hatch_add(&ex_hatch, &ex, &e.contours, 1);
+            ex_crest = crest_profile(&ex, &e.contours, 1);
             tn_extraction_free(&e);
         }
         for (k = 0; k < 4; k++) printf("example_%s_relief: %.2f m (main %s)\n", relief_name[k], ex_relief[k], k & 1 ? "valleys" : "ridges");
         if (ex_valley.n) valley_print("example", &ex_valley, NULL, 0);
+        if (ex_crest.n) crest_profile_print("example", &ex_crest, NULL);
         printf("example_hatch: %.2f m in periods of 3.2-6.4 px along the main lines' flanks (%.1f %% of the power; %d windows)\n",
                hatch_rms(&ex_hatch), 100 * hatch_share(&ex_hatch), ex_hatch.windows);
         for (k = 0; k < 2; k++)
@@ -830,8 +908,10 @@ int main(int argc, char **argv)
             }
             {
                 valley_shape vs = valley_profiles(&out[w], &asked, 0, ex_thr);
+                crest_sides cp = crest_profile(&out[w], &asked, 0);
                 char who[64];
                 snprintf(who, sizeof who, "%s_%s", all[d], way[w]);
+                if (cp.n) crest_profile_print(who, &cp, ex_crest.n ? &ex_crest : NULL);
                 if (vs.n) valley_print(who, &vs, ex_valley.n ? &ex_valley : NULL, 0);
                 if (vs.n && real_valley.n) printf("%s_floor_profile_distance_real: %.3f\n", who, valley_profile_distance(&vs, &real_valley));
             }

@@ -1753,6 +1753,64 @@ TN_TEST(drawn_ridge_is_a_crest)
     tn_image_free(&dem);
 }
 
+TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
+{
+    /* the fine detail adds the example's texture to a drawn ridge, not a cross profile of its
+       own: its change, averaged along the ridge at each distance across it, stays near its
+       change on the ridge. Pinning only the change on the ridge, faded over 12 px, left the
+       detail's raised band 0-3 px wide and dug a groove along its foot 4-8 px out (an
+       embankment in map view) */
+    tn_image dem = tn_test_dem(64, 22), t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_contour c;
+    tn_contour_set sk;
+    float pts[6] = {12, 20, 0, 148, 100, 0};
+    float dlo = 0, dhi = 0;
+    double len = hypot(136.0, 80.0), nx = -80 / len, ny = 136 / len, ch[11], dev = 0, s;
+    int k, o1, n = 0;
+    tn_image_range(&dlo, &dhi, &dem);
+    pts[2] = pts[5] = dlo + 0.8f * (dhi - dlo);
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE;
+    c.npoints = 2;
+    c.points = pts;
+    memset(&sk, 0, sizeof sk);
+    sk.width = 160;
+    sk.height = 120;
+    sk.count = 1;
+    sk.items = &c;
+    memset(&go, 0, sizeof go);
+    go.seed = 1;
+    go.grow = 1;
+    go.map_scale = -1;
+    for (k = 0; k < 2; k++) {
+        go.detail = k ? 0 : -1;
+        TN_CHECK(tn_gnn_generate(&t[k], &m, &sk, 160, 120, &go) == TN_OK);
+    }
+    if (t[0].data && t[1].data) {
+        for (o1 = 0; o1 <= 10; o1++) ch[o1] = 0;
+        for (s = 12; s <= len - 12; s += 1, n++) /* the detail's change 0..10 px across, both sides */
+            for (o1 = 0; o1 <= 10; o1++)
+                for (k = -1; k <= 1; k += 2) {
+                    double x = 12 + 136 * s / len + k * nx * o1, y = 20 + 80 * s / len + k * ny * o1;
+                    ch[o1] += 0.5 * (height_at(&t[1], x, y) - height_at(&t[0], x, y));
+                }
+        printf("  the detail's mean change 0..10 px across a drawn ridge, m:");
+        for (o1 = 0; o1 <= 10; o1++) printf(" %.1f", ch[o1] / n);
+        for (o1 = 3; o1 <= 8; o1++) dev = fmax(dev, fabs(ch[o1] - ch[0]) / n);
+        printf("\n  largest 3-8 px across, against its change on the ridge: %.1f m (range %.0f m)\n", dev, (double)(dhi - dlo));
+        TN_CHECK(dev < 0.01 * (dhi - dlo));
+    }
+    tn_image_free(&t[0]);
+    tn_image_free(&t[1]);
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
 TN_TEST(drawn_valley_widens_downstream)
 {
     /* a drawn valley is a valley of the example's, not a trough of one width: its ground rises as
@@ -2089,6 +2147,7 @@ int main(void)
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
+    TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);
     TN_RUN(drawn_valley_widens_downstream);
     TN_RUN(map_scale_level);
     return tn_test_summary("test_gnn");
