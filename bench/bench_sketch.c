@@ -240,6 +240,27 @@ typedef struct cross_shape {
     int n;
 } cross_shape;
 
+/* Whether point j of line c of the densified set d is read, and its unit tangent (over +-2
+   points) in *ux, *uy: it lies `edge` px inside the map and, for a drawn line (!mains), CLEAR px
+   from its ends and from every other line. */
+static int line_point(const tn_image *img, const tn_contour_set *d, int c, int j, int mains, int edge, double *ux, double *uy)
+{
+    const tn_contour *l = &d->items[c];
+    const float *pt = l->points;
+    int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, k, m;
+    double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty);
+    if (!(len > 0) || x < edge || y < edge || x > img->width - 1 - edge || y > img->height - 1 - edge) return 0;
+    if (!mains) {
+        if (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR) return 0;
+        for (k = 0; k < d->count; k++)
+            for (m = 0; k != c && m < d->items[k].npoints; m++)
+                if (hypot(x - d->items[k].points[3 * m], y - d->items[k].points[3 * m + 1]) < CLEAR) return 0;
+    }
+    *ux = tx / len;
+    *uy = ty / len;
+    return 1;
+}
+
 /* The cross profiles of set's lines of one kind (heights negated for valleys, so a floor is a
    top), sampled every 0.5 px from -ACROSS to +ACROSS px along the normal of each px of their
    length (tangent over +-2 points of the densified line), CLEAR px from their ends and from every
@@ -255,7 +276,7 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
     tn_contour_set d;
     cross_shape r;
     double d1 = 0, d3 = 0;
-    int c, j, k, m, o, top = -1, ntop = 0, nseam = 0;
+    int c, j, o, top = -1, ntop = 0, nseam = 0;
     r.top = r.seam = r.spike = NAN;
     r.n = 0;
     if (tn_sketch_densify(&d, set)) return r;
@@ -266,16 +287,10 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
         const float *pt = l->points;
         if ((int)l->type != kind || (mains && l->order != top)) continue;
         for (j = 0; j < l->npoints; j++) {
-            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
-            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty);
+            double x = pt[3 * j], y = pt[3 * j + 1], ux, uy;
             double h[NS], sg = kind == TN_RIDGE ? 1 : -1, lo = -HUGE_VAL, side[2] = {-HUGE_VAL, -HUGE_VAL};
-            if (!(len > 0) || x < ACROSS || y < ACROSS || x > img->width - 1 - ACROSS || y > img->height - 1 - ACROSS) continue;
-            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
-            for (k = 0; k < d.count && !mains && !near; k++)
-                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
-                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
-            if (near) continue;
-            for (o = 0; o < NS; o++) h[o] = sg * height_at(img, x - ty / len * (o - MID) * 0.5, y + tx / len * (o - MID) * 0.5);
+            if (!line_point(img, &d, c, j, mains, ACROSS, &ux, &uy)) continue;
+            for (o = 0; o < NS; o++) h[o] = sg * height_at(img, x - uy * (o - MID) * 0.5, y + ux * (o - MID) * 0.5);
             for (o = 2; o <= 6; o++) lo = fmax(lo, fmax(h[MID - o], h[MID + o]));
             for (o = 2; o <= 12; o++) side[0] = fmax(side[0], h[MID - o]), side[1] = fmax(side[1], h[MID + o]);
             ntop += h[MID] >= lo;
@@ -309,7 +324,7 @@ static crest_sides crest_profile(const tn_image *img, const tn_contour_set *set,
 {
     tn_contour_set d;
     crest_sides r;
-    int c, j, k, m, o, s, top = -1;
+    int c, j, o, s, top = -1;
     memset(&r, 0, sizeof r);
     if (tn_sketch_densify(&d, set)) return r;
     for (c = 0; c < d.count; c++)
@@ -319,18 +334,12 @@ static crest_sides crest_profile(const tn_image *img, const tn_contour_set *set,
         const float *pt = l->points;
         if (l->type != TN_RIDGE || (mains && l->order != top)) continue;
         for (j = 0; j < l->npoints; j++) {
-            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
-            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty), h0;
-            if (!(len > 0) || x < SHOULDER || y < SHOULDER || x > img->width - 1 - SHOULDER || y > img->height - 1 - SHOULDER) continue;
-            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
-            for (k = 0; k < d.count && !mains && !near; k++)
-                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
-                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
-            if (near) continue;
+            double x = pt[3 * j], y = pt[3 * j + 1], ux, uy, h0;
+            if (!line_point(img, &d, c, j, mains, SHOULDER, &ux, &uy)) continue;
             h0 = height_at(img, x, y);
             for (s = 0; s < 2; s++)
                 for (o = 1; o <= SHOULDER; o++) {
-                    double dr = h0 - height_at(img, x + (s ? ty : -ty) / len * o, y + (s ? -tx : tx) / len * o);
+                    double dr = h0 - height_at(img, x + (s ? uy : -uy) * o, y + (s ? -ux : ux) * o);
                     if (mains) r.drop[0][o] += 0.5 * dr, r.drop[1][o] += 0.5 * dr;
                     else r.drop[s][o] += dr;
                 }
@@ -574,20 +583,14 @@ static valley_shape valley_profiles(const tn_image *img, const tn_contour_set *s
         if (l->type != TN_VALLEY || (mains && l->order != top)) continue;
         for (j = 1; j < l->npoints; j++) length += hypot(pt[3 * j] - pt[3 * j - 3], pt[3 * j + 1] - pt[3 * j - 2]);
         for (j = 0; j < l->npoints; j++) {
-            int a = j - 2 > 0 ? j - 2 : 0, b = j + 2 < l->npoints - 1 ? j + 2 : l->npoints - 1, near = 0;
-            double x = pt[3 * j], y = pt[3 * j + 1], tx = pt[3 * b] - pt[3 * a], ty = pt[3 * b + 1] - pt[3 * a + 1], len = hypot(tx, ty);
+            double x = pt[3 * j], y = pt[3 * j + 1], ux, uy;
             double h0, rr[NS], w = NAN;
-            if (!(len > 0) || x < DEEP || y < DEEP || x > img->width - 1 - DEEP || y > img->height - 1 - DEEP) continue;
-            if (!mains && (hypot(x - pt[0], y - pt[1]) < CLEAR || hypot(x - pt[3 * l->npoints - 3], y - pt[3 * l->npoints - 2]) < CLEAR)) continue;
-            for (k = 0; k < d.count && !mains && !near; k++)
-                for (m = 0; k != c && m < d.items[k].npoints && !near; m++)
-                    near = hypot(x - d.items[k].points[3 * m], y - d.items[k].points[3 * m + 1]) < CLEAR;
-            if (near) continue;
+            if (!line_point(img, &d, c, j, mains, DEEP, &ux, &uy)) continue;
             h0 = height_at(img, x, y);
             rr[0] = 0;
             for (o = 1; o < NS; o++) {
                 double t = 0.5 * o;
-                rr[o] = 0.5 * (height_at(img, x - ty / len * t, y + tx / len * t) + height_at(img, x + ty / len * t, y - tx / len * t)) - h0;
+                rr[o] = 0.5 * (height_at(img, x - uy * t, y + ux * t) + height_at(img, x + uy * t, y - ux * t)) - h0;
             }
             for (k = 0; k < 5; k++) r.rise[k] += rr[2 * valley_at[k]];
             s1d += rr[NS - 1], s2d += rr[NS - 1] * rr[NS - 1];

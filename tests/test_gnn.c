@@ -1706,22 +1706,20 @@ static void ridge_shape(const tn_image *t, double x0, double y0, double x1, doub
     *spike = d3 > 0 ? 3 * d1 / d3 : HUGE_VAL;
 }
 
-TN_TEST(drawn_ridge_is_a_crest)
+/* A lone ridge drawn across a 160 x 120 map, at 80 % of the range (*lo..*hi) of a tiny model's
+   example, grown, generated without (t[0]) and with (t[1]) the fine detail. */
+static void lone_ridge_with_and_without_detail(tn_image t[2], float *lo, float *hi)
 {
-    /* a lone ridge drawn across the map, grown: in map view a crest, not a thin line or a groove.
-       Across it the stroke is the highest ground within 3 px and its flanks fall from it without
-       the network's wall of a pixel on its ground; through the fine detail it keeps a top */
-    tn_image dem = tn_test_dem(64, 22), t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    tn_image dem = tn_test_dem(64, 22);
     tn_gnn m;
     tn_gnn_opts o;
     tn_gnn_generate_opts go;
     tn_contour c;
     tn_contour_set sk;
     float pts[6] = {12, 20, 0, 148, 100, 0};
-    float dlo = 0, dhi = 0;
     int k;
-    tn_image_range(&dlo, &dhi, &dem);
-    pts[2] = pts[5] = dlo + 0.8f * (dhi - dlo);
+    tn_image_range(lo, hi, &dem);
+    pts[2] = pts[5] = *lo + 0.8f * (*hi - *lo);
     tn_test_tiny_gnn_opts(&o, 3);
     TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
     memset(&c, 0, sizeof c);
@@ -1738,9 +1736,24 @@ TN_TEST(drawn_ridge_is_a_crest)
     go.grow = 1;
     go.map_scale = -1;
     for (k = 0; k < 2; k++) {
-        double top = 0, spike = 0;
         go.detail = k ? 0 : -1;
         TN_CHECK(tn_gnn_generate(&t[k], &m, &sk, 160, 120, &go) == TN_OK);
+    }
+    tn_gnn_free(&m);
+    tn_image_free(&dem);
+}
+
+TN_TEST(drawn_ridge_is_a_crest)
+{
+    /* a lone ridge drawn across the map, grown: in map view a crest, not a thin line or a groove.
+       Across it the stroke is the highest ground within 3 px and its flanks fall from it without
+       the network's wall of a pixel on its ground; through the fine detail it keeps a top */
+    tn_image t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
+    float dlo = 0, dhi = 0;
+    int k;
+    lone_ridge_with_and_without_detail(t, &dlo, &dhi);
+    for (k = 0; k < 2; k++) {
+        double top = 0, spike = 0;
         if (!t[k].data) continue;
         ridge_shape(&t[k], 12, 20, 148, 100, &top, &spike);
         printf("  drawn ridge %s the detail: highest within 3 px at %.1f %% of its points, spike %.2f\n", k ? "with" : "without", 100 * top, spike);
@@ -1749,8 +1762,6 @@ TN_TEST(drawn_ridge_is_a_crest)
     }
     tn_image_free(&t[0]);
     tn_image_free(&t[1]);
-    tn_gnn_free(&m);
-    tn_image_free(&dem);
 }
 
 TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
@@ -1760,37 +1771,11 @@ TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
        change on the ridge. Pinning only the change on the ridge, faded over 12 px, left the
        detail's raised band 0-3 px wide and dug a groove along its foot 4-8 px out (an
        embankment in map view) */
-    tn_image dem = tn_test_dem(64, 22), t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
-    tn_gnn m;
-    tn_gnn_opts o;
-    tn_gnn_generate_opts go;
-    tn_contour c;
-    tn_contour_set sk;
-    float pts[6] = {12, 20, 0, 148, 100, 0};
+    tn_image t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
     float dlo = 0, dhi = 0;
     double len = hypot(136.0, 80.0), nx = -80 / len, ny = 136 / len, ch[11], dev = 0, s;
     int k, o1, n = 0;
-    tn_image_range(&dlo, &dhi, &dem);
-    pts[2] = pts[5] = dlo + 0.8f * (dhi - dlo);
-    tn_test_tiny_gnn_opts(&o, 3);
-    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
-    memset(&c, 0, sizeof c);
-    c.type = TN_RIDGE;
-    c.npoints = 2;
-    c.points = pts;
-    memset(&sk, 0, sizeof sk);
-    sk.width = 160;
-    sk.height = 120;
-    sk.count = 1;
-    sk.items = &c;
-    memset(&go, 0, sizeof go);
-    go.seed = 1;
-    go.grow = 1;
-    go.map_scale = -1;
-    for (k = 0; k < 2; k++) {
-        go.detail = k ? 0 : -1;
-        TN_CHECK(tn_gnn_generate(&t[k], &m, &sk, 160, 120, &go) == TN_OK);
-    }
+    lone_ridge_with_and_without_detail(t, &dlo, &dhi);
     if (t[0].data && t[1].data) {
         for (o1 = 0; o1 <= 10; o1++) ch[o1] = 0;
         for (s = 12; s <= len - 12; s += 1, n++) /* the detail's change 0..10 px across, both sides */
@@ -1807,8 +1792,6 @@ TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
     }
     tn_image_free(&t[0]);
     tn_image_free(&t[1]);
-    tn_gnn_free(&m);
-    tn_image_free(&dem);
 }
 
 TN_TEST(drawn_valley_widens_downstream)
