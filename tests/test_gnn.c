@@ -1454,6 +1454,32 @@ TN_TEST(grow_crest_widens_a_short_pool)
     TN_CHECK(memcmp(up, before, sizeof before) == 0);
 }
 
+/* A 128 px example whose one ridge runs along y = 64, falling 15 m per px, with gullies and spurs
+   swinging 40 m with a 20 px period on its flanks; its ridge line as 16 pieces of order 2 (ep:
+   128 points, items: 16). */
+static tn_status gullied_ridge_example(tn_image *dem, float *ep, tn_contour *items, tn_contour_set *ex)
+{
+    int x, y, k = 0;
+    tn_status st = tn_image_create(dem, 128, 128, 1);
+    if (st) return st;
+    for (y = 0; y < 128; y++)
+        for (x = 0; x < 128; x++) {
+            float dy = fabsf((float)(y - 64));
+            dem->data[y * 128 + x] = 1000 - 15 * dy + 40 * sinf(6.2831853f * x / 20) * fminf(1.0f, dy / 4);
+        }
+    for (x = 0; x < 128; x++) ep[3 * x] = (float)x, ep[3 * x + 1] = 64, ep[3 * x + 2] = 1000;
+    memset(items, 0, 16 * sizeof *items);
+    for (x = 0; x < 128; x += 8, k++) {
+        items[k].type = TN_RIDGE;
+        items[k].order = 2;
+        items[k].npoints = 8;
+        items[k].points = ep + 3 * x;
+    }
+    memset(ex, 0, sizeof *ex);
+    ex->width = ex->height = 128, ex->items = items, ex->count = k;
+    return TN_OK;
+}
+
 TN_TEST(grow_flanks_copy_the_example_flanks)
 {
     /* the flanks of a drawn ridge take the example's: its main ridge (8 px parts along y = 64) has
@@ -1466,23 +1492,8 @@ TN_TEST(grow_flanks_copy_the_example_flanks)
     tn_contour items[16], user;
     tn_contour_set ex, sk;
     double want, got;
-    int x, y, k = 0;
-    TN_CHECK(field && again && tn_image_create(&dem, 128, 128, 1) == TN_OK);
-    for (y = 0; y < 128; y++)
-        for (x = 0; x < 128; x++) {
-            float dy = fabsf((float)(y - 64));
-            dem.data[y * 128 + x] = 1000 - 15 * dy + 40 * sinf(6.2831853f * x / 20) * fminf(1.0f, dy / 4);
-        }
-    for (x = 0; x < 128; x++) ep[3 * x] = (float)x, ep[3 * x + 1] = 64, ep[3 * x + 2] = 1000;
-    memset(items, 0, sizeof items);
-    for (x = 0; x < 128; x += 8, k++) {
-        items[k].type = TN_RIDGE;
-        items[k].order = 2;
-        items[k].npoints = 8;
-        items[k].points = ep + 3 * x;
-    }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128, ex.items = items, ex.count = k;
+    int x, y;
+    TN_CHECK(field && again && gullied_ridge_example(&dem, ep, items, &ex) == TN_OK);
     for (x = 0; x < 96; x++) fl[3 * x + 2] = dem.data[70 * 128 + 16 + x]; /* the example's flank, 6 px across */
     want = crest_relief_of(fl, 8, 88);
     for (x = 0; x <= 200; x++) up[3 * x] = (float)(28 + x), up[3 * x + 1] = 128, up[3 * x + 2] = 500;
@@ -1640,24 +1651,9 @@ TN_TEST(grow_flanks_without_streaks)
     tn_contour items[16], user;
     tn_contour_set ex, sk, dense;
     double s1 = 0, s2 = 0, c2 = 0, h[161], ux = 200 / sqrt(200.0 * 200 + 60 * 60), uy = 60 / sqrt(200.0 * 200 + 60 * 60), ratio;
-    int x, y, k = 0, side;
-    TN_CHECK(tn_image_create(&dem, 128, 128, 1) == TN_OK);
+    int k = 0, side;
+    TN_CHECK(gullied_ridge_example(&dem, ep, items, &ex) == TN_OK);
     TN_CHECK((fi.data = (float *)malloc(256 * 256 * sizeof(float))) != NULL);
-    for (y = 0; y < 128; y++)
-        for (x = 0; x < 128; x++) {
-            float dy = fabsf((float)(y - 64));
-            dem.data[y * 128 + x] = 1000 - 15 * dy + 40 * sinf(6.2831853f * x / 20) * fminf(1.0f, dy / 4);
-        }
-    for (x = 0; x < 128; x++) ep[3 * x] = (float)x, ep[3 * x + 1] = 64, ep[3 * x + 2] = 1000;
-    memset(items, 0, sizeof items);
-    for (x = 0; x < 128; x += 8, k++) {
-        items[k].type = TN_RIDGE;
-        items[k].order = 2;
-        items[k].npoints = 8;
-        items[k].points = ep + 3 * x;
-    }
-    memset(&ex, 0, sizeof ex);
-    ex.width = ex.height = 128, ex.items = items, ex.count = k;
     up[0] = 28, up[1] = 90, up[2] = 500, up[3] = 228, up[4] = 150, up[5] = 500;
     memset(&user, 0, sizeof user);
     user.type = TN_RIDGE, user.npoints = 2, user.points = up;
