@@ -22772,7 +22772,6 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
     r.map_is_output = 1;
     s = *run;
     s.gate = gt;
-    s.limit = 0;
     if (!(r.ctx = s.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     for (sc = 1; sc < last && !st; sc++) {
         int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), n, x, y;
@@ -26224,6 +26223,16 @@ static tn_status tn__gnn_line_density(const tn_contour_set *s, double *density)
     return TN_OK;
 }
 
+/* The example heights the model keeps (detail.example, on its network's pixels) as a view in *ex;
+   0 when it keeps none (models trained before them). */
+static int tn__gnn_example_dem(const tn_gnn *model, const tn__gnn_arch *A, tn_image *ex)
+{
+    const tn_tensor *e = tn_params_find(model->weights, "detail.example");
+    ex->width = A->width, ex->height = A->height, ex->channels = 1;
+    ex->data = e ? e->data : NULL;
+    return e != NULL;
+}
+
 /* Whether the fine detail by example runs (opts->detail, the model's example); generation
    builds its index (tn__gnn_detail_index), a plan does not need it. */
 static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
@@ -26250,10 +26259,7 @@ static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_
 static tn_status tn__gnn_detail_index(const tn_gnn *model, tn__gnn_gen *G)
 {
     tn_image ex;
-    ex.width = G->A.width;
-    ex.height = G->A.height;
-    ex.channels = 1;
-    ex.data = tn_params_find(model->weights, "detail.example")->data;
+    tn__gnn_example_dem(model, &G->A, &ex);
     return tn__fd_build(&ex, NULL, &G->fd);
 }
 
@@ -26282,6 +26288,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
 {
     tn_gnn_generate_opts o;
     tn_contour_set sk, rnd;
+    tn_image dem;
     int i, known = 0;
     tn_status st;
     memset(&o, 0, sizeof o);
@@ -26328,10 +26335,8 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 memset(&rnd, 0, sizeof rnd);
                 st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            tn_image dem = {0, 0, 0, NULL};
-            const tn_tensor *de = tn_params_find(model->weights, "detail.example");
-            if (de) dem.width = G->A.width, dem.height = G->A.height, dem.channels = 1, dem.data = de->data;
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, de ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief))) {
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, tn__gnn_example_dem(model, &G->A, &dem) ? &dem : NULL, width, height, &go, &rnd, &G->grown,
+                                           &relief))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
@@ -26358,13 +26363,10 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
-        if (!st && tn_params_find(model->weights, "detail.example") && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
+        if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
             /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
-            tn_image ex;
-            ex.width = G->A.width, ex.height = G->A.height, ex.channels = 1;
-            ex.data = tn_params_find(model->weights, "detail.example")->data;
             if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-            if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &ex, o.seed, G->flank);
+            if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &dem, o.seed, G->flank);
             for (q = 0; !st && q < n; q++) G->flank[q] /= G->A.std;
             tn_contour_set_free(&rnd);
         }

@@ -1771,7 +1771,6 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
     r.map_is_output = 1;
     s = *run;
     s.gate = gt;
-    s.limit = 0;
     if (!(r.ctx = s.ctx = tn_ctx_create())) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
     for (sc = 1; sc < last && !st; sc++) {
         int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), n, x, y;
