@@ -1589,6 +1589,10 @@ typedef struct tn_singan_opts {
                               Laplacians of a scale's output and of the example's scale, in units of
                               the example's mean square Laplacian; 0 = 10, < 0 = none (without it the
                               finest scales add crumpled detail, no smooth floors or sharp crests) */
+    float spec_weight;     /* weight of the spectrum loss at the coarsest scale: the squared log ratio
+                              of its power spectrum to the example's at periods of 4 px and more;
+                              0 = none (it mended the Sahara's undulation at half the map's period,
+                              1 did, but doubled held-out Everest's curvature; docs/singan.md) */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -21243,6 +21247,7 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->d_steps <= 0) o->d_steps = 1;
     if (o->curv_weight == 0) o->curv_weight = 10.0f;
     if (o->curv_weight < 0) o->curv_weight = 0.0f;
+    if (o->spec_weight < 0) o->spec_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -21260,7 +21265,7 @@ static tn_status tn__sg_validate(const tn_singan_opts *o)
     if ((st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) || (st = tn__opt_float(w, "rec_weight", o->rec_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
         (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
         (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
-        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)))
+        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)) || (st = tn__opt_float(w, "spec_weight", o->spec_weight, "[]", 0, 1e6)))
         return st;
     return TN_OK;
 }
@@ -21686,6 +21691,7 @@ typedef struct tn__sg_ranked {
     int i;
 } tn__sg_ranked;
 
+#define TN__SG_SPEC_BINS 33 /* radii of the spectrum loss at scale 0 (13 on a 26 px scale) */
 typedef struct tn__sg_train {
     tn_singan_opts o;
     tn__sg_arch A;
@@ -21711,6 +21717,7 @@ typedef struct tn__sg_train {
     float *bank;               /* TN__SG_BANK fake bases of the whole scale, grown by the context */
     int bank_w, bank_h;        /* their size; 0 = none (scale 0, or a scale too large to hold) */
     double budget;             /* seconds */
+    double spec_real[TN__SG_SPEC_BINS]; /* the example's radial power spectrum at scale 0 (the spectrum loss's target) */
 } tn__sg_train;
 
 static void tn__sg_train_free(tn__sg_train *s)
@@ -21845,6 +21852,136 @@ static int tn__sg_cmp_ranked(const void *a, const void *b)
     return x->v < y->v ? -1 : x->v > y->v ? 1 : x->i - y->i;
 }
 
+/* The radially binned power spectrum of x (w x h, mean removed, Hann-windowed) into e (bins 1 ..
+   TN__SG_SPEC_BINS - 1 of radius round(sqrt((kx s / w)^2 + (ky s / h)^2)), s = (w + h) / 2; bin
+   0 unused, an empty bin 0). With g: the gradient of w_loss x the sum over the radii of periods
+   of 4 px or more of ln((e + f) / (t + f))^2 (t: target, f: a hundredth of its mean) added into
+   g; returns that loss, or -1 out of memory. The coarsest scale sets the arrangement and its critic's
+   15 px field does not see the longest periods: from the smoothed noise the generator drew them
+   too strong (the Sahara's undulation at a 128 px period, docs/singan.md). */
+static double tn__sg_spec(const float *x, int w, int h, double *e, const double *target, float w_loss, float *g)
+{
+    size_t n = (size_t)w * h;
+    double *cx, *sx, *cy, *sy, *xw, *A, *B, *re, *im, *win, cnt[TN__SG_SPEC_BINS], m = 0, loss = 0, f[TN__SG_SPEC_BINS], lr;
+    int *bin, i, j, k, q;
+    const double tau = 6.28318530717958647692, sc = 0.5 * (w + h);
+    double *buf = (double *)tn__alloc((2 * (size_t)w * w + 2 * (size_t)h * h + 6 * n) * sizeof(double));
+    bin = (int *)tn__alloc(n * sizeof(int));
+    if (!buf || !bin) {
+        TN_FREE(buf);
+        TN_FREE(bin);
+        return -1;
+    }
+    cx = buf, sx = cx + (size_t)w * w, cy = sx + (size_t)w * w, sy = cy + (size_t)h * h;
+    xw = sy + (size_t)h * h, A = xw + n, B = A + n, re = B + n, im = re + n, win = im + n;
+    for (k = 0; k < w; k++)
+        for (i = 0; i < w; i++) cx[(size_t)k * w + i] = cos(tau * k * i / w), sx[(size_t)k * w + i] = sin(tau * k * i / w);
+    for (k = 0; k < h; k++)
+        for (j = 0; j < h; j++) cy[(size_t)k * h + j] = cos(tau * k * j / h), sy[(size_t)k * h + j] = sin(tau * k * j / h);
+    for (i = 0; i < (int)n; i++) m += x[i];
+    m /= (double)n;
+    for (j = 0; j < h; j++)
+        for (i = 0; i < w; i++) {
+            win[(size_t)j * w + i] = (0.5 - 0.5 * cos(tau * (i + 0.5) / w)) * (0.5 - 0.5 * cos(tau * (j + 0.5) / h));
+            xw[(size_t)j * w + i] = win[(size_t)j * w + i] * (x[(size_t)j * w + i] - m);
+        }
+    /* A = xw Cx^T, B = xw Sx^T; Re = Cy A - Sy B, Im = -(Sy A + Cy B) */
+    for (j = 0; j < h; j++)
+        for (k = 0; k < w; k++) {
+            double a = 0, bb = 0;
+            for (i = 0; i < w; i++) a += xw[(size_t)j * w + i] * cx[(size_t)k * w + i], bb += xw[(size_t)j * w + i] * sx[(size_t)k * w + i];
+            A[(size_t)j * w + k] = a, B[(size_t)j * w + k] = bb;
+        }
+    for (q = 0; q < h; q++)
+        for (k = 0; k < w; k++) {
+            double r = 0, s2 = 0;
+            for (j = 0; j < h; j++) {
+                double c = cy[(size_t)q * h + j], s1 = sy[(size_t)q * h + j];
+                r += c * A[(size_t)j * w + k] - s1 * B[(size_t)j * w + k];
+                s2 -= s1 * A[(size_t)j * w + k] + c * B[(size_t)j * w + k];
+            }
+            re[(size_t)q * w + k] = r, im[(size_t)q * w + k] = s2;
+        }
+    memset(cnt, 0, sizeof cnt);
+    for (k = 0; k < TN__SG_SPEC_BINS; k++) e[k] = 0;
+    for (q = 0; q < h; q++)
+        for (k = 0; k < w; k++) {
+            double fx = (k <= w / 2 ? k : k - w) * sc / w, fy = (q <= h / 2 ? q : q - h) * sc / h;
+            int b = (int)floor(sqrt(fx * fx + fy * fy) + 0.5);
+            size_t t = (size_t)q * w + k;
+            bin[t] = b >= 1 && b < TN__SG_SPEC_BINS ? b : 0;
+            if (bin[t]) e[b] += re[t] * re[t] + im[t] * im[t], cnt[b]++;
+        }
+    for (k = 1; k < TN__SG_SPEC_BINS; k++) e[k] = cnt[k] > 0 ? e[k] / cnt[k] + 1e-12 : 0;
+    if (g && target) {
+        /* d loss / d xw = Cy^T U Cx - Sy^T U Sx - Sy^T V Cx - Cy^T V Sx, U = f Re, V = f Im */
+        /* radii of periods of 4 px and more: shorter ones at this scale are finer scales' detail,
+           averaged down (pulled up here, they were bumps the upsampling spread into hills) */
+        int top = (int)(sc / 4);
+        double fl = 0; /* the floor: a hundredth of the mean power over those radii */
+        for (k = 1; k <= top && k < TN__SG_SPEC_BINS; k++) fl += target[k] / (100.0 * top);
+        for (k = 0; k < TN__SG_SPEC_BINS; k++) {
+            f[k] = 0;
+            if (!cnt[k] || !(target[k] > 0) || k > top) continue;
+            lr = log((e[k] + fl) / (target[k] + fl));
+            loss += w_loss * lr * lr;
+            f[k] = 2.0 * w_loss * lr / (e[k] + fl) * 2.0 / cnt[k];
+        }
+        for (i = 0; i < (int)n; i++) re[i] *= f[bin[i]], im[i] *= f[bin[i]];
+        /* A = U Cx - V Sx, B = -(U Sx + V Cx) (k-space rows, pixel columns): G = Cy^T A + Sy^T B */
+        for (q = 0; q < h; q++)
+            for (i = 0; i < w; i++) {
+                double a = 0, bb = 0;
+                for (k = 0; k < w; k++) {
+                    double u = re[(size_t)q * w + k], v = im[(size_t)q * w + k], c = cx[(size_t)k * w + i], s1 = sx[(size_t)k * w + i];
+                    a += u * c - v * s1;
+                    bb -= u * s1 + v * c;
+                }
+                A[(size_t)q * w + i] = a, B[(size_t)q * w + i] = bb;
+            }
+        m = 0;
+        for (j = 0; j < h; j++)
+            for (i = 0; i < w; i++) {
+                double gg = 0;
+                for (q = 0; q < h; q++) gg += cy[(size_t)q * h + j] * A[(size_t)q * w + i] + sy[(size_t)q * h + j] * B[(size_t)q * w + i];
+                xw[(size_t)j * w + i] = gg * win[(size_t)j * w + i];
+                m += xw[(size_t)j * w + i];
+            }
+        m /= (double)n;
+        for (i = 0; i < (int)n; i++) g[i] += (float)(xw[i] - m);
+    }
+    TN_FREE(buf);
+    TN_FREE(bin);
+    return loss;
+}
+
+/* The spectrum loss's target: the mean spectrum of the example's scale 0 over windows of the
+   training window's size pw x ph (one: the whole scale, by default). */
+static tn_status tn__sg_spec_target(tn__sg_train *s, int pw, int ph)
+{
+    int W = s->real[0].width, H = s->real[0].height, sx = (W - pw) / 4 > 1 ? (W - pw) / 4 : 1, sy = (H - ph) / 4 > 1 ? (H - ph) / 4 : 1, x0, y0, x, y, k;
+    float *d = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+    double e[TN__SG_SPEC_BINS], n = 0;
+    if (!d) return TN_ERR_OUT_OF_MEMORY;
+    memset(s->spec_real, 0, sizeof s->spec_real);
+    for (y0 = 0; y0 + ph <= H; y0 += sy)
+        for (x0 = 0; x0 + pw <= W; x0 += sx) {
+            for (y = 0; y < ph; y++)
+                for (x = 0; x < pw; x++) {
+                    d[(size_t)y * pw + x] = s->real[0].data[(size_t)(y0 + y) * W + x0 + x];
+                }
+            if (tn__sg_spec(d, pw, ph, e, NULL, 0, NULL) < 0) {
+                TN_FREE(d);
+                return TN_ERR_OUT_OF_MEMORY;
+            }
+            for (k = 0; k < TN__SG_SPEC_BINS; k++) s->spec_real[k] += e[k];
+            n++;
+        }
+    for (k = 0; k < TN__SG_SPEC_BINS; k++) s->spec_real[k] /= n;
+    TN_FREE(d);
+    return TN_OK;
+}
+
 /* The curvature loss's gradient with respect to the fake output patch out (pw x ph) into s->lapc:
    the patch's Laplacian values, sorted, are pulled to the example's Laplacian quantiles of the
    same ranks (the 1-D optimal transport between the two histograms, as the sliced Wasserstein
@@ -21963,6 +22100,10 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     s->realbase = (float *)tn__alloc((size_t)W * H * sizeof(float));
     if (!s->recbase || !s->xrec || !s->base || !s->xin || !s->fake || !s->fcond || !s->realbase) return TN_ERR_OUT_OF_MEMORY;
     tn__sg_real_base(s, sc, s->realbase);
+    if (sc == 0 && s->o.spec_weight > 0) { /* the spectrum loss's target */
+        tn_status st = tn__sg_spec_target(s, pw, ph);
+        if (st) return st;
+    }
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
@@ -22149,12 +22290,16 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
                  tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
     lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
     loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight / (s->sigma[sc] * s->sigma[sc]), 0.0f));
-    if (gres && s->o.curv_weight > 0 && s->nlapq) { /* the curvature loss, as sum(fake x its gradient) */
+    if (gres && ((s->o.curv_weight > 0 && s->nlapq) || (sc == 0 && s->o.spec_weight > 0))) { /* the curvature and spectrum losses, as sum(fake x their gradient) */
         tn_tensor *c = tn_tensor_4d(ctx, 1, 1, ph, pw);
         int y, x;
         for (y = 0; y < ph; y++)
             for (x = 0; x < pw; x++) s->fake[(size_t)y * pw + x] = s->base[(size_t)(y + M) * pew + x + M] + gres->data[(size_t)y * pw + x];
         tn__sg_curv_grad(s, s->fake, pw, ph);
+        if (sc == 0 && s->o.spec_weight > 0) {
+            double e[TN__SG_SPEC_BINS];
+            if (tn__sg_spec(s->fake, pw, ph, e, s->spec_real, s->o.spec_weight, s->lapc) < 0) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+        }
         if (c) memcpy(c->data, s->lapc, (size_t)pw * ph * sizeof(float));
         loss = tn_add(ctx, loss, tn_sum(ctx, tn_mul(ctx, gres, c)));
     }

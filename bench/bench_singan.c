@@ -28,7 +28,7 @@
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
                        [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1]
-                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--coarsest PX] [--channels N]
+                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but the second tuning set, M = 10, 2 threads) */
 #include "terrainnet.h"
@@ -568,6 +568,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--adv-weight") && v) g_opts.adv_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--d-steps") && v) g_opts.d_steps = atoi(argv[++i]);
         else if (!strcmp(a, "--curv-weight") && v) g_opts.curv_weight = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--spec-weight") && v) g_opts.spec_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--coarsest") && v) g_opts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--channels") && v) g_opts.channels = g_opts.max_channels = atoi(argv[++i]);
         else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
@@ -589,8 +590,8 @@ int main(int argc, char **argv)
             any = 1;
     }
     printf("# bench_singan: %.1f min per DEM, %d threads, singan options (0 = default): patch %d, disc_layers %d, noise_amp %g, adv_weight %g, d_steps %d, "
-           "curv_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp, (double)g_opts.adv_weight,
-           g_opts.d_steps, (double)g_opts.curv_weight, g_opts.coarsest, g_opts.channels);
+           "curv_weight %g, spec_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
+           (double)g_opts.adv_weight, g_opts.d_steps, (double)g_opts.curv_weight, (double)g_opts.spec_weight, g_opts.coarsest, g_opts.channels);
     fflush(stdout);
     if (peer) {
         if (system("/usr/bin/python3 /work/shared/peers/torch_singan_step.py --threads 2 --size 256 --runs 3 2>&1 | sed 's/^/peer: /'"))
