@@ -958,17 +958,14 @@ static double tn__sg_spec(const float *x, int w, int h, double *e, const double 
    training window's size pw x ph (one: the whole scale, by default). */
 static tn_status tn__sg_spec_target(tn__sg_train *s, int pw, int ph)
 {
-    int W = s->real[0].width, H = s->real[0].height, sx = (W - pw) / 4 > 1 ? (W - pw) / 4 : 1, sy = (H - ph) / 4 > 1 ? (H - ph) / 4 : 1, x0, y0, x, y, k;
+    int W = s->real[0].width, H = s->real[0].height, sx = (W - pw) / 4 > 1 ? (W - pw) / 4 : 1, sy = (H - ph) / 4 > 1 ? (H - ph) / 4 : 1, x0, y0, y, k;
     float *d = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
     double e[TN__SG_SPEC_BINS], n = 0;
     if (!d) return TN_ERR_OUT_OF_MEMORY;
     memset(s->spec_real, 0, sizeof s->spec_real);
     for (y0 = 0; y0 + ph <= H; y0 += sy)
         for (x0 = 0; x0 + pw <= W; x0 += sx) {
-            for (y = 0; y < ph; y++)
-                for (x = 0; x < pw; x++) {
-                    d[(size_t)y * pw + x] = s->real[0].data[(size_t)(y0 + y) * W + x0 + x];
-                }
+            for (y = 0; y < ph; y++) memcpy(d + (size_t)y * pw, s->real[0].data + (size_t)(y0 + y) * W + x0, (size_t)pw * sizeof(float));
             if (tn__sg_spec(d, pw, ph, e, NULL, 0, NULL) < 0) {
                 TN_FREE(d);
                 return TN_ERR_OUT_OF_MEMORY;
