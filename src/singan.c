@@ -61,9 +61,9 @@ typedef struct tn_singan_opts {
                               the example's mean square Laplacian; 0 = 10, < 0 = none (without it the
                               finest scales add crumpled detail, no smooth floors or sharp crests) */
     float spec_weight;     /* weight of the spectrum loss at the coarsest scale: the squared log ratio
-                              of its power spectrum to the example's at periods of 4 px and more;
-                              0 = none (it mended the Sahara's undulation at half the map's period,
-                              1 did, but doubled held-out Everest's curvature; docs/singan.md) */
+                              of its power spectrum to the example's where it exceeds it, at periods
+                              of 8 px and more (the Sahara's undulation at half the map's period;
+                              docs/singan.md); 0 = 1, < 0 = none */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -246,6 +246,7 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->d_steps <= 0) o->d_steps = 1;
     if (o->curv_weight == 0) o->curv_weight = 10.0f;
     if (o->curv_weight < 0) o->curv_weight = 0.0f;
+    if (o->spec_weight == 0) o->spec_weight = 1.0f;
     if (o->spec_weight < 0) o->spec_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
 }
@@ -854,10 +855,11 @@ static int tn__sg_cmp_ranked(const void *a, const void *b)
 /* The radially binned power spectrum of x (w x h, mean removed, Hann-windowed) into e (bins 1 ..
    TN__SG_SPEC_BINS - 1 of radius round(sqrt((kx s / w)^2 + (ky s / h)^2)), s = (w + h) / 2; bin
    0 unused, an empty bin 0). With g: the gradient of w_loss x the sum over the radii of periods
-   of 4 px or more of ln((e + f) / (t + f))^2 (t: target, f: a hundredth of its mean) added into
-   g; returns that loss, or -1 out of memory. The coarsest scale sets the arrangement and its critic's
-   15 px field does not see the longest periods: from the smoothed noise the generator drew them
-   too strong (the Sahara's undulation at a 128 px period, docs/singan.md). */
+   of 8 px or more of ln((e + f) / (t + f))^2 where e > t (t: target, f: a hundredth of its mean)
+   added into g; returns that loss, or -1 out of memory. Nothing in training sees those periods
+   (the generator's field is 11 px, the critic's 15), and the generator drew them too strong
+   (the Sahara's undulation at a 128 px period). Only an excess is penalised: pulled up as well,
+   shorter periods grew into rows of linear dunes (docs/singan.md). */
 static double tn__sg_spec(const float *x, int w, int h, double *e, const double *target, float w_loss, float *g)
 {
     size_t n = (size_t)w * h;
@@ -914,15 +916,14 @@ static double tn__sg_spec(const float *x, int w, int h, double *e, const double 
     for (k = 1; k < TN__SG_SPEC_BINS; k++) e[k] = cnt[k] > 0 ? e[k] / cnt[k] + 1e-12 : 0;
     if (g && target) {
         /* d loss / d xw = Cy^T U Cx - Sy^T U Sx - Sy^T V Cx - Cy^T V Sx, U = f Re, V = f Im */
-        /* radii of periods of 4 px and more: shorter ones at this scale are finer scales' detail,
-           averaged down (pulled up here, they were bumps the upsampling spread into hills) */
-        int top = (int)(sc / 4);
+        int top = (int)(sc / 8); /* radii of periods of 8 px and more */
         double fl = 0; /* the floor: a hundredth of the mean power over those radii */
         for (k = 1; k <= top && k < TN__SG_SPEC_BINS; k++) fl += target[k] / (100.0 * top);
         for (k = 0; k < TN__SG_SPEC_BINS; k++) {
             f[k] = 0;
             if (!cnt[k] || !(target[k] > 0) || k > top) continue;
             lr = log((e[k] + fl) / (target[k] + fl));
+            if (lr <= 0) continue; /* an excess only */
             loss += w_loss * lr * lr;
             f[k] = 2.0 * w_loss * lr / (e[k] + fl) * 2.0 / cnt[k];
         }
