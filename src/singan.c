@@ -858,8 +858,8 @@ static int tn__sg_cmp_ranked(const void *a, const void *b)
    of 8 px or more of ln((e + f) / (t + f))^2 where e > t (t: target, f: a hundredth of its mean)
    added into g; returns that loss, or -1 out of memory. Nothing in training sees those periods
    (the generator's field is 11 px, the critic's 15), and the generator drew them too strong
-   (the Sahara's undulation at a 128 px period). Only an excess is penalised: pulled up as well,
-   shorter periods grew into rows of linear dunes (docs/singan.md). */
+   (the Sahara's undulation at a 128 px period). Only an excess is penalised: the two-sided form,
+   which pulled shorter periods up too, drew rows of linear dunes (docs/singan.md). */
 static double tn__sg_spec(const float *x, int w, int h, double *e, const double *target, float w_loss, float *g)
 {
     size_t n = (size_t)w * h;
