@@ -586,8 +586,17 @@ int main(int argc, char **argv)
         else if (a[0] == '-') {
             fprintf(stderr, "bench_singan: unknown option %s (see the comment at the top of bench/bench_singan.c)\n", a);
             return 2;
-        } else
+        } else {
+            for (k = 0; k < (int)(sizeof regions / sizeof regions[0]) && strcmp(a, regions[k].dir); k++) {
+            }
+            if (k == (int)(sizeof regions / sizeof regions[0])) {
+                fprintf(stderr, "bench_singan: unknown region %s; the regions:", a);
+                for (k = 0; k < (int)(sizeof regions / sizeof regions[0]); k++) fprintf(stderr, " %s", regions[k].dir);
+                fprintf(stderr, "\n");
+                return 2;
+            }
             any = 1;
+        }
     }
     printf("# bench_singan: %.1f min per DEM, %d threads, singan options (0 = default): patch %d, disc_layers %d, noise_amp %g, adv_weight %g, d_steps %d, "
            "curv_weight %g, spec_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
