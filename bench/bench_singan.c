@@ -50,6 +50,17 @@ static const region regions[] = {
     {"alps_n47e009", 2},           {"seed_merizzi_himalaya", 2},   {"karst_yangshuo", 2},
 };
 
+#define NREGIONS ((int)(sizeof regions / sizeof regions[0]))
+
+/* Whether name is one of the regions. */
+static int region_named(const char *name)
+{
+    int k;
+    for (k = 0; k < NREGIONS; k++)
+        if (!strcmp(name, regions[k].dir)) return 1;
+    return 0;
+}
+
 static const char *g_root = "../shared/data";
 
 /* A region's PNG in metres (dem_index.csv's linear mapping) and its pixel size (1 if unknown). */
@@ -587,11 +598,9 @@ int main(int argc, char **argv)
             fprintf(stderr, "bench_singan: unknown option %s (see the comment at the top of bench/bench_singan.c)\n", a);
             return 2;
         } else {
-            for (k = 0; k < (int)(sizeof regions / sizeof regions[0]) && strcmp(a, regions[k].dir); k++) {
-            }
-            if (k == (int)(sizeof regions / sizeof regions[0])) {
+            if (!region_named(a)) {
                 fprintf(stderr, "bench_singan: unknown region %s; the regions:", a);
-                for (k = 0; k < (int)(sizeof regions / sizeof regions[0]); k++) fprintf(stderr, " %s", regions[k].dir);
+                for (k = 0; k < NREGIONS; k++) fprintf(stderr, " %s", regions[k].dir);
                 fprintf(stderr, "\n");
                 return 2;
             }
@@ -607,7 +616,7 @@ int main(int argc, char **argv)
             printf("# peer failed\n");
         fflush(stdout);
     }
-    for (k = 0; k < (int)(sizeof regions / sizeof regions[0]); k++) {
+    for (k = 0; k < NREGIONS; k++) {
         int want = !any && regions[k].tuned != 2;
         for (i = 1; any && i < argc; i++)
             if (!strcmp(argv[i], regions[k].dir)) want = 1;
