@@ -799,6 +799,8 @@ done:
 #define TN__GNN_CREST_POOL 64  /* px: less of the example's main lines are not copied (one short
                                   line, copied again and again, drew a comb of spurs at its own
                                   period along a drawn ridge) */
+#define TN__GNN_CREST_WIDE 256 /* px: lower orders join a pool shorter than this (8 chunks): a pool
+                                  of two or three lines gave every drawn ridge the same few chunks */
 #define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
 #define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
 
@@ -848,8 +850,8 @@ static void tn__gnn_crest_rms(const float *h, int n, double *s2, int *nw, float 
 /* The example's heights along its main lines of one kind (the highest Strahler order among
    them; parts that continue one another, an end beside the next one's start, are one line),
    sampled every px: the pool tn__gnn_grow_crest copies from. When those add up to less than
-   TN__GNN_CREST_POOL px the next orders down join, a whole order at a time, until the pool holds
-   that much: one short line, copied again and again, drew a comb of spurs at its own period. A
+   TN__GNN_CREST_WIDE px the next orders down join, a whole order at a time, until the pool holds
+   that much: a few short lines, copied again and again, drew a comb of spurs at their period. A
    lower order's lines are scaled by sc[k] = min(1, sqrt(the top order's relief / theirs)) (the
    RMS of tn__gnn_crest_rms): their relief meets the top order's halfway (geometric mean), so
    they vary the pool without raising its relief much (the Sahara's second order has 2.5 x its
@@ -881,7 +883,7 @@ static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, flo
     h = (float *)tn__alloc((size_t)total * 2 * sizeof(float)); /* a chain's length is under 1.5 px a point */
     if (xy && !(at = (float *)tn__alloc((size_t)total * 4 * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
     if (!pts || !h) st = TN_ERR_OUT_OF_MEMORY;
-    for (ord = top; !st && ord >= low && (ord == top || n < TN__GNN_CREST_POOL); ord--) {
+    for (ord = top; !st && ord >= low && (ord == top || n < TN__GNN_CREST_WIDE); ord--) {
         k0 = *runs;
         np = 0;
         for (c = 0; c <= example->count; c++) {

@@ -1358,19 +1358,21 @@ static double crest_relief_of(const float *pts, int a, int b)
 
 /* An example of two ridge orders along x, cut into 8 px parts: a main ridge (order 2, its first
    top_len px) at y 64 swinging 40 m and a lower order (128 px) at y 20 swinging 400 m, both with a
-   24 px period. */
-static void two_ridge_orders(float ep[2][128 * 3], tn_contour *items, int top_len, tn_contour_set *ex)
+   24 px period; with top_lines 3, two more main ridges of 128 px at y 80 and 96 (ep[2], ep[3]),
+   after the lower order's parts. */
+static void two_ridge_orders(float ep[4][128 * 3], tn_contour *items, int top_len, int top_lines, tn_contour_set *ex)
 {
     int i, k = 0, x;
     for (x = 0; x < 128; x++) {
         ep[0][3 * x] = (float)x, ep[0][3 * x + 1] = 64, ep[0][3 * x + 2] = 1000 + 40 * sinf(6.2831853f * x / 24);
         ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
+        for (i = 2; i < 4; i++) ep[i][3 * x] = (float)x, ep[i][3 * x + 1] = (float)(48 + 16 * i), ep[i][3 * x + 2] = ep[0][3 * x + 2];
     }
-    for (i = 0; i < 2; i++)
-        for (x = 0; x < (i ? 128 : top_len); x += 8, k++) {
+    for (i = 0; i < (top_lines > 1 ? 4 : 2); i++)
+        for (x = 0; x < (i == 0 ? top_len : 128); x += 8, k++) {
             memset(&items[k], 0, sizeof items[k]);
             items[k].type = TN_RIDGE;
-            items[k].order = i ? 1 : 2;
+            items[k].order = i == 1 ? 1 : 2;
             items[k].npoints = 8;
             items[k].points = ep[i] + 3 * x;
         }
@@ -1380,16 +1382,16 @@ static void two_ridge_orders(float ep[2][128 * 3], tn_contour *items, int top_le
 
 TN_TEST(grow_crest_copies_the_example_relief)
 {
-    /* a drawn ridge of constant height takes the along-line relief of the example's main ridge (a
-       chain of 8 px parts whose heights swing 40 m with a 24 px period), not that of its
-       lower-order ridge (400 m); a drawn valley keeps its heights, and so does the ridge where the
-       valley starts beside it; the seed decides */
-    float ep[2][128 * 3], up[2][201 * 3], before[201 * 3], first[201 * 3];
-    tn_contour items[40], user[2];
+    /* a drawn ridge of constant height takes the along-line relief of the example's main ridges
+       (three chains of 8 px parts whose heights swing 40 m with a 24 px period: over
+       TN__GNN_CREST_WIDE px), not that of its lower-order ridge (400 m); a drawn valley keeps its
+       heights, and so does the ridge where the valley starts beside it; the seed decides */
+    float ep[4][128 * 3], up[2][201 * 3], before[201 * 3], first[201 * 3];
+    tn_contour items[64], user[2];
     tn_contour_set ex, sk;
     double want, got;
     int x, seed;
-    two_ridge_orders(ep, items, 128, &ex);
+    two_ridge_orders(ep, items, 128, 3, &ex);
     want = crest_relief_of(ep[0], 8, 120);
     for (x = 0; x <= 200; x++) {
         up[0][3 * x] = (float)(20 + x), up[0][3 * x + 1] = 100, up[0][3 * x + 2] = 500;
@@ -1420,33 +1422,37 @@ TN_TEST(grow_crest_copies_the_example_relief)
 
 TN_TEST(grow_crest_widens_a_short_pool)
 {
-    /* an example whose main ridge is one line of 24 px (under TN__GNN_CREST_POOL: copied again
-       and again it is a comb) takes its next order down too (128 px), scaled to meet the main
-       ridge's relief halfway: a swing of 40 m and one of 400 m give a drawn ridge the relief of
-       about sqrt(40 x 400) m, well under the lower order's own; with no main line long enough to
-       size it by (one 8 px part), the drawn ridge keeps its heights */
-    float ep[2][128 * 3], up[201 * 3], before[201 * 3];
-    tn_contour items[40], user;
+    /* an example whose main ridge is one line of 24 or 128 px (under TN__GNN_CREST_WIDE: copied
+       again and again it is a comb) takes its next order down too (128 px), scaled to meet the
+       main ridge's relief halfway: a swing of 40 m and one of 400 m give a drawn ridge the relief
+       of about sqrt(40 x 400) m, well under the lower order's own; with no main line long enough
+       to size it by (one 8 px part), the drawn ridge keeps its heights */
+    static const int top_len[2] = {24, 128};
+    float ep[4][128 * 3], up[201 * 3], before[201 * 3];
+    tn_contour items[64], user;
     tn_contour_set ex, sk;
     double want_top, want_low, got;
-    int x, seed;
-    two_ridge_orders(ep, items, 24, &ex);
-    want_top = crest_relief_of(ep[0], 8, 120);
-    want_low = crest_relief_of(ep[1], 8, 120);
+    int x, seed, t;
     for (x = 0; x <= 200; x++) up[3 * x] = (float)(20 + x), up[3 * x + 1] = 100, up[3 * x + 2] = 500;
     memcpy(before, up, sizeof before);
     memset(&user, 0, sizeof user);
     user.type = TN_RIDGE, user.npoints = 201, user.points = up;
     memset(&sk, 0, sizeof sk);
     sk.width = sk.height = 256, sk.items = &user, sk.count = 1;
-    for (seed = 1; seed <= 2; seed++) {
-        memcpy(up, before, sizeof before);
-        TN_CHECK(tn__gnn_grow_crest(&sk, 1, &ex, TN_RIDGE, (uint64_t)seed) == TN_OK);
-        got = crest_relief_of(up, 20, 180);
-        printf("  seed %d: drawn ridge's relief %.1f m; main ridge %.1f m, next order %.1f m, their geometric mean %.1f m\n", seed, got, want_top, want_low,
-               sqrt(want_top * want_low));
-        TN_CHECK(got > 0.6 * sqrt(want_top * want_low) && got < 1.4 * sqrt(want_top * want_low) && got < 0.5 * want_low);
+    for (t = 0; t < 2; t++) {
+        two_ridge_orders(ep, items, top_len[t], 1, &ex);
+        want_top = crest_relief_of(ep[0], 8, 120);
+        want_low = crest_relief_of(ep[1], 8, 120);
+        for (seed = 1; seed <= 2; seed++) {
+            memcpy(up, before, sizeof before);
+            TN_CHECK(tn__gnn_grow_crest(&sk, 1, &ex, TN_RIDGE, (uint64_t)seed) == TN_OK);
+            got = crest_relief_of(up, 20, 180);
+            printf("  main ridge %d px, seed %d: drawn ridge's relief %.1f m; main ridge %.1f m, next order %.1f m, their geometric mean %.1f m\n", top_len[t],
+                   seed, got, want_top, want_low, sqrt(want_top * want_low));
+            TN_CHECK(got > 0.6 * sqrt(want_top * want_low) && got < 1.4 * sqrt(want_top * want_low) && got < 0.5 * want_low);
+        }
     }
+    two_ridge_orders(ep, items, 24, 1, &ex);
     ex.count = 1 + 16; /* the main ridge's first part alone: 8 px */
     memmove(items + 1, items + 3, 16 * sizeof items[0]);
     memcpy(up, before, sizeof before);
