@@ -1,0 +1,58 @@
+#!/bin/sh
+# Issue 30's measurement at its own setup, in one command: for each region, a gnn-train model of
+# the 128 example for MINUTES on THREADS (bench_gnn, which also measures the reconstruction and
+# the neighbours), then every drawing of examples/data on that model (bench_sketch, with maps of
+# BIG x BIG and the strips), then one summary table of the issue's targets.
+#   sh bench/sketch_setup.sh [OUT] [REGION ...]
+#   (defaults: OUT build/sketch_setup; alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit
+#    himalaya_everest moon_nearside_lola4ppd; MINUTES=10 THREADS=2 BIG=1024)
+# Run from the repository root after `make bin/bench_gnn bin/bench_sketch`, with ../shared/data
+# (or TN_DATA) holding the DEMs. About 16 minutes a region at the defaults, nothing else running.
+# Writes OUT/REGION.tnw, OUT/REGION.gnn.log, OUT/REGION.sketch.log, OUT/gnn_fig10_REGION.png,
+# OUT/sketch_REGION_DRAWING.png and OUT/summary.md. A model already in OUT is used, not trained.
+set -e
+OUT=${1:-build/sketch_setup}
+[ $# -gt 0 ] && shift
+REGIONS=${*:-alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit himalaya_everest moon_nearside_lola4ppd}
+MINUTES=${MINUTES:-10}
+THREADS=${THREADS:-2}
+BIG=${BIG:-1024}
+for b in bin/bench_gnn bin/bench_sketch; do
+    [ -x $b ] || { echo "sketch_setup: $b is missing (make $b; run from the repository root)" >&2; exit 2; }
+done
+mkdir -p "$OUT"
+for r in $REGIONS; do
+    echo "== $r: bench_gnn $MINUTES min, $THREADS threads ($(date -u +%H:%M:%S) UTC)"
+    ./bin/bench_gnn "$r" "$MINUTES" "$THREADS" pictures=1 model="$OUT/$r.tnw" > "$OUT/$r.gnn.log"
+    [ -f "gnn_fig10_$r.png" ] && mv "gnn_fig10_$r.png" "$OUT/"
+    echo "== $r: bench_sketch ($(date -u +%H:%M:%S) UTC)"
+    ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log"
+done
+# The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
+# distances <= 1.5 x the real crops'), the 256 and BIG generation seconds, and per region the
+# reconstruction and the neighbours against the membrane.
+{
+    echo "| region | drawing | follow % | height error % | slope x | curvature x | spectrum x | s (256) | s ($BIG) |"
+    echo "|---|---|---|---|---|---|---|---|---|"
+    for r in $REGIONS; do
+        L="$OUT/$r.sketch.log"
+        [ -f "$L" ] || continue
+        for d in valley summit ring cross; do
+            v() { sed -n "s/^${d}_$1: \([^ ]*\).*/\1/p" "$L" | head -1; }
+            x() { sed -n "s/^${d}_$1: [^(]*(\([0-9.na]*\) x real).*/\1/p" "$L" | head -1; }
+            s256=$(sed -n "s/^${d}_new_gain: .*seconds: \([^ ]*\).*/\1/p" "$L" | head -1)
+            sbig=$(sed -n "s/^${d}_${BIG}_map_scale: .*; seconds \([^;]*\);.*/\1/p" "$L" | head -1)
+            echo "| $r | $d | $(v new_follow) | $(v new_height_error) | $(x new_slope) | $(x new_curvature) | $(x new_spectrum) | $s256 | $sbig |"
+        done
+    done
+    echo
+    echo "| region | reconstruction SSIM | neighbours t0 SSIM (membrane) | t200 | t500 | train iterations |"
+    echo "|---|---|---|---|---|---|"
+    for r in $REGIONS; do
+        G="$OUT/$r.gnn.log"
+        [ -f "$G" ] || continue
+        g() { sed -n "s/^$1: \([^ ]*\).*/\1/p" "$G" | head -1; }
+        echo "| $r | $(g recon_ssim) | $(g neighbours_t0_gnn_ssim) ($(g neighbours_t0_membrane_ssim)) | $(g neighbours_t200_gnn_ssim) ($(g neighbours_t200_membrane_ssim)) | $(g neighbours_t500_gnn_ssim) ($(g neighbours_t500_membrane_ssim)) | $(g train_iterations) |"
+    done
+} > "$OUT/summary.md"
+cat "$OUT/summary.md"
