@@ -31,6 +31,8 @@ done
 # The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
 # distances <= 1.5 x the real crops'), the 256 and BIG generation seconds, and per region the
 # reconstruction and the neighbours against the membrane.
+first() { sed -n "s/$2/\1/p" "$1" | head -1; } # FILE SED-PATTERN: the first line's \1
+num='\([^ ;]*\)'
 {
     echo "| region | drawing | follow % | height error % | slope x | curvature x | spectrum x | s (256) | s ($BIG) |"
     echo "|---|---|---|---|---|---|---|---|---|"
@@ -38,11 +40,9 @@ done
         L="$OUT/$r.sketch.log"
         [ -f "$L" ] || continue
         for d in valley summit ring cross; do
-            v() { sed -n "s/^${d}_$1: \([^ ]*\).*/\1/p" "$L" | head -1; }
-            x() { sed -n "s/^${d}_$1: [^(]*(\([0-9.na]*\) x real).*/\1/p" "$L" | head -1; }
-            s256=$(sed -n "s/^${d}_new_gain: .*seconds: \([^ ]*\).*/\1/p" "$L" | head -1)
-            sbig=$(sed -n "s/^${d}_${BIG}_map_scale: .*; seconds \([^;]*\);.*/\1/p" "$L" | head -1)
-            echo "| $r | $d | $(v new_follow) | $(v new_height_error) | $(x new_slope) | $(x new_curvature) | $(x new_spectrum) | $s256 | $sbig |"
+            row="| $r | $d | $(first "$L" "^${d}_new_follow: $num.*") | $(first "$L" "^${d}_new_height_error: $num.*")"
+            for k in slope curvature spectrum; do row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"; done
+            echo "$row | $(first "$L" "^${d}_new_gain: .*seconds: $num.*") | $(first "$L" "^${d}_${BIG}_map_scale: .*; seconds $num;.*") |"
         done
     done
     echo
@@ -51,8 +51,9 @@ done
     for r in $REGIONS; do
         G="$OUT/$r.gnn.log"
         [ -f "$G" ] || continue
-        g() { sed -n "s/^$1: \([^ ]*\).*/\1/p" "$G" | head -1; }
-        echo "| $r | $(g recon_ssim) | $(g neighbours_t0_gnn_ssim) ($(g neighbours_t0_membrane_ssim)) | $(g neighbours_t200_gnn_ssim) ($(g neighbours_t200_membrane_ssim)) | $(g neighbours_t500_gnn_ssim) ($(g neighbours_t500_membrane_ssim)) | $(g train_iterations) |"
+        row="| $r | $(first "$G" "^recon_ssim: $num.*")"
+        for t in 0 200 500; do row="$row | $(first "$G" "^neighbours_t${t}_gnn_ssim: $num.*") ($(first "$G" "^neighbours_t${t}_membrane_ssim: $num.*"))"; done
+        echo "$row | $(first "$G" "^train_iterations: $num.*") |"
     done
 } > "$OUT/summary.md"
 cat "$OUT/summary.md"
