@@ -1358,8 +1358,8 @@ static double crest_relief_of(const float *pts, int a, int b)
 
 /* An example of two ridge orders along x, cut into 8 px parts: a main ridge (order 2, its first
    top_len px) at y 64 swinging 40 m and a lower order (128 px) at y 20 swinging 400 m, both with a
-   24 px period; with top_lines 3, two more main ridges of 128 px at y 80 and 96 (ep[2], ep[3]),
-   after the lower order's parts. */
+   24 px period; with top_lines 2 or 3, one or two more main ridges of 128 px at y 80 and 96
+   (ep[2], ep[3]), after the lower order's parts. */
 static void two_ridge_orders(float ep[4][128 * 3], tn_contour *items, int top_len, int top_lines, tn_contour_set *ex)
 {
     int i, k = 0, x;
@@ -1368,7 +1368,7 @@ static void two_ridge_orders(float ep[4][128 * 3], tn_contour *items, int top_le
         ep[1][3 * x] = (float)x, ep[1][3 * x + 1] = 20, ep[1][3 * x + 2] = 1000 + 400 * sinf(6.2831853f * x / 24);
         for (i = 2; i < 4; i++) ep[i][3 * x] = (float)x, ep[i][3 * x + 1] = (float)(48 + 16 * i), ep[i][3 * x + 2] = ep[0][3 * x + 2];
     }
-    for (i = 0; i < (top_lines > 1 ? 4 : 2); i++)
+    for (i = 0; i < top_lines + 1; i++)
         for (x = 0; x < (i == 0 ? top_len : 128); x += 8, k++) {
             memset(&items[k], 0, sizeof items[k]);
             items[k].type = TN_RIDGE;
