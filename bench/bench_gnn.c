@@ -14,7 +14,8 @@
      generation of 128 x 128 (with a 30-step fine-tune too) and of
      512 x 512 (the sketch of the map's top-left 512 crop; tiled internally), peak memory (RSS).
    The crop is where <region>_128.png lies in <region>_full.png, moved inwards if needed so its
-   8 neighbours fit. Heights in metres by the mapping of dem_index.csv.
+   8 neighbours fit (moved=0 keeps it there and scores the neighbours that fit: a model of the
+   128 example itself, trained by gnn-train). Heights in metres by the mapping of dem_index.csv.
    Usage: bench_gnn [region] [minutes] [threads] [key=value ...]   (defaults alps_montblanc 3 2),
    from the repository root (the drawn sketch is examples/data/sketch_a.tns).
    Variants (the measurements of design choices in docs/gnn.md): iters=N trains N iterations
@@ -28,7 +29,8 @@
    with 48 random nodes, hillshaded), finetune=N (fine-tune steps of the neighbours' GNN figures,
    the drawn sketch's and the 512 map's; default 0), model=PATH (load the model from PATH and
    skip training when it exists, else train and save it there), grow=G (tn_gnn_generate_opts.grow of
-   every generation: 0 = auto, the default; -1 = never densify by example, the form before it).
+   every generation: 0 = auto, the default; -1 = never densify by example, the form before it),
+   moved=0 (see above).
    Prints `name: value unit` lines. */
 #include "terrainnet.h"
 #include "bench_data.h"
@@ -274,7 +276,7 @@ int main(int argc, char **argv)
     float gain = 0.0f, phase = 0.0f; /* 0: tn_gnn_defaults' embed_phase */
     double done = 0;
     long iters = 0, phase_from = -1;
-    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0, finetune = 0, grow = 0;
+    int seg, a, pictures = 0, trace = 0, hold = 1, nhold = 0, finetune = 0, grow = 0, moved = 1;
     const char *model_path = NULL;
     tn_image hw[4];
     trace_set ts;
@@ -300,8 +302,9 @@ int main(int argc, char **argv)
         else if (kl == 8 && !strncmp(argv[a], "phasenet", kl)) o.phase_network = (int)v;
         else if (kl == 8 && !strncmp(argv[a], "finetune", kl)) finetune = (int)v;
         else if (kl == 5 && !strncmp(argv[a], "model", kl)) model_path = eq + 1;
+        else if (kl == 5 && !strncmp(argv[a], "moved", kl)) moved = v != 0;
         else {
-            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= grow= holdout= phasenet= finetune= model= pictures= trace=)\n", argv[a]);
+            fprintf(stderr, "bench_gnn: unknown variant '%s' (iters= seed= smooth= sketch= further= phase= index= gain= grow= holdout= phasenet= finetune= model= moved= pictures= trace=)\n", argv[a]);
             return 2;
         }
         printf("variant: %s\n", argv[a]);
@@ -318,10 +321,12 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_gnn: %s_128 not found in %s_full, or the map is under 384 px\n", region, region);
         return 1;
     }
-    if (cx < SIDE) cx = SIDE;
-    if (cy < SIDE) cy = SIDE;
-    if (cx + 2 * SIDE > full.width) cx = full.width - 2 * SIDE;
-    if (cy + 2 * SIDE > full.height) cy = full.height - 2 * SIDE;
+    if (moved) {
+        if (cx < SIDE) cx = SIDE;
+        if (cy < SIDE) cy = SIDE;
+        if (cx + 2 * SIDE > full.width) cx = full.width - 2 * SIDE;
+        if (cy + 2 * SIDE > full.height) cy = full.height - 2 * SIDE;
+    }
     printf("region: %s\n", region);
     printf("crop: %d %d px (x y of the trained 128 crop in %s_full)\n", cx, cy, region);
     printf("threads: %d\n", threads);
@@ -444,7 +449,7 @@ int main(int argc, char **argv)
             for (dx = -1; dx <= 1; dx++) {
                 tn_image nb = {0, 0, 0, NULL};
                 if (!dx && !dy) continue;
-                tn_image_crop(&nb, &full, cx + dx * SIDE, cy + dy * SIDE, SIDE, SIDE);
+                if (tn_image_crop(&nb, &full, cx + dx * SIDE, cy + dy * SIDE, SIDE, SIDE)) continue; /* off the map (moved=0) */
                 if (!sketch_of(&nb, thr[ti], &sk, &cover)) {
                     tn_image_free(&nb);
                     continue;

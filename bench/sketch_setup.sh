@@ -1,15 +1,17 @@
 #!/bin/sh
-# Issue 30's measurement at its own setup, in one command: for each region, a gnn-train model of
-# the 128 example for MINUTES on THREADS (bench_gnn, which also measures the reconstruction and
-# the neighbours), then every drawing of examples/data on that model (bench_sketch, with maps of
-# BIG x BIG and the strips), then one summary table of the issue's targets.
+# Issue 30's measurement at its own setup, in one command: for each region, the default gnn-train
+# of the 128 example (the _full DEM with --crop where the MANIFEST puts the 128 crop, MINUTES on
+# THREADS, as a user trains a style), then bench_gnn's reconstruction and neighbours of that model
+# (moved=0: the neighbours that fit around the example), then every drawing of examples/data on it
+# (bench_sketch, with maps of BIG x BIG and the strips), then one summary table of the targets.
 #   sh bench/sketch_setup.sh [OUT] [REGION ...]
 #   (defaults: OUT build/sketch_setup; alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit
 #    himalaya_everest moon_nearside_lola4ppd; MINUTES=10 THREADS=2 BIG=1024)
-# Run from the repository root after `make bin/bench_gnn bin/bench_sketch`, with ../shared/data
-# (or TN_DATA) holding the DEMs. About 16 minutes a region at the defaults, nothing else running.
-# Writes OUT/REGION.tnw, OUT/REGION.gnn.log, OUT/REGION.sketch.log, OUT/gnn_fig10_REGION.png,
-# OUT/sketch_REGION_DRAWING.png and OUT/summary.md. A model already in OUT is used, not trained.
+# Run from the repository root after `make bin/terrainnet bin/bench_gnn bin/bench_sketch`, with
+# ../shared/data (or TN_DATA) holding the DEMs. About 16 minutes a region at the defaults, nothing
+# else running. Writes OUT/REGION.tnw, OUT/REGION.train.log, OUT/REGION.gnn.log,
+# OUT/REGION.sketch.log, OUT/gnn_fig10_REGION.png, OUT/sketch_REGION_DRAWING.png and
+# OUT/summary.md. A model already in OUT is used, not trained.
 set -e
 OUT=${1:-build/sketch_setup}
 [ $# -gt 0 ] && shift
@@ -17,13 +19,26 @@ REGIONS=${*:-alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit himalaya_e
 MINUTES=${MINUTES:-10}
 THREADS=${THREADS:-2}
 BIG=${BIG:-1024}
-for b in bin/bench_gnn bin/bench_sketch; do
+DATA=${TN_DATA:-../shared/data}
+for b in bin/terrainnet bin/bench_gnn bin/bench_sketch; do
     [ -x $b ] || { echo "sketch_setup: $b is missing (make $b; run from the repository root)" >&2; exit 2; }
 done
 mkdir -p "$OUT"
 for r in $REGIONS; do
-    echo "== $r: bench_gnn $MINUTES min, $THREADS threads ($(date -u +%H:%M:%S) UTC)"
-    ./bin/bench_gnn "$r" "$MINUTES" "$THREADS" pictures=1 model="$OUT/$r.tnw" > "$OUT/$r.gnn.log"
+    dem="$DATA/dem/$r/${r}_full.png"
+    # the 128 crop ("rows Y-.. cols X-.. of REGION_full.png") and the metre mapping of the 16-bit codes
+    at=$(sed -n "s/^| \`dem\/$r\/${r}_128.png\`.*| rows \([0-9]*\)-[0-9]* cols \([0-9]*\)-[0-9]* of ${r}_full.png.*/\2 \1/p" "$DATA/MANIFEST.md")
+    range=$(awk -F, -v p="dem/$r/${r}_full.png" '$1 == p { print $8, $9; exit }' "$DATA/dem_index.csv")
+    [ -n "$at" ] && [ -n "$range" ] || { echo "sketch_setup: $r: no 128 crop in $DATA/MANIFEST.md or no row in dem_index.csv" >&2; exit 1; }
+    if [ ! -f "$OUT/$r.tnw" ]; then
+        echo "== $r: gnn-train --crop $at, $MINUTES min, $THREADS threads ($(date -u +%H:%M:%S) UTC)"
+        # shellcheck disable=SC2086
+        ./bin/terrainnet --threads "$THREADS" gnn-train "$dem" --crop $at --range $range --minutes "$MINUTES" \
+            --checkpoint "$OUT/$r.tnw.ckpt" -o "$OUT/$r.tnw" > "$OUT/$r.train.log" 2>&1 || { tail -n 5 "$OUT/$r.train.log" >&2; exit 1; }
+        rm -f "$OUT/$r.tnw.ckpt"
+    fi
+    echo "== $r: bench_gnn ($(date -u +%H:%M:%S) UTC)"
+    ./bin/bench_gnn "$r" "$MINUTES" "$THREADS" pictures=1 moved=0 model="$OUT/$r.tnw" > "$OUT/$r.gnn.log"
     [ -f "gnn_fig10_$r.png" ] && mv "gnn_fig10_$r.png" "$OUT/"
     echo "== $r: bench_sketch ($(date -u +%H:%M:%S) UTC)"
     ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log"
@@ -46,14 +61,14 @@ num='\([^ ;]*\)'
         done
     done
     echo
-    echo "| region | reconstruction SSIM | neighbours t0 SSIM (membrane) | t200 | t500 | train iterations |"
-    echo "|---|---|---|---|---|---|"
+    echo "| region | reconstruction SSIM | neighbours t0 SSIM (membrane) | t200 | t500 | neighbour crops | train iterations |"
+    echo "|---|---|---|---|---|---|---|"
     for r in $REGIONS; do
         G="$OUT/$r.gnn.log"
         [ -f "$G" ] || continue
         row="| $r | $(first "$G" "^recon_ssim: $num.*")"
         for t in 0 200 500; do row="$row | $(first "$G" "^neighbours_t${t}_gnn_ssim: $num.*") ($(first "$G" "^neighbours_t${t}_membrane_ssim: $num.*"))"; done
-        echo "$row | $(first "$G" "^train_iterations: $num.*") |"
+        echo "$row | $(first "$G" "^neighbours_t0_gnn_ssim: .*(\([0-9]*\) crops).*") | $(first "$OUT/$r.train.log" "^iterations: $num.*") |"
     done
 } > "$OUT/summary.md"
 cat "$OUT/summary.md"
