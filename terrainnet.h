@@ -2724,6 +2724,7 @@ typedef struct tn__style_cfg {
 /* ---- src/core.c ---- */
 tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out);
 tn_status tn__progress(const char *stage, double fraction);
+void tn__progress_within(const char *stage, double fraction);
 float tn__clampf(float v, float lo, float hi);
 /* ---- src/io.c ---- */
 uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n);
@@ -3322,9 +3323,13 @@ TN__SHARED char *tn__strndup(const char *s, size_t n)
 #ifdef TN__TLS
 static TN__TLS tn_progress_fn tn__progress_fn;
 static TN__TLS void *tn__progress_user;
+static TN__TLS const char *tn__progress_outer;
+static TN__TLS double tn__progress_outer_f;
 #else
 static tn_progress_fn tn__progress_fn;
 static void *tn__progress_user;
+static const char *tn__progress_outer;
+static double tn__progress_outer_f;
 #endif
 
 TN_API void tn_set_progress(tn_progress_fn fn, void *user)
@@ -3333,9 +3338,18 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
     tn__progress_user = user;
 }
 
+/* Until called with NULL, every report goes out as `stage` at `fraction`: the steps of a longer
+   operation's preparation (gnn-train's extractions) show as one stage, not dozens, and still cancel. */
+TN__INTERNAL_SHARED void tn__progress_within(const char *stage, double fraction)
+{
+    tn__progress_outer = stage;
+    tn__progress_outer_f = fraction;
+}
+
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
 TN__INTERNAL_SHARED tn_status tn__progress(const char *stage, double fraction)
 {
+    if (tn__progress_outer) stage = tn__progress_outer, fraction = tn__progress_outer_f;
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
     return TN_OK;
@@ -25385,6 +25399,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
     }
     /* the example's network and parts: deterministic in the DEM, the extraction options and
        the seed, so a resumed run rebuilds the same graph */
+    tn__progress_within("gnn-prepare", 0.0); /* its dozen extractions (example, holdouts, levels) as one stage */
     if ((st = tn_extract(&ex, d1, &s.o.extract))) goto done;
     if (!ex.contours.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: no ridge or valley was extracted from the DEM (try a lower extraction threshold)");
@@ -25430,12 +25445,14 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         if (!(s.opt = tn_optim_create(s.w, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
     }
     if ((st = tn_train_add_net(s.run, "gnn", s.w, s.opt)) || (st = tn_train_add_rng(s.run, "main", &s.rng))) goto done;
+    tn__progress_within("gnn-prepare", 0.3);
     if ((st = tn__gnn_set_meta(&s, digest)) || (st = tn__gnn_holdout_make(&s))) goto done;
     /* the best weights travel with the checkpoint (one written without holdouts starts the checks afresh) */
     if (s.best && (!s.o.train.resume || ck_best) && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     if (s.o.train.resume && (st = tn_train_restore(s.run))) goto done;
     if (s.best && s.o.train.resume && !ck_best && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     /* the levels: the example's own network, then its sparser networks */
+    tn__progress_within("gnn-prepare", 0.7);
     s.npix = s.A.width * s.A.height;
     if (!(s.target = (float *)tn__alloc((size_t)s.npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     for (i = 0; i < s.npix; i++) s.target[i] = (d1->data[i] - s.A.mean) / s.A.std;
@@ -25461,6 +25478,8 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         tn_extraction_free(&sx);
         if (st) goto done;
     }
+    tn__progress_within(NULL, 0.0);
+    if ((st = tn__progress("gnn-prepare", 1.0))) goto done;
     if (!(s.masked = (uint8_t *)tn__alloc((size_t)s.maxparts)) || !(s.known = (uint8_t *)tn__alloc((size_t)s.maxparts))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
@@ -25531,6 +25550,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         s.w = NULL; /* handed over */
     }
 done:
+    tn__progress_within(NULL, 0.0);
     tn_ctx_free(ctx);
     tn_image_free(&one);
     tn_extraction_free(&ex);

@@ -488,9 +488,13 @@ TN__SHARED char *tn__strndup(const char *s, size_t n)
 #ifdef TN__TLS
 static TN__TLS tn_progress_fn tn__progress_fn;
 static TN__TLS void *tn__progress_user;
+static TN__TLS const char *tn__progress_outer;
+static TN__TLS double tn__progress_outer_f;
 #else
 static tn_progress_fn tn__progress_fn;
 static void *tn__progress_user;
+static const char *tn__progress_outer;
+static double tn__progress_outer_f;
 #endif
 
 TN_API void tn_set_progress(tn_progress_fn fn, void *user)
@@ -499,9 +503,18 @@ TN_API void tn_set_progress(tn_progress_fn fn, void *user)
     tn__progress_user = user;
 }
 
+/* Until called with NULL, every report goes out as `stage` at `fraction`: the steps of a longer
+   operation's preparation (gnn-train's extractions) show as one stage, not dozens, and still cancel. */
+TN__INTERNAL_SHARED void tn__progress_within(const char *stage, double fraction)
+{
+    tn__progress_outer = stage;
+    tn__progress_outer_f = fraction;
+}
+
 /* Reports progress; returns TN_ERR_CANCELLED (with a message) if the hook asks to stop. */
 TN__INTERNAL_SHARED tn_status tn__progress(const char *stage, double fraction)
 {
+    if (tn__progress_outer) stage = tn__progress_outer, fraction = tn__progress_outer_f;
     if (tn__progress_fn && tn__progress_fn(tn__progress_user, stage, fraction))
         return tn__fail(TN_ERR_CANCELLED, "%s: cancelled by the progress callback", stage);
     return TN_OK;

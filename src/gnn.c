@@ -2109,6 +2109,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
     }
     /* the example's network and parts: deterministic in the DEM, the extraction options and
        the seed, so a resumed run rebuilds the same graph */
+    tn__progress_within("gnn-prepare", 0.0); /* its dozen extractions (example, holdouts, levels) as one stage */
     if ((st = tn_extract(&ex, d1, &s.o.extract))) goto done;
     if (!ex.contours.count) {
         st = tn__fail(TN_ERR_EMPTY, "gnn: no ridge or valley was extracted from the DEM (try a lower extraction threshold)");
@@ -2154,12 +2155,14 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         if (!(s.opt = tn_optim_create(s.w, &oo))) { st = TN_ERR_INVALID_ARG; goto done; }
     }
     if ((st = tn_train_add_net(s.run, "gnn", s.w, s.opt)) || (st = tn_train_add_rng(s.run, "main", &s.rng))) goto done;
+    tn__progress_within("gnn-prepare", 0.3);
     if ((st = tn__gnn_set_meta(&s, digest)) || (st = tn__gnn_holdout_make(&s))) goto done;
     /* the best weights travel with the checkpoint (one written without holdouts starts the checks afresh) */
     if (s.best && (!s.o.train.resume || ck_best) && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     if (s.o.train.resume && (st = tn_train_restore(s.run))) goto done;
     if (s.best && s.o.train.resume && !ck_best && (st = tn_train_add_params(s.run, "best.", s.best))) goto done;
     /* the levels: the example's own network, then its sparser networks */
+    tn__progress_within("gnn-prepare", 0.7);
     s.npix = s.A.width * s.A.height;
     if (!(s.target = (float *)tn__alloc((size_t)s.npix * sizeof(float)))) { st = TN_ERR_OUT_OF_MEMORY; goto done; }
     for (i = 0; i < s.npix; i++) s.target[i] = (d1->data[i] - s.A.mean) / s.A.std;
@@ -2185,6 +2188,8 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         tn_extraction_free(&sx);
         if (st) goto done;
     }
+    tn__progress_within(NULL, 0.0);
+    if ((st = tn__progress("gnn-prepare", 1.0))) goto done;
     if (!(s.masked = (uint8_t *)tn__alloc((size_t)s.maxparts)) || !(s.known = (uint8_t *)tn__alloc((size_t)s.maxparts))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
@@ -2255,6 +2260,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         s.w = NULL; /* handed over */
     }
 done:
+    tn__progress_within(NULL, 0.0);
     tn_ctx_free(ctx);
     tn_image_free(&one);
     tn_extraction_free(&ex);

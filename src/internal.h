@@ -130,6 +130,7 @@ typedef struct tn__style_cfg {
 /* ---- src/core.c ---- */
 tn_status tn__size4(size_t a, size_t b, size_t c, size_t d, size_t *out);
 tn_status tn__progress(const char *stage, double fraction);
+void tn__progress_within(const char *stage, double fraction);
 float tn__clampf(float v, float lo, float hi);
 /* ---- src/io.c ---- */
 uint32_t tn__crc32(uint32_t crc, const uint8_t *p, size_t n);

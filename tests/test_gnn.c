@@ -924,6 +924,55 @@ TN_TEST(holdout_early_stopping)
     tn_image_free(&dem);
 }
 
+/* the stages a progress hook sees; cancels at the first report of stage `cancel_at` */
+typedef struct stage_log {
+    char seen[8][16];
+    int n, calls;
+    const char *cancel_at;
+} stage_log;
+
+static int log_stage(void *user, const char *stage, double fraction)
+{
+    stage_log *l = (stage_log *)user;
+    int i;
+    (void)fraction;
+    l->calls++;
+    for (i = 0; i < l->n && strcmp(l->seen[i], stage); i++) {}
+    if (i == l->n && l->n < 8) snprintf(l->seen[l->n++], sizeof l->seen[0], "%s", stage);
+    return l->cancel_at && !strcmp(stage, l->cancel_at);
+}
+
+TN_TEST(training_reports_its_preparation_as_one_stage)
+{
+    /* the dozen extractions before training (example, holdouts, sparse levels) report as
+       gnn-prepare, not as fill / valleys / ridges / extract each; a cancel there stops the run,
+       and the next operation reports its own stages again */
+    tn_image dem = tn_test_dem(40, 4), hold[2];
+    tn_extraction ex;
+    tn_gnn_opts o;
+    tn_gnn m;
+    stage_log l;
+    hold[0] = tn_test_dem(40, 8);
+    hold[1] = tn_test_dem(40, 9);
+    holdout_opts(&o, 4, hold);
+    memset(&l, 0, sizeof l);
+    tn_set_progress(log_stage, &l);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    tn_gnn_free(&m);
+    TN_CHECK(l.n == 2 && !strcmp(l.seen[0], "gnn-prepare") && !strcmp(l.seen[1], "gnn-train"));
+    memset(&l, 0, sizeof l);
+    l.cancel_at = "gnn-prepare";
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_ERR_CANCELLED && strstr(tn_last_error(), "gnn-prepare") && l.calls == 1);
+    memset(&l, 0, sizeof l);
+    TN_CHECK(tn_extract(&ex, &dem, NULL) == TN_OK);
+    tn_extraction_free(&ex);
+    TN_CHECK(l.n >= 2 && !strcmp(l.seen[l.n - 1], "extract"));
+    tn_set_progress(NULL, NULL);
+    tn_image_free(&dem);
+    tn_image_free(&hold[0]);
+    tn_image_free(&hold[1]);
+}
+
 /* Mean SSIM over the holdouts' networks at the default threshold and 4 x it (those of 8 lines or
    more, as the gain's calibration takes them), generated with m's scale set to `scale`. */
 static double holdout_mean_ssim(tn_gnn *m, const tn_image *hold, int n, float scale)
@@ -2113,6 +2162,7 @@ int main(void)
     TN_RUN(embedding_phase);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(holdout_early_stopping);
+    TN_RUN(training_reports_its_preparation_as_one_stage);
     TN_RUN(holdout_windows);
     TN_RUN(gain_scale_from_holdouts);
     TN_RUN(same_results_for_1_and_2_threads);
