@@ -42,8 +42,8 @@
 
 /* The regions, and which ones SinGAN's defaults were tuned on (docs/singan.md); the others are
    held out: measured only after the choices were made. Regions marked 2 are a second tuning set
-   (issue 31's sixth round), run only when named; those marked 3 are held out too, never run
-   before stop 53, and also run only when named. */
+   (issue 31's sixth round), run only when named; those marked 3 are held out and also run
+   only when named (docs/singan.md's regions never used in tuning). */
 typedef struct region { const char *dir; int tuned; } region;
 static const region regions[] = {
     {"alps_montblanc", 1},         {"sahara_erg_oriental", 1},     {"grandcanyon_hoppe8bit", 0}, {"moon_nearside_lola4ppd", 0},
