@@ -68,7 +68,7 @@ num='\([^ ;]*\)'
         [ -f "$G" ] || continue
         row="| $r | $(first "$G" "^recon_ssim: $num.*")"
         for t in 0 200 500; do row="$row | $(first "$G" "^neighbours_t${t}_gnn_ssim: $num.*") ($(first "$G" "^neighbours_t${t}_membrane_ssim: $num.*"))"; done
-        echo "$row | $(first "$G" "^neighbours_t0_gnn_ssim: .*(\([0-9]*\) crops).*") | $(first "$OUT/$r.train.log" "^iterations: $num.*") |"
+        echo "$row | $(first "$G" "^neighbours_t0_gnn_ssim: .*(\([0-9]*\) crops).*") | $(./bin/terrainnet info "$OUT/$r.tnw" | sed -n 's/^iterations: //p') |"
     done
 } > "$OUT/summary.md"
 cat "$OUT/summary.md"
