@@ -20,6 +20,10 @@
      example) to the example: <= 1.5 is the issue's target;
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
+   - peaks: summits per 10^4 px, points of the terrain blurred by a Gaussian of 1.5 px that are the
+     highest within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops'
+     mean (real_peaks; the example's 128 px beside it). An egg-crate of cones has several times
+     the real crops' count, the example's main-line profile none of it;
    - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
      the terrain along them (every px of their length) minus its running mean over 17 px, against
      the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
@@ -94,6 +98,35 @@ static void distances(const tn_image *ex, const tn_image *img, double *d)
     d[0] = r.slope_distance;
     d[1] = r.curvature_distance;
     d[2] = r.spectrum_distance;
+}
+
+#define PEAK_SIGMA 1.5f /* px: the Gaussian a peak is found on */
+#define PEAK_R 4         /* px: a peak is the highest point within this many px (a 9 x 9 window) */
+
+/* Summits per 10^4 px: points of img blurred by PEAK_SIGMA that are the highest within PEAK_R px
+   (ties count once, the first in raster order), PEAK_R px from the map's edge. An egg-crate of
+   cones at the lines of a grown network has several times the example's. */
+static double peaks(const tn_image *img)
+{
+    tn_image b = {0, 0, 0, NULL};
+    int x, y, u, v, W = img->width, H = img->height, n = 0;
+    if (W <= 2 * PEAK_R || H <= 2 * PEAK_R || tn_image_blur(&b, img, PEAK_SIGMA)) return NAN;
+    for (y = PEAK_R; y < H - PEAK_R; y++)
+        for (x = PEAK_R; x < W - PEAK_R; x++) {
+            float h = b.data[(size_t)y * W + x];
+            int top = 1;
+            for (v = -PEAK_R; top && v <= PEAK_R; v++)
+                for (u = -PEAK_R; u <= PEAK_R; u++) {
+                    float q = b.data[(size_t)(y + v) * W + x + u];
+                    if (q > h || (q == h && (v < 0 || (v == 0 && u < 0)))) {
+                        top = 0;
+                        break;
+                    }
+                }
+            n += top;
+        }
+    tn_image_free(&b);
+    return 1e4 * n / ((double)(W - 2 * PEAK_R) * (H - 2 * PEAK_R));
 }
 
 /* The share of img's pixels in closed basins deeper than 1 % of the example's range (lo..hi):
@@ -715,7 +748,7 @@ int main(int argc, char **argv)
     static const char *all[] = {"valley", "summit", "ring", "cross"};
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *only = NULL;
-    double dxy[2], h0, h1, real[3] = {0, 0, 0}, ex_relief[4] = {NAN, NAN, NAN, NAN};
+    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_peaks = 0, ex_relief[4] = {NAN, NAN, NAN, NAN};
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
@@ -789,13 +822,16 @@ int main(int argc, char **argv)
                         tn_extraction_free(&e);
                     }
                 }
-                printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %%\n", k, cx[best], cy[best], dist[0], dist[1], dist[2],
-                       100 * basins(&c, model.lo, model.hi));
+                real_peaks += peaks(&c);
+                printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %% peaks %.1f per 10^4 px\n", k, cx[best], cy[best], dist[0],
+                       dist[1], dist[2], 100 * basins(&c, model.lo, model.hi), peaks(&c));
                 real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
                 tn_image_free(&c);
             }
         }
         for (k = 0; k < 3; k++) real[k] /= nreal;
+        real_peaks /= nreal;
+        printf("real_peaks: %.1f per 10^4 px (the real crops' mean; the example's 128 px: %.1f)\n", real_peaks, peaks(&ex));
         if (real_valley.n) { /* the mean over the crops of their normalised profiles and figures */
             for (k = 0; k < 5; k++) real_valley.rise[k] /= real_valley.n;
             real_valley.width_cv /= real_valley.n, real_valley.depth_cv /= real_valley.n, real_valley.junctions /= real_valley.n;
@@ -891,6 +927,7 @@ int main(int argc, char **argv)
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
             printf("%s_%s_basins: %.1f %% of the map\n", all[d], way[w], 100 * basins(&out[w], model.lo, model.hi));
+            printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], peaks(&out[w]), peaks(&out[w]) / real_peaks);
             for (k = 0; k < 4; k++) {
                 double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
                 if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);

@@ -44,19 +44,19 @@ for r in $REGIONS; do
     ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log"
 done
 # The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
-# distances <= 1.5 x the real crops'), the 256 and BIG generation seconds, and per region the
-# reconstruction and the neighbours against the membrane.
+# distances <= 1.5 x the real crops'), the summits per area against the real crops', the 256 and
+# BIG generation seconds, and per region the reconstruction and the neighbours against the membrane.
 first() { sed -n "s/$2/\1/p" "$1" | head -1; } # FILE SED-PATTERN: the first line's \1
 num='\([^ ;]*\)'
 {
-    echo "| region | drawing | follow % | height error % | slope x | curvature x | spectrum x | s (256) | s ($BIG) |"
-    echo "|---|---|---|---|---|---|---|---|---|"
+    echo "| region | drawing | follow % | height error % | slope x | curvature x | spectrum x | peaks x | s (256) | s ($BIG) |"
+    echo "|---|---|---|---|---|---|---|---|---|---|"
     for r in $REGIONS; do
         L="$OUT/$r.sketch.log"
         [ -f "$L" ] || continue
         for d in valley summit ring cross; do
             row="| $r | $d | $(first "$L" "^${d}_new_follow: $num.*") | $(first "$L" "^${d}_new_height_error: $num.*")"
-            for k in slope curvature spectrum; do row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"; done
+            for k in slope curvature spectrum peaks; do row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"; done
             echo "$row | $(first "$L" "^${d}_new_gain: .*seconds: $num.*") | $(first "$L" "^${d}_${BIG}_map_scale: .*; seconds $num;.*") |"
         done
     done
