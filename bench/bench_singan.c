@@ -49,7 +49,7 @@ static const region regions[] = {
     {"alps_montblanc", 1},         {"sahara_erg_oriental", 1},     {"grandcanyon_hoppe8bit", 0}, {"moon_nearside_lola4ppd", 0},
     {"volcano_fuji_terrainrgb", 0}, {"volcano_sthelens_10m", 1},   {"greenriver_utah_lidar1m", 0}, {"himalaya_everest", 0},
     {"alps_n47e009", 2},           {"seed_merizzi_himalaya", 2},   {"karst_yangshuo", 2},
-    {"fault_jacksboro_tn", 3},     {"seed_merizzi_river", 3},      {"seed_merizzi_fjord", 3},
+    {"fault_jacksboro_tn", 3},     {"seed_merizzi_river", 3},      {"seed_merizzi_fjord", 3},    {"seed_merizzi_caucasus", 3},
 };
 
 #define NREGIONS ((int)(sizeof regions / sizeof regions[0]))
