@@ -22,8 +22,8 @@
      could not leave them), beside the real crops' (real_crop_K lines);
    - peaks: summits per 10^4 px, points of the terrain blurred by a Gaussian of 1.5 px that are the
      highest within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops'
-     mean (real_peaks; the example's 128 px beside it). An egg-crate of cones has several times
-     the real crops' count, the example's main-line profile none of it;
+     mean (real_peaks; the example's 128 px beside it); an egg-crate of cones between the
+     strokes has several times the real crops' count;
    - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
      the terrain along them (every px of their length) minus its running mean over 17 px, against
      the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
@@ -748,7 +748,7 @@ int main(int argc, char **argv)
     static const char *all[] = {"valley", "summit", "ring", "cross"};
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *only = NULL;
-    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_peaks = 0, ex_relief[4] = {NAN, NAN, NAN, NAN};
+    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_peaks = 0, pk, ex_relief[4] = {NAN, NAN, NAN, NAN};
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
     tn_gnn model;
@@ -822,9 +822,10 @@ int main(int argc, char **argv)
                         tn_extraction_free(&e);
                     }
                 }
-                real_peaks += peaks(&c);
+                pk = peaks(&c);
+                real_peaks += pk;
                 printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %% peaks %.1f per 10^4 px\n", k, cx[best], cy[best], dist[0],
-                       dist[1], dist[2], 100 * basins(&c, model.lo, model.hi), peaks(&c));
+                       dist[1], dist[2], 100 * basins(&c, model.lo, model.hi), pk);
                 real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
                 tn_image_free(&c);
             }
@@ -927,7 +928,8 @@ int main(int argc, char **argv)
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
             printf("%s_%s_basins: %.1f %% of the map\n", all[d], way[w], 100 * basins(&out[w], model.lo, model.hi));
-            printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], peaks(&out[w]), peaks(&out[w]) / real_peaks);
+            pk = peaks(&out[w]);
+            printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], pk, pk / real_peaks);
             for (k = 0; k < 4; k++) {
                 double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
                 if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);
