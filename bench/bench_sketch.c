@@ -104,8 +104,7 @@ static void distances(const tn_image *ex, const tn_image *img, double *d)
 #define PEAK_R 4         /* px: a peak is the highest point within this many px (a 9 x 9 window) */
 
 /* Summits per 10^4 px: points of img blurred by PEAK_SIGMA that are the highest within PEAK_R px
-   (ties count once, the first in raster order), PEAK_R px from the map's edge. An egg-crate of
-   cones at the lines of a grown network has several times the example's. */
+   (ties count once, the first in raster order), PEAK_R px from the map's edge. */
 static double peaks(const tn_image *img)
 {
     tn_image b = {0, 0, 0, NULL};
