@@ -2045,8 +2045,11 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
    a user ridge and rising away from a user valley as the example's lines do from its main ridges
    and valleys (so a stroke stays the main line around it), plus the example line's own height above
    the mean of the example's lines within 48 px (its local relief; the quilting also matches
-   these heights across the overlap),
-   then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
+   these heights across the overlap). Given the example's heights as well (the model's path), the
+   quilt carries them too, each block offset so its heights meet its neighbours', and the added
+   lines are the network of those heights on the strokes' ground, with their relief taken, away
+   from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
+   tilt), then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
    user valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
    when the lines' membrane holds far more closed basins than the example's own, each basin drains
    by a valley over its lowest saddle (tn__gnn_grow_drain). */
@@ -2774,6 +2777,8 @@ float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, floa
 tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out);
 tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
                                int *near);
+tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
+                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief);
 tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
 tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif
@@ -25744,8 +25749,8 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
     }
 }
 
-static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                              const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, uint8_t *mask, float *dist,
                                            int *near); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
@@ -27777,6 +27782,116 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
     }
 }
 
+#define TN__GNN_RELIEF_RADIUS 48     /* px: local relief is a height less the mean within this radius */
+#define TN__GNN_QUILT_CANDIDATES 200 /* placements scored per block when heights are quilted too */
+#define TN__GNN_QUILT_FEATHER 3      /* px past the height cut over which a block fades in */
+#define TN__GNN_QUILT_MEAN 512       /* px: away from the strokes, the quilted heights lose their mean within this radius */
+
+/* With the example's heights (dem), the quilt carries them too: block (x0, y0) under placement
+   (t, ox, oy) is offset by its mean height difference from the heights already placed (Q, where
+   qset) on its overlap, so neighbours meet, and pasted from the path of least height difference
+   across the overlap (tn__gnn_grow_cut on heights), faded in over TN__GNN_QUILT_FEATHER px past it.
+   pq: S x S, cutc, cutr: S, E: S x mg scratch. */
+static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, int width, int height, int x0, int y0, int B, int mg,
+                                  int t, int ox, int oy, float *pq, int *cutc, int *cutr, double *E)
+{
+    const int S = B + 2 * mg, Wx = dem->width;
+    double so = 0;
+    long no = 0;
+    float off;
+    int u, v;
+    for (v = -mg; v < B + mg; v++)
+        for (u = -mg; u < B + mg; u++) {
+            int X = x0 + u, Y = y0 + v;
+            if (X < 0 || Y < 0 || X >= width || Y >= height || !qset[(size_t)Y * width + X]) continue;
+            so += Q[(size_t)Y * width + X] - dem->data[tn__gnn_grow_at(u + mg, v + mg, S, t, ox, oy, Wx)], no++;
+        }
+    off = no ? (float)(so / (double)no) : 0.0f;
+    for (v = -mg; v < B + mg; v++) /* the placed heights in the block's frame, less the offset */
+        for (u = -mg; u < B + mg; u++) {
+            int X = x0 + u, Y = y0 + v;
+            int in = X >= 0 && Y >= 0 && X < width && Y < height && qset[(size_t)Y * width + X];
+            pq[(size_t)(v + mg) * S + u + mg] = in ? Q[(size_t)Y * width + X] - off : 0.0f;
+        }
+    tn__gnn_grow_cut(qset, pq, dem->data, width, height, x0, y0, B, mg, t, ox, oy, Wx, cutc, cutr, E);
+    for (v = -mg; v < B; v++)
+        for (u = -mg; u < B; u++) {
+            int X = x0 + u, Y = y0 + v;
+            size_t p;
+            float a = 1, h;
+            if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
+            p = (size_t)Y * width + X;
+            h = dem->data[tn__gnn_grow_at(u + mg, v + mg, S, t, ox, oy, Wx)] + off;
+            if (u < 0) a = fminf(a, tn__clampf((float)(u - cutc[v + mg] + 1) / TN__GNN_QUILT_FEATHER, 0, 1));
+            if (v < 0) a = fminf(a, tn__clampf((float)(v - cutr[u + mg] + 1) / TN__GNN_QUILT_FEATHER, 0, 1));
+            Q[p] = qset[p] ? (1 - a) * Q[p] + a * h : h;
+            qset[p] = 1;
+        }
+}
+
+/* The mean of an integral image qs ((width + 1) x (height + 1)) over the box of radius r around
+   (x, y), clipped to the map. */
+static double tn__gnn_box_mean(const double *qs, int width, int height, int x, int y, int r)
+{
+    const size_t W1 = (size_t)width + 1;
+    int x0 = x - r < 0 ? 0 : x - r, y0 = y - r < 0 ? 0 : y - r, x1 = x + r + 1 > width ? width : x + r + 1, y1 = y + r + 1 > height ? height : y + r + 1;
+    return (qs[(size_t)y1 * W1 + x1] - qs[(size_t)y0 * W1 + x1] - qs[(size_t)y1 * W1 + x0] + qs[(size_t)y0 * W1 + x0]) /
+           ((double)(x1 - x0) * (y1 - y0));
+}
+
+/* The quilted heights' relief: Q less its mean within TN__GNN_RELIEF_RADIUS px (its local relief,
+   as the network's lines have theirs), plus, from TN__GNN_FALL_REACH px of the strokes on (D: px to
+   the nearest), where their own fall ends, that mean less the one within TN__GNN_QUILT_MEAN px: so
+   a mountainside keeps its tilt toward the main ridges (without it its spurs were hills) but does
+   not sink a drawn valley below its ground (a slot along it). */
+static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width, int height, float *prel)
+{
+    const size_t W1 = (size_t)width + 1;
+    double *qs = (double *)tn__calloc(W1 * (height + 1) * sizeof(double));
+    int x, y;
+    if (!qs) return TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; y < height; y++)
+        for (x = 0; x < width; x++) {
+            size_t q = (size_t)(y + 1) * W1 + x + 1;
+            qs[q] = Q[(size_t)y * width + x] + qs[q - 1] + qs[q - W1] - qs[q - W1 - 1];
+        }
+    for (y = 0; y < height; y++)
+        for (x = 0; x < width; x++) {
+            size_t p = (size_t)y * width + x;
+            double loc = tn__gnn_box_mean(qs, width, height, x, y, TN__GNN_RELIEF_RADIUS);
+            float w = tn__clampf(D[p] / TN__GNN_FALL_REACH, 0, 1);
+            w = w * w * (3 - 2 * w);
+            prel[p] = (float)(Q[p] - loc + w * (loc - tn__gnn_box_mean(qs, width, height, x, y, TN__GNN_QUILT_MEAN)));
+        }
+    TN_FREE(qs);
+    return TN_OK;
+}
+
+/* The network of the grown ground: the quilted relief (prel) on the strokes' ground (ground: the
+   membrane and the fall from the strokes), extracted as the example was (its threshold, from its
+   Wx x Hx), so the lines lie where that terrain has its ridges and valleys (the quilted network's
+   own lines meet the heights only inside each block). ptype = its lines (1 ridge, -1 valley, 0). */
+static tn_status tn__gnn_quilt_network(const float *prel, const float *ground, int width, int height, int Wx, int Hx, int8_t *ptype)
+{
+    tn_image T = {0, 0, 0, NULL}, xr = {0, 0, 0, NULL};
+    tn_extraction xe;
+    tn_extract_opts eo;
+    size_t i, n = (size_t)width * height;
+    tn_status st = tn_image_create(&T, width, height, 1);
+    if (st) return st;
+    for (i = 0; i < n; i++) T.data[i] = ground[i] + prel[i];
+    memset(&eo, 0, sizeof eo);
+    eo.threshold = tn_extract_default_threshold(Wx, Hx);
+    if (!(st = tn_extract(&xe, &T, &eo))) {
+        if (!(st = tn_sketch_rasterise(&xr, &xe.contours, width, height)))
+            for (i = 0; i < n; i++) ptype[i] = (int8_t)(xr.data[3 * i] > 0 ? 1 : xr.data[3 * i + 1] > 0 ? -1 : 0);
+        tn_extraction_free(&xe);
+    }
+    tn_image_free(&xr);
+    tn_image_free(&T);
+    return st;
+}
+
 /* A straight run from the line's last point on to user pixel q of the ur raster (width px a row),
    its heights linear to the user line's there; it ends on the first user pixel it meets, at that
    pixel's height (the later line wins a pixel, and a user pixel keeps its height). */
@@ -27992,8 +28107,8 @@ done:
 
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
-static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                              const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
+TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
 {
     tn_gnn_grow_opts o;
     tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
@@ -28008,9 +28123,12 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     int *nearv = NULL;
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
+    float *Q = NULL, *pq = NULL; /* with the example's heights: the quilted heights, a block's scratch */
+    uint8_t *qset = NULL;
     tn_rng rng;
     tn_status st;
     TN_ASSERT(out);
+    if (dem && (dem->width != example->width || dem->height != example->height)) dem = NULL;
     memset(&o, 0, sizeof o);
     if (opts) o = *opts;
     if (added) *added = 0;
@@ -28025,7 +28143,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         return tn__fail(TN_ERR_INVALID_ARG, "gnn grow: bad option (gap %g, block %d, candidates %d)", (double)o.gap, o.block, o.candidates);
     if (o.gap == 0) o.gap = 4;
     if (!o.block) o.block = 48;
-    if (!o.candidates) o.candidates = 48;
+    if (!o.candidates) o.candidates = dem ? TN__GNN_QUILT_CANDIDATES : 48;
     Wx = example->width;
     Hx = example->height;
     B = o.block;
@@ -28060,8 +28178,13 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     cutc = (int *)tn__alloc((size_t)S * sizeof(int));
     cutr = (int *)tn__alloc((size_t)S * sizeof(int));
     cutE = (double *)tn__alloc((size_t)S * mg * sizeof(double));
+    if (dem) {
+        Q = (float *)tn__alloc(n * sizeof(float));
+        qset = (uint8_t *)tn__calloc(n);
+        pq = (float *)tn__alloc((size_t)S * S * sizeof(float));
+    }
     if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
-        !cutc || !cutr || !cutE || !nearv || !kv) {
+        !cutc || !cutr || !cutE || !nearv || !kv || (dem && (!Q || !qset || !pq))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -28075,7 +28198,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
     /* the example: line types, each line pixel's height above the mean of the lines within R px
        (integral images of (Wx + 1) x (Hx + 1)) */
     {
-        int x, y, R = 48, W1 = Wx + 1;
+        int x, y, R = TN__GNN_RELIEF_RADIUS, W1 = Wx + 1;
         size_t nline = 0;
         for (i = 0; i < nx; i++) {
             etype[i] = (int8_t)(er.data[3 * i] > 0 ? 1 : er.data[3 * i + 1] > 0 ? -1 : 0);
@@ -28110,7 +28233,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
         for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
         if (!edist || !enear) st = TN_ERR_OUT_OF_MEMORY;
         if (!st) st = tn__gnn_grow_profile(example, &er, TN_RIDGE, pr, emask, edist, enear);
-        if (!st && dem && dem->width == Wx && dem->height == Hx) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        if (!st && dem) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
         else if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
         TN_FREE(edist);
         TN_FREE(enear);
@@ -28127,7 +28250,8 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             for (c = 0; c < o.candidates; c++) {
                 int t = (int)(tn_rng_u32(&rng) % 8u), ox = (int)(tn_rng_u32(&rng) % (uint32_t)(Wx - S + 1)),
                     oy = (int)(tn_rng_u32(&rng) % (uint32_t)(Hx - S + 1));
-                double score = 0, sxy = 0, sxx = 0, syy = 0;
+                double score = 0, sxy = 0, sxx = 0, syy = 0, dh = 0, dh2 = 0;
+                long ndh = 0;
                 for (v = -mg; v < B + mg; v++)
                     for (u = -mg; u < B + mg; u++) {
                         int X = x0 + u, Y = y0 + v, e;
@@ -28145,8 +28269,13 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                             sxy += a * b, sxx += a * a, syy += b * b;
                             if (e && e == ptype[p]) score -= fabsf(erel[q] - prel[p]) / relief;
                         }
+                        if (Q && qset[p]) { /* and their heights, up to the offset that will make them meet */
+                            double d = Q[p] - dem->data[q];
+                            dh += d, dh2 += d * d, ndh++;
+                        }
                     }
                 if (sxx > 0 && syy > 0) score += nl * sxy / sqrt(sxx * syy);
+                if (ndh) score -= nl * (dh2 / ndh - (dh / ndh) * (dh / ndh)) / ((double)relief * relief);
                 if (score > best) best = score, bt = t, box = ox, boy = oy;
             }
             tn__gnn_grow_cut(placed, pbl, ebl, width, height, x0, y0, B, mg, bt, box, boy, Wx, cutc, cutr, cutE);
@@ -28161,7 +28290,12 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
                     ptype[p] = etype[q];
                     prel[p] = erel[q];
                 }
+            if (Q) tn__gnn_quilt_heights(Q, qset, dem, width, height, x0, y0, B, mg, bt, box, boy, pq, cutc, cutr, cutE);
         }
+    for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
+        mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
+    if (Q && ((st = tn__gnn_quilt_relief(Q, D, width, height, prel)) || (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
+        goto done;
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
     for (c = 0; c < user->count; c++) {
         const tn_contour *u = &user->items[c];
@@ -28191,7 +28325,7 @@ static tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *
             pts.n = 0;
             for (k = 0; !st && (size_t)k < t.starts[l + 1] - t.starts[l]; k++) {
                 size_t p = t.cells[t.starts[l] + (size_t)k];
-                float h = mem.data[p] + tn__gnn_grow_fall(Dr[p], nearv[p] >= 0 ? Dv[p] / kv[nearv[p]] : Dv[p], pr, pv) + prel[p], d = D[p];
+                float h = mem.data[p] + prel[p], d = D[p];
                 if (near[p] >= 0 && d < 4 * o.gap) { /* below a user ridge, above a user valley, released from 2 to 4 gaps */
                     float hs = ur.data[3 * (size_t)near[p] + 2], b, w = tn__clampf((d - 2 * o.gap) / (2 * o.gap), 0.0f, 1.0f);
                     b = ur.data[3 * (size_t)near[p]] > 0 ? fminf(h, hs - near_slope * d) : fmaxf(h, hs + near_slope * d);
@@ -28235,6 +28369,9 @@ done:
     TN_FREE(cutc);
     TN_FREE(cutr);
     TN_FREE(cutE);
+    TN_FREE(Q);
+    TN_FREE(qset);
+    TN_FREE(pq);
     TN_FREE(pts.p);
     if (st) {
         tn_contour_set_free(&set);

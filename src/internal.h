@@ -180,6 +180,8 @@ float tn__gnn_overhang(const tn__gnn_parts *P, int part, float f0, float x, floa
 tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, int H, float *out);
 tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
                                int *near);
+tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
+                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief);
 tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
 tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif

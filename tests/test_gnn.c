@@ -1684,6 +1684,59 @@ TN_TEST(grown_strokes_stay_main_lines)
     tn_image_free(&full);
 }
 
+
+/* The mean height range (max - min) along the ridge lines of 24+ points of g from index `from`. */
+static double ridge_range(const tn_contour_set *g, int from)
+{
+    double r = 0;
+    int i, j, nl = 0;
+    for (i = from; i < g->count; i++) {
+        const tn_contour *c = &g->items[i];
+        float lo = 1e30f, hi = -1e30f;
+        if (c->type != TN_RIDGE || c->npoints < 24) continue;
+        for (j = 0; j < c->npoints; j++) lo = fminf(lo, c->points[3 * j + 2]), hi = fmaxf(hi, c->points[3 * j + 2]);
+        r += hi - lo, nl++;
+    }
+    return nl ? r / nl : 0;
+}
+
+TN_TEST(grown_spurs_keep_the_example_tilt)
+{
+    /* with the example's heights, the added lines take theirs from the quilted example, away
+       from the strokes less its mean over 512 px, so a spur keeps falling down its mountainside: along the added ridge
+       lines the height range comes near the example's own ridge lines'; the network's heights
+       against a 48 px mean of its lines (no heights given) flatten each spur into a hill.
+       Example: the bundled Alps DEM's central 128 px, one drawn ridge */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    tn_contour c;
+    float pts[3 * 20];
+    double range[2], want;
+    int i, with;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    want = ridge_range(&ex, 0);
+    for (i = 0; i < 20; i++) {
+        pts[3 * i] = 10.0f + 11.0f * (float)i;
+        pts[3 * i + 1] = 120.0f + 8.0f * sinf(0.5f * (float)i);
+        pts[3 * i + 2] = 1800;
+    }
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE, c.npoints = 20, c.points = pts;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 240, user.count = 1, user.items = &c;
+    for (with = 0; with < 2; with++) {
+        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+        range[with] = ridge_range(&g, 1);
+        tn_contour_set_free(&g);
+    }
+    printf("  added ridge lines' height range: %.0f m (without the example's heights %.0f m; the example's lines %.0f m)\n", range[1], range[0], want);
+    TN_CHECK(range[1] > 0.7 * want && range[1] > 1.2 * range[0]);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
 /* Mean |terrain - asked height| over the strokes' pixels, and the share of their points that keep
    ridges above and valleys below the land 4 px across (tn_gnn_ordering). */
 /* Bilinear height of img at (x, y) (inside the map). */
@@ -2180,6 +2233,7 @@ int main(void)
     TN_RUN(grow_flanks_copy_the_example_flanks);
     TN_RUN(grow_flanks_without_streaks);
     TN_RUN(grown_strokes_stay_main_lines);
+    TN_RUN(grown_spurs_keep_the_example_tilt);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
     TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);

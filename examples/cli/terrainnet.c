@@ -1872,7 +1872,7 @@ static const cli_opt gnn_generate_opts[] = {
      "densify the sketch with random ridges and valleys from N random nodes (paper 5.2)", "0 = none"},
     {"grow", 0, ARG_CHOICE, 0, &gnn_generate_arg.grow, NULL, 0, 0, "auto|on|off",
      "densify by example: fill the space between the sketch's lines with blocks of the example's own ridge/valley network, "
-     "placed to continue the lines (never crossing them; heights from the lines)",
+     "placed to continue the lines (never crossing them; heights from the lines and the example's own heights)",
      "auto: on when the sketch's lines cover under a sixth of the example network's density (a drawing of a few strokes) "
      "and --random is 0"},
     {"finetune", 0, ARG_INT, 0, &gnn_generate_arg.o.finetune, NULL, 0, 100000, "STEPS",
