@@ -27829,14 +27829,14 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
         }
 }
 
-/* The mean of an integral image qs ((width + 1) x (height + 1)) over the box of radius r around
-   (x, y), clipped to the map. */
-static double tn__gnn_box_mean(const double *qs, int width, int height, int x, int y, int r)
+/* The sum of integral image I ((width + 1) x (height + 1)) over the box of radius r around (x, y),
+   clipped to the map; *area = the clipped box's pixels. */
+static double tn__gnn_box_sum(const double *I, int width, int height, int x, int y, int r, double *area)
 {
     const size_t W1 = (size_t)width + 1;
     int x0 = x - r < 0 ? 0 : x - r, y0 = y - r < 0 ? 0 : y - r, x1 = x + r + 1 > width ? width : x + r + 1, y1 = y + r + 1 > height ? height : y + r + 1;
-    return (qs[(size_t)y1 * W1 + x1] - qs[(size_t)y0 * W1 + x1] - qs[(size_t)y1 * W1 + x0] + qs[(size_t)y0 * W1 + x0]) /
-           ((double)(x1 - x0) * (y1 - y0));
+    *area = (double)(x1 - x0) * (y1 - y0);
+    return I[(size_t)y1 * W1 + x1] - I[(size_t)y0 * W1 + x1] - I[(size_t)y1 * W1 + x0] + I[(size_t)y0 * W1 + x0];
 }
 
 /* The quilted heights' relief: Q less its mean within TN__GNN_RELIEF_RADIUS px (its local relief,
@@ -27858,10 +27858,11 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width,
     for (y = 0; y < height; y++)
         for (x = 0; x < width; x++) {
             size_t p = (size_t)y * width + x;
-            double loc = tn__gnn_box_mean(qs, width, height, x, y, TN__GNN_RELIEF_RADIUS);
+            double a, A, loc = tn__gnn_box_sum(qs, width, height, x, y, TN__GNN_RELIEF_RADIUS, &a) / a;
+            double far = tn__gnn_box_sum(qs, width, height, x, y, TN__GNN_QUILT_MEAN, &A) / A;
             float w = tn__clampf(D[p] / TN__GNN_FALL_REACH, 0, 1);
             w = w * w * (3 - 2 * w);
-            prel[p] = (float)(Q[p] - loc + w * (loc - tn__gnn_box_mean(qs, width, height, x, y, TN__GNN_QUILT_MEAN)));
+            prel[p] = (float)(Q[p] - loc + w * (loc - far));
         }
     TN_FREE(qs);
     return TN_OK;
@@ -28213,9 +28214,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         for (y = 0; y < Hx; y++)
             for (x = 0; x < Wx; x++) {
                 size_t p = (size_t)y * Wx + x;
-                int x0 = x - R < 0 ? 0 : x - R, y0 = y - R < 0 ? 0 : y - R, x1 = x + R + 1 > Wx ? Wx : x + R + 1, y1 = y + R + 1 > Hx ? Hx : y + R + 1;
-                double s = sum[(size_t)y1 * W1 + x1] - sum[(size_t)y0 * W1 + x1] - sum[(size_t)y1 * W1 + x0] + sum[(size_t)y0 * W1 + x0];
-                double k = cnt[(size_t)y1 * W1 + x1] - cnt[(size_t)y0 * W1 + x1] - cnt[(size_t)y1 * W1 + x0] + cnt[(size_t)y0 * W1 + x0];
+                double area, s = tn__gnn_box_sum(sum, Wx, Hx, x, y, R, &area), k = tn__gnn_box_sum(cnt, Wx, Hx, x, y, R, &area);
                 erel[p] = emask[p] && k > 0 ? (float)(er.data[3 * p + 2] - s / k) : 0.0f;
                 if (emask[p]) rel_sum += fabsf(erel[p]), nline++;
             }

@@ -1684,7 +1684,6 @@ TN_TEST(grown_strokes_stay_main_lines)
     tn_image_free(&full);
 }
 
-
 /* The mean height range (max - min) along the ridge lines of 24+ points of g from index `from`. */
 static double ridge_range(const tn_contour_set *g, int from)
 {
@@ -1703,10 +1702,10 @@ static double ridge_range(const tn_contour_set *g, int from)
 TN_TEST(grown_spurs_keep_the_example_tilt)
 {
     /* with the example's heights, the added lines take theirs from the quilted example, away
-       from the strokes less its mean over 512 px, so a spur keeps falling down its mountainside: along the added ridge
-       lines the height range comes near the example's own ridge lines'; the network's heights
-       against a 48 px mean of its lines (no heights given) flatten each spur into a hill.
-       Example: the bundled Alps DEM's central 128 px, one drawn ridge */
+       from the strokes less its mean over 512 px, so a spur keeps falling down its mountainside:
+       along the added ridge lines the height range comes near the example's own ridge lines';
+       the network's heights against a 48 px mean of its lines (no heights given) flatten each
+       spur into a hill. Example: the bundled Alps DEM's central 128 px, one drawn ridge */
     tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
     tn_contour_set ex, user, g;
     tn_contour c;
@@ -1737,6 +1736,7 @@ TN_TEST(grown_spurs_keep_the_example_tilt)
     tn_image_free(&dem);
     tn_image_free(&full);
 }
+
 /* Mean |terrain - asked height| over the strokes' pixels, and the share of their points that keep
    ridges above and valleys below the land 4 px across (tn_gnn_ordering). */
 /* Bilinear height of img at (x, y) (inside the map). */
