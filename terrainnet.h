@@ -27497,8 +27497,8 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
 #endif /* TN_NO_GNN */
 /* --------------------------------------------------------------------------------------------
    >>gnn_grow  (part of @@gnn implementation; goes after >>gnn, whose chamfer distance it uses)
-   Densify by example: image quilting of the example's extracted network between the user's
-   lines (issue 30).
+   Densify by example: image quilting of the example's extracted network (and, given them, its
+   heights) between the user's lines (issue 30).
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_GNN
 
@@ -27562,15 +27562,6 @@ static float tn__gnn_grow_fall(float dr, float dv, const float *pr, const float 
     return fv * (1 - wr) - fr * wr;
 }
 
-/* The example's profile away from its main lines of one kind (those of the highest Strahler
-   order among its lines of that kind): prof[d], d = 0 .. TN__GNN_PROFILE, the mean over the
-   example's lines of the same kind, at chamfer distance d (rounded) from the nearest main-line
-   pixel, of how far they lie below it (ridges) or above it (valleys). Lines of the same kind
-   only: the alternation of ridges and valleys is the added lines' own relief (tn__gnn_grow's
-   prel), so this is the trend under it, and a dune field's crests, all alike, give almost none.
-   Averaged over 13 px, so a dune field's few crests do not take their whole fall within a few
-   px, and never below the distance before; distances no pixel reaches hold the last value. er: the example's raster (tn_sketch_rasterise); W x H scratch in mask, dist, near.
-   prof is untouched when the example has no line of that kind. */
 /* The example's main lines of one kind (the highest Strahler order among its lines of that kind)
    rasterised W x H into *mr (mr->data NULL when it has no line of that kind), and the chamfer
    distance to them (dist) with the nearest one's pixel (near); mask: W x H scratch. */
@@ -27597,6 +27588,16 @@ static tn_status tn__gnn_grow_mains(const tn_contour_set *example, int kind, int
     return TN_OK;
 }
 
+/* The example's profile away from its main lines of one kind (those of the highest Strahler
+   order among its lines of that kind): prof[d], d = 0 .. TN__GNN_PROFILE, the mean over the
+   example's lines of the same kind, at chamfer distance d (rounded) from the nearest main-line
+   pixel, of how far they lie below it (ridges) or above it (valleys). Lines of the same kind
+   only: the alternation of ridges and valleys is the added lines' own relief (tn__gnn_grow's
+   prel), so this is the trend under it, and a dune field's crests, all alike, give almost none.
+   Averaged over 13 px, so a dune field's few crests do not take their whole fall within a few
+   px, and never below the distance before; distances no pixel reaches hold the last value.
+   er: the example's raster (tn_sketch_rasterise); W x H scratch in mask, dist, near. prof is
+   untouched when the example has no line of that kind. */
 TN__INTERNAL tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask,
                                             float *dist, int *near)
 {
