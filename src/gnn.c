@@ -837,6 +837,16 @@ static inline void tn__gnn_axpy(float a, const float *x, float *y, int n)
     for (; i < n; i++) y[i] += a * x[i];
 }
 
+/* y[i] += a * x[i], the product rounded before the sum (the bytes of the scalar loop, unlike
+   tn__gnn_axpy's fused multiply-add; a = 1 is a plain sum) */
+static inline void tn__gnn_add_scaled(float a, const float *x, float *y, int n)
+{
+    tn__vf va = tn__vf_set1(a);
+    int i = 0;
+    for (; i + TN__VF_N <= n; i += TN__VF_N) tn__vf_store(y + i, tn__vf_add(tn__vf_load(y + i), tn__vf_mul(va, tn__vf_load(x + i))));
+    for (; i < n; i++) y[i] += a * x[i];
+}
+
 typedef struct tn__gnn_att {
     const tn__gnn_dir *g;
     const float *U, *V, *WcT, *a, *dY;   /* WcT: F x H, so the per-edge loop runs along H */
@@ -1059,10 +1069,7 @@ static void tn__gnn_mean_fwd(void *vj, size_t b, size_t end)
         int k0 = J->g->dst_start[d], k1 = J->g->dst_start[d + 1], k;
         float *y = J->Y + d * J->H, inv = k1 > k0 ? 1.0f / (float)(k1 - k0) : 0.0f;
         for (i = 0; i < J->H; i++) y[i] = 0;
-        for (k = k0; k < k1; k++) {
-            const float *x = J->X + (size_t)J->g->src_of[k] * J->H;
-            for (i = 0; i < J->H; i++) y[i] += x[i];
-        }
+        for (k = k0; k < k1; k++) tn__gnn_add_scaled(1.0f, J->X + (size_t)J->g->src_of[k] * J->H, y, J->H);
         for (i = 0; i < J->H; i++) y[i] *= inv;
     }
 }
@@ -1071,15 +1078,13 @@ static void tn__gnn_mean_bwd(void *vj, size_t b, size_t end)
 {
     const tn__gnn_mean_job *J = (const tn__gnn_mean_job *)vj;
     size_t s;
-    int i;
     for (s = b; s < end; s++) {
         int k;
         float *dx = J->dX + s * J->H;
         for (k = J->g->src_start[s]; k < J->g->src_start[s + 1]; k++) {
             int d = J->g->dst_of[J->g->src_pos[k]];
             float inv = 1.0f / (float)(J->g->dst_start[d + 1] - J->g->dst_start[d]);
-            const float *dy = J->dY + (size_t)d * J->H;
-            for (i = 0; i < J->H; i++) dx[i] += inv * dy[i];
+            tn__gnn_add_scaled(inv, J->dY + (size_t)d * J->H, dx, J->H);
         }
     }
 }

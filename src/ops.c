@@ -142,6 +142,30 @@ typedef struct tn__bin_job {
     int op;
 } tn__bin_job;
 
+/* o = a op b over n contiguous floats (op: add, sub or mul), in SIMD; the same bytes as the
+   scalar loop, one rounding per element. */
+static void tn__bin_row_contig(int op, const float *a, const float *b, float *o, size_t n)
+{
+    size_t x = 0;
+    for (; x + TN__VF_N <= n; x += TN__VF_N) {
+        tn__vf va = tn__vf_load(a + x), vb = tn__vf_load(b + x);
+        tn__vf_store(o + x, op == TN__BIN_ADD ? tn__vf_add(va, vb) : op == TN__BIN_SUB ? tn__vf_sub(va, vb) : tn__vf_mul(va, vb));
+    }
+    for (; x < n; x++) o[x] = op == TN__BIN_ADD ? a[x] + b[x] : op == TN__BIN_SUB ? a[x] - b[x] : a[x] * b[x];
+}
+
+/* d += s * g (s = +1 or -1), or d += g * m with m (contiguous), over n floats, in SIMD; the
+   same bytes as the scalar loop (a product, then a sum: no fused multiply-add). */
+static void tn__bin_grad_contig(float *d, const float *g, const float *m, float s, size_t n)
+{
+    size_t x = 0;
+    for (; x + TN__VF_N <= n; x += TN__VF_N) {
+        tn__vf vg = tn__vf_load(g + x), vd = tn__vf_load(d + x);
+        tn__vf_store(d + x, m ? tn__vf_add(vd, tn__vf_mul(vg, tn__vf_load(m + x))) : s > 0 ? tn__vf_add(vd, vg) : tn__vf_sub(vd, vg));
+    }
+    for (; x < n; x++) d[x] += m ? g[x] * m[x] : s > 0 ? g[x] : -g[x];
+}
+
 /* Forward over output rows [b, e) of the flattened (n, c, h) index. */
 static void tn__bin_rows(void *ctx, size_t rb, size_t re)
 {
@@ -155,6 +179,10 @@ static void tn__bin_rows(void *ctx, size_t rb, size_t re)
         float *po = j->o + r * (size_t)W;
         size_t ia = j->sa[3], ib = j->sb[3];
         int x;
+        if (ia == 1 && ib == 1 && j->op != TN__BIN_DIV) {
+            tn__bin_row_contig(j->op, pa, pb, po, (size_t)W);
+            continue;
+        }
         switch (j->op) {
         case TN__BIN_ADD: for (x = 0; x < W; x++) po[x] = pa[x * ia] + pb[x * ib]; break;
         case TN__BIN_SUB: for (x = 0; x < W; x++) po[x] = pa[x * ia] - pb[x * ib]; break;
@@ -187,6 +215,10 @@ static void tn__bin_grad_rows(void *vj, size_t rb, size_t re)
         if (id == 1) for (x = 0; x < W; x++) pd[x] += (expr); \
         else for (x = 0; x < W; x++) pd[x * id] += (expr); \
     } while (0)
+        if (id == 1 && j->op != TN__BIN_DIV && (j->op != TN__BIN_MUL || (j->which ? ia : ib) == 1)) {
+            tn__bin_grad_contig(pd, pg, j->op != TN__BIN_MUL ? NULL : j->which ? pa : pb, j->op == TN__BIN_SUB && j->which ? -1.0f : 1.0f, W);
+            continue;
+        }
         switch (j->op * 2 + j->which) {
         case TN__BIN_ADD * 2: case TN__BIN_ADD * 2 + 1: case TN__BIN_SUB * 2: TN__BIN_GRAD(pg[x]); break;
         case TN__BIN_SUB * 2 + 1: TN__BIN_GRAD(-pg[x]); break;
