@@ -24573,8 +24573,8 @@ static tn_tensor *tn__gnn_forward(tn_ctx *ctx, const tn_params *w, const tn__gnn
 
 /* Node inputs shared by training and generation: pixel (type, baseline) rows, baseline column,
    part (sign, embedding) rows. emb: nparts x D. */
-static tn_status tn__gnn_inputs(tn_ctx *ctx, const tn__gnn_graph *g, const float *type, const float *base, const float *sign,
-                                tn_tensor *emb, tn__gnn_in *in)
+static tn_status tn__gnn_inputs(tn_ctx *ctx, const tn__gnn_graph *g, const float *type, const float *base, const float *level,
+                                const float *sign, tn_tensor *emb, tn__gnn_in *in)
 {
     tn_tensor *s;
     int i;
@@ -24586,7 +24586,7 @@ static tn_status tn__gnn_inputs(tn_ctx *ctx, const tn__gnn_graph *g, const float
     if (!in->pix_in || !in->base || !s) return tn_ctx_status(ctx);
     for (i = 0; i < g->npix; i++) {
         in->pix_in->data[2 * i] = type[i];
-        in->pix_in->data[2 * i + 1] = base ? base[i] : 0.0f;
+        in->pix_in->data[2 * i + 1] = base ? base[i] - (level ? level[i] : 0.0f) : 0.0f;
         in->base->data[i] = base ? base[i] : 0.0f;
     }
     for (i = 0; i < g->nparts; i++) s->data[i] = sign[i];
@@ -25079,7 +25079,7 @@ static tn_status tn__gnn_step(tn__gnn_train *s, tn_ctx *ctx, int phase, float *l
         emb = tn_tensor_new(ctx, 2, shape);
     if (s->A.overhang) tn__gnn_overhangs(&s->g, &L->P, lev == 0 ? s->known : NULL, NULL, s->A.width, 0, 0);
     tn__gnn_graph_finish(&s->g);
-    if ((st = tn__gnn_inputs(ctx, &s->g, L->type, s->A.membrane ? L->base : NULL, L->P.sign, emb, &in))) return st;
+    if ((st = tn__gnn_inputs(ctx, &s->g, L->type, s->A.membrane ? L->base : NULL, NULL, L->P.sign, emb, &in))) return st;
     in.E0 = tn__gnn_part_states(ctx, &s->A, L->P.n, &s->rng);
     {
         int s4[4];
@@ -25822,6 +25822,11 @@ typedef struct tn__gnn_gen {
     uint8_t *fixed;            /* W x H: sketch pixel */
     float *base;               /* W x H: the whole map's membrane (example units), or NULL: each
                                   region solves its own (tn_gnn_prepare sets it for its windows) */
+    int level;                 /* px: > 0 (the network's reach, A.radius), the network sees each
+                                  pixel's baseline less how far the membrane's mean within this
+                                  radius lies outside [level_lo, level_hi], the example's own such
+                                  means (tn__gnn_region_level); 0 = as it is */
+    float level_lo, level_hi;  /* normalised */
     const tn_params *w;        /* the network it runs on (tn__gnn_pick_net) */
     tn_params *own_w;          /* w when it is the model's early network */
     int detail;                /* 1: fd's fine detail is added to the output */
@@ -25835,6 +25840,7 @@ typedef struct tn__gnn_region {
     tn__gnn_parts P;
     int *of;                   /* region part -> sketch part */
     float *type, *base;        /* rw x rh; base normalised (0 without membrane) */
+    float *level;              /* rw x rh or NULL: subtracted from base in the pixels' input (G->level) */
     tn__gnn_graph g;
 } tn__gnn_region;
 
@@ -25862,8 +25868,79 @@ static void tn__gnn_region_free(tn__gnn_region *R)
     TN_FREE(R->of);
     TN_FREE(R->type);
     TN_FREE(R->base);
+    TN_FREE(R->level);
     tn__gnn_graph_free(&R->g);
     memset(R, 0, sizeof *R);
+}
+
+/* The sum of integral image I ((width + 1) x (height + 1)) over the box of radius r around (x, y),
+   clipped to the map; *area = the clipped box's pixels. */
+static double tn__gnn_box_sum(const double *I, int width, int height, int x, int y, int r, double *area)
+{
+    const size_t W1 = (size_t)width + 1;
+    int x0 = x - r < 0 ? 0 : x - r, y0 = y - r < 0 ? 0 : y - r, x1 = x + r + 1 > width ? width : x + r + 1, y1 = y + r + 1 > height ? height : y + r + 1;
+    *area = (double)(x1 - x0) * (y1 - y0);
+    return I[(size_t)y1 * W1 + x1] - I[(size_t)y0 * W1 + x1] - I[(size_t)y1 * W1 + x0] + I[(size_t)y0 * W1 + x0];
+}
+
+/* The range of the example's (dem, example units) means within L px, clipped to it, normalised. */
+static tn_status tn__gnn_level_range(const tn_image *dem, const tn__gnn_arch *A, int L, float *lo, float *hi)
+{
+    const int W = dem->width, H = dem->height;
+    const size_t W1 = (size_t)W + 1;
+    double *I = (double *)tn__calloc(W1 * (H + 1) * sizeof(double)), a = DBL_MAX, b = -DBL_MAX;
+    int x, y;
+    if (!I) return TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            size_t q = (size_t)(y + 1) * W1 + x + 1;
+            I[q] = dem->data[(size_t)y * W + x] + I[q - 1] + I[q - W1] - I[q - W1 - 1];
+        }
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            double area, m = tn__gnn_box_sum(I, W, H, x, y, L, &area) / area;
+            a = fmin(a, m), b = fmax(b, m);
+        }
+    TN_FREE(I);
+    *lo = (float)((a - A->mean) / A->std);
+    *hi = (float)((b - A->mean) / A->std);
+    return TN_OK;
+}
+
+/* R->level: how far each region pixel's mean membrane (normalised) within G->level px (the
+   network's reach), clipped to the map, lies outside the example's own such means, so the
+   network sees a drawing's ground at levels the example has. It learnt the example's heights: given a drawing's ground above
+   (below) them it pulls the land beside the strokes down (up) by as much or more (docs/gnn.md),
+   and a drawn valley was then dug below its asked height to stay lowest. base_map as in
+   tn__gnn_region_make. */
+static tn_status tn__gnn_region_level(const tn__gnn_gen *G, const float *base_map, tn__gnn_region *R)
+{
+    const int L = G->level;
+    int ex = R->rx - L > 0 ? R->rx - L : 0, ey = R->ry - L > 0 ? R->ry - L : 0, x, y;
+    int ew = (R->rx + R->rw + L < G->W ? R->rx + R->rw + L : G->W) - ex, eh = (R->ry + R->rh + L < G->H ? R->ry + R->rh + L : G->H) - ey;
+    size_t W1 = (size_t)ew + 1;
+    float *eb = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
+    double *I = (double *)tn__calloc(W1 * (eh + 1) * sizeof(double));
+    tn_status st = TN_OK;
+    R->level = (float *)tn__alloc((size_t)R->rw * R->rh * sizeof(float));
+    if (!eb || !I || !R->level) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st && base_map)
+        for (y = 0; y < eh; y++) memcpy(eb + (size_t)y * ew, base_map + (size_t)(ey + y) * G->W + ex, (size_t)ew * sizeof(float));
+    else if (!st)
+        st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, ex, ey, ew, eh, eb);
+    for (y = 0; !st && y < eh; y++)
+        for (x = 0; x < ew; x++) {
+            size_t q = (size_t)(y + 1) * W1 + x + 1;
+            I[q] = eb[(size_t)y * ew + x] + I[q - 1] + I[q - W1] - I[q - W1 - 1];
+        }
+    for (y = 0; !st && y < R->rh; y++)
+        for (x = 0; x < R->rw; x++) {
+            double area, m = (tn__gnn_box_sum(I, ew, eh, R->rx + x - ex, R->ry + y - ey, L, &area) / area - G->A.mean) / G->A.std;
+            R->level[(size_t)y * R->rw + x] = (float)(m - fmin(fmax(m, (double)G->level_lo), (double)G->level_hi));
+        }
+    TN_FREE(eb);
+    TN_FREE(I);
+    return st;
 }
 
 /* The graph of the region: its pixels' k nearest parts within the radius, from the parts with a
@@ -25897,6 +25974,7 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
         else
             st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
         for (i = 0; !st && i < npix; i++) R->base[i] = (R->base[i] - G->A.mean) / G->A.std;
+        if (!st && G->level > 0) st = tn__gnn_region_level(G, base_map, R);
     } else if (!st)
         memset(R->base, 0, npix * sizeof(float));
     for (p = 0; !st && p < S->n; p++) {
@@ -25950,7 +26028,7 @@ static tn_status tn__gnn_region_inputs(tn_ctx *ctx, const tn__gnn_gen *G, const 
         if (!(emb = tn_tensor_2d(ctx, R->P.n, D))) return tn_ctx_status(ctx);
         for (i = 0; i < R->P.n; i++) memcpy(emb->data + (size_t)i * D, G->emb + (size_t)R->of[i] * D, (size_t)D * sizeof(float));
     }
-    if ((st = tn__gnn_inputs(ctx, &R->g, R->type, G->A.membrane ? R->base : NULL, R->P.sign, emb, in))) return st;
+    if ((st = tn__gnn_inputs(ctx, &R->g, R->type, G->A.membrane ? R->base : NULL, R->level, R->P.sign, emb, in))) return st;
     if (!(E0 = tn_tensor_2d(ctx, R->P.n, Hd))) return tn_ctx_status(ctx);
     if (G->E0)
         for (i = 0; i < R->P.n; i++) memcpy(E0->data + (size_t)i * Hd, G->E0 + (size_t)R->of[i] * Hd, (size_t)Hd * sizeof(float));
@@ -26568,6 +26646,9 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
+        if (!st && tn__gnn_example_dem(model, &G->A, &dem) &&
+            !(st = tn__gnn_level_range(&dem, &G->A, (int)ceilf(G->A.radius), &G->level_lo, &G->level_hi)))
+            G->level = (int)ceilf(G->A.radius);
         if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
             /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
             if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
@@ -27865,16 +27946,6 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
             Q[p] = qset[p] ? (1 - a) * Q[p] + a * h : h;
             qset[p] = 1;
         }
-}
-
-/* The sum of integral image I ((width + 1) x (height + 1)) over the box of radius r around (x, y),
-   clipped to the map; *area = the clipped box's pixels. */
-static double tn__gnn_box_sum(const double *I, int width, int height, int x, int y, int r, double *area)
-{
-    const size_t W1 = (size_t)width + 1;
-    int x0 = x - r < 0 ? 0 : x - r, y0 = y - r < 0 ? 0 : y - r, x1 = x + r + 1 > width ? width : x + r + 1, y1 = y + r + 1 > height ? height : y + r + 1;
-    *area = (double)(x1 - x0) * (y1 - y0);
-    return I[(size_t)y1 * W1 + x1] - I[(size_t)y0 * W1 + x1] - I[(size_t)y1 * W1 + x0] + I[(size_t)y0 * W1 + x0];
 }
 
 /* The quilted heights' relief: Q less its mean within TN__GNN_RELIEF_RADIUS px (its local relief,

@@ -376,16 +376,6 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
         }
 }
 
-/* The sum of integral image I ((width + 1) x (height + 1)) over the box of radius r around (x, y),
-   clipped to the map; *area = the clipped box's pixels. */
-static double tn__gnn_box_sum(const double *I, int width, int height, int x, int y, int r, double *area)
-{
-    const size_t W1 = (size_t)width + 1;
-    int x0 = x - r < 0 ? 0 : x - r, y0 = y - r < 0 ? 0 : y - r, x1 = x + r + 1 > width ? width : x + r + 1, y1 = y + r + 1 > height ? height : y + r + 1;
-    *area = (double)(x1 - x0) * (y1 - y0);
-    return I[(size_t)y1 * W1 + x1] - I[(size_t)y0 * W1 + x1] - I[(size_t)y1 * W1 + x0] + I[(size_t)y0 * W1 + x0];
-}
-
 /* The quilted heights' relief: Q less its mean within TN__GNN_RELIEF_RADIUS px (its local relief,
    as the network's lines have theirs), plus, from TN__GNN_FALL_REACH px of the strokes on (D: px to
    the nearest), where their own fall ends, that mean less the one within TN__GNN_QUILT_MEAN px: so
