@@ -25873,6 +25873,18 @@ static void tn__gnn_region_free(tn__gnn_region *R)
     memset(R, 0, sizeof *R);
 }
 
+/* The integral image of v (width x height) into I ((width + 1) x (height + 1), zeroed). */
+static void tn__gnn_integral(const float *v, int width, int height, double *I)
+{
+    const size_t W1 = (size_t)width + 1;
+    int x, y;
+    for (y = 0; y < height; y++)
+        for (x = 0; x < width; x++) {
+            size_t q = (size_t)(y + 1) * W1 + x + 1;
+            I[q] = v[(size_t)y * width + x] + I[q - 1] + I[q - W1] - I[q - W1 - 1];
+        }
+}
+
 /* The sum of integral image I ((width + 1) x (height + 1)) over the box of radius r around (x, y),
    clipped to the map; *area = the clipped box's pixels. */
 static double tn__gnn_box_sum(const double *I, int width, int height, int x, int y, int r, double *area)
@@ -25887,15 +25899,10 @@ static double tn__gnn_box_sum(const double *I, int width, int height, int x, int
 static tn_status tn__gnn_level_range(const tn_image *dem, const tn__gnn_arch *A, int L, float *lo, float *hi)
 {
     const int W = dem->width, H = dem->height;
-    const size_t W1 = (size_t)W + 1;
-    double *I = (double *)tn__calloc(W1 * (H + 1) * sizeof(double)), a = DBL_MAX, b = -DBL_MAX;
+    double *I = (double *)tn__calloc(((size_t)W + 1) * (H + 1) * sizeof(double)), a = DBL_MAX, b = -DBL_MAX;
     int x, y;
     if (!I) return TN_ERR_OUT_OF_MEMORY;
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            size_t q = (size_t)(y + 1) * W1 + x + 1;
-            I[q] = dem->data[(size_t)y * W + x] + I[q - 1] + I[q - W1] - I[q - W1 - 1];
-        }
+    tn__gnn_integral(dem->data, W, H, I);
     for (y = 0; y < H; y++)
         for (x = 0; x < W; x++) {
             double area, m = tn__gnn_box_sum(I, W, H, x, y, L, &area) / area;
@@ -25918,9 +25925,8 @@ static tn_status tn__gnn_region_level(const tn__gnn_gen *G, const float *base_ma
     const int L = G->level;
     int ex = R->rx - L > 0 ? R->rx - L : 0, ey = R->ry - L > 0 ? R->ry - L : 0, x, y;
     int ew = (R->rx + R->rw + L < G->W ? R->rx + R->rw + L : G->W) - ex, eh = (R->ry + R->rh + L < G->H ? R->ry + R->rh + L : G->H) - ey;
-    size_t W1 = (size_t)ew + 1;
     float *eb = (float *)tn__alloc((size_t)ew * eh * sizeof(float));
-    double *I = (double *)tn__calloc(W1 * (eh + 1) * sizeof(double));
+    double *I = (double *)tn__calloc(((size_t)ew + 1) * (eh + 1) * sizeof(double));
     tn_status st = TN_OK;
     R->level = (float *)tn__alloc((size_t)R->rw * R->rh * sizeof(float));
     if (!eb || !I || !R->level) st = TN_ERR_OUT_OF_MEMORY;
@@ -25928,11 +25934,7 @@ static tn_status tn__gnn_region_level(const tn__gnn_gen *G, const float *base_ma
         for (y = 0; y < eh; y++) memcpy(eb + (size_t)y * ew, base_map + (size_t)(ey + y) * G->W + ex, (size_t)ew * sizeof(float));
     else if (!st)
         st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, ex, ey, ew, eh, eb);
-    for (y = 0; !st && y < eh; y++)
-        for (x = 0; x < ew; x++) {
-            size_t q = (size_t)(y + 1) * W1 + x + 1;
-            I[q] = eb[(size_t)y * ew + x] + I[q - 1] + I[q - W1] - I[q - W1 - 1];
-        }
+    if (!st) tn__gnn_integral(eb, ew, eh, I);
     for (y = 0; !st && y < R->rh; y++)
         for (x = 0; x < R->rw; x++) {
             double area, m = (tn__gnn_box_sum(I, ew, eh, R->rx + x - ex, R->ry + y - ey, L, &area) / area - G->A.mean) / G->A.std;
@@ -27955,15 +27957,10 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
    not sink a drawn valley below its ground (a slot along it). */
 static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width, int height, float *prel)
 {
-    const size_t W1 = (size_t)width + 1;
-    double *qs = (double *)tn__calloc(W1 * (height + 1) * sizeof(double));
+    double *qs = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
     int x, y;
     if (!qs) return TN_ERR_OUT_OF_MEMORY;
-    for (y = 0; y < height; y++)
-        for (x = 0; x < width; x++) {
-            size_t q = (size_t)(y + 1) * W1 + x + 1;
-            qs[q] = Q[(size_t)y * width + x] + qs[q - 1] + qs[q - W1] - qs[q - W1 - 1];
-        }
+    tn__gnn_integral(Q, width, height, qs);
     for (y = 0; y < height; y++)
         for (x = 0; x < width; x++) {
             size_t p = (size_t)y * width + x;

@@ -383,15 +383,10 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
    not sink a drawn valley below its ground (a slot along it). */
 static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width, int height, float *prel)
 {
-    const size_t W1 = (size_t)width + 1;
-    double *qs = (double *)tn__calloc(W1 * (height + 1) * sizeof(double));
+    double *qs = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
     int x, y;
     if (!qs) return TN_ERR_OUT_OF_MEMORY;
-    for (y = 0; y < height; y++)
-        for (x = 0; x < width; x++) {
-            size_t q = (size_t)(y + 1) * W1 + x + 1;
-            qs[q] = Q[(size_t)y * width + x] + qs[q - 1] + qs[q - W1] - qs[q - W1 - 1];
-        }
+    tn__gnn_integral(Q, width, height, qs);
     for (y = 0; y < height; y++)
         for (x = 0; x < width; x++) {
             size_t p = (size_t)y * width + x;
