@@ -2061,7 +2061,8 @@ TN_TEST(drawing_off_the_example_level_is_seen_at_it)
        its asked height to keep it lowest. It now sees a ground that lies outside the example's
        levels moved to the nearest one, so a drawing wholly above the example raised by 20 % of
        the range more is the same terrain 20 % higher, to float rounding (7 m off in 1000 m
-       without). Without the fine detail, which takes the example's patches by their heights too */
+       without). Without the fine detail: its choice of patch can turn float rounding into
+       another patch */
     tn_image dem = tn_test_dem(64, 22), a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
     tn_gnn m;
     tn_gnn_opts o;
