@@ -2587,12 +2587,13 @@ static tn_status tn__gnn_level_range(const tn_image *dem, const tn__gnn_arch *A,
     return TN_OK;
 }
 
-/* R->level: how far each region pixel's mean membrane (normalised) within G->level px (the
-   network's reach), clipped to the map, lies outside the example's own such means, so the
-   network sees a drawing's ground at levels the example has. It learnt the example's heights: given a drawing's ground above
-   (below) them it pulls the land beside the strokes down (up) by as much or more (docs/gnn.md),
-   and a drawn valley was then dug below its asked height to stay lowest. base_map as in
-   tn__gnn_region_make. */
+/* R->base (example units) and R->level from one membrane of the region grown by G->level px:
+   how far each pixel's mean membrane (normalised) within G->level px (the network's reach),
+   clipped to the map, lies outside the example's own such means, so the network sees a
+   drawing's ground at levels the example has. It learnt the example's heights: given a
+   drawing's ground above (below) them it pulls the land beside the strokes down (up) by as much
+   or more (docs/gnn.md), and a drawn valley was then dug below its asked height to stay lowest.
+   base_map as in tn__gnn_region_make. */
 static tn_status tn__gnn_region_level(const tn__gnn_gen *G, const float *base_map, tn__gnn_region *R)
 {
     const int L = G->level;
@@ -2607,6 +2608,8 @@ static tn_status tn__gnn_region_level(const tn__gnn_gen *G, const float *base_ma
         for (y = 0; y < eh; y++) memcpy(eb + (size_t)y * ew, base_map + (size_t)(ey + y) * G->W + ex, (size_t)ew * sizeof(float));
     else if (!st)
         st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, ex, ey, ew, eh, eb);
+    for (y = 0; !st && y < R->rh; y++)
+        memcpy(R->base + (size_t)y * R->rw, eb + (size_t)(R->ry - ey + y) * ew + (R->rx - ex), (size_t)R->rw * sizeof(float));
     if (!st) tn__gnn_integral(eb, ew, eh, I);
     for (y = 0; !st && y < R->rh; y++)
         for (x = 0; x < R->rw; x++) {
@@ -2644,12 +2647,13 @@ static tn_status tn__gnn_region_make(const tn__gnn_gen *G, int rx, int ry, int r
     if (!R->type || !R->base || !R->of || !R->P.start || !R->P.of || !R->P.pts || !R->P.sign) st = TN_ERR_OUT_OF_MEMORY;
     for (y = 0; !st && y < rh; y++) memcpy(R->type + (size_t)y * rw, G->type + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
     if (!st && G->A.membrane) {
-        if (base_map)
+        if (G->level > 0)
+            st = tn__gnn_region_level(G, base_map, R);
+        else if (base_map)
             for (y = 0; y < rh; y++) memcpy(R->base + (size_t)y * rw, base_map + (size_t)(ry + y) * G->W + rx, (size_t)rw * sizeof(float));
         else
             st = tn__gnn_membrane_rect(G->hgt, G->fixed, G->W, G->H, rx, ry, rw, rh, R->base);
         for (i = 0; !st && i < npix; i++) R->base[i] = (R->base[i] - G->A.mean) / G->A.std;
-        if (!st && G->level > 0) st = tn__gnn_region_level(G, base_map, R);
     } else if (!st)
         memset(R->base, 0, npix * sizeof(float));
     for (p = 0; !st && p < S->n; p++) {
@@ -3321,12 +3325,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         }
         tn_image_free(&r);
         TN_FREE(near);
-        if (!st && tn__gnn_example_dem(model, &G->A, &dem) &&
-            !(st = tn__gnn_level_range(&dem, &G->A, (int)ceilf(G->A.radius), &G->level_lo, &G->level_hi)))
+        if (!st && tn__gnn_example_dem(model, &G->A, &dem)) {
+            /* the ground at the example's levels (tn__gnn_region_level), and the drawn ridges'
+               flanks by example, on the output before the notch (which keeps them followed) */
             G->level = (int)ceilf(G->A.radius);
-        if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd))) {
-            /* the drawn ridges' flanks by example, on the output before the notch (which keeps them followed) */
-            if (!(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            st = tn__gnn_level_range(&dem, &G->A, G->level, &G->level_lo, &G->level_hi);
+            if (!st) st = tn__gnn_stored_parts(model->weights, &G->A, "gnn", &rnd);
+            if (!st && !(G->flank = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
             if (!st) st = tn__gnn_grow_flanks(&sk, sketch->count, &rnd, &dem, o.seed, G->flank);
             for (q = 0; !st && q < n; q++) G->flank[q] /= G->A.std;
             tn_contour_set_free(&rnd);
