@@ -12,7 +12,9 @@
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
        every 128 px crop of the example (stride 4; copy check); whether two seeds differ; the
        depth of the main valleys (valley_depth: the arrangement the distances miss) against the
-       example's, and the reference crop's,
+       example's, and the reference crop's; how far the heights' distribution lies from the
+       example's (heights_distance: a massif or range the sample lacks), against the reference
+       crop's and the corner crops',
      - with --layout 1: the same model's samples laid out (tn_singan_gen_opts.layout: GPNN on the
        example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
        GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
@@ -28,7 +30,7 @@
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
                        [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1]
-                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--coarsest PX] [--channels N]
+                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but those run only when named, M = 10, 2 threads) */
 #include "terrainnet.h"
@@ -206,11 +208,14 @@ static void other_crop(const tn_image *full, int ex, int ey, int S, int *ox, int
 /* The three 256 crops at the DEM's corners farthest from the example (bench_sketch's rule): their
    mean distance to the example, and the least and greatest in lo, hi. How far the DEM's other
    ground lies from the example: the reference crop, picked as the example was, can lie far closer. */
-static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi)
+static double heights_distance(const tn_image *ex, const tn_image *img);
+
+static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi, double *heights)
 {
     int cx[4] = {0, full->width - 256, 0, full->width - 256}, cy[4] = {0, 0, full->height - 256, full->height - 256}, used[4] = {0, 0, 0, 0};
     int k, n = 0;
     dists mean = {0, 0, 0};
+    *heights = 0;
     lo->slope = lo->curv = lo->spec = DBL_MAX;
     hi->slope = hi->curv = hi->spec = 0;
     for (k = 0; k < 3; k++) {
@@ -225,6 +230,7 @@ static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, in
         used[best] = 1;
         if (tn_image_crop(&c, full, cx[best], cy[best], 256, 256)) continue;
         d = dist3(ex, &c, dx, dy);
+        *heights += heights_distance(ex, &c) / 3;
         tn_image_free(&c);
         mean.slope += d.slope, mean.curv += d.curv, mean.spec += d.spec, n++;
         lo->slope = fmin(lo->slope, d.slope), lo->curv = fmin(lo->curv, d.curv), lo->spec = fmin(lo->spec, d.spec);
@@ -263,10 +269,45 @@ static double valley_depth(const tn_image *dem)
     return cnt ? sum / (double)cnt : 0;
 }
 
-/* Measures 3 samples against the example and the reference distances; prints one line. */
-typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff, valleys; } measured;
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
 
-static double g_valleys_ex; /* valley_depth of the current region's example */
+/* How far img's heights lie from ex's as a distribution (the hypsometric curve): the mean
+   |difference| of the two at the same quantile (the 1-D Wasserstein distance), in % of ex's
+   height range. A sample without the example's massif or range lacks its high quantiles, which
+   the slope, curvature and spectrum distances do not see. */
+static double heights_distance(const tn_image *ex, const tn_image *img)
+{
+    size_t n = (size_t)ex->width * ex->height, m = (size_t)img->width * img->height, k;
+    float *a = (float *)malloc(n * sizeof(float)), *b = (float *)malloc(m * sizeof(float));
+    double sum = 0;
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return NAN;
+    }
+    memcpy(a, ex->data, n * sizeof(float));
+    memcpy(b, img->data, m * sizeof(float));
+    qsort(a, n, sizeof(float), cmp_float);
+    qsort(b, m, sizeof(float), cmp_float);
+    for (k = 0; k < 256; k++) {
+        double q = ((double)k + 0.5) / 256.0;
+        sum += fabs((double)a[(size_t)(q * (double)n)] - (double)b[(size_t)(q * (double)m)]);
+    }
+    sum = 100.0 * sum / 256.0 / ((double)a[n - 1] - a[0] > 0 ? (double)a[n - 1] - a[0] : 1.0);
+    free(a);
+    free(b);
+    return sum;
+}
+
+/* Measures 3 samples against the example and the reference distances; prints one line. */
+typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff, valleys, heights; } measured;
+
+static double g_valleys_ex;  /* valley_depth of the current region's example */
+static double g_heights_ref; /* heights_distance of the reference crop */
 
 static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
@@ -274,10 +315,11 @@ static void report(const char *name, const char *what, const measured *m, const 
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | heights %.0f..%.0f (%s the example +-10 %%) | "
-           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx)%s\n",
+           "best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | "
+           "heights_distance %.1f %% (%.2fx)%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, (double)m->lo, (double)m->hi, ok_h ? "within" : "OUTSIDE",
            m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
-           m->valleys, m->valleys / g_valleys_ex,
+           m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref,
            rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
 }
 
@@ -297,6 +339,7 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         m->d.curv += d.curv / 3;
         m->d.spec += d.spec / 3;
         m->valleys += valley_depth(&s[i]) / 3;
+        m->heights += heights_distance(ex, &s[i]) / 3;
         tn_image_range(&lo, &hi, &s[i]);
         if (lo < m->lo) m->lo = lo;
         if (hi > m->hi) m->hi = hi;
@@ -358,7 +401,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     tn_singan_gen_opts g;
     measured ms, mg, ml;
     dists ref, corners, lo, hi;
-    double t0;
+    double t0, corner_heights;
     float dx, dy, fdx, fdy, elo, ehi;
     int i, exx, exy, ox = 0, oy = 0;
     long ov = 0;
@@ -376,14 +419,15 @@ static void bench_region(const region *rg, double minutes, int threads)
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);
     ref = dist3(&ex, &other, dx, dy);
-    corners = corner_crops(&full, &ex, exx, exy, dx, dy, &lo, &hi);
+    corners = corner_crops(&full, &ex, exx, exy, dx, dy, &lo, &hi, &corner_heights);
+    g_heights_ref = heights_distance(&ex, &other);
     printf("%s (%s): example %.0f..%.0f m at (%d, %d) of the full DEM; reference crop at (%d, %d) (overlap %ld px), pixel %.1f x %.1f m\n", n,
            rg->tuned == 2 ? "tuning set 2" : rg->tuned == 1 ? "tuned on" : "held out", (double)elo, (double)ehi, exx, exy, ox, oy, ov, (double)dx, (double)dy);
     g_valleys_ex = valley_depth(&ex);
-    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f | valleys %.1f m (%.2fx the example's %.1f m)\n", n, ref.slope, ref.curv,
-           ref.spec, valley_depth(&other), valley_depth(&other) / g_valleys_ex, g_valleys_ex);
-    printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f)\n", n, corners.slope,
-           corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec);
+    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f | valleys %.1f m (%.2fx the example's %.1f m) | heights_distance %.1f %%\n", n,
+           ref.slope, ref.curv, ref.spec, valley_depth(&other), valley_depth(&other) / g_valleys_ex, g_valleys_ex, g_heights_ref);
+    printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f) | heights_distance %.1f %%\n", n,
+           corners.slope, corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec, corner_heights);
     fflush(stdout);
     if (g_singan) {
         o = g_opts;
@@ -582,6 +626,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--d-steps") && v) g_opts.d_steps = atoi(argv[++i]);
         else if (!strcmp(a, "--curv-weight") && v) g_opts.curv_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--spec-weight") && v) g_opts.spec_weight = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--height-weight") && v) g_opts.height_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--coarsest") && v) g_opts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--channels") && v) g_opts.channels = g_opts.max_channels = atoi(argv[++i]);
         else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
@@ -610,8 +655,9 @@ int main(int argc, char **argv)
         }
     }
     printf("# bench_singan: %.1f min per DEM, %d threads, singan options (0 = default): patch %d, disc_layers %d, noise_amp %g, adv_weight %g, d_steps %d, "
-           "curv_weight %g, spec_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
-           (double)g_opts.adv_weight, g_opts.d_steps, (double)g_opts.curv_weight, (double)g_opts.spec_weight, g_opts.coarsest, g_opts.channels);
+           "curv_weight %g, spec_weight %g, height_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
+           (double)g_opts.adv_weight, g_opts.d_steps, (double)g_opts.curv_weight, (double)g_opts.spec_weight, (double)g_opts.height_weight, g_opts.coarsest,
+           g_opts.channels);
     fflush(stdout);
     if (peer) {
         if (system("/usr/bin/python3 /work/shared/peers/torch_singan_step.py --threads 2 --size 256 --runs 3 2>&1 | sed 's/^/peer: /'"))

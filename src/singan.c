@@ -64,6 +64,11 @@ typedef struct tn_singan_opts {
                               of its power spectrum to the example's where it exceeds it, at periods
                               of 8 px and more (the Sahara's undulation at half the map's period;
                               docs/singan.md); 0 = 1, < 0 = none */
+    float height_weight;   /* weight of the heights loss at the coarsest scale: the 1-D Wasserstein
+                              distance between the heights of its output and of the example's
+                              coarsest scale, in units of their variance there (without it samples
+                              lack the example's rarer massif or range; docs/singan.md); 0 = 4,
+                              < 0 = none */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -219,6 +224,10 @@ static const char *const tn__sg_format_why[TN__SG_FORMAT] = {
 #define TN__SG_CONFIG1 (8 + 2 * TN_SINGAN_MAX_SCALES) /* format 1 */
 #define TN__SG_SCHED (5 + TN_SINGAN_MAX_SCALES) /* scale, its first iteration, its count, a time, its deadline, iterations per scale */
 #define TN__SG_M 5 /* context of 5 valid 3 x 3 convolutions */
+/* The coarsest generator's tanh times 2: the example spans -1..1 there, and at a gain of 1 its
+   summits and floors sat where tanh saturates, so samples fell short of them (older models
+   store 1, and keep it) */
+#define TN__SG_GAIN0 2.0f
 #define TN__SG_BANK 4 /* fake bases per scale (tn__sg_bank_fill) */
 #define TN__SG_BANK_PX (1 << 20) /* scales with more pixels (grown by the context) make each base anew */
 #define TN__SG_BANK_TILE 256
@@ -248,6 +257,8 @@ TN_API void tn_singan_defaults(tn_singan_opts *o)
     if (o->curv_weight < 0) o->curv_weight = 0.0f;
     if (o->spec_weight == 0) o->spec_weight = 1.0f;
     if (o->spec_weight < 0) o->spec_weight = 0.0f;
+    if (o->height_weight == 0) o->height_weight = 4.0f;
+    if (o->height_weight < 0) o->height_weight = 0.0f;
     tn_train_defaults(&o->train, 10.0);
 }
 
@@ -265,7 +276,8 @@ static tn_status tn__sg_validate(const tn_singan_opts *o)
     if ((st = tn__opt_float(w, "lr", o->lr, "()", 0, 10)) || (st = tn__opt_float(w, "rec_weight", o->rec_weight, "()", -HUGE_VAL, HUGE_VAL)) ||
         (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
         (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
-        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)) || (st = tn__opt_float(w, "spec_weight", o->spec_weight, "[]", 0, 1e6)))
+        (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)) || (st = tn__opt_float(w, "spec_weight", o->spec_weight, "[]", 0, 1e6)) ||
+        (st = tn__opt_float(w, "height_weight", o->height_weight, "[]", 0, 1e6)))
         return st;
     return TN_OK;
 }
@@ -290,7 +302,7 @@ typedef struct tn__sg_arch {
     int scales, width, height, trained, disc_layers;
     float factor, offset, range;
     float amp[TN_SINGAN_MAX_SCALES];
-    float gain[TN_SINGAN_MAX_SCALES]; /* the generator's tanh times this: 5 x the example's detail RMS (<= 1; 1 at scale 0) */
+    float gain[TN_SINGAN_MAX_SCALES]; /* the generator's tanh times this: 5 x the example's detail RMS (<= 1; TN__SG_GAIN0 at scale 0) */
     int ch[TN_SINGAN_MAX_SCALES];
 } tn__sg_arch;
 
@@ -340,7 +352,7 @@ static tn_status tn__sg_read_config(const float *c, tn__sg_arch *A, const char *
     A->disc_layers = (int)c[7];
     for (s = 0; s < A->scales; s++) {
         float a = c[8 + s], w = c[8 + TN_SINGAN_MAX_SCALES + s], g = c[8 + 2 * TN_SINGAN_MAX_SCALES + s];
-        if (!(a >= 0 && a <= 100) || !(w >= 1 && w <= 512 && w == floorf(w)) || !(g > 0 && g <= 1))
+        if (!(a >= 0 && a <= 100) || !(w >= 1 && w <= 512 && w == floorf(w)) || !(g > 0 && g <= 2))
             return tn__fail(TN_ERR_CORRUPT, "%s: damaged singan configuration (scale %d)", name, s);
         A->amp[s] = a;
         A->gain[s] = g;
@@ -712,8 +724,11 @@ typedef struct tn__sg_train {
     float *lapq;               /* the example's Laplacian at the current scale, sorted (its quantiles) */
     size_t nlapq;
     double lapms;              /* its mean square */
-    float *lapc;               /* the curvature loss's gradient on the fake patch */
-    tn__sg_ranked *lapv;       /* the fake patch's Laplacian values and their pixels */
+    float *lapc;               /* the curvature, spectrum and heights losses' gradient on the fake patch */
+    tn__sg_ranked *lapv;       /* the fake patch's Laplacian values (or heights) and their pixels */
+    float *hq;                 /* the example's heights at scale 0, sorted (the heights loss's target) */
+    size_t nhq;
+    double hvar;               /* their variance */
     float *bank;               /* TN__SG_BANK fake bases of the whole scale, grown by the context */
     int bank_w, bank_h;        /* their size; 0 = none (scale 0, or a scale too large to hold) */
     double budget;             /* seconds */
@@ -741,6 +756,7 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
+    TN_FREE(s->hq);
 }
 
 /* The training window of scale sc: the whole scale or a patch. */
@@ -979,16 +995,31 @@ static tn_status tn__sg_spec_target(tn__sg_train *s, int pw, int ph)
     return TN_OK;
 }
 
+/* Sorts v (n values and their pixels) and replaces each value by its distance to q's quantile
+   (q: nq values, sorted) of the same rank: the gradient of the 1-D optimal transport between the
+   two histograms, as the sliced Wasserstein texture loss. Returns the sum of squared distances. */
+static double tn__sg_ot_errors(tn__sg_ranked *v, size_t n, const float *q, size_t nq)
+{
+    size_t i;
+    double sum = 0;
+    qsort(v, n, sizeof(tn__sg_ranked), tn__sg_cmp_ranked);
+    for (i = 0; i < n; i++) {
+        size_t qi = (size_t)(((double)i + 0.5) / (double)n * (double)nq);
+        v[i].v -= q[qi < nq ? qi : nq - 1];
+        sum += (double)v[i].v * v[i].v;
+    }
+    return sum;
+}
+
 /* The curvature loss's gradient with respect to the fake output patch out (pw x ph) into s->lapc:
-   the patch's Laplacian values, sorted, are pulled to the example's Laplacian quantiles of the
-   same ranks (the 1-D optimal transport between the two histograms, as the sliced Wasserstein
-   texture loss), so the sample gets the example's smooth floors and sharp crests rather than
-   the network's Gaussian-like texture. Returns the loss (weighted). */
+   the patch's Laplacian values are pulled to the example's Laplacian quantiles of the same ranks,
+   so the sample gets the example's smooth floors and sharp crests rather than the network's
+   Gaussian-like texture. Returns the loss (weighted). */
 static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph)
 {
     size_t n = 0, i;
     int x, y;
-    double loss = 0, gs;
+    double loss, gs;
     memset(s->lapc, 0, (size_t)pw * ph * sizeof(float));
     if (!s->nlapq || pw < 3 || ph < 3 || !(s->o.curv_weight > 0)) return 0;
     for (y = 1; y < ph - 1; y++)
@@ -998,15 +1029,12 @@ static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph
             s->lapv[n].i = (int)n;
             n++;
         }
-    qsort(s->lapv, n, sizeof(tn__sg_ranked), tn__sg_cmp_ranked);
+    loss = tn__sg_ot_errors(s->lapv, n, s->lapq, s->nlapq);
     gs = 2.0 * s->o.curv_weight / ((double)n * s->lapms);
     for (i = 0; i < n; i++) {
         int j = s->lapv[i].i, xx = 1 + j % (pw - 2), yy = 1 + j / (pw - 2);
-        size_t qi = (size_t)(((double)i + 0.5) / (double)n * (double)s->nlapq);
-        double e = (double)s->lapv[i].v - s->lapq[qi < s->nlapq ? qi : s->nlapq - 1];
-        float g = (float)(gs * e);
+        float g = (float)(gs * s->lapv[i].v);
         float *c = s->lapc + (size_t)yy * pw + xx;
-        loss += e * e;
         c[0] -= 4.0f * g; /* the Laplacian is its own adjoint */
         c[1] += g;
         c[-1] += g;
@@ -1014,6 +1042,25 @@ static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph
         c[-pw] += g;
     }
     return s->o.curv_weight * loss / ((double)n * s->lapms);
+}
+
+/* The heights loss's gradient with respect to the fake output patch out (pw x ph), added to
+   s->lapc: its heights are pulled to the example's of the same rank, so that a sample has the
+   example's massif or range even where the critic's patches, mostly of lower ground, would let
+   it leave it out. Returns the loss (weighted). */
+static double tn__sg_height_grad(tn__sg_train *s, const float *out, int pw, int ph)
+{
+    size_t n = (size_t)pw * ph, i;
+    double loss, gs;
+    if (!s->nhq || !s->lapv || !(s->o.height_weight > 0)) return 0;
+    for (i = 0; i < n; i++) {
+        s->lapv[i].v = out[i];
+        s->lapv[i].i = (int)i;
+    }
+    loss = tn__sg_ot_errors(s->lapv, n, s->hq, s->nhq);
+    gs = 2.0 * s->o.height_weight / ((double)n * s->hvar);
+    for (i = 0; i < n; i++) s->lapc[s->lapv[i].i] += (float)(gs * s->lapv[i].v);
+    return s->o.height_weight * loss / ((double)n * s->hvar);
 }
 
 /* Scale sc's bank: TN__SG_BANK fake bases of the whole scale (the coarser generators, frozen
@@ -1100,6 +1147,21 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     if (sc == 0 && s->o.spec_weight > 0) { /* the spectrum loss's target */
         tn_status st = tn__sg_spec_target(s, pw, ph);
         if (st) return st;
+    }
+    TN_FREE(s->hq);
+    s->hq = NULL;
+    s->nhq = 0;
+    s->hvar = 0;
+    if (sc == 0 && s->o.height_weight > 0) { /* the heights loss's target */
+        size_t k, n = (size_t)W * H;
+        double m = 0;
+        if (!(s->hq = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
+        memcpy(s->hq, s->real[0].data, n * sizeof(float));
+        qsort(s->hq, n, sizeof(float), tn__cmp_float);
+        for (k = 0; k < n; k++) m += s->hq[k] / (double)n;
+        for (k = 0; k < n; k++) s->hvar += ((double)s->hq[k] - m) * ((double)s->hq[k] - m) / (double)n;
+        s->hvar += 1e-20;
+        s->nhq = n;
     }
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
@@ -1287,12 +1349,13 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
                  tn__sg_tensor(ctx, s->recbase, ew, ox + M, oy + M, pw, ph));
     lr = tn_mse_loss(ctx, rec, tn__sg_tensor(ctx, s->real[sc].data, W, ox, oy, pw, ph));
     loss = tn_add(ctx, lg, tn_scale_shift(ctx, lr, s->o.rec_weight / (s->sigma[sc] * s->sigma[sc]), 0.0f));
-    if (gres && ((s->o.curv_weight > 0 && s->nlapq) || (sc == 0 && s->o.spec_weight > 0))) { /* the curvature and spectrum losses, as sum(fake x their gradient) */
+    if (gres && ((s->o.curv_weight > 0 && s->nlapq) || (sc == 0 && (s->o.spec_weight > 0 || s->nhq)))) { /* the curvature, spectrum and heights losses, as sum(fake x their gradient) */
         tn_tensor *c = tn_tensor_4d(ctx, 1, 1, ph, pw);
         int y, x;
         for (y = 0; y < ph; y++)
             for (x = 0; x < pw; x++) s->fake[(size_t)y * pw + x] = s->base[(size_t)(y + M) * pew + x + M] + gres->data[(size_t)y * pw + x];
         tn__sg_curv_grad(s, s->fake, pw, ph);
+        if (sc == 0) tn__sg_height_grad(s, s->fake, pw, ph);
         if (sc == 0 && s->o.spec_weight > 0) {
             double e[TN__SG_SPEC_BINS];
             if (tn__sg_spec(s->fake, pw, ph, e, s->spec_real, s->o.spec_weight, s->lapc) < 0) return tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
@@ -1526,7 +1589,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         tn__sg_real_base(&s, i, b);
         for (k = 0; k < nn; k++) se += (double)(s.real[i].data[k] - b[k]) * (s.real[i].data[k] - b[k]);
         s.sigma[i] = (float)sqrt(se / (double)nn + 1e-12);
-        if (!s.o.train.resume) s.A.gain[i] = i == 0 || 5.0f * s.sigma[i] > 1.0f ? 1.0f : 5.0f * s.sigma[i];
+        if (!s.o.train.resume) s.A.gain[i] = i == 0 ? TN__SG_GAIN0 : 5.0f * s.sigma[i] > 1.0f ? 1.0f : 5.0f * s.sigma[i];
         { /* the RMS of the base's gradient (0 at the coarsest scale, whose base is zero) */
             float *gxy = (float *)tn__alloc(2 * nn * sizeof(float));
             double sg = 0;
