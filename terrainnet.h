@@ -1593,9 +1593,10 @@ typedef struct tn_singan_opts {
                               of its power spectrum to the example's where it exceeds it, at periods
                               of 8 px and more (the Sahara's undulation at half the map's period;
                               docs/singan.md); 0 = 1, < 0 = none */
-    float height_weight;   /* weight of the heights loss at the coarsest scale: the 1-D Wasserstein
-                              distance between the heights of its output and of the example's
-                              coarsest scale, in units of their variance there (without it samples
+    float height_weight;   /* weight of the heights loss at the coarsest scale (on whole windows:
+                              not when coarsest > patch): the 1-D Wasserstein distance between
+                              the heights of its output and of the example's coarsest scale, in
+                              units of their variance there (without it samples
                               lack the example's rarer massif or range; docs/singan.md); 0 = 4,
                               < 0 = none */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
@@ -22204,7 +22205,9 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     s->hq = NULL;
     s->nhq = 0;
     s->hvar = 0;
-    if (sc == 0 && s->o.height_weight > 0) { /* the heights loss's target */
+    /* the heights loss's target, on whole windows only (a window of part of the scale need not
+       hold the example's heights; scale 0 is whole unless `coarsest` exceeds `patch`) */
+    if (sc == 0 && s->o.height_weight > 0 && pw == W && ph == H) {
         size_t k, n = (size_t)W * H;
         double m = 0;
         if (!(s->hq = (float *)tn__alloc(n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
