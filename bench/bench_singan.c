@@ -205,11 +205,43 @@ static void other_crop(const tn_image *full, int ex, int ey, int S, int *ox, int
             }
 }
 
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* How far img's heights lie from ex's as a distribution (the hypsometric curve): the mean
+   |difference| of the two at the same quantile (the 1-D Wasserstein distance), in % of ex's
+   height range. A sample without the example's massif or range lacks its high quantiles, which
+   the slope, curvature and spectrum distances do not see. */
+static double heights_distance(const tn_image *ex, const tn_image *img)
+{
+    size_t n = (size_t)ex->width * ex->height, m = (size_t)img->width * img->height, k;
+    float *a = (float *)malloc(n * sizeof(float)), *b = (float *)malloc(m * sizeof(float));
+    double sum = 0;
+    if (!a || !b) {
+        free(a);
+        free(b);
+        return NAN;
+    }
+    memcpy(a, ex->data, n * sizeof(float));
+    memcpy(b, img->data, m * sizeof(float));
+    qsort(a, n, sizeof(float), cmp_float);
+    qsort(b, m, sizeof(float), cmp_float);
+    for (k = 0; k < 256; k++) {
+        double q = ((double)k + 0.5) / 256.0;
+        sum += fabs((double)a[(size_t)(q * (double)n)] - (double)b[(size_t)(q * (double)m)]);
+    }
+    sum = 100.0 * sum / 256.0 / ((double)a[n - 1] - a[0] > 0 ? (double)a[n - 1] - a[0] : 1.0);
+    free(a);
+    free(b);
+    return sum;
+}
+
 /* The three 256 crops at the DEM's corners farthest from the example (bench_sketch's rule): their
    mean distance to the example, and the least and greatest in lo, hi. How far the DEM's other
    ground lies from the example: the reference crop, picked as the example was, can lie far closer. */
-static double heights_distance(const tn_image *ex, const tn_image *img);
-
 static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi, double *heights)
 {
     int cx[4] = {0, full->width - 256, 0, full->width - 256}, cy[4] = {0, 0, full->height - 256, full->height - 256}, used[4] = {0, 0, 0, 0};
@@ -267,40 +299,6 @@ static double valley_depth(const tn_image *dem)
     tn_flow_free(&f);
     tn_image_free(&b);
     return cnt ? sum / (double)cnt : 0;
-}
-
-static int cmp_float(const void *a, const void *b)
-{
-    float x = *(const float *)a, y = *(const float *)b;
-    return (x > y) - (x < y);
-}
-
-/* How far img's heights lie from ex's as a distribution (the hypsometric curve): the mean
-   |difference| of the two at the same quantile (the 1-D Wasserstein distance), in % of ex's
-   height range. A sample without the example's massif or range lacks its high quantiles, which
-   the slope, curvature and spectrum distances do not see. */
-static double heights_distance(const tn_image *ex, const tn_image *img)
-{
-    size_t n = (size_t)ex->width * ex->height, m = (size_t)img->width * img->height, k;
-    float *a = (float *)malloc(n * sizeof(float)), *b = (float *)malloc(m * sizeof(float));
-    double sum = 0;
-    if (!a || !b) {
-        free(a);
-        free(b);
-        return NAN;
-    }
-    memcpy(a, ex->data, n * sizeof(float));
-    memcpy(b, img->data, m * sizeof(float));
-    qsort(a, n, sizeof(float), cmp_float);
-    qsort(b, m, sizeof(float), cmp_float);
-    for (k = 0; k < 256; k++) {
-        double q = ((double)k + 0.5) / 256.0;
-        sum += fabs((double)a[(size_t)(q * (double)n)] - (double)b[(size_t)(q * (double)m)]);
-    }
-    sum = 100.0 * sum / 256.0 / ((double)a[n - 1] - a[0] > 0 ? (double)a[n - 1] - a[0] : 1.0);
-    free(a);
-    free(b);
-    return sum;
 }
 
 /* Measures 3 samples against the example and the reference distances; prints one line. */
