@@ -20,10 +20,11 @@
      example) to the example: <= 1.5 is the issue's target;
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
-   - peaks: summits per 10^4 px, points of the terrain blurred by a Gaussian of 1.5 px that are the
-     highest within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops'
-     mean (real_peaks; the example's 128 px beside it); an egg-crate of cones between the
-     strokes has several times the real crops' count;
+   - peaks: summits per 10^4 px, points of the terrain (rounded to the DEM's height step, as the
+     real crops are stored: height_step) blurred by a Gaussian of 1.5 px that are the highest
+     within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops' mean
+     (real_peaks; the example's 128 px beside it); an egg-crate of cones between the strokes has
+     several times the real crops' count;
    - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
      the terrain along them (every px of their length) minus its running mean over 17 px, against
      the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
@@ -103,13 +104,55 @@ static void distances(const tn_image *ex, const tn_image *img, double *d)
 #define PEAK_SIGMA 1.5f /* px: the Gaussian a peak is found on */
 #define PEAK_R 4         /* px: a peak is the highest point within this many px (a 9 x 9 window) */
 
-/* Summits per 10^4 px: points of img blurred by PEAK_SIGMA that are the highest within PEAK_R px
-   (ties count once, the first in raster order), PEAK_R px from the map's edge. */
+/* The DEM's height step (the smallest gap between two of its heights) and one of its heights:
+   peaks counts a terrain on that grid, as the real crops are stored. On an 8-bit DEM a flat
+   mesa top is one grey level, and a continuous terrain's sub-level ripples there would count
+   as summits (docs/gnn.md, "Summits on an 8-bit DEM"). */
+static double g_step, g_base;
+
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* g_step and g_base from the DEM's heights. */
+static void height_step(const tn_image *dem)
+{
+    size_t i, n = (size_t)dem->width * dem->height;
+    float *v = (float *)malloc(n * sizeof(float));
+    double tiny;
+    g_step = 0, g_base = 0;
+    if (!v || !n) {
+        free(v);
+        return;
+    }
+    memcpy(v, dem->data, n * sizeof(float));
+    qsort(v, n, sizeof(float), cmp_float);
+    tiny = 1e-6 * ((double)v[n - 1] - v[0]);
+    for (i = 1; i < n; i++) {
+        double gap = (double)v[i] - v[i - 1];
+        if (gap > tiny && (g_step == 0 || gap < g_step)) g_step = gap;
+    }
+    g_base = v[0];
+    free(v);
+}
+
+/* Summits per 10^4 px: points of img (on the DEM's height grid) blurred by PEAK_SIGMA that are the
+   highest within PEAK_R px (ties count once, the first in raster order), PEAK_R px from the map's edge. */
 static double peaks(const tn_image *img)
 {
-    tn_image b = {0, 0, 0, NULL};
+    tn_image b = {0, 0, 0, NULL}, g = {0, 0, 0, NULL};
     int x, y, u, v, W = img->width, H = img->height, n = 0;
-    if (W <= 2 * PEAK_R || H <= 2 * PEAK_R || tn_image_blur(&b, img, PEAK_SIGMA)) return NAN;
+    size_t i;
+    if (W <= 2 * PEAK_R || H <= 2 * PEAK_R || tn_image_copy(&g, img)) return NAN;
+    if (g_step > 0)
+        for (i = 0; i < (size_t)W * H; i++) g.data[i] = (float)(g_base + g_step * floor((g.data[i] - g_base) / g_step + 0.5));
+    if (tn_image_blur(&b, &g, PEAK_SIGMA)) {
+        tn_image_free(&g);
+        return NAN;
+    }
+    tn_image_free(&g);
     for (y = PEAK_R; y < H - PEAK_R; y++)
         for (x = PEAK_R; x < W - PEAK_R; x++) {
             float h = b.data[(size_t)y * W + x];
@@ -779,6 +822,7 @@ int main(int argc, char **argv)
         return 1;
     }
     if (dxy[0] <= 0) dxy[0] = dxy[1] = 1; /* no spacing recorded: 1 per pixel */
+    height_step(&full);
     if (tn_gnn_load(&model, model_path)) {
         fprintf(stderr, "bench_sketch: %s: %s\n", model_path, tn_last_error());
         return 1;
@@ -788,6 +832,7 @@ int main(int argc, char **argv)
     ropts.dy_a = (float)dxy[1];
     printf("region: %s\nexample: 128 x 128 at (%d, %d), %.6g .. %.6g m\nmodel: %s (%ld iterations)\nthreads: %d\nfinetune: %d\n", region, ex_x, ex_y,
            (double)model.lo, (double)model.hi, model_path, model.iterations, threads, finetune);
+    printf("height_step: %.6g m (the DEM's smallest gap between heights; peaks counts a terrain on that grid)\n", g_step);
     /* the three real 256 crops of the DEM's corners farthest from the example */
     {
         int cx[4] = {0, full.width - 256, 0, full.width - 256}, cy[4] = {0, 0, full.height - 256, full.height - 256}, used[4] = {0, 0, 0, 0};
