@@ -2758,6 +2758,8 @@ float tn__bf16_round(float f);
 void tn__bf16_round_n(float *x, size_t n);
 uint32_t tn__bf16_bits(float f);
 void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+/* ---- src/loss.c ---- */
+void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch);
 #endif
 #ifndef TN_NO_SKETCH
 /* ---- src/sketch.c ---- */
@@ -2806,7 +2808,6 @@ void tn__dm_seamless(const tn_image *h, float *out, int axis);
 #endif
 #ifndef TN_NO_STYLE
 /* ---- src/style.c ---- */
-void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch);
 tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);
 void tn__style_band_outflow(tn_flow *f);
 tn_status tn__style_content_target(tn__style_level *L, const float *anchor);
@@ -12315,6 +12316,73 @@ TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float da
     den = tn_mul(ctx, tn_scale_shift(ctx, m2, 1.0f, c1), tn_scale_shift(ctx, tn_add(ctx, vx, vy), 1.0f, c2));
     return tn_scale_shift(ctx, tn_mean(ctx, tn_div(ctx, num, den)), -1.0f, 1.0f);
 }
+
+/* ---- 1-D optimal transport: the histogram losses of style transfer and SinGAN ---- */
+
+/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
+static uint32_t tn__float_key(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
+   (float keys are exact, so ties keep index order and the result is deterministic).
+   scratch holds 3 * n uint32. */
+TN__INTERNAL_SHARED void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
+{
+    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
+    size_t cnt[2048], i;
+    int pass;
+    for (i = 0; i < n; i++) {
+        key[i] = tn__float_key(v[i]);
+        ia[i] = (uint32_t)i;
+    }
+    for (pass = 0; pass < 3; pass++) {
+        int sh = pass * 11;
+        size_t sum = 0;
+        memset(cnt, 0, sizeof cnt);
+        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
+        for (i = 0; i < 2048; i++) {
+            size_t c = cnt[i];
+            cnt[i] = sum;
+            sum += c;
+        }
+        for (i = 0; i < n; i++) {
+            size_t d = cnt[(key[i] >> sh) & 2047]++;
+            k2[d] = key[i];
+            i2[d] = ia[i];
+        }
+        t = key; key = k2; k2 = t;
+        t = ia; ia = i2; i2 = t;
+    }
+    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
+}
+
+/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
+TN__SHARED float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
+{
+    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
+    return sorted[j < nt ? j : nt - 1];
+}
+
+/* res = each of the n values of x less the quantile of the sorted t (nt values) at its rank: the
+   gradient of half the squared 1-D Wasserstein-2 distance between the two histograms (the sliced
+   Wasserstein texture loss). idx: 4 n uint32 of scratch; its first n hold the sorting permutation
+   on return. Returns the sum of res^2. */
+TN__SHARED double tn__ot_residuals(const float *x, size_t n, const float *t, size_t nt, uint32_t *idx, float *res)
+{
+    double s = 0;
+    size_t i;
+    tn__argsort_f32(x, n, idx, idx + n);
+    for (i = 0; i < n; i++) {
+        float d = x[idx[i]] - tn__quantile_at(t, nt, i, n);
+        res[idx[i]] = d;
+        s += (double)d * d;
+    }
+    return s;
+}
 #endif /* TN_NO_ENGINE */
 
 
@@ -18042,54 +18110,6 @@ TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const 
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_STYLE
 
-/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
-static uint32_t tn__float_key(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
-/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
-   (float keys are exact, so ties keep index order and the result is deterministic).
-   scratch holds 3 * n uint32. */
-TN__INTERNAL void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
-{
-    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
-    size_t cnt[2048], i;
-    int pass;
-    for (i = 0; i < n; i++) {
-        key[i] = tn__float_key(v[i]);
-        ia[i] = (uint32_t)i;
-    }
-    for (pass = 0; pass < 3; pass++) {
-        int sh = pass * 11;
-        size_t sum = 0;
-        memset(cnt, 0, sizeof cnt);
-        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
-        for (i = 0; i < 2048; i++) {
-            size_t c = cnt[i];
-            cnt[i] = sum;
-            sum += c;
-        }
-        for (i = 0; i < n; i++) {
-            size_t d = cnt[(key[i] >> sh) & 2047]++;
-            k2[d] = key[i];
-            i2[d] = ia[i];
-        }
-        t = key; key = k2; k2 = t;
-        t = ia; ia = i2; i2 = t;
-    }
-    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
-}
-
-/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
-static float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
-{
-    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
-    return sorted[j < nt ? j : nt - 1];
-}
-
 /* Per-row sorting work, rows split round-robin over threads (each row's result is independent of
    the split). mode 0: sorted copy of each row into out; mode 1: residual of the sorted row
    against the target (written back at the unsorted positions) and the row's squared sum. */
@@ -18113,19 +18133,11 @@ static void tn__rowsort_task(void *ctx, int ith, int nth)
     for (r = (size_t)ith; r < j->rows; r += (size_t)nth) {
         const float *x = j->x + r * j->n;
         float *o = j->out + r * j->n;
-        tn__argsort_f32(x, j->n, idx, idx + j->n);
         if (j->mode == 0) {
+            tn__argsort_f32(x, j->n, idx, idx + j->n);
             for (i = 0; i < j->n; i++) o[i] = x[idx[i]];
-        } else {
-            const float *t = j->target + r * j->nt;
-            double s = 0;
-            for (i = 0; i < j->n; i++) {
-                float d = x[idx[i]] - tn__quantile_at(t, j->nt, i, j->n);
-                o[idx[i]] = d;
-                s += (double)d * d;
-            }
-            j->rowsum[r] = s;
-        }
+        } else
+            j->rowsum[r] = tn__ot_residuals(x, j->n, j->target + r * j->nt, j->nt, idx, o);
     }
     TN_FREE(idx);
 }
@@ -21778,7 +21790,8 @@ typedef struct tn__sg_train {
     size_t nlapq;
     double lapms;              /* its mean square */
     float *lapc;               /* the curvature, spectrum and heights losses' gradient on the fake patch */
-    tn__sg_ranked *lapv;       /* the fake patch's Laplacian values (or heights) and their pixels */
+    float *lapv, *lapr;        /* the fake patch's Laplacian values; the transport's residuals (Laplacians or heights) */
+    uint32_t *lapi;            /* the transport's scratch (4 x the patch's pixels) */
     float *hq;                 /* the example's heights at scale 0, sorted (the heights loss's target) */
     size_t nhq;
     double hvar;               /* their variance */
@@ -21809,6 +21822,8 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
+    TN_FREE(s->lapr);
+    TN_FREE(s->lapi);
     TN_FREE(s->hq);
 }
 
@@ -22048,46 +22063,27 @@ static tn_status tn__sg_spec_target(tn__sg_train *s, int pw, int ph)
     return TN_OK;
 }
 
-/* Sorts v (n values and their pixels) and replaces each value by its distance to q's quantile
-   (q: nq values, sorted) of the same rank: the gradient of the 1-D optimal transport between the
-   two histograms, as the sliced Wasserstein texture loss. Returns the sum of squared distances. */
-static double tn__sg_ot_errors(tn__sg_ranked *v, size_t n, const float *q, size_t nq)
-{
-    size_t i;
-    double sum = 0;
-    qsort(v, n, sizeof(tn__sg_ranked), tn__sg_cmp_ranked);
-    for (i = 0; i < n; i++) {
-        size_t qi = (size_t)(((double)i + 0.5) / (double)n * (double)nq);
-        v[i].v -= q[qi < nq ? qi : nq - 1];
-        sum += (double)v[i].v * v[i].v;
-    }
-    return sum;
-}
-
 /* The curvature loss's gradient with respect to the fake output patch out (pw x ph) into s->lapc:
    the patch's Laplacian values are pulled to the example's Laplacian quantiles of the same ranks,
    so the sample gets the example's smooth floors and sharp crests rather than the network's
    Gaussian-like texture. Returns the loss (weighted). */
 static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph)
 {
-    size_t n = 0, i;
+    size_t n = 0, r;
     int x, y;
     double loss, gs;
     memset(s->lapc, 0, (size_t)pw * ph * sizeof(float));
     if (!s->nlapq || pw < 3 || ph < 3 || !(s->o.curv_weight > 0)) return 0;
     for (y = 1; y < ph - 1; y++)
         for (x = 1; x < pw - 1; x++) {
-            const float *q = out + (size_t)y * pw + x;
-            s->lapv[n].v = tn__sg_lap5(q, pw);
-            s->lapv[n].i = (int)n;
-            n++;
+            s->lapv[n++] = tn__sg_lap5(out + (size_t)y * pw + x, pw);
         }
-    loss = tn__sg_ot_errors(s->lapv, n, s->lapq, s->nlapq);
+    loss = tn__ot_residuals(s->lapv, n, s->lapq, s->nlapq, s->lapi, s->lapr);
     gs = 2.0 * s->o.curv_weight / ((double)n * s->lapms);
-    for (i = 0; i < n; i++) {
-        int j = s->lapv[i].i, xx = 1 + j % (pw - 2), yy = 1 + j / (pw - 2);
-        float g = (float)(gs * s->lapv[i].v);
-        float *c = s->lapc + (size_t)yy * pw + xx;
+    for (r = 0; r < n; r++) { /* in rank order (the permutation the transport leaves in lapi) */
+        size_t i = s->lapi[r], xx = 1 + i % (size_t)(pw - 2), yy = 1 + i / (size_t)(pw - 2);
+        float g = (float)(gs * s->lapr[i]);
+        float *c = s->lapc + yy * (size_t)pw + xx;
         c[0] -= 4.0f * g; /* the Laplacian is its own adjoint */
         c[1] += g;
         c[-1] += g;
@@ -22105,14 +22101,10 @@ static double tn__sg_height_grad(tn__sg_train *s, const float *out, int pw, int 
 {
     size_t n = (size_t)pw * ph, i;
     double loss, gs;
-    if (!s->nhq || !s->lapv || !(s->o.height_weight > 0)) return 0;
-    for (i = 0; i < n; i++) {
-        s->lapv[i].v = out[i];
-        s->lapv[i].i = (int)i;
-    }
-    loss = tn__sg_ot_errors(s->lapv, n, s->hq, s->nhq);
+    if (!s->nhq || !s->lapr || !(s->o.height_weight > 0)) return 0;
+    loss = tn__ot_residuals(out, n, s->hq, s->nhq, s->lapi, s->lapr);
     gs = 2.0 * s->o.height_weight / ((double)n * s->hvar);
-    for (i = 0; i < n; i++) s->lapc[s->lapv[i].i] += (float)(gs * s->lapv[i].v);
+    for (i = 0; i < n; i++) s->lapc[i] += (float)(gs * s->lapr[i]);
     return s->o.height_weight * loss / ((double)n * s->hvar);
 }
 
@@ -22221,6 +22213,8 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
+    TN_FREE(s->lapr);
+    TN_FREE(s->lapi);
     s->nlapq = 0;
     if (W >= 3 && H >= 3) { /* the example's Laplacian quantiles at this scale (the curvature loss's target) */
         const float *e = s->real[sc].data;
@@ -22228,8 +22222,10 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
         size_t k = 0;
         s->lapq = (float *)tn__alloc((size_t)(W - 2) * (H - 2) * sizeof(float));
         s->lapc = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
-        s->lapv = (tn__sg_ranked *)tn__alloc((size_t)pw * ph * sizeof(tn__sg_ranked));
-        if (!s->lapq || !s->lapc || !s->lapv) return TN_ERR_OUT_OF_MEMORY;
+        s->lapv = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+        s->lapr = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+        s->lapi = (uint32_t *)tn__alloc(4 * (size_t)pw * ph * sizeof(uint32_t));
+        if (!s->lapq || !s->lapc || !s->lapv || !s->lapr || !s->lapi) return TN_ERR_OUT_OF_MEMORY;
         s->lapms = 0;
         for (y = 1; y < H - 1; y++)
             for (x = 1; x < W - 1; x++) {

@@ -155,6 +155,8 @@ float tn__bf16_round(float f);
 void tn__bf16_round_n(float *x, size_t n);
 uint32_t tn__bf16_bits(float f);
 void tn__gemm_bf16_prep(int kern, float *p, int panels, size_t stride, int kc, int w);
+/* ---- src/loss.c ---- */
+void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch);
 #endif
 #ifndef TN_NO_SKETCH
 /* ---- src/sketch.c ---- */
@@ -203,7 +205,6 @@ void tn__dm_seamless(const tn_image *h, float *out, int axis);
 #endif
 #ifndef TN_NO_STYLE
 /* ---- src/style.c ---- */
-void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch);
 tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);
 void tn__style_band_outflow(tn_flow *f);
 tn_status tn__style_content_target(tn__style_level *L, const float *anchor);

@@ -174,6 +174,73 @@ TN_API tn_tensor *tn_ssim_loss(tn_ctx *ctx, tn_tensor *x, tn_tensor *y, float da
     den = tn_mul(ctx, tn_scale_shift(ctx, m2, 1.0f, c1), tn_scale_shift(ctx, tn_add(ctx, vx, vy), 1.0f, c2));
     return tn_scale_shift(ctx, tn_mean(ctx, tn_div(ctx, num, den)), -1.0f, 1.0f);
 }
+
+/* ---- 1-D optimal transport: the histogram losses of style transfer and SinGAN ---- */
+
+/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
+static uint32_t tn__float_key(float f)
+{
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
+}
+
+/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
+   (float keys are exact, so ties keep index order and the result is deterministic).
+   scratch holds 3 * n uint32. */
+TN__INTERNAL_SHARED void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
+{
+    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
+    size_t cnt[2048], i;
+    int pass;
+    for (i = 0; i < n; i++) {
+        key[i] = tn__float_key(v[i]);
+        ia[i] = (uint32_t)i;
+    }
+    for (pass = 0; pass < 3; pass++) {
+        int sh = pass * 11;
+        size_t sum = 0;
+        memset(cnt, 0, sizeof cnt);
+        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
+        for (i = 0; i < 2048; i++) {
+            size_t c = cnt[i];
+            cnt[i] = sum;
+            sum += c;
+        }
+        for (i = 0; i < n; i++) {
+            size_t d = cnt[(key[i] >> sh) & 2047]++;
+            k2[d] = key[i];
+            i2[d] = ia[i];
+        }
+        t = key; key = k2; k2 = t;
+        t = ia; ia = i2; i2 = t;
+    }
+    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
+}
+
+/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
+TN__SHARED float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
+{
+    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
+    return sorted[j < nt ? j : nt - 1];
+}
+
+/* res = each of the n values of x less the quantile of the sorted t (nt values) at its rank: the
+   gradient of half the squared 1-D Wasserstein-2 distance between the two histograms (the sliced
+   Wasserstein texture loss). idx: 4 n uint32 of scratch; its first n hold the sorting permutation
+   on return. Returns the sum of res^2. */
+TN__SHARED double tn__ot_residuals(const float *x, size_t n, const float *t, size_t nt, uint32_t *idx, float *res)
+{
+    double s = 0;
+    size_t i;
+    tn__argsort_f32(x, n, idx, idx + n);
+    for (i = 0; i < n; i++) {
+        float d = x[idx[i]] - tn__quantile_at(t, nt, i, n);
+        res[idx[i]] = d;
+        s += (double)d * d;
+    }
+    return s;
+}
 #endif /* TN_NO_ENGINE */
 
 

@@ -726,7 +726,8 @@ typedef struct tn__sg_train {
     size_t nlapq;
     double lapms;              /* its mean square */
     float *lapc;               /* the curvature, spectrum and heights losses' gradient on the fake patch */
-    tn__sg_ranked *lapv;       /* the fake patch's Laplacian values (or heights) and their pixels */
+    float *lapv, *lapr;        /* the fake patch's Laplacian values; the transport's residuals (Laplacians or heights) */
+    uint32_t *lapi;            /* the transport's scratch (4 x the patch's pixels) */
     float *hq;                 /* the example's heights at scale 0, sorted (the heights loss's target) */
     size_t nhq;
     double hvar;               /* their variance */
@@ -757,6 +758,8 @@ static void tn__sg_train_free(tn__sg_train *s)
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
+    TN_FREE(s->lapr);
+    TN_FREE(s->lapi);
     TN_FREE(s->hq);
 }
 
@@ -996,46 +999,27 @@ static tn_status tn__sg_spec_target(tn__sg_train *s, int pw, int ph)
     return TN_OK;
 }
 
-/* Sorts v (n values and their pixels) and replaces each value by its distance to q's quantile
-   (q: nq values, sorted) of the same rank: the gradient of the 1-D optimal transport between the
-   two histograms, as the sliced Wasserstein texture loss. Returns the sum of squared distances. */
-static double tn__sg_ot_errors(tn__sg_ranked *v, size_t n, const float *q, size_t nq)
-{
-    size_t i;
-    double sum = 0;
-    qsort(v, n, sizeof(tn__sg_ranked), tn__sg_cmp_ranked);
-    for (i = 0; i < n; i++) {
-        size_t qi = (size_t)(((double)i + 0.5) / (double)n * (double)nq);
-        v[i].v -= q[qi < nq ? qi : nq - 1];
-        sum += (double)v[i].v * v[i].v;
-    }
-    return sum;
-}
-
 /* The curvature loss's gradient with respect to the fake output patch out (pw x ph) into s->lapc:
    the patch's Laplacian values are pulled to the example's Laplacian quantiles of the same ranks,
    so the sample gets the example's smooth floors and sharp crests rather than the network's
    Gaussian-like texture. Returns the loss (weighted). */
 static double tn__sg_curv_grad(tn__sg_train *s, const float *out, int pw, int ph)
 {
-    size_t n = 0, i;
+    size_t n = 0, r;
     int x, y;
     double loss, gs;
     memset(s->lapc, 0, (size_t)pw * ph * sizeof(float));
     if (!s->nlapq || pw < 3 || ph < 3 || !(s->o.curv_weight > 0)) return 0;
     for (y = 1; y < ph - 1; y++)
         for (x = 1; x < pw - 1; x++) {
-            const float *q = out + (size_t)y * pw + x;
-            s->lapv[n].v = tn__sg_lap5(q, pw);
-            s->lapv[n].i = (int)n;
-            n++;
+            s->lapv[n++] = tn__sg_lap5(out + (size_t)y * pw + x, pw);
         }
-    loss = tn__sg_ot_errors(s->lapv, n, s->lapq, s->nlapq);
+    loss = tn__ot_residuals(s->lapv, n, s->lapq, s->nlapq, s->lapi, s->lapr);
     gs = 2.0 * s->o.curv_weight / ((double)n * s->lapms);
-    for (i = 0; i < n; i++) {
-        int j = s->lapv[i].i, xx = 1 + j % (pw - 2), yy = 1 + j / (pw - 2);
-        float g = (float)(gs * s->lapv[i].v);
-        float *c = s->lapc + (size_t)yy * pw + xx;
+    for (r = 0; r < n; r++) { /* in rank order (the permutation the transport leaves in lapi) */
+        size_t i = s->lapi[r], xx = 1 + i % (size_t)(pw - 2), yy = 1 + i / (size_t)(pw - 2);
+        float g = (float)(gs * s->lapr[i]);
+        float *c = s->lapc + yy * (size_t)pw + xx;
         c[0] -= 4.0f * g; /* the Laplacian is its own adjoint */
         c[1] += g;
         c[-1] += g;
@@ -1053,14 +1037,10 @@ static double tn__sg_height_grad(tn__sg_train *s, const float *out, int pw, int 
 {
     size_t n = (size_t)pw * ph, i;
     double loss, gs;
-    if (!s->nhq || !s->lapv || !(s->o.height_weight > 0)) return 0;
-    for (i = 0; i < n; i++) {
-        s->lapv[i].v = out[i];
-        s->lapv[i].i = (int)i;
-    }
-    loss = tn__sg_ot_errors(s->lapv, n, s->hq, s->nhq);
+    if (!s->nhq || !s->lapr || !(s->o.height_weight > 0)) return 0;
+    loss = tn__ot_residuals(out, n, s->hq, s->nhq, s->lapi, s->lapr);
     gs = 2.0 * s->o.height_weight / ((double)n * s->hvar);
-    for (i = 0; i < n; i++) s->lapc[s->lapv[i].i] += (float)(gs * s->lapv[i].v);
+    for (i = 0; i < n; i++) s->lapc[i] += (float)(gs * s->lapr[i]);
     return s->o.height_weight * loss / ((double)n * s->hvar);
 }
 
@@ -1169,6 +1149,8 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
     TN_FREE(s->lapq);
     TN_FREE(s->lapc);
     TN_FREE(s->lapv);
+    TN_FREE(s->lapr);
+    TN_FREE(s->lapi);
     s->nlapq = 0;
     if (W >= 3 && H >= 3) { /* the example's Laplacian quantiles at this scale (the curvature loss's target) */
         const float *e = s->real[sc].data;
@@ -1176,8 +1158,10 @@ static tn_status tn__sg_enter_scale(tn__sg_train *s, tn_ctx *ctx, int sc, int re
         size_t k = 0;
         s->lapq = (float *)tn__alloc((size_t)(W - 2) * (H - 2) * sizeof(float));
         s->lapc = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
-        s->lapv = (tn__sg_ranked *)tn__alloc((size_t)pw * ph * sizeof(tn__sg_ranked));
-        if (!s->lapq || !s->lapc || !s->lapv) return TN_ERR_OUT_OF_MEMORY;
+        s->lapv = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+        s->lapr = (float *)tn__alloc((size_t)pw * ph * sizeof(float));
+        s->lapi = (uint32_t *)tn__alloc(4 * (size_t)pw * ph * sizeof(uint32_t));
+        if (!s->lapq || !s->lapc || !s->lapv || !s->lapr || !s->lapi) return TN_ERR_OUT_OF_MEMORY;
         s->lapms = 0;
         for (y = 1; y < H - 1; y++)
             for (x = 1; x < W - 1; x++) {

@@ -112,54 +112,6 @@ TN_API tn_status tn_style_content_noise(tn_image *out, int width, int height, co
    -------------------------------------------------------------------------------------------- */
 #ifndef TN_NO_STYLE
 
-/* Order-preserving map of a float to an unsigned key (negative floats reversed). */
-static uint32_t tn__float_key(float f)
-{
-    uint32_t u;
-    memcpy(&u, &f, sizeof u);
-    return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-
-/* idx = the permutation that sorts v ascending: stable LSD radix sort, 3 passes of 11 bits
-   (float keys are exact, so ties keep index order and the result is deterministic).
-   scratch holds 3 * n uint32. */
-TN__INTERNAL void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
-{
-    uint32_t *key = scratch, *k2 = scratch + n, *i2 = scratch + 2 * n, *ia = idx, *t;
-    size_t cnt[2048], i;
-    int pass;
-    for (i = 0; i < n; i++) {
-        key[i] = tn__float_key(v[i]);
-        ia[i] = (uint32_t)i;
-    }
-    for (pass = 0; pass < 3; pass++) {
-        int sh = pass * 11;
-        size_t sum = 0;
-        memset(cnt, 0, sizeof cnt);
-        for (i = 0; i < n; i++) cnt[(key[i] >> sh) & 2047]++;
-        for (i = 0; i < 2048; i++) {
-            size_t c = cnt[i];
-            cnt[i] = sum;
-            sum += c;
-        }
-        for (i = 0; i < n; i++) {
-            size_t d = cnt[(key[i] >> sh) & 2047]++;
-            k2[d] = key[i];
-            i2[d] = ia[i];
-        }
-        t = key; key = k2; k2 = t;
-        t = ia; ia = i2; i2 = t;
-    }
-    if (ia != idx) memcpy(idx, ia, n * sizeof *idx);
-}
-
-/* Element i of a sorted row of length nt read as a row of length n (quantile resampling). */
-static float tn__quantile_at(const float *sorted, size_t nt, size_t i, size_t n)
-{
-    size_t j = (size_t)(((double)i + 0.5) * (double)nt / (double)n);
-    return sorted[j < nt ? j : nt - 1];
-}
-
 /* Per-row sorting work, rows split round-robin over threads (each row's result is independent of
    the split). mode 0: sorted copy of each row into out; mode 1: residual of the sorted row
    against the target (written back at the unsorted positions) and the row's squared sum. */
@@ -183,19 +135,11 @@ static void tn__rowsort_task(void *ctx, int ith, int nth)
     for (r = (size_t)ith; r < j->rows; r += (size_t)nth) {
         const float *x = j->x + r * j->n;
         float *o = j->out + r * j->n;
-        tn__argsort_f32(x, j->n, idx, idx + j->n);
         if (j->mode == 0) {
+            tn__argsort_f32(x, j->n, idx, idx + j->n);
             for (i = 0; i < j->n; i++) o[i] = x[idx[i]];
-        } else {
-            const float *t = j->target + r * j->nt;
-            double s = 0;
-            for (i = 0; i < j->n; i++) {
-                float d = x[idx[i]] - tn__quantile_at(t, j->nt, i, j->n);
-                o[idx[i]] = d;
-                s += (double)d * d;
-            }
-            j->rowsum[r] = s;
-        }
+        } else
+            j->rowsum[r] = tn__ot_residuals(x, j->n, j->target + r * j->nt, j->nt, idx, o);
     }
     TN_FREE(idx);
 }
