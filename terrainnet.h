@@ -13724,6 +13724,23 @@ TN_API tn_status tn_model_stamp(tn_params *p, const char *method, int format, co
     return st;
 }
 
+/* tn_model_stamp with the provenance of a finished run: its seed, iterations and seconds, and the
+   example's digest and size (what each method's training does last). */
+TN__SHARED tn_status tn__train_stamp(tn_params *p, const char *method, int format, const tn_train *run, uint64_t digest, int width,
+                                     int height, int channels)
+{
+    tn_model_provenance pv;
+    memset(&pv, 0, sizeof pv);
+    pv.seed = tn_train_seed(run);
+    pv.iterations = tn_train_iteration(run);
+    pv.seconds = tn_train_seconds(run);
+    pv.example_digest = digest;
+    pv.example_width = width;
+    pv.example_height = height;
+    pv.example_channels = channels;
+    return tn_model_stamp(p, method, format, &pv);
+}
+
 TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_format, const char *legacy_tensor, const char *name)
 {
     const char *m = tn_params_meta(p, "method"), *kind = tn_params_meta(p, "kind");
@@ -20121,21 +20138,6 @@ static tn_status tn__tg_fresh(tn__tg_train *s, const tn_image *ex, const tn_texg
     return tn__tg_put_settings(s);
 }
 
-/* The model's metadata: method, format and where it came from. */
-static tn_status tn__tg_stamp(tn__tg_train *s, const tn_image *ex, uint64_t seed)
-{
-    tn_model_provenance pv;
-    memset(&pv, 0, sizeof pv);
-    pv.seed = seed;
-    pv.iterations = tn_train_iteration(s->run);
-    pv.seconds = tn_train_seconds(s->run);
-    pv.example_digest = tn_image_digest(ex);
-    pv.example_width = ex->width;
-    pv.example_height = ex->height;
-    pv.example_channels = ex->channels;
-    return tn_model_stamp(s->m.weights, "texgan", TN__TG_FORMAT, &pv);
-}
-
 TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_texgan_opts *opts_in, tn_texgan_stats *stats)
 {
     tn_texgan_opts o;
@@ -20219,7 +20221,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
         s.m.iterations = tn_train_iteration(s.run);
         s.m.train_seconds = tn_train_seconds(s.run);
         tn__tg_write_config(&s.m, s.disc_width, s.disc_layers, tn_params_find(s.m.weights, "texgan.config")->data);
-        st = tn__tg_stamp(&s, ex0, tn_train_seed(s.run));
+        st = tn__train_stamp(s.m.weights, "texgan", TN__TG_FORMAT, s.run, tn_image_digest(ex0), ex0->width, ex0->height, ex0->channels);
     }
     if (!st) {
         *model = s.m;
@@ -22754,18 +22756,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         stats->loss_rec_first = rec_first;
         stats->checkpoints = tn_train_checkpoints(s.run);
     }
-    if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(s.run);
-        pv.iterations = tn_train_iteration(s.run);
-        pv.seconds = tn_train_seconds(s.run);
-        pv.example_digest = digest;
-        pv.example_width = d1->width;
-        pv.example_height = d1->height;
-        pv.example_channels = 1;
-        st = tn_model_stamp(s.g, "singan", TN__SG_FORMAT, &pv);
-    }
+    if (!st) st = tn__train_stamp(s.g, "singan", TN__SG_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {
         memset(model, 0, sizeof *model);
         model->scales = s.A.scales;
@@ -25633,18 +25624,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         }
     }
     if (!st) st = tn__gnn_store_example(s.w, d1);
-    if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(s.run);
-        pv.iterations = tn_train_iteration(s.run);
-        pv.seconds = tn_train_seconds(s.run);
-        pv.example_digest = digest;
-        pv.example_width = d1->width;
-        pv.example_height = d1->height;
-        pv.example_channels = 1;
-        st = tn_model_stamp(s.w, "gnn", TN__GNN_FORMAT, &pv);
-    }
+    if (!st) st = tn__train_stamp(s.w, "gnn", TN__GNN_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {
         memset(model, 0, sizeof *model);
         tn__gnn_model_fields(model, &s.A);
@@ -31038,17 +31018,9 @@ TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, in
         stats->checkpoints = tn_train_checkpoints(t.run);
     }
     if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(t.run);
-        pv.iterations = tn_train_iteration(t.run);
-        pv.seconds = tn_train_seconds(t.run);
-        pv.example_digest = digest;
-        pv.example_width = samples[0].target->width;
-        pv.example_height = samples[0].target->height;
-        pv.example_channels = t.A.out_channels;
         tn__kpd_write_config(&t.A, tn_params_find(t.g, "kpd.config")->data);
-        st = tn_model_stamp(t.g, "kpd", TN__KPD_FORMAT, &pv);
+        st = tn__train_stamp(t.g, "kpd", TN__KPD_FORMAT, t.run, digest, samples[0].target->width, samples[0].target->height,
+                             t.A.out_channels);
     }
     if (!st) {
         *model = t.A;

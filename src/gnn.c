@@ -2244,18 +2244,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         }
     }
     if (!st) st = tn__gnn_store_example(s.w, d1);
-    if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(s.run);
-        pv.iterations = tn_train_iteration(s.run);
-        pv.seconds = tn_train_seconds(s.run);
-        pv.example_digest = digest;
-        pv.example_width = d1->width;
-        pv.example_height = d1->height;
-        pv.example_channels = 1;
-        st = tn_model_stamp(s.w, "gnn", TN__GNN_FORMAT, &pv);
-    }
+    if (!st) st = tn__train_stamp(s.w, "gnn", TN__GNN_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {
         memset(model, 0, sizeof *model);
         tn__gnn_model_fields(model, &s.A);

@@ -1916,17 +1916,9 @@ TN_API tn_status tn_kpd_train(tn_kpd *model, const tn_season_sample *samples, in
         stats->checkpoints = tn_train_checkpoints(t.run);
     }
     if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(t.run);
-        pv.iterations = tn_train_iteration(t.run);
-        pv.seconds = tn_train_seconds(t.run);
-        pv.example_digest = digest;
-        pv.example_width = samples[0].target->width;
-        pv.example_height = samples[0].target->height;
-        pv.example_channels = t.A.out_channels;
         tn__kpd_write_config(&t.A, tn_params_find(t.g, "kpd.config")->data);
-        st = tn_model_stamp(t.g, "kpd", TN__KPD_FORMAT, &pv);
+        st = tn__train_stamp(t.g, "kpd", TN__KPD_FORMAT, t.run, digest, samples[0].target->width, samples[0].target->height,
+                             t.A.out_channels);
     }
     if (!st) {
         *model = t.A;

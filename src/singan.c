@@ -1690,18 +1690,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         stats->loss_rec_first = rec_first;
         stats->checkpoints = tn_train_checkpoints(s.run);
     }
-    if (!st) {
-        tn_model_provenance pv;
-        memset(&pv, 0, sizeof pv);
-        pv.seed = tn_train_seed(s.run);
-        pv.iterations = tn_train_iteration(s.run);
-        pv.seconds = tn_train_seconds(s.run);
-        pv.example_digest = digest;
-        pv.example_width = d1->width;
-        pv.example_height = d1->height;
-        pv.example_channels = 1;
-        st = tn_model_stamp(s.g, "singan", TN__SG_FORMAT, &pv);
-    }
+    if (!st) st = tn__train_stamp(s.g, "singan", TN__SG_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {
         memset(model, 0, sizeof *model);
         model->scales = s.A.scales;

@@ -983,21 +983,6 @@ static tn_status tn__tg_fresh(tn__tg_train *s, const tn_image *ex, const tn_texg
     return tn__tg_put_settings(s);
 }
 
-/* The model's metadata: method, format and where it came from. */
-static tn_status tn__tg_stamp(tn__tg_train *s, const tn_image *ex, uint64_t seed)
-{
-    tn_model_provenance pv;
-    memset(&pv, 0, sizeof pv);
-    pv.seed = seed;
-    pv.iterations = tn_train_iteration(s->run);
-    pv.seconds = tn_train_seconds(s->run);
-    pv.example_digest = tn_image_digest(ex);
-    pv.example_width = ex->width;
-    pv.example_height = ex->height;
-    pv.example_channels = ex->channels;
-    return tn_model_stamp(s->m.weights, "texgan", TN__TG_FORMAT, &pv);
-}
-
 TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_texgan_opts *opts_in, tn_texgan_stats *stats)
 {
     tn_texgan_opts o;
@@ -1081,7 +1066,7 @@ TN_API tn_status tn_texgan_train(tn_texgan *model, const tn_image *ex, const tn_
         s.m.iterations = tn_train_iteration(s.run);
         s.m.train_seconds = tn_train_seconds(s.run);
         tn__tg_write_config(&s.m, s.disc_width, s.disc_layers, tn_params_find(s.m.weights, "texgan.config")->data);
-        st = tn__tg_stamp(&s, ex0, tn_train_seed(s.run));
+        st = tn__train_stamp(s.m.weights, "texgan", TN__TG_FORMAT, s.run, tn_image_digest(ex0), ex0->width, ex0->height, ex0->channels);
     }
     if (!st) {
         *model = s.m;

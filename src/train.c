@@ -706,6 +706,23 @@ TN_API tn_status tn_model_stamp(tn_params *p, const char *method, int format, co
     return st;
 }
 
+/* tn_model_stamp with the provenance of a finished run: its seed, iterations and seconds, and the
+   example's digest and size (what each method's training does last). */
+TN__SHARED tn_status tn__train_stamp(tn_params *p, const char *method, int format, const tn_train *run, uint64_t digest, int width,
+                                     int height, int channels)
+{
+    tn_model_provenance pv;
+    memset(&pv, 0, sizeof pv);
+    pv.seed = tn_train_seed(run);
+    pv.iterations = tn_train_iteration(run);
+    pv.seconds = tn_train_seconds(run);
+    pv.example_digest = digest;
+    pv.example_width = width;
+    pv.example_height = height;
+    pv.example_channels = channels;
+    return tn_model_stamp(p, method, format, &pv);
+}
+
 TN_API tn_status tn_model_check(const tn_params *p, const char *method, int max_format, const char *legacy_tensor, const char *name)
 {
     const char *m = tn_params_meta(p, "method"), *kind = tn_params_meta(p, "kind");
