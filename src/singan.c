@@ -1292,6 +1292,27 @@ static void tn__sg_cond(const float *b, int bw, int bh, int x0, int y0, int w, i
     }
 }
 
+/* A step's draw at scale sc, for a pw x ph window: the fake's noise seed and window (ox, oy), the
+   real window (rx, ry); then the fake's base and input there (s->base, s->xin, with the margin)
+   and the critic's condition (s->fcond). */
+static tn_status tn__sg_draw(tn__sg_train *s, tn_ctx *ctx, int sc, int pw, int ph, tn__sg_gen_run *r, int *ox, int *oy, int *rx, int *ry)
+{
+    const int M = TN__SG_M;
+    int W = s->real[sc].width, H = s->real[sc].height, pew = pw + 2 * M, peh = ph + 2 * M;
+    uint64_t seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
+    tn_status st;
+    *ox = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
+    *oy = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+    *rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
+    *ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
+    *r = tn__sg_train_gen(s, ctx, 0, seed);
+    if ((st = tn__sg_fake_base(s, r, sc, *ox, *oy, pew, peh))) return st;
+    memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
+    tn__sg_add_noise(r, sc, *ox - M, *oy - M, pew, peh, s->xin);
+    tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
+    return TN_OK;
+}
+
 /* One G step and one D step at scale sc on a random window (the whole scale or a patch): the G
    step first, and the D step on its fake (one generator pass fewer than D first).
    l: D loss, G adversarial loss, reconstruction MSE. */
@@ -1299,7 +1320,6 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
 {
     const int M = TN__SG_M;
     int W = s->real[sc].width, H = s->real[sc].height, ew = W + 2 * M, pw, ph, pew, peh, ox, oy, rx, ry;
-    uint64_t seed;
     tn__sg_gen_run r;
     tn_tensor *real, *fake, *rec, *loss, *lg, *lr, *gres;
     int ds;
@@ -1308,16 +1328,8 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
     tn__sg_patch_size(s, sc, &pw, &ph);
     pew = pw + 2 * M;
     peh = ph + 2 * M;
-    seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
-    ox = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1)); /* the fake's and reconstruction's window */
-    oy = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
-    rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1)); /* the D step's real patch */
-    ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
-    r = tn__sg_train_gen(s, ctx, 0, seed);
-    if ((st = tn__sg_fake_base(s, &r, sc, ox, oy, pew, peh))) return st;
-    memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
-    tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
-    tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
+    /* the fake's and the reconstruction's window (ox, oy); the D step's real patch (rx, ry) */
+    if ((st = tn__sg_draw(s, ctx, sc, pw, ph, &r, &ox, &oy, &rx, &ry))) return st;
     /* G step: adversarial + reconstruction on the same window */
     tn_ctx_reset(ctx);
     tn_ctx_set_grad(ctx, 1);
@@ -1361,16 +1373,7 @@ static tn_status tn__sg_step(tn__sg_train *s, tn_ctx *ctx, int sc, float *l)
         /* D steps: the first on the G step's fake (a constant), the others on new fakes (new noise
            and windows) of the updated generator, each against a new real window */
         if (ds > 0) {
-            seed = ((uint64_t)tn_rng_u32(&s->rng) << 32) | tn_rng_u32(&s->rng);
-            ox = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
-            oy = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
-            rx = (int)tn_rng_below(&s->rng, (uint32_t)(W - pw + 1));
-            ry = (int)tn_rng_below(&s->rng, (uint32_t)(H - ph + 1));
-            r = tn__sg_train_gen(s, ctx, 0, seed);
-            if ((st = tn__sg_fake_base(s, &r, sc, ox, oy, pew, peh))) return st;
-            memcpy(s->xin, s->base, (size_t)pew * peh * sizeof(float));
-            tn__sg_add_noise(&r, sc, ox - M, oy - M, pew, peh, s->xin);
-            tn__sg_cond(s->base, pew, peh, M, M, pw, ph, s->gnorm[sc] > 0 ? 1.0f / s->gnorm[sc] : 0.0f, s->fcond);
+            if ((st = tn__sg_draw(s, ctx, sc, pw, ph, &r, &ox, &oy, &rx, &ry))) return st;
             tn_ctx_reset(ctx);
             tn_ctx_set_grad(ctx, 0);
             if (!(gres = tn__sg_gen(ctx, s->g, sc, s->A.gain[sc], tn__sg_tensor(ctx, s->xin, pew, 0, 0, pew, peh), 1)))
