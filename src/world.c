@@ -207,6 +207,14 @@ static void tn__world_same_raster(tn__world_stage *s)
     s->factor = 1;
 }
 
+/* A stage that keeps the raster's size and makes a picture of c channels, not heights. */
+static void tn__world_picture_raster(tn__world_stage *s, int c)
+{
+    tn__world_same_raster(s);
+    s->out_c = c;
+    s->out_heights = 0;
+}
+
 /* out = the r part of img, which covers img_r. */
 static tn_status tn__world_crop(const tn_image *img, tn_rect img_r, tn_rect r, tn_image *out)
 {
@@ -760,11 +768,7 @@ static tn_status tn__world_season_setup(tn__world_stage *s, const tn_world *w, c
     if ((st = tn__world_climate_setup(s, w, base_dir, &s->halo))) return st;
     if ((st = tn__world_num(s, "shade", 0, 0, 1, &shade))) return st;
     s->p[4] = (float)shade;
-    s->factor = 1;
-    s->out_w = s->in_w;
-    s->out_h = s->in_h;
-    s->out_c = 3;
-    s->out_heights = 0;
+    tn__world_picture_raster(s, 3);
     return TN_OK;
 }
 
@@ -815,10 +819,7 @@ static tn_status tn__world_kpd_setup(tn__world_stage *s, const tn_world *w, cons
     s->climate->has_latitude = 1;
     s->p[6] = (float)(s->method->halo(s->model) + TN__WORLD_KPD_ALIGN);
     s->halo = (int)s->p[6] + TN__WORLD_KPD_ALIGN - 1 + (m->condition == TN_KPD_OURS ? ins_halo : 0);
-    s->factor = 1;
-    s->out_w = s->in_w;
-    s->out_h = s->in_h;
-    s->out_heights = 0;
+    tn__world_picture_raster(s, s->out_c);
     return TN_OK;
 }
 
@@ -913,11 +914,7 @@ static tn_status tn__world_hillshade_setup(tn__world_stage *s, const tn_world *w
     s->p[2] = (float)v[2];
     s->p[3] = tn__world_spacing(s, w);
     s->halo = 1; /* Horn's 3 x 3 window */
-    s->factor = 1;
-    s->out_w = s->in_w;
-    s->out_h = s->in_h;
-    s->out_c = 1;
-    s->out_heights = 0;
+    tn__world_picture_raster(s, 1);
     return TN_OK;
 }
 
@@ -950,11 +947,7 @@ static tn_status tn__world_normalmap_setup(tn__world_stage *s, const tn_world *w
     s->p[1] = (float)dx;
     s->p[2] = tn__world_spacing(s, w);
     s->halo = 1; /* central differences */
-    s->factor = 1;
-    s->out_w = s->in_w;
-    s->out_h = s->in_h;
-    s->out_c = 3;
-    s->out_heights = 0;
+    tn__world_picture_raster(s, 3);
     return TN_OK;
 }
 
