@@ -329,10 +329,10 @@ static void report(const char *name, const char *what, const measured *m, const 
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | "
-           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | "
-           "heights_distance %.1f %% (%.2fx)%s\n",
-           name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, m->d.curv2, m->d.curv2 / ref->curv2, (double)m->lo, (double)m->hi, ok_h ? "within" : "OUTSIDE",
-           m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
+           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | "
+           "to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | heights_distance %.1f %% (%.2fx)%s\n",
+           name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, m->d.curv2, m->d.curv2 / ref->curv2, (double)m->lo, (double)m->hi,
+           ok_h ? "within" : "OUTSIDE", m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
            m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref,
            rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
 }
@@ -463,8 +463,9 @@ static void bench_region(const region *rg, double minutes, int threads)
     printf("%s (%s): example %.0f..%.0f m at (%d, %d) of the full DEM; reference crop at (%d, %d) (overlap %ld px), pixel %.1f x %.1f m\n", n,
            rg->tuned == 2 ? "tuning set 2" : rg->tuned == 1 ? "tuned on" : "held out", (double)elo, (double)ehi, exx, exy, ox, oy, ov, (double)dx, (double)dy);
     g_valleys_ex = valley_depth(&ex);
-    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f | curvature_2px %.3f | valleys %.1f m (%.2fx the example's %.1f m) | heights_distance %.1f %%\n", n,
-           ref.slope, ref.curv, ref.spec, ref.curv2, valley_depth(&other), valley_depth(&other) / g_valleys_ex, g_valleys_ex, g_heights_ref);
+    printf("%s_reference_crop: slope %.3f curvature %.3f spectrum %.3f | curvature_2px %.3f | valleys %.1f m (%.2fx the example's %.1f m) | "
+           "heights_distance %.1f %%\n", n, ref.slope, ref.curv, ref.spec, ref.curv2, valley_depth(&other), valley_depth(&other) / g_valleys_ex,
+           g_valleys_ex, g_heights_ref);
     printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f) | heights_distance %.1f %%\n", n,
            corners.slope, corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec, corner_heights);
     reference_blurred(n, &ex, &other, &ref, dx, dy);
