@@ -699,11 +699,6 @@ done:
 
 /* ---- training (a tn_train run) ---- */
 
-typedef struct tn__sg_ranked {
-    float v;
-    int i;
-} tn__sg_ranked;
-
 #define TN__SG_SPEC_BINS 33 /* radii of the spectrum loss at scale 0 (13 on a 26 px scale) */
 typedef struct tn__sg_train {
     tn_singan_opts o;
@@ -865,12 +860,6 @@ static void tn__sg_real_base(const tn__sg_train *s, int sc, float *out)
 
 /* The 5-point Laplacian at q, rows `stride` floats apart. */
 static float tn__sg_lap5(const float *q, int stride) { return q[1] + q[-1] + q[stride] + q[-stride] - 4.0f * q[0]; }
-
-static int tn__sg_cmp_ranked(const void *a, const void *b)
-{
-    const tn__sg_ranked *x = (const tn__sg_ranked *)a, *y = (const tn__sg_ranked *)b;
-    return x->v < y->v ? -1 : x->v > y->v ? 1 : x->i - y->i;
-}
 
 /* The radially binned power spectrum of x (w x h, mean removed, Hann-windowed) into e (bins 1 ..
    TN__SG_SPEC_BINS - 1 of radius round(sqrt((kx s / w)^2 + (ky s / h)^2)), s = (w + h) / 2; bin
@@ -1860,6 +1849,18 @@ done:
     tn_image_free(&d);
     tn_image_free(&src);
     return st;
+}
+
+/* A value and its pixel: the gate ranks pixels by slope, the layout by height (ties by pixel). */
+typedef struct tn__sg_ranked {
+    float v;
+    int i;
+} tn__sg_ranked;
+
+static int tn__sg_cmp_ranked(const void *a, const void *b)
+{
+    const tn__sg_ranked *x = (const tn__sg_ranked *)a, *y = (const tn__sg_ranked *)b;
+    return x->v < y->v ? -1 : x->v > y->v ? 1 : x->i - y->i;
 }
 
 /* Ranks the interior pixels of b (W x H) by slope into rk; returns their count. */
