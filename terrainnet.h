@@ -1638,6 +1638,10 @@ typedef struct tn_singan_gen_opts {
                               (1..scales-1; 0 = scales - 3); upscale: the scale the input stands
                               for + 1 (1..scales; 0 = the output at the example's pixel size) */
     float noise;           /* multiplier of the trained noise amplitudes; 0 = 1, < 0 = no noise */
+    float fine_noise;      /* a further multiplier of the finest generator's noise, wherever it runs (upscaling's
+                              levels too); < 0 = none; 0 = 0.7 in a free sample with the gate, 1 (as trained) in
+                              laid-out maps, refinement and upscaling. The finest generator passes part of its
+                              noise on, and a free sample's gate keeps that grain at the example's detail RMS */
     int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
     int layout;            /* sample: 1 = the example itself, rearranged by patch nearest neighbours (GPNN) and
                               bent by a random smooth warp on the grid of scale layout_scale - 1, is that scale's
@@ -1656,7 +1660,8 @@ typedef struct tn_singan_gen_opts {
 
 /* Fills *o with the defaults (what zero fields mean). */
 TN_API void tn_singan_defaults(tn_singan_opts *o);
-/* Resolves the zero fields of generation options (from_scale is resolved per call, by the model). */
+/* Resolves the zero fields of generation options (from_scale is resolved per call, by the model, and
+   fine_noise per call, by what is generated). */
 TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o);
 /* Trains on channel 0 of dem (finite, not constant, its smaller side >= opts->coarsest).
    Reports progress as "singan-train scale S/N". *model is allocated here (free with
@@ -21558,6 +21563,7 @@ typedef struct tn__sg_gen_run {
     uint64_t seed;
     int rec;              /* the reconstruction: fixed noise at level 0, none above */
     float noise;          /* multiplier of the amplitudes */
+    float fine_noise;     /* and of the finest generator's, on top */
     const float *map;     /* injected map on level map_level's grid (origin 0), or NULL */
     int mw, mh, map_level;
     int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
@@ -21656,7 +21662,8 @@ done:
 /* Generator input of `level` on the window grown by the context: base + amplitude x noise. */
 static void tn__sg_add_noise(const tn__sg_gen_run *r, int level, long x0, long y0, int w, int h, float *x)
 {
-    float amp = r->rec ? (level == 0 ? 1.0f : 0.0f) : r->A->amp[tn__sg_net(r->A, level)] * r->noise;
+    float amp = r->rec ? (level == 0 ? 1.0f : 0.0f)
+                       : r->A->amp[tn__sg_net(r->A, level)] * r->noise * (level >= r->A->scales - 1 ? r->fine_noise : 1.0f);
     uint64_t key = r->rec ? TN__SG_REC_KEY : tn__sg_level_key(r->seed, level);
     int i, j;
     if (amp == 0) return;
@@ -21888,6 +21895,7 @@ static tn__sg_gen_run tn__sg_train_gen(tn__sg_train *s, tn_ctx *ctx, int rec, ui
     r.seed = seed;
     r.rec = rec;
     r.noise = 1.0f;
+    r.fine_noise = 1.0f;
     return r;
 }
 
@@ -22864,6 +22872,15 @@ TN_API tn_status tn_singan_load(tn_singan *model, const char *path)
 
 /* ---- sampling, refinement, upscaling ---- */
 
+/* tn_singan_gen_opts.fine_noise for a free sample (`sample` 1) or anything else. A free sample's
+   gate scales the finest generator's detail to the example's RMS, noise it passed on included. */
+#define TN__SG_FINE_NOISE 0.7f
+static float tn__sg_fine_noise(const tn_singan_gen_opts *o, int sample)
+{
+    if (o->fine_noise != 0) return o->fine_noise < 0 ? 0.0f : o->fine_noise;
+    return sample && !o->layout && o->gate ? TN__SG_FINE_NOISE : 1.0f;
+}
+
 static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_opts *opts, tn__sg_arch *A, tn_singan_gen_opts *o,
                                     tn__sg_gen_run *r)
 {
@@ -22872,17 +22889,18 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if (opts) *o = *opts;
     tn_singan_gen_defaults(o);
     if ((st = tn__sg_arch_of(model, A))) return st;
-    if (!isfinite(o->noise) || o->noise > 100 || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
+    if (!isfinite(o->noise) || o->noise > 100 || !(o->fine_noise <= 100) || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
         o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
         o->gate > 1)
-        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, layout noise %g <= 100, "
-                        "layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, gate %d 0 or 1)",
-                        (double)o->noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth, o->gate);
+        return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, fine noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, "
+                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, gate %d 0 or 1)",
+                        (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth, o->gate);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
     r->seed = o->seed;
     r->noise = o->noise;
+    r->fine_noise = tn__sg_fine_noise(o, 0);
     return TN_OK;
 }
 
@@ -23020,6 +23038,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
     r.g = m->weights;
     r.seed = 0x67617465ULL;
     r.noise = 1.0f;
+    r.fine_noise = run->fine_noise;
     r.map_is_output = 1;
     s = *run;
     s.gate = gt;
@@ -23214,6 +23233,7 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         p->level = K - 1;
     }
     r.limit = 1;
+    r.fine_noise = tn__sg_fine_noise(&p->o, 1);
     if (p->map) {
         r.map = p->map;
         r.mw = p->mw;
@@ -23255,6 +23275,7 @@ TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0,
     if (!o.layout) {
         tn__sg_gate gate;
         r.limit = 1;
+        r.fine_noise = tn__sg_fine_noise(&o, 1);
         if (o.gate && (st = tn__sg_gate_make(model, &A, &r, &gate))) return st;
         r.gate = o.gate ? &gate : NULL;
         return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);

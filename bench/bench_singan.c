@@ -26,6 +26,8 @@
        GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
      - --gate -1: SinGAN's samples without the gate (tn_singan_gen_opts.gate: the detail scaled
        by the example's own at the same slope, relative to the median slope's; on by default),
+     - --fine-noise K: tn_singan_gen_opts.fine_noise of every sample (the finest generator's noise;
+       1 = as trained, 0 = the default 0.7, -1 = none),
      - GPNN (no training): the same lines,
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
@@ -35,7 +37,7 @@
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
-                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1]
+                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1] [--fine-noise K]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but those run only when named, M = 10, 2 threads) */
@@ -399,6 +401,7 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
 static const char *g_argv0, *g_pictures, *g_model_dir;
 static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
 static int g_gate;                          /* tn_singan_gen_opts.gate of every sample (-1: off) */
+static float g_fine_noise;                  /* tn_singan_gen_opts.fine_noise of every sample (0: default) */
 static float g_layout_noise, g_layout_warp, g_layout_smooth;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
@@ -496,6 +499,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         if (g_singan > 0) {
             memset(&g, 0, sizeof g);
             g.gate = g_gate;
+            g.fine_noise = g_fine_noise;
             for (i = 0; i < 3; i++) {
                 g.seed = 100 + (uint64_t)i;
                 if (tn_singan_sample(&sg[i], &m, 0, 0, 256, 256, &g)) printf("# %s: sample failed: %s\n", n, tn_last_error());
@@ -515,6 +519,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         g.layout_smooth = g_layout_smooth;
         g.layout_scale = g_layout_scale;
         g.gate = g_gate;
+        g.fine_noise = g_fine_noise;
         t0 = tn_time_seconds();
         for (i = 0; i < 3; i++) {
             g.seed = 100 + (uint64_t)i;
@@ -582,6 +587,7 @@ static void extras(const char *n, const tn_image *ex, tn_singan *m, int threads,
     tn_extraction exn;
     int k;
     memset(&g, 0, sizeof g);
+    g.fine_noise = g_fine_noise;
     tn_image_blur(&in[0], ex, 4.0f);
     if (!tn_extract(&exn, ex, NULL)) {
         tn_gnn_membrane(&in[1], &exn.contours, 256, 256);
@@ -677,6 +683,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--layout-scale") && v) g_layout_scale = atoi(argv[++i]);
         else if (!strcmp(a, "--layout-smooth") && v) g_layout_smooth = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gate") && v) g_gate = atoi(argv[++i]);
+        else if (!strcmp(a, "--fine-noise") && v) g_fine_noise = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-coarsest") && v) g_gopts.coarsest = atoi(argv[++i]);
         else if (!strcmp(a, "--gpnn-noise") && v) g_gopts.noise = (float)atof(argv[++i]);
@@ -696,9 +703,9 @@ int main(int argc, char **argv)
         }
     }
     printf("# bench_singan: %.1f min per DEM, %d threads, singan options (0 = default): patch %d, disc_layers %d, noise_amp %g, adv_weight %g, d_steps %d, "
-           "curv_weight %g, spec_weight %g, height_weight %g, coarsest %d, channels %d\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
+           "curv_weight %g, spec_weight %g, height_weight %g, coarsest %d, channels %d; sampling: fine_noise %g\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
            (double)g_opts.adv_weight, g_opts.d_steps, (double)g_opts.curv_weight, (double)g_opts.spec_weight, (double)g_opts.height_weight, g_opts.coarsest,
-           g_opts.channels);
+           g_opts.channels, (double)g_fine_noise);
     fflush(stdout);
     if (peer) {
         if (system("/usr/bin/python3 /work/shared/peers/torch_singan_step.py --threads 2 --size 256 --runs 3 2>&1 | sed 's/^/peer: /'"))

@@ -1615,6 +1615,8 @@ static const cli_opt singan_sample_opts[] = {
      "the window's corner in the infinite sample (tiles of one seed fit together exactly)", "0 0"},
     {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+    {"fine-noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.fine_noise, NULL, -1, 100, "K",
+     "a further multiplier of the finest generator's noise (1: as trained; < 0: none)", "0.7 (1 with --layout)"},
     {"layout", 0, ARG_FLAG, 0, &singan_gen_arg.g.layout, NULL, 0, 0, NULL,
      "the example's own arrangement, rearranged by patches (GPNN) and bent by a smooth warp, under SinGAN's finer scales; "
      "a finite map (origin 0 0, or --map)", NULL},
@@ -1633,6 +1635,8 @@ static const cli_opt singan_refine_opts[] = {
     {"from-scale", 0, ARG_INT, 0, &singan_gen_arg.g.from_scale, NULL, 1, 64, "K", "first scale whose generator runs (higher = finer detail only)", "scales - 3"},
     {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+    {"fine-noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.fine_noise, NULL, -1, 100, "K",
+     "a further multiplier of the finest generator's noise (1: as trained; < 0: none)", "1"},
 };
 static const cli_opt singan_upscale_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
@@ -1643,6 +1647,8 @@ static const cli_opt singan_upscale_opts[] = {
      "the scale IN stands for + 1 (= scales: IN at the example's pixel size, the finest generator repeats)", "output at the example's pixel size"},
     {"seed", 0, ARG_U64, 0, &singan_gen_arg.g.seed, NULL, 0, 0, "S", "random seed", "0"},
     {"noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.noise, NULL, -1, 100, "K", "multiplier of the trained noise amplitudes (< 0: none)", "1"},
+    {"fine-noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.fine_noise, NULL, -1, 100, "K",
+     "a further multiplier of the finest generator's noise (1: as trained; < 0: none)", "1"},
 };
 
 /* kind: 0 sample, 1 refine, 2 upscale */
