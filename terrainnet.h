@@ -22881,8 +22881,10 @@ static float tn__sg_fine_noise(const tn_singan_gen_opts *o, int sample)
     return sample && !o->layout && o->gate ? TN__SG_FINE_NOISE : 1.0f;
 }
 
-static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_opts *opts, tn__sg_arch *A, tn_singan_gen_opts *o,
-                                    tn__sg_gen_run *r)
+/* Resolves opts into *o and the run *r; sample: 1 for tn_singan_sample and tn_singan_prepare, 0 for
+   refinement and upscaling (tn__sg_fine_noise). */
+static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_opts *opts, int sample, tn__sg_arch *A,
+                                    tn_singan_gen_opts *o, tn__sg_gen_run *r)
 {
     tn_status st;
     memset(o, 0, sizeof *o);
@@ -22900,7 +22902,7 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     r->g = model->weights;
     r->seed = o->seed;
     r->noise = o->noise;
-    r->fine_noise = tn__sg_fine_noise(o, 0);
+    r->fine_noise = tn__sg_fine_noise(o, sample);
     return TN_OK;
 }
 
@@ -23218,7 +23220,7 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
     p->model = model;
     p->width = w;
     p->height = h;
-    if ((st = tn__sg_gen_prepare(model, opts, &p->A, &p->o, &r))) goto fail;
+    if ((st = tn__sg_gen_prepare(model, opts, 1, &p->A, &p->o, &r))) goto fail;
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || (p->o.layout && (long)w * h > TN_SINGAN_LAYOUT_MAX_PX)) {
         st = tn__fail(TN_ERR_INVALID_ARG, "singan: map %d x %d (sides 1..2^20; a laid-out map at most %ld pixels)", w, h, TN_SINGAN_LAYOUT_MAX_PX);
         goto fail;
@@ -23233,7 +23235,6 @@ TN_API tn_status tn_singan_prepare(tn_singan_prepared **out, const tn_singan *mo
         p->level = K - 1;
     }
     r.limit = 1;
-    r.fine_noise = tn__sg_fine_noise(&p->o, 1);
     if (p->map) {
         r.map = p->map;
         r.mw = p->mw;
@@ -23269,13 +23270,12 @@ TN_API tn_status tn_singan_sample(tn_image *out, const tn_singan *model, int x0,
     tn_singan_prepared *p;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if ((st = tn__sg_gen_prepare(model, opts, 1, &A, &o, &r))) return st;
     if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20) || x0 < -(1 << 29) || x0 > (1 << 29) || y0 < -(1 << 29) || y0 > (1 << 29))
         return tn__fail(TN_ERR_INVALID_ARG, "singan sample: window %d x %d at (%d, %d) (sizes 1..2^20, origin within +-2^29)", w, h, x0, y0);
     if (!o.layout) {
         tn__sg_gate gate;
         r.limit = 1;
-        r.fine_noise = tn__sg_fine_noise(&o, 1);
         if (o.gate && (st = tn__sg_gate_make(model, &A, &r, &gate))) return st;
         r.gate = o.gate ? &gate : NULL;
         return tn__sg_generate(model, &r, A.scales - 1, x0, y0, w, h, o.tile, out);
@@ -23325,7 +23325,7 @@ TN_API tn_status tn_singan_refine(tn_image *out, const tn_singan *model, const t
     int K, mw, mh;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if ((st = tn__sg_gen_prepare(model, opts, 0, &A, &o, &r))) return st;
     if (A.scales < 2) return tn__fail(TN_ERR_INVALID_ARG, "singan refine: the model has one scale only");
     K = o.from_scale ? o.from_scale : A.scales - 3;
     if (K < 1) K = 1;
@@ -23353,7 +23353,7 @@ TN_API tn_status tn_singan_upscale(tn_image *out, const tn_singan *model, const 
     int m, L, W, H, mw, mh;
     tn_status st;
     TN_ASSERT(out);
-    if ((st = tn__sg_gen_prepare(model, opts, &A, &o, &r))) return st;
+    if ((st = tn__sg_gen_prepare(model, opts, 0, &A, &o, &r))) return st;
     if (!(factor > 1.0f && factor <= 64.0f)) return tn__fail(TN_ERR_INVALID_ARG, "singan upscale: factor %g outside (1, 64]", (double)factor);
     if (!in || !in->data || in->width < 1 || in->height < 1) return tn__fail(TN_ERR_EMPTY, "singan upscale: empty input map");
     W = (int)floor((double)in->width * factor + 0.5);
@@ -32985,7 +32985,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
     go.seed = w->seed;
     go.noise = s->p[1];
     go.from_scale = K;
-    if ((st = tn__sg_gen_prepare(m, &go, &A, &o, &run))) return st;
+    if ((st = tn__sg_gen_prepare(m, &go, 0, &A, &o, &run))) return st;
     n = A.scales - 1 - K;
     mw = tn__sg_size(s->in_w, A.factor, n);
     mh = tn__sg_size(s->in_h, A.factor, n);

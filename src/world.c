@@ -636,7 +636,7 @@ static tn_status tn__world_refine_run(const tn__world_stage *s, const tn_world *
     go.seed = w->seed;
     go.noise = s->p[1];
     go.from_scale = K;
-    if ((st = tn__sg_gen_prepare(m, &go, &A, &o, &run))) return st;
+    if ((st = tn__sg_gen_prepare(m, &go, 0, &A, &o, &run))) return st;
     n = A.scales - 1 - K;
     mw = tn__sg_size(s->in_w, A.factor, n);
     mh = tn__sg_size(s->in_h, A.factor, n);
