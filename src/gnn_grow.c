@@ -22,8 +22,9 @@
    quilt carries them too, each block offset so its heights meet its neighbours', and the added
    lines are the network of those heights on the strokes' ground, with their relief taken, away
    from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
-   tilt), then, within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a
-   user valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
+   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's), then,
+   within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
+   valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
    when the lines' membrane holds far more closed basins than the example's own, each basin drains
    by a valley over its lowest saddle (tn__gnn_grow_drain). */
 typedef struct tn_gnn_grow_opts {
@@ -333,6 +334,7 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
 #define TN__GNN_QUILT_CANDIDATES 200 /* placements scored per block when heights are quilted too */
 #define TN__GNN_QUILT_FEATHER 3      /* px past the height cut over which a block fades in */
 #define TN__GNN_QUILT_MEAN 512       /* px: away from the strokes, the quilted heights lose their mean within this radius */
+#define TN__GNN_FLANK 16             /* px across a drawn ridge that take the example's flanks; the quilted relief fades in over them */
 
 /* With the example's heights (dem), the quilt carries them too: block (x0, y0) under placement
    (t, ox, oy) is offset by its mean height difference from the heights already placed (Q, where
@@ -380,8 +382,11 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
    as the network's lines have theirs), plus, from TN__GNN_FALL_REACH px of the strokes on (D: px to
    the nearest), where their own fall ends, that mean less the one within TN__GNN_QUILT_MEAN px: so
    a mountainside keeps its tilt toward the main ridges (without it its spurs were hills) but does
-   not sink a drawn valley below its ground (a slot along it). */
-static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width, int height, float *prel)
+   not sink a drawn valley below its ground (a slot along it). The whole fades in over
+   TN__GNN_FLANK px from the drawn ridges (Dr: px to the nearest), where the example's flanks lie
+   (tn__gnn_grow_flanks): a quilt that knows nothing of the ridge put full-depth gullies and knolls
+   a few px from it, and the ridge stood as a thin fin on them. */
+static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, const float *Dr, int width, int height, float *prel)
 {
     double *qs = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
     int x, y;
@@ -392,9 +397,9 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, int width,
             size_t p = (size_t)y * width + x;
             double a, A, loc = tn__gnn_box_sum(qs, width, height, x, y, TN__GNN_RELIEF_RADIUS, &a) / a;
             double far = tn__gnn_box_sum(qs, width, height, x, y, TN__GNN_QUILT_MEAN, &A) / A;
-            float w = tn__clampf(D[p] / TN__GNN_FALL_REACH, 0, 1);
+            float w = tn__clampf(D[p] / TN__GNN_FALL_REACH, 0, 1), k = tn__clampf(Dr[p] / TN__GNN_FLANK, 0, 1);
             w = w * w * (3 - 2 * w);
-            prel[p] = (float)(Q[p] - loc + w * (loc - far));
+            prel[p] = (float)(Q[p] - loc + w * (loc - far)) * k * k * (3 - 2 * k);
         }
     TN_FREE(qs);
     return TN_OK;
@@ -825,7 +830,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         }
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
         mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
-    if (Q && ((st = tn__gnn_quilt_relief(Q, D, width, height, prel)) || (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
+    if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) || (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
     for (c = 0; c < user->count; c++) {
@@ -1149,7 +1154,6 @@ TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const 
     return st;
 }
 
-#define TN__GNN_FLANK 16 /* px across a drawn ridge that take the example's flanks */
 #define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
                                 staircase turns a shorter chord by up to 45 degrees, and 8 px across
                                 that moves a strip's row along its line by 6 px */

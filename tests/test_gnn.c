@@ -1737,6 +1737,48 @@ TN_TEST(grown_spurs_keep_the_example_tilt)
     tn_image_free(&full);
 }
 
+TN_TEST(grown_ridge_flanks_are_its_own)
+{
+    /* with the example's heights, the quilted relief fades in over 16 px from a drawn ridge: the
+       added lines 4-8 px from it lie near their mean height at that distance (the ridge's fall),
+       where those from 24 px on scatter with the quilt's full relief; a quilt that knew nothing
+       of the ridge put full-depth gullies a few px from it (a thin fin). Example: the bundled Alps
+       DEM's central 128 px, one drawn ridge */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    tn_contour c;
+    float pts[3 * 20];
+    double s[2] = {0, 0}, s2[2] = {0, 0}, sd[2];
+    long cnt[2] = {0, 0};
+    int i, j, b;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    for (i = 0; i < 20; i++) pts[3 * i] = 10.0f + 11.0f * (float)i, pts[3 * i + 1] = 120.0f, pts[3 * i + 2] = 1800;
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE, c.npoints = 20, c.points = pts;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 240, user.count = 1, user.items = &c;
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+    for (i = 1; i < g.count; i++)
+        for (j = 0; j < g.items[i].npoints; j++) {
+            const float *p = g.items[i].points + 3 * j;
+            double d = fabs(p[1] - 120.0);
+            if (p[0] < 24 || p[0] > 205) continue; /* beside the stroke, not past its ends */
+            b = d >= 4 && d < 8 ? 0 : d >= 24 && d < 48 ? 1 : -1;
+            if (b < 0) continue;
+            s[b] += p[2], s2[b] += (double)p[2] * p[2], cnt[b]++;
+        }
+    for (b = 0; b < 2; b++) sd[b] = cnt[b] > 1 ? sqrt(fmax(s2[b] / cnt[b] - (s[b] / cnt[b]) * (s[b] / cnt[b]), 0)) : 0;
+    printf("  added lines' heights: 4-8 px from the ridge sd %.0f m (%ld points), 24-48 px sd %.0f m (%ld points)\n", sd[0], cnt[0], sd[1], cnt[1]);
+    TN_CHECK(cnt[0] > 20 && cnt[1] > 100);
+    TN_CHECK(sd[0] < 0.15 * sd[1]);
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 /* Mean |terrain - asked height| over the strokes' pixels, and the share of their points that keep
    ridges above and valleys below the land 4 px across (tn_gnn_ordering). */
 /* Bilinear height of img at (x, y) (inside the map). */
@@ -2274,6 +2316,7 @@ int main(void)
     TN_RUN(grow_flanks_without_streaks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_spurs_keep_the_example_tilt);
+    TN_RUN(grown_ridge_flanks_are_its_own);
     TN_RUN(drawing_off_the_example_level_is_seen_at_it);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
