@@ -78,8 +78,9 @@
    the median elsewhere (the example's own: the plan's floor_detail); for N >= 512, _windows: the
    three distances of 9 windows of 256 px of the big map (a 3 x 3 grid over its middle 3/4) to
    the example, their mean, against the real crops' mean.
-   Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...] [big=N]
-   from the repository root; pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
+   Usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b,...] [from=DIR] [big=N] [seed=S]
+   from the repository root; seed= the generation's seed (default 1); drawings= names the drawings, read from DIR/sketch_<name>.tns (from=,
+   default examples/data); pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
    range. */
 #include "terrainnet.h"
@@ -738,7 +739,7 @@ static void valley_print(const char *who, const valley_shape *v, const valley_sh
 
 /* The drawing at N x N the new way, with the map-scale level and without it (big=N). */
 static void big_map(const char *name, const tn_gnn *model, const tn_contour_set *sk, const tn_contour_set *asked, int N, const tn_image *ex,
-                    const double *real)
+                    const double *real, uint64_t seed)
 {
     tn_image rast = {0, 0, 0, NULL};
     int level;
@@ -751,7 +752,7 @@ static void big_map(const char *name, const tn_gnn *model, const tn_contour_set 
         double t0 = tn_time_seconds(), share = 0, err = 0, secs;
         size_t q, nq = 0;
         memset(&o, 0, sizeof o);
-        o.seed = 1;
+        o.seed = seed;
         o.map_scale = level ? -1 : 0;
         if (tn_gnn_plan_of(&plan, model, sk, N, N, &o) || tn_gnn_generate(&t, model, sk, N, N, &o)) {
             printf("%s_%d_%s: failed (%s)\n", name, N, lv, tn_last_error());
@@ -787,9 +788,10 @@ static void big_map(const char *name, const tn_gnn *model, const tn_contour_set 
 
 int main(int argc, char **argv)
 {
-    static const char *all[] = {"valley", "summit", "ring", "cross"};
+    static const char *all[16] = {"valley", "summit", "ring", "cross"};
+    static char names[512];
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
-    const char *region, *model_path, *pictures = NULL, *only = NULL;
+    const char *region, *model_path, *pictures = NULL, *from = "examples/data";
     double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_peaks = 0, pk, ex_relief[4] = {NAN, NAN, NAN, NAN};
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
@@ -797,9 +799,10 @@ int main(int argc, char **argv)
     valley_shape ex_valley, real_valley;
     hatch_power ex_hatch, real_hatch;
     crest_sides ex_crest;
-    int ex_thr, threads = 1, finetune = 0, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
+    uint64_t seed = 1;
+    int ex_thr, threads = 1, finetune = 0, ndrawings = 4, a, d, w, ex_x = 0, ex_y = 0, nreal = 0, k, big = 0;
     if (argc < 3) {
-        fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [big=N]\n");
+        fprintf(stderr, "usage: bench_sketch REGION MODEL.tnw [threads] [finetune=N] [pictures=DIR] [drawings=a,b] [from=DIR] [big=N] [seed=S]\n");
         return 2;
     }
     region = argv[1];
@@ -807,8 +810,14 @@ int main(int argc, char **argv)
     for (a = 3; a < argc; a++) {
         if (!strncmp(argv[a], "finetune=", 9)) finetune = atoi(argv[a] + 9);
         else if (!strncmp(argv[a], "pictures=", 9)) pictures = argv[a] + 9;
-        else if (!strncmp(argv[a], "drawings=", 9)) only = argv[a] + 9;
+        else if (!strncmp(argv[a], "drawings=", 9)) { /* names, comma-separated */
+            char *t;
+            strncpy(names, argv[a] + 9, sizeof names - 1);
+            for (ndrawings = 0, t = strtok(names, ","); t && ndrawings < 16; t = strtok(NULL, ",")) all[ndrawings++] = t;
+        } else if (!strncmp(argv[a], "from=", 5))
+            from = argv[a] + 5;
         else if (!strncmp(argv[a], "big=", 4)) big = atoi(argv[a] + 4);
+        else if (!strncmp(argv[a], "seed=", 5)) seed = strtoull(argv[a] + 5, NULL, 10);
         else threads = atoi(argv[a]);
     }
     tn_set_threads(threads);
@@ -910,12 +919,11 @@ int main(int argc, char **argv)
                 printf("example_%s_top: %.1f %%; %s_seam: %.1f %%; %s_spike: %.2f (main %s, %d points)\n", shape_name[k], 100 * cs[k].top, shape_name[k],
                        100 * cs[k].seam, shape_name[k], cs[k].spike, k ? "valleys" : "ridges", cs[k].n);
     }
-    for (d = 0; d < 4; d++) {
+    for (d = 0; d < ndrawings; d++) {
         char path[512];
         tn_contour_set sk, asked;
         tn_image out[6], rast = {0, 0, 0, NULL}, drawing = {0, 0, 0, NULL};
-        if (only && !strstr(only, all[d])) continue;
-        snprintf(path, sizeof path, "examples/data/sketch_%s.tns", all[d]);
+        snprintf(path, sizeof path, "%s/sketch_%s.tns", from, all[d]);
         if (tn_sketch_load(&sk, path)) {
             fprintf(stderr, "bench_sketch: %s\n", tn_last_error());
             continue;
@@ -943,7 +951,7 @@ int main(int argc, char **argv)
             memset(&out[w], 0, sizeof out[w]);
             memset(&o, 0, sizeof o);
             memset(&plan, 0, sizeof plan);
-            o.seed = 1;
+            o.seed = seed;
             o.finetune = w == 0 ? 0 : finetune;
             o.grow = w >= 3 ? 0 : -1;
             o.detail = w >= 4 ? -1 : 0;
@@ -1021,7 +1029,7 @@ int main(int argc, char **argv)
             snprintf(path, sizeof path, "%s/sketch_%s_%s.png", pictures, region, all[d]);
             save_strip(path, panel, out[5].data ? 5 : 4, model.lo, model.hi, dxy);
         }
-        if (big >= 16) big_map(all[d], &model, &sk, &asked, big, &ex, real);
+        if (big >= 16) big_map(all[d], &model, &sk, &asked, big, &ex, real, seed);
         for (w = 0; w < 6; w++) tn_image_free(&out[w]);
         tn_image_free(&rast);
         tn_image_free(&drawing);
