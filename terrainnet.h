@@ -2663,6 +2663,9 @@ typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap
 #ifndef TN_NO_GNN
 #define TN__GNN_DIST 16.0f /* gnn: distance scale of the edge features (px) */
 #define TN__GNN_PROFILE 48 /* gnn grow: how far the main lines' profiles reach (px) */
+#define TN__GNN_CREST_BEND_MAX 1.5f /* gnn grow: px a drawn ridge moves at most (softly) for the example's
+                                       bends; the notch keeps it above the ground 4 px across it as
+                                       drawn (tn__gnn_incise) */
 /* gnn: the parts of a sketch as flat arrays */
 typedef struct tn__gnn_parts {
     int n, npts;
@@ -25876,6 +25879,9 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    uint8_t *drawn;            /* W x H or NULL: the user's ridges where they were drawn, when the
+                                  example's bends moved them (tn__gnn_grow_crest) */
+    float *drawn_d;            /* W x H: chamfer distance to them */
     float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
@@ -25924,6 +25930,8 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->base);
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
+    TN_FREE(G->drawn);
+    TN_FREE(G->drawn_d);
     TN_FREE(G->flank);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
@@ -26640,6 +26648,22 @@ static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
     return TN_OK;
 }
 
+/* G->drawn: the user's ridges (the first nuser lines of sk, map px) where they were drawn, before
+   the example's bends move them (tn__gnn_grow_crest); the notch keeps them followed there too. */
+static tn_status tn__gnn_drawn_mask(const tn_contour_set *sk, int nuser, int width, int height, tn__gnn_gen *G)
+{
+    tn_contour_set u = *sk;
+    tn_image r = {0, 0, 0, NULL};
+    size_t q, n = (size_t)width * height;
+    tn_status st;
+    u.count = nuser < sk->count ? nuser : sk->count;
+    if ((st = tn_sketch_rasterise(&r, &u, width, height))) return st;
+    if (!(G->drawn = (uint8_t *)tn__alloc(n))) st = TN_ERR_OUT_OF_MEMORY;
+    for (q = 0; !st && q < n; q++) G->drawn[q] = (uint8_t)(r.data[3 * q] > 0);
+    tn_image_free(&r);
+    return st;
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -26690,7 +26714,8 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);
-                st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
+                st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
+                if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
             if (!st && !(st = tn__gnn_grow(&sk, &ex, tn__gnn_example_dem(model, &G->A, &dem) ? &dem : NULL, width, height, &go, &rnd, &G->grown,
                                            &relief))) {
@@ -26717,6 +26742,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         if (!st && !(st = tn_sketch_rasterise(&r, &u, width, height))) {
             for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
             tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
+            for (q = 0; G->drawn && q < n && G->drawn[q] == (G->pin[q] == 1); q++) {}
+            if (q == n) { /* the bends moved no ridge */
+                TN_FREE(G->drawn);
+                G->drawn = NULL;
+            }
+            if (G->drawn && !(G->drawn_d = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st && G->drawn) tn__gnn_chamfer(G->drawn, width, height, G->drawn_d, near);
         }
         tn_image_free(&r);
         TN_FREE(near);
@@ -26816,62 +26848,102 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
 #define TN__GNN_BANK 4  /* px: a stroke's banks, which stay above a valley and below a ridge */
 #define TN__GNN_NOTCH 7 /* px: half-width of the notch that deepens a valley or raises a ridge */
 
+/* How far stroke pixel (X, Y) of type t (1 ridge, 2 valley) must rise (a ridge) or sink (a
+   valley, negative) to lie margin above (below) its banks: the output TN__GNN_BANK px away and
+   3 px or more from every stroke (dist, W x H: the strokes' distance; across the stroke, not
+   along it). val: the output on the area (ax, ay, aw, ah). */
+static float tn__gnn_bank_need(const tn__gnn_gen *G, const float *dist, int t, float margin, const float *val, int ax, int ay, int aw, int ah, int X,
+                               int Y)
+{
+    const int Bk = TN__GNN_BANK;
+    float m = t == 1 ? -FLT_MAX : FLT_MAX, h = val[(size_t)(Y - ay) * aw + (X - ax)], need;
+    int a, b, any = 0;
+    for (b = Y - Bk - 1; b <= Y + Bk + 1; b++)
+        for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
+            float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
+            if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah || dist[(size_t)b * G->W + a] < Bk - 1) continue;
+            q = val[(size_t)(b - ay) * aw + (a - ax)];
+            m = t == 1 ? fmaxf(m, q) : fminf(m, q);
+            any = 1;
+        }
+    if (!any) return 0;
+    need = t == 1 ? m + margin - h : h - (m - margin);
+    return need > 0 ? (t == 1 ? need : -need) : 0;
+}
+
+/* The highest of val (on the area) on the ridge strokes of G->pin within ceil(TN__GNN_CREST_BEND_MAX)
+   px of (X, Y): the moved crest beside a ridge pixel as drawn; -FLT_MAX = none. */
+static float tn__gnn_crest_near(const tn__gnn_gen *G, const float *val, int ax, int ay, int aw, int ah, int X, int Y)
+{
+    const int R = (int)ceilf(TN__GNN_CREST_BEND_MAX);
+    float m = -FLT_MAX;
+    int a, b;
+    for (b = Y - R; b <= Y + R; b++)
+        for (a = X - R; a <= X + R; a++)
+            if (a >= ax && b >= ay && a < ax + aw && b < ay + ah && (a - X) * (a - X) + (b - Y) * (b - Y) <= R * R && G->pin[(size_t)b * G->W + a] == 1)
+                m = fmaxf(m, val[(size_t)(b - ay) * aw + (a - ax)]);
+    return m;
+}
+
+/* The notch at (X, Y): the asks def (on the area) of the stroke pixels of mask within
+   TN__GNN_NOTCH px, averaged with the line kernel, times (1 - d/7)^2 (d: dist at (X, Y)). */
+static float tn__gnn_notch_at(const tn__gnn_gen *G, const uint8_t *mask, const float *dist, const float *def, int ax, int ay, int aw, int ah, int X,
+                              int Y)
+{
+    const int Wn = TN__GNN_NOTCH;
+    float d = dist[(size_t)Y * G->W + X];
+    double num = 0, den = 0;
+    int a, b;
+    if (!(d < (float)Wn)) return 0;
+    for (b = Y - Wn + 1; b < Y + Wn; b++)
+        for (a = X - Wn + 1; a < X + Wn; a++) {
+            float e, k;
+            if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !mask[(size_t)b * G->W + a]) continue;
+            e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+            if (e >= (float)Wn) continue;
+            k = tn__gnn_line_kernel(e, Wn);
+            num += k * def[(size_t)(b - ay) * aw + (a - ax)];
+            den += k;
+        }
+    return den > 0 ? (1 - d / Wn) * (1 - d / Wn) * (float)(num / den) : 0;
+}
+
 /* A grown sketch's user lines stay the lowest (valley) or highest (ridge) ground across them:
-   where a bank (the output 4 px from a stroke pixel and 3 px or more from every stroke: across it,
-   not along it) is not at least side per px (G->side, the added lines' fall, TN__GNN_FALL; less at
-   the map-scale level, whose floors are broader) above a valley
-   pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
-   in a notch of (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the
-   network leave a stroke on a hillside where the land around it tilts more than the stroke's own
-   profile (a tributary above a main valley); lifting the low bank instead left levees at a fixed
-   distance. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which holds every
-   pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def: aw x ah
-   scratch; the result goes into out (ww x wh). */
+   where a bank (tn__gnn_bank_need) is not at least side per px (G->side, the added lines' fall,
+   TN__GNN_FALL; less at the map-scale level, whose floors are broader) above a valley pixel
+   (below a ridge pixel), the stroke is deepened (raised) by the shortfall in a notch of
+   (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the network leave a
+   stroke on a hillside where the land around it tilts more than the stroke's own profile (a
+   tributary above a main valley); lifting the low bank instead left levees at a fixed distance.
+   A ridge the example's bends moved off its drawn place is raised there too where the ground
+   across it as drawn is higher (G->drawn): the user asked for the ridge there. By the shortfall
+   alone, of which the notch closes 4/5, and never above the moved crest beside it: a margin, the
+   full fix or ground higher than the crest raised drawn ridges above their asked heights. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which
+   holds every pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def:
+   scratch of aw x ah (2 x that with G->drawn); the result goes into out (ww x wh). */
 static void tn__gnn_incise(const tn__gnn_gen *G, float side, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww,
                            int wh, float *def, float *out)
 {
     const int Wn = TN__GNN_NOTCH, Bk = TN__GNN_BANK;
     const float keep = 1 - (1 - (float)Bk / Wn) * (1 - (float)Bk / Wn); /* what the notch leaves of a bank-to-stroke difference */
-    int u, v, a, b;
+    float *def2 = G->drawn ? def + (size_t)aw * ah : NULL;
+    int u, v;
     for (v = 0; v < ah; v++)
         for (u = 0; u < aw; u++) {
             int X = ax + u, Y = ay + v, t = G->pin[(size_t)Y * G->W + X];
-            float m = t == 1 ? -FLT_MAX : FLT_MAX, h = val[(size_t)v * aw + u], need;
-            int any = 0;
-            def[(size_t)v * aw + u] = 0;
-            if (!t || X < x - Wn || Y < y - Wn || X >= x + ww + Wn || Y >= y + wh + Wn) continue;
-            for (b = Y - Bk - 1; b <= Y + Bk + 1; b++)
-                for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
-                    float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
-                    if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah ||
-                        G->pin_d[(size_t)b * G->W + a] < Bk - 1)
-                        continue;
-                    q = val[(size_t)(b - ay) * aw + (a - ax)];
-                    m = t == 1 ? fmaxf(m, q) : fminf(m, q);
-                    any = 1;
-                }
-            if (!any) continue;
-            need = t == 1 ? m + side * Bk - h : h - (m - side * Bk);
-            if (need > 0) def[(size_t)v * aw + u] = (t == 1 ? need : -need) / keep;
+            int far = X < x - Wn || Y < y - Wn || X >= x + ww + Wn || Y >= y + wh + Wn;
+            def[(size_t)v * aw + u] = t && !far ? tn__gnn_bank_need(G, G->pin_d, t, side * Bk, val, ax, ay, aw, ah, X, Y) / keep : 0;
+            if (def2) {
+                float need = G->drawn[(size_t)Y * G->W + X] && !far ? tn__gnn_bank_need(G, G->drawn_d, 1, 0, val, ax, ay, aw, ah, X, Y) : 0;
+                if (need > 0) need = fminf(need, fmaxf(tn__gnn_crest_near(G, val, ax, ay, aw, ah, X, Y) - val[(size_t)v * aw + u], 0));
+                def2[(size_t)v * aw + u] = need;
+            }
         }
     for (v = 0; v < wh; v++)
         for (u = 0; u < ww; u++) {
             int X = x + u, Y = y + v;
-            float d = G->pin_d[(size_t)Y * G->W + X], h = val[(size_t)(Y - ay) * aw + (X - ax)];
-            double num = 0, den = 0;
-            if (d < (float)Wn) {
-                for (b = Y - Wn + 1; b < Y + Wn; b++)
-                    for (a = X - Wn + 1; a < X + Wn; a++) {
-                        float e, k;
-                        if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !G->pin[(size_t)b * G->W + a]) continue;
-                        e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
-                        if (e >= (float)Wn) continue;
-                        k = tn__gnn_line_kernel(e, Wn);
-                        num += k * def[(size_t)(b - ay) * aw + (a - ax)];
-                        den += k;
-                    }
-                if (den > 0) h += (1 - d / Wn) * (1 - d / Wn) * (float)(num / den);
-            }
+            float h = val[(size_t)(Y - ay) * aw + (X - ax)] + tn__gnn_notch_at(G, G->pin, G->pin_d, def, ax, ay, aw, ah, X, Y);
+            if (def2) h += tn__gnn_notch_at(G, G->drawn, G->drawn_d, def2, ax, ay, aw, ah, X, Y);
             out[(size_t)v * ww + u] = h;
         }
 }
@@ -26895,7 +26967,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float))) ||
         !(val = (float *)tn__alloc((size_t)aw * ah * sizeof(float))))
         st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && G->pin && (!(corr = (float *)tn__alloc((size_t)aw * ah * sizeof(float))) ||
+    if (!st && G->pin && (!(corr = (float *)tn__alloc((size_t)aw * ah * (G->drawn ? 2 : 1) * sizeof(float))) ||
                           !(inc = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))))
         st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);
@@ -28565,6 +28637,20 @@ done:
     return TN_OK;
 }
 
+#define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
+                                staircase turns a shorter chord by up to 45 degrees, and 8 px across
+                                that moves a strip's row along its line by 6 px */
+
+/* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
+static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
+{
+    const int S = TN__GNN_FLANK_SPAN;
+    int a = i - S < 0 ? 0 : i - S, b = i + S >= n ? n - 1 : i + S;
+    float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
+    *nx = l > 0 ? -dy / l : 0;
+    *ny = l > 0 ? dx / l : 0;
+}
+
 #define TN__GNN_CREST_HALF 8   /* px: an example line shorter than 2 x 8 + 1 px has no peak to give */
 #define TN__GNN_CREST_CHUNK 32 /* px of relief copied at once from one example line */
 #define TN__GNN_CREST_POOL 64  /* px: less of the example's main lines are not copied (one short
@@ -28574,6 +28660,7 @@ done:
                                   of two or three lines gave every drawn ridge the same few chunks */
 #define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
 #define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
+#define TN__GNN_CREST_BEND 8.0f /* px: the sigma of the smooth path a main line's bends are taken against */
 
 /* Heights along a polyline of n points (x, y, h) every px of its length into h (at most
    floor(length) + 1 values), and their places into xy (may be NULL); returns how many. */
@@ -28695,6 +28782,30 @@ static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, flo
     return TN_OK;
 }
 
+/* How far each px of the pool's lines (xy: their places, runs as in tn__gnn_crest_pool) lies
+   beside its own path smoothed by a Gaussian of TN__GNN_CREST_BEND px (signed, along that path's
+   normal) into bend: the line's small bends, which the user's smooth stroke has not. */
+static void tn__gnn_crest_bends(const float *xy, const int *off, int runs, float *bend)
+{
+    const float sg = TN__GNN_CREST_BEND;
+    const int reach = (int)(3 * sg);
+    int k, i, j;
+    for (k = 0; k < runs; k++)
+        for (i = off[k]; i < off[k + 1]; i++) {
+            double sx = 0, sy = 0, sw = 0, tx = 0, ty = 0, l;
+            for (j = i - reach; j <= i + reach; j++) {
+                double w, dw;
+                if (j < off[k] || j >= off[k + 1]) continue;
+                w = exp(-0.5 * (j - i) * (j - i) / (sg * sg));
+                dw = w * (j - i); /* the smoothed path's tangent */
+                sx += w * xy[2 * j], sy += w * xy[2 * j + 1], sw += w;
+                tx += dw * (xy[2 * j] - xy[2 * i]), ty += dw * (xy[2 * j + 1] - xy[2 * i + 1]);
+            }
+            l = sqrt(tx * tx + ty * ty);
+            bend[i] = l > 0 ? (float)(((xy[2 * i] - sx / sw) * -ty + (xy[2 * i + 1] - sy / sw) * tx) / l) : 0.0f;
+        }
+}
+
 /* Relief along a line of m px into g (m x R, zeroed by the caller): chunks of TN__GNN_CREST_CHUNK
    px from random places of pool (R values a px: a strip across the example's line, or its heights
    alone), forwards or backwards (the sides of a strip swap), each row less its straight trend along
@@ -28743,75 +28854,84 @@ static float tn__gnn_crest_fade(const tn_contour_set *set, int nuser, int c, int
     return f * f * (3 - 2 * f);
 }
 
+/* g (a line's relief from tn__gnn_crest_synth) at s px along a line of len px; a closed line's
+   closing stretch mixes in the relief past its end, so it closes on itself. */
+static float tn__gnn_crest_at(const float *g, float s, float len, int closed)
+{
+    int a = (int)s, b;
+    float r = g[a] + (s - (float)a) * (g[a + 1] - g[a]), t, e, r2;
+    if (!closed || s >= TN__GNN_CREST_BLEND) return r;
+    t = s / TN__GNN_CREST_BLEND, e = len + s, b = (int)e;
+    r2 = g[b] + (e - (float)b) * (g[b + 1] - g[b]);
+    return (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
+}
+
 /* A drawn line of `kind` takes the example's along-line relief: the peaks and saddles of its main
    ridges (the floor's rises and falls along its main valleys), copied in chunks of
    TN__GNN_CREST_CHUNK px from random places of its main lines (tn__gnn_crest_pool), forwards or
    backwards, less each chunk's own straight trend, cross-faded at equal power over
    TN__GNN_CREST_BLEND px, and added to the asked heights. The sketch gives the trend along a
-   stroke; a smooth one made a levee. The relief fades in over TN__GNN_CREST_FADE px from every
-   other stroke, so strokes that meet keep one height; a closed line's relief closes on itself.
-   set: lines drawn pixel by pixel
-   (tn_sketch_densify), heights in the example's units; its first nuser lines are the user's. */
+   stroke; a smooth one made a levee. Its path takes the main lines' bends the same way
+   (tn__gnn_crest_bends), moved along its normal by at most TN__GNN_CREST_BEND_MAX px: a drawn
+   curve kept its pen's smoothness and read as a thin line through the ground. Both fade in over
+   TN__GNN_CREST_FADE px from every other stroke, so strokes that meet keep one place and height;
+   a closed line closes on itself.
+   set: lines drawn pixel by pixel (tn_sketch_densify), heights in the example's units; its first
+   nuser lines are the user's. */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed)
 {
-    const int Bl = TN__GNN_CREST_BLEND;
     int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j;
-    float sc[TN__GNN_CREST_MAX_RUNS];
-    float *pool = NULL, *g = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
-    tn_rng rng;
-    tn_status st = tn__gnn_crest_pool(example, kind, &pool, NULL, off, sc, NULL, &runs);
+    float sc[TN__GNN_CREST_MAX_RUNS], one[TN__GNN_CREST_MAX_RUNS];
+    float *pool = NULL, *xy = NULL, *bend = NULL, *g = NULL, *gb = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
+    tn_rng rng, rngb;
+    tn_status st = tn__gnn_crest_pool(example, kind, &pool, &xy, off, sc, NULL, &runs);
     if (st || !pool) return st;
+    if (!(bend = (float *)tn__alloc((size_t)off[runs] * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) tn__gnn_crest_bends(xy, off, runs, bend);
+    for (c = 0; c < runs; c++) one[c] = 1;
     tn_rng_seed(&rng, seed, 0x6372657374ULL + (uint64_t)kind);
+    tn_rng_seed(&rngb, seed, 0x62656e64ULL + (uint64_t)kind);
     for (c = 0; !st && c < nuser && c < set->count; c++) {
         tn_contour *l = &set->items[c];
-        float *p = l->points, len = 0, *s;
+        float *p = l->points, len = 0, *s, *nrm;
         int n = l->npoints, closed, m;
         if ((int)l->type != kind || n < 2) continue;
         closed = n > 2 && fabsf(p[0] - p[3 * n - 3]) <= 1.5f && fabsf(p[1] - p[3 * n - 2]) <= 1.5f;
-        if (!(s = (float *)tn__alloc((size_t)n * sizeof(float)))) {
+        s = (float *)tn__alloc((size_t)n * 3 * sizeof(float));
+        if (!s) {
             st = TN_ERR_OUT_OF_MEMORY;
             break;
         }
+        nrm = s + n;
         for (j = 0; j < n; j++) {
             if (j) len += sqrtf((p[3 * j] - p[3 * j - 3]) * (p[3 * j] - p[3 * j - 3]) + (p[3 * j + 1] - p[3 * j - 2]) * (p[3 * j + 1] - p[3 * j - 2]));
             s[j] = len;
+            tn__gnn_normal(p, 3, n, j, &nrm[2 * j], &nrm[2 * j + 1]);
         }
         m = (int)len + TN__GNN_CREST_CHUNK + 2;
         g = (float *)tn__calloc((size_t)m * sizeof(float));
+        gb = (float *)tn__calloc((size_t)m * sizeof(float));
         w2 = (float *)tn__alloc((size_t)m * sizeof(float));
-        if (!g || !w2) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st) tn__gnn_crest_synth(pool, 1, off, sc, runs, m, &rng, g, w2, col);
+        if (!g || !gb || !w2) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st) {
+            tn__gnn_crest_synth(pool, 1, off, sc, runs, m, &rng, g, w2, col);
+            tn__gnn_crest_synth(bend, 1, off, one, runs, m, &rngb, gb, w2, col);
+        }
         for (j = 0; !st && j < n; j++) {
-            int a = (int)s[j];
-            float f = s[j] - a, r = g[a] + f * (g[a + 1] - g[a]);
-            if (closed && s[j] < Bl) { /* the closing stretch mixes in the relief past the line's end */
-                float t = s[j] / Bl, e = len + s[j];
-                int b = (int)e;
-                float r2 = g[b] + (e - b) * (g[b + 1] - g[b]);
-                r = (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
-            }
-            p[3 * j + 2] += tn__gnn_crest_fade(set, nuser, c, j) * r;
+            float f = tn__gnn_crest_fade(set, nuser, c, j), b = f * tn__gnn_crest_at(gb, s[j], len, closed);
+            p[3 * j + 2] += f * tn__gnn_crest_at(g, s[j], len, closed);
+            b = TN__GNN_CREST_BEND_MAX * tanhf(b / TN__GNN_CREST_BEND_MAX);
+            p[3 * j] += b * nrm[2 * j], p[3 * j + 1] += b * nrm[2 * j + 1];
         }
         TN_FREE(s);
         TN_FREE(g);
+        TN_FREE(gb);
         TN_FREE(w2);
     }
     TN_FREE(pool);
+    TN_FREE(xy);
+    TN_FREE(bend);
     return st;
-}
-
-#define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
-                                staircase turns a shorter chord by up to 45 degrees, and 8 px across
-                                that moves a strip's row along its line by 6 px */
-
-/* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
-static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
-{
-    const int S = TN__GNN_FLANK_SPAN;
-    int a = i - S < 0 ? 0 : i - S, b = i + S >= n ? n - 1 : i + S;
-    float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
-    *nx = l > 0 ? -dy / l : 0;
-    *ny = l > 0 ? dx / l : 0;
 }
 
 /* The flanks of the drawn ridges by example: field (W x H, the example's units, zero elsewhere)
@@ -29133,7 +29253,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn_prepared *P, tn_ctx *ctx, int x
     tmp = (float *)tn__alloc((size_t)g.w * r.h * sizeof(float));
     corr = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
     val = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
-    def = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
+    def = (float *)tn__alloc((size_t)A.w * A.h * (G->drawn ? 2 : 1) * sizeof(float)); /* tn__gnn_incise's scratch */
     res = (float *)tn__alloc((size_t)w * h * sizeof(float));
     if (!kern || !F || !B || !C || !lowF || !lowB || !M || !tmp || !corr || !val || !def || !res) {
         st = TN_ERR_OUT_OF_MEMORY;

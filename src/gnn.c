@@ -2470,6 +2470,9 @@ typedef struct tn__gnn_gen {
     uint8_t *pin;              /* W x H, grown sketches only: the user's own line pixels (1 ridge, 2
                                   valley), whose heights the output keeps (tn__gnn_pin); NULL = none */
     float *pin_d;              /* W x H: chamfer distance to them */
+    uint8_t *drawn;            /* W x H or NULL: the user's ridges where they were drawn, when the
+                                  example's bends moved them (tn__gnn_grow_crest) */
+    float *drawn_d;            /* W x H: chamfer distance to them */
     float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
@@ -2518,6 +2521,8 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->base);
     TN_FREE(G->pin);
     TN_FREE(G->pin_d);
+    TN_FREE(G->drawn);
+    TN_FREE(G->drawn_d);
     TN_FREE(G->flank);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
@@ -3234,6 +3239,22 @@ static tn_status tn__gnn_generate_validate(const tn_gnn_generate_opts *o)
     return TN_OK;
 }
 
+/* G->drawn: the user's ridges (the first nuser lines of sk, map px) where they were drawn, before
+   the example's bends move them (tn__gnn_grow_crest); the notch keeps them followed there too. */
+static tn_status tn__gnn_drawn_mask(const tn_contour_set *sk, int nuser, int width, int height, tn__gnn_gen *G)
+{
+    tn_contour_set u = *sk;
+    tn_image r = {0, 0, 0, NULL};
+    size_t q, n = (size_t)width * height;
+    tn_status st;
+    u.count = nuser < sk->count ? nuser : sk->count;
+    if ((st = tn_sketch_rasterise(&r, &u, width, height))) return st;
+    if (!(G->drawn = (uint8_t *)tn__alloc(n))) st = TN_ERR_OUT_OF_MEMORY;
+    for (q = 0; !st && q < n; q++) G->drawn[q] = (uint8_t)(r.data[3 * q] > 0);
+    tn_image_free(&r);
+    return st;
+}
+
 static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *sketch, int width, int height, const tn_gnn_generate_opts *opts,
                                   tn__gnn_gen *G)
 {
@@ -3284,7 +3305,8 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 tn_contour_set_free(&sk);
                 sk = rnd;
                 memset(&rnd, 0, sizeof rnd);
-                st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
+                st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
+                if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
             if (!st && !(st = tn__gnn_grow(&sk, &ex, tn__gnn_example_dem(model, &G->A, &dem) ? &dem : NULL, width, height, &go, &rnd, &G->grown,
                                            &relief))) {
@@ -3311,6 +3333,13 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
         if (!st && !(st = tn_sketch_rasterise(&r, &u, width, height))) {
             for (q = 0; q < n; q++) G->pin[q] = (uint8_t)(r.data[3 * q] > 0 ? 1 : r.data[3 * q + 1] > 0 ? 2 : 0);
             tn__gnn_chamfer(G->pin, width, height, G->pin_d, near);
+            for (q = 0; G->drawn && q < n && G->drawn[q] == (G->pin[q] == 1); q++) {}
+            if (q == n) { /* the bends moved no ridge */
+                TN_FREE(G->drawn);
+                G->drawn = NULL;
+            }
+            if (G->drawn && !(G->drawn_d = (float *)tn__alloc(n * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+            if (!st && G->drawn) tn__gnn_chamfer(G->drawn, width, height, G->drawn_d, near);
         }
         tn_image_free(&r);
         TN_FREE(near);
@@ -3410,62 +3439,102 @@ static void tn__gnn_pin(const tn__gnn_gen *G, const float *a, const float *b, in
 #define TN__GNN_BANK 4  /* px: a stroke's banks, which stay above a valley and below a ridge */
 #define TN__GNN_NOTCH 7 /* px: half-width of the notch that deepens a valley or raises a ridge */
 
+/* How far stroke pixel (X, Y) of type t (1 ridge, 2 valley) must rise (a ridge) or sink (a
+   valley, negative) to lie margin above (below) its banks: the output TN__GNN_BANK px away and
+   3 px or more from every stroke (dist, W x H: the strokes' distance; across the stroke, not
+   along it). val: the output on the area (ax, ay, aw, ah). */
+static float tn__gnn_bank_need(const tn__gnn_gen *G, const float *dist, int t, float margin, const float *val, int ax, int ay, int aw, int ah, int X,
+                               int Y)
+{
+    const int Bk = TN__GNN_BANK;
+    float m = t == 1 ? -FLT_MAX : FLT_MAX, h = val[(size_t)(Y - ay) * aw + (X - ax)], need;
+    int a, b, any = 0;
+    for (b = Y - Bk - 1; b <= Y + Bk + 1; b++)
+        for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
+            float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
+            if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah || dist[(size_t)b * G->W + a] < Bk - 1) continue;
+            q = val[(size_t)(b - ay) * aw + (a - ax)];
+            m = t == 1 ? fmaxf(m, q) : fminf(m, q);
+            any = 1;
+        }
+    if (!any) return 0;
+    need = t == 1 ? m + margin - h : h - (m - margin);
+    return need > 0 ? (t == 1 ? need : -need) : 0;
+}
+
+/* The highest of val (on the area) on the ridge strokes of G->pin within ceil(TN__GNN_CREST_BEND_MAX)
+   px of (X, Y): the moved crest beside a ridge pixel as drawn; -FLT_MAX = none. */
+static float tn__gnn_crest_near(const tn__gnn_gen *G, const float *val, int ax, int ay, int aw, int ah, int X, int Y)
+{
+    const int R = (int)ceilf(TN__GNN_CREST_BEND_MAX);
+    float m = -FLT_MAX;
+    int a, b;
+    for (b = Y - R; b <= Y + R; b++)
+        for (a = X - R; a <= X + R; a++)
+            if (a >= ax && b >= ay && a < ax + aw && b < ay + ah && (a - X) * (a - X) + (b - Y) * (b - Y) <= R * R && G->pin[(size_t)b * G->W + a] == 1)
+                m = fmaxf(m, val[(size_t)(b - ay) * aw + (a - ax)]);
+    return m;
+}
+
+/* The notch at (X, Y): the asks def (on the area) of the stroke pixels of mask within
+   TN__GNN_NOTCH px, averaged with the line kernel, times (1 - d/7)^2 (d: dist at (X, Y)). */
+static float tn__gnn_notch_at(const tn__gnn_gen *G, const uint8_t *mask, const float *dist, const float *def, int ax, int ay, int aw, int ah, int X,
+                              int Y)
+{
+    const int Wn = TN__GNN_NOTCH;
+    float d = dist[(size_t)Y * G->W + X];
+    double num = 0, den = 0;
+    int a, b;
+    if (!(d < (float)Wn)) return 0;
+    for (b = Y - Wn + 1; b < Y + Wn; b++)
+        for (a = X - Wn + 1; a < X + Wn; a++) {
+            float e, k;
+            if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !mask[(size_t)b * G->W + a]) continue;
+            e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
+            if (e >= (float)Wn) continue;
+            k = tn__gnn_line_kernel(e, Wn);
+            num += k * def[(size_t)(b - ay) * aw + (a - ax)];
+            den += k;
+        }
+    return den > 0 ? (1 - d / Wn) * (1 - d / Wn) * (float)(num / den) : 0;
+}
+
 /* A grown sketch's user lines stay the lowest (valley) or highest (ridge) ground across them:
-   where a bank (the output 4 px from a stroke pixel and 3 px or more from every stroke: across it,
-   not along it) is not at least side per px (G->side, the added lines' fall, TN__GNN_FALL; less at
-   the map-scale level, whose floors are broader) above a valley
-   pixel (below a ridge pixel), the stroke is deepened (raised) by the shortfall
-   in a notch of (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the
-   network leave a stroke on a hillside where the land around it tilts more than the stroke's own
-   profile (a tributary above a main valley); lifting the low bank instead left levees at a fixed
-   distance. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which holds every
-   pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def: aw x ah
-   scratch; the result goes into out (ww x wh). */
+   where a bank (tn__gnn_bank_need) is not at least side per px (G->side, the added lines' fall,
+   TN__GNN_FALL; less at the map-scale level, whose floors are broader) above a valley pixel
+   (below a ridge pixel), the stroke is deepened (raised) by the shortfall in a notch of
+   (1 - d/7)^2 around it, as a gully is cut into a hillside. The membrane and the network leave a
+   stroke on a hillside where the land around it tilts more than the stroke's own profile (a
+   tributary above a main valley); lifting the low bank instead left levees at a fixed distance.
+   A ridge the example's bends moved off its drawn place is raised there too where the ground
+   across it as drawn is higher (G->drawn): the user asked for the ridge there. By the shortfall
+   alone, of which the notch closes 4/5, and never above the moved crest beside it: a margin, the
+   full fix or ground higher than the crest raised drawn ridges above their asked heights. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which
+   holds every pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def:
+   scratch of aw x ah (2 x that with G->drawn); the result goes into out (ww x wh). */
 static void tn__gnn_incise(const tn__gnn_gen *G, float side, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww,
                            int wh, float *def, float *out)
 {
     const int Wn = TN__GNN_NOTCH, Bk = TN__GNN_BANK;
     const float keep = 1 - (1 - (float)Bk / Wn) * (1 - (float)Bk / Wn); /* what the notch leaves of a bank-to-stroke difference */
-    int u, v, a, b;
+    float *def2 = G->drawn ? def + (size_t)aw * ah : NULL;
+    int u, v;
     for (v = 0; v < ah; v++)
         for (u = 0; u < aw; u++) {
             int X = ax + u, Y = ay + v, t = G->pin[(size_t)Y * G->W + X];
-            float m = t == 1 ? -FLT_MAX : FLT_MAX, h = val[(size_t)v * aw + u], need;
-            int any = 0;
-            def[(size_t)v * aw + u] = 0;
-            if (!t || X < x - Wn || Y < y - Wn || X >= x + ww + Wn || Y >= y + wh + Wn) continue;
-            for (b = Y - Bk - 1; b <= Y + Bk + 1; b++)
-                for (a = X - Bk - 1; a <= X + Bk + 1; a++) {
-                    float e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y))), q;
-                    if (fabsf(e - (float)Bk) > 0.5f || a < ax || b < ay || a >= ax + aw || b >= ay + ah ||
-                        G->pin_d[(size_t)b * G->W + a] < Bk - 1)
-                        continue;
-                    q = val[(size_t)(b - ay) * aw + (a - ax)];
-                    m = t == 1 ? fmaxf(m, q) : fminf(m, q);
-                    any = 1;
-                }
-            if (!any) continue;
-            need = t == 1 ? m + side * Bk - h : h - (m - side * Bk);
-            if (need > 0) def[(size_t)v * aw + u] = (t == 1 ? need : -need) / keep;
+            int far = X < x - Wn || Y < y - Wn || X >= x + ww + Wn || Y >= y + wh + Wn;
+            def[(size_t)v * aw + u] = t && !far ? tn__gnn_bank_need(G, G->pin_d, t, side * Bk, val, ax, ay, aw, ah, X, Y) / keep : 0;
+            if (def2) {
+                float need = G->drawn[(size_t)Y * G->W + X] && !far ? tn__gnn_bank_need(G, G->drawn_d, 1, 0, val, ax, ay, aw, ah, X, Y) : 0;
+                if (need > 0) need = fminf(need, fmaxf(tn__gnn_crest_near(G, val, ax, ay, aw, ah, X, Y) - val[(size_t)v * aw + u], 0));
+                def2[(size_t)v * aw + u] = need;
+            }
         }
     for (v = 0; v < wh; v++)
         for (u = 0; u < ww; u++) {
             int X = x + u, Y = y + v;
-            float d = G->pin_d[(size_t)Y * G->W + X], h = val[(size_t)(Y - ay) * aw + (X - ax)];
-            double num = 0, den = 0;
-            if (d < (float)Wn) {
-                for (b = Y - Wn + 1; b < Y + Wn; b++)
-                    for (a = X - Wn + 1; a < X + Wn; a++) {
-                        float e, k;
-                        if (a < ax || b < ay || a >= ax + aw || b >= ay + ah || !G->pin[(size_t)b * G->W + a]) continue;
-                        e = sqrtf((float)((a - X) * (a - X) + (b - Y) * (b - Y)));
-                        if (e >= (float)Wn) continue;
-                        k = tn__gnn_line_kernel(e, Wn);
-                        num += k * def[(size_t)(b - ay) * aw + (a - ax)];
-                        den += k;
-                    }
-                if (den > 0) h += (1 - d / Wn) * (1 - d / Wn) * (float)(num / den);
-            }
+            float h = val[(size_t)(Y - ay) * aw + (X - ax)] + tn__gnn_notch_at(G, G->pin, G->pin_d, def, ax, ay, aw, ah, X, Y);
+            if (def2) h += tn__gnn_notch_at(G, G->drawn, G->drawn_d, def2, ax, ay, aw, ah, X, Y);
             out[(size_t)v * ww + u] = h;
         }
 }
@@ -3489,7 +3558,7 @@ static tn_status tn__gnn_gen_window(const tn__gnn_gen *G, const tn_params *w, tn
     if (!(pred = (float *)tn__alloc((size_t)R.rw * R.rh * sizeof(float))) ||
         !(val = (float *)tn__alloc((size_t)aw * ah * sizeof(float))))
         st = TN_ERR_OUT_OF_MEMORY;
-    if (!st && G->pin && (!(corr = (float *)tn__alloc((size_t)aw * ah * sizeof(float))) ||
+    if (!st && G->pin && (!(corr = (float *)tn__alloc((size_t)aw * ah * (G->drawn ? 2 : 1) * sizeof(float))) ||
                           !(inc = (float *)tn__alloc((size_t)ww * wh * sizeof(float)))))
         st = TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn__gnn_region_predict(ctx, G, w, &R, pred);

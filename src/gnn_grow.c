@@ -919,6 +919,20 @@ done:
     return TN_OK;
 }
 
+#define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
+                                staircase turns a shorter chord by up to 45 degrees, and 8 px across
+                                that moves a strip's row along its line by 6 px */
+
+/* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
+static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
+{
+    const int S = TN__GNN_FLANK_SPAN;
+    int a = i - S < 0 ? 0 : i - S, b = i + S >= n ? n - 1 : i + S;
+    float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
+    *nx = l > 0 ? -dy / l : 0;
+    *ny = l > 0 ? dx / l : 0;
+}
+
 #define TN__GNN_CREST_HALF 8   /* px: an example line shorter than 2 x 8 + 1 px has no peak to give */
 #define TN__GNN_CREST_CHUNK 32 /* px of relief copied at once from one example line */
 #define TN__GNN_CREST_POOL 64  /* px: less of the example's main lines are not copied (one short
@@ -928,6 +942,7 @@ done:
                                   of two or three lines gave every drawn ridge the same few chunks */
 #define TN__GNN_CREST_BLEND 8  /* px over which two copies cross-fade */
 #define TN__GNN_CREST_FADE 16  /* px over which the relief fades in from another stroke */
+#define TN__GNN_CREST_BEND 8.0f /* px: the sigma of the smooth path a main line's bends are taken against */
 
 /* Heights along a polyline of n points (x, y, h) every px of its length into h (at most
    floor(length) + 1 values), and their places into xy (may be NULL); returns how many. */
@@ -1049,6 +1064,30 @@ static tn_status tn__gnn_crest_pool(const tn_contour_set *example, int kind, flo
     return TN_OK;
 }
 
+/* How far each px of the pool's lines (xy: their places, runs as in tn__gnn_crest_pool) lies
+   beside its own path smoothed by a Gaussian of TN__GNN_CREST_BEND px (signed, along that path's
+   normal) into bend: the line's small bends, which the user's smooth stroke has not. */
+static void tn__gnn_crest_bends(const float *xy, const int *off, int runs, float *bend)
+{
+    const float sg = TN__GNN_CREST_BEND;
+    const int reach = (int)(3 * sg);
+    int k, i, j;
+    for (k = 0; k < runs; k++)
+        for (i = off[k]; i < off[k + 1]; i++) {
+            double sx = 0, sy = 0, sw = 0, tx = 0, ty = 0, l;
+            for (j = i - reach; j <= i + reach; j++) {
+                double w, dw;
+                if (j < off[k] || j >= off[k + 1]) continue;
+                w = exp(-0.5 * (j - i) * (j - i) / (sg * sg));
+                dw = w * (j - i); /* the smoothed path's tangent */
+                sx += w * xy[2 * j], sy += w * xy[2 * j + 1], sw += w;
+                tx += dw * (xy[2 * j] - xy[2 * i]), ty += dw * (xy[2 * j + 1] - xy[2 * i + 1]);
+            }
+            l = sqrt(tx * tx + ty * ty);
+            bend[i] = l > 0 ? (float)(((xy[2 * i] - sx / sw) * -ty + (xy[2 * i + 1] - sy / sw) * tx) / l) : 0.0f;
+        }
+}
+
 /* Relief along a line of m px into g (m x R, zeroed by the caller): chunks of TN__GNN_CREST_CHUNK
    px from random places of pool (R values a px: a strip across the example's line, or its heights
    alone), forwards or backwards (the sides of a strip swap), each row less its straight trend along
@@ -1097,75 +1136,84 @@ static float tn__gnn_crest_fade(const tn_contour_set *set, int nuser, int c, int
     return f * f * (3 - 2 * f);
 }
 
+/* g (a line's relief from tn__gnn_crest_synth) at s px along a line of len px; a closed line's
+   closing stretch mixes in the relief past its end, so it closes on itself. */
+static float tn__gnn_crest_at(const float *g, float s, float len, int closed)
+{
+    int a = (int)s, b;
+    float r = g[a] + (s - (float)a) * (g[a + 1] - g[a]), t, e, r2;
+    if (!closed || s >= TN__GNN_CREST_BLEND) return r;
+    t = s / TN__GNN_CREST_BLEND, e = len + s, b = (int)e;
+    r2 = g[b] + (e - (float)b) * (g[b + 1] - g[b]);
+    return (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
+}
+
 /* A drawn line of `kind` takes the example's along-line relief: the peaks and saddles of its main
    ridges (the floor's rises and falls along its main valleys), copied in chunks of
    TN__GNN_CREST_CHUNK px from random places of its main lines (tn__gnn_crest_pool), forwards or
    backwards, less each chunk's own straight trend, cross-faded at equal power over
    TN__GNN_CREST_BLEND px, and added to the asked heights. The sketch gives the trend along a
-   stroke; a smooth one made a levee. The relief fades in over TN__GNN_CREST_FADE px from every
-   other stroke, so strokes that meet keep one height; a closed line's relief closes on itself.
-   set: lines drawn pixel by pixel
-   (tn_sketch_densify), heights in the example's units; its first nuser lines are the user's. */
+   stroke; a smooth one made a levee. Its path takes the main lines' bends the same way
+   (tn__gnn_crest_bends), moved along its normal by at most TN__GNN_CREST_BEND_MAX px: a drawn
+   curve kept its pen's smoothness and read as a thin line through the ground. Both fade in over
+   TN__GNN_CREST_FADE px from every other stroke, so strokes that meet keep one place and height;
+   a closed line closes on itself.
+   set: lines drawn pixel by pixel (tn_sketch_densify), heights in the example's units; its first
+   nuser lines are the user's. */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed)
 {
-    const int Bl = TN__GNN_CREST_BLEND;
     int off[TN__GNN_CREST_MAX_RUNS + 1], runs, c, j;
-    float sc[TN__GNN_CREST_MAX_RUNS];
-    float *pool = NULL, *g = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
-    tn_rng rng;
-    tn_status st = tn__gnn_crest_pool(example, kind, &pool, NULL, off, sc, NULL, &runs);
+    float sc[TN__GNN_CREST_MAX_RUNS], one[TN__GNN_CREST_MAX_RUNS];
+    float *pool = NULL, *xy = NULL, *bend = NULL, *g = NULL, *gb = NULL, *w2 = NULL, col[2 * TN__GNN_CREST_CHUNK];
+    tn_rng rng, rngb;
+    tn_status st = tn__gnn_crest_pool(example, kind, &pool, &xy, off, sc, NULL, &runs);
     if (st || !pool) return st;
+    if (!(bend = (float *)tn__alloc((size_t)off[runs] * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
+    if (!st) tn__gnn_crest_bends(xy, off, runs, bend);
+    for (c = 0; c < runs; c++) one[c] = 1;
     tn_rng_seed(&rng, seed, 0x6372657374ULL + (uint64_t)kind);
+    tn_rng_seed(&rngb, seed, 0x62656e64ULL + (uint64_t)kind);
     for (c = 0; !st && c < nuser && c < set->count; c++) {
         tn_contour *l = &set->items[c];
-        float *p = l->points, len = 0, *s;
+        float *p = l->points, len = 0, *s, *nrm;
         int n = l->npoints, closed, m;
         if ((int)l->type != kind || n < 2) continue;
         closed = n > 2 && fabsf(p[0] - p[3 * n - 3]) <= 1.5f && fabsf(p[1] - p[3 * n - 2]) <= 1.5f;
-        if (!(s = (float *)tn__alloc((size_t)n * sizeof(float)))) {
+        s = (float *)tn__alloc((size_t)n * 3 * sizeof(float));
+        if (!s) {
             st = TN_ERR_OUT_OF_MEMORY;
             break;
         }
+        nrm = s + n;
         for (j = 0; j < n; j++) {
             if (j) len += sqrtf((p[3 * j] - p[3 * j - 3]) * (p[3 * j] - p[3 * j - 3]) + (p[3 * j + 1] - p[3 * j - 2]) * (p[3 * j + 1] - p[3 * j - 2]));
             s[j] = len;
+            tn__gnn_normal(p, 3, n, j, &nrm[2 * j], &nrm[2 * j + 1]);
         }
         m = (int)len + TN__GNN_CREST_CHUNK + 2;
         g = (float *)tn__calloc((size_t)m * sizeof(float));
+        gb = (float *)tn__calloc((size_t)m * sizeof(float));
         w2 = (float *)tn__alloc((size_t)m * sizeof(float));
-        if (!g || !w2) st = TN_ERR_OUT_OF_MEMORY;
-        if (!st) tn__gnn_crest_synth(pool, 1, off, sc, runs, m, &rng, g, w2, col);
+        if (!g || !gb || !w2) st = TN_ERR_OUT_OF_MEMORY;
+        if (!st) {
+            tn__gnn_crest_synth(pool, 1, off, sc, runs, m, &rng, g, w2, col);
+            tn__gnn_crest_synth(bend, 1, off, one, runs, m, &rngb, gb, w2, col);
+        }
         for (j = 0; !st && j < n; j++) {
-            int a = (int)s[j];
-            float f = s[j] - a, r = g[a] + f * (g[a + 1] - g[a]);
-            if (closed && s[j] < Bl) { /* the closing stretch mixes in the relief past the line's end */
-                float t = s[j] / Bl, e = len + s[j];
-                int b = (int)e;
-                float r2 = g[b] + (e - b) * (g[b + 1] - g[b]);
-                r = (t * r + (1 - t) * r2) / sqrtf(t * t + (1 - t) * (1 - t));
-            }
-            p[3 * j + 2] += tn__gnn_crest_fade(set, nuser, c, j) * r;
+            float f = tn__gnn_crest_fade(set, nuser, c, j), b = f * tn__gnn_crest_at(gb, s[j], len, closed);
+            p[3 * j + 2] += f * tn__gnn_crest_at(g, s[j], len, closed);
+            b = TN__GNN_CREST_BEND_MAX * tanhf(b / TN__GNN_CREST_BEND_MAX);
+            p[3 * j] += b * nrm[2 * j], p[3 * j + 1] += b * nrm[2 * j + 1];
         }
         TN_FREE(s);
         TN_FREE(g);
+        TN_FREE(gb);
         TN_FREE(w2);
     }
     TN_FREE(pool);
+    TN_FREE(xy);
+    TN_FREE(bend);
     return st;
-}
-
-#define TN__GNN_FLANK_SPAN 6 /* points either side over which a line's normal is taken: a pixel chain's
-                                staircase turns a shorter chord by up to 45 degrees, and 8 px across
-                                that moves a strip's row along its line by 6 px */
-
-/* Unit normal (nx, ny) at point i of n points (stride 2 floats at xy, or 3 with stride 3). */
-static void tn__gnn_normal(const float *p, int stride, int n, int i, float *nx, float *ny)
-{
-    const int S = TN__GNN_FLANK_SPAN;
-    int a = i - S < 0 ? 0 : i - S, b = i + S >= n ? n - 1 : i + S;
-    float dx = p[stride * b] - p[stride * a], dy = p[stride * b + 1] - p[stride * a + 1], l = sqrtf(dx * dx + dy * dy);
-    *nx = l > 0 ? -dy / l : 0;
-    *ny = l > 0 ? dx / l : 0;
 }
 
 /* The flanks of the drawn ridges by example: field (W x H, the example's units, zero elsewhere)

@@ -199,7 +199,7 @@ static tn_status tn__gnn_map_scaled(const tn_gnn_prepared *P, tn_ctx *ctx, int x
     tmp = (float *)tn__alloc((size_t)g.w * r.h * sizeof(float));
     corr = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
     val = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
-    def = (float *)tn__alloc((size_t)A.w * A.h * sizeof(float));
+    def = (float *)tn__alloc((size_t)A.w * A.h * (G->drawn ? 2 : 1) * sizeof(float)); /* tn__gnn_incise's scratch */
     res = (float *)tn__alloc((size_t)w * h * sizeof(float));
     if (!kern || !F || !B || !C || !lowF || !lowB || !M || !tmp || !corr || !val || !def || !res) {
         st = TN_ERR_OUT_OF_MEMORY;

@@ -54,6 +54,9 @@ typedef struct tn__pheap { tn__pheap_item *a; size_t n, cap; } tn__pheap; /* cap
 #ifndef TN_NO_GNN
 #define TN__GNN_DIST 16.0f /* gnn: distance scale of the edge features (px) */
 #define TN__GNN_PROFILE 48 /* gnn grow: how far the main lines' profiles reach (px) */
+#define TN__GNN_CREST_BEND_MAX 1.5f /* gnn grow: px a drawn ridge moves at most (softly) for the example's
+                                       bends; the notch keeps it above the ground 4 px across it as
+                                       drawn (tn__gnn_incise) */
 /* gnn: the parts of a sketch as flat arrays */
 typedef struct tn__gnn_parts {
     int n, npts;

@@ -1429,6 +1429,25 @@ static void two_ridge_orders(float ep[4][128 * 3], tn_contour *items, int top_le
     ex->width = ex->height = 128, ex->items = items, ex->count = k;
 }
 
+/* A drawn sketch on a 256 canvas: a straight ridge at 500 m along y = 100 (x 20..220) and a valley
+   that runs down from its middle (user[0], user[1]; up: their 201 points each). */
+static tn_contour_set ridge_with_valley_drawn(float up[2][201 * 3], tn_contour user[2])
+{
+    tn_contour_set sk;
+    int x;
+    for (x = 0; x <= 200; x++) {
+        up[0][3 * x] = (float)(20 + x), up[0][3 * x + 1] = 100, up[0][3 * x + 2] = 500;
+        up[1][3 * x] = 120, up[1][3 * x + 1] = (float)(101 + x / 2), up[1][3 * x + 2] = 500;
+    }
+    memset(user, 0, 2 * sizeof *user);
+    user[0].type = TN_RIDGE, user[1].type = TN_VALLEY;
+    user[0].npoints = user[1].npoints = 201;
+    user[0].points = up[0], user[1].points = up[1];
+    memset(&sk, 0, sizeof sk);
+    sk.width = sk.height = 256, sk.items = user, sk.count = 2;
+    return sk;
+}
+
 TN_TEST(grow_crest_copies_the_example_relief)
 {
     /* a drawn ridge of constant height takes the along-line relief of the example's main ridges
@@ -1442,17 +1461,8 @@ TN_TEST(grow_crest_copies_the_example_relief)
     int x, seed;
     two_ridge_orders(ep, items, 128, 3, &ex);
     want = crest_relief_of(ep[0], 8, 120);
-    for (x = 0; x <= 200; x++) {
-        up[0][3 * x] = (float)(20 + x), up[0][3 * x + 1] = 100, up[0][3 * x + 2] = 500;
-        up[1][3 * x] = 120, up[1][3 * x + 1] = (float)(101 + x / 2), up[1][3 * x + 2] = 500; /* runs down from the ridge's middle */
-    }
+    sk = ridge_with_valley_drawn(up, user);
     memcpy(before, up[0], sizeof before);
-    memset(user, 0, sizeof user);
-    user[0].type = TN_RIDGE, user[1].type = TN_VALLEY;
-    user[0].npoints = user[1].npoints = 201;
-    user[0].points = up[0], user[1].points = up[1];
-    memset(&sk, 0, sizeof sk);
-    sk.width = sk.height = 256, sk.items = user, sk.count = 2;
     for (seed = 1; seed <= 2; seed++) {
         if (seed == 2) memcpy(up[0], before, sizeof before);
         TN_CHECK(tn__gnn_grow_crest(&sk, 2, &ex, TN_RIDGE, (uint64_t)seed) == TN_OK);
@@ -1508,6 +1518,49 @@ TN_TEST(grow_crest_widens_a_short_pool)
     TN_CHECK(tn__gnn_grow_crest(&sk, 1, &ex, TN_RIDGE, 1) == TN_OK);
     TN_CHECK(memcmp(up, before, sizeof before) == 0);
 }
+
+TN_TEST(grow_crest_takes_the_example_bends)
+{
+    /* a straight drawn ridge takes the bends of the example's main ridges (three of 128 px that
+       swing across by amp px with a 24 px period), never more than TN__GNN_CREST_BEND_MAX px off
+       its place; where a drawn valley starts beside it, it stays put; a straight example leaves
+       it straight */
+    static const float amp[3] = {0, 1, 4};
+    float ep[3][128 * 3], up[2][201 * 3];
+    tn_contour items[48], user[2];
+    tn_contour_set ex, sk;
+    int a, i, x, k;
+    for (a = 0; a < 3; a++) {
+        double s2 = 0, mx = 0;
+        int n = 0;
+        for (i = 0, k = 0; i < 3; i++) {
+            for (x = 0; x < 128; x++)
+                ep[i][3 * x] = (float)x, ep[i][3 * x + 1] = (float)(40 + 24 * i) + amp[a] * sinf(6.2831853f * x / 24), ep[i][3 * x + 2] = 1000;
+            for (x = 0; x < 128; x += 8, k++) {
+                memset(&items[k], 0, sizeof items[k]);
+                items[k].type = TN_RIDGE, items[k].order = 2, items[k].npoints = 8, items[k].points = ep[i] + 3 * x;
+            }
+        }
+        memset(&ex, 0, sizeof ex);
+        ex.width = ex.height = 128, ex.items = items, ex.count = k;
+        sk = ridge_with_valley_drawn(up, user);
+        TN_CHECK(tn__gnn_grow_crest(&sk, 2, &ex, TN_RIDGE, 1) == TN_OK);
+        for (x = 0; x <= 200; x++) {
+            double d = up[0][3 * x + 1] - 100.0;
+            TN_CHECK(fabsf(up[0][3 * x] - (float)(20 + x)) < 1e-4f);
+            mx = fmax(mx, fabs(d));
+            if (abs(x - 100) > 24) s2 += d * d, n++;
+        }
+        printf("  example bends %.0f px: the drawn ridge moves %.2f px RMS away from the valley, at most %.2f px, %.3f px where the valley starts\n", (double)amp[a],
+               sqrt(s2 / n), mx, fabs(up[0][3 * 100 + 1] - 100.0));
+        TN_CHECK(mx <= TN__GNN_CREST_BEND_MAX + 1e-4);
+        TN_CHECK(fabs(up[0][3 * 100 + 1] - 100.0) < 0.05);
+        if (a == 0) TN_CHECK(mx < 1e-3);
+        if (a == 1) TN_CHECK(sqrt(s2 / n) > 0.3 && sqrt(s2 / n) < 1.0);
+        if (a == 2) TN_CHECK(sqrt(s2 / n) > 0.8);
+    }
+}
+
 
 /* A 128 px example whose one ridge runs along y = 64, falling 15 m per px, with gullies and spurs
    swinging 40 m with a 20 px period on its flanks; its ridge line as 16 pieces of order 2 (ep:
@@ -1908,6 +1961,58 @@ TN_TEST(drawn_ridge_is_a_crest)
     }
     tn_image_free(&t[0]);
     tn_image_free(&t[1]);
+}
+
+TN_TEST(bent_ridge_is_followed_where_drawn)
+{
+    /* the example's main ridges wander (2 px across, 20 px period); a straight ridge drawn
+       across the map takes those bends, so its crest leaves the line as drawn, yet the line as
+       drawn stays above the ground 4 px across it: the notch raises it there, up to the moved
+       crest, where the bends left it lower (95 %; without that notch 90 %), and a window equals
+       the whole map. Example: ridges every 32 px, 300 m high */
+    tn_image dem, t = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_contour c;
+    tn_contour_set sk;
+    float pts[6] = {10, 60, 900, 150, 60, 900};
+    double share = 0, off = 0;
+    int x, y, n = 0, moved = 0;
+    TN_CHECK(tn_image_create(&dem, 96, 96, 1) == TN_OK);
+    for (y = 0; y < 96; y++)
+        for (x = 0; x < 96; x++) {
+            double w = fmod(y + 2.0 * sin(6.2831853 * x / 20) + 64, 32.0); /* 0 .. 32 across a ridge spacing */
+            dem.data[y * 96 + x] = (float)(600 + 300 * (1 - fabs(w - 16) / 16) + 20 * sin(0.7 * x + 0.3 * y));
+        }
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE, c.npoints = 2, c.points = pts;
+    memset(&sk, 0, sizeof sk);
+    sk.width = 160, sk.height = 120, sk.count = 1, sk.items = &c;
+    memset(&go, 0, sizeof go);
+    go.seed = 1, go.grow = 1, go.detail = -1, go.map_scale = -1, go.heights = TN_GNN_HEIGHTS_EXAMPLE;
+    TN_CHECK(tn_gnn_generate(&t, &m, &sk, 160, 120, &go) == TN_OK);
+    if (t.data) {
+        for (x = 20; x <= 140; x++, n++) { /* where the crest lies across the line, within 3 px */
+            int best = 0, d;
+            for (d = -3; d <= 3; d++)
+                if (t.data[(60 + d) * 160 + x] > t.data[(60 + best) * 160 + x]) best = d;
+            off += abs(best), moved += best != 0;
+        }
+        TN_CHECK(tn_gnn_ordering(&share, &sk, &t, 4, NULL) == TN_OK);
+        printf("  bent drawn ridge: crest off the line at %d of %d columns (%.2f px on average), followed at %.1f %% of its points\n", moved, n,
+               off / n, 100 * share);
+        TN_CHECK(moved > n / 4);
+        TN_CHECK(share >= 0.93);
+        TN_CHECK(tn_gnn_generate_window(&win, &m, &sk, 160, 120, 50, 40, 70, 50, &go) == TN_OK); /* the notch reads the line as drawn tile by tile */
+        TN_CHECK(win.data && window_matches(&win, &t, 50, 40));
+    }
+    tn_image_free(&win);
+    tn_image_free(&t);
+    tn_image_free(&dem);
+    tn_gnn_free(&m);
 }
 
 TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
@@ -2312,6 +2417,7 @@ int main(void)
     TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grow_crest_copies_the_example_relief);
     TN_RUN(grow_crest_widens_a_short_pool);
+    TN_RUN(grow_crest_takes_the_example_bends);
     TN_RUN(grow_flanks_copy_the_example_flanks);
     TN_RUN(grow_flanks_without_streaks);
     TN_RUN(grown_strokes_stay_main_lines);
@@ -2320,6 +2426,7 @@ int main(void)
     TN_RUN(drawing_off_the_example_level_is_seen_at_it);
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
+    TN_RUN(bent_ridge_is_followed_where_drawn);
     TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);
     TN_RUN(drawn_valley_widens_downstream);
     TN_RUN(map_scale_level);
