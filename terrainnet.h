@@ -28920,7 +28920,7 @@ TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const 
         for (j = 0; !st && j < n; j++) {
             float f = tn__gnn_crest_fade(set, nuser, c, j), b = f * tn__gnn_crest_at(gb, s[j], len, closed);
             p[3 * j + 2] += f * tn__gnn_crest_at(g, s[j], len, closed);
-            b = TN__GNN_CREST_BEND_MAX * tanhf(b / TN__GNN_CREST_BEND_MAX);
+            b = TN__GNN_CREST_BEND_MAX * (float)tanh((double)b / TN__GNN_CREST_BEND_MAX); /* in double: tanhf differs between libms (the wasm's) */
             p[3 * j] += b * nrm[2 * j], p[3 * j + 1] += b * nrm[2 * j + 1];
         }
         TN_FREE(s);
