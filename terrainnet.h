@@ -26730,6 +26730,10 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
     }
     if ((st = tn__gnn_gen_build(model, &sk, width, height, &o, G, &known))) goto done;
     if ((st = tn__gnn_detail_plan(model, &o, G))) goto done;
+    if (G->drawn && G->grown <= 0) { /* nothing grew: no pinned strokes, no notch to read it (G->drawn implies G->drawn_d) */
+        TN_FREE(G->drawn);
+        G->drawn = NULL;
+    }
     if (G->grown > 0) { /* the user's lines of a grown sketch keep their heights (tn__gnn_pin) */
         tn_contour_set u = sk;
         tn_image r = {0, 0, 0, NULL};
