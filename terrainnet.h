@@ -79,7 +79,7 @@ ARGUMENTS
 TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once in the code)
     @@core      status codes, errors, allocation, RNG, progress, timing
     @@thread    thread pool and parallel-for
-    @@image     tn_image, crop/pad/resize, blur, gradients, normals, hillshade, colour ramp
+    @@image     tn_image, crop/pad/resize, blur, gradients, normals, hillshade, colours, height steps
     @@io        file formats: PNG (own inflate/deflate), GeoTIFF, PGM/PPM, PFM, SRTM .hgt, .asc, .r16
     @@metrics   SSIM, PSNR, RMSE, MAE
     @@gemm      SGEMM: packed, cache-blocked, AVX-512 / AVX2 / portable kernels, threaded
@@ -269,6 +269,15 @@ typedef struct tn_hillshade_opts {
 } tn_hillshade_opts;
 /* Lambertian hillshade in [0, 1], one channel. opts may be NULL for defaults. */
 TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn_hillshade_opts *opts);
+/* The step a DEM's heights are stored in (channel 0): the smallest height difference between
+   neighbours when at least 99 % of all such differences are whole multiples of it, else 0 (heights
+   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. */
+TN_API float     tn_image_height_step(const tn_image *dem);
+/* Removes the terraces of heights stored in coarse steps (channel 0 -> one channel): dst is the
+   smoothest surface (least squared Laplacian) within step / 2 of dem everywhere, so rounding it
+   to the same steps gives dem back. step <= 0 copies channel 0. Threaded; 200 passes over the
+   raster. */
+TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float step);
 /* Hypsometric terrain colours (water-blue, green lowlands, brown, rock grey, snow white) for
    heights mapped linearly from [lo, hi] (lo == hi: the DEM's own range). RGB in [0, 1]. */
 TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float lo, float hi);
@@ -1599,6 +1608,10 @@ typedef struct tn_singan_opts {
                               units of their variance there (without it samples
                               lack the example's rarer massif or range; docs/singan.md); 0 = 4,
                               < 0 = none */
+    int dequantize;        /* train on the example without its height steps (tn_image_dequantize):
+                              0 = when they are coarse (a step >= 0.1 x the mean |Laplacian| at
+                              1 px: 8-bit heightmaps, whose steps the finest scales would learn
+                              as a grain), 1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -1629,6 +1642,8 @@ typedef struct tn_singan_stats {
                                        (loss_rec: unweighted MSE in network units) */
     float loss_rec_first;     /* loss_rec of the first iteration of that scale in this run (NaN if none) */
     int checkpoints;          /* checkpoints written by this run */
+    float dequantized;        /* the height step the example was trained without (option
+                                 dequantize); 0 = none */
 } tn_singan_stats;
 
 /* Options of sampling, refinement and upscaling (zero = defaults, resolved by tn_singan_gen_defaults). */
@@ -4720,6 +4735,139 @@ static void tn__colour_at(float t, float *rgb)
     rgb[0] = stops[i - 1][1] + f * (stops[i][1] - stops[i - 1][1]);
     rgb[1] = stops[i - 1][2] + f * (stops[i][2] - stops[i - 1][2]);
     rgb[2] = stops[i - 1][3] + f * (stops[i][3] - stops[i - 1][3]);
+}
+
+TN_API float tn_image_height_step(const tn_image *dem)
+{
+    size_t W, H, x, y, n = 0, on = 0, k;
+    float *d, s, top = 0;
+    double lim;
+    if (!dem || !dem->data || dem->width < 2 || dem->height < 2 || dem->channels < 1) return 0;
+    W = (size_t)dem->width;
+    H = (size_t)dem->height;
+    if (!(d = (float *)tn__alloc(2 * W * H * sizeof(float)))) return 0;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float h = dem->data[(y * W + x) * dem->channels], e;
+            if (fabsf(h) > top) top = fabsf(h);
+            if (x + 1 < W && (e = fabsf(dem->data[(y * W + x + 1) * dem->channels] - h)) > 0) d[n++] = e;
+            if (y + 1 < H && (e = fabsf(dem->data[((y + 1) * W + x) * dem->channels] - h)) > 0) d[n++] = e;
+        }
+    if (!n) {
+        TN_FREE(d);
+        return 0;
+    }
+    qsort(d, n, sizeof(float), tn__cmp_float);
+    s = d[0];
+    for (lim = 8; s > 0 && isfinite(s); lim *= 8) { /* float heights round each difference: fit s to the small multiples, then larger */
+        double sd = 0, sm = 0;
+        for (k = 0; k < n; k++) {
+            double m = floor(d[k] / s + 0.5);
+            if (m >= 1 && m <= lim) sd += d[k], sm += m;
+        }
+        s = (float)(sd / sm);
+        if (lim > d[n - 1] / s) break;
+    }
+    for (k = 0; k < n; k++) { /* whole multiples, to a fiftieth of a step and float32's rounding of the heights */
+        double m = floor(d[k] / s + 0.5);
+        if (fabs(d[k] - m * s) <= 0.02 * s + 4.0 * FLT_EPSILON * top) on++;
+    }
+    TN_FREE(d);
+    return s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n ? s : 0;
+}
+
+/* Passes of each smoothing in tn_image_dequantize: both had converged at 100 on the 8-bit 256 px
+   DEMs (docs/singan.md). */
+#define TN__DEQUANT_ITERS 100
+
+/* One pass of tn_image_dequantize over rows [y0, y1): the Laplacian of `h` (lap_only), or one
+   projected step of membrane or biharmonic smoothing from `h` into `out`, clamped to [lo, hi].
+   Borders replicate the edge. Each pixel reads only the pass's input: any thread count gives the
+   same bytes. */
+typedef struct tn__dequant_job {
+    const float *h, *lap, *lo, *hi;
+    float *out;
+    int W, H, membrane, lap_only;
+} tn__dequant_job;
+
+static void tn__dequant_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__dequant_job *j = (const tn__dequant_job *)ctx;
+    const float *h = j->h, *lap = j->lap;
+    size_t y, W = (size_t)j->W;
+    int x;
+    for (y = y0; y < y1; y++)
+        for (x = 0; x < j->W; x++) {
+            size_t i = y * W + (size_t)x;
+            size_t l = x > 0 ? i - 1 : i, r = x + 1 < j->W ? i + 1 : i, u = y > 0 ? i - W : i, d = y + 1 < (size_t)j->H ? i + W : i;
+            float v;
+            if (j->lap_only) {
+                j->out[i] = h[l] + h[r] + h[u] + h[d] - 4.0f * h[i];
+                continue;
+            }
+            if (j->membrane) v = 0.25f * (h[l] + h[r] + h[u] + h[d]);
+            else v = h[i] - (lap[l] + lap[r] + lap[u] + lap[d] - 4.0f * lap[i]) * (0.9f / 64.0f); /* 0.9 x the stable step */
+            j->out[i] = tn__clampf(v, j->lo[i], j->hi[i]);
+        }
+}
+
+TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float step)
+{
+    tn_image out = {0, 0, 0, NULL};
+    float *buf, *lo, *hi, *lap, *a, *b;
+    size_t N, i;
+    int W, H, it;
+    tn_status st;
+    if ((st = tn__image_check(dem, "dequantize"))) return st;
+    if (!isfinite(step)) return tn__fail(TN_ERR_INVALID_ARG, "dequantize: step must be finite");
+    W = dem->width;
+    H = dem->height;
+    N = (size_t)W * H;
+    if ((st = tn__image_alloc(&out, W, H, 1))) return st;
+    for (i = 0; i < N; i++) out.data[i] = dem->data[i * dem->channels];
+    if (step > 0) {
+        if (!(buf = (float *)tn__alloc(4 * N * sizeof(float)))) {
+            tn_image_free(&out);
+            return tn__fail(TN_ERR_OUT_OF_MEMORY, "dequantize: out of memory");
+        }
+        lo = buf;
+        hi = buf + N;
+        lap = buf + 2 * N;
+        b = buf + 3 * N;
+        a = out.data;
+        for (i = 0; i < N; i++) {
+            lo[i] = a[i] - 0.5f * step;
+            hi[i] = a[i] + 0.5f * step;
+        }
+        /* the membrane first (fast over wide terraces), then the biharmonic removes its kinks */
+        for (it = 0; it < 2 * TN__DEQUANT_ITERS; it++) {
+            tn__dequant_job job;
+            float *t;
+            job.lo = lo;
+            job.hi = hi;
+            job.lap = lap;
+            job.W = W;
+            job.H = H;
+            job.membrane = it < TN__DEQUANT_ITERS;
+            if (!job.membrane) {
+                job.h = a;
+                job.out = lap;
+                job.lap_only = 1;
+                tn_parallel_for((size_t)H, tn__row_grain(W), tn__dequant_rows, &job);
+            }
+            job.h = a;
+            job.out = b;
+            job.lap_only = 0;
+            tn_parallel_for((size_t)H, tn__row_grain(W), tn__dequant_rows, &job);
+            t = a;
+            a = b;
+            b = t;
+        }
+        if (a != out.data) memcpy(out.data, a, N * sizeof(float));
+        TN_FREE(buf);
+    }
+    tn__image_give(dst, dem, &out);
+    return TN_OK;
 }
 
 TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float lo, float hi)
@@ -21353,7 +21501,7 @@ static tn_status tn__sg_validate(const tn_singan_opts *o)
         (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
         (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
         (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)) || (st = tn__opt_float(w, "spec_weight", o->spec_weight, "[]", 0, 1e6)) ||
-        (st = tn__opt_float(w, "height_weight", o->height_weight, "[]", 0, 1e6)))
+        (st = tn__opt_float(w, "height_weight", o->height_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "dequantize", o->dequantize, -1, 1)))
         return st;
     return TN_OK;
 }
@@ -22551,13 +22699,38 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
+/* The example the networks see: *d without its height steps when `mode` asks for it (the
+   option dequantize), made in *own. */
+static tn_status tn__sg_smooth_steps(tn_image *own, const tn_image **d, int mode, float *step_out)
+{
+    const tn_image *e = *d;
+    float step = mode < 0 ? 0.0f : tn_image_height_step(e);
+    tn_status st;
+    *step_out = 0;
+    if (step > 0 && mode == 0) { /* coarse: against the mean |Laplacian| at 1 px */
+        double sum = 0;
+        int x, y, W = e->width, H = e->height;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                const float *q = e->data + (size_t)y * W + x;
+                sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
+            }
+        if (W < 3 || H < 3 || step < 0.1 * sum / ((double)(W - 2) * (H - 2))) step = 0;
+    }
+    if (!(step > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, e, step))) return st;
+    *d = own;
+    *step_out = step;
+    return TN_OK;
+}
+
 TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
     tn_ctx *ctx = NULL;
     tn_image one = {0, 0, 0, NULL};
     const tn_image *d1 = dem;
-    float lo = 0, hi = 0, hist[50][3], rec_first = NAN;
+    float lo = 0, hi = 0, hist[50][3], rec_first = NAN, dq_step = 0;
     float *sch;
     double fin_sec = 0;
     long fin_it = 0;
@@ -22577,6 +22750,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         d1 = &one;
     }
     digest = tn_image_digest(d1);
+    if ((st = tn__sg_smooth_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
@@ -22759,6 +22933,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         }
         stats->loss_rec_first = rec_first;
         stats->checkpoints = tn_train_checkpoints(s.run);
+        stats->dequantized = dq_step;
     }
     if (!st) st = tn__train_stamp(s.g, "singan", TN__SG_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {

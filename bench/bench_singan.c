@@ -21,6 +21,12 @@
        example's, and the reference crop's; how far the heights' distribution lies from the
        example's (heights_distance: a massif or range the sample lacks), against the reference
        crop's and the corner crops',
+     - where the example is stored in coarse height steps (8-bit; coarse_step, SinGAN's rule for
+       training without them): REGION_reference_smooth, the reference crop's distances with both
+       without their steps (tn_image_dequantize) and the blurred reference's ratios there; and
+       after each generator's line, _stored (its samples rounded to the example's steps, against
+       the example and the reference as stored) and _smooth (its samples against both without
+       their steps: the line whose targets count for such a region, docs/singan.md),
      - with --layout 1: the same model's samples laid out (tn_singan_gen_opts.layout: GPNN on the
        example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
        GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
@@ -38,7 +44,7 @@
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
                        [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1] [--fine-noise K]
-                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N]
+                       [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N] [--dequantize N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but those run only when named, M = 10, 2 threads) */
 #include "terrainnet.h"
@@ -320,10 +326,28 @@ static double valley_depth(const tn_image *dem)
 }
 
 /* Measures 3 samples against the example and the reference distances; prints one line. */
-typedef struct measured { dists d; float lo, hi; double best_ssim, seed_diff, valleys, heights; } measured;
+typedef struct measured { dists d, stored, smooth; float lo, hi; double best_ssim, seed_diff, valleys, heights; } measured;
 
 static double g_valleys_ex;  /* valley_depth of the current region's example */
 static double g_heights_ref; /* heights_distance of the reference crop */
+static float g_step;         /* the example's height step where it is coarse (coarse_step), else 0 */
+static tn_image g_ex_smooth; /* then the example without its steps (tn_image_dequantize) */
+static dists g_ref_smooth;   /* and the reference crop's distances, both without their steps */
+
+/* The example's height step where it is coarse, by SinGAN's rule (tn_singan_opts.dequantize):
+   >= 0.1 x the mean |Laplacian| at 1 px. Else 0. */
+static float coarse_step(const tn_image *ex)
+{
+    float step = tn_image_height_step(ex);
+    double sum = 0;
+    int x, y, W = ex->width;
+    for (y = 1; y < ex->height - 1; y++)
+        for (x = 1; x < W - 1; x++) {
+            const float *q = ex->data + (size_t)y * W + x;
+            sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
+        }
+    return step >= 0.1 * sum / ((double)(W - 2) * (ex->height - 2)) ? step : 0.0f;
+}
 
 static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
@@ -337,6 +361,28 @@ static void report(const char *name, const char *what, const measured *m, const 
            ok_h ? "within" : "OUTSIDE", m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
            m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref,
            rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
+    if (g_step > 0) {
+        const dists *t = &m->stored;
+        rs = t->slope / ref->slope, rc = t->curv / ref->curv, rp = t->spec / ref->spec;
+        printf("%s_%s_stored: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | the samples "
+               "stored in the example's height steps of %g, against the example and the reference crop as stored\n",
+               name, what, t->slope, rs, t->curv, rc, t->spec, rp, t->curv2, t->curv2 / ref->curv2, (double)g_step);
+        t = &m->smooth;
+        ref = &g_ref_smooth;
+        rs = t->slope / ref->slope, rc = t->curv / ref->curv, rp = t->spec / ref->spec;
+        printf("%s_%s_smooth: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | the samples "
+               "against the example and the reference crop without their height steps%s\n",
+               name, what, t->slope, rs, t->curv, rc, t->spec, rp, t->curv2, t->curv2 / ref->curv2,
+               rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
+    }
+}
+
+/* img rounded to the example's height steps, on the grid through its lowest height: stored as
+   the example is, to be compared with it at 1 px. */
+static void store_in_steps(tn_image *img, float lo)
+{
+    size_t k;
+    for (k = 0; k < (size_t)img->width * img->height; k++) img->data[k] = lo + g_step * floorf((img->data[k] - lo) / g_step + 0.5f);
 }
 
 static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy, measured *m)
@@ -357,6 +403,25 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         m->d.curv2 += d.curv2 / 3;
         m->valleys += valley_depth(&s[i]) / 3;
         m->heights += heights_distance(ex, &s[i]) / 3;
+        if (g_step > 0) {
+            tn_image c = {0, 0, 0, NULL};
+            float elo, ehi;
+            tn_image_range(&elo, &ehi, ex);
+            if (!tn_image_copy(&c, &s[i])) {
+                store_in_steps(&c, elo);
+                d = dist3(ex, &c, dx, dy);
+                m->stored.slope += d.slope / 3;
+                m->stored.curv += d.curv / 3;
+                m->stored.spec += d.spec / 3;
+                m->stored.curv2 += d.curv2 / 3;
+            }
+            tn_image_free(&c);
+            d = dist3(&g_ex_smooth, &s[i], dx, dy);
+            m->smooth.slope += d.slope / 3;
+            m->smooth.curv += d.curv / 3;
+            m->smooth.spec += d.spec / 3;
+            m->smooth.curv2 += d.curv2 / 3;
+        }
         tn_image_range(&lo, &hi, &s[i]);
         if (lo < m->lo) m->lo = lo;
         if (hi > m->hi) m->hi = hi;
@@ -457,6 +522,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     }
     tn_set_threads(threads);
     tn_image_range(&elo, &ehi, &ex);
+    g_step = coarse_step(&ex);
     locate(&full, &ex, &exx, &exy);
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);
@@ -472,6 +538,20 @@ static void bench_region(const region *rg, double minutes, int threads)
     printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f) | heights_distance %.1f %%\n", n,
            corners.slope, corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec, corner_heights);
     reference_blurred(n, &ex, &other, &ref, dx, dy);
+    if (g_step > 0) { /* judged without the steps too: the blurred reference stays near it there */
+        tn_image os = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+        dists d;
+        tn_image_dequantize(&g_ex_smooth, &ex, g_step);
+        tn_image_dequantize(&os, &other, g_step);
+        g_ref_smooth = dist3(&g_ex_smooth, &os, dx, dy);
+        tn_image_blur(&b, &os, CALIBRATION_SIGMA);
+        d = dist3(&g_ex_smooth, &b, dx, dy);
+        printf("%s_reference_smooth: slope %.3f curvature %.3f spectrum %.3f | curvature_2px %.3f | both without their height steps of %g; "
+               "the reference blurred by %.1f px: %.2fx %.2fx %.2fx\n", n, g_ref_smooth.slope, g_ref_smooth.curv, g_ref_smooth.spec, g_ref_smooth.curv2,
+               (double)g_step, (double)CALIBRATION_SIGMA, d.slope / g_ref_smooth.slope, d.curv / g_ref_smooth.curv, d.spec / g_ref_smooth.spec);
+        tn_image_free(&os);
+        tn_image_free(&b);
+    }
     fflush(stdout);
     if (g_singan) {
         o = g_opts;
@@ -495,6 +575,7 @@ static void bench_region(const region *rg, double minutes, int threads)
             for (i = 0; i < st.scales; i++) printf(" %ld", st.scale_iters[i]);
             printf(", %.3f s / iteration (finest %.3f), finest scale's last losses: D %.3f, G %.3f, reconstruction %.5f\n", st.seconds_per_iter,
                    st.seconds_per_iter_finest, (double)st.loss_d, (double)st.loss_g, (double)st.loss_rec);
+            if (st.dequantized > 0) printf("%s_singan_dequantized: trained without the example's height steps of %g\n", n, (double)st.dequantized);
         }
         if (g_singan > 0) {
             memset(&g, 0, sizeof g);
@@ -573,6 +654,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     tn_image_free(&ex);
     tn_image_free(&full);
     tn_image_free(&other);
+    tn_image_free(&g_ex_smooth);
 }
 
 static double spec(const tn_image *ref, const tn_image *img, float dx, float dy) { return dist3(ref, img, dx, dy).spec; }
@@ -675,6 +757,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--spec-weight") && v) g_opts.spec_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--height-weight") && v) g_opts.height_weight = (float)atof(argv[++i]);
         else if (!strcmp(a, "--coarsest") && v) g_opts.coarsest = atoi(argv[++i]);
+        else if (!strcmp(a, "--dequantize") && v) g_opts.dequantize = atoi(argv[++i]);
         else if (!strcmp(a, "--channels") && v) g_opts.channels = g_opts.max_channels = atoi(argv[++i]);
         else if (!strcmp(a, "--model") && v) g_model_dir = argv[++i];
         else if (!strcmp(a, "--layout") && v) g_layout = atoi(argv[++i]);

@@ -60,6 +60,15 @@ typedef struct tn_hillshade_opts {
 } tn_hillshade_opts;
 /* Lambertian hillshade in [0, 1], one channel. opts may be NULL for defaults. */
 TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn_hillshade_opts *opts);
+/* The step a DEM's heights are stored in (channel 0): the smallest height difference between
+   neighbours when at least 99 % of all such differences are whole multiples of it, else 0 (heights
+   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. */
+TN_API float     tn_image_height_step(const tn_image *dem);
+/* Removes the terraces of heights stored in coarse steps (channel 0 -> one channel): dst is the
+   smoothest surface (least squared Laplacian) within step / 2 of dem everywhere, so rounding it
+   to the same steps gives dem back. step <= 0 copies channel 0. Threaded; 200 passes over the
+   raster. */
+TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float step);
 /* Hypsometric terrain colours (water-blue, green lowlands, brown, rock grey, snow white) for
    heights mapped linearly from [lo, hi] (lo == hi: the DEM's own range). RGB in [0, 1]. */
 TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float lo, float hi);
@@ -1071,6 +1080,139 @@ static void tn__colour_at(float t, float *rgb)
     rgb[0] = stops[i - 1][1] + f * (stops[i][1] - stops[i - 1][1]);
     rgb[1] = stops[i - 1][2] + f * (stops[i][2] - stops[i - 1][2]);
     rgb[2] = stops[i - 1][3] + f * (stops[i][3] - stops[i - 1][3]);
+}
+
+TN_API float tn_image_height_step(const tn_image *dem)
+{
+    size_t W, H, x, y, n = 0, on = 0, k;
+    float *d, s, top = 0;
+    double lim;
+    if (!dem || !dem->data || dem->width < 2 || dem->height < 2 || dem->channels < 1) return 0;
+    W = (size_t)dem->width;
+    H = (size_t)dem->height;
+    if (!(d = (float *)tn__alloc(2 * W * H * sizeof(float)))) return 0;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float h = dem->data[(y * W + x) * dem->channels], e;
+            if (fabsf(h) > top) top = fabsf(h);
+            if (x + 1 < W && (e = fabsf(dem->data[(y * W + x + 1) * dem->channels] - h)) > 0) d[n++] = e;
+            if (y + 1 < H && (e = fabsf(dem->data[((y + 1) * W + x) * dem->channels] - h)) > 0) d[n++] = e;
+        }
+    if (!n) {
+        TN_FREE(d);
+        return 0;
+    }
+    qsort(d, n, sizeof(float), tn__cmp_float);
+    s = d[0];
+    for (lim = 8; s > 0 && isfinite(s); lim *= 8) { /* float heights round each difference: fit s to the small multiples, then larger */
+        double sd = 0, sm = 0;
+        for (k = 0; k < n; k++) {
+            double m = floor(d[k] / s + 0.5);
+            if (m >= 1 && m <= lim) sd += d[k], sm += m;
+        }
+        s = (float)(sd / sm);
+        if (lim > d[n - 1] / s) break;
+    }
+    for (k = 0; k < n; k++) { /* whole multiples, to a fiftieth of a step and float32's rounding of the heights */
+        double m = floor(d[k] / s + 0.5);
+        if (fabs(d[k] - m * s) <= 0.02 * s + 4.0 * FLT_EPSILON * top) on++;
+    }
+    TN_FREE(d);
+    return s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n ? s : 0;
+}
+
+/* Passes of each smoothing in tn_image_dequantize: both had converged at 100 on the 8-bit 256 px
+   DEMs (docs/singan.md). */
+#define TN__DEQUANT_ITERS 100
+
+/* One pass of tn_image_dequantize over rows [y0, y1): the Laplacian of `h` (lap_only), or one
+   projected step of membrane or biharmonic smoothing from `h` into `out`, clamped to [lo, hi].
+   Borders replicate the edge. Each pixel reads only the pass's input: any thread count gives the
+   same bytes. */
+typedef struct tn__dequant_job {
+    const float *h, *lap, *lo, *hi;
+    float *out;
+    int W, H, membrane, lap_only;
+} tn__dequant_job;
+
+static void tn__dequant_rows(void *ctx, size_t y0, size_t y1)
+{
+    const tn__dequant_job *j = (const tn__dequant_job *)ctx;
+    const float *h = j->h, *lap = j->lap;
+    size_t y, W = (size_t)j->W;
+    int x;
+    for (y = y0; y < y1; y++)
+        for (x = 0; x < j->W; x++) {
+            size_t i = y * W + (size_t)x;
+            size_t l = x > 0 ? i - 1 : i, r = x + 1 < j->W ? i + 1 : i, u = y > 0 ? i - W : i, d = y + 1 < (size_t)j->H ? i + W : i;
+            float v;
+            if (j->lap_only) {
+                j->out[i] = h[l] + h[r] + h[u] + h[d] - 4.0f * h[i];
+                continue;
+            }
+            if (j->membrane) v = 0.25f * (h[l] + h[r] + h[u] + h[d]);
+            else v = h[i] - (lap[l] + lap[r] + lap[u] + lap[d] - 4.0f * lap[i]) * (0.9f / 64.0f); /* 0.9 x the stable step */
+            j->out[i] = tn__clampf(v, j->lo[i], j->hi[i]);
+        }
+}
+
+TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float step)
+{
+    tn_image out = {0, 0, 0, NULL};
+    float *buf, *lo, *hi, *lap, *a, *b;
+    size_t N, i;
+    int W, H, it;
+    tn_status st;
+    if ((st = tn__image_check(dem, "dequantize"))) return st;
+    if (!isfinite(step)) return tn__fail(TN_ERR_INVALID_ARG, "dequantize: step must be finite");
+    W = dem->width;
+    H = dem->height;
+    N = (size_t)W * H;
+    if ((st = tn__image_alloc(&out, W, H, 1))) return st;
+    for (i = 0; i < N; i++) out.data[i] = dem->data[i * dem->channels];
+    if (step > 0) {
+        if (!(buf = (float *)tn__alloc(4 * N * sizeof(float)))) {
+            tn_image_free(&out);
+            return tn__fail(TN_ERR_OUT_OF_MEMORY, "dequantize: out of memory");
+        }
+        lo = buf;
+        hi = buf + N;
+        lap = buf + 2 * N;
+        b = buf + 3 * N;
+        a = out.data;
+        for (i = 0; i < N; i++) {
+            lo[i] = a[i] - 0.5f * step;
+            hi[i] = a[i] + 0.5f * step;
+        }
+        /* the membrane first (fast over wide terraces), then the biharmonic removes its kinks */
+        for (it = 0; it < 2 * TN__DEQUANT_ITERS; it++) {
+            tn__dequant_job job;
+            float *t;
+            job.lo = lo;
+            job.hi = hi;
+            job.lap = lap;
+            job.W = W;
+            job.H = H;
+            job.membrane = it < TN__DEQUANT_ITERS;
+            if (!job.membrane) {
+                job.h = a;
+                job.out = lap;
+                job.lap_only = 1;
+                tn_parallel_for((size_t)H, tn__row_grain(W), tn__dequant_rows, &job);
+            }
+            job.h = a;
+            job.out = b;
+            job.lap_only = 0;
+            tn_parallel_for((size_t)H, tn__row_grain(W), tn__dequant_rows, &job);
+            t = a;
+            a = b;
+            b = t;
+        }
+        if (a != out.data) memcpy(out.data, a, N * sizeof(float));
+        TN_FREE(buf);
+    }
+    tn__image_give(dst, dem, &out);
+    return TN_OK;
 }
 
 TN_API tn_status tn_image_colour_ramp(tn_image *dst, const tn_image *dem, float lo, float hi)

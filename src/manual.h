@@ -79,7 +79,7 @@ ARGUMENTS
 TABLE OF CONTENTS (grep for the tag; each appears once in the declarations, once in the code)
     @@core      status codes, errors, allocation, RNG, progress, timing
     @@thread    thread pool and parallel-for
-    @@image     tn_image, crop/pad/resize, blur, gradients, normals, hillshade, colour ramp
+    @@image     tn_image, crop/pad/resize, blur, gradients, normals, hillshade, colours, height steps
     @@io        file formats: PNG (own inflate/deflate), GeoTIFF, PGM/PPM, PFM, SRTM .hgt, .asc, .r16
     @@metrics   SSIM, PSNR, RMSE, MAE
     @@gemm      SGEMM: packed, cache-blocked, AVX-512 / AVX2 / portable kernels, threaded

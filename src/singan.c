@@ -70,6 +70,10 @@ typedef struct tn_singan_opts {
                               units of their variance there (without it samples
                               lack the example's rarer massif or range; docs/singan.md); 0 = 4,
                               < 0 = none */
+    int dequantize;        /* train on the example without its height steps (tn_image_dequantize):
+                              0 = when they are coarse (a step >= 0.1 x the mean |Laplacian| at
+                              1 px: 8-bit heightmaps, whose steps the finest scales would learn
+                              as a grain), 1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -100,6 +104,8 @@ typedef struct tn_singan_stats {
                                        (loss_rec: unweighted MSE in network units) */
     float loss_rec_first;     /* loss_rec of the first iteration of that scale in this run (NaN if none) */
     int checkpoints;          /* checkpoints written by this run */
+    float dequantized;        /* the height step the example was trained without (option
+                                 dequantize); 0 = none */
 } tn_singan_stats;
 
 /* Options of sampling, refinement and upscaling (zero = defaults, resolved by tn_singan_gen_defaults). */
@@ -283,7 +289,7 @@ static tn_status tn__sg_validate(const tn_singan_opts *o)
         (st = tn__opt_float(w, "noise_amp", o->noise_amp, "[]", 0, 100)) || (st = tn__opt_int(w, "iters", o->iters, 0, INT_MAX)) ||
         (st = tn__opt_float(w, "adv_weight", o->adv_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "d_steps", o->d_steps, 1, 100)) ||
         (st = tn__opt_float(w, "curv_weight", o->curv_weight, "[]", 0, 1e6)) || (st = tn__opt_float(w, "spec_weight", o->spec_weight, "[]", 0, 1e6)) ||
-        (st = tn__opt_float(w, "height_weight", o->height_weight, "[]", 0, 1e6)))
+        (st = tn__opt_float(w, "height_weight", o->height_weight, "[]", 0, 1e6)) || (st = tn__opt_int(w, "dequantize", o->dequantize, -1, 1)))
         return st;
     return TN_OK;
 }
@@ -1481,13 +1487,38 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
+/* The example the networks see: *d without its height steps when `mode` asks for it (the
+   option dequantize), made in *own. */
+static tn_status tn__sg_smooth_steps(tn_image *own, const tn_image **d, int mode, float *step_out)
+{
+    const tn_image *e = *d;
+    float step = mode < 0 ? 0.0f : tn_image_height_step(e);
+    tn_status st;
+    *step_out = 0;
+    if (step > 0 && mode == 0) { /* coarse: against the mean |Laplacian| at 1 px */
+        double sum = 0;
+        int x, y, W = e->width, H = e->height;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                const float *q = e->data + (size_t)y * W + x;
+                sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
+            }
+        if (W < 3 || H < 3 || step < 0.1 * sum / ((double)(W - 2) * (H - 2))) step = 0;
+    }
+    if (!(step > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, e, step))) return st;
+    *d = own;
+    *step_out = step;
+    return TN_OK;
+}
+
 TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
     tn_ctx *ctx = NULL;
     tn_image one = {0, 0, 0, NULL};
     const tn_image *d1 = dem;
-    float lo = 0, hi = 0, hist[50][3], rec_first = NAN;
+    float lo = 0, hi = 0, hist[50][3], rec_first = NAN, dq_step = 0;
     float *sch;
     double fin_sec = 0;
     long fin_it = 0;
@@ -1507,6 +1538,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         d1 = &one;
     }
     digest = tn_image_digest(d1);
+    if ((st = tn__sg_smooth_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
@@ -1689,6 +1721,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         }
         stats->loss_rec_first = rec_first;
         stats->checkpoints = tn_train_checkpoints(s.run);
+        stats->dequantized = dq_step;
     }
     if (!st) st = tn__train_stamp(s.g, "singan", TN__SG_FORMAT, s.run, digest, d1->width, d1->height, 1);
     if (!st) {

@@ -287,6 +287,58 @@ static int ti_plane(tn_image *img, int w, int h, float ax, float ay)
     return 1;
 }
 
+/* A smooth hill stored in 8 bits, about a step per pixel: the step is found, and dequantizing stays within half a step
+   of the stored heights while coming back nearer the hill, without the steps' curvature. */
+TN_TEST(height_step_and_dequantize_undo_8_bit_terraces)
+{
+    const int W = 64, H = 48;
+    const float step = 100.0f / 255.0f;
+    tn_image hill = {0, 0, 0, NULL}, q = {0, 0, 0, NULL}, d = {0, 0, 0, NULL}, keep;
+    double eq = 0, ed = 0, lq = 0, ld = 0;
+    int x, y;
+    TN_CHECK(tn_image_create(&hill, W, H, 1) == TN_OK);
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) TN_PIXEL(&hill, x, y, 0) = 50.0f + 20.0f * sinf(0.021f * x) * cosf(0.027f * y) + 0.05f * x;
+    TN_CHECK(tn_image_copy(&q, &hill) == TN_OK);
+    for (x = 0; x < W * H; x++) q.data[x] = step * floorf(q.data[x] / step + 0.5f);
+    TN_CHECK_NEAR(tn_image_height_step(&q), step, 1e-4f);
+    TN_CHECK(tn_image_height_step(&hill) == 0.0f); /* heights stored as floats */
+    { /* a 16-bit DEM in metres: fine steps, many of them per pixel, on heights where float32 rounds */
+        tn_image fine = {0, 0, 0, NULL};
+        const float f = 4000.0f / 65535.0f;
+        TN_CHECK(tn_image_copy(&fine, &hill) == TN_OK);
+        for (x = 0; x < W * H; x++) fine.data[x] = 600.0f + f * floorf((fine.data[x] - 30.0f) * 600.0f / f / 60.0f + 0.5f);
+        TN_CHECK_NEAR(tn_image_height_step(&fine), f, 1e-3f * f);
+        tn_image_free(&fine);
+    }
+    TN_CHECK(tn_image_dequantize(&d, &q, step) == TN_OK);
+    TN_CHECK(d.width == W && d.height == H && d.channels == 1);
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float e = TN_PIXEL(&d, x, y, 0) - TN_PIXEL(&q, x, y, 0);
+            TN_CHECK(fabsf(e) <= 0.5f * step * 1.0001f);
+            eq += pow(TN_PIXEL(&q, x, y, 0) - TN_PIXEL(&hill, x, y, 0), 2);
+            ed += pow(TN_PIXEL(&d, x, y, 0) - TN_PIXEL(&hill, x, y, 0), 2);
+            if (x > 0 && y > 0 && x < W - 1 && y < H - 1) {
+                lq += fabsf(TN_PIXEL(&q, x - 1, y, 0) + TN_PIXEL(&q, x + 1, y, 0) + TN_PIXEL(&q, x, y - 1, 0) + TN_PIXEL(&q, x, y + 1, 0) - 4 * TN_PIXEL(&q, x, y, 0));
+                ld += fabsf(TN_PIXEL(&d, x - 1, y, 0) + TN_PIXEL(&d, x + 1, y, 0) + TN_PIXEL(&d, x, y - 1, 0) + TN_PIXEL(&d, x, y + 1, 0) - 4 * TN_PIXEL(&d, x, y, 0));
+            }
+        }
+    printf("# dequantize: RMS error %.4f -> %.4f m, mean |Laplacian| %.4f -> %.4f\n", sqrt(eq / (W * H)), sqrt(ed / (W * H)), lq / ((W - 2) * (H - 2)),
+           ld / ((W - 2) * (H - 2)));
+    TN_CHECK(ed < 0.5 * eq);
+    TN_CHECK(ld < 0.25 * lq);
+    keep = d;
+    TN_CHECK(tn_image_dequantize(&d, &q, NAN) == TN_ERR_INVALID_ARG && d.data == keep.data);
+    TN_CHECK(tn_image_dequantize(&q, &q, 0) == TN_OK && fabsf(tn_image_height_step(&q) - step) < 1e-4f); /* step 0 copies; in place */
+    tn_set_threads(1);
+    TN_CHECK(tn_image_dequantize(&q, &q, step) == TN_OK && ti_same_bits(&q, &d)); /* in place, and on one thread */
+    tn_set_threads(0);
+    tn_image_free(&hill);
+    tn_image_free(&q);
+    tn_image_free(&d);
+}
+
 TN_TEST(gradient_slope_normals_of_a_plane)
 {
     tn_image d = {0, 0, 0, NULL}, gx = {0, 0, 0, NULL}, gy = {0, 0, 0, NULL}, s = {0, 0, 0, NULL}, n = {0, 0, 0, NULL};
@@ -392,6 +444,7 @@ int main(void)
     TN_RUN(blur_matches_direct_sum_everywhere);
     TN_RUN(blur_in_place_and_thread_count_bit_identical);
     TN_RUN(blur_edge_cases);
+    TN_RUN(height_step_and_dequantize_undo_8_bit_terraces);
     TN_RUN(gradient_slope_normals_of_a_plane);
     TN_RUN(hillshade_lighting_and_auto_scale);
     TN_RUN(colour_ramp_runs_from_water_to_snow);

@@ -419,6 +419,40 @@ TN_TEST(fine_noise_scales_the_finest_generator)
     tn_image_free(&dem);
 }
 
+/* An example stored in coarse steps (32 over its range: on 24 px of this relief, as coarse as 8
+   bits on the 8-bit DEMs) is trained without them (option dequantize, on by default where they are
+   coarse); one stored as floats is trained as it is. */
+TN_TEST(an_example_in_coarse_steps_is_trained_without_them)
+{
+    tn_image dem = tn_test_dem(24, 1), q = {0, 0, 0, NULL};
+    tn_singan_opts o;
+    tn_singan a, b;
+    tn_singan_stats st;
+    float lo, hi, step;
+    int k;
+    tn_image_range(&lo, &hi, &dem);
+    step = (hi - lo) / 32.0f;
+    TN_CHECK(tn_image_copy(&q, &dem) == TN_OK);
+    for (k = 0; k < 24 * 24; k++) q.data[k] = lo + step * floorf((q.data[k] - lo) / step + 0.5f);
+    tn_test_tiny_singan_opts(&o, 2);
+    TN_CHECK(tn_singan_train(&a, &q, &o, &st) == TN_OK);
+    TN_CHECK_NEAR(st.dequantized, step, 1e-3f * step);
+    o.dequantize = -1;
+    TN_CHECK(tn_singan_train(&b, &q, &o, &st) == TN_OK);
+    TN_CHECK(st.dequantized == 0.0f);
+    TN_CHECK(!tn_test_same_params(a.weights, b.weights, 0));
+    tn_singan_free(&b);
+    o.dequantize = 1;
+    TN_CHECK(tn_singan_train(&b, &dem, &o, &st) == TN_OK);
+    TN_CHECK(st.dequantized == 0.0f); /* floats: no steps */
+    tn_singan_free(&b);
+    o.dequantize = 2;
+    TN_CHECK(tn_singan_train(&b, &dem, &o, &st) == TN_ERR_INVALID_ARG);
+    tn_singan_free(&a);
+    tn_image_free(&q);
+    tn_image_free(&dem);
+}
+
 TN_TEST(resume_is_bit_identical)
 {
     const char *ck = tn_test_tmp_path("singan", "run.ckpt");
@@ -863,6 +897,7 @@ int main(void)
     TN_RUN(gate_follows_a_rougher_sample);
     TN_RUN(refine_and_upscale);
     TN_RUN(fine_noise_scales_the_finest_generator);
+    TN_RUN(an_example_in_coarse_steps_is_trained_without_them);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(bad_inputs);
     TN_RUN(curvature_loss);

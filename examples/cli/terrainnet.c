@@ -1561,6 +1561,9 @@ static const cli_opt singan_train_opts[] = {
     {"factor", 0, ARG_FLOAT, 0, &singan_train_arg.o.factor, NULL, 0, 0, "R", "size ratio between scales (0.5..0.9)", "0.75"},
     {"channels", 0, ARG_INT, 0, &singan_train_arg.o.channels, NULL, 0, 1e9, "N", "network width at the coarsest scale", "32"},
     {"max-channels", 0, ARG_INT, 0, &singan_train_arg.o.max_channels, NULL, 0, 1e9, "N", "the width doubles every 4 scales up to N", "32"},
+    {"dequantize", 0, ARG_INT, 0, &singan_train_arg.o.dequantize, NULL, -1, 1, "N",
+     "train without the example's height steps: 1 whenever it is stored in steps, -1 never",
+     "0 = when the steps are coarse (8-bit heightmaps)"},
 };
 
 static int run_singan_train(void)
@@ -1594,6 +1597,8 @@ static int run_singan_train(void)
                "checkpoints: %d (%s)\nmodel: %s\n",
                s.seconds / 60.0, s.seconds_per_iter, s.seconds_per_iter_finest, (double)s.loss_d, (double)s.loss_g, (double)s.loss_rec,
                s.checkpoints, a->ckpt, a->out);
+        if (s.dequantized > 0) printf("dequantized: trained without the example's height steps of %g\n", (double)s.dequantized);
+        else printf("dequantized: no\n");
         checkpoint_warning("singan-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     }
     tn_singan_free(&model);
