@@ -271,8 +271,11 @@ typedef struct tn_hillshade_opts {
 TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn_hillshade_opts *opts);
 /* The step a DEM's heights are stored in (channel 0): the smallest height difference between
    neighbours when at least 99 % of all such differences are whole multiples of it, else 0 (heights
-   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. */
-TN_API float     tn_image_height_step(const tn_image *dem);
+   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. With coarse_only,
+   only a step of at least 0.1 x the DEM's mean |Laplacian| at 1 px, else 0: steps the terrain's
+   own curvature does not dwarf (8-bit heightmaps: 1.1-1.7 steps), which the learned methods
+   train without (their option dequantize). */
+TN_API float     tn_image_height_step(const tn_image *dem, int coarse_only);
 /* Removes the terraces of heights stored in coarse steps (channel 0 -> one channel): dst is the
    smoothest surface (least squared Laplacian) within step / 2 of dem everywhere, so rounding it
    to the same steps gives dem back. step <= 0 copies channel 0. Threaded; 200 passes over the
@@ -1868,6 +1871,9 @@ typedef struct tn_gnn_opts {
                               0 = on, -1 = off
                               (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
+    int dequantize;        /* train on the example (and the holdouts) without its height steps
+                              (tn_image_dequantize): 0 = when they are coarse, as SinGAN's option
+                              (8-bit heightmaps), 1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_gnn_opts;
@@ -1906,6 +1912,8 @@ typedef struct tn_gnn_stats {
     double holdout_last_ssim; /* the last check's */
     float gain_scale;         /* the scale of the residual gain's test (tn_gnn_gain), calibrated on
                                  the holdouts' sketches; 1 without holdouts */
+    float dequantized;        /* the height step the example was trained without (option
+                                 dequantize); 0 = none */
 } tn_gnn_stats;
 
 /* Sketch height units at generation. */
@@ -4737,7 +4745,7 @@ static void tn__colour_at(float t, float *rgb)
     rgb[2] = stops[i - 1][3] + f * (stops[i][3] - stops[i - 1][3]);
 }
 
-TN_API float tn_image_height_step(const tn_image *dem)
+TN_API float tn_image_height_step(const tn_image *dem, int coarse_only)
 {
     size_t W, H, x, y, n = 0, on = 0, k;
     float *d, s, top = 0;
@@ -4773,7 +4781,19 @@ TN_API float tn_image_height_step(const tn_image *dem)
         if (fabs(d[k] - m * s) <= 0.02 * s + 4.0 * FLT_EPSILON * top) on++;
     }
     TN_FREE(d);
-    return s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n ? s : 0;
+    if (!(s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n)) return 0;
+    if (coarse_only) {
+        double sum = 0;
+        const float *e = dem->data;
+        size_t c = (size_t)dem->channels, r = W * c;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                const float *q = e + (y * W + x) * c;
+                sum += fabs((double)q[c] + q[-(ptrdiff_t)c] + q[r] + q[-(ptrdiff_t)r] - 4.0 * q[0]);
+            }
+        if (W < 3 || H < 3 || s < 0.1 * sum / ((double)(W - 2) * (H - 2))) return 0;
+    }
+    return s;
 }
 
 /* Passes of each smoothing in tn_image_dequantize: both had converged at 100 on the 8-bit 256 px
@@ -4867,6 +4887,22 @@ TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float s
         TN_FREE(buf);
     }
     tn__image_give(dst, dem, &out);
+    return TN_OK;
+}
+
+/* The example a learned method trains on (their option `dequantize`): *d without its height
+   steps, made in *own, when mode is 1 and it is stored in steps, or mode is 0 and they are coarse
+   (tn_image_height_step: the finest scales would learn them as a grain). *step = the step taken
+   away, 0 = none. */
+TN__SHARED tn_status tn__train_without_steps(tn_image *own, const tn_image **d, int mode, float *step)
+{
+    float s = mode < 0 ? 0.0f : tn_image_height_step(*d, mode == 0);
+    tn_status st;
+    *step = 0;
+    if (!(s > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, *d, s))) return st;
+    *d = own;
+    *step = s;
     return TN_OK;
 }
 
@@ -22699,31 +22735,6 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
-/* The example the networks see: *d without its height steps when `mode` asks for it (the
-   option dequantize), made in *own. */
-static tn_status tn__sg_smooth_steps(tn_image *own, const tn_image **d, int mode, float *step_out)
-{
-    const tn_image *e = *d;
-    float step = mode < 0 ? 0.0f : tn_image_height_step(e);
-    tn_status st;
-    *step_out = 0;
-    if (step > 0 && mode == 0) { /* coarse: against the mean |Laplacian| at 1 px */
-        double sum = 0;
-        int x, y, W = e->width, H = e->height;
-        for (y = 1; y + 1 < H; y++)
-            for (x = 1; x + 1 < W; x++) {
-                const float *q = e->data + (size_t)y * W + x;
-                sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
-            }
-        if (W < 3 || H < 3 || step < 0.1 * sum / ((double)(W - 2) * (H - 2))) step = 0;
-    }
-    if (!(step > 0)) return TN_OK;
-    if ((st = tn_image_dequantize(own, e, step))) return st;
-    *d = own;
-    *step_out = step;
-    return TN_OK;
-}
-
 TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
@@ -22750,7 +22761,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         d1 = &one;
     }
     digest = tn_image_digest(d1);
-    if ((st = tn__sg_smooth_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
+    if ((st = tn__train_without_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
@@ -23955,7 +23966,7 @@ static tn_status tn__gnn_validate(const tn_gnn_opts *o)
         (st = tn__opt_float(w, "sketch_weight", o->sketch_weight, "[]", 0, 1e6)) ||
         (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
         (st = tn__opt_float(w, "further_weight", o->further_weight, "[]", 0, 1e6)) ||
-        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)))
+        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)) || (st = tn__opt_int(w, "dequantize", o->dequantize, -1, 1)))
         return st;
     if (o->holdout_count > 0 && !o->holdout)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn: option holdout_count = %d, allowed 0 while holdout is NULL", o->holdout_count);
@@ -25642,15 +25653,32 @@ static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
     return TN_OK;
 }
 
+/* The holdouts without the example's height steps (windows of the same DEM, stored alike), in
+   *own, which o->holdout then points to. Holdouts validation will refuse are left as they are. */
+static tn_status tn__gnn_holdouts_without_steps(tn_gnn_opts *o, float step, tn_image **own)
+{
+    int i;
+    tn_status st;
+    if (o->holdout_count <= 0 || !o->holdout) return TN_OK;
+    for (i = 0; i < o->holdout_count; i++)
+        if (!o->holdout[i].data || o->holdout[i].channels != 1) return TN_OK;
+    if (!(*own = (tn_image *)tn__alloc((size_t)o->holdout_count * sizeof **own))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    memset(*own, 0, (size_t)o->holdout_count * sizeof **own);
+    for (i = 0; i < o->holdout_count; i++)
+        if ((st = tn_image_dequantize(&(*own)[i], &o->holdout[i], step))) return st;
+    o->holdout = *own;
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
     tn_extraction ex;
     tn_contour_set parts;
     tn_ctx *ctx = NULL;
-    tn_image one = {0, 0, 0, NULL};
+    tn_image one = {0, 0, 0, NULL}, *hold = NULL;
     const tn_image *d1 = dem;
-    float lo = 0, hi = 0, hist[50][4];
+    float lo = 0, hi = 0, hist[50][4], dq_step = 0;
     double mean = 0, std = 0;
     int nh = 0, i;
     size_t n;
@@ -25676,6 +25704,8 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         d1 = &one;
     }
     digest = tn_image_digest(d1);
+    if ((st = tn__train_without_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
+    if (dq_step > 0 && (st = tn__gnn_holdouts_without_steps(&s.o, dq_step, &hold))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "gnn", "gnn-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
@@ -25819,6 +25849,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         stats->embed_phase_from = s.phase_from;
         stats->holdout_iteration = -1;
         stats->gain_scale = (float)tn__gnn_gain_scale(s.w);
+        stats->dequantized = dq_step;
         if (s.best) {
             const tn_tensor *info = tn_params_find(s.best, "holdout");
             stats->holdout_ssim = info->data[0];
@@ -25841,6 +25872,9 @@ done:
     tn__progress_within(NULL, 0.0);
     tn_ctx_free(ctx);
     tn_image_free(&one);
+    if (hold)
+        for (i = 0; i < s.o.holdout_count; i++) tn_image_free(&hold[i]);
+    TN_FREE(hold);
     tn_extraction_free(&ex);
     tn_contour_set_free(&parts);
     tn__gnn_train_free(&s);

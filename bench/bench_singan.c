@@ -21,8 +21,8 @@
        example's, and the reference crop's; how far the heights' distribution lies from the
        example's (heights_distance: a massif or range the sample lacks), against the reference
        crop's and the corner crops',
-     - where the example is stored in coarse height steps (8-bit; coarse_step, SinGAN's rule for
-       training without them): REGION_reference_smooth, the reference crop's distances with both
+     - where the example is stored in coarse height steps (8-bit; tn_image_height_step's coarse
+       steps, which SinGAN trains without): REGION_reference_smooth, the reference crop's distances with both
        without their steps (tn_image_dequantize) and the blurred reference's ratios there; and
        after each generator's line, _stored (its samples rounded to the example's steps, against
        the example and the reference as stored) and _smooth (its samples against both without
@@ -330,24 +330,10 @@ typedef struct measured { dists d, stored, smooth; float lo, hi; double best_ssi
 
 static double g_valleys_ex;  /* valley_depth of the current region's example */
 static double g_heights_ref; /* heights_distance of the reference crop */
-static float g_step;         /* the example's height step where it is coarse (coarse_step), else 0 */
+static float g_step;         /* the example's height step where it is coarse (tn_image_height_step), else 0 */
 static tn_image g_ex_smooth; /* then the example without its steps (tn_image_dequantize) */
 static dists g_ref_smooth;   /* and the reference crop's distances, both without their steps */
 
-/* The example's height step where it is coarse, by SinGAN's rule (tn_singan_opts.dequantize):
-   >= 0.1 x the mean |Laplacian| at 1 px. Else 0. */
-static float coarse_step(const tn_image *ex)
-{
-    float step = tn_image_height_step(ex);
-    double sum = 0;
-    int x, y, W = ex->width;
-    for (y = 1; y < ex->height - 1; y++)
-        for (x = 1; x < W - 1; x++) {
-            const float *q = ex->data + (size_t)y * W + x;
-            sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
-        }
-    return step >= 0.1 * sum / ((double)(W - 2) * (ex->height - 2)) ? step : 0.0f;
-}
 
 static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
@@ -522,7 +508,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     }
     tn_set_threads(threads);
     tn_image_range(&elo, &ehi, &ex);
-    g_step = coarse_step(&ex);
+    g_step = tn_image_height_step(&ex, 1);
     locate(&full, &ex, &exx, &exy);
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);

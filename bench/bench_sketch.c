@@ -17,7 +17,9 @@
    - slope, curvature, spectrum: tn_realism_compare distances of the output to the example (the
      128 crop, metres, its pixel spacing; nothing resized), each divided by the mean distance of
      three real 256 crops of the same DEM (the corners of <region>_full.png farthest from the
-     example) to the example: <= 1.5 is the issue's target;
+     example) to the example: <= 1.5 is the issue's target; where the example is stored in
+     coarse height steps (tn_image_height_step: 8-bit), _smooth: the same three against the
+     example and the real crops without their steps (tn_image_dequantize), as gnn-train learns it;
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
    - peaks: summits per 10^4 px, points of the terrain (rounded to the DEM's height step, as the
@@ -792,9 +794,10 @@ int main(int argc, char **argv)
     static char names[512];
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *from = "examples/data";
-    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_peaks = 0, pk, ex_relief[4] = {NAN, NAN, NAN, NAN};
+    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_s[3] = {0, 0, 0}, real_peaks = 0, pk, ex_relief[4] = {NAN, NAN, NAN, NAN};
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
-    tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL};
+    tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL}, ex_s = {0, 0, 0, NULL};
+    float coarse;
     tn_gnn model;
     valley_shape ex_valley, real_valley;
     hatch_power ex_hatch, real_hatch;
@@ -842,6 +845,12 @@ int main(int argc, char **argv)
     printf("region: %s\nexample: 128 x 128 at (%d, %d), %.6g .. %.6g m\nmodel: %s (%ld iterations)\nthreads: %d\nfinetune: %d\n", region, ex_x, ex_y,
            (double)model.lo, (double)model.hi, model_path, model.iterations, threads, finetune);
     printf("height_step: %.6g m (the DEM's smallest gap between heights; peaks counts a terrain on that grid)\n", g_step);
+    coarse = tn_image_height_step(&ex, 1);
+    if (coarse > 0) { /* judged without the steps too, as the model was trained (docs/gnn.md) */
+        tn_image_dequantize(&ex_s, &ex, coarse);
+        printf("coarse_step: %.6g m (the example is stored in steps coarse against its curvature: gnn-train learns it without them; "
+               "the _smooth lines compare with the example and the real crops without them)\n", (double)coarse);
+    }
     /* the three real 256 crops of the DEM's corners farthest from the example */
     {
         int cx[4] = {0, full.width - 256, 0, full.width - 256}, cy[4] = {0, 0, full.height - 256, full.height - 256}, used[4] = {0, 0, 0, 0};
@@ -880,6 +889,13 @@ int main(int argc, char **argv)
                 printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %% peaks %.1f per 10^4 px\n", k, cx[best], cy[best], dist[0],
                        dist[1], dist[2], 100 * basins(&c, model.lo, model.hi), pk);
                 real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
+                if (coarse > 0) {
+                    tn_image cs = {0, 0, 0, NULL};
+                    tn_image_dequantize(&cs, &c, coarse);
+                    distances(&ex_s, &cs, dist);
+                    real_s[0] += dist[0], real_s[1] += dist[1], real_s[2] += dist[2];
+                    tn_image_free(&cs);
+                }
                 tn_image_free(&c);
             }
         }
@@ -892,6 +908,10 @@ int main(int argc, char **argv)
             valley_print("real", &real_valley, NULL, real_valley.n);
         }
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
+        if (coarse > 0) {
+            for (k = 0; k < 3; k++) real_s[k] /= nreal;
+            printf("real_mean_smooth: slope %.4f curvature %.4f spectrum %.4f (all without their height steps)\n", real_s[0], real_s[1], real_s[2]);
+        }
         printf("real_hatch: %.2f m in periods of 3.2-6.4 px along the main lines' flanks (%.1f %% of the power; %d windows)\n",
                hatch_rms(&real_hatch), 100 * hatch_share(&real_hatch), real_hatch.windows);
     }
@@ -979,6 +999,11 @@ int main(int argc, char **argv)
             printf("%s_%s_slope: %.4f (%.2f x real)\n", all[d], way[w], dist[0], dist[0] / real[0]);
             printf("%s_%s_curvature: %.4f (%.2f x real)\n", all[d], way[w], dist[1], dist[1] / real[1]);
             printf("%s_%s_spectrum: %.4f (%.2f x real)\n", all[d], way[w], dist[2], dist[2] / real[2]);
+            if (coarse > 0) {
+                distances(&ex_s, &out[w], dist);
+                printf("%s_%s_smooth: slope %.4f (%.2f x real) curvature %.4f (%.2f x real) spectrum %.4f (%.2f x real)\n", all[d], way[w], dist[0],
+                       dist[0] / real_s[0], dist[1], dist[1] / real_s[1], dist[2], dist[2] / real_s[2]);
+            }
             printf("%s_%s_basins: %.1f %% of the map\n", all[d], way[w], 100 * basins(&out[w], model.lo, model.hi));
             pk = peaks(&out[w]);
             printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], pk, pk / real_peaks);
@@ -1039,5 +1064,6 @@ int main(int argc, char **argv)
     tn_gnn_free(&model);
     tn_image_free(&full);
     tn_image_free(&ex);
+    tn_image_free(&ex_s);
     return 0;
 }

@@ -115,6 +115,9 @@ typedef struct tn_gnn_opts {
                               0 = on, -1 = off
                               (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
+    int dequantize;        /* train on the example (and the holdouts) without its height steps
+                              (tn_image_dequantize): 0 = when they are coarse, as SinGAN's option
+                              (8-bit heightmaps), 1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_gnn_opts;
@@ -153,6 +156,8 @@ typedef struct tn_gnn_stats {
     double holdout_last_ssim; /* the last check's */
     float gain_scale;         /* the scale of the residual gain's test (tn_gnn_gain), calibrated on
                                  the holdouts' sketches; 1 without holdouts */
+    float dequantized;        /* the height step the example was trained without (option
+                                 dequantize); 0 = none */
 } tn_gnn_stats;
 
 /* Sketch height units at generation. */
@@ -371,7 +376,7 @@ static tn_status tn__gnn_validate(const tn_gnn_opts *o)
         (st = tn__opt_float(w, "sketch_weight", o->sketch_weight, "[]", 0, 1e6)) ||
         (st = tn__opt_float(w, "smooth_weight", o->smooth_weight, "(]", -HUGE_VAL, 1e6)) ||
         (st = tn__opt_float(w, "further_weight", o->further_weight, "[]", 0, 1e6)) ||
-        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)))
+        (st = tn__opt_int(w, "holdout_count", o->holdout_count, 0, 64)) || (st = tn__opt_int(w, "dequantize", o->dequantize, -1, 1)))
         return st;
     if (o->holdout_count > 0 && !o->holdout)
         return tn__fail(TN_ERR_INVALID_ARG, "gnn: option holdout_count = %d, allowed 0 while holdout is NULL", o->holdout_count);
@@ -2058,15 +2063,32 @@ static tn_status tn__gnn_store_example(tn_params *w, const tn_image *dem)
     return TN_OK;
 }
 
+/* The holdouts without the example's height steps (windows of the same DEM, stored alike), in
+   *own, which o->holdout then points to. Holdouts validation will refuse are left as they are. */
+static tn_status tn__gnn_holdouts_without_steps(tn_gnn_opts *o, float step, tn_image **own)
+{
+    int i;
+    tn_status st;
+    if (o->holdout_count <= 0 || !o->holdout) return TN_OK;
+    for (i = 0; i < o->holdout_count; i++)
+        if (!o->holdout[i].data || o->holdout[i].channels != 1) return TN_OK;
+    if (!(*own = (tn_image *)tn__alloc((size_t)o->holdout_count * sizeof **own))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gnn: out of memory");
+    memset(*own, 0, (size_t)o->holdout_count * sizeof **own);
+    for (i = 0; i < o->holdout_count; i++)
+        if ((st = tn_image_dequantize(&(*own)[i], &o->holdout[i], step))) return st;
+    o->holdout = *own;
+    return TN_OK;
+}
+
 TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_opts *opts_in, tn_gnn_stats *stats)
 {
     tn__gnn_train s;
     tn_extraction ex;
     tn_contour_set parts;
     tn_ctx *ctx = NULL;
-    tn_image one = {0, 0, 0, NULL};
+    tn_image one = {0, 0, 0, NULL}, *hold = NULL;
     const tn_image *d1 = dem;
-    float lo = 0, hi = 0, hist[50][4];
+    float lo = 0, hi = 0, hist[50][4], dq_step = 0;
     double mean = 0, std = 0;
     int nh = 0, i;
     size_t n;
@@ -2092,6 +2114,8 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         d1 = &one;
     }
     digest = tn_image_digest(d1);
+    if ((st = tn__train_without_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
+    if (dq_step > 0 && (st = tn__gnn_holdouts_without_steps(&s.o, dq_step, &hold))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "gnn", "gnn-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */
@@ -2235,6 +2259,7 @@ TN_API tn_status tn_gnn_train(tn_gnn *model, const tn_image *dem, const tn_gnn_o
         stats->embed_phase_from = s.phase_from;
         stats->holdout_iteration = -1;
         stats->gain_scale = (float)tn__gnn_gain_scale(s.w);
+        stats->dequantized = dq_step;
         if (s.best) {
             const tn_tensor *info = tn_params_find(s.best, "holdout");
             stats->holdout_ssim = info->data[0];
@@ -2257,6 +2282,9 @@ done:
     tn__progress_within(NULL, 0.0);
     tn_ctx_free(ctx);
     tn_image_free(&one);
+    if (hold)
+        for (i = 0; i < s.o.holdout_count; i++) tn_image_free(&hold[i]);
+    TN_FREE(hold);
     tn_extraction_free(&ex);
     tn_contour_set_free(&parts);
     tn__gnn_train_free(&s);

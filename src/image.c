@@ -62,8 +62,11 @@ typedef struct tn_hillshade_opts {
 TN_API tn_status tn_image_hillshade(tn_image *dst, const tn_image *dem, const tn_hillshade_opts *opts);
 /* The step a DEM's heights are stored in (channel 0): the smallest height difference between
    neighbours when at least 99 % of all such differences are whole multiples of it, else 0 (heights
-   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. */
-TN_API float     tn_image_height_step(const tn_image *dem);
+   stored as floats, or resampled). An 8-bit heightmap gives its range / 255. With coarse_only,
+   only a step of at least 0.1 x the DEM's mean |Laplacian| at 1 px, else 0: steps the terrain's
+   own curvature does not dwarf (8-bit heightmaps: 1.1-1.7 steps), which the learned methods
+   train without (their option dequantize). */
+TN_API float     tn_image_height_step(const tn_image *dem, int coarse_only);
 /* Removes the terraces of heights stored in coarse steps (channel 0 -> one channel): dst is the
    smoothest surface (least squared Laplacian) within step / 2 of dem everywhere, so rounding it
    to the same steps gives dem back. step <= 0 copies channel 0. Threaded; 200 passes over the
@@ -1082,7 +1085,7 @@ static void tn__colour_at(float t, float *rgb)
     rgb[2] = stops[i - 1][3] + f * (stops[i][3] - stops[i - 1][3]);
 }
 
-TN_API float tn_image_height_step(const tn_image *dem)
+TN_API float tn_image_height_step(const tn_image *dem, int coarse_only)
 {
     size_t W, H, x, y, n = 0, on = 0, k;
     float *d, s, top = 0;
@@ -1118,7 +1121,19 @@ TN_API float tn_image_height_step(const tn_image *dem)
         if (fabs(d[k] - m * s) <= 0.02 * s + 4.0 * FLT_EPSILON * top) on++;
     }
     TN_FREE(d);
-    return s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n ? s : 0;
+    if (!(s > 0 && isfinite(s) && (double)on >= 0.99 * (double)n)) return 0;
+    if (coarse_only) {
+        double sum = 0;
+        const float *e = dem->data;
+        size_t c = (size_t)dem->channels, r = W * c;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                const float *q = e + (y * W + x) * c;
+                sum += fabs((double)q[c] + q[-(ptrdiff_t)c] + q[r] + q[-(ptrdiff_t)r] - 4.0 * q[0]);
+            }
+        if (W < 3 || H < 3 || s < 0.1 * sum / ((double)(W - 2) * (H - 2))) return 0;
+    }
+    return s;
 }
 
 /* Passes of each smoothing in tn_image_dequantize: both had converged at 100 on the 8-bit 256 px
@@ -1212,6 +1227,22 @@ TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float s
         TN_FREE(buf);
     }
     tn__image_give(dst, dem, &out);
+    return TN_OK;
+}
+
+/* The example a learned method trains on (their option `dequantize`): *d without its height
+   steps, made in *own, when mode is 1 and it is stored in steps, or mode is 0 and they are coarse
+   (tn_image_height_step: the finest scales would learn them as a grain). *step = the step taken
+   away, 0 = none. */
+TN__SHARED tn_status tn__train_without_steps(tn_image *own, const tn_image **d, int mode, float *step)
+{
+    float s = mode < 0 ? 0.0f : tn_image_height_step(*d, mode == 0);
+    tn_status st;
+    *step = 0;
+    if (!(s > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, *d, s))) return st;
+    *d = own;
+    *step = s;
     return TN_OK;
 }
 

@@ -1487,31 +1487,6 @@ static tn_status tn__sg_train_nets(tn__sg_train *s)
 
 static tn_status tn__sg_file_matches(const tn_params *f, const tn__sg_arch *A, const char *name);
 
-/* The example the networks see: *d without its height steps when `mode` asks for it (the
-   option dequantize), made in *own. */
-static tn_status tn__sg_smooth_steps(tn_image *own, const tn_image **d, int mode, float *step_out)
-{
-    const tn_image *e = *d;
-    float step = mode < 0 ? 0.0f : tn_image_height_step(e);
-    tn_status st;
-    *step_out = 0;
-    if (step > 0 && mode == 0) { /* coarse: against the mean |Laplacian| at 1 px */
-        double sum = 0;
-        int x, y, W = e->width, H = e->height;
-        for (y = 1; y + 1 < H; y++)
-            for (x = 1; x + 1 < W; x++) {
-                const float *q = e->data + (size_t)y * W + x;
-                sum += fabs((double)q[1] + q[-1] + q[W] + q[-W] - 4.0 * q[0]);
-            }
-        if (W < 3 || H < 3 || step < 0.1 * sum / ((double)(W - 2) * (H - 2))) step = 0;
-    }
-    if (!(step > 0)) return TN_OK;
-    if ((st = tn_image_dequantize(own, e, step))) return st;
-    *d = own;
-    *step_out = step;
-    return TN_OK;
-}
-
 TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn_singan_opts *opts_in, tn_singan_stats *stats)
 {
     tn__sg_train s;
@@ -1538,7 +1513,7 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
         d1 = &one;
     }
     digest = tn_image_digest(d1);
-    if ((st = tn__sg_smooth_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
+    if ((st = tn__train_without_steps(&one, &d1, s.o.dequantize, &dq_step))) goto done;
     seed = s.o.train.seed;
     if ((st = tn_train_create(&s.run, "singan", "singan-train", &s.o.train))) goto done;
     if (s.o.train.resume) { /* the checkpoint's seed and architecture win */

@@ -807,6 +807,46 @@ static int stopped_run(const tn_image *dem, long iters, tn_gnn *out)
     return tn_gnn_train(out, dem, &o, NULL) == TN_OK;
 }
 
+/* Heights stored in coarse steps (32 over the range: on 40 px of this relief, as coarse as 8
+   bits on the 8-bit DEMs): the example and the holdouts train without them (option dequantize,
+   on by default where they are coarse), and the holdouts' checks run on them. */
+static void in_steps(tn_image *img, int levels)
+{
+    float lo, hi, step;
+    size_t k;
+    tn_image_range(&lo, &hi, img);
+    step = (hi - lo) / (float)levels;
+    for (k = 0; k < (size_t)img->width * img->height; k++) img->data[k] = lo + step * floorf((img->data[k] - lo) / step + 0.5f);
+}
+
+TN_TEST(an_example_in_coarse_steps_is_trained_without_them)
+{
+    tn_image dem = tn_test_dem(40, 4), hold[2];
+    tn_gnn_opts o;
+    tn_gnn a, b;
+    tn_gnn_stats st;
+    hold[0] = tn_test_dem(40, 8);
+    hold[1] = tn_test_dem(40, 9);
+    in_steps(&dem, 32);
+    in_steps(&hold[0], 32);
+    in_steps(&hold[1], 32);
+    holdout_opts(&o, 4, hold);
+    TN_CHECK(tn_gnn_train(&a, &dem, &o, &st) == TN_OK);
+    TN_CHECK(st.dequantized > 0 && st.holdout_checks == 2);
+    TN_CHECK(o.holdout == hold); /* the caller's options and holdouts are left as they were */
+    o.dequantize = -1;
+    TN_CHECK(tn_gnn_train(&b, &dem, &o, &st) == TN_OK);
+    TN_CHECK(st.dequantized == 0.0f);
+    TN_CHECK(!same_learned(&a, 0, &b, 0));
+    tn_gnn_free(&b);
+    o.dequantize = 2;
+    TN_CHECK(tn_gnn_train(&b, &dem, &o, &st) == TN_ERR_INVALID_ARG);
+    tn_gnn_free(&a);
+    tn_image_free(&dem);
+    tn_image_free(&hold[0]);
+    tn_image_free(&hold[1]);
+}
+
 TN_TEST(holdout_early_stopping)
 {
     /* checks every 2 iterations on two other terrains. The model keeps the fully trained
@@ -2402,6 +2442,7 @@ int main(void)
     TN_RUN(embedding_phase);
     TN_RUN(resume_is_bit_identical);
     TN_RUN(holdout_early_stopping);
+    TN_RUN(an_example_in_coarse_steps_is_trained_without_them);
     TN_RUN(training_reports_its_preparation_as_one_stage);
     TN_RUN(holdout_windows);
     TN_RUN(gain_scale_from_holdouts);

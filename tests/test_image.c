@@ -301,14 +301,20 @@ TN_TEST(height_step_and_dequantize_undo_8_bit_terraces)
         for (x = 0; x < W; x++) TN_PIXEL(&hill, x, y, 0) = 50.0f + 20.0f * sinf(0.021f * x) * cosf(0.027f * y) + 0.05f * x;
     TN_CHECK(tn_image_copy(&q, &hill) == TN_OK);
     for (x = 0; x < W * H; x++) q.data[x] = step * floorf(q.data[x] / step + 0.5f);
-    TN_CHECK_NEAR(tn_image_height_step(&q), step, 1e-4f);
-    TN_CHECK(tn_image_height_step(&hill) == 0.0f); /* heights stored as floats */
-    { /* a 16-bit DEM in metres: fine steps, many of them per pixel, on heights where float32 rounds */
+    TN_CHECK_NEAR(tn_image_height_step(&q, 0), step, 1e-4f);
+    TN_CHECK_NEAR(tn_image_height_step(&q, 1), step, 1e-4f); /* coarse: about a step per pixel */
+    TN_CHECK(tn_image_height_step(&hill, 0) == 0.0f); /* heights stored as floats */
+    { /* a rough 16-bit DEM in metres: fine steps, many of them per pixel, on heights where float32 rounds */
         tn_image fine = {0, 0, 0, NULL};
         const float f = 4000.0f / 65535.0f;
         TN_CHECK(tn_image_copy(&fine, &hill) == TN_OK);
-        for (x = 0; x < W * H; x++) fine.data[x] = 600.0f + f * floorf((fine.data[x] - 30.0f) * 600.0f / f / 60.0f + 0.5f);
-        TN_CHECK_NEAR(tn_image_height_step(&fine), f, 1e-3f * f);
+        for (y = 0; y < H; y++)
+            for (x = 0; x < W; x++) { /* rough, with a Laplacian of metres per pixel */
+                float *v = &TN_PIXEL(&fine, x, y, 0);
+                *v = 600.0f + f * floorf(((*v - 30.0f) * 10.0f + 3.0f * sinf(1.3f * x) * sinf(1.1f * y)) / f + 0.5f);
+            }
+        TN_CHECK_NEAR(tn_image_height_step(&fine, 0), f, 1e-3f * f);
+        TN_CHECK(tn_image_height_step(&fine, 1) == 0.0f); /* fine against its curvature */
         tn_image_free(&fine);
     }
     TN_CHECK(tn_image_dequantize(&d, &q, step) == TN_OK);
@@ -330,7 +336,7 @@ TN_TEST(height_step_and_dequantize_undo_8_bit_terraces)
     TN_CHECK(ld < 0.25 * lq);
     keep = d;
     TN_CHECK(tn_image_dequantize(&d, &q, NAN) == TN_ERR_INVALID_ARG && d.data == keep.data);
-    TN_CHECK(tn_image_dequantize(&q, &q, 0) == TN_OK && fabsf(tn_image_height_step(&q) - step) < 1e-4f); /* step 0 copies; in place */
+    TN_CHECK(tn_image_dequantize(&q, &q, 0) == TN_OK && fabsf(tn_image_height_step(&q, 0) - step) < 1e-4f); /* step 0 copies; in place */
     tn_set_threads(1);
     TN_CHECK(tn_image_dequantize(&q, &q, step) == TN_OK && ti_same_bits(&q, &d)); /* in place, and on one thread */
     tn_set_threads(0);

@@ -44,6 +44,13 @@ static void checkpoint_warning(const char *cmd, long iterations, long resumed_fr
             ckpt, why[0] && strstr(why, ckpt) ? why : "a full disk, or a missing or read-only directory?");
 }
 
+/* The height step a training took away from its example (the trainers' --dequantize). */
+static void print_dequantized(float step)
+{
+    if (step > 0) printf("dequantized: trained without the example's height steps of %g\n", (double)step);
+    else printf("dequantized: no\n");
+}
+
 static void progress_close(void);
 
 /* TERRAINNET_TRAIN_SECONDS=S caps every training budget at S seconds (tests/readme_runs.sh runs
@@ -1597,8 +1604,7 @@ static int run_singan_train(void)
                "checkpoints: %d (%s)\nmodel: %s\n",
                s.seconds / 60.0, s.seconds_per_iter, s.seconds_per_iter_finest, (double)s.loss_d, (double)s.loss_g, (double)s.loss_rec,
                s.checkpoints, a->ckpt, a->out);
-        if (s.dequantized > 0) printf("dequantized: trained without the example's height steps of %g\n", (double)s.dequantized);
-        else printf("dequantized: no\n");
+        print_dequantized(s.dequantized);
         checkpoint_warning("singan-train", s.iterations, s.resumed_from, s.checkpoints, a->ckpt);
     }
     tn_singan_free(&model);
@@ -1787,6 +1793,9 @@ static const cli_opt gnn_train_opts[] = {
      "share of the budget at the end that trains for the example alone (a sharper reconstruction): everything with --holdout, "
      "else only the part embeddings (-1 = none)",
      "0.5 with --holdout, else 0.25"},
+    {"dequantize", 0, ARG_INT, 0, &gnn_train_arg.o.dequantize, NULL, -1, 1, "N",
+     "train without the example's height steps: 1 whenever it is stored in steps, -1 never",
+     "0 = when the steps are coarse (8-bit heightmaps)"},
 };
 
 static int run_gnn_train(void)
@@ -1851,6 +1860,7 @@ static int run_gnn_train(void)
                s.holdout_iteration, s.holdout_checks, s.holdout_last_ssim,
                tn_params_find(model.weights, "early.gnn.emb") ? "kept, for every sketch but the example's own network" : "none (the trained network was the best)");
     if (!st) printf("gain_scale: %.2f (of the residual gain's test, calibrated on the holdouts; 1 = none)\n", (double)s.gain_scale);
+    if (!st) print_dequantized(s.dequantized);
     tn_gnn_free(&model);
     return st ? fail_status(st) : 0;
 }
