@@ -1612,9 +1612,9 @@ typedef struct tn_singan_opts {
                               lack the example's rarer massif or range; docs/singan.md); 0 = 4,
                               < 0 = none */
     int dequantize;        /* train on the example without its height steps (tn_image_dequantize):
-                              0 = when they are coarse (a step >= 0.1 x the mean |Laplacian| at
-                              1 px: 8-bit heightmaps, whose steps the finest scales would learn
-                              as a grain), 1 = whenever it is stored in steps, -1 = never */
+                              0 = when they are coarse (tn_image_height_step's coarse_only: 8-bit
+                              heightmaps, whose steps the finest scales would learn as a grain),
+                              1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;
@@ -1872,8 +1872,9 @@ typedef struct tn_gnn_opts {
                               (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     int dequantize;        /* train on the example (and the holdouts) without its height steps
-                              (tn_image_dequantize): 0 = when they are coarse, as SinGAN's option
-                              (8-bit heightmaps), 1 = whenever it is stored in steps, -1 = never */
+                              (tn_image_dequantize): 0 = when they are coarse (tn_image_height_step's
+                              coarse_only: 8-bit heightmaps), 1 = whenever it is stored in steps,
+                              -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_gnn_opts;
@@ -4887,22 +4888,6 @@ TN_API tn_status tn_image_dequantize(tn_image *dst, const tn_image *dem, float s
         TN_FREE(buf);
     }
     tn__image_give(dst, dem, &out);
-    return TN_OK;
-}
-
-/* The example a learned method trains on (their option `dequantize`): *d without its height
-   steps, made in *own, when mode is 1 and it is stored in steps, or mode is 0 and they are coarse
-   (tn_image_height_step: the finest scales would learn them as a grain). *step = the step taken
-   away, 0 = none. */
-TN__SHARED tn_status tn__train_without_steps(tn_image *own, const tn_image **d, int mode, float *step)
-{
-    float s = mode < 0 ? 0.0f : tn_image_height_step(*d, mode == 0);
-    tn_status st;
-    *step = 0;
-    if (!(s > 0)) return TN_OK;
-    if ((st = tn_image_dequantize(own, *d, s))) return st;
-    *d = own;
-    *step = s;
     return TN_OK;
 }
 
@@ -13578,6 +13563,24 @@ TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds)
 {
     run->it = run->it0 = run->last_ck_it = iteration;
     run->seconds = run->sec0 = seconds;
+}
+
+/* ---- the example ---- */
+
+/* The example a learned method trains on (their option `dequantize`): *d without its height
+   steps, made in *own, when mode is 1 and it is stored in steps, or mode is 0 and they are coarse
+   (tn_image_height_step: the finest scales would learn them as a grain). *step = the step taken
+   away, 0 = none. */
+TN__SHARED tn_status tn__train_without_steps(tn_image *own, const tn_image **d, int mode, float *step)
+{
+    float s = mode < 0 ? 0.0f : tn_image_height_step(*d, mode == 0);
+    tn_status st;
+    *step = 0;
+    if (!(s > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, *d, s))) return st;
+    *d = own;
+    *step = s;
+    return TN_OK;
 }
 
 /* ---- metadata numbers (locale-free) ---- */

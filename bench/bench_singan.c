@@ -331,9 +331,15 @@ typedef struct measured { dists d, stored, smooth; float lo, hi; double best_ssi
 static double g_valleys_ex;  /* valley_depth of the current region's example */
 static double g_heights_ref; /* heights_distance of the reference crop */
 static float g_step;         /* the example's height step where it is coarse (tn_image_height_step), else 0 */
+static float g_step_base;    /* and the example's lowest height, on that grid */
 static tn_image g_ex_smooth; /* then the example without its steps (tn_image_dequantize) */
 static dists g_ref_smooth;   /* and the reference crop's distances, both without their steps */
 
+/* The targets: the three ratios, the heights, the copy rule, two seeds that differ. */
+static const char *met(double rs, double rc, double rp, int ok_h, const measured *m)
+{
+    return rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "";
+}
 
 static void report(const char *name, const char *what, const measured *m, const dists *ref, const dists *corners, float elo, float ehi)
 {
@@ -345,8 +351,7 @@ static void report(const char *name, const char *what, const measured *m, const 
            "to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | heights_distance %.1f %% (%.2fx)%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, m->d.curv2, m->d.curv2 / ref->curv2, (double)m->lo, (double)m->hi,
            ok_h ? "within" : "OUTSIDE", m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
-           m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref,
-           rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
+           m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref, met(rs, rc, rp, ok_h, m));
     if (g_step > 0) {
         const dists *t = &m->stored;
         rs = t->slope / ref->slope, rc = t->curv / ref->curv, rp = t->spec / ref->spec;
@@ -358,17 +363,25 @@ static void report(const char *name, const char *what, const measured *m, const 
         rs = t->slope / ref->slope, rc = t->curv / ref->curv, rp = t->spec / ref->spec;
         printf("%s_%s_smooth: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | the samples "
                "against the example and the reference crop without their height steps%s\n",
-               name, what, t->slope, rs, t->curv, rc, t->spec, rp, t->curv2, t->curv2 / ref->curv2,
-               rs <= 1.5 && rc <= 1.5 && rp <= 1.5 && ok_h && m->best_ssim < 0.9 && m->seed_diff > 0 ? "  [all targets met]" : "");
+               name, what, t->slope, rs, t->curv, rc, t->spec, rp, t->curv2, t->curv2 / ref->curv2, met(rs, rc, rp, ok_h, m));
     }
 }
 
 /* img rounded to the example's height steps, on the grid through its lowest height: stored as
    the example is, to be compared with it at 1 px. */
-static void store_in_steps(tn_image *img, float lo)
+static void store_in_steps(tn_image *img)
 {
     size_t k;
-    for (k = 0; k < (size_t)img->width * img->height; k++) img->data[k] = lo + g_step * floorf((img->data[k] - lo) / g_step + 0.5f);
+    for (k = 0; k < (size_t)img->width * img->height; k++) img->data[k] = g_step_base + g_step * floorf((img->data[k] - g_step_base) / g_step + 0.5f);
+}
+
+/* acc += d / 3: the mean over the three samples. */
+static void add_third(dists *acc, dists d)
+{
+    acc->slope += d.slope / 3;
+    acc->curv += d.curv / 3;
+    acc->spec += d.spec / 3;
+    acc->curv2 += d.curv2 / 3;
 }
 
 static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy, measured *m)
@@ -383,30 +396,17 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         dists d = dist3(ex, &s[i], dx, dy);
         tn_image w = {0, 0, 0, NULL};
         float lo, hi;
-        m->d.slope += d.slope / 3;
-        m->d.curv += d.curv / 3;
-        m->d.spec += d.spec / 3;
-        m->d.curv2 += d.curv2 / 3;
+        add_third(&m->d, d);
         m->valleys += valley_depth(&s[i]) / 3;
         m->heights += heights_distance(ex, &s[i]) / 3;
         if (g_step > 0) {
             tn_image c = {0, 0, 0, NULL};
-            float elo, ehi;
-            tn_image_range(&elo, &ehi, ex);
             if (!tn_image_copy(&c, &s[i])) {
-                store_in_steps(&c, elo);
-                d = dist3(ex, &c, dx, dy);
-                m->stored.slope += d.slope / 3;
-                m->stored.curv += d.curv / 3;
-                m->stored.spec += d.spec / 3;
-                m->stored.curv2 += d.curv2 / 3;
+                store_in_steps(&c);
+                add_third(&m->stored, dist3(ex, &c, dx, dy));
             }
             tn_image_free(&c);
-            d = dist3(&g_ex_smooth, &s[i], dx, dy);
-            m->smooth.slope += d.slope / 3;
-            m->smooth.curv += d.curv / 3;
-            m->smooth.spec += d.spec / 3;
-            m->smooth.curv2 += d.curv2 / 3;
+            add_third(&m->smooth, dist3(&g_ex_smooth, &s[i], dx, dy));
         }
         tn_image_range(&lo, &hi, &s[i]);
         if (lo < m->lo) m->lo = lo;
@@ -509,6 +509,7 @@ static void bench_region(const region *rg, double minutes, int threads)
     tn_set_threads(threads);
     tn_image_range(&elo, &ehi, &ex);
     g_step = tn_image_height_step(&ex, 1);
+    g_step_base = elo;
     locate(&full, &ex, &exx, &exy);
     other_crop(&full, exx, exy, 256, &ox, &oy, &ov);
     tn_image_crop(&other, &full, ox, oy, 256, 256);

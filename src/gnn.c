@@ -116,8 +116,9 @@ typedef struct tn_gnn_opts {
                               (without holdouts the phase always leaves the network as it is) */
     tn_extract_opts extract; /* how the example's ridges and valleys are found (zero = defaults) */
     int dequantize;        /* train on the example (and the holdouts) without its height steps
-                              (tn_image_dequantize): 0 = when they are coarse, as SinGAN's option
-                              (8-bit heightmaps), 1 = whenever it is stored in steps, -1 = never */
+                              (tn_image_dequantize): 0 = when they are coarse (tn_image_height_step's
+                              coarse_only: 8-bit heightmaps), 1 = whenever it is stored in steps,
+                              -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_gnn_opts;

@@ -71,9 +71,9 @@ typedef struct tn_singan_opts {
                               lack the example's rarer massif or range; docs/singan.md); 0 = 4,
                               < 0 = none */
     int dequantize;        /* train on the example without its height steps (tn_image_dequantize):
-                              0 = when they are coarse (a step >= 0.1 x the mean |Laplacian| at
-                              1 px: 8-bit heightmaps, whose steps the finest scales would learn
-                              as a grain), 1 = whenever it is stored in steps, -1 = never */
+                              0 = when they are coarse (tn_image_height_step's coarse_only: 8-bit
+                              heightmaps, whose steps the finest scales would learn as a grain),
+                              1 = whenever it is stored in steps, -1 = never */
     tn_train_opts train;   /* budget (minutes 0 = 10), checkpoints, resume (the checkpoint's
                               architecture wins; the example must be the same), seed */
 } tn_singan_opts;

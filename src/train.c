@@ -369,6 +369,24 @@ TN_API void tn_train_set_position(tn_train *run, long iteration, double seconds)
     run->seconds = run->sec0 = seconds;
 }
 
+/* ---- the example ---- */
+
+/* The example a learned method trains on (their option `dequantize`): *d without its height
+   steps, made in *own, when mode is 1 and it is stored in steps, or mode is 0 and they are coarse
+   (tn_image_height_step: the finest scales would learn them as a grain). *step = the step taken
+   away, 0 = none. */
+TN__SHARED tn_status tn__train_without_steps(tn_image *own, const tn_image **d, int mode, float *step)
+{
+    float s = mode < 0 ? 0.0f : tn_image_height_step(*d, mode == 0);
+    tn_status st;
+    *step = 0;
+    if (!(s > 0)) return TN_OK;
+    if ((st = tn_image_dequantize(own, *d, s))) return st;
+    *d = own;
+    *step = s;
+    return TN_OK;
+}
+
 /* ---- metadata numbers (locale-free) ---- */
 
 static tn_status tn__meta_put_num(tn_params *p, const char *key, double v)
