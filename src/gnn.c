@@ -3542,7 +3542,8 @@ static float tn__gnn_notch_at(const tn__gnn_gen *G, const uint8_t *mask, const f
    A ridge the example's bends moved off its drawn place is raised there too where the ground
    across it as drawn is higher (G->drawn): the user asked for the ridge there. By the shortfall
    alone, of which the notch closes 4/5, and never above the moved crest beside it: a margin, the
-   full fix or ground higher than the crest raised drawn ridges above their asked heights. val: the pinned output (normalised) on the area (ax, ay, aw, ah), which
+   full fix or ground higher than the crest raised drawn ridges above their asked heights. val: the pinned output (normalised; with side 0 any
+   units: tn__gnn_gen_detailed runs it on metres) on the area (ax, ay, aw, ah), which
    holds every pixel within TN__GNN_NOTCH + TN__GNN_BANK + 1 of the window (x, y, ww, wh); def:
    scratch of aw x ah (2 x that with G->drawn); the result goes into out (ww x wh). */
 static void tn__gnn_incise(const tn__gnn_gen *G, float side, const float *val, int ax, int ay, int aw, int ah, int x, int y, int ww,
@@ -3677,36 +3678,50 @@ static tn_status tn__gnn_keep_profile(const tn__gnn_gen *G, const tn_image *t, t
 
 /* Window (x, y, ww, wh) with the fine detail by example, ww floats a row, in tiles: each tile's
    terrain is computed grown by the detail's halo (tn_rect_halo; plus, on a grown sketch, the
-   pinning's reach, whose strokes are pinned again after the detail, and the low-pass's reach of
-   tn__gnn_keep_profile before that), detailed, and cropped. */
+   pinning's reach, whose strokes are pinned again after the detail, the low-pass's reach of
+   tn__gnn_keep_profile before that, and the notch's after it), detailed, and cropped. On a grown
+   sketch the notch runs again after the detail, asking only that the strokes stay above (below)
+   their banks: the example's detail on a bank (a crater's rim) can top a drawn ridge the notch
+   had cleared. */
 static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, int y, int ww, int wh, float *dst)
 {
+    const int N = G->pin ? TN__GNN_NOTCH + TN__GNN_BANK + 1 : 0; /* px the notch reads around its window */
     int halo = tn_fine_detail_halo(NULL), tx, ty, v, T = TN__GNN_DETAIL_TILE;
     tn_status st = TN_OK;
     for (ty = 0; !st && ty < wh; ty += T)
         for (tx = 0; !st && tx < ww; tx += T) {
-            tn_rect r, g;
+            tn_rect r, g, a;
             tn_image t = {0, 0, 0, NULL}, d = {0, 0, 0, NULL};
-            float *corr = NULL;
+            float *val = NULL, *def = NULL, *out = NULL;
+            size_t na;
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) : 0), G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) + N : 0), G->W, G->H);
+            a = tn_rect_halo(r, N, G->W, G->H);
+            na = (size_t)a.w * a.h;
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
                 !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
-                if (G->pin && !(corr = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))) st = TN_ERR_OUT_OF_MEMORY;
-                else if (corr) tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, r.x, r.y, r.w, r.h, TN__GNN_PIN_ACROSS, corr); /* the strokes keep their heights through the detail too */
-                for (v = 0; !st && v < r.h; v++) {
-                    float *o = dst + (size_t)(ty + v) * ww + tx;
+                if (G->pin && (!(val = (float *)tn__alloc(na * sizeof(float))) || !(def = (float *)tn__alloc(na * (G->drawn ? 2 : 1) * sizeof(float))) ||
+                               !(out = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))))
+                    st = TN_ERR_OUT_OF_MEMORY;
+                else if (G->pin) {
+                    size_t i;
                     int u;
-                    memcpy(o, d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x), (size_t)r.w * sizeof(float));
-                    for (u = 0; corr && u < r.w; u++) o[u] -= corr[(size_t)v * r.w + u];
+                    tn__gnn_pin(G, d.data, t.data, g.x, g.y, g.w, a.x, a.y, a.w, a.h, TN__GNN_PIN_ACROSS, val); /* the strokes keep their heights through the detail too */
+                    for (v = 0, i = 0; v < a.h; v++)
+                        for (u = 0; u < a.w; u++, i++) val[i] = d.data[(size_t)(a.y - g.y + v) * g.w + (a.x - g.x + u)] - val[i];
+                    tn__gnn_incise(G, 0, val, a.x, a.y, a.w, a.h, r.x, r.y, r.w, r.h, def, out);
                 }
+                for (v = 0; !st && v < r.h; v++)
+                    memcpy(dst + (size_t)(ty + v) * ww + tx, out ? out + (size_t)v * r.w : d.data + (size_t)(r.y - g.y + v) * g.w + (r.x - g.x),
+                           (size_t)r.w * sizeof(float));
             }
             tn_image_free(&t);
             tn_image_free(&d);
-            TN_FREE(corr);
-            corr = NULL;
+            TN_FREE(val);
+            TN_FREE(def);
+            TN_FREE(out);
         }
     return st;
 }

@@ -2055,13 +2055,65 @@ TN_TEST(bent_ridge_is_followed_where_drawn)
     tn_gnn_free(&m);
 }
 
+TN_TEST(drawn_ridge_stays_above_cratered_detail)
+{
+    /* an example of low ridges pitted with craters whose rims stand far above a ridge's flank:
+       the fine detail brings such rims to the drawn ridge's banks, where they topped it (followed
+       at 77 % of its points with the notch before the detail alone, 100 % without the detail).
+       The notch runs again after the detail (96 %); a window equals the whole map. Example:
+       ridges every 32 px, 60 m high, craters every 12 px whose rims rise 400 m */
+    tn_image dem, t = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
+    tn_gnn m;
+    tn_gnn_opts o;
+    tn_gnn_generate_opts go;
+    tn_contour c;
+    tn_contour_set sk;
+    float pts[6] = {10, 60, 760, 150, 60, 760};
+    double share = 0;
+    int x, y, i, j;
+    TN_CHECK(tn_image_create(&dem, 96, 96, 1) == TN_OK);
+    for (y = 0; y < 96; y++)
+        for (x = 0; x < 96; x++) {
+            double w = fmod(y + 64.0, 32.0), h = 600 + 60 * (1 - fabs(w - 16) / 16);
+            for (j = 0; j < 8; j++)
+                for (i = 0; i < 8; i++) { /* a crater: a bowl within a rim of radius 3 px */
+                    double cx = 6 + 12 * i + 3 * sin(1.7 * j + 0.9 * i), cy = 6 + 12 * j + 3 * cos(1.3 * i + 0.7 * j);
+                    double r = hypot(x - cx, y - cy);
+                    h += 400 * exp(-(r - 3) * (r - 3)) - 300 * exp(-r * r / 3);
+                }
+            dem.data[y * 96 + x] = (float)h;
+        }
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE, c.npoints = 2, c.points = pts;
+    memset(&sk, 0, sizeof sk);
+    sk.width = 160, sk.height = 120, sk.count = 1, sk.items = &c;
+    memset(&go, 0, sizeof go);
+    go.seed = 1, go.grow = 1, go.map_scale = -1, go.heights = TN_GNN_HEIGHTS_EXAMPLE; /* the detail by default */
+    TN_CHECK(tn_gnn_generate(&t, &m, &sk, 160, 120, &go) == TN_OK);
+    if (t.data) {
+        TN_CHECK(tn_gnn_ordering(&share, &sk, &t, 4, NULL) == TN_OK);
+        printf("  drawn ridge through cratered detail: followed at %.1f %% of its points\n", 100 * share);
+        TN_CHECK(share >= 0.93);
+        TN_CHECK(tn_gnn_generate_window(&win, &m, &sk, 160, 120, 50, 40, 70, 50, &go) == TN_OK); /* the notch after the detail, tile by tile */
+        TN_CHECK(win.data && window_matches(&win, &t, 50, 40));
+    }
+    tn_image_free(&win);
+    tn_image_free(&t);
+    tn_image_free(&dem);
+    tn_gnn_free(&m);
+}
+
 TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
 {
     /* the fine detail adds the example's texture to a drawn ridge, not a cross profile of its
        own: its change, averaged along the ridge at each distance across it, stays near its
        change on the ridge. Pinning only the change on the ridge, faded over 12 px, left the
        detail's raised band 0-3 px wide and dug a groove along its foot 4-8 px out (an
-       embankment in map view) */
+       embankment in map view). The notch after the detail raises the ridge where the detail's
+       banks top it (here by 1.3 m on average; 3-8 px out the change is as without it): 1.2 %
+       of the range, where 9.3 m passed 1 % without that notch */
     tn_image t[2] = {{0, 0, 0, NULL}, {0, 0, 0, NULL}};
     float dlo = 0, dhi = 0;
     double len = hypot(136.0, 80.0), nx = -80 / len, ny = 136 / len, ch[11], dev = 0, s;
@@ -2079,7 +2131,7 @@ TN_TEST(detail_digs_no_groove_beside_a_drawn_ridge)
         for (o1 = 0; o1 <= 10; o1++) printf(" %.1f", ch[o1] / n);
         for (o1 = 3; o1 <= 8; o1++) dev = fmax(dev, fabs(ch[o1] - ch[0]) / n);
         printf("\n  largest 3-8 px across, against its change on the ridge: %.1f m (range %.0f m)\n", dev, (double)(dhi - dlo));
-        TN_CHECK(dev < 0.01 * (dhi - dlo));
+        TN_CHECK(dev < 0.012 * (dhi - dlo));
     }
     tn_image_free(&t[0]);
     tn_image_free(&t[1]);
@@ -2469,6 +2521,7 @@ int main(void)
     TN_RUN(drawn_ridge_is_a_crest);
     TN_RUN(bent_ridge_is_followed_where_drawn);
     TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);
+    TN_RUN(drawn_ridge_stays_above_cratered_detail);
     TN_RUN(drawn_valley_widens_downstream);
     TN_RUN(map_scale_level);
     return tn_test_summary("test_gnn");
