@@ -45,7 +45,8 @@ for r in $REGIONS; do
 done
 # The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
 # distances <= 1.5 x the real crops'), the summits per area against the real crops', the 256 and
-# BIG generation seconds, and per region the reconstruction and the neighbours against the membrane.
+# BIG generation seconds, and per region the reconstruction (of an 8-bit example also without its
+# steps, as gnn-train learns it) and the neighbours against the membrane.
 first() { sed -n "s/$2/\1/p" "$1" | head -1; } # FILE SED-PATTERN: the first line's \1
 num='\([^ ;]*\)'
 {
@@ -66,7 +67,8 @@ num='\([^ ;]*\)'
     for r in $REGIONS; do
         G="$OUT/$r.gnn.log"
         [ -f "$G" ] || continue
-        row="| $r | $(first "$G" "^recon_ssim: $num.*")"
+        sm=$(first "$G" "^recon_smooth_ssim: $num.*") # an 8-bit example: as learnt, without its steps
+        row="| $r | $(first "$G" "^recon_ssim: $num.*")${sm:+ (without the steps: $sm)}"
         for t in 0 200 500; do row="$row | $(first "$G" "^neighbours_t${t}_gnn_ssim: $num.*") ($(first "$G" "^neighbours_t${t}_membrane_ssim: $num.*"))"; done
         echo "$row | $(first "$G" "^neighbours_t0_gnn_ssim: .*(\([0-9]*\) crops).*") | $(./bin/terrainnet info "$OUT/$r.tnw" | sed -n 's/^iterations: //p') |"
     done
