@@ -166,12 +166,15 @@ clean:
 # 32-bit build (issue 35: wasm32 and -m32 have a 32-bit size_t): the implementation and a few
 # tests with $(CC) -m32, no sanitizers. SSE arithmetic as on wasm32 and every 64-bit target: x87's
 # excess precision (FLT_EVAL_METHOD 2) breaks the exact float round trips test_sketch checks.
-# Skipped, saying so, when the compiler cannot target it (Debian: apt-get install gcc-multilib).
+# Skipped, saying so, when the compiler cannot target it (Debian: apt-get install gcc-multilib) or
+# the machine cannot run what it builds (a kernel without IA-32 emulation).
 M32      = -m32 -msse2 -mfpmath=sse
 M32_TESTS = test_core test_noise test_image test_export test_tensor test_metrics test_sketch
 m32: | build
 	@if ! printf 'int main(void) { return 0; }\n' | $(CC) $(M32) -x c - -o build/m32_probe > /dev/null 2>&1; then \
 	  echo "skipped m32: $(CC) -m32 cannot link (Debian: apt-get install gcc-multilib)"; echo "m32: 0 passed, 0 failed, 1 skipped"; exit 0; fi; \
+	if ! ./build/m32_probe > /dev/null 2>&1; then \
+	  echo "skipped m32: this machine cannot run 32-bit programs (a kernel without IA-32 emulation)"; echo "m32: 0 passed, 0 failed, 1 skipped"; exit 0; fi; \
 	mkdir -p build/m32 build/test; \
 	$(CC) $(M32) $(WARN) -O2 $(CFLAGS) -DTN_INTERNALS -c src/terrainnet.c -o build/m32/terrainnet.o || \
 	  { echo "FAIL m32: the implementation does not compile"; echo "m32: 0 passed, 1 failed, 0 skipped"; exit 1; }; \
