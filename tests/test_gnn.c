@@ -2003,6 +2003,24 @@ TN_TEST(drawn_ridge_is_a_crest)
     tn_image_free(&t[1]);
 }
 
+/* A tiny model of dem, and on it one straight ridge drawn across a 160 x 120 map (pts: x, y and
+   height of its two ends, example units), grown, seed 1, no map-scale level; detail as
+   tn_gnn_generate_opts.detail. The model, sketch (c, sk) and options stay for windows. */
+static void one_drawn_ridge(const tn_image *dem, float *pts, int detail, tn_gnn *m, tn_contour *c, tn_contour_set *sk, tn_gnn_generate_opts *go,
+                            tn_image *t)
+{
+    tn_gnn_opts o;
+    tn_test_tiny_gnn_opts(&o, 3);
+    TN_CHECK(tn_gnn_train(m, dem, &o, NULL) == TN_OK);
+    memset(c, 0, sizeof *c);
+    c->type = TN_RIDGE, c->npoints = 2, c->points = pts;
+    memset(sk, 0, sizeof *sk);
+    sk->width = 160, sk->height = 120, sk->count = 1, sk->items = c;
+    memset(go, 0, sizeof *go);
+    go->seed = 1, go->grow = 1, go->detail = detail, go->map_scale = -1, go->heights = TN_GNN_HEIGHTS_EXAMPLE;
+    TN_CHECK(tn_gnn_generate(t, m, sk, 160, 120, go) == TN_OK);
+}
+
 TN_TEST(bent_ridge_is_followed_where_drawn)
 {
     /* the example's main ridges wander (2 px across, 20 px period); a straight ridge drawn
@@ -2012,7 +2030,6 @@ TN_TEST(bent_ridge_is_followed_where_drawn)
        the whole map. Example: ridges every 32 px, 300 m high */
     tn_image dem, t = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
     tn_gnn m;
-    tn_gnn_opts o;
     tn_gnn_generate_opts go;
     tn_contour c;
     tn_contour_set sk;
@@ -2025,15 +2042,7 @@ TN_TEST(bent_ridge_is_followed_where_drawn)
             double w = fmod(y + 2.0 * sin(6.2831853 * x / 20) + 64, 32.0); /* 0 .. 32 across a ridge spacing */
             dem.data[y * 96 + x] = (float)(600 + 300 * (1 - fabs(w - 16) / 16) + 20 * sin(0.7 * x + 0.3 * y));
         }
-    tn_test_tiny_gnn_opts(&o, 3);
-    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
-    memset(&c, 0, sizeof c);
-    c.type = TN_RIDGE, c.npoints = 2, c.points = pts;
-    memset(&sk, 0, sizeof sk);
-    sk.width = 160, sk.height = 120, sk.count = 1, sk.items = &c;
-    memset(&go, 0, sizeof go);
-    go.seed = 1, go.grow = 1, go.detail = -1, go.map_scale = -1, go.heights = TN_GNN_HEIGHTS_EXAMPLE;
-    TN_CHECK(tn_gnn_generate(&t, &m, &sk, 160, 120, &go) == TN_OK);
+    one_drawn_ridge(&dem, pts, -1, &m, &c, &sk, &go, &t);
     if (t.data) {
         for (x = 20; x <= 140; x++, n++) { /* where the crest lies across the line, within 3 px */
             int best = 0, d;
@@ -2064,7 +2073,6 @@ TN_TEST(drawn_ridge_stays_above_cratered_detail)
        ridges every 32 px, 60 m high, craters every 12 px whose rims rise 400 m */
     tn_image dem, t = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
     tn_gnn m;
-    tn_gnn_opts o;
     tn_gnn_generate_opts go;
     tn_contour c;
     tn_contour_set sk;
@@ -2083,15 +2091,7 @@ TN_TEST(drawn_ridge_stays_above_cratered_detail)
                 }
             dem.data[y * 96 + x] = (float)h;
         }
-    tn_test_tiny_gnn_opts(&o, 3);
-    TN_CHECK(tn_gnn_train(&m, &dem, &o, NULL) == TN_OK);
-    memset(&c, 0, sizeof c);
-    c.type = TN_RIDGE, c.npoints = 2, c.points = pts;
-    memset(&sk, 0, sizeof sk);
-    sk.width = 160, sk.height = 120, sk.count = 1, sk.items = &c;
-    memset(&go, 0, sizeof go);
-    go.seed = 1, go.grow = 1, go.map_scale = -1, go.heights = TN_GNN_HEIGHTS_EXAMPLE; /* the detail by default */
-    TN_CHECK(tn_gnn_generate(&t, &m, &sk, 160, 120, &go) == TN_OK);
+    one_drawn_ridge(&dem, pts, 0, &m, &c, &sk, &go, &t); /* the detail by default */
     if (t.data) {
         TN_CHECK(tn_gnn_ordering(&share, &sk, &t, 4, NULL) == TN_OK);
         printf("  drawn ridge through cratered detail: followed at %.1f %% of its points\n", 100 * share);
