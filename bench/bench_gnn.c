@@ -317,8 +317,13 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_gnn: cannot read %s from %s (set TN_DATA)\n", region, data_dir());
         return 1;
     }
-    if (!locate(&full, &c128, &cx, &cy) || full.width < 3 * SIDE || full.height < 3 * SIDE) {
-        fprintf(stderr, "bench_gnn: %s_128 not found in %s_full, or the map is under 384 px\n", region, region);
+    if (!locate(&full, &c128, &cx, &cy)) {
+        fprintf(stderr, "bench_gnn: %s_128 not found in %s_full\n", region, region);
+        return 1;
+    }
+    /* moved=0 scores the neighbours that fit on the map; moved=1 needs all eight */
+    if (moved && (full.width < 3 * SIDE || full.height < 3 * SIDE)) {
+        fprintf(stderr, "bench_gnn: %s_full is %dx%d px, under the 384 px that moved=1 needs (use moved=0)\n", region, full.width, full.height);
         return 1;
     }
     if (moved) {

@@ -7,6 +7,8 @@
        to the example, which the ratios and the targets divide by; beside it, for the spread of
        the DEM's own ground, the three 256 px crops at its corners farthest from the example
        (bench_sketch's reference): their mean distances and range, and the ratios to the mean;
+       the copy check below on the reference and corner crops themselves (reference_best_ssim:
+       how near the DEM's own other ground comes to the 0.9 rule);
        and the reference blurred by 0.4 px, a change the eye does not see on a hillshade, as a
        calibration: where it misses the curvature target, that target reads the pixels' texture
        (docs/singan.md, "The curvature target at 1 px"),
@@ -263,28 +265,40 @@ static double heights_distance(const tn_image *ex, const tn_image *img)
     return sum;
 }
 
-/* The three 256 crops at the DEM's corners farthest from the example (bench_sketch's rule): their
-   mean distance to the example, and the least and greatest in lo, hi. How far the DEM's other
-   ground lies from the example: the reference crop, picked as the example was, can lie far closer. */
-static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi, double *heights)
+/* Where the three 256 crops at the DEM's corners farthest from the example lie (bench_sketch's
+   rule), farthest first. */
+static void far_corners(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, int *ox, int *oy)
 {
     int cx[4] = {0, full->width - 256, 0, full->width - 256}, cy[4] = {0, 0, full->height - 256, full->height - 256}, used[4] = {0, 0, 0, 0};
-    int k, n = 0;
-    dists mean = {0, 0, 0, 0};
-    *heights = 0;
-    lo->slope = lo->curv = lo->spec = DBL_MAX;
-    hi->slope = hi->curv = hi->spec = 0;
+    int k, i;
     for (k = 0; k < 3; k++) {
-        int i, best = 0;
+        int best = 0;
         double bd = -1;
-        tn_image c = {0, 0, 0, NULL};
-        dists d;
         for (i = 0; i < 4; i++) {
             double dd = hypot(cx[i] + 128 - (ex_x + ex->width / 2), cy[i] + 128 - (ex_y + ex->height / 2));
             if (!used[i] && dd > bd) bd = dd, best = i;
         }
         used[best] = 1;
-        if (tn_image_crop(&c, full, cx[best], cy[best], 256, 256)) continue;
+        ox[k] = cx[best];
+        oy[k] = cy[best];
+    }
+}
+
+/* The three far corner crops' mean distance to the example, and the least and greatest in lo,
+   hi. How far the DEM's other ground lies from the example: the reference crop, picked as the
+   example was, can lie far closer. */
+static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, int ex_y, float dx, float dy, dists *lo, dists *hi, double *heights)
+{
+    int ox[3], oy[3], k, n = 0;
+    dists mean = {0, 0, 0, 0};
+    far_corners(full, ex, ex_x, ex_y, ox, oy);
+    *heights = 0;
+    lo->slope = lo->curv = lo->spec = DBL_MAX;
+    hi->slope = hi->curv = hi->spec = 0;
+    for (k = 0; k < 3; k++) {
+        tn_image c = {0, 0, 0, NULL};
+        dists d;
+        if (tn_image_crop(&c, full, ox[k], oy[k], 256, 256)) continue;
         d = dist3(ex, &c, dx, dy);
         *heights += heights_distance(ex, &c) / 3;
         tn_image_free(&c);
@@ -294,6 +308,24 @@ static dists corner_crops(const tn_image *full, const tn_image *ex, int ex_x, in
     }
     if (n) mean.slope /= n, mean.curv /= n, mean.spec /= n;
     return mean;
+}
+
+/* The copy check (measure's best_ssim) on the DEM's own other ground: the middle 128 px of the
+   reference crop and of the three far corner crops against every crop of the example. Real
+   terrain of smooth slopes reaches high SSIM without being a copy; this says how near. */
+static void reference_copies(const char *n, const tn_image *full, const tn_image *ex, int ex_x, int ex_y, int ref_x, int ref_y)
+{
+    int x[4], y[4], k;
+    double b[4] = {-1, -1, -1, -1};
+    x[0] = ref_x, y[0] = ref_y;
+    far_corners(full, ex, ex_x, ex_y, x + 1, y + 1);
+    for (k = 0; k < 4; k++) {
+        tn_image w = {0, 0, 0, NULL};
+        if (!tn_image_crop(&w, full, x[k] + 64, y[k] + 64, 128, 128)) b[k] = best_crop_ssim(ex, &w);
+        tn_image_free(&w);
+    }
+    printf("%s_reference_best_ssim: %.3f (the copy check on the reference crop: its middle 128 px against every crop of the example; "
+           "the far corner crops' %.3f %.3f %.3f; real ground, not copies)\n", n, b[0], b[1], b[2], b[3]);
 }
 
 /* How deep the main valleys are cut (the arrangement the three distances miss): the mean of
@@ -524,6 +556,7 @@ static void bench_region(const region *rg, double minutes, int threads)
            g_valleys_ex, g_heights_ref);
     printf("%s_corner_crops: slope %.3f curvature %.3f spectrum %.3f (mean of 3; ranges %.3f-%.3f, %.3f-%.3f, %.3f-%.3f) | heights_distance %.1f %%\n", n,
            corners.slope, corners.curv, corners.spec, lo.slope, hi.slope, lo.curv, hi.curv, lo.spec, hi.spec, corner_heights);
+    reference_copies(n, &full, &ex, exx, exy, ox, oy);
     reference_blurred(n, &ex, &other, &ref, dx, dy);
     if (g_step > 0) { /* judged without the steps too: the blurred reference stays near it there */
         tn_image os = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};

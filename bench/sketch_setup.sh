@@ -24,6 +24,7 @@ for b in bin/terrainnet bin/bench_gnn bin/bench_sketch; do
     [ -x $b ] || { echo "sketch_setup: $b is missing (make $b; run from the repository root)" >&2; exit 2; }
 done
 mkdir -p "$OUT"
+failed=
 for r in $REGIONS; do
     dem="$DATA/dem/$r/${r}_full.png"
     # the 128 crop ("rows Y-.. cols X-.. of REGION_full.png") and the metre mapping of the 16-bit codes
@@ -37,11 +38,14 @@ for r in $REGIONS; do
             --checkpoint "$OUT/$r.tnw.ckpt" -o "$OUT/$r.tnw" > "$OUT/$r.train.log" 2>&1 || { tail -n 5 "$OUT/$r.train.log" >&2; exit 1; }
         rm -f "$OUT/$r.tnw.ckpt"
     fi
+    # a bench that fails on one region is reported and the next region still runs
     echo "== $r: bench_gnn ($(date -u +%H:%M:%S) UTC)"
-    ./bin/bench_gnn "$r" "$MINUTES" "$THREADS" pictures=1 moved=0 model="$OUT/$r.tnw" > "$OUT/$r.gnn.log"
+    ./bin/bench_gnn "$r" "$MINUTES" "$THREADS" pictures=1 moved=0 model="$OUT/$r.tnw" > "$OUT/$r.gnn.log" ||
+        { echo "sketch_setup: $r: bench_gnn failed (see above)" >&2; failed="$failed $r"; }
     [ -f "gnn_fig10_$r.png" ] && mv "gnn_fig10_$r.png" "$OUT/"
     echo "== $r: bench_sketch ($(date -u +%H:%M:%S) UTC)"
-    ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log"
+    ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log" ||
+        { echo "sketch_setup: $r: bench_sketch failed (see above)" >&2; failed="$failed $r"; }
 done
 # The summary: per drawing the targets (follow >= 90 %, height error <= 10 %, the three
 # distances <= 1.5 x the real crops'), the summits per area against the real crops', the 256 and
@@ -74,3 +78,4 @@ num='\([^ ;]*\)'
     done
 } > "$OUT/summary.md"
 cat "$OUT/summary.md"
+[ -z "$failed" ] || { echo "sketch_setup: a bench failed on:$failed" >&2; exit 1; }
