@@ -203,9 +203,12 @@ static int progress(void *user, const char *stage, double f)
     static double last;
     double t = tn_time_seconds();
     (void)user;
-    if (t - last > 15.0 || f >= 1.0) {
+    /* every 15 s: the short stages (hundreds of extractions a run) would flood the log */
+    if (t - last > 15.0) {
+        double eta = tn_progress_eta();
         last = t;
-        fprintf(stderr, "  %s %3.0f %% (eta %.0f s)\n", stage, 100.0 * f, tn_progress_eta());
+        if (eta >= 0) fprintf(stderr, "  %s %3.0f %% (eta %.0f s)\n", stage, 100.0 * f, eta);
+        else fprintf(stderr, "  %s %3.0f %%\n", stage, 100.0 * f);
     }
     return 0;
 }

@@ -18,11 +18,11 @@
      - SinGAN trained for the budget: the same three distances of 3 samples (seeds 100..102,
        256 x 256, mean) and their ratios to the reference's; the samples' height range against
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
-       every 128 px crop of the example (stride 4; copy check); whether two seeds differ; the
-       depth of the main valleys (valley_depth: the arrangement the distances miss) against the
-       example's, and the reference crop's; how far the heights' distribution lies from the
-       example's (heights_distance: a massif or range the sample lacks), against the reference
-       crop's and the corner crops',
+       every 128 px crop of the example (stride 4; copy check) and where it matched; whether two
+       seeds differ; the depth of the main valleys (valley_depth: the arrangement the distances
+       miss) against the example's, and the reference crop's; how far the heights' distribution
+       lies from the example's (heights_distance: a massif or range the sample lacks), against
+       the reference crop's and the corner crops',
      - where the example is stored in coarse height steps (8-bit; tn_image_height_step's coarse
        steps, which SinGAN trains without): REGION_reference_smooth, the reference crop's distances with both
        without their steps (tn_image_dequantize) and the blurred reference's ratios there; and
@@ -40,7 +40,8 @@
      - with --pictures DIR: DIR/singan_REGION.png, hillshaded previews example | SinGAN | GPNN
        (colours on the example's height range, so heights outside it show), the SinGAN sample
        (DIR/REGION_singan.png) and model (DIR/REGION_singan.tnw); with --layout the laid-out sample
-       between SinGAN and GPNN,
+       between SinGAN and GPNN; and per generator the copy check's best pair, the sample's middle
+       128 px | the example's crop it matched (DIR/singan_REGION_copy_{singan,layout,gpnn}.png),
      - with --model DIR: the models an earlier --pictures DIR run saved, instead of training,
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
@@ -154,8 +155,9 @@ static double ssim_of(const tn_image *a, const tn_image *b)
     return s;
 }
 
-/* Best SSIM of a w x w window against every w x w crop of ex (stride 4). */
-static double best_crop_ssim(const tn_image *ex, const tn_image *win)
+/* Best SSIM of a w x w window against every w x w crop of ex (stride 4); where that crop lies in
+   (bx, by) (may be NULL). */
+static double best_crop_ssim(const tn_image *ex, const tn_image *win, int *bx, int *by)
 {
     double best = -1;
     int x, y, w = win->width;
@@ -165,7 +167,10 @@ static double best_crop_ssim(const tn_image *ex, const tn_image *win)
             double s;
             tn_image_crop(&c, ex, x, y, w, w);
             s = ssim_of(&c, win);
-            if (s > best) best = s;
+            if (s > best) {
+                best = s;
+                if (bx) *bx = x, *by = y;
+            }
             tn_image_free(&c);
         }
     return best;
@@ -321,7 +326,7 @@ static void reference_copies(const char *n, const tn_image *full, const tn_image
     far_corners(full, ex, ex_x, ex_y, x + 1, y + 1);
     for (k = 0; k < 4; k++) {
         tn_image w = {0, 0, 0, NULL};
-        if (!tn_image_crop(&w, full, x[k] + 64, y[k] + 64, 128, 128)) b[k] = best_crop_ssim(ex, &w);
+        if (!tn_image_crop(&w, full, x[k] + 64, y[k] + 64, 128, 128)) b[k] = best_crop_ssim(ex, &w, NULL, NULL);
         tn_image_free(&w);
     }
     printf("%s_reference_best_ssim: %.3f (the copy check on the reference crop: its middle 128 px against every crop of the example; "
@@ -358,7 +363,12 @@ static double valley_depth(const tn_image *dem)
 }
 
 /* Measures 3 samples against the example and the reference distances; prints one line. */
-typedef struct measured { dists d, stored, smooth; float lo, hi; double best_ssim, seed_diff, valleys, heights; } measured;
+typedef struct measured {
+    dists d, stored, smooth;
+    float lo, hi;
+    double best_ssim, seed_diff, valleys, heights;
+    int best_seed, best_x, best_y; /* the copy check's best: which sample (0..2), and where in the example */
+} measured;
 
 static double g_valleys_ex;  /* valley_depth of the current region's example */
 static double g_heights_ref; /* heights_distance of the reference crop */
@@ -379,10 +389,10 @@ static void report(const char *name, const char *what, const measured *m, const 
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | "
-           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f | seeds differ by %.1f (mean |a-b|) | "
+           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f (sample %d's middle 128 px against (%d, %d) of the example) | seeds differ by %.1f (mean |a-b|) | "
            "to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | heights_distance %.1f %% (%.2fx)%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, m->d.curv2, m->d.curv2 / ref->curv2, (double)m->lo, (double)m->hi,
-           ok_h ? "within" : "OUTSIDE", m->best_ssim, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
+           ok_h ? "within" : "OUTSIDE", m->best_ssim, m->best_seed, m->best_x, m->best_y, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
            m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref, met(rs, rc, rp, ok_h, m));
     if (g_step > 0) {
         const dists *t = &m->stored;
@@ -445,8 +455,9 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
         if (hi > m->hi) m->hi = hi;
         tn_image_crop(&w, &s[i], 64, 64, 128, 128);
         {
-            double b = best_crop_ssim(ex, &w);
-            if (b > m->best_ssim) m->best_ssim = b;
+            int bx = 0, by = 0;
+            double b = best_crop_ssim(ex, &w, &bx, &by);
+            if (b > m->best_ssim) m->best_ssim = b, m->best_seed = i, m->best_x = bx, m->best_y = by;
         }
         tn_image_free(&w);
     }
@@ -482,6 +493,21 @@ static void pictures(const char *dir, const char *name, const tn_image *imgs, in
 }
 
 static const char *g_argv0, *g_pictures, *g_model_dir;
+
+/* With --pictures: DIR/singan_REGION_copy_WHAT.png, the copy check's best pair side by side (the
+   sample's middle 128 px | the example's crop it matched), to judge by eye whether it is a copy. */
+static void copy_pair(const char *n, const char *what, const tn_image *ex, const tn_image *s, const measured *m, float dx, float dy, float lo, float hi)
+{
+    tn_image pair[2];
+    char name[300];
+    memset(pair, 0, sizeof pair);
+    if (!tn_image_crop(&pair[0], &s[m->best_seed], 64, 64, 128, 128) && !tn_image_crop(&pair[1], ex, m->best_x, m->best_y, 128, 128)) {
+        snprintf(name, sizeof name, "%s_copy_%s", n, what);
+        pictures(g_pictures, name, pair, 2, dx, dy, lo, hi);
+    }
+    tn_image_free(&pair[0]);
+    tn_image_free(&pair[1]);
+}
 static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPNN (tn_singan_gen_opts.layout) */
 static int g_gate;                          /* tn_singan_gen_opts.gate of every sample (-1: off) */
 static float g_fine_noise;                  /* tn_singan_gen_opts.fine_noise of every sample (0: default) */
@@ -534,6 +560,9 @@ static void bench_region(const region *rg, double minutes, int threads)
     memset(sg, 0, sizeof sg);
     memset(gp, 0, sizeof gp);
     memset(sl, 0, sizeof sl);
+    memset(&ms, 0, sizeof ms);
+    memset(&mg, 0, sizeof mg);
+    memset(&ml, 0, sizeof ml);
     if (!load(n, "256", &ex, &dx, &dy) || !load(n, "full", &full, &fdx, &fdy)) {
         printf("# %s: skipped (no data)\n", n);
         return;
@@ -654,6 +683,9 @@ static void bench_region(const region *rg, double minutes, int threads)
         if (sl[0].data) set[k++] = sl[0];
         if (gp[0].data) set[k++] = gp[0];
         pictures(g_pictures, n, set, k, dx, dy, elo, ehi);
+        if (sg[0].data) copy_pair(n, "singan", &ex, sg, &ms, dx, dy, elo, ehi);
+        if (sl[0].data) copy_pair(n, "layout", &ex, sl, &ml, dx, dy, elo, ehi);
+        if (gp[0].data) copy_pair(n, "gpnn", &ex, gp, &mg, dx, dy, elo, ehi);
         {
             char path[512];
             snprintf(path, sizeof path, "%s/%s_singan.png", g_pictures, n); /* the sample itself, 16 bit with its range */

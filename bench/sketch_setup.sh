@@ -48,7 +48,8 @@ for r in $REGIONS; do
         { echo "sketch_setup: $r: bench_sketch failed (see above)" >&2; failed="$failed $r"; }
 done
 # The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
-# distances <= 1.5 x the real crops'), the summits per area against the real crops', the 256 and
+# distances <= 1.5 x the real crops'; for an 8-bit example also without the height steps, in
+# brackets), the summits per area against the real crops', the 256 and
 # BIG generation seconds, and per region the reconstruction (of an 8-bit example also without its
 # steps, as gnn-train learns it) and the neighbours against the membrane.
 first() { sed -n "s/$2/\1/p" "$1" | head -1; } # FILE SED-PATTERN: the first line's \1
@@ -61,7 +62,12 @@ num='\([^ ;]*\)'
         [ -f "$L" ] || continue
         for d in valley summit ring cross; do
             row="| $r | $d | $(first "$L" "^${d}_new_follow: $num.*") | $(first "$L" "^${d}_new_height_error: $num.*")"
-            for k in slope curvature spectrum peaks; do row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"; done
+            for k in slope curvature spectrum peaks; do
+                row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"
+                # an 8-bit example: also without the height steps, as gnn-train learns it
+                sm=$(first "$L" "^${d}_new_smooth: .*$k [^(]*($num x real).*")
+                [ -n "$sm" ] && row="$row ($sm)"
+            done
             echo "$row | $(first "$L" "^${d}_new_gain: .*seconds: $num.*") | $(first "$L" "^${d}_${BIG}_map_scale: .*; seconds $num;.*") |"
         done
     done
