@@ -2084,11 +2084,13 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
    quilt carries them too, each block offset so its heights meet its neighbours', and the added
    lines are the network of those heights on the strokes' ground, with their relief taken, away
    from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
-   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's), then,
+   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's); then,
    within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
-   valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
-   when the lines' membrane holds far more closed basins than the example's own, each basin drains
-   by a valley over its lowest saddle (tn__gnn_grow_drain). */
+   valley (the nearest user line) by the example's mean local relief / 16 px per px. When the
+   lines' membrane holds far more closed basins than the example's own, each basin drains by a
+   valley over its lowest saddle (tn__gnn_grow_drain). Last, the added lines' heights are kept
+   within the example's and the strokes' (tn__soft_limit): relief stacked on a high stroke's
+   ground rose above the example's top, on a low one below its floor. */
 typedef struct tn_gnn_grow_opts {
     uint64_t seed;
     float gap;            /* px between an added line and every user line; 0 = 4 */
@@ -3420,6 +3422,18 @@ TN_API double tn_time_seconds(void)
 }
 
 TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
+
+/* v beyond [lo, hi] compressed smoothly into a band of that width beyond it (no plateau at the
+   edge: slope 1 there): generated terrain kept within its example's heights, where an
+   undertrained scale or a stack of copied relief would run far past them. */
+TN__SHARED float tn__soft_limit(float v, float lo, float hi, float band)
+{
+    float k = 1.0f / band;
+    if (!(band > 0)) return v;
+    if (v > hi) return hi + band * tanhf((v - hi) * k);
+    if (v < lo) return lo - band * tanhf((lo - v) * k);
+    return v;
+}
 
 /* qsort's order of floats, ascending. */
 TN__SHARED int tn__cmp_float(const void *a, const void *b)
@@ -21760,19 +21774,8 @@ typedef struct tn__sg_gen_run {
     int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
                               mstride apart (0 = mw: the whole map); @@world's refine tiles */
     int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
-    int limit;            /* 1: the output's heights softly limited to the example's range +- 10 % */
+    int limit;            /* 1: the output's heights softly limited to the example's range +- 10 % (tn__soft_limit; upstream SinGAN clamps) */
 } tn__sg_gen_run;
-
-/* Random terrain's heights beyond the example's range [-1, 1] are compressed into a 0.2 (10 %
-   of the range) band, smoothly (no plateaus): v -> 1 + 0.2 tanh((v - 1) / 0.2). Upstream
-   SinGAN clamps its samples to the example's range; an undertrained scale can push a few
-   pixels far out (the issue's trenches; docs/singan.md). */
-static float tn__sg_limit(float v)
-{
-    if (v > 1.0f) return 1.0f + 0.2f * tanhf((v - 1.0f) * 5.0f);
-    if (v < -1.0f) return -1.0f - 0.2f * tanhf((-1.0f - v) * 5.0f);
-    return v;
-}
 
 static int tn__sg_net(const tn__sg_arch *A, int level) { return level < A->scales ? level : A->scales - 1; }
 
@@ -21948,7 +21951,7 @@ static tn_status tn__sg_generate(const tn_singan *m, tn__sg_gen_run *r, int leve
             for (y = 0; y < th; y++)
                 for (x = 0; x < tw; x++) {
                     float v = buf[(size_t)y * tw + x];
-                    img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * (r->limit ? tn__sg_limit(v) : v);
+                    img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * (r->limit ? tn__soft_limit(v, -1.0f, 1.0f, 0.2f) : v);
                 }
             if (total > 1) st = tn__progress("singan-generate", (double)++done / (double)total);
         }
@@ -28606,7 +28609,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
-    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL;
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL;
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
@@ -28631,6 +28634,19 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     if (o.gap == 0) o.gap = 4;
     if (!o.block) o.block = 48;
     if (!o.candidates) o.candidates = dem ? TN__GNN_QUILT_CANDIDATES : 48;
+    if (dem) tn_image_range(&elo, &ehi, dem);
+    else
+        for (c = 0; c < example->count; c++)
+            for (i = 0; i < (size_t)example->items[c].npoints; i++) {
+                elo = fminf(elo, example->items[c].points[3 * i + 2]);
+                ehi = fmaxf(ehi, example->items[c].points[3 * i + 2]);
+            }
+    band = 0.1f * (ehi - elo);
+    for (c = 0; c < user->count; c++) /* a drawing beyond the example's heights widens them (the band stays) */
+        for (i = 0; i < (size_t)user->items[c].npoints; i++) {
+            elo = fminf(elo, user->items[c].points[3 * i + 2]);
+            ehi = fmaxf(ehi, user->items[c].points[3 * i + 2]);
+        }
     Wx = example->width;
     Hx = example->height;
     B = o.block;
@@ -28829,6 +28845,13 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     }
     if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
     nl = (size_t)(set.count - user->count);
+    for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
+        for (i = 0; i < (size_t)set.items[c].npoints; i++) {
+            float *q = set.items[c].points + 3 * i;
+            int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(width - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(height - 1));
+            size_t p = (size_t)y * width + (size_t)x;
+            if (!(ur.data[3 * p] > 0 || ur.data[3 * p + 1] > 0)) q[2] = tn__soft_limit(q[2], elo, ehi, band);
+        }
 done:
     tn_image_free(&ur);
     tn_image_free(&er);

@@ -20,6 +20,8 @@
      example) to the example: <= 1.5 is the issue's target; where the example is stored in
      coarse height steps (tn_image_height_step: 8-bit), _smooth: the same three against the
      example and the real crops without their steps (tn_image_dequantize), as gnn-train learns it;
+   - heights: the output's height range against the example's (the model's), and the share of
+     the map more than 10 % of that range outside it (ground the example has nowhere);
    - basins: the share of the map in closed basins deeper than 1 % of the example's range (water
      could not leave them), beside the real crops' (real_crop_K lines);
    - peaks: summits per 10^4 px, points of the terrain (rounded to the DEM's height step, as the
@@ -1005,6 +1007,14 @@ int main(int argc, char **argv)
                        dist[0] / real_s[0], dist[1], dist[1] / real_s[1], dist[2], dist[2] / real_s[2]);
             }
             printf("%s_%s_basins: %.1f %% of the map\n", all[d], way[w], 100 * basins(&out[w], model.lo, model.hi));
+            {
+                float lo, hi, band = 0.1f * (model.hi - model.lo);
+                size_t beyond = 0;
+                tn_image_range(&lo, &hi, &out[w]);
+                for (q = 0; q < (size_t)256 * 256; q++) beyond += out[w].data[q] < model.lo - band || out[w].data[q] > model.hi + band;
+                printf("%s_%s_heights: %.0f..%.0f m (the example's %.0f..%.0f m; %.1f %% of the map beyond it by more than 10 %% of its range)\n", all[d],
+                       way[w], (double)lo, (double)hi, (double)model.lo, (double)model.hi, 100.0 * (double)beyond / (256.0 * 256.0));
+            }
             pk = peaks(&out[w]);
             printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], pk, pk / real_peaks);
             for (k = 0; k < 4; k++) {

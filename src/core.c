@@ -541,6 +541,18 @@ TN_API double tn_time_seconds(void)
 
 TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < lo ? lo : (v > hi ? hi : v); }
 
+/* v beyond [lo, hi] compressed smoothly into a band of that width beyond it (no plateau at the
+   edge: slope 1 there): generated terrain kept within its example's heights, where an
+   undertrained scale or a stack of copied relief would run far past them. */
+TN__SHARED float tn__soft_limit(float v, float lo, float hi, float band)
+{
+    float k = 1.0f / band;
+    if (!(band > 0)) return v;
+    if (v > hi) return hi + band * tanhf((v - hi) * k);
+    if (v < lo) return lo - band * tanhf((lo - v) * k);
+    return v;
+}
+
 /* qsort's order of floats, ascending. */
 TN__SHARED int tn__cmp_float(const void *a, const void *b)
 {

@@ -22,11 +22,13 @@
    quilt carries them too, each block offset so its heights meet its neighbours', and the added
    lines are the network of those heights on the strokes' ground, with their relief taken, away
    from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
-   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's), then,
+   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's); then,
    within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
-   valley (the nearest user line) by the example's mean local relief / 16 px per px. Last,
-   when the lines' membrane holds far more closed basins than the example's own, each basin drains
-   by a valley over its lowest saddle (tn__gnn_grow_drain). */
+   valley (the nearest user line) by the example's mean local relief / 16 px per px. When the
+   lines' membrane holds far more closed basins than the example's own, each basin drains by a
+   valley over its lowest saddle (tn__gnn_grow_drain). Last, the added lines' heights are kept
+   within the example's and the strokes' (tn__soft_limit): relief stacked on a high stroke's
+   ground rose above the example's top, on a low one below its floor. */
 typedef struct tn_gnn_grow_opts {
     uint64_t seed;
     float gap;            /* px between an added line and every user line; 0 = 4 */
@@ -657,7 +659,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
-    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL;
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL;
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
@@ -682,6 +684,19 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     if (o.gap == 0) o.gap = 4;
     if (!o.block) o.block = 48;
     if (!o.candidates) o.candidates = dem ? TN__GNN_QUILT_CANDIDATES : 48;
+    if (dem) tn_image_range(&elo, &ehi, dem);
+    else
+        for (c = 0; c < example->count; c++)
+            for (i = 0; i < (size_t)example->items[c].npoints; i++) {
+                elo = fminf(elo, example->items[c].points[3 * i + 2]);
+                ehi = fmaxf(ehi, example->items[c].points[3 * i + 2]);
+            }
+    band = 0.1f * (ehi - elo);
+    for (c = 0; c < user->count; c++) /* a drawing beyond the example's heights widens them (the band stays) */
+        for (i = 0; i < (size_t)user->items[c].npoints; i++) {
+            elo = fminf(elo, user->items[c].points[3 * i + 2]);
+            ehi = fmaxf(ehi, user->items[c].points[3 * i + 2]);
+        }
     Wx = example->width;
     Hx = example->height;
     B = o.block;
@@ -880,6 +895,13 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     }
     if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
     nl = (size_t)(set.count - user->count);
+    for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
+        for (i = 0; i < (size_t)set.items[c].npoints; i++) {
+            float *q = set.items[c].points + 3 * i;
+            int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(width - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(height - 1));
+            size_t p = (size_t)y * width + (size_t)x;
+            if (!(ur.data[3 * p] > 0 || ur.data[3 * p + 1] > 0)) q[2] = tn__soft_limit(q[2], elo, ehi, band);
+        }
 done:
     tn_image_free(&ur);
     tn_image_free(&er);

@@ -509,19 +509,8 @@ typedef struct tn__sg_gen_run {
     int mx0, my0, mstride; /* map holds only columns mx0.. and rows my0.. of the mw x mh map, rows
                               mstride apart (0 = mw: the whole map); @@world's refine tiles */
     int map_is_output;    /* 1: the map is that level's output; 0: its upsampled coarser input */
-    int limit;            /* 1: the output's heights softly limited to the example's range +- 10 % */
+    int limit;            /* 1: the output's heights softly limited to the example's range +- 10 % (tn__soft_limit; upstream SinGAN clamps) */
 } tn__sg_gen_run;
-
-/* Random terrain's heights beyond the example's range [-1, 1] are compressed into a 0.2 (10 %
-   of the range) band, smoothly (no plateaus): v -> 1 + 0.2 tanh((v - 1) / 0.2). Upstream
-   SinGAN clamps its samples to the example's range; an undertrained scale can push a few
-   pixels far out (the issue's trenches; docs/singan.md). */
-static float tn__sg_limit(float v)
-{
-    if (v > 1.0f) return 1.0f + 0.2f * tanhf((v - 1.0f) * 5.0f);
-    if (v < -1.0f) return -1.0f - 0.2f * tanhf((-1.0f - v) * 5.0f);
-    return v;
-}
 
 static int tn__sg_net(const tn__sg_arch *A, int level) { return level < A->scales ? level : A->scales - 1; }
 
@@ -697,7 +686,7 @@ static tn_status tn__sg_generate(const tn_singan *m, tn__sg_gen_run *r, int leve
             for (y = 0; y < th; y++)
                 for (x = 0; x < tw; x++) {
                     float v = buf[(size_t)y * tw + x];
-                    img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * (r->limit ? tn__sg_limit(v) : v);
+                    img.data[(size_t)(ty + y) * w + tx + x] = m->offset + m->range * (r->limit ? tn__soft_limit(v, -1.0f, 1.0f, 0.2f) : v);
                 }
             if (total > 1) st = tn__progress("singan-generate", (double)++done / (double)total);
         }

@@ -1830,6 +1830,45 @@ TN_TEST(grown_spurs_keep_the_example_tilt)
     tn_image_free(&full);
 }
 
+TN_TEST(grown_lines_keep_the_example_heights)
+{
+    /* the added lines are the quilted relief on the strokes' ground: on a ridge drawn at the
+       example's top and a valley at its floor, that relief ran past both; now it stays within
+       the example's range, give or take 10 % of it (tn__soft_limit; strokes beyond it would
+       widen it). Example: the bundled Alps DEM's central 128 px */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    tn_contour c[2];
+    float rp[3 * 20], vp[3 * 20], lo, hi, glo = 1e30f, ghi = -1e30f, band;
+    int i, j;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    tn_image_range(&lo, &hi, &dem);
+    band = 0.1f * (hi - lo);
+    ex = own_sketch(&dem);
+    for (i = 0; i < 20; i++) {
+        rp[3 * i] = vp[3 * i] = 10.0f + 11.0f * (float)i;
+        rp[3 * i + 1] = 70.0f + 6.0f * sinf(0.5f * (float)i), rp[3 * i + 2] = hi;
+        vp[3 * i + 1] = 170.0f, vp[3 * i + 2] = lo;
+    }
+    memset(c, 0, sizeof c);
+    c[0].type = TN_RIDGE, c[0].npoints = 20, c[0].points = rp;
+    c[1].type = TN_VALLEY, c[1].npoints = 20, c[1].points = vp;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 240, user.count = 2, user.items = c;
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+    for (i = 2; i < g.count; i++)
+        for (j = 0; j < g.items[i].npoints; j++) glo = fminf(glo, g.items[i].points[3 * j + 2]), ghi = fmaxf(ghi, g.items[i].points[3 * j + 2]);
+    printf("  added lines' heights %.0f..%.0f m; the example's %.0f..%.0f m (+-10 %%: %.0f..%.0f)\n", (double)glo, (double)ghi, (double)lo,
+           (double)hi, (double)(lo - band), (double)(hi + band));
+    TN_CHECK(g.count > 10);
+    TN_CHECK(glo >= lo - band - 1e-3f * (hi - lo) && ghi <= hi + band + 1e-3f * (hi - lo));
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grown_ridge_flanks_are_its_own)
 {
     /* with the example's heights, the quilted relief fades in over 16 px from a drawn ridge: the
@@ -2515,6 +2554,7 @@ int main(void)
     TN_RUN(grow_flanks_without_streaks);
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_spurs_keep_the_example_tilt);
+    TN_RUN(grown_lines_keep_the_example_heights);
     TN_RUN(grown_ridge_flanks_are_its_own);
     TN_RUN(drawing_off_the_example_level_is_seen_at_it);
     TN_RUN(grown_generation);
