@@ -2801,6 +2801,7 @@ void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
 extern const int tn__d8x[8], tn__d8y[8];
 tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                        const float *pts, int npts);
+void tn__cset_height_range(const tn_contour_set *s, float *lo, float *hi);
 void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8]);
 int tn__yokoi8(const int p[8]);
 #endif
@@ -3428,10 +3429,9 @@ TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < l
    undertrained scale or a stack of copied relief would run far past them. */
 TN__SHARED float tn__soft_limit(float v, float lo, float hi, float band)
 {
-    float k = 1.0f / band;
     if (!(band > 0)) return v;
-    if (v > hi) return hi + band * tanhf((v - hi) * k);
-    if (v < lo) return lo - band * tanhf((lo - v) * k);
+    if (v > hi) return hi + band * tanhf((v - hi) * (1.0f / band));
+    if (v < lo) return lo - band * tanhf((lo - v) * (1.0f / band));
     return v;
 }
 
@@ -15149,6 +15149,18 @@ TN_API void tn_contour_set_free(tn_contour_set *set) {
 
 /* ---- small builders shared by the sketch code ---- */
 
+/* Widens [*lo, *hi] to take in every point height of s (start from FLT_MAX, -FLT_MAX). */
+TN__INTERNAL_SHARED void tn__cset_height_range(const tn_contour_set *s, float *lo, float *hi)
+{
+    int c, j;
+    for (c = 0; c < s->count; c++)
+        for (j = 0; j < s->items[c].npoints; j++) {
+            float h = s->items[c].points[3 * j + 2];
+            if (h < *lo) *lo = h;
+            if (h > *hi) *hi = h;
+        }
+}
+
 /* Appends a polyline (points copied) to *s, whose items array has capacity *cap bytes. */
 TN__INTERNAL tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                               const float *pts, int npts)
@@ -26017,12 +26029,7 @@ static tn_status tn__gnn_sketch_units(const tn__gnn_arch *A, const tn_contour_se
     tn_contour_set s;
     float sx = (float)W / (float)sk->width, sy = (float)H / (float)sk->height, hmin = FLT_MAX, hmax = -FLT_MAX, a = 1, b = 0;
     int i, j;
-    for (i = 0; i < sk->count; i++)
-        for (j = 0; j < sk->items[i].npoints; j++) {
-            float h = sk->items[i].points[3 * j + 2];
-            if (h < hmin) hmin = h;
-            if (h > hmax) hmax = h;
-        }
+    tn__cset_height_range(sk, &hmin, &hmax);
     if (heights == TN_GNN_HEIGHTS_AUTO)
         heights = hmin >= 0 && hmax <= 1 && !(A->lo >= 0 && A->hi <= 1) ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_EXAMPLE;
     if (heights == TN_GNN_HEIGHTS_UNIT) {
@@ -28635,18 +28642,9 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     if (!o.block) o.block = 48;
     if (!o.candidates) o.candidates = dem ? TN__GNN_QUILT_CANDIDATES : 48;
     if (dem) tn_image_range(&elo, &ehi, dem);
-    else
-        for (c = 0; c < example->count; c++)
-            for (i = 0; i < (size_t)example->items[c].npoints; i++) {
-                elo = fminf(elo, example->items[c].points[3 * i + 2]);
-                ehi = fmaxf(ehi, example->items[c].points[3 * i + 2]);
-            }
+    else tn__cset_height_range(example, &elo, &ehi);
     band = 0.1f * (ehi - elo);
-    for (c = 0; c < user->count; c++) /* a drawing beyond the example's heights widens them (the band stays) */
-        for (i = 0; i < (size_t)user->items[c].npoints; i++) {
-            elo = fminf(elo, user->items[c].points[3 * i + 2]);
-            ehi = fmaxf(ehi, user->items[c].points[3 * i + 2]);
-        }
+    tn__cset_height_range(user, &elo, &ehi); /* a drawing beyond the example's heights widens them (the band stays) */
     Wx = example->width;
     Hx = example->height;
     B = o.block;

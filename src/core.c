@@ -546,10 +546,9 @@ TN__INTERNAL_SHARED float tn__clampf(float v, float lo, float hi) { return v < l
    undertrained scale or a stack of copied relief would run far past them. */
 TN__SHARED float tn__soft_limit(float v, float lo, float hi, float band)
 {
-    float k = 1.0f / band;
     if (!(band > 0)) return v;
-    if (v > hi) return hi + band * tanhf((v - hi) * k);
-    if (v < lo) return lo - band * tanhf((lo - v) * k);
+    if (v > hi) return hi + band * tanhf((v - hi) * (1.0f / band));
+    if (v < lo) return lo - band * tanhf((lo - v) * (1.0f / band));
     return v;
 }
 

@@ -2422,12 +2422,7 @@ static tn_status tn__gnn_sketch_units(const tn__gnn_arch *A, const tn_contour_se
     tn_contour_set s;
     float sx = (float)W / (float)sk->width, sy = (float)H / (float)sk->height, hmin = FLT_MAX, hmax = -FLT_MAX, a = 1, b = 0;
     int i, j;
-    for (i = 0; i < sk->count; i++)
-        for (j = 0; j < sk->items[i].npoints; j++) {
-            float h = sk->items[i].points[3 * j + 2];
-            if (h < hmin) hmin = h;
-            if (h > hmax) hmax = h;
-        }
+    tn__cset_height_range(sk, &hmin, &hmax);
     if (heights == TN_GNN_HEIGHTS_AUTO)
         heights = hmin >= 0 && hmax <= 1 && !(A->lo >= 0 && A->hi <= 1) ? TN_GNN_HEIGHTS_UNIT : TN_GNN_HEIGHTS_EXAMPLE;
     if (heights == TN_GNN_HEIGHTS_UNIT) {

@@ -685,18 +685,9 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     if (!o.block) o.block = 48;
     if (!o.candidates) o.candidates = dem ? TN__GNN_QUILT_CANDIDATES : 48;
     if (dem) tn_image_range(&elo, &ehi, dem);
-    else
-        for (c = 0; c < example->count; c++)
-            for (i = 0; i < (size_t)example->items[c].npoints; i++) {
-                elo = fminf(elo, example->items[c].points[3 * i + 2]);
-                ehi = fmaxf(ehi, example->items[c].points[3 * i + 2]);
-            }
+    else tn__cset_height_range(example, &elo, &ehi);
     band = 0.1f * (ehi - elo);
-    for (c = 0; c < user->count; c++) /* a drawing beyond the example's heights widens them (the band stays) */
-        for (i = 0; i < (size_t)user->items[c].npoints; i++) {
-            elo = fminf(elo, user->items[c].points[3 * i + 2]);
-            ehi = fmaxf(ehi, user->items[c].points[3 * i + 2]);
-        }
+    tn__cset_height_range(user, &elo, &ehi); /* a drawing beyond the example's heights widens them (the band stays) */
     Wx = example->width;
     Hx = example->height;
     B = o.block;

@@ -166,6 +166,7 @@ void tn__argsort_f32(const float *v, size_t n, uint32_t *idx, uint32_t *scratch)
 extern const int tn__d8x[8], tn__d8y[8];
 tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                        const float *pts, int npts);
+void tn__cset_height_range(const tn_contour_set *s, float *lo, float *hi);
 void tn__nbrs(const uint8_t *m, int w, int h, int x, int y, int p[8]);
 int tn__yokoi8(const int p[8]);
 #endif

@@ -182,6 +182,18 @@ TN_API void tn_contour_set_free(tn_contour_set *set) {
 
 /* ---- small builders shared by the sketch code ---- */
 
+/* Widens [*lo, *hi] to take in every point height of s (start from FLT_MAX, -FLT_MAX). */
+TN__INTERNAL_SHARED void tn__cset_height_range(const tn_contour_set *s, float *lo, float *hi)
+{
+    int c, j;
+    for (c = 0; c < s->count; c++)
+        for (j = 0; j < s->items[c].npoints; j++) {
+            float h = s->items[c].points[3 * j + 2];
+            if (h < *lo) *lo = h;
+            if (h > *hi) *hi = h;
+        }
+}
+
 /* Appends a polyline (points copied) to *s, whose items array has capacity *cap bytes. */
 TN__INTERNAL tn_status tn__cset_add(tn_contour_set *s, size_t *cap, tn_contour_type type, int order, float gradient,
                               const float *pts, int npts)
