@@ -29,6 +29,14 @@
      within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops' mean
      (real_peaks; the example's 128 px beside it); an egg-crate of cones between the strokes has
      several times the real crops' count;
+   - crest_dominance, floor_dominance: whether the drawing shapes the map around its lines: at
+     every px of the drawn ridges (valleys), 12 px from their ends and 48 px from the map's edge,
+     over the ground 6-48 px from it (ground within 4 px of a line of the kind left out): the
+     share lower than the line (higher for a valley), and over: how far the highest (lowest)
+     pixel of that ground tops the line (lies below it), mean over the points, % of the
+     example's range; real_crest_dominance, real_floor_dominance: the same on the three real
+     crops' main lines (tn_extract's highest Strahler order). Quilted high ground standing over
+     a drawn ring tens of px away passes follow (4 px) but reads here;
    - crest_relief, floor_relief: the along-line relief of the drawn ridges (valleys): the std of
      the terrain along them (every px of their length) minus its running mean over 17 px, against
      the same on the example's main ridges (valleys: the highest Strahler order of tn_extract's
@@ -386,6 +394,69 @@ static cross_shape cross_profiles(const tn_image *img, const tn_contour_set *set
         r.seam = (double)nseam / r.n;
         r.spike = d3 > 0 ? 3 * d1 / d3 : NAN;
     }
+    return r;
+}
+
+#define DOMINANCE_R 48 /* px: a line's ground is read out to this far around it (a fifth of a 256 map) */
+
+/* Dominance: how far a line stands over (a valley under) the ground around it. At every px of
+   set's lines of one kind (with mains, the highest Strahler order of that kind; drawn lines CLEAR
+   px from their ends as cross_profiles, not from other lines), DOMINANCE_R px from the map's
+   edge, over the ground 6 to DOMINANCE_R px from it, ground within 4 px of any line read left
+   out (a summit's other ridges, a valley's own lower course): share, the mean share of that ground
+   lower (higher for a valley); over, the mean height of its highest pixel above the line (its
+   lowest below a valley), 0 where none is, in the heights' units. A drawn ridge in higher quilted
+   ground reads low: the drawing no longer shapes the map there. NAN without any point. */
+typedef struct dominance_t {
+    double share, over;
+} dominance_t;
+
+static dominance_t dominance(const tn_image *img, const tn_contour_set *set, int kind, int mains)
+{
+    tn_contour_set d;
+    uint8_t *near;
+    dominance_t r = {NAN, NAN};
+    double s = 0, o = 0;
+    int c, j, top = -1, n = 0, W = img->width, H = img->height, R = DOMINANCE_R;
+    if (tn_sketch_densify(&d, set)) return r;
+    if (!(near = (uint8_t *)calloc((size_t)W * H, 1))) {
+        tn_contour_set_free(&d);
+        return r;
+    }
+    for (c = 0; c < d.count; c++)
+        if ((int)d.items[c].type == kind && d.items[c].order > top) top = d.items[c].order;
+    for (c = 0; c < d.count; c++) /* the ground left out: 4 px around every line read */
+        for (j = 0; (int)d.items[c].type == kind && (!mains || d.items[c].order == top) && j < d.items[c].npoints; j++) {
+            int x = (int)lrint(d.items[c].points[3 * j]), y = (int)lrint(d.items[c].points[3 * j + 1]), u, v;
+            for (v = -4; v <= 4; v++)
+                for (u = -4; u <= 4; u++)
+                    if (u * u + v * v <= 16 && x + u >= 0 && y + v >= 0 && x + u < W && y + v < H) near[(size_t)(y + v) * W + x + u] = 1;
+        }
+    for (c = 0; c < d.count; c++) {
+        const tn_contour *l = &d.items[c];
+        if ((int)l->type != kind || (mains && l->order != top)) continue;
+        for (j = 0; j < l->npoints; j++) {
+            double x = l->points[3 * j], y = l->points[3 * j + 1], sg = kind == TN_RIDGE ? 1 : -1, h0 = sg * height_at(img, x, y), hi = h0;
+            int X = (int)lrint(x), Y = (int)lrint(y), u, v, below = 0, all = 0;
+            if (X < R || Y < R || X >= W - R || Y >= H - R) continue;
+            if (!mains && (hypot(x - l->points[0], y - l->points[1]) < CLEAR ||
+                           hypot(x - l->points[3 * l->npoints - 3], y - l->points[3 * l->npoints - 2]) < CLEAR))
+                continue;
+            for (v = -R; v <= R; v++)
+                for (u = -R; u <= R; u++) {
+                    size_t p = (size_t)(Y + v) * W + X + u;
+                    double h;
+                    if (u * u + v * v < 36 || u * u + v * v > R * R || near[p]) continue;
+                    h = sg * img->data[p];
+                    below += h < h0, all++;
+                    if (h > hi) hi = h;
+                }
+            if (all) s += (double)below / all, o += hi - h0, n++;
+        }
+    }
+    free(near);
+    tn_contour_set_free(&d);
+    if (n) r.share = s / n, r.over = o / n;
     return r;
 }
 
@@ -801,6 +872,8 @@ int main(int argc, char **argv)
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL}, ex_s = {0, 0, 0, NULL};
     float coarse;
     tn_gnn model;
+    dominance_t real_dom[2] = {{0, 0}, {0, 0}};
+    int ndom[2] = {0, 0};
     valley_shape ex_valley, real_valley;
     hatch_power ex_hatch, real_hatch;
     crest_sides ex_crest;
@@ -877,6 +950,13 @@ int main(int argc, char **argv)
                     if (!tn_extract(&e, &c, &eo)) {
                         valley_shape v = valley_profiles(&c, &e.contours, 1, ex_thr);
                         hatch_add(&real_hatch, &c, &e.contours, 1);
+                        {
+                            int kd;
+                            for (kd = 0; kd < 2; kd++) {
+                                dominance_t dm = dominance(&c, &e.contours, kd ? TN_VALLEY : TN_RIDGE, 1);
+                                if (dm.share == dm.share) real_dom[kd].share += dm.share, real_dom[kd].over += dm.over, ndom[kd]++;
+                            }
+                        }
                         int q;
                         if (v.n) {
                             for (q = 0; q < 5; q++) real_valley.rise[q] += v.rise[q] / v.rise[4];
@@ -910,6 +990,14 @@ int main(int argc, char **argv)
             valley_print("real", &real_valley, NULL, real_valley.n);
         }
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
+        for (k = 0; k < 2; k++) {
+            if (ndom[k]) real_dom[k].share /= ndom[k], real_dom[k].over /= ndom[k];
+            else real_dom[k].share = real_dom[k].over = NAN;
+            printf("real_%s_dominance: %.1f %%; over %.2f %% of range (the crops' main %s: the share of the ground 6-%d px around them %s, and how far "
+                   "its %s pixel %s them)\n",
+                   shape_name[k], 100 * real_dom[k].share, 100 * real_dom[k].over / (model.hi - model.lo), k ? "valleys" : "ridges", DOMINANCE_R,
+                   k ? "above a valley" : "below a ridge", k ? "lowest" : "highest", k ? "lies below" : "tops");
+        }
         if (coarse > 0) {
             for (k = 0; k < 3; k++) real_s[k] /= nreal;
             printf("real_mean_smooth: slope %.4f curvature %.4f spectrum %.4f (all without their height steps)\n", real_s[0], real_s[1], real_s[2]);
@@ -1020,6 +1108,12 @@ int main(int argc, char **argv)
             for (k = 0; k < 4; k++) {
                 double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
                 if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);
+            }
+            for (k = 0; k < 2; k++) {
+                dominance_t dm = dominance(&out[w], &asked, k ? TN_VALLEY : TN_RIDGE, 0);
+                if (dm.share == dm.share)
+                    printf("%s_%s_%s_dominance: %.1f %% (real %.1f %%); over %.2f %% of range (real %.2f %%)\n", all[d], way[w], shape_name[k], 100 * dm.share,
+                           100 * real_dom[k].share, 100 * dm.over / (model.hi - model.lo), 100 * real_dom[k].over / (model.hi - model.lo));
             }
             for (k = 0; k < 2; k++) {
                 cross_shape cs = cross_profiles(&out[w], &asked, k ? TN_VALLEY : TN_RIDGE, 0);

@@ -26,9 +26,11 @@
    within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
    valley (the nearest user line) by the example's mean local relief / 16 px per px. When the
    lines' membrane holds far more closed basins than the example's own, each basin drains by a
-   valley over its lowest saddle (tn__gnn_grow_drain). Last, the added lines' heights are kept
-   within the example's and the strokes' (tn__soft_limit): relief stacked on a high stroke's
-   ground rose above the example's top, on a low one below its floor. */
+   valley over its lowest saddle (tn__gnn_grow_drain). Ground whose lines stand above their
+   nearest drawn ridge sinks as a whole under it (tn__gnn_grow_sink: the drawn ridges stay the
+   high ground). Last, the added lines' heights are kept within the example's and the strokes'
+   (tn__soft_limit): relief stacked on a high stroke's ground rose above the example's top, on a
+   low one below its floor. */
 typedef struct tn_gnn_grow_opts {
     uint64_t seed;
     float gap;            /* px between an added line and every user line; 0 = 4 */
@@ -647,6 +649,68 @@ done:
 
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
+#define TN__GNN_SINK_REACH 24     /* px: the largest sink asked within this many px (a square's half side) ... */
+#define TN__GNN_SINK_SPREAD 12.0f /* ... smoothed by a Gaussian of this many px ... */
+#define TN__GNN_SINK_FADE 16.0f   /* ... fades in over this many px from half the drawn ridges' flanks (TN__GNN_FLANK / 2) */
+
+/* img (one channel) replaced by its maximum within r px (a square) of each pixel. */
+static tn_status tn__gnn_grow_max(tn_image *img, int r)
+{
+    int W = img->width, H = img->height, x, y, k;
+    float *t = (float *)tn__alloc((size_t)W * H * sizeof(float));
+    if (!t) return TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float v = -FLT_MAX;
+            for (k = x - r < 0 ? 0 : x - r; k <= x + r && k < W; k++) v = fmaxf(v, img->data[(size_t)y * W + k]);
+            t[(size_t)y * W + x] = v;
+        }
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float v = -FLT_MAX;
+            for (k = y - r < 0 ? 0 : y - r; k <= y + r && k < H; k++) v = fmaxf(v, t[(size_t)k * W + x]);
+            img->data[(size_t)y * W + x] = v;
+        }
+    TN_FREE(t);
+    return TN_OK;
+}
+
+/* The added lines (set's items from nuser on) sunk under the drawn ridges: a point above its
+   nearest drawn ridge (nearr: its pixel in ur, Dr: px to it) asks the ground there to sink by
+   the difference; the largest ask within TN__GNN_SINK_REACH px, smoothed, sinks the ground as a
+   whole, so it keeps its own relief (a point-wise cap left flat tops, a local sink pits), and
+   fades in from the drawn ridges, whose flanks rise to them. Only where a drawn ridge is nearer
+   than every drawn valley (Dv: px to the nearest), fading out toward the valleys: across a valley
+   the ground is the other slope's, and a whole map sunk under one low ridge left the drawn
+   valleys standing above it. Points on user pixels stay. Quilted
+   high ground stood above a drawn ring or crest tens of px away, and the drawing no longer
+   shaped the map (docs/gnn.md, stop 67). */
+static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_image *ur, const int *nearr, const float *Dr, const float *Dv)
+{
+    tn_image ask = {0, 0, 0, NULL};
+    int W = ur->width, H = ur->height, c, j, pass;
+    tn_status st;
+    if ((st = tn_image_create(&ask, W, H, 1))) return st;
+    for (pass = 0; pass < 2 && !st; pass++) {
+        if (pass && ((st = tn__gnn_grow_max(&ask, TN__GNN_SINK_REACH)) || (st = tn_image_blur(&ask, &ask, TN__GNN_SINK_SPREAD)))) break;
+        for (c = nuser; c < set->count; c++)
+            for (j = 0; j < set->items[c].npoints; j++) {
+                float *q = set->items[c].points + 3 * j, k, v;
+                int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(W - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(H - 1));
+                size_t p = (size_t)y * W + (size_t)x;
+                if (ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0 || nearr[p] < 0 || Dv[p] <= Dr[p]) continue;
+                if (!pass) ask.data[p] = fmaxf(ask.data[p], q[2] - ur->data[3 * (size_t)nearr[p] + 2]);
+                else {
+                    k = tn__clampf((Dr[p] - 0.5f * TN__GNN_FLANK) / TN__GNN_SINK_FADE, 0, 1);
+                    v = tn__clampf((Dv[p] - Dr[p]) / TN__GNN_SINK_FADE, 0, 1);
+                    q[2] -= ask.data[p] * k * k * (3 - 2 * k) * v * v * (3 - 2 * v);
+                }
+            }
+    }
+    tn_image_free(&ask);
+    return st;
+}
+
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
                                     const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
 {
@@ -660,7 +724,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
     float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
-    int *nearv = NULL;
+    int *nearv = NULL, *nearr = NULL;
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
     float *Q = NULL, *pq = NULL; /* with the example's heights: the quilted heights, a block's scratch */
@@ -709,6 +773,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     D = (float *)tn__alloc(n * sizeof(float));
     near = (int *)tn__alloc(n * sizeof(int));
     nearv = (int *)tn__alloc(n * sizeof(int));
+    nearr = (int *)tn__alloc(n * sizeof(int));
     kv = (float *)tn__alloc(n * sizeof(float));
     Dr = (float *)tn__alloc(n * sizeof(float));
     Dv = (float *)tn__alloc(n * sizeof(float));
@@ -728,13 +793,13 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         pq = (float *)tn__alloc((size_t)S * S * sizeof(float));
     }
     if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
-        !cutc || !cutr || !cutE || !nearv || !kv || (dem && (!Q || !qset || !pq))) {
+        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || (dem && (!Q || !qset || !pq))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
     for (type = 0; type < 2; type++) { /* the distance to the nearest user ridge, then valley (FLT_MAX: none) */
         for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i + (size_t)type] > 0);
-        tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, type ? nearv : near);
+        tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, type ? nearv : nearr);
     }
     if ((st = tn__gnn_grow_widths(user, width, height, kv))) goto done;
     for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
@@ -886,6 +951,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     }
     if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
     nl = (size_t)(set.count - user->count);
+    if ((st = tn__gnn_grow_sink(&set, user->count, &ur, nearr, Dr, Dv))) goto done;
     for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
         for (i = 0; i < (size_t)set.items[c].npoints; i++) {
             float *q = set.items[c].points + 3 * i;
@@ -907,6 +973,7 @@ done:
     TN_FREE(Dv);
     TN_FREE(near);
     TN_FREE(nearv);
+    TN_FREE(nearr);
     TN_FREE(kv);
     TN_FREE(etype);
     TN_FREE(emask);

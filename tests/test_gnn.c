@@ -1869,6 +1869,58 @@ TN_TEST(grown_lines_keep_the_example_heights)
     tn_image_free(&full);
 }
 
+/* tn__gnn_grow of one drawn ridge (n points at pts) on a 240 x 240 canvas, over ex with its heights dem. */
+static tn_status grow_one_ridge(tn_contour_set *g, const tn_contour_set *ex, const tn_image *dem, float *pts, int n)
+{
+    tn_contour c;
+    tn_contour_set user;
+    memset(&c, 0, sizeof c);
+    c.type = TN_RIDGE, c.npoints = n, c.points = pts;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 240, user.count = 1, user.items = &c;
+    return tn__gnn_grow(&user, ex, dem, 240, 240, NULL, g, NULL, NULL);
+}
+
+TN_TEST(grown_ground_sinks_under_a_drawn_ring)
+{
+    /* a ring drawn at the middle of the example's heights: the quilted ground (the example's
+       high massifs) stood above it tens of px away, inside and out, and the drawing no longer
+       shaped the map; now it sinks as a whole under the ring (tn__gnn_grow_sink) and keeps its
+       own relief. Example: the bundled Alps DEM's central 128 px */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, g;
+    float pts[3 * 49], lo, hi, top;
+    double s = 0, s2 = 0, sd, worst = -1e30;
+    long cnt = 0, above = 0;
+    int i, j;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    tn_image_range(&lo, &hi, &dem);
+    top = lo + 0.5f * (hi - lo);
+    ex = own_sketch(&dem);
+    for (i = 0; i < 49; i++) /* closed: the last point is the first */
+        pts[3 * i] = 120.0f + 80.0f * cosf(6.2831853f * (float)i / 48), pts[3 * i + 1] = 120.0f + 80.0f * sinf(6.2831853f * (float)i / 48), pts[3 * i + 2] = top;
+    TN_CHECK(grow_one_ridge(&g, &ex, &dem, pts, 49) == TN_OK);
+    for (i = 1; i < g.count; i++)
+        for (j = 0; j < g.items[i].npoints; j++) {
+            const float *p = g.items[i].points + 3 * j;
+            if (fabs(hypot(p[0] - 120.0, p[1] - 120.0) - 80.0) < 24) continue; /* the ring's flanks */
+            s += p[2], s2 += (double)p[2] * p[2], cnt++;
+            above += p[2] > top;
+            if (p[2] - top > worst) worst = p[2] - top;
+        }
+    sd = cnt > 1 ? sqrt(fmax(s2 / cnt - (s / cnt) * (s / cnt), 0)) : 0;
+    printf("  added lines 24+ px from the ring at %.0f m: %.1f %% above it, at most %+.0f m; their sd %.0f m (the example's range %.0f m; %ld points)\n",
+           (double)top, 100.0 * (double)above / (double)(cnt ? cnt : 1), worst, sd, (double)(hi - lo), cnt);
+    TN_CHECK(cnt > 500);
+    TN_CHECK(above <= cnt / 50 && worst < 0.1 * (hi - lo));
+    TN_CHECK(sd > 0.08 * (hi - lo)); /* sunk, not flattened */
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grown_ridge_flanks_are_its_own)
 {
     /* with the example's heights, the quilted relief fades in over 16 px from a drawn ridge: the
@@ -1877,8 +1929,7 @@ TN_TEST(grown_ridge_flanks_are_its_own)
        of the ridge put full-depth gullies a few px from it (a thin fin). Example: the bundled Alps
        DEM's central 128 px, one drawn ridge */
     tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
-    tn_contour_set ex, user, g;
-    tn_contour c;
+    tn_contour_set ex, g;
     float pts[3 * 20];
     double s[2] = {0, 0}, s2[2] = {0, 0}, sd[2];
     long cnt[2] = {0, 0};
@@ -1887,11 +1938,7 @@ TN_TEST(grown_ridge_flanks_are_its_own)
     TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
     ex = own_sketch(&dem);
     for (i = 0; i < 20; i++) pts[3 * i] = 10.0f + 11.0f * (float)i, pts[3 * i + 1] = 120.0f, pts[3 * i + 2] = 1800;
-    memset(&c, 0, sizeof c);
-    c.type = TN_RIDGE, c.npoints = 20, c.points = pts;
-    memset(&user, 0, sizeof user);
-    user.width = user.height = 240, user.count = 1, user.items = &c;
-    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+    TN_CHECK(grow_one_ridge(&g, &ex, &dem, pts, 20) == TN_OK);
     for (i = 1; i < g.count; i++)
         for (j = 0; j < g.items[i].npoints; j++) {
             const float *p = g.items[i].points + 3 * j;
@@ -2555,6 +2602,7 @@ int main(void)
     TN_RUN(grown_strokes_stay_main_lines);
     TN_RUN(grown_spurs_keep_the_example_tilt);
     TN_RUN(grown_lines_keep_the_example_heights);
+    TN_RUN(grown_ground_sinks_under_a_drawn_ring);
     TN_RUN(grown_ridge_flanks_are_its_own);
     TN_RUN(drawing_off_the_example_level_is_seen_at_it);
     TN_RUN(grown_generation);
