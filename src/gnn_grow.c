@@ -27,8 +27,8 @@
    valley (the nearest user line) by the example's mean local relief / 16 px per px. When the
    lines' membrane holds far more closed basins than the example's own, each basin drains by a
    valley over its lowest saddle (tn__gnn_grow_drain). Ground whose lines stand above their
-   nearest drawn ridge sinks as a whole under it (tn__gnn_grow_sink: the drawn ridges stay the
-   high ground). Last, the added lines' heights are kept within the example's and the strokes'
+   nearest drawn ridge, by more than the example's own ground tops its main ridges, sinks as a
+   whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). Last, the added lines' heights are kept within the example's and the strokes'
    (tn__soft_limit): relief stacked on a high stroke's ground rose above the example's top, on a
    low one below its floor. */
 typedef struct tn_gnn_grow_opts {
@@ -675,9 +675,55 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
     return TN_OK;
 }
 
+#define TN__GNN_ROOM_RADIUS 48 /* px around a main ridge over which the example's ground may top it */
+
+/* How far the example's own ground tops its main ridges (tn__gnn_grow_mains): at every main-ridge
+   pixel, how far the highest ground within TN__GNN_ROOM_RADIUS px (farther than 4 px from the
+   mains) rises above it, 0 where none does; the mean over them (0 without ridges). The ground:
+   dem where given, else the example's lines (er, tn_sketch_rasterise). A canyon's or a fjord's
+   main ridges stand over their ground (a few m), a dune field's ride on ground half its range
+   above them: the drawn ridges are sunk under only as far as the example's own stand. */
+static tn_status tn__gnn_grow_room(const tn_contour_set *example, const tn_image *er, const tn_image *dem, float *room)
+{
+    tn_image mr = {0, 0, 0, NULL};
+    int W = er->width, H = er->height, x, y, u, v, R = TN__GNN_ROOM_RADIUS, *near = (int *)tn__alloc((size_t)W * H * sizeof(int));
+    uint8_t *mask = (uint8_t *)tn__alloc((size_t)W * H);
+    float *dist = (float *)tn__alloc((size_t)W * H * sizeof(float));
+    double sum = 0;
+    long n = 0;
+    tn_status st = near && mask && dist ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+    *room = 0;
+    if (!st) st = tn__gnn_grow_mains(example, TN_RIDGE, W, H, &mr, mask, dist, near);
+    TN_FREE(near);
+    TN_FREE(mask);
+    if (st || !mr.data) {
+        TN_FREE(dist);
+        return st;
+    }
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            size_t p = (size_t)y * W + x;
+            float h0, hi;
+            if (!(mr.data[3 * p] > 0)) continue;
+            h0 = hi = dem ? dem->data[p] : er->data[3 * p + 2];
+            for (v = y - R < 0 ? -y : -R; v <= R && y + v < H; v++)
+                for (u = x - R < 0 ? -x : -R; u <= R && x + u < W; u++) {
+                    size_t q = (size_t)(y + v) * W + (size_t)(x + u);
+                    if (u * u + v * v > R * R || dist[q] <= 4 || (!dem && !(er->data[3 * q] > 0 || er->data[3 * q + 1] > 0))) continue;
+                    hi = fmaxf(hi, dem ? dem->data[q] : er->data[3 * q + 2]);
+                }
+            sum += hi - h0, n++;
+        }
+    tn_image_free(&mr);
+    TN_FREE(dist);
+    if (n) *room = (float)(sum / (double)n);
+    return TN_OK;
+}
+
 /* The added lines (set's items from nuser on) sunk under the drawn ridges: a point above its
-   nearest drawn ridge (nearr: its pixel in ur, Dr: px to it) asks the ground there to sink by
-   the difference; the largest ask within TN__GNN_SINK_REACH px, smoothed, sinks the ground as a
+   nearest drawn ridge (nearr: its pixel in ur, Dr: px to it) by more than room (how far the
+   example's own ground tops its main ridges, tn__gnn_grow_room) asks the ground there to sink by
+   the excess; the largest ask within TN__GNN_SINK_REACH px, smoothed, sinks the ground as a
    whole, so it keeps its own relief (a point-wise cap left flat tops, a local sink pits), and
    fades in from the drawn ridges, whose flanks rise to them. Only where a drawn ridge is nearer
    than every drawn valley (Dv: px to the nearest), fading out toward the valleys: across a valley
@@ -685,7 +731,7 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
    valleys standing above it. Points on user pixels stay. Quilted
    high ground stood above a drawn ring or crest tens of px away, and the drawing no longer
    shaped the map (docs/gnn.md, stop 67). */
-static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_image *ur, const int *nearr, const float *Dr, const float *Dv)
+static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_image *ur, const int *nearr, const float *Dr, const float *Dv, float room)
 {
     tn_image ask = {0, 0, 0, NULL};
     int W = ur->width, H = ur->height, c, j, pass;
@@ -699,7 +745,7 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
                 int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(W - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(H - 1));
                 size_t p = (size_t)y * W + (size_t)x;
                 if (ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0 || nearr[p] < 0 || Dv[p] <= Dr[p]) continue;
-                if (!pass) ask.data[p] = fmaxf(ask.data[p], q[2] - ur->data[3 * (size_t)nearr[p] + 2]);
+                if (!pass) ask.data[p] = fmaxf(ask.data[p], q[2] - ur->data[3 * (size_t)nearr[p] + 2] - room);
                 else {
                     k = tn__clampf((Dr[p] - 0.5f * TN__GNN_FLANK) / TN__GNN_SINK_FADE, 0, 1);
                     v = tn__clampf((Dv[p] - Dr[p]) / TN__GNN_SINK_FADE, 0, 1);
@@ -722,7 +768,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0;
+    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
     float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL, *nearr = NULL;
     int *cutc = NULL, *cutr = NULL;
@@ -951,7 +997,9 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     }
     if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
     nl = (size_t)(set.count - user->count);
-    if ((st = tn__gnn_grow_sink(&set, user->count, &ur, nearr, Dr, Dv))) goto done;
+    if ((st = tn__gnn_grow_room(example, &er, dem, &room)) ||
+        (st = tn__gnn_grow_sink(&set, user->count, &ur, nearr, Dr, Dv, room)))
+        goto done;
     for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
         for (i = 0; i < (size_t)set.items[c].npoints; i++) {
             float *q = set.items[c].points + 3 * i;
