@@ -675,14 +675,15 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
     return TN_OK;
 }
 
-#define TN__GNN_ROOM_RADIUS 48 /* px around a main ridge over which the example's ground may top it */
+#define TN__GNN_ROOM_RADIUS 16 /* px around a main ridge over which the example's ground may top it */
 
 /* How far the example's own ground tops its main ridges (tn__gnn_grow_mains): at every main-ridge
    pixel, how far the highest ground within TN__GNN_ROOM_RADIUS px (farther than 4 px from the
    mains) rises above it, 0 where none does; the mean over them (0 without ridges). The ground:
    dem where given, else the example's lines (er, tn_sketch_rasterise). A canyon's or a fjord's
    main ridges stand over their ground (a few m), a dune field's ride on ground half its range
-   above them: the drawn ridges are sunk under only as far as the example's own stand. */
+   above them: the drawn ridges are sunk under only as far as the example's own stand. Over 48 px
+   a massif near the Alps example's main ridges gave them a third of the range (docs/gnn.md). */
 static tn_status tn__gnn_grow_room(const tn_contour_set *example, const tn_image *er, const tn_image *dem, float *room)
 {
     tn_image mr = {0, 0, 0, NULL};

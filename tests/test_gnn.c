@@ -1914,7 +1914,7 @@ TN_TEST(grown_ground_sinks_under_a_drawn_ring)
     printf("  added lines 24+ px from the ring at %.0f m: %.1f %% above it, at most %+.0f m; their sd %.0f m (the example's range %.0f m; %ld points)\n",
            (double)top, 100.0 * (double)above / (double)(cnt ? cnt : 1), worst, sd, (double)(hi - lo), cnt);
     TN_CHECK(cnt > 500);
-    TN_CHECK(above < cnt * 3 / 10 && worst < 0.25 * (hi - lo)); /* before: 41.2 %, 693 m (39 %); the example's own ridges are topped by some */
+    TN_CHECK(above < cnt * 15 / 100 && worst < 0.15 * (hi - lo)); /* before: 41.2 %, 693 m (39 %); the example's own ridges are topped by some */
     TN_CHECK(sd > 0.08 * (hi - lo)); /* sunk, not flattened */
     tn_contour_set_free(&g);
     tn_contour_set_free(&ex);
