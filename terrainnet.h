@@ -2090,9 +2090,9 @@ TN_API tn_status tn_gnn_membrane(tn_image *out, const tn_contour_set *sketch, in
    lines' membrane holds far more closed basins than the example's own, each basin drains by a
    valley over its lowest saddle (tn__gnn_grow_drain). Ground whose lines stand above their
    nearest drawn ridge, by more than the example's own ground tops its main ridges, sinks as a
-   whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). Last, the added lines' heights are kept within the example's and the strokes'
-   (tn__soft_limit): relief stacked on a high stroke's ground rose above the example's top, on a
-   low one below its floor. */
+   whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). Last, the added lines'
+   heights are kept within the example's and the strokes' (tn__soft_limit): relief stacked on a
+   high stroke's ground rose above the example's top, on a low one below its floor. */
 typedef struct tn_gnn_grow_opts {
     uint64_t seed;
     float gap;            /* px between an added line and every user line; 0 = 4 */
@@ -28394,6 +28394,16 @@ static tn_status tn__gnn_quilt_network(const float *prel, const float *ground, i
 /* A straight run from the line's last point on to user pixel q of the ur raster (width px a row),
    its heights linear to the user line's there; it ends on the first user pixel it meets, at that
    pixel's height (the later line wins a pixel, and a user pixel keeps its height). */
+/* Whether a stroke is drawn on pixel p of ur (the strokes rasterised: ridge, valley, height). */
+static int tn__gnn_on_stroke(const tn_image *ur, size_t p) { return ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0; }
+
+/* The pixel of ur under point q (x, y, height) of a line, clamped into the map. */
+static size_t tn__gnn_pixel_of(const tn_image *ur, const float *q)
+{
+    int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(ur->width - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(ur->height - 1));
+    return (size_t)y * (size_t)ur->width + (size_t)x;
+}
+
 static tn_status tn__gnn_grow_run_on(tn__pts *b, size_t q, const tn_image *ur, int width)
 {
     float x = b->p[3 * (b->n - 1)], y = b->p[3 * (b->n - 1) + 1], h = b->p[3 * (b->n - 1) + 2];
@@ -28403,7 +28413,7 @@ static tn_status tn__gnn_grow_run_on(tn__pts *b, size_t q, const tn_image *ur, i
     for (s = 1; !st && s <= steps; s++) {
         float f = (float)s / (float)steps, px = floorf(x + f * (qx - x) + 0.5f), py = floorf(y + f * (qy - y) + 0.5f);
         size_t p = (size_t)py * (size_t)width + (size_t)px;
-        if (ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0) return tn__pts_push(b, px, py, ur->data[3 * p + 2]);
+        if (tn__gnn_on_stroke(ur, p)) return tn__pts_push(b, px, py, ur->data[3 * p + 2]);
         st = tn__pts_push(b, px, py, h + f * (hs - h));
     }
     return st;
@@ -28686,9 +28696,8 @@ static tn_status tn__gnn_grow_room(const tn_contour_set *example, const tn_image
    fades in from the drawn ridges, whose flanks rise to them. Only where a drawn ridge is nearer
    than every drawn valley (Dv: px to the nearest), fading out toward the valleys: across a valley
    the ground is the other slope's, and a whole map sunk under one low ridge left the drawn
-   valleys standing above it. Points on user pixels stay. Quilted
-   high ground stood above a drawn ring or crest tens of px away, and the drawing no longer
-   shaped the map (docs/gnn.md, stop 67). */
+   valleys standing above it. Points on user pixels stay. Quilted high ground stood above a drawn
+   ring or crest tens of px away, and the drawing no longer shaped the map (docs/gnn.md, stop 67). */
 static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_image *ur, const int *nearr, const float *Dr, const float *Dv, float room)
 {
     tn_image ask = {0, 0, 0, NULL};
@@ -28700,9 +28709,8 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
         for (c = nuser; c < set->count; c++)
             for (j = 0; j < set->items[c].npoints; j++) {
                 float *q = set->items[c].points + 3 * j, k, v;
-                int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(W - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(H - 1));
-                size_t p = (size_t)y * W + (size_t)x;
-                if (ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0 || nearr[p] < 0 || Dv[p] <= Dr[p]) continue;
+                size_t p = tn__gnn_pixel_of(ur, q);
+                if (tn__gnn_on_stroke(ur, p) || nearr[p] < 0 || Dv[p] <= Dr[p]) continue;
                 if (!pass) ask.data[p] = fmaxf(ask.data[p], q[2] - ur->data[3 * (size_t)nearr[p] + 2] - room);
                 else {
                     k = tn__clampf((Dr[p] - 0.5f * TN__GNN_FLANK) / TN__GNN_SINK_FADE, 0, 1);
@@ -28961,9 +28969,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
         for (i = 0; i < (size_t)set.items[c].npoints; i++) {
             float *q = set.items[c].points + 3 * i;
-            int x = (int)tn__clampf(q[0] + 0.5f, 0, (float)(width - 1)), y = (int)tn__clampf(q[1] + 0.5f, 0, (float)(height - 1));
-            size_t p = (size_t)y * width + (size_t)x;
-            if (!(ur.data[3 * p] > 0 || ur.data[3 * p + 1] > 0)) q[2] = tn__soft_limit(q[2], elo, ehi, band);
+            if (!tn__gnn_on_stroke(&ur, tn__gnn_pixel_of(&ur, q))) q[2] = tn__soft_limit(q[2], elo, ehi, band);
         }
 done:
     tn_image_free(&ur);
