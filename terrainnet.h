@@ -1545,8 +1545,9 @@ TN_API tn_status tn_detail_preview(tn_image *out, const tn_detail_maps *maps, co
    A pyramid of the example DEM from a coarsest side of about 25 px, each scale `factor` (0.75)
    times the next finer one; per scale a generator of 5 valid 3 x 3 convolutions (conv, batch
    norm, leaky ReLU 0.2; tanh last, times a gain of 5 x the example's detail RMS sigma at that
-   scale) that adds a residual to the upsampled coarser output, fed that output plus noise of
-   amplitude noise_amp x sigma (1 at the coarsest scale, smoothed over 1.4 px). Scales train one
+   scale, or 1.25 x its largest detail where that is more) that adds a residual to the upsampled
+   coarser output, fed that output plus noise of amplitude noise_amp x sigma (1 at the coarsest
+   scale, smoothed over 1.4 px). Scales train one
    after another, coarse to fine, each against its own spectral-normalised patch discriminator
    with the hinge loss (the engine has no double backward for SinGAN's WGAN-GP) plus 10 x the
    MSE of the reconstruction in units of sigma^2: the fixed noise map at the coarsest scale, and above it the example's
@@ -21519,6 +21520,16 @@ static const char *const tn__sg_format_why[TN__SG_FORMAT] = {
    summits and floors sat where tanh saturates, so samples fell short of them (older models
    store 1, and keep it) */
 #define TN__SG_GAIN0 2.0f
+/* The finer generators' tanh times 5 x the example's detail RMS sigma at the scale, or 1.25 x its
+   largest detail where that is more (at most 1): a summit or a crater rim is 6-14 sigma, and a gain
+   of 5 sigma cut it off, so a sample's massifs came out flat-topped (docs/singan.md). */
+#define TN__SG_GAIN_RMS 5.0f
+#define TN__SG_GAIN_PEAK 1.25f
+static float tn__sg_gain(float sigma, float peak)
+{
+    float g = fmaxf(TN__SG_GAIN_RMS * sigma, TN__SG_GAIN_PEAK * peak);
+    return g > 1.0f ? 1.0f : g;
+}
 #define TN__SG_BANK 4 /* fake bases per scale (tn__sg_bank_fill) */
 #define TN__SG_BANK_PX (1 << 20) /* scales with more pixels (grown by the context) make each base anew */
 #define TN__SG_BANK_TILE 256
@@ -21593,7 +21604,7 @@ typedef struct tn__sg_arch {
     int scales, width, height, trained, disc_layers;
     float factor, offset, range;
     float amp[TN_SINGAN_MAX_SCALES];
-    float gain[TN_SINGAN_MAX_SCALES]; /* the generator's tanh times this: 5 x the example's detail RMS (<= 1; TN__SG_GAIN0 at scale 0) */
+    float gain[TN_SINGAN_MAX_SCALES]; /* the generator's tanh times this: tn__sg_gain (TN__SG_GAIN0 at scale 0) */
     int ch[TN_SINGAN_MAX_SCALES];
 } tn__sg_arch;
 
@@ -22843,15 +22854,19 @@ TN_API tn_status tn_singan_train(tn_singan *model, const tn_image *dem, const tn
     for (i = 0; i < s.A.scales; i++) { /* the detail each scale adds to the coarser one: its RMS */
         size_t k, nn = (size_t)s.real[i].width * s.real[i].height;
         float *b = (float *)tn__alloc(nn * sizeof(float));
-        double se = 0;
+        double se = 0, peak = 0;
         if (!b) {
             st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
             goto done;
         }
         tn__sg_real_base(&s, i, b);
-        for (k = 0; k < nn; k++) se += (double)(s.real[i].data[k] - b[k]) * (s.real[i].data[k] - b[k]);
+        for (k = 0; k < nn; k++) {
+            double d = (double)s.real[i].data[k] - b[k];
+            se += d * d;
+            if (fabs(d) > peak) peak = fabs(d);
+        }
         s.sigma[i] = (float)sqrt(se / (double)nn + 1e-12);
-        if (!s.o.train.resume) s.A.gain[i] = i == 0 ? TN__SG_GAIN0 : 5.0f * s.sigma[i] > 1.0f ? 1.0f : 5.0f * s.sigma[i];
+        if (!s.o.train.resume) s.A.gain[i] = i == 0 ? TN__SG_GAIN0 : tn__sg_gain(s.sigma[i], (float)peak);
         { /* the RMS of the base's gradient (0 at the coarsest scale, whose base is zero) */
             float *gxy = (float *)tn__alloc(2 * nn * sizeof(float));
             double sg = 0;
