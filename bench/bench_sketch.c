@@ -266,6 +266,7 @@ static double floor_detail(const tn_image *t, const tn_image *rast)
 }
 
 #define RELIEF_HALF 8 /* px: the running mean along a line spans 2 x 8 + 1 px */
+#define RELIEF_SPAN 6 /* points either side of a line's step over which its flanks' normal is taken */
 #define FLANK 6       /* px: a line's flanks are measured this far across it */
 
 /* Bilinear height of img at (x, y), clamped to the map. */
@@ -285,7 +286,10 @@ static double height_at(const tn_image *img, double x, double y)
 /* Along-line relief: the std of img along set's lines of one kind (sampled every px of their
    length; with off > 0, on both sides of them, off px across: their flanks) minus its running
    mean over 2 x RELIEF_HALF + 1 px along the same path; with mains, only the lines of the highest
-   Strahler order of that kind. NAN without such lines. */
+   Strahler order of that kind. NAN without such lines. The flanks are read along the normal over
+   RELIEF_SPAN points either side, as tn__gnn_grow_flanks reads the example's: an extracted line
+   is a pixel chain, and the normal of each of its steps swung the path 6 px off across the slope
+   at every turn, which inflated the example's flank relief (docs/gnn.md, stop 70). */
 static double line_relief(const tn_image *img, const tn_contour_set *set, int kind, int mains, double off)
 {
     int c, j, top = -1;
@@ -304,7 +308,9 @@ static double line_relief(const tn_image *img, const tn_contour_set *set, int ki
             m = 0;
             for (j = 1, len = 0; j < l->npoints; j++) { /* a sample every px of the length; len carries the step over */
                 double ax = l->points[3 * j - 3], ay = l->points[3 * j - 2], dx = l->points[3 * j] - ax, dy = l->points[3 * j + 1] - ay;
-                double sl = hypot(dx, dy), t, nx = sl > 0 ? -dy / sl * side * off : 0, ny = sl > 0 ? dx / sl * side * off : 0;
+                int ja = j - 1 - RELIEF_SPAN > 0 ? j - 1 - RELIEF_SPAN : 0, jb = j + RELIEF_SPAN < l->npoints - 1 ? j + RELIEF_SPAN : l->npoints - 1;
+                double tx = l->points[3 * jb] - l->points[3 * ja], ty = l->points[3 * jb + 1] - l->points[3 * ja + 1], tl = hypot(tx, ty);
+                double sl = hypot(dx, dy), t, nx = tl > 0 ? -ty / tl * side * off : 0, ny = tl > 0 ? tx / tl * side * off : 0;
                 for (t = len; t < sl && m < cap; t += 1) h[m++] = height_at(img, ax + dx * t / sl + nx, ay + dy * t / sl + ny);
                 len = t - sl;
             }
