@@ -24,11 +24,12 @@
    from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
    tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's); then,
    within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
-   valley (the nearest user line) by the example's mean local relief / 16 px per px. When the
-   lines' membrane holds far more closed basins than the example's own, each basin drains by a
-   valley over its lowest saddle (tn__gnn_grow_drain). Ground whose lines stand above their
-   nearest drawn ridge, by more than the example's own ground tops its main ridges, sinks as a
-   whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). Last, the added lines'
+   valley (the nearest user line) by the example's mean local relief / 16 px per px. Ground whose
+   lines stand above their nearest drawn ridge, by more than the example's own ground tops its
+   main ridges, sinks as a whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). When
+   the lines' membrane then holds far more closed basins than the example's own, each basin
+   drains by a valley over its lowest saddle, and a drawn valley whose low end lies in one goes
+   on out of it (tn__gnn_grow_drain; after the sink, which left new basins). Last, the added lines'
    heights are kept within the example's and the strokes' (tn__soft_limit): relief stacked on a
    high stroke's ground rose above the example's top, on a low one below its floor. */
 typedef struct tn_gnn_grow_opts {
@@ -511,20 +512,81 @@ static tn_status tn__gnn_pit_share(const tn_image *z, float thr, tn_image *fille
     return TN_OK;
 }
 
+/* A drawn valley's low end in a closed basin of the membrane z (f: z filled; thr: the depth that
+   counts) goes on as the example's valleys do, to lower ground: from the end, heading as the
+   stroke's last segment, each step to the lowest of the pixels ahead (within 45 degrees of the
+   heading, which turns a quarter of the way toward each step), falling by `step` per px from the
+   end's height, until ground lies below it outside a basin, or the map's edge. A user valley as
+   low takes it (the path runs on to it); any other user line, met once the path is `gap` px off
+   its end, leaves it out (*ok = 0). The flood's own path from such a pit ran back beside the
+   drawn valley. pts: the path (x, y, h), without the end; *cut: the most it cuts below the
+   ground. */
+static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_image *z, const tn_image *f, const tn_image *ur, const float *D,
+                                   const int *unear, float gap, float step, float thr, float *cut, int *ok)
+{
+    const int W = z->width, H = z->height, n = l->npoints;
+    const float *p = l->points, *e, *b;
+    float hx, hy, len, L, ex, ey;
+    int x, y, m;
+    size_t k;
+    tn_status st = TN_OK;
+    if (p[3 * (n - 1) + 2] <= p[2]) e = p + 3 * (n - 1), b = p + 3 * (n - 2);
+    else e = p, b = p + 3;
+    hx = e[0] - b[0], hy = e[1] - b[1], len = sqrtf(hx * hx + hy * hy);
+    if (!(len > 0)) return TN_OK;
+    hx /= len, hy /= len;
+    ex = e[0], ey = e[1], L = e[2];
+    x = (int)floorf(ex + 0.5f), y = (int)floorf(ey + 0.5f);
+    if (x < 0 || y < 0 || x >= W || y >= H) return TN_OK;
+    k = (size_t)y * W + x;
+    if (!(f->data[k] - z->data[k] > thr)) return TN_OK;
+    for (m = 0; !st && m < W + H; m++) {
+        int d, best = -1, qx, qy;
+        size_t q;
+        float sx, sy, s;
+        for (d = 0; d < 8; d++) {
+            float dx = (float)tn__d8x[d], dy = (float)tn__d8y[d];
+            qx = x + tn__d8x[d], qy = y + tn__d8y[d];
+            if ((dx * hx + dy * hy) / sqrtf(dx * dx + dy * dy) < 0.7f) continue;
+            if (qx < 0 || qy < 0 || qx >= W || qy >= H) return TN_OK; /* the map's edge */
+            if (best < 0 || z->data[(size_t)qy * W + qx] < z->data[(size_t)(y + tn__d8y[best]) * W + x + tn__d8x[best]]) best = d;
+        }
+        if (best < 0) return TN_OK;
+        sx = (float)tn__d8x[best], sy = (float)tn__d8y[best], s = sqrtf(sx * sx + sy * sy);
+        x += tn__d8x[best], y += tn__d8y[best];
+        q = (size_t)y * W + x;
+        L -= step * s;
+        hx = 0.75f * hx + 0.25f * sx / s, hy = 0.75f * hy + 0.25f * sy / s, len = sqrtf(hx * hx + hy * hy);
+        hx /= len, hy /= len;
+        if (D[q] < gap && (x - ex) * (x - ex) + (y - ey) * (y - ey) > (gap + 1) * (gap + 1)) {
+            size_t u = (size_t)unear[q];
+            if (pts->n && ur->data[3 * u + 1] > 0 && ur->data[3 * u + 2] <= L) return tn__gnn_grow_run_on(pts, u, ur, W);
+            *ok = 0;
+            return TN_OK;
+        }
+        if (z->data[q] <= L && !(f->data[q] - z->data[q] > thr)) return tn__pts_push(pts, (float)x, (float)y, z->data[q]);
+        *cut = fmaxf(*cut, z->data[q] - L);
+        st = tn__pts_push(pts, (float)x, (float)y, L);
+    }
+    return st;
+}
+
 /* Densified lines drain as the example's do. Blocks of the example's network, each with its own
    line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
    sketch then holds closed basins that the example's own network does not have, and the terrain
    looks like separate cones rather than ridges between valleys.
-   When the grown membrane has more than twice the example's share of basins, each basin's lowest
+   When the grown membrane has more than twice the example's share of basins (its DEM's, given
+   dem, else its network's membrane's), each basin's lowest
    point gets a valley down its outlet path (the flood's path over the lowest saddle, tn_flow_compute)
    to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
    alone steepens the ground past the example's, so the basin's added valleys first rise halfway
-   to its brim and the path starts there. A
+   to its brim and the path starts there. A drawn valley's low end in a basin goes on out of it
+   first (tn__gnn_drain_end); a basin's lowest point on a user line is otherwise left alone. A
    path that comes within `gap` of a user valley as low as itself runs on to it; one that meets
    any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
    to set (nuser user lines first) and counts them in *drained. */
-static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser, const tn_contour_set *example, const tn_image *ur,
-                                    const float *D, const int *unear, float gap, float relief, int *drained)
+static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser, const tn_contour_set *example, const tn_image *dem,
+                                    const tn_image *ur, const float *D, const int *unear, float gap, float relief, int *drained)
 {
     const int W = set->width, H = set->height;
     const size_t n = (size_t)W * H;
@@ -545,9 +607,13 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
     if ((st = tn_gnn_membrane(&ze, example, example->width, example->height))) return st;
     for (i = 0; i < (size_t)ze.width * ze.height; i++) lo = fminf(lo, ze.data[i]), hi = fmaxf(hi, ze.data[i]);
     thr = 0.01f * (hi - lo);
-    if ((st = tn__gnn_pit_share(&ze, thr, &fe, &share_ex)) || (st = tn_gnn_membrane(&z, set, W, H)) ||
-        (st = tn__gnn_pit_share(&z, thr, &f, &share)))
-        goto done;
+    if (dem) { /* the example's own ground: its network's membrane holds basins between lines the DEM drains */
+        float dlo, dhi;
+        tn_image_range(&dlo, &dhi, dem);
+        st = tn__gnn_pit_share(dem, 0.01f * (dhi - dlo), &fe, &share_ex);
+    } else
+        st = tn__gnn_pit_share(&ze, thr, &fe, &share_ex);
+    if (st || (st = tn_gnn_membrane(&z, set, W, H)) || (st = tn__gnn_pit_share(&z, thr, &f, &share))) goto done;
     if (!(share > 2 * share_ex)) goto done;
     if ((st = tn_flow_compute(&flow, &z, 0))) goto done;
     pit = (tn__gnn_pit *)tn__alloc(n * sizeof(tn__gnn_pit));
@@ -574,6 +640,18 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
             if (f.data[q] - z.data[q] > thr && !(ur->data[3 * q] > 0 || ur->data[3 * q + 1] > 0)) /* a join's end keeps the user's height */
                 l->points[3 * a + 2] += 0.5f * (f.data[q] - z.data[q]);
         }
+    }
+    for (c = 0; c < nuser && !st; c++) { /* the drawn valleys' low ends go on out of their basins */
+        const tn_contour *l = &set->items[c];
+        float cut = 0;
+        int ok = 1;
+        if (l->type != TN_VALLEY || l->npoints < 2) continue;
+        pts.n = 0;
+        st = tn__gnn_drain_end(&pts, l, &z, &f, ur, D, unear, gap, step, thr, &cut, &ok);
+        if (st || !ok || pts.n < 5 || !(cut > thr)) continue;
+        for (i = 0; i < (size_t)pts.n; i++) on[(size_t)pts.p[3 * i + 1] * W + (size_t)pts.p[3 * i]] = 1;
+        if ((st = tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts.p, pts.n))) goto done;
+        (*drained)++;
     }
     for (i = 0; i < np && !st; i++) {
         size_t k = pit[i].cell;
@@ -1004,11 +1082,11 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         tn__trace_free(&t);
         if (st) goto done;
     }
-    if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, &ur, D, near, o.gap, relief, &c))) goto done;
-    nl = (size_t)(set.count - user->count);
     if ((st = tn__gnn_grow_room(example, &er, dem, &room)) ||
         (st = tn__gnn_grow_sink(&set, user->count, &ur, nearr, Dr, Dv, room)))
         goto done;
+    if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, dem, &ur, D, near, o.gap, relief, &c))) goto done;
+    nl = (size_t)(set.count - user->count);
     for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
         for (i = 0; i < (size_t)set.items[c].npoints; i++) {
             float *q = set.items[c].points + 3 * i;

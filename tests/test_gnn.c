@@ -1376,6 +1376,99 @@ TN_TEST(grown_sketch_drains)
     tn_image_free(&full);
 }
 
+TN_TEST(drawn_valley_end_drains)
+{
+    /* a drawn valley that ends inside the map ended in a lake: the ground beyond its low end rises
+       as the example's rises from its valleys, and the flood's path out of that basin ran back
+       beside the drawn valley, so it was left out. Now the valley goes on from its end to lower
+       ground. Inside a drawn ring it stays closed */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, m = {0, 0, 0, NULL}, f = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float vp[3 * 9], ring[3 * 41];
+    tn_contour c[2];
+    size_t end = (size_t)160 * 256 + 176;
+    int i;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    for (i = 0; i < 9; i++) { /* west to east, 1500 m down to 800 m, ending 80 px from the east edge */
+        vp[3 * i] = 80.0f + 12.0f * (float)i;
+        vp[3 * i + 1] = 128.0f + 4.0f * (float)i;
+        vp[3 * i + 2] = 1500.0f - 87.5f * (float)i;
+    }
+    memset(c, 0, sizeof c);
+    c[0].type = TN_VALLEY;
+    c[0].points = vp;
+    c[0].npoints = 9;
+    memset(&user, 0, sizeof user);
+    user.width = user.height = 256;
+    user.items = c;
+    user.count = 1;
+    TN_CHECK(tn_gnn_grow(&g, &user, &ex, 256, 256, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+    TN_CHECK(tn_fill_depressions(&f, &m) == TN_OK);
+    printf("  the drawn valley's end: %.0f m below its basin's brim (%.0f m)\n", (double)(f.data[end] - m.data[end]), (double)m.data[end]);
+    TN_CHECK(f.data[end] - m.data[end] < 25); /* 1 % of the example's range */
+    tn_image_free(&m);
+    tn_image_free(&f);
+    tn_contour_set_free(&g);
+    for (i = 0; i <= 40; i++) { /* the same valley inside a ring of ridge: it stays a basin */
+        ring[3 * i] = 128 + 100 * cosf(6.2831853f * (float)i / 40);
+        ring[3 * i + 1] = 128 + 100 * sinf(6.2831853f * (float)i / 40);
+        ring[3 * i + 2] = 3000.0f;
+    }
+    c[1].type = TN_RIDGE;
+    c[1].points = ring;
+    c[1].npoints = 41;
+    user.count = 2;
+    TN_CHECK(tn_gnn_grow(&g, &user, &ex, 256, 256, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+    TN_CHECK(tn_fill_depressions(&f, &m) == TN_OK);
+    TN_CHECK(f.data[end] - m.data[end] > 100);
+    tn_image_free(&m);
+    tn_image_free(&f);
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
+TN_TEST(grown_basins_against_the_example_ground)
+{
+    /* whether the grown lines drain is judged against the example's own ground when the model
+       holds it: an 8-bit example's network held as many closed basins as its grown sketch (16 %
+       of the map), its DEM almost none, and nothing drained. Here the Alps network's heights
+       get a saw of +-150 m along every line (basins between the lines), its DEM none */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, m = {0, 0, 0, NULL}, me = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float rp[30], vp[30];
+    double range, share[2], share_ex;
+    int i, j, with;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    for (i = 0; i < ex.count; i++)
+        for (j = 0; j < ex.items[i].npoints; j++) ex.items[i].points[3 * j + 2] += (j / 6) % 2 ? 150.0f : -150.0f;
+    TN_CHECK(tn_gnn_membrane(&me, &ex, 128, 128) == TN_OK);
+    range = 1779; /* the example's heights, 475..2254 m */
+    share_ex = basin_share(&me, range);
+    user = two_strokes(256, 256, rp, vp);
+    for (with = 0; with < 2; with++) {
+        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 256, 256, NULL, &g, NULL, NULL) == TN_OK);
+        TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+        share[with] = basin_share(&m, range);
+        tn_image_free(&m);
+        tn_contour_set_free(&g);
+    }
+    printf("  closed basins: the sawn network %.1f %%, grown without / with its DEM %.1f / %.1f %%\n", 100 * share_ex, 100 * share[0],
+           100 * share[1]);
+    TN_CHECK(share[1] < 0.5 * share[0]);
+    tn_image_free(&me);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 /* A 128 px example of 15 horizontal lines 8 px apart around y = 64: lines of kind `main` at 0,
    +-16, +-32, +-48 px (order 3 at 0, else 1), the other kind between; heights h0 + slope |dy|,
    the other kind's 10 slope more (lower between ridges, higher between valleys). pts holds
@@ -2594,6 +2687,8 @@ int main(void)
     TN_RUN(grow_by_example);
     TN_RUN(grow_without_block_grid);
     TN_RUN(grown_sketch_drains);
+    TN_RUN(drawn_valley_end_drains);
+    TN_RUN(grown_basins_against_the_example_ground);
     TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grow_crest_copies_the_example_relief);
     TN_RUN(grow_crest_widens_a_short_pool);
