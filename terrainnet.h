@@ -28485,9 +28485,9 @@ static tn_status tn__gnn_pit_share(const tn_image *z, float thr, tn_image *fille
 }
 
 /* A drawn valley's low end in a closed basin of the membrane z (f: z filled; thr: the depth that
-   counts) goes on as the example's valleys do, to lower ground: from the end, heading as the
-   stroke's last segment, each step to the lowest of the pixels ahead (within 45 degrees of the
-   heading, which turns a quarter of the way toward each step), falling by `step` per px from the
+   counts) goes on as the example's valleys do, to lower ground: from the end, each step to the
+   lowest of the pixels within 45 degrees of the stroke's last segment (a heading that turned
+   toward each step ran along the map's edge, a crack 120 px long), falling by `step` per px from the
    end's height, until ground lies below it outside a basin, or the map's edge. A user valley as
    low takes it (the path runs on to it); any other user line, met once the path is `gap` px off
    its end, leaves it out (*ok = 0). The flood's own path from such a pit ran back beside the
@@ -28528,8 +28528,6 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
         x += tn__d8x[best], y += tn__d8y[best];
         q = (size_t)y * W + x;
         L -= step * s;
-        hx = 0.75f * hx + 0.25f * sx / s, hy = 0.75f * hy + 0.25f * sy / s, len = sqrtf(hx * hx + hy * hy);
-        hx /= len, hy /= len;
         if (D[q] < gap && (x - ex) * (x - ex) + (y - ey) * (y - ey) > (gap + 1) * (gap + 1)) {
             size_t u = (size_t)unear[q];
             if (pts->n && ur->data[3 * u + 1] > 0 && ur->data[3 * u + 2] <= L) return tn__gnn_grow_run_on(pts, u, ur, W);
@@ -28543,6 +28541,8 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
     return st;
 }
 
+#define TN__GNN_DRAIN_CUT 0.25f /* of the example's range: the deepest a basin's path may cut (deeper, a straight gorge the example does not have) */
+
 /* Densified lines drain as the example's do. Blocks of the example's network, each with its own
    line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
    sketch then holds closed basins that the example's own network does not have, and the terrain
@@ -28552,7 +28552,8 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
    point gets a valley down its outlet path (the flood's path over the lowest saddle, tn_flow_compute)
    to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
    alone steepens the ground past the example's, so the basin's added valleys first rise halfway
-   to its brim and the path starts there. A drawn valley's low end in a basin goes on out of it
+   to its brim and the path starts there; a path that would cut deeper than TN__GNN_DRAIN_CUT of
+   the example's range is left out (a crack across a volcano's smooth flank). A drawn valley's low end in a basin goes on out of it
    first (tn__gnn_drain_end); a basin's lowest point on a user line is otherwise left alone. A
    path that comes within `gap` of a user valley as low as itself runs on to it; one that meets
    any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
@@ -28656,7 +28657,7 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
             k = q;
             st = tn__pts_push(&pts, (float)(q % (size_t)W), (float)(q / (size_t)W), L);
         }
-        if (st || !ok || pts.n < 5 || !(cut > thr)) continue;
+        if (st || !ok || pts.n < 5 || !(cut > thr) || cut > TN__GNN_DRAIN_CUT * 100 * thr) continue;
         for (m = 0; m < pts.n; m++) on[(size_t)pts.p[3 * m + 1] * W + (size_t)pts.p[3 * m]] = 1;
         if ((st = tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts.p, pts.n))) goto done;
         (*drained)++;
