@@ -514,13 +514,12 @@ static tn_status tn__gnn_pit_share(const tn_image *z, float thr, tn_image *fille
 
 /* A drawn valley's low end in a closed basin of the membrane z (f: z filled; thr: the depth that
    counts) goes on as the example's valleys do, to lower ground: from the end, each step to the
-   lowest of the pixels within 45 degrees of the stroke's last segment (a heading that turned
-   toward each step ran along the map's edge, a crack 120 px long), falling by `step` per px from the
-   end's height, until ground lies below it outside a basin, or the map's edge. A user valley as
-   low takes it (the path runs on to it); any other user line, met once the path is `gap` px off
-   its end, leaves it out (*ok = 0). The flood's own path from such a pit ran back beside the
-   drawn valley. pts: the path (x, y, h), without the end; *cut: the most it cuts below the
-   ground. */
+   lowest of the pixels within 45 degrees of the stroke's last segment (a fixed heading: one that
+   turns toward each step can run along the map's edge), falling by `step` per px from the end's
+   height, until ground lies below it outside a basin, or the map's edge. (The flood's own path
+   from such a pit runs back beside the drawn valley.) A user valley as low takes it (the path
+   runs on to it); any other user line, met once the path is `gap` px off its end, leaves it out
+   (*ok = 0). pts: the path (x, y, h), without the end; *cut: the most it cuts below the ground. */
 static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_image *z, const tn_image *f, const tn_image *ur, const float *D,
                                    const int *unear, float gap, float step, float thr, float *cut, int *ok)
 {
@@ -543,13 +542,13 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
     for (m = 0; !st && m < W + H; m++) {
         int d, best = -1, qx, qy;
         size_t q;
-        float sx, sy, s;
+        float sx, sy, s, bz = 0;
         for (d = 0; d < 8; d++) {
             float dx = (float)tn__d8x[d], dy = (float)tn__d8y[d];
             qx = x + tn__d8x[d], qy = y + tn__d8y[d];
             if ((dx * hx + dy * hy) / sqrtf(dx * dx + dy * dy) < 0.7f) continue;
             if (qx < 0 || qy < 0 || qx >= W || qy >= H) return TN_OK; /* the map's edge */
-            if (best < 0 || z->data[(size_t)qy * W + qx] < z->data[(size_t)(y + tn__d8y[best]) * W + x + tn__d8x[best]]) best = d;
+            if (best < 0 || z->data[(size_t)qy * W + qx] < bz) best = d, bz = z->data[(size_t)qy * W + qx];
         }
         if (best < 0) return TN_OK;
         sx = (float)tn__d8x[best], sy = (float)tn__d8y[best], s = sqrtf(sx * sx + sy * sy);
@@ -571,6 +570,15 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
 
 #define TN__GNN_DRAIN_CUT 0.25f /* of the example's range: the deepest a basin's path may cut (deeper, a straight gorge the example does not have) */
 
+/* A drain path kept: its pixels marked in on (W px a row), appended to set as a valley. */
+static tn_status tn__gnn_drain_add(tn_contour_set *set, size_t *cap, uint8_t *on, int W, const tn__pts *pts, int *drained)
+{
+    int m;
+    for (m = 0; m < pts->n; m++) on[(size_t)pts->p[3 * m + 1] * W + (size_t)pts->p[3 * m]] = 1;
+    (*drained)++;
+    return tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts->p, pts->n);
+}
+
 /* Densified lines drain as the example's do. Blocks of the example's network, each with its own
    line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
    sketch then holds closed basins that the example's own network does not have, and the terrain
@@ -581,8 +589,9 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
    to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
    alone steepens the ground past the example's, so the basin's added valleys first rise halfway
    to its brim and the path starts there; a path that would cut deeper than TN__GNN_DRAIN_CUT of
-   the example's range is left out (a crack across a volcano's smooth flank). A drawn valley's low end in a basin goes on out of it
-   first (tn__gnn_drain_end); a basin's lowest point on a user line is otherwise left alone. A
+   the example's range is left out (a crack across a smooth flank). A drawn valley's low end in a
+   basin goes on out of it first, however deep (tn__gnn_drain_end); a basin's lowest point on a
+   user line is otherwise left alone. A
    path that comes within `gap` of a user valley as low as itself runs on to it; one that meets
    any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
    to set (nuser user lines first) and counts them in *drained. */
@@ -650,9 +659,7 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
         pts.n = 0;
         st = tn__gnn_drain_end(&pts, l, &z, &f, ur, D, unear, gap, step, thr, &cut, &ok);
         if (st || !ok || pts.n < 5 || !(cut > thr)) continue;
-        for (i = 0; i < (size_t)pts.n; i++) on[(size_t)pts.p[3 * i + 1] * W + (size_t)pts.p[3 * i]] = 1;
-        if ((st = tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts.p, pts.n))) goto done;
-        (*drained)++;
+        if ((st = tn__gnn_drain_add(set, cap, on, W, &pts, drained))) goto done;
     }
     for (i = 0; i < np && !st; i++) {
         size_t k = pit[i].cell;
@@ -686,9 +693,7 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
             st = tn__pts_push(&pts, (float)(q % (size_t)W), (float)(q / (size_t)W), L);
         }
         if (st || !ok || pts.n < 5 || !(cut > thr) || cut > TN__GNN_DRAIN_CUT * 100 * thr) continue;
-        for (m = 0; m < pts.n; m++) on[(size_t)pts.p[3 * m + 1] * W + (size_t)pts.p[3 * m]] = 1;
-        if ((st = tn__cset_add(set, cap, TN_VALLEY, 0, 0.0f, pts.p, pts.n))) goto done;
-        (*drained)++;
+        if ((st = tn__gnn_drain_add(set, cap, on, W, &pts, drained))) goto done;
     }
     if (st || !*drained) goto done;
     /* added ridges give way around the new valleys */
