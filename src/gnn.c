@@ -2474,8 +2474,8 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
                                     const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
-TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, uint8_t *mask, float *dist,
-                                           int *near); /* >>gnn_grow */
+TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, float *median, uint8_t *mask,
+                                           float *dist, int *near); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed,
                                            float *field); /* >>gnn_grow */

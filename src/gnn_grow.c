@@ -140,6 +140,13 @@ static tn_status tn__gnn_grow_mains(const tn_contour_set *example, int kind, int
     return TN_OK;
 }
 
+/* (distance, value) pairs by distance, then value. */
+static int tn__gnn_pair_cmp(const void *a, const void *b)
+{
+    const float *x = (const float *)a, *y = (const float *)b;
+    return x[0] != y[0] ? (x[0] < y[0] ? -1 : 1) : (x[1] > y[1]) - (x[1] < y[1]);
+}
+
 /* The example's profile away from its main lines of one kind (those of the highest Strahler
    order among its lines of that kind): prof[d], d = 0 .. TN__GNN_PROFILE, the mean over the
    example's lines of the same kind, at chamfer distance d (rounded) from the nearest main-line
@@ -192,32 +199,46 @@ TN__INTERNAL tn_status tn__gnn_grow_profile(const tn_contour_set *example, const
    other valleys alone (tn__gnn_grow_profile) stop rising where its tributaries join (the Alps:
    279 m from 18 px on), and a drawn valley between two such shoulders read as a trough; its
    ground rises on (the Alps: 294 m at 16 px, 472 m at 24). Every pixel counts, so it is not
-   smoothed (the lines' 13 px window lifted its floor to 44 m at 0 px on the Alps). prof is untouched when the
-   example has no line of that kind. mask, dist, near: W x H scratch. */
-TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, uint8_t *mask, float *dist,
-                                           int *near)
+   smoothed (the lines' 13 px window lifted its floor to 44 m at 0 px on the Alps). median (may
+   be NULL): the same with the median at each distance (tn__gnn_quilt_lift). prof and median are
+   untouched when the example has no line of that kind. mask, dist, near: W x H scratch. */
+TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, float *median, uint8_t *mask,
+                                           float *dist, int *near)
 {
     const int P = TN__GNN_PROFILE;
+    const size_t n = (size_t)dem->width * dem->height;
     tn_image mr = {0, 0, 0, NULL};
     double sum[TN__GNN_PROFILE + 1], cnt[TN__GNN_PROFILE + 1];
-    float last = 0, sign = kind == TN_VALLEY ? 1.0f : -1.0f;
+    float last = 0, sign = kind == TN_VALLEY ? 1.0f : -1.0f, *pairs = NULL; /* (distance, height above) per pixel, for the median */
     int d;
-    size_t i;
+    size_t i, a, b, np = 0;
     tn_status st = tn__gnn_grow_mains(example, kind, dem->width, dem->height, &mr, mask, dist, near);
     if (st || !mr.data) return st;
     tn_image_free(&mr);
+    if (median && !(pairs = (float *)tn__alloc(2 * n * sizeof(float)))) return TN_ERR_OUT_OF_MEMORY;
     memset(sum, 0, sizeof sum);
     memset(cnt, 0, sizeof cnt);
-    for (i = 0; i < (size_t)dem->width * dem->height; i++) {
+    for (i = 0; i < n; i++) {
+        float h;
         if (near[i] < 0 || !(dist[i] < P + 0.5f)) continue;
         d = (int)(dist[i] + 0.5f);
-        sum[d] += sign * (dem->data[i] - dem->data[near[i]]);
+        h = sign * (dem->data[i] - dem->data[near[i]]);
+        sum[d] += h;
         cnt[d]++;
+        if (pairs) pairs[2 * np] = (float)d, pairs[2 * np + 1] = h, np++;
     }
     for (d = 0; d <= P; d++) { /* distances no pixel reaches hold the last value; never falling back */
         if (cnt[d] > 0) last = fmaxf(last, (float)(sum[d] / cnt[d]));
         prof[d] = last;
     }
+    if (!pairs) return TN_OK;
+    qsort(pairs, np, 2 * sizeof(float), tn__gnn_pair_cmp);
+    for (d = 0, a = 0, last = 0; d <= P; d++, a = b) {
+        for (b = a; b < np && pairs[2 * b] == (float)d; b++) {}
+        if (b > a) last = fmaxf(last, pairs[2 * (a + (b - a) / 2) + 1]);
+        median[d] = last;
+    }
+    TN_FREE(pairs);
     return TN_OK;
 }
 
@@ -408,6 +429,86 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, const floa
         }
     TN_FREE(qs);
     return TN_OK;
+}
+
+static tn_status tn__gnn_grow_max(tn_image *img, int r);
+
+#define TN__GNN_LIFT 6 /* px: the lift is the shortfall's max over this radius, averaged over as many */
+
+/* Whether the point e (x, y, ...) of a drawn valley lies within 3 px of another drawn valley c != skip. */
+static int tn__gnn_on_valley(const tn_contour_set *user, int skip, const float *e)
+{
+    int c, k;
+    for (c = 0; c < user->count; c++) {
+        const tn_contour *m = &user->items[c];
+        if (c == skip || m->type != TN_VALLEY) continue;
+        for (k = 0; k + 1 < m->npoints; k++) {
+            const float *a = m->points + 3 * k, *b = a + 3;
+            float ux = b[0] - a[0], uy = b[1] - a[1], L2 = ux * ux + uy * uy;
+            float t = L2 > 0 ? tn__clampf(((e[0] - a[0]) * ux + (e[1] - a[1]) * uy) / L2, 0, 1) : 0;
+            float qx = a[0] + t * ux - e[0], qy = a[1] + t * uy - e[1];
+            if (qx * qx + qy * qy < 9) return 1;
+        }
+    }
+    return 0;
+}
+
+/* A drawn valley is the low ground around it. The quilt knows nothing of it: it laid the
+   example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
+   stood perched between banks forced up around it (a tube on a causeway). So where the grown
+   ground (ground + prel) lies less than the example's median rise from its main valleys (floor,
+   at the distance over the valley's width factor kv, tn__gnn_grow_widths) above the nearest
+   drawn valley pixel, prel is lifted by the shortfall: in full within TN__GNN_PROFILE / 2 px,
+   fading out by TN__GNN_PROFILE, and by a smooth field (the shortfall's max over TN__GNN_LIFT
+   px, averaged over as many: never under the shortfall) so the quilt's gullies and spurs stay.
+   Not past a drawn valley's low end that meets no other drawn valley: its outlet stays open.
+   ur: the user's lines rasterised (tn_sketch_rasterise); Dv, nearv: the distance to the nearest
+   user valley pixel and that pixel. */
+static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const tn_image *ur, const float *ground, const float *Dv, const int *nearv,
+                                    const float *kv, const float *floor, int width, int height, float *prel)
+{
+    const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
+    size_t p, n = (size_t)width * height;
+    int c, x, y, dx, dy;
+    tn_image v = {0, 0, 0, NULL};
+    double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
+    uint8_t *end = (uint8_t *)tn__calloc(n); /* the pixels around the open low ends */
+    tn_status st = tn_image_create(&v, width, height, 1);
+    if (!st && (!I || !end)) st = TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; !st && c < user->count; c++) {
+        const tn_contour *l = &user->items[c];
+        const float *e;
+        if (l->type != TN_VALLEY || l->npoints < 2) continue;
+        e = l->points[2] <= l->points[3 * (l->npoints - 1) + 2] ? l->points : l->points + 3 * (l->npoints - 1);
+        if (tn__gnn_on_valley(user, c, e)) continue;
+        for (dy = -1; dy <= 1; dy++)
+            for (dx = -1; dx <= 1; dx++) {
+                int X = (int)(e[0] + 0.5f) + dx, Y = (int)(e[1] + 0.5f) + dy;
+                if (X >= 0 && Y >= 0 && X < width && Y < height) end[(size_t)Y * width + X] = 1;
+            }
+    }
+    for (p = 0; !st && p < n; p++) {
+        float need = 0, w;
+        if (nearv[p] >= 0 && Dv[p] < R && !end[nearv[p]]) {
+            w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
+            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / kv[nearv[p]]) - (ground[p] + prel[p]);
+            need *= w * w * (3 - 2 * w);
+        }
+        v.data[p] = fmaxf(need, 0);
+    }
+    if (!st) st = tn__gnn_grow_max(&v, TN__GNN_LIFT);
+    if (!st) {
+        tn__gnn_integral(v.data, width, height, I);
+        for (y = 0; y < height; y++)
+            for (x = 0; x < width; x++) {
+                double a, m = tn__gnn_box_sum(I, width, height, x, y, TN__GNN_LIFT, &a) / a;
+                prel[(size_t)y * width + x] += (float)m;
+            }
+    }
+    TN_FREE(I);
+    TN_FREE(end);
+    tn_image_free(&v);
+    return st;
 }
 
 /* The network of the grown ground: the quilted relief (prel) on the strokes' ground (ground: the
@@ -862,7 +963,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
-    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL, *nearr = NULL;
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
@@ -976,10 +1077,10 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
          TN__GNN_FALL x relief over TN__GNN_FALL_REACH px) */
         float *edist = (float *)tn__alloc(nx * sizeof(float));
         int *enear = (int *)tn__alloc(nx * sizeof(int)), d;
-        for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
+        for (d = 0; d <= TN__GNN_PROFILE; d++) pr[d] = pv[d] = pf[d] = TN__GNN_FALL * relief * fminf((float)d / TN__GNN_FALL_REACH, 1.0f);
         if (!edist || !enear) st = TN_ERR_OUT_OF_MEMORY;
         if (!st) st = tn__gnn_grow_profile(example, &er, TN_RIDGE, pr, emask, edist, enear);
-        if (!st && dem) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, emask, edist, enear);
+        if (!st && dem) st = tn__gnn_grow_ground(example, dem, TN_VALLEY, pv, pf, emask, edist, enear);
         else if (!st) st = tn__gnn_grow_profile(example, &er, TN_VALLEY, pv, emask, edist, enear);
         TN_FREE(edist);
         TN_FREE(enear);
@@ -1040,7 +1141,9 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         }
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
         mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
-    if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) || (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
+    if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) ||
+              (st = tn__gnn_quilt_lift(user, &ur, mem.data, Dv, nearv, kv, pf, width, height, prel)) ||
+              (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
     for (c = 0; c < user->count; c++) {

@@ -1433,6 +1433,38 @@ TN_TEST(drawn_valley_end_drains)
     tn_image_free(&full);
 }
 
+TN_TEST(drawn_valley_is_the_low_ground)
+{
+    /* the quilt laid the example's deeper valleys beside a drawn one; it stood perched between
+       banks forced up around it. With the example's DEM, the grown ground within 24 px of a drawn
+       valley (a line at y = 2/3 of the map, 1200..1245 m) keeps above it */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, m = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float rp[30], vp[30];
+    long below = 0, all = 0;
+    int x, y;
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    user = two_strokes(256, 256, rp, vp);
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 256, 256, NULL, &g, NULL, NULL) == TN_OK);
+    TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
+    for (y = 0; y < 256; y++)
+        for (x = 16; x < 240; x++) {
+            float d = fabsf((float)y - 256.0f * 2 / 3), hv = 1200.0f + 45.0f * ((float)x - 5) / 246;
+            if (d < 4 || d > 24) continue;
+            all++;
+            below += m.data[(size_t)y * 256 + x] < hv - 17.8f; /* 1 % of the range under it */
+        }
+    printf("  ground within 4..24 px of the drawn valley below it: %.1f %%\n", 100.0 * (double)below / (double)all);
+    TN_CHECK(below < all / 50);
+    tn_image_free(&m);
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 TN_TEST(grown_basins_against_the_example_ground)
 {
     /* whether the grown lines drain is judged against the example's own ground when the model
@@ -2688,6 +2720,7 @@ int main(void)
     TN_RUN(grow_without_block_grid);
     TN_RUN(grown_sketch_drains);
     TN_RUN(drawn_valley_end_drains);
+    TN_RUN(drawn_valley_is_the_low_ground);
     TN_RUN(grown_basins_against_the_example_ground);
     TN_RUN(grow_fall_follows_the_example);
     TN_RUN(grow_crest_copies_the_example_relief);
