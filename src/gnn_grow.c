@@ -431,7 +431,27 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, const floa
     return TN_OK;
 }
 
-static tn_status tn__gnn_grow_max(tn_image *img, int r);
+/* img (one channel) replaced by its maximum within r px (a square) of each pixel. */
+static tn_status tn__gnn_grow_max(tn_image *img, int r)
+{
+    int W = img->width, H = img->height, x, y, k;
+    float *t = (float *)tn__alloc((size_t)W * H * sizeof(float));
+    if (!t) return TN_ERR_OUT_OF_MEMORY;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float v = -FLT_MAX;
+            for (k = x - r < 0 ? 0 : x - r; k <= x + r && k < W; k++) v = fmaxf(v, img->data[(size_t)y * W + k]);
+            t[(size_t)y * W + x] = v;
+        }
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            float v = -FLT_MAX;
+            for (k = y - r < 0 ? 0 : y - r; k <= y + r && k < H; k++) v = fmaxf(v, t[(size_t)k * W + x]);
+            img->data[(size_t)y * W + x] = v;
+        }
+    TN_FREE(t);
+    return TN_OK;
+}
 
 #define TN__GNN_LIFT 6 /* px: the lift is the shortfall's max over this radius, averaged over as many */
 
@@ -842,33 +862,9 @@ done:
     return st;
 }
 
-/* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
-   from which generation takes the least slope from a stroke to its banks. */
 #define TN__GNN_SINK_REACH 24     /* px: the largest sink asked within this many px (a square's half side) ... */
 #define TN__GNN_SINK_SPREAD 12.0f /* ... smoothed by a Gaussian of this many px ... */
 #define TN__GNN_SINK_FADE 16.0f   /* ... fades in over this many px from half the drawn ridges' flanks (TN__GNN_FLANK / 2) */
-
-/* img (one channel) replaced by its maximum within r px (a square) of each pixel. */
-static tn_status tn__gnn_grow_max(tn_image *img, int r)
-{
-    int W = img->width, H = img->height, x, y, k;
-    float *t = (float *)tn__alloc((size_t)W * H * sizeof(float));
-    if (!t) return TN_ERR_OUT_OF_MEMORY;
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            float v = -FLT_MAX;
-            for (k = x - r < 0 ? 0 : x - r; k <= x + r && k < W; k++) v = fmaxf(v, img->data[(size_t)y * W + k]);
-            t[(size_t)y * W + x] = v;
-        }
-    for (y = 0; y < H; y++)
-        for (x = 0; x < W; x++) {
-            float v = -FLT_MAX;
-            for (k = y - r < 0 ? 0 : y - r; k <= y + r && k < H; k++) v = fmaxf(v, t[(size_t)k * W + x]);
-            img->data[(size_t)y * W + x] = v;
-        }
-    TN_FREE(t);
-    return TN_OK;
-}
 
 #define TN__GNN_ROOM_RADIUS 16 /* px around a main ridge over which the example's ground may top it */
 
@@ -951,6 +947,8 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
     return st;
 }
 
+/* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
+   from which generation takes the least slope from a stroke to its banks. */
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
                                     const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
 {
