@@ -28223,24 +28223,25 @@ TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const 
    of drawn valley upstream of it: its own from its higher end, and the whole of every drawn valley
    whose lower end lies within 3 px of it upstream of that point (tributaries of tributaries too).
    The mean over the drawn valleys is the example's width. kv (width x height): the factor on the
-   valleys' pixels (each point rounded), 1 elsewhere. */
-static tn_status tn__gnn_grow_widths(const tn_contour_set *drawn, int width, int height, float *kv)
+   valleys' pixels (each point rounded), 1 elsewhere; into (drawn->count): the valley each drawn
+   valley's lower end joins, -1 where none does (and for ridges). */
+static tn_status tn__gnn_grow_widths(const tn_contour_set *drawn, int width, int height, float *kv, int *into)
 {
     tn_contour_set dense, *user = &dense;
     const int nu = drawn->count;
     double *tot = (double *)tn__calloc((size_t)nu * sizeof(double)), *len = (double *)tn__calloc((size_t)nu * sizeof(double)), sum = 0, npt = 0;
-    int *at = (int *)tn__alloc((size_t)nu * sizeof(int)), *into = (int *)tn__alloc((size_t)nu * sizeof(int)), c, t, j, pass;
+    int *at = (int *)tn__alloc((size_t)nu * sizeof(int)), c, t, j, pass;
     size_t i, n = (size_t)width * height;
     tn_status st = TN_OK;
     for (i = 0; i < n; i++) kv[i] = 1;
     memset(&dense, 0, sizeof dense);
-    if (!tot || !len || !at || !into) st = TN_ERR_OUT_OF_MEMORY;
+    for (c = 0; c < nu; c++) into[c] = -1;
+    if (!tot || !len || !at) st = TN_ERR_OUT_OF_MEMORY;
     if (st || (st = tn_sketch_densify(&dense, drawn))) goto done; /* a factor on every pixel of the lines */
     for (c = 0; c < nu; c++) { /* each valley's length and where its lower end joins another */
         const tn_contour *l = &user->items[c];
         const float *e;
         double best = 9.0;
-        into[c] = -1;
         if (l->type != TN_VALLEY || l->npoints < 2) continue;
         for (j = 1; j < l->npoints; j++) len[c] += hypot(l->points[3 * j] - l->points[3 * j - 3], l->points[3 * j + 1] - l->points[3 * j - 2]);
         e = l->points[2] <= l->points[3 * l->npoints - 1] ? l->points : l->points + 3 * (l->npoints - 1);
@@ -28283,7 +28284,6 @@ done:
     TN_FREE(tot);
     TN_FREE(len);
     TN_FREE(at);
-    TN_FREE(into);
     return st;
 }
 
@@ -28427,24 +28427,6 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
 
 #define TN__GNN_LIFT 6 /* px: the lift is the shortfall's max over this radius, averaged over as many */
 
-/* Whether the point e (x, y, ...) of a drawn valley lies within 3 px of another drawn valley c != skip. */
-static int tn__gnn_on_valley(const tn_contour_set *user, int skip, const float *e)
-{
-    int c, k;
-    for (c = 0; c < user->count; c++) {
-        const tn_contour *m = &user->items[c];
-        if (c == skip || m->type != TN_VALLEY) continue;
-        for (k = 0; k + 1 < m->npoints; k++) {
-            const float *a = m->points + 3 * k, *b = a + 3;
-            float ux = b[0] - a[0], uy = b[1] - a[1], L2 = ux * ux + uy * uy;
-            float t = L2 > 0 ? tn__clampf(((e[0] - a[0]) * ux + (e[1] - a[1]) * uy) / L2, 0, 1) : 0;
-            float qx = a[0] + t * ux - e[0], qy = a[1] + t * uy - e[1];
-            if (qx * qx + qy * qy < 9) return 1;
-        }
-    }
-    return 0;
-}
-
 /* A drawn valley is the low ground around it. The quilt knows nothing of it: it laid the
    example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
    stood perched between banks forced up around it (a tube on a causeway). So where the grown
@@ -28453,11 +28435,11 @@ static int tn__gnn_on_valley(const tn_contour_set *user, int skip, const float *
    drawn valley pixel, prel is lifted by the shortfall: in full within TN__GNN_PROFILE / 2 px,
    fading out by TN__GNN_PROFILE, and by a smooth field (the shortfall's max over TN__GNN_LIFT
    px, averaged over as many: never under the shortfall) so the quilt's gullies and spurs stay.
-   Not past a drawn valley's low end that meets no other drawn valley: its outlet stays open.
-   ur: the user's lines rasterised (tn_sketch_rasterise); Dv, nearv: the distance to the nearest
-   user valley pixel and that pixel. */
-static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const tn_image *ur, const float *ground, const float *Dv, const int *nearv,
-                                    const float *kv, const float *floor, int width, int height, float *prel)
+   Not past a drawn valley's low end that meets no other drawn valley (into[c] < 0,
+   tn__gnn_grow_widths): its outlet stays open. ur: the user's lines rasterised
+   (tn_sketch_rasterise); Dv, nearv: the distance to the nearest user valley pixel and that pixel. */
+static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into, const tn_image *ur, const float *ground, const float *Dv,
+                                    const int *nearv, const float *kv, const float *floor, int width, int height, float *prel)
 {
     const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
     size_t p, n = (size_t)width * height;
@@ -28470,9 +28452,8 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const tn_image *
     for (c = 0; !st && c < user->count; c++) {
         const tn_contour *l = &user->items[c];
         const float *e;
-        if (l->type != TN_VALLEY || l->npoints < 2) continue;
+        if (l->type != TN_VALLEY || l->npoints < 2 || into[c] >= 0) continue;
         e = l->points[2] <= l->points[3 * (l->npoints - 1) + 2] ? l->points : l->points + 3 * (l->npoints - 1);
-        if (tn__gnn_on_valley(user, c, e)) continue;
         for (dy = -1; dy <= 1; dy++)
             for (dx = -1; dx <= 1; dx++) {
                 int X = (int)(e[0] + 0.5f) + dx, Y = (int)(e[1] + 0.5f) + dy;
@@ -28934,7 +28915,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
     float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
-    int *nearv = NULL, *nearr = NULL;
+    int *nearv = NULL, *nearr = NULL, *into = NULL; /* into: the valley each user valley's lower end joins (tn__gnn_grow_widths) */
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
     float *Q = NULL, *pq = NULL; /* with the example's heights: the quilted heights, a block's scratch */
@@ -28985,6 +28966,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     nearv = (int *)tn__alloc(n * sizeof(int));
     nearr = (int *)tn__alloc(n * sizeof(int));
     kv = (float *)tn__alloc(n * sizeof(float));
+    into = (int *)tn__alloc((size_t)user->count * sizeof(int));
     Dr = (float *)tn__alloc(n * sizeof(float));
     Dv = (float *)tn__alloc(n * sizeof(float));
     etype = (int8_t *)tn__alloc(nx);
@@ -29003,7 +28985,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         pq = (float *)tn__alloc((size_t)S * S * sizeof(float));
     }
     if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
-        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || (dem && (!Q || !qset || !pq))) {
+        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || !into || (dem && (!Q || !qset || !pq))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -29011,7 +28993,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i + (size_t)type] > 0);
         tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, type ? nearv : nearr);
     }
-    if ((st = tn__gnn_grow_widths(user, width, height, kv))) goto done;
+    if ((st = tn__gnn_grow_widths(user, width, height, kv, into))) goto done;
     for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
     tn__gnn_chamfer(umask, width, height, D, near);
     /* the example: line types, each line pixel's height above the mean of the lines within R px
@@ -29112,7 +29094,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
         mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
     if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) ||
-              (st = tn__gnn_quilt_lift(user, &ur, mem.data, Dv, nearv, kv, pf, width, height, prel)) ||
+              (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, kv, pf, width, height, prel)) ||
               (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
@@ -29187,6 +29169,7 @@ done:
     TN_FREE(nearv);
     TN_FREE(nearr);
     TN_FREE(kv);
+    TN_FREE(into);
     TN_FREE(etype);
     TN_FREE(emask);
     TN_FREE(erel);
