@@ -242,6 +242,10 @@ TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const 
     return TN_OK;
 }
 
+/* The index of a drawn valley's lower end (its last point when both ends are as high): where it
+   drains, the mouth it shares with the valley it joins. */
+static int tn__gnn_low_end(const tn_contour *l) { return l->points[3 * (l->npoints - 1) + 2] <= l->points[2] ? l->npoints - 1 : 0; }
+
 #define TN__GNN_WIDEN_MIN 0.6f /* a drawn valley's width factor at its head ... */
 #define TN__GNN_WIDEN_MAX 1.6f /* ... and at most, at the mouth of a long network */
 
@@ -272,7 +276,7 @@ static tn_status tn__gnn_grow_widths(const tn_contour_set *drawn, int width, int
         double best = 9.0;
         if (l->type != TN_VALLEY || l->npoints < 2) continue;
         for (j = 1; j < l->npoints; j++) len[c] += hypot(l->points[3 * j] - l->points[3 * j - 3], l->points[3 * j + 1] - l->points[3 * j - 2]);
-        e = l->points[2] <= l->points[3 * l->npoints - 1] ? l->points : l->points + 3 * (l->npoints - 1);
+        e = l->points + 3 * tn__gnn_low_end(l);
         for (t = 0; t < nu; t++)
             for (j = 0; t != c && user->items[t].type == TN_VALLEY && j < user->items[t].npoints; j++) {
                 double dx = e[0] - user->items[t].points[3 * j], dy = e[1] - user->items[t].points[3 * j + 1];
@@ -288,7 +292,7 @@ static tn_status tn__gnn_grow_widths(const tn_contour_set *drawn, int width, int
     for (pass = 0; pass < 2 && (!pass || sum > 0); pass++) /* the mean of A, then the factors */
         for (c = 0; c < nu; c++) {
             const tn_contour *l = &user->items[c];
-            int down = l->points[2] >= l->points[3 * l->npoints - 1]; /* the head is the higher end */
+            int down = tn__gnn_low_end(l) > 0; /* from the head, the higher end */
             double s = 0;
             if (l->type != TN_VALLEY || l->npoints < 2) continue;
             for (j = 0; j < l->npoints; j++) {
@@ -481,7 +485,7 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
         const tn_contour *l = &user->items[c];
         const float *e;
         if (l->type != TN_VALLEY || l->npoints < 2 || into[c] >= 0) continue;
-        e = l->points[2] <= l->points[3 * (l->npoints - 1) + 2] ? l->points : l->points + 3 * (l->npoints - 1);
+        e = l->points + 3 * tn__gnn_low_end(l);
         for (dy = -1; dy <= 1; dy++)
             for (dx = -1; dx <= 1; dx++) {
                 int X = (int)(e[0] + 0.5f) + dx, Y = (int)(e[1] + 0.5f) + dy;
@@ -631,7 +635,7 @@ static tn_status tn__gnn_drain_end(tn__pts *pts, const tn_contour *l, const tn_i
     int x, y, m;
     size_t k;
     tn_status st = TN_OK;
-    if (p[3 * (n - 1) + 2] <= p[2]) e = p + 3 * (n - 1), b = p + 3 * (n - 2);
+    if (tn__gnn_low_end(l) > 0) e = p + 3 * (n - 1), b = p + 3 * (n - 2);
     else e = p, b = p + 3;
     hx = e[0] - b[0], hy = e[1] - b[1], len = sqrtf(hx * hx + hy * hy);
     if (!(len > 0)) return TN_OK;
