@@ -965,8 +965,9 @@ TN_API tn_status tn_noise_blend(tn_image *out, const tn_image *noise, const tn_i
    the guide: every 7 x 7 patch of the terrain's low-pass is matched to the nearest patch of the
    example's low-pass (under the example's 8 rotations and mirrors, heights relative to the
    patch mean), and the example's detail (itself minus its low-pass) at the matches is added.
-   A pixel depends only on the terrain within tn_fine_detail_halo pixels, so tiles equal the
-   whole map, and on no thread count.
+   A pixel depends only on the terrain within tn_fine_detail_halo pixels (and on the colour,
+   x + y even or odd, its place gives it), so tiles cut at an even x + y equal the whole map,
+   and on no thread count.
    ============================================================================================ */
 #ifndef TN_NO_FINEDETAIL
 
@@ -983,7 +984,9 @@ typedef struct tn_fine_detail_opts {
 TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts);
 
 /* Pixels around a window that tn_fine_detail reads for it: a window computed from the
-   terrain grown by this much (tn_rect_halo) equals the whole map's pixels there. */
+   terrain grown by this much (tn_rect_halo), cut from the map at an even x + y, equals the whole
+   map's pixels there (the coherence sweeps take the pixels of one colour, x + y even or odd, at a
+   time). */
 TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts);
 #endif /* TN_NO_FINEDETAIL */
 
@@ -1963,7 +1966,9 @@ typedef struct tn_gnn_generate_opts {
                                 their heights differ from the asked ones by about that relief */
     int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
                                 detail of the example heights the model holds (gnn-train stores them),
-                                matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
+                                matched by shape; on a grown sketch, first the fine relief of the ground
+                                the added lines were traced from, from 6 px of the strokes on (docs/gnn.md,
+                                stop 73). 0 = on a grown sketch (a drawing of a few strokes: the
                                 network gives its layout, not the example's roughness), when the model
                                 holds its example; 1 = always (fails without the example); -1 = never */
     int map_scale;           /* a grown drawing larger than its example (tn_gnn_plan.map_scale): 0 = by
@@ -2826,8 +2831,9 @@ tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, 
 tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
                                int *near);
 tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief);
+                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief, float *ground);
 tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
+tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K);
 tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif
 #ifndef TN_NO_TEXGAN
@@ -14927,7 +14933,7 @@ done:
 typedef struct tn__fd_job {
     const tn__fd *d;
     const float *img;        /* the terrain's low-pass, w x h */
-    int w, h, parity;
+    int w, h, parity, odd;   /* odd: the image's origin lies at an odd x + y of its map */
     const int *from;         /* sweeps: the matches before the sweep */
     int *match;              /* w x h plane indices */
     float *vote, *own, *band;/* w x h: the voted band, the finest detail at each pixel's own match, the
@@ -14972,7 +14978,8 @@ static void tn__fd_match_task(void *vj, size_t b, size_t e)
     }
 }
 
-/* One coherence half-sweep over the pixels of one colour (x + y even or odd): each keeps its
+/* One coherence half-sweep over the pixels of one colour (x + y even or odd, in the map's
+   coordinates: a window cut at an odd x + y keeps its pixels' colours): each keeps its
    match or takes a 4-neighbour's, shifted by the pixel between them, whichever fits its patch
    best, a match that no neighbour shares counting (1 + kappa) times its distance. Red-black, so
    two neighbours never swap matches back and forth. */
@@ -14990,7 +14997,7 @@ static void tn__fd_sweep_task(void *vj, size_t b, size_t e)
             int best = j->from[i], cand[4], shared = 0;
             float bd;
             j->match[i] = best;
-            if (((x + (int)row) & 1) != j->parity) continue;
+            if (((x + (int)row + j->odd) & 1) != j->parity) continue;
             for (k = 0; k < 4; k++) {
                 int x2 = x + nx[k], y2 = (int)row + ny[k];
                 cand[k] = -1;
@@ -15066,8 +15073,9 @@ static void tn__fd_vote_task(void *vj, size_t b, size_t e)
     }
 }
 
-/* out (terrain's size) = terrain's low-pass + detail from d's example. */
-TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, tn_image *out)
+/* out (terrain's size) = terrain's low-pass + detail from d's example; odd: terrain's origin lies
+   at an odd x + y of the map it is a window of. */
+TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, int odd, tn_image *out)
 {
     tn_image guide = {0, 0, 0, NULL}, vote = {0, 0, 0, NULL}, own = {0, 0, 0, NULL}, band = {0, 0, 0, NULL}, v2 = {0, 0, 0, NULL};
     size_t n = (size_t)terrain->width * terrain->height, i;
@@ -15088,6 +15096,7 @@ TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, tn_i
     j.img = guide.data;
     j.w = terrain->width;
     j.h = terrain->height;
+    j.odd = odd & 1;
     j.match = match;
     j.vote = vote.data;
     j.own = own.data;
@@ -15133,7 +15142,7 @@ TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn
     if ((st = tn__dem_check(terrain, 1, "fine detail: terrain"))) return st;
     if (terrain->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: the terrain must have one channel (heights)");
     if ((st = tn__fd_build(example, opts, &d))) return st;
-    st = tn__fd_apply(&d, terrain, out);
+    st = tn__fd_apply(&d, terrain, 0, out);
     tn__fd_free(&d);
     return st;
 }
@@ -26098,7 +26107,7 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 }
 
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief, float *ground); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, float *median, uint8_t *mask,
                                            float *dist, int *near); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
@@ -26123,6 +26132,9 @@ typedef struct tn__gnn_gen {
                                   example's bends moved them (tn__gnn_grow_crest) */
     float *drawn_d;            /* W x H: chamfer distance to them */
     float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
+    float *ground;             /* W x H or NULL: the grown ground's fine band (tn__gnn_ground_band), example units */
+    float *ground_lp;          /* W x H: the rest of that ground */
+    float ground_rms;          /* the band's RMS */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
@@ -26173,6 +26185,8 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->drawn);
     TN_FREE(G->drawn_d);
     TN_FREE(G->flank);
+    TN_FREE(G->ground);
+    TN_FREE(G->ground_lp);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
@@ -26838,6 +26852,69 @@ static int tn__gnn_example_dem(const tn_gnn *model, const tn__gnn_arch *A, tn_im
     return e != NULL;
 }
 
+#define TN__GNN_BAND_SIGMA 3.0f /* px: the grown ground gives the output what is finer than this Gaussian ... */
+#define TN__GNN_BAND_NEAR 6.0f   /* ... none of it within this many px of the user's strokes (they are the network's) ... */
+#define TN__GNN_BAND_FAR 16.0f   /* ... all of it from here on (a smoothstep between) ... */
+#define TN__GNN_BAND_GATE 3.0f   /* ... and none where the output's low-pass and the ground's part by more than
+                                    2 x this many times the band's RMS (all within 1 x) */
+
+/* The grown ground's fine band for tn__gnn_ground_apply. G->ground on entry: tn__gnn_grow's
+   ground (the quilted example on the strokes' ground, example units); its closed basins are
+   filled (tn_fill_depressions: the quilt dams valleys at its seams, and their detail closed lakes
+   in the output), and it is split by a Gaussian of TN__GNN_BAND_SIGMA px into G->ground_lp and
+   the rest, G->ground, whose RMS is G->ground_rms. */
+static tn_status tn__gnn_ground_band(tn__gnn_gen *G, int width, int height)
+{
+    tn_image t = {0, 0, 0, NULL}, f = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    size_t i, n = (size_t)width * height;
+    double s2 = 0;
+    tn_status st;
+    if (!G->ground) return TN_OK;
+    t.width = width, t.height = height, t.channels = 1, t.data = G->ground;
+    if ((st = tn_fill_depressions(&f, &t)) || (st = tn_image_blur(&b, &f, TN__GNN_BAND_SIGMA))) {
+        tn_image_free(&f);
+        return st;
+    }
+    for (i = 0; i < n; i++) {
+        G->ground[i] = f.data[i] - b.data[i];
+        s2 += (double)G->ground[i] * G->ground[i];
+    }
+    tn_image_free(&f);
+    G->ground_rms = (float)sqrt(s2 / (double)n);
+    G->ground_lp = b.data;
+    return TN_OK;
+}
+
+/* px a window's terrain is read around it by tn__gnn_ground_apply (tn_image_blur's radius) */
+static int tn__gnn_band_halo(const tn__gnn_gen *G) { return G->ground ? (int)(4.0f * TN__GNN_BAND_SIGMA + 0.5f) + 1 : 0; }
+
+/* Terrain t (window g of the map, example units) takes the grown ground's fine band in place of
+   its own (both below a Gaussian of TN__GNN_BAND_SIGMA px), from TN__GNN_BAND_NEAR to
+   TN__GNN_BAND_FAR px of the user's strokes on, where its low-pass is the ground's (within
+   TN__GNN_BAND_GATE x the band's RMS, none from twice that): the network renders the grown lines
+   as rounded knolls between them, and the ground they were traced from has the example's own
+   crests and gullies there; where the output went its own way (a drained valley, sunk ground),
+   they do not fit. Pixels within tn__gnn_band_halo of the window's inner edges are not right (the
+   caller's halo covers them). */
+static tn_status tn__gnn_ground_apply(const tn__gnn_gen *G, tn_image *t, tn_rect g)
+{
+    const float tau = TN__GNN_BAND_GATE * G->ground_rms;
+    tn_image b = {0, 0, 0, NULL};
+    int u, v;
+    tn_status st;
+    if (!G->ground || !G->pin_d) return TN_OK;
+    if ((st = tn_image_blur(&b, t, TN__GNN_BAND_SIGMA))) return st;
+    for (v = 0; v < g.h; v++)
+        for (u = 0; u < g.w; u++) {
+            size_t q = (size_t)(g.y + v) * G->W + g.x + u, i = (size_t)v * g.w + u;
+            float w = tn__clampf((G->pin_d[q] - TN__GNN_BAND_NEAR) / (TN__GNN_BAND_FAR - TN__GNN_BAND_NEAR), 0, 1);
+            float k = tau > 0 ? tn__clampf(2 - fabsf(b.data[i] - G->ground_lp[q]) / tau, 0, 1) : 0;
+            t->data[i] += k * w * w * (3 - 2 * w) * (G->ground[q] - (t->data[i] - b.data[i]));
+        }
+    tn_image_free(&b);
+    return TN_OK;
+}
+
 /* Whether the fine detail by example runs (opts->detail, the model's example); generation
    builds its index (tn__gnn_detail_index), a plan does not need it. */
 static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
@@ -26957,8 +27034,10 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
                 if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, tn__gnn_example_dem(model, &G->A, &dem) ? &dem : NULL, width, height, &go, &rnd, &G->grown,
-                                           &relief))) {
+            if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
+                st = TN_ERR_OUT_OF_MEMORY;
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, G->ground ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
+                !(st = tn__gnn_ground_band(G, width, height))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
@@ -27317,11 +27396,11 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) + N : 0), G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) + N : 0) + tn__gnn_band_halo(G), G->W, G->H);
             a = tn_rect_halo(r, N, G->W, G->H);
             na = (size_t)a.w * a.h;
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
-                !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
+                !(st = tn__gnn_ground_apply(G, &t, g)) && !(st = tn__fd_apply(&G->fd, &t, (g.x + g.y) & 1, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && (!(val = (float *)tn__alloc(na * sizeof(float))) || !(def = (float *)tn__alloc(na * (G->drawn ? 2 : 1) * sizeof(float))) ||
                                !(out = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))))
                     st = TN_ERR_OUT_OF_MEMORY;
@@ -28291,6 +28370,33 @@ done:
     return st;
 }
 
+#define TN__GNN_WIDTH_BLUR 12 /* px: radius of the two box means that smooth the width field */
+
+/* The width factor of the nearest drawn valley pixel (kv at nearv; 1 where there is none) at
+   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: where the nearest
+   pixel jumps from one valley to another (or along one, as its factor steps), the factor read
+   at it jumped too, and the ground's rise from the valleys with it (cliffs of 150 m along the
+   bisector between two branches, terraces beside a long valley). */
+TN__INTERNAL tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K)
+{
+    size_t p, n = (size_t)width * height;
+    double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
+    int x, y, pass;
+    if (!I) return TN_ERR_OUT_OF_MEMORY;
+    for (p = 0; p < n; p++) K[p] = nearv[p] >= 0 ? kv[nearv[p]] : 1.0f;
+    for (pass = 0; pass < 2; pass++) {
+        if (pass) memset(I, 0, ((size_t)width + 1) * (height + 1) * sizeof(double));
+        tn__gnn_integral(K, width, height, I);
+        for (y = 0; y < height; y++)
+            for (x = 0; x < width; x++) {
+                double a, s = tn__gnn_box_sum(I, width, height, x, y, TN__GNN_WIDTH_BLUR, &a);
+                K[(size_t)y * width + x] = (float)(s / a);
+            }
+    }
+    TN_FREE(I);
+    return TN_OK;
+}
+
 /* The minimum-error boundary cut of image quilting, on the blurred line types: in the block's left
    and top overlaps (mg px wide), the path (a column per row, a row per column, steps of at most
    1 px) along which the placed network and the new block's agree best; the new block covers the
@@ -28435,7 +28541,7 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
    example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
    stood perched between banks forced up around it (a tube on a causeway). So where the grown
    ground (ground + prel) lies less than the example's median rise from its main valleys (floor,
-   at the distance over the valley's width factor kv, tn__gnn_grow_widths) above the nearest
+   at the distance over the width factor K, tn__gnn_grow_width_field) above the nearest
    drawn valley pixel, prel is lifted by the shortfall: in full within TN__GNN_PROFILE / 2 px,
    fading out by TN__GNN_PROFILE, and by a smooth field (the shortfall's max over TN__GNN_LIFT
    px, averaged over as many: never under the shortfall) so the quilt's gullies and spurs stay.
@@ -28443,7 +28549,7 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
    tn__gnn_grow_widths): its outlet stays open. ur: the user's lines rasterised
    (tn_sketch_rasterise); Dv, nearv: the distance to the nearest user valley pixel and that pixel. */
 static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into, const tn_image *ur, const float *ground, const float *Dv,
-                                    const int *nearv, const float *kv, const float *floor, int width, int height, float *prel)
+                                    const int *nearv, const float *K, const float *floor, int width, int height, float *prel)
 {
     const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
     size_t p, n = (size_t)width * height;
@@ -28468,7 +28574,7 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
         float need = 0, w;
         if (nearv[p] >= 0 && Dv[p] < R && !end[nearv[p]]) {
             w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
-            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / kv[nearv[p]]) - (ground[p] + prel[p]);
+            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + prel[p]);
             need *= w * w * (3 - 2 * w);
         }
         v.data[p] = fmaxf(need, 0);
@@ -28907,7 +29013,7 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out, float *ground_out)
 {
     tn_gnn_grow_opts o;
     tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
@@ -28918,7 +29024,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
-    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, *K = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL, *nearr = NULL, *into = NULL; /* into: the valley each user valley's lower end joins (tn__gnn_grow_widths) */
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
@@ -28970,6 +29076,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     nearv = (int *)tn__alloc(n * sizeof(int));
     nearr = (int *)tn__alloc(n * sizeof(int));
     kv = (float *)tn__alloc(n * sizeof(float));
+    K = (float *)tn__alloc(n * sizeof(float));
     into = (int *)tn__alloc((size_t)user->count * sizeof(int));
     Dr = (float *)tn__alloc(n * sizeof(float));
     Dv = (float *)tn__alloc(n * sizeof(float));
@@ -28989,7 +29096,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         pq = (float *)tn__alloc((size_t)S * S * sizeof(float));
     }
     if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
-        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || !into || (dem && (!Q || !qset || !pq))) {
+        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || !K || !into || (dem && (!Q || !qset || !pq))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -28997,7 +29104,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i + (size_t)type] > 0);
         tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, type ? nearv : nearr);
     }
-    if ((st = tn__gnn_grow_widths(user, width, height, kv, into))) goto done;
+    if ((st = tn__gnn_grow_widths(user, width, height, kv, into)) || (st = tn__gnn_grow_width_field(kv, nearv, width, height, K))) goto done;
     for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
     tn__gnn_chamfer(umask, width, height, D, near);
     /* the example: line types, each line pixel's height above the mean of the lines within R px
@@ -29096,11 +29203,13 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
             if (Q) tn__gnn_quilt_heights(Q, qset, dem, width, height, x0, y0, B, mg, bt, box, boy, pq, cutc, cutr, cutE);
         }
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
-        mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
+        mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / K[i] : Dv[i], pr, pv);
     if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) ||
-              (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, kv, pf, width, height, prel)) ||
+              (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, K, pf, width, height, prel)) ||
               (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
+    if (Q && ground_out)
+        for (i = 0; i < n; i++) ground_out[i] = mem.data[i] + prel[i];
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
     for (c = 0; c < user->count; c++) {
         const tn_contour *u = &user->items[c];
@@ -29173,6 +29282,7 @@ done:
     TN_FREE(nearv);
     TN_FREE(nearr);
     TN_FREE(kv);
+    TN_FREE(K);
     TN_FREE(into);
     TN_FREE(etype);
     TN_FREE(emask);
@@ -29631,7 +29741,7 @@ done:
 TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
                              int height, const tn_gnn_grow_opts *opts, int *added)
 {
-    return tn__gnn_grow(user, example, NULL, width, height, opts, out, added, NULL);
+    return tn__gnn_grow(user, example, NULL, width, height, opts, out, added, NULL, NULL);
 }
 #endif /* TN_NO_GNN */
 /* --------------------------------------------------------------------------------------------

@@ -5,8 +5,9 @@
    the guide: every 7 x 7 patch of the terrain's low-pass is matched to the nearest patch of the
    example's low-pass (under the example's 8 rotations and mirrors, heights relative to the
    patch mean), and the example's detail (itself minus its low-pass) at the matches is added.
-   A pixel depends only on the terrain within tn_fine_detail_halo pixels, so tiles equal the
-   whole map, and on no thread count.
+   A pixel depends only on the terrain within tn_fine_detail_halo pixels (and on the colour,
+   x + y even or odd, its place gives it), so tiles cut at an even x + y equal the whole map,
+   and on no thread count.
    ============================================================================================ */
 #ifndef TN_NO_FINEDETAIL
 
@@ -23,7 +24,9 @@ typedef struct tn_fine_detail_opts {
 TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn_image *terrain, const tn_fine_detail_opts *opts);
 
 /* Pixels around a window that tn_fine_detail reads for it: a window computed from the
-   terrain grown by this much (tn_rect_halo) equals the whole map's pixels there. */
+   terrain grown by this much (tn_rect_halo), cut from the map at an even x + y, equals the whole
+   map's pixels there (the coherence sweeps take the pixels of one colour, x + y even or odd, at a
+   time). */
 TN_API int tn_fine_detail_halo(const tn_fine_detail_opts *opts);
 #endif /* TN_NO_FINEDETAIL */
 
@@ -411,7 +414,7 @@ done:
 typedef struct tn__fd_job {
     const tn__fd *d;
     const float *img;        /* the terrain's low-pass, w x h */
-    int w, h, parity;
+    int w, h, parity, odd;   /* odd: the image's origin lies at an odd x + y of its map */
     const int *from;         /* sweeps: the matches before the sweep */
     int *match;              /* w x h plane indices */
     float *vote, *own, *band;/* w x h: the voted band, the finest detail at each pixel's own match, the
@@ -456,7 +459,8 @@ static void tn__fd_match_task(void *vj, size_t b, size_t e)
     }
 }
 
-/* One coherence half-sweep over the pixels of one colour (x + y even or odd): each keeps its
+/* One coherence half-sweep over the pixels of one colour (x + y even or odd, in the map's
+   coordinates: a window cut at an odd x + y keeps its pixels' colours): each keeps its
    match or takes a 4-neighbour's, shifted by the pixel between them, whichever fits its patch
    best, a match that no neighbour shares counting (1 + kappa) times its distance. Red-black, so
    two neighbours never swap matches back and forth. */
@@ -474,7 +478,7 @@ static void tn__fd_sweep_task(void *vj, size_t b, size_t e)
             int best = j->from[i], cand[4], shared = 0;
             float bd;
             j->match[i] = best;
-            if (((x + (int)row) & 1) != j->parity) continue;
+            if (((x + (int)row + j->odd) & 1) != j->parity) continue;
             for (k = 0; k < 4; k++) {
                 int x2 = x + nx[k], y2 = (int)row + ny[k];
                 cand[k] = -1;
@@ -550,8 +554,9 @@ static void tn__fd_vote_task(void *vj, size_t b, size_t e)
     }
 }
 
-/* out (terrain's size) = terrain's low-pass + detail from d's example. */
-TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, tn_image *out)
+/* out (terrain's size) = terrain's low-pass + detail from d's example; odd: terrain's origin lies
+   at an odd x + y of the map it is a window of. */
+TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, int odd, tn_image *out)
 {
     tn_image guide = {0, 0, 0, NULL}, vote = {0, 0, 0, NULL}, own = {0, 0, 0, NULL}, band = {0, 0, 0, NULL}, v2 = {0, 0, 0, NULL};
     size_t n = (size_t)terrain->width * terrain->height, i;
@@ -572,6 +577,7 @@ TN__SHARED tn_status tn__fd_apply(const tn__fd *d, const tn_image *terrain, tn_i
     j.img = guide.data;
     j.w = terrain->width;
     j.h = terrain->height;
+    j.odd = odd & 1;
     j.match = match;
     j.vote = vote.data;
     j.own = own.data;
@@ -617,7 +623,7 @@ TN_API tn_status tn_fine_detail(tn_image *out, const tn_image *example, const tn
     if ((st = tn__dem_check(terrain, 1, "fine detail: terrain"))) return st;
     if (terrain->channels != 1) return tn__fail(TN_ERR_INVALID_ARG, "fine detail: the terrain must have one channel (heights)");
     if ((st = tn__fd_build(example, opts, &d))) return st;
-    st = tn__fd_apply(&d, terrain, out);
+    st = tn__fd_apply(&d, terrain, 0, out);
     tn__fd_free(&d);
     return st;
 }

@@ -206,7 +206,9 @@ typedef struct tn_gnn_generate_opts {
                                 their heights differ from the asked ones by about that relief */
     int detail;              /* fine detail by example (tn_fine_detail): the output's low-pass plus the
                                 detail of the example heights the model holds (gnn-train stores them),
-                                matched by shape. 0 = on a grown sketch (a drawing of a few strokes: the
+                                matched by shape; on a grown sketch, first the fine relief of the ground
+                                the added lines were traced from, from 6 px of the strokes on (docs/gnn.md,
+                                stop 73). 0 = on a grown sketch (a drawing of a few strokes: the
                                 network gives its layout, not the example's roughness), when the model
                                 holds its example; 1 = always (fails without the example); -1 = never */
     int map_scale;           /* a grown drawing larger than its example (tn_gnn_plan.map_scale): 0 = by
@@ -2473,7 +2475,7 @@ static void tn__gnn_same_parts(const tn_contour_set *sk, const tn_contour_set *e
 }
 
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief); /* >>gnn_grow */
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief, float *ground); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_ground(const tn_contour_set *example, const tn_image *dem, int kind, float *prof, float *median, uint8_t *mask,
                                            float *dist, int *near); /* >>gnn_grow */
 TN__INTERNAL tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed); /* >>gnn_grow */
@@ -2498,6 +2500,9 @@ typedef struct tn__gnn_gen {
                                   example's bends moved them (tn__gnn_grow_crest) */
     float *drawn_d;            /* W x H: chamfer distance to them */
     float *flank;              /* W x H or NULL: the drawn ridges' flanks by example (tn__gnn_grow_flanks), normalised units */
+    float *ground;             /* W x H or NULL: the grown ground's fine band (tn__gnn_ground_band), example units */
+    float *ground_lp;          /* W x H: the rest of that ground */
+    float ground_rms;          /* the band's RMS */
     float side;                /* least slope from a stroke to its banks (normalised units per px; tn__gnn_incise) */
     double user_density, example_density; /* line pixels per pixel: the sketch's, the example's */
     float gain;                /* share of the residual over the membrane that is added */
@@ -2548,6 +2553,8 @@ static void tn__gnn_gen_free(tn__gnn_gen *G)
     TN_FREE(G->drawn);
     TN_FREE(G->drawn_d);
     TN_FREE(G->flank);
+    TN_FREE(G->ground);
+    TN_FREE(G->ground_lp);
     tn_params_free(G->own_w);
     tn__fd_free(&G->fd);
     memset(G, 0, sizeof *G);
@@ -3213,6 +3220,69 @@ static int tn__gnn_example_dem(const tn_gnn *model, const tn__gnn_arch *A, tn_im
     return e != NULL;
 }
 
+#define TN__GNN_BAND_SIGMA 3.0f /* px: the grown ground gives the output what is finer than this Gaussian ... */
+#define TN__GNN_BAND_NEAR 6.0f   /* ... none of it within this many px of the user's strokes (they are the network's) ... */
+#define TN__GNN_BAND_FAR 16.0f   /* ... all of it from here on (a smoothstep between) ... */
+#define TN__GNN_BAND_GATE 3.0f   /* ... and none where the output's low-pass and the ground's part by more than
+                                    2 x this many times the band's RMS (all within 1 x) */
+
+/* The grown ground's fine band for tn__gnn_ground_apply. G->ground on entry: tn__gnn_grow's
+   ground (the quilted example on the strokes' ground, example units); its closed basins are
+   filled (tn_fill_depressions: the quilt dams valleys at its seams, and their detail closed lakes
+   in the output), and it is split by a Gaussian of TN__GNN_BAND_SIGMA px into G->ground_lp and
+   the rest, G->ground, whose RMS is G->ground_rms. */
+static tn_status tn__gnn_ground_band(tn__gnn_gen *G, int width, int height)
+{
+    tn_image t = {0, 0, 0, NULL}, f = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    size_t i, n = (size_t)width * height;
+    double s2 = 0;
+    tn_status st;
+    if (!G->ground) return TN_OK;
+    t.width = width, t.height = height, t.channels = 1, t.data = G->ground;
+    if ((st = tn_fill_depressions(&f, &t)) || (st = tn_image_blur(&b, &f, TN__GNN_BAND_SIGMA))) {
+        tn_image_free(&f);
+        return st;
+    }
+    for (i = 0; i < n; i++) {
+        G->ground[i] = f.data[i] - b.data[i];
+        s2 += (double)G->ground[i] * G->ground[i];
+    }
+    tn_image_free(&f);
+    G->ground_rms = (float)sqrt(s2 / (double)n);
+    G->ground_lp = b.data;
+    return TN_OK;
+}
+
+/* px a window's terrain is read around it by tn__gnn_ground_apply (tn_image_blur's radius) */
+static int tn__gnn_band_halo(const tn__gnn_gen *G) { return G->ground ? (int)(4.0f * TN__GNN_BAND_SIGMA + 0.5f) + 1 : 0; }
+
+/* Terrain t (window g of the map, example units) takes the grown ground's fine band in place of
+   its own (both below a Gaussian of TN__GNN_BAND_SIGMA px), from TN__GNN_BAND_NEAR to
+   TN__GNN_BAND_FAR px of the user's strokes on, where its low-pass is the ground's (within
+   TN__GNN_BAND_GATE x the band's RMS, none from twice that): the network renders the grown lines
+   as rounded knolls between them, and the ground they were traced from has the example's own
+   crests and gullies there; where the output went its own way (a drained valley, sunk ground),
+   they do not fit. Pixels within tn__gnn_band_halo of the window's inner edges are not right (the
+   caller's halo covers them). */
+static tn_status tn__gnn_ground_apply(const tn__gnn_gen *G, tn_image *t, tn_rect g)
+{
+    const float tau = TN__GNN_BAND_GATE * G->ground_rms;
+    tn_image b = {0, 0, 0, NULL};
+    int u, v;
+    tn_status st;
+    if (!G->ground || !G->pin_d) return TN_OK;
+    if ((st = tn_image_blur(&b, t, TN__GNN_BAND_SIGMA))) return st;
+    for (v = 0; v < g.h; v++)
+        for (u = 0; u < g.w; u++) {
+            size_t q = (size_t)(g.y + v) * G->W + g.x + u, i = (size_t)v * g.w + u;
+            float w = tn__clampf((G->pin_d[q] - TN__GNN_BAND_NEAR) / (TN__GNN_BAND_FAR - TN__GNN_BAND_NEAR), 0, 1);
+            float k = tau > 0 ? tn__clampf(2 - fabsf(b.data[i] - G->ground_lp[q]) / tau, 0, 1) : 0;
+            t->data[i] += k * w * w * (3 - 2 * w) * (G->ground[q] - (t->data[i] - b.data[i]));
+        }
+    tn_image_free(&b);
+    return TN_OK;
+}
+
 /* Whether the fine detail by example runs (opts->detail, the model's example); generation
    builds its index (tn__gnn_detail_index), a plan does not need it. */
 static tn_status tn__gnn_detail_plan(const tn_gnn *model, const tn_gnn_generate_opts *o, tn__gnn_gen *G)
@@ -3332,8 +3402,10 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
                 if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, tn__gnn_example_dem(model, &G->A, &dem) ? &dem : NULL, width, height, &go, &rnd, &G->grown,
-                                           &relief))) {
+            if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
+                st = TN_ERR_OUT_OF_MEMORY;
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, G->ground ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
+                !(st = tn__gnn_ground_band(G, width, height))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
                 sk = rnd;
@@ -3692,11 +3764,11 @@ static tn_status tn__gnn_gen_detailed(const tn__gnn_gen *G, tn_ctx *ctx, int x, 
             r.x = x + tx, r.y = y + ty;
             r.w = ww - tx < T ? ww - tx : T;
             r.h = wh - ty < T ? wh - ty : T;
-            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) + N : 0), G->W, G->H);
+            g = tn_rect_halo(r, halo + (G->pin ? TN__GNN_PIN + (int)(4.0f * G->fd.sigma + 0.5f) + N : 0) + tn__gnn_band_halo(G), G->W, G->H);
             a = tn_rect_halo(r, N, G->W, G->H);
             na = (size_t)a.w * a.h;
             if (!(st = tn_image_create(&t, g.w, g.h, 1)) && !(st = tn__gnn_gen_run(G, G->w, ctx, g.x, g.y, g.w, g.h, t.data, NULL, "gnn-generate")) &&
-                !(st = tn__fd_apply(&G->fd, &t, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
+                !(st = tn__gnn_ground_apply(G, &t, g)) && !(st = tn__fd_apply(&G->fd, &t, (g.x + g.y) & 1, &d)) && !(G->pin && (st = tn__gnn_keep_profile(G, &t, g, &d)))) {
                 if (G->pin && (!(val = (float *)tn__alloc(na * sizeof(float))) || !(def = (float *)tn__alloc(na * (G->drawn ? 2 : 1) * sizeof(float))) ||
                                !(out = (float *)tn__alloc((size_t)r.w * r.h * sizeof(float)))))
                     st = TN_ERR_OUT_OF_MEMORY;

@@ -319,6 +319,33 @@ done:
     return st;
 }
 
+#define TN__GNN_WIDTH_BLUR 12 /* px: radius of the two box means that smooth the width field */
+
+/* The width factor of the nearest drawn valley pixel (kv at nearv; 1 where there is none) at
+   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: where the nearest
+   pixel jumps from one valley to another (or along one, as its factor steps), the factor read
+   at it jumped too, and the ground's rise from the valleys with it (cliffs of 150 m along the
+   bisector between two branches, terraces beside a long valley). */
+TN__INTERNAL tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K)
+{
+    size_t p, n = (size_t)width * height;
+    double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
+    int x, y, pass;
+    if (!I) return TN_ERR_OUT_OF_MEMORY;
+    for (p = 0; p < n; p++) K[p] = nearv[p] >= 0 ? kv[nearv[p]] : 1.0f;
+    for (pass = 0; pass < 2; pass++) {
+        if (pass) memset(I, 0, ((size_t)width + 1) * (height + 1) * sizeof(double));
+        tn__gnn_integral(K, width, height, I);
+        for (y = 0; y < height; y++)
+            for (x = 0; x < width; x++) {
+                double a, s = tn__gnn_box_sum(I, width, height, x, y, TN__GNN_WIDTH_BLUR, &a);
+                K[(size_t)y * width + x] = (float)(s / a);
+            }
+    }
+    TN_FREE(I);
+    return TN_OK;
+}
+
 /* The minimum-error boundary cut of image quilting, on the blurred line types: in the block's left
    and top overlaps (mg px wide), the path (a column per row, a row per column, steps of at most
    1 px) along which the placed network and the new block's agree best; the new block covers the
@@ -463,7 +490,7 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
    example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
    stood perched between banks forced up around it (a tube on a causeway). So where the grown
    ground (ground + prel) lies less than the example's median rise from its main valleys (floor,
-   at the distance over the valley's width factor kv, tn__gnn_grow_widths) above the nearest
+   at the distance over the width factor K, tn__gnn_grow_width_field) above the nearest
    drawn valley pixel, prel is lifted by the shortfall: in full within TN__GNN_PROFILE / 2 px,
    fading out by TN__GNN_PROFILE, and by a smooth field (the shortfall's max over TN__GNN_LIFT
    px, averaged over as many: never under the shortfall) so the quilt's gullies and spurs stay.
@@ -471,7 +498,7 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
    tn__gnn_grow_widths): its outlet stays open. ur: the user's lines rasterised
    (tn_sketch_rasterise); Dv, nearv: the distance to the nearest user valley pixel and that pixel. */
 static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into, const tn_image *ur, const float *ground, const float *Dv,
-                                    const int *nearv, const float *kv, const float *floor, int width, int height, float *prel)
+                                    const int *nearv, const float *K, const float *floor, int width, int height, float *prel)
 {
     const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
     size_t p, n = (size_t)width * height;
@@ -496,7 +523,7 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
         float need = 0, w;
         if (nearv[p] >= 0 && Dv[p] < R && !end[nearv[p]]) {
             w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
-            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / kv[nearv[p]]) - (ground[p] + prel[p]);
+            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + prel[p]);
             need *= w * w * (3 - 2 * w);
         }
         v.data[p] = fmaxf(need, 0);
@@ -935,7 +962,7 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
    from which generation takes the least slope from a stroke to its banks. */
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out)
+                                    const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out, float *ground_out)
 {
     tn_gnn_grow_opts o;
     tn_image ur = {0, 0, 0, NULL}, er = {0, 0, 0, NULL}, mem = {0, 0, 0, NULL};
@@ -946,7 +973,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
     float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
-    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
+    float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, *K = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL, *nearr = NULL, *into = NULL; /* into: the valley each user valley's lower end joins (tn__gnn_grow_widths) */
     int *cutc = NULL, *cutr = NULL;
     double *sum = NULL, *cnt = NULL, *cutE = NULL, rel_sum = 0;
@@ -998,6 +1025,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     nearv = (int *)tn__alloc(n * sizeof(int));
     nearr = (int *)tn__alloc(n * sizeof(int));
     kv = (float *)tn__alloc(n * sizeof(float));
+    K = (float *)tn__alloc(n * sizeof(float));
     into = (int *)tn__alloc((size_t)user->count * sizeof(int));
     Dr = (float *)tn__alloc(n * sizeof(float));
     Dv = (float *)tn__alloc(n * sizeof(float));
@@ -1017,7 +1045,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         pq = (float *)tn__alloc((size_t)S * S * sizeof(float));
     }
     if (!umask || !placed || !mask || !ptype || !prel || !D || !Dr || !Dv || !near || !etype || !emask || !erel || !sum || !cnt || !ebl || !pbl ||
-        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || !into || (dem && (!Q || !qset || !pq))) {
+        !cutc || !cutr || !cutE || !nearv || !nearr || !kv || !K || !into || (dem && (!Q || !qset || !pq))) {
         st = TN_ERR_OUT_OF_MEMORY;
         goto done;
     }
@@ -1025,7 +1053,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
         for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i + (size_t)type] > 0);
         tn__gnn_chamfer(umask, width, height, type ? Dv : Dr, type ? nearv : nearr);
     }
-    if ((st = tn__gnn_grow_widths(user, width, height, kv, into))) goto done;
+    if ((st = tn__gnn_grow_widths(user, width, height, kv, into)) || (st = tn__gnn_grow_width_field(kv, nearv, width, height, K))) goto done;
     for (i = 0; i < n; i++) umask[i] = (uint8_t)(ur.data[3 * i] > 0 || ur.data[3 * i + 1] > 0);
     tn__gnn_chamfer(umask, width, height, D, near);
     /* the example: line types, each line pixel's height above the mean of the lines within R px
@@ -1124,11 +1152,13 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
             if (Q) tn__gnn_quilt_heights(Q, qset, dem, width, height, x0, y0, B, mg, bt, box, boy, pq, cutc, cutr, cutE);
         }
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
-        mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / kv[nearv[i]] : Dv[i], pr, pv);
+        mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / K[i] : Dv[i], pr, pv);
     if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) ||
-              (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, kv, pf, width, height, prel)) ||
+              (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, K, pf, width, height, prel)) ||
               (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
+    if (Q && ground_out)
+        for (i = 0; i < n; i++) ground_out[i] = mem.data[i] + prel[i];
     /* the user's lines first, then each type's added pixels away from them, thinned and traced */
     for (c = 0; c < user->count; c++) {
         const tn_contour *u = &user->items[c];
@@ -1201,6 +1231,7 @@ done:
     TN_FREE(nearv);
     TN_FREE(nearr);
     TN_FREE(kv);
+    TN_FREE(K);
     TN_FREE(into);
     TN_FREE(etype);
     TN_FREE(emask);
@@ -1659,6 +1690,6 @@ done:
 TN_API tn_status tn_gnn_grow(tn_contour_set *out, const tn_contour_set *user, const tn_contour_set *example, int width,
                              int height, const tn_gnn_grow_opts *opts, int *added)
 {
-    return tn__gnn_grow(user, example, NULL, width, height, opts, out, added, NULL);
+    return tn__gnn_grow(user, example, NULL, width, height, opts, out, added, NULL, NULL);
 }
 #endif /* TN_NO_GNN */

@@ -187,8 +187,9 @@ tn_status tn__gnn_membrane_solve(const float *val, const uint8_t *fixed, int W, 
 tn_status tn__gnn_grow_profile(const tn_contour_set *example, const tn_image *er, int kind, float *prof, uint8_t *mask, float *dist,
                                int *near);
 tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
-                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief);
+                       const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief, float *ground);
 tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
+tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K);
 tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif
 #ifndef TN_NO_TEXGAN

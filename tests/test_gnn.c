@@ -1447,7 +1447,7 @@ TN_TEST(drawn_valley_is_the_low_ground)
     TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
     ex = own_sketch(&dem);
     user = two_strokes(256, 256, rp, vp);
-    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 256, 256, NULL, &g, NULL, NULL) == TN_OK);
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 256, 256, NULL, &g, NULL, NULL, NULL) == TN_OK);
     TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
     for (y = 0; y < 256; y++)
         for (x = 16; x < 240; x++) {
@@ -1486,7 +1486,7 @@ TN_TEST(grown_basins_against_the_example_ground)
     share_ex = basin_share(&me, range);
     user = two_strokes(256, 256, rp, vp);
     for (with = 0; with < 2; with++) {
-        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 256, 256, NULL, &g, NULL, NULL) == TN_OK);
+        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 256, 256, NULL, &g, NULL, NULL, NULL) == TN_OK);
         TN_CHECK(tn_gnn_membrane(&m, &g, 256, 256) == TN_OK);
         share[with] = basin_share(&m, range);
         tn_image_free(&m);
@@ -1944,7 +1944,7 @@ TN_TEST(grown_spurs_keep_the_example_tilt)
     memset(&user, 0, sizeof user);
     user.width = user.height = 240, user.count = 1, user.items = &c;
     for (with = 0; with < 2; with++) {
-        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+        TN_CHECK(tn__gnn_grow(&user, &ex, with ? &dem : NULL, 240, 240, NULL, &g, NULL, NULL, NULL) == TN_OK);
         range[with] = ridge_range(&g, 1);
         tn_contour_set_free(&g);
     }
@@ -1981,7 +1981,7 @@ TN_TEST(grown_lines_keep_the_example_heights)
     c[1].type = TN_VALLEY, c[1].npoints = 20, c[1].points = vp;
     memset(&user, 0, sizeof user);
     user.width = user.height = 240, user.count = 2, user.items = c;
-    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 240, 240, NULL, &g, NULL, NULL) == TN_OK);
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 240, 240, NULL, &g, NULL, NULL, NULL) == TN_OK);
     for (i = 2; i < g.count; i++)
         for (j = 0; j < g.items[i].npoints; j++) glo = fminf(glo, g.items[i].points[3 * j + 2]), ghi = fmaxf(ghi, g.items[i].points[3 * j + 2]);
     printf("  added lines' heights %.0f..%.0f m; the example's %.0f..%.0f m (+-10 %%: %.0f..%.0f)\n", (double)glo, (double)ghi, (double)lo,
@@ -2003,7 +2003,7 @@ static tn_status grow_one_ridge(tn_contour_set *g, const tn_contour_set *ex, con
     c.type = TN_RIDGE, c.npoints = n, c.points = pts;
     memset(&user, 0, sizeof user);
     user.width = user.height = 240, user.count = 1, user.items = &c;
-    return tn__gnn_grow(&user, ex, dem, 240, 240, NULL, g, NULL, NULL);
+    return tn__gnn_grow(&user, ex, dem, 240, 240, NULL, g, NULL, NULL, NULL);
 }
 
 TN_TEST(grown_ground_sinks_under_a_drawn_ring)
@@ -2314,6 +2314,55 @@ TN_TEST(drawn_ridge_stays_above_cratered_detail)
     tn_image_free(&win);
     tn_image_free(&t);
     tn_image_free(&dem);
+    tn_gnn_free(&m);
+}
+
+TN_TEST(width_field_is_smooth)
+{
+    /* two drawn valleys of width factors 0.6 and 1.6, 80 px apart: the factor read at each
+       pixel's nearest valley pixel jumps by 1.0 on the bisector between them (a 150 m cliff in
+       the grown ground on the Alps); the smoothed field moves by at most 0.05 a px there, and
+       keeps each valley's own factor beside it within 0.1 */
+    const int W = 120, H = 40;
+    float kv[120 * 40], K[120 * 40], step = 0;
+    int nearv[120 * 40], x, y;
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            kv[y * W + x] = x == 20 ? 0.6f : x == 100 ? 1.6f : 1.0f;
+            nearv[y * W + x] = y * W + (x <= 60 ? 20 : 100); /* the valleys run down x = 20 and x = 100 */
+        }
+    TN_CHECK(fabsf(kv[nearv[20 * W + 59]] - kv[nearv[20 * W + 61]]) > 0.99f);
+    TN_CHECK(tn__gnn_grow_width_field(kv, nearv, W, H, K) == TN_OK);
+    for (y = 0; y < H; y++)
+        for (x = 1; x < W; x++) step = fmaxf(step, fabsf(K[y * W + x] - K[y * W + x - 1]));
+    printf("  largest step of the width field: %.3f a px\n", (double)step);
+    TN_CHECK(step <= 0.05f);
+    TN_CHECK(fabsf(K[20 * W + 20] - 0.6f) <= 0.1f && fabsf(K[20 * W + 100] - 1.6f) <= 0.1f);
+}
+
+TN_TEST(bundled_style_window_equals_whole_map)
+{
+    /* the Alps style on the fork drawing, grown, with the fine detail and the grown ground's
+       band: windows equal the whole map, one of the two starting its detail tile at an odd x (the
+       detail's coherence sweeps colour the pixels by their x + y in the map, not in the tile) */
+    tn_gnn m;
+    tn_contour_set sk;
+    tn_gnn_generate_opts go;
+    tn_image whole = {0, 0, 0, NULL}, win = {0, 0, 0, NULL};
+    int x;
+    memset(&m, 0, sizeof m);
+    memset(&sk, 0, sizeof sk);
+    memset(&go, 0, sizeof go);
+    go.seed = 1;
+    TN_CHECK(tn_gnn_load(&m, "examples/data/styles/alps.tnw") == TN_OK && tn_sketch_load(&sk, "bench/drawings/sketch_fork.tns") == TN_OK);
+    TN_CHECK(tn_gnn_generate(&whole, &m, &sk, 256, 256, &go) == TN_OK);
+    for (x = 100; whole.data && x <= 101; x++) {
+        TN_CHECK(tn_gnn_generate_window(&win, &m, &sk, 256, 256, x, 60, 90, 70, &go) == TN_OK);
+        TN_CHECK(window_matches(&win, &whole, x, 60));
+        tn_image_free(&win);
+    }
+    tn_image_free(&whole);
+    tn_contour_set_free(&sk);
     tn_gnn_free(&m);
 }
 
@@ -2737,6 +2786,8 @@ int main(void)
     TN_RUN(grown_generation);
     TN_RUN(drawn_ridge_is_a_crest);
     TN_RUN(bent_ridge_is_followed_where_drawn);
+    TN_RUN(width_field_is_smooth);
+    TN_RUN(bundled_style_window_equals_whole_map);
     TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);
     TN_RUN(drawn_ridge_stays_above_cratered_detail);
     TN_RUN(drawn_valley_widens_downstream);

@@ -1911,8 +1911,9 @@ static const cli_opt gnn_generate_opts[] = {
      "share of the network's relief added to the membrane of the sketch heights (1 = the network as trained, -1 = none)",
      "0 = tested on the sketch: held-out lines, scaled as the model's holdouts showed"},
     {"detail", 0, ARG_STR, 0, &gnn_generate_arg.detail, NULL, 0, 0, "auto|example|none|SINGAN.tnw",
-     "the fine scales: the example's own detail matched by shape to the terrain (fine detail by example; the model holds "
-     "its example), or a singan-train model of the same example (singan-refine), or none",
+     "the fine scales: the example's own detail matched by shape to the terrain, on a grown sketch after the fine relief of "
+     "the ground grown between its strokes (fine detail by example; the model holds its example), or a singan-train model of "
+     "the same example (singan-refine), or none",
      "auto: by example on a grown sketch (a drawing of a few strokes)"},
     {"detail-from-scale", 0, ARG_INT, 0, &gnn_generate_arg.detail_opts.from_scale, NULL, 1, 64, "K",
      "with --detail SINGAN.tnw: first SinGAN scale that runs on the terrain (higher = finer detail only)", "scales - 3"},
