@@ -28440,14 +28440,16 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
 
 #define TN__GNN_RELIEF_RADIUS 48     /* px: local relief is a height less the mean within this radius */
 #define TN__GNN_QUILT_CANDIDATES 200 /* placements scored per block when heights are quilted too */
-#define TN__GNN_QUILT_FEATHER 3      /* px past the height cut over which a block fades in */
+#define TN__GNN_QUILT_FEATHER 6      /* px past the height cut over which a block fades in (the cut keeps as many
+                                        before the block's core: a cut at its edge left steps of 400 m) */
 #define TN__GNN_QUILT_MEAN 512       /* px: away from the strokes, the quilted heights lose their mean within this radius */
 #define TN__GNN_FLANK 16             /* px across a drawn ridge that take the example's flanks; the quilted relief fades in over them */
 
 /* With the example's heights (dem), the quilt carries them too: block (x0, y0) under placement
    (t, ox, oy) is offset by its mean height difference from the heights already placed (Q, where
    qset) on its overlap, so neighbours meet, and pasted from the path of least height difference
-   across the overlap (tn__gnn_grow_cut on heights), faded in over TN__GNN_QUILT_FEATHER px past it.
+   across the overlap (tn__gnn_grow_cut on heights) but at least TN__GNN_QUILT_FEATHER px before the
+   block's core, faded in over TN__GNN_QUILT_FEATHER px past it.
    pq: S x S, cutc, cutr: S, E: S x mg scratch. */
 static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, int width, int height, int x0, int y0, int B, int mg,
                                   int t, int ox, int oy, float *pq, int *cutc, int *cutr, double *E)
@@ -28471,6 +28473,10 @@ static void tn__gnn_quilt_heights(float *Q, uint8_t *qset, const tn_image *dem, 
             pq[(size_t)(v + mg) * S + u + mg] = in ? Q[(size_t)Y * width + X] - off : 0.0f;
         }
     tn__gnn_grow_cut(qset, pq, dem->data, width, height, x0, y0, B, mg, t, ox, oy, Wx, cutc, cutr, E);
+    for (u = 0; u < S; u++) { /* room to fade in before the core */
+        cutc[u] = cutc[u] < -TN__GNN_QUILT_FEATHER ? cutc[u] : -TN__GNN_QUILT_FEATHER;
+        cutr[u] = cutr[u] < -TN__GNN_QUILT_FEATHER ? cutr[u] : -TN__GNN_QUILT_FEATHER;
+    }
     for (v = -mg; v < B; v++)
         for (u = -mg; u < B; u++) {
             int X = x0 + u, Y = y0 + v;
