@@ -27025,6 +27025,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             st = tn__gnn_line_density(&ex, &G->example_density);
         if (!st && (o.grow == 1 || (o.random_nodes == 0 && G->user_density < G->example_density / 6))) {
             tn_gnn_grow_opts go;
+            int with_dem = tn__gnn_example_dem(model, &G->A, &dem);
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
             if (!(st = tn_sketch_densify(&rnd, &sk))) { /* the drawn ridges' peaks and saddles, before the ground grows around them */
@@ -27034,9 +27035,9 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
                 if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
-                st = TN_ERR_OUT_OF_MEMORY;
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, G->ground ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
+            if (!st && with_dem && o.detail >= 0 && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
+                st = TN_ERR_OUT_OF_MEMORY; /* the band goes with the fine detail */
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, with_dem ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
                 !(st = tn__gnn_ground_band(G, width, height))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);
@@ -28373,10 +28374,9 @@ done:
 #define TN__GNN_WIDTH_BLUR 12 /* px: radius of the two box means that smooth the width field */
 
 /* The width factor of the nearest drawn valley pixel (kv at nearv; 1 where there is none) at
-   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: where the nearest
-   pixel jumps from one valley to another (or along one, as its factor steps), the factor read
-   at it jumped too, and the ground's rise from the valleys with it (cliffs of 150 m along the
-   bisector between two branches, terraces beside a long valley). */
+   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: the nearest pixel
+   jumps from one valley to another on the line halfway between them (and along one valley from
+   one factor to the next), and the ground's rise read at it would step there with it. */
 TN__INTERNAL tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K)
 {
     size_t p, n = (size_t)width * height;
@@ -28441,7 +28441,7 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
 #define TN__GNN_RELIEF_RADIUS 48     /* px: local relief is a height less the mean within this radius */
 #define TN__GNN_QUILT_CANDIDATES 200 /* placements scored per block when heights are quilted too */
 #define TN__GNN_QUILT_FEATHER 6      /* px past the height cut over which a block fades in (the cut keeps as many
-                                        before the block's core: a cut at its edge left steps of 400 m) */
+                                        before the block's core, or the block steps up at its edge) */
 #define TN__GNN_QUILT_MEAN 512       /* px: away from the strokes, the quilted heights lose their mean within this radius */
 #define TN__GNN_FLANK 16             /* px across a drawn ridge that take the example's flanks; the quilted relief fades in over them */
 

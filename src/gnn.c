@@ -3393,6 +3393,7 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
             st = tn__gnn_line_density(&ex, &G->example_density);
         if (!st && (o.grow == 1 || (o.random_nodes == 0 && G->user_density < G->example_density / 6))) {
             tn_gnn_grow_opts go;
+            int with_dem = tn__gnn_example_dem(model, &G->A, &dem);
             memset(&go, 0, sizeof go);
             go.seed = o.seed;
             if (!(st = tn_sketch_densify(&rnd, &sk))) { /* the drawn ridges' peaks and saddles, before the ground grows around them */
@@ -3402,9 +3403,9 @@ static tn_status tn__gnn_gen_make(const tn_gnn *model, const tn_contour_set *ske
                 st = tn__gnn_drawn_mask(&sk, sketch->count, width, height, G);
                 if (!st) st = tn__gnn_grow_crest(&sk, sketch->count, &ex, TN_RIDGE, o.seed);
             }
-            if (!st && tn__gnn_example_dem(model, &G->A, &dem) && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
-                st = TN_ERR_OUT_OF_MEMORY;
-            if (!st && !(st = tn__gnn_grow(&sk, &ex, G->ground ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
+            if (!st && with_dem && o.detail >= 0 && !(G->ground = (float *)tn__calloc((size_t)width * height * sizeof(float))))
+                st = TN_ERR_OUT_OF_MEMORY; /* the band goes with the fine detail */
+            if (!st && !(st = tn__gnn_grow(&sk, &ex, with_dem ? &dem : NULL, width, height, &go, &rnd, &G->grown, &relief, G->ground)) &&
                 !(st = tn__gnn_ground_band(G, width, height))) {
                 G->side = TN__GNN_FALL * relief / TN__GNN_FALL_REACH / G->A.std; /* the added ground's fall (tn__gnn_grow_fall) */
                 tn_contour_set_free(&sk);

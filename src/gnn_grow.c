@@ -322,10 +322,9 @@ done:
 #define TN__GNN_WIDTH_BLUR 12 /* px: radius of the two box means that smooth the width field */
 
 /* The width factor of the nearest drawn valley pixel (kv at nearv; 1 where there is none) at
-   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: where the nearest
-   pixel jumps from one valley to another (or along one, as its factor steps), the factor read
-   at it jumped too, and the ground's rise from the valleys with it (cliffs of 150 m along the
-   bisector between two branches, terraces beside a long valley). */
+   every pixel, smoothed by two box means of TN__GNN_WIDTH_BLUR px into K: the nearest pixel
+   jumps from one valley to another on the line halfway between them (and along one valley from
+   one factor to the next), and the ground's rise read at it would step there with it. */
 TN__INTERNAL tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K)
 {
     size_t p, n = (size_t)width * height;
@@ -390,7 +389,7 @@ static void tn__gnn_grow_cut(const uint8_t *placed, const float *pbl, const floa
 #define TN__GNN_RELIEF_RADIUS 48     /* px: local relief is a height less the mean within this radius */
 #define TN__GNN_QUILT_CANDIDATES 200 /* placements scored per block when heights are quilted too */
 #define TN__GNN_QUILT_FEATHER 6      /* px past the height cut over which a block fades in (the cut keeps as many
-                                        before the block's core: a cut at its edge left steps of 400 m) */
+                                        before the block's core, or the block steps up at its edge) */
 #define TN__GNN_QUILT_MEAN 512       /* px: away from the strokes, the quilted heights lose their mean within this radius */
 #define TN__GNN_FLANK 16             /* px across a drawn ridge that take the example's flanks; the quilted relief fades in over them */
 
