@@ -319,6 +319,20 @@ done:
     return st;
 }
 
+/* v (width x height) replaced by its mean over the box of radius r around each pixel, clipped to
+   the map. I: (width + 1) x (height + 1) scratch whose first row and column are zero (tn__calloc'd;
+   tn__gnn_integral writes the rest). */
+static void tn__gnn_box_mean(float *v, int width, int height, int r, double *I)
+{
+    int x, y;
+    tn__gnn_integral(v, width, height, I);
+    for (y = 0; y < height; y++)
+        for (x = 0; x < width; x++) {
+            double a, s = tn__gnn_box_sum(I, width, height, x, y, r, &a);
+            v[(size_t)y * width + x] = (float)(s / a);
+        }
+}
+
 #define TN__GNN_WIDTH_BLUR 12 /* px: radius of the two box means that smooth the width field */
 
 /* The width factor of the nearest drawn valley pixel (kv at nearv; 1 where there is none) at
@@ -329,18 +343,10 @@ TN__INTERNAL tn_status tn__gnn_grow_width_field(const float *kv, const int *near
 {
     size_t p, n = (size_t)width * height;
     double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
-    int x, y, pass;
     if (!I) return TN_ERR_OUT_OF_MEMORY;
     for (p = 0; p < n; p++) K[p] = nearv[p] >= 0 ? kv[nearv[p]] : 1.0f;
-    for (pass = 0; pass < 2; pass++) {
-        if (pass) memset(I, 0, ((size_t)width + 1) * (height + 1) * sizeof(double));
-        tn__gnn_integral(K, width, height, I);
-        for (y = 0; y < height; y++)
-            for (x = 0; x < width; x++) {
-                double a, s = tn__gnn_box_sum(I, width, height, x, y, TN__GNN_WIDTH_BLUR, &a);
-                K[(size_t)y * width + x] = (float)(s / a);
-            }
-    }
+    tn__gnn_box_mean(K, width, height, TN__GNN_WIDTH_BLUR, I);
+    tn__gnn_box_mean(K, width, height, TN__GNN_WIDTH_BLUR, I);
     TN_FREE(I);
     return TN_OK;
 }
@@ -507,7 +513,7 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
 {
     const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
     size_t p, n = (size_t)width * height;
-    int c, x, y, dx, dy;
+    int c, dx, dy;
     tn_image v = {0, 0, 0, NULL};
     double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
     uint8_t *end = (uint8_t *)tn__calloc(n); /* the pixels around the open low ends */
@@ -535,12 +541,8 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
     }
     if (!st) st = tn__gnn_grow_max(&v, TN__GNN_LIFT);
     if (!st) {
-        tn__gnn_integral(v.data, width, height, I);
-        for (y = 0; y < height; y++)
-            for (x = 0; x < width; x++) {
-                double a, m = tn__gnn_box_sum(I, width, height, x, y, TN__GNN_LIFT, &a) / a;
-                prel[(size_t)y * width + x] += (float)m;
-            }
+        tn__gnn_box_mean(v.data, width, height, TN__GNN_LIFT, I);
+        for (p = 0; p < n; p++) prel[p] += v.data[p];
     }
     TN_FREE(I);
     TN_FREE(end);
@@ -965,7 +967,8 @@ static tn_status tn__gnn_grow_sink(tn_contour_set *set, int nuser, const tn_imag
 }
 
 /* tn_gnn_grow, and *relief (may be NULL) = the example lines' mean local relief (example units),
-   from which generation takes the least slope from a stroke to its banks. */
+   from which generation takes the least slope from a stroke to its banks; with dem, ground (width
+   x height, may be NULL) = the grown ground the added lines are traced from (tn__gnn_ground_band). */
 TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example, const tn_image *dem, int width, int height,
                                     const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief_out, float *ground_out)
 {
