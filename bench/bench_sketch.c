@@ -29,6 +29,19 @@
      within 4 px (a 9 x 9 window), 4 px from the map's edge; x real: over the real crops' mean
      (real_peaks; the example's 128 px beside it); an egg-crate of cones between the strokes has
      several times the real crops' count;
+   - lines, blobness: the arrangement of the relief (issue 30: cones of one size against long
+     crests), ARR_EDGE px from the map's edge. lines: on a Gaussian of LINE_SIGMA px, the LINE_TOP
+     share of the pixels with the largest Hessian eigenvalue (valleys; the smallest, negated:
+     ridges), 8-connected, and the share of them in lines whose bounding box has a diagonal of
+     LINE_LONG px or more; blobness: on a Gaussian of BLOB_SIGMA px, over the BLOB_TOP share of the
+     pixels most curved across, the mean of |the other eigenvalue| over |that one| (0: crests and
+     valleys, 1: cones and pits); x real: over the real crops' mean (real_lines, with the example's
+     128 px beside it). Smooth ground scores long lines and low blobness too (the membrane, today's
+     output): these read the arrangement beside the three distances, not alone;
+   - fall_ratio: whether the relief runs down the slopes (gullies and spurs down a mountainside, not
+     knolls): the relief finer than two box means of FALL_FINE px, the energy of its gradient across
+     the fall lines of the ground (two box means of FALL_GROUND px) over that along them (1: no
+     preference), ARR_EDGE px from the edge; x real: over the real crops' mean (real_lines);
    - crest_dominance, floor_dominance: whether the drawing shapes the map around its lines: at
      every px of the drawn ridges (valleys), 12 px from their ends and 48 px from the map's edge,
      over the ground 6-48 px from it (ground within 4 px of a line of the kind left out): the
@@ -182,6 +195,163 @@ static double peaks(const tn_image *img)
         }
     tn_image_free(&b);
     return 1e4 * n / ((double)(W - 2 * PEAK_R) * (H - 2 * PEAK_R));
+}
+
+#define LINE_SIGMA 1.5f /* px: the Gaussian the lines' curvature is read on ... */
+#define LINE_TOP 0.15    /* ... the sharpest share of the pixels that are line pixels ... */
+#define LINE_LONG 32     /* ... and a long line's bounding-box diagonal (px) */
+#define BLOB_SIGMA 3.0f  /* px: the Gaussian the blobness is read on ... */
+#define BLOB_TOP 0.25    /* ... over this share of the pixels, the most curved */
+#define ARR_EDGE 16      /* px from the map's edge left out of both */
+
+/* The Hessian's eigenvalues at p of g (W wide), e1 >= e2. */
+static void hessian(const float *g, int W, size_t p, float *e1, float *e2)
+{
+    float xx = g[p + 1] - 2 * g[p] + g[p - 1], yy = g[p + W] - 2 * g[p] + g[p - W];
+    float xy = 0.25f * (g[p + W + 1] - g[p + W - 1] - g[p - W + 1] + g[p - W - 1]);
+    float tr = 0.5f * (xx + yy), d = sqrtf(0.25f * (xx - yy) * (xx - yy) + xy * xy);
+    *e1 = tr + d, *e2 = tr - d;
+}
+
+/* The value at share q of v's n values (sorts v). */
+static float quantile(float *v, size_t n, double q)
+{
+    qsort(v, n, sizeof(float), cmp_float);
+    return v[(size_t)(q * (double)(n - 1))];
+}
+
+/* Whether valleys and ridges run on as lines: img blurred by LINE_SIGMA; its valley pixels are the
+   LINE_TOP share with the largest Hessian eigenvalue (ridges: the smallest, negated), 8-connected
+   into lines; share[0] (valleys), share[1] (ridges) = the share of them in lines whose bounding box
+   has a diagonal of LINE_LONG px or more. ARR_EDGE px from the edge left out. */
+static void long_lines(const tn_image *img, double *share)
+{
+    tn_image b = {0, 0, 0, NULL};
+    int W = img->width, H = img->height, kind, x, y;
+    size_t n = (size_t)W * H, m = 0, i;
+    float *e = (float *)malloc(n * sizeof(float)), *v = (float *)malloc(n * sizeof(float));
+    int *stack = (int *)malloc(n * sizeof(int));
+    unsigned char *seen = (unsigned char *)malloc(n);
+    share[0] = share[1] = NAN;
+    if (!e || !v || !stack || !seen || W <= 2 * ARR_EDGE + 2 || H <= 2 * ARR_EDGE + 2 || tn_image_blur(&b, img, LINE_SIGMA)) goto done;
+    for (kind = 0; kind < 2; kind++) {
+        long all = 0, longp = 0;
+        float thr;
+        m = 0;
+        for (y = ARR_EDGE; y < H - ARR_EDGE; y++)
+            for (x = ARR_EDGE; x < W - ARR_EDGE; x++) {
+                float e1, e2;
+                i = (size_t)y * W + x;
+                hessian(b.data, W, i, &e1, &e2);
+                v[m++] = e[i] = kind ? -e2 : e1;
+            }
+        thr = quantile(v, m, 1 - LINE_TOP);
+        memset(seen, 0, n);
+        for (y = ARR_EDGE; y < H - ARR_EDGE; y++)
+            for (x = ARR_EDGE; x < W - ARR_EDGE; x++) {
+                int sp = 0, x0 = x, x1 = x, y0 = y, y1 = y, cnt = 0;
+                i = (size_t)y * W + x;
+                if (seen[i] || !(e[i] >= thr && e[i] > 0)) continue;
+                seen[i] = 1, stack[sp++] = (int)i;
+                while (sp) {
+                    int q = stack[--sp], qx = q % W, qy = q / W, dx, dy;
+                    cnt++;
+                    x0 = qx < x0 ? qx : x0, x1 = qx > x1 ? qx : x1, y0 = qy < y0 ? qy : y0, y1 = qy > y1 ? qy : y1;
+                    for (dy = -1; dy <= 1; dy++)
+                        for (dx = -1; dx <= 1; dx++) {
+                            int X = qx + dx, Y = qy + dy;
+                            size_t r = (size_t)Y * W + X;
+                            if (X < ARR_EDGE || Y < ARR_EDGE || X >= W - ARR_EDGE || Y >= H - ARR_EDGE || seen[r] || !(e[r] >= thr && e[r] > 0)) continue;
+                            seen[r] = 1, stack[sp++] = (int)r;
+                        }
+                }
+                all += cnt;
+                if ((double)(x1 - x0 + 1) * (x1 - x0 + 1) + (double)(y1 - y0 + 1) * (y1 - y0 + 1) >= (double)LINE_LONG * LINE_LONG) longp += cnt;
+            }
+        share[kind] = all ? (double)longp / all : NAN;
+    }
+done:
+    tn_image_free(&b);
+    free(e), free(v), free(stack), free(seen);
+}
+
+#define FALL_FINE 8     /* px: the relief finer than two box means of this radius ... */
+#define FALL_GROUND 16  /* ... against the fall lines of two box means of this radius */
+
+/* v (W x H) replaced by its mean over the (2 r + 1)^2 box around each pixel, clipped to the map
+   (a pass along x into t, then along y back into v). */
+static void box_mean(float *v, int W, int H, int r, float *t)
+{
+    int x, y, k, pass;
+    for (pass = 0; pass < 2; pass++) {
+        const float *src = pass ? t : v;
+        float *dst = pass ? v : t;
+        for (y = 0; y < H; y++)
+            for (x = 0; x < W; x++) {
+                int a = pass ? y : x, n = pass ? H : W, c = 0;
+                double s = 0;
+                for (k = a - r < 0 ? 0 : a - r; k <= a + r && k < n; k++) s += pass ? src[(size_t)k * W + x] : src[(size_t)y * W + k], c++;
+                dst[(size_t)y * W + x] = (float)(s / c);
+            }
+    }
+}
+
+/* Whether the relief runs down the slopes: its part finer than two box means of FALL_FINE px, the
+   energy of its gradient across the fall lines of the ground (two box means of FALL_GROUND px) over
+   that along them (1: no preference; gullies and spurs down the mountainsides: more).
+   ARR_EDGE px from the edge left out. */
+static double fall_ratio(const tn_image *img)
+{
+    int W = img->width, H = img->height, x, y;
+    size_t n = (size_t)W * H, i;
+    float *lo = (float *)malloc(n * sizeof(float)), *g = (float *)malloc(n * sizeof(float)), *t = (float *)malloc(n * sizeof(float));
+    double across = 0, along = 0, r = NAN;
+    if (!lo || !g || !t || W <= 2 * ARR_EDGE + 2 || H <= 2 * ARR_EDGE + 2) goto done;
+    for (i = 0; i < n; i++) lo[i] = g[i] = img->data[i];
+    box_mean(lo, W, H, FALL_FINE, t), box_mean(lo, W, H, FALL_FINE, t);
+    box_mean(g, W, H, FALL_GROUND, t), box_mean(g, W, H, FALL_GROUND, t);
+    for (y = ARR_EDGE; y < H - ARR_EDGE; y++)
+        for (x = ARR_EDGE; x < W - ARR_EDGE; x++) {
+            size_t q = (size_t)y * W + x;
+            float dx = 0.5f * (g[q + 1] - g[q - 1]), dy = 0.5f * (g[q + W] - g[q - W]), m = sqrtf(dx * dx + dy * dy);
+            float f0 = img->data[q] - lo[q], hx = img->data[q + 1] - lo[q + 1] - f0, hy = img->data[q + W] - lo[q + W] - f0, pa, pc;
+            if (!(m > 0)) continue;
+            pa = (hx * dx + hy * dy) / m, pc = (hx * dy - hy * dx) / m;
+            along += (double)pa * pa, across += (double)pc * pc;
+        }
+    if (along > 0) r = across / along;
+done:
+    free(lo), free(g), free(t);
+    return r;
+}
+
+/* Cones against crests: img blurred by BLOB_SIGMA; over the BLOB_TOP share of the pixels with the
+   largest |Hessian eigenvalue| (the more curved direction), the mean of the other eigenvalue's
+   magnitude over it (0: a crest or a valley, curved across only; 1: a cone's top or a pit).
+   ARR_EDGE px from the edge left out. */
+static double blobness(const tn_image *img)
+{
+    tn_image b = {0, 0, 0, NULL};
+    int W = img->width, H = img->height, x, y;
+    size_t n = (size_t)W * H, m = 0, k, cnt = 0;
+    float *a = (float *)malloc(n * sizeof(float)), *o = (float *)malloc(n * sizeof(float)), *v = (float *)malloc(n * sizeof(float)), thr;
+    double sum = 0, r = NAN;
+    if (!a || !o || !v || W <= 2 * ARR_EDGE + 2 || H <= 2 * ARR_EDGE + 2 || tn_image_blur(&b, img, BLOB_SIGMA)) goto done;
+    for (y = ARR_EDGE; y < H - ARR_EDGE; y++)
+        for (x = ARR_EDGE; x < W - ARR_EDGE; x++) {
+            float e1, e2;
+            hessian(b.data, W, (size_t)y * W + x, &e1, &e2);
+            e1 = fabsf(e1), e2 = fabsf(e2);
+            a[m] = v[m] = e1 > e2 ? e1 : e2, o[m] = e1 > e2 ? e2 : e1, m++;
+        }
+    thr = quantile(v, m, 1 - BLOB_TOP);
+    for (k = 0; k < m; k++)
+        if (a[k] >= thr && a[k] > 0) sum += o[k] / a[k], cnt++;
+    if (cnt) r = sum / (double)cnt;
+done:
+    tn_image_free(&b);
+    free(a), free(o), free(v);
+    return r;
 }
 
 /* The share of img's pixels in closed basins deeper than 1 % of the example's range (lo..hi):
@@ -873,7 +1043,7 @@ int main(int argc, char **argv)
     static char names[512];
     static const char *way[] = {"membrane", "today", "random48", "new", "grown_membrane", "grown_nodetail"};
     const char *region, *model_path, *pictures = NULL, *from = "examples/data";
-    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_s[3] = {0, 0, 0}, real_peaks = 0, pk, ex_relief[4] = {NAN, NAN, NAN, NAN};
+    double dxy[2], h0, h1, real[3] = {0, 0, 0}, real_s[3] = {0, 0, 0}, real_peaks = 0, pk, real_lines[2] = {0, 0}, real_blob = 0, real_fall = 0, ln[2], bl, fr, ex_relief[4] = {NAN, NAN, NAN, NAN};
     static const char *relief_name[] = {"crest", "floor", "crest_flank", "floor_flank"}, *shape_name[] = {"crest", "floor"};
     tn_image full = {0, 0, 0, NULL}, ex = {0, 0, 0, NULL}, ex_s = {0, 0, 0, NULL};
     float coarse;
@@ -974,6 +1144,11 @@ int main(int argc, char **argv)
                 }
                 pk = peaks(&c);
                 real_peaks += pk;
+                long_lines(&c, ln);
+                bl = blobness(&c);
+                fr = fall_ratio(&c);
+                real_lines[0] += ln[0], real_lines[1] += ln[1], real_blob += bl, real_fall += fr;
+                printf("real_crop_%d_lines: valleys %.2f ridges %.2f; blobness %.3f; fall_ratio %.3f\n", k, ln[0], ln[1], bl, fr);
                 printf("real_crop_%d: (%d, %d) slope %.4f curvature %.4f spectrum %.4f basins %.1f %% peaks %.1f per 10^4 px\n", k, cx[best], cy[best], dist[0],
                        dist[1], dist[2], 100 * basins(&c, model.lo, model.hi), pk);
                 real[0] += dist[0], real[1] += dist[1], real[2] += dist[2], nreal++;
@@ -990,6 +1165,10 @@ int main(int argc, char **argv)
         for (k = 0; k < 3; k++) real[k] /= nreal;
         real_peaks /= nreal;
         printf("real_peaks: %.1f per 10^4 px (the real crops' mean; the example's 128 px: %.1f)\n", real_peaks, peaks(&ex));
+        real_lines[0] /= nreal, real_lines[1] /= nreal, real_blob /= nreal, real_fall /= nreal;
+        long_lines(&ex, ln);
+        printf("real_lines: valleys %.2f ridges %.2f; blobness %.3f; fall_ratio %.3f (the real crops' mean; the example's 128 px: %.2f %.2f; %.3f; %.3f)\n",
+               real_lines[0], real_lines[1], real_blob, real_fall, ln[0], ln[1], blobness(&ex), fall_ratio(&ex));
         if (real_valley.n) { /* the mean over the crops of their normalised profiles and figures */
             for (k = 0; k < 5; k++) real_valley.rise[k] /= real_valley.n;
             real_valley.width_cv /= real_valley.n, real_valley.depth_cv /= real_valley.n, real_valley.junctions /= real_valley.n;
@@ -1111,6 +1290,12 @@ int main(int argc, char **argv)
             }
             pk = peaks(&out[w]);
             printf("%s_%s_peaks: %.1f per 10^4 px (%.2f x real)\n", all[d], way[w], pk, pk / real_peaks);
+            long_lines(&out[w], ln);
+            bl = blobness(&out[w]);
+            printf("%s_%s_lines: valleys %.2f ridges %.2f (%.2f %.2f x real); blobness %.3f (%.2f x real)\n", all[d], way[w], ln[0], ln[1],
+                   ln[0] / real_lines[0], ln[1] / real_lines[1], bl, bl / real_blob);
+            fr = fall_ratio(&out[w]);
+            printf("%s_%s_fall_ratio: %.3f (%.2f x real)\n", all[d], way[w], fr, fr / real_fall);
             for (k = 0; k < 4; k++) {
                 double r = line_relief(&out[w], &asked, k & 1 ? TN_VALLEY : TN_RIDGE, 0, k < 2 ? 0 : FLANK);
                 if (r == r) printf("%s_%s_%s_relief: %.2f m (%.2f x example)\n", all[d], way[w], relief_name[k], r, r / ex_relief[k]);
