@@ -39,9 +39,9 @@
      128 px beside it). Smooth ground scores long lines and low blobness too (the membrane, today's
      output): these read the arrangement beside the three distances, not alone;
    - fall_ratio: whether the relief runs down the slopes (gullies and spurs down a mountainside, not
-     knolls): the relief finer than two box means of FALL_FINE px, the energy of its gradient across
-     the fall lines of the ground (two box means of FALL_GROUND px) over that along them (1: no
-     preference), ARR_EDGE px from the edge; x real: over the real crops' mean (real_lines);
+     knolls): the relief finer than two box means of 8 px, the energy of its gradient across
+     the fall lines of the ground (two box means of 16 px) over that along them (1: no
+     preference), 16 px from the edge; x real: over the real crops' mean (real_lines);
    - crest_dominance, floor_dominance: whether the drawing shapes the map around its lines: at
      every px of the drawn ridges (valleys), 12 px from their ends and 48 px from the map's edge,
      over the ground 6-48 px from it (ground within 4 px of a line of the kind left out): the
@@ -108,6 +108,7 @@
    default examples/data); pictures=DIR writes DIR/sketch_<region>_<drawing>.png: example (its
    128 px at their own size) | drawing | today | grown_nodetail | new, hillshaded on the example's
    range. */
+#define TN_INTERNALS /* tn__gnn_fall_ratio */
 #include "terrainnet.h"
 #include "bench_data.h"
 #include <stdio.h>
@@ -275,54 +276,14 @@ done:
     free(e), free(v), free(stack), free(seen);
 }
 
-#define FALL_FINE 8     /* px: the relief finer than two box means of this radius ... */
-#define FALL_GROUND 16  /* ... against the fall lines of two box means of this radius */
-
-/* v (W x H) replaced by its mean over the (2 r + 1)^2 box around each pixel, clipped to the map
-   (a pass along x into t, then along y back into v). */
-static void box_mean(float *v, int W, int H, int r, float *t)
-{
-    int x, y, k, pass;
-    for (pass = 0; pass < 2; pass++) {
-        const float *src = pass ? t : v;
-        float *dst = pass ? v : t;
-        for (y = 0; y < H; y++)
-            for (x = 0; x < W; x++) {
-                int a = pass ? y : x, n = pass ? H : W, c = 0;
-                double s = 0;
-                for (k = a - r < 0 ? 0 : a - r; k <= a + r && k < n; k++) s += pass ? src[(size_t)k * W + x] : src[(size_t)y * W + k], c++;
-                dst[(size_t)y * W + x] = (float)(s / c);
-            }
-    }
-}
-
-/* Whether the relief runs down the slopes: its part finer than two box means of FALL_FINE px, the
-   energy of its gradient across the fall lines of the ground (two box means of FALL_GROUND px) over
-   that along them (1: no preference; gullies and spurs down the mountainsides: more).
-   ARR_EDGE px from the edge left out. */
+/* Whether the relief runs down the slopes (tn__gnn_fall_ratio, which the grown ground's erosion
+   reads on the example): its part finer than two box means of 8 px, the energy of its gradient
+   across the fall lines of the ground (two box means of 16 px) over that along them (1: no
+   preference; gullies and spurs down a mountainside: more), 16 px from the edge left out. */
 static double fall_ratio(const tn_image *img)
 {
-    int W = img->width, H = img->height, x, y;
-    size_t n = (size_t)W * H, i;
-    float *lo = (float *)malloc(n * sizeof(float)), *g = (float *)malloc(n * sizeof(float)), *t = (float *)malloc(n * sizeof(float));
-    double across = 0, along = 0, r = NAN;
-    if (!lo || !g || !t || W <= 2 * ARR_EDGE + 2 || H <= 2 * ARR_EDGE + 2) goto done;
-    for (i = 0; i < n; i++) lo[i] = g[i] = img->data[i];
-    box_mean(lo, W, H, FALL_FINE, t), box_mean(lo, W, H, FALL_FINE, t);
-    box_mean(g, W, H, FALL_GROUND, t), box_mean(g, W, H, FALL_GROUND, t);
-    for (y = ARR_EDGE; y < H - ARR_EDGE; y++)
-        for (x = ARR_EDGE; x < W - ARR_EDGE; x++) {
-            size_t q = (size_t)y * W + x;
-            float dx = 0.5f * (g[q + 1] - g[q - 1]), dy = 0.5f * (g[q + W] - g[q - W]), m = sqrtf(dx * dx + dy * dy);
-            float f0 = img->data[q] - lo[q], hx = img->data[q + 1] - lo[q + 1] - f0, hy = img->data[q + W] - lo[q + W] - f0, pa, pc;
-            if (!(m > 0)) continue;
-            pa = (hx * dx + hy * dy) / m, pc = (hx * dy - hy * dx) / m;
-            along += (double)pa * pa, across += (double)pc * pc;
-        }
-    if (along > 0) r = across / along;
-done:
-    free(lo), free(g), free(t);
-    return r;
+    double r = NAN;
+    return tn__gnn_fall_ratio(img, &r) ? NAN : r;
 }
 
 /* Cones against crests: img blurred by BLOB_SIGMA; over the BLOB_TOP share of the pixels with the

@@ -125,7 +125,7 @@ TN_API tn_status tn_realism_compare(tn_realism *out, const tn_image *ref, const 
 #ifndef TN_NO_EXTRACT
 
 /* Order-preserving map float -> uint32 (-0 and +0 share a key). */
-static uint32_t tn__fkey(float f)
+TN__INTERNAL uint32_t tn__fkey(float f)
 {
     uint32_t u;
     if (f == 0.0f) f = 0.0f;

@@ -22,13 +22,15 @@
    quilt carries them too, each block offset so its heights meet its neighbours', and the added
    lines are the network of those heights on the strokes' ground, with their relief taken, away
    from the strokes, against a mean over 512 px (tn__gnn_quilt_relief: a mountainside keeps its
-   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's); then,
-   within 2 gaps of a user line (released by 4 gaps), kept below a user ridge and above a user
-   valley (the nearest user line) by the example's mean local relief / 16 px per px. Ground whose
-   lines stand above their nearest drawn ridge, by more than the example's own ground tops its
-   main ridges, sinks as a whole (tn__gnn_grow_sink: the drawn ridges stay the high ground). When
-   the lines' membrane then holds far more closed basins than the example's own, each basin
-   drains by a valley over its lowest saddle, and a drawn valley whose low end lies in one goes
+   tilt) and faded in over 16 px from the drawn ridges (their flanks are the example's), that
+   ground eroded by its own drainage in as far as the example's relief runs down its slopes
+   (tn__gnn_quilt_erode: its gullies reach the drawn valleys); then, within 2 gaps of a user line
+   (released by 4 gaps), kept below a user ridge and above a user valley (the nearest user line)
+   by the example's mean local relief / 16 px per px. Ground whose lines stand above their nearest
+   drawn ridge, by more than the example's own ground tops its main ridges, sinks as a whole
+   (tn__gnn_grow_sink: the drawn ridges stay the high ground). When the lines' membrane then
+   holds far more closed basins than the example's own (on an eroded ground, any more), each
+   basin drains by a valley over its lowest saddle, and a drawn valley whose low end lies in one goes
    on out of it (tn__gnn_grow_drain; after the sink, which left new basins). Last, the added lines'
    heights are kept within the example's and the strokes' (tn__soft_limit): relief stacked on a
    high stroke's ground rose above the example's top, on a low one below its floor. */
@@ -473,6 +475,170 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, const floa
     return TN_OK;
 }
 
+#define TN__GNN_FALL_FINE 8        /* px: the relief is what two box means of this radius leave ... */
+#define TN__GNN_FALL_GROUND 16     /* ... and the fall lines those of two box means of this radius */
+
+/* How far the relief of a DEM (one channel) runs down its slopes: the energy of the fine relief's
+   gradient across the ground's fall lines over that along them, TN__GNN_FALL_GROUND px from the
+   edge left out (1: no preference; a mountainside whose gullies and spurs run down it: 1.3 and
+   more; 0 where the ground is flat or the DEM too small). The measure of bench_sketch's
+   fall_ratio. */
+TN__INTERNAL tn_status tn__gnn_fall_ratio(const tn_image *dem, double *ratio)
+{
+    const int W = dem->width, H = dem->height, E = TN__GNN_FALL_GROUND;
+    size_t n = (size_t)W * H;
+    float *lo = (float *)tn__alloc(n * sizeof(float)), *g = (float *)tn__alloc(n * sizeof(float));
+    double *I = (double *)tn__calloc(((size_t)W + 1) * (H + 1) * sizeof(double)), across = 0, along = 0;
+    int x, y;
+    *ratio = 0;
+    if (!lo || !g || !I) {
+        TN_FREE(lo), TN_FREE(g), TN_FREE(I);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    memcpy(lo, dem->data, n * sizeof(float));
+    memcpy(g, dem->data, n * sizeof(float));
+    tn__gnn_box_mean(lo, W, H, TN__GNN_FALL_FINE, I);
+    tn__gnn_box_mean(lo, W, H, TN__GNN_FALL_FINE, I);
+    tn__gnn_box_mean(g, W, H, TN__GNN_FALL_GROUND, I);
+    tn__gnn_box_mean(g, W, H, TN__GNN_FALL_GROUND, I);
+    for (y = E; y < H - E; y++)
+        for (x = E; x < W - E; x++) {
+            size_t q = (size_t)y * W + x;
+            float dx = 0.5f * (g[q + 1] - g[q - 1]), dy = 0.5f * (g[q + W] - g[q - W]), m = sqrtf(dx * dx + dy * dy);
+            float f0 = dem->data[q] - lo[q], hx = dem->data[q + 1] - lo[q + 1] - f0, hy = dem->data[q + W] - lo[q + W] - f0, pa, pc;
+            if (!(m > 0)) continue;
+            pa = (hx * dx + hy * dy) / m, pc = (hx * dy - hy * dx) / m;
+            along += (double)pa * pa, across += (double)pc * pc;
+        }
+    if (along > 0) *ratio = across / along;
+    TN_FREE(lo), TN_FREE(g), TN_FREE(I);
+    return TN_OK;
+}
+
+#define TN__GNN_ERODE_STEPS 5      /* implicit stream-power steps */
+#define TN__GNN_ERODE_K 1.0f       /* per step, for a channel draining the example's valley threshold */
+#define TN__GNN_ERODE_SPREAD 2.5f  /* px: the Gaussian that spreads the depth (a channel takes its banks) */
+#define TN__GNN_ERODE_FADE 8.0f    /* px: fades in from this many px off the drawn ridges to twice as many */
+#define TN__GNN_ERODE_PASSES 16    /* passes that keep the steps within the example's steepest */
+
+/* The drainage of ground T (width x height): a priority flood from the map's border and the
+   drawn valleys (ur's valley channel), over the lowest saddle out of every basin. order: the
+   pixels, each after the one it drains to (rcv; -1 at an outlet). */
+static tn_status tn__gnn_erode_route(const float *T, const tn_image *ur, int width, int height, uint32_t *order, int32_t *rcv)
+{
+    const size_t n = (size_t)width * height;
+    tn__pheap q = {NULL, 0, 0};
+    float *F = (float *)tn__alloc(n * sizeof(float)); /* the level the flood reached each pixel at */
+    uint8_t *seen = (uint8_t *)tn__calloc(n);
+    uint64_t seq = 0;
+    size_t i, k = 0;
+    tn_status st = F && seen ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+    for (i = 0; !st && i < n; i++) {
+        int x = (int)(i % (size_t)width), y = (int)(i / (size_t)width);
+        if (x > 0 && y > 0 && x < width - 1 && y < height - 1 && !(ur->data[3 * i + 1] > 0)) continue;
+        seen[i] = 1, rcv[i] = -1, F[i] = T[i];
+        st = tn__pheap_push(&q, (uint64_t)tn__fkey(T[i]) << 32 | seq++, (uint32_t)i);
+    }
+    while (!st && q.n) {
+        uint32_t c = tn__pheap_pop(&q);
+        int x = (int)(c % (uint32_t)width), y = (int)(c / (uint32_t)width), d;
+        order[k++] = c;
+        for (d = 0; d < 8 && !st; d++) {
+            int X = x + tn__d8x[d], Y = y + tn__d8y[d];
+            size_t p = (size_t)Y * width + X;
+            if (X < 0 || Y < 0 || X >= width || Y >= height || seen[p]) continue;
+            seen[p] = 1, rcv[p] = (int32_t)c, F[p] = fmaxf(T[p], F[c]);
+            st = tn__pheap_push(&q, (uint64_t)tn__fkey(F[p]) << 32 | seq++, (uint32_t)p);
+        }
+    }
+    TN_FREE(q.a);
+    TN_FREE(F);
+    TN_FREE(seen);
+    return st;
+}
+
+/* The grown ground (ground + prel) eroded by its own drainage, so its gullies and spurs run down
+   the slopes to the drawn valleys as the example's do (the quilt's relief lies every way). Routed
+   by tn__gnn_erode_route, TN__GNN_ERODE_STEPS implicit stream-power steps (Braun & Willett 2013):
+   each channel pixel (upstream area A >= Ac / 4, Ac the example's valley threshold; hillslopes and
+   divides stay) moves F / (1 + F) of the way to its receiver, F = K (A / Ac)^0.5 / the step's
+   length. The depth dug is softly capped at the example lines' mean local relief (uncapped, the
+   trunks were cut down to their outlets), spread by a Gaussian of TN__GNN_ERODE_SPREAD px, faded
+   in off the drawn ridges (Dr: px to the nearest; their flanks are the example's), scaled by mix,
+   kept from steepening any 4-neighbour step past the example's steepest (dem) and from digging
+   basins: nothing ends below the pixel it drains to unless it lay there already. prel is lowered
+   by it. */
+TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *ur, const float *Dr, const tn_image *dem, int Ac, float relief,
+                                           float mix, int width, int height, float *prel)
+{
+    const size_t n = (size_t)width * height;
+    tn_image d = {0, 0, 0, NULL};
+    float *T = (float *)tn__alloc(n * sizeof(float)), *A = (float *)tn__alloc(n * sizeof(float)), smax = 0;
+    uint32_t *order = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
+    int32_t *rcv = (int32_t *)tn__alloc(n * sizeof(int32_t));
+    size_t i, k;
+    int s, x, y, pass, changed = 1;
+    tn_status st = T && A && order && rcv ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+    if (!st && !(mix > 0)) goto done;
+    if (!st) st = tn_image_create(&d, width, height, 1);
+    for (i = 0; !st && i < n; i++) T[i] = ground[i] + prel[i], A[i] = 1, d.data[i] = T[i];
+    if (!st) st = tn__gnn_erode_route(T, ur, width, height, order, rcv);
+    if (st) goto done;
+    for (k = n; k-- > 0;)
+        if (rcv[order[k]] >= 0) A[rcv[order[k]]] += A[order[k]];
+    for (s = 0; s < TN__GNN_ERODE_STEPS; s++) /* d holds the eroded heights here */
+        for (k = 0; k < n; k++) {
+            size_t p = order[k];
+            int32_t r = rcv[p];
+            float F, hr;
+            if (r < 0 || A[p] < 0.25f * (float)Ac || !(d.data[p] > (hr = d.data[r]))) continue;
+            F = TN__GNN_ERODE_K * sqrtf(A[p] / (float)Ac);
+            if ((size_t)r % (size_t)width != p % (size_t)width && (size_t)r / (size_t)width != p / (size_t)width) F *= 0.70710678f; /* a diagonal step */
+            d.data[p] = (d.data[p] + F * hr) / (1 + F);
+        }
+    for (i = 0; i < n; i++) d.data[i] = relief * tanhf((T[i] - d.data[i]) / relief); /* now the depth */
+    if ((st = tn_image_blur(&d, &d, TN__GNN_ERODE_SPREAD))) goto done;
+    for (i = 0; i < n; i++) {
+        float f = tn__clampf((Dr[i] - TN__GNN_ERODE_FADE) / TN__GNN_ERODE_FADE, 0, 1);
+        d.data[i] = fmaxf(d.data[i], 0) * mix * f * f * (3 - 2 * f);
+    }
+    for (y = 0; y < dem->height; y++) /* the example's steepest 4-neighbour step */
+        for (x = 0; x < dem->width; x++) {
+            const float *h = dem->data + (size_t)y * dem->width + x;
+            if (x + 1 < dem->width) smax = fmaxf(smax, fabsf(h[1] - h[0]));
+            if (y + 1 < dem->height) smax = fmaxf(smax, fabsf(h[dem->width] - h[0]));
+        }
+    for (pass = 0; changed && pass < TN__GNN_ERODE_PASSES; pass++)
+        for (changed = 0, y = 0; y < height; y++)
+            for (x = 0; x < width; x++) {
+                size_t p = (size_t)y * width + x;
+                int e;
+                for (e = 0; e < 4; e++) {
+                    int X = x + (e == 0) - (e == 1), Y = y + (e == 2) - (e == 3);
+                    size_t q = (size_t)Y * width + X;
+                    float lim, most;
+                    if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
+                    lim = fmaxf(smax, T[q] - T[p]);
+                    most = lim - T[q] + d.data[q] + T[p]; /* the depth at p that leaves the step from q at lim */
+                    if (d.data[p] > most) d.data[p] = fmaxf(most, 0), changed = 1;
+                }
+            }
+    for (k = 0; k < n; k++) { /* downstream first: no pixel below its receiver unless it lay there */
+        size_t p = order[k];
+        int32_t r = rcv[p];
+        float h = T[p] - d.data[p];
+        if (r >= 0 && h < T[r] - d.data[r]) d.data[p] = T[p] - fmaxf(h, fminf(T[p], T[r] - d.data[r]));
+        prel[p] -= d.data[p];
+    }
+done:
+    tn_image_free(&d);
+    TN_FREE(T);
+    TN_FREE(A);
+    TN_FREE(order);
+    TN_FREE(rcv);
+    return st;
+}
+
 /* img (one channel) replaced by its maximum within r px (a square) of each pixel. */
 static tn_status tn__gnn_grow_max(tn_image *img, int r)
 {
@@ -723,8 +889,9 @@ static tn_status tn__gnn_drain_add(tn_contour_set *set, size_t *cap, uint8_t *on
    line heights, leave the valleys of neighbouring blocks unconnected: the membrane of the grown
    sketch then holds closed basins that the example's own network does not have, and the terrain
    looks like separate cones rather than ridges between valleys.
-   When the grown membrane has more than twice the example's share of basins (its DEM's, given
-   dem, else its network's membrane's), each basin's lowest
+   When the grown membrane has more than (2 - erode) times the example's share of basins (its
+   DEM's, given dem, else its network's membrane's; erode: how far the ground was eroded,
+   tn__gnn_quilt_erode, whose gullies' lines the membrane spans with lakes), each basin's lowest
    point gets a valley down its outlet path (the flood's path over the lowest saddle, tn_flow_compute)
    to lower ground, falling by relief / 64 per px, and added ridges give way 2 px around it. Carving
    alone steepens the ground past the example's, so the basin's added valleys first rise halfway
@@ -736,7 +903,7 @@ static tn_status tn__gnn_drain_add(tn_contour_set *set, size_t *cap, uint8_t *on
    any other user line is left out: a basin the user drew closed stays closed. Appends the valleys
    to set (nuser user lines first) and counts them in *drained. */
 static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser, const tn_contour_set *example, const tn_image *dem,
-                                    const tn_image *ur, const float *D, const int *unear, float gap, float relief, int *drained)
+                                    const tn_image *ur, const float *D, const int *unear, float gap, float relief, float erode, int *drained)
 {
     const int W = set->width, H = set->height;
     const size_t n = (size_t)W * H;
@@ -764,7 +931,7 @@ static tn_status tn__gnn_grow_drain(tn_contour_set *set, size_t *cap, int nuser,
     } else
         st = tn__gnn_pit_share(&ze, thr, &fe, &share_ex);
     if (st || (st = tn_gnn_membrane(&z, set, W, H)) || (st = tn__gnn_pit_share(&z, thr, &f, &share))) goto done;
-    if (!(share > 2 * share_ex)) goto done;
+    if (!(share > (2 - erode) * share_ex)) goto done;
     if ((st = tn_flow_compute(&flow, &z, 0))) goto done;
     pit = (tn__gnn_pit *)tn__alloc(n * sizeof(tn__gnn_pit));
     on = (uint8_t *)tn__calloc(n);
@@ -980,7 +1147,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     int Wx, Hx, B, mg, S, bx, by, type, *near = NULL, c;
     int8_t *etype = NULL, *ptype = NULL;
     uint8_t *umask = NULL, *placed = NULL, *mask = NULL, *emask = NULL;
-    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0;
+    float *D = NULL, *Dr = NULL, *Dv = NULL, *erel = NULL, *prel = NULL, *ebl = NULL, *pbl = NULL, near_slope = 0, relief = 0, room = 0, erode = 0;
     float pr[TN__GNN_PROFILE + 1], pv[TN__GNN_PROFILE + 1], pf[TN__GNN_PROFILE + 1], *kv = NULL, *K = NULL, elo = FLT_MAX, ehi = -FLT_MAX, band; /* the example's and strokes' heights; 10 % of the example's */
     int *nearv = NULL, *nearr = NULL, *into = NULL; /* into: the valley each user valley's lower end joins (tn__gnn_grow_widths) */
     int *cutc = NULL, *cutr = NULL;
@@ -1159,9 +1326,15 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
                 }
             if (Q) tn__gnn_quilt_heights(Q, qset, dem, width, height, x0, y0, B, mg, bt, box, boy, pq, cutc, cutr, cutE);
         }
+    if (dem) { /* the erosion, in as far as the example's own relief runs down its slopes */
+        double fr;
+        if ((st = tn__gnn_fall_ratio(dem, &fr))) goto done;
+        erode = tn__clampf((float)(fr - 1) / 0.25f, 0, 1);
+    }
     for (i = 0; i < n; i++) /* the strokes' ground: their membrane, and the fall from them */
         mem.data[i] += tn__gnn_grow_fall(Dr[i], nearv[i] >= 0 ? Dv[i] / K[i] : Dv[i], pr, pv);
     if (Q && ((st = tn__gnn_quilt_relief(Q, D, Dr, width, height, prel)) ||
+              (st = tn__gnn_quilt_erode(mem.data, &ur, Dr, dem, tn_extract_default_threshold(Wx, Hx), relief, erode, width, height, prel)) ||
               (st = tn__gnn_quilt_lift(user, into, &ur, mem.data, Dv, nearv, K, pf, width, height, prel)) ||
               (st = tn__gnn_quilt_network(prel, mem.data, width, height, Wx, Hx, ptype))))
         goto done;
@@ -1216,7 +1389,7 @@ TN__INTERNAL tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour
     if ((st = tn__gnn_grow_room(example, &er, dem, &room)) ||
         (st = tn__gnn_grow_sink(&set, user->count, &ur, nearr, Dr, Dv, room)))
         goto done;
-    if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, dem, &ur, D, near, o.gap, relief, &c))) goto done;
+    if ((st = tn__gnn_grow_drain(&set, &cap, user->count, example, dem, &ur, D, near, o.gap, relief, erode, &c))) goto done;
     nl = (size_t)(set.count - user->count);
     for (c = user->count; c < set.count; c++) /* within the example's heights, but where a line runs onto a user pixel */
         for (i = 0; i < (size_t)set.items[c].npoints; i++) {

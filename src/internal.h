@@ -173,6 +173,7 @@ int tn__yokoi8(const int p[8]);
 #ifndef TN_NO_EXTRACT
 /* ---- src/extract.c ---- */
 tn_status tn__channel0_image(const tn_image *src, tn_image *dst);
+uint32_t tn__fkey(float f);
 tn_status tn__pheap_push(tn__pheap *h, uint64_t pri, uint32_t cell);
 uint32_t tn__pheap_replace(tn__pheap *h, tn__pheap_item it);
 uint32_t tn__pheap_pop(tn__pheap *h);
@@ -190,6 +191,9 @@ tn_status tn__gnn_grow(const tn_contour_set *user, const tn_contour_set *example
                        const tn_gnn_grow_opts *opts, tn_contour_set *out, int *added, float *relief, float *ground);
 tn_status tn__gnn_grow_crest(tn_contour_set *set, int nuser, const tn_contour_set *example, int kind, uint64_t seed);
 tn_status tn__gnn_grow_width_field(const float *kv, const int *nearv, int width, int height, float *K);
+tn_status tn__gnn_fall_ratio(const tn_image *dem, double *ratio);
+tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *ur, const float *Dr, const tn_image *dem, int Ac, float relief,
+                              float mix, int width, int height, float *prel);
 tn_status tn__gnn_grow_flanks(const tn_contour_set *set, int nuser, const tn_contour_set *example, const tn_image *dem, uint64_t seed, float *field);
 #endif
 #ifndef TN_NO_TEXGAN

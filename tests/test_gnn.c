@@ -2380,6 +2380,92 @@ TN_TEST(drawn_ridge_stays_above_cratered_detail)
     tn_gnn_free(&m);
 }
 
+TN_TEST(example_fall_ratio_reads_the_lie_of_gullies)
+{
+    /* a slope falling along y with gullies running down it (relief across the fall lines) reads
+       well above 1; the same relief turned to run across the slope (terraces) well below 1; a flat
+       map reads 0. Erosion follows the first kind only */
+    tn_image a = {0, 0, 0, NULL}, b = {0, 0, 0, NULL};
+    double ra = 0, rb = 0, rf = 1;
+    int x, y;
+    TN_CHECK(tn_image_create(&a, 128, 128, 1) == TN_OK && tn_image_create(&b, 128, 128, 1) == TN_OK);
+    for (y = 0; a.data && b.data && y < 128; y++)
+        for (x = 0; x < 128; x++) {
+            a.data[y * 128 + x] = 2.0f * (float)y + 5.0f * sinf(6.2831853f * (float)x / 10);
+            b.data[y * 128 + x] = 2.0f * (float)y + 5.0f * sinf(6.2831853f * (float)y / 10);
+        }
+    TN_CHECK(tn__gnn_fall_ratio(&a, &ra) == TN_OK && tn__gnn_fall_ratio(&b, &rb) == TN_OK);
+    for (x = 0; b.data && x < 128 * 128; x++) b.data[x] = 7;
+    TN_CHECK(tn__gnn_fall_ratio(&b, &rf) == TN_OK);
+    printf("  fall ratio: gullies %.2f, terraces %.2f, flat %.2f\n", ra, rb, rf);
+    TN_CHECK(ra > 4 && rb < 0.25 && rf == 0);
+    tn_image_free(&a);
+    tn_image_free(&b);
+}
+
+TN_TEST(grown_ground_erodes_down_its_slopes)
+{
+    /* ground falling 2 a px to a drawn valley along the bottom row, with waves every way on it:
+       eroded by its own drainage, its relief runs more down the slope (the fall ratio rises, and
+       what was dug runs down it: gullies, not pits), nothing is raised, no depth passes the cap,
+       no basin is dug, and no step grows past the example's steepest or its own; mix 0, or
+       ground on a drawn ridge's flank, stays as it was */
+    const int W = 96, H = 96;
+    tn_image ur = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL}, t0 = {0, 0, 0, NULL}, t1 = {0, 0, 0, NULL};
+    float *ground = (float *)malloc(sizeof(float) * W * H), *prel = (float *)malloc(sizeof(float) * W * H), *p0 = (float *)malloc(sizeof(float) * W * H);
+    float *Dr = (float *)malloc(sizeof(float) * W * H), deepest = 0, worst = 0;
+    double r0 = 0, r1 = 0, rd = 0, b0, b1;
+    int x, y, i, k, raised = 0;
+    TN_CHECK(ground && prel && p0 && Dr);
+    TN_CHECK(tn_image_create(&ur, W, H, 3) == TN_OK && tn_image_create(&dem, 32, 32, 1) == TN_OK);
+    TN_CHECK(tn_image_create(&t0, W, H, 1) == TN_OK && tn_image_create(&t1, W, H, 1) == TN_OK);
+    if (!ground || !prel || !p0 || !Dr || !ur.data || !dem.data || !t0.data || !t1.data) goto done;
+    for (i = 0; i < 32 * 32; i++) dem.data[i] = 5.0f * (float)(i % 32); /* steepest step 5 */
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            i = y * W + x;
+            ground[i] = 2.0f * (float)(H - 1 - y);
+            for (p0[i] = 0, k = 0; k < 12; k++) { /* waves every way: relief with no lie */
+                float a = 2.3999632f * (float)k, f = 6.2831853f / (9.0f + 1.3f * (float)k);
+                p0[i] += 2.0f * sinf(f * (cosf(a) * (float)x + sinf(a) * (float)y) + (float)k);
+            }
+            ur.data[3 * i + 1] = y == H - 1 ? 1.0f : 0.0f;
+            Dr[i] = 1e9f;
+            t0.data[i] = ground[i] + p0[i];
+        }
+    memcpy(prel, p0, sizeof(float) * W * H);
+    TN_CHECK(tn__gnn_quilt_erode(ground, &ur, Dr, &dem, 16, 6.0f, 0.0f, W, H, prel) == TN_OK);
+    TN_CHECK(!memcmp(prel, p0, sizeof(float) * W * H));
+    for (i = 0; i < W * H; i++) Dr[i] = 4;
+    TN_CHECK(tn__gnn_quilt_erode(ground, &ur, Dr, &dem, 16, 6.0f, 1.0f, W, H, prel) == TN_OK);
+    TN_CHECK(!memcmp(prel, p0, sizeof(float) * W * H));
+    for (i = 0; i < W * H; i++) Dr[i] = 1e9f;
+    TN_CHECK(tn__gnn_quilt_erode(ground, &ur, Dr, &dem, 16, 6.0f, 1.0f, W, H, prel) == TN_OK);
+    for (i = 0; i < W * H; i++) t1.data[i] = ground[i] + prel[i];
+    for (y = 0; y < H; y++)
+        for (x = 0; x < W; x++) {
+            i = y * W + x;
+            raised += prel[i] > p0[i];
+            deepest = fmaxf(deepest, p0[i] - prel[i]);
+            if (x + 1 < W) worst = fmaxf(worst, fabsf(t1.data[i + 1] - t1.data[i]) - fmaxf(5, fabsf(t0.data[i + 1] - t0.data[i])));
+            if (y + 1 < H) worst = fmaxf(worst, fabsf(t1.data[i + W] - t1.data[i]) - fmaxf(5, fabsf(t0.data[i + W] - t0.data[i])));
+        }
+    TN_CHECK(tn__gnn_fall_ratio(&t0, &r0) == TN_OK && tn__gnn_fall_ratio(&t1, &r1) == TN_OK);
+    for (i = 0; i < W * H; i++) t1.data[i] = ground[i] + prel[i] - p0[i]; /* what the erosion dug, on the slope */
+    TN_CHECK(tn__gnn_fall_ratio(&t1, &rd) == TN_OK);
+    for (i = 0; i < W * H; i++) t1.data[i] = ground[i] + prel[i];
+    b0 = basin_share(&t0, 50), b1 = basin_share(&t1, 50); /* deeper than 0.5 */
+    printf("  fall ratio %.2f -> %.2f (what was dug: %.2f); deepest cut %.2f (cap 6); basins %.2f -> %.2f %%; steps past the limit by %.3f\n", r0, r1, rd,
+           (double)deepest, 100 * b0, 100 * b1, (double)worst);
+    TN_CHECK(r1 > 1.1 * r0 && rd > 1.5);
+    TN_CHECK(!raised && deepest > 1 && deepest <= 6);
+    TN_CHECK(b1 <= b0 + 0.002);
+    TN_CHECK(worst <= 0.01f);
+done:
+    free(ground), free(prel), free(p0), free(Dr);
+    tn_image_free(&ur), tn_image_free(&dem), tn_image_free(&t0), tn_image_free(&t1);
+}
+
 TN_TEST(width_field_is_smooth)
 {
     /* two drawn valleys of width factors 0.6 and 1.6, 80 px apart: the factor read at each
@@ -2851,6 +2937,8 @@ int main(void)
     TN_RUN(drawn_ridge_is_a_crest);
     TN_RUN(bent_ridge_is_followed_where_drawn);
     TN_RUN(width_field_is_smooth);
+    TN_RUN(example_fall_ratio_reads_the_lie_of_gullies);
+    TN_RUN(grown_ground_erodes_down_its_slopes);
     TN_RUN(bundled_style_window_equals_whole_map);
     TN_RUN(detail_digs_no_groove_beside_a_drawn_ridge);
     TN_RUN(drawn_ridge_stays_above_cratered_detail);
