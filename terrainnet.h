@@ -28629,13 +28629,16 @@ TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *
 {
     const size_t n = (size_t)width * height;
     tn_image d = {0, 0, 0, NULL};
-    float *T = (float *)tn__alloc(n * sizeof(float)), *A = (float *)tn__alloc(n * sizeof(float)), smax = 0;
-    uint32_t *order = (uint32_t *)tn__alloc(n * sizeof(uint32_t));
-    int32_t *rcv = (int32_t *)tn__alloc(n * sizeof(int32_t));
+    float *T, *A, smax = 0;
+    uint32_t *order;
+    int32_t *rcv;
     size_t i, k;
     int s, x, y, pass, changed = 1;
-    tn_status st = T && A && order && rcv ? TN_OK : TN_ERR_OUT_OF_MEMORY;
-    if (!st && !(mix > 0)) goto done;
+    tn_status st;
+    if (!(mix > 0)) return TN_OK;
+    T = (float *)tn__alloc(n * sizeof(float)), A = (float *)tn__alloc(n * sizeof(float));
+    order = (uint32_t *)tn__alloc(n * sizeof(uint32_t)), rcv = (int32_t *)tn__alloc(n * sizeof(int32_t));
+    st = T && A && order && rcv ? TN_OK : TN_ERR_OUT_OF_MEMORY;
     if (!st) st = tn_image_create(&d, width, height, 1);
     for (i = 0; !st && i < n; i++) T[i] = ground[i] + prel[i], A[i] = 1, d.data[i] = T[i];
     if (!st) st = tn__gnn_erode_route(T, ur, width, height, order, rcv);
