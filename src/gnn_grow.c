@@ -557,6 +557,36 @@ static tn_status tn__gnn_erode_route(const float *T, const tn_image *ur, int wid
     return st;
 }
 
+/* Depth d (width x height) dug into ground T lessened until no 4-neighbour step of T - d is
+   steeper than the example's steepest (dem) or than T's own there (a few passes: each lessening
+   can steepen a step beside it). */
+static void tn__gnn_erode_guard_steps(const float *T, const tn_image *dem, int width, int height, float *d)
+{
+    float smax = 0;
+    int x, y, pass, changed = 1;
+    for (y = 0; y < dem->height; y++)
+        for (x = 0; x < dem->width; x++) {
+            const float *h = dem->data + (size_t)y * dem->width + x;
+            if (x + 1 < dem->width) smax = fmaxf(smax, fabsf(h[1] - h[0]));
+            if (y + 1 < dem->height) smax = fmaxf(smax, fabsf(h[dem->width] - h[0]));
+        }
+    for (pass = 0; changed && pass < TN__GNN_ERODE_PASSES; pass++)
+        for (changed = 0, y = 0; y < height; y++)
+            for (x = 0; x < width; x++) {
+                size_t p = (size_t)y * width + x;
+                int e;
+                for (e = 0; e < 4; e++) {
+                    int X = x + (e == 0) - (e == 1), Y = y + (e == 2) - (e == 3);
+                    size_t q = (size_t)Y * width + X;
+                    float lim, most;
+                    if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
+                    lim = fmaxf(smax, T[q] - T[p]);
+                    most = lim - T[q] + d[q] + T[p]; /* the depth at p that leaves the step from q at lim */
+                    if (d[p] > most) d[p] = fmaxf(most, 0), changed = 1;
+                }
+            }
+}
+
 /* The grown ground (ground + prel) eroded by its own drainage, so its gullies and spurs run down
    the slopes to the drawn valleys as the example's do (the quilt's relief lies every way). Routed
    by tn__gnn_erode_route, TN__GNN_ERODE_STEPS implicit stream-power steps (Braun & Willett 2013):
@@ -573,11 +603,11 @@ TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *
 {
     const size_t n = (size_t)width * height;
     tn_image d = {0, 0, 0, NULL};
-    float *T, *A, smax = 0;
+    float *T, *A;
     uint32_t *order;
     int32_t *rcv;
     size_t i, k;
-    int s, x, y, pass, changed = 1;
+    int s;
     tn_status st;
     if (!(mix > 0)) return TN_OK;
     T = (float *)tn__alloc(n * sizeof(float)), A = (float *)tn__alloc(n * sizeof(float));
@@ -605,27 +635,7 @@ TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *
         float f = tn__clampf((Dr[i] - TN__GNN_ERODE_FADE) / TN__GNN_ERODE_FADE, 0, 1);
         d.data[i] = fmaxf(d.data[i], 0) * mix * f * f * (3 - 2 * f);
     }
-    for (y = 0; y < dem->height; y++) /* the example's steepest 4-neighbour step */
-        for (x = 0; x < dem->width; x++) {
-            const float *h = dem->data + (size_t)y * dem->width + x;
-            if (x + 1 < dem->width) smax = fmaxf(smax, fabsf(h[1] - h[0]));
-            if (y + 1 < dem->height) smax = fmaxf(smax, fabsf(h[dem->width] - h[0]));
-        }
-    for (pass = 0; changed && pass < TN__GNN_ERODE_PASSES; pass++)
-        for (changed = 0, y = 0; y < height; y++)
-            for (x = 0; x < width; x++) {
-                size_t p = (size_t)y * width + x;
-                int e;
-                for (e = 0; e < 4; e++) {
-                    int X = x + (e == 0) - (e == 1), Y = y + (e == 2) - (e == 3);
-                    size_t q = (size_t)Y * width + X;
-                    float lim, most;
-                    if (X < 0 || Y < 0 || X >= width || Y >= height) continue;
-                    lim = fmaxf(smax, T[q] - T[p]);
-                    most = lim - T[q] + d.data[q] + T[p]; /* the depth at p that leaves the step from q at lim */
-                    if (d.data[p] > most) d.data[p] = fmaxf(most, 0), changed = 1;
-                }
-            }
+    tn__gnn_erode_guard_steps(T, dem, width, height, d.data);
     for (k = 0; k < n; k++) { /* downstream first: no pixel below its receiver unless it lay there */
         size_t p = order[k];
         int32_t r = rcv[p];
