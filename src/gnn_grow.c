@@ -520,6 +520,7 @@ TN__INTERNAL tn_status tn__gnn_fall_ratio(const tn_image *dem, double *ratio)
 #define TN__GNN_ERODE_SPREAD 2.5f  /* px: the Gaussian that spreads the depth (a channel takes its banks) */
 #define TN__GNN_ERODE_FADE 8.0f    /* px: fades in from this many px off the drawn ridges to twice as many */
 #define TN__GNN_ERODE_PASSES 16    /* passes that keep the steps within the example's steepest */
+#define TN__GNN_ERODE_BISECT 12    /* bisections of the share of the fine relief that keeps the mean slope */
 
 /* The drainage of ground T (width x height): a priority flood from the map's border and the
    drawn valleys (ur's valley channel), over the lowest saddle out of every basin. order: the
@@ -587,6 +588,57 @@ static void tn__gnn_erode_guard_steps(const float *T, const tn_image *dem, int w
             }
 }
 
+/* The mean gradient length (height per px, central differences, the border left out) of h - s d
+   (d NULL: of h alone), width x height. */
+static double tn__gnn_mean_slope(const float *h, const float *d, float s, int width, int height)
+{
+    double sum = 0;
+    long m = 0;
+    int x, y;
+    for (y = 1; y < height - 1; y++)
+        for (x = 1; x < width - 1; x++) {
+            size_t p = (size_t)y * width + x;
+            float gx = h[p + 1] - h[p - 1], gy = h[p + width] - h[p - width];
+            if (d) gx -= s * (d[p + 1] - d[p - 1]), gy -= s * (d[p + width] - d[p - width]);
+            sum += 0.5 * sqrt((double)gx * gx + (double)gy * gy), m++;
+        }
+    return m ? sum / (double)m : 0;
+}
+
+/* Eroded relief P (width x height) on ground G, its fine part (P less two box means of
+   TN__GNN_FALL_FINE px of it, as tn__gnn_fall_ratio splits a DEM) lessened by the least share that keeps the mean slope of G + P at
+   most the example's (dem) or cap, whichever is more (none where that is not enough): digging
+   channels steepens their banks, and ground as steep as the example's came out steeper than it.
+   The coarser part, a spur's fall down its mountainside, stays. The mean slope is convex in the
+   share, so the shares that keep it form an interval up to 1, bisected. */
+static tn_status tn__gnn_erode_keep_slope(const float *G, float *P, const tn_image *dem, double cap, int width, int height)
+{
+    const size_t n = (size_t)width * height;
+    float *h = (float *)tn__alloc(n * sizeof(float)), *f = (float *)tn__alloc(n * sizeof(float));
+    double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double)), lo = 0, hi = 1;
+    size_t i;
+    int it;
+    tn_status st = h && f && I ? TN_OK : TN_ERR_OUT_OF_MEMORY;
+    if (st) goto done;
+    memcpy(f, P, n * sizeof(float));
+    tn__gnn_box_mean(f, width, height, TN__GNN_FALL_FINE, I);
+    tn__gnn_box_mean(f, width, height, TN__GNN_FALL_FINE, I);
+    for (i = 0; i < n; i++) h[i] = G[i] + P[i], f[i] = P[i] - f[i]; /* f: the fine part */
+    cap = fmax(cap, tn__gnn_mean_slope(dem->data, NULL, 0, dem->width, dem->height));
+    if (tn__gnn_mean_slope(h, NULL, 0, width, height) <= cap || tn__gnn_mean_slope(h, f, 1, width, height) > cap) goto done;
+    for (it = 0; it < TN__GNN_ERODE_BISECT; it++) { /* hi keeps the slope, lo does not */
+        double mid = 0.5 * (lo + hi);
+        if (tn__gnn_mean_slope(h, f, (float)mid, width, height) <= cap) hi = mid;
+        else lo = mid;
+    }
+    for (i = 0; i < n; i++) P[i] -= (float)hi * f[i];
+done:
+    TN_FREE(h);
+    TN_FREE(f);
+    TN_FREE(I);
+    return st;
+}
+
 /* The grown ground (ground + prel) eroded by its own drainage, so its gullies and spurs run down
    the slopes to the drawn valleys as the example's do (the quilt's relief lies every way). Routed
    by tn__gnn_erode_route, TN__GNN_ERODE_STEPS implicit stream-power steps (Braun & Willett 2013):
@@ -597,7 +649,8 @@ static void tn__gnn_erode_guard_steps(const float *T, const tn_image *dem, int w
    in off the drawn ridges (Dr: px to the nearest; their flanks are the example's), scaled by mix,
    kept from steepening any 4-neighbour step past the example's steepest (dem) and from digging
    basins: nothing ends below the pixel it drains to unless it lay there already. prel is lowered
-   by it. */
+   by it, and its fine part then lessened so the eroded ground is no steeper on the mean than the
+   example or than it was (tn__gnn_erode_keep_slope). */
 TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *ur, const float *Dr, const tn_image *dem, int Ac, float relief,
                                            float mix, int width, int height, float *prel)
 {
@@ -641,8 +694,9 @@ TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *
         int32_t r = rcv[p];
         float h = T[p] - d.data[p];
         if (r >= 0 && h < T[r] - d.data[r]) d.data[p] = T[p] - fmaxf(h, fminf(T[p], T[r] - d.data[r]));
-        prel[p] -= d.data[p];
     }
+    for (i = 0; i < n; i++) prel[i] -= d.data[i];
+    st = tn__gnn_erode_keep_slope(ground, prel, dem, tn__gnn_mean_slope(T, NULL, 0, width, height), width, height);
 done:
     tn_image_free(&d);
     TN_FREE(T);
