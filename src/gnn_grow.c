@@ -606,11 +606,12 @@ static double tn__gnn_mean_slope(const float *h, const float *d, float s, int wi
 }
 
 /* Eroded relief P (width x height) on ground G, its fine part (P less two box means of
-   TN__GNN_FALL_FINE px of it, as tn__gnn_fall_ratio splits a DEM) lessened by the least share that keeps the mean slope of G + P at
-   most the example's (dem) or cap, whichever is more (none where that is not enough): digging
-   channels steepens their banks, and ground as steep as the example's came out steeper than it.
-   The coarser part, a spur's fall down its mountainside, stays. The mean slope is convex in the
-   share, so the shares that keep it form an interval up to 1, bisected. */
+   TN__GNN_FALL_FINE px of it, as tn__gnn_fall_ratio splits a DEM) lessened by the least share
+   that keeps the mean slope of G + P at most the example's (dem) or cap, whichever is more (none
+   where that is not enough): digging channels steepens their banks, and ground as steep as the
+   example's came out steeper than it. The coarser part, a spur's fall down its mountainside,
+   stays. The mean slope is convex in the share, so the shares that keep it form an interval up
+   to 1, bisected. */
 static tn_status tn__gnn_erode_keep_slope(const float *G, float *P, const tn_image *dem, double cap, int width, int height)
 {
     const size_t n = (size_t)width * height;
@@ -694,8 +695,8 @@ TN__INTERNAL tn_status tn__gnn_quilt_erode(const float *ground, const tn_image *
         int32_t r = rcv[p];
         float h = T[p] - d.data[p];
         if (r >= 0 && h < T[r] - d.data[r]) d.data[p] = T[p] - fmaxf(h, fminf(T[p], T[r] - d.data[r]));
+        prel[p] -= d.data[p];
     }
-    for (i = 0; i < n; i++) prel[i] -= d.data[i];
     st = tn__gnn_erode_keep_slope(ground, prel, dem, tn__gnn_mean_slope(T, NULL, 0, width, height), width, height);
 done:
     tn_image_free(&d);
