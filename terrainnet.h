@@ -28534,6 +28534,17 @@ static tn_status tn__gnn_quilt_relief(const float *Q, const float *D, const floa
 #define TN__GNN_FALL_FINE 8        /* px: the relief is what two box means of this radius leave ... */
 #define TN__GNN_FALL_GROUND 16     /* ... and the fall lines those of two box means of this radius */
 
+/* The fine relief of h (width x height) into fine: h less two box means of TN__GNN_FALL_FINE px
+   of it. I: tn__gnn_box_mean's scratch. */
+static void tn__gnn_fine_relief(const float *h, int width, int height, double *I, float *fine)
+{
+    size_t i, n = (size_t)width * height;
+    memcpy(fine, h, n * sizeof(float));
+    tn__gnn_box_mean(fine, width, height, TN__GNN_FALL_FINE, I);
+    tn__gnn_box_mean(fine, width, height, TN__GNN_FALL_FINE, I);
+    for (i = 0; i < n; i++) fine[i] = h[i] - fine[i];
+}
+
 /* How far the relief of a DEM (one channel) runs down its slopes: the energy of the fine relief's
    gradient across the ground's fall lines over that along them, TN__GNN_FALL_GROUND px from the
    edge left out (1: no preference; a mountainside whose gullies and spurs run down it: 1.3 and
@@ -28543,31 +28554,29 @@ TN__INTERNAL tn_status tn__gnn_fall_ratio(const tn_image *dem, double *ratio)
 {
     const int W = dem->width, H = dem->height, E = TN__GNN_FALL_GROUND;
     size_t n = (size_t)W * H;
-    float *lo = (float *)tn__alloc(n * sizeof(float)), *g = (float *)tn__alloc(n * sizeof(float));
+    float *fine = (float *)tn__alloc(n * sizeof(float)), *g = (float *)tn__alloc(n * sizeof(float));
     double *I = (double *)tn__calloc(((size_t)W + 1) * (H + 1) * sizeof(double)), across = 0, along = 0;
     int x, y;
     *ratio = 0;
-    if (!lo || !g || !I) {
-        TN_FREE(lo), TN_FREE(g), TN_FREE(I);
+    if (!fine || !g || !I) {
+        TN_FREE(fine), TN_FREE(g), TN_FREE(I);
         return TN_ERR_OUT_OF_MEMORY;
     }
-    memcpy(lo, dem->data, n * sizeof(float));
+    tn__gnn_fine_relief(dem->data, W, H, I, fine);
     memcpy(g, dem->data, n * sizeof(float));
-    tn__gnn_box_mean(lo, W, H, TN__GNN_FALL_FINE, I);
-    tn__gnn_box_mean(lo, W, H, TN__GNN_FALL_FINE, I);
     tn__gnn_box_mean(g, W, H, TN__GNN_FALL_GROUND, I);
     tn__gnn_box_mean(g, W, H, TN__GNN_FALL_GROUND, I);
     for (y = E; y < H - E; y++)
         for (x = E; x < W - E; x++) {
             size_t q = (size_t)y * W + x;
             float dx = 0.5f * (g[q + 1] - g[q - 1]), dy = 0.5f * (g[q + W] - g[q - W]), m = sqrtf(dx * dx + dy * dy);
-            float f0 = dem->data[q] - lo[q], hx = dem->data[q + 1] - lo[q + 1] - f0, hy = dem->data[q + W] - lo[q + W] - f0, pa, pc;
+            float hx = fine[q + 1] - fine[q], hy = fine[q + W] - fine[q], pa, pc;
             if (!(m > 0)) continue;
             pa = (hx * dx + hy * dy) / m, pc = (hx * dy - hy * dx) / m;
             along += (double)pa * pa, across += (double)pc * pc;
         }
     if (along > 0) *ratio = across / along;
-    TN_FREE(lo), TN_FREE(g), TN_FREE(I);
+    TN_FREE(fine), TN_FREE(g), TN_FREE(I);
     return TN_OK;
 }
 
@@ -28661,8 +28670,8 @@ static double tn__gnn_mean_slope(const float *h, const float *d, float s, int wi
     return m ? sum / (double)m : 0;
 }
 
-/* Eroded relief P (width x height) on ground G, its fine part (P less two box means of
-   TN__GNN_FALL_FINE px of it, as tn__gnn_fall_ratio splits a DEM) lessened by the least share
+/* Eroded relief P (width x height) on ground G, its fine part (tn__gnn_fine_relief, as
+   tn__gnn_fall_ratio splits a DEM) lessened by the least share
    that keeps the mean slope of G + P at most the example's (dem) or cap, whichever is more (none
    where that is not enough): digging channels steepens their banks, and ground as steep as the
    example's came out steeper than it. The coarser part, a spur's fall down its mountainside,
@@ -28677,10 +28686,8 @@ static tn_status tn__gnn_erode_keep_slope(const float *G, float *P, const tn_ima
     int it;
     tn_status st = h && f && I ? TN_OK : TN_ERR_OUT_OF_MEMORY;
     if (st) goto done;
-    memcpy(f, P, n * sizeof(float));
-    tn__gnn_box_mean(f, width, height, TN__GNN_FALL_FINE, I);
-    tn__gnn_box_mean(f, width, height, TN__GNN_FALL_FINE, I);
-    for (i = 0; i < n; i++) h[i] = G[i] + P[i], f[i] = P[i] - f[i]; /* f: the fine part */
+    tn__gnn_fine_relief(P, width, height, I, f);
+    for (i = 0; i < n; i++) h[i] = G[i] + P[i];
     cap = fmax(cap, tn__gnn_mean_slope(dem->data, NULL, 0, dem->width, dem->height));
     if (tn__gnn_mean_slope(h, NULL, 0, width, height) <= cap || tn__gnn_mean_slope(h, f, 1, width, height) > cap) goto done;
     for (it = 0; it < TN__GNN_ERODE_BISECT; it++) { /* hi keeps the slope, lo does not */
