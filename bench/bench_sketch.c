@@ -94,7 +94,9 @@
      px of the lines: tn_extract run on the output itself (the example's threshold, 16 cells),
      its valleys with one end within 3 px of a drawn valley and the other more than 9 px from all
      of them; example_floor_* and real_floor_* lines: the same on the example and on the real
-     crops (the mean of their normalised figures);
+     crops (the mean of their normalised figures); floor_depth: the mean r at 16 px, m, against
+     the example's main valleys and the real crops' (a drawn valley cut deeper than the example's
+     main valleys is a trench);
    - seconds: generation time (gain test included); membrane_seconds and membrane_1024_seconds:
      tn_gnn_membrane alone at 256 and 1024 px.
    With big=N, each drawing also at N x N (its canvas scaled) the new way, with the map-scale level
@@ -1012,6 +1014,7 @@ int main(int argc, char **argv)
     dominance_t real_dom[2] = {{0, 0}, {0, 0}};
     int ndom[2] = {0, 0};
     valley_shape ex_valley, real_valley;
+    double real_deep = 0; /* the real crops' mean floor depth at 16 px, m */
     hatch_power ex_hatch, real_hatch;
     crest_sides ex_crest;
     uint64_t seed = 1;
@@ -1097,6 +1100,7 @@ int main(int argc, char **argv)
                         int q;
                         if (v.n) {
                             for (q = 0; q < 5; q++) real_valley.rise[q] += v.rise[q] / v.rise[4];
+                            real_deep += v.rise[4];
                             real_valley.width_cv += v.width_cv, real_valley.depth_cv += v.depth_cv, real_valley.junctions += v.junctions;
                             real_valley.n++;
                         }
@@ -1134,6 +1138,8 @@ int main(int argc, char **argv)
             for (k = 0; k < 5; k++) real_valley.rise[k] /= real_valley.n;
             real_valley.width_cv /= real_valley.n, real_valley.depth_cv /= real_valley.n, real_valley.junctions /= real_valley.n;
             valley_print("real", &real_valley, NULL, real_valley.n);
+            real_deep /= real_valley.n;
+            printf("real_floor_depth: %.1f m at 16 px (the mean of %d crops' main valleys)\n", real_deep, real_valley.n);
         }
         printf("real_mean: slope %.4f curvature %.4f spectrum %.4f\n", real[0], real[1], real[2]);
         for (k = 0; k < 2; k++) {
@@ -1289,6 +1295,8 @@ int main(int argc, char **argv)
                 if (cp.n) crest_profile_print(who, &cp, ex_crest.n ? &ex_crest : NULL);
                 if (vs.n) valley_print(who, &vs, ex_valley.n ? &ex_valley : NULL, 0);
                 if (vs.n && real_valley.n) printf("%s_floor_profile_distance_real: %.3f\n", who, valley_profile_distance(&vs, &real_valley));
+                if (vs.n && ex_valley.n && real_valley.n)
+                    printf("%s_floor_depth: %.1f m at 16 px (%.2f x example, %.2f x real)\n", who, vs.rise[4], vs.rise[4] / ex_valley.rise[4], vs.rise[4] / real_deep);
             }
             if (w) printf("%s_%s_gain: %.3f; grown_lines: %d; detail: %d; seconds: %.2f\n", all[d], way[w], (double)plan.gain, plan.grown_lines, plan.detail, secs);
             else { /* the membrane alone, at 256 and 1024 px (its blocks of 128 + 64 px) */

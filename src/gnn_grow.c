@@ -736,16 +736,20 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
     return TN_OK;
 }
 
-#define TN__GNN_LIFT 6 /* px: the lift is the shortfall's max over this radius, averaged over as many */
+#define TN__GNN_LIFT (TN__GNN_PROFILE / 2) /* px: the lift reads the ground's low-pass, two box means of this radius (its full reach) */
+#define TN__GNN_LIFT_SEAM 3 /* px: ... and is itself smoothed by two box means of this radius */
 
 /* A drawn valley is the low ground around it. The quilt knows nothing of it: it laid the
    example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
    stood perched between banks forced up around it (a tube on a causeway). So where the grown
-   ground (ground + prel) lies less than the example's median rise from its main valleys (floor,
-   at the distance over the width factor K, tn__gnn_grow_width_field) above the nearest
-   drawn valley pixel, prel is lifted by the shortfall: in full within TN__GNN_PROFILE / 2 px,
-   fading out by TN__GNN_PROFILE, and by a smooth field (the shortfall's max over TN__GNN_LIFT
-   px, averaged over as many: never under the shortfall) so the quilt's gullies and spurs stay.
+   ground's low-pass (ground, plus prel under two box means of TN__GNN_LIFT px) lies less than the
+   example's median rise from its main valleys (floor, at the distance over the width factor K,
+   tn__gnn_grow_width_field) above the nearest drawn valley pixel, prel is lifted by that
+   shortfall: in full within TN__GNN_PROFILE / 2 px, fading out by TN__GNN_PROFILE. The low-pass
+   is lifted, not the ground itself, so the quilt's gullies and spurs stay on the banks (those
+   still below the drawn valley's own height rise to it: they closed basins); a lift
+   by the shortfall's upper envelope instead (its max over some px) carried the steep shortfall of
+   a bank falling the wrong way onto the valley, which then stood in a trench between walls.
    Not past a drawn valley's low end that meets no other drawn valley (into[c] < 0,
    tn__gnn_grow_widths): its outlet stays open. ur: the user's lines rasterised
    (tn_sketch_rasterise); Dv, nearv: the distance to the nearest user valley pixel and that pixel. */
@@ -755,12 +759,16 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
     const float R = TN__GNN_PROFILE, R0 = 0.5f * TN__GNN_PROFILE;
     size_t p, n = (size_t)width * height;
     int c, dx, dy;
-    tn_image v = {0, 0, 0, NULL};
     double *I = (double *)tn__calloc(((size_t)width + 1) * (height + 1) * sizeof(double));
     uint8_t *end = (uint8_t *)tn__calloc(n); /* the pixels around the open low ends */
-    tn_status st = tn_image_create(&v, width, height, 1);
-    if (!st && (!I || !end)) st = TN_ERR_OUT_OF_MEMORY;
-    for (c = 0; !st && c < user->count; c++) {
+    float *lp = (float *)tn__alloc(n * sizeof(float));
+    if (!I || !end || !lp) {
+        TN_FREE(I);
+        TN_FREE(end);
+        TN_FREE(lp);
+        return TN_ERR_OUT_OF_MEMORY;
+    }
+    for (c = 0; c < user->count; c++) {
         const tn_contour *l = &user->items[c];
         const float *e;
         if (l->type != TN_VALLEY || l->npoints < 2 || into[c] >= 0) continue;
@@ -771,24 +779,35 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
                 if (X >= 0 && Y >= 0 && X < width && Y < height) end[(size_t)Y * width + X] = 1;
             }
     }
-    for (p = 0; !st && p < n; p++) {
-        float need = 0, w;
+    memcpy(lp, prel, n * sizeof(float));
+    tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT, I);
+    tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT, I);
+    for (p = 0; p < n; p++) {
+        float need = 0;
         if (nearv[p] >= 0 && Dv[p] < R && !end[nearv[p]]) {
-            w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
-            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + prel[p]);
+            float w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
+            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + lp[p]);
             need *= w * w * (3 - 2 * w);
         }
-        v.data[p] = fmaxf(need, 0);
+        lp[p] = fmaxf(need, 0);
     }
-    if (!st) st = tn__gnn_grow_max(&v, TN__GNN_LIFT);
-    if (!st) {
-        tn__gnn_box_mean(v.data, width, height, TN__GNN_LIFT, I);
-        for (p = 0; p < n; p++) prel[p] += v.data[p];
+    tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I); /* no step where the nearest valley pixel jumps, or at an open end */
+    tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I);
+    for (p = 0; p < n; p++) prel[p] += lp[p];
+    for (p = 0; p < n; p++) { /* and the gullies left on the banks not below the drawn valley (they closed basins) */
+        float need = 0;
+        if (nearv[p] >= 0 && Dv[p] >= 1 && Dv[p] < R && !end[nearv[p]]) {
+            float w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
+            need = (ur->data[3 * (size_t)nearv[p] + 2] - (ground[p] + prel[p])) * w * w * (3 - 2 * w);
+        }
+        lp[p] = fmaxf(need, 0);
     }
+    tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I);
+    for (p = 0; p < n; p++) prel[p] += lp[p];
     TN_FREE(I);
     TN_FREE(end);
-    tn_image_free(&v);
-    return st;
+    TN_FREE(lp);
+    return TN_OK;
 }
 
 /* The network of the grown ground: the quilted relief (prel) on the strokes' ground (ground: the

@@ -1465,6 +1465,43 @@ TN_TEST(drawn_valley_is_the_low_ground)
     tn_image_free(&full);
 }
 
+TN_TEST(drawn_valley_is_no_trench)
+{
+    /* the lift that keeps a drawn valley the low ground was the shortfall's maximum over 6 px: where
+       the quilted ground fell away from the valley, that carried the banks' large shortfall onto the
+       valley itself, and the grown ground stood 255 m above the drawn valley of two_strokes (1200..1245
+       m; the example's range 1780 m), rising 388 m within 4 px and 597 m by 16 px. The network then
+       kept the drawn heights: a trench between walls. Now the ground's low-pass is lifted: -21 m on
+       the valley, 117 m at 4 px, 355 m at 16 px */
+    tn_image full = {0, 0, 0, NULL}, dem = {0, 0, 0, NULL};
+    tn_contour_set ex, user, g;
+    float rp[30], vp[30], *ground = (float *)calloc(256 * 256, sizeof(float));
+    double on = 0, at4 = 0, at16 = 0;
+    int x, n = 0;
+    const int y = 171; /* the valley's row, 2/3 of the map */
+    TN_CHECK(ground != NULL);
+    TN_CHECK(tn_image_load(&full, "examples/data/alps_n47e009_256.png", NULL) == TN_OK);
+    TN_CHECK(tn_image_crop(&dem, &full, 64, 64, 128, 128) == TN_OK);
+    ex = own_sketch(&dem);
+    user = two_strokes(256, 256, rp, vp);
+    TN_CHECK(tn__gnn_grow(&user, &ex, &dem, 256, 256, NULL, &g, NULL, NULL, ground) == TN_OK);
+    for (x = 16; x < 240; x++, n++) {
+        float hv = 1200.0f + 45.0f * ((float)x - 5) / 246;
+        on += ground[(size_t)y * 256 + x] - hv;
+        at4 += 0.5 * (ground[(size_t)(y - 4) * 256 + x] + ground[(size_t)(y + 4) * 256 + x]) - hv;
+        at16 += 0.5 * (ground[(size_t)(y - 16) * 256 + x] + ground[(size_t)(y + 16) * 256 + x]) - hv;
+    }
+    on /= n, at4 /= n, at16 /= n;
+    printf("  the grown ground on the drawn valley: %.1f m above it; 4 px across %.1f m, 16 px %.1f m\n", on, at4, at16);
+    TN_CHECK(fabs(on) < 35.6);    /* 2 % of the example's range */
+    TN_CHECK(at4 < 0.5 * at16);   /* a V, not a trench's walls */
+    free(ground);
+    tn_contour_set_free(&g);
+    tn_contour_set_free(&ex);
+    tn_image_free(&dem);
+    tn_image_free(&full);
+}
+
 /* The largest height difference between 4-neighbours of a one-channel W x H field; *over (may
    be NULL): how many exceed `than`. */
 static float largest_step(const float *h, int W, int H, float than, int *over)
@@ -2986,6 +3023,7 @@ int main(void)
     TN_RUN(grown_sketch_drains);
     TN_RUN(drawn_valley_end_drains);
     TN_RUN(drawn_valley_is_the_low_ground);
+    TN_RUN(drawn_valley_is_no_trench);
     TN_RUN(quilted_ground_has_no_seam_cliffs);
     TN_RUN(grown_basins_against_the_example_ground);
     TN_RUN(grow_fall_follows_the_example);
