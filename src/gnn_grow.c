@@ -739,6 +739,17 @@ static tn_status tn__gnn_grow_max(tn_image *img, int r)
 #define TN__GNN_LIFT (TN__GNN_PROFILE / 2) /* px: the lift reads the ground's low-pass, two box means of this radius (its full reach) */
 #define TN__GNN_LIFT_SEAM 3 /* px: ... and is itself smoothed by two box means of this radius */
 
+/* How much of the lift pixel p takes (0 where none): those whose nearest drawn valley pixel is no
+   open low end and lies within R px, at least dmin px away, in full within R0 px and fading out
+   (smoothstep) by R. */
+static float tn__gnn_lift_share(const float *Dv, const int *nearv, const uint8_t *end, size_t p, float dmin, float R0, float R)
+{
+    float w;
+    if (nearv[p] < 0 || Dv[p] < dmin || Dv[p] >= R || end[nearv[p]]) return 0;
+    w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
+    return w * w * (3 - 2 * w);
+}
+
 /* A drawn valley is the low ground around it. The quilt knows nothing of it: it laid the
    example's deeper valleys beside a drawn one and its ridges across it, and the drawn valley
    stood perched between banks forced up around it (a tube on a causeway). So where the grown
@@ -783,24 +794,15 @@ static tn_status tn__gnn_quilt_lift(const tn_contour_set *user, const int *into,
     tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT, I);
     tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT, I);
     for (p = 0; p < n; p++) {
-        float need = 0;
-        if (nearv[p] >= 0 && Dv[p] < R && !end[nearv[p]]) {
-            float w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
-            need = ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + lp[p]);
-            need *= w * w * (3 - 2 * w);
-        }
-        lp[p] = fmaxf(need, 0);
+        float s = tn__gnn_lift_share(Dv, nearv, end, p, 0, R0, R);
+        lp[p] = s > 0 ? fmaxf((ur->data[3 * (size_t)nearv[p] + 2] + tn__gnn_grow_table(floor, Dv[p] / K[p]) - (ground[p] + lp[p])) * s, 0) : 0;
     }
     tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I); /* no step where the nearest valley pixel jumps, or at an open end */
     tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I);
     for (p = 0; p < n; p++) prel[p] += lp[p];
     for (p = 0; p < n; p++) { /* and the gullies left on the banks not below the drawn valley (they closed basins) */
-        float need = 0;
-        if (nearv[p] >= 0 && Dv[p] >= 1 && Dv[p] < R && !end[nearv[p]]) {
-            float w = tn__clampf((R - Dv[p]) / (R - R0), 0, 1);
-            need = (ur->data[3 * (size_t)nearv[p] + 2] - (ground[p] + prel[p])) * w * w * (3 - 2 * w);
-        }
-        lp[p] = fmaxf(need, 0);
+        float s = tn__gnn_lift_share(Dv, nearv, end, p, 1, R0, R);
+        lp[p] = s > 0 ? fmaxf((ur->data[3 * (size_t)nearv[p] + 2] - (ground[p] + prel[p])) * s, 0) : 0;
     }
     tn__gnn_box_mean(lp, width, height, TN__GNN_LIFT_SEAM, I);
     for (p = 0; p < n; p++) prel[p] += lp[p];
@@ -835,9 +837,6 @@ static tn_status tn__gnn_quilt_network(const float *prel, const float *ground, i
     return st;
 }
 
-/* A straight run from the line's last point on to user pixel q of the ur raster (width px a row),
-   its heights linear to the user line's there; it ends on the first user pixel it meets, at that
-   pixel's height (the later line wins a pixel, and a user pixel keeps its height). */
 /* Whether a stroke is drawn on pixel p of ur (the strokes rasterised: ridge, valley, height). */
 static int tn__gnn_on_stroke(const tn_image *ur, size_t p) { return ur->data[3 * p] > 0 || ur->data[3 * p + 1] > 0; }
 
@@ -848,6 +847,9 @@ static size_t tn__gnn_pixel_of(const tn_image *ur, const float *q)
     return (size_t)y * (size_t)ur->width + (size_t)x;
 }
 
+/* A straight run from the line's last point on to user pixel q of the ur raster (width px a row),
+   its heights linear to the user line's there; it ends on the first user pixel it meets, at that
+   pixel's height (the later line wins a pixel, and a user pixel keeps its height). */
 static tn_status tn__gnn_grow_run_on(tn__pts *b, size_t q, const tn_image *ur, int width)
 {
     float x = b->p[3 * (b->n - 1)], y = b->p[3 * (b->n - 1) + 1], h = b->p[3 * (b->n - 1) + 2];
