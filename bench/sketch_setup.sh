@@ -2,8 +2,10 @@
 # Issue 30's measurement at its own setup, in one command: for each region, the default gnn-train
 # of the 128 example (the _full DEM with --crop where the MANIFEST puts the 128 crop, MINUTES on
 # THREADS, as a user trains a style), then bench_gnn's reconstruction and neighbours of that model
-# (moved=0: the neighbours that fit around the example), then every drawing of examples/data on it
+# (moved=0: the neighbours that fit around the example), then eight drawings on it
 # (bench_sketch, with maps of BIG x BIG and the strips), then one summary table of the targets.
+# The drawings: the four of examples/data (valley, summit, ring, cross) and the four of
+# bench/drawings (spine, horseshoe, fork, twin), copied together into OUT/drawings.
 #   sh bench/sketch_setup.sh [OUT] [REGION ...]
 #   (defaults: OUT build/sketch_setup; alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit
 #    himalaya_everest moon_nearside_lola4ppd; MINUTES=10 THREADS=2 BIG=1024)
@@ -23,7 +25,10 @@ DATA=${TN_DATA:-../shared/data}
 for b in bin/terrainnet bin/bench_gnn bin/bench_sketch; do
     [ -x $b ] || { echo "sketch_setup: $b is missing (make $b; run from the repository root)" >&2; exit 2; }
 done
-mkdir -p "$OUT"
+DRAWINGS="valley summit ring cross spine horseshoe fork twin"
+mkdir -p "$OUT/drawings"
+cp examples/data/sketch_valley.tns examples/data/sketch_summit.tns examples/data/sketch_ring.tns examples/data/sketch_cross.tns \
+    bench/drawings/sketch_*.tns "$OUT/drawings/"
 failed=
 for r in $REGIONS; do
     dem="$DATA/dem/$r/${r}_full.png"
@@ -44,7 +49,8 @@ for r in $REGIONS; do
         { echo "sketch_setup: $r: bench_gnn failed (see above)" >&2; failed="$failed $r"; }
     [ -f "gnn_fig10_$r.png" ] && mv "gnn_fig10_$r.png" "$OUT/"
     echo "== $r: bench_sketch ($(date -u +%H:%M:%S) UTC)"
-    ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" > "$OUT/$r.sketch.log" ||
+    ./bin/bench_sketch "$r" "$OUT/$r.tnw" "$THREADS" pictures="$OUT" big="$BIG" \
+        drawings="$(echo $DRAWINGS | tr ' ' ,)" from="$OUT/drawings" > "$OUT/$r.sketch.log" ||
         { echo "sketch_setup: $r: bench_sketch failed (see above)" >&2; failed="$failed $r"; }
 done
 # The summary: per drawing the issue's targets (follow >= 90 %, height error <= 10 %, the three
@@ -60,7 +66,7 @@ num='\([^ ;]*\)'
     for r in $REGIONS; do
         L="$OUT/$r.sketch.log"
         [ -f "$L" ] || continue
-        for d in valley summit ring cross; do
+        for d in $DRAWINGS; do
             row="| $r | $d | $(first "$L" "^${d}_new_follow: $num.*") | $(first "$L" "^${d}_new_height_error: $num.*")"
             for k in slope curvature spectrum peaks; do
                 row="$row | $(first "$L" "^${d}_new_$k: [^(]*($num x real).*")"
