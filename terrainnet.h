@@ -1674,6 +1674,8 @@ typedef struct tn_singan_gen_opts {
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
+    int layout_turn;       /* 1 = the layout is turned by a random quarter turn and mirrored or not (one of
+                              the 8, drawn from the seed); 0 = 1, < 0 = as the example */
     int gate;              /* sample: 1 = each scale's detail is scaled by the example's own detail over the
                               generator's at the same rank of the coarser scale's slope, at most 1.5 (the
                               example's plains stay smooth, its crests sharp); measured on a reference
@@ -21610,6 +21612,8 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->layout_warp == 0) o->layout_warp = 16.0f;
     if (o->layout_warp < 0) o->layout_warp = 0.0f;
     if (o->layout_smooth == 0) o->layout_smooth = 96.0f;
+    if (o->layout_turn == 0) o->layout_turn = 1;
+    if (o->layout_turn < 0) o->layout_turn = 0;
     if (o->gate == 0) o->gate = 1;
     if (o->gate < 0) o->gate = 0;
 }
@@ -23134,10 +23138,11 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if ((st = tn__sg_arch_of(model, A))) return st;
     if (!isfinite(o->noise) || o->noise > 100 || !(o->fine_noise <= 100) || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
         o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
-        o->gate > 1)
+        o->layout_turn > 1 || o->gate > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, fine noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, "
-                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, gate %d 0 or 1)",
-                        (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth, o->gate);
+                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0 or 1, gate %d 0 or 1)",
+                        (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth,
+                        o->layout_turn, o->gate);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
@@ -23176,6 +23181,24 @@ done:
     tn_image_free(&d);
     tn_image_free(&src);
     return st;
+}
+
+/* *map becomes one of its 8 quarter turns and mirror images: bit 0 of orient swaps x and y (its
+   width becomes its height), bit 1 mirrors x and bit 2 y of the result. Exact: no resampling. */
+static tn_status tn__sg_turn(tn_image *map, int orient)
+{
+    tn_image out = {0, 0, 0, NULL};
+    int sw = orient & 1, w = sw ? map->height : map->width, h = sw ? map->width : map->height, x, y;
+    tn_status st = tn_image_create(&out, w, h, 1);
+    if (st) return st;
+    for (y = 0; y < h; y++)
+        for (x = 0; x < w; x++) {
+            int u = orient & 2 ? w - 1 - x : x, v = orient & 4 ? h - 1 - y : y;
+            TN_PIXEL(&out, x, y, 0) = sw ? TN_PIXEL(map, v, u, 0) : TN_PIXEL(map, u, v, 0);
+        }
+    tn_image_free(map);
+    *map = out;
+    return TN_OK;
 }
 
 /* A value and its pixel: the gate ranks pixels by slope, the layout by height (ties by pixel). */
@@ -23386,16 +23409,20 @@ static tn_status tn__sg_match_heights(tn_image *map, const tn_image *ref)
 
 /* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
    allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up),
-   given the example's height distribution at that scale and bent by a random smooth warp. The coarsest generator, 5 layers on noise, made features
-   without the example's arrangement (no cone, no massif, no main valleys); the example's own
-   scale rearranged by patches keeps them, the warp and SinGAN's finer scales with their noise on
-   top keep samples from being copies (docs/singan.md). */
+   given the example's height distribution at that scale, bent by a random smooth warp, then
+   given one of its 8 quarter turns and mirror images (exact, where a turn by any angle would
+   smooth the layout by resampling it). The coarsest generator, 5 layers on noise, made features
+   without the example's arrangement (no cone, no massif, no main valleys); the example's own scale
+   rearranged by patches keeps them; the warp, the turn and SinGAN's finer scales with their
+   noise on top keep samples from being copies (docs/singan.md). */
 static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const tn_singan_gen_opts *o, int K, int w, int h, float **map, int *mw,
                                int *mh)
 {
     const tn_tensor *t = tn_params_find(m->weights, "singan.layout");
     tn_image ex, exl = {0, 0, 0, NULL}, lay = {0, 0, 0, NULL};
     tn_gpnn_opts go;
+    tn_rng rng;
+    int orient;
     int down = A->scales - K, ew = tn__sg_size(A->width, A->factor, down), eh = tn__sg_size(A->height, A->factor, down);
     int cw = tn__sg_size(A->width, A->factor, A->scales - 1), ch = tn__sg_size(A->height, A->factor, A->scales - 1);
     float px;
@@ -23419,12 +23446,14 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     go.extend = 1;
     go.coarsest = cw < ch ? cw : ch;
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
-    st = tn_gpnn_sample(&lay, &exl, *mw, *mh, &go);
+    tn_rng_seed(&rng, o->seed, 0x7475726eULL);
+    orient = o->layout_turn ? (int)(tn_rng_u32(&rng) & 7) : 0;
+    st = tn_gpnn_sample(&lay, &exl, orient & 1 ? *mh : *mw, orient & 1 ? *mw : *mh, &go);
     if (!st) st = tn__sg_match_heights(&lay, &exl);
     tn_image_free(&exl);
     if (st) return st;
     px = (float)*mw / (float)w; /* the layout's px per sample px */
-    if ((st = tn__sg_warp(&lay, o->layout_warp * px, o->layout_smooth * px, o->seed))) {
+    if ((st = tn__sg_warp(&lay, o->layout_warp * px, o->layout_smooth * px, o->seed)) || (st = tn__sg_turn(&lay, orient))) {
         tn_image_free(&lay);
         return st;
     }

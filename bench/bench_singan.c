@@ -18,7 +18,10 @@
      - SinGAN trained for the budget: the same three distances of 3 samples (seeds 100..102,
        256 x 256, mean) and their ratios to the reference's; the samples' height range against
        the example's and its +-10 % band; the best SSIM of a 128 px window of a sample against
-       every 128 px crop of the example (stride 4; copy check) and where it matched; whether two
+       every 128 px crop of the example (stride 4; copy check) and where it matched; the same
+       check on the sample's middle turned by 0, 15, ..., 345 degrees and mirrored (turned: a
+       turned or mirrored copy, which the plain check does not see; the layout turns and
+       mirrors its samples); whether two
        seeds differ; the depth of the main valleys (valley_depth: the arrangement the distances
        miss) against the example's, and the reference crop's; how far the heights' distribution
        lies from the example's (heights_distance: a massif or range the sample lacks), against
@@ -31,7 +34,7 @@
        their steps: the line whose targets count for such a region, docs/singan.md),
      - with --layout 1: the same model's samples laid out (tn_singan_gen_opts.layout: GPNN on the
        example at scale K - 1, warped, SinGAN from scale K; --layout-scale K, --layout-noise S
-       GPNN's noise, --layout-warp PX, --layout-smooth PX), the same lines,
+       GPNN's noise, --layout-warp PX, --layout-smooth PX, --layout-turn T), the same lines,
      - --gate -1: SinGAN's samples without the gate (tn_singan_gen_opts.gate: the detail scaled
        by the example's own at the same slope, relative to the median slope's; on by default),
      - --fine-noise K: tn_singan_gen_opts.fine_noise of every sample (the finest generator's noise;
@@ -46,7 +49,7 @@
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
    Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
-                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--gate -1] [--fine-noise K]
+                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--layout-turn T] [--gate -1] [--fine-noise K]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N] [--dequantize N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but those run only when named, M = 10, 2 threads) */
@@ -174,6 +177,30 @@ static double best_crop_ssim(const tn_image *ex, const tn_image *win, int *bx, i
             tn_image_free(&c);
         }
     return best;
+}
+
+/* The middle w x w of img turned by deg degrees about img's centre (img at least 1.42 w wide),
+   mirrored in x first when mirror is set. */
+static int turned_window(tn_image *out, const tn_image *img, int w, int deg, int mirror)
+{
+    float a = (float)deg * 3.14159265f / 180.0f, c = cosf(a), s = sinf(a);
+    float cx = 0.5f * (float)(img->width - 1), cy = 0.5f * (float)(img->height - 1);
+    int x, y;
+    if (tn_image_create(out, w, w, 1)) return -1;
+    for (y = 0; y < w; y++)
+        for (x = 0; x < w; x++) {
+            float dx = ((float)x - 0.5f * (float)(w - 1)) * (mirror ? -1.0f : 1.0f), dy = (float)y - 0.5f * (float)(w - 1);
+            float u = cx + c * dx - s * dy, v = cy + s * dx + c * dy;
+            int x0 = (int)floorf(u), y0 = (int)floorf(v);
+            float fx = u - (float)x0, fy = v - (float)y0;
+            if (x0 < 0) x0 = 0, fx = 0;
+            if (y0 < 0) y0 = 0, fy = 0;
+            if (x0 > img->width - 2) x0 = img->width - 2, fx = 1;
+            if (y0 > img->height - 2) y0 = img->height - 2, fy = 1;
+            TN_PIXEL(out, x, y, 0) = (1 - fy) * ((1 - fx) * TN_PIXEL(img, x0, y0, 0) + fx * TN_PIXEL(img, x0 + 1, y0, 0)) +
+                                     fy * ((1 - fx) * TN_PIXEL(img, x0, y0 + 1, 0) + fx * TN_PIXEL(img, x0 + 1, y0 + 1, 0));
+        }
+    return 0;
 }
 
 /* Where the example lies in the full DEM (least absolute difference, coarse then fine). */
@@ -368,6 +395,8 @@ typedef struct measured {
     float lo, hi;
     double best_ssim, seed_diff, valleys, heights;
     int best_seed, best_x, best_y; /* the copy check's best: which sample (0..2), and where in the example */
+    double turned_ssim;            /* the copy check on the sample's middle turned by 15..345 degrees or mirrored */
+    int turned_deg, turned_mirror;
 } measured;
 
 static double g_valleys_ex;  /* valley_depth of the current region's example */
@@ -389,10 +418,10 @@ static void report(const char *name, const char *what, const measured *m, const 
     int ok_h = m->lo >= elo - band && m->hi <= ehi + band;
     double rs = m->d.slope / ref->slope, rc = m->d.curv / ref->curv, rp = m->d.spec / ref->spec;
     printf("%s_%s: slope %.3f (%.2fx) curvature %.3f (%.2fx) spectrum %.3f (%.2fx) | curvature_2px %.3f (%.2fx) | "
-           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f (sample %d's middle 128 px against (%d, %d) of the example) | seeds differ by %.1f (mean |a-b|) | "
+           "heights %.0f..%.0f (%s the example +-10 %%) | best_ssim %.3f (sample %d's middle 128 px against (%d, %d) of the example) | turned %.3f (the same turned by %d degrees%s) | seeds differ by %.1f (mean |a-b|) | "
            "to the corner crops %.2fx %.2fx %.2fx | valleys %.1f m (%.2fx) | heights_distance %.1f %% (%.2fx)%s\n",
            name, what, m->d.slope, rs, m->d.curv, rc, m->d.spec, rp, m->d.curv2, m->d.curv2 / ref->curv2, (double)m->lo, (double)m->hi,
-           ok_h ? "within" : "OUTSIDE", m->best_ssim, m->best_seed, m->best_x, m->best_y, m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
+           ok_h ? "within" : "OUTSIDE", m->best_ssim, m->best_seed, m->best_x, m->best_y, m->turned_ssim, m->turned_deg, m->turned_mirror ? ", mirrored" : "", m->seed_diff, m->d.slope / corners->slope, m->d.curv / corners->curv, m->d.spec / corners->spec,
            m->valleys, m->valleys / g_valleys_ex, m->heights, m->heights / g_heights_ref, met(rs, rc, rp, ok_h, m));
     if (g_step > 0) {
         const dists *t = &m->stored;
@@ -434,7 +463,9 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
     m->lo = FLT_MAX;
     m->hi = -FLT_MAX;
     m->best_ssim = -1;
+    m->turned_ssim = -1;
     for (i = 0; i < 3; i++) {
+        int deg;
         dists d = dist3(ex, &s[i], dx, dy);
         tn_image w = {0, 0, 0, NULL};
         float lo, hi;
@@ -460,6 +491,14 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
             if (b > m->best_ssim) m->best_ssim = b, m->best_seed = i, m->best_x = bx, m->best_y = by;
         }
         tn_image_free(&w);
+        for (deg = 0; deg < 720 && s[i].width >= 182 && s[i].height >= 182; deg += 15) {
+            double b;
+            if (deg == 0) continue; /* the plain check's */
+            if (turned_window(&w, &s[i], 128, deg % 360, deg >= 360)) break;
+            b = best_crop_ssim(ex, &w, NULL, NULL);
+            if (b > m->turned_ssim) m->turned_ssim = b, m->turned_deg = deg % 360, m->turned_mirror = deg >= 360;
+            tn_image_free(&w);
+        }
     }
     for (k = 0; k < n; k++) m->seed_diff += fabs(s[0].data[k] - s[1].data[k]) / (double)n;
 }
@@ -512,6 +551,7 @@ static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPN
 static int g_gate;                          /* tn_singan_gen_opts.gate of every sample (-1: off) */
 static float g_fine_noise;                  /* tn_singan_gen_opts.fine_noise of every sample (0: default) */
 static float g_layout_noise, g_layout_warp, g_layout_smooth;
+static int g_layout_turn;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
 static tn_gpnn_opts g_gopts;
@@ -647,6 +687,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         g.layout_noise = g_layout_noise;
         g.layout_warp = g_layout_warp;
         g.layout_smooth = g_layout_smooth;
+        g.layout_turn = g_layout_turn;
         g.layout_scale = g_layout_scale;
         g.gate = g_gate;
         g.fine_noise = g_fine_noise;
@@ -817,6 +858,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--layout-warp") && v) g_layout_warp = (float)atof(argv[++i]);
         else if (!strcmp(a, "--layout-scale") && v) g_layout_scale = atoi(argv[++i]);
         else if (!strcmp(a, "--layout-smooth") && v) g_layout_smooth = (float)atof(argv[++i]);
+        else if (!strcmp(a, "--layout-turn") && v) g_layout_turn = atoi(argv[++i]);
         else if (!strcmp(a, "--gate") && v) g_gate = atoi(argv[++i]);
         else if (!strcmp(a, "--fine-noise") && v) g_fine_noise = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);

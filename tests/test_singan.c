@@ -106,7 +106,7 @@ TN_TEST(tile_equals_whole_map_and_seeds_differ)
    (stored in the model) at that scale, bent by a warp. Its tiles still equal the whole map, seeds
    differ, heights stay in the band; without any noise or warp it rebuilds the example, which a
    sample of the coarsest generator does not (the stored map is the example's, and it is the one
-   used); the warp moves it off the example; a layout scale past the model's is refused. */
+   used); the warp and the turn move it off the example; a layout scale past the model's is refused. */
 TN_TEST(layout_from_the_example)
 {
     tn_image ex = tn_test_dem(24, 1), whole = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, other = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
@@ -134,6 +134,7 @@ TN_TEST(layout_from_the_example)
     g.noise = -1;
     g.layout_noise = -1;
     g.layout_warp = -1;
+    g.layout_turn = -1;
     TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 24, 24, &g) == TN_OK);
     g.layout = 0;
     TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_OK);
@@ -161,6 +162,29 @@ TN_TEST(layout_from_the_example)
         printf("# layout bent by a warp of 3 px: SSIM to the example %.3f\n", s_bent);
         TN_CHECK(s_bent < s_layout - 0.1);
         tn_image_free(&bent);
+    }
+    { /* the turn: without noise or warp, turned layouts (a random angle per seed) lie further
+         from the example than the unturned one, which rebuilds it */
+        tn_image turned = {0, 0, 0, NULL};
+        double s_turned = 0, mean = 0;
+        int seed;
+        g.layout_warp = -1;
+        g.layout_turn = 1;
+        for (seed = 1; seed <= 8; seed++) {
+            g.seed = (uint64_t)seed;
+            TN_CHECK(tn_singan_sample(&turned, &trained, 0, 0, 24, 24, &g) == TN_OK);
+            TN_CHECK(tn_ssim(&s_turned, &ex, &turned, ehi - elo) == TN_OK);
+            tn_image_range(&lo, &hi, &turned);
+            TN_CHECK(lo >= elo - 0.1f * (ehi - elo) && hi <= ehi + 0.1f * (ehi - elo));
+            mean += s_turned / 8;
+            tn_image_free(&turned);
+        }
+        printf("# layout turned: mean SSIM to the example over 8 seeds %.3f (unturned %.3f)\n", mean, s_layout);
+        TN_CHECK(mean < s_layout - 0.1);
+        g.layout_turn = 2;
+        TN_CHECK(tn_singan_sample(&turned, &trained, 0, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
+        g.layout_turn = -1;
+        g.seed = 11;
     }
     { /* a map 3x the example's side: the layout keeps the example's heights (GPNN's averaging alone
          lowers its summits and raises its floors) */
