@@ -130,8 +130,10 @@ typedef struct tn_singan_gen_opts {
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
-    int layout_turn;       /* 1 = the layout is turned by a random quarter turn and mirrored or not (one of
-                              the 8, drawn from the seed); 0 = 1, < 0 = as the example */
+    int layout_turn;       /* the layout is given one of its mirror images, drawn from the seed: 1 = one of 4
+                              (as it is, mirrored in x, in y, or both: a half turn), right for any pixel shape;
+                              2 = one of 8, the quarter turns too (square pixels only: a quarter turn swaps
+                              the pixel's sides); 0 = 1, < 0 = as the example */
     int gate;              /* sample: 1 = each scale's detail is scaled by the example's own detail over the
                               generator's at the same rank of the coarser scale's slope, at most 1.5 (the
                               example's plains stay smooth, its crests sharp); measured on a reference
@@ -1843,9 +1845,9 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if ((st = tn__sg_arch_of(model, A))) return st;
     if (!isfinite(o->noise) || o->noise > 100 || !(o->fine_noise <= 100) || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
         o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
-        o->layout_turn > 1 || o->gate > 1)
+        o->layout_turn > 2 || o->gate > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, fine noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, "
-                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0 or 1, gate %d 0 or 1)",
+                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0..2, gate %d 0 or 1)",
                         (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth,
                         o->layout_turn, o->gate);
     memset(r, 0, sizeof *r);
@@ -2115,7 +2117,7 @@ static tn_status tn__sg_match_heights(tn_image *map, const tn_image *ref)
 /* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
    allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up),
    given the example's height distribution at that scale, bent by a random smooth warp, then
-   given one of its 8 quarter turns and mirror images (exact, where a turn by any angle would
+   given one of its mirror images or quarter turns (exact, where a turn by any angle would
    smooth the layout by resampling it). The coarsest generator, 5 layers on noise, made features
    without the example's arrangement (no cone, no massif, no main valleys); the example's own scale
    rearranged by patches keeps them; the warp, the turn and SinGAN's finer scales with their
@@ -2152,7 +2154,7 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     go.coarsest = cw < ch ? cw : ch;
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
     tn_rng_seed(&rng, o->seed, 0x7475726eULL);
-    orient = o->layout_turn ? (int)(tn_rng_u32(&rng) & 7) : 0;
+    orient = o->layout_turn ? (int)(tn_rng_u32(&rng) & (o->layout_turn == 2 ? 7u : 6u)) : 0; /* bit 0, the swap, only at 2 */
     st = tn_gpnn_sample(&lay, &exl, orient & 1 ? *mh : *mw, orient & 1 ? *mw : *mh, &go);
     if (!st) st = tn__sg_match_heights(&lay, &exl);
     tn_image_free(&exl);

@@ -1638,8 +1638,9 @@ static const cli_opt singan_sample_opts[] = {
      "with --layout: the first scale that runs on the layout (1: the layout replaces the coarsest scale; higher keeps more of the example)", "3"},
     {"layout-warp", 0, ARG_FLOAT, 0, &singan_gen_arg.g.layout_warp, NULL, -1, 4096, "PX",
      "with --layout: RMS displacement of the warp in output px (< 0: none)", "16"},
-    {"layout-turn", 0, ARG_INT, 0, &singan_gen_arg.g.layout_turn, NULL, -1, 1, "T",
-     "with --layout: 1 = the layout turned by a random quarter turn and mirrored or not (one of 8 from the seed); -1 = as the example",
+    {"layout-turn", 0, ARG_INT, 0, &singan_gen_arg.g.layout_turn, NULL, -1, 2, "T",
+     "with --layout: the layout mirrored by the seed: 1 = in x, y, both or neither (any pixel shape); 2 = the quarter turns too "
+     "(square pixels only); -1 = as the example",
      "1"},
 };
 static const cli_opt singan_refine_opts[] = {
