@@ -465,7 +465,7 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
     m->best_ssim = -1;
     m->turned_ssim = -1;
     for (i = 0; i < 3; i++) {
-        int deg;
+        int k;
         dists d = dist3(ex, &s[i], dx, dy);
         tn_image w = {0, 0, 0, NULL};
         float lo, hi;
@@ -491,12 +491,12 @@ static void measure(const tn_image *ex, tn_image *s /* 3 */, float dx, float dy,
             if (b > m->best_ssim) m->best_ssim = b, m->best_seed = i, m->best_x = bx, m->best_y = by;
         }
         tn_image_free(&w);
-        for (deg = 0; deg < 720 && s[i].width >= 182 && s[i].height >= 182; deg += 15) {
+        for (k = 1; k < 48 && s[i].width >= 182 && s[i].height >= 182; k++) { /* k = 0 is the plain check */
+            int deg = 15 * (k % 24), mirror = k >= 24;
             double b;
-            if (deg == 0) continue; /* the plain check's */
-            if (turned_window(&w, &s[i], 128, deg % 360, deg >= 360)) break;
+            if (turned_window(&w, &s[i], 128, deg, mirror)) break;
             b = best_crop_ssim(ex, &w, NULL, NULL);
-            if (b > m->turned_ssim) m->turned_ssim = b, m->turned_deg = deg % 360, m->turned_mirror = deg >= 360;
+            if (b > m->turned_ssim) m->turned_ssim = b, m->turned_deg = deg, m->turned_mirror = mirror;
             tn_image_free(&w);
         }
     }
