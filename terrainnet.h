@@ -10101,11 +10101,54 @@ TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
     for (; i < n; i++) x[i] = tn__bf16_round(x[i]);
 }
 
+#ifdef TN__BF16_HW
+/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns how many it wrote. */
+__attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_halves512(const float *x, uint16_t *out, int n)
+{
+    int j;
+    for (j = 0; j + 32 <= n; j += 32)
+        _mm512_storeu_si512((void *)(out + j), (__m512i)_mm512_cvtne2ps_pbh(_mm512_loadu_ps(x + j + 16), _mm512_loadu_ps(x + j)));
+    return j;
+}
+#endif
+
+/* out[j] = the bf16 of x[j] (tn__bf16_bits's upper half), j < n. */
+static void tn__bf16_halves(const float *x, uint16_t *out, int n)
+{
+    int j = 0;
+#ifdef TN__BF16_HW
+    if (tn__cpu_flags & TN_CPU_AVX512_BF16) j = tn__bf16_halves512(x, out, n);
+#endif
+    for (; j < n; j++) out[j] = (uint16_t)(tn__bf16_bits(x[j]) >> 16);
+}
+
+#ifdef TN__BF16_HW
+/* tn__bf16_pair_words with VCVTNE2PS2BF16: round to nearest even, subnormal inputs to zeros of
+   their sign, NaN quieted (Intel SDM, convert_fp32_to_bfloat16): tn__bf16_bits's bytes, which
+   test_bf16 checks. Returns how many words it wrote (whole groups of 16). */
+__attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_words512(const float *r0, const float *r1,
+                                                                                            void *out, int w)
+{
+    const __m512i inter = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7, 22, 6, 21, 5,
+                                           20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+    int j;
+    for (j = 0; j + 16 <= w; j += 16) {
+        __m512 hi = r1 ? _mm512_loadu_ps(r1 + j) : _mm512_setzero_ps();
+        __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_loadu_ps(r0 + j)); /* r0's 16 low, r1's high */
+        _mm512_storeu_si512((void *)((uint32_t *)out + j), _mm512_permutexvar_epi16(inter, both));
+    }
+    return j;
+}
+#endif
+
 /* out[j] = bf16(r0[j]) | bf16(r1[j]) << 16 for j < w (r1 NULL: zeros). out may be r0 itself (each
    group is read before it is written) but not r1. */
 static void tn__bf16_pair_words(const float *r0, const float *r1, void *out, int w)
 {
     int j = 0;
+#ifdef TN__BF16_HW
+    if (tn__cpu_flags & TN_CPU_AVX512_BF16) j = tn__bf16_pair_words512(r0, r1, out, w);
+#endif
 #ifdef __AVX2__
     for (; j + 8 <= w; j += 8) {
         __m256i lo = _mm256_srli_epi32(tn__bf16_bits8(_mm256_loadu_ps(r0 + j)), 16);
@@ -10293,6 +10336,175 @@ static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, in
 {
     tn__gemm_amx_pack_b(pb, nc, kc, tb);
     tn__gemm_amx_tiles(g, ic, mc, jc, nc, kc, ta, tb, beta);
+}
+
+/* Direct convolution on the tiles (stride 1, no im2col), for >>ops' tn__conv_forward_amx and
+   tn__conv_weight_grad_amx. The input is converted once to bf16 padded rows in which every
+   channel's (or channel pair's) row of Wr values follows the previous channel's, so a tile of 16
+   channels x 32 positions of one row is one load with a stride of Wr elements, tap (ky, kx) is a
+   fixed offset from it, and all reads of one output row stay within KH padded rows (a few tens of
+   KiB: separate planes per channel made tens of streams and ran at a quarter of the speed). The
+   sum over C*KH*KW becomes taps x 32-channel steps of TDPBF16PS. Outputs are computed in chunks of
+   32 positions of one output row (the last one of a row partly past OW, dropped). */
+typedef struct tn__amx_conv {
+    const uint32_t *xp;    /* padded row iy at xp + iy * prow * Wr: channel-pair rows of Wr words
+                              (word = bf16 channels 2p, 2p + 1) */
+    int Wr, prow;          /* prow: channel-pair rows per padded row (kpairs if ksteps is 1, else 16 ksteps) */
+    const uint16_t *wa;    /* A tiles of 16 rows x 32 bf16: tile ((mt * ntaps + t) * ksteps + s) */
+    const int *off;        /* word offset of each tap */
+    int ntaps, ksteps, kpairs, M; /* kpairs: channel pairs of the last step (16 but for C < 32) */
+    int OW, OH;
+    float *y;              /* M planes of OH x OW: y = beta * y + conv (+ bias) */
+    const float *bias;     /* M floats, or NULL */
+    float beta;
+} tn__amx_conv;
+
+/* The weight gradient, also without im2col: dW[m][c][t] = sum over images and positions of
+   dy[m][oy][ox] x[c][oy + ky dil][ox + kx dil] (padded input). A tiles: 16 channels x 32 positions
+   of the padded input (bf16 rows laid out as above, Wr halves each), at the tap's offset; B tiles:
+   16 position pairs x 16 output channels of dy transposed to pair words (each output row padded
+   to Wq, a multiple of 32, with zeros). C tiles hold dW^T (channels x output channels) of one tap;
+   each element is summed over images, then output rows and chunks in order, whatever the split
+   of the items (tap, block of 32 channels, block of 32 output channels). */
+typedef struct tn__amx_dw {
+    const uint16_t *xh;    /* per image: Hp padded rows of cp channel rows of Wr halves */
+    const uint32_t *dyt;   /* per image: OH * Wq / 2 rows of mp words */
+    int Wr, Wq, Hp;
+    const int *off;
+    int N, ntaps, cp, mp, C, M, OH;
+    float *dw;             /* M x C x ntaps, added to */
+} tn__amx_dw;
+
+static void tn__amx_cfg_set(tn__amx_cfg *cfg, int arows_bytes, int brows)
+{
+    int t;
+    memset(cfg, 0, sizeof *cfg);
+    cfg->palette = 1;
+    for (t = 0; t < 8; t++) {
+        cfg->rows[t] = (unsigned char)(t >= 6 ? brows : 16);
+        cfg->colsb[t] = (unsigned short)(t == 4 || t == 5 ? arows_bytes : 64);
+    }
+}
+
+/* Item it of ntaps * ceil(cp / 32) * ceil(mp / 32) over output rows [oy0, oy1) of image n: its 32 x 32
+   block of sums (acc, rows of 32 floats) loaded into the tiles, added to and stored back. Rows in
+   bands, every item on a band before the next band, so the band's input stays in L2 (an item over
+   a whole image read it once per item, from L3). */
+__attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_dw_item(const tn__amx_dw *d, int it, int n, int oy0, int oy1,
+                                                                            float *acc)
+{
+    tn__amx_cfg cfg;
+    int cpairs = (d->cp + 31) / 32, mpairs = (d->mp + 31) / 32, t = it / (cpairs * mpairs);
+    int cb = it / mpairs % cpairs * 32, mb = it % mpairs * 32, c2 = cb + 16 < d->cp, m2 = mb + 16 < d->mp, oy, ox;
+    long astride = (long)d->Wr * 2, bstride = (long)d->mp * 4;
+    size_t rowx = (size_t)d->cp * d->Wr;
+    const uint32_t *b = d->dyt + ((size_t)n * d->OH + oy0) * (d->Wq / 2) * d->mp + mb;
+    tn__amx_cfg_set(&cfg, 64, 16);
+    _tile_loadconfig(&cfg);
+    _tile_loadd(0, acc, 128);
+    _tile_loadd(1, acc + 16, 128);
+    _tile_loadd(2, acc + 16 * 32, 128);
+    _tile_loadd(3, acc + 16 * 32 + 16, 128);
+    for (oy = oy0; oy < oy1; oy++) {
+        const uint16_t *a = d->xh + ((size_t)n * d->Hp + oy) * rowx + (size_t)cb * d->Wr + d->off[t];
+        for (ox = 0; ox < d->Wq; ox += 32, a += 32, b += (size_t)16 * d->mp) {
+            _tile_loadd(4, a, astride);
+            _tile_loadd(6, b, bstride);
+            _tile_dpbf16ps(0, 4, 6);
+            if (m2) {
+                _tile_loadd(7, b + 16, bstride);
+                _tile_dpbf16ps(1, 4, 7);
+            }
+            if (c2) {
+                _tile_loadd(5, a + (size_t)16 * d->Wr, astride);
+                _tile_dpbf16ps(2, 5, 6);
+                if (m2) _tile_dpbf16ps(3, 5, 7);
+            }
+        }
+    }
+    _tile_stored(0, acc, 128);
+    _tile_stored(1, acc + 16, 128);
+    _tile_stored(2, acc + 16 * 32, 128);
+    _tile_stored(3, acc + 16 * 32 + 16, 128);
+    _tile_release();
+}
+
+/* d[0 .. n) = (v + *bias) + beta * d (no bias: v + beta * d; beta 0: d not read). */
+__attribute__((target("avx512f"))) static void tn__amx_conv_out512(float *d, const float *v, int n, const float *bias, float beta)
+{
+    __m512 bm = _mm512_set1_ps(bias ? *bias : 0.0f), bt = _mm512_set1_ps(beta);
+    int i;
+    for (i = 0; i < n; i += 16) {
+        __mmask16 k = (__mmask16)(n - i >= 16 ? 0xffffu : (1u << (n - i)) - 1u);
+        __m512 x = _mm512_maskz_loadu_ps(k, v + i);
+        if (bias) x = _mm512_add_ps(x, bm);
+        if (beta != 0.0f) x = _mm512_add_ps(x, _mm512_mul_ps(bt, _mm512_maskz_loadu_ps(k, d + i))); /* not fused: as below */
+        _mm512_mask_storeu_ps(d + i, k, x);
+    }
+}
+
+static void tn__amx_conv_out(float *d, const float *v, int n, const float *bias, float beta)
+{
+    int i;
+    if (tn__cpu_flags & TN_CPU_AVX512F) { /* every AMX CPU; not the tile model of test_bf16_amx */
+        tn__amx_conv_out512(d, v, n, bias, beta);
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        float x = bias ? v[i] + *bias : v[i];
+        d[i] = beta == 0.0f ? x : x + beta * d[i];
+    }
+}
+
+/* Chunks [k0, k1) of one image, chunk k = 32 positions of output row k / ceil(OW / 32). With a
+   single step of fewer than 16 channel pairs (C < 32) the tiles are configured that short. */
+__attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const tn__amx_conv *c, int k0, int k1)
+{
+    tn__amx_cfg cfg;
+    float tile[32 * 32];
+    int cw = (c->OW + 31) / 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    size_t tiles_per_mt = (size_t)c->ntaps * c->ksteps * 512, ohw = (size_t)c->OH * c->OW, rowx = (size_t)c->prow * c->Wr;
+    long bstride = (long)c->Wr * 4;
+    tn__amx_cfg_set(&cfg, c->ksteps == 1 ? 4 * c->kpairs : 64, c->ksteps == 1 ? c->kpairs : 16);
+    _tile_loadconfig(&cfg);
+    for (k = k0; k < k1;) { /* the chunks of one output row, each pair of M tiles in turn: one pair's
+                               A tiles stay in L1 along the row */
+        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk;
+        for (mt = 0; mt < mtiles; mt += 2)
+            for (kk = k; kk < kend; kk++) {
+                int ox = kk % cw * 32, n = c->OW - ox < 32 ? c->OW - ox : 32;
+                int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
+                const uint16_t *a = c->wa + (size_t)mt * tiles_per_mt;
+                _tile_zero(0);
+                _tile_zero(1);
+                _tile_zero(2);
+                _tile_zero(3);
+                for (t = 0; t < c->ntaps; t++) {
+                    const uint32_t *b = c->xp + oy * rowx + ox + c->off[t];
+                    for (s = 0; s < c->ksteps; s++, a += 512, b += (size_t)16 * c->Wr) {
+                        _tile_loadd(4, a, 64);
+                        _tile_loadd(6, b, bstride);
+                        _tile_loadd(7, b + 16, bstride);
+                        _tile_dpbf16ps(0, 4, 6);
+                        _tile_dpbf16ps(1, 4, 7);
+                        if (two) {
+                            _tile_loadd(5, a + tiles_per_mt, 64);
+                            _tile_dpbf16ps(2, 5, 6);
+                            _tile_dpbf16ps(3, 5, 7);
+                        }
+                    }
+                }
+                _tile_stored(0, tile, 128);
+                _tile_stored(1, tile + 16, 128);
+                _tile_stored(2, tile + 16 * 32, 128);
+                _tile_stored(3, tile + 16 * 32 + 16, 128);
+                for (r = 0; r < rows; r++)
+                    tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox, tile + r * 32, n,
+                                     c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+            }
+        k = kend;
+    }
+    _tile_release();
 }
 #endif
 #endif /* TN_NO_ENGINE */
@@ -11517,12 +11729,153 @@ static void tn__conv_run(tn_task_fn fn, tn__conv_job *j, int items)
     else tn_parallel_run(fn, j);
 }
 
+#ifdef TN__BF16_HW
+/* The forward on AMX tiles without im2col (tn__amx_conv in >>gemm_bf16): the input converted once
+   to padded rows of bf16 channel pairs (a ninth of im2col's writes, half their bytes), the
+   weights to A tiles per tap. Stride 1 only; up to TN__CONV_AMX_TAPS taps. */
+#define TN__CONV_AMX_TAPS 64
+typedef struct tn__conv_amx_job {
+    const tn__conv_geom *g;
+    const float *x;
+    int N, Hp, Wp, chunks;         /* chunks: of 32 positions per image */
+    const int *colmap;             /* padded column -> input column, -1: zero */
+    tn__amx_conv c;                /* image 0's; xp and y step by image */
+    int off[TN__CONV_AMX_TAPS];
+} tn__conv_amx_job;
+
+/* A row of bf16 values or pair words of padded width: x row r0 (and r1 for pairs) through colmap,
+   the inside [pad, pad + W) converted 16 or 32 at a time; zeros from Wp to Wr. */
+static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int Wp, int Wr, const float *r0, const float *r1,
+                                 uint32_t *words, uint16_t *halves)
+{
+    int ix;
+    if (words) tn__bf16_pair_words(r0, r1, words + g->pad, g->W);
+    else tn__bf16_halves(r0, halves + g->pad, g->W);
+    for (ix = 0; ix < Wr; ix++) {
+        int sx = ix < Wp ? colmap[ix] : -1;
+        uint32_t v;
+        if (ix == g->pad) {
+            ix += g->W - 1; /* the inside is done */
+            continue;
+        }
+        v = sx < 0 ? 0u : tn__bf16_bits(r0[sx]) >> 16 | (r1 ? tn__bf16_bits(r1[sx]) & 0xffff0000u : 0u);
+        if (words) words[ix] = v;
+        else halves[ix] = (uint16_t)v;
+    }
+}
+
+/* Padded rows [N*Hp*ith/nth, ...): each one's channel-pair rows. */
+static void tn__conv_amx_prep_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amx_job *j = (const tn__conv_amx_job *)ctx;
+    const tn__conv_geom *g = j->g;
+    int total = j->N * j->Hp, b = (int)((long long)total * ith / nth), e = (int)((long long)total * (ith + 1) / nth), it, p;
+    size_t hw = (size_t)g->H * g->W;
+    for (it = b; it < e; it++) {
+        int n = it / j->Hp, iy = tn__conv_src(it % j->Hp, 0, 1, g->pad, 1, g->H, g->reflect);
+        uint32_t *d = (uint32_t *)j->c.xp + (size_t)it * j->c.prow * j->c.Wr;
+        for (p = 0; p < j->c.prow; p++, d += j->c.Wr) {
+            const float *r0 = j->x + ((size_t)n * g->C + 2 * p) * hw + (size_t)iy * g->W;
+            if (iy < 0 || 2 * p >= g->C) memset(d, 0, (size_t)j->c.Wr * sizeof(uint32_t));
+            else tn__conv_amx_pad_row(g, j->colmap, j->Wp, j->c.Wr, r0, 2 * p + 1 < g->C ? r0 + hw : NULL, d, NULL);
+        }
+    }
+}
+
+/* Chunks [N*chunks*ith/nth, ...), image by image. */
+static void tn__conv_amx_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amx_job *j = (const tn__conv_amx_job *)ctx;
+    long long total = (long long)j->N * j->chunks, b = total * ith / nth, e = total * (ith + 1) / nth;
+    while (b < e) {
+        int n = (int)(b / j->chunks), c0 = (int)(b % j->chunks), c1 = e - (long long)n * j->chunks < j->chunks ? (int)(e - (long long)n * j->chunks) : j->chunks;
+        tn__amx_conv c = j->c;
+        c.xp += (size_t)n * j->Hp * c.prow * c.Wr;
+        c.y += (size_t)n * c.M * c.OH * c.OW;
+        tn__amx_conv_rows(&c, c0, c1);
+        b += c1 - c0;
+    }
+}
+
+/* Padded row length (elements) for tiles of 32 positions: past the last chunk's reads, and an odd
+   number of 64-byte lines (`line` elements), so a tile's 16 rows fall in 16 different L1 sets. */
+static int tn__conv_amx_row(const tn__conv_geom *g, int Wp, int line)
+{
+    int w = (g->OW + 31) / 32 * 32 + g->dil * (g->KW - 1);
+    if (w < Wp) w = Wp;
+    w = (w + line - 1) / line;
+    return (w | 1) * line;
+}
+
+/* 1 done, 0 out of memory, -1 not for this geometry or CPU (the caller goes on with im2col). */
+static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
+                                const float *bias, float *y, float beta)
+{
+    tn__conv_amx_job j;
+    int ntaps = g->KH * g->KW, mtiles = (M + 15) / 16, t, s, mt, r, h, *colmap;
+    size_t wa_halves, xp_words;
+    uint16_t *wa;
+    if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    memset(&j, 0, sizeof j);
+    j.g = g;
+    j.x = x;
+    j.N = N;
+    j.Hp = g->H + 2 * g->pad;
+    j.Wp = g->W + 2 * g->pad;
+    j.c.ksteps = (g->C + 31) / 32;
+    j.c.kpairs = j.c.ksteps == 1 ? (g->C + 1) / 2 : 16; /* later steps: channels padded with zeros */
+    j.c.prow = j.c.ksteps == 1 ? j.c.kpairs : 16 * j.c.ksteps;
+    j.c.Wr = tn__conv_amx_row(g, j.Wp, 16);
+    j.chunks = g->OH * ((g->OW + 31) / 32);
+    j.c.ntaps = ntaps;
+    j.c.M = M;
+    j.c.OW = g->OW;
+    j.c.OH = g->OH;
+    j.c.y = y;
+    j.c.bias = bias;
+    j.c.beta = beta;
+    j.c.off = j.off;
+    for (t = 0; t < ntaps; t++) j.off[t] = (t / g->KW) * g->dil * j.c.prow * j.c.Wr + (t % g->KW) * g->dil;
+    wa_halves = (size_t)mtiles * ntaps * j.c.ksteps * 512;
+    xp_words = (size_t)N * j.Hp * j.c.prow * j.c.Wr;
+    wa = (uint16_t *)tn_ctx_alloc(ctx, wa_halves * sizeof(uint16_t));
+    j.c.xp = (const uint32_t *)tn_ctx_alloc(ctx, xp_words * sizeof(uint32_t));
+    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    if (!wa || !j.c.xp || !colmap) return 0;
+    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
+    j.colmap = colmap;
+    for (mt = 0; mt < mtiles; mt++) /* tile (mt, t, s): rows m = 16 mt + r, columns c = 32 s + h */
+        for (t = 0; t < ntaps; t++)
+            for (s = 0; s < j.c.ksteps; s++) {
+                uint16_t *tile = wa + (((size_t)mt * ntaps + t) * j.c.ksteps + s) * 512;
+                for (r = 0; r < 16; r++)
+                    for (h = 0; h < 32; h++) {
+                        int m = mt * 16 + r, c = s * 32 + h;
+                        tile[r * 32 + h] = m < M && c < g->C ? (uint16_t)(tn__bf16_bits(w[((size_t)m * g->C + c) * ntaps + t]) >> 16) : 0;
+                    }
+            }
+    j.c.wa = wa;
+    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
+        tn__conv_amx_prep_task(&j, 0, 1);
+        tn__conv_amx_task(&j, 0, 1);
+    } else {
+        tn_parallel_run(tn__conv_amx_prep_task, &j);
+        tn_parallel_run(tn__conv_amx_task, &j);
+    }
+    return 1;
+}
+#endif
+
 /* y = beta * y + conv(x, w) (+ bias): x N x g.C x H x W, w M x K, y N x M x OH x OW. */
 static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
                             const float *bias, float *y, float beta)
 {
     tn__conv_job j;
     int items, nth = tn_get_threads(), mtiles = (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
+#ifdef TN__BF16_HW
+    int direct = tn__conv_forward_amx(ctx, g, N, M, x, w, bias, y, beta);
+    if (direct >= 0) return direct;
+#endif
     if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__sgemm_gen_b_floats(M) + TN__CONV_TINY))
         return 0;
     j.sub = (int)(TN__CONV_FWD_PIX / (size_t)g->OW); /* pixels per GEMM */
@@ -11618,6 +11971,138 @@ static int tn__conv_dw_transposed(int M, int K)
     return K % TN__GEMM_MR + M % TN__GEMM_NR < M % TN__GEMM_MR + K % TN__GEMM_NR;
 }
 
+#ifdef TN__BF16_HW
+/* The weight gradient on AMX tiles without im2col (tn__amx_dw in >>gemm_bf16); stride 1. */
+typedef struct tn__conv_amxdw_job {
+    const tn__conv_geom *g;
+    const float *x, *dy;
+    int Wp;
+    const int *colmap;    /* padded column -> input column, -1: zero */
+    uint16_t *tmp;        /* per thread: 16 rows of Wq halves */
+    float *acc;           /* per item: a 32 x 32 block of sums */
+    int band;             /* output rows per band */
+    tn__amx_dw d;
+    int off[TN__CONV_AMX_TAPS];
+} tn__conv_amxdw_job;
+
+/* Items N * (Hp + OH * mp / 16): a padded row of the input (cp channel rows of bf16), or 16
+   output channels of one output row of dy transposed to pair words (zeros past OW and M). */
+static void tn__conv_amxdw_prep_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amxdw_job *j = (const tn__conv_amxdw_job *)ctx;
+    const tn__conv_geom *g = j->g;
+    const tn__amx_dw *d = &j->d;
+    int mb16 = d->mp / 16, per = d->Hp + g->OH * mb16, total = d->N * per;
+    int b = (int)((long long)total * ith / nth), e = (int)((long long)total * (ith + 1) / nth), it, c, i, k, half = d->Wq / 2;
+    size_t hw = (size_t)g->H * g->W;
+    uint16_t *tmp = j->tmp + (size_t)ith * 16 * d->Wq;
+    for (it = b; it < e; it++) {
+        int n = it / per, item = it % per;
+        if (item < d->Hp) { /* padded input row `item` */
+            int iy = tn__conv_src(item, 0, 1, g->pad, 1, g->H, g->reflect);
+            uint16_t *row = (uint16_t *)d->xh + ((size_t)n * d->Hp + item) * d->cp * d->Wr;
+            for (c = 0; c < d->cp; c++, row += d->Wr) {
+                if (iy < 0 || c >= g->C) memset(row, 0, (size_t)d->Wr * sizeof(uint16_t));
+                else tn__conv_amx_pad_row(g, j->colmap, j->Wp, d->Wr, j->x + ((size_t)n * g->C + c) * hw + (size_t)iy * g->W, NULL, NULL, row);
+            }
+            continue;
+        }
+        item -= d->Hp;
+        { /* output row oy, output channels [m0, m0 + 16) */
+            int oy = item / mb16, m0 = item % mb16 * 16;
+            uint32_t *out = (uint32_t *)d->dyt + (((size_t)n * g->OH + oy) * half) * d->mp + m0, word;
+            for (i = 0; i < 16; i++) {
+                uint16_t *t = tmp + (size_t)i * d->Wq;
+                int m = m0 + i;
+                if (m < d->M) {
+                    tn__bf16_halves(j->dy + (((size_t)n * d->M + m) * g->OH + oy) * g->OW, t, g->OW);
+                    memset(t + g->OW, 0, (size_t)(d->Wq - g->OW) * sizeof(uint16_t));
+                } else {
+                    memset(t, 0, (size_t)d->Wq * sizeof(uint16_t));
+                }
+            }
+            for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
+                for (i = 0; i < 16; i++) {
+                    memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
+                    out[i] = word;
+                }
+        }
+    }
+}
+
+/* Items [items*ith/nth, ...), band by band; then each one's block added to dw. */
+static void tn__conv_amxdw_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amxdw_job *j = (const tn__conv_amxdw_job *)ctx;
+    const tn__amx_dw *d = &j->d;
+    int items = d->ntaps * ((d->cp + 31) / 32) * ((d->mp + 31) / 32), b = (int)((long long)items * ith / nth);
+    int e = (int)((long long)items * (ith + 1) / nth), it, n, oy, r, c;
+    if (b >= e) return;
+    memset(j->acc + (size_t)b * 1024, 0, (size_t)(e - b) * 1024 * sizeof(float));
+    for (n = 0; n < d->N; n++)
+        for (oy = 0; oy < d->OH; oy += j->band)
+            for (it = b; it < e; it++) tn__amx_dw_item(d, it, n, oy, oy + j->band < d->OH ? oy + j->band : d->OH, j->acc + (size_t)it * 1024);
+    for (it = b; it < e; it++) {
+        int cpairs = (d->cp + 31) / 32, mpairs = (d->mp + 31) / 32, t = it / (cpairs * mpairs);
+        int cb = it / mpairs % cpairs * 32, mb = it % mpairs * 32;
+        const float *blk = j->acc + (size_t)it * 1024; /* blk[r][c] = dW[mb + c][cb + r][t] */
+        for (r = 0; r < 32 && cb + r < d->C; r++)
+            for (c = 0; c < 32 && mb + c < d->M; c++) d->dw[((size_t)(mb + c) * d->C + cb + r) * d->ntaps + t] += blk[r * 32 + c];
+    }
+}
+
+/* dw += the weight gradient, db += dy's channel sums (float32); 1 done, 0 out of memory, -1 not
+   for this geometry or CPU. */
+static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
+                                    float *dw, float *db)
+{
+    tn__conv_amxdw_job j;
+    int ntaps = g->KH * g->KW, t, h, *colmap;
+    size_t xh_halves, dyt_words;
+    if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    memset(&j, 0, sizeof j);
+    j.g = g;
+    j.x = x;
+    j.dy = dy;
+    j.Wp = g->W + 2 * g->pad;
+    j.d.Hp = g->H + 2 * g->pad;
+    j.d.Wq = (g->OW + 31) / 32 * 32;
+    j.d.Wr = tn__conv_amx_row(g, j.Wp, 32);
+    j.d.N = N;
+    j.d.ntaps = ntaps;
+    j.d.C = g->C;
+    j.d.M = M;
+    j.d.OH = g->OH;
+    j.d.cp = (g->C + 15) / 16 * 16;
+    j.d.mp = (M + 15) / 16 * 16;
+    for (t = 0; t < ntaps; t++) j.off[t] = (t / g->KW) * g->dil * j.d.cp * j.d.Wr + (t % g->KW) * g->dil;
+    j.d.off = j.off;
+    j.d.dw = dw;
+    xh_halves = (size_t)N * j.d.Hp * j.d.cp * j.d.Wr;
+    dyt_words = (size_t)N * g->OH * (j.d.Wq / 2) * j.d.mp;
+    j.d.xh = (const uint16_t *)tn_ctx_alloc(ctx, xh_halves * sizeof(uint16_t));
+    j.d.dyt = (const uint32_t *)tn_ctx_alloc(ctx, dyt_words * sizeof(uint32_t));
+    j.tmp = (uint16_t *)tn_ctx_alloc(ctx, (size_t)tn_get_threads() * 16 * j.d.Wq * sizeof(uint16_t));
+    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    j.acc = tn__ctx_floats(ctx, (size_t)ntaps * ((j.d.cp + 31) / 32) * ((j.d.mp + 31) / 32) * 1024, 0);
+    if (!j.d.xh || !j.d.dyt || !j.tmp || !colmap || !j.acc) return 0;
+    /* a band's input and dy rows: about 1 MiB, half of L2 */
+    j.band = (int)(((size_t)1 << 20) / ((size_t)j.d.cp * j.d.Wr * 2 + (size_t)j.d.Wq / 2 * j.d.mp * 4));
+    if (j.band < 1) j.band = 1;
+    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
+    j.colmap = colmap;
+    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
+        tn__conv_amxdw_prep_task(&j, 0, 1);
+        tn__conv_amxdw_task(&j, 0, 1);
+    } else {
+        tn_parallel_run(tn__conv_amxdw_prep_task, &j);
+        tn_parallel_run(tn__conv_amxdw_task, &j);
+    }
+    if (db) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
+    return 1;
+}
+#endif
+
 /* dw (M x K) += sum over images of dy (M x OH*OW) x im2col(x)^T, and db (M, if not NULL) += the
    sums of dy's channels, taken in the same pass over dy (1x1: separately). */
 static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
@@ -11626,6 +12111,10 @@ static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     tn__conv_job j;
     tn__conv_sum_job s;
     int fuse = db && !tn__conv_is_1x1(g);
+#ifdef TN__BF16_HW
+    int direct = tn__conv_weight_grad_amx(ctx, g, N, M, x, dy, dw, db);
+    if (direct >= 0) return direct;
+#endif
     if (db && !fuse) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
     if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__conv_col_floats(g) + (size_t)g->OH * g->OW))
         return 0;
@@ -11688,7 +12177,8 @@ static int tn__conv_input_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M
 {
     tn__conv_job j;
     int pad2 = (g->KH - 1) * g->dil - g->pad;
-    if (g->stride == 1 && !g->reflect && g->KH == g->KW && pad2 >= 0 && g->C >= 8 &&
+    /* (few channels: col2im costs less than a convolution of few output channels, but not on AMX) */
+    if (g->stride == 1 && !g->reflect && g->KH == g->KW && pad2 >= 0 && (g->C >= 8 || tn__gemm_kern(TN_PRECISION_AUTO) == TN__KERN_AMX) &&
         g->OH + 2 * pad2 - g->dil * (g->KH - 1) == g->H && g->OW + 2 * pad2 - g->dil * (g->KW - 1) == g->W) {
         /* dx = conv(dy, w'), w'[c][m][ky][kx] = w[m][c][KH-1-ky][KW-1-kx], padding dil*(K-1) - pad */
         tn__conv_geom f;

@@ -788,11 +788,54 @@ TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
     for (; i < n; i++) x[i] = tn__bf16_round(x[i]);
 }
 
+#ifdef TN__BF16_HW
+/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns how many it wrote. */
+__attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_halves512(const float *x, uint16_t *out, int n)
+{
+    int j;
+    for (j = 0; j + 32 <= n; j += 32)
+        _mm512_storeu_si512((void *)(out + j), (__m512i)_mm512_cvtne2ps_pbh(_mm512_loadu_ps(x + j + 16), _mm512_loadu_ps(x + j)));
+    return j;
+}
+#endif
+
+/* out[j] = the bf16 of x[j] (tn__bf16_bits's upper half), j < n. */
+static void tn__bf16_halves(const float *x, uint16_t *out, int n)
+{
+    int j = 0;
+#ifdef TN__BF16_HW
+    if (tn__cpu_flags & TN_CPU_AVX512_BF16) j = tn__bf16_halves512(x, out, n);
+#endif
+    for (; j < n; j++) out[j] = (uint16_t)(tn__bf16_bits(x[j]) >> 16);
+}
+
+#ifdef TN__BF16_HW
+/* tn__bf16_pair_words with VCVTNE2PS2BF16: round to nearest even, subnormal inputs to zeros of
+   their sign, NaN quieted (Intel SDM, convert_fp32_to_bfloat16): tn__bf16_bits's bytes, which
+   test_bf16 checks. Returns how many words it wrote (whole groups of 16). */
+__attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_words512(const float *r0, const float *r1,
+                                                                                            void *out, int w)
+{
+    const __m512i inter = _mm512_set_epi16(31, 15, 30, 14, 29, 13, 28, 12, 27, 11, 26, 10, 25, 9, 24, 8, 23, 7, 22, 6, 21, 5,
+                                           20, 4, 19, 3, 18, 2, 17, 1, 16, 0);
+    int j;
+    for (j = 0; j + 16 <= w; j += 16) {
+        __m512 hi = r1 ? _mm512_loadu_ps(r1 + j) : _mm512_setzero_ps();
+        __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_loadu_ps(r0 + j)); /* r0's 16 low, r1's high */
+        _mm512_storeu_si512((void *)((uint32_t *)out + j), _mm512_permutexvar_epi16(inter, both));
+    }
+    return j;
+}
+#endif
+
 /* out[j] = bf16(r0[j]) | bf16(r1[j]) << 16 for j < w (r1 NULL: zeros). out may be r0 itself (each
    group is read before it is written) but not r1. */
 static void tn__bf16_pair_words(const float *r0, const float *r1, void *out, int w)
 {
     int j = 0;
+#ifdef TN__BF16_HW
+    if (tn__cpu_flags & TN_CPU_AVX512_BF16) j = tn__bf16_pair_words512(r0, r1, out, w);
+#endif
 #ifdef __AVX2__
     for (; j + 8 <= w; j += 8) {
         __m256i lo = _mm256_srli_epi32(tn__bf16_bits8(_mm256_loadu_ps(r0 + j)), 16);
@@ -980,6 +1023,175 @@ static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, in
 {
     tn__gemm_amx_pack_b(pb, nc, kc, tb);
     tn__gemm_amx_tiles(g, ic, mc, jc, nc, kc, ta, tb, beta);
+}
+
+/* Direct convolution on the tiles (stride 1, no im2col), for >>ops' tn__conv_forward_amx and
+   tn__conv_weight_grad_amx. The input is converted once to bf16 padded rows in which every
+   channel's (or channel pair's) row of Wr values follows the previous channel's, so a tile of 16
+   channels x 32 positions of one row is one load with a stride of Wr elements, tap (ky, kx) is a
+   fixed offset from it, and all reads of one output row stay within KH padded rows (a few tens of
+   KiB: separate planes per channel made tens of streams and ran at a quarter of the speed). The
+   sum over C*KH*KW becomes taps x 32-channel steps of TDPBF16PS. Outputs are computed in chunks of
+   32 positions of one output row (the last one of a row partly past OW, dropped). */
+typedef struct tn__amx_conv {
+    const uint32_t *xp;    /* padded row iy at xp + iy * prow * Wr: channel-pair rows of Wr words
+                              (word = bf16 channels 2p, 2p + 1) */
+    int Wr, prow;          /* prow: channel-pair rows per padded row (kpairs if ksteps is 1, else 16 ksteps) */
+    const uint16_t *wa;    /* A tiles of 16 rows x 32 bf16: tile ((mt * ntaps + t) * ksteps + s) */
+    const int *off;        /* word offset of each tap */
+    int ntaps, ksteps, kpairs, M; /* kpairs: channel pairs of the last step (16 but for C < 32) */
+    int OW, OH;
+    float *y;              /* M planes of OH x OW: y = beta * y + conv (+ bias) */
+    const float *bias;     /* M floats, or NULL */
+    float beta;
+} tn__amx_conv;
+
+/* The weight gradient, also without im2col: dW[m][c][t] = sum over images and positions of
+   dy[m][oy][ox] x[c][oy + ky dil][ox + kx dil] (padded input). A tiles: 16 channels x 32 positions
+   of the padded input (bf16 rows laid out as above, Wr halves each), at the tap's offset; B tiles:
+   16 position pairs x 16 output channels of dy transposed to pair words (each output row padded
+   to Wq, a multiple of 32, with zeros). C tiles hold dW^T (channels x output channels) of one tap;
+   each element is summed over images, then output rows and chunks in order, whatever the split
+   of the items (tap, block of 32 channels, block of 32 output channels). */
+typedef struct tn__amx_dw {
+    const uint16_t *xh;    /* per image: Hp padded rows of cp channel rows of Wr halves */
+    const uint32_t *dyt;   /* per image: OH * Wq / 2 rows of mp words */
+    int Wr, Wq, Hp;
+    const int *off;
+    int N, ntaps, cp, mp, C, M, OH;
+    float *dw;             /* M x C x ntaps, added to */
+} tn__amx_dw;
+
+static void tn__amx_cfg_set(tn__amx_cfg *cfg, int arows_bytes, int brows)
+{
+    int t;
+    memset(cfg, 0, sizeof *cfg);
+    cfg->palette = 1;
+    for (t = 0; t < 8; t++) {
+        cfg->rows[t] = (unsigned char)(t >= 6 ? brows : 16);
+        cfg->colsb[t] = (unsigned short)(t == 4 || t == 5 ? arows_bytes : 64);
+    }
+}
+
+/* Item it of ntaps * ceil(cp / 32) * ceil(mp / 32) over output rows [oy0, oy1) of image n: its 32 x 32
+   block of sums (acc, rows of 32 floats) loaded into the tiles, added to and stored back. Rows in
+   bands, every item on a band before the next band, so the band's input stays in L2 (an item over
+   a whole image read it once per item, from L3). */
+__attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_dw_item(const tn__amx_dw *d, int it, int n, int oy0, int oy1,
+                                                                            float *acc)
+{
+    tn__amx_cfg cfg;
+    int cpairs = (d->cp + 31) / 32, mpairs = (d->mp + 31) / 32, t = it / (cpairs * mpairs);
+    int cb = it / mpairs % cpairs * 32, mb = it % mpairs * 32, c2 = cb + 16 < d->cp, m2 = mb + 16 < d->mp, oy, ox;
+    long astride = (long)d->Wr * 2, bstride = (long)d->mp * 4;
+    size_t rowx = (size_t)d->cp * d->Wr;
+    const uint32_t *b = d->dyt + ((size_t)n * d->OH + oy0) * (d->Wq / 2) * d->mp + mb;
+    tn__amx_cfg_set(&cfg, 64, 16);
+    _tile_loadconfig(&cfg);
+    _tile_loadd(0, acc, 128);
+    _tile_loadd(1, acc + 16, 128);
+    _tile_loadd(2, acc + 16 * 32, 128);
+    _tile_loadd(3, acc + 16 * 32 + 16, 128);
+    for (oy = oy0; oy < oy1; oy++) {
+        const uint16_t *a = d->xh + ((size_t)n * d->Hp + oy) * rowx + (size_t)cb * d->Wr + d->off[t];
+        for (ox = 0; ox < d->Wq; ox += 32, a += 32, b += (size_t)16 * d->mp) {
+            _tile_loadd(4, a, astride);
+            _tile_loadd(6, b, bstride);
+            _tile_dpbf16ps(0, 4, 6);
+            if (m2) {
+                _tile_loadd(7, b + 16, bstride);
+                _tile_dpbf16ps(1, 4, 7);
+            }
+            if (c2) {
+                _tile_loadd(5, a + (size_t)16 * d->Wr, astride);
+                _tile_dpbf16ps(2, 5, 6);
+                if (m2) _tile_dpbf16ps(3, 5, 7);
+            }
+        }
+    }
+    _tile_stored(0, acc, 128);
+    _tile_stored(1, acc + 16, 128);
+    _tile_stored(2, acc + 16 * 32, 128);
+    _tile_stored(3, acc + 16 * 32 + 16, 128);
+    _tile_release();
+}
+
+/* d[0 .. n) = (v + *bias) + beta * d (no bias: v + beta * d; beta 0: d not read). */
+__attribute__((target("avx512f"))) static void tn__amx_conv_out512(float *d, const float *v, int n, const float *bias, float beta)
+{
+    __m512 bm = _mm512_set1_ps(bias ? *bias : 0.0f), bt = _mm512_set1_ps(beta);
+    int i;
+    for (i = 0; i < n; i += 16) {
+        __mmask16 k = (__mmask16)(n - i >= 16 ? 0xffffu : (1u << (n - i)) - 1u);
+        __m512 x = _mm512_maskz_loadu_ps(k, v + i);
+        if (bias) x = _mm512_add_ps(x, bm);
+        if (beta != 0.0f) x = _mm512_add_ps(x, _mm512_mul_ps(bt, _mm512_maskz_loadu_ps(k, d + i))); /* not fused: as below */
+        _mm512_mask_storeu_ps(d + i, k, x);
+    }
+}
+
+static void tn__amx_conv_out(float *d, const float *v, int n, const float *bias, float beta)
+{
+    int i;
+    if (tn__cpu_flags & TN_CPU_AVX512F) { /* every AMX CPU; not the tile model of test_bf16_amx */
+        tn__amx_conv_out512(d, v, n, bias, beta);
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        float x = bias ? v[i] + *bias : v[i];
+        d[i] = beta == 0.0f ? x : x + beta * d[i];
+    }
+}
+
+/* Chunks [k0, k1) of one image, chunk k = 32 positions of output row k / ceil(OW / 32). With a
+   single step of fewer than 16 channel pairs (C < 32) the tiles are configured that short. */
+__attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const tn__amx_conv *c, int k0, int k1)
+{
+    tn__amx_cfg cfg;
+    float tile[32 * 32];
+    int cw = (c->OW + 31) / 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    size_t tiles_per_mt = (size_t)c->ntaps * c->ksteps * 512, ohw = (size_t)c->OH * c->OW, rowx = (size_t)c->prow * c->Wr;
+    long bstride = (long)c->Wr * 4;
+    tn__amx_cfg_set(&cfg, c->ksteps == 1 ? 4 * c->kpairs : 64, c->ksteps == 1 ? c->kpairs : 16);
+    _tile_loadconfig(&cfg);
+    for (k = k0; k < k1;) { /* the chunks of one output row, each pair of M tiles in turn: one pair's
+                               A tiles stay in L1 along the row */
+        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk;
+        for (mt = 0; mt < mtiles; mt += 2)
+            for (kk = k; kk < kend; kk++) {
+                int ox = kk % cw * 32, n = c->OW - ox < 32 ? c->OW - ox : 32;
+                int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
+                const uint16_t *a = c->wa + (size_t)mt * tiles_per_mt;
+                _tile_zero(0);
+                _tile_zero(1);
+                _tile_zero(2);
+                _tile_zero(3);
+                for (t = 0; t < c->ntaps; t++) {
+                    const uint32_t *b = c->xp + oy * rowx + ox + c->off[t];
+                    for (s = 0; s < c->ksteps; s++, a += 512, b += (size_t)16 * c->Wr) {
+                        _tile_loadd(4, a, 64);
+                        _tile_loadd(6, b, bstride);
+                        _tile_loadd(7, b + 16, bstride);
+                        _tile_dpbf16ps(0, 4, 6);
+                        _tile_dpbf16ps(1, 4, 7);
+                        if (two) {
+                            _tile_loadd(5, a + tiles_per_mt, 64);
+                            _tile_dpbf16ps(2, 5, 6);
+                            _tile_dpbf16ps(3, 5, 7);
+                        }
+                    }
+                }
+                _tile_stored(0, tile, 128);
+                _tile_stored(1, tile + 16, 128);
+                _tile_stored(2, tile + 16 * 32, 128);
+                _tile_stored(3, tile + 16 * 32 + 16, 128);
+                for (r = 0; r < rows; r++)
+                    tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox, tile + r * 32, n,
+                                     c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+            }
+        k = kend;
+    }
+    _tile_release();
 }
 #endif
 #endif /* TN_NO_ENGINE */

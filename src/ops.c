@@ -1041,12 +1041,153 @@ static void tn__conv_run(tn_task_fn fn, tn__conv_job *j, int items)
     else tn_parallel_run(fn, j);
 }
 
+#ifdef TN__BF16_HW
+/* The forward on AMX tiles without im2col (tn__amx_conv in >>gemm_bf16): the input converted once
+   to padded rows of bf16 channel pairs (a ninth of im2col's writes, half their bytes), the
+   weights to A tiles per tap. Stride 1 only; up to TN__CONV_AMX_TAPS taps. */
+#define TN__CONV_AMX_TAPS 64
+typedef struct tn__conv_amx_job {
+    const tn__conv_geom *g;
+    const float *x;
+    int N, Hp, Wp, chunks;         /* chunks: of 32 positions per image */
+    const int *colmap;             /* padded column -> input column, -1: zero */
+    tn__amx_conv c;                /* image 0's; xp and y step by image */
+    int off[TN__CONV_AMX_TAPS];
+} tn__conv_amx_job;
+
+/* A row of bf16 values or pair words of padded width: x row r0 (and r1 for pairs) through colmap,
+   the inside [pad, pad + W) converted 16 or 32 at a time; zeros from Wp to Wr. */
+static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int Wp, int Wr, const float *r0, const float *r1,
+                                 uint32_t *words, uint16_t *halves)
+{
+    int ix;
+    if (words) tn__bf16_pair_words(r0, r1, words + g->pad, g->W);
+    else tn__bf16_halves(r0, halves + g->pad, g->W);
+    for (ix = 0; ix < Wr; ix++) {
+        int sx = ix < Wp ? colmap[ix] : -1;
+        uint32_t v;
+        if (ix == g->pad) {
+            ix += g->W - 1; /* the inside is done */
+            continue;
+        }
+        v = sx < 0 ? 0u : tn__bf16_bits(r0[sx]) >> 16 | (r1 ? tn__bf16_bits(r1[sx]) & 0xffff0000u : 0u);
+        if (words) words[ix] = v;
+        else halves[ix] = (uint16_t)v;
+    }
+}
+
+/* Padded rows [N*Hp*ith/nth, ...): each one's channel-pair rows. */
+static void tn__conv_amx_prep_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amx_job *j = (const tn__conv_amx_job *)ctx;
+    const tn__conv_geom *g = j->g;
+    int total = j->N * j->Hp, b = (int)((long long)total * ith / nth), e = (int)((long long)total * (ith + 1) / nth), it, p;
+    size_t hw = (size_t)g->H * g->W;
+    for (it = b; it < e; it++) {
+        int n = it / j->Hp, iy = tn__conv_src(it % j->Hp, 0, 1, g->pad, 1, g->H, g->reflect);
+        uint32_t *d = (uint32_t *)j->c.xp + (size_t)it * j->c.prow * j->c.Wr;
+        for (p = 0; p < j->c.prow; p++, d += j->c.Wr) {
+            const float *r0 = j->x + ((size_t)n * g->C + 2 * p) * hw + (size_t)iy * g->W;
+            if (iy < 0 || 2 * p >= g->C) memset(d, 0, (size_t)j->c.Wr * sizeof(uint32_t));
+            else tn__conv_amx_pad_row(g, j->colmap, j->Wp, j->c.Wr, r0, 2 * p + 1 < g->C ? r0 + hw : NULL, d, NULL);
+        }
+    }
+}
+
+/* Chunks [N*chunks*ith/nth, ...), image by image. */
+static void tn__conv_amx_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amx_job *j = (const tn__conv_amx_job *)ctx;
+    long long total = (long long)j->N * j->chunks, b = total * ith / nth, e = total * (ith + 1) / nth;
+    while (b < e) {
+        int n = (int)(b / j->chunks), c0 = (int)(b % j->chunks), c1 = e - (long long)n * j->chunks < j->chunks ? (int)(e - (long long)n * j->chunks) : j->chunks;
+        tn__amx_conv c = j->c;
+        c.xp += (size_t)n * j->Hp * c.prow * c.Wr;
+        c.y += (size_t)n * c.M * c.OH * c.OW;
+        tn__amx_conv_rows(&c, c0, c1);
+        b += c1 - c0;
+    }
+}
+
+/* Padded row length (elements) for tiles of 32 positions: past the last chunk's reads, and an odd
+   number of 64-byte lines (`line` elements), so a tile's 16 rows fall in 16 different L1 sets. */
+static int tn__conv_amx_row(const tn__conv_geom *g, int Wp, int line)
+{
+    int w = (g->OW + 31) / 32 * 32 + g->dil * (g->KW - 1);
+    if (w < Wp) w = Wp;
+    w = (w + line - 1) / line;
+    return (w | 1) * line;
+}
+
+/* 1 done, 0 out of memory, -1 not for this geometry or CPU (the caller goes on with im2col). */
+static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
+                                const float *bias, float *y, float beta)
+{
+    tn__conv_amx_job j;
+    int ntaps = g->KH * g->KW, mtiles = (M + 15) / 16, t, s, mt, r, h, *colmap;
+    size_t wa_halves, xp_words;
+    uint16_t *wa;
+    if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    memset(&j, 0, sizeof j);
+    j.g = g;
+    j.x = x;
+    j.N = N;
+    j.Hp = g->H + 2 * g->pad;
+    j.Wp = g->W + 2 * g->pad;
+    j.c.ksteps = (g->C + 31) / 32;
+    j.c.kpairs = j.c.ksteps == 1 ? (g->C + 1) / 2 : 16; /* later steps: channels padded with zeros */
+    j.c.prow = j.c.ksteps == 1 ? j.c.kpairs : 16 * j.c.ksteps;
+    j.c.Wr = tn__conv_amx_row(g, j.Wp, 16);
+    j.chunks = g->OH * ((g->OW + 31) / 32);
+    j.c.ntaps = ntaps;
+    j.c.M = M;
+    j.c.OW = g->OW;
+    j.c.OH = g->OH;
+    j.c.y = y;
+    j.c.bias = bias;
+    j.c.beta = beta;
+    j.c.off = j.off;
+    for (t = 0; t < ntaps; t++) j.off[t] = (t / g->KW) * g->dil * j.c.prow * j.c.Wr + (t % g->KW) * g->dil;
+    wa_halves = (size_t)mtiles * ntaps * j.c.ksteps * 512;
+    xp_words = (size_t)N * j.Hp * j.c.prow * j.c.Wr;
+    wa = (uint16_t *)tn_ctx_alloc(ctx, wa_halves * sizeof(uint16_t));
+    j.c.xp = (const uint32_t *)tn_ctx_alloc(ctx, xp_words * sizeof(uint32_t));
+    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    if (!wa || !j.c.xp || !colmap) return 0;
+    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
+    j.colmap = colmap;
+    for (mt = 0; mt < mtiles; mt++) /* tile (mt, t, s): rows m = 16 mt + r, columns c = 32 s + h */
+        for (t = 0; t < ntaps; t++)
+            for (s = 0; s < j.c.ksteps; s++) {
+                uint16_t *tile = wa + (((size_t)mt * ntaps + t) * j.c.ksteps + s) * 512;
+                for (r = 0; r < 16; r++)
+                    for (h = 0; h < 32; h++) {
+                        int m = mt * 16 + r, c = s * 32 + h;
+                        tile[r * 32 + h] = m < M && c < g->C ? (uint16_t)(tn__bf16_bits(w[((size_t)m * g->C + c) * ntaps + t]) >> 16) : 0;
+                    }
+            }
+    j.c.wa = wa;
+    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
+        tn__conv_amx_prep_task(&j, 0, 1);
+        tn__conv_amx_task(&j, 0, 1);
+    } else {
+        tn_parallel_run(tn__conv_amx_prep_task, &j);
+        tn_parallel_run(tn__conv_amx_task, &j);
+    }
+    return 1;
+}
+#endif
+
 /* y = beta * y + conv(x, w) (+ bias): x N x g.C x H x W, w M x K, y N x M x OH x OW. */
 static int tn__conv_forward(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
                             const float *bias, float *y, float beta)
 {
     tn__conv_job j;
     int items, nth = tn_get_threads(), mtiles = (M + TN__GEMM_MR - 1) / TN__GEMM_MR;
+#ifdef TN__BF16_HW
+    int direct = tn__conv_forward_amx(ctx, g, N, M, x, w, bias, y, beta);
+    if (direct >= 0) return direct;
+#endif
     if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__sgemm_gen_b_floats(M) + TN__CONV_TINY))
         return 0;
     j.sub = (int)(TN__CONV_FWD_PIX / (size_t)g->OW); /* pixels per GEMM */
@@ -1142,6 +1283,138 @@ static int tn__conv_dw_transposed(int M, int K)
     return K % TN__GEMM_MR + M % TN__GEMM_NR < M % TN__GEMM_MR + K % TN__GEMM_NR;
 }
 
+#ifdef TN__BF16_HW
+/* The weight gradient on AMX tiles without im2col (tn__amx_dw in >>gemm_bf16); stride 1. */
+typedef struct tn__conv_amxdw_job {
+    const tn__conv_geom *g;
+    const float *x, *dy;
+    int Wp;
+    const int *colmap;    /* padded column -> input column, -1: zero */
+    uint16_t *tmp;        /* per thread: 16 rows of Wq halves */
+    float *acc;           /* per item: a 32 x 32 block of sums */
+    int band;             /* output rows per band */
+    tn__amx_dw d;
+    int off[TN__CONV_AMX_TAPS];
+} tn__conv_amxdw_job;
+
+/* Items N * (Hp + OH * mp / 16): a padded row of the input (cp channel rows of bf16), or 16
+   output channels of one output row of dy transposed to pair words (zeros past OW and M). */
+static void tn__conv_amxdw_prep_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amxdw_job *j = (const tn__conv_amxdw_job *)ctx;
+    const tn__conv_geom *g = j->g;
+    const tn__amx_dw *d = &j->d;
+    int mb16 = d->mp / 16, per = d->Hp + g->OH * mb16, total = d->N * per;
+    int b = (int)((long long)total * ith / nth), e = (int)((long long)total * (ith + 1) / nth), it, c, i, k, half = d->Wq / 2;
+    size_t hw = (size_t)g->H * g->W;
+    uint16_t *tmp = j->tmp + (size_t)ith * 16 * d->Wq;
+    for (it = b; it < e; it++) {
+        int n = it / per, item = it % per;
+        if (item < d->Hp) { /* padded input row `item` */
+            int iy = tn__conv_src(item, 0, 1, g->pad, 1, g->H, g->reflect);
+            uint16_t *row = (uint16_t *)d->xh + ((size_t)n * d->Hp + item) * d->cp * d->Wr;
+            for (c = 0; c < d->cp; c++, row += d->Wr) {
+                if (iy < 0 || c >= g->C) memset(row, 0, (size_t)d->Wr * sizeof(uint16_t));
+                else tn__conv_amx_pad_row(g, j->colmap, j->Wp, d->Wr, j->x + ((size_t)n * g->C + c) * hw + (size_t)iy * g->W, NULL, NULL, row);
+            }
+            continue;
+        }
+        item -= d->Hp;
+        { /* output row oy, output channels [m0, m0 + 16) */
+            int oy = item / mb16, m0 = item % mb16 * 16;
+            uint32_t *out = (uint32_t *)d->dyt + (((size_t)n * g->OH + oy) * half) * d->mp + m0, word;
+            for (i = 0; i < 16; i++) {
+                uint16_t *t = tmp + (size_t)i * d->Wq;
+                int m = m0 + i;
+                if (m < d->M) {
+                    tn__bf16_halves(j->dy + (((size_t)n * d->M + m) * g->OH + oy) * g->OW, t, g->OW);
+                    memset(t + g->OW, 0, (size_t)(d->Wq - g->OW) * sizeof(uint16_t));
+                } else {
+                    memset(t, 0, (size_t)d->Wq * sizeof(uint16_t));
+                }
+            }
+            for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
+                for (i = 0; i < 16; i++) {
+                    memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
+                    out[i] = word;
+                }
+        }
+    }
+}
+
+/* Items [items*ith/nth, ...), band by band; then each one's block added to dw. */
+static void tn__conv_amxdw_task(void *ctx, int ith, int nth)
+{
+    const tn__conv_amxdw_job *j = (const tn__conv_amxdw_job *)ctx;
+    const tn__amx_dw *d = &j->d;
+    int items = d->ntaps * ((d->cp + 31) / 32) * ((d->mp + 31) / 32), b = (int)((long long)items * ith / nth);
+    int e = (int)((long long)items * (ith + 1) / nth), it, n, oy, r, c;
+    if (b >= e) return;
+    memset(j->acc + (size_t)b * 1024, 0, (size_t)(e - b) * 1024 * sizeof(float));
+    for (n = 0; n < d->N; n++)
+        for (oy = 0; oy < d->OH; oy += j->band)
+            for (it = b; it < e; it++) tn__amx_dw_item(d, it, n, oy, oy + j->band < d->OH ? oy + j->band : d->OH, j->acc + (size_t)it * 1024);
+    for (it = b; it < e; it++) {
+        int cpairs = (d->cp + 31) / 32, mpairs = (d->mp + 31) / 32, t = it / (cpairs * mpairs);
+        int cb = it / mpairs % cpairs * 32, mb = it % mpairs * 32;
+        const float *blk = j->acc + (size_t)it * 1024; /* blk[r][c] = dW[mb + c][cb + r][t] */
+        for (r = 0; r < 32 && cb + r < d->C; r++)
+            for (c = 0; c < 32 && mb + c < d->M; c++) d->dw[((size_t)(mb + c) * d->C + cb + r) * d->ntaps + t] += blk[r * 32 + c];
+    }
+}
+
+/* dw += the weight gradient, db += dy's channel sums (float32); 1 done, 0 out of memory, -1 not
+   for this geometry or CPU. */
+static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
+                                    float *dw, float *db)
+{
+    tn__conv_amxdw_job j;
+    int ntaps = g->KH * g->KW, t, h, *colmap;
+    size_t xh_halves, dyt_words;
+    if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    memset(&j, 0, sizeof j);
+    j.g = g;
+    j.x = x;
+    j.dy = dy;
+    j.Wp = g->W + 2 * g->pad;
+    j.d.Hp = g->H + 2 * g->pad;
+    j.d.Wq = (g->OW + 31) / 32 * 32;
+    j.d.Wr = tn__conv_amx_row(g, j.Wp, 32);
+    j.d.N = N;
+    j.d.ntaps = ntaps;
+    j.d.C = g->C;
+    j.d.M = M;
+    j.d.OH = g->OH;
+    j.d.cp = (g->C + 15) / 16 * 16;
+    j.d.mp = (M + 15) / 16 * 16;
+    for (t = 0; t < ntaps; t++) j.off[t] = (t / g->KW) * g->dil * j.d.cp * j.d.Wr + (t % g->KW) * g->dil;
+    j.d.off = j.off;
+    j.d.dw = dw;
+    xh_halves = (size_t)N * j.d.Hp * j.d.cp * j.d.Wr;
+    dyt_words = (size_t)N * g->OH * (j.d.Wq / 2) * j.d.mp;
+    j.d.xh = (const uint16_t *)tn_ctx_alloc(ctx, xh_halves * sizeof(uint16_t));
+    j.d.dyt = (const uint32_t *)tn_ctx_alloc(ctx, dyt_words * sizeof(uint32_t));
+    j.tmp = (uint16_t *)tn_ctx_alloc(ctx, (size_t)tn_get_threads() * 16 * j.d.Wq * sizeof(uint16_t));
+    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    j.acc = tn__ctx_floats(ctx, (size_t)ntaps * ((j.d.cp + 31) / 32) * ((j.d.mp + 31) / 32) * 1024, 0);
+    if (!j.d.xh || !j.d.dyt || !j.tmp || !colmap || !j.acc) return 0;
+    /* a band's input and dy rows: about 1 MiB, half of L2 */
+    j.band = (int)(((size_t)1 << 20) / ((size_t)j.d.cp * j.d.Wr * 2 + (size_t)j.d.Wq / 2 * j.d.mp * 4));
+    if (j.band < 1) j.band = 1;
+    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
+    j.colmap = colmap;
+    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
+        tn__conv_amxdw_prep_task(&j, 0, 1);
+        tn__conv_amxdw_task(&j, 0, 1);
+    } else {
+        tn_parallel_run(tn__conv_amxdw_prep_task, &j);
+        tn_parallel_run(tn__conv_amxdw_task, &j);
+    }
+    if (db) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
+    return 1;
+}
+#endif
+
 /* dw (M x K) += sum over images of dy (M x OH*OW) x im2col(x)^T, and db (M, if not NULL) += the
    sums of dy's channels, taken in the same pass over dy (1x1: separately). */
 static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *dy,
@@ -1150,6 +1423,10 @@ static int tn__conv_weight_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     tn__conv_job j;
     tn__conv_sum_job s;
     int fuse = db && !tn__conv_is_1x1(g);
+#ifdef TN__BF16_HW
+    int direct = tn__conv_weight_grad_amx(ctx, g, N, M, x, dy, dw, db);
+    if (direct >= 0) return direct;
+#endif
     if (db && !fuse) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
     if (!tn__conv_job_init(ctx, &j, g, N, M, tn__conv_groups(g, M), tn__conv_col_floats(g) + (size_t)g->OH * g->OW))
         return 0;
@@ -1212,7 +1489,8 @@ static int tn__conv_input_grad(tn_ctx *ctx, const tn__conv_geom *g, int N, int M
 {
     tn__conv_job j;
     int pad2 = (g->KH - 1) * g->dil - g->pad;
-    if (g->stride == 1 && !g->reflect && g->KH == g->KW && pad2 >= 0 && g->C >= 8 &&
+    /* (few channels: col2im costs less than a convolution of few output channels, but not on AMX) */
+    if (g->stride == 1 && !g->reflect && g->KH == g->KW && pad2 >= 0 && (g->C >= 8 || tn__gemm_kern(TN_PRECISION_AUTO) == TN__KERN_AMX) &&
         g->OH + 2 * pad2 - g->dil * (g->KH - 1) == g->H && g->OW + 2 * pad2 - g->dil * (g->KW - 1) == g->W) {
         /* dx = conv(dy, w'), w'[c][m][ky][kx] = w[m][c][KH-1-ky][KW-1-kx], padding dil*(K-1) - pad */
         tn__conv_geom f;

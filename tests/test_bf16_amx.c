@@ -188,13 +188,196 @@ TN_TEST(amx_path_matches_the_tile_model)
     TN_CHECK(!model_configured); /* released */
     tn__cpu_probed = 0;
 }
+
+/* ---- convolutions on the tiles (tn__conv_forward_amx, tn__conv_weight_grad_amx) ---- */
+
+static float bf(float v) { return tn__bf16_round(v); }
+
+/* The padded input as the tiles see it: bf16, zero padding (or reflected), zero past the padded
+   width Wp and past the channels. */
+static float xpad(const tn__conv_geom *g, const float *x, int c, int iyp, int ixp)
+{
+    int iy = tn__conv_src(iyp, 0, 1, g->pad, 1, g->H, g->reflect), ix;
+    if (c >= g->C || iy < 0 || ixp >= g->W + 2 * g->pad) return 0.0f;
+    ix = tn__conv_src(ixp, 0, 1, g->pad, 1, g->W, g->reflect);
+    return ix < 0 ? 0.0f : bf(x[((size_t)c * g->H + iy) * g->W + ix]);
+}
+
+/* y[m][oy][ox] as the forward's tiles sum it: taps in order, each over 32-channel steps of
+   channel pairs (even channel first; a single step has (C + 1) / 2 pairs, later steps 16, zeros
+   past C), from zero; then + bias, then + beta * y. */
+static float conv_model(const tn__conv_geom *g, const float *x, const float *w, const float *bias, float beta, float y0,
+                        int m, int oy, int ox)
+{
+    int ntaps = g->KH * g->KW, ksteps = (g->C + 31) / 32, kpairs = ksteps == 1 ? (g->C + 1) / 2 : 16, t, s, h;
+    float acc = 0.0f, v;
+    for (t = 0; t < ntaps; t++)
+        for (s = 0; s < ksteps; s++)
+            for (h = 0; h < 2 * kpairs; h++) {
+                int c = 32 * s + h;
+                float a = c < g->C ? bf(w[((size_t)m * g->C + c) * ntaps + t]) : 0.0f;
+                acc = fmaf(a, xpad(g, x, c, oy + t / g->KW * g->dil, ox + t % g->KW * g->dil), acc);
+            }
+    v = bias ? acc + bias[m] : acc;
+    return beta == 0.0f ? v : v + beta * y0;
+}
+
+/* dw[m][c][t] + the tiles' sum: images, output rows, then positions 0 .. Wq (OW rounded up to 32;
+   dy zero past OW) in order, from zero. */
+static float dw_model(const tn__conv_geom *g, int N, int M, const float *x, const float *dy, float dw0, int m, int c, int t)
+{
+    int wq = (g->OW + 31) / 32 * 32, n, oy, ox;
+    float acc = 0.0f;
+    for (n = 0; n < N; n++)
+        for (oy = 0; oy < g->OH; oy++)
+            for (ox = 0; ox < wq; ox++) {
+                float d = ox < g->OW ? bf(dy[(((size_t)n * M + m) * g->OH + oy) * g->OW + ox]) : 0.0f;
+                acc = fmaf(xpad(g, x + (size_t)n * g->C * g->H * g->W, c, oy + t / g->KW * g->dil, ox + t % g->KW * g->dil), d, acc);
+            }
+    return dw0 + acc;
+}
+
+static int amx_conv_case(int C, int M, int H, int W, int K, int pad, int dil, int reflect, int N, int threads)
+{
+    tn__conv_geom g;
+    tn_ctx *ctx = tn_ctx_create();
+    tn_rng rng;
+    size_t nx, nw, ny, i;
+    int m, c, t, oy, ox, n, same = 1, calls;
+    float *x, *w, *b, *y, *y2, *y0, *dy, *dw, *dw0, *db;
+    g.C = C; g.H = H; g.W = W; g.KH = g.KW = K; g.stride = 1; g.pad = pad; g.dil = dil; g.reflect = reflect;
+    g.OH = H + 2 * pad - dil * (K - 1);
+    g.OW = W + 2 * pad - dil * (K - 1);
+    nx = (size_t)N * C * H * W;
+    nw = (size_t)M * C * K * K;
+    ny = (size_t)N * M * g.OH * g.OW;
+    tn_rng_seed(&rng, (uint64_t)(C * 1000 + M), (uint64_t)(H * 100 + W));
+    x = rand_matrix(&rng, nx);
+    w = rand_matrix(&rng, nw);
+    b = rand_matrix(&rng, (size_t)M);
+    y0 = rand_matrix(&rng, ny);
+    dy = rand_matrix(&rng, ny);
+    dw0 = rand_matrix(&rng, nw);
+    y = (float *)malloc(ny * sizeof(float));
+    y2 = (float *)malloc(ny * sizeof(float));
+    dw = (float *)malloc(nw * sizeof(float));
+    db = (float *)calloc((size_t)M, sizeof(float));
+    memcpy(y2, y0, ny * sizeof(float));
+    memcpy(dw, dw0, nw * sizeof(float));
+    tn_set_threads(threads);
+    model_dp_calls = 0;
+    TN_CHECK(tn__conv_forward(ctx, &g, N, M, x, w, b, y, 0.0f) == 1);
+    TN_CHECK(tn__conv_forward(ctx, &g, N, M, x, w, NULL, y2, -0.75f) == 1);
+    calls = model_dp_calls;
+    TN_CHECK(tn__conv_weight_grad(ctx, &g, N, M, x, dy, dw, db) == 1);
+    tn_set_threads(0);
+    if (calls == 0 || model_dp_calls == calls) same = 0; /* the tiles were not used */
+    for (n = 0; n < N && same; n++)
+        for (m = 0; m < M && same; m++)
+            for (oy = 0; oy < g.OH && same; oy++)
+                for (ox = 0; ox < g.OW && same; ox++) {
+                    size_t at = (((size_t)n * M + m) * g.OH + oy) * g.OW + ox;
+                    const float *xn = x + (size_t)n * C * H * W;
+                    float e1 = conv_model(&g, xn, w, b, 0.0f, 0.0f, m, oy, ox), e2 = conv_model(&g, xn, w, NULL, -0.75f, y0[at], m, oy, ox);
+                    if (memcmp(&e1, &y[at], sizeof e1) || memcmp(&e2, &y2[at], sizeof e2)) {
+                        fprintf(stderr, "  AMX conv C=%d M=%d %dx%d k%d pad %d dil %d at %d,%d,%d,%d: %.9g %.9g, model %.9g %.9g\n", C, M,
+                                H, W, K, pad, dil, n, m, oy, ox, y[at], y2[at], e1, e2);
+                        same = 0;
+                    }
+                }
+    for (m = 0; m < M && same; m++)
+        for (c = 0; c < C && same; c++)
+            for (t = 0; t < K * K && same; t++) {
+                size_t at = ((size_t)m * C + c) * K * K + t;
+                float e = dw_model(&g, N, M, x, dy, dw0[at], m, c, t);
+                if (memcmp(&e, &dw[at], sizeof e)) {
+                    fprintf(stderr, "  AMX conv dw C=%d M=%d %dx%d k%d at %d,%d,%d: %.9g, model %.9g\n", C, M, H, W, K, m, c, t, dw[at], e);
+                    same = 0;
+                }
+            }
+    for (m = 0; m < M && same; m++) { /* the bias gradient: float32 sums of dy */
+        double s = 0;
+        for (n = 0; n < N; n++)
+            for (i = 0; i < (size_t)g.OH * g.OW; i++) s += dy[((size_t)n * M + m) * g.OH * g.OW + i];
+        if (fabs(db[m] - s) > 1e-4 * (1 + fabs(s))) same = 0;
+    }
+    free(x); free(w); free(b); free(y); free(y2); free(y0); free(dy); free(dw); free(dw0); free(db);
+    tn_ctx_free(ctx);
+    return same;
+}
+
+TN_TEST(amx_convolutions_match_the_tile_model)
+{
+    /* C, M, H, W, K, pad, dil, reflect, N: SinGAN's valid 32 -> 32; few channels, odd M, two
+       images; two channel steps (the second partial), dilation, reflection; one channel and
+       three M tiles; 1 x 1 to one channel; a row wider than 32 positions with a partial chunk */
+    static const int cases[][9] = {{32, 32, 12, 40, 3, 0, 1, 0, 1}, {3, 20, 9, 33, 3, 1, 1, 0, 2}, {40, 8, 7, 20, 3, 2, 2, 1, 1},
+                                   {1, 33, 8, 70, 3, 1, 1, 0, 1},   {16, 1, 10, 10, 1, 0, 1, 0, 1}, {5, 17, 3, 97, 5, 2, 1, 0, 1}};
+    int k;
+    tn__cpu_flags = TN_CPU_AVX2 | TN_CPU_AMX_BF16; /* told it has tiles; the model stands in */
+    tn__cpu_probed = 1;
+    tn_set_precision(TN_PRECISION_BF16);
+    for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); k++) {
+        const int *c = cases[k];
+        TN_CHECK(amx_conv_case(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], 1 + (k & 1)));
+    }
+    tn_set_precision(TN_PRECISION_AUTO);
+    TN_CHECK(!model_configured);
+    tn__cpu_probed = 0;
+}
+
+/* The VCVTNE2PS2BF16 conversions (tn__bf16_halves, tn__bf16_pair_words, on CPUs with
+   AVX512-BF16) against tn__bf16_bits: the same bytes for ties, subnormals, infinities, NaNs and
+   a million random bit patterns. */
+TN_TEST(bf16_vector_conversions_keep_the_bytes)
+{
+    static const uint32_t special[] = {0x00000000u, 0x80000000u, 0x00000001u, 0x807fffffu, 0x00800000u, 0x3f808000u, 0x3f818000u,
+                                       0x3f808001u, 0x7f7fffffu, 0xff7f8000u, 0x7f800000u, 0xff800000u, 0x7fc00000u, 0x7f800001u,
+                                       0xffbfffffu, 0x7fffffffu, 0x3f7fffffu, 0x477fe000u};
+    enum { n = 1 << 20 };
+    float *x = (float *)malloc(n * sizeof(float)), *x1 = (float *)malloc(n * sizeof(float));
+    uint16_t *h = (uint16_t *)malloc(n * sizeof(uint16_t));
+    uint32_t *wd = (uint32_t *)malloc(n * sizeof(uint32_t)), u;
+    tn_rng rng;
+    int i, bad = 0;
+    tn__cpu_probed = 0;
+    if (!(tn_cpu_features() & TN_CPU_AVX512_BF16)) {
+        fprintf(stderr, "  no AVX512-BF16 here: the scalar and AVX2 conversions only\n");
+    }
+    tn_rng_seed(&rng, 5, 6);
+    for (i = 0; i < n; i++) {
+        u = i < (int)(sizeof special / sizeof special[0]) ? special[i] : tn_rng_u32(&rng);
+        memcpy(&x[i], &u, sizeof u);
+        u = tn_rng_u32(&rng);
+        memcpy(&x1[i], &u, sizeof u);
+    }
+    tn__bf16_halves(x, h, n - 5); /* a tail past the last whole group */
+    tn__bf16_pair_words(x, x1, wd, n - 7);
+    for (i = 0; i < n - 7 && bad < 5; i++) {
+        uint32_t want = tn__bf16_bits(x[i]) >> 16 | (tn__bf16_bits(x1[i]) & 0xffff0000u);
+        if (h[i] != (uint16_t)(tn__bf16_bits(x[i]) >> 16) || wd[i] != want) {
+            memcpy(&u, &x[i], sizeof u);
+            fprintf(stderr, "  %08x: halves %04x pair %08x, want %04x %08x\n", u, h[i], wd[i], (unsigned)(want & 0xffffu), want);
+            bad++;
+        }
+    }
+    TN_CHECK(bad == 0);
+    tn__bf16_pair_words(x, NULL, wd, 100);
+    for (i = 0; i < 100; i++) TN_CHECK(wd[i] == tn__bf16_bits(x[i]) >> 16);
+    free(x);
+    free(x1);
+    free(h);
+    free(wd);
+}
 #endif
 
 int main(void)
 {
     (void)tn_test_data;
 #ifdef AMX_MODEL
+    TN_RUN(bf16_vector_conversions_keep_the_bytes);
     TN_RUN(amx_path_matches_the_tile_model);
+    TN_RUN(amx_convolutions_match_the_tile_model);
 #else
     fprintf(stderr, "test_bf16_amx: no AMX kernel in this build (x86-64 with GCC >= 11 or clang >= 12)\n");
 #endif
