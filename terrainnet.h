@@ -10102,13 +10102,18 @@ TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
 }
 
 #ifdef TN__BF16_HW
-/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns how many it wrote. */
+/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns n. */
 __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_halves512(const float *x, uint16_t *out, int n)
 {
     int j;
     for (j = 0; j + 32 <= n; j += 32)
         _mm512_storeu_si512((void *)(out + j), (__m512i)_mm512_cvtne2ps_pbh(_mm512_loadu_ps(x + j + 16), _mm512_loadu_ps(x + j)));
-    return j;
+    if (j < n) { /* the tail, masked (rows of 26 .. 260 values: tails matter) */
+        __mmask32 k = (__mmask32)(((uint64_t)1 << (n - j)) - 1u);
+        __m512 lo = _mm512_maskz_loadu_ps((__mmask16)k, x + j), hi = _mm512_maskz_loadu_ps((__mmask16)(k >> 16), x + j + 16);
+        _mm512_mask_storeu_epi16((void *)(out + j), k, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+    }
+    return n;
 }
 #endif
 
@@ -10125,7 +10130,7 @@ static void tn__bf16_halves(const float *x, uint16_t *out, int n)
 #ifdef TN__BF16_HW
 /* tn__bf16_pair_words with VCVTNE2PS2BF16: round to nearest even, subnormal inputs to zeros of
    their sign, NaN quieted (Intel SDM, convert_fp32_to_bfloat16): tn__bf16_bits's bytes, which
-   test_bf16 checks. Returns how many words it wrote (whole groups of 16). */
+   test_bf16_amx checks. Returns w. */
 __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_words512(const float *r0, const float *r1,
                                                                                             void *out, int w)
 {
@@ -10137,7 +10142,13 @@ __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_
         __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_loadu_ps(r0 + j)); /* r0's 16 low, r1's high */
         _mm512_storeu_si512((void *)((uint32_t *)out + j), _mm512_permutexvar_epi16(inter, both));
     }
-    return j;
+    if (j < w) { /* the tail, masked */
+        __mmask16 k = (__mmask16)((1u << (w - j)) - 1u);
+        __m512 hi = r1 ? _mm512_maskz_loadu_ps(k, r1 + j) : _mm512_setzero_ps();
+        __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_maskz_loadu_ps(k, r0 + j));
+        _mm512_mask_storeu_epi32((void *)((uint32_t *)out + j), k, _mm512_permutexvar_epi16(inter, both));
+    }
+    return w;
 }
 #endif
 
@@ -10357,6 +10368,7 @@ typedef struct tn__amx_conv {
     float *y;              /* M planes of OH x OW: y = beta * y + conv (+ bias) */
     const float *bias;     /* M floats, or NULL */
     float beta;
+    float *rows;           /* the caller's: 32 rows of OW rounded up to 32 floats */
 } tn__amx_conv;
 
 /* The weight gradient, also without im2col: dW[m][c][t] = sum over images and positions of
@@ -10429,6 +10441,33 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_dw_item(const t
     _tile_release();
 }
 
+/* dst[k * dstride + i] = word k of row i (rows `sstride` words apart), 16 x 16 32-bit words:
+   unpacks within 128-bit lanes, then a 4 x 4 transpose of the lanes. */
+__attribute__((target("avx512f"))) static void tn__transpose16_words(const void *src, size_t sstride, uint32_t *dst, size_t dstride)
+{
+    __m512i r[16], t[16];
+    int i;
+    for (i = 0; i < 16; i++) r[i] = _mm512_loadu_si512((const void *)((const uint32_t *)src + i * sstride));
+    for (i = 0; i < 16; i += 2) {
+        t[i] = _mm512_unpacklo_epi32(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_epi32(r[i], r[i + 1]);
+    }
+    for (i = 0; i < 16; i += 4) { /* r[i + c], lane L: column 4 L + c of rows i .. i + 3 */
+        r[i] = _mm512_unpacklo_epi64(t[i], t[i + 2]);
+        r[i + 1] = _mm512_unpackhi_epi64(t[i], t[i + 2]);
+        r[i + 2] = _mm512_unpacklo_epi64(t[i + 1], t[i + 3]);
+        r[i + 3] = _mm512_unpackhi_epi64(t[i + 1], t[i + 3]);
+    }
+    for (i = 0; i < 4; i++) { /* column c = i: lanes L of r[i], r[4 + i], r[8 + i], r[12 + i] -> row 4 L + c */
+        __m512i u0 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0x44), u1 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0xee);
+        __m512i u2 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0x44), u3 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0xee);
+        _mm512_storeu_si512((void *)(dst + (size_t)i * dstride), _mm512_shuffle_i32x4(u0, u2, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(4 + i) * dstride), _mm512_shuffle_i32x4(u0, u2, 0xdd));
+        _mm512_storeu_si512((void *)(dst + (size_t)(8 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(12 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0xdd));
+    }
+}
+
 /* d[0 .. n) = (v + *bias) + beta * d (no bias: v + beta * d; beta 0: d not read). */
 __attribute__((target("avx512f"))) static void tn__amx_conv_out512(float *d, const float *v, int n, const float *bias, float beta)
 {
@@ -10461,19 +10500,20 @@ static void tn__amx_conv_out(float *d, const float *v, int n, const float *bias,
 __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const tn__amx_conv *c, int k0, int k1)
 {
     tn__amx_cfg cfg;
-    float tile[32 * 32];
-    int cw = (c->OW + 31) / 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    int cw = (c->OW + 31) / 32, wq = cw * 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    long rstride = (long)wq * 4;
     size_t tiles_per_mt = (size_t)c->ntaps * c->ksteps * 512, ohw = (size_t)c->OH * c->OW, rowx = (size_t)c->prow * c->Wr;
     long bstride = (long)c->Wr * 4;
     tn__amx_cfg_set(&cfg, c->ksteps == 1 ? 4 * c->kpairs : 64, c->ksteps == 1 ? c->kpairs : 16);
     _tile_loadconfig(&cfg);
     for (k = k0; k < k1;) { /* the chunks of one output row, each pair of M tiles in turn: one pair's
                                A tiles stay in L1 along the row */
-        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk;
-        for (mt = 0; mt < mtiles; mt += 2)
+        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk, ox0 = k % cw * 32;
+        int ox1 = (kend - oy * cw) * 32 < c->OW ? (kend - oy * cw) * 32 : c->OW;
+        for (mt = 0; mt < mtiles; mt += 2) {
+            int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
             for (kk = k; kk < kend; kk++) {
-                int ox = kk % cw * 32, n = c->OW - ox < 32 ? c->OW - ox : 32;
-                int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
+                int ox = kk % cw * 32;
                 const uint16_t *a = c->wa + (size_t)mt * tiles_per_mt;
                 _tile_zero(0);
                 _tile_zero(1);
@@ -10494,14 +10534,17 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const
                         }
                     }
                 }
-                _tile_stored(0, tile, 128);
-                _tile_stored(1, tile + 16, 128);
-                _tile_stored(2, tile + 16 * 32, 128);
-                _tile_stored(3, tile + 16 * 32 + 16, 128);
-                for (r = 0; r < rows; r++)
-                    tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox, tile + r * 32, n,
-                                     c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+                _tile_stored(0, c->rows + ox, rstride);
+                _tile_stored(1, c->rows + ox + 16, rstride);
+                _tile_stored(2, c->rows + (size_t)16 * wq + ox, rstride);
+                _tile_stored(3, c->rows + (size_t)16 * wq + ox + 16, rstride);
             }
+            /* then output channel by channel: 32 outputs a row at a time were 32 planes apart (a
+               multiple of 4 KiB in large maps: one cache set) and cost more than the products */
+            for (r = 0; r < rows; r++)
+                tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox0, c->rows + (size_t)r * wq + ox0,
+                                 ox1 - ox0, c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+        }
         k = kend;
     }
     _tile_release();
@@ -11751,8 +11794,8 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
     int ix;
     if (words) tn__bf16_pair_words(r0, r1, words + g->pad, g->W);
     else tn__bf16_halves(r0, halves + g->pad, g->W);
-    for (ix = 0; ix < Wr; ix++) {
-        int sx = ix < Wp ? colmap[ix] : -1;
+    for (ix = 0; ix < Wp; ix++) { /* the padding columns */
+        int sx = colmap[ix];
         uint32_t v;
         if (ix == g->pad) {
             ix += g->W - 1; /* the inside is done */
@@ -11762,6 +11805,8 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
         if (words) words[ix] = v;
         else halves[ix] = (uint16_t)v;
     }
+    if (words) memset(words + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint32_t));
+    else memset(halves + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint16_t));
 }
 
 /* Padded rows [N*Hp*ith/nth, ...): each one's channel-pair rows. */
@@ -11790,6 +11835,7 @@ static void tn__conv_amx_task(void *ctx, int ith, int nth)
     while (b < e) {
         int n = (int)(b / j->chunks), c0 = (int)(b % j->chunks), c1 = e - (long long)n * j->chunks < j->chunks ? (int)(e - (long long)n * j->chunks) : j->chunks;
         tn__amx_conv c = j->c;
+        c.rows += (size_t)ith * 32 * ((c.OW + 31) / 32 * 32);
         c.xp += (size_t)n * j->Hp * c.prow * c.Wr;
         c.y += (size_t)n * c.M * c.OH * c.OW;
         tn__amx_conv_rows(&c, c0, c1);
@@ -11807,6 +11853,25 @@ static int tn__conv_amx_row(const tn__conv_geom *g, int Wp, int line)
     return (w | 1) * line;
 }
 
+/* A tile product costs the same whatever its channel count, so with one channel 3 x 3 taps cost
+   nine products for 1/32 of their work. Up to 32 channels x taps the taps become channels instead:
+   *v is a 1 x 1 convolution of the OH x OW im2col of x (channel c * KH * KW + t: w's own layout),
+   one product per chunk. NULL when out of memory. */
+static const float *tn__conv_amx_taps_as_channels(tn_ctx *ctx, const tn__conv_geom *g, int N, const float *x, tn__conv_geom *v)
+{
+    size_t per = (size_t)g->C * g->KH * g->KW * g->OH * g->OW;
+    float *xv = tn__ctx_floats(ctx, (size_t)N * per, 0);
+    int n;
+    if (!xv) return NULL;
+    for (n = 0; n < N; n++) tn__im2col_band(g, x + (size_t)n * g->C * g->H * g->W, xv + (size_t)n * per, 0, g->OH);
+    memset(v, 0, sizeof *v);
+    v->C = g->C * g->KH * g->KW;
+    v->H = v->OH = g->OH;
+    v->W = v->OW = g->OW;
+    v->KH = v->KW = v->stride = v->dil = 1;
+    return xv;
+}
+
 /* 1 done, 0 out of memory, -1 not for this geometry or CPU (the caller goes on with im2col). */
 static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
                                 const float *bias, float *y, float beta)
@@ -11816,6 +11881,11 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     size_t wa_halves, xp_words;
     uint16_t *wa;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    if (ntaps > 1 && g->C * ntaps <= 32) { /* few channels: see tn__conv_amx_taps_as_channels */
+        tn__conv_geom v;
+        const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
+        return xv ? tn__conv_forward_amx(ctx, &v, N, M, xv, w, bias, y, beta) : 0;
+    }
     memset(&j, 0, sizeof j);
     j.g = g;
     j.x = x;
@@ -11841,7 +11911,8 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     wa = (uint16_t *)tn_ctx_alloc(ctx, wa_halves * sizeof(uint16_t));
     j.c.xp = (const uint32_t *)tn_ctx_alloc(ctx, xp_words * sizeof(uint32_t));
     colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
-    if (!wa || !j.c.xp || !colmap) return 0;
+    j.c.rows = tn__ctx_floats(ctx, (size_t)tn_get_threads() * 32 * ((g->OW + 31) / 32 * 32), 0);
+    if (!wa || !j.c.xp || !colmap || !j.c.rows) return 0;
     for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
     j.colmap = colmap;
     for (mt = 0; mt < mtiles; mt++) /* tile (mt, t, s): rows m = 16 mt + r, columns c = 32 s + h */
@@ -12021,11 +12092,14 @@ static void tn__conv_amxdw_prep_task(void *ctx, int ith, int nth)
                     memset(t, 0, (size_t)d->Wq * sizeof(uint16_t));
                 }
             }
-            for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
-                for (i = 0; i < 16; i++) {
-                    memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
-                    out[i] = word;
-                }
+            if (tn__cpu_flags & TN_CPU_AVX512F) /* half is a multiple of 16 */
+                for (k = 0; k < half; k += 16) tn__transpose16_words(tmp + 2 * k, d->Wq / 2, out + (size_t)k * d->mp, d->mp);
+            else
+                for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
+                    for (i = 0; i < 16; i++) {
+                        memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
+                        out[i] = word;
+                    }
         }
     }
 }
@@ -12060,6 +12134,11 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
     int ntaps = g->KH * g->KW, t, h, *colmap;
     size_t xh_halves, dyt_words;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    if (ntaps > 1 && g->C * ntaps <= 32) { /* as in tn__conv_forward_amx: dW's layout is the same */
+        tn__conv_geom v;
+        const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
+        return xv ? tn__conv_weight_grad_amx(ctx, &v, N, M, xv, dy, dw, db) : 0;
+    }
     memset(&j, 0, sizeof j);
     j.g = g;
     j.x = x;

@@ -1,5 +1,7 @@
-/* bench_conv: conv2d 3x3 (padding 1, batch 1, with bias) forward and forward+backward (input,
-   weight and bias gradients) in milliseconds, the shapes of ../shared/peers/torch_conv2d.py.
+/* bench_conv: conv2d 3x3 (batch 1, with bias) forward and forward+backward (input, weight and
+   bias gradients) in milliseconds: padding 1 on the shapes of ../shared/peers/torch_conv2d.py,
+   then SinGAN's (valid 3x3 convolutions of 32 channels, 1 channel in and out at the ends) at its
+   finest scale of a 256 px example (268 px in, 266 out; _p0 in the names).
    Each in float32, then with bf16 GEMM operands (tn_set_precision(TN_PRECISION_BF16)) in the same
    run, with the float32 time over the bf16 time.
    Usage: bin/bench_conv [--threads N] [--runs R] [--fp32]   (no --threads: 1 and 2; --fp32: no bf16)
@@ -20,13 +22,13 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
-static double run_once(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *b, int backward)
+static double run_once(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *b, int backward, int pad)
 {
     tn_conv_opts o;
     tn_tensor *y;
     double t0 = tn_time_seconds();
     memset(&o, 0, sizeof o);
-    o.pad = 1;
+    o.pad = pad;
     tn_ctx_reset(ctx);
     tn_ctx_set_grad(ctx, backward);
     y = tn_conv2d(ctx, x, w, b, &o);
@@ -41,8 +43,9 @@ static double run_once(tn_ctx *ctx, tn_tensor *x, tn_tensor *w, tn_tensor *b, in
 
 int main(int argc, char **argv)
 {
-    static const struct { const char *name; int ci, co, hw; } shapes[3] = {
-        {"c32to32_3x3_128", 32, 32, 128}, {"c64to64_3x3_256", 64, 64, 256}, {"c3to64_3x3_512", 3, 64, 512}};
+    static const struct { const char *name; int ci, co, hw, pad; } shapes[6] = {
+        {"c32to32_3x3_128", 32, 32, 128, 1}, {"c64to64_3x3_256", 64, 64, 256, 1}, {"c3to64_3x3_512", 3, 64, 512, 1},
+        {"c32to32_3x3_p0_268", 32, 32, 268, 0}, {"c1to32_3x3_p0_268", 1, 32, 268, 0}, {"c32to1_3x3_p0_268", 32, 1, 268, 0}};
     int threads[2] = {1, 2}, nthreads = 2, runs = 11, nprec = 2, a, s, t, r, bw, pr;
     for (a = 1; a < argc; a++) {
         if (!strcmp(argv[a], "--threads") && a + 1 < argc) { threads[0] = atoi(argv[++a]); nthreads = 1; }
@@ -53,7 +56,7 @@ int main(int argc, char **argv)
     if (runs < 1 || runs > 1000 || threads[0] < 1) { fprintf(stderr, "bench_conv: bad arguments\n"); return 2; }
     for (t = 0; t < nthreads; t++) {
         tn_set_threads(threads[t]);
-        for (s = 0; s < 3; s++) {
+        for (s = 0; s < 6; s++) {
             tn_ctx *pc = tn_ctx_create(), *ctx = tn_ctx_create();
             tn_rng rng;
             tn_tensor *x = tn_tensor_requires_grad(pc, tn_tensor_4d(pc, 1, shapes[s].ci, shapes[s].hw, shapes[s].hw));
@@ -67,9 +70,9 @@ int main(int argc, char **argv)
                 double fp32_ms = 0;
                 for (pr = 0; pr < nprec; pr++) {
                     tn_set_precision(pr ? TN_PRECISION_BF16 : TN_PRECISION_FP32);
-                    run_once(ctx, x, w, b, bw); /* warm-up: sizes the arena */
-                    run_once(ctx, x, w, b, bw);
-                    for (r = 0; r < runs; r++) ms[r] = run_once(ctx, x, w, b, bw);
+                    run_once(ctx, x, w, b, bw, shapes[s].pad); /* warm-up: sizes the arena */
+                    run_once(ctx, x, w, b, bw, shapes[s].pad);
+                    for (r = 0; r < runs; r++) ms[r] = run_once(ctx, x, w, b, bw, shapes[s].pad);
                     qsort(ms, (size_t)runs, sizeof(double), cmp_double);
                     printf("conv_%s%s_%s_t%d: %.3f ms (min %.3f max %.3f, runs %d", pr ? "bf16_" : "", bw ? "fwdbwd" : "fwd",
                            shapes[s].name, threads[t], ms[runs / 2], ms[0], ms[runs - 1], runs);

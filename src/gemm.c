@@ -789,13 +789,18 @@ TN__INTERNAL void tn__bf16_round_n(float *x, size_t n)
 }
 
 #ifdef TN__BF16_HW
-/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns how many it wrote. */
+/* out[j] = bf16(x[j]) for j < n, 32 at a time; returns n. */
 __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_halves512(const float *x, uint16_t *out, int n)
 {
     int j;
     for (j = 0; j + 32 <= n; j += 32)
         _mm512_storeu_si512((void *)(out + j), (__m512i)_mm512_cvtne2ps_pbh(_mm512_loadu_ps(x + j + 16), _mm512_loadu_ps(x + j)));
-    return j;
+    if (j < n) { /* the tail, masked (rows of 26 .. 260 values: tails matter) */
+        __mmask32 k = (__mmask32)(((uint64_t)1 << (n - j)) - 1u);
+        __m512 lo = _mm512_maskz_loadu_ps((__mmask16)k, x + j), hi = _mm512_maskz_loadu_ps((__mmask16)(k >> 16), x + j + 16);
+        _mm512_mask_storeu_epi16((void *)(out + j), k, (__m512i)_mm512_cvtne2ps_pbh(hi, lo));
+    }
+    return n;
 }
 #endif
 
@@ -812,7 +817,7 @@ static void tn__bf16_halves(const float *x, uint16_t *out, int n)
 #ifdef TN__BF16_HW
 /* tn__bf16_pair_words with VCVTNE2PS2BF16: round to nearest even, subnormal inputs to zeros of
    their sign, NaN quieted (Intel SDM, convert_fp32_to_bfloat16): tn__bf16_bits's bytes, which
-   test_bf16 checks. Returns how many words it wrote (whole groups of 16). */
+   test_bf16_amx checks. Returns w. */
 __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_words512(const float *r0, const float *r1,
                                                                                             void *out, int w)
 {
@@ -824,7 +829,13 @@ __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_pair_
         __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_loadu_ps(r0 + j)); /* r0's 16 low, r1's high */
         _mm512_storeu_si512((void *)((uint32_t *)out + j), _mm512_permutexvar_epi16(inter, both));
     }
-    return j;
+    if (j < w) { /* the tail, masked */
+        __mmask16 k = (__mmask16)((1u << (w - j)) - 1u);
+        __m512 hi = r1 ? _mm512_maskz_loadu_ps(k, r1 + j) : _mm512_setzero_ps();
+        __m512i both = (__m512i)_mm512_cvtne2ps_pbh(hi, _mm512_maskz_loadu_ps(k, r0 + j));
+        _mm512_mask_storeu_epi32((void *)((uint32_t *)out + j), k, _mm512_permutexvar_epi16(inter, both));
+    }
+    return w;
 }
 #endif
 
@@ -1044,6 +1055,7 @@ typedef struct tn__amx_conv {
     float *y;              /* M planes of OH x OW: y = beta * y + conv (+ bias) */
     const float *bias;     /* M floats, or NULL */
     float beta;
+    float *rows;           /* the caller's: 32 rows of OW rounded up to 32 floats */
 } tn__amx_conv;
 
 /* The weight gradient, also without im2col: dW[m][c][t] = sum over images and positions of
@@ -1116,6 +1128,33 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_dw_item(const t
     _tile_release();
 }
 
+/* dst[k * dstride + i] = word k of row i (rows `sstride` words apart), 16 x 16 32-bit words:
+   unpacks within 128-bit lanes, then a 4 x 4 transpose of the lanes. */
+__attribute__((target("avx512f"))) static void tn__transpose16_words(const void *src, size_t sstride, uint32_t *dst, size_t dstride)
+{
+    __m512i r[16], t[16];
+    int i;
+    for (i = 0; i < 16; i++) r[i] = _mm512_loadu_si512((const void *)((const uint32_t *)src + i * sstride));
+    for (i = 0; i < 16; i += 2) {
+        t[i] = _mm512_unpacklo_epi32(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_epi32(r[i], r[i + 1]);
+    }
+    for (i = 0; i < 16; i += 4) { /* r[i + c], lane L: column 4 L + c of rows i .. i + 3 */
+        r[i] = _mm512_unpacklo_epi64(t[i], t[i + 2]);
+        r[i + 1] = _mm512_unpackhi_epi64(t[i], t[i + 2]);
+        r[i + 2] = _mm512_unpacklo_epi64(t[i + 1], t[i + 3]);
+        r[i + 3] = _mm512_unpackhi_epi64(t[i + 1], t[i + 3]);
+    }
+    for (i = 0; i < 4; i++) { /* column c = i: lanes L of r[i], r[4 + i], r[8 + i], r[12 + i] -> row 4 L + c */
+        __m512i u0 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0x44), u1 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0xee);
+        __m512i u2 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0x44), u3 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0xee);
+        _mm512_storeu_si512((void *)(dst + (size_t)i * dstride), _mm512_shuffle_i32x4(u0, u2, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(4 + i) * dstride), _mm512_shuffle_i32x4(u0, u2, 0xdd));
+        _mm512_storeu_si512((void *)(dst + (size_t)(8 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(12 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0xdd));
+    }
+}
+
 /* d[0 .. n) = (v + *bias) + beta * d (no bias: v + beta * d; beta 0: d not read). */
 __attribute__((target("avx512f"))) static void tn__amx_conv_out512(float *d, const float *v, int n, const float *bias, float beta)
 {
@@ -1148,19 +1187,20 @@ static void tn__amx_conv_out(float *d, const float *v, int n, const float *bias,
 __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const tn__amx_conv *c, int k0, int k1)
 {
     tn__amx_cfg cfg;
-    float tile[32 * 32];
-    int cw = (c->OW + 31) / 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    int cw = (c->OW + 31) / 32, wq = cw * 32, mtiles = (c->M + 15) / 16, k, mt, t, s, r;
+    long rstride = (long)wq * 4;
     size_t tiles_per_mt = (size_t)c->ntaps * c->ksteps * 512, ohw = (size_t)c->OH * c->OW, rowx = (size_t)c->prow * c->Wr;
     long bstride = (long)c->Wr * 4;
     tn__amx_cfg_set(&cfg, c->ksteps == 1 ? 4 * c->kpairs : 64, c->ksteps == 1 ? c->kpairs : 16);
     _tile_loadconfig(&cfg);
     for (k = k0; k < k1;) { /* the chunks of one output row, each pair of M tiles in turn: one pair's
                                A tiles stay in L1 along the row */
-        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk;
-        for (mt = 0; mt < mtiles; mt += 2)
+        int oy = k / cw, kend = (oy + 1) * cw < k1 ? (oy + 1) * cw : k1, kk, ox0 = k % cw * 32;
+        int ox1 = (kend - oy * cw) * 32 < c->OW ? (kend - oy * cw) * 32 : c->OW;
+        for (mt = 0; mt < mtiles; mt += 2) {
+            int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
             for (kk = k; kk < kend; kk++) {
-                int ox = kk % cw * 32, n = c->OW - ox < 32 ? c->OW - ox : 32;
-                int two = mt + 1 < mtiles, rows = c->M - mt * 16 < 32 ? c->M - mt * 16 : 32;
+                int ox = kk % cw * 32;
                 const uint16_t *a = c->wa + (size_t)mt * tiles_per_mt;
                 _tile_zero(0);
                 _tile_zero(1);
@@ -1181,14 +1221,17 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_conv_rows(const
                         }
                     }
                 }
-                _tile_stored(0, tile, 128);
-                _tile_stored(1, tile + 16, 128);
-                _tile_stored(2, tile + 16 * 32, 128);
-                _tile_stored(3, tile + 16 * 32 + 16, 128);
-                for (r = 0; r < rows; r++)
-                    tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox, tile + r * 32, n,
-                                     c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+                _tile_stored(0, c->rows + ox, rstride);
+                _tile_stored(1, c->rows + ox + 16, rstride);
+                _tile_stored(2, c->rows + (size_t)16 * wq + ox, rstride);
+                _tile_stored(3, c->rows + (size_t)16 * wq + ox + 16, rstride);
             }
+            /* then output channel by channel: 32 outputs a row at a time were 32 planes apart (a
+               multiple of 4 KiB in large maps: one cache set) and cost more than the products */
+            for (r = 0; r < rows; r++)
+                tn__amx_conv_out(c->y + (size_t)(mt * 16 + r) * ohw + (size_t)oy * c->OW + ox0, c->rows + (size_t)r * wq + ox0,
+                                 ox1 - ox0, c->bias ? c->bias + mt * 16 + r : NULL, c->beta);
+        }
         k = kend;
     }
     _tile_release();

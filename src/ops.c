@@ -1063,8 +1063,8 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
     int ix;
     if (words) tn__bf16_pair_words(r0, r1, words + g->pad, g->W);
     else tn__bf16_halves(r0, halves + g->pad, g->W);
-    for (ix = 0; ix < Wr; ix++) {
-        int sx = ix < Wp ? colmap[ix] : -1;
+    for (ix = 0; ix < Wp; ix++) { /* the padding columns */
+        int sx = colmap[ix];
         uint32_t v;
         if (ix == g->pad) {
             ix += g->W - 1; /* the inside is done */
@@ -1074,6 +1074,8 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
         if (words) words[ix] = v;
         else halves[ix] = (uint16_t)v;
     }
+    if (words) memset(words + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint32_t));
+    else memset(halves + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint16_t));
 }
 
 /* Padded rows [N*Hp*ith/nth, ...): each one's channel-pair rows. */
@@ -1102,6 +1104,7 @@ static void tn__conv_amx_task(void *ctx, int ith, int nth)
     while (b < e) {
         int n = (int)(b / j->chunks), c0 = (int)(b % j->chunks), c1 = e - (long long)n * j->chunks < j->chunks ? (int)(e - (long long)n * j->chunks) : j->chunks;
         tn__amx_conv c = j->c;
+        c.rows += (size_t)ith * 32 * ((c.OW + 31) / 32 * 32);
         c.xp += (size_t)n * j->Hp * c.prow * c.Wr;
         c.y += (size_t)n * c.M * c.OH * c.OW;
         tn__amx_conv_rows(&c, c0, c1);
@@ -1119,6 +1122,25 @@ static int tn__conv_amx_row(const tn__conv_geom *g, int Wp, int line)
     return (w | 1) * line;
 }
 
+/* A tile product costs the same whatever its channel count, so with one channel 3 x 3 taps cost
+   nine products for 1/32 of their work. Up to 32 channels x taps the taps become channels instead:
+   *v is a 1 x 1 convolution of the OH x OW im2col of x (channel c * KH * KW + t: w's own layout),
+   one product per chunk. NULL when out of memory. */
+static const float *tn__conv_amx_taps_as_channels(tn_ctx *ctx, const tn__conv_geom *g, int N, const float *x, tn__conv_geom *v)
+{
+    size_t per = (size_t)g->C * g->KH * g->KW * g->OH * g->OW;
+    float *xv = tn__ctx_floats(ctx, (size_t)N * per, 0);
+    int n;
+    if (!xv) return NULL;
+    for (n = 0; n < N; n++) tn__im2col_band(g, x + (size_t)n * g->C * g->H * g->W, xv + (size_t)n * per, 0, g->OH);
+    memset(v, 0, sizeof *v);
+    v->C = g->C * g->KH * g->KW;
+    v->H = v->OH = g->OH;
+    v->W = v->OW = g->OW;
+    v->KH = v->KW = v->stride = v->dil = 1;
+    return xv;
+}
+
 /* 1 done, 0 out of memory, -1 not for this geometry or CPU (the caller goes on with im2col). */
 static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
                                 const float *bias, float *y, float beta)
@@ -1128,6 +1150,11 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     size_t wa_halves, xp_words;
     uint16_t *wa;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    if (ntaps > 1 && g->C * ntaps <= 32) { /* few channels: see tn__conv_amx_taps_as_channels */
+        tn__conv_geom v;
+        const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
+        return xv ? tn__conv_forward_amx(ctx, &v, N, M, xv, w, bias, y, beta) : 0;
+    }
     memset(&j, 0, sizeof j);
     j.g = g;
     j.x = x;
@@ -1153,7 +1180,8 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     wa = (uint16_t *)tn_ctx_alloc(ctx, wa_halves * sizeof(uint16_t));
     j.c.xp = (const uint32_t *)tn_ctx_alloc(ctx, xp_words * sizeof(uint32_t));
     colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
-    if (!wa || !j.c.xp || !colmap) return 0;
+    j.c.rows = tn__ctx_floats(ctx, (size_t)tn_get_threads() * 32 * ((g->OW + 31) / 32 * 32), 0);
+    if (!wa || !j.c.xp || !colmap || !j.c.rows) return 0;
     for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
     j.colmap = colmap;
     for (mt = 0; mt < mtiles; mt++) /* tile (mt, t, s): rows m = 16 mt + r, columns c = 32 s + h */
@@ -1333,11 +1361,14 @@ static void tn__conv_amxdw_prep_task(void *ctx, int ith, int nth)
                     memset(t, 0, (size_t)d->Wq * sizeof(uint16_t));
                 }
             }
-            for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
-                for (i = 0; i < 16; i++) {
-                    memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
-                    out[i] = word;
-                }
+            if (tn__cpu_flags & TN_CPU_AVX512F) /* half is a multiple of 16 */
+                for (k = 0; k < half; k += 16) tn__transpose16_words(tmp + 2 * k, d->Wq / 2, out + (size_t)k * d->mp, d->mp);
+            else
+                for (k = 0; k < half; k++, out += d->mp) /* a 16-word row per position pair */
+                    for (i = 0; i < 16; i++) {
+                        memcpy(&word, tmp + (size_t)i * d->Wq + 2 * k, sizeof word);
+                        out[i] = word;
+                    }
         }
     }
 }
@@ -1372,6 +1403,11 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
     int ntaps = g->KH * g->KW, t, h, *colmap;
     size_t xh_halves, dyt_words;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
+    if (ntaps > 1 && g->C * ntaps <= 32) { /* as in tn__conv_forward_amx: dW's layout is the same */
+        tn__conv_geom v;
+        const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
+        return xv ? tn__conv_weight_grad_amx(ctx, &v, N, M, xv, dy, dw, db) : 0;
+    }
     memset(&j, 0, sizeof j);
     j.g = g;
     j.x = x;

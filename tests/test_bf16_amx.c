@@ -205,25 +205,35 @@ static float xpad(const tn__conv_geom *g, const float *x, int c, int iyp, int ix
 
 /* y[m][oy][ox] as the forward's tiles sum it: taps in order, each over 32-channel steps of
    channel pairs (even channel first; a single step has (C + 1) / 2 pairs, later steps 16, zeros
-   past C), from zero; then + bias, then + beta * y. */
+   past C), from zero; then + bias, then + beta * y. Up to 32 channels x taps, over channels x
+   taps in w's order instead (the taps as channels of a 1 x 1 convolution), pairs of them. */
 static float conv_model(const tn__conv_geom *g, const float *x, const float *w, const float *bias, float beta, float y0,
                         int m, int oy, int ox)
 {
     int ntaps = g->KH * g->KW, ksteps = (g->C + 31) / 32, kpairs = ksteps == 1 ? (g->C + 1) / 2 : 16, t, s, h;
     float acc = 0.0f, v;
-    for (t = 0; t < ntaps; t++)
-        for (s = 0; s < ksteps; s++)
-            for (h = 0; h < 2 * kpairs; h++) {
-                int c = 32 * s + h;
-                float a = c < g->C ? bf(w[((size_t)m * g->C + c) * ntaps + t]) : 0.0f;
-                acc = fmaf(a, xpad(g, x, c, oy + t / g->KW * g->dil, ox + t % g->KW * g->dil), acc);
-            }
+    if (ntaps > 1 && g->C * ntaps <= 32)
+        for (h = 0; h < (g->C * ntaps + 1) / 2 * 2; h++) {
+            int c = h / ntaps;
+            t = h % ntaps;
+            acc = fmaf(h < g->C * ntaps ? bf(w[(size_t)m * g->C * ntaps + h]) : 0.0f,
+                       xpad(g, x, c, oy + t / g->KW * g->dil, ox + t % g->KW * g->dil), acc);
+        }
+    else
+        for (t = 0; t < ntaps; t++)
+            for (s = 0; s < ksteps; s++)
+                for (h = 0; h < 2 * kpairs; h++) {
+                    int c = 32 * s + h;
+                    float a = c < g->C ? bf(w[((size_t)m * g->C + c) * ntaps + t]) : 0.0f;
+                    acc = fmaf(a, xpad(g, x, c, oy + t / g->KW * g->dil, ox + t % g->KW * g->dil), acc);
+                }
     v = bias ? acc + bias[m] : acc;
     return beta == 0.0f ? v : v + beta * y0;
 }
 
 /* dw[m][c][t] + the tiles' sum: images, output rows, then positions 0 .. Wq (OW rounded up to 32;
-   dy zero past OW) in order, from zero. */
+   dy zero past OW) in order, from zero (also with the taps as channels: only products with dy
+   zero change, and they add +0). */
 static float dw_model(const tn__conv_geom *g, int N, int M, const float *x, const float *dy, float dw0, int m, int c, int t)
 {
     int wq = (g->OW + 31) / 32 * 32, n, oy, ox;
@@ -308,18 +318,27 @@ static int amx_conv_case(int C, int M, int H, int W, int K, int pad, int dil, in
 
 TN_TEST(amx_convolutions_match_the_tile_model)
 {
-    /* C, M, H, W, K, pad, dil, reflect, N: SinGAN's valid 32 -> 32; few channels, odd M, two
-       images; two channel steps (the second partial), dilation, reflection; one channel and
-       three M tiles; 1 x 1 to one channel; a row wider than 32 positions with a partial chunk */
+    /* C, M, H, W, K, pad, dil, reflect, N: SinGAN's valid 32 -> 32; taps as channels (3 x 9),
+       odd M, two images; two channel steps (the second partial), dilation, reflection; taps as
+       channels (1 x 9), three M tiles; 1 x 1 to one channel; 5 x 5 taps, a row wider than 32
+       positions with a partial chunk; 4 x 9 taps as channels (36 > 32: not) */
     static const int cases[][9] = {{32, 32, 12, 40, 3, 0, 1, 0, 1}, {3, 20, 9, 33, 3, 1, 1, 0, 2}, {40, 8, 7, 20, 3, 2, 2, 1, 1},
-                                   {1, 33, 8, 70, 3, 1, 1, 0, 1},   {16, 1, 10, 10, 1, 0, 1, 0, 1}, {5, 17, 3, 97, 5, 2, 1, 0, 1}};
+                                   {1, 33, 8, 70, 3, 1, 1, 0, 1},   {16, 1, 10, 10, 1, 0, 1, 0, 1}, {5, 17, 3, 97, 5, 2, 1, 0, 1},
+                                   {4, 9, 6, 35, 3, 0, 1, 0, 2}};
+    unsigned real, pass;
     int k;
-    tn__cpu_flags = TN_CPU_AVX2 | TN_CPU_AMX_BF16; /* told it has tiles; the model stands in */
-    tn__cpu_probed = 1;
+    tn__cpu_probed = 0;
+    real = tn_cpu_features();
     tn_set_precision(TN_PRECISION_BF16);
-    for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); k++) {
-        const int *c = cases[k];
-        TN_CHECK(amx_conv_case(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], 1 + (k & 1)));
+    for (pass = 0; pass < 2; pass++) { /* the portable data movement, then AVX-512's where the CPU has it */
+        if (pass == 1 && !(real & TN_CPU_AVX512F)) break;
+        /* told it has tiles; the model stands in */
+        tn__cpu_flags = TN_CPU_AVX2 | TN_CPU_AMX_BF16 | (pass ? real & (TN_CPU_AVX512F | TN_CPU_AVX512_BF16) : 0u);
+        tn__cpu_probed = 1;
+        for (k = 0; k < (int)(sizeof cases / sizeof cases[0]); k++) {
+            const int *c = cases[k];
+            TN_CHECK(amx_conv_case(c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], 1 + (k & 1)));
+        }
     }
     tn_set_precision(TN_PRECISION_AUTO);
     TN_CHECK(!model_configured);
