@@ -9619,8 +9619,8 @@ static tn__gemm_kernel_fn tn__gemm_bf16_kernel_fn(int kern);
 #define TN__AMX_A_HALVES ((size_t)((TN__GEMM_MC + 31) / 32 * 32) * TN__AMX_KP)
 #define TN__AMX_B_HALVES ((size_t)((TN__GEMM_NC + 31) / 32 * 32) * TN__AMX_KP)
 static uint16_t *tn__gemm_amx_scratch(int *slot);
-static void tn__gemm_amx_pack_a(const float *pa, int mc, int kc, uint16_t *ta);
-static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, int nc, int kc, const uint16_t *ta,
+static void tn__gemm_amx_pack_a(const tn__gemm_job *g, int ic, int mc, int pc, int kc, float *pa, uint16_t *ta);
+static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int pc, int jc, int nc, int kc, const uint16_t *ta,
                                const float *pb, uint16_t *tb, float beta);
 #endif
 
@@ -9775,23 +9775,24 @@ static void tn__gemm_blocked(const tn__gemm_job *g, int m0, int m1, int n0, int 
         for (pc = 0; pc < g->K; pc += kcb) {
             int kc = g->K - pc < kcb ? g->K - pc : kcb;
             float beta = pc == 0 ? g->beta : 1.0f; /* later K blocks accumulate into C */
-            tn__gemm_pack_a(g->trans_a, g->A, g->lda, ic, mc, pc, kc, pa);
 #ifdef TN__BF16_HW
-            if (kern == TN__KERN_AMX) tn__gemm_amx_pack_a(pa, mc, kc, ta);
-            else
+            if (kern == TN__KERN_AMX) { /* bf16 copies straight from A and B (B: from the callback's panels) */
+                tn__gemm_amx_pack_a(g, ic, mc, pc, kc, pa, ta);
+                for (jc = n0; jc < n1; jc += TN__GEMM_NC) {
+                    int nc = n1 - jc < TN__GEMM_NC ? n1 - jc : TN__GEMM_NC;
+                    if (g->pack_b) g->pack_b(g->pack_ctx, pc, kc, jc, nc, pb);
+                    tn__gemm_amx_block(g, ic, mc, pc, jc, nc, kc, ta, g->pack_b ? pb : NULL, ta + TN__AMX_A_HALVES, beta);
+                }
+                continue;
+            }
 #endif
+            tn__gemm_pack_a(g->trans_a, g->A, g->lda, ic, mc, pc, kc, pa);
             if (kern != TN__KERN_FP32)
                 tn__gemm_bf16_prep(kern, pa, (mc + TN__GEMM_MR - 1) / TN__GEMM_MR, (size_t)kc * TN__GEMM_MR, kc, TN__GEMM_MR);
             for (jc = n0; jc < n1; jc += TN__GEMM_NC) {
                 int nc = n1 - jc < TN__GEMM_NC ? n1 - jc : TN__GEMM_NC;
                 if (g->pack_b) g->pack_b(g->pack_ctx, pc, kc, jc, nc, pb);
                 else tn__gemm_pack_b(g->trans_b, g->B, g->ldb, pc, kc, jc, nc, pb);
-#ifdef TN__BF16_HW
-                if (kern == TN__KERN_AMX) {
-                    tn__gemm_amx_block(g, ic, mc, jc, nc, kc, ta, pb, ta + TN__AMX_A_HALVES, beta);
-                    continue;
-                }
-#endif
                 if (kern != TN__KERN_FP32)
                     tn__gemm_bf16_prep(kern, pb, (nc + TN__GEMM_NR - 1) / TN__GEMM_NR, tn__gemm_b_stride(kc), kc, TN__GEMM_NR);
                 tn__gemm_macro(g, kern, ic, mc, jc, nc, kc, pa, pb, beta);
@@ -10254,15 +10255,97 @@ static uint16_t *tn__gemm_amx_scratch(int *slot)
     return (uint16_t *)(((uintptr_t)tn__gemm_amx_raw[s] + 63) & ~(uintptr_t)63);
 }
 
-/* The packed A block (MR-row panels) as bf16 rows of kp = kc rounded up to 32, rows up to a
-   multiple of 32; the padding is zero. */
-static void tn__gemm_amx_pack_a(const float *pa, int mc, int kc, uint16_t *ta)
+/* dst[k * dstride + i] = word k of row i (rows `sstride` words apart), 16 x 16 32-bit words:
+   unpacks within 128-bit lanes, then a 4 x 4 transpose of the lanes. */
+__attribute__((target("avx512f"))) static void tn__transpose16_words(const void *src, size_t sstride, uint32_t *dst, size_t dstride)
 {
-    int kp = (kc + 31) / 32 * 32, mp = (mc + 31) / 32 * 32, i, k;
-    for (i = 0; i < mp; i++) {
-        uint16_t *row = ta + (size_t)i * kp;
-        const float *src = pa + (size_t)(i / TN__GEMM_MR) * kc * TN__GEMM_MR + i % TN__GEMM_MR;
-        for (k = 0; k < kp; k++) row[k] = i < mc && k < kc ? (uint16_t)(tn__bf16_bits(src[(size_t)k * TN__GEMM_MR]) >> 16) : 0;
+    __m512i r[16], t[16];
+    int i;
+    for (i = 0; i < 16; i++) r[i] = _mm512_loadu_si512((const void *)((const uint32_t *)src + i * sstride));
+    for (i = 0; i < 16; i += 2) {
+        t[i] = _mm512_unpacklo_epi32(r[i], r[i + 1]);
+        t[i + 1] = _mm512_unpackhi_epi32(r[i], r[i + 1]);
+    }
+    for (i = 0; i < 16; i += 4) { /* r[i + c], lane L: column 4 L + c of rows i .. i + 3 */
+        r[i] = _mm512_unpacklo_epi64(t[i], t[i + 2]);
+        r[i + 1] = _mm512_unpackhi_epi64(t[i], t[i + 2]);
+        r[i + 2] = _mm512_unpacklo_epi64(t[i + 1], t[i + 3]);
+        r[i + 3] = _mm512_unpackhi_epi64(t[i + 1], t[i + 3]);
+    }
+    for (i = 0; i < 4; i++) { /* column c = i: lanes L of r[i], r[4 + i], r[8 + i], r[12 + i] -> row 4 L + c */
+        __m512i u0 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0x44), u1 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0xee);
+        __m512i u2 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0x44), u3 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0xee);
+        _mm512_storeu_si512((void *)(dst + (size_t)i * dstride), _mm512_shuffle_i32x4(u0, u2, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(4 + i) * dstride), _mm512_shuffle_i32x4(u0, u2, 0xdd));
+        _mm512_storeu_si512((void *)(dst + (size_t)(8 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0x88));
+        _mm512_storeu_si512((void *)(dst + (size_t)(12 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0xdd));
+    }
+}
+
+/* op(A)[ic .. ic+mc) x [pc .. pc+kc) as bf16 rows of kp = kc rounded up to 32, rows up to a
+   multiple of 32; the padding is zero. A row-major: each row converted straight from A; A
+   transposed: through the float32 panels of tn__gemm_pack_a (pa), a panel converted at once. */
+static void tn__gemm_amx_pack_a(const tn__gemm_job *g, int ic, int mc, int pc, int kc, float *pa, uint16_t *ta)
+{
+    int kp = (kc + 31) / 32 * 32, mp = (mc + 31) / 32 * 32, i, k, r;
+    if (!g->trans_a) {
+        for (i = 0; i < mc; i++) {
+            tn__bf16_halves(g->A + (size_t)(ic + i) * g->lda + pc, ta + (size_t)i * kp, kc);
+            memset(ta + (size_t)i * kp + kc, 0, (size_t)(kp - kc) * sizeof(uint16_t));
+        }
+    } else {
+        uint16_t *h = (uint16_t *)(void *)pa; /* each panel's halves over its own first half */
+        tn__gemm_pack_a(1, g->A, g->lda, ic, mc, pc, kc, pa);
+        for (i = 0; i < mc; i += TN__GEMM_MR) {
+            const float *panel = pa + (size_t)i * kc;
+            uint16_t *hp = h + (size_t)i * kc * 2;
+            tn__bf16_halves(panel, hp, kc * TN__GEMM_MR); /* halves never overtake the floats read */
+            for (r = 0; r < TN__GEMM_MR && i + r < mc; r++) {
+                uint16_t *row = ta + (size_t)(i + r) * kp;
+                for (k = 0; k < kc; k++) row[k] = hp[(size_t)k * TN__GEMM_MR + r];
+                memset(row + kc, 0, (size_t)(kp - kc) * sizeof(uint16_t));
+            }
+        }
+    }
+    memset(ta + (size_t)mc * kp, 0, (size_t)(mp - mc) * kp * sizeof(uint16_t));
+}
+
+/* op(B)[pc .. pc+kc) x [jc .. jc+nc) straight from B in the layout of tn__gemm_amx_pack_b. B
+   row-major: pair words of rows k, k + 1; transposed: each column's run of k converted, whose
+   words are the pairs, then 16 x 16 words transposed. */
+static void tn__gemm_amx_pack_b_direct(const tn__gemm_job *g, int pc, int kc, int jc, int nc, uint16_t *tb)
+{
+    int kp = (kc + 31) / 32 * 32, groups = (nc + 31) / 32 * 2, q, k, jj;
+    uint16_t tmp[16 * TN__AMX_KP];
+    for (q = 0; q < groups; q++) {
+        uint16_t *d = tb + (size_t)q * kp * 16;
+        int cols = nc - 16 * q < 16 ? (nc - 16 * q > 0 ? nc - 16 * q : 0) : 16;
+        if (cols == 0) {
+            memset(d, 0, (size_t)kp * 16 * sizeof(uint16_t));
+            continue;
+        }
+        if (!g->trans_b) {
+            for (k = 0; k < kp; k += 2, d += 32) {
+                const float *r0 = g->B + (size_t)(pc + k) * g->ldb + jc + 16 * q;
+                if (k >= kc) {
+                    memset(d, 0, 64);
+                    continue;
+                }
+                tn__bf16_pair_words(r0, k + 1 < kc ? r0 + g->ldb : NULL, d, cols);
+                memset(d + 2 * cols, 0, (size_t)(16 - cols) * 4);
+            }
+            continue;
+        }
+        for (jj = 0; jj < 16; jj++) { /* column jj's k run as halves, zero past kc (and past nc) */
+            uint16_t *t = tmp + (size_t)jj * kp;
+            if (jj < cols) tn__bf16_halves(g->B + (size_t)(jc + 16 * q + jj) * g->ldb + pc, t, kc);
+            memset(t + (jj < cols ? kc : 0), 0, (size_t)(jj < cols ? kp - kc : kp) * sizeof(uint16_t));
+        }
+        if (tn__cpu_flags & TN_CPU_AVX512F)
+            for (k = 0; k < kp / 2; k += 16) tn__transpose16_words(tmp + 2 * k, (size_t)kp / 2, (uint32_t *)(void *)d + (size_t)k * 16, 16);
+        else
+            for (k = 0; k < kp / 2; k++)
+                for (jj = 0; jj < 16; jj++) memcpy(d + ((size_t)k * 16 + jj) * 2, tmp + (size_t)jj * kp + 2 * k, 4);
     }
 }
 
@@ -10291,6 +10374,32 @@ typedef struct tn__amx_cfg {
     unsigned short colsb[16];
     unsigned char rows[16];
 } tn__amx_cfg;
+
+/* d[0 .. n) = alpha * v (+ beta * d, not fused: the scalar loop's bytes). */
+__attribute__((target("avx512f"))) static void tn__amx_gemm_out512(float *d, const float *v, int n, float alpha, float beta)
+{
+    __m512 al = _mm512_set1_ps(alpha), bt = _mm512_set1_ps(beta);
+    int i;
+    for (i = 0; i < n; i += 16) {
+        __mmask16 k = (__mmask16)(n - i >= 16 ? 0xffffu : (1u << (n - i)) - 1u);
+        __m512 x = _mm512_mul_ps(al, _mm512_maskz_loadu_ps(k, v + i));
+        if (beta != 0.0f) x = _mm512_add_ps(x, _mm512_mul_ps(bt, _mm512_maskz_loadu_ps(k, d + i)));
+        _mm512_mask_storeu_ps(d + i, k, x);
+    }
+}
+
+static void tn__amx_gemm_out(float *d, const float *v, int n, float alpha, float beta)
+{
+    int i;
+    if (tn__cpu_flags & TN_CPU_AVX512F) {
+        tn__amx_gemm_out512(d, v, n, alpha, beta);
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        float x = alpha * v[i];
+        d[i] = beta == 0.0f ? x : x + beta * d[i];
+    }
+}
 
 /* C[ic.., jc..] (+)= A block x B block on the tiles: tmm0-3 the 2 x 2 C tiles of a 32 x 32 block,
    tmm4-5 two A tiles (16 rows x 32 k), tmm6-7 two B tiles (16 pair rows x 16 columns). */
@@ -10327,25 +10436,31 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__gemm_amx_tiles(cons
                 _tile_dpbf16ps(2, 5, 6);
                 _tile_dpbf16ps(3, 5, 7);
             }
+            if (rows == 32 && cols == 32 && g->alpha == 1.0f && beta == 0.0f) { /* C = the sums: straight */
+                float *c0 = g->C + (size_t)(ic + i) * g->ldc + jc + j;
+                long ldc = (long)g->ldc * 4;
+                _tile_stored(0, c0, ldc);
+                _tile_stored(1, c0 + 16, ldc);
+                _tile_stored(2, c0 + (size_t)16 * g->ldc, ldc);
+                _tile_stored(3, c0 + (size_t)16 * g->ldc + 16, ldc);
+                continue;
+            }
             _tile_stored(0, tile, 128);
             _tile_stored(1, tile + 16, 128);
             _tile_stored(2, tile + 16 * 32, 128);
             _tile_stored(3, tile + 16 * 32 + 16, 128);
-            for (r = 0; r < rows; r++) {
-                float *crow = g->C + (size_t)(ic + i + r) * g->ldc + jc + j;
-                for (t = 0; t < cols; t++) {
-                    float v = g->alpha * tile[r * 32 + t];
-                    crow[t] = beta == 0.0f ? v : v + beta * crow[t];
-                }
-            }
+            for (r = 0; r < rows; r++)
+                tn__amx_gemm_out(g->C + (size_t)(ic + i + r) * g->ldc + jc + j, tile + r * 32, cols, g->alpha, beta);
         }
     _tile_release();
 }
 
-static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int jc, int nc, int kc, const uint16_t *ta,
+/* pb: the float32 panels of g->pack_b, or NULL: B packed straight. */
+static void tn__gemm_amx_block(const tn__gemm_job *g, int ic, int mc, int pc, int jc, int nc, int kc, const uint16_t *ta,
                                const float *pb, uint16_t *tb, float beta)
 {
-    tn__gemm_amx_pack_b(pb, nc, kc, tb);
+    if (pb) tn__gemm_amx_pack_b(pb, nc, kc, tb);
+    else tn__gemm_amx_pack_b_direct(g, pc, kc, jc, nc, tb);
     tn__gemm_amx_tiles(g, ic, mc, jc, nc, kc, ta, tb, beta);
 }
 
@@ -10439,33 +10554,6 @@ __attribute__((target("amx-tile,amx-bf16"))) static void tn__amx_dw_item(const t
     _tile_stored(2, acc + 16 * 32, 128);
     _tile_stored(3, acc + 16 * 32 + 16, 128);
     _tile_release();
-}
-
-/* dst[k * dstride + i] = word k of row i (rows `sstride` words apart), 16 x 16 32-bit words:
-   unpacks within 128-bit lanes, then a 4 x 4 transpose of the lanes. */
-__attribute__((target("avx512f"))) static void tn__transpose16_words(const void *src, size_t sstride, uint32_t *dst, size_t dstride)
-{
-    __m512i r[16], t[16];
-    int i;
-    for (i = 0; i < 16; i++) r[i] = _mm512_loadu_si512((const void *)((const uint32_t *)src + i * sstride));
-    for (i = 0; i < 16; i += 2) {
-        t[i] = _mm512_unpacklo_epi32(r[i], r[i + 1]);
-        t[i + 1] = _mm512_unpackhi_epi32(r[i], r[i + 1]);
-    }
-    for (i = 0; i < 16; i += 4) { /* r[i + c], lane L: column 4 L + c of rows i .. i + 3 */
-        r[i] = _mm512_unpacklo_epi64(t[i], t[i + 2]);
-        r[i + 1] = _mm512_unpackhi_epi64(t[i], t[i + 2]);
-        r[i + 2] = _mm512_unpacklo_epi64(t[i + 1], t[i + 3]);
-        r[i + 3] = _mm512_unpackhi_epi64(t[i + 1], t[i + 3]);
-    }
-    for (i = 0; i < 4; i++) { /* column c = i: lanes L of r[i], r[4 + i], r[8 + i], r[12 + i] -> row 4 L + c */
-        __m512i u0 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0x44), u1 = _mm512_shuffle_i32x4(r[i], r[4 + i], 0xee);
-        __m512i u2 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0x44), u3 = _mm512_shuffle_i32x4(r[8 + i], r[12 + i], 0xee);
-        _mm512_storeu_si512((void *)(dst + (size_t)i * dstride), _mm512_shuffle_i32x4(u0, u2, 0x88));
-        _mm512_storeu_si512((void *)(dst + (size_t)(4 + i) * dstride), _mm512_shuffle_i32x4(u0, u2, 0xdd));
-        _mm512_storeu_si512((void *)(dst + (size_t)(8 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0x88));
-        _mm512_storeu_si512((void *)(dst + (size_t)(12 + i) * dstride), _mm512_shuffle_i32x4(u1, u3, 0xdd));
-    }
 }
 
 /* d[0 .. n) = (v + *bias) + beta * d (no bias: v + beta * d; beta 0: d not read). */
