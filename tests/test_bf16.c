@@ -364,7 +364,9 @@ static float *dup_floats(const float *p, size_t n)
 }
 
 /* conv2d (kind 0: 3x3 pad 1; 1: 3x3 stride 2 reflect; 2: 1x1; 3: conv with Cin >= 8, flipped-
-   kernel input gradient) or linear (kind 4), loss = sum(y * r), on `threads` in `prec`. */
+   kernel input gradient; 5: SinGAN's valid 32 -> 32; 6: valid 1 -> 32, two images) or linear
+   (kind 4), loss = sum(y * r), on `threads` in `prec`. Kinds 3, 5 and 6 are large enough for the
+   products to be split between threads (AMX: the tile convolutions, 6 with the taps as channels). */
 static void run_layer(int kind, tn_precision prec, int threads, layer_out *o)
 {
     tn_ctx *c = tn_ctx_create();
@@ -377,6 +379,11 @@ static void run_layer(int kind, tn_precision prec, int threads, layer_out *o)
         x = tn_tensor_requires_grad(c, tn_tensor_2d(c, 300, 70));
         w = tn_tensor_requires_grad(c, tn_tensor_2d(c, 90, 70));
         b = tn_tensor_requires_grad(c, tn_tensor_1d(c, 90));
+    } else if (kind >= 5) {
+        int cin = kind == 5 ? 32 : 1;
+        x = tn_tensor_requires_grad(c, kind == 5 ? tn_tensor_4d(c, 1, 32, 40, 44) : tn_tensor_4d(c, 2, 1, 100, 90));
+        w = tn_tensor_requires_grad(c, tn_tensor_4d(c, 32, cin, 3, 3));
+        b = tn_tensor_requires_grad(c, tn_tensor_1d(c, 32));
     } else {
         int cin = kind == 3 ? 16 : 5, k = kind == 2 ? 1 : 3;
         x = tn_tensor_requires_grad(c, tn_tensor_4d(c, 2, cin, 37, 41));
@@ -391,7 +398,7 @@ static void run_layer(int kind, tn_precision prec, int threads, layer_out *o)
     } else {
         tn_conv_opts co;
         memset(&co, 0, sizeof co);
-        co.pad = kind == 2 ? 0 : 1;
+        co.pad = kind == 2 || kind >= 5 ? 0 : 1;
         co.stride = kind == 1 ? 2 : 1;
         co.padding = kind == 1 ? TN_PADDING_REFLECT : TN_PADDING_ZERO;
         y = tn_conv2d(c, x, w, b, &co);
@@ -439,9 +446,10 @@ static int same_layer(const layer_out *a, const layer_out *b)
 
 TN_TEST(conv_and_linear_bf16_gradients)
 {
-    static const char *names[5] = {"conv3x3", "conv3x3_s2_reflect", "conv1x1", "conv3x3_cin16", "linear"};
+    static const char *names[7] = {"conv3x3", "conv3x3_s2_reflect", "conv1x1", "conv3x3_cin16", "linear", "conv3x3_valid_c32",
+                                   "conv3x3_valid_c1"};
     int kind;
-    for (kind = 0; kind < 5; kind++) {
+    for (kind = 0; kind < 7; kind++) {
         layer_out f, h1, h2, h3, d;
         double ey, ex, ew, eb;
         run_layer(kind, TN_PRECISION_FP32, 1, &f);
