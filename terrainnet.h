@@ -10116,17 +10116,15 @@ __attribute__((target("avx512f,avx512bw,avx512bf16"))) static int tn__bf16_halve
     }
     return n;
 }
-#endif
 
-/* out[j] = the bf16 of x[j] (tn__bf16_bits's upper half), j < n. */
+/* out[j] = the bf16 of x[j] (tn__bf16_bits's upper half), j < n. (Only the AMX paths use it.) */
 static void tn__bf16_halves(const float *x, uint16_t *out, int n)
 {
     int j = 0;
-#ifdef TN__BF16_HW
     if (tn__cpu_flags & TN_CPU_AVX512_BF16) j = tn__bf16_halves512(x, out, n);
-#endif
     for (; j < n; j++) out[j] = (uint16_t)(tn__bf16_bits(x[j]) >> 16);
 }
+#endif
 
 #ifdef TN__BF16_HW
 /* tn__bf16_pair_words with VCVTNE2PS2BF16: round to nearest even, subnormal inputs to zeros of
