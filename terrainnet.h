@@ -11958,6 +11958,14 @@ static const float *tn__conv_amx_taps_as_channels(tn_ctx *ctx, const tn__conv_ge
     return xv;
 }
 
+/* Whether the taps go as channels: up to 32 of them, and an im2col of at most 2^26 floats (256
+   MiB; beyond, the 32-channel steps, which need no copy larger than the input). */
+static int tn__conv_amx_taps_fit(const tn__conv_geom *g, int N)
+{
+    size_t ntaps = (size_t)g->KH * g->KW;
+    return ntaps > 1 && g->C * ntaps <= 32 && (size_t)N * g->C * ntaps * g->OH * g->OW <= ((size_t)1 << 26);
+}
+
 /* 1 done, 0 out of memory, -1 not for this geometry or CPU (the caller goes on with im2col). */
 static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int M, const float *x, const float *w,
                                 const float *bias, float *y, float beta)
@@ -11967,7 +11975,7 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     size_t wa_halves, xp_words;
     uint16_t *wa;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
-    if (ntaps > 1 && g->C * ntaps <= 32) { /* few channels: see tn__conv_amx_taps_as_channels */
+    if (tn__conv_amx_taps_fit(g, N)) { /* few channels: see tn__conv_amx_taps_as_channels */
         tn__conv_geom v;
         const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
         return xv ? tn__conv_forward_amx(ctx, &v, N, M, xv, w, bias, y, beta) : 0;
@@ -12220,7 +12228,7 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
     int ntaps = g->KH * g->KW, t, h, *colmap;
     size_t xh_halves, dyt_words;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
-    if (ntaps > 1 && g->C * ntaps <= 32) { /* as in tn__conv_forward_amx: dW's layout is the same */
+    if (tn__conv_amx_taps_fit(g, N)) { /* as in tn__conv_forward_amx: dW's layout is the same */
         tn__conv_geom v;
         const float *xv = tn__conv_amx_taps_as_channels(ctx, g, N, x, &v);
         return xv ? tn__conv_weight_grad_amx(ctx, &v, N, M, xv, dy, dw, db) : 0;
