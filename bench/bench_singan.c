@@ -47,8 +47,9 @@
        128 px | the example's crop it matched (DIR/singan_REGION_copy_{singan,layout,gpnn}.png),
      - with --model DIR: the models an earlier --pictures DIR run saved, instead of training,
      - with --extras: refinement, 4x upscaling and a 2048 x 2048 sample (docs/singan.md),
-     - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py).
-   Usage: bench_singan [--minutes M] [--threads N] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
+     - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py),
+     - --precision auto|bf16|fp32: the products' precision for training and sampling (tn_set_precision).
+   Usage: bench_singan [--minutes M] [--threads N] [--precision P] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
                        [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--layout-turn T] [--gate -1] [--fine-noise K]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N] [--dequantize N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
@@ -836,7 +837,14 @@ int main(int argc, char **argv)
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--minutes") && v) minutes = atof(argv[++i]);
         else if (!strcmp(a, "--threads") && v) threads = atoi(argv[++i]);
-        else if (!strcmp(a, "--pictures") && v) g_pictures = argv[++i];
+        else if (!strcmp(a, "--precision") && v) {
+            tn_precision p;
+            if (tn_precision_parse(&p, argv[++i])) {
+                fprintf(stderr, "bench_singan: --precision takes auto, bf16 or fp32\n");
+                return 2;
+            }
+            tn_set_precision(p);
+        } else if (!strcmp(a, "--pictures") && v) g_pictures = argv[++i];
         else if (!strcmp(a, "--extras")) g_extras = 1;
         else if (!strcmp(a, "--peer")) peer = 1;
         else if (!strcmp(a, "--no-singan")) g_singan = 0;
@@ -883,6 +891,7 @@ int main(int argc, char **argv)
            "curv_weight %g, spec_weight %g, height_weight %g, coarsest %d, channels %d; sampling: fine_noise %g\n", minutes, threads, g_opts.patch, g_opts.disc_layers, (double)g_opts.noise_amp,
            (double)g_opts.adv_weight, g_opts.d_steps, (double)g_opts.curv_weight, (double)g_opts.spec_weight, (double)g_opts.height_weight, g_opts.coarsest,
            g_opts.channels, (double)g_fine_noise);
+    printf("# precision: %s (bf16 kernel here: %s)\n", tn_precision_name(tn_precision_resolve(TN_PRECISION_AUTO)), tn_gemm_bf16_kernel());
     fflush(stdout);
     if (peer) {
         if (system("/usr/bin/python3 /work/shared/peers/torch_singan_step.py --threads 2 --size 256 --runs 3 2>&1 | sed 's/^/peer: /'"))

@@ -5,10 +5,11 @@
 # (moved=0: the neighbours that fit around the example), then eight drawings on it
 # (bench_sketch, with maps of BIG x BIG and the strips), then one summary table of the targets.
 # The drawings: the four of examples/data (valley, summit, ring, cross) and the four of
-# bench/drawings (spine, horseshoe, fork, twin), copied together into OUT/drawings.
+# bench/drawings (spine, horseshoe, fork, twin), copied together into OUT/drawings. FROM=DIR runs
+# every DIR/sketch_NAME.tns instead (e.g. FROM=bench/heldout, the drawings kept out of every choice).
 #   sh bench/sketch_setup.sh [OUT] [REGION ...]
 #   (defaults: OUT build/sketch_setup; alps_montblanc sahara_erg_oriental grandcanyon_hoppe8bit
-#    himalaya_everest moon_nearside_lola4ppd; MINUTES=10 THREADS=2 BIG=1024)
+#    himalaya_everest moon_nearside_lola4ppd; MINUTES=10 THREADS=2 BIG=1024 FROM=)
 # Run from the repository root after `make bin/terrainnet bin/bench_gnn bin/bench_sketch`, with
 # ../shared/data (or TN_DATA) holding the DEMs. About 16 minutes a region at the defaults, nothing
 # else running. Writes OUT/REGION.tnw, OUT/REGION.train.log, OUT/REGION.gnn.log,
@@ -25,10 +26,15 @@ DATA=${TN_DATA:-../shared/data}
 for b in bin/terrainnet bin/bench_gnn bin/bench_sketch; do
     [ -x $b ] || { echo "sketch_setup: $b is missing (make $b; run from the repository root)" >&2; exit 2; }
 done
-DRAWINGS="valley summit ring cross spine horseshoe fork twin"
 mkdir -p "$OUT/drawings"
-cp examples/data/sketch_valley.tns examples/data/sketch_summit.tns examples/data/sketch_ring.tns examples/data/sketch_cross.tns \
-    bench/drawings/sketch_*.tns "$OUT/drawings/"
+if [ -n "${FROM:-}" ]; then
+    cp "$FROM"/sketch_*.tns "$OUT/drawings/" || { echo "sketch_setup: no sketch_*.tns in $FROM" >&2; exit 2; }
+    DRAWINGS=$(cd "$FROM" && ls sketch_*.tns | sed 's/^sketch_//; s/\.tns$//' | tr '\n' ' ')
+else
+    DRAWINGS="valley summit ring cross spine horseshoe fork twin"
+    cp examples/data/sketch_valley.tns examples/data/sketch_summit.tns examples/data/sketch_ring.tns \
+        examples/data/sketch_cross.tns bench/drawings/sketch_*.tns "$OUT/drawings/"
+fi
 failed=
 for r in $REGIONS; do
     dem="$DATA/dem/$r/${r}_full.png"
