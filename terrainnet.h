@@ -11895,6 +11895,18 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
     else memset(halves + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint16_t));
 }
 
+/* The AMX convolutions' two passes (bf16 copies, then tiles) on the pool, or inline when small. */
+static void tn__conv_amx_run(tn_task_fn prep, tn_task_fn task, void *job, double work)
+{
+    if (tn_get_threads() <= 1 || work < TN__GEMM_PAR_MIN) {
+        prep(job, 0, 1);
+        task(job, 0, 1);
+    } else {
+        tn_parallel_run(prep, job);
+        tn_parallel_run(task, job);
+    }
+}
+
 /* Padded rows [N*Hp*ith/nth, ...): each one's channel-pair rows. */
 static void tn__conv_amx_prep_task(void *ctx, int ith, int nth)
 {
@@ -12020,13 +12032,7 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
                     }
             }
     j.c.wa = wa;
-    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
-        tn__conv_amx_prep_task(&j, 0, 1);
-        tn__conv_amx_task(&j, 0, 1);
-    } else {
-        tn_parallel_run(tn__conv_amx_prep_task, &j);
-        tn_parallel_run(tn__conv_amx_task, &j);
-    }
+    tn__conv_amx_run(tn__conv_amx_prep_task, tn__conv_amx_task, &j, (double)N * M * g->OH * g->OW * ntaps * g->C);
     return 1;
 }
 #endif
@@ -12264,13 +12270,7 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
     if (j.band < 1) j.band = 1;
     for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
     j.colmap = colmap;
-    if (tn_get_threads() <= 1 || (double)N * M * g->OH * g->OW * ntaps * g->C < TN__GEMM_PAR_MIN) {
-        tn__conv_amxdw_prep_task(&j, 0, 1);
-        tn__conv_amxdw_task(&j, 0, 1);
-    } else {
-        tn_parallel_run(tn__conv_amxdw_prep_task, &j);
-        tn_parallel_run(tn__conv_amxdw_task, &j);
-    }
+    tn__conv_amx_run(tn__conv_amxdw_prep_task, tn__conv_amxdw_task, &j, (double)N * M * g->OH * g->OW * ntaps * g->C);
     if (db) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
     return 1;
 }
