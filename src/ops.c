@@ -1078,6 +1078,15 @@ static void tn__conv_amx_pad_row(const tn__conv_geom *g, const int *colmap, int 
     else memset(halves + Wp, 0, (size_t)(Wr - Wp) * sizeof(uint16_t));
 }
 
+/* Padded column -> input column (-1: zero) for the AMX convolutions' rows; NULL out of memory. */
+static const int *tn__conv_amx_colmap(tn_ctx *ctx, const tn__conv_geom *g, int Wp)
+{
+    int h, *colmap = (int *)tn_ctx_alloc(ctx, (size_t)Wp * sizeof(int));
+    if (colmap)
+        for (h = 0; h < Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
+    return colmap;
+}
+
 /* The AMX convolutions' two passes (bf16 copies, then tiles) on the pool, or inline when small. */
 static void tn__conv_amx_run(tn_task_fn prep, tn_task_fn task, void *job, double work)
 {
@@ -1166,7 +1175,7 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
                                 const float *bias, float *y, float beta)
 {
     tn__conv_amx_job j;
-    int ntaps = g->KH * g->KW, mtiles = (M + 15) / 16, t, s, mt, r, h, *colmap;
+    int ntaps = g->KH * g->KW, mtiles = (M + 15) / 16, t, s, mt, r, h;
     size_t wa_halves, xp_words;
     uint16_t *wa;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
@@ -1199,11 +1208,9 @@ static int tn__conv_forward_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, int 
     xp_words = (size_t)N * j.Hp * j.c.prow * j.c.Wr;
     wa = (uint16_t *)tn_ctx_alloc(ctx, wa_halves * sizeof(uint16_t));
     j.c.xp = (const uint32_t *)tn_ctx_alloc(ctx, xp_words * sizeof(uint32_t));
-    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    j.colmap = tn__conv_amx_colmap(ctx, g, j.Wp);
     j.c.rows = tn__ctx_floats(ctx, (size_t)tn_get_threads() * 32 * ((g->OW + 31) / 32 * 32), 0);
-    if (!wa || !j.c.xp || !colmap || !j.c.rows) return 0;
-    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
-    j.colmap = colmap;
+    if (!wa || !j.c.xp || !j.colmap || !j.c.rows) return 0;
     for (mt = 0; mt < mtiles; mt++) /* tile (mt, t, s): rows m = 16 mt + r, columns c = 32 s + h */
         for (t = 0; t < ntaps; t++)
             for (s = 0; s < j.c.ksteps; s++) {
@@ -1414,7 +1421,7 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
                                     float *dw, float *db)
 {
     tn__conv_amxdw_job j;
-    int ntaps = g->KH * g->KW, t, h, *colmap;
+    int ntaps = g->KH * g->KW, t;
     size_t xh_halves, dyt_words;
     if (tn__gemm_kern(TN_PRECISION_AUTO) != TN__KERN_AMX || g->stride != 1 || ntaps > TN__CONV_AMX_TAPS) return -1;
     if (tn__conv_amx_taps_fit(g, N)) { /* as in tn__conv_forward_amx: dW's layout is the same */
@@ -1445,14 +1452,12 @@ static int tn__conv_weight_grad_amx(tn_ctx *ctx, const tn__conv_geom *g, int N, 
     j.d.xh = (const uint16_t *)tn_ctx_alloc(ctx, xh_halves * sizeof(uint16_t));
     j.d.dyt = (const uint32_t *)tn_ctx_alloc(ctx, dyt_words * sizeof(uint32_t));
     j.tmp = (uint16_t *)tn_ctx_alloc(ctx, (size_t)tn_get_threads() * 16 * j.d.Wq * sizeof(uint16_t));
-    colmap = (int *)tn_ctx_alloc(ctx, (size_t)j.Wp * sizeof(int));
+    j.colmap = tn__conv_amx_colmap(ctx, g, j.Wp);
     j.acc = tn__ctx_floats(ctx, (size_t)ntaps * ((j.d.cp + 31) / 32) * ((j.d.mp + 31) / 32) * 1024, 0);
-    if (!j.d.xh || !j.d.dyt || !j.tmp || !colmap || !j.acc) return 0;
+    if (!j.d.xh || !j.d.dyt || !j.tmp || !j.colmap || !j.acc) return 0;
     /* a band's input and dy rows: about 1 MiB, half of L2 */
     j.band = (int)(((size_t)1 << 20) / ((size_t)j.d.cp * j.d.Wr * 2 + (size_t)j.d.Wq / 2 * j.d.mp * 4));
     if (j.band < 1) j.band = 1;
-    for (h = 0; h < j.Wp; h++) colmap[h] = tn__conv_src(h, 0, 1, g->pad, 1, g->W, g->reflect);
-    j.colmap = colmap;
     tn__conv_amx_run(tn__conv_amxdw_prep_task, tn__conv_amxdw_task, &j, (double)N * M * g->OH * g->OW * ntaps * g->C);
     if (db) tn__bias_grad(db, dy, N, M, (size_t)g->OH * g->OW);
     return 1;
