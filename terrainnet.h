@@ -2863,6 +2863,9 @@ tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band);
 void tn__dm_seamless(const tn_image *h, float *out, int axis);
 #endif
 #ifndef TN_NO_STYLE
+/* ---- src/singan.c ---- */
+tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed);
+
 /* ---- src/style.c ---- */
 tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);
 void tn__style_band_outflow(tn_flow *f);
@@ -3980,15 +3983,6 @@ TN__SHARED int tn__reflect_whole(long long i, int n)
     m = i % p;
     if (m < 0) m += p;
     return (int)(m >= n ? p - m : m);
-}
-
-/* tn__reflect_whole of a position between samples: x mirrored into [0, n - 1]. */
-TN__SHARED float tn__reflect_whole_f(float x, int n)
-{
-    float p = 2.0f * (float)(n - 1);
-    if (n < 2) return 0;
-    x = fmodf(fabsf(x), p);
-    return x > (float)(n - 1) ? p - x : x;
 }
 
 /* ---- crop / pad ---------------------------------------------------------------------------- */
@@ -23822,9 +23816,20 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     return TN_OK;
 }
 
-/* Bends map by a random smooth warp: each pixel takes the map (mirrored at its border) at itself
-   plus a displacement of Gaussian-blurred noise (sigma `smooth` px), scaled to RMS `amp` px. */
-static tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed)
+/* The displacement d at x of an n px side, faded towards the border (tn__sg_warp). */
+static float tn__sg_warp_fade(float d, int x, int n, float amp)
+{
+    float m = 3 * amp, e = (float)(x < n - 1 - x ? x : n - 1 - x), f = e < m ? e / m : 1;
+    d = d > 2.5f * amp ? 2.5f * amp : d < -2.5f * amp ? -2.5f * amp : d;
+    d *= f;
+    return x + d < 0 ? -(float)x : x + d > n - 1 ? (float)(n - 1 - x) : d;
+}
+
+/* Bends map by a random smooth warp: each pixel takes the map at itself plus a displacement of
+   Gaussian-blurred noise (sigma `smooth` px), scaled to RMS `amp` px. Towards the border the
+   displacement across it fades (within 3 amp, capped at 2.5 amp), so the warp never reaches
+   outside: a mirrored read there folded the map into a straight crease along the border. */
+TN__INTERNAL tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed)
 {
     tn_image d = {0, 0, 0, NULL}, src = {0, 0, 0, NULL};
     size_t n = (size_t)map->width * map->height, i;
@@ -23843,8 +23848,8 @@ static tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t se
     for (y = 0; y < map->height; y++)
         for (x = 0; x < map->width; x++) {
             const float *v = &TN_PIXEL(&d, x, y, 0);
-            float sx = tn__reflect_whole_f((float)x + (float)rms[0] * v[0], map->width);
-            float sy = tn__reflect_whole_f((float)y + (float)rms[1] * v[1], map->height);
+            float sx = (float)x + tn__sg_warp_fade((float)rms[0] * v[0], x, map->width, amp);
+            float sy = (float)y + tn__sg_warp_fade((float)rms[1] * v[1], y, map->height, amp);
             TN_PIXEL(map, x, y, 0) = tn__sample_bilinear(&src, sx, sy, 0);
         }
 done:

@@ -287,15 +287,6 @@ TN__SHARED int tn__reflect_whole(long long i, int n)
     return (int)(m >= n ? p - m : m);
 }
 
-/* tn__reflect_whole of a position between samples: x mirrored into [0, n - 1]. */
-TN__SHARED float tn__reflect_whole_f(float x, int n)
-{
-    float p = 2.0f * (float)(n - 1);
-    if (n < 2) return 0;
-    x = fmodf(fabsf(x), p);
-    return x > (float)(n - 1) ? p - x : x;
-}
-
 /* ---- crop / pad ---------------------------------------------------------------------------- */
 
 /* Bilinear sample of channel c at (x, y), clamped to the image. */

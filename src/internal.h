@@ -213,6 +213,9 @@ tn_status tn__tg_collect_band(void *user, int y0, const tn_image *band);
 void tn__dm_seamless(const tn_image *h, float *out, int axis);
 #endif
 #ifndef TN_NO_STYLE
+/* ---- src/singan.c ---- */
+tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed);
+
 /* ---- src/style.c ---- */
 tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);
 void tn__style_band_outflow(tn_flow *f);

@@ -5,7 +5,9 @@
    inputs (a DEM smaller than the coarsest scale, a constant DEM, NaN, another method's model, a
    checkpoint as a model); the curvature loss brings the samples' Laplacian histogram closer to
    the example's, the spectrum loss the coarsest scale's power spectrum, the heights loss its
-   heights' histogram; GPNN, and its start for an output larger than the example. */
+   heights' histogram; GPNN, and its start for an output larger than the example; the layout's
+   warp never folds the map at its border. */
+#define TN_INTERNALS /* tn__sg_warp */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -128,6 +130,30 @@ static double mean_ssim_of_seeds(const tn_image *ex, tn_singan_gen_opts *g)
    differ, heights stay in the band; without any noise or warp it rebuilds the example, which a
    sample of the coarsest generator does not (the stored map is the example's, and it is the one
    used); the warp and the turn move it off the example; a layout scale past the model's is refused. */
+TN_TEST(the_warp_never_folds_at_the_border)
+{ /* a ramp stays a ramp: a fold (the map read mirrored beyond its border) turns it back.
+     Displacement RMS over smoothing as the layout's defaults (16 over 96 px) */
+    int axis, seed, x, y, bad = 0, moved = 0;
+    for (axis = 0; axis < 2; axis++)
+        for (seed = 1; seed <= 8; seed++) {
+            tn_image m = {0, 0, 0, NULL};
+            TN_CHECK(tn_image_create(&m, 64, 48, 1) == TN_OK);
+            for (y = 0; y < 48; y++)
+                for (x = 0; x < 64; x++) TN_PIXEL(&m, x, y, 0) = (float)(axis ? y : x);
+            TN_CHECK(tn__sg_warp(&m, 4.0f, 24.0f, (uint64_t)seed) == TN_OK);
+            for (y = 0; y < 48; y++)
+                for (x = 0; x < 64; x++) {
+                    float v = TN_PIXEL(&m, x, y, 0), prev = axis ? (y ? TN_PIXEL(&m, x, y - 1, 0) : -1) : (x ? TN_PIXEL(&m, x - 1, y, 0) : -1);
+                    bad += v < prev + 0.01f;
+                    moved += fabsf(v - (float)(axis ? y : x)) > 2;
+                }
+            bad += TN_PIXEL(&m, 0, 0, 0) != 0.0f;
+            tn_image_free(&m);
+        }
+    printf("# warp of 4 px RMS on 64 x 48 ramps: %d pixels moved by over 2 px, %d folds\n", moved, bad);
+    TN_CHECK(moved > 1000 && bad == 0);
+}
+
 TN_TEST(layout_from_the_example)
 {
     tn_image ex = tn_test_dem(24, 1), whole = {0, 0, 0, NULL}, tiled = {0, 0, 0, NULL}, other = {0, 0, 0, NULL}, plain = {0, 0, 0, NULL};
@@ -970,6 +996,7 @@ int main(void)
     TN_RUN(training_lowers_the_reconstruction_loss);
     TN_RUN(save_load_round_trip);
     TN_RUN(tile_equals_whole_map_and_seeds_differ);
+    TN_RUN(the_warp_never_folds_at_the_border);
     TN_RUN(layout_from_the_example);
     TN_RUN(prepared_windows_of_a_laid_out_map);
     TN_RUN(gate_keeps_the_example_plain_smooth);
