@@ -50,7 +50,7 @@
      - with --peer: the PyTorch SinGAN-like step once (../shared/peers/torch_singan_step.py),
      - --precision auto|bf16|fp32: the products' precision for training and sampling (tn_set_precision).
    Usage: bench_singan [--minutes M] [--threads N] [--precision P] [--pictures DIR] [--model DIR] [--extras] [--peer] [--no-singan] [--no-gpnn]
-                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--layout-turn T] [--gate -1] [--fine-noise K]
+                       [--layout 1] [--layout-scale K] [--layout-noise S] [--layout-warp PX] [--layout-smooth PX] [--layout-turn T] [--layout-blocks N] [--gate -1] [--fine-noise K]
                        [--patch P] [--disc-layers N] [--noise-amp A] [--adv-weight W] [--d-steps N] [--curv-weight W] [--spec-weight W] [--height-weight W] [--coarsest PX] [--channels N] [--dequantize N]
                        [--gpnn-patch P] [--gpnn-coarsest PX] [--gpnn-noise S] [REGION ...]
    (default: every region of `regions` below but those run only when named, M = 10, 2 threads) */
@@ -552,7 +552,7 @@ static int g_layout, g_layout_scale;        /* > 0: also samples laid out by GPN
 static int g_gate;                          /* tn_singan_gen_opts.gate of every sample (-1: off) */
 static float g_fine_noise;                  /* tn_singan_gen_opts.fine_noise of every sample (0: default) */
 static float g_layout_noise, g_layout_warp, g_layout_smooth;
-static int g_layout_turn;
+static int g_layout_turn, g_layout_blocks;
 static int g_extras, g_singan = 1, g_gpnn = 1;
 static tn_singan_opts g_opts; /* knobs from the command line (zero = defaults) */
 static tn_gpnn_opts g_gopts;
@@ -689,6 +689,7 @@ static void bench_region(const region *rg, double minutes, int threads)
         g.layout_warp = g_layout_warp;
         g.layout_smooth = g_layout_smooth;
         g.layout_turn = g_layout_turn;
+        g.layout_blocks = g_layout_blocks;
         g.layout_scale = g_layout_scale;
         g.gate = g_gate;
         g.fine_noise = g_fine_noise;
@@ -867,6 +868,7 @@ int main(int argc, char **argv)
         else if (!strcmp(a, "--layout-scale") && v) g_layout_scale = atoi(argv[++i]);
         else if (!strcmp(a, "--layout-smooth") && v) g_layout_smooth = (float)atof(argv[++i]);
         else if (!strcmp(a, "--layout-turn") && v) g_layout_turn = atoi(argv[++i]);
+        else if (!strcmp(a, "--layout-blocks") && v) g_layout_blocks = atoi(argv[++i]);
         else if (!strcmp(a, "--gate") && v) g_gate = atoi(argv[++i]);
         else if (!strcmp(a, "--fine-noise") && v) g_fine_noise = (float)atof(argv[++i]);
         else if (!strcmp(a, "--gpnn-patch") && v) g_gopts.patch = atoi(argv[++i]);

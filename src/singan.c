@@ -128,6 +128,10 @@ typedef struct tn_singan_gen_opts {
     int layout_scale;      /* the first scale that runs on the layout, 1..scales-1 (1: the layout replaces the
                               coarsest scale); 0 = 3, at most scales - 1 */
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
+    int layout_blocks;     /* GPNN starts the layout from a quilt of n x n blocks of the example, with GPNN's
+                              completeness term so that no part repeats: a new arrangement of the example's
+                              parts (tn_gpnn_opts.blocks, alpha 0.005); 0 = 2, < 0 = from the example itself
+                              (its own arrangement, bent and turned) */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
     int layout_turn;       /* the layout is given one of its mirror images, drawn from the seed: 1 = one of 4
@@ -211,6 +215,10 @@ typedef struct tn_gpnn_opts {
     int extend;            /* an output larger than the example starts from: 0 = the example's coarsest scale
                               stretched to it (GPNN's retargeting: features grow with the output); 1 = blocks
                               of it at random places (features keep the example's size) */
+    int blocks;            /* > 0: the coarsest scale starts from a quilt of blocks of 1 / blocks of the
+                              example's smaller side, from places of it mirrored at its border that continue
+                              the blocks beside them but are not their continuation in the example (its
+                              parts rearranged, at any output size); 0 = as `extend` says */
 } tn_gpnn_opts;
 
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
@@ -321,6 +329,7 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->layout_smooth == 0) o->layout_smooth = 96.0f;
     if (o->layout_turn == 0) o->layout_turn = 1;
     if (o->layout_turn < 0) o->layout_turn = 0;
+    if (o->layout_blocks == 0) o->layout_blocks = 2;
     if (o->gate == 0) o->gate = 1;
     if (o->gate < 0) o->gate = 0;
 }
@@ -1845,11 +1854,12 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if ((st = tn__sg_arch_of(model, A))) return st;
     if (!isfinite(o->noise) || o->noise > 100 || !(o->fine_noise <= 100) || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
         o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
-        o->layout_turn > 2 || o->gate > 1)
+        o->layout_turn > 2 || o->layout_blocks > 64 || o->gate > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, fine noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, "
-                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0..2, gate %d 0 or 1)",
+                        "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0..2, "
+                        "layout blocks %d <= 64, gate %d 0 or 1)",
                         (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth,
-                        o->layout_turn, o->gate);
+                        o->layout_turn, o->layout_blocks, o->gate);
     memset(r, 0, sizeof *r);
     r->A = A;
     r->g = model->weights;
@@ -2162,6 +2172,8 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     go.seed = o->seed;
     go.noise = o->layout_noise;
     go.extend = 1;
+    go.blocks = o->layout_blocks > 0 ? o->layout_blocks : 0;
+    go.alpha = o->layout_blocks > 0 ? 0.005f : 0; /* without it, blocks' seams drew rows of the same scarp */
     go.coarsest = cw < ch ? cw : ch;
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
     tn_rng_seed(&rng, o->seed, 0x7475726eULL);
@@ -2495,28 +2507,95 @@ static void tn__gp_fold(const float *val, int vw, int P, const int *nnf, int w, 
     for (p = 0; p < n; p++) img[p] /= cnt[p];
 }
 
-/* *y = a w x h map of blocks of ex (its smaller side) taken at random places of ex mirrored
-   about its border (uniform over the mirror period, so every part of ex is drawn as often; a
-   start inside ex only drew its far sides twice): GPNN's start for an output larger than the
-   example, at the example's scale. */
-static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, tn_rng *rng)
+/* ex at (sx, sy) of its mirror period (2 n - 2 per side): every part of ex, mirrored or not. */
+static float tn__gp_mirrored(const tn_image *ex, int sx, int sy)
 {
-    int B = ex->width < ex->height ? ex->width : ex->height, bx, by, x, y0, nbx, nby;
+    return ex->data[(size_t)tn__reflect_whole(sy, ex->height) * ex->width + tn__reflect_whole(sx, ex->width)];
+}
+
+/* The distance of a and b on a circle of p. */
+static int tn__gp_wrapdist(int a, int b, int p)
+{
+    int d = ((a - b) % p + p) % p;
+    return d < p - d ? d : p - d;
+}
+
+/* The source of block (x0, y0) of side B in a quilt: among up to 1024 random places of ex's
+   mirror period, one whose surroundings in ex match what the left and upper blocks already
+   placed in y (a strip of B / 4 px; Efros and Freeman's quilting: any within 10 % of the best),
+   but not their own continuation, which would rebuild ex. Blocks then meet at the level and
+   slope they have on both sides, without steps at the blocks' period. */
+static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int y0, int B, const int *left, const int *up, tn_rng *rng, int *ox,
+                              int *oy)
+{
+    int pw = ex->width > 1 ? 2 * ex->width - 2 : 1, ph = ex->height > 1 ? 2 * ex->height - 2 : 1, ov = B / 4 > 1 ? B / 4 : 1, c, n = 1024;
+    int cx[1024], cy[1024];
+    float err[1024], best = FLT_MAX;
+    int chosen = 0, k, m = 0;
+    for (c = 0; c < n; c++) {
+        int sx = (int)tn_rng_below(rng, (uint32_t)pw), sy = (int)tn_rng_below(rng, (uint32_t)ph), i, j;
+        float e = 0;
+        cx[c] = sx;
+        cy[c] = sy;
+        err[c] = FLT_MAX;
+        if ((left && tn__gp_wrapdist(sx, left[0] + B, pw) <= B / 2 && tn__gp_wrapdist(sy, left[1], ph) <= B / 2) ||
+            (up && tn__gp_wrapdist(sx, up[0], pw) <= B / 2 && tn__gp_wrapdist(sy, up[1] + B, ph) <= B / 2))
+            continue;
+        for (j = 0; left && j < B && y0 + j < y->height; j++)
+            for (i = 1; i <= ov && x0 - i >= 0; i++) {
+                float d = y->data[(size_t)(y0 + j) * y->width + x0 - i] - tn__gp_mirrored(ex, sx - i, sy + j);
+                e += d * d;
+            }
+        for (j = 1; up && j <= ov && y0 - j >= 0; j++)
+            for (i = 0; i < B && x0 + i < y->width; i++) {
+                float d = y->data[(size_t)(y0 - j) * y->width + x0 + i] - tn__gp_mirrored(ex, sx + i, sy - j);
+                e += d * d;
+            }
+        err[c] = e;
+        if (e < best) best = e;
+    }
+    for (k = 0; k < n; k++) m += err[k] <= 1.1f * best;
+    if (m > 0) {
+        int pick = (int)tn_rng_below(rng, (uint32_t)m);
+        for (k = 0; k < n; k++)
+            if (err[k] <= 1.1f * best && pick-- == 0) {
+                chosen = k;
+                break;
+            }
+    }
+    *ox = cx[chosen];
+    *oy = cy[chosen];
+}
+
+/* *y = a w x h map of blocks of ex of side B, taken from ex mirrored about its border (uniform
+   over the mirror period, so every part of ex is drawn as often; a start inside ex only drew its
+   far sides twice): at random places, or with quilt as tn__gp_quilt_pick chooses. GPNN's start
+   for an output larger than the example (blocks of its smaller side) or for a new arrangement
+   of its parts (tn_gpnn_opts.blocks). */
+static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, int B, int quilt, tn_rng *rng)
+{
+    int bx, by, x, y0, nbx, nby, *src;
     tn_status st = tn_image_create(y, w, h, 1);
     if (st) return st;
     if (B < 1) B = 1;
     nbx = (w + B - 1) / B;
     nby = (h + B - 1) / B;
+    if (!(src = (int *)tn__alloc((size_t)nbx * nby * 2 * sizeof(int)))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
     for (by = 0; by < nby; by++)
         for (bx = 0; bx < nbx; bx++) {
-            int ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
-            int oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
+            int *o = src + 2 * ((size_t)by * nbx + bx), ox, oy;
+            if (quilt && (bx || by))
+                tn__gp_quilt_pick(y, ex, bx * B, by * B, B, bx ? o - 2 : NULL, by ? o - 2 * nbx : NULL, rng, &ox, &oy);
+            else {
+                ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
+                oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
+            }
+            o[0] = ox;
+            o[1] = oy;
             for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
-                for (x = bx * B; x < w && x < (bx + 1) * B; x++) {
-                    int sx = tn__reflect_whole(x - bx * B + ox, ex->width), sy = tn__reflect_whole(y0 - by * B + oy, ex->height);
-                    y->data[(size_t)y0 * w + x] = ex->data[(size_t)sy * ex->width + sx];
-                }
+                for (x = bx * B; x < w && x < (bx + 1) * B; x++) y->data[(size_t)y0 * w + x] = tn__gp_mirrored(ex, x - bx * B + ox, y0 - by * B + oy);
         }
+    TN_FREE(src);
     return TN_OK;
 }
 
@@ -2541,10 +2620,10 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
     if (o.noise < 0) o.noise = 0;
     P = o.patch;
     if (P < 3 || P > 15 || !(P & 1) || o.coarsest < P || o.coarsest > 4096 || !(o.factor >= 0.5f && o.factor <= 0.9f) || o.iters < 1 ||
-        o.iters > 1000 || !(o.noise <= 100) || !(o.alpha >= 0 && o.alpha <= 1e6f) || o.extend < 0 || o.extend > 1)
+        o.iters > 1000 || !(o.noise <= 100) || !(o.alpha >= 0 && o.alpha <= 1e6f) || o.extend < 0 || o.extend > 1 || o.blocks < 0 || o.blocks > 64)
         return tn__fail(TN_ERR_INVALID_ARG, "gpnn: bad option (patch %d odd in 3..15, coarsest %d >= patch, factor %g in 0.5..0.9, iters %d in 1..1000, "
-                        "noise %g <= 100, alpha %g in 0..1e6, extend %d 0 or 1)", o.patch, o.coarsest, (double)o.factor, o.iters, (double)o.noise,
-                        (double)o.alpha, o.extend);
+                        "noise %g <= 100, alpha %g in 0..1e6, extend %d 0 or 1, blocks %d in 0..64)", o.patch, o.coarsest, (double)o.factor, o.iters,
+                        (double)o.noise, (double)o.alpha, o.extend, o.blocks);
     if ((st = tn__sg_check_dem(example, o.coarsest, &lo, &hi))) return st;
     if (w < 1 || h < 1 || w > (1 << 14) || h > (1 << 14)) return tn__fail(TN_ERR_INVALID_ARG, "gpnn: output %d x %d (sides 1..16384)", w, h);
     {
@@ -2585,8 +2664,10 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
         size_t nq = (size_t)qnx * qny, nk = (size_t)knx * kny;
         int exact = (double)nq * nk * d <= 3e8;
         if (L == 0) { /* the example's coarsest scale at the output's size, plus noise */
-            if (ow == kw && oh == kh) st = tn_image_copy(&y, &ex[0]);
-            else if (o.extend && (ow > kw || oh > kh)) st = tn__gp_blocks(&y, &ex[0], ow, oh, &rng);
+            int side = kw < kh ? kw : kh;
+            if (o.blocks > 0) st = tn__gp_blocks(&y, &ex[0], ow, oh, (side + o.blocks - 1) / o.blocks, 1, &rng);
+            else if (ow == kw && oh == kh) st = tn_image_copy(&y, &ex[0]);
+            else if (o.extend && (ow > kw || oh > kh)) st = tn__gp_blocks(&y, &ex[0], ow, oh, side, 0, &rng);
             else st = tn_image_resize(&y, &ex[0], ow, oh, TN_RESIZE_BICUBIC);
             for (i = 0; !st && i < (size_t)ow * oh; i++) y.data[i] += o.noise * (float)sqrt(var) * tn_rng_normal(&rng);
             if (!st) st = tn_image_copy(&keys, &ex[0]);

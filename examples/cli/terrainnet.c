@@ -1642,6 +1642,9 @@ static const cli_opt singan_sample_opts[] = {
      "with --layout: the layout mirrored by the seed: 1 = in x, y, both or neither (any pixel shape); 2 = the quarter turns too "
      "(square pixels only); -1 = as the example",
      "1"},
+    {"layout-blocks", 0, ARG_INT, 0, &singan_gen_arg.g.layout_blocks, NULL, -1, 64, "N",
+     "with --layout: GPNN starts from N x N blocks of the example from random places, a new arrangement of its parts "
+     "(-1: from the example itself, its own arrangement bent and turned)", "2"},
 };
 static const cli_opt singan_refine_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
