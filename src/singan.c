@@ -121,17 +121,17 @@ typedef struct tn_singan_gen_opts {
                               laid-out maps, refinement and upscaling. The finest generator passes part of its
                               noise on, and a free sample's gate keeps that grain at the example's detail RMS */
     int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
-    int layout;            /* sample: 1 = the example itself, rearranged by patch nearest neighbours (GPNN) and
-                              bent by a random smooth warp on the grid of scale layout_scale - 1, is that scale's
+    int layout;            /* sample: 1 = the example itself (or its parts: layout_blocks), rearranged by patch
+                              nearest neighbours (GPNN) and bent by a random smooth warp on the grid of scale layout_scale - 1, is that scale's
                               output; the finer scales add SinGAN's detail; the map is then finite (origin (0, 0)
                               only). 0 = the coarsest generator (infinite terrain) */
     int layout_scale;      /* the first scale that runs on the layout, 1..scales-1 (1: the layout replaces the
                               coarsest scale); 0 = 3, at most scales - 1 */
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
-    int layout_blocks;     /* GPNN starts the layout from a quilt of n x n blocks of the example, with GPNN's
-                              completeness term so that no part repeats: a new arrangement of the example's
-                              parts (tn_gpnn_opts.blocks, alpha 0.005); 0 = 2, < 0 = from the example itself
-                              (its own arrangement, bent and turned) */
+    int layout_blocks;     /* n > 0: GPNN starts the layout from a quilt of n x n blocks of the example, with
+                              GPNN's completeness term so that no part repeats: a new arrangement of the
+                              example's parts (tn_gpnn_opts.blocks, alpha 0.005; 2 is what docs/singan.md
+                              measured); 0 = from the example itself (its own arrangement, bent and turned) */
     float layout_warp;     /* RMS displacement of the layout's warp, in the sample's px; 0 = 16, < 0 = none */
     float layout_smooth;   /* the warp's Gaussian smoothing, in the sample's px; 0 = 96 */
     int layout_turn;       /* the layout is given one of its mirror images, drawn from the seed: 1 = one of 4
@@ -329,7 +329,6 @@ TN_API void tn_singan_gen_defaults(tn_singan_gen_opts *o)
     if (o->layout_smooth == 0) o->layout_smooth = 96.0f;
     if (o->layout_turn == 0) o->layout_turn = 1;
     if (o->layout_turn < 0) o->layout_turn = 0;
-    if (o->layout_blocks == 0) o->layout_blocks = 2;
     if (o->gate == 0) o->gate = 1;
     if (o->gate < 0) o->gate = 0;
 }
@@ -1854,10 +1853,10 @@ static tn_status tn__sg_gen_prepare(const tn_singan *model, const tn_singan_gen_
     if ((st = tn__sg_arch_of(model, A))) return st;
     if (!isfinite(o->noise) || o->noise > 100 || !(o->fine_noise <= 100) || o->tile > 4096 || o->layout < 0 || o->layout > 1 || !(o->layout_noise <= 100) ||
         o->layout_scale < 0 || o->layout_scale > TN_SINGAN_MAX_SCALES || !(o->layout_warp <= 4096) || !(o->layout_smooth > 0 && o->layout_smooth <= 4096) ||
-        o->layout_turn > 2 || o->layout_blocks > 64 || o->gate > 1)
+        o->layout_turn > 2 || o->layout_blocks < 0 || o->layout_blocks > 64 || o->gate > 1)
         return tn__fail(TN_ERR_INVALID_ARG, "singan: bad generation option (noise %g <= 100, fine noise %g <= 100, tile %d <= 4096, layout %d 0 or 1, "
                         "layout noise %g <= 100, layout scale %d, layout warp %g <= 4096 px, layout smooth %g in (0, 4096] px, layout turn %d 0..2, "
-                        "layout blocks %d <= 64, gate %d 0 or 1)",
+                        "layout blocks %d in 0..64, gate %d 0 or 1)",
                         (double)o->noise, (double)o->fine_noise, o->tile, o->layout, (double)o->layout_noise, o->layout_scale, (double)o->layout_warp, (double)o->layout_smooth,
                         o->layout_turn, o->layout_blocks, o->gate);
     memset(r, 0, sizeof *r);
@@ -2520,20 +2519,20 @@ static int tn__gp_wrapdist(int a, int b, int p)
     return d < p - d ? d : p - d;
 }
 
-/* The source of block (x0, y0) of side B in a quilt: among up to 1024 random places of ex's
-   mirror period, one whose surroundings in ex match what the left and upper blocks already
-   placed in y (a strip of B / 4 px; Efros and Freeman's quilting: any within 10 % of the best),
-   but not their own continuation, which would rebuild ex. Blocks then meet at the level and
-   slope they have on both sides, without steps at the blocks' period. */
-static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int y0, int B, const int *left, const int *up, tn_rng *rng, int *ox,
-                              int *oy)
+/* The source of block (x0, y0) of side B in a quilt, which reaches ovl px left and ovu px up
+   into the blocks already placed in y: among up to 1024 random places of ex's mirror period,
+   one whose surroundings in ex match that overlap (Efros and Freeman's quilting: any within
+   10 % of the best), but not the left or upper block's own continuation, which would rebuild
+   ex. Blocks then meet at the level and slope they have on both sides. */
+static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int y0, int B, int ovl, int ovu, const int *left, const int *up,
+                              tn_rng *rng, int *ox, int *oy)
 {
-    int pw = ex->width > 1 ? 2 * ex->width - 2 : 1, ph = ex->height > 1 ? 2 * ex->height - 2 : 1, ov = B / 4 > 1 ? B / 4 : 1, c, n = 1024;
+    int pw = ex->width > 1 ? 2 * ex->width - 2 : 1, ph = ex->height > 1 ? 2 * ex->height - 2 : 1, c, n = 1024;
     int cx[1024], cy[1024];
     float err[1024], best = FLT_MAX;
     int chosen = 0, k, m = 0;
     for (c = 0; c < n; c++) {
-        int sx = (int)tn_rng_below(rng, (uint32_t)pw), sy = (int)tn_rng_below(rng, (uint32_t)ph), i, j;
+        int sx = (int)tn_rng_below(rng, (uint32_t)pw), sy = (int)tn_rng_below(rng, (uint32_t)ph), u, v;
         float e = 0;
         cx[c] = sx;
         cy[c] = sy;
@@ -2541,16 +2540,12 @@ static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int
         if ((left && tn__gp_wrapdist(sx, left[0] + B, pw) <= B / 2 && tn__gp_wrapdist(sy, left[1], ph) <= B / 2) ||
             (up && tn__gp_wrapdist(sx, up[0], pw) <= B / 2 && tn__gp_wrapdist(sy, up[1] + B, ph) <= B / 2))
             continue;
-        for (j = 0; left && j < B && y0 + j < y->height; j++)
-            for (i = 1; i <= ov && x0 - i >= 0; i++) {
-                float d = y->data[(size_t)(y0 + j) * y->width + x0 - i] - tn__gp_mirrored(ex, sx - i, sy + j);
-                e += d * d;
-            }
-        for (j = 1; up && j <= ov && y0 - j >= 0; j++)
-            for (i = 0; i < B && x0 + i < y->width; i++) {
-                float d = y->data[(size_t)(y0 - j) * y->width + x0 + i] - tn__gp_mirrored(ex, sx + i, sy - j);
-                e += d * d;
-            }
+        for (v = y0 - ovu; v < y0 + B && v < y->height; v++)
+            for (u = x0 - ovl; u < x0 + B && u < y->width; u++)
+                if (u < x0 || v < y0) {
+                    float d = y->data[(size_t)v * y->width + u] - tn__gp_mirrored(ex, sx + u - x0, sy + v - y0);
+                    e += d * d;
+                }
         err[c] = e;
         if (e < best) best = e;
     }
@@ -2567,36 +2562,119 @@ static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int
     *oy = cy[chosen];
 }
 
+/* The cheapest path across a rows x cols cost grid (row-major), one column per row, moving at
+   most one column between rows: path[r] = its column in row r. tmp holds rows x cols. */
+static void tn__gp_min_cut(const float *cost, int rows, int cols, float *tmp, int *path)
+{
+    int r, c;
+    for (c = 0; c < cols; c++) tmp[c] = cost[c];
+    for (r = 1; r < rows; r++)
+        for (c = 0; c < cols; c++) {
+            float b = tmp[(size_t)(r - 1) * cols + c];
+            if (c > 0 && tmp[(size_t)(r - 1) * cols + c - 1] < b) b = tmp[(size_t)(r - 1) * cols + c - 1];
+            if (c + 1 < cols && tmp[(size_t)(r - 1) * cols + c + 1] < b) b = tmp[(size_t)(r - 1) * cols + c + 1];
+            tmp[(size_t)r * cols + c] = cost[(size_t)r * cols + c] + b;
+        }
+    path[rows - 1] = 0;
+    for (c = 1; c < cols; c++)
+        if (tmp[(size_t)(rows - 1) * cols + c] < tmp[(size_t)(rows - 1) * cols + path[rows - 1]]) path[rows - 1] = c;
+    for (r = rows - 2; r >= 0; r--) {
+        int p = path[r + 1], b = p;
+        if (p > 0 && tmp[(size_t)r * cols + p - 1] < tmp[(size_t)r * cols + b]) b = p - 1;
+        if (p + 1 < cols && tmp[(size_t)r * cols + p + 1] < tmp[(size_t)r * cols + b]) b = p + 1;
+        path[r] = b;
+    }
+}
+
+/* Writes block (x0, y0) of side B from ex at (sx, sy) into y, over its overlap of ovl px left and
+   ovu px up only beyond the cheapest cut through the squared difference there (Efros and
+   Freeman), so blocks meet along a winding seam where they agree, not along a straight line. */
+static tn_status tn__gp_quilt_place(tn_image *y, const tn_image *ex, int x0, int y0, int B, int ovl, int ovu, int sx, int sy)
+{
+    int rx = x0 - ovl, ry = y0 - ovu, rw = (x0 + B < y->width ? x0 + B : y->width) - rx, rh = (y0 + B < y->height ? y0 + B : y->height) - ry, u, v;
+    size_t n = (size_t)rw * rh;
+    float *cost = (float *)tn__alloc(3 * n * sizeof(float)), *tmp = cost + n, *val = tmp + n;
+    int *cut = (int *)tn__alloc((size_t)(rw + rh) * sizeof(int));
+    if (!cost || !cut) {
+        TN_FREE(cost);
+        TN_FREE(cut);
+        return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+    }
+    for (v = 0; v < rh; v++)
+        for (u = 0; u < rw; u++) {
+            float d;
+            val[(size_t)v * rw + u] = tn__gp_mirrored(ex, sx + rx + u - x0, sy + ry + v - y0);
+            d = y->data[(size_t)(ry + v) * y->width + rx + u] - val[(size_t)v * rw + u];
+            cost[(size_t)v * rw + u] = d * d;
+        }
+    if (ovl > 0) { /* down the left overlap: columns 0..ovl-1 of every row */
+        float *c2 = (float *)tn__alloc((size_t)rh * ovl * sizeof(float));
+        if (!c2) {
+            TN_FREE(cost);
+            TN_FREE(cut);
+            return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+        }
+        for (v = 0; v < rh; v++)
+            for (u = 0; u < ovl; u++) c2[(size_t)v * ovl + u] = cost[(size_t)v * rw + u];
+        tn__gp_min_cut(c2, rh, ovl, tmp, cut);
+        TN_FREE(c2);
+        for (v = 0; v < rh; v++)
+            for (u = 0; u <= cut[v]; u++) cost[(size_t)v * rw + u] = -1; /* keeps the old */
+    }
+    if (ovu > 0) { /* across the upper overlap: rows 0..ovu-1 of every column, as a transposed grid */
+        float *c2 = (float *)tn__alloc((size_t)rw * ovu * sizeof(float));
+        if (!c2) {
+            TN_FREE(cost);
+            TN_FREE(cut);
+            return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+        }
+        for (u = 0; u < rw; u++)
+            for (v = 0; v < ovu; v++) c2[(size_t)u * ovu + v] = cost[(size_t)v * rw + u] < 0 ? 0 : cost[(size_t)v * rw + u];
+        tn__gp_min_cut(c2, rw, ovu, tmp, cut + rh);
+        TN_FREE(c2);
+        for (u = 0; u < rw; u++)
+            for (v = 0; v <= cut[rh + u]; v++) cost[(size_t)v * rw + u] = -1;
+    }
+    for (v = 0; v < rh; v++)
+        for (u = 0; u < rw; u++)
+            if (cost[(size_t)v * rw + u] >= 0) y->data[(size_t)(ry + v) * y->width + rx + u] = val[(size_t)v * rw + u];
+    TN_FREE(cost);
+    TN_FREE(cut);
+    return TN_OK;
+}
+
 /* *y = a w x h map of blocks of ex of side B, taken from ex mirrored about its border (uniform
    over the mirror period, so every part of ex is drawn as often; a start inside ex only drew its
-   far sides twice): at random places, or with quilt as tn__gp_quilt_pick chooses. GPNN's start
-   for an output larger than the example (blocks of its smaller side) or for a new arrangement
-   of its parts (tn_gpnn_opts.blocks). */
+   far sides twice): at random places, or with quilt a quilt (tn__gp_quilt_pick, _place) whose
+   blocks reach half their side into the ones before. GPNN's start for an output larger than the
+   example (blocks of its smaller side) or for a new arrangement of its parts (tn_gpnn_opts.blocks). */
 static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, int B, int quilt, tn_rng *rng)
 {
-    int bx, by, x, y0, nbx, nby, *src;
+    int bx, by, x, y0, nbx, nby, *src, ov;
     tn_status st = tn_image_create(y, w, h, 1);
     if (st) return st;
     if (B < 1) B = 1;
+    ov = B / 2;
     nbx = (w + B - 1) / B;
     nby = (h + B - 1) / B;
     if (!(src = (int *)tn__alloc((size_t)nbx * nby * 2 * sizeof(int)))) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
-    for (by = 0; by < nby; by++)
-        for (bx = 0; bx < nbx; bx++) {
+    for (by = 0; by < nby && !st; by++)
+        for (bx = 0; bx < nbx && !st; bx++) {
             int *o = src + 2 * ((size_t)by * nbx + bx), ox, oy;
-            if (quilt && (bx || by))
-                tn__gp_quilt_pick(y, ex, bx * B, by * B, B, bx ? o - 2 : NULL, by ? o - 2 * nbx : NULL, rng, &ox, &oy);
-            else {
+            if (quilt && (bx || by) && ov > 0) {
+                tn__gp_quilt_pick(y, ex, bx * B, by * B, B, bx ? ov : 0, by ? ov : 0, bx ? o - 2 : NULL, by ? o - 2 * nbx : NULL, rng, &ox, &oy);
+                st = tn__gp_quilt_place(y, ex, bx * B, by * B, B, bx ? ov : 0, by ? ov : 0, ox, oy);
+            } else {
                 ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
                 oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
+                for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
+                    for (x = bx * B; x < w && x < (bx + 1) * B; x++) y->data[(size_t)y0 * w + x] = tn__gp_mirrored(ex, x - bx * B + ox, y0 - by * B + oy);
             }
             o[0] = ox;
             o[1] = oy;
-            for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
-                for (x = bx * B; x < w && x < (bx + 1) * B; x++) y->data[(size_t)y0 * w + x] = tn__gp_mirrored(ex, x - bx * B + ox, y0 - by * B + oy);
         }
     TN_FREE(src);
-    return TN_OK;
+    return st;
 }
 
 TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, int h, const tn_gpnn_opts *opts)

@@ -182,26 +182,26 @@ TN_TEST(layout_from_the_example)
     g.layout_noise = -1;
     g.layout_warp = -1;
     g.layout_turn = -1;
-    g.layout_blocks = -1; /* from the example itself */
     TN_CHECK(tn_singan_sample(&whole, &trained, 0, 0, 24, 24, &g) == TN_OK);
     g.layout = 0;
     TN_CHECK(tn_singan_sample(&plain, &trained, 0, 0, 24, 24, &g) == TN_OK);
     TN_CHECK(tn_ssim(&s_layout, &ex, &whole, ehi - elo) == TN_OK && tn_ssim(&s_plain, &ex, &plain, ehi - elo) == TN_OK);
     printf("# layout without noise: SSIM to the example %.3f (the coarsest generator's: %.3f)\n", s_layout, s_plain);
     TN_CHECK(s_layout > 0.8 && s_layout > s_plain + 0.2);
-    { /* from blocks (the default): the example's parts rearranged, not the example */
+    { /* from a quilt: the example's parts rearranged, not the example, within its
+         heights; on this 12 px grid some seeds' quilts still fall back into the example's order */
         tn_image re = {0, 0, 0, NULL};
-        double s_re = 0;
+        double mean;
         g.layout = 1;
-        g.layout_blocks = 0;
-        TN_CHECK(tn_singan_sample(&re, &trained, 0, 0, 24, 24, &g) == TN_OK);
-        TN_CHECK(tn_ssim(&s_re, &ex, &re, ehi - elo) == TN_OK);
-        printf("# layout from 2 x 2 blocks without noise: SSIM to the example %.3f\n", s_re);
-        TN_CHECK(s_re < s_layout - 0.3);
+        g.layout_blocks = 2;
+        mean = mean_ssim_of_seeds(&ex, &g);
+        printf("# layout from a quilt of 2 x 2 blocks without noise: mean SSIM to the example over 8 seeds %.3f\n", mean);
+        TN_CHECK(mean < s_layout - 0.2);
         g.layout_blocks = 65;
         TN_CHECK(tn_singan_sample(&re, &trained, 0, 0, 24, 24, &g) == TN_ERR_INVALID_ARG);
-        g.layout_blocks = -1;
+        g.layout_blocks = 0;
         g.layout = 0;
+        g.seed = 12;
         tn_image_free(&re);
     }
     g.layout = 1; /* finite: no other origin; one kind of layout */

@@ -1629,7 +1629,7 @@ static const cli_opt singan_sample_opts[] = {
     {"fine-noise", 0, ARG_FLOAT, 0, &singan_gen_arg.g.fine_noise, NULL, -1, 100, "K",
      "a further multiplier of the finest generator's noise (1: as trained; < 0: none)", "0.7 (1 with --layout)"},
     {"layout", 0, ARG_FLAG, 0, &singan_gen_arg.g.layout, NULL, 0, 0, NULL,
-     "the example's own arrangement, rearranged by patches (GPNN) and bent by a smooth warp, under SinGAN's finer scales; "
+     "the example's own arrangement (or its parts in a new one: --layout-blocks), rearranged by patches (GPNN) and bent by a smooth warp, under SinGAN's finer scales; "
      "a finite map (origin 0 0, or --map)", NULL},
     {"map", 0, ARG_WXH, 0, &singan_gen_arg.mw, &singan_gen_arg.mh, 1, 1 << 20, "WxH",
      "the whole map, of which --origin and --size give a window (a laid-out map is made once, then only the window is generated; "
@@ -1642,9 +1642,9 @@ static const cli_opt singan_sample_opts[] = {
      "with --layout: the layout mirrored by the seed: 1 = in x, y, both or neither (any pixel shape); 2 = the quarter turns too "
      "(square pixels only); -1 = as the example",
      "1"},
-    {"layout-blocks", 0, ARG_INT, 0, &singan_gen_arg.g.layout_blocks, NULL, -1, 64, "N",
-     "with --layout: GPNN starts from N x N blocks of the example from random places, a new arrangement of its parts "
-     "(-1: from the example itself, its own arrangement bent and turned)", "2"},
+    {"layout-blocks", 0, ARG_INT, 0, &singan_gen_arg.g.layout_blocks, NULL, 0, 64, "N",
+     "with --layout: GPNN starts from a quilt of N x N blocks of the example, a new arrangement of its parts (2 is what "
+     "docs/singan.md measured; 0: from the example itself, its own arrangement bent and turned)", "0"},
 };
 static const cli_opt singan_refine_opts[] = {
     {"MODEL.tnw", 0, ARG_POS, 0, &singan_gen_arg.model, NULL, 0, 0, NULL, "a model from singan-train", NULL},
