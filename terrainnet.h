@@ -24543,11 +24543,32 @@ static void tn__gp_min_cut(const float *cost, int rows, int cols, float *tmp, in
     }
 }
 
+/* Marks with -1 the pixels of a rw x rh cost grid on the old side of the cheapest cut through
+   an overlap ov px wide: down its left ov columns (across 0) or across its upper ov rows
+   (across 1); pixels marked already cost 0. tmp and cut hold rw * rh and rw + rh. */
+static tn_status tn__gp_cut_overlap(float *cost, int rw, int rh, int ov, int across, float *tmp, int *cut)
+{
+    int n = across ? rw : rh, i, j;
+    float *c2 = (float *)tn__alloc((size_t)n * ov * sizeof(float));
+    if (!c2) return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
+    for (i = 0; i < n; i++)
+        for (j = 0; j < ov; j++) {
+            float c = across ? cost[(size_t)j * rw + i] : cost[(size_t)i * rw + j];
+            c2[(size_t)i * ov + j] = c < 0 ? 0 : c;
+        }
+    tn__gp_min_cut(c2, n, ov, tmp, cut);
+    TN_FREE(c2);
+    for (i = 0; i < n; i++)
+        for (j = 0; j <= cut[i]; j++) *(across ? &cost[(size_t)j * rw + i] : &cost[(size_t)i * rw + j]) = -1;
+    return TN_OK;
+}
+
 /* Writes block (x0, y0) of side B from ex at (sx, sy) into y, over its overlap of ovl px left and
    ovu px up only beyond the cheapest cut through the squared difference there (Efros and
    Freeman), so blocks meet along a winding seam where they agree, not along a straight line. */
 static tn_status tn__gp_quilt_place(tn_image *y, const tn_image *ex, int x0, int y0, int B, int ovl, int ovu, int sx, int sy)
 {
+    tn_status st;
     int rx = x0 - ovl, ry = y0 - ovu, rw = (x0 + B < y->width ? x0 + B : y->width) - rx, rh = (y0 + B < y->height ? y0 + B : y->height) - ry, u, v;
     size_t n = (size_t)rw * rh;
     float *cost = (float *)tn__alloc(3 * n * sizeof(float)), *tmp = cost + n, *val = tmp + n;
@@ -24564,33 +24585,10 @@ static tn_status tn__gp_quilt_place(tn_image *y, const tn_image *ex, int x0, int
             d = y->data[(size_t)(ry + v) * y->width + rx + u] - val[(size_t)v * rw + u];
             cost[(size_t)v * rw + u] = d * d;
         }
-    if (ovl > 0) { /* down the left overlap: columns 0..ovl-1 of every row */
-        float *c2 = (float *)tn__alloc((size_t)rh * ovl * sizeof(float));
-        if (!c2) {
-            TN_FREE(cost);
-            TN_FREE(cut);
-            return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
-        }
-        for (v = 0; v < rh; v++)
-            for (u = 0; u < ovl; u++) c2[(size_t)v * ovl + u] = cost[(size_t)v * rw + u];
-        tn__gp_min_cut(c2, rh, ovl, tmp, cut);
-        TN_FREE(c2);
-        for (v = 0; v < rh; v++)
-            for (u = 0; u <= cut[v]; u++) cost[(size_t)v * rw + u] = -1; /* keeps the old */
-    }
-    if (ovu > 0) { /* across the upper overlap: rows 0..ovu-1 of every column, as a transposed grid */
-        float *c2 = (float *)tn__alloc((size_t)rw * ovu * sizeof(float));
-        if (!c2) {
-            TN_FREE(cost);
-            TN_FREE(cut);
-            return tn__fail(TN_ERR_OUT_OF_MEMORY, "gpnn: out of memory");
-        }
-        for (u = 0; u < rw; u++)
-            for (v = 0; v < ovu; v++) c2[(size_t)u * ovu + v] = cost[(size_t)v * rw + u] < 0 ? 0 : cost[(size_t)v * rw + u];
-        tn__gp_min_cut(c2, rw, ovu, tmp, cut + rh);
-        TN_FREE(c2);
-        for (u = 0; u < rw; u++)
-            for (v = 0; v <= cut[rh + u]; v++) cost[(size_t)v * rw + u] = -1;
+    if ((ovl > 0 && (st = tn__gp_cut_overlap(cost, rw, rh, ovl, 0, tmp, cut))) || (ovu > 0 && (st = tn__gp_cut_overlap(cost, rw, rh, ovu, 1, tmp, cut)))) {
+        TN_FREE(cost);
+        TN_FREE(cut);
+        return st;
     }
     for (v = 0; v < rh; v++)
         for (u = 0; u < rw; u++)
