@@ -24476,11 +24476,20 @@ static int tn__gp_wrapdist(int a, int b, int p)
     return d < p - d ? d : p - d;
 }
 
+/* Whether the len px from a on ex's mirror period (side n) lie within one mirror image of ex:
+   a block across a mirror line has a straight crease of symmetry. */
+static int tn__gp_one_image(int a, int len, int n)
+{
+    int p = n > 1 ? 2 * n - 2 : 1;
+    a = ((a % p) + p) % p;
+    return a + len - 1 <= n - 1 || (a >= n - 1 && a + len - 1 <= p);
+}
+
 /* The source of block (x0, y0) of side B in a quilt, which reaches ovl px left and ovu px up
    into the blocks already placed in y: among up to 1024 random places of ex's mirror period,
    one whose surroundings in ex match that overlap (Efros and Freeman's quilting: any within
-   10 % of the best), but not the left or upper block's own continuation, which would rebuild
-   ex. Blocks then meet at the level and slope they have on both sides. */
+   10 % of the best), within one mirror image of ex, and not the left or upper block's own
+   continuation, which would rebuild ex. Blocks then meet at the level and slope they have on both sides. */
 static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int y0, int B, int ovl, int ovu, const int *left, const int *up,
                               tn_rng *rng, int *ox, int *oy)
 {
@@ -24494,6 +24503,7 @@ static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int
         cx[c] = sx;
         cy[c] = sy;
         err[c] = FLT_MAX;
+        if (!tn__gp_one_image(sx - ovl, ovl + B, ex->width) || !tn__gp_one_image(sy - ovu, ovu + B, ex->height)) continue;
         if ((left && tn__gp_wrapdist(sx, left[0] + B, pw) <= B / 2 && tn__gp_wrapdist(sy, left[1], ph) <= B / 2) ||
             (up && tn__gp_wrapdist(sx, up[0], pw) <= B / 2 && tn__gp_wrapdist(sy, up[1] + B, ph) <= B / 2))
             continue;
@@ -24620,8 +24630,11 @@ static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, in
                 tn__gp_quilt_pick(y, ex, bx * B, by * B, B, bx ? ov : 0, by ? ov : 0, bx ? o - 2 : NULL, by ? o - 2 * nbx : NULL, rng, &ox, &oy);
                 st = tn__gp_quilt_place(y, ex, bx * B, by * B, B, bx ? ov : 0, by ? ov : 0, ox, oy);
             } else {
-                ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
-                oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
+                int tries = 0;
+                do { /* a quilt's first block too within one mirror image, if one holds it */
+                    ox = (int)tn_rng_below(rng, (uint32_t)(ex->width > 1 ? 2 * ex->width - 2 : 1));
+                    oy = (int)tn_rng_below(rng, (uint32_t)(ex->height > 1 ? 2 * ex->height - 2 : 1));
+                } while (quilt && ++tries < 1024 && !(tn__gp_one_image(ox, B, ex->width) && tn__gp_one_image(oy, B, ex->height)));
                 for (y0 = by * B; y0 < h && y0 < (by + 1) * B; y0++)
                     for (x = bx * B; x < w && x < (bx + 1) * B; x++) y->data[(size_t)y0 * w + x] = tn__gp_mirrored(ex, x - bx * B + ox, y0 - by * B + oy);
             }
@@ -24629,6 +24642,37 @@ static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, in
             o[1] = oy;
         }
     TN_FREE(src);
+    return st;
+}
+
+/* *y = a w x h quilt of blocks of side B of ex without its tilt (the least-squares plane),
+   with the tilt added back stretched over the quilt: quilted with it, the tilt became blocks
+   of high and low ground side by side (power at the blocks' period: the Sahara's spectrum
+   1.78x the reference crop's, 1.16x without). */
+static tn_status tn__gp_quilt_start(tn_image *y, const tn_image *ex, int w, int h, int B, tn_rng *rng)
+{
+    tn_image flat = {0, 0, 0, NULL};
+    double mx = (ex->width - 1) / 2.0, my = (ex->height - 1) / 2.0, sxx = 0, syy = 0, sxz = 0, syz = 0, gx, gy;
+    int x, yy;
+    tn_status st = tn_image_copy(&flat, ex);
+    if (st) return st;
+    for (yy = 0; yy < ex->height; yy++) /* x and y are centred and uncorrelated on a full grid */
+        for (x = 0; x < ex->width; x++) {
+            double z = ex->data[(size_t)yy * ex->width + x];
+            sxx += (x - mx) * (x - mx);
+            syy += (yy - my) * (yy - my);
+            sxz += (x - mx) * z;
+            syz += (yy - my) * z;
+        }
+    gx = sxx > 0 ? sxz / sxx : 0;
+    gy = syy > 0 ? syz / syy : 0;
+    for (yy = 0; yy < ex->height; yy++)
+        for (x = 0; x < ex->width; x++) flat.data[(size_t)yy * ex->width + x] -= (float)(gx * (x - mx) + gy * (yy - my));
+    st = tn__gp_blocks(y, &flat, w, h, B, 1, rng);
+    tn_image_free(&flat);
+    for (yy = 0; !st && yy < h; yy++)
+        for (x = 0; x < w; x++)
+            y->data[(size_t)yy * w + x] += (float)(gx * ((x + 0.5) * ex->width / w - 0.5 - mx) + gy * ((yy + 0.5) * ex->height / h - 0.5 - my));
     return st;
 }
 
@@ -24698,7 +24742,7 @@ TN_API tn_status tn_gpnn_sample(tn_image *out, const tn_image *example, int w, i
         int exact = (double)nq * nk * d <= 3e8;
         if (L == 0) { /* the example's coarsest scale at the output's size, plus noise */
             int side = kw < kh ? kw : kh;
-            if (o.blocks > 0) st = tn__gp_blocks(&y, &ex[0], ow, oh, (side + o.blocks - 1) / o.blocks, 1, &rng);
+            if (o.blocks > 0) st = tn__gp_quilt_start(&y, &ex[0], ow, oh, (side + o.blocks - 1) / o.blocks, &rng);
             else if (ow == kw && oh == kh) st = tn_image_copy(&y, &ex[0]);
             else if (o.extend && (ow > kw || oh > kh)) st = tn__gp_blocks(&y, &ex[0], ow, oh, side, 0, &rng);
             else st = tn_image_resize(&y, &ex[0], ow, oh, TN_RESIZE_BICUBIC);
