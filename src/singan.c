@@ -122,9 +122,10 @@ typedef struct tn_singan_gen_opts {
                               noise on, and a free sample's gate keeps that grain at the example's detail RMS */
     int tile;              /* generated in tiles of this side (bounded memory, same result); 0 = 256 */
     int layout;            /* sample: 1 = the example itself (or its parts: layout_blocks), rearranged by patch
-                              nearest neighbours (GPNN) and bent by a random smooth warp on the grid of scale layout_scale - 1, is that scale's
-                              output; the finer scales add SinGAN's detail; the map is then finite (origin (0, 0)
-                              only). 0 = the coarsest generator (infinite terrain) */
+                              nearest neighbours (GPNN) and bent by a random smooth warp on the grid of scale
+                              layout_scale - 1, is that scale's output; the finer scales add SinGAN's detail; the
+                              map is then finite (origin (0, 0) only). 0 = the coarsest generator (infinite
+                              terrain) */
     int layout_scale;      /* the first scale that runs on the layout, 1..scales-1 (1: the layout replaces the
                               coarsest scale); 0 = 3, at most scales - 1 */
     float layout_noise;    /* GPNN's noise for the layout (tn_gpnn_opts.noise); 0 = 2 */
@@ -216,9 +217,9 @@ typedef struct tn_gpnn_opts {
                               stretched to it (GPNN's retargeting: features grow with the output); 1 = blocks
                               of it at random places (features keep the example's size) */
     int blocks;            /* > 0: the coarsest scale starts from a quilt of blocks of 1 / blocks of the
-                              example's smaller side, from places of it mirrored at its border that continue
-                              the blocks beside them but are not their continuation in the example (its
-                              parts rearranged, at any output size); 0 = as `extend` says */
+                              example's smaller side, of the example without its tilt and within one of its
+                              mirror images, that continue the blocks beside them but not as the example
+                              does (its parts rearranged, at any output size); 0 = as `extend` says */
 } tn_gpnn_opts;
 
 /* A w x h terrain like channel 0 of example (finite, not constant, smaller side >= opts->coarsest),
@@ -2532,7 +2533,8 @@ static int tn__gp_one_image(int a, int len, int n)
    into the blocks already placed in y: among up to 1024 random places of ex's mirror period,
    one whose surroundings in ex match that overlap (Efros and Freeman's quilting: any within
    10 % of the best), within one mirror image of ex, and not the left or upper block's own
-   continuation, which would rebuild ex. Blocks then meet at the level and slope they have on both sides. */
+   continuation, which would rebuild ex. Blocks then meet at the level and slope they have on
+   both sides. */
 static void tn__gp_quilt_pick(const tn_image *y, const tn_image *ex, int x0, int y0, int B, int ovl, int ovu, const int *left, const int *up,
                               tn_rng *rng, int *ox, int *oy)
 {
@@ -2690,8 +2692,7 @@ static tn_status tn__gp_blocks(tn_image *y, const tn_image *ex, int w, int h, in
 
 /* *y = a w x h quilt of blocks of side B of ex without its tilt (the least-squares plane),
    with the tilt added back stretched over the quilt: quilted with it, the tilt became blocks
-   of high and low ground side by side (power at the blocks' period: the Sahara's spectrum
-   1.78x the reference crop's, 1.16x without). */
+   of high and low ground side by side, relief at the blocks' period that ex lacks. */
 static tn_status tn__gp_quilt_start(tn_image *y, const tn_image *ex, int w, int h, int B, tn_rng *rng)
 {
     tn_image flat = {0, 0, 0, NULL};
