@@ -215,6 +215,7 @@ void tn__dm_seamless(const tn_image *h, float *out, int axis);
 #ifndef TN_NO_STYLE
 /* ---- src/singan.c ---- */
 tn_status tn__sg_warp(tn_image *map, float amp, float smooth, uint64_t seed);
+tn_status tn__sg_match_detail(tn_image *map, const tn_image *ref);
 
 /* ---- src/style.c ---- */
 tn_status tn__style_auto_drainage(tn__style_cfg *c, const tn_image *s);

@@ -1998,6 +1998,61 @@ static void tn__sg_gate_keep(float *keep, const float *qe, const float *q, int r
     for (b = 0; b < TN__SG_GATE_BINS; b++) keep[b] = med <= 0 ? 1.0f : r[b] < TN__SG_GATE_MAX * med ? r[b] / med : TN__SG_GATE_MAX;
 }
 
+/* A laid-out map's gate at the example's level: scale by scale from the layout up, on the map's
+   window of (at most) the example's size at the origin, made with the gate so far, each scale's
+   factors times the example's detail RMS there (level[sc]) over the map's, within 1 / and x
+   TN__SG_GATE_MAX. The generators add detail by how sharp their input is: on the layout, GPNN's
+   rearranged map, less than on the example on Mont Blanc, more on the Moon. */
+static tn_status tn__sg_gate_level(const tn__sg_arch *A, const tn__sg_gen_run *run, tn_ctx *ctx, const double *level, int last, tn__sg_gate *gt)
+{
+    tn__sg_gen_run s = *run;
+    float *base = NULL, *out = NULL, *sample = NULL;
+    int sc, lw = tn__sg_size(A->width, A->factor, A->scales - 1 - run->map_level), lh = tn__sg_size(A->height, A->factor, A->scales - 1 - run->map_level);
+    tn_status st = TN_OK;
+    s.gate = gt;
+    s.ctx = ctx;
+    for (sc = run->map_level + 1; sc < last && !st && gt->on[sc]; sc++) {
+        int W = tn__sg_size(A->width, A->factor, A->scales - 1 - sc), H = tn__sg_size(A->height, A->factor, A->scales - 1 - sc), x, y, b;
+        int mw = (int)((long)run->mw * W / lw), mh = (int)((long)run->mh * H / lh); /* the map at scale sc, about */
+        double se = 0, f;
+        size_t i;
+        if (mw < W) W = mw;
+        if (mh < H) H = mh;
+        if (W < 3 || H < 3) break;
+        TN_FREE(base);
+        base = (float *)tn__alloc((size_t)W * H * sizeof(float));
+        out = (float *)tn__alloc((size_t)W * H * sizeof(float));
+        if (!base || !out) {
+            st = tn__fail(TN_ERR_OUT_OF_MEMORY, "singan: out of memory");
+            break;
+        }
+        if ((st = tn__sg_base(&s, sc, 0, 0, W, H, base)) || (st = tn__sg_window(&s, sc, 0, 0, W, H, out))) break;
+        for (y = 1; y + 1 < H; y++)
+            for (x = 1; x + 1 < W; x++) {
+                double e = out[(size_t)y * W + x] - base[(size_t)y * W + x];
+                se += e * e;
+            }
+        se = sqrt(se / ((double)(W - 2) * (H - 2)));
+        f = se > 0 && level[sc] > 0 ? level[sc] / se : 1.0;
+        f = f < 1.0 / TN__SG_GATE_MAX ? 1.0 / TN__SG_GATE_MAX : f > TN__SG_GATE_MAX ? TN__SG_GATE_MAX : f;
+        for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] *= (float)f;
+        for (i = 0; i < (size_t)W * H; i++) out[i] = base[i] + (float)f * (out[i] - base[i]);
+        TN_FREE(sample); /* the next scale's map */
+        sample = out;
+        out = NULL;
+        s.map = sample;
+        s.mw = W;
+        s.mh = H;
+        s.mx0 = s.my0 = s.mstride = 0;
+        s.map_level = sc;
+        s.map_is_output = 1;
+    }
+    TN_FREE(base);
+    TN_FREE(out);
+    TN_FREE(sample);
+    return st;
+}
+
 /* The gate (tn_singan_gen_opts.gate) of every trained scale from 1 up: at scale s, in bins of
    equal count by the slope of the coarser scale upsampled (the base), the RMS of the example's
    detail (its scale s less its scale s - 1 upsampled) over the generator's (tn__sg_gate_keep).
@@ -2005,8 +2060,8 @@ static void tn__sg_gate_keep(float *keep, const float *qe, const float *q, int r
    the example has none, or too much everywhere (docs/singan.md).
    - A laid-out map (`run` has a layout): the generator runs on the example's own scale s - 1,
      ranked on the example's slopes, relative to the median bin. The map's coarse scales are the
-     example's arrangement and heights; measured on a sample, the factors rose above 1 and
-     speckled its plains.
+     example's arrangement and heights; measured on a sample bin by bin, the factors rose above 1
+     and speckled its plains. Each scale's level is then measured on the map (tn__sg_gate_level).
    - A free sample: the generator's detail is its own on `run`'s window of the example's size at
      the origin, made scale by scale with the gate and ranked on its own slopes, at the
      example's level. A free sample's ground can be rougher than the example's: ranked on the
@@ -2020,8 +2075,10 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
     tn__sg_ranked *rk = NULL;
     float *base = NULL, *out = NULL, *sample = NULL;
     int sc, last = A->trained < A->scales ? A->trained : A->scales;
+    double level[TN_SINGAN_MAX_SCALES]; /* a laid-out map's: the example's detail RMS per scale */
     tn_status st = TN_OK;
     memset(gt, 0, sizeof *gt);
+    memset(level, 0, sizeof level);
     if (!t) return TN_OK;
     ex.width = A->width;
     ex.height = A->height;
@@ -2065,6 +2122,9 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
         n = tn__sg_rank_slopes(base, W, H, rk);
         tn__sg_bin_rms(qe, ls.data, base, rk, n);
         if (run->map) {
+            int b;
+            for (b = 0; b < TN__SG_GATE_BINS; b++) level[sc] += (double)qe[b] * qe[b] / TN__SG_GATE_BINS;
+            level[sc] = sqrt(level[sc]);
             if ((st = tn__sg_window(&r, sc, 0, 0, W, H, out))) break;
             tn__sg_bin_rms(q, out, base, rk, n);
             tn__sg_gate_keep(gt->keep[sc], qe, q, 1);
@@ -2094,6 +2154,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
         s.map_level = sc;
         s.map_is_output = 1;
     }
+    if (!st && run->map) st = tn__sg_gate_level(A, run, s.ctx, level, last, gt);
     tn_ctx_free(r.ctx);
     tn_image_free(&lc);
     tn_image_free(&ls);
@@ -2135,11 +2196,48 @@ static tn_status tn__sg_match_heights(tn_image *map, const tn_image *ref)
     return TN_OK;
 }
 
+/* Restores map's detail to ref's in three bands (differences of Gaussians of 0.6, 1.2 and
+   2.4 px), band by band where map has less, by at most TN__SG_DETAIL_MAX: GPNN's average of
+   overlapping patches and the warp's interpolation smooth the layout, and the finer
+   generators, trained on the example's sharp scales, then add less detail than it has. */
+#define TN__SG_DETAIL_MAX 3.0
+TN__INTERNAL tn_status tn__sg_match_detail(tn_image *map, const tn_image *ref)
+{
+    static const float sigma[3] = {0.6f, 1.2f, 2.4f};
+    tn_image gm[4], gr[4];
+    double gain[3];
+    size_t n = (size_t)map->width * map->height, m = (size_t)ref->width * ref->height, i;
+    int b;
+    tn_status st = TN_OK;
+    memset(gm, 0, sizeof gm);
+    memset(gr, 0, sizeof gr);
+    if (!(st = tn_image_copy(&gm[0], map))) st = tn_image_copy(&gr[0], ref);
+    for (b = 0; b < 3 && !st; b++)
+        if (!(st = tn_image_blur(&gm[b + 1], map, sigma[b]))) st = tn_image_blur(&gr[b + 1], ref, sigma[b]);
+    for (b = 0; b < 3 && !st; b++) {
+        double em = 0, er = 0;
+        for (i = 0; i < n; i++) em += (double)(gm[b].data[i] - gm[b + 1].data[i]) * (gm[b].data[i] - gm[b + 1].data[i]) / (double)n;
+        for (i = 0; i < m; i++) er += (double)(gr[b].data[i] - gr[b + 1].data[i]) * (gr[b].data[i] - gr[b + 1].data[i]) / (double)m;
+        gain[b] = em <= 0 || er <= em ? 1.0 : er >= TN__SG_DETAIL_MAX * TN__SG_DETAIL_MAX * em ? TN__SG_DETAIL_MAX : sqrt(er / em);
+    }
+    for (i = 0; i < n && !st; i++) {
+        float v = gm[3].data[i];
+        for (b = 0; b < 3; b++) v += (float)gain[b] * (gm[b].data[i] - gm[b + 1].data[i]);
+        map->data[i] = v;
+    }
+    for (b = 0; b < 4; b++) {
+        tn_image_free(&gm[b]);
+        tn_image_free(&gr[b]);
+    }
+    return st;
+}
+
 /* The layout of a w x h sample: the output of scale K - 1 on its grid (*mw x *mh, network units,
    allocated here), made of the example at that scale by GPNN (from SinGAN's coarsest size up),
-   given the example's height distribution at that scale, bent by a random smooth warp, then
-   given one of its mirror images or quarter turns (exact, where a turn by any angle would
-   smooth the layout by resampling it). The coarsest generator, 5 layers on noise, made features
+   given the example's height distribution at that scale, bent by a random smooth warp, given
+   the example's detail and heights again (tn__sg_match_detail), then one of its mirror images
+   or quarter turns (exact, where a turn by any angle would smooth the layout by resampling
+   it). The coarsest generator, 5 layers on noise, made features
    without the example's arrangement (no cone, no massif, no main valleys); the example's own scale
    rearranged by patches keeps them; the warp, the turn and SinGAN's finer scales with their
    noise on top keep samples from being copies (docs/singan.md). */
@@ -2178,15 +2276,15 @@ static tn_status tn__sg_layout(const tn_singan *m, const tn__sg_arch *A, const t
     if (go.coarsest > (ew < eh ? ew : eh)) go.coarsest = ew < eh ? ew : eh;
     tn_rng_seed(&rng, o->seed, 0x7475726eULL);
     orient = o->layout_turn ? (int)(tn_rng_u32(&rng) & (o->layout_turn == 2 ? 7u : 6u)) : 0; /* bit 0, the swap, only at 2 */
-    st = tn_gpnn_sample(&lay, &exl, orient & 1 ? *mh : *mw, orient & 1 ? *mw : *mh, &go);
-    if (!st) st = tn__sg_match_heights(&lay, &exl);
-    tn_image_free(&exl);
-    if (st) return st;
     px = (float)*mw / (float)w; /* the layout's px per sample px */
-    if ((st = tn__sg_warp(&lay, o->layout_warp * px, o->layout_smooth * px, o->seed)) || (st = tn__sg_turn(&lay, orient))) {
+    if ((st = tn_gpnn_sample(&lay, &exl, orient & 1 ? *mh : *mw, orient & 1 ? *mw : *mh, &go)) || (st = tn__sg_match_heights(&lay, &exl)) ||
+        (st = tn__sg_warp(&lay, o->layout_warp * px, o->layout_smooth * px, o->seed)) || (st = tn__sg_match_detail(&lay, &exl)) ||
+        (st = tn__sg_match_heights(&lay, &exl)) || (st = tn__sg_turn(&lay, orient))) {
+        tn_image_free(&exl);
         tn_image_free(&lay);
         return st;
     }
+    tn_image_free(&exl);
     *map = lay.data;
     return TN_OK;
 }

@@ -7,7 +7,7 @@
    the example's, the spectrum loss the coarsest scale's power spectrum, the heights loss its
    heights' histogram; GPNN, and its start for an output larger than the example; the layout's
    warp never folds the map at its border. */
-#define TN_INTERNALS /* tn__sg_warp */
+#define TN_INTERNALS /* tn__sg_warp, tn__sg_match_detail */
 #include "terrainnet.h"
 #include "tn_test.h"
 
@@ -152,6 +152,41 @@ TN_TEST(the_warp_never_folds_at_the_border)
         }
     printf("# warp of 4 px RMS on 64 x 48 ramps: %d pixels moved by over 2 px, %d folds\n", moved, bad);
     TN_CHECK(moved > 1000 && bad == 0);
+}
+
+TN_TEST(the_layout_gets_its_detail_back)
+{ /* a map blurred as GPNN's patch average and the warp blur the layout: its detail comes back
+     towards the example's, band by band (a band's RMS, so the finest pixels' less); a sharper
+     map is left alone; a flat one is not amplified without limit */
+    tn_image ex = tn_test_dem(48, 3), soft = {0, 0, 0, NULL}, back = {0, 0, 0, NULL}, flat = {0, 0, 0, NULL};
+    double e_ex = 0, e_soft = 0, e_back = 0;
+    float lo, hi;
+    int x, y;
+    TN_CHECK(tn_image_blur(&soft, &ex, 0.8f) == TN_OK && tn_image_copy(&back, &soft) == TN_OK);
+    TN_CHECK(tn__sg_match_detail(&back, &ex) == TN_OK);
+    for (y = 1; y < 47; y++)
+        for (x = 1; x < 47; x++) { /* the Laplacian's energy: the finest detail */
+#define LAP(m) (4 * TN_PIXEL(m, x, y, 0) - TN_PIXEL(m, x - 1, y, 0) - TN_PIXEL(m, x + 1, y, 0) - TN_PIXEL(m, x, y - 1, 0) - TN_PIXEL(m, x, y + 1, 0))
+            e_ex += LAP(&ex) * LAP(&ex);
+            e_soft += LAP(&soft) * LAP(&soft);
+            e_back += LAP(&back) * LAP(&back);
+#undef LAP
+        }
+    printf("# detail restored: Laplacian energy %.3g blurred, %.3g restored, %.3g the example\n", e_soft, e_back, e_ex);
+    TN_CHECK(e_soft < 0.3 * e_ex && e_back > 1.5 * e_soft && e_back < e_ex);
+    tn_image_free(&back); /* the example against its blur: kept as it is */
+    TN_CHECK(tn_image_copy(&back, &ex) == TN_OK && tn__sg_match_detail(&back, &soft) == TN_OK);
+    TN_CHECK(!memcmp(back.data, ex.data, 48 * 48 * sizeof(float)));
+    TN_CHECK(tn_image_create(&flat, 48, 48, 1) == TN_OK); /* a near-flat map: at most TN__SG_DETAIL_MAX, 3x */
+    for (y = 0; y < 48; y++)
+        for (x = 0; x < 48; x++) TN_PIXEL(&flat, x, y, 0) = 0.001f * (float)((x * 7 + y * 13) % 5);
+    TN_CHECK(tn__sg_match_detail(&flat, &ex) == TN_OK);
+    tn_image_range(&lo, &hi, &flat);
+    TN_CHECK(hi - lo < 0.001f * 4 * 3 * 3 + 1e-4f);
+    tn_image_free(&ex);
+    tn_image_free(&soft);
+    tn_image_free(&back);
+    tn_image_free(&flat);
 }
 
 TN_TEST(layout_from_the_example)
@@ -411,6 +446,21 @@ TN_TEST(gate_follows_a_rougher_sample)
         printf("# gate, noise x4: mean |Laplacian| example %.3f, gate on %.3f, off %.3f\n", ex, lon, loff);
         TN_CHECK(loff > 1.2 * ex);
         TN_CHECK(fabs(lon - ex) < 0.5 * fabs(loff - ex));
+    }
+    g.layout = 1; /* a laid-out map's gate: each scale's level measured on the map */
+    g.gate = 0;
+    tn_image_free(&on);
+    tn_image_free(&off);
+    TN_CHECK(tn_singan_sample(&on, &m, 0, 0, 32, 32, &g) == TN_OK);
+    g.gate = -1;
+    TN_CHECK(tn_singan_sample(&off, &m, 0, 0, 32, 32, &g) == TN_OK);
+    if (on.data && off.data) {
+        ex = tn_test_mean_laplacian(&dem);
+        lon = tn_test_mean_laplacian(&on);
+        loff = tn_test_mean_laplacian(&off);
+        printf("# gate, noise x4, laid out: mean |Laplacian| example %.3f, gate on %.3f, off %.3f\n", ex, lon, loff);
+        TN_CHECK(loff > 1.2 * ex);
+        TN_CHECK(fabs(lon - ex) < 0.7 * fabs(loff - ex));
     }
     tn_image_free(&on);
     tn_image_free(&off);
@@ -1013,6 +1063,7 @@ int main(void)
     TN_RUN(save_load_round_trip);
     TN_RUN(tile_equals_whole_map_and_seeds_differ);
     TN_RUN(the_warp_never_folds_at_the_border);
+    TN_RUN(the_layout_gets_its_detail_back);
     TN_RUN(layout_from_the_example);
     TN_RUN(prepared_windows_of_a_laid_out_map);
     TN_RUN(gate_keeps_the_example_plain_smooth);
