@@ -23956,6 +23956,21 @@ static void tn__sg_gate_keep(float *keep, const float *qe, const float *q, int r
     for (b = 0; b < TN__SG_GATE_BINS; b++) keep[b] = med <= 0 ? 1.0f : r[b] < TN__SG_GATE_MAX * med ? r[b] / med : TN__SG_GATE_MAX;
 }
 
+/* Makes *out, scale sc's W x H output, the map s runs the next scale on (held in *sample, the
+   previous one freed). */
+static void tn__sg_chain_map(tn__sg_gen_run *s, float **sample, float **out, int W, int H, int sc)
+{
+    TN_FREE(*sample);
+    *sample = *out;
+    *out = NULL;
+    s->map = *sample;
+    s->mw = W;
+    s->mh = H;
+    s->mx0 = s->my0 = s->mstride = 0;
+    s->map_level = sc;
+    s->map_is_output = 1;
+}
+
 /* A laid-out map's gate at the example's level: scale by scale from the layout up, on the map's
    window of (at most) the example's size at the origin, made with the gate so far, each scale's
    factors times the example's detail RMS there (level[sc]) over the map's, within 1 / and x
@@ -23995,15 +24010,7 @@ static tn_status tn__sg_gate_level(const tn__sg_arch *A, const tn__sg_gen_run *r
         f = f < 1.0 / TN__SG_GATE_MAX ? 1.0 / TN__SG_GATE_MAX : f > TN__SG_GATE_MAX ? TN__SG_GATE_MAX : f;
         for (b = 0; b < TN__SG_GATE_BINS; b++) gt->keep[sc][b] *= (float)f;
         for (i = 0; i < (size_t)W * H; i++) out[i] = base[i] + (float)f * (out[i] - base[i]);
-        TN_FREE(sample); /* the next scale's map */
-        sample = out;
-        out = NULL;
-        s.map = sample;
-        s.mw = W;
-        s.mh = H;
-        s.mx0 = s.my0 = s.mstride = 0;
-        s.map_level = sc;
-        s.map_is_output = 1;
+        tn__sg_chain_map(&s, &sample, &out, W, H, sc);
     }
     TN_FREE(base);
     TN_FREE(out);
@@ -24102,15 +24109,7 @@ static tn_status tn__sg_gate_make(const tn_singan *m, const tn__sg_arch *A, cons
                 size_t i = (size_t)y * W + x;
                 out[i] = base[i] + tn__sg_gate_at(gt, sc, base + (size_t)cy * W + cx, W) * (out[i] - base[i]);
             }
-        TN_FREE(sample);
-        sample = out;
-        out = NULL;
-        s.map = sample;
-        s.mw = W;
-        s.mh = H;
-        s.mx0 = s.my0 = s.mstride = 0;
-        s.map_level = sc;
-        s.map_is_output = 1;
+        tn__sg_chain_map(&s, &sample, &out, W, H, sc);
     }
     if (!st && run->map) st = tn__sg_gate_level(A, run, s.ctx, level, last, gt);
     tn_ctx_free(r.ctx);
