@@ -2015,9 +2015,9 @@ static void tn__sg_chain_map(tn__sg_gen_run *s, float **sample, float **out, int
 
 /* A laid-out map's gate at the example's level: scale by scale from the layout up, on the map's
    window of (at most) the example's size at the origin, made with the gate so far, each scale's
-   factors times the example's detail RMS there (level[sc]) over the map's, within 1 / and x
-   TN__SG_GATE_MAX. The generators add detail by how sharp their input is: on the layout, GPNN's
-   rearranged map, less than on the example on Mont Blanc, more on the Moon. */
+   factors times the example's detail RMS there (level[sc]) over the map's, by at most
+   TN__SG_GATE_MAX either way. The generators add detail by how sharp their input is, and the
+   layout, GPNN's rearranged map, is not the example: they add more or less on it. */
 static tn_status tn__sg_gate_level(const tn__sg_arch *A, const tn__sg_gen_run *run, tn_ctx *ctx, const double *level, int last, tn__sg_gate *gt)
 {
     tn__sg_gen_run s = *run;
