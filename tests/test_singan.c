@@ -6,7 +6,7 @@
    checkpoint as a model); the curvature loss brings the samples' Laplacian histogram closer to
    the example's, the spectrum loss the coarsest scale's power spectrum, the heights loss its
    heights' histogram; GPNN, and its start for an output larger than the example; the layout's
-   warp never folds the map at its border. */
+   warp never folds the map at its border, and the layout gets the example's detail back. */
 #define TN_INTERNALS /* tn__sg_warp, tn__sg_match_detail */
 #include "terrainnet.h"
 #include "tn_test.h"
@@ -419,10 +419,6 @@ static double tn_test_mean_laplacian(const tn_image *a)
     return s / ((double)(w - 2) * (a->height - 2));
 }
 
-/* The gate measures the sample, not only the example: with 4 times the noise the generators make
-   rougher terrain than the example, and the gate brings its roughness back towards the
-   example's. (A gate measured on the example alone, relative to its median bin, left the
-   overall level as generated.) */
 /* Mean |Laplacian| of m's 32 x 32 sample with g, gate on (*on) and off (*off); 0 if one failed. */
 static void gate_on_and_off(const tn_singan *m, tn_singan_gen_opts *g, double *on, double *off)
 {
@@ -437,6 +433,10 @@ static void gate_on_and_off(const tn_singan *m, tn_singan_gen_opts *g, double *o
     tn_image_free(&b);
 }
 
+/* The gate measures the sample, not only the example: with 4 times the noise the generators make
+   rougher terrain than the example, and the gate brings its roughness back towards the
+   example's, for a free sample and for a laid-out map. (A gate measured on the example alone,
+   relative to its median bin, left the overall level as generated: a laid-out map's did.) */
 TN_TEST(gate_follows_a_rougher_sample)
 {
     tn_image dem = tn_test_dem(32, 5);
